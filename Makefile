@@ -1,0 +1,98 @@
+# neuralao: meshes -> ray-traced AO -> neural AO models -> ONNX -> GLSL.
+# Stages are real file targets under build/, so only stale stages rerun.
+SHELL := bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DELETE_ON_ERROR:
+.DEFAULT_GOAL := help
+MAKEFLAGS += --warn-undefined-variables --no-builtin-rules
+
+PYTHON_SYSTEM ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+NEURALAO := $(VENV)/bin/neuralao
+STAMP := $(VENV)/.installed
+# OSMesa by default; EGL (surfaceless llvmpipe) works too: `make demo PYOPENGL_PLATFORM=egl`.
+export PYOPENGL_PLATFORM ?= osmesa
+# Two cores: keep BLAS/torch from oversubscribing when we fan out ourselves.
+export OMP_NUM_THREADS ?= 2
+
+DEMO_CONFIG := configs/demo.json
+BUILD := build/demo
+DATASET := $(BUILD)/dataset/manifest.json
+MLP_SIZES := 16x8 32x16 64x32
+MLP_CKPTS := $(foreach s,$(MLP_SIZES),$(BUILD)/models/mlp-$(s).pt)
+UNET_CKPT := $(BUILD)/models/unet.pt
+EXPORTS := $(foreach s,$(MLP_SIZES),$(BUILD)/export/mlp-$(s)/manifest.json) $(BUILD)/export/unet/manifest.json
+PARITY := $(BUILD)/parity.json
+REPORT := $(BUILD)/report/report.md
+
+.PHONY: help setup system-deps dataset train export parity report select demo test bench lint clean
+
+help: ## Show this help
+	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
+
+system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator
+	@if ! dpkg -s libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools >/dev/null 2>&1; then \
+	  echo "installing system packages (apt-get)"; \
+	  apt-get update -qq; \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools >/dev/null; \
+	fi
+
+$(STAMP): pyproject.toml
+	$(MAKE) system-deps
+	test -x $(PY) || $(PYTHON_SYSTEM) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	# pyrender pins PyOpenGL 3.1.0, which lacks OSMesaCreateContextAttribs: replace it (pip warns).
+	$(PY) -m pip install -q --no-deps 'PyOpenGL==3.1.10'
+	touch $@
+
+setup: $(STAMP) ## Create .venv with pinned packages (and apt packages when missing)
+
+$(DATASET): $(DEMO_CONFIG) | $(STAMP)
+	$(NEURALAO) dataset $(DEMO_CONFIG) --out $(BUILD)/dataset
+
+dataset: $(DATASET) ## Render and label the default scenes (G-buffers + Embree AO)
+
+$(BUILD)/models/mlp-%.pt: $(DATASET)
+	$(NEURALAO) train mlp --data $(BUILD)/dataset --size $* --out $@
+
+$(UNET_CKPT): $(DATASET)
+	$(NEURALAO) train unet --data $(BUILD)/dataset --out $@
+
+train: $(MLP_CKPTS) $(UNET_CKPT) ## Train the three MLP sizes and the U-Net on the default dataset
+
+$(BUILD)/export/%/manifest.json: $(BUILD)/models/%.pt
+	$(NEURALAO) export $< --out $(@D)
+
+export: $(EXPORTS) ## Export ONNX + GLSL for every trained model
+
+$(PARITY): $(EXPORTS)
+	$(NEURALAO) parity $(BUILD)/export --data $(BUILD)/dataset --out $@
+
+parity: $(PARITY) ## Run generated GLSL against onnxruntime on real frames; fail above tolerance
+
+$(REPORT): $(PARITY)
+	$(NEURALAO) report --data $(BUILD)/dataset --exports $(BUILD)/export --out $(@D)
+
+report: $(REPORT) ## Speed-vs-error report of every method on held-back frames
+
+select: $(EXPORTS) ## Pick the smallest model meeting the error target per scene
+	$(NEURALAO) select --data $(BUILD)/dataset --exports $(BUILD)/export --out $(BUILD)/select.json
+
+demo: $(REPORT) ## Set up if needed, then dataset -> train -> export -> parity -> report on the default scenes
+	@echo "report: $(REPORT)"
+
+test: $(STAMP) ## Set up if needed, then run the test suite
+	$(PY) -m pytest -n 2 --dist loadfile
+
+bench: $(STAMP) ## Run benchmarks under bench/ (JSON + markdown tables in build/bench)
+	mkdir -p build/bench
+	for b in bench/bench_*.py; do $(PY) $$b --out build/bench; done
+
+lint: $(STAMP) ## ruff check + format check
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+clean: ## Remove build outputs (keeps .venv)
+	rm -rf build

@@ -1,0 +1,1 @@
+"""neuralao export: ONNX export and validation, GLSL generation from the ONNX graph."""

@@ -1,0 +1,1 @@
+"""neuralao pipeline: scenes, cameras, G-buffers, AO labels, datasets, training, evaluation."""

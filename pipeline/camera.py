@@ -1,0 +1,197 @@
+"""Pinhole cameras: orbits around the bounding sphere, interior views, explicit poses from JSON.
+
+Convention (OpenGL, as pyrender): ``pose`` is camera-to-world, the camera looks down its -z axis
+with +y up. Linear camera-space depth is the distance along the viewing axis, ``-z_cam``.
+Pixel (row i, column j) has its centre at ``((j + 0.5) / W, (i + 0.5) / H)``; row 0 is the top.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import NeuralaoError
+from .scene import Scene
+
+
+@dataclass(frozen=True)
+class Camera:
+    """pose : (4, 4) float64 camera-to-world; yfov in radians; znear/zfar in scene units."""
+
+    pose: np.ndarray
+    width: int
+    height: int
+    yfov: float = math.radians(45.0)
+    znear: float = 0.01
+    zfar: float = 100.0
+
+    @property
+    def aspect(self) -> float:
+        return self.width / self.height
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.pose[:3, 3]
+
+    @property
+    def view(self) -> np.ndarray:
+        """(4, 4) float64 world-to-camera."""
+        return np.linalg.inv(self.pose)
+
+    @property
+    def projection(self) -> np.ndarray:
+        """(4, 4) float64 OpenGL perspective matrix (same as pyrender's PerspectiveCamera)."""
+        f = 1.0 / math.tan(self.yfov / 2.0)
+        n, fa = self.znear, self.zfar
+        return np.array(
+            [
+                [f / self.aspect, 0, 0, 0],
+                [0, f, 0, 0],
+                [0, 0, (fa + n) / (n - fa), 2 * fa * n / (n - fa)],
+                [0, 0, -1, 0],
+            ]
+        )
+
+    def with_size(self, width: int, height: int) -> Camera:
+        return Camera(self.pose, width, height, self.yfov, self.znear, self.zfar)
+
+    def pixel_rays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Primary rays through pixel centres.
+
+        Returns origins (H*W, 3) float64 and unit directions (H*W, 3) float64, row-major, row 0 top.
+        """
+        h, w = self.height, self.width
+        t = math.tan(self.yfov / 2.0)
+        x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * t * self.aspect
+        y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * t
+        xx, yy = np.meshgrid(x, y)
+        d_cam = np.stack([xx, yy, -np.ones_like(xx)], axis=-1).reshape(-1, 3)
+        d = d_cam @ self.pose[:3, :3].T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        o = np.broadcast_to(self.position, d.shape).copy()
+        return o, d
+
+    def to_dict(self) -> dict:
+        return {
+            "pose": self.pose.tolist(),
+            "width": self.width,
+            "height": self.height,
+            "yfov": self.yfov,
+            "znear": self.znear,
+            "zfar": self.zfar,
+        }
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> np.ndarray:
+    """(4, 4) camera-to-world pose looking from ``eye`` at ``target``."""
+    eye = np.asarray(eye, dtype=np.float64)
+    fwd = np.asarray(target, dtype=np.float64) - eye
+    fwd /= np.linalg.norm(fwd)
+    up = np.asarray(up, dtype=np.float64)
+    if abs(float(np.dot(fwd, up / np.linalg.norm(up)))) > 0.999:  # looking along up: pick another up
+        up = np.array([0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    right = np.cross(fwd, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, fwd)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, true_up, -fwd, eye
+    return pose
+
+
+def _clip_planes(scene: Scene, eye: np.ndarray) -> tuple[float, float]:
+    """Near/far planes enclosing the scene from ``eye``, relative to its size (scale invariant)."""
+    radius = scene.diagonal / 2.0
+    dist = float(np.linalg.norm(eye - scene.center))
+    zfar = dist + radius * 1.05
+    znear = max(dist - radius * 1.05, zfar * 1e-4)
+    return znear, zfar
+
+
+def orbit(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 40.0, seed: int = 0) -> list[Camera]:
+    """``views`` cameras on a sphere around the bounding sphere, all looking at its centre.
+
+    Directions follow a Fibonacci spiral (even coverage, deterministic), rotated by ``seed`` so
+    different seeds give different but reproducible orbits. The distance fits the bounding sphere
+    into the narrower field of view.
+    """
+    if views < 1:
+        raise NeuralaoError(f"views must be >= 1, got {views}")
+    yfov = math.radians(yfov_deg)
+    aspect = width / height
+    half = min(yfov, 2 * math.atan(math.tan(yfov / 2) * aspect)) / 2
+    radius = scene.diagonal / 2.0
+    dist = radius / math.sin(half) * 1.02
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0, 2 * math.pi) if seed else 0.0
+    cams = []
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    for k in range(views):
+        y = 1.0 - 2.0 * (k + 0.5) / views
+        r = math.sqrt(max(0.0, 1.0 - y * y))
+        th = golden * k + phase
+        d = np.array([r * math.cos(th), y, r * math.sin(th)])
+        eye = scene.center + d * dist
+        znear, zfar = _clip_planes(scene, eye)
+        cams.append(Camera(look_at(eye, scene.center), width, height, yfov, znear, zfar))
+    return cams
+
+
+def interior(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 60.0, seed: int = 0) -> list[Camera]:
+    """Cameras inside the bounding box (indoor scenes), seeded.
+
+    Eyes are drawn in the central 60% of the box at 20-60% of its height, looking at a point in the
+    central 80% of the box with a slight downward bias, so views see walls, floor and furniture.
+    """
+    rng = np.random.default_rng(seed)
+    lo, hi = scene.bounds
+    size = hi - lo
+    yfov = math.radians(yfov_deg)
+    cams = []
+    for _ in range(views):
+        eye = lo + size * np.array([rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.6), rng.uniform(0.2, 0.8)])
+        target = lo + size * rng.uniform(0.1, 0.9, size=3)
+        target[1] = lo[1] + size[1] * rng.uniform(0.05, 0.6)
+        znear = scene.diagonal * 1e-3
+        zfar = scene.diagonal * 1.5
+        cams.append(Camera(look_at(eye, target), width, height, yfov, znear, zfar))
+    return cams
+
+
+def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -> list[Camera]:
+    """Explicit cameras from JSON: a list (or ``{"cameras": [...]}``) of objects with either
+
+    ``{"eye": [x,y,z], "target": [x,y,z], "up": [0,1,0]?, "yfov_deg": 45?}`` or
+    ``{"pose": 4x4 camera-to-world, "yfov_deg": 45?}``; optional ``znear``/``zfar``.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise NeuralaoError(f"camera file not found: {p}")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as e:
+        raise NeuralaoError(f"camera file {p} is not valid JSON: {e.msg} at line {e.lineno}") from None
+    items = data.get("cameras") if isinstance(data, dict) else data
+    if not isinstance(items, list) or not items:
+        raise NeuralaoError(f"camera file {p} must hold a non-empty list of cameras")
+    cams = []
+    for k, c in enumerate(items):
+        try:
+            if "pose" in c:
+                pose = np.asarray(c["pose"], dtype=np.float64)
+                if pose.shape != (4, 4) or not np.isfinite(pose).all():
+                    raise ValueError("pose must be a finite 4x4 matrix")
+            else:
+                pose = look_at(np.asarray(c["eye"], float), np.asarray(c["target"], float), np.asarray(c.get("up", [0, 1, 0]), float))
+            yfov = math.radians(float(c.get("yfov_deg", 45.0)))
+            znear, zfar = _clip_planes(scene, pose[:3, 3])
+            if np.all(np.abs(pose[:3, 3] - scene.center) <= (scene.bounds[1] - scene.bounds[0]) / 2):
+                znear, zfar = scene.diagonal * 1e-3, scene.diagonal * 1.5  # inside the scene
+            cams.append(Camera(pose, width, height, yfov, float(c.get("znear", znear)), float(c.get("zfar", zfar))))
+        except (KeyError, TypeError, ValueError) as e:
+            raise NeuralaoError(f"camera {k} in {p} is invalid: {e}") from None
+    return cams

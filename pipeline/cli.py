@@ -1,0 +1,60 @@
+"""The ``neuralao`` command. Each subcommand lives in its own module, imported lazily so
+``neuralao --help`` stays fast; a module provides ``add_arguments(parser)`` and ``run(args) -> int``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from .errors import NeuralaoError
+
+# subcommand -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "render": ("pipeline.render", "render G-buffers + ray-traced AO for views of a mesh (.npz + PNG previews)"),
+    "bake": ("pipeline.bake", "bake per-vertex AO into a PLY/GLB (vertex colours + float 'ao' property)"),
+    "dataset": ("pipeline.dataset", "render and label a dataset from a config (resumable shards + manifest)"),
+    "train": ("pipeline.train", "train the baked MLP or the DeepAO U-Net"),
+    "export": ("export.cli", "export a checkpoint to ONNX + generated GLSL"),
+    "parity": ("export.parity", "run generated GLSL against onnxruntime on real frames"),
+    "infer": ("runtime.infer", "apply an exported ONNX model to a G-buffer frame"),
+    "report": ("pipeline.report", "speed-vs-error report of every method on held-back frames"),
+    "select": ("pipeline.select", "pick the smallest model that meets an error target per scene"),
+}
+
+
+def build_parser(load: str | None = None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="neuralao", description="Neural ambient occlusion: meshes -> AO labels -> models -> ONNX -> GLSL.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_, description=help_)
+        if name == load:
+            importlib.import_module(module).add_arguments(p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if a in COMMANDS), None)
+    parser = build_parser(load=command)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if not args.command:
+        parser.print_help()
+        return 2
+    module = importlib.import_module(COMMANDS[args.command][0])
+    try:
+        return int(module.run(args) or 0)
+    except NeuralaoError as e:
+        sys.stderr.write(f"neuralao {args.command}: error: {e}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write(f"neuralao {args.command}: interrupted\n")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
