@@ -20,6 +20,8 @@ DEMO_CONFIG := configs/demo.json
 BUILD := build/demo
 DATASET := $(BUILD)/dataset/manifest.json
 MLP_SIZES := 16x8 32x16 64x32
+# The baked MLP is one network per mesh (as in the paper): the demo trains it for this scene.
+MLP_SCENE := bunny
 MLP_CKPTS := $(foreach s,$(MLP_SIZES),$(BUILD)/models/mlp-$(s).pt)
 UNET_CKPT := $(BUILD)/models/unet.pt
 EXPORTS := $(foreach s,$(MLP_SIZES),$(BUILD)/export/mlp-$(s)/manifest.json) $(BUILD)/export/unet/manifest.json
@@ -55,7 +57,7 @@ $(DATASET): $(DEMO_CONFIG) | $(STAMP)
 dataset: $(DATASET) ## Render and label the default scenes (G-buffers + Embree AO)
 
 $(BUILD)/models/mlp-%.pt: $(DATASET)
-	$(NEURALAO) train mlp --data $(BUILD)/dataset --size $* --out $@
+	$(NEURALAO) train mlp --data $(BUILD)/dataset --scene $(MLP_SCENE) --size $* --out $@
 
 $(UNET_CKPT): $(DATASET)
 	$(NEURALAO) train unet --data $(BUILD)/dataset --out $@

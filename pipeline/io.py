@@ -66,10 +66,35 @@ def _json_default(o: Any) -> Any:
 
 
 def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
-    """Uncompressed npz written atomically (deterministic bytes for identical arrays)."""
+    """Uncompressed npz written atomically, byte-for-byte deterministic for identical arrays.
+
+    ``np.savez`` stamps each member with the current time, so two identical datasets would hash
+    differently; here every member gets a fixed timestamp and members are sorted by name.
+    """
+    import io as _io
+    import zipfile
+
     with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            np.savez(f, **arrays)
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name in sorted(arrays):
+                buf = _io.BytesIO()
+                np.lib.format.write_array(buf, np.ascontiguousarray(arrays[name]), allow_pickle=False)
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.external_attr = 0o644 << 16
+                zf.writestr(info, buf.getvalue())
+
+
+def read_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Load every array of an npz (no pickles); a truncated or corrupt file is a one-line error."""
+    from .errors import NeuralaoError
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise NeuralaoError(f"file not found: {path}") from None
+    except Exception as e:
+        raise NeuralaoError(f"cannot read {path}: corrupt or truncated ({type(e).__name__})") from None
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:

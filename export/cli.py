@@ -1,0 +1,39 @@
+"""`neuralao export MODEL.pt --out DIR`: ONNX + generated GLSL + manifest, by checkpoint kind."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+
+from pipeline.errors import NeuralaoError
+
+EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet"}
+
+
+def checkpoint_kind(path: str | Path) -> str:
+    """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
+    import torch
+
+    p = Path(path)
+    if not p.is_file():
+        raise NeuralaoError(f"checkpoint not found: {p}")
+    try:
+        ckpt = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise NeuralaoError(f"cannot read checkpoint {p}: {str(e).splitlines()[0][:200]}") from None
+    kind = ckpt.get("kind") if isinstance(ckpt, dict) else None
+    if kind not in EXPORTERS:
+        raise NeuralaoError(f"{p} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})")
+    return kind
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", help="checkpoint written by `neuralao train` (MODEL.pt)")
+    p.add_argument("--out", required=True, help="export folder: model.onnx, GLSL shaders, manifest.json")
+
+
+def run(args: argparse.Namespace) -> int:
+    kind = checkpoint_kind(args.model)
+    importlib.import_module(EXPORTERS[kind]).export_checkpoint(Path(args.model), Path(args.out))
+    return 0

@@ -1,0 +1,98 @@
+"""Shared ONNX plumbing: atomic save with metadata, checker, onnxruntime and OpenCV dnn runners.
+
+Metadata values are stored as strings in ``metadata_props`` (JSON for anything structured), so
+any ONNX consumer can read what the model expects without neuralao.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+
+from pipeline.errors import NeuralaoError
+from pipeline.io import atomic_path
+
+
+def set_metadata(model: onnx.ModelProto, metadata: dict[str, Any]) -> None:
+    """Replace ``metadata_props`` with ``metadata`` (non-strings JSON-encoded)."""
+    del model.metadata_props[:]
+    for k, v in sorted(metadata.items()):
+        p = model.metadata_props.add()
+        p.key = k
+        p.value = v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+
+
+def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for p in model.metadata_props:
+        try:
+            out[p.key] = json.loads(p.value)
+        except json.JSONDecodeError:
+            out[p.key] = p.value
+    return out
+
+
+def save_onnx(model: onnx.ModelProto, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> Path:
+    """Check the model with ``onnx.checker`` (full check) and write it atomically."""
+    if metadata is not None:
+        set_metadata(model, metadata)
+    try:
+        onnx.checker.check_model(model, full_check=True)
+    except onnx.checker.ValidationError as e:
+        raise NeuralaoError(f"ONNX checker rejected the model: {str(e).splitlines()[0]}") from None
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        onnx.save(model, str(tmp))
+    return path
+
+
+def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
+    """Load and check an ONNX file; a missing or corrupt file is a one-line error."""
+    p = Path(path)
+    if not p.is_file():
+        raise NeuralaoError(f"ONNX file not found: {p}")
+    try:
+        model = onnx.load(str(p))
+        onnx.checker.check_model(model)
+    except Exception as e:
+        raise NeuralaoError(f"cannot load ONNX file {p}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+    return model
+
+
+def ort_session(path_or_bytes: str | os.PathLike | bytes):
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 2
+    opts.log_severity_level = 3
+    src = path_or_bytes if isinstance(path_or_bytes, bytes) else str(path_or_bytes)
+    try:
+        return ort.InferenceSession(src, sess_options=opts, providers=["CPUExecutionProvider"])
+    except Exception as e:
+        raise NeuralaoError(f"onnxruntime cannot load the model: {str(e).splitlines()[0]}") from None
+
+
+def run_onnxruntime(path_or_bytes: str | os.PathLike | bytes, inputs: dict[str, np.ndarray]) -> list[np.ndarray]:
+    """Run every output of the model on ``inputs`` (float32 arrays by input name)."""
+    sess = ort_session(path_or_bytes)
+    return sess.run(None, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in inputs.items()})
+
+
+def run_opencv(path: str | os.PathLike, inputs: dict[str, np.ndarray]) -> np.ndarray:
+    """Second consumer: OpenCV's dnn module (its own importer and kernels). Returns the first output."""
+    import cv2
+
+    try:
+        net = cv2.dnn.readNetFromONNX(str(path))
+    except cv2.error as e:
+        raise NeuralaoError(f"OpenCV dnn cannot import {path}: {str(e).strip().splitlines()[-1]}") from None
+    net.setPreferableBackend(cv2.dnn.DNN_BACKEND_OPENCV)
+    net.setPreferableTarget(cv2.dnn.DNN_TARGET_CPU)
+    for name, arr in inputs.items():
+        net.setInput(np.ascontiguousarray(arr, dtype=np.float32), name)
+    return np.asarray(net.forward(), dtype=np.float32)

@@ -1,0 +1,87 @@
+"""`neuralao parity EXPORT_DIR`: generated GLSL vs onnxruntime on real frames; non-zero exit above tolerance.
+
+EXPORT_DIR is one export folder (with manifest.json) or a folder of them. Frames come from a
+dataset when ``--data`` is given (held-back views of the MLP's mesh; validation scenes for the
+U-Net), otherwise each model's parity function renders its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from pipeline.errors import NeuralaoError
+from pipeline.io import write_json
+
+log = logging.getLogger(__name__)
+
+
+def export_dirs(root: Path) -> list[Path]:
+    if (root / "manifest.json").is_file():
+        return [root]
+    dirs = sorted(p.parent for p in root.glob("*/manifest.json"))
+    if not dirs:
+        raise NeuralaoError(f"no export (manifest.json) in {root} or its subfolders")
+    return dirs
+
+
+def read_manifest(d: Path) -> dict:
+    try:
+        return json.loads((d / "manifest.json").read_text())
+    except json.JSONDecodeError:
+        raise NeuralaoError(f"{d / 'manifest.json'} is corrupt") from None
+
+
+def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dict] | None:
+    """Dataset frames for one export: held-back views of the MLP's scene, or validation-split frames."""
+    if data is None:
+        return None
+    from pipeline.dataset import open_dataset
+
+    ds = open_dataset(data)
+    if manifest["kind"] == "mlp" and manifest.get("scene") in ds.scenes:
+        it = ds.frames(scene=manifest["scene"], holdout=True)
+    else:
+        it = ds.frames(split="val")
+    frames = []
+    for f in it:
+        frames.append(f)
+        if len(frames) >= limit:
+            break
+    return frames or None
+
+
+def check_exports(root: Path, data: Path | None = None) -> dict:
+    import importlib
+
+    results = {}
+    for d in export_dirs(root):
+        manifest = read_manifest(d)
+        kind = manifest.get("kind")
+        if kind not in ("mlp", "unet"):
+            raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
+        module = importlib.import_module(f"export.{kind}")
+        log.info("parity: %s (%s)", d.name, kind)
+        results[d.name] = module.parity(d, parity_frames(data, manifest))
+    return results
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("exports", help="an export folder, or a folder of export folders")
+    p.add_argument("--data", help="dataset folder whose frames to use (default: render frames)")
+    p.add_argument("--out", help="write the figures as JSON here")
+
+
+def run(args: argparse.Namespace) -> int:
+    results = check_exports(Path(args.exports), Path(args.data) if args.data else None)
+    failed = [name for name, r in results.items() if not r.get("passed", False)]
+    summary = {"exports": results, "passed": not failed}
+    for name, r in results.items():
+        log.info("%-12s %s  %s", name, "PASS" if r.get("passed") else "FAIL", {k: v for k, v in r.items() if "err" in k})
+    if args.out:
+        write_json(args.out, summary)
+    if failed:
+        raise NeuralaoError(f"parity above tolerance for: {', '.join(failed)}")
+    return 0
