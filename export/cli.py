@@ -24,7 +24,9 @@ def checkpoint_kind(path: str | Path) -> str:
         raise NeuralaoError(f"cannot read checkpoint {p}: {str(e).splitlines()[0][:200]}") from None
     kind = ckpt.get("kind") if isinstance(ckpt, dict) else None
     if kind not in EXPORTERS:
-        raise NeuralaoError(f"{p} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})")
+        raise NeuralaoError(
+            f"{p} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})"
+        )
     return kind
 
 

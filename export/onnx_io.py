@@ -37,7 +37,9 @@ def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
     return out
 
 
-def save_onnx(model: onnx.ModelProto, path: str | os.PathLike, metadata: dict[str, Any] | None = None) -> Path:
+def save_onnx(
+    model: onnx.ModelProto, path: str | os.PathLike, metadata: dict[str, Any] | None = None
+) -> Path:
     """Check the model with ``onnx.checker`` (full check) and write it atomically."""
     if metadata is not None:
         set_metadata(model, metadata)
@@ -60,7 +62,9 @@ def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
         model = onnx.load(str(p))
         onnx.checker.check_model(model)
     except Exception as e:
-        raise NeuralaoError(f"cannot load ONNX file {p}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+        raise NeuralaoError(
+            f"cannot load ONNX file {p}: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
+        ) from None
     return model
 
 
@@ -77,7 +81,9 @@ def ort_session(path_or_bytes: str | os.PathLike | bytes):
         raise NeuralaoError(f"onnxruntime cannot load the model: {str(e).splitlines()[0]}") from None
 
 
-def run_onnxruntime(path_or_bytes: str | os.PathLike | bytes, inputs: dict[str, np.ndarray]) -> list[np.ndarray]:
+def run_onnxruntime(
+    path_or_bytes: str | os.PathLike | bytes, inputs: dict[str, np.ndarray]
+) -> list[np.ndarray]:
     """Run every output of the model on ``inputs`` (float32 arrays by input name)."""
     sess = ort_session(path_or_bytes)
     return sess.run(None, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in inputs.items()})

@@ -79,7 +79,12 @@ def run(args: argparse.Namespace) -> int:
     failed = [name for name, r in results.items() if not r.get("passed", False)]
     summary = {"exports": results, "passed": not failed}
     for name, r in results.items():
-        log.info("%-12s %s  %s", name, "PASS" if r.get("passed") else "FAIL", {k: v for k, v in r.items() if "err" in k})
+        log.info(
+            "%-12s %s  %s",
+            name,
+            "PASS" if r.get("passed") else "FAIL",
+            {k: v for k, v in r.items() if "err" in k},
+        )
     if args.out:
         write_json(args.out, summary)
     if failed:

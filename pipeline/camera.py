@@ -87,8 +87,9 @@ class Camera:
         }
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> np.ndarray:
-    """(4, 4) camera-to-world pose looking from ``eye`` at ``target``."""
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
+    """(4, 4) camera-to-world pose looking from ``eye`` at ``target`` (``up`` defaults to +y)."""
+    up = np.array([0.0, 1.0, 0.0]) if up is None else up
     eye = np.asarray(eye, dtype=np.float64)
     fwd = np.asarray(target, dtype=np.float64) - eye
     fwd /= np.linalg.norm(fwd)
@@ -112,7 +113,9 @@ def _clip_planes(scene: Scene, eye: np.ndarray) -> tuple[float, float]:
     return znear, zfar
 
 
-def orbit(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 40.0, seed: int = 0) -> list[Camera]:
+def orbit(
+    scene: Scene, views: int, width: int, height: int, yfov_deg: float = 40.0, seed: int = 0
+) -> list[Camera]:
     """``views`` cameras on a sphere around the bounding sphere, all looking at its centre.
 
     Directions follow a Fibonacci spiral (even coverage, deterministic), rotated by ``seed`` so
@@ -124,7 +127,9 @@ def orbit(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 4
     yfov = math.radians(yfov_deg)
     aspect = width / height
     half = min(yfov, 2 * math.atan(math.tan(yfov / 2) * aspect)) / 2
-    radius = scene.diagonal / 2.0
+    # The tightest sphere about the box centre that holds every vertex (<= half the diagonal),
+    # so objects fill the frame instead of their bounding box's circumsphere.
+    radius = float(np.linalg.norm(scene.vertices - scene.center, axis=1).max())
     dist = radius / math.sin(half) * 1.02
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0, 2 * math.pi) if seed else 0.0
@@ -141,23 +146,60 @@ def orbit(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 4
     return cams
 
 
-def interior(scene: Scene, views: int, width: int, height: int, yfov_deg: float = 60.0, seed: int = 0) -> list[Camera]:
+def _clearance(scene: Scene, eyes: np.ndarray) -> np.ndarray:
+    """(n,) distance from each eye to the nearest surface hit along 26 axis/diagonal directions."""
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    es = rtcore_scene.EmbreeScene()
+    TriangleMesh(es, (scene.triangles - scene.center).astype(np.float32))
+    dirs = np.array(
+        [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if (x, y, z) != (0, 0, 0)],
+        float,
+    )
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    o = np.repeat(eyes - scene.center, len(dirs), axis=0).astype(np.float32)
+    d = np.tile(dirs, (len(eyes), 1)).astype(np.float32)
+    t = es.run(o, d, query="DISTANCE")
+    return np.asarray(t, dtype=np.float64).reshape(len(eyes), len(dirs)).min(axis=1)
+
+
+def interior(
+    scene: Scene, views: int, width: int, height: int, yfov_deg: float = 60.0, seed: int = 0
+) -> list[Camera]:
     """Cameras inside the bounding box (indoor scenes), seeded.
 
-    Eyes are drawn in the central 60% of the box at 20-60% of its height, looking at a point in the
-    central 80% of the box with a slight downward bias, so views see walls, floor and furniture.
+    Eyes are drawn in the central 60% of the box at 20-60% of its height and kept only if no
+    surface is closer than 2% of the diagonal (else the near plane would clip a wall and the view
+    would see through it); each looks at a point in the central 80% of the box with a downward bias.
     """
     rng = np.random.default_rng(seed)
     lo, hi = scene.bounds
     size = hi - lo
     yfov = math.radians(yfov_deg)
+    znear, zfar = scene.diagonal * 1e-3, scene.diagonal * 1.5
+    min_clearance = 0.02 * scene.diagonal
+    eyes: list[np.ndarray] = []
+    for _ in range(50):  # rejection sampling in batches; deterministic for a given seed
+        cand = lo + size * np.stack(
+            [
+                rng.uniform(0.2, 0.8, 4 * views),
+                rng.uniform(0.2, 0.6, 4 * views),
+                rng.uniform(0.2, 0.8, 4 * views),
+            ],
+            axis=1,
+        )
+        eyes.extend(cand[_clearance(scene, cand) > min_clearance])
+        if len(eyes) >= views:
+            break
+    if len(eyes) < views:
+        raise NeuralaoError(
+            f"scene {scene.name}: found only {len(eyes)} of {views} interior camera positions clear of geometry"
+        )
     cams = []
-    for _ in range(views):
-        eye = lo + size * np.array([rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.6), rng.uniform(0.2, 0.8)])
+    for eye in eyes[:views]:
         target = lo + size * rng.uniform(0.1, 0.9, size=3)
         target[1] = lo[1] + size[1] * rng.uniform(0.05, 0.6)
-        znear = scene.diagonal * 1e-3
-        zfar = scene.diagonal * 1.5
         cams.append(Camera(look_at(eye, target), width, height, yfov, znear, zfar))
     return cams
 
@@ -186,12 +228,18 @@ def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -
                 if pose.shape != (4, 4) or not np.isfinite(pose).all():
                     raise ValueError("pose must be a finite 4x4 matrix")
             else:
-                pose = look_at(np.asarray(c["eye"], float), np.asarray(c["target"], float), np.asarray(c.get("up", [0, 1, 0]), float))
+                pose = look_at(
+                    np.asarray(c["eye"], float),
+                    np.asarray(c["target"], float),
+                    np.asarray(c.get("up", [0, 1, 0]), float),
+                )
             yfov = math.radians(float(c.get("yfov_deg", 45.0)))
             znear, zfar = _clip_planes(scene, pose[:3, 3])
             if np.all(np.abs(pose[:3, 3] - scene.center) <= (scene.bounds[1] - scene.bounds[0]) / 2):
                 znear, zfar = scene.diagonal * 1e-3, scene.diagonal * 1.5  # inside the scene
-            cams.append(Camera(pose, width, height, yfov, float(c.get("znear", znear)), float(c.get("zfar", zfar))))
+            cams.append(
+                Camera(pose, width, height, yfov, float(c.get("znear", znear)), float(c.get("zfar", zfar)))
+            )
         except (KeyError, TypeError, ValueError) as e:
             raise NeuralaoError(f"camera {k} in {p} is invalid: {e}") from None
     return cams

@@ -13,7 +13,10 @@ from .errors import NeuralaoError
 
 # subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "render": ("pipeline.render", "render G-buffers + ray-traced AO for views of a mesh (.npz + PNG previews)"),
+    "render": (
+        "pipeline.render",
+        "render G-buffers + ray-traced AO for views of a mesh (.npz + PNG previews)",
+    ),
     "bake": ("pipeline.bake", "bake per-vertex AO into a PLY/GLB (vertex colours + float 'ao' property)"),
     "dataset": ("pipeline.dataset", "render and label a dataset from a config (resumable shards + manifest)"),
     "train": ("pipeline.train", "train the baked MLP or the DeepAO U-Net"),
@@ -26,7 +29,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 def build_parser(load: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="neuralao", description="Neural ambient occlusion: meshes -> AO labels -> models -> ONNX -> GLSL.")
+    parser = argparse.ArgumentParser(
+        prog="neuralao",
+        description="Neural ambient occlusion: meshes -> AO labels -> models -> ONNX -> GLSL.",
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module, help_) in COMMANDS.items():
@@ -41,7 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     command = next((a for a in argv if a in COMMANDS), None)
     parser = build_parser(load=command)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+    )
+    for noisy in ("trimesh", "OpenGL"):  # library chatter (triangulating faces, accelerate module)
+        logging.getLogger(noisy).setLevel(logging.DEBUG if args.verbose else logging.WARNING)
     if not args.command:
         parser.print_help()
         return 2

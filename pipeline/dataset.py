@@ -28,7 +28,7 @@ import numpy as np
 from .camera import Camera, interior, load_poses, orbit
 from .config import load_settings, settings_to_dict
 from .errors import NeuralaoError
-from .io import read_npz, sha256_file, write_json, write_npz
+from .io import read_npz, remove_stale_temporaries, sha256_file, write_json, write_npz
 from .labels import LabelSettings
 from .scene import Scene, load_scene
 
@@ -36,7 +36,20 @@ log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
 # Per-frame keys stored in shards (stacked along a new first axis).
-FRAME_KEYS = ("depth", "normal_cam", "normal_obj", "position", "mask", "tri_id", "ao", "valid", "pose", "yfov", "znear", "zfar")
+FRAME_KEYS = (
+    "depth",
+    "normal_cam",
+    "normal_obj",
+    "position",
+    "mask",
+    "tri_id",
+    "ao",
+    "valid",
+    "pose",
+    "yfov",
+    "znear",
+    "zfar",
+)
 
 
 @dataclass
@@ -45,11 +58,15 @@ class SceneSpec:
 
     name: str  # short unique name used in shard names and reports
     mesh: str  # mesh file, glTF folder, or a bare name under the shared mesh folder (e.g. "spot")
-    cameras: Literal["orbit", "interior", "file"] = "orbit"  # orbit around the bounding sphere, inside the box, or JSON poses
+    cameras: Literal["orbit", "interior", "file"] = (
+        "orbit"  # orbit around the bounding sphere, inside the box, or JSON poses
+    )
     views: int = 16  # number of views (ignored for cameras="file")
     poses: str | None = None  # JSON camera file when cameras="file" (path relative to the config file)
     yfov_deg: float | None = None  # vertical field of view; None: 40 for orbits, 60 for interiors
-    split: Literal["train", "val", "test"] = "train"  # scene-level split: the U-Net never trains on val/test scenes
+    split: Literal["train", "val", "test"] = (
+        "train"  # scene-level split: the U-Net never trains on val/test scenes
+    )
 
 
 @dataclass
@@ -59,9 +76,13 @@ class DatasetSettings:
     name: str = "dataset"  # dataset name (recorded in the manifest)
     scenes: list[SceneSpec] = field(default_factory=list)  # the scenes to render
     size: tuple[int, int] = (128, 128)  # frame width, height in pixels
-    labels: LabelSettings = field(default_factory=LabelSettings)  # AO labeller settings (rays, max distance, kernel...)
+    labels: LabelSettings = field(
+        default_factory=LabelSettings
+    )  # AO labeller settings (rays, max distance, kernel...)
     seed: int = 0  # master seed: cameras and labeller directions derive from it
-    holdout_every: int = 8  # every k-th view of each scene is held back (never used for training; MLP evaluation)
+    holdout_every: int = (
+        8  # every k-th view of each scene is held back (never used for training; MLP evaluation)
+    )
     frames_per_shard: int = 8  # frames per shard file (the unit of resumption)
 
 
@@ -71,7 +92,9 @@ def frame_seed(seed: int, scene_index: int, view: int) -> int:
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
-def scene_cameras(spec: SceneSpec, scene: Scene, size: tuple[int, int], seed: int, config_dir: Path) -> list[Camera]:
+def scene_cameras(
+    spec: SceneSpec, scene: Scene, size: tuple[int, int], seed: int, config_dir: Path
+) -> list[Camera]:
     w, h = size
     if spec.cameras == "orbit":
         return orbit(scene, spec.views, w, h, spec.yfov_deg or 40.0, seed=seed)
@@ -85,7 +108,7 @@ def scene_cameras(spec: SceneSpec, scene: Scene, size: tuple[int, int], seed: in
 
 def _validate(settings: DatasetSettings) -> None:
     names = set()
-    for si, spec in enumerate(settings.scenes):
+    for spec in settings.scenes:
         if spec.name in names:
             raise NeuralaoError(f"scene name {spec.name!r} appears twice in the dataset config")
         names.add(spec.name)
@@ -93,7 +116,9 @@ def _validate(settings: DatasetSettings) -> None:
             raise NeuralaoError(f"scene {spec.name}: views must be >= 1")
 
 
-def build_dataset(settings: DatasetSettings, out: Path, config_dir: Path = Path("."), progress: bool = True) -> dict:
+def build_dataset(
+    settings: DatasetSettings, out: Path, config_dir: Path = Path("."), progress: bool = True
+) -> dict:
     """Render and label every scene of ``settings`` into ``out``; resumable. Returns the manifest."""
     from tqdm import tqdm
 
@@ -107,6 +132,9 @@ def build_dataset(settings: DatasetSettings, out: Path, config_dir: Path = Path(
     _validate(settings)
     out = Path(out)
     (out / "shards").mkdir(parents=True, exist_ok=True)
+    for folder in (out, out / "shards"):  # a killed run (SIGKILL) leaves its half-written shard behind
+        for stale in remove_stale_temporaries(folder):
+            log.info("removed %s left by an interrupted run", stale.name)
     config = settings_to_dict(settings)
     config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
     progress_path = out / "progress.json"
@@ -128,7 +156,9 @@ def build_dataset(settings: DatasetSettings, out: Path, config_dir: Path = Path(
         total_views += len(cams)
         renderer = labeller = None
         views = list(range(len(cams)))
-        chunks = [views[i : i + settings.frames_per_shard] for i in range(0, len(views), settings.frames_per_shard)]
+        chunks = [
+            views[i : i + settings.frames_per_shard] for i in range(0, len(views), settings.frames_per_shard)
+        ]
         bar = tqdm(total=len(views), desc=f"{spec.name}", unit="view", disable=not progress, leave=False)
         for k, chunk in enumerate(chunks):
             rel = f"shards/{spec.name}-{k:04d}.npz"
@@ -138,7 +168,10 @@ def build_dataset(settings: DatasetSettings, out: Path, config_dir: Path = Path(
                 "scene": spec.name,
                 "split": spec.split,
                 "views": chunk,
-                "holdout": [bool(settings.holdout_every and v % settings.holdout_every == settings.holdout_every - 1) for v in chunk],
+                "holdout": [
+                    bool(settings.holdout_every and v % settings.holdout_every == settings.holdout_every - 1)
+                    for v in chunk
+                ],
                 "faces": int(len(scene.faces)),
             }
             if rel in done and path.exists() and sha256_file(path) == done[rel]:
@@ -197,7 +230,11 @@ class Dataset:
         self.root = Path(root)
         mpath = self.root / "manifest.json"
         if not mpath.is_file():
-            hint = " (an interrupted run: rerun `neuralao dataset` to resume)" if (self.root / "progress.json").exists() else ""
+            hint = (
+                " (an interrupted run: rerun `neuralao dataset` to resume)"
+                if (self.root / "progress.json").exists()
+                else ""
+            )
             raise NeuralaoError(f"no dataset manifest at {mpath}{hint}")
         try:
             self.manifest = json.loads(mpath.read_text())
@@ -225,11 +262,15 @@ class Dataset:
             raise NeuralaoError(f"dataset shard missing: {path}")
         if self.verify and entry["file"] not in self._verified:
             if sha256_file(path) != entry["sha256"]:
-                raise NeuralaoError(f"dataset shard {path} is corrupt (sha256 differs from the manifest); rerun `neuralao dataset`")
+                raise NeuralaoError(
+                    f"dataset shard {path} is corrupt (sha256 differs from the manifest); rerun `neuralao dataset`"
+                )
             self._verified.add(entry["file"])
         return read_npz(path)
 
-    def frames(self, split: str | None = None, scene: str | None = None, holdout: bool | None = None) -> Iterator[dict]:
+    def frames(
+        self, split: str | None = None, scene: str | None = None, holdout: bool | None = None
+    ) -> Iterator[dict]:
         """Yield frame dicts (COMMON G-buffer keys + ao, valid, pose...) with 'scene', 'view', 'split', 'holdout'."""
         for entry in self.manifest["shards"]:
             if split is not None and entry["split"] != split:
@@ -245,7 +286,12 @@ class Dataset:
                 frame = {k: arrays[k][i] for k in FRAME_KEYS}
                 for k in ("yfov", "znear", "zfar"):
                     frame[k] = float(frame[k])
-                frame.update(scene=entry["scene"], view=int(arrays["view"][i]), split=entry["split"], holdout=bool(arrays["holdout"][i]))
+                frame.update(
+                    scene=entry["scene"],
+                    view=int(arrays["view"][i]),
+                    split=entry["split"],
+                    holdout=bool(arrays["holdout"][i]),
+                )
                 yield frame
 
 
@@ -256,12 +302,26 @@ def open_dataset(root: str | Path, verify: bool = True) -> Dataset:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="dataset config (JSON); see configs/demo.json")
     p.add_argument("--out", required=True, help="output folder (resumes if an interrupted run is there)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a setting, e.g. --set labels.rays=64")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a setting, e.g. --set labels.rays=64",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
     settings = load_settings(DatasetSettings, args.config, args.set)
-    manifest = build_dataset(settings, Path(args.out), Path(args.config).resolve().parent, progress=not args.no_progress)
-    log.info("dataset %s: %d frames, %d shards, hash %s", args.out, manifest["frames"], len(manifest["shards"]), manifest["dataset_hash"][:16])
+    manifest = build_dataset(
+        settings, Path(args.out), Path(args.config).resolve().parent, progress=not args.no_progress
+    )
+    log.info(
+        "dataset %s: %d frames, %d shards, hash %s",
+        args.out,
+        manifest["frames"],
+        len(manifest["shards"]),
+        manifest["dataset_hash"][:16],
+    )
     return 0

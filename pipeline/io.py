@@ -28,7 +28,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=".tmp" + (suffix if suffix is not None else path.suffix), dir=path.parent
+        prefix=f".{path.name}.",
+        suffix=".tmp" + (suffix if suffix is not None else path.suffix),
+        dir=path.parent,
     )
     os.close(fd)
     tmp_path = Path(tmp)
@@ -40,6 +42,16 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def remove_stale_temporaries(directory: str | os.PathLike) -> list[Path]:
+    """Delete temporaries that :func:`atomic_path` left in ``directory`` when a run was killed
+    (SIGKILL skips its ``finally``). Call it before resuming work in that folder. Returns what went."""
+    d = Path(directory)
+    stale = [p for p in d.glob(".*.tmp*") if p.is_file()] if d.is_dir() else []
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> None:
@@ -78,7 +90,9 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
             for name in sorted(arrays):
                 buf = _io.BytesIO()
-                np.lib.format.write_array(buf, np.ascontiguousarray(arrays[name]), allow_pickle=False)
+                np.lib.format.write_array(
+                    buf, np.asarray(arrays[name], order="C"), allow_pickle=False
+                )  # keeps 0-d scalars 0-d
                 info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
                 info.external_attr = 0o644 << 16
                 zf.writestr(info, buf.getvalue())

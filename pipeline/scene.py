@@ -178,7 +178,9 @@ def resolve_mesh_path(path: str | os.PathLike) -> Path:
     if not p.exists():
         raise NeuralaoError(f"mesh file not found: {path}")
     if p.suffix.lower() not in SUPPORTED_SUFFIXES:
-        raise NeuralaoError(f"unsupported mesh format {p.suffix!r} for {p} (use one of {', '.join(SUPPORTED_SUFFIXES)})")
+        raise NeuralaoError(
+            f"unsupported mesh format {p.suffix!r} for {p} (use one of {', '.join(SUPPORTED_SUFFIXES)})"
+        )
     if p.stat().st_size == 0:
         raise NeuralaoError(f"mesh file {p} is empty")
     return p

@@ -6,7 +6,10 @@ import argparse
 import importlib
 
 TRAINERS = {
-    "mlp": ("pipeline.mlp", "the baked MLP of Erra et al. (16 object-space normals -> AO), one network per mesh"),
+    "mlp": (
+        "pipeline.mlp",
+        "the baked MLP of Erra et al. (16 object-space normals -> AO), one network per mesh",
+    ),
     "unet": ("pipeline.unet_train", "the DeepAO screen-space U-Net (depth + camera normal -> AO)"),
 }
 

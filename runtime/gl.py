@@ -38,7 +38,9 @@ class _Context:
             # we only use the context, rendering into our own float framebuffers.
             self.renderer = pyrender.OffscreenRenderer(8, 8)
         except Exception as e:
-            raise NeuralaoError(f"cannot create a headless GL context with PYOPENGL_PLATFORM={platform}: {e}") from None
+            raise NeuralaoError(
+                f"cannot create a headless GL context with PYOPENGL_PLATFORM={platform}: {e}"
+            ) from None
         self.platform = platform
         self.make_current()
         self.info = GLInfo(
@@ -175,7 +177,9 @@ def create_framebuffer(color_textures: list[int], width: int, height: int, depth
     return fbo
 
 
-def create_buffer(data: np.ndarray | None = None, nbytes: int | None = None, target=GL.GL_SHADER_STORAGE_BUFFER) -> int:
+def create_buffer(
+    data: np.ndarray | None = None, nbytes: int | None = None, target=GL.GL_SHADER_STORAGE_BUFFER
+) -> int:
     """A buffer object (SSBO by default) filled with ``data`` or ``nbytes`` zero bytes."""
     context()
     buf = GL.glGenBuffers(1)

@@ -73,7 +73,17 @@ def test_cli_bad_mesh_exits_nonzero_with_one_line(tmp_path):
     bad = tmp_path / "nan.obj"
     bad.write_text("v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n")
     r = subprocess.run(
-        [sys.executable, "-m", "pipeline.cli", "bake", str(bad), "--rays", "4", "--out", str(tmp_path / "o.ply")],
+        [
+            sys.executable,
+            "-m",
+            "pipeline.cli",
+            "bake",
+            str(bad),
+            "--rays",
+            "4",
+            "--out",
+            str(tmp_path / "o.ply"),
+        ],
         capture_output=True,
         text=True,
     )

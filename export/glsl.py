@@ -1,0 +1,1756 @@
+"""GLSL generated from the ONNX graph: the baked-MLP fragment shader and the U-Net compute passes.
+
+Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + writer):
+
+* **Op tables.** :class:`VectorOps` (per-pixel dense networks, fragment target) and
+  :class:`ImageOps` (NCHW image networks, compute target) map an ONNX op type to a handler method
+  named exactly after the op, whose positional parameters are the op's inputs and whose
+  keyword-only parameters are the ONNX attributes with the ONNX defaults. Handlers lower the graph to
+  a small IR (dense layers / compute passes) and fuse on the way (bias, batch norm, activations,
+  concat into the consuming conv). An op not in the table, an attribute the handler does not take,
+  or an attribute value it cannot honour raises :class:`NeuralaoError` naming the op and the node.
+* **Dialects.** :class:`Dialect` is desktop GLSL 4.3 (explicit ``binding`` qualifiers);
+  :class:`GLSL330` and :class:`ES300` override only what differs (version line, precision
+  statements, no binding qualifiers: the host binds blocks and samplers, the manifest says where).
+* **Writer.** Only :func:`_write_*` functions here produce shader text, and only by filling the
+  named templates of :mod:`export.glsl_templates`. Identifiers are generated (``t3``, ``w0_1``,
+  ``src0``); ONNX node and tensor names go to the manifest, never into shader source.
+
+Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
+
+    generate_mlp_fragment(model, dialect="glsl330", fold_repeated_input=True) -> MLPShader
+    write_mlp_export(shader, out_dir, validate=True) -> Path      (manifest.json path)
+    load_mlp_export(export_dir, dialect="glsl330") -> MLPShader
+    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8)) -> ComputeProgram
+    write_compute_export(program, out_dir, validate=True) -> Path
+    load_compute_export(export_dir) -> ComputeProgram
+    validate_glsl(source, stage) -> None                         (glslangValidator)
+
+The runner is :mod:`runtime.glsl_runner`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+import logging
+import math
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+from onnx import numpy_helper
+
+from pipeline.errors import NeuralaoError
+from pipeline.io import write_bytes, write_json
+
+from .glsl_templates import fill
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+# Portable minimum GL_MAX_UNIFORM_BLOCK_SIZE (GL 3.3+, ES 3.0): every uniform block stays below it.
+MAX_UNIFORM_BLOCK_BYTES = 16384
+# Portable minimum GL_MAX_FRAGMENT_UNIFORM_BLOCKS (GL 3.3, ES 3.0).
+MAX_FRAGMENT_UNIFORM_BLOCKS = 12
+# Widest per-pixel activation vector the fragment target accepts (local vec4 arrays live in registers).
+MAX_VECTOR_WIDTH = 1024
+# Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
+MAX_TEXTURE_SIZE = 16384
+MAX_ARRAY_LAYERS = 2048
+MAX_PARAM_BYTES = 1 << 27
+MAX_KERNEL = 15
+# Alignment of each pass's parameter range in weights.bin (>= any GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT).
+PARAM_ALIGN = 256
+
+_ONNX_DOMAINS = ("", "ai.onnx")
+
+
+# --------------------------------------------------------------------------- small helpers
+
+
+def glsl_float(value: float) -> str:
+    """A GLSL float literal that parses back to exactly ``np.float32(value)``."""
+    f = np.float32(value)
+    if not np.isfinite(f):
+        raise NeuralaoError(f"non-finite constant {value!r} cannot be written to GLSL")
+    a = abs(float(f))
+    if a != 0.0 and (a >= 1e7 or a < 1e-4):
+        s = np.format_float_scientific(f, unique=True, trim="0")
+    else:
+        s = np.format_float_positional(f, unique=True, trim="0")
+    return f"({s})" if s.startswith("-") else s
+
+
+def _ceil4(n: int) -> int:
+    return (int(n) + 3) // 4
+
+
+def _node_label(node: onnx.NodeProto, index: int) -> str:
+    return f"{node.op_type} node {node.name!r}" if node.name else f"{node.op_type} node #{index}"
+
+
+def _attributes(node: onnx.NodeProto) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for a in node.attribute:
+        v = onnx.helper.get_attribute_value(a)
+        if isinstance(v, bytes):
+            v = v.decode("utf-8", "replace")
+        elif isinstance(v, onnx.TensorProto):
+            v = numpy_helper.to_array(v)
+        elif isinstance(v, list) and v and isinstance(v[0], bytes):
+            v = [x.decode("utf-8", "replace") for x in v]
+        out[a.name] = v
+    return out
+
+
+def _dims(vi: onnx.ValueInfoProto) -> list[int | str | None]:
+    """Declared dims of a graph input: int (static), str (symbolic) or None (unknown)."""
+    t = vi.type.tensor_type
+    if not t.HasField("shape"):
+        return []
+    out: list[int | str | None] = []
+    for d in t.shape.dim:
+        if d.HasField("dim_value"):
+            out.append(int(d.dim_value))
+        elif d.HasField("dim_param"):
+            out.append(str(d.dim_param))
+        else:
+            out.append(None)
+    return out
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+# --------------------------------------------------------------------------- dialects
+
+
+class Dialect:
+    """Desktop GLSL 4.3 core: explicit ``binding`` qualifiers, no precision statements."""
+
+    name = "glsl430"
+    version = "430 core"
+    precision = "precision_none"
+    explicit_bindings = True
+
+    def header(self) -> str:
+        return fill("header", version=self.version, precision=fill(self.precision))
+
+    def ubo_layout(self, binding: int) -> str:
+        return fill("ubo_layout_binding", binding=binding) if self.explicit_bindings else fill("ubo_layout")
+
+    def sampler2d(self, name: str, binding: int) -> str:
+        if self.explicit_bindings:
+            return fill("sampler2d_decl_binding", name=name, binding=binding)
+        return fill("sampler2d_decl", name=name)
+
+
+class GLSL330(Dialect):
+    """Desktop GLSL 3.30 core: no binding qualifiers (the host binds blocks and samplers)."""
+
+    name = "glsl330"
+    version = "330 core"
+    explicit_bindings = False
+
+
+class ES300(GLSL330):
+    """GLSL ES 3.00: as 3.30, plus highp default precisions."""
+
+    name = "es300"
+    version = "300 es"
+    precision = "precision_es"
+
+
+DIALECTS: dict[str, Dialect] = {d.name: d() for d in (Dialect, GLSL330, ES300)}
+FRAGMENT_FILES = {"glsl330": ("mlp.vert", "mlp.frag"), "es300": ("mlp_es300.vert", "mlp_es300.frag"),
+                  "glsl430": ("mlp_430.vert", "mlp_430.frag")}  # fmt: skip
+
+
+def get_dialect(name: str) -> Dialect:
+    try:
+        return DIALECTS[name]
+    except KeyError:
+        raise NeuralaoError(f"unknown GLSL dialect {name!r} (expected one of {sorted(DIALECTS)})") from None
+
+
+# --------------------------------------------------------------------------- activations (shared)
+
+
+@dataclass
+class Act:
+    """An elementwise activation applied in a layer's epilogue. ``op`` is the ONNX op type."""
+
+    op: str
+    params: dict[str, float] = field(default_factory=dict)
+
+    def expr(self, x: str) -> str:
+        """GLSL vec4 expression applying this activation to the vec4 expression ``x``."""
+        if self.op == "LeakyRelu":
+            return fill("act_LeakyRelu", x=x, alpha=glsl_float(self.params["alpha"]))
+        if self.op == "Clip":
+            lo, hi = self.params.get("lo"), self.params.get("hi")
+            if lo is not None and hi is not None:
+                return fill("act_Clip", x=x, lo=glsl_float(lo), hi=glsl_float(hi))
+            if lo is not None:
+                return fill("act_Clip_min", x=x, lo=glsl_float(lo))
+            if hi is not None:
+                return fill("act_Clip_max", x=x, hi=glsl_float(hi))
+            return fill("act_Identity", x=x)
+        return fill(f"act_{self.op}", x=x)
+
+    def numpy(self, x: np.ndarray) -> np.ndarray:
+        """Reference semantics (float64), used only by tests and docs."""
+        if self.op == "Relu":
+            return np.maximum(x, 0)
+        if self.op == "LeakyRelu":
+            return np.where(x >= 0, x, self.params["alpha"] * x)
+        if self.op == "Sigmoid":
+            return 1 / (1 + np.exp(-x))
+        if self.op == "Tanh":
+            return np.tanh(x)
+        if self.op == "Clip":
+            return np.clip(x, self.params.get("lo", -np.inf), self.params.get("hi", np.inf))
+        return x
+
+
+def _clip_bounds(min_: np.ndarray | None, max_: np.ndarray | None) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for key, v in (("lo", min_), ("hi", max_)):
+        if v is not None:
+            arr = np.asarray(v)
+            if arr.size != 1:
+                raise ValueError("Clip bounds must be scalars")
+            out[key] = float(arr.reshape(()))
+    return out
+
+
+# --------------------------------------------------------------------------- graph reading + dispatch
+
+
+@dataclass
+class OnnxGraph:
+    """What the lowering needs from a model: constants, the one real input, outputs, fan-out."""
+
+    model: onnx.ModelProto
+    constants: dict[str, np.ndarray]
+    input: onnx.ValueInfoProto
+    outputs: list[str]
+    consumers: dict[str, int]
+    metadata: dict[str, str]
+
+    @property
+    def nodes(self) -> list[onnx.NodeProto]:
+        return list(self.model.graph.node)
+
+
+def read_graph(model: onnx.ModelProto) -> OnnxGraph:
+    if not isinstance(model, onnx.ModelProto):
+        raise NeuralaoError(f"expected an onnx.ModelProto, got {type(model).__name__}")
+    g = model.graph
+    constants: dict[str, np.ndarray] = {}
+    for init in g.initializer:
+        try:
+            constants[init.name] = numpy_helper.to_array(init)
+        except Exception as e:  # external data missing, unsupported dtype
+            raise NeuralaoError(f"cannot read initializer {init.name!r}: {e}") from None
+    inputs = [i for i in g.input if i.name not in constants]
+    if len(inputs) != 1:
+        raise NeuralaoError(
+            f"expected exactly one graph input, found {len(inputs)}: {[i.name for i in inputs]}"
+        )
+    if inputs[0].type.tensor_type.elem_type != onnx.TensorProto.FLOAT:
+        raise NeuralaoError(f"graph input {inputs[0].name!r} must be float32")
+    consumers: dict[str, int] = {}
+    for node in g.node:
+        for name in node.input:
+            if name:
+                consumers[name] = consumers.get(name, 0) + 1
+    outputs = [o.name for o in g.output]
+    if not outputs:
+        raise NeuralaoError("the graph has no output")
+    metadata = {p.key: p.value for p in model.metadata_props}
+    return OnnxGraph(model, constants, inputs[0], outputs, consumers, metadata)
+
+
+class OpTable:
+    """Base of the op tables: dispatch ONNX nodes to handlers named after their op type.
+
+    A handler's positional parameters are the node's inputs (constants arrive as numpy arrays, graph
+    tensors as the table's value type, absent optional inputs as None); its keyword-only parameters
+    are the ONNX attributes with their ONNX defaults.
+    """
+
+    OPS: tuple[str, ...] = ()
+    target = "GLSL"
+
+    def __init__(self, graph: OnnxGraph):
+        self.graph = graph
+        self.env: dict[str, Any] = dict(graph.constants)
+        self.label = ""
+        self.node: onnx.NodeProto | None = None
+
+    # -- errors naming the op and the node
+    def fail(self, message: str) -> NeuralaoError:
+        return NeuralaoError(f"{self.label}: {message}")
+
+    def unsupported(self, attribute: str, value: Any) -> NeuralaoError:
+        return self.fail(f"unsupported attribute value {attribute}={value!r} for the {self.target} target")
+
+    def const(self, value: Any, what: str) -> np.ndarray:
+        if not isinstance(value, np.ndarray):
+            raise self.fail(f"input {what} must be a constant (initializer or Constant node)")
+        return value
+
+    def fusible(self, index: int) -> bool:
+        """Input ``index`` of the current node has no other reader and is not a graph output.
+
+        Counts the readers still to come (this node included) over every name bound to the same
+        value: in-place fusion and Identity bind several names to one value."""
+        assert self.node is not None
+        value = self.env.get(self.node.input[index])
+        names = [n for n, v in self.env.items() if v is value]
+        readers = sum(self.remaining.get(n, 0) + (n in self.graph.outputs) for n in names)
+        return readers == 1
+
+    def run(self) -> None:
+        self.remaining = dict(self.graph.consumers)
+        for index, node in enumerate(self.graph.nodes):
+            self.dispatch(node, index)
+            for name in node.input:
+                if name:
+                    self.remaining[name] -= 1
+        for name in self.graph.outputs:
+            if name not in self.env:
+                raise NeuralaoError(f"graph output {name!r} is not produced by any node")
+
+    def dispatch(self, node: onnx.NodeProto, index: int) -> None:
+        self.node, self.label = node, _node_label(node, index)
+        if node.domain not in _ONNX_DOMAINS or node.op_type not in self.OPS:
+            domain = f" (domain {node.domain!r})" if node.domain not in _ONNX_DOMAINS else ""
+            raise NeuralaoError(
+                f"unsupported op {node.op_type!r}{domain} ({self.label}) for the {self.target} target"
+            )
+        handler = getattr(self, node.op_type)
+        params = inspect.signature(handler).parameters.values()
+        positional = [p for p in params if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
+        variadic = any(p.kind is inspect.Parameter.VAR_POSITIONAL for p in params)
+        keywords = {p.name: p for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY}
+        attrs = _attributes(node)
+        for name, value in attrs.items():
+            if name not in keywords:
+                raise self.unsupported(name, value)
+        for name, p in keywords.items():
+            if p.default is inspect.Parameter.empty and name not in attrs:
+                raise self.fail(f"required attribute {name!r} is missing")
+        if not variadic and len(node.input) > len(positional):
+            raise self.fail(f"{len(node.input)} inputs given, this op takes at most {len(positional)}")
+        args = []
+        for name in node.input:
+            if not name:
+                args.append(None)
+            elif name in self.env:
+                args.append(self.env[name])
+            else:
+                raise self.fail(
+                    f"input {name!r} is not produced before this node (graph not topologically sorted?)"
+                )
+        try:
+            result = handler(*args, **attrs)
+        except NeuralaoError:
+            raise
+        except (ValueError, TypeError, IndexError) as e:
+            raise self.fail(str(e)) from None
+        results = result if isinstance(result, tuple) else (result,)
+        if any(node.output[len(results) :]):
+            raise self.fail(
+                f"only the first {len(results)} output(s) are supported, the node has {len(node.output)}"
+            )
+        for name, value in zip(node.output, results, strict=False):
+            if name:
+                self.env[name] = value
+
+    # -- ops every table shares
+    def Constant(
+        self,
+        *,
+        value: np.ndarray | None = None,
+        value_float: float | None = None,
+        value_floats: list[float] | None = None,
+        value_int: int | None = None,
+        value_ints: list[int] | None = None,
+    ) -> np.ndarray:
+        for v, dt in ((value, None), (value_float, np.float32), (value_floats, np.float32),
+                      (value_int, np.int64), (value_ints, np.int64)):  # fmt: skip
+            if v is not None:
+                return np.asarray(v, dtype=dt)
+        raise self.fail("Constant without a value")
+
+
+# --------------------------------------------------------------------------- A. fragment MLP
+
+
+@dataclass
+class VecValue:
+    """A per-pixel activation vector, stored as the local array ``vec4 <ident>[ceil(width/4)]``."""
+
+    ident: str
+    width: int
+
+    @property
+    def n4(self) -> int:
+        return _ceil4(self.width)
+
+
+@dataclass
+class DenseOp:
+    """dst = epilogue(weight @ src + bias). weight (out, in) float32, bias (out,) float32."""
+
+    src: VecValue
+    dst: VecValue
+    weight: np.ndarray
+    bias: np.ndarray
+    epilogue: list[Act]
+    nodes: list[str]
+    chunks: list[tuple[int, int, str, str, int]] = field(
+        default_factory=list
+    )  # (j0, j1, weight, bias, block)
+
+
+@dataclass
+class MapOp:
+    """dst = epilogue(src [+ other | + const]) elementwise; const (width,) float32 or None."""
+
+    src: VecValue
+    dst: VecValue
+    other: VecValue | None
+    const: np.ndarray | None
+    epilogue: list[Act]
+    nodes: list[str]
+    const_member: str = ""
+
+
+@dataclass
+class UniformBlock:
+    """One std140 uniform block of vec4 arrays. members: (identifier, (n, 4) float32, layout words)."""
+
+    name: str
+    binding: int
+    members: list[tuple[str, np.ndarray, str]]
+
+    @property
+    def data(self) -> np.ndarray:
+        return np.ascontiguousarray(
+            np.concatenate([m[1].reshape(-1) for m in self.members]).astype(np.float32)
+        )
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.data.nbytes)
+
+
+class VectorOps(OpTable):
+    """ONNX -> per-pixel dense network (N, K) -> (N, M) for the fragment target."""
+
+    OPS = ("Gemm", "MatMul", "Add", "Relu", "LeakyRelu", "Sigmoid", "Tanh", "Clip", "Identity", "Constant")
+    target = "fragment (per-pixel MLP)"
+
+    def __init__(self, graph: OnnxGraph):
+        super().__init__(graph)
+        self.ops: list[DenseOp | MapOp] = []
+        self.values: list[VecValue] = []
+        self.producer: dict[str, DenseOp | MapOp] = {}
+        dims = _dims(graph.input)
+        if len(dims) != 2:
+            raise NeuralaoError(
+                f"MLP input {graph.input.name!r} must have rank 2 (N, 3*k normals), got shape {dims or 'unknown'}"
+            )
+        width = dims[1]
+        if not isinstance(width, int) or width <= 0:
+            raise NeuralaoError(
+                f"MLP input {graph.input.name!r} needs a static positive width, got {width!r}"
+            )
+        if width > MAX_VECTOR_WIDTH:
+            raise NeuralaoError(f"MLP input width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}")
+        if width % 3:
+            raise NeuralaoError(f"MLP input width {width} is not a multiple of 3 (xyz normals repeated)")
+        self.input = self.new_value(width)
+        self.repeats = width // 3
+        self.env[graph.input.name] = self.input
+
+    def new_value(self, width: int) -> VecValue:
+        if width > MAX_VECTOR_WIDTH:
+            raise self.fail(f"vector width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}")
+        v = VecValue(f"t{len(self.values)}", int(width))
+        self.values.append(v)
+        return v
+
+    def vec(self, value: Any, what: str) -> VecValue:
+        if not isinstance(value, VecValue):
+            raise self.fail(f"input {what} must be a per-pixel tensor, not a constant")
+        return value
+
+    def _fusible_op(self, index: int, kind: type) -> Any:
+        assert self.node is not None
+        value = self.env.get(self.node.input[index])
+        op = self.producer.get(value.ident) if isinstance(value, VecValue) else None
+        return op if isinstance(op, kind) and self.fusible(index) and op.dst is value else None
+
+    def _dense(self, x: VecValue, weight: np.ndarray, bias: np.ndarray) -> VecValue:
+        if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
+            raise self.fail("weights contain non-finite values")
+        dst = self.new_value(weight.shape[0])
+        op = DenseOp(x, dst, weight.astype(np.float32), bias.astype(np.float32), [], [self.label])
+        self.ops.append(op)
+        self.producer[dst.ident] = op
+        return dst
+
+    def _vector_const(self, c: np.ndarray, width: int) -> np.ndarray:
+        c = np.asarray(c, dtype=np.float64)
+        if c.ndim == 2 and c.shape[0] == 1:
+            c = c[0]
+        if c.ndim > 1 or c.size not in (1, width):
+            raise self.fail(
+                f"constant of shape {list(c.shape)} does not broadcast to a per-pixel vector of {width}"
+            )
+        return np.broadcast_to(c.reshape(-1), (width,)).astype(np.float64)
+
+    def _activation(self, x: Any, act: Act) -> VecValue:
+        x = self.vec(x, "X")
+        op = self._fusible_op(0, (DenseOp, MapOp))
+        if op is not None:
+            op.epilogue.append(act)
+            op.nodes.append(self.label)
+            return x
+        dst = self.new_value(x.width)
+        mop = MapOp(x, dst, None, None, [act], [self.label])
+        self.ops.append(mop)
+        self.producer[dst.ident] = mop
+        return dst
+
+    # -- handlers (named after the ONNX op; attributes with ONNX defaults)
+    def Gemm(self, A, B, C=None, *, alpha=1.0, beta=1.0, transA=0, transB=0) -> VecValue:
+        x = self.vec(A, "A")
+        if transA:
+            raise self.unsupported("transA", transA)  # the per-pixel batch axis cannot be transposed
+        b = self.const(B, "B").astype(np.float64)
+        if b.ndim != 2:
+            raise self.fail(f"B must be a matrix, got shape {list(b.shape)}")
+        w = (b.T if not transB else b) * float(alpha)  # (out, in)
+        if w.shape[1] != x.width:
+            raise self.fail(f"B of shape {list(b.shape)} (transB={transB}) does not take {x.width} inputs")
+        bias = (
+            np.zeros(w.shape[0])
+            if C is None
+            else float(beta) * self._vector_const(self.const(C, "C"), w.shape[0])
+        )
+        return self._dense(x, w, bias)
+
+    def MatMul(self, A, B) -> VecValue:
+        x = self.vec(A, "A")
+        b = self.const(B, "B").astype(np.float64)
+        if b.ndim != 2 or b.shape[0] != x.width:
+            raise self.fail(f"B of shape {list(b.shape)} does not take {x.width} inputs")
+        return self._dense(x, b.T, np.zeros(b.shape[1]))
+
+    def Add(self, A, B) -> VecValue:
+        if isinstance(A, np.ndarray) and isinstance(B, VecValue):
+            A, B = B, A
+            swapped = True
+        else:
+            swapped = False
+        x = self.vec(A, "A")
+        if isinstance(B, VecValue):
+            if B.width != x.width:
+                raise self.fail(f"cannot add vectors of widths {x.width} and {B.width}")
+            dst = self.new_value(x.width)
+            op = MapOp(x, dst, B, None, [], [self.label])
+        else:
+            c = self._vector_const(B, x.width)
+            dense = self._fusible_op(1 if swapped else 0, DenseOp)
+            if dense is not None and not dense.epilogue:
+                dense.bias = (dense.bias.astype(np.float64) + c).astype(
+                    np.float32
+                )  # MatMul + Add -> one layer
+                dense.nodes.append(self.label)
+                return x
+            dst = self.new_value(x.width)
+            op = MapOp(x, dst, None, c.astype(np.float32), [], [self.label])
+        self.ops.append(op)
+        self.producer[dst.ident] = op
+        return dst
+
+    def Relu(self, X) -> VecValue:
+        return self._activation(X, Act("Relu"))
+
+    def LeakyRelu(self, X, *, alpha=0.01) -> VecValue:
+        return self._activation(X, Act("LeakyRelu", {"alpha": float(alpha)}))
+
+    def Sigmoid(self, X) -> VecValue:
+        return self._activation(X, Act("Sigmoid"))
+
+    def Tanh(self, X) -> VecValue:
+        return self._activation(X, Act("Tanh"))
+
+    def Clip(self, input, min=None, max=None) -> VecValue:  # noqa: A002  (ONNX input names)
+        lo = None if min is None else self.const(min, "min")
+        hi = None if max is None else self.const(max, "max")
+        return self._activation(input, Act("Clip", _clip_bounds(lo, hi)))
+
+    def Identity(self, input) -> Any:  # noqa: A002
+        return input
+
+
+@dataclass
+class MLPShader:
+    """A generated baked-MLP fragment pass.
+
+    fragment_source / vertex_source : GLSL of ``dialect``; ``sources`` holds every dialect's pair by
+    name ({"glsl330": (vert, frag), "es300": ..., "glsl430": ...}). uniform_blocks : list of
+    (block name, binding, (n,) float32 std140 data). manifest : dict (see :func:`write_mlp_export`).
+    """
+
+    fragment_source: str
+    vertex_source: str
+    uniform_blocks: list[tuple[str, int, np.ndarray]]
+    manifest: dict
+    dialect: str = "glsl330"
+    sources: dict[str, tuple[str, str]] = field(default_factory=dict)
+
+    @property
+    def output_width(self) -> int:
+        return int(self.manifest["network"]["output_width"])
+
+
+def _fold_repeated_input(table: VectorOps) -> bool:
+    """Fold W1 (out, 3k) to (out, 3): the shader feeds the same normal k times, so the k column
+    blocks of the first layer multiply the same three numbers. Sums in float64 (the summation order
+    differs from onnxruntime's by rounding only; the parity tests hold both paths to the same TOL)."""
+    readers = [op for op in table.ops if op.src is table.input or getattr(op, "other", None) is table.input]
+    if len(readers) != 1 or not isinstance(readers[0], DenseOp):
+        return False
+    if any(table.env.get(o) is table.input for o in table.graph.outputs):
+        return False
+    op = readers[0]
+    k = table.input.width // 3
+    op.weight = op.weight.astype(np.float64).reshape(op.weight.shape[0], k, 3).sum(axis=1).astype(np.float32)
+    table.input.width = 3
+    return True
+
+
+def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
+    """Dense layers (row chunks) and constant vectors to std140 blocks, each <= 16 KB."""
+    blocks: list[UniformBlock] = []
+    for li, op in enumerate(table.ops):
+        if isinstance(op, DenseOp):
+            out4, in4 = _ceil4(op.weight.shape[0]), _ceil4(op.weight.shape[1])
+            rows4 = (MAX_UNIFORM_BLOCK_BYTES // 16) // (4 * in4 + 1)  # vec4 rows (x4 outputs) per block
+            if rows4 < 1:
+                raise NeuralaoError(
+                    f"layer {li}: input width {op.weight.shape[1]} does not fit a 16 KB uniform block"
+                )
+            w = np.zeros((out4 * 4, in4 * 4), np.float32)
+            w[: op.weight.shape[0], : op.weight.shape[1]] = op.weight
+            b = np.zeros(out4 * 4, np.float32)
+            b[: op.bias.shape[0]] = op.bias
+            op.chunks = []
+            for ci, j0 in enumerate(range(0, out4, rows4)):
+                j1 = min(out4, j0 + rows4)
+                wname, bname = f"w{li}_{ci}", f"b{li}_{ci}"
+                members = [
+                    (wname, w[4 * j0 : 4 * j1].reshape(-1, 4),
+                     f"rows {4 * j0}..{4 * j1 - 1} of W (out, in) row-major, in padded to {4 * in4}"),
+                    (bname, b[4 * j0 : 4 * j1].reshape(-1, 4), f"bias[{4 * j0}..{4 * j1 - 1}]"),
+                ]  # fmt: skip
+                blocks.append(UniformBlock(f"Layer{li}_{ci}", len(blocks), members))
+                op.chunks.append((j0, j1, wname, bname, len(blocks) - 1))
+        elif op.const is not None:
+            c = np.zeros(op.dst.n4 * 4, np.float32)
+            c[: op.const.shape[0]] = op.const
+            op.const_member = f"c{li}"
+            blocks.append(
+                UniformBlock(f"Const{li}", len(blocks), [(op.const_member, c.reshape(-1, 4), "vector")])
+            )
+    if len(blocks) > MAX_FRAGMENT_UNIFORM_BLOCKS:
+        raise NeuralaoError(
+            f"the network needs {len(blocks)} uniform blocks; the portable limit is {MAX_FRAGMENT_UNIFORM_BLOCKS}"
+        )
+    return blocks
+
+
+def _write_mlp_fragment(table: VectorOps, blocks: list[UniformBlock], result: VecValue, d: Dialect) -> str:
+    """The writer for the fragment target: IR -> template fills."""
+    block_text = []
+    for blk in blocks:
+        members = "\n".join(fill("ubo_member", name=m[0], count=m[1].shape[0]) for m in blk.members)
+        block_text.append(
+            fill("ubo_block", layout=d.ubo_layout(blk.binding), block=blk.name, members=members)
+        )
+    body = [fill("vec_decl", name=v.ident, count=v.n4) for v in table.values]
+    lanes = ("n.x", "n.y", "n.z")
+    inp = table.input
+    for i in range(inp.n4):
+        comps = [lanes[(4 * i + c) % 3] if 4 * i + c < inp.width else "0.0" for c in range(4)]
+        body.append(
+            fill("input_tile", dst=inp.ident, index=i, c0=comps[0], c1=comps[1], c2=comps[2], c3=comps[3])
+        )
+    for op in table.ops:
+        if isinstance(op, DenseOp):
+            in4 = op.src.n4
+            store = "acc"
+            for act in op.epilogue:
+                store = act.expr(store)
+            for j0, j1, wname, bname, _ in op.chunks:
+                body.append(
+                    fill("dense_chunk", j_begin=j0, j_end=j1, bias=bname, weight=wname, src=op.src.ident, dst=op.dst.ident,
+                         row_stride=4 * in4, in4=in4, in4_2=2 * in4, in4_3=3 * in4, store=store)
+                )  # fmt: skip
+        else:
+            expr = fill("index_j", name=op.src.ident)
+            if op.other is not None:
+                expr = fill("add", a=expr, b=fill("index_j", name=op.other.ident))
+            elif op.const is not None:
+                expr = fill("add", a=expr, b=fill("index_j", name=op.const_member))
+            for act in op.epilogue:
+                expr = act.expr(expr)
+            body.append(fill("vec_map", count=op.dst.n4, dst=op.dst.ident, expr=expr))
+    return fill(
+        "mlp_fragment",
+        header=d.header(),
+        repeats=table.repeats,
+        n_blocks=len(blocks),
+        max_block_bytes=MAX_UNIFORM_BLOCK_BYTES,
+        prelude=fill("prelude"),
+        sampler=d.sampler2d("u_gbuffer", 0),
+        blocks="\n\n".join(block_text),
+        body="\n".join(body),
+        result=fill("index_0", name=result.ident),
+    )
+
+
+def _write_fullscreen_vertex(d: Dialect) -> str:
+    return fill("fullscreen_vertex", header=d.header())
+
+
+def generate_mlp_fragment(
+    model: onnx.ModelProto, dialect: str = "glsl330", fold_repeated_input: bool = True
+) -> MLPShader:
+    """Baked-MLP fragment shader from an ONNX graph (N, 3k) -> (N, m<=4), k normals repeated.
+
+    The shader reads the object-space normal (xyz) and a mask (w >= 0.5: foreground) from an
+    RGBA32F G-buffer texture ``u_gbuffer`` (unit 0), feeds the normal k times (radius zero, as in
+    Erra et al.), evaluates the network and writes its m outputs to ``o_result`` (location 0);
+    background pixels get 1. ``fold_repeated_input`` folds the k column blocks of the first layer
+    into one (out, 3) matrix (same function, k times fewer multiply-adds); False keeps the literal
+    network. Weights: std140 uniform blocks, one or more per layer, each <= 16384 bytes.
+    """
+    d = get_dialect(dialect)
+    graph = read_graph(model)
+    table = VectorOps(graph)
+    table.run()
+    out_name = graph.outputs[0]
+    if len(graph.outputs) != 1:
+        raise NeuralaoError(f"the MLP graph must have one output, found {len(graph.outputs)}")
+    result = table.env[out_name]
+    if not isinstance(result, VecValue):
+        raise NeuralaoError(f"graph output {out_name!r} is a constant, not a per-pixel value")
+    if result.width > 4:
+        raise NeuralaoError(f"output width {result.width} > 4: a fragment pass writes one vec4 per pixel")
+    input_width = table.input.width
+    folded = _fold_repeated_input(table) if fold_repeated_input else False
+    blocks = _assign_blocks(table)
+    sources = {
+        name: (_write_fullscreen_vertex(dl), _write_mlp_fragment(table, blocks, result, dl))
+        for name, dl in DIALECTS.items()
+    }
+    manifest = _mlp_manifest(table, blocks, graph, result, input_width, folded)
+    ubos = [(b.name, b.binding, b.data) for b in blocks]
+    return MLPShader(sources[d.name][1], sources[d.name][0], ubos, manifest, d.name, sources)
+
+
+def _mlp_manifest(
+    table: VectorOps,
+    blocks: list[UniformBlock],
+    graph: OnnxGraph,
+    result: VecValue,
+    input_width: int,
+    folded: bool,
+) -> dict:
+    layers = []
+    for op in table.ops:
+        if isinstance(op, DenseOp):
+            layers.append({"type": "dense", "in": int(op.weight.shape[1]), "out": int(op.weight.shape[0]),
+                           "epilogue": [a.op for a in op.epilogue], "onnx_nodes": op.nodes,
+                           "blocks": [c[4] for c in op.chunks]})  # fmt: skip
+        else:
+            layers.append({"type": "map", "width": op.dst.width, "add": "vector" if op.other else ("constant" if
+                           op.const is not None else None), "epilogue": [a.op for a in op.epilogue],
+                           "onnx_nodes": op.nodes})  # fmt: skip
+    ubo = []
+    for b in blocks:
+        offset, members = 0, []
+        for name, arr, layout in b.members:
+            members.append({"name": name, "offset": offset, "vec4s": int(arr.shape[0]), "layout": layout})
+            offset += int(arr.nbytes)
+        ubo.append({"name": b.name, "binding": b.binding, "bytes": b.nbytes, "file": f"mlp_block{b.binding}.bin",
+                    "sha256": _sha256(b.data.tobytes()), "members": members})  # fmt: skip
+    param_bytes = int(sum(op.weight.size + op.bias.size for op in table.ops if isinstance(op, DenseOp)) * 4)
+    return {
+        "kind": "mlp",
+        "format": "neuralao-glsl-fragment",
+        "format_version": FORMAT_VERSION,
+        "dialects": {name: {"vertex": v, "fragment": f} for name, (v, f) in FRAGMENT_FILES.items()},
+        "passes": [
+            {
+                "name": "mlp",
+                "type": "fullscreen_triangle",
+                "draw": "glDrawArrays(GL_TRIANGLES, 0, 3) with an empty VAO, viewport = G-buffer size",
+                "inputs": [{"texture": "gbuffer", "sampler": "u_gbuffer", "unit": 0, "fetch": "texelFetch"}],
+                "outputs": [{"texture": "ao", "location": 0}],
+                "uniform_blocks": [b["name"] for b in ubo],
+                "uniforms": {
+                    "u_loop_guard": "int, leave at its default 0 (keeps loops rolled; see the shader)"
+                },
+            }
+        ],
+        "textures": {
+            "gbuffer": {
+                "format": "RGBA32F",
+                "size": "screen",
+                "channels": "xyz object-space normal as stored (not renormalised), w mask: >= 0.5 foreground",
+            },
+            "ao": {
+                "format": "R32F (RGBA32F when output_width > 1)",
+                "size": "screen",
+                "channels": "network output (raw, not clamped); background 1.0",
+            },
+        },  # fmt: skip
+        "uniform_blocks": ubo,
+        "uniform_block_rule": f"std140, vec4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes (the portable "
+        "GL_MAX_UNIFORM_BLOCK_SIZE); glsl330/es300 bind with glUniformBlockBinding(name -> binding)",
+        "uniform_bytes": int(sum(b.nbytes for b in blocks)),
+        "parameter_bytes_fp32": param_bytes,
+        "network": {
+            "onnx_input": graph.input.name,
+            "onnx_output": graph.outputs[0],
+            "input_width": input_width,
+            "repeats": input_width // 3,
+            "fold_repeated_input": folded,
+            "output_width": result.width,
+            "layers": layers,
+        },
+        "activations": "tanh(x) = sign(x)(1-e)/(1+e), e = exp(-2|x|); sigmoid via exp(-|x|): overflow-free",
+        "es300_note": "rendering to R32F/RGBA32F on GLES needs EXT_color_buffer_float",
+        "source_model_metadata": dict(graph.metadata),
+    }
+
+
+def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    manifest = dict(manifest)
+    manifest["files"] = {name: _sha256(data) for name, data in sorted(files.items())}
+    for name, data in files.items():
+        write_bytes(out_dir / name, data)
+    write_json(out_dir / "manifest.json", manifest)  # last: its presence marks a complete export
+    return out_dir / "manifest.json"
+
+
+def write_mlp_export(shader: MLPShader, out_dir: str | Path, validate: bool = True) -> Path:
+    """Write mlp.vert/.frag (GLSL 3.30), mlp_es300.vert/.frag, mlp_430.vert/.frag, one
+    mlp_block<binding>.bin per uniform block (float32 little-endian std140) and manifest.json,
+    each atomically. ``validate`` runs glslangValidator on every shader first (skipped with a log
+    line when it is not installed). Returns the manifest path."""
+    out_dir = Path(out_dir)
+    files: dict[str, bytes] = {}
+    validate = validate and _can_validate()
+    for name, (vert, frag) in shader.sources.items():
+        vname, fname = FRAGMENT_FILES[name]
+        if validate:
+            validate_glsl(vert, "vert")
+            validate_glsl(frag, "frag")
+        files[vname], files[fname] = vert.encode(), frag.encode()
+    for b in shader.manifest["uniform_blocks"]:
+        data = next(arr for (n, _, arr) in shader.uniform_blocks if n == b["name"])
+        files[b["file"]] = np.ascontiguousarray(data, dtype="<f4").tobytes()
+    return _write_export_files(out_dir, files, shader.manifest)
+
+
+def _read_export(export_dir: str | Path) -> tuple[Path, dict]:
+    d = Path(export_dir)
+    try:
+        manifest = json.loads((d / "manifest.json").read_text())
+    except FileNotFoundError:
+        raise NeuralaoError(f"no manifest.json in {d}") from None
+    except json.JSONDecodeError:
+        raise NeuralaoError(f"{d / 'manifest.json'} is corrupt") from None
+    return d, manifest
+
+
+def _read_checked(d: Path, manifest: dict, name: str) -> bytes:
+    try:
+        data = (d / name).read_bytes()
+    except FileNotFoundError:
+        raise NeuralaoError(f"export {d} lacks {name}") from None
+    want = manifest.get("files", {}).get(name)
+    if want is not None and _sha256(data) != want:
+        raise NeuralaoError(f"{d / name} does not match its manifest hash (modified or truncated)")
+    return data
+
+
+def load_mlp_export(export_dir: str | Path, dialect: str = "glsl330") -> MLPShader:
+    """Rebuild an :class:`MLPShader` from an export folder (what an engine reads)."""
+    d, manifest = _read_export(export_dir)
+    if manifest.get("format") != "neuralao-glsl-fragment":
+        raise NeuralaoError(f"{d} is not a fragment-shader export")
+    sources = {}
+    for name, files in manifest["dialects"].items():
+        sources[name] = (_read_checked(d, manifest, files["vertex"]).decode(),
+                         _read_checked(d, manifest, files["fragment"]).decode())  # fmt: skip
+    if dialect not in sources:
+        raise NeuralaoError(f"export {d} has no {dialect!r} shaders")
+    ubos = [(b["name"], int(b["binding"]), np.frombuffer(_read_checked(d, manifest, b["file"]), dtype="<f4").copy())
+            for b in manifest["uniform_blocks"]]  # fmt: skip
+    return MLPShader(sources[dialect][1], sources[dialect][0], ubos, manifest, dialect, sources)
+
+
+# --------------------------------------------------------------------------- B. compute passes
+
+
+@dataclass(frozen=True)
+class Dim:
+    """A spatial size: ``base * scale + offset`` where base is the padded input size (Hp or Wp).
+
+    scale 0 means a static size. The lowering keeps ``base * scale`` an integer by requiring the
+    input to be padded to a multiple of every scale's denominator (``pad_multiple``).
+    """
+
+    scale: Fraction
+    offset: int
+
+    def eval(self, base: int) -> int:
+        v = base * self.scale + self.offset
+        if v.denominator != 1:
+            raise NeuralaoError(f"size {self.describe('n')} is fractional for n = {base}")
+        return int(v)
+
+    def describe(self, symbol: str) -> str:
+        if self.scale == 0:
+            return str(self.offset)
+        s = symbol if self.scale == 1 else f"{symbol}*{self.scale.numerator}/{self.scale.denominator}"
+        return s if self.offset == 0 else f"{s}{self.offset:+d}"
+
+    def to_json(self, symbol: str) -> dict:
+        return {"of": symbol, "num": self.scale.numerator, "den": self.scale.denominator, "offset": self.offset,
+                "formula": self.describe(symbol)}  # fmt: skip
+
+
+@dataclass
+class Texture:
+    """A tensor (1, channels, height, width) as a 2-D array texture, 4 channels per layer.
+
+    base "padded": sizes relative to the padded input (Hp, Wp); "raw": to the input (H, W).
+    """
+
+    ident: str
+    channels: int
+    height: Dim
+    width: Dim
+    base: str = "padded"
+    onnx_name: str = ""
+
+    @property
+    def layers(self) -> int:
+        return _ceil4(self.channels)
+
+
+@dataclass
+class ConcatValue:
+    """A channel concatenation not yet materialised (a consuming Conv reads the parts directly)."""
+
+    parts: list[Texture]
+    texture: Texture | None = None  # set once materialised (one concat pass however many readers)
+
+    @property
+    def channels(self) -> int:
+        return sum(p.channels for p in self.parts)
+
+
+@dataclass
+class Epilogue:
+    """Per-texel step after a pass's body: an activation or a per-channel affine (batch norm)."""
+
+    act: Act | None = None
+    scale: str = ""  # param array names for the affine form
+    shift: str = ""
+
+
+@dataclass
+class Pass:
+    """One compute dispatch: reads ``inputs`` (sampler2DArray src0..), writes ``output`` (image dst)."""
+
+    index: int
+    kind: (
+        str  # pad | crop | conv | pool_avg | pool_max | resize_linear | resize_nearest | concat | elementwise
+    )
+    ops: list[str]
+    inputs: list[Texture]
+    output: Texture
+    fields: dict[str, Any] = field(default_factory=dict)
+    params: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (n, 4) float32
+    epilogue: list[Epilogue] = field(default_factory=list)
+    nodes: list[str] = field(default_factory=list)
+    folded_bn: bool = False
+
+    @property
+    def name(self) -> str:
+        return f"p{self.index:02d}_{self.kind}"
+
+    def param_offsets(self) -> dict[str, int]:
+        out, off = {}, 0
+        for name, arr in self.params.items():
+            out[name] = off
+            off += int(arr.shape[0])
+        return out
+
+
+def _spatial_pairs(values: list[int] | None, default: int, what: str) -> tuple[int, int]:
+    v = [default, default] if values is None else [int(x) for x in values]
+    if len(v) != 2:
+        raise ValueError(f"{what} must have 2 entries (2-D images), got {v}")
+    return v[0], v[1]
+
+
+class ImageOps(OpTable):
+    """ONNX -> compute passes over (1, C, H, W) images (GLSL 4.3 compute, texture storage)."""
+
+    OPS = ("Conv", "BatchNormalization", "Relu", "LeakyRelu", "Sigmoid", "Tanh", "Clip", "AveragePool",
+           "MaxPool", "Resize", "Concat", "Identity", "Constant")  # fmt: skip
+    target = "compute (image)"
+
+    def __init__(self, graph: OnnxGraph, metadata_multiple: int | None):
+        super().__init__(graph)
+        self.passes: list[Pass] = []
+        self.textures: list[Texture] = []
+        self.producer: dict[str, Pass] = {}
+        self.denominators: set[int] = {1}
+        dims = _dims(graph.input)
+        name = graph.input.name
+        if len(dims) != 4:
+            raise NeuralaoError(
+                f"image input {name!r} must have rank 4 (N, C, H, W), got shape {dims or 'unknown'}"
+            )
+        n, c, h, w = dims
+        if isinstance(n, int) and n != 1:
+            raise NeuralaoError(f"image input {name!r} has batch {n}; the compute target runs batch 1")
+        if not isinstance(c, int) or c <= 0:
+            raise NeuralaoError(f"image input {name!r} needs a static channel count, got {c!r}")
+        if _ceil4(c) > MAX_ARRAY_LAYERS:
+            raise NeuralaoError(f"image input {name!r}: {c} channels exceed {4 * MAX_ARRAY_LAYERS}")
+        self.static = isinstance(h, int) and isinstance(w, int)
+        if not self.static and (isinstance(h, int) or isinstance(w, int)):
+            raise NeuralaoError(
+                f"image input {name!r}: H and W must be both static or both symbolic, got {h!r}, {w!r}"
+            )
+        if self.static:
+            for v in (h, w):
+                if v <= 0 or v > MAX_TEXTURE_SIZE:
+                    raise NeuralaoError(f"image input {name!r}: size {v} outside 1..{MAX_TEXTURE_SIZE}")
+            hd, wd = Dim(Fraction(0), h), Dim(Fraction(0), w)
+        else:
+            hd = wd = Dim(Fraction(1), 0)
+        self.input_dims = (h, w)
+        self.label = f"graph input {name!r}"
+        self.metadata_multiple = metadata_multiple
+        raw = self.new_texture(c, hd, wd, base="raw", onnx_name=name)
+        padded = self.new_texture(c, hd, wd, onnx_name=name)
+        self.add_pass(Pass(0, "pad", ["Pad"], [raw], padded))
+        self.env[name] = padded
+        self.input_texture, self.padded_texture = raw, padded
+
+    # -- IR helpers
+    def new_texture(
+        self, channels: int, h: Dim, w: Dim, base: str = "padded", onnx_name: str = ""
+    ) -> Texture:
+        if _ceil4(channels) > MAX_ARRAY_LAYERS:
+            raise self.fail(f"{channels} channels exceed the texture-array limit {4 * MAX_ARRAY_LAYERS}")
+        for d in (h, w):
+            if d.scale == 0 and not 1 <= d.offset <= MAX_TEXTURE_SIZE:
+                raise self.fail(f"output size {d.offset} outside 1..{MAX_TEXTURE_SIZE}")
+            if d.scale != 0:
+                self.denominators.add(d.scale.denominator)
+                if d.scale > 64:
+                    raise self.fail(f"output size {d.describe('n')} grows beyond 64x the input")
+        t = Texture(f"t{len(self.textures)}", int(channels), h, w, base, onnx_name)
+        self.textures.append(t)
+        return t
+
+    def add_pass(self, p: Pass) -> Pass:
+        p.index = len(self.passes)
+        self.passes.append(p)
+        self.producer[p.output.ident] = p
+        return p
+
+    def image(self, value: Any, what: str) -> Texture:
+        """A real texture for ``value`` (materialising a pending concatenation)."""
+        if isinstance(value, ConcatValue):
+            return self.materialise(value)
+        if not isinstance(value, Texture):
+            raise self.fail(f"input {what} must be an image tensor, not a constant")
+        return value
+
+    def materialise(self, value: ConcatValue) -> Texture:
+        if value.texture is None:
+            first = value.parts[0]
+            value.texture = self.new_texture(value.channels, first.height, first.width)
+            self.add_pass(Pass(0, "concat", ["Concat"], list(value.parts), value.texture, nodes=[self.label]))
+        return value.texture
+
+    def fusible_pass(self, index: int) -> Pass | None:
+        assert self.node is not None
+        value = self.env.get(self.node.input[index])
+        p = self.producer.get(value.ident) if isinstance(value, Texture) else None
+        if p is None or p.kind in ("pad", "crop") or not self.fusible(index):
+            return None
+        return p
+
+    def output_dim(self, d: Dim, kernel: int, stride: int, dilation: int, pad_total: int) -> Dim:
+        """floor((n + pads - dilation (k - 1) - 1) / stride) + 1, kept symbolic (exact when
+        stride divides Hp * scale, which the pad multiple guarantees)."""
+        c = pad_total - dilation * (kernel - 1) - 1
+        if d.scale == 0:
+            n = (d.offset + c) // stride + 1
+            if n < 1:
+                raise self.fail(f"window larger than the padded input ({d.offset})")
+            return Dim(Fraction(0), n)
+        return Dim(d.scale / stride, (d.offset + c) // stride + 1)
+
+    def _window(self, kernel_shape, strides, dilations, pads, auto_pad) -> tuple:
+        kh, kw = _spatial_pairs(kernel_shape, 1, "kernel_shape")
+        sy, sx = _spatial_pairs(strides, 1, "strides")
+        dy, dx = _spatial_pairs(dilations, 1, "dilations")
+        if min(kh, kw, sy, sx, dy, dx) < 1:
+            raise self.fail("kernel_shape, strides and dilations must be positive")
+        if max(kh, kw) > MAX_KERNEL:
+            raise self.fail(f"kernel {kh}x{kw} exceeds {MAX_KERNEL}x{MAX_KERNEL}")
+        if auto_pad in ("NOTSET", ""):
+            p = [0, 0, 0, 0] if pads is None else [int(v) for v in pads]
+            if len(p) != 4 or min(p) < 0:
+                raise self.fail(f"pads must be 4 non-negative values, got {p}")
+        elif auto_pad == "VALID":
+            p = [0, 0, 0, 0]
+        elif auto_pad in ("SAME_UPPER", "SAME_LOWER") and sy == sx == 1:
+            th, tw = dy * (kh - 1), dx * (kw - 1)
+            if auto_pad == "SAME_UPPER":
+                p = [th // 2, tw // 2, th - th // 2, tw - tw // 2]
+            else:
+                p = [th - th // 2, tw - tw // 2, th // 2, tw // 2]
+        else:
+            raise self.unsupported("auto_pad", auto_pad)
+        return (kh, kw), (sy, sx), (dy, dx), p  # p: top, left, bottom, right
+
+    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str) -> Texture:
+        x = self.image(X, "X")
+        p = self.fusible_pass(0) if isinstance(X, Texture) else None
+        if p is None:
+            out = self.new_texture(x.channels, x.height, x.width)
+            p = self.add_pass(Pass(0, "elementwise", [], [x], out))
+        p.params.update(params)
+        p.epilogue.append(epi)
+        p.ops.append(op)
+        p.nodes.append(self.label)
+        return p.output
+
+    def _activation(self, X: Any, act: Act) -> Texture:
+        return self._elementwise(X, Epilogue(act=act), {}, act.op)
+
+    # -- handlers
+    def Conv(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None, pads=None,
+             strides=None) -> Texture:  # fmt: skip
+        parts = list(X.parts) if isinstance(X, ConcatValue) else [self.image(X, "X")]
+        w = self.const(W, "W").astype(np.float64)
+        if w.ndim != 4:
+            raise self.fail(f"W must be (M, C, kH, kW), got shape {list(w.shape)}")
+        if group != 1:
+            raise self.unsupported("group", group)
+        if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
+            raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
+        (kh, kw), (sy, sx), (dy, dx), p = self._window(list(w.shape[2:]), strides, dilations, pads, auto_pad)
+        cin = sum(t.channels for t in parts)
+        if w.shape[1] != cin:
+            raise self.fail(f"W takes {w.shape[1]} input channels, the input has {cin}")
+        cout = w.shape[0]
+        bias = np.zeros(cout) if B is None else self.const(B, "B").astype(np.float64).reshape(-1)
+        if bias.shape != (cout,):
+            raise self.fail(f"B must have {cout} entries, got {bias.shape}")
+        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(bias))):
+            raise self.fail("weights contain non-finite values")
+        h = self.output_dim(parts[0].height, kh, sy, dy, p[0] + p[2])
+        wd = self.output_dim(parts[0].width, kw, sx, dx, p[1] + p[3])
+        out = self.new_texture(cout, h, wd)
+        layer_offsets, off = [], 0
+        for t in parts:
+            if t.height != parts[0].height or t.width != parts[0].width:
+                raise self.fail("concatenated inputs differ in size")
+            layer_offsets.append(off)
+            off += t.layers
+        conv = Pass(0, "conv", ["Conv"], parts, out, nodes=[self.label])
+        conv.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p,
+                       "layer_offsets": layer_offsets, "in_layers": off}  # fmt: skip
+        conv.fields["weight64"], conv.fields["bias64"] = w, bias  # packed by _pack_conv (after BN folding)
+        if isinstance(X, ConcatValue):
+            conv.ops.insert(0, "Concat")
+        return self.add_pass(conv).output
+
+    def BatchNormalization(self, X, scale, B, input_mean, input_var, *, epsilon=1e-5, momentum=0.9,
+                           training_mode=0, spatial=1) -> Texture:  # fmt: skip
+        if training_mode:
+            raise self.unsupported("training_mode", training_mode)
+        if spatial != 1:
+            raise self.unsupported("spatial", spatial)
+        x = self.image(X, "X")
+        arrs = [self.const(v, n).astype(np.float64).reshape(-1) for v, n in
+                ((scale, "scale"), (B, "B"), (input_mean, "input_mean"), (input_var, "input_var"))]  # fmt: skip
+        if any(a.shape != (x.channels,) for a in arrs):
+            raise self.fail(f"batch-norm parameters must have {x.channels} entries")
+        gamma, beta, mean, var = arrs
+        s = gamma / np.sqrt(var + float(epsilon))
+        shift = beta - mean * s
+        if not (np.all(np.isfinite(s)) and np.all(np.isfinite(shift))):
+            raise self.fail("batch-norm parameters give non-finite scale/shift")
+        p = self.fusible_pass(0) if isinstance(X, Texture) else None
+        if p is not None and p.kind == "conv" and not p.epilogue:
+            # Fold into the conv: W' = W * s (per output channel), b' = b * s + shift.
+            p.fields["weight64"] = p.fields["weight64"] * s[:, None, None, None]
+            p.fields["bias64"] = p.fields["bias64"] * s + shift
+            p.ops.append("BatchNormalization")
+            p.nodes.append(self.label)
+            p.folded_bn = True
+            return p.output
+        k = self._affine_count = getattr(self, "_affine_count", 0) + 1
+        names = (f"bn_scale{k}", f"bn_shift{k}")
+        params = {names[0]: _vec4_rows(s, x.layers), names[1]: _vec4_rows(shift, x.layers)}
+        return self._elementwise(X, Epilogue(scale=names[0], shift=names[1]), params, "BatchNormalization")
+
+    def Relu(self, X) -> Texture:
+        return self._activation(X, Act("Relu"))
+
+    def LeakyRelu(self, X, *, alpha=0.01) -> Texture:
+        return self._activation(X, Act("LeakyRelu", {"alpha": float(alpha)}))
+
+    def Sigmoid(self, X) -> Texture:
+        return self._activation(X, Act("Sigmoid"))
+
+    def Tanh(self, X) -> Texture:
+        return self._activation(X, Act("Tanh"))
+
+    def Clip(self, input, min=None, max=None) -> Texture:  # noqa: A002
+        lo = None if min is None else self.const(min, "min")
+        hi = None if max is None else self.const(max, "max")
+        return self._activation(input, Act("Clip", _clip_bounds(lo, hi)))
+
+    def Identity(self, input) -> Any:  # noqa: A002
+        return input
+
+    def _pool(self, kind, X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode) -> Pass:
+        x = self.image(X, "X")
+        (kh, kw), (sy, sx), (dy, dx), p = self._window(kernel_shape, strides, dilations, pads, auto_pad)
+        if (dy, dx) != (1, 1) and kind == "pool_avg":
+            raise self.unsupported("dilations", dilations)
+        if ceil_mode != 0:
+            raise self.unsupported("ceil_mode", ceil_mode)  # clipped last windows: not replicated
+        h = self.output_dim(x.height, kh, sy, dy, p[0] + p[2])
+        w = self.output_dim(x.width, kw, sx, dx, p[1] + p[3])
+        out = self.new_texture(x.channels, h, w)
+        ps = Pass(0, kind, [self.node.op_type], [x], out, nodes=[self.label])
+        ps.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p}
+        return self.add_pass(ps)
+
+    def AveragePool(self, X, *, auto_pad="NOTSET", ceil_mode=0, count_include_pad=0, dilations=None, kernel_shape,
+                    pads=None, strides=None) -> Texture:  # fmt: skip
+        if count_include_pad not in (0, 1):
+            raise self.unsupported("count_include_pad", count_include_pad)
+        ps = self._pool("pool_avg", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode)
+        kh, kw = ps.fields["kernel"]
+        ps.fields["divisor"] = float(kh * kw) if count_include_pad else None
+        return ps.output
+
+    def MaxPool(self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, pads=None,
+                storage_order=0, strides=None) -> Texture:  # fmt: skip
+        if storage_order != 0:
+            raise self.unsupported("storage_order", storage_order)
+        return self._pool("pool_max", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode).output
+
+    RESIZE_COORDS = (
+        "half_pixel",
+        "pytorch_half_pixel",
+        "align_corners",
+        "asymmetric",
+        "half_pixel_symmetric",
+    )
+    NEAREST_MODES = ("round_prefer_floor", "round_prefer_ceil", "floor", "ceil")
+
+    def Resize(self, X, roi=None, scales=None, sizes=None, *, antialias=0, axes=None,
+               coordinate_transformation_mode="half_pixel", cubic_coeff_a=-0.75, exclude_outside=0,
+               extrapolation_value=0.0, keep_aspect_ratio_policy="stretch", mode="nearest",
+               nearest_mode="round_prefer_floor") -> Texture:  # fmt: skip
+        x = self.image(X, "X")
+        if mode not in ("nearest", "linear"):
+            raise self.unsupported("mode", mode)
+        if coordinate_transformation_mode not in self.RESIZE_COORDS:
+            raise self.unsupported("coordinate_transformation_mode", coordinate_transformation_mode)
+        if mode == "nearest" and nearest_mode not in self.NEAREST_MODES:
+            raise self.unsupported("nearest_mode", nearest_mode)
+        if antialias:
+            raise self.unsupported("antialias", antialias)
+        if exclude_outside:
+            raise self.unsupported("exclude_outside", exclude_outside)
+        if keep_aspect_ratio_policy != "stretch":
+            raise self.unsupported("keep_aspect_ratio_policy", keep_aspect_ratio_policy)
+        ax = [0, 1, 2, 3] if axes is None else [int(a) % 4 for a in axes]
+        full_scales = [1.0, 1.0, None, None]
+        full_sizes: list[int | None] = [None, None, None, None]
+        sc = None if scales is None else self.const(scales, "scales").astype(np.float32).reshape(-1)
+        sz = None if sizes is None else self.const(sizes, "sizes").astype(np.int64).reshape(-1)
+        if sc is not None and sc.size == 0:
+            sc = None
+        if sz is not None and sz.size == 0:
+            sz = None
+        if (sc is None) == (sz is None):
+            raise self.fail("exactly one of scales and sizes must be given as a constant")
+        vals = sc if sc is not None else sz
+        if vals.size != len(ax):
+            raise self.fail(f"{vals.size} scales/sizes for {len(ax)} axes")
+        for a, v in zip(ax, vals, strict=True):
+            if sc is not None:
+                full_scales[a] = float(v)
+            else:
+                full_sizes[a] = int(v)
+        if sc is not None:
+            if full_scales[0] != 1.0 or full_scales[1] != 1.0:
+                raise self.fail("only the spatial axes (H, W) may be resized")
+            for a in (2, 3):
+                if full_scales[a] is None:
+                    full_scales[a] = 1.0
+                if not full_scales[a] > 0:
+                    raise self.fail(f"scale {full_scales[a]} must be positive")
+        else:
+            if (full_sizes[0] not in (None, 1)) or (full_sizes[1] not in (None, x.channels)):
+                raise self.fail("only the spatial axes (H, W) may be resized")
+        dims = []
+        scale_exprs = []
+        for a, d in ((2, x.height), (3, x.width)):
+            if sc is not None:
+                s = np.float32(full_scales[a])
+                if d.scale == 0:
+                    dims.append(Dim(Fraction(0), int(np.float32(d.offset) * s)))
+                else:
+                    f = Fraction(float(s))
+                    if f.denominator > 64 or (d.offset * f).denominator != 1:
+                        raise self.fail(
+                            f"scale {float(s)} is not exact on a dynamic size; give sizes or a 1/2^k scale"
+                        )
+                    dims.append(Dim(d.scale * f, int(d.offset * f)))
+                scale_exprs.append(("literal", glsl_float(s)))
+            else:
+                n = full_sizes[a]
+                if n is None:
+                    dims.append(d)
+                else:
+                    if n < 1:
+                        raise self.fail(f"size {n} must be positive")
+                    dims.append(Dim(Fraction(0), int(n)))
+                scale_exprs.append(("ratio", ""))
+        out = self.new_texture(x.channels, dims[0], dims[1])
+        kind = "resize_linear" if mode == "linear" else "resize_nearest"
+        ps = Pass(0, kind, ["Resize"], [x], out, nodes=[self.label])
+        ps.fields = {
+            "coord": coordinate_transformation_mode,
+            "nearest_mode": nearest_mode,
+            "scales": scale_exprs,
+        }
+        return self.add_pass(ps).output
+
+    def Concat(self, *inputs, axis) -> ConcatValue:
+        if int(axis) not in (1, -3):
+            raise self.unsupported("axis", axis)
+        parts: list[Texture] = []
+        for k, v in enumerate(inputs):
+            if isinstance(v, ConcatValue):
+                parts.extend(v.parts)
+            else:
+                parts.append(self.image(v, f"#{k}"))
+        if not parts:
+            raise self.fail("Concat without inputs")
+        if any(t.height != parts[0].height or t.width != parts[0].width for t in parts):
+            raise self.fail("Concat inputs differ in spatial size")
+        return ConcatValue(parts)
+
+
+def _vec4_rows(v: np.ndarray, n4: int) -> np.ndarray:
+    out = np.zeros(n4 * 4, np.float32)
+    out[: v.shape[0]] = v
+    return out.reshape(n4, 4)
+
+
+def _pack_conv(p: Pass) -> None:
+    """Conv weights as mat4 taps: element (r, c) of tap [oz, ky, kx, l] = W[4oz+r, channel(l, c), ky, kx]."""
+    w64, b64 = p.fields.pop("weight64"), p.fields.pop("bias64")
+    cout, _, kh, kw = w64.shape
+    ol, il = p.output.layers, p.fields["in_layers"]
+    packed = np.zeros((ol * 4, il * 4, kh, kw), np.float64)  # (out padded, in padded by part)
+    c0 = 0
+    for t, loff in zip(p.inputs, p.fields["layer_offsets"], strict=True):
+        packed[:cout, 4 * loff : 4 * loff + t.channels] = w64[:, c0 : c0 + t.channels]
+        c0 += t.channels
+    # (oz, r, l, c, ky, kx) -> (oz, ky, kx, l, c, r): column c (input lane) of 4 rows r (output lanes)
+    taps = packed.reshape(ol, 4, il, 4, kh, kw).transpose(0, 4, 5, 2, 3, 1)
+    p.params = {"weight": taps.reshape(-1, 4).astype(np.float32), "bias": _vec4_rows(b64, ol), **p.params}
+
+
+# ----------------------------------------------------------------------- compute writer
+
+
+def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) -> str:
+    d = DIALECTS["glsl430"]
+    fmt = "rgba16f" if precision == "fp16" and p.kind != "crop" else "rgba32f"
+    decls = [fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
+    decls.append(fill("image_array_decl", binding=0, format=fmt))
+    if p.params:
+        decls.append(fill("params_decl", binding=0))
+    if p.kind in ("pad", "crop"):
+        decls.append(fill("uniform_int_decl", location=0, name="u_flip_y"))
+    offs = p.param_offsets()
+    f = p.fields
+    if p.kind == "conv":
+        (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
+        sizes = "\n".join(fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
+        loops = "\n".join(
+            fill(
+                "conv_input_loop",
+                size=f"size{i}",
+                layers=t.layers,
+                src=f"src{i}",
+                layer_offset=f["layer_offsets"][i],
+            )
+            for i, t in enumerate(p.inputs)
+        )
+        body = fill("conv_body", sizes=sizes, bias_offset=offs["bias"], kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx,
+                    pad_top=pads[0], pad_left=pads[1], weight_offset=offs["weight"], tap_stride=4 * f["in_layers"],
+                    input_loops=loops)  # fmt: skip
+    elif p.kind in ("pool_avg", "pool_max"):
+        (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
+        if p.kind == "pool_max":
+            init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+        else:
+            init, acc = fill("pool_init_avg"), fill("pool_acc_avg")
+            div = f["divisor"]
+            finish = (
+                fill("pool_finish_count")
+                if div is None
+                else fill("pool_finish_fixed", divisor=glsl_float(div))
+            )
+        body = fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
+                    pad_left=pads[1], accumulate=acc, finish=finish)  # fmt: skip
+    elif p.kind in ("resize_linear", "resize_nearest"):
+        coords = []
+        for axis, (kind, value) in zip("yx", f["scales"], strict=True):
+            comp = "y" if axis == "y" else "x"
+            len_in = fill("float_of", v=f"in_size.{comp}")
+            len_out = fill("float_of", v=f"out_size.{comp}")
+            scale = fill("scale_literal", value=value) if kind == "literal" else fill("scale_ratio", len_out=len_out,
+                                                                                       len_in=len_in)  # fmt: skip
+            fields = {
+                "x": fill("float_of", v=f"gid.{comp}"),
+                "scale": scale,
+                "len_in": len_in,
+                "len_out": len_out,
+            }
+            tpl = f"coord_{f['coord']}"
+            wanted = {"coord_half_pixel": ("x", "scale"), "coord_asymmetric": ("x", "scale"),
+                      "coord_pytorch_half_pixel": ("x", "scale", "len_out"),
+                      "coord_align_corners": ("x", "len_in", "len_out"),
+                      "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out")}[tpl]  # fmt: skip
+            coords.append(fill(tpl, **{k: fields[k] for k in wanted}))
+        if p.kind == "resize_linear":
+            body = fill("resize_linear_body", coord_y=coords[0], coord_x=coords[1])
+        else:
+            rt = f"round_{f['nearest_mode']}"
+            body = fill("resize_nearest_body", coord_y=coords[0], coord_x=coords[1], round_y=fill(rt, v="fy"),
+                        round_x=fill(rt, v="fx"))  # fmt: skip
+    elif p.kind == "concat":
+        branches, begin = [], 0
+        for i, t in enumerate(p.inputs):
+            branches.append(fill("concat_branch", begin=begin, end=begin + t.channels, src=f"src{i}"))
+            begin += t.channels
+        body = fill("concat_body", branches="\n".join(branches))
+    elif p.kind == "elementwise":
+        body = fill("elementwise_body")
+    elif p.kind == "pad":
+        body = fill("pad_reflect_body")
+    elif p.kind == "crop":
+        body = fill("crop_body")
+    else:  # pragma: no cover - kinds are created above only
+        raise AssertionError(p.kind)
+    epi = []
+    for e in p.epilogue:
+        if e.act is not None:
+            epi.append(fill("epilogue_act", expr=e.act.expr("r")))
+        else:
+            epi.append(fill("epilogue_affine", scale_offset=offs[e.scale], shift_offset=offs[e.shift]))
+    return fill(
+        "compute_pass",
+        header=d.header(),
+        pass_index=p.index,
+        summary=" + ".join(p.ops),
+        local_x=local_size[0],
+        local_y=local_size[1],
+        prelude=fill("prelude"),
+        declarations="\n".join(decls),
+        out_layers=p.output.layers,
+        body=body,
+        epilogue="\n".join(epi) if epi else fill("epilogue_none"),
+    )
+
+
+@dataclass
+class ComputeProgram:
+    """Generated compute passes for an image network.
+
+    sources : {shader file name: GLSL 4.30 compute source}, in pass order; weights : the bytes of
+    weights.bin (float32 little-endian, each pass's range aligned to 256 bytes); manifest : dict
+    (passes, textures, weights, pad/crop; see :func:`write_compute_export`).
+    """
+
+    sources: dict[str, str]
+    weights: bytes
+    manifest: dict
+
+    @property
+    def pad_multiple(self) -> int:
+        return int(self.manifest["pad"]["multiple"])
+
+    @property
+    def precision(self) -> str:
+        return str(self.manifest["precision"])
+
+
+def _pad_multiple(table: ImageOps) -> int:
+    required = math.lcm(*table.denominators)
+    meta = table.metadata_multiple
+    if table.static:
+        return 1
+    if meta is None:
+        return required
+    if meta % required:
+        raise NeuralaoError(
+            f"metadata pad_multiple {meta} is not a multiple of {required}, which the graph needs"
+        )
+    return meta
+
+
+def generate_compute(
+    model: onnx.ModelProto, precision: str = "fp32", kind: str = "unet", local_size: tuple[int, int] = (8, 8)
+) -> ComputeProgram:
+    """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
+
+    Storage: every tensor is a 2-D array texture, 4 channels per texel (channel c in layer c // 4,
+    lane c % 4), RGBA32F (``precision="fp32"``) or RGBA16F (``"fp16"``: storage only, arithmetic
+    stays fp32); the raw input and the cropped outputs are RGBA32F. Fusions: Conv + bias + batch
+    norm (folded into the weights) + activations; a Concat feeding only Convs is read in place by
+    each of them; activations / batch norm after any other pass join its epilogue.
+    H and W may be symbolic: sizes are ``Hp * num/den + offset`` of the padded input, which is the
+    input reflect-padded (bottom/right) to ``pad_multiple`` (metadata "pad_multiple", checked
+    against what the graph needs) by the generated pad pass; crop passes cut outputs back to H x W.
+    """
+    if precision not in ("fp32", "fp16"):
+        raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
+    graph = read_graph(model)
+    meta = graph.metadata.get("pad_multiple")
+    try:
+        meta_multiple = None if meta is None else int(json.loads(meta))
+    except (ValueError, TypeError):
+        raise NeuralaoError(f"metadata pad_multiple {meta!r} is not an integer") from None
+    if meta_multiple is not None and meta_multiple < 1:
+        raise NeuralaoError(f"metadata pad_multiple {meta_multiple} must be positive")
+    table = ImageOps(graph, meta_multiple)
+    table.run()
+    outputs = []
+    for name in graph.outputs:
+        v = table.env[name]
+        if isinstance(v, ConcatValue):
+            table.label = f"graph output {name!r}"
+            v = table.materialise(v)
+        if not isinstance(v, Texture):
+            raise NeuralaoError(f"graph output {name!r} is a constant, not an image")
+        # Same size rule as the padded tensor, but of the raw input: H * num/den + offset (exact
+        # for outputs at input resolution; static outputs keep their size).
+        crop = table.new_texture(v.channels, v.height, v.width, base="raw", onnx_name=name)
+        table.add_pass(Pass(0, "crop", ["Crop"], [v], crop))
+        outputs.append((name, v, crop))
+    for p in table.passes:
+        if p.kind == "conv":
+            _pack_conv(p)
+    multiple = _pad_multiple(table)
+    # Parameters: one float32 blob, each pass's range aligned for glBindBufferRange.
+    blob = bytearray()
+    ranges: dict[int, tuple[int, int]] = {}
+    for p in table.passes:
+        if not p.params:
+            continue
+        blob.extend(b"\0" * ((-len(blob)) % PARAM_ALIGN))
+        data = np.concatenate([a.reshape(-1) for a in p.params.values()]).astype("<f4").tobytes()
+        ranges[p.index] = (len(blob), len(data))
+        blob.extend(data)
+    if len(blob) > MAX_PARAM_BYTES:
+        raise NeuralaoError(f"parameters need {len(blob)} bytes, over the SSBO limit {MAX_PARAM_BYTES}")
+    sources = {f"{p.name}.comp": _write_compute_pass(p, precision, local_size) for p in table.passes}
+    manifest = _compute_manifest(
+        table, graph, outputs, ranges, bytes(blob), precision, kind, multiple, local_size
+    )
+    return ComputeProgram(sources, bytes(blob), manifest)
+
+
+def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, multiple, local_size) -> dict:
+    internal = "RGBA16F" if precision == "fp16" else "RGBA32F"
+    textures = {}
+    for t in table.textures:
+        raw = t.base == "raw"
+        fmt = "RGBA32F" if raw else internal
+        textures[t.ident] = {"channels": t.channels, "layers": t.layers, "format": fmt,
+                             "height": t.height.to_json("H" if raw else "Hp"),
+                             "width": t.width.to_json("W" if raw else "Wp"),
+                             "onnx_tensor": t.onnx_name}  # fmt: skip
+        log2 = math.log2(t.height.scale) if t.height.scale > 0 else None
+        if log2 is not None and log2 == int(log2) and t.height.scale == t.width.scale:
+            textures[t.ident]["scale_log2"] = int(log2)
+    passes = []
+    for p in table.passes:
+        offs = p.param_offsets()
+        entry = {
+            "name": p.name,
+            "shader": f"{p.name}.comp",
+            "kind": p.kind,
+            "ops": p.ops,
+            "onnx_nodes": p.nodes,
+            "inputs": [{"texture": t.ident, "binding": i, "as": "sampler2DArray (texelFetch)"} for i, t in
+                       enumerate(p.inputs)],
+            "output": {"texture": p.output.ident, "binding": 0, "as": "image2DArray writeonly, layered",
+                       "format": textures[p.output.ident]["format"].lower()},
+            "local_size": [local_size[0], local_size[1], 1],
+            "dispatch": {"size_of": p.output.ident,
+                         "groups": [f"ceil(width({p.output.ident}) / {local_size[0]})",
+                                    f"ceil(height({p.output.ident}) / {local_size[1]})",
+                                    f"layers({p.output.ident}) = {p.output.layers}"]},
+        }  # fmt: skip
+        if p.index in ranges:
+            off, size = ranges[p.index]
+            entry["params"] = {"buffer": "weights.bin", "binding": 0, "offset": off, "bytes": size,
+                               "as": "std430 readonly buffer { vec4 prm[]; } via glBindBufferRange",
+                               "arrays": {n: {"offset_vec4": offs[n], "vec4s": int(a.shape[0])} for n, a in
+                                          p.params.items()}}  # fmt: skip
+            if p.kind == "conv":
+                entry["params"]["layout"] = (
+                    "weight: mat4 per (out_layer, ky, kx, in_layer) = 4 vec4 columns; column c = input lane, "
+                    "row r = output lane: W[4*out_layer + r, channel(in_layer, c), ky, kx]; bias: vec4 per out_layer"
+                )
+                entry["conv"] = {k: list(v) if isinstance(v, tuple) else v for k, v in p.fields.items()}
+                entry["folded_batch_norm"] = p.folded_bn
+        if p.kind in ("pad", "crop"):
+            entry["uniforms"] = {"u_flip_y": {"location": 0, "value": "0: texture row 0 = tensor row 0 (top); "
+                                              "1: the texture is a bottom-up GL image (row 0 = bottom)"}}  # fmt: skip
+        if p.kind.startswith("resize"):
+            entry["resize"] = {"coordinate_transformation_mode": p.fields["coord"],
+                               "nearest_mode": p.fields["nearest_mode"]}  # fmt: skip
+        passes.append(entry)
+    return {
+        "kind": kind,
+        "format": "neuralao-glsl-compute",
+        "format_version": FORMAT_VERSION,
+        "glsl": "430 core compute",
+        "precision": precision,
+        "storage": {
+            "type": "GL_TEXTURE_2D_ARRAY, 4 channels per texel",
+            "internal_format": internal,
+            "io_format": "RGBA32F",
+            "channel": "layer = c // 4, lane = c % 4 (padding lanes hold finite junk, never read)",
+            "rows": "texel (x, y) = tensor[..., y, x]: row 0 is the tensor's first (top) row",
+            "arithmetic": "fp32",
+        },
+        "input": {"onnx_name": graph.input.name, "texture": table.input_texture.ident,
+                  "channels": table.input_texture.channels, "declared_shape": [str(v) for v in _dims(graph.input)]},
+        "outputs": [{"onnx_name": n, "texture": crop.ident, "channels": crop.channels} for n, _, crop in outputs],
+        "pad": {"multiple": multiple, "mode": "reflect", "side": "bottom,right", "pass": table.passes[0].name,
+                "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",
+                "crop_passes": [p.name for p in table.passes if p.kind == "crop"]},
+        "static_input_size": list(table.input_dims) if table.static else None,
+        "textures": textures,
+        "weights": {"file": "weights.bin", "bytes": len(blob), "sha256": _sha256(blob),
+                    "dtype": "float32 little-endian", "range_alignment": PARAM_ALIGN},
+        "passes": passes,
+        "barrier": "glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT) after each pass",
+        "source_model_metadata": dict(graph.metadata),
+    }  # fmt: skip
+
+
+def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate: bool = True) -> Path:
+    """Write every pass as <name>.comp, weights.bin and manifest.json (atomically); returns the manifest path."""
+    files: dict[str, bytes] = {}
+    validate = validate and _can_validate()
+    for name, src in program.sources.items():
+        if validate:
+            validate_glsl(src, "comp")
+        files[name] = src.encode()
+    files["weights.bin"] = program.weights
+    return _write_export_files(Path(out_dir), files, program.manifest)
+
+
+def load_compute_export(export_dir: str | Path) -> ComputeProgram:
+    """Rebuild a :class:`ComputeProgram` from an export folder (manifest + shaders + weights.bin)."""
+    d, manifest = _read_export(export_dir)
+    if manifest.get("format") != "neuralao-glsl-compute":
+        raise NeuralaoError(f"{d} is not a compute-shader export")
+    sources = {p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in manifest["passes"]}
+    weights = _read_checked(d, manifest, manifest["weights"]["file"])
+    return ComputeProgram(sources, weights, manifest)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def validate_glsl(source: str, stage: str) -> None:
+    """Compile ``source`` with glslangValidator (stage: vert | frag | comp); NeuralaoError on failure.
+
+    Raises NeuralaoError when glslangValidator is not installed (callers that treat validation as
+    optional check :func:`glslang_available` first).
+    """
+    exe = shutil.which("glslangValidator")
+    if exe is None:
+        raise NeuralaoError("glslangValidator is not installed (apt-get install glslang-tools)")
+    if stage not in ("vert", "frag", "comp"):
+        raise NeuralaoError(f"unknown shader stage {stage!r}")
+    with tempfile.TemporaryDirectory(prefix="nao_glsl_") as tmp:
+        path = Path(tmp) / f"shader.{stage}"
+        path.write_text(source)
+        r = subprocess.run([exe, str(path)], capture_output=True, text=True, timeout=60)
+    if r.returncode != 0:
+        lines = [ln for ln in (r.stdout + r.stderr).splitlines() if "ERROR" in ln] or [r.stdout.strip()]
+        raise NeuralaoError(f"glslangValidator rejected the {stage} shader: {lines[0]}")
+
+
+def glslang_available() -> bool:
+    return shutil.which("glslangValidator") is not None
+
+
+def _can_validate() -> bool:
+    if not glslang_available():
+        log.warning("glslangValidator not found: exporting shaders without validating them")
+        return False
+    return True

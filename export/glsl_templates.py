@@ -1,0 +1,333 @@
+"""Every piece of GLSL text neuralao emits, as named templates, and the one function that fills them.
+
+hls4ml habit: templates here, structure in ``export/glsl.py`` (the writer), nothing else builds
+shader text. Placeholders are ``${name}`` (:class:`string.Template`; ``$`` never occurs in GLSL, so
+braces need no escaping). :func:`fill` is strict: a missing or an unexpected field is an error, so a
+template and its caller cannot drift apart silently.
+
+Values substituted are generated identifiers (``t3``, ``w0_1``, ``src0``), integers and float
+literals produced by the writer; ONNX node and tensor names never reach a template.
+
+Layout conventions the templates rely on (stated again in every manifest):
+
+* fragment MLP: activations are local ``vec4`` arrays, lane ``i % 4`` of element ``i // 4``;
+  dense weights are ``vec4`` rows of the (out, in) matrix, input padded to a multiple of 4.
+* compute passes: tensors are ``sampler2DArray`` / ``image2DArray`` textures, channel ``c`` in
+  layer ``c // 4``, lane ``c % 4``; texel (x, y) holds tensor element [.., y, x] (row 0 = the
+  tensor's first row). Parameters are one std430 ``vec4 prm[]`` buffer per pass; a Conv tap is
+  a ``mat4`` built from 4 consecutive vec4s, column = input lane, row = output lane.
+"""
+
+from __future__ import annotations
+
+from string import Template
+
+_T: dict[str, str] = {}
+
+# --------------------------------------------------------------------------- common
+
+_T["header"] = """#version ${version}
+${precision}"""
+
+# ES: float, int and sampler default precisions must be raised (sampler2D defaults to lowp in a
+# fragment shader, which would truncate RGBA32F texels).
+_T["precision_es"] = """precision highp float;
+precision highp int;
+precision highp sampler2D;"""
+
+_T["precision_none"] = ""
+
+# Overflow-safe activations: exp() only ever receives a non-positive argument, so no input (not
+# even +-1e30) produces inf/inf = NaN, whatever the driver's own tanh/exp do with large values.
+_T["prelude"] = """// Overflow-safe activations (exp() only sees arguments <= 0).
+vec4 nao_tanh(vec4 x) {
+    vec4 e = exp(-2.0 * abs(x));
+    return sign(x) * ((1.0 - e) / (1.0 + e));
+}
+
+vec4 nao_sigmoid(vec4 x) {
+    vec4 e = exp(-abs(x));
+    vec4 r = 1.0 / (1.0 + e);
+    return mix(e * r, r, greaterThanEqual(x, vec4(0.0)));
+}
+
+vec4 nao_leaky_relu(vec4 x, float alpha) {
+    return mix(alpha * x, x, greaterThanEqual(x, vec4(0.0)));
+}"""
+
+# Activation expressions by ONNX op type; ``x`` is any vec4 expression.
+_T["act_Relu"] = "max(${x}, vec4(0.0))"
+_T["act_LeakyRelu"] = "nao_leaky_relu(${x}, ${alpha})"
+_T["act_Sigmoid"] = "nao_sigmoid(${x})"
+_T["act_Tanh"] = "nao_tanh(${x})"
+_T["act_Clip"] = "clamp(${x}, vec4(${lo}), vec4(${hi}))"
+_T["act_Clip_min"] = "max(${x}, vec4(${lo}))"
+_T["act_Clip_max"] = "min(${x}, vec4(${hi}))"
+_T["act_Identity"] = "${x}"
+
+# --------------------------------------------------------------------------- fragment MLP
+
+_T["fullscreen_vertex"] = """${header}
+// neuralao: full-screen triangle from gl_VertexID; draw 3 vertices with an empty VAO.
+void main() {
+    vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+    gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+_T["sampler2d_decl"] = "uniform sampler2D ${name};"
+_T["sampler2d_decl_binding"] = "layout(binding = ${binding}) uniform sampler2D ${name};"
+
+_T["ubo_block"] = """${layout}uniform ${block} {
+${members}
+};"""
+_T["ubo_layout"] = "layout(std140) "
+_T["ubo_layout_binding"] = "layout(std140, binding = ${binding}) "
+_T["ubo_member"] = "    vec4 ${name}[${count}];"
+
+_T["mlp_fragment"] = """${header}
+// neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed ${repeats} times.
+// Generated from the ONNX graph; ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes.
+
+${prelude}
+
+${sampler}
+
+// Always 0 (uniforms start at 0; never set it). Loop bounds read it so the shader compiler cannot
+// see a constant trip count: Mesa's llvmpipe fully unrolls constant loops and LLVM then spends
+// 26 s (16x8) to over 100 s (64x32) compiling this shader; rolled loops compile in 1-3 s and
+// give bit-identical output (measured in bench/bench_mlp.py: unfolded draws faster, folded ~1.3x slower).
+uniform int u_loop_guard;
+
+${blocks}
+
+layout(location = 0) out vec4 o_result;
+
+void main() {
+    vec4 g = texelFetch(u_gbuffer, ivec2(gl_FragCoord.xy), 0);
+    if (g.w < 0.5) {
+        o_result = vec4(1.0);  // background: ao = 1
+        return;
+    }
+    vec3 n = g.xyz;
+${body}
+    o_result = ${result};
+}
+"""
+
+_T["vec_decl"] = "    vec4 ${name}[${count}];"
+_T["input_tile"] = "    ${dst}[${index}] = vec4(${c0}, ${c1}, ${c2}, ${c3});"
+
+# One dense chunk: rows [4 * j_begin, 4 * j_end) of W (out, in), weights row-major as vec4s.
+_T["dense_chunk"] = """    for (int j = ${j_begin}; j < ${j_end} + u_loop_guard; ++j) {
+        vec4 acc = ${bias}[j - ${j_begin}];
+        int row = (j - ${j_begin}) * ${row_stride};
+        for (int i = 0; i < ${in4} + u_loop_guard; ++i) {
+            vec4 v = ${src}[i];
+            acc.x += dot(${weight}[row + i], v);
+            acc.y += dot(${weight}[row + ${in4} + i], v);
+            acc.z += dot(${weight}[row + ${in4_2} + i], v);
+            acc.w += dot(${weight}[row + ${in4_3} + i], v);
+        }
+        ${dst}[j] = ${store};
+    }"""
+
+_T["vec_map"] = """    for (int j = 0; j < ${count} + u_loop_guard; ++j) {
+        ${dst}[j] = ${expr};
+    }"""
+
+_T["index_j"] = "${name}[j]"
+_T["index_0"] = "${name}[0]"
+_T["add"] = "${a} + ${b}"
+
+# --------------------------------------------------------------------------- compute passes
+
+_T["compute_pass"] = """${header}
+// neuralao compute pass ${pass_index}: ${summary}
+layout(local_size_x = ${local_x}, local_size_y = ${local_y}, local_size_z = 1) in;
+
+${prelude}
+
+${declarations}
+
+void main() {
+    ivec3 gid = ivec3(gl_GlobalInvocationID);
+    ivec2 out_size = imageSize(dst).xy;
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= ${out_layers}) {
+        return;
+    }
+${body}
+${epilogue}
+    imageStore(dst, gid, r);
+}
+"""
+
+_T["sampler_array_decl"] = "layout(binding = ${binding}) uniform highp sampler2DArray ${name};"
+_T["image_array_decl"] = "layout(binding = ${binding}, ${format}) writeonly uniform highp image2DArray dst;"
+_T["params_decl"] = """layout(std430, binding = ${binding}) readonly buffer Params {
+    vec4 prm[];
+};"""
+_T["uniform_int_decl"] = "layout(location = ${location}) uniform int ${name};"
+_T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
+
+# Conv: one invocation = one output texel (4 output channels of layer gid.z).
+_T["conv_body"] = """${sizes}
+    vec4 r = prm[${bias_offset} + gid.z];
+    for (int ky = 0; ky < ${kh}; ++ky) {
+        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+        for (int kx = 0; kx < ${kw}; ++kx) {
+            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+            int tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+${input_loops}
+        }
+    }"""
+
+# Zero padding: taps outside the input contribute nothing (texelFetch outside is undefined).
+_T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
+                for (int l = 0; l < ${layers}; ++l) {
+                    vec4 v = texelFetch(${src}, ivec3(ix, iy, l), 0);
+                    int o = tap + (${layer_offset} + l) * 4;
+                    r += mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]) * v;
+                }
+            }"""
+
+_T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = ${init};
+    int count = 0;
+    for (int ky = 0; ky < ${kh}; ++ky) {
+        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+        if (iy < 0 || iy >= in_size.y) {
+            continue;
+        }
+        for (int kx = 0; kx < ${kw}; ++kx) {
+            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+            if (ix < 0 || ix >= in_size.x) {
+                continue;
+            }
+            vec4 v = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            r = ${accumulate};
+            count += 1;
+        }
+    }
+${finish}"""
+_T["pool_init_avg"] = "vec4(0.0)"
+_T["pool_init_max"] = "vec4(-3.402823466e+38)"
+_T["pool_acc_avg"] = "r + v"
+_T["pool_acc_max"] = "max(r, v)"
+_T["pool_finish_count"] = "    r /= float(max(count, 1));"
+_T["pool_finish_fixed"] = "    r /= ${divisor};"
+_T["pool_finish_none"] = "    // max pool: no normalisation"
+
+# Resize: source coordinate per ONNX coordinate_transformation_mode (x: output index as float).
+_T["coord_half_pixel"] = "((${x} + 0.5) / ${scale} - 0.5)"
+_T["coord_pytorch_half_pixel"] = "(${len_out} > 1.0 ? (${x} + 0.5) / ${scale} - 0.5 : 0.0)"
+_T["coord_align_corners"] = "(${len_out} > 1.0 ? ${x} * (${len_in} - 1.0) / (${len_out} - 1.0) : 0.0)"
+_T["coord_asymmetric"] = "(${x} / ${scale})"
+_T["coord_half_pixel_symmetric"] = (
+    "(${len_in} * 0.5 * (1.0 - ${len_out} / (${scale} * ${len_in})) + (${x} + 0.5) / ${scale} - 0.5)"
+)
+_T["scale_literal"] = "${value}"
+_T["scale_ratio"] = "(${len_out} / ${len_in})"
+_T["float_of"] = "float(${v})"
+
+# Nearest index per nearest_mode, exact for non-negative coordinates (negative ones clamp to 0).
+_T["round_round_prefer_floor"] = "(fract(${v}) > 0.5 ? ceil(${v}) : floor(${v}))"
+_T["round_round_prefer_ceil"] = "(fract(${v}) >= 0.5 ? ceil(${v}) : floor(${v}))"
+_T["round_floor"] = "floor(${v})"
+_T["round_ceil"] = "ceil(${v})"
+
+_T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    float fy = ${coord_y};
+    float fx = ${coord_x};
+    fy = clamp(fy, 0.0, float(in_size.y - 1));
+    fx = clamp(fx, 0.0, float(in_size.x - 1));
+    int y0 = int(fy);
+    int x0 = int(fx);
+    int y1 = min(y0 + 1, in_size.y - 1);
+    int x1 = min(x0 + 1, in_size.x - 1);
+    float wy = fy - float(y0);
+    float wx = fx - float(x0);
+    vec4 a = texelFetch(src0, ivec3(x0, y0, gid.z), 0);
+    vec4 b = texelFetch(src0, ivec3(x1, y0, gid.z), 0);
+    vec4 c = texelFetch(src0, ivec3(x0, y1, gid.z), 0);
+    vec4 d = texelFetch(src0, ivec3(x1, y1, gid.z), 0);
+    vec4 r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;"""
+
+_T["resize_nearest_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    float fy = ${coord_y};
+    float fx = ${coord_x};
+    int iy = clamp(int(${round_y}), 0, in_size.y - 1);
+    int ix = clamp(int(${round_x}), 0, in_size.x - 1);
+    vec4 r = texelFetch(src0, ivec3(ix, iy, gid.z), 0);"""
+
+_T["concat_body"] = """    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int c = gid.z * 4 + lane;
+${branches}
+    }"""
+_T["concat_branch"] = """        if (c >= ${begin} && c < ${end}) {
+            r[lane] = texelFetch(${src}, ivec3(gid.xy, (c - ${begin}) / 4), 0)[(c - ${begin}) % 4];
+        }"""
+
+_T["elementwise_body"] = "    vec4 r = texelFetch(src0, gid, 0);"
+
+# Reflect padding at the bottom/right (numpy/torch "reflect": the edge sample is not repeated).
+_T["pad_reflect_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    int x = gid.x < in_size.x ? gid.x : 2 * (in_size.x - 1) - gid.x;
+    int y = gid.y < in_size.y ? gid.y : 2 * (in_size.y - 1) - gid.y;
+    x = clamp(x, 0, in_size.x - 1);
+    y = clamp(y, 0, in_size.y - 1);
+    if (u_flip_y != 0) {
+        y = in_size.y - 1 - y;  // source texture stored bottom-up (a GL render target)
+    }
+    vec4 r = texelFetch(src0, ivec3(x, y, gid.z), 0);"""
+
+_T["crop_body"] = """    int y = u_flip_y != 0 ? out_size.y - 1 - gid.y : gid.y;
+    vec4 r = texelFetch(src0, ivec3(gid.x, y, gid.z), 0);"""
+
+_T["epilogue_act"] = "    r = ${expr};"
+_T["epilogue_affine"] = "    r = r * prm[${scale_offset} + gid.z] + prm[${shift_offset} + gid.z];"
+_T["epilogue_none"] = "    // no epilogue"
+
+# --------------------------------------------------------------------------- baseline: vertex-colour AO
+
+# The cheapest AO an engine can draw (baked per-vertex values, Sloan et al. style), used by the
+# benchmark as the reference cost next to the MLP pass.
+_T["vertex_colour_vert"] = """${header}
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in float a_ao;
+uniform mat4 u_mvp;
+out float v_ao;
+void main() {
+    v_ao = a_ao;
+    gl_Position = u_mvp * vec4(a_position, 1.0);
+}
+"""
+
+_T["vertex_colour_frag"] = """${header}
+in float v_ao;
+layout(location = 0) out vec4 o_colour;
+void main() {
+    o_colour = vec4(vec3(v_ao), 1.0);
+}
+"""
+
+TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.items()}
+
+
+def fill(template: str, /, **fields: object) -> str:
+    """Fill the template named ``template``; every placeholder must be given and nothing else.
+
+    Values are converted with ``str``; the caller formats floats (see ``glsl.glsl_float``).
+    """
+    try:
+        tpl = TEMPLATES[template]
+    except KeyError:
+        raise KeyError(f"no GLSL template named {template!r}") from None
+    wanted = set(tpl.get_identifiers())
+    given = set(fields)
+    if wanted != given:
+        raise KeyError(
+            f"template {template!r}: missing {sorted(wanted - given)}, unexpected {sorted(given - wanted)}"
+        )
+    return tpl.substitute({k: str(v) for k, v in fields.items()})

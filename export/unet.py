@@ -1,0 +1,454 @@
+"""U-Net export: ONNX (dynamic H, W) + generated GLSL + manifest; backend checks, GLSL parity, inference.
+
+The ONNX graph is the raw :class:`pipeline.unet.UNet` (H, W multiples of ``pad_multiple``); padding
+stays outside it. Every consumer here goes through :func:`run_padded`: preprocess the frame with
+:func:`pipeline.unet.preprocess_frame`, reflect-pad bottom/right to the multiple, run, crop back,
+and set background pixels to AO 1. The metadata of the ONNX file states all of it in words.
+
+Exporters: the TorchScript exporter (``dynamo=False``, the shipped model.onnx) folds batch norm into
+the preceding conv in eval mode. :func:`export_onnx_dynamo` is the second path: the dynamo exporter
+without graph optimisation keeps ``BatchNormalization`` nodes and emits the Resize scales as
+``Constant`` nodes, which are moved into initializers here so the graph holds only the ops the GLSL
+generator knows.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+
+from pipeline.constants import TOL
+from pipeline.errors import NeuralaoError
+from pipeline.io import sha256_file, write_json
+from pipeline.unet import (
+    PAD_MODE,
+    PREPROCESS_DESCRIPTION,
+    PREPROCESS_VERSION,
+    UNet,
+    count_parameters,
+    pad_to_multiple,
+    predict,
+    preprocess_frame,
+)
+
+from .onnx_io import get_metadata, load_onnx, ort_session, run_opencv, save_onnx
+
+log = logging.getLogger(__name__)
+
+OPSET = 17
+INPUT, OUTPUT = "gbuffer", "ao"
+# Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
+# 8, odd sizes that need padding on both axes (through the pad/crop wrapper).
+CHECK_SIZES: tuple[tuple[int, int], ...] = ((64, 64), (96, 72), (101, 67), (37, 53))
+# Parity sizes: the frames' own size, plus crops to a non-power-of-two and an odd size.
+PARITY_SIZES: tuple[tuple[int, int], ...] = ((96, 72), (101, 67))
+
+
+# ----------------------------------------------------------------------------------------------- loading
+
+
+def load_model(ckpt_path: str | Path) -> tuple[UNet, dict]:
+    """(model in eval mode, checkpoint dict) from a U-Net checkpoint (weights_only load, kind checked)."""
+    from pipeline.unet_train import load_checkpoint, model_from_checkpoint
+
+    ckpt = load_checkpoint(ckpt_path)
+    return model_from_checkpoint(ckpt), ckpt
+
+
+def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
+    """Metadata for ``metadata_props``: input semantics, units, padding contract, provenance, error."""
+    ckpt = ckpt or {}
+    dataset = ckpt.get("dataset", {})
+    metrics = {
+        k: v
+        for k, v in ckpt.get("metrics", {}).items()
+        if k in ("val_ssim", "val_rmse", "val_frames", "per_scene")
+    }
+    meta = {
+        "neuralao_kind": "unet",
+        **PREPROCESS_DESCRIPTION,
+        "pad_multiple": str(model.pad_multiple),
+        "pad_mode": PAD_MODE,
+        "model_args": {"widths": list(model.args.widths), "negative_slope": model.args.negative_slope},
+        "parameters": str(count_parameters(model)),
+        "training_scenes": dataset.get("training_scenes", []),
+        "validation_scenes": dataset.get("val_scenes", []),
+        "validation_error": metrics,
+        "ao_labels": dataset.get("labels") or {},
+        "dataset_hash": dataset.get("dataset_hash") or "",
+        "epochs": str(ckpt.get("epoch", 0)),
+    }
+    return meta
+
+
+# ----------------------------------------------------------------------------------------------- exporters
+
+
+def _dummy(model: UNet, size: int = 64) -> torch.Tensor:
+    m = model.pad_multiple
+    s = max(m, (size // m) * m)
+    return torch.zeros(1, model.args.in_channels, s, s)
+
+
+def export_onnx(model: UNet, path: str | Path, metadata: dict | None = None) -> onnx.ModelProto:
+    """TorchScript exporter (``dynamo=False``), opset 17, dynamic H and W; checked and written atomically."""
+    import io
+
+    model = model.eval()
+    buf = io.BytesIO()
+    with torch.no_grad():
+        torch.onnx.export(
+            model,
+            (_dummy(model),),
+            buf,
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=[INPUT],
+            output_names=[OUTPUT],
+            dynamic_axes={INPUT: {2: "height", 3: "width"}, OUTPUT: {2: "height", 3: "width"}},
+            do_constant_folding=True,
+        )
+    proto = onnx.load_from_string(buf.getvalue())
+    save_onnx(proto, path, metadata if metadata is not None else onnx_metadata(model))
+    return proto
+
+
+def constants_to_initializers(proto: onnx.ModelProto) -> onnx.ModelProto:
+    """Move ``Constant`` nodes (tensor values) into graph initializers, in place; returns ``proto``."""
+    from onnx import numpy_helper
+
+    dtypes = {
+        "value_float": np.float32,
+        "value_floats": np.float32,
+        "value_int": np.int64,
+        "value_ints": np.int64,
+    }
+    graph = proto.graph
+    keep = []
+    for node in graph.node:
+        attr = node.attribute[0] if node.op_type == "Constant" and len(node.attribute) == 1 else None
+        if attr is not None and attr.name == "value":
+            t = onnx.TensorProto()
+            t.CopyFrom(attr.t)
+            t.name = node.output[0]
+            graph.initializer.append(t)
+        elif attr is not None and attr.name in dtypes:
+            value = np.asarray(onnx.helper.get_attribute_value(attr), dtype=dtypes[attr.name])
+            graph.initializer.append(numpy_helper.from_array(value, node.output[0]))
+        else:
+            keep.append(node)
+    del graph.node[:]
+    graph.node.extend(keep)
+    return proto
+
+
+def export_onnx_dynamo(
+    model: UNet, path: str | Path | None = None, metadata: dict | None = None
+) -> onnx.ModelProto:
+    """Dynamo exporter (torch.export + onnxscript) WITHOUT graph optimisation: keeps BatchNormalization.
+
+    H and W are dynamic as ``pad_multiple * k``; the symbolic dim names are renamed to height/width.
+    Written (checked, atomically) when ``path`` is given.
+    """
+    import warnings
+
+    model = model.eval()
+    m = model.pad_multiple
+    h = torch.export.Dim("h", min=1, max=4096)
+    w = torch.export.Dim("w", min=1, max=4096)
+    with warnings.catch_warnings(), torch.no_grad():
+        warnings.simplefilter("ignore")
+        program = torch.onnx.export(
+            model,
+            (_dummy(model),),
+            dynamo=True,
+            input_names=[INPUT],
+            output_names=[OUTPUT],
+            dynamic_shapes={"x": {2: m * h, 3: m * w}},
+            optimize=False,
+            verbose=False,
+        )
+    proto = constants_to_initializers(program.model_proto)
+    for vi in list(proto.graph.input) + list(proto.graph.output):
+        dims = vi.type.tensor_type.shape.dim
+        dims[2].dim_param, dims[3].dim_param = "height", "width"
+    if path is not None:
+        save_onnx(proto, path, metadata if metadata is not None else onnx_metadata(model))
+    return proto
+
+
+# ----------------------------------------------------------------------------------------------- runners
+
+
+def run_padded(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, pad_multiple: int) -> np.ndarray:
+    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn`` on (1, 4, H', W'), crop -> (H, W) float32."""
+    h, w = x.shape[-2:]
+    y = np.asarray(fn(pad_to_multiple(x, pad_multiple)[None]), dtype=np.float32)
+    return y.reshape(y.shape[-2:])[:h, :w]
+
+
+def ort_runner(path_or_bytes) -> Callable[[np.ndarray], np.ndarray]:
+    sess = ort_session(path_or_bytes)
+    return lambda xp: sess.run(None, {INPUT: np.ascontiguousarray(xp, dtype=np.float32)})[0]
+
+
+def opencv_runner(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
+    return lambda xp: run_opencv(path, {INPUT: xp})
+
+
+def glsl_runner(glsl_dir: str | Path) -> Callable[[np.ndarray], np.ndarray]:
+    from runtime.glsl_runner import run_compute
+
+    return lambda xp: run_compute(glsl_dir, np.ascontiguousarray(xp, dtype=np.float32))
+
+
+def random_input(width: int, height: int, seed: int = 0) -> np.ndarray:
+    """A G-buffer-like network input (4, H, W) float32: smooth depth around 1, unit normals, a background band."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    depth = (
+        1.0
+        + 0.3 * np.sin(xx / 7.0 + rng.uniform(0, 6)) * np.cos(yy / 5.0)
+        + 0.05 * rng.standard_normal((height, width))
+    )
+    n = rng.standard_normal((3, height, width)).astype(np.float32)
+    n[2] = np.abs(n[2]) + 0.5
+    n /= np.linalg.norm(n, axis=0, keepdims=True)
+    x = np.concatenate([depth[None], n]).astype(np.float32)
+    x[:, :, : max(1, width // 8)] = 0.0  # background: depth 0, normal 0
+    return x
+
+
+def check_backends(
+    model: UNet, onnx_path: Path, sizes: Sequence[tuple[int, int]] = CHECK_SIZES, seed: int = 0
+) -> dict:
+    """Max |difference| torch vs onnxruntime and OpenCV dnn vs onnxruntime at ``sizes`` (width, height).
+
+    Every size goes through the pad/crop path. Raises NeuralaoError above TOL.onnx_vs_torch /
+    TOL.opencv_vs_onnx (a model that does not survive export is not written as if it did).
+    """
+    ort = ort_runner(onnx_path)
+    cv = opencv_runner(onnx_path)
+    m = model.pad_multiple
+    rows = []
+    for k, (w, h) in enumerate(sizes):
+        x = random_input(w, h, seed + k)
+        ref_torch = predict(model, x)
+        y_ort = run_padded(ort, x, m)
+        y_cv = run_padded(cv, x, m)
+        rows.append(
+            {
+                "size": [w, h],
+                "onnxruntime_vs_torch": float(np.abs(y_ort - ref_torch).max()),
+                "opencv_vs_onnxruntime": float(np.abs(y_cv - y_ort).max()),
+            }
+        )
+    result = {
+        "sizes": rows,
+        "onnxruntime_vs_torch": max(r["onnxruntime_vs_torch"] for r in rows),
+        "opencv_vs_onnxruntime": max(r["opencv_vs_onnxruntime"] for r in rows),
+        "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch, "opencv_vs_onnxruntime": TOL.opencv_vs_onnx},
+    }
+    if result["onnxruntime_vs_torch"] > TOL.onnx_vs_torch:
+        raise NeuralaoError(
+            f"onnxruntime differs from torch by {result['onnxruntime_vs_torch']:.3g} > {TOL.onnx_vs_torch:g}"
+        )
+    if result["opencv_vs_onnxruntime"] > TOL.opencv_vs_onnx:
+        raise NeuralaoError(
+            f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"
+        )
+    return result
+
+
+# ----------------------------------------------------------------------------------------------- export
+
+
+def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:
+    """Generate the compute passes from the ONNX graph and write them (and their manifest) to ``out_dir``."""
+    from .glsl import generate_compute, write_compute_export
+
+    program = generate_compute(proto, precision=precision)
+    write_compute_export(program, out_dir)
+    return out_dir
+
+
+def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
+    """model.onnx + glsl/ (fp32 compute passes) + manifest.json in ``out_dir``. Returns the manifest."""
+    t0 = time.perf_counter()
+    ckpt_path, out_dir = Path(ckpt_path), Path(out_dir)
+    model, ckpt = load_model(ckpt_path)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    onnx_path = out_dir / "model.onnx"
+    metadata = onnx_metadata(model, ckpt)
+    proto = export_onnx(model, onnx_path, metadata)
+    checks = check_backends(model, onnx_path)
+    glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
+    n_params = count_parameters(model)
+    manifest = {
+        "kind": "unet",
+        "format_version": 1,
+        "onnx": "model.onnx",
+        "onnx_sha256": sha256_file(onnx_path),
+        "glsl": glsl_dir.name,
+        "exporter": f"torch.onnx.export(dynamo=False, opset={OPSET}) {torch.__version__}",
+        "ops": sorted({n.op_type for n in proto.graph.node}),
+        "metadata": metadata,
+        "pad_multiple": model.pad_multiple,
+        "pad_mode": PAD_MODE,
+        "preprocess_version": PREPROCESS_VERSION,
+        "parameters": n_params,
+        "bytes_fp32": 4 * n_params,
+        "checks": checks,
+        "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")},
+        "config": ckpt.get("config", {}),
+        "metrics": ckpt.get("metrics", {}),
+        "seconds": time.perf_counter() - t0,
+    }
+    write_json(out_dir / "manifest.json", manifest)
+    log.info(
+        "exported %s: %d parameters, ort-vs-torch %.2g, opencv-vs-ort %.2g",
+        out_dir,
+        n_params,
+        checks["onnxruntime_vs_torch"],
+        checks["opencv_vs_onnxruntime"],
+    )
+    return manifest
+
+
+# ----------------------------------------------------------------------------------------------- inference
+
+
+def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
+    """Metadata of a U-Net ONNX file; another kind or another preprocessing version is a one-line error."""
+    meta = get_metadata(proto)
+    if meta.get("neuralao_kind") != "unet":
+        raise NeuralaoError(
+            f"{where} is not a neuralao U-Net ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})"
+        )
+    if str(meta.get("preprocess_version")) != str(PREPROCESS_VERSION):
+        raise NeuralaoError(
+            f"{where} expects preprocessing version {meta.get('preprocess_version')}, this neuralao has {PREPROCESS_VERSION}"
+        )
+    return meta
+
+
+def composite(y: np.ndarray, frame: dict) -> np.ndarray:
+    """Network output (H, W) -> AO (H, W) float32 with background 1 (DESIGN: ao = 1 where nothing is hit)."""
+    return np.where(np.asarray(frame["mask"], dtype=bool), y, np.float32(1.0)).astype(np.float32)
+
+
+def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
+    """AO of one G-buffer frame with onnxruntime. frame: depth (H,W), normal_cam (H,W,3), mask (H,W).
+
+    Returns ao : (H, W) float32 in [0, 1], 1 on background. Any H, W >= pad_multiple.
+    """
+    proto = load_onnx(onnx_path)
+    meta = check_unet_onnx(proto, onnx_path)
+    x = preprocess_frame(frame)
+    y = run_padded(ort_runner(proto.SerializeToString()), x, int(meta["pad_multiple"]))
+    return composite(y, frame)
+
+
+# ----------------------------------------------------------------------------------------------- parity
+
+
+def crop_frame(frame: dict, width: int, height: int) -> dict:
+    """Centre crop of every image channel of a frame to ``width`` x ``height`` (scalars kept)."""
+    h, w = frame["depth"].shape
+    if width > w or height > h:
+        raise NeuralaoError(f"cannot crop a {w}x{h} frame to {width}x{height}")
+    top, left = (h - height) // 2, (w - width) // 2
+    out = {}
+    for k, v in frame.items():
+        if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[:2] == (h, w):
+            out[k] = v[top : top + height, left : left + width]
+        else:
+            out[k] = v
+    return out
+
+
+def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
+    """Two real G-buffer frames (an orbit of a closed mesh, an interior view) when no dataset is given."""
+    from pipeline.camera import interior, orbit
+    from pipeline.gbuffer import render_gbuffer
+    from pipeline.scene import load_scene
+
+    w, h = size
+    frames = []
+    for name, cams in (("spot", orbit), ("cornell_box", interior)):
+        scene = load_scene(name)
+        cam = cams(scene, 3, w, h, seed=1)[1]
+        frame = render_gbuffer(scene, cam)
+        frame["scene"] = name
+        frames.append(frame)
+    return frames
+
+
+def parity(
+    export_dir: str | Path, frames: list[dict] | None = None, sizes: Sequence[tuple[int, int]] | None = None
+) -> dict:
+    """Generated GLSL (fp32) vs onnxruntime on real frames, each at its own size and at ``sizes`` (w, h).
+
+    Both consumers get the same preprocessed, reflect-padded input; outputs are cropped back and
+    compared over all pixels. Returns figures with ``passed`` = max error <= TOL.parity_unet_fp32.
+    """
+    export_dir = Path(export_dir)
+    manifest_path = export_dir / "manifest.json"
+    if not manifest_path.is_file():
+        raise NeuralaoError(f"no export manifest at {manifest_path}")
+    import json
+
+    manifest = json.loads(manifest_path.read_text())
+    onnx_path = export_dir / manifest.get("onnx", "model.onnx")
+    proto = load_onnx(onnx_path)
+    meta = check_unet_onnx(proto, onnx_path)
+    m = int(meta["pad_multiple"])
+    glsl_dir = export_dir / manifest.get("glsl", "glsl")
+    if not glsl_dir.is_dir():
+        raise NeuralaoError(f"export {export_dir} has no GLSL folder {glsl_dir.name}")
+    frames = frames if frames else render_parity_frames()
+    sizes = list(PARITY_SIZES if sizes is None else sizes)
+    ort, gl = ort_runner(proto.SerializeToString()), glsl_runner(glsl_dir)
+    rows = []
+    for i, frame in enumerate(frames):
+        h0, w0 = frame["depth"].shape
+        for w, h in [(w0, h0)] + [s for s in sizes if tuple(s) != (w0, h0)]:
+            if w > w0 or h > h0:
+                rows.append({"frame": i, "size": [w, h], "skipped": f"larger than the {w0}x{h0} frame"})
+                continue
+            f = crop_frame(frame, w, h)
+            x = preprocess_frame(f)
+            y_ort = run_padded(ort, x, m)
+            t0 = time.perf_counter()
+            y_gl = run_padded(gl, x, m)
+            seconds = time.perf_counter() - t0
+            fg = np.asarray(f["mask"], dtype=bool)
+            rows.append(
+                {
+                    "frame": i,
+                    "scene": str(frame.get("scene", "")),
+                    "size": [w, h],
+                    "max_abs_err": float(np.abs(y_gl - y_ort).max()),
+                    "max_abs_err_foreground": float(np.abs(y_gl - y_ort)[fg].max()) if fg.any() else 0.0,
+                    "glsl_seconds": seconds,
+                }
+            )
+    checked = [r for r in rows if "max_abs_err" in r]
+    if not checked:
+        raise NeuralaoError("parity: no frame/size could be checked")
+    max_err = max(r["max_abs_err"] for r in checked)
+    return {
+        "kind": "unet",
+        "precision": "fp32",
+        "max_abs_err": max_err,
+        "tolerance": TOL.parity_unet_fp32,
+        "passed": bool(max_err <= TOL.parity_unet_fp32),
+        "checks": rows,
+        "frames": len(frames),
+    }

@@ -1,0 +1,940 @@
+"""`neuralao report`: every AO method on the same held-back frames, speed against error, in one run.
+
+What is measured
+----------------
+Frames: per scene, the dataset's held-back views (``holdout``: never used to train either model),
+topped up with other views of ``val`` / ``test`` scenes (which no model trained on), at most
+``frames_per_scene``. Ground truth: the frames relabelled with ``gt_rays`` (1024) Embree rays with
+the dataset's own label settings (kernel, max distance, back-face rule) and a seed of their own; when
+the dataset was labelled with at least that many rays its labels are used as they are. Relabelled
+ground truth is cached under ``OUT/gt/`` (keyed by the dataset hash, frame and settings).
+
+Methods (each one run on every frame it applies to):
+
+* ``ssao``, ``gtao``: the screen-space baselines of :mod:`runtime.baselines` (GLSL fragment passes),
+  radius = the labels' max distance;
+* ``vertex-sampled``, ``vertex-lsq``: AO baked per vertex (:mod:`pipeline.bake`: sampled at vertices,
+  or least-squares fitted to surface samples) with ``bake_rays`` rays, shown as a vertex-colour draw
+  shows it (barycentric interpolation per pixel);
+* ``trace-4`` / ``-16`` / ``-64``: Embree AO of every pixel at that ray count (the labeller itself);
+* ``mlp-<size>``: every exported baked MLP, on the frames of the scene it was trained for (its
+  generated GLSL fragment shader on the frame's object-space normals, output clamped to [0, 1]);
+* ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame.
+
+Error: masked SSIM (:func:`pipeline.metrics.masked_ssim`) and RMSE over foreground pixels whose
+ground truth is valid, averaged over frames. Time: seconds per frame at ``time_size`` (512 x 512),
+all in this run: GL passes (SSAO, GTAO, the MLP fragment shader, the U-Net's generated compute
+shaders, the vertex-colour draw) on the same headless GL context, timed with ``glFinish`` around
+each frame with the G-buffer resident; traced AO as the wall time of the Embree trace on the CPU
+(``workers`` threads); onnxruntime (CPU) times of the models are reported beside the GL ones. Each
+scene gets a ``time_size`` G-buffer rendered from the pose of its first evaluation frame; a
+method's time is the median over scenes. Ratios: time over SSAO's time, and RMSE (and 1 - SSIM)
+over SSAO's on the same frames.
+
+Outputs (every file atomic): ``report.md`` (tables), ``report.json`` (everything, per scene and per
+frame), ``speed_vs_error.png`` (scatter with the Pareto front), ``contact_<scene>.png`` (ground
+truth | each method, and the error heat maps). Methods whose export is missing or broken are listed
+as not available; the report never fails because a model is absent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import platform
+import time
+import zlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from runtime.baselines import GTAOSettings, SSAOSettings
+
+from .config import load_settings, settings_to_dict
+from .errors import NeuralaoError
+from .io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
+BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq")
+FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, "mlp": 3, "unet": 4}
+
+
+@dataclass
+class ReportSettings:
+    # Rays per pixel of the ground truth (frames are relabelled when the dataset used fewer).
+    gt_rays: int = 1024
+    # At most this many evaluation frames per scene (held-back views first).
+    frames_per_scene: int = 4
+    # Width, height of the timing frames.
+    time_size: tuple[int, int] = (512, 512)
+    # Timed repetitions per GL measurement (median kept); traced AO is timed once per scene.
+    repeats: int = 10
+    # Ray counts of the "just trace it" baselines.
+    trace_rays: list[int] = field(default_factory=lambda: [4, 16, 64])
+    # Rays per sample of the vertex bakes.
+    bake_rays: int = 128
+    # Least-squares bake sample budget per vertex.
+    bake_samples_per_vertex: float = 8.0
+    # Target masked SSIM of the model-selection section.
+    target_ssim: float = 0.95
+    # Seed of ground-truth and low-ray tracing directions.
+    seed: int = 0
+    # Tracing threads (ground truth, baselines).
+    workers: int = 2
+    # Write a contact sheet per scene.
+    contact_sheets: bool = True
+    # Screen-space baseline settings (radius: the labels' max distance).
+    ssao: SSAOSettings = field(default_factory=SSAOSettings)
+    gtao: GTAOSettings = field(default_factory=GTAOSettings)
+
+
+@dataclass
+class Method:
+    """One entry of the report: what it is, where it runs, what it applies to."""
+
+    name: str
+    family: str  # screen-space | baked | traced | mlp | unet
+    description: str
+    time_on: str
+    error_on: str
+    scene: str | None = None  # the only scene it applies to (baked MLP), None = every scene
+    bytes: int | None = None
+    bytes_note: str = ""
+    export: Path | None = None
+    available: bool = True
+    reason: str = ""
+    runner: object = None  # prepared per-frame predictor (model methods)
+    ort_runner: object = None
+
+
+# --------------------------------------------------------------------------- frames and ground truth
+
+
+def evaluation_frames(ds, per_scene: int) -> dict[str, list[dict]]:
+    """Per scene: held-back frames first, then (val/test scenes only) other frames; at most ``per_scene``."""
+    out: dict[str, list[dict]] = {}
+    for scene in ds.scenes:
+        frames = list(ds.frames(scene=scene, holdout=True))[:per_scene]
+        if len(frames) < per_scene and ds.split_of(scene) in ("val", "test"):
+            for f in ds.frames(scene=scene, holdout=False):
+                if len(frames) >= per_scene:
+                    break
+                frames.append(f)
+        if frames:
+            out[scene] = frames
+    return out
+
+
+def label_settings_of(ds, workers: int):
+    from .config import from_dict
+    from .labels import LabelSettings
+
+    return replace(from_dict(LabelSettings, dict(ds.label_settings)), workers=workers)
+
+
+def frame_key_seed(seed: int, *parts) -> int:
+    return zlib.crc32("/".join(str(p) for p in (seed, *parts)).encode()) & 0x7FFFFFFF
+
+
+def ground_truth(
+    labeller, frame: dict, ds_rays: int, settings: ReportSettings, cache: Path | None, key: dict
+):
+    """(ao (H, W) float32, valid (H, W) bool, source str) for one frame; cached when relabelled."""
+    if ds_rays >= settings.gt_rays:
+        return (
+            np.asarray(frame["ao"], np.float32),
+            np.asarray(frame["valid"], bool),
+            f"dataset labels ({ds_rays} rays)",
+        )
+    digest = sha256_json(key)[:16]
+    path = cache / f"{frame['scene']}-{int(frame['view']):04d}-{digest}.npz" if cache else None
+    if path is not None and path.is_file():
+        try:
+            z = read_npz(path)
+            return z["ao"], z["valid"].astype(bool), f"relabelled, {settings.gt_rays} rays (cached)"
+        except NeuralaoError:
+            log.warning("ground-truth cache %s unreadable; relabelling", path)
+    saved = labeller.settings
+    labeller.settings = replace(
+        saved, rays=settings.gt_rays, seed=frame_key_seed(settings.seed, "gt", frame["scene"], frame["view"])
+    )
+    try:
+        ao, valid = labeller.label_frame(frame)
+    finally:
+        labeller.settings = saved
+    if path is not None:
+        write_npz(path, ao=ao, valid=valid)
+    return ao, valid, f"relabelled, {settings.gt_rays} rays"
+
+
+# --------------------------------------------------------------------------- methods
+
+
+def discover_exports(exports: Path | None, scenes: list[str]) -> list[Method]:
+    """Model methods from export folders (kind mlp / unet); absent or broken ones are unavailable."""
+    methods: list[Method] = []
+    found: dict[str, Path] = {}
+    if exports is not None and Path(exports).is_dir():
+        for m in sorted(Path(exports).glob("*/manifest.json")):
+            found[m.parent.name] = m.parent
+    for name in EXPECTED_EXPORTS:
+        if name not in found:
+            family = "unet" if name == "unet" else "mlp"
+            where = Path(exports) / name if exports is not None else name
+            methods.append(Method(name, family, "", "", "", available=False, reason=f"no export at {where}"))
+    for name, d in sorted(found.items()):
+        methods.append(_export_method(name, d, scenes))
+    return methods
+
+
+def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
+    try:
+        manifest = json.loads((d / "manifest.json").read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        return Method(name, "mlp" if name.startswith("mlp") else "unet", "", "", "", available=False,
+                      reason=f"unreadable manifest ({type(e).__name__})")  # fmt: skip
+    kind = manifest.get("kind")
+    if kind == "mlp":
+        scene = manifest.get("scene")
+        m = Method(name, "mlp", f"baked MLP {manifest.get('model_size', '')} (Erra et al.), one network per mesh",
+                   "GL fragment shader (generated GLSL)", "GL fragment shader, clamped to [0, 1]", scene=scene,
+                   bytes=manifest.get("parameter_bytes"), bytes_note="float32 weights", export=d)  # fmt: skip
+        if scene not in scenes:
+            m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
+        return m
+    if kind == "unet":
+        return Method(name, "unet", "DeepAO screen-space U-Net (Zhang et al.)", "GL compute shaders (generated GLSL)",
+                      "onnxruntime (GLSL parity-checked)", bytes=manifest.get("bytes_fp32"),
+                      bytes_note="float32 weights", export=d)  # fmt: skip
+    return Method(name, "unknown", "", "", "", available=False, reason=f"unknown export kind {kind!r}")
+
+
+def baseline_methods(settings: ReportSettings) -> list[Method]:
+    s = settings.ssao
+    ssao_bytes = s.samples * 12 + s.noise_size**2 * 16
+    gtao_bytes = settings.gtao.noise_size**2 * 16
+    out = [
+        Method("ssao", "screen-space", f"Crytek-style normal-oriented hemisphere SSAO, {s.samples} samples + {s.noise_size}x{s.noise_size} blur",
+               "GL fragment shader", "GL fragment shader", bytes=ssao_bytes, bytes_note="kernel + noise tile"),
+        Method("gtao", "screen-space", f"GTAO, {settings.gtao.slices} slices x {settings.gtao.steps} steps + blur",
+               "GL fragment shader", "GL fragment shader", bytes=gtao_bytes, bytes_note="noise tile"),
+        Method("vertex-sampled", "baked", f"per-vertex AO sampled at vertices ({settings.bake_rays} rays), vertex colours",
+               "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
+        Method("vertex-lsq", "baked", f"least-squares vertex bake ({settings.bake_rays} rays/sample), vertex colours",
+               "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
+    ]  # fmt: skip
+    for r in settings.trace_rays:
+        out.append(Method(f"trace-{r}", "traced", f"Embree ray-traced AO, {r} rays per pixel",
+                          f"CPU Embree ({settings.workers} threads)", "CPU Embree", bytes_note="scene + BVH"))  # fmt: skip
+    return out
+
+
+def prepare_model(m: Method) -> None:
+    """Load what a model method needs once (shader objects, onnxruntime sessions); failure -> unavailable."""
+    try:
+        if m.family == "mlp":
+            from export.glsl import load_mlp_export
+            from export.mlp import check_mlp_onnx
+            from export.onnx_io import load_onnx, ort_session
+
+            manifest = json.loads((m.export / "manifest.json").read_text())
+            m.runner = load_mlp_export(m.export / manifest.get("glsl", "glsl"))
+            proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
+            check_mlp_onnx(proto, m.export)
+            m.ort_runner = ort_session(proto.SerializeToString())
+        elif m.family == "unet":
+            from export.glsl import load_compute_export
+            from export.onnx_io import load_onnx
+            from export.unet import check_unet_onnx, ort_runner
+
+            manifest = json.loads((m.export / "manifest.json").read_text())
+            proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
+            meta = check_unet_onnx(proto, m.export)
+            m.ort_runner = (ort_runner(proto.SerializeToString()), int(meta["pad_multiple"]))
+            m.runner = load_compute_export(m.export / manifest.get("glsl", "glsl"))
+    except Exception as e:  # a broken export must not stop the report: list it with the reason
+        m.available, m.reason = (
+            False,
+            f"cannot load export: {str(e).splitlines()[0][:160] if str(e) else type(e).__name__}",
+        )
+
+
+def predict_model(m: Method, frame: dict) -> np.ndarray:
+    """AO (H, W) float32 of a model method on one frame, background 1."""
+    mask = np.asarray(frame["mask"], bool)
+    if m.family == "mlp":
+        from runtime.glsl_runner import run_mlp_fragment
+
+        raw = run_mlp_fragment(m.runner, np.asarray(frame["normal_obj"], np.float32), mask)
+        return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
+    from export.unet import composite, run_padded
+    from pipeline.unet import preprocess_frame
+
+    fn, multiple = m.ort_runner
+    return composite(np.clip(run_padded(fn, preprocess_frame(frame), multiple), 0.0, 1.0), frame)
+
+
+def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
+    """GL and onnxruntime seconds per frame at ``size`` (W, H) (content-independent networks)."""
+    w, h = size
+    out: dict = {}
+    if m.family == "mlp":
+        from export.mlp import INPUT
+        from pipeline.mlp import radius_zero_inputs
+        from runtime.glsl_runner import time_mlp_fragment
+
+        out["seconds"] = time_mlp_fragment(m.runner, h, w, repeats=repeats)
+        n = np.random.default_rng(0).normal(size=(h * w, 3)).astype(np.float32)
+        x = radius_zero_inputs(n / np.linalg.norm(n, axis=1, keepdims=True))
+        out["seconds_onnxruntime"] = _median_seconds(
+            lambda: m.ort_runner.run(None, {INPUT: x}), max(1, repeats // 3)
+        )
+    else:
+        from export.unet import run_padded
+        from runtime.glsl_runner import time_compute
+
+        out["seconds"] = time_compute(m.runner, h, w, repeats=max(1, min(repeats, 5)))
+        fn, multiple = m.ort_runner
+        x = np.random.default_rng(0).normal(size=(4, h, w)).astype(np.float32)
+        out["seconds_onnxruntime"] = _median_seconds(
+            lambda: run_padded(fn, x, multiple), max(1, min(repeats, 5))
+        )
+    return out
+
+
+def _median_seconds(fn, repeats: int) -> float:
+    fn()  # warm-up
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+# --------------------------------------------------------------------------- per-scene context
+
+
+class SceneContext:
+    """The scene's mesh, labeller, bakes and timing frame, built lazily."""
+
+    def __init__(
+        self,
+        name: str,
+        mesh: str,
+        label_settings,
+        settings: ReportSettings,
+        cache: Path | None,
+        progress: bool,
+    ):
+        from .labels import Labeller
+        from .scene import load_scene
+
+        self.name = name
+        self.scene = load_scene(mesh, name=name)
+        self.labeller = Labeller(self.scene, label_settings)
+        self.radius = self.labeller.max_distance
+        self.settings = settings
+        self.cache = cache
+        self.progress = progress
+        self.bakes: dict[str, np.ndarray] = {}
+        self.bake_info: dict[str, dict] = {}
+
+    def baked(self, method: str) -> np.ndarray:
+        """Per-vertex AO (n,) float32 of 'vertex-sampled' / 'vertex-lsq' (cached under OUT/bake/)."""
+        if method in self.bakes:
+            return self.bakes[method]
+        from .bake import BakeSettings, bake
+
+        ls = self.labeller.settings
+        bs = BakeSettings(rays=self.settings.bake_rays, max_distance=self.labeller.max_distance, kernel=ls.kernel,
+                          half_distance=self.labeller.half_distance, method="vertex" if method == "vertex-sampled" else "least-squares",
+                          samples_per_vertex=self.settings.bake_samples_per_vertex, backface_threshold=ls.backface_threshold,
+                          seed=frame_key_seed(self.settings.seed, "bake", self.name), workers=ls.workers)  # fmt: skip
+        key = {"scene": self.name, "vertices": len(self.scene.vertices), "faces": len(self.scene.faces),
+               "source": self.scene.source, "bake": settings_to_dict(bs)}  # fmt: skip
+        path = self.cache / f"{self.name}-{method}-{sha256_json(key)[:16]}.npz" if self.cache else None
+        if path is not None and path.is_file():
+            z = read_npz(path)
+            self.bakes[method] = z["ao"]
+            self.bake_info[method] = json.loads(str(z["info"]))
+        else:
+            log.info(
+                "baking %s (%s, %d vertices) for the vertex-AO baselines",
+                self.name,
+                method,
+                len(self.scene.vertices),
+            )
+            r = bake(self.scene, bs, progress=self.progress)
+            self.bakes[method], self.bake_info[method] = r.ao, r.info
+            if path is not None:
+                write_npz(path, ao=r.ao, info=np.array(json.dumps(r.info, default=str)))
+        return self.bakes[method]
+
+    def timing_frame(self, frame: dict) -> tuple[dict, object]:
+        """A ``time_size`` G-buffer from the pose of ``frame`` and its camera."""
+        from .camera import Camera
+        from .gbuffer import GBufferRenderer
+
+        w, h = self.settings.time_size
+        cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]),
+                     float(frame["znear"]), float(frame["zfar"]))  # fmt: skip
+        with GBufferRenderer(self.scene) as r:
+            return r.render(cam), cam
+
+
+def predict(m: Method, ctx: SceneContext, frame: dict) -> np.ndarray:
+    """AO (H, W) float32 of method ``m`` on ``frame``."""
+    from runtime.baselines import run_screen_space, traced_ao, vertex_ao_image
+
+    s = ctx.settings
+    if m.family == "screen-space":
+        return run_screen_space(frame, m.name, ctx.radius, s.ssao if m.name == "ssao" else s.gtao)
+    if m.family == "baked":
+        return vertex_ao_image(ctx.scene, ctx.baked(m.name), frame)
+    if m.family == "traced":
+        rays = int(m.name.split("-")[1])
+        ao, _, _ = traced_ao(
+            ctx.labeller, frame, rays, seed=frame_key_seed(s.seed, m.name, ctx.name, frame["view"])
+        )
+        return ao
+    return predict_model(m, frame)
+
+
+def time_method(m: Method, ctx: SceneContext, frame512: dict, camera) -> float:
+    from runtime.baselines import time_screen_space, time_vertex_ao, traced_ao
+
+    s = ctx.settings
+    if m.family == "screen-space":
+        return time_screen_space(
+            frame512, m.name, ctx.radius, s.ssao if m.name == "ssao" else s.gtao, repeats=s.repeats
+        )
+    if m.family == "baked":
+        return time_vertex_ao(ctx.scene, camera, ctx.baked(m.name), repeats=s.repeats)
+    if m.family == "traced":
+        return traced_ao(ctx.labeller, frame512, int(m.name.split("-")[1]), seed=1)[2]
+    raise ValueError(m.family)
+
+
+# --------------------------------------------------------------------------- the run
+
+
+def evaluate(
+    data: str | Path,
+    exports: str | Path | None,
+    settings: ReportSettings,
+    out: Path | None,
+    families: set[str] | None = None,
+    progress: bool = True,
+    keep_images: bool = True,
+) -> dict:
+    """Measure every method (or only ``families``) on the evaluation frames; returns the result dict
+    (the content of report.json, without the figures). ``out`` holds the caches (None: no cache)."""
+    from tqdm import tqdm
+
+    from runtime import gl
+
+    from .dataset import open_dataset
+    from .metrics import masked_rmse, masked_ssim
+
+    check_settings(settings)
+    ds = open_dataset(data)
+    frames_by_scene = evaluation_frames(ds, settings.frames_per_scene)
+    if not frames_by_scene:
+        raise NeuralaoError(f"dataset {data} has no frame to evaluate on")
+    label_settings = label_settings_of(ds, settings.workers)
+    ds_rays = int(label_settings.rays)
+    methods = [*baseline_methods(settings), *discover_exports(Path(exports) if exports else None, ds.scenes)]
+    if families is not None:
+        methods = [m for m in methods if m.family in families]
+    for m in methods:
+        if m.available and m.family in ("mlp", "unet"):
+            prepare_model(m)
+    gt_cache = out / "gt" if out is not None else None
+    bake_cache = out / "bake" if out is not None else None
+    per_frame: list[dict] = []
+    per_scene_time: dict[str, dict[str, float]] = {}
+    sheets: dict[str, dict] = {}
+    scene_info: dict[str, dict] = {}
+    model_times: dict[str, dict] = {}
+    total = sum(len(v) for v in frames_by_scene.values())
+    bar = tqdm(total=total, desc="report", unit="frame", disable=not progress)
+    for scene_name, frames in frames_by_scene.items():
+        mesh = ds.manifest["scenes"][scene_name]["mesh"]
+        try:
+            ctx = SceneContext(scene_name, mesh, label_settings, settings, bake_cache, progress=False)
+        except NeuralaoError as e:
+            log.warning("scene %s skipped: %s", scene_name, e)
+            scene_info[scene_name] = {"skipped": str(e)}
+            bar.update(len(frames))
+            continue
+        scene_info[scene_name] = {"split": ds.split_of(scene_name), "vertices": len(ctx.scene.vertices),
+                                  "faces": len(ctx.scene.faces), "radius": ctx.radius, "frames": len(frames)}  # fmt: skip
+        applicable = [m for m in methods if m.available and (m.scene is None or m.scene == scene_name)]
+        for fi, frame in enumerate(frames):
+            key = {"dataset": ds.manifest.get("dataset_hash"), "scene": scene_name, "view": frame["view"],
+                   "labels": settings_to_dict(label_settings), "gt_rays": settings.gt_rays, "seed": settings.seed}  # fmt: skip
+            gt, gt_valid, gt_source = ground_truth(ctx.labeller, frame, ds_rays, settings, gt_cache, key)
+            mask = np.asarray(frame["mask"], bool) & gt_valid
+            row = {"scene": scene_name, "view": int(frame["view"]), "split": frame["split"], "holdout": bool(frame["holdout"]),
+                   "pixels": int(mask.sum()), "gt": gt_source, "methods": {}}  # fmt: skip
+            if not mask.any():
+                row["skipped"] = "no valid foreground pixel"
+                per_frame.append(row)
+                bar.update(1)
+                continue
+            images = {}
+            for m in applicable:
+                try:
+                    pred = predict(m, ctx, frame)
+                except Exception as e:  # one method failing must not sink the report
+                    if m.family not in ("mlp", "unet"):
+                        raise
+                    m.available, m.reason = (
+                        False,
+                        f"failed on {scene_name}/{frame['view']}: {str(e).splitlines()[0][:160]}",
+                    )
+                    continue
+                row["methods"][m.name] = {
+                    "ssim": masked_ssim(pred, gt, mask),
+                    "rmse": masked_rmse(pred, gt, mask),
+                }
+                if fi == 0 and keep_images:
+                    images[m.name] = pred
+            if fi == 0 and keep_images:
+                sheets[scene_name] = {"gt": gt, "mask": mask, "fg": np.asarray(frame["mask"], bool),
+                                      "view": int(frame["view"]), "images": images}  # fmt: skip
+            per_frame.append(row)
+            bar.update(1)
+        # timing at time_size, from the first frame's pose
+        frame512, cam512 = ctx.timing_frame(frames[0])
+        times = per_scene_time.setdefault(scene_name, {})
+        for m in applicable:
+            if not m.available:
+                continue
+            if m.family in ("mlp", "unet"):
+                if m.name not in model_times:
+                    try:
+                        model_times[m.name] = time_model(m, settings.time_size, settings.repeats)
+                    except Exception as e:  # listed with its error, never fatal
+                        model_times[m.name] = {
+                            "error": str(e).splitlines()[0][:160] if str(e) else type(e).__name__
+                        }
+                if "seconds" in model_times[m.name]:
+                    times[m.name] = model_times[m.name]["seconds"]
+            else:
+                times[m.name] = time_method(m, ctx, frame512, cam512)
+        for name in ("vertex-sampled", "vertex-lsq"):
+            if name in ctx.bake_info:
+                scene_info[scene_name][f"bake_{name}"] = {k: ctx.bake_info[name].get(k) for k in
+                                                          ("samples", "invalid_samples", "seconds", "vertices")}  # fmt: skip
+        for m in methods:
+            if m.family == "baked" and m.available:
+                scene_info[scene_name].setdefault("vertex_ao_bytes", 4 * len(ctx.scene.vertices))
+    bar.close()
+    ctx_gl = gl.context()
+    result = {
+        "format": "neuralao-report",
+        "version": FORMAT_VERSION,
+        "settings": settings_to_dict(settings),
+        "dataset": {
+            "path": str(data),
+            "name": ds.manifest.get("name"),
+            "dataset_hash": ds.manifest.get("dataset_hash"),
+            "labels": settings_to_dict(label_settings),
+            "label_rays": ds_rays,
+            "size": ds.manifest.get("size"),
+        },  # fmt: skip
+        "device": {
+            "gl_renderer": ctx_gl.info.renderer,
+            "gl_version": ctx_gl.info.version,
+            "gl_platform": ctx_gl.info.platform,
+            "cpu": cpu_name(),
+            "python": platform.python_version(),
+        },  # fmt: skip
+        "scenes": scene_info,
+        "frames": per_frame,
+        "model_times": model_times,
+        "methods": summarise(methods, per_frame, per_scene_time, scene_info, model_times),
+    }
+    result["pareto"] = pareto_front(result["methods"])
+    result["_sheets"] = sheets
+    return result
+
+
+def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> dict:
+    """Per-method means, per-scene breakdown and ratios to SSAO on the same frames."""
+    out: dict = {}
+    for m in methods:
+        entry = {"family": m.family, "description": m.description, "available": m.available, "reason": m.reason,
+                 "time_on": m.time_on, "error_on": m.error_on, "scope": m.scene or "all scenes",
+                 "bytes": m.bytes, "bytes_note": m.bytes_note}  # fmt: skip
+        rows = [r for r in per_frame if m.name in r["methods"]]
+        if not m.available or not rows:
+            if m.available:
+                entry.update(available=False, reason="no frame of its scene in the evaluation set")
+            out[m.name] = entry
+            continue
+        ssim = [r["methods"][m.name]["ssim"] for r in rows]
+        rmse = [r["methods"][m.name]["rmse"] for r in rows]
+        per_scene: dict = {}
+        for r in rows:
+            ps = per_scene.setdefault(r["scene"], {"ssim": [], "rmse": []})
+            ps["ssim"].append(r["methods"][m.name]["ssim"])
+            ps["rmse"].append(r["methods"][m.name]["rmse"])
+        for scene, ps in per_scene.items():
+            ps["frames"] = len(ps["ssim"])
+            ps["ssim"], ps["rmse"] = float(np.mean(ps["ssim"])), float(np.mean(ps["rmse"]))
+            t = per_scene_time.get(scene, {}).get(m.name)
+            ps["seconds"] = t
+        times = [per_scene_time[s][m.name] for s in per_scene if m.name in per_scene_time.get(s, {})]
+        entry.update(frames=len(rows), ssim=float(np.mean(ssim)), rmse=float(np.mean(rmse)),
+                     seconds=float(np.median(times)) if times else None, per_scene=per_scene)  # fmt: skip
+        if m.family == "baked":
+            sizes = [
+                scene_info[s].get("vertex_ao_bytes")
+                for s in per_scene
+                if scene_info[s].get("vertex_ao_bytes")
+            ]
+            entry["bytes"] = int(np.mean(sizes)) if sizes else None
+            entry["bytes_note"] = "4 B per vertex (mean over scenes)"
+        if m.name in model_times:
+            entry["seconds_onnxruntime"] = model_times[m.name].get("seconds_onnxruntime")
+            if "error" in model_times[m.name]:
+                entry["timing_error"] = model_times[m.name]["error"]
+        # SSAO on exactly the same frames
+        ssao_rows = [r for r in rows if "ssao" in r["methods"]]
+        if ssao_rows and len(ssao_rows) == len(rows):
+            s_rmse = float(np.mean([r["methods"]["ssao"]["rmse"] for r in rows]))
+            s_dssim = float(np.mean([1.0 - r["methods"]["ssao"]["ssim"] for r in rows]))
+            entry["rmse_ratio_vs_ssao"] = entry["rmse"] / s_rmse if s_rmse > 0 else None
+            entry["dssim_ratio_vs_ssao"] = (1.0 - entry["ssim"]) / s_dssim if s_dssim > 0 else None
+            s_times = [per_scene_time[s]["ssao"] for s in per_scene if "ssao" in per_scene_time.get(s, {})]
+            if entry["seconds"] is not None and s_times:
+                entry["time_ratio_vs_ssao"] = entry["seconds"] / float(np.median(s_times))
+        out[m.name] = entry
+    return out
+
+
+def pareto_front(methods: dict) -> list[str]:
+    """Methods not dominated in (seconds, RMSE ratio vs SSAO): nothing else is both faster and better."""
+    pts = {n: (e["seconds"], e["rmse_ratio_vs_ssao"]) for n, e in methods.items()
+           if e.get("available") and e.get("seconds") is not None and e.get("rmse_ratio_vs_ssao") is not None}  # fmt: skip
+    front = []
+    for n, (t, r) in pts.items():
+        dominated = any(
+            (t2 <= t and r2 <= r) and (t2 < t or r2 < r) for n2, (t2, r2) in pts.items() if n2 != n
+        )
+        if not dominated:
+            front.append(n)
+    return sorted(front, key=lambda n: pts[n][0])
+
+
+def check_settings(s: ReportSettings) -> None:
+    if s.gt_rays < 1 or s.frames_per_scene < 1 or s.repeats < 1 or s.bake_rays < 1:
+        raise NeuralaoError("gt_rays, frames_per_scene, repeats and bake_rays must be >= 1")
+    if len(s.time_size) != 2 or min(s.time_size) < 1:
+        raise NeuralaoError(f"time_size must be two positive integers, got {s.time_size}")
+    if any(r < 1 for r in s.trace_rays):
+        raise NeuralaoError(f"trace_rays must be positive, got {s.trace_rays}")
+    if not (0.0 < s.target_ssim <= 1.0):
+        raise NeuralaoError(f"target SSIM must be in (0, 1], got {s.target_ssim}")
+
+
+def cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def method_order(methods: dict) -> list[str]:
+    def key(n: str):
+        e = methods[n]
+        fam = FAMILY_ORDER.get(e["family"], 9)
+        sub = BASELINE_ORDER.index(n) if n in BASELINE_ORDER else (e.get("bytes") or 0)
+        if e["family"] == "traced":
+            sub = int(n.split("-")[1])
+        return (fam, sub, n)
+
+    return sorted(methods, key=key)
+
+
+def _fmt(v, spec: str, none: str = "-") -> str:
+    return none if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
+
+
+def _bytes(v) -> str:
+    if v is None:
+        return "-"
+    return f"{v / 1024:.1f} KiB" if v >= 1024 else f"{v} B"
+
+
+def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
+    from .select import render_markdown as select_markdown
+
+    ms = result["methods"]
+    d = result["dataset"]
+    w, h = result["settings"]["time_size"]
+    lines = [
+        "# neuralao report: speed against error",
+        "",
+        f"Dataset `{d['name']}` ({d['dataset_hash'][:12] if d.get('dataset_hash') else '?'}), "
+        f"{sum(1 for f in result['frames'] if 'skipped' not in f)} held-back frames at {d['size'][0]}x{d['size'][1]}; "
+        f"ground truth: {result['settings']['gt_rays']} rays, kernel {d['labels']['kernel']}, "
+        f"max distance {d['labels']['max_distance_rel']} x scene diagonal. "
+        f"Times: {w}x{h} frames, GL on {result['device']['gl_renderer']} ({result['device']['gl_platform']}); "
+        f"CPU: {result['device']['cpu']}.",
+        "",
+        f"| method | scope | frames | SSIM | RMSE | ms / frame ({w}x{h}) | time / SSAO | RMSE / SSAO | (1-SSIM) / SSAO | bytes | timed on |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for n in method_order(ms):
+        e = ms[n]
+        if not e.get("available"):
+            continue
+        pareto = " *" if n in result.get("pareto", []) else ""
+        lines.append(
+            f"| {n}{pareto} | {e['scope']} | {e['frames']} | {_fmt(e['ssim'], '.3f')} | {_fmt(e['rmse'], '.4f')} | "
+            f"{_fmt(e['seconds'] * 1e3 if e.get('seconds') is not None else None, '.2f')} | "
+            f"{_fmt(e.get('time_ratio_vs_ssao'), '.2f')} | {_fmt(e.get('rmse_ratio_vs_ssao'), '.2f')} | "
+            f"{_fmt(e.get('dssim_ratio_vs_ssao'), '.2f')} | {_bytes(e.get('bytes'))} | {e['time_on']} |"
+        )
+    lines += ["", "`*` on the Pareto front of (time, RMSE / SSAO). Ratios are over SSAO on the same frames "
+              "(an MLP is measured on its own scene only)."]  # fmt: skip
+    ort = [(n, ms[n]["seconds_onnxruntime"]) for n in method_order(ms) if ms[n].get("seconds_onnxruntime")]
+    if ort:
+        lines += [
+            "",
+            f"onnxruntime (CPU) at {w}x{h}: " + ", ".join(f"{n} {t * 1e3:.1f} ms" for n, t in ort) + ".",
+        ]
+    missing = [n for n in method_order(ms) if not ms[n].get("available")]
+    if missing:
+        lines += ["", "Not available:", ""] + [
+            f"- {n}: {ms[n].get('reason') or 'not available'}" for n in missing
+        ]
+    lines += ["", "## Per scene (SSIM / RMSE)", ""]
+    scenes = [s for s, info in result["scenes"].items() if "skipped" not in info]
+    avail = [n for n in method_order(ms) if ms[n].get("available")]
+    lines += ["| method | " + " | ".join(scenes) + " |", "|---|" + "---:|" * len(scenes)]
+    for n in avail:
+        cells = []
+        for s in scenes:
+            ps = ms[n].get("per_scene", {}).get(s)
+            cells.append(f"{ps['ssim']:.3f} / {ps['rmse']:.3f}" if ps else "")
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    skipped = {s: i["skipped"] for s, i in result["scenes"].items() if "skipped" in i}
+    if skipped:
+        lines += [""] + [f"- scene {s} skipped: {why}" for s, why in skipped.items()]
+    if figures:
+        lines += ["", "## Figures", ""]
+        if figures.get("scatter"):
+            lines += [f"![speed vs error]({figures['scatter']})", ""]
+        for s, p in figures.get("contact_sheets", {}).items():
+            lines += [f"![{s}]({p})", ""]
+    if selection is not None:
+        lines += ["", select_markdown(selection, heading="## Model selection")]
+    lines += [
+        "",
+        "## How this was measured",
+        "",
+        "- Error: masked SSIM (Gaussian window 11, sigma 1.5) and RMSE over foreground pixels with valid ground truth, "
+        "mean over frames. SSAO, GTAO and the MLP: their GLSL on the frames' G-buffers; U-Net: onnxruntime "
+        "(its generated GLSL matches it within the parity tolerance); vertex AO: barycentric interpolation of the "
+        "baked values (what the vertex-colour draw shows); traced: Embree.",
+        "- Time: median seconds per frame at the stated size, G-buffer resident; GL methods with glFinish around "
+        "each frame in this process's headless context; traced AO: wall time of the CPU trace; the U-Net's GL "
+        "time covers all generated compute passes. A method's time is the median over scenes.",
+        "- Bytes: float32 weights for the networks, 4 bytes per vertex for baked AO, shader constants for SSAO/GTAO.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def scatter_plot(result: dict, path: Path) -> Path | None:
+    """Speed (ms, log) against RMSE relative to SSAO, with the Pareto front."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    ms = result["methods"]
+    pts = [(n, ms[n]["seconds"] * 1e3, ms[n]["rmse_ratio_vs_ssao"], ms[n]["family"]) for n in method_order(ms)
+           if ms[n].get("available") and ms[n].get("seconds") and ms[n].get("rmse_ratio_vs_ssao") is not None]  # fmt: skip
+    if not pts:
+        return None
+    colours = {
+        "screen-space": "tab:blue",
+        "baked": "tab:green",
+        "traced": "tab:gray",
+        "mlp": "tab:orange",
+        "unet": "tab:red",
+    }
+    fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=110)
+    for n, t, r, fam in pts:
+        on = n in result.get("pareto", [])
+        ax.scatter(
+            [t],
+            [r],
+            s=60 if on else 36,
+            color=colours.get(fam, "k"),
+            edgecolors="k" if on else "none",
+            zorder=3,
+        )
+        ax.annotate(n, (t, r), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    front = [(ms[n]["seconds"] * 1e3, ms[n]["rmse_ratio_vs_ssao"]) for n in result.get("pareto", [])]
+    if len(front) > 1:
+        xs, ys = zip(*sorted(front), strict=True)
+        ax.step(xs, ys, where="post", color="k", lw=1, ls="--", zorder=2, label="Pareto front")
+        ax.legend(loc="upper right", fontsize=8)
+    ax.axhline(1.0, color="tab:blue", lw=0.6, ls=":")
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    w, h = result["settings"]["time_size"]
+    ax.set_xlabel(
+        f"time per frame at {w}x{h} (ms, log; GL on {result['device']['gl_renderer'][:40]}, traced on CPU)"
+    )
+    ax.set_ylabel("RMSE / SSAO's RMSE (same frames)")
+    ax.set_title("AO methods: speed against error")
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path
+
+
+def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
+    """Ground truth | each method (top) and |method - ground truth| heat maps (bottom)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [n for n in order if n in sheet["images"]]
+    cols = 1 + len(names)
+    fig, axes = plt.subplots(2, cols, figsize=(1.9 * cols, 4.2), dpi=100, squeeze=False)
+    fg, mask, gt = sheet["fg"], sheet["mask"], sheet["gt"]
+    grey = np.where(fg, gt, 0.5)
+    axes[0, 0].imshow(grey, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    axes[0, 0].set_title("ground truth", fontsize=8)
+    invalid = fg & ~mask
+    axes[1, 0].imshow(
+        np.where(invalid, 1.0, np.where(fg, 0.6, 0.2)), cmap="gray", vmin=0, vmax=1, interpolation="nearest"
+    )
+    axes[1, 0].set_title("invalid GT (white)", fontsize=8)
+    im = None
+    for k, n in enumerate(names, start=1):
+        pred = sheet["images"][n]
+        axes[0, k].imshow(np.where(fg, pred, 0.5), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        axes[0, k].set_title(n, fontsize=8)
+        err = np.ma.masked_array(np.abs(pred - gt), mask=~mask)
+        im = axes[1, k].imshow(err, cmap="magma", vmin=0.0, vmax=0.5, interpolation="nearest")
+        rmse = float(np.sqrt(np.mean((pred[mask] - gt[mask]) ** 2))) if mask.any() else float("nan")
+        axes[1, k].set_title(f"|error| rmse {rmse:.3f}", fontsize=7)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if im is not None:
+        fig.colorbar(im, ax=axes[1, :].tolist(), fraction=0.02, pad=0.01)
+    fig.suptitle(f"{scene}, view {sheet['view']}", fontsize=9)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path
+
+
+def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
+    """Figures, the selection section, report.json and report.md (written last) under ``out``."""
+    from .select import select_from_results
+
+    sheets = result.pop("_sheets", {})
+    figures: dict = {"contact_sheets": {}}
+    scatter = scatter_plot(result, out / "speed_vs_error.png")
+    if scatter is not None:
+        figures["scatter"] = scatter.name
+    if settings.contact_sheets:
+        order = method_order(result["methods"])
+        for scene, sheet in sheets.items():
+            figures["contact_sheets"][scene] = contact_sheet(
+                scene, sheet, order, out / f"contact_{scene}.png"
+            ).name
+    selection = select_from_results(result, settings.target_ssim)
+    result["select"] = selection
+    result["figures"] = figures
+    write_json(out / "report.json", result)
+    write_text(out / "report.md", render_markdown(result, selection, figures))
+    return result
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="dataset folder (neuralao dataset)")
+    p.add_argument(
+        "--exports",
+        help="folder of export folders (mlp-16x8, mlp-32x16, mlp-64x32, unet); missing ones are listed as not available",
+    )
+    p.add_argument("--out", required=True, help="output folder: report.md, report.json, PNG figures, caches")
+    p.add_argument("--config", help="JSON preset of report settings")
+    p.add_argument("--gt-rays", type=int, help="ground-truth rays per pixel (default 1024)")
+    p.add_argument("--frames-per-scene", type=int, help="evaluation frames per scene (default 4)")
+    p.add_argument(
+        "--time-size", type=int, nargs=2, metavar=("W", "H"), help="timing resolution (default 512 512)"
+    )
+    p.add_argument("--repeats", type=int, help="timed repetitions per GL measurement (default 10)")
+    p.add_argument("--target", type=float, help="model-selection SSIM target (default 0.95)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any report setting, e.g. --set trace_rays=[4,16] --set ssao.samples=32 (strict)")  # fmt: skip
+
+
+def settings_from_args(args: argparse.Namespace) -> ReportSettings:
+    overrides = list(args.set)
+    for flag, key in (("gt_rays", "gt_rays"), ("frames_per_scene", "frames_per_scene"), ("repeats", "repeats"),
+                      ("target", "target_ssim")):  # fmt: skip
+        v = getattr(args, flag, None)
+        if v is not None:
+            overrides.append(f"{key}={json.dumps(v)}")
+    if getattr(args, "time_size", None):
+        overrides.append(f"time_size={json.dumps(list(args.time_size))}")
+    settings = load_settings(ReportSettings, args.config, overrides)
+    check_settings(settings)
+    return settings
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    result = evaluate(args.data, args.exports, settings, out, progress=True)
+    write_report(result, out, settings)
+    ms = result["methods"]
+    for n in method_order(ms):
+        e = ms[n]
+        if e.get("available"):
+            log.info(
+                "%-15s ssim %.3f rmse %.4f  %8.2f ms",
+                n,
+                e["ssim"],
+                e["rmse"],
+                (e.get("seconds") or float("nan")) * 1e3,
+            )
+        else:
+            log.info("%-15s not available: %s", n, e.get("reason"))
+    log.info("report: %s", out / "report.md")
+    return 0

@@ -1,0 +1,401 @@
+"""Headless executor for the generated GLSL (Mesa llvmpipe through :mod:`runtime.gl`, or any GL 4.3+).
+
+Everything here is driven by what an engine would read: shader sources, uniform-block / weight
+files and the manifest. Passing an export folder instead of an in-memory object runs exactly the
+files on disk, so the runner doubles as the check that an export is self-sufficient.
+
+    run_mlp_fragment(shader_or_dir, normal_obj, mask, fp16=False, dialect=None) -> (H, W) f32
+    time_mlp_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
+    time_vertex_colour(scene, camera, repeats=30, ao=None) -> s/frame
+    run_compute(program_or_dir, x, flip_y=False) -> (1, C, H, W) f32      (first graph output)
+    run_compute_all(program_or_dir, x, flip_y=False) -> {onnx output name: (1, C, H, W) f32}
+    time_compute(program_or_dir, height, width, repeats=5) -> s/frame
+
+Timings are medians of per-frame wall times, each frame closed by ``glFinish``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from export.glsl import (
+    DIALECTS,
+    ComputeProgram,
+    MLPShader,
+    load_compute_export,
+    load_mlp_export,
+)
+from export.glsl_templates import fill
+from pipeline.errors import NeuralaoError
+
+from . import gl
+from .gl import GL
+
+log = logging.getLogger(__name__)
+
+_PROGRAMS: dict[tuple[tuple[str, str], ...], int] = {}
+
+
+def _program(**sources: str) -> int:
+    """Compiled program for these sources, cached for the life of the process-wide context."""
+    key = tuple(sorted(sources.items()))
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = gl.compile_program(**sources)
+    return _PROGRAMS[key]
+
+
+def _median_time(frame, repeats: int, warmup: int) -> float:
+    for _ in range(warmup):
+        frame()
+    gl.finish()
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        frame()
+        gl.finish()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+# --------------------------------------------------------------------------- fragment MLP
+
+
+def _mlp(shader_or_dir: MLPShader | str | Path, dialect: str | None) -> tuple[MLPShader, str, str]:
+    shader = shader_or_dir if isinstance(shader_or_dir, MLPShader) else load_mlp_export(shader_or_dir)
+    name = dialect or shader.dialect
+    if name not in shader.sources:
+        raise NeuralaoError(f"no {name!r} variant in this shader (have {sorted(shader.sources)})")
+    vert, frag = shader.sources[name]
+    return shader, vert, frag
+
+
+class _MLPPass:
+    """G-buffer texture, output texture + FBO, uniform buffers and the program of one MLP draw."""
+
+    def __init__(self, shader: MLPShader, vert: str, frag: str, height: int, width: int, fp16: bool):
+        ctx = gl.context()
+        self.vao = ctx.empty_vao
+        self.h, self.w = int(height), int(width)
+        self.internal = GL.GL_RGBA16F if fp16 else GL.GL_RGBA32F
+        self.prog = _program(vertex=vert, fragment=frag)
+        self.gbuffer = gl.create_texture(self.w, self.h, self.internal)
+        self.out = gl.create_texture(self.w, self.h, self.internal)
+        self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
+        GL.glUseProgram(self.prog)
+        loc = GL.glGetUniformLocation(self.prog, "u_gbuffer")
+        if loc >= 0:
+            GL.glUniform1i(loc, 0)
+        self.ubos = []
+        for name, binding, data in shader.uniform_blocks:
+            index = GL.glGetUniformBlockIndex(self.prog, name)
+            if index == GL.GL_INVALID_INDEX:
+                continue  # optimised out (unused)
+            GL.glUniformBlockBinding(self.prog, index, binding)
+            buf = gl.create_buffer(np.ascontiguousarray(data, np.float32), target=GL.GL_UNIFORM_BUFFER)
+            self.ubos.append((binding, buf))
+
+    def upload(self, normal: np.ndarray, mask: np.ndarray) -> None:
+        g = np.concatenate([normal.astype(np.float32), mask.astype(np.float32)[..., None]], axis=-1)
+        gl.upload_texture(self.gbuffer, g, self.internal)
+
+    def draw(self) -> None:
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self.fbo)
+        GL.glViewport(0, 0, self.w, self.h)
+        GL.glDisable(GL.GL_DEPTH_TEST)
+        GL.glDisable(GL.GL_BLEND)
+        GL.glUseProgram(self.prog)
+        GL.glActiveTexture(GL.GL_TEXTURE0)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, self.gbuffer)
+        for binding, buf in self.ubos:
+            GL.glBindBufferBase(GL.GL_UNIFORM_BUFFER, binding, buf)
+        GL.glBindVertexArray(self.vao)
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, 3)
+
+    def read(self) -> np.ndarray:
+        return gl.read_texture(self.out, self.w, self.h, self.internal)
+
+    def release(self) -> None:
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+        GL.glDeleteFramebuffers(1, [self.fbo])
+        GL.glDeleteTextures(2, [self.gbuffer, self.out])
+        if self.ubos:
+            GL.glDeleteBuffers(len(self.ubos), [b for _, b in self.ubos])
+
+
+def run_mlp_fragment(
+    shader: MLPShader | str | Path,
+    normal_obj: np.ndarray,
+    mask: np.ndarray,
+    fp16: bool = False,
+    dialect: str | None = None,
+) -> np.ndarray:
+    """Render the MLP pass over a G-buffer and read the result back.
+
+    normal_obj : (H, W, 3) float32 object-space normals (fed as stored); mask : (H, W) bool.
+    fp16 : store the G-buffer and the target as RGBA16F (arithmetic stays fp32).
+    dialect : which variant to run ("glsl330" | "es300" | "glsl430"; default: the shader's own).
+    Returns (H, W) float32 when the network has one output, else (H, W, m); background = 1.
+    """
+    normal_obj = np.asarray(normal_obj, dtype=np.float32)
+    mask = np.asarray(mask, dtype=bool)
+    if normal_obj.ndim != 3 or normal_obj.shape[2] != 3 or mask.shape != normal_obj.shape[:2]:
+        raise NeuralaoError(
+            f"expected normal_obj (H, W, 3) and mask (H, W), got {normal_obj.shape}, {mask.shape}"
+        )
+    sh, vert, frag = _mlp(shader, dialect)
+    p = _MLPPass(sh, vert, frag, normal_obj.shape[0], normal_obj.shape[1], fp16)
+    try:
+        p.upload(normal_obj, mask)
+        p.draw()
+        out = p.read()
+    finally:
+        p.release()
+    m = sh.output_width
+    return out[..., 0].copy() if m == 1 else out[..., :m].copy()
+
+
+def time_mlp_fragment(
+    shader: MLPShader | str | Path,
+    height: int,
+    width: int,
+    repeats: int = 30,
+    warmup: int = 3,
+    fp16: bool = False,
+    dialect: str | None = None,
+) -> float:
+    """Median seconds per full-screen MLP pass at width x height (random unit normals, all foreground)."""
+    sh, vert, frag = _mlp(shader, dialect)
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(height, width, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    p = _MLPPass(sh, vert, frag, height, width, fp16)
+    try:
+        p.upload(n, np.ones((height, width), bool))
+        return _median_time(p.draw, repeats, warmup)
+    finally:
+        p.release()
+
+
+def time_vertex_colour(
+    scene, camera, repeats: int = 30, warmup: int = 3, ao: np.ndarray | None = None
+) -> float:
+    """Median seconds per frame of the plain baked-AO draw: the mesh with one float per vertex as its
+    colour, depth-tested, into an RGBA8 target of the camera's size (the engine's cheapest AO).
+
+    scene : pipeline.scene.Scene; camera : pipeline.camera.Camera; ao : (n_vertices,) float32 or None
+    (then a deterministic pattern; the cost does not depend on the values).
+    """
+    ctx = gl.context()
+    d = DIALECTS["glsl330"]
+    prog = _program(vertex=fill("vertex_colour_vert", header=d.header()),
+                    fragment=fill("vertex_colour_frag", header=d.header()))  # fmt: skip
+    v = np.ascontiguousarray(scene.vertices, dtype=np.float32)
+    f = np.ascontiguousarray(scene.faces, dtype=np.uint32)
+    a = np.linspace(0.2, 1.0, len(v), dtype=np.float32) if ao is None else np.asarray(ao, np.float32)
+    if a.shape != (len(v),):
+        raise NeuralaoError(f"ao must have one value per vertex ({len(v)}), got {a.shape}")
+    w, h = camera.width, camera.height
+    colour = gl.create_texture(w, h, GL.GL_RGBA8)
+    fbo = gl.create_framebuffer([colour], w, h, depth=True)
+    vao = GL.glGenVertexArrays(1)
+    GL.glBindVertexArray(vao)
+    bufs = []
+    for loc, arr, comps in ((0, v, 3), (1, a, 1)):
+        buf = gl.create_buffer(arr, target=GL.GL_ARRAY_BUFFER)
+        GL.glVertexAttribPointer(loc, comps, GL.GL_FLOAT, GL.GL_FALSE, 0, None)
+        GL.glEnableVertexAttribArray(loc)
+        bufs.append(buf)
+    ebo = gl.create_buffer(f, target=GL.GL_ELEMENT_ARRAY_BUFFER)
+    bufs.append(ebo)
+    mvp = (camera.projection @ camera.view).astype(np.float32)
+    GL.glUseProgram(prog)
+    GL.glUniformMatrix4fv(GL.glGetUniformLocation(prog, "u_mvp"), 1, GL.GL_TRUE, mvp)
+    count = int(f.size)
+
+    def frame() -> None:
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fbo)
+        GL.glViewport(0, 0, w, h)
+        GL.glEnable(GL.GL_DEPTH_TEST)
+        GL.glClearColor(1.0, 1.0, 1.0, 1.0)
+        GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+        GL.glUseProgram(prog)
+        GL.glBindVertexArray(vao)
+        GL.glDrawElements(GL.GL_TRIANGLES, count, GL.GL_UNSIGNED_INT, None)
+
+    try:
+        return _median_time(frame, repeats, warmup)
+    finally:
+        GL.glDisable(GL.GL_DEPTH_TEST)
+        GL.glBindVertexArray(ctx.empty_vao)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+        GL.glDeleteVertexArrays(1, [vao])
+        GL.glDeleteBuffers(len(bufs), bufs)
+        GL.glDeleteFramebuffers(1, [fbo])
+        GL.glDeleteTextures(1, [colour])
+
+
+# --------------------------------------------------------------------------- compute passes
+
+_IMAGE_FORMATS = {"RGBA32F": GL.GL_RGBA32F, "RGBA16F": GL.GL_RGBA16F}
+
+
+def _size(dim: dict, sizes: dict[str, int]) -> int:
+    v = sizes[dim["of"]] * dim["num"]
+    if v % dim["den"]:
+        raise NeuralaoError(
+            f"texture size {dim['formula']} is fractional for {dim['of']} = {sizes[dim['of']]}"
+        )
+    return v // dim["den"] + dim["offset"]
+
+
+def _array_texture(width: int, height: int, layers: int, internal: int) -> int:
+    tex = GL.glGenTextures(1)
+    GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
+    GL.glTexStorage3D(GL.GL_TEXTURE_2D_ARRAY, 1, internal, width, height, layers)
+    for p, v in ((GL.GL_TEXTURE_MIN_FILTER, GL.GL_NEAREST), (GL.GL_TEXTURE_MAG_FILTER, GL.GL_NEAREST)):
+        GL.glTexParameteri(GL.GL_TEXTURE_2D_ARRAY, p, v)
+    return tex
+
+
+class _ComputeRun:
+    """Textures sized for one input resolution, compiled passes and the parameter buffer."""
+
+    def __init__(self, program: ComputeProgram, height: int, width: int):
+        gl.context()
+        m = program.manifest
+        self.manifest = m
+        multiple = int(m["pad"]["multiple"])
+        static = m.get("static_input_size")
+        if static is not None and [height, width] != list(static):
+            raise NeuralaoError(
+                f"this program was generated for a fixed {static[1]}x{static[0]} input, got {width}x{height}"
+            )
+        if height < multiple or width < multiple:
+            raise NeuralaoError(f"image {width}x{height} is smaller than the pad multiple {multiple}")
+        hp, wp = math.ceil(height / multiple) * multiple, math.ceil(width / multiple) * multiple
+        self.sizes = {"H": height, "W": width, "Hp": hp, "Wp": wp}
+        max_size = int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE))
+        self.textures: dict[str, tuple[int, int, int, int, int]] = {}  # id -> (tex, w, h, layers, internal)
+        for ident, t in m["textures"].items():
+            tw, th = _size(t["width"], self.sizes), _size(t["height"], self.sizes)
+            if not (1 <= tw <= max_size and 1 <= th <= max_size):
+                raise NeuralaoError(f"texture {ident} would be {tw}x{th}, outside 1..{max_size}")
+            internal = _IMAGE_FORMATS[t["format"]]
+            self.textures[ident] = (
+                _array_texture(tw, th, t["layers"], internal),
+                tw,
+                th,
+                t["layers"],
+                internal,
+            )
+        self.ssbo = None
+        if program.weights:
+            align = int(GL.glGetIntegerv(GL.GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT))
+            if int(m["weights"]["range_alignment"]) % align:
+                raise NeuralaoError(
+                    f"parameter ranges aligned to {m['weights']['range_alignment']}, GL needs {align}"
+                )
+            self.ssbo = gl.create_buffer(np.frombuffer(program.weights, dtype=np.uint8))
+        self.passes = []
+        for p in m["passes"]:
+            prog = _program(compute=program.sources[p["shader"]])
+            tex, tw, th, layers, internal = self.textures[p["output"]["texture"]]
+            lx, ly, _ = p["local_size"]
+            groups = (-(-tw // lx), -(-th // ly), layers)
+            self.passes.append((p, prog, groups))
+
+    def upload(self, x: np.ndarray) -> None:
+        ident = self.manifest["input"]["texture"]
+        tex, w, h, layers, _ = self.textures[ident]
+        c = x.shape[1]
+        data = np.zeros((layers * 4, h, w), np.float32)
+        data[:c] = x[0]
+        data = np.ascontiguousarray(data.reshape(layers, 4, h, w).transpose(0, 2, 3, 1))
+        GL.glPixelStorei(GL.GL_UNPACK_ALIGNMENT, 1)
+        GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
+        GL.glTexSubImage3D(GL.GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, w, h, layers, GL.GL_RGBA, GL.GL_FLOAT, data)
+
+    def dispatch(self, flip_y: bool = False) -> None:
+        barrier = GL.GL_TEXTURE_FETCH_BARRIER_BIT | GL.GL_SHADER_IMAGE_ACCESS_BARRIER_BIT
+        for p, prog, groups in self.passes:
+            GL.glUseProgram(prog)
+            for inp in p["inputs"]:
+                GL.glActiveTexture(GL.GL_TEXTURE0 + inp["binding"])
+                GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, self.textures[inp["texture"]][0])
+            tex, _, _, _, internal = self.textures[p["output"]["texture"]]
+            GL.glBindImageTexture(p["output"]["binding"], tex, 0, GL.GL_TRUE, 0, GL.GL_WRITE_ONLY, internal)
+            if "params" in p:
+                prm = p["params"]
+                GL.glBindBufferRange(
+                    GL.GL_SHADER_STORAGE_BUFFER, prm["binding"], self.ssbo, prm["offset"], prm["bytes"]
+                )
+            if "uniforms" in p:
+                GL.glUniform1i(p["uniforms"]["u_flip_y"]["location"], int(flip_y))
+            GL.glDispatchCompute(*groups)
+            GL.glMemoryBarrier(barrier)
+        GL.glActiveTexture(GL.GL_TEXTURE0)
+
+    def read(self, ident: str, channels: int) -> np.ndarray:
+        tex, w, h, layers, _ = self.textures[ident]
+        GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
+        GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
+        buf = np.empty((layers, h, w, 4), np.float32)
+        GL.glGetTexImage(GL.GL_TEXTURE_2D_ARRAY, 0, GL.GL_RGBA, GL.GL_FLOAT, buf)
+        return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
+
+    def release(self) -> None:
+        GL.glDeleteTextures(len(self.textures), [t[0] for t in self.textures.values()])
+        if self.ssbo is not None:
+            GL.glDeleteBuffers(1, [self.ssbo])
+
+
+def _compute_program(program_or_dir: ComputeProgram | str | Path) -> ComputeProgram:
+    return (
+        program_or_dir if isinstance(program_or_dir, ComputeProgram) else load_compute_export(program_or_dir)
+    )
+
+
+def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False) -> dict:
+    """Run every pass on x : (1, C, H, W) float32; returns {onnx output name: (1, C_out, H, W) float32}.
+
+    flip_y : the input/output textures are bottom-up GL images (here: x is given bottom row first).
+    """
+    prog = _compute_program(program_or_dir)
+    x = np.asarray(x, dtype=np.float32)
+    want_c = prog.manifest["input"]["channels"]
+    if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
+        raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
+    run = _ComputeRun(prog, x.shape[2], x.shape[3])
+    try:
+        run.upload(x)
+        run.dispatch(flip_y)
+        return {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
+    finally:
+        run.release()
+
+
+def run_compute(
+    program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False
+) -> np.ndarray:
+    """The first graph output of :func:`run_compute_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
+    prog = _compute_program(program_or_dir)
+    return run_compute_all(prog, x, flip_y)[prog.manifest["outputs"][0]["onnx_name"]]
+
+
+def time_compute(
+    program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5, warmup: int = 1
+) -> float:
+    """Median seconds for all passes (pad, network, crop) at width x height, random input."""
+    prog = _compute_program(program_or_dir)
+    c = prog.manifest["input"]["channels"]
+    run = _ComputeRun(prog, height, width)
+    try:
+        run.upload(np.random.default_rng(0).normal(size=(1, c, height, width)).astype(np.float32))
+        return _median_time(run.dispatch, repeats, warmup)
+    finally:
+        run.release()

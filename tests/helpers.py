@@ -1,0 +1,97 @@
+"""Shared test helpers (trimesh's ``tests/generic.py`` habit): tiny analytic scenes and MC bounds.
+
+Add helpers at the end; keep each one small, documented with shapes, and free of test logic.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.constants import TOL
+from pipeline.scene import Scene, scene_from_arrays
+
+
+def quad(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A planar quad from 4 corners (4, 3), counter-clockwise seen from the side its normal faces.
+
+    Returns vertices (4, 3) float64 and faces (2, 3) int64 (right-handed winding keeps the normal).
+    """
+    return np.asarray(corners, dtype=np.float64), np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+
+
+def merge(*parts: tuple[np.ndarray, np.ndarray], name: str = "test") -> Scene:
+    """Concatenate (vertices, faces) parts into one :class:`Scene`."""
+    verts, faces, offset = [], [], 0
+    for v, f in parts:
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    return scene_from_arrays(np.concatenate(verts), np.concatenate(faces), name)
+
+
+def floor_quad(half: float, z: float = 0.0, up: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Square [-half, half]^2 at height z, normal +z (``up``) or -z."""
+    c = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]])
+    return quad(c if up else c[::-1])
+
+
+def wall_quad(
+    x: float, half_width: float, height: float, facing_minus_x: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Wall in the plane X = x, y in [-half_width, half_width], z in [0, height]; normal -x or +x."""
+    c = np.array(
+        [[x, -half_width, 0.0], [x, -half_width, height], [x, half_width, height], [x, half_width, 0.0]]
+    )
+    return quad(c if facing_minus_x else c[::-1])
+
+
+def box(half: float, inward: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Closed axis-aligned cube [-half, half]^3 (8 vertices, 12 faces), normals outward or inward."""
+    v = np.array(
+        [[x, y, z] for x in (-half, half) for y in (-half, half) for z in (-half, half)], dtype=np.float64
+    )
+    # Outward, counter-clockwise seen from outside (index = 4x + 2y + z over {0,1}).
+    f = np.array(
+        [
+            [0, 1, 3], [0, 3, 2],  # x = -half
+            [4, 6, 7], [4, 7, 5],  # x = +half
+            [0, 4, 5], [0, 5, 1],  # y = -half
+            [2, 3, 7], [2, 7, 6],  # y = +half
+            [0, 2, 6], [0, 6, 4],  # z = -half
+            [1, 5, 7], [1, 7, 3],  # z = +half
+        ],
+        dtype=np.int64,
+    )  # fmt: skip
+    return v, (f[:, ::-1].copy() if inward else f)
+
+
+def random_rotation(seed: int) -> np.ndarray:
+    """(3, 3) float64 proper rotation, uniformly random (QR of a Gaussian matrix, sign-fixed)."""
+    q, r = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+def transformed(scene: Scene, rotation: np.ndarray, offset: np.ndarray | float = 0.0) -> Scene:
+    """Scene with vertices @ rotation.T + offset (faces unchanged)."""
+    return Scene(scene.vertices @ rotation.T + offset, scene.faces.copy(), scene.name)
+
+
+def mc_bound(p: float | np.ndarray, samples: int | np.ndarray) -> float | np.ndarray:
+    """Allowed |estimate - p| for a mean of ``samples`` values in [0, 1] with mean p.
+
+    TOL.mc_sigmas standard errors, with the binomial variance p(1-p) (the largest variance any
+    [0, 1]-valued variable with mean p can have, so also valid for obscurance and for stratified
+    estimators, whose variance is lower), plus TOL.mc_abs_floor for p near 0 or 1.
+    """
+    p = np.clip(p, 0.0, 1.0)
+    return TOL.mc_sigmas * np.sqrt(p * (1.0 - p) / samples) + TOL.mc_abs_floor
+
+
+def segment_fraction(c: float) -> float:
+    """Fraction of the unit disk's area with x > c (0 <= c <= 1): (acos c - c sqrt(1 - c^2)) / pi."""
+    return (math.acos(c) - c * math.sqrt(1.0 - c * c)) / math.pi
