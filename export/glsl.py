@@ -1512,7 +1512,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         summary=" + ".join(p.ops),
         local_x=local_size[0],
         local_y=local_size[1],
-        prelude=fill("prelude"),
+        prelude=fill("prelude") + ("\n\n" + fill("prelude_div") if p.kind.startswith("resize") else ""),
         declarations="\n".join(decls),
         out_layers=p.output.layers,
         body=body,

@@ -60,7 +60,8 @@ _T["act_Relu"] = "max(${x}, vec4(0.0))"
 _T["act_LeakyRelu"] = "nao_leaky_relu(${x}, ${alpha})"
 _T["act_Sigmoid"] = "nao_sigmoid(${x})"
 _T["act_Tanh"] = "nao_tanh(${x})"
-_T["act_Clip"] = "clamp(${x}, vec4(${lo}), vec4(${hi}))"
+# min(max()) rather than clamp(): GLSL leaves clamp undefined for lo > hi; ONNX Clip then gives hi.
+_T["act_Clip"] = "min(max(${x}, vec4(${lo})), vec4(${hi}))"
 _T["act_Clip_min"] = "max(${x}, vec4(${lo}))"
 _T["act_Clip_max"] = "min(${x}, vec4(${hi}))"
 _T["act_Identity"] = "${x}"
@@ -218,16 +219,28 @@ _T["pool_finish_count"] = "    r /= float(max(count, 1));"
 _T["pool_finish_fixed"] = "    r /= ${divisor};"
 _T["pool_finish_none"] = "    // max pool: no normalisation"
 
-# Resize: source coordinate per ONNX coordinate_transformation_mode (x: output index as float).
-_T["coord_half_pixel"] = "((${x} + 0.5) / ${scale} - 0.5)"
-_T["coord_pytorch_half_pixel"] = "(${len_out} > 1.0 ? (${x} + 0.5) / ${scale} - 0.5 : 0.0)"
-_T["coord_align_corners"] = "(${len_out} > 1.0 ? ${x} * (${len_in} - 1.0) / (${len_out} - 1.0) : 0.0)"
-_T["coord_asymmetric"] = "(${x} / ${scale})"
+# Resize: source coordinate per ONNX coordinate_transformation_mode (x: output index as float), the
+# float32 operations of the ONNX formulas in onnxruntime's order, each correctly rounded: a coordinate
+# that is exactly an integer or a half (scale 1.5, 0.75, ...) must not come out one ulp off, or
+# nearest mode's floor / ceil / tie rounding picks the neighbouring pixel. GLSL allows 2.5 ulp for
+# ``/`` (llvmpipe computes a * rcp(b)) and may contract a * b + c into an fma, hence nao_div and the
+# ``precise`` coordinates in the resize bodies (found by tests/test_fuzz.py, seed 33).
+# nao_div: correctly rounded a / b (one exact fma residual step on the <= 2.5 ulp GLSL quotient).
+_T["prelude_div"] = """float nao_div(float a, float b) {
+    precise float q = a / b;
+    precise float r = fma(-q, b, a);
+    precise float d = q + r / b;
+    return d;
+}"""
+_T["coord_half_pixel"] = "(nao_div(${x} + 0.5, ${scale}) - 0.5)"
+_T["coord_pytorch_half_pixel"] = "(${len_out} > 1.0 ? nao_div(${x} + 0.5, ${scale}) - 0.5 : 0.0)"
+_T["coord_align_corners"] = "(${len_out} > 1.0 ? nao_div(${x} * (${len_in} - 1.0), ${len_out} - 1.0) : 0.0)"
+_T["coord_asymmetric"] = "nao_div(${x}, ${scale})"
 _T["coord_half_pixel_symmetric"] = (
-    "(${len_in} * 0.5 * (1.0 - ${len_out} / (${scale} * ${len_in})) + (${x} + 0.5) / ${scale} - 0.5)"
+    "(${len_in} * 0.5 * (1.0 - nao_div(${len_out}, ${scale} * ${len_in})) + nao_div(${x} + 0.5, ${scale}) - 0.5)"
 )
 _T["scale_literal"] = "${value}"
-_T["scale_ratio"] = "(${len_out} / ${len_in})"
+_T["scale_ratio"] = "nao_div(${len_out}, ${len_in})"
 _T["float_of"] = "float(${v})"
 
 # Nearest index per nearest_mode, exact for non-negative coordinates (negative ones clamp to 0).
@@ -237,8 +250,8 @@ _T["round_floor"] = "floor(${v})"
 _T["round_ceil"] = "ceil(${v})"
 
 _T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    float fy = ${coord_y};
-    float fx = ${coord_x};
+    precise float fy = ${coord_y};
+    precise float fx = ${coord_x};
     fy = clamp(fy, 0.0, float(in_size.y - 1));
     fx = clamp(fx, 0.0, float(in_size.x - 1));
     int y0 = int(fy);
@@ -254,8 +267,8 @@ _T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
     vec4 r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;"""
 
 _T["resize_nearest_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    float fy = ${coord_y};
-    float fx = ${coord_x};
+    precise float fy = ${coord_y};
+    precise float fx = ${coord_x};
     int iy = clamp(int(${round_y}), 0, in_size.y - 1);
     int ix = clamp(int(${round_x}), 0, in_size.x - 1);
     vec4 r = texelFetch(src0, ivec3(ix, iy, gid.z), 0);"""

@@ -34,6 +34,22 @@ class Tolerances:
     # onnxruntime vs torch, OpenCV dnn vs onnxruntime (same fp32 math, different kernels).
     onnx_vs_torch: float = 1e-5
     opencv_vs_onnx: float = 1e-4
+    # float32 SSIM (torch training loss, pipeline/unet_train.py) vs float64 SSIM (pipeline/metrics.py),
+    # per pixel or averaged. The variance terms E[x^2] - E[x]^2 cancel catastrophically in float32
+    # (rounding ~6e-8 for values in [0, 1]) and are then divided by (var_x + var_y + C2) >= C2 = 9e-4,
+    # so a flat window can be off by ~1e-4; measured 4.2e-5 on constant 0.3 / 0.7 crops and 2e-6 on
+    # random images. A wrong window, sigma, padding or mask handling moves SSIM by > 1e-2.
+    ssim_fp32_vs_fp64: float = 1e-4
+    # Fuzzed GLSL (tests/test_fuzz.py: random image graphs and MLPs, weights up to ~100, inputs up to
+    # ~1e3, so sums reach 1e4+ and cancel) vs onnxruntime, both fp32. A fixed absolute or relative
+    # tolerance is meaningless under cancellation, so each element is held to this factor times its
+    # first-order forward-error bound for |GLSL - onnxruntime| (Higham: an n-term fp32 dot product is
+    # within gamma_n = n u / (1 - n u), u = 2^-24, of exact relative to sum |w| |x|, on each side;
+    # propagated through later layers with |W| and the activations' slopes; nearest-resize ties and
+    # exp rounding as stated in the test). The bound is a worst case, so the factor is 1: measured
+    # max |diff| / bound 0.18 over 166 image graphs (seeds 0-199) and 0.09 over 30 MLPs, while an
+    # indexing or formula error is off by O(|x|), thousands of times the bound.
+    glsl_fuzz_bound: float = 1.0
     # Screen-space baselines (runtime/baselines.py) on an open plane facing the camera (exact AO 1).
     # SSAO: the hemisphere kernel never dips below the plane and the bias is positive -> exactly 1
     # up to float32 rounding of the reprojected depth.

@@ -88,14 +88,18 @@ class Scene:
         return Scene(self.vertices * factor + offset, self.faces.copy(), self.name, self.source)
 
 
-def _read_trimesh(path: Path):
+def _read_geometries(path: Path) -> list:
+    """Every geometry of the file with its node transforms applied (``dump(concatenate=False)`` keeps
+    instanced geometry). Reading *and* flattening are guarded: a truncated OBJ whose last vertex
+    line lost coordinates parses, then fails inside trimesh's transform code."""
     import trimesh
 
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
+        return list(loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded])
     except Exception as e:  # trimesh raises many types for corrupt files
-        raise NeuralaoError(f"cannot read mesh {path}: {type(e).__name__}: {e}") from None
-    return loaded
+        first = str(e).splitlines()[0][:200] if str(e) else ""
+        raise NeuralaoError(f"cannot read mesh {path}: {type(e).__name__}: {first}") from None
 
 
 def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate: bool = True) -> Scene:
@@ -105,11 +109,8 @@ def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate
     faces. Degenerate faces (zero area or repeated indices) are dropped with a warning.
     """
     path = resolve_mesh_path(path)
-    loaded = _read_trimesh(path)
     verts, faces, offset = [], [], 0
-    # dump(concatenate=False) applies every node's transform and keeps instanced geometry.
-    geoms = loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded]
-    for g in geoms:
+    for g in _read_geometries(path):
         if not hasattr(g, "faces") or g.faces is None or len(g.faces) == 0:
             continue
         v = np.asarray(g.vertices, dtype=np.float64)

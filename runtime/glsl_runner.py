@@ -148,6 +148,9 @@ def run_mlp_fragment(
             f"expected normal_obj (H, W, 3) and mask (H, W), got {normal_obj.shape}, {mask.shape}"
         )
     sh, vert, frag = _mlp(shader, dialect)
+    m = sh.output_width
+    if mask.size == 0:  # no pixel to draw (GL rejects zero-sized textures): an empty result
+        return np.ones(mask.shape if m == 1 else (*mask.shape, m), np.float32)
     p = _MLPPass(sh, vert, frag, normal_obj.shape[0], normal_obj.shape[1], fp16)
     try:
         p.upload(normal_obj, mask)
@@ -155,7 +158,6 @@ def run_mlp_fragment(
         out = p.read()
     finally:
         p.release()
-    m = sh.output_width
     return out[..., 0].copy() if m == 1 else out[..., :m].copy()
 
 
