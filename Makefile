@@ -15,6 +15,9 @@ STAMP := $(VENV)/.installed
 export PYOPENGL_PLATFORM ?= osmesa
 # Two cores: keep BLAS/torch from oversubscribing when we fan out ourselves.
 export OMP_NUM_THREADS ?= 2
+# Idle OpenMP threads sleep instead of spinning: with a spinning pool, torch ran 20-50x slower
+# whenever another process held one of the two cores (measured in bench/bench_unet.py).
+export OMP_WAIT_POLICY ?= PASSIVE
 
 DEMO_CONFIG := configs/demo.json
 BUILD := build/demo
