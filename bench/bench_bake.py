@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -40,19 +39,10 @@ from pipeline.bake import (  # noqa: E402
 )
 from pipeline.io import write_json, write_text  # noqa: E402
 from pipeline.labels import Labeller  # noqa: E402
+from pipeline.report import cpu_name
 from pipeline.scene import load_scene  # noqa: E402
 
 ALPHAS = (0.0, 0.1, 1.0, 10.0, 100.0)
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def compare(name: str, rays: int, ref_rays: int, held_out: int) -> dict:

@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -33,20 +32,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline.camera import orbit  # noqa: E402
 from pipeline.gbuffer import GBufferRenderer, reversed_z_projection  # noqa: E402
 from pipeline.io import write_json, write_text  # noqa: E402
+from pipeline.report import cpu_name
 from pipeline.scene import load_scene  # noqa: E402
 from runtime import gl as rgl  # noqa: E402
 
 DEFAULT_MESHES = ("spot", "bunny", "2CylinderEngine")
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 class PyrenderBaseline:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -33,19 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pipeline.camera import orbit  # noqa: E402
 from pipeline.io import write_json, write_text  # noqa: E402
 from pipeline.labels import Labeller, LabelSettings  # noqa: E402
+from pipeline.report import cpu_name
 from pipeline.scene import load_scene  # noqa: E402
 
 RAW_CHUNK = 1 << 16  # rays per raw call when split over threads (same granularity as the labeller)
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def render_frame(scene, size: int) -> tuple[dict, str]:

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -42,6 +41,7 @@ from pipeline.io import write_json, write_text  # noqa: E402
 from pipeline.labels import Labeller, LabelSettings  # noqa: E402
 from pipeline.metrics import masked_rmse, masked_ssim  # noqa: E402
 from pipeline.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
+from pipeline.report import cpu_name
 from pipeline.scene import load_scene  # noqa: E402
 
 # Erra et al. 2017, Table 2: SSIM against ray-traced AO for NN-16x8, NN-32x16, NN-64x32.
@@ -52,16 +52,6 @@ PAPER_SSIM = {
     "lucy": (0.9743, 0.9750, 0.9754),
 }
 SIZES = ("16x8", "32x16", "64x32")
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def noise_ceiling(mesh: str, frames: list[dict], settings: LabelSettings) -> dict:

@@ -41,7 +41,6 @@ import argparse
 import json
 import logging
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -55,21 +54,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline.errors import NeuralaoError  # noqa: E402
 from pipeline.io import write_json, write_text  # noqa: E402
+from pipeline.report import cpu_name
 
 log = logging.getLogger("bench_unet")
 
 LARGE_PIXELS = 1_000_000  # sizes above this get --glsl-repeats-large GLSL rounds
 WARMUP_SIZE = 64  # padded side of the untimed JIT warm-up for power-of-two sizes (else 3 x multiple)
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def parse_size(text: str) -> tuple[int, int]:

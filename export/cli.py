@@ -13,19 +13,12 @@ EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet"}
 
 def checkpoint_kind(path: str | Path) -> str:
     """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
-    import torch
+    from pipeline.checkpoint import read_checkpoint
 
-    p = Path(path)
-    if not p.is_file():
-        raise NeuralaoError(f"checkpoint not found: {p}")
-    try:
-        ckpt = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as e:
-        raise NeuralaoError(f"cannot read checkpoint {p}: {str(e).splitlines()[0][:200]}") from None
-    kind = ckpt.get("kind") if isinstance(ckpt, dict) else None
+    kind = read_checkpoint(path).get("kind")
     if kind not in EXPORTERS:
         raise NeuralaoError(
-            f"{p} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})"
+            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})"
         )
     return kind
 

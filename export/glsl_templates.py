@@ -328,15 +328,14 @@ void main() {
 TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.items()}
 
 
-def fill(template: str, /, **fields: object) -> str:
-    """Fill the template named ``template``; every placeholder must be given and nothing else.
-
-    Values are converted with ``str``; the caller formats floats (see ``glsl.glsl_float``).
-    """
+def fill_from(templates: dict[str, Template], template: str, what: str, /, **fields: object) -> str:
+    """Fill ``templates[template]``: every placeholder must be given and nothing else (strict, so a
+    template and its caller cannot drift apart). Values are converted with ``str``; the caller formats
+    floats (see ``glsl.glsl_float``). Shared by the generated shaders and the baselines'."""
     try:
-        tpl = TEMPLATES[template]
+        tpl = templates[template]
     except KeyError:
-        raise KeyError(f"no GLSL template named {template!r}") from None
+        raise KeyError(f"no {what} template named {template!r}") from None
     wanted = set(tpl.get_identifiers())
     given = set(fields)
     if wanted != given:
@@ -344,3 +343,8 @@ def fill(template: str, /, **fields: object) -> str:
             f"template {template!r}: missing {sorted(wanted - given)}, unexpected {sorted(given - wanted)}"
         )
     return tpl.substitute({k: str(v) for k, v in fields.items()})
+
+
+def fill(template: str, /, **fields: object) -> str:
+    """Fill the GLSL template named ``template``; every placeholder must be given and nothing else."""
+    return fill_from(TEMPLATES, template, "GLSL", **fields)

@@ -74,9 +74,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from .checkpoint import load_checkpoint as _load_checkpoint
+from .checkpoint import restore_model, save_checkpoint
 from .config import load_settings, settings_to_dict
 from .errors import NeuralaoError
-from .io import atomic_path
 from .labels import LabelSettings
 
 log = logging.getLogger(__name__)
@@ -728,40 +729,13 @@ def make_checkpoint(
     }
 
 
-def save_checkpoint(path: str | Path, ckpt: dict) -> None:
-    with atomic_path(path) as tmp:
-        torch.save(ckpt, tmp)
-
-
 def load_checkpoint(path: str | Path) -> dict:
     """Load an MLP checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line error."""
-    p = Path(path)
-    if not p.is_file():
-        raise NeuralaoError(f"checkpoint not found: {p}")
-    try:
-        ckpt = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as e:
-        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()] or [type(e).__name__]
-        reason = next((ln for ln in lines if "Unsupported global" in ln), lines[0])
-        raise NeuralaoError(f"cannot read checkpoint {p} (weights_only): {reason[:200]}") from None
-    kind = ckpt.get("kind") if isinstance(ckpt, dict) else None
-    if kind != KIND:
-        raise NeuralaoError(f"{p} is not an MLP checkpoint (kind {kind!r}, expected 'mlp')")
-    for key in ("model_args", "state_dict", "config"):
-        if key not in ckpt:
-            raise NeuralaoError(f"MLP checkpoint {p} lacks {key!r}")
-    return ckpt
+    return _load_checkpoint(path, KIND, "an MLP")
 
 
 def model_from_checkpoint(ckpt: dict) -> BakedMLP:
-    model = build_model(ckpt["model_args"])
-    try:
-        model.load_state_dict(ckpt["state_dict"])
-    except RuntimeError as e:
-        raise NeuralaoError(
-            f"checkpoint weights do not fit its model_args: {str(e).splitlines()[0]}"
-        ) from None
-    return model.eval()
+    return restore_model(build_model, ckpt)
 
 
 # ----------------------------------------------------------------------------------------------- driver

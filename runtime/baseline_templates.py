@@ -20,6 +20,8 @@ from __future__ import annotations
 
 from string import Template
 
+from export.glsl_templates import fill_from
+
 _T: dict[str, str] = {}
 
 _T["fullscreen_vertex"] = """#version 430 core
@@ -215,15 +217,5 @@ TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.item
 
 
 def fill(template: str, /, **fields: object) -> str:
-    """Fill the template named ``template``; every placeholder must be given and nothing else."""
-    try:
-        tpl = TEMPLATES[template]
-    except KeyError:
-        raise KeyError(f"no baseline GLSL template named {template!r}") from None
-    wanted = set(tpl.get_identifiers())
-    given = set(fields)
-    if wanted != given:
-        raise KeyError(
-            f"template {template!r}: missing {sorted(wanted - given)}, unexpected {sorted(given - wanted)}"
-        )
-    return tpl.substitute({k: str(v) for k, v in fields.items()})
+    """Fill the baseline template named ``template``; every placeholder must be given and nothing else."""
+    return fill_from(TEMPLATES, template, "baseline GLSL", **fields)
