@@ -8,6 +8,7 @@ saved next to every output with :func:`settings_to_dict`.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import types
@@ -135,3 +136,14 @@ def load_settings(cls: type[T], preset: str | Path | None = None, overrides: lis
 def settings_to_dict(settings: Any) -> dict[str, Any]:
     """Resolved settings as plain JSON-able data (tuples become lists)."""
     return json.loads(json.dumps(dataclasses.asdict(settings), default=str))
+
+
+def add_set_option(parser: argparse.ArgumentParser, example: str) -> None:
+    """The ``--set KEY=VALUE`` option every command with settings takes (read by :func:`load_settings`)."""
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"override a setting (repeatable; unknown keys and wrong types are rejected), e.g. {example}",
+    )

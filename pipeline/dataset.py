@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 
 from .camera import Camera, interior, load_poses, orbit
-from .config import load_settings, settings_to_dict
+from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import read_npz, remove_stale_temporaries, sha256_file, write_json, write_npz
 from .labels import LabelSettings
@@ -302,13 +302,7 @@ def open_dataset(root: str | Path, verify: bool = True) -> Dataset:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="dataset config (JSON); see configs/demo.json")
     p.add_argument("--out", required=True, help="output folder (resumes if an interrupted run is there)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a setting, e.g. --set labels.rays=64",
-    )
+    add_set_option(p, "--set labels.rays=64")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

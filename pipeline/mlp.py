@@ -76,7 +76,7 @@ from torch import nn
 
 from .checkpoint import load_checkpoint as _load_checkpoint
 from .checkpoint import restore_model, save_checkpoint
-from .config import load_settings, settings_to_dict
+from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .labels import LabelSettings
 
@@ -791,13 +791,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
     p.add_argument("--config", help="JSON preset of MLPSettings")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a setting, e.g. --set optimizer=adam",
-    )
+    add_set_option(p, "--set optimizer=adam")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

@@ -53,7 +53,7 @@ import numpy as np
 
 from runtime.baselines import GTAOSettings, SSAOSettings
 
-from .config import load_settings, settings_to_dict
+from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
 
@@ -897,8 +897,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--repeats", type=int, help="timed repetitions per GL measurement (default 10)")
     p.add_argument("--target", type=float, help="model-selection SSIM target (default 0.95)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="any report setting, e.g. --set trace_rays=[4,16] --set ssao.samples=32 (strict)")  # fmt: skip
+    add_set_option(p, "--set trace_rays=[4,16] --set ssao.samples=32 (any report setting)")
 
 
 def settings_from_args(args: argparse.Namespace) -> ReportSettings:

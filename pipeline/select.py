@@ -20,6 +20,7 @@ import json
 import logging
 from pathlib import Path
 
+from .config import add_set_option
 from .errors import NeuralaoError
 from .io import write_json
 
@@ -169,8 +170,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--report", help="reuse the measurements of this report.json instead of running the models"
     )
     p.add_argument("--gt-cache", help="ground-truth cache folder (default: gt-cache next to --out)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="report settings for the measurement, e.g. --set gt_rays=256 (strict)")  # fmt: skip
+    add_set_option(p, "--set gt_rays=256 (a report setting for the measurement)")
 
 
 def run(args: argparse.Namespace) -> int:

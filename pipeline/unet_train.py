@@ -34,7 +34,7 @@ import torch.nn.functional as F
 
 from .checkpoint import load_checkpoint as _load_checkpoint
 from .checkpoint import restore_model, save_checkpoint
-from .config import load_settings, settings_to_dict
+from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .unet import (
     PREPROCESS_DESCRIPTION,
@@ -526,13 +526,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--out", required=True, help="checkpoint MODEL.pt (progress in MODEL.pt.partial; a rerun resumes)"
     )
     p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a setting, e.g. --set epochs=3",
-    )
+    add_set_option(p, "--set epochs=3")
     p.add_argument(
         "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
     )

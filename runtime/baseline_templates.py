@@ -54,6 +54,17 @@ bool inside(ivec2 q, ivec2 size) {
 # tile (Gram-Schmidt), scaled by the world radius; a kernel point counts as occluded when the
 # G-buffer surface seen at its pixel lies in front of it by more than the bias, faded by a range
 # check so far-away foreground does not darken silhouettes.
+# Both screen-space methods start the same way: this pixel's camera-space position and unit normal
+# (background -> ao 1; a zero-length or NaN normal falls back to +z, facing the camera).
+_T["surface_at_pixel"] = """    ivec2 px = ivec2(gl_FragCoord.xy);
+    ivec2 size = textureSize(u_position, 0);
+    vec4 pw = texelFetch(u_position, px, 0);
+    if (pw.w < 0.5) { o_ao = 1.0; return; }
+    vec3 p = pw.xyz;
+    vec3 n = texelFetch(u_normal, px, 0).xyz;
+    float ln = length(n);
+    n = ln > 1e-20 ? n / ln : vec3(0.0, 0.0, 1.0);"""
+
 _T["ssao_fragment"] = """#version 430 core
 // neuralao baseline: normal-oriented hemisphere SSAO (Crytek style), ${samples} kernel samples.
 uniform vec2 u_proj;                 // (P00, P11) of the projection matrix
@@ -63,14 +74,7 @@ uniform vec3 u_kernel[${samples}];   // hemisphere kernel, |k| <= 1, k.z > 0
 ${inputs}
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    ivec2 size = textureSize(u_position, 0);
-    vec4 pw = texelFetch(u_position, px, 0);
-    if (pw.w < 0.5) { o_ao = 1.0; return; }
-    vec3 p = pw.xyz;
-    vec3 n = texelFetch(u_normal, px, 0).xyz;
-    float ln = length(n);
-    n = ln > 1e-20 ? n / ln : vec3(0.0, 0.0, 1.0);
+${surface}
     vec3 r = texelFetch(u_noise, px % ${noise_size}, 0).xyz;
     vec3 t = r - n * dot(r, n);
     // A noise vector (nearly) parallel to the normal leaves no tangent: pick any perpendicular.
@@ -111,14 +115,7 @@ const float HALF_PI = 1.57079632679490;
 float acos_safe(float x) { return acos(clamp(x, -1.0, 1.0)); }
 
 void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
-    ivec2 size = textureSize(u_position, 0);
-    vec4 pw = texelFetch(u_position, px, 0);
-    if (pw.w < 0.5) { o_ao = 1.0; return; }
-    vec3 p = pw.xyz;
-    vec3 n = texelFetch(u_normal, px, 0).xyz;
-    float ln = length(n);
-    n = ln > 1e-20 ? n / ln : vec3(0.0, 0.0, 1.0);
+${surface}
     vec3 view_v = normalize(-p);
     float radius_px = u_radius * u_pixels_per_unit / max(-p.z, 1e-30);
     if (!(radius_px > 1.0)) { o_ao = 1.0; return; }   // the radius stays inside this pixel

@@ -152,9 +152,15 @@ def _program(fragment: str) -> int:
 
 def fragment_source(method: Method, settings: SSAOSettings | GTAOSettings) -> str:
     """The AO fragment shader of ``method`` with ``settings`` baked in."""
-    inputs = fill("gbuffer_inputs")
+    inputs, surface = fill("gbuffer_inputs"), fill("surface_at_pixel")
     if method == "ssao":
-        return fill("ssao_fragment", samples=settings.samples, noise_size=settings.noise_size, inputs=inputs)
+        return fill(
+            "ssao_fragment",
+            samples=settings.samples,
+            noise_size=settings.noise_size,
+            inputs=inputs,
+            surface=surface,
+        )
     if method == "gtao":
         return fill(
             "gtao_fragment",
@@ -162,6 +168,7 @@ def fragment_source(method: Method, settings: SSAOSettings | GTAOSettings) -> st
             steps=settings.steps,
             noise_size=settings.noise_size,
             inputs=inputs,
+            surface=surface,
         )
     raise NeuralaoError(f"unknown screen-space AO method {method!r} (ssao or gtao)")
 
