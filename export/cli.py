@@ -8,7 +8,7 @@ from pathlib import Path
 
 from pipeline.errors import NeuralaoError
 
-EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet"}
+EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field"}
 
 
 def checkpoint_kind(path: str | Path) -> str:

@@ -205,6 +205,11 @@ class Act:
             if hi is not None:
                 return fill("act_Clip_max", x=x, hi=glsl_float(hi))
             return fill("act_Identity", x=x)
+        if self.op == "Elu":
+            return fill("act_Elu", x=x, alpha=glsl_float(self.params["alpha"]))
+        if self.op == "HardSigmoid":
+            return fill("act_HardSigmoid", x=x, alpha=glsl_float(self.params["alpha"]),
+                        beta=glsl_float(self.params["beta"]))  # fmt: skip
         return fill(f"act_{self.op}", x=x)
 
     def numpy(self, x: np.ndarray) -> np.ndarray:
@@ -219,6 +224,16 @@ class Act:
             return np.tanh(x)
         if self.op == "Clip":
             return np.clip(x, self.params.get("lo", -np.inf), self.params.get("hi", np.inf))
+        if self.op == "Sin":
+            return np.sin(x)
+        if self.op == "Cos":
+            return np.cos(x)
+        if self.op == "Elu":
+            return np.where(x >= 0, x, self.params["alpha"] * np.expm1(np.minimum(x, 0)))
+        if self.op == "Softplus":
+            return np.maximum(x, 0) + np.log1p(np.exp(-np.abs(x)))
+        if self.op == "HardSigmoid":
+            return np.clip(self.params["alpha"] * x + self.params["beta"], 0, 1)
         return x
 
 
@@ -246,13 +261,15 @@ class OnnxGraph:
     outputs: list[str]
     consumers: dict[str, int]
     metadata: dict[str, str]
+    inputs: list[onnx.ValueInfoProto] = field(default_factory=list)  # every real input (input = inputs[0])
 
     @property
     def nodes(self) -> list[onnx.NodeProto]:
         return list(self.model.graph.node)
 
 
-def read_graph(model: onnx.ModelProto) -> OnnxGraph:
+def read_graph(model: onnx.ModelProto, max_inputs: int = 1) -> OnnxGraph:
+    """The graph as the lowering sees it; ``max_inputs`` real (non-initializer) inputs at most."""
     if not isinstance(model, onnx.ModelProto):
         raise NeuralaoError(f"expected an onnx.ModelProto, got {type(model).__name__}")
     g = model.graph
@@ -263,12 +280,12 @@ def read_graph(model: onnx.ModelProto) -> OnnxGraph:
         except Exception as e:  # external data missing, unsupported dtype
             raise NeuralaoError(f"cannot read initializer {init.name!r}: {e}") from None
     inputs = [i for i in g.input if i.name not in constants]
-    if len(inputs) != 1:
-        raise NeuralaoError(
-            f"expected exactly one graph input, found {len(inputs)}: {[i.name for i in inputs]}"
-        )
-    if inputs[0].type.tensor_type.elem_type != onnx.TensorProto.FLOAT:
-        raise NeuralaoError(f"graph input {inputs[0].name!r} must be float32")
+    if len(inputs) != 1 and (max_inputs == 1 or not 1 <= len(inputs) <= max_inputs):
+        want = "exactly one graph input" if max_inputs == 1 else f"1 to {max_inputs} graph inputs"
+        raise NeuralaoError(f"expected {want}, found {len(inputs)}: {[i.name for i in inputs]}")
+    for vi in inputs:
+        if vi.type.tensor_type.elem_type != onnx.TensorProto.FLOAT:
+            raise NeuralaoError(f"graph input {vi.name!r} must be float32")
     consumers: dict[str, int] = {}
     for node in g.node:
         for name in node.input:
@@ -278,7 +295,7 @@ def read_graph(model: onnx.ModelProto) -> OnnxGraph:
     if not outputs:
         raise NeuralaoError("the graph has no output")
     metadata = {p.key: p.value for p in model.metadata_props}
-    return OnnxGraph(model, constants, inputs[0], outputs, consumers, metadata)
+    return OnnxGraph(model, constants, inputs[0], outputs, consumers, metadata, inputs)
 
 
 class OpTable:
@@ -427,7 +444,10 @@ class DenseOp:
 
 @dataclass
 class MapOp:
-    """dst = epilogue(src [+ other | + const]) elementwise; const (width,) float32 or None."""
+    """dst = epilogue(src [binop other | binop const]) elementwise; const (width,) float32 or None.
+
+    binop is one of + - * / (ONNX Add, Sub, Mul, Div); ``swapped``: the operand comes first
+    (``const - src``), as the ONNX node wrote it."""
 
     src: VecValue
     dst: VecValue
@@ -436,6 +456,31 @@ class MapOp:
     epilogue: list[Act]
     nodes: list[str]
     const_member: str = ""
+    binop: str = "+"
+    swapped: bool = False
+
+
+@dataclass
+class ConcatOp:
+    """dst = the parts side by side along the feature axis (ONNX Concat, axis 1)."""
+
+    parts: list[VecValue]
+    dst: VecValue
+    nodes: list[str]
+
+
+@dataclass(frozen=True)
+class InputBinding:
+    """Where one graph input of the fragment target comes from: ``channels`` (a subset of "xyzw") of
+    the RGBA32F texture ``texture`` (sampler ``u_<texture>``), repeated ``repeats`` times, so the
+    input width is ``len(channels) * repeats``. The first texture's w channel is the mask."""
+
+    texture: str
+    channels: str = "xyz"
+    repeats: int = 1
+
+    def to_json(self) -> dict:
+        return {"texture": self.texture, "channels": self.channels, "repeats": self.repeats}
 
 
 @dataclass
@@ -460,31 +505,55 @@ class UniformBlock:
 class VectorOps(OpTable):
     """ONNX -> per-pixel dense network (N, K) -> (N, M) for the fragment target."""
 
-    OPS = ("Gemm", "MatMul", "Add", "Relu", "LeakyRelu", "Sigmoid", "Tanh", "Clip", "Identity", "Constant")
+    OPS = ("Gemm", "MatMul", "Add", "Sub", "Mul", "Div", "Concat", "Relu", "LeakyRelu", "Sigmoid", "Tanh",
+           "Sin", "Cos", "Clip", "Identity", "Constant")  # fmt: skip
     target = "fragment (per-pixel MLP)"
 
-    def __init__(self, graph: OnnxGraph):
+    def __init__(self, graph: OnnxGraph, bindings: dict[str, InputBinding] | None = None):
+        """``bindings``: graph input name -> texture channels. None: the baked-MLP layout (one input of
+        3k floats, the object-space normal of texture "gbuffer" repeated k times)."""
         super().__init__(graph)
-        self.ops: list[DenseOp | MapOp] = []
+        self.ops: list[DenseOp | MapOp | ConcatOp] = []
         self.values: list[VecValue] = []
-        self.producer: dict[str, DenseOp | MapOp] = {}
-        dims = _dims(graph.input)
+        self.producer: dict[str, DenseOp | MapOp | ConcatOp] = {}
+        legacy = bindings is None
+        if legacy:
+            width = self._input_width(graph.input, "MLP", "(N, 3*k normals)")
+            if width % 3:
+                raise NeuralaoError(f"MLP input width {width} is not a multiple of 3 (xyz normals repeated)")
+            bindings = {graph.input.name: InputBinding("gbuffer", "xyz", width // 3)}
+        names = [vi.name for vi in graph.inputs]
+        if sorted(names) != sorted(bindings):
+            raise NeuralaoError(f"graph inputs {names} do not match the bound inputs {sorted(bindings)}")
+        self.bindings = {name: bindings[name] for name in names}
+        self.inputs: list[VecValue] = []
+        for vi in graph.inputs:
+            b = self.bindings[vi.name]
+            if not b.channels or any(c not in "xyzw" for c in b.channels) or b.repeats < 1:
+                raise NeuralaoError(f"input {vi.name!r}: bad binding {b}")
+            width = self._input_width(vi, "input", f"(N, {len(b.channels) * b.repeats})")
+            if width != len(b.channels) * b.repeats:
+                raise NeuralaoError(
+                    f"input {vi.name!r} has width {width}, its binding gives {len(b.channels)} x {b.repeats}"
+                )
+            value = self.new_value(width)
+            self.inputs.append(value)
+            self.env[vi.name] = value
+        self.input = self.inputs[0]
+        self.repeats = next(iter(self.bindings.values())).repeats
+        self.textures = list(dict.fromkeys(b.texture for b in self.bindings.values()))
+
+    @staticmethod
+    def _input_width(vi: onnx.ValueInfoProto, what: str, layout: str) -> int:
+        dims = _dims(vi)
         if len(dims) != 2:
-            raise NeuralaoError(
-                f"MLP input {graph.input.name!r} must have rank 2 (N, 3*k normals), got shape {dims or 'unknown'}"
-            )
+            raise NeuralaoError(f"{what} {vi.name!r} must have rank 2 {layout}, got shape {dims or 'unknown'}")
         width = dims[1]
         if not isinstance(width, int) or width <= 0:
-            raise NeuralaoError(
-                f"MLP input {graph.input.name!r} needs a static positive width, got {width!r}"
-            )
+            raise NeuralaoError(f"{what} {vi.name!r} needs a static positive width, got {width!r}")
         if width > MAX_VECTOR_WIDTH:
-            raise NeuralaoError(f"MLP input width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}")
-        if width % 3:
-            raise NeuralaoError(f"MLP input width {width} is not a multiple of 3 (xyz normals repeated)")
-        self.input = self.new_value(width)
-        self.repeats = width // 3
-        self.env[graph.input.name] = self.input
+            raise NeuralaoError(f"{what} {vi.name!r}: width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}")
+        return int(width)
 
     def new_value(self, width: int) -> VecValue:
         if width > MAX_VECTOR_WIDTH:
@@ -502,7 +571,11 @@ class VectorOps(OpTable):
         assert self.node is not None
         value = self.env.get(self.node.input[index])
         op = self.producer.get(value.ident) if isinstance(value, VecValue) else None
-        return op if isinstance(op, kind) and self.fusible(index) and op.dst is value else None
+        if not (isinstance(op, kind) and self.fusible(index) and op.dst is value):
+            return None
+        # fusible() counts the readers still to come; one already emitted (Sin and Cos of one MatMul)
+        # must keep seeing the unfused value.
+        return None if any(_reads(o, value) for o in self.ops) else op
 
     def _dense(self, x: VecValue, weight: np.ndarray, bias: np.ndarray) -> VecValue:
         if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
@@ -562,6 +635,21 @@ class VectorOps(OpTable):
         return self._dense(x, b.T, np.zeros(b.shape[1]))
 
     def Add(self, A, B) -> VecValue:
+        return self._binary(A, B, "+")
+
+    def Sub(self, A, B) -> VecValue:
+        return self._binary(A, B, "-")
+
+    def Mul(self, A, B) -> VecValue:
+        return self._binary(A, B, "*")
+
+    def Div(self, A, B) -> VecValue:
+        return self._binary(A, B, "/")
+
+    def _binary(self, A, B, binop: str) -> VecValue:
+        """Elementwise A binop B, either operand a per-pixel vector, the other a vector or a constant
+        that broadcasts to it (numpy rules on the feature axis). Kept as written (no reassociation,
+        no division turned into a product), so GLSL rounds exactly as onnxruntime does."""
         if isinstance(A, np.ndarray) and isinstance(B, VecValue):
             A, B = B, A
             swapped = True
@@ -570,12 +658,12 @@ class VectorOps(OpTable):
         x = self.vec(A, "A")
         if isinstance(B, VecValue):
             if B.width != x.width:
-                raise self.fail(f"cannot add vectors of widths {x.width} and {B.width}")
+                raise self.fail(f"cannot combine vectors of widths {x.width} and {B.width}")
             dst = self.new_value(x.width)
-            op = MapOp(x, dst, B, None, [], [self.label])
+            op = MapOp(x, dst, B, None, [], [self.label], binop=binop, swapped=swapped)
         else:
             c = self._vector_const(B, x.width)
-            dense = self._fusible_op(1 if swapped else 0, DenseOp)
+            dense = self._fusible_op(1 if swapped else 0, DenseOp) if binop == "+" else None
             if dense is not None and not dense.epilogue:
                 dense.bias = (dense.bias.astype(np.float64) + c).astype(
                     np.float32
@@ -583,7 +671,7 @@ class VectorOps(OpTable):
                 dense.nodes.append(self.label)
                 return x
             dst = self.new_value(x.width)
-            op = MapOp(x, dst, None, c.astype(np.float32), [], [self.label])
+            op = MapOp(x, dst, None, c.astype(np.float32), [], [self.label], binop=binop, swapped=swapped)
         self.ops.append(op)
         self.producer[dst.ident] = op
         return dst
@@ -599,6 +687,24 @@ class VectorOps(OpTable):
 
     def Tanh(self, X) -> VecValue:
         return self._activation(X, Act("Tanh"))
+
+    def Sin(self, input) -> VecValue:  # noqa: A002
+        return self._activation(input, Act("Sin"))
+
+    def Cos(self, input) -> VecValue:  # noqa: A002
+        return self._activation(input, Act("Cos"))
+
+    def Concat(self, *inputs, axis) -> VecValue:
+        if axis not in (1, -1):
+            raise self.unsupported("axis", axis)  # axis 0 is the per-pixel batch
+        parts = [self.vec(v, f"#{i}") for i, v in enumerate(inputs)]
+        if not parts:
+            raise self.fail("Concat without inputs")
+        dst = self.new_value(sum(p.width for p in parts))
+        op = ConcatOp(parts, dst, [self.label])
+        self.ops.append(op)
+        self.producer[dst.ident] = op
+        return dst
 
     def Clip(self, input, min=None, max=None) -> VecValue:  # noqa: A002  (ONNX input names)
         lo = None if min is None else self.const(min, "min")
@@ -630,11 +736,19 @@ class MLPShader:
         return int(self.manifest["network"]["output_width"])
 
 
+def _reads(op: DenseOp | MapOp | ConcatOp, value: VecValue) -> bool:
+    if isinstance(op, ConcatOp):
+        return any(p is value for p in op.parts)
+    return op.src is value or getattr(op, "other", None) is value
+
+
 def _fold_repeated_input(table: VectorOps) -> bool:
     """Fold W1 (out, 3k) to (out, 3): the shader feeds the same normal k times, so the k column
     blocks of the first layer multiply the same three numbers. Sums in float64 (the summation order
     differs from onnxruntime's by rounding only; the parity tests hold both paths to the same TOL)."""
-    readers = [op for op in table.ops if op.src is table.input or getattr(op, "other", None) is table.input]
+    if len(table.inputs) != 1 or table.repeats < 2 or table.bindings[table.graph.input.name].channels != "xyz":
+        return False
+    readers = [op for op in table.ops if _reads(op, table.input)]
     if len(readers) != 1 or not isinstance(readers[0], DenseOp):
         return False
     if any(table.env.get(o) is table.input for o in table.graph.outputs):
@@ -672,7 +786,7 @@ def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
                 ]  # fmt: skip
                 blocks.append(UniformBlock(f"Layer{li}_{ci}", len(blocks), members))
                 op.chunks.append((j0, j1, wname, bname, len(blocks) - 1))
-        elif op.const is not None:
+        elif isinstance(op, MapOp) and op.const is not None:
             c = np.zeros(op.dst.n4 * 4, np.float32)
             c[: op.const.shape[0]] = op.const
             op.const_member = f"c{li}"
@@ -686,7 +800,43 @@ def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
     return blocks
 
 
-def _write_mlp_fragment(table: VectorOps, blocks: list[UniformBlock], result: VecValue, d: Dialect) -> str:
+def _concat_copies(op: ConcatOp) -> list[str]:
+    """Component copies of a Concat: whole vec4s where source and destination lanes line up."""
+    lanes = "xyzw"
+    out, k = [], 0
+    for part in op.parts:
+        i = 0
+        while i < part.width:
+            if k % 4 == 0 and i % 4 == 0 and part.width - i >= 4:
+                out.append(fill("vec_copy", dst=op.dst.ident, di=k // 4, src=part.ident, si=i // 4))
+                i, k = i + 4, k + 4
+                continue
+            out.append(fill("lane_copy", dst=op.dst.ident, di=k // 4, dl=lanes[k % 4], src=part.ident,
+                            si=i // 4, sl=lanes[i % 4]))  # fmt: skip
+            i, k = i + 1, k + 1
+    for k in range(op.dst.width, op.dst.n4 * 4):  # padding lanes are read by dot(): keep them 0
+        out.append(fill("lane_zero", dst=op.dst.ident, di=k // 4, dl=lanes[k % 4]))
+    return out
+
+
+def _map_expr(op: MapOp) -> str:
+    expr = fill("index_j", name=op.src.ident)
+    operand = None
+    if op.other is not None:
+        operand = fill("index_j", name=op.other.ident)
+    elif op.const is not None:
+        operand = fill("index_j", name=op.const_member)
+    if operand is not None:
+        a, b = (operand, expr) if op.swapped else (expr, operand)
+        expr = fill("binop", a=a, b=b, op=op.binop)
+    for act in op.epilogue:
+        expr = act.expr(expr)
+    return expr
+
+
+def _write_vector_fragment(
+    table: VectorOps, blocks: list[UniformBlock], result: VecValue, d: Dialect, description: str
+) -> str:
     """The writer for the fragment target: IR -> template fills."""
     block_text = []
     for blk in blocks:
@@ -694,14 +844,18 @@ def _write_mlp_fragment(table: VectorOps, blocks: list[UniformBlock], result: Ve
         block_text.append(
             fill("ubo_block", layout=d.ubo_layout(blk.binding), block=blk.name, members=members)
         )
+    samplers = "\n".join(d.sampler2d(f"u_{t}", unit) for unit, t in enumerate(table.textures))
+    fetches = "\n".join(
+        fill("texel_fetch", index=unit, sampler=f"u_{t}") for unit, t in enumerate(table.textures) if unit
+    )
     body = [fill("vec_decl", name=v.ident, count=v.n4) for v in table.values]
-    lanes = ("n.x", "n.y", "n.z")
-    inp = table.input
-    for i in range(inp.n4):
-        comps = [lanes[(4 * i + c) % 3] if 4 * i + c < inp.width else "0.0" for c in range(4)]
-        body.append(
-            fill("input_tile", dst=inp.ident, index=i, c0=comps[0], c1=comps[1], c2=comps[2], c3=comps[3])
-        )
+    for value, (_, b) in zip(table.inputs, table.bindings.items(), strict=True):
+        g = f"g{table.textures.index(b.texture)}"
+        lanes = [f"{g}.{c}" for c in b.channels]
+        for i in range(value.n4):
+            comps = [lanes[(4 * i + c) % len(lanes)] if 4 * i + c < value.width else "0.0" for c in range(4)]
+            body.append(fill("input_tile", dst=value.ident, index=i, c0=comps[0], c1=comps[1], c2=comps[2],
+                             c3=comps[3]))  # fmt: skip
     for op in table.ops:
         if isinstance(op, DenseOp):
             in4 = op.src.n4
@@ -713,23 +867,20 @@ def _write_mlp_fragment(table: VectorOps, blocks: list[UniformBlock], result: Ve
                     fill("dense_chunk", j_begin=j0, j_end=j1, bias=bname, weight=wname, src=op.src.ident, dst=op.dst.ident,
                          row_stride=4 * in4, in4=in4, in4_2=2 * in4, in4_3=3 * in4, store=store)
                 )  # fmt: skip
+        elif isinstance(op, ConcatOp):
+            body.extend(_concat_copies(op))
         else:
-            expr = fill("index_j", name=op.src.ident)
-            if op.other is not None:
-                expr = fill("add", a=expr, b=fill("index_j", name=op.other.ident))
-            elif op.const is not None:
-                expr = fill("add", a=expr, b=fill("index_j", name=op.const_member))
-            for act in op.epilogue:
-                expr = act.expr(expr)
-            body.append(fill("vec_map", count=op.dst.n4, dst=op.dst.ident, expr=expr))
+            body.append(fill("vec_map", count=op.dst.n4, dst=op.dst.ident, expr=_map_expr(op)))
     return fill(
-        "mlp_fragment",
+        "vector_fragment",
         header=d.header(),
-        repeats=table.repeats,
+        description=description,
         n_blocks=len(blocks),
         max_block_bytes=MAX_UNIFORM_BLOCK_BYTES,
         prelude=fill("prelude"),
-        sampler=d.sampler2d("u_gbuffer", 0),
+        samplers=samplers,
+        mask_sampler=f"u_{table.textures[0]}",
+        fetches=fetches,
         blocks="\n\n".join(block_text),
         body="\n".join(body),
         result=fill("index_0", name=result.ident),
@@ -752,13 +903,31 @@ def generate_mlp_fragment(
     into one (out, 3) matrix (same function, k times fewer multiply-adds); False keeps the literal
     network. Weights: std140 uniform blocks, one or more per layer, each <= 16384 bytes.
     """
+    return generate_vector_fragment(model, None, dialect, fold_repeated_input)
+
+
+def generate_vector_fragment(
+    model: onnx.ModelProto,
+    bindings: dict[str, InputBinding] | None,
+    dialect: str = "glsl330",
+    fold_repeated_input: bool = True,
+    kind: str = "mlp",
+    description: str = "",
+) -> MLPShader:
+    """Fragment shader of any per-pixel network (N, k_i) inputs -> (N, m<=4) in the vector op set.
+
+    ``bindings`` maps each graph input to channels of a named RGBA32F texture (sampler
+    ``u_<texture>``, unit = the texture's order of first appearance); the first texture's w is the
+    foreground mask (>= 0.5). None: the baked-MLP layout (see :func:`generate_mlp_fragment`).
+    Background pixels get 1; the m outputs go to ``o_result`` (location 0).
+    """
     d = get_dialect(dialect)
-    graph = read_graph(model)
-    table = VectorOps(graph)
+    graph = read_graph(model, max_inputs=1 if bindings is None else 8)
+    table = VectorOps(graph, bindings)
     table.run()
     out_name = graph.outputs[0]
     if len(graph.outputs) != 1:
-        raise NeuralaoError(f"the MLP graph must have one output, found {len(graph.outputs)}")
+        raise NeuralaoError(f"the per-pixel graph must have one output, found {len(graph.outputs)}")
     result = table.env[out_name]
     if not isinstance(result, VecValue):
         raise NeuralaoError(f"graph output {out_name!r} is a constant, not a per-pixel value")
@@ -766,12 +935,21 @@ def generate_mlp_fragment(
         raise NeuralaoError(f"output width {result.width} > 4: a fragment pass writes one vec4 per pixel")
     input_width = table.input.width
     folded = _fold_repeated_input(table) if fold_repeated_input else False
+    if not description:
+        description = (
+            f"neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed {table.repeats} times."
+            if bindings is None
+            else f"neuralao per-pixel network ({kind}): inputs "
+            + ", ".join(f"{n} = {b.texture}.{b.channels}" for n, b in table.bindings.items())
+        )
     blocks = _assign_blocks(table)
     sources = {
-        name: (_write_fullscreen_vertex(dl), _write_mlp_fragment(table, blocks, result, dl))
+        name: (_write_fullscreen_vertex(dl), _write_vector_fragment(table, blocks, result, dl, description))
         for name, dl in DIALECTS.items()
     }
     manifest = _mlp_manifest(table, blocks, graph, result, input_width, folded)
+    if bindings is not None:
+        manifest["kind"] = kind
     ubos = [(b.name, b.binding, b.data) for b in blocks]
     return MLPShader(sources[d.name][1], sources[d.name][0], ubos, manifest, d.name, sources)
 
@@ -790,10 +968,13 @@ def _mlp_manifest(
             layers.append({"type": "dense", "in": int(op.weight.shape[1]), "out": int(op.weight.shape[0]),
                            "epilogue": [a.op for a in op.epilogue], "onnx_nodes": op.nodes,
                            "blocks": [c[4] for c in op.chunks]})  # fmt: skip
+        elif isinstance(op, ConcatOp):
+            layers.append({"type": "concat", "widths": [p.width for p in op.parts], "onnx_nodes": op.nodes})
         else:
-            layers.append({"type": "map", "width": op.dst.width, "add": "vector" if op.other else ("constant" if
-                           op.const is not None else None), "epilogue": [a.op for a in op.epilogue],
-                           "onnx_nodes": op.nodes})  # fmt: skip
+            operand = "vector" if op.other else ("constant" if op.const is not None else None)
+            layers.append({"type": "map", "width": op.dst.width, "binop": op.binop if operand else None,
+                           "operand": operand, "operand_first": op.swapped,
+                           "epilogue": [a.op for a in op.epilogue], "onnx_nodes": op.nodes})  # fmt: skip
     ubo = []
     for b in blocks:
         offset, members = 0, []
@@ -813,7 +994,8 @@ def _mlp_manifest(
                 "name": "mlp",
                 "type": "fullscreen_triangle",
                 "draw": "glDrawArrays(GL_TRIANGLES, 0, 3) with an empty VAO, viewport = G-buffer size",
-                "inputs": [{"texture": "gbuffer", "sampler": "u_gbuffer", "unit": 0, "fetch": "texelFetch"}],
+                "inputs": [{"texture": t, "sampler": f"u_{t}", "unit": unit, "fetch": "texelFetch"}
+                           for unit, t in enumerate(table.textures)],
                 "outputs": [{"texture": "ao", "location": 0}],
                 "uniform_blocks": [b["name"] for b in ubo],
                 "uniforms": {
@@ -822,11 +1004,7 @@ def _mlp_manifest(
             }
         ],
         "textures": {
-            "gbuffer": {
-                "format": "RGBA32F",
-                "size": "screen",
-                "channels": "xyz object-space normal as stored (not renormalised), w mask: >= 0.5 foreground",
-            },
+            **_input_textures(table),
             "ao": {
                 "format": "R32F (RGBA32F when output_width > 1)",
                 "size": "screen",
@@ -843,6 +1021,7 @@ def _mlp_manifest(
             "onnx_output": graph.outputs[0],
             "input_width": input_width,
             "repeats": input_width // 3,
+            "bindings": {name: b.to_json() for name, b in table.bindings.items()},
             "fold_repeated_input": folded,
             "output_width": result.width,
             "layers": layers,
@@ -851,6 +1030,20 @@ def _mlp_manifest(
         "es300_note": "rendering to R32F/RGBA32F on GLES needs EXT_color_buffer_float",
         "source_model_metadata": dict(graph.metadata),
     }
+
+
+def _input_textures(table: VectorOps) -> dict:
+    if list(table.bindings.values()) == [InputBinding("gbuffer", "xyz", table.repeats)]:
+        return {"gbuffer": {"format": "RGBA32F", "size": "screen",
+                            "channels": "xyz object-space normal as stored (not renormalised), w mask: >= 0.5 foreground"}}  # fmt: skip
+    out = {}
+    for unit, t in enumerate(table.textures):
+        uses = [f"{b.channels} -> ONNX input {n!r}" + (f" (x{b.repeats})" if b.repeats > 1 else "")
+                for n, b in table.bindings.items() if b.texture == t]  # fmt: skip
+        if unit == 0:
+            uses.append("w: mask, >= 0.5 foreground")
+        out[t] = {"format": "RGBA32F", "size": "screen", "channels": "; ".join(uses)}
+    return out
 
 
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
@@ -1118,6 +1311,12 @@ class ImageOps(OpTable):
         value = self.env.get(self.node.input[index])
         p = self.producer.get(value.ident) if isinstance(value, Texture) else None
         if p is None or p.kind in ("pad", "crop") or not self.fusible(index):
+            return None
+        # fusible() counts readers still to come; one already lowered (a pass, or a Concat waiting to
+        # be fused into its consumer) must keep seeing the unfused value.
+        if any(t is value for q in self.passes if q is not p for t in q.inputs):
+            return None
+        if any(isinstance(v, ConcatValue) and any(t is value for t in v.parts) for v in self.env.values()):
             return None
         return p
 

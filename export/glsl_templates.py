@@ -65,6 +65,14 @@ _T["act_Clip"] = "min(max(${x}, vec4(${lo})), vec4(${hi}))"
 _T["act_Clip_min"] = "max(${x}, vec4(${lo}))"
 _T["act_Clip_max"] = "min(${x}, vec4(${hi}))"
 _T["act_Identity"] = "${x}"
+# Sin / Cos: the builtins (Mesa: Cephes-style range reduction, ~1e-7 absolute for |x| <~ 1e3; the
+# field encoding keeps |x| <= 2^(octaves-1) pi and its arguments bit-identical to onnxruntime's).
+_T["act_Sin"] = "sin(${x})"
+_T["act_Cos"] = "cos(${x})"
+# Elu: exp() of min(x, 0) only; Softplus as max(x, 0) + log(1 + exp(-|x|)), so exp() never overflows.
+_T["act_Elu"] = "mix(${alpha} * (exp(min(${x}, vec4(0.0))) - 1.0), ${x}, greaterThanEqual(${x}, vec4(0.0)))"
+_T["act_Softplus"] = "(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x}))))"
+_T["act_HardSigmoid"] = "clamp(${alpha} * ${x} + ${beta}, 0.0, 1.0)"
 
 # --------------------------------------------------------------------------- fragment MLP
 
@@ -86,13 +94,13 @@ _T["ubo_layout"] = "layout(std140) "
 _T["ubo_layout_binding"] = "layout(std140, binding = ${binding}) "
 _T["ubo_member"] = "    vec4 ${name}[${count}];"
 
-_T["mlp_fragment"] = """${header}
-// neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed ${repeats} times.
+_T["vector_fragment"] = """${header}
+// ${description}
 // Generated from the ONNX graph; ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes.
 
 ${prelude}
 
-${sampler}
+${samplers}
 
 // Always 0 (uniforms start at 0; never set it). Loop bounds read it so the shader compiler cannot
 // see a constant trip count: Mesa's llvmpipe fully unrolls constant loops and LLVM then spends
@@ -105,16 +113,18 @@ ${blocks}
 layout(location = 0) out vec4 o_result;
 
 void main() {
-    vec4 g = texelFetch(u_gbuffer, ivec2(gl_FragCoord.xy), 0);
-    if (g.w < 0.5) {
+    vec4 g0 = texelFetch(${mask_sampler}, ivec2(gl_FragCoord.xy), 0);
+    if (g0.w < 0.5) {
         o_result = vec4(1.0);  // background: ao = 1
         return;
     }
-    vec3 n = g.xyz;
+${fetches}
 ${body}
     o_result = ${result};
 }
 """
+
+_T["texel_fetch"] = "    vec4 g${index} = texelFetch(${sampler}, ivec2(gl_FragCoord.xy), 0);"
 
 _T["vec_decl"] = "    vec4 ${name}[${count}];"
 _T["input_tile"] = "    ${dst}[${index}] = vec4(${c0}, ${c1}, ${c2}, ${c3});"
@@ -138,8 +148,11 @@ _T["vec_map"] = """    for (int j = 0; j < ${count} + u_loop_guard; ++j) {
     }"""
 
 _T["index_j"] = "${name}[j]"
+_T["binop"] = "(${a} ${op} ${b})"
+_T["vec_copy"] = "    ${dst}[${di}] = ${src}[${si}];"
+_T["lane_copy"] = "    ${dst}[${di}].${dl} = ${src}[${si}].${sl};"
+_T["lane_zero"] = "    ${dst}[${di}].${dl} = 0.0;"
 _T["index_0"] = "${name}[0]"
-_T["add"] = "${a} + ${b}"
 
 # --------------------------------------------------------------------------- compute passes
 

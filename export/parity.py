@@ -41,7 +41,7 @@ def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dic
     from pipeline.dataset import open_dataset
 
     ds = open_dataset(data)
-    if manifest["kind"] == "mlp" and manifest.get("scene") in ds.scenes:
+    if manifest["kind"] in ("mlp", "field") and manifest.get("scene") in ds.scenes:
         it = ds.frames(scene=manifest["scene"], holdout=True)
     else:
         it = ds.frames(split="val")
@@ -60,7 +60,7 @@ def check_exports(root: Path, data: Path | None = None) -> dict:
     for d in export_dirs(root):
         manifest = read_manifest(d)
         kind = manifest.get("kind")
-        if kind not in ("mlp", "unet"):
+        if kind not in ("mlp", "unet", "field"):
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
         module = importlib.import_module(f"export.{kind}")
         log.info("parity: %s (%s)", d.name, kind)

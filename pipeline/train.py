@@ -1,4 +1,4 @@
-"""`neuralao train mlp|unet`: dispatch to the model's own training module."""
+"""`neuralao train mlp|unet|field`: dispatch to the model's own training module."""
 
 from __future__ import annotations
 
@@ -11,6 +11,10 @@ TRAINERS = {
         "the baked MLP of Erra et al. (16 object-space normals -> AO), one network per mesh",
     ),
     "unet": ("pipeline.unet_train", "the DeepAO screen-space U-Net (depth + camera normal -> AO)"),
+    "field": (
+        "pipeline.field",
+        "a per-mesh neural AO field (object-space position + normal -> AO), one network per mesh",
+    ),
 }
 
 

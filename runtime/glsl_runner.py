@@ -5,6 +5,8 @@ files and the manifest. Passing an export folder instead of an in-memory object 
 files on disk, so the runner doubles as the check that an export is self-sufficient.
 
     run_mlp_fragment(shader_or_dir, normal_obj, mask, fp16=False, dialect=None) -> (H, W) f32
+    run_vector_fragment(shader_or_dir, textures, fp16=False, dialect=None) -> (H, W) f32
+    time_vector_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_mlp_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_vertex_colour(scene, camera, repeats=30, ao=None) -> s/frame
     run_compute(program_or_dir, x, flip_y=False) -> (1, C, H, W) f32      (first graph output)
@@ -74,8 +76,13 @@ def _mlp(shader_or_dir: MLPShader | str | Path, dialect: str | None) -> tuple[ML
     return shader, vert, frag
 
 
+def texture_names(shader: MLPShader) -> list[str]:
+    """The input textures of a fragment pass in unit order (manifest ``passes[0].inputs``)."""
+    return [t["texture"] for t in shader.manifest["passes"][0]["inputs"]]
+
+
 class _MLPPass:
-    """G-buffer texture, output texture + FBO, uniform buffers and the program of one MLP draw."""
+    """Input textures, output texture + FBO, uniform buffers and the program of one fragment draw."""
 
     def __init__(self, shader: MLPShader, vert: str, frag: str, height: int, width: int, fp16: bool):
         ctx = gl.context()
@@ -83,13 +90,16 @@ class _MLPPass:
         self.h, self.w = int(height), int(width)
         self.internal = GL.GL_RGBA16F if fp16 else GL.GL_RGBA32F
         self.prog = _program(vertex=vert, fragment=frag)
-        self.gbuffer = gl.create_texture(self.w, self.h, self.internal)
+        self.names = texture_names(shader)
+        self.inputs = [gl.create_texture(self.w, self.h, self.internal) for _ in self.names]
+        self.gbuffer = self.inputs[0]
         self.out = gl.create_texture(self.w, self.h, self.internal)
         self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
         GL.glUseProgram(self.prog)
-        loc = GL.glGetUniformLocation(self.prog, "u_gbuffer")
-        if loc >= 0:
-            GL.glUniform1i(loc, 0)
+        for unit, name in enumerate(self.names):
+            loc = GL.glGetUniformLocation(self.prog, f"u_{name}")
+            if loc >= 0:
+                GL.glUniform1i(loc, unit)
         self.ubos = []
         for name, binding, data in shader.uniform_blocks:
             index = GL.glGetUniformBlockIndex(self.prog, name)
@@ -103,14 +113,20 @@ class _MLPPass:
         g = np.concatenate([normal.astype(np.float32), mask.astype(np.float32)[..., None]], axis=-1)
         gl.upload_texture(self.gbuffer, g, self.internal)
 
+    def upload_all(self, textures: dict[str, np.ndarray]) -> None:
+        for name, tex in zip(self.names, self.inputs, strict=True):
+            gl.upload_texture(tex, np.ascontiguousarray(textures[name], np.float32), self.internal)
+
     def draw(self) -> None:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self.fbo)
         GL.glViewport(0, 0, self.w, self.h)
         GL.glDisable(GL.GL_DEPTH_TEST)
         GL.glDisable(GL.GL_BLEND)
         GL.glUseProgram(self.prog)
+        for unit, tex in enumerate(self.inputs):
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, tex)
         GL.glActiveTexture(GL.GL_TEXTURE0)
-        GL.glBindTexture(GL.GL_TEXTURE_2D, self.gbuffer)
         for binding, buf in self.ubos:
             GL.glBindBufferBase(GL.GL_UNIFORM_BUFFER, binding, buf)
         GL.glBindVertexArray(self.vao)
@@ -122,7 +138,7 @@ class _MLPPass:
     def release(self) -> None:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
         GL.glDeleteFramebuffers(1, [self.fbo])
-        GL.glDeleteTextures(2, [self.gbuffer, self.out])
+        GL.glDeleteTextures(len(self.inputs) + 1, [*self.inputs, self.out])
         if self.ubos:
             GL.glDeleteBuffers(len(self.ubos), [b for _, b in self.ubos])
 
@@ -178,6 +194,65 @@ def time_mlp_fragment(
     p = _MLPPass(sh, vert, frag, height, width, fp16)
     try:
         p.upload(n, np.ones((height, width), bool))
+        return _median_time(p.draw, repeats, warmup)
+    finally:
+        p.release()
+
+
+def run_vector_fragment(
+    shader: MLPShader | str | Path,
+    textures: dict[str, np.ndarray],
+    fp16: bool = False,
+    dialect: str | None = None,
+) -> np.ndarray:
+    """Render a generated fragment pass over its named input textures and read the result back.
+
+    textures : texture name -> (H, W, 4) float32, the names of the manifest's pass inputs; the first
+    texture's w channel is the mask (>= 0.5 foreground). Returns (H, W) float32 when the network has
+    one output, else (H, W, m); background = 1.
+    """
+    sh, vert, frag = _mlp(shader, dialect)
+    names = texture_names(sh)
+    missing = [n for n in names if n not in textures]
+    if missing:
+        raise NeuralaoError(f"textures {missing} not given (the pass reads {names})")
+    shapes = {np.shape(textures[n]) for n in names}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[2] != 4:
+        raise NeuralaoError(f"input textures must all be (H, W, 4), got {sorted(shapes)}")
+    h, w, _ = next(iter(shapes))
+    m = sh.output_width
+    if h * w == 0:
+        return np.ones((h, w) if m == 1 else (h, w, m), np.float32)
+    p = _MLPPass(sh, vert, frag, h, w, fp16)
+    try:
+        p.upload_all(textures)
+        p.draw()
+        out = p.read()
+    finally:
+        p.release()
+    return out[..., 0].copy() if m == 1 else out[..., :m].copy()
+
+
+def time_vector_fragment(
+    shader: MLPShader | str | Path,
+    height: int,
+    width: int,
+    repeats: int = 30,
+    warmup: int = 3,
+    fp16: bool = False,
+    dialect: str | None = None,
+) -> float:
+    """Median seconds per full-screen pass at width x height: random inputs in [-1, 1], all foreground."""
+    sh, vert, frag = _mlp(shader, dialect)
+    rng = np.random.default_rng(0)
+    textures = {}
+    for name in texture_names(sh):
+        t = rng.uniform(-1, 1, size=(height, width, 4)).astype(np.float32)
+        t[..., 3] = 1.0
+        textures[name] = t
+    p = _MLPPass(sh, vert, frag, height, width, fp16)
+    try:
+        p.upload_all(textures)
         return _median_time(p.draw, repeats, warmup)
     finally:
         p.release()

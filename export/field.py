@@ -1,0 +1,316 @@
+"""Neural-field export: ONNX (two inputs, dynamic N) + generated GLSL fragment shader + manifest; parity.
+
+The ONNX graph is :class:`pipeline.field.FieldNet` as is: inputs ``position`` (N, 3) float32 = the
+object-space position in the mesh's own units (the graph normalises it by the bounding box itself) and
+``normal`` (N, 3) float32 = the viewer-facing object-space unit normal; output ``ao`` (N, 1) float32,
+linear and unclamped. Ops: Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh.
+
+The fragment shader reads two RGBA32F G-buffer textures, ``u_position`` (xyz object-space position,
+w foreground mask) and ``u_normal`` (xyz object-space normal), and writes the AO; everything it needs
+(weights, normalisation, frequencies) is in std140 uniform blocks described by its manifest.
+
+Export layout (``export_checkpoint``)::
+
+    OUT/model.onnx       checked, with metadata (encoding, bounding box, sizes, exact bytes, error)
+    OUT/glsl/            the fragment target's files: mlp.vert/.frag (GLSL 3.30), mlp_es300.*, mlp_430.*,
+                         uniform-block weight files, manifest.json (kind "field")
+    OUT/manifest.json    files + hashes, backend checks, provenance, metrics (written last)
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+
+from pipeline.constants import TOL
+from pipeline.errors import NeuralaoError
+from pipeline.field import (
+    FieldNet,
+    count_parameters,
+    load_checkpoint,
+    model_from_checkpoint,
+    parameter_bytes,
+    predict,
+    size_name,
+)
+from pipeline.io import sha256_file, write_json
+
+from .onnx_io import get_metadata, load_onnx, ort_session, save_onnx
+
+log = logging.getLogger(__name__)
+
+OPSET = 17
+POSITION, NORMAL, OUTPUT = "position", "normal", "ao"
+GLSL_DIR = "glsl"
+DIALECTS = ("glsl330", "es300")
+CHECK_BATCHES = (1, 7, 4096)
+TEXTURES = {"position": "xyz object-space position, w mask (>= 0.5 foreground)", "normal": "xyz object-space normal"}
+
+
+def bindings():
+    from .glsl import InputBinding
+
+    return {POSITION: InputBinding("position", "xyz"), NORMAL: InputBinding("normal", "xyz")}
+
+
+def encoding_description(model: FieldNet) -> str:
+    if model.octaves == 0:
+        return "none: features = [q, normal], q = (position - centre) * inv_half"
+    return (f"axis-aligned positional encoding, {model.octaves} octaves: q = (position - centre) * inv_half, "
+            f"z[3k+a] = q[a] * pi * 2^k (k < {model.octaves}), features = [q, normal, sin(z), cos(z)] "
+            f"({model.features} floats)")  # fmt: skip
+
+
+def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
+    ckpt = ckpt or {}
+    metrics = ckpt.get("metrics", {})
+    return {
+        "neuralao_kind": "field",
+        "input": f"{POSITION}: (N, 3) float32 object-space position in the mesh's units; {NORMAL}: (N, 3) float32 "
+        "viewer-facing object-space unit normal (the G-buffer's, flipped towards the camera on back faces)",
+        "output": "ao: (N, 1) float32 accessibility (1 open, 0 occluded), linear, NOT clamped: clamp to [0, 1]",
+        "output_clamped": "false",
+        "encoding": encoding_description(model),
+        "octaves": str(model.octaves),
+        "bounding_box_centre": model.centre.reshape(-1).tolist(),
+        "bounding_box_inv_half_extent": model.inv_half.reshape(-1).tolist(),
+        "model_size": size_name(model.hidden),
+        "model_args": ckpt.get("model_args", {}),
+        "parameters": str(count_parameters(model)),
+        "parameter_bytes": str(parameter_bytes(model)),
+        "parameter_bytes_note": "float32: trainable weights + 6 normalisation constants + 3*octaves frequencies",
+        "training_mesh": str(ckpt.get("mesh") or ""),
+        "scene": str(ckpt.get("scene") or ""),
+        "ao_labels": ckpt.get("samples", {}).get("labels", {}),
+        "measured_error": {k: metrics.get(k) for k in ("val_rmse", "constant_val_rmse", "holdout_ssim",
+                                                        "holdout_rmse", "holdout_frames")},  # fmt: skip
+        "measured_error_note": "val: surface samples held out; holdout_*: held-back orbit views, clamped, "
+        "masked SSIM (Gaussian 11, sigma 1.5) and RMSE over valid foreground pixels",
+    }
+
+
+def onnx_bytes(model: FieldNet) -> bytes:
+    model = model.eval().to(torch.float32)
+    buf = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(model, (torch.zeros(2, 3), torch.zeros(2, 3)), buf, dynamo=False, opset_version=OPSET,
+                          input_names=[POSITION, NORMAL], output_names=[OUTPUT],
+                          dynamic_axes={POSITION: {0: "N"}, NORMAL: {0: "N"}, OUTPUT: {0: "N"}},
+                          do_constant_folding=True)  # fmt: skip
+    return buf.getvalue()
+
+
+def random_inputs(model: FieldNet, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions uniform in the bounding box grown by 10%, unit normals."""
+    rng = np.random.default_rng(seed)
+    centre = model.centre.reshape(-1).numpy()
+    half = 1.0 / model.inv_half.reshape(-1).numpy()
+    p = (centre + rng.uniform(-1.1, 1.1, size=(n, 3)) * half).astype(np.float32)
+    v = rng.standard_normal((n, 3))
+    return p, (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
+
+
+def check_backends(model: FieldNet, onnx_path: Path, seed: int = 0) -> dict:
+    """onnxruntime vs torch on random inputs at CHECK_BATCHES; raises above TOL.onnx_vs_torch."""
+    sess = ort_session(onnx_path)
+    rows = []
+    for k, n in enumerate(CHECK_BATCHES):
+        p, nrm = random_inputs(model, n, seed + k)
+        y = sess.run(None, {POSITION: p, NORMAL: nrm})[0]
+        if y.shape != (n, 1):
+            raise NeuralaoError(f"exported field returned shape {y.shape} for N={n}")
+        rows.append({"batch": n, "onnxruntime_vs_torch": float(np.abs(y[:, 0] - predict(model, p, nrm)).max())})
+    worst = max(r["onnxruntime_vs_torch"] for r in rows)
+    if worst > TOL.onnx_vs_torch:
+        raise NeuralaoError(f"onnxruntime differs from torch by {worst:.3g} > {TOL.onnx_vs_torch:g}")
+    return {"inputs": "positions in the bounding box grown by 10%, random unit normals", "checks": rows,
+            "onnxruntime_vs_torch": worst, "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch},
+            "opencv": "not checked: OpenCV dnn is the MLP's second consumer; the field's Sin/Cos graph is "
+                      "checked against torch and the generated GLSL"}  # fmt: skip
+
+
+def write_glsl(proto: onnx.ModelProto, out_dir: Path, description: str) -> dict:
+    from .glsl import generate_vector_fragment, write_mlp_export
+
+    shader = generate_vector_fragment(proto, bindings(), kind="field", description=description)
+    for name, text in TEXTURES.items():
+        shader.manifest["textures"][name]["semantics"] = text
+    path = write_mlp_export(shader, out_dir)
+    return json.loads(Path(path).read_text())
+
+
+def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
+    """model.onnx + glsl/ + manifest.json in ``out_dir`` from a field checkpoint. Returns the manifest."""
+    t0 = time.perf_counter()
+    ckpt_path, out_dir = Path(ckpt_path), Path(out_dir)
+    ckpt = load_checkpoint(ckpt_path)
+    model = model_from_checkpoint(ckpt)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    onnx_path = out_dir / "model.onnx"
+    metadata = onnx_metadata(model, ckpt)
+    proto = onnx.load_from_string(onnx_bytes(model))
+    save_onnx(proto, onnx_path, metadata)
+    checks = check_backends(model, onnx_path)
+    glsl_manifest = write_glsl(proto, out_dir / GLSL_DIR,
+                               f"neuralao AO field {size_name(model.hidden)} of {Path(str(ckpt.get('mesh') or '')).name}: "
+                               f"{encoding_description(model)}")  # fmt: skip
+    manifest = {
+        "kind": "field",
+        "format_version": 1,
+        "onnx": "model.onnx",
+        "onnx_sha256": sha256_file(onnx_path),
+        "glsl": GLSL_DIR,
+        "glsl_manifest_sha256": sha256_file(out_dir / GLSL_DIR / "manifest.json"),
+        "glsl_summary": {"format": glsl_manifest.get("format"), "dialects": sorted(glsl_manifest.get("dialects", {})),
+                         "uniform_bytes": glsl_manifest.get("uniform_bytes")},  # fmt: skip
+        "exporter": f"torch.onnx.export(dynamo=False, opset={OPSET}) torch {torch.__version__}",
+        "ops": sorted({n.op_type for n in proto.graph.node}),
+        "inputs": [{"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
+                   {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"}],  # fmt: skip
+        "output": {"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": metadata["output"]},
+        "metadata": metadata,
+        "encoding": metadata["encoding"],
+        "octaves": model.octaves,
+        "model_size": f"{size_name(model.hidden)}",
+        "model_args": ckpt["model_args"],
+        "parameters": count_parameters(model),
+        "parameter_bytes": parameter_bytes(model),
+        "scene": ckpt.get("scene"),
+        "mesh": ckpt.get("mesh"),
+        "checks": checks,
+        "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path)},
+        "config": ckpt.get("config", {}),
+        "metrics": ckpt.get("metrics", {}),
+        "training_time_s": ckpt.get("training_time_s"),
+        "seconds": time.perf_counter() - t0,
+    }
+    write_json(out_dir / "manifest.json", manifest)
+    log.info("exported %s: field %s, %d bytes, ort-vs-torch %.2g", out_dir, manifest["model_size"],
+             manifest["parameter_bytes"], checks["onnxruntime_vs_torch"])  # fmt: skip
+    return manifest
+
+
+# ----------------------------------------------------------------------------------------------- inference
+
+
+def check_field_onnx(proto: onnx.ModelProto, where) -> dict:
+    meta = get_metadata(proto)
+    if meta.get("neuralao_kind") != "field":
+        raise NeuralaoError(f"{where} is not a neuralao field ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})")
+    names = sorted(i.name for i in proto.graph.input if i.name not in {t.name for t in proto.graph.initializer})
+    if names != sorted([POSITION, NORMAL]):
+        raise NeuralaoError(f"{where}: expected inputs {POSITION!r} and {NORMAL!r}, found {names}")
+    return meta
+
+
+def frame_inputs(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """position (H, W, 3), normal_obj (H, W, 3) float32 and mask (H, W) bool; one-line errors."""
+    for key in ("position", "normal_obj"):
+        if key not in frame:
+            raise NeuralaoError(f"frame has no {key!r} channel, which the field reads")
+    p = np.asarray(frame["position"], np.float32)
+    n = np.asarray(frame["normal_obj"], np.float32)
+    if p.ndim != 3 or p.shape[2] != 3 or n.shape != p.shape:
+        raise NeuralaoError(f"frame position / normal_obj must both be (H, W, 3), got {p.shape}, {n.shape}")
+    mask = np.asarray(frame["mask"], bool) if "mask" in frame else np.abs(n).sum(axis=-1) > 0
+    if mask.shape != p.shape[:2]:
+        raise NeuralaoError(f"frame mask {mask.shape} does not match position {p.shape}")
+    return p, n, mask
+
+
+def gbuffer_textures(frame: dict) -> dict[str, np.ndarray]:
+    """The shader's two RGBA32F inputs from a frame: position + mask, normal + 0."""
+    p, n, mask = frame_inputs(frame)
+    return {"position": np.concatenate([p, mask[..., None].astype(np.float32)], axis=-1),
+            "normal": np.concatenate([n, np.zeros_like(n[..., :1])], axis=-1)}  # fmt: skip
+
+
+def run_network(sess, frame: dict) -> np.ndarray:
+    """Raw network output (H, W) float32 through onnxruntime, NaN on background."""
+    p, n, mask = frame_inputs(frame)
+    out = np.full(mask.shape, np.nan, np.float32)
+    if mask.any():
+        out[mask] = sess.run(None, {POSITION: p[mask], NORMAL: n[mask]})[0][:, 0]
+    return out
+
+
+def infer_frame(onnx_path, frame: dict) -> np.ndarray:
+    """AO (H, W) float32 of one G-buffer frame with onnxruntime, clamped, background 1."""
+    proto = load_onnx(onnx_path)
+    check_field_onnx(proto, onnx_path)
+    raw = run_network(ort_session(proto.SerializeToString()), frame)
+    mask = ~np.isnan(raw)
+    return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------------- parity
+
+
+def read_manifest(export_dir: Path) -> dict:
+    path = export_dir / "manifest.json"
+    if not path.is_file():
+        raise NeuralaoError(f"no export manifest at {path}")
+    try:
+        manifest = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        raise NeuralaoError(f"{path} is corrupt") from None
+    if manifest.get("kind") != "field":
+        raise NeuralaoError(f"{export_dir} is not a field export (kind {manifest.get('kind')!r})")
+    return manifest
+
+
+def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ...] = DIALECTS) -> dict:
+    """Generated GLSL (from the export folder) vs onnxruntime on real G-buffer frames of the mesh.
+
+    Raw outputs compared on every foreground pixel (gate TOL.parity_mlp_fp32); background must be
+    exactly 1. No fp16 variant: half-float positions would move points by ~1e-3 of the box, which is
+    a different input, not storage rounding. Returns figures with ``passed``."""
+    from runtime.glsl_runner import run_vector_fragment
+
+    from .glsl import load_mlp_export
+    from .mlp import render_parity_frames
+
+    export_dir = Path(export_dir)
+    manifest = read_manifest(export_dir)
+    onnx_path = export_dir / manifest.get("onnx", "model.onnx")
+    proto = load_onnx(onnx_path)
+    check_field_onnx(proto, onnx_path)
+    glsl_dir = export_dir / manifest.get("glsl", GLSL_DIR)
+    source = "given frames"
+    if not frames:
+        if not manifest.get("mesh"):
+            raise NeuralaoError(f"export {export_dir} names no training mesh to render parity frames from")
+        frames = render_parity_frames(manifest["mesh"])
+        source = f"rendered: 2 orbit views of {manifest['mesh']} at 128x128"
+    sess = ort_session(proto.SerializeToString())
+    shaders = {d: load_mlp_export(glsl_dir, dialect=d) for d in dialects}
+    rows = []
+    for i, frame in enumerate(frames):
+        _, _, mask = frame_inputs(frame)
+        if not mask.any():
+            continue
+        ref = run_network(sess, frame)
+        tex = gbuffer_textures(frame)
+        for d in dialects:
+            out = run_vector_fragment(shaders[d], tex, dialect=d)
+            rows.append({"frame": i, "dialect": d, "size": [int(mask.shape[1]), int(mask.shape[0])],
+                         "foreground_pixels": int(mask.sum()),
+                         "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
+                         "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0})  # fmt: skip
+    if not rows:
+        raise NeuralaoError("parity: no frame with foreground pixels to check")
+    err = max(r["max_abs_err"] for r in rows)
+    bg = max(r["background_max_abs_err"] for r in rows)
+    return {"kind": "field", "model_size": manifest.get("model_size"), "frames": len(frames), "frame_source": source,
+            "max_abs_err": err, **{f"max_abs_err_{d}": max(r["max_abs_err"] for r in rows if r["dialect"] == d) for d in dialects},
+            "background_max_abs_err": bg, "tolerance": TOL.parity_mlp_fp32,
+            "passed": bool(err <= TOL.parity_mlp_fp32 and bg == 0.0), "checks": rows}  # fmt: skip
