@@ -17,8 +17,11 @@ Methods (each one run on every frame it applies to):
   or least-squares fitted to surface samples) with ``bake_rays`` rays, shown as a vertex-colour draw
   shows it (barycentric interpolation per pixel);
 * ``trace-4`` / ``-16`` / ``-64``: Embree AO of every pixel at that ray count (the labeller itself);
+* ``vertex-lsq-8bit``: the least-squares bake stored as 8-bit UNORM vertex colours (1 B per vertex);
 * ``mlp-<size>``: every exported baked MLP, on the frames of the scene it was trained for (its
   generated GLSL fragment shader on the frame's object-space normals, output clamped to [0, 1]);
+* ``field-<size>``: every exported AO field (:mod:`pipeline.field`), on the frames of the scene it was
+  trained for: its generated GLSL fragment shader on the frame's object-space position + normal;
 * ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame.
 
 Error: masked SSIM (:func:`pipeline.metrics.masked_ssim`) and RMSE over foreground pixels whose
@@ -61,8 +64,13 @@ log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
-BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq")
-FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, "mlp": 3, "unet": 4}
+BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
+FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, "mlp": 3, "field": 4, "unet": 5}
+MODEL_FAMILIES = ("mlp", "field", "unet")  # methods loaded from exports
+# Which methods can show a single-sided surface differently from its two sides (the G-buffer turns
+# the normal towards the viewer): per-vertex bakes store one value per vertex, so both sides of an
+# open sheet show the same AO; networks fed the viewer-facing normal and screen-space methods can differ.
+TWO_SIDED = {"screen-space": True, "baked": False, "traced": True, "mlp": True, "field": True, "unet": True}
 
 
 @dataclass
@@ -208,11 +216,32 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
         if scene not in scenes:
             m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
         return m
+    if kind == "field":
+        scene = manifest.get("scene")
+        m = Method(name, "field", f"AO field {manifest.get('model_size', '')}, {manifest.get('octaves')} octaves "
+                   "(object-space position + normal), one network per mesh", "GL fragment shader (generated GLSL)",
+                   "GL fragment shader, clamped to [0, 1]", scene=scene, bytes=manifest.get("parameter_bytes"),
+                   bytes_note="float32 weights + encoding constants", export=d)  # fmt: skip
+        if scene not in scenes:
+            m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
+        return m
     if kind == "unet":
         return Method(name, "unet", "DeepAO screen-space U-Net (Zhang et al.)", "GL compute shaders (generated GLSL)",
                       "onnxruntime (GLSL parity-checked)", bytes=manifest.get("bytes_fp32"),
                       bytes_note="float32 weights", export=d)  # fmt: skip
     return Method(name, "unknown", "", "", "", available=False, reason=f"unknown export kind {kind!r}")
+
+
+def _field_method(m: Method) -> None:
+    from export.field import check_field_onnx
+    from export.glsl import load_mlp_export
+    from export.onnx_io import load_onnx, ort_session
+
+    manifest = json.loads((m.export / "manifest.json").read_text())
+    m.runner = load_mlp_export(m.export / manifest.get("glsl", "glsl"))
+    proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
+    check_field_onnx(proto, m.export)
+    m.ort_runner = ort_session(proto.SerializeToString())
 
 
 def baseline_methods(settings: ReportSettings) -> list[Method]:
@@ -228,6 +257,8 @@ def baseline_methods(settings: ReportSettings) -> list[Method]:
                "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
         Method("vertex-lsq", "baked", f"least-squares vertex bake ({settings.bake_rays} rays/sample), vertex colours",
                "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
+        Method("vertex-lsq-8bit", "baked", "the least-squares bake stored as 8-bit UNORM vertex colours",
+               "GL vertex-colour draw", "barycentric interpolation of the 8-bit values", bytes_note="1 B per vertex"),
     ]  # fmt: skip
     for r in settings.trace_rays:
         out.append(Method(f"trace-{r}", "traced", f"Embree ray-traced AO, {r} rays per pixel",
@@ -248,6 +279,8 @@ def prepare_model(m: Method) -> None:
             proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
             check_mlp_onnx(proto, m.export)
             m.ort_runner = ort_session(proto.SerializeToString())
+        elif m.family == "field":
+            _field_method(m)
         elif m.family == "unet":
             from export.glsl import load_compute_export
             from export.onnx_io import load_onnx
@@ -273,6 +306,12 @@ def predict_model(m: Method, frame: dict) -> np.ndarray:
 
         raw = run_mlp_fragment(m.runner, np.asarray(frame["normal_obj"], np.float32), mask)
         return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
+    if m.family == "field":
+        from export.field import gbuffer_textures
+        from runtime.glsl_runner import run_vector_fragment
+
+        raw = run_vector_fragment(m.runner, gbuffer_textures(frame))
+        return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
     from export.unet import composite, run_padded
     from pipeline.unet import preprocess_frame
 
@@ -294,6 +333,18 @@ def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
         x = radius_zero_inputs(n / np.linalg.norm(n, axis=1, keepdims=True))
         out["seconds_onnxruntime"] = _median_seconds(
             lambda: m.ort_runner.run(None, {INPUT: x}), max(1, repeats // 3)
+        )
+    elif m.family == "field":
+        from export.field import NORMAL, POSITION
+        from runtime.glsl_runner import time_vector_fragment
+
+        out["seconds"] = time_vector_fragment(m.runner, h, w, repeats=repeats)
+        rng = np.random.default_rng(0)
+        p = rng.uniform(-1, 1, size=(h * w, 3)).astype(np.float32)
+        n = rng.normal(size=(h * w, 3)).astype(np.float32)
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        out["seconds_onnxruntime"] = _median_seconds(
+            lambda: m.ort_runner.run(None, {POSITION: p, NORMAL: n}), max(1, repeats // 3)
         )
     else:
         from export.unet import run_padded
@@ -349,6 +400,10 @@ class SceneContext:
     def baked(self, method: str) -> np.ndarray:
         """Per-vertex AO (n,) float32 of 'vertex-sampled' / 'vertex-lsq' (cached under OUT/bake/)."""
         if method in self.bakes:
+            return self.bakes[method]
+        if method == "vertex-lsq-8bit":  # what an RGBA8 vertex-colour attribute stores
+            lsq = self.baked("vertex-lsq")
+            self.bakes[method] = (np.rint(np.clip(lsq, 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
             return self.bakes[method]
         from .bake import BakeSettings, bake
 
@@ -454,7 +509,7 @@ def evaluate(
     if families is not None:
         methods = [m for m in methods if m.family in families]
     for m in methods:
-        if m.available and m.family in ("mlp", "unet"):
+        if m.available and m.family in MODEL_FAMILIES:
             prepare_model(m)
     gt_cache = out / "gt" if out is not None else None
     bake_cache = out / "bake" if out is not None else None
@@ -494,7 +549,7 @@ def evaluate(
                 try:
                     pred = predict(m, ctx, frame)
                 except Exception as e:  # one method failing must not sink the report
-                    if m.family not in ("mlp", "unet"):
+                    if m.family not in MODEL_FAMILIES:
                         raise
                     m.available, m.reason = (
                         False,
@@ -518,7 +573,7 @@ def evaluate(
         for m in applicable:
             if not m.available:
                 continue
-            if m.family in ("mlp", "unet"):
+            if m.family in MODEL_FAMILIES:
                 if m.name not in model_times:
                     try:
                         model_times[m.name] = time_model(m, settings.time_size, settings.repeats)
@@ -537,6 +592,7 @@ def evaluate(
         for m in methods:
             if m.family == "baked" and m.available:
                 scene_info[scene_name].setdefault("vertex_ao_bytes", 4 * len(ctx.scene.vertices))
+                scene_info[scene_name].setdefault("vertices", len(ctx.scene.vertices))
     bar.close()
     ctx_gl = gl.context()
     result = {
@@ -574,7 +630,8 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
     for m in methods:
         entry = {"family": m.family, "description": m.description, "available": m.available, "reason": m.reason,
                  "time_on": m.time_on, "error_on": m.error_on, "scope": m.scene or "all scenes",
-                 "bytes": m.bytes, "bytes_note": m.bytes_note}  # fmt: skip
+                 "bytes": m.bytes, "bytes_note": m.bytes_note,
+                 "two_sided": TWO_SIDED.get(m.family, True)}  # fmt: skip
         rows = [r for r in per_frame if m.name in r["methods"]]
         if not m.available or not rows:
             if m.available:
@@ -597,13 +654,13 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
         entry.update(frames=len(rows), ssim=float(np.mean(ssim)), rmse=float(np.mean(rmse)),
                      seconds=float(np.median(times)) if times else None, per_scene=per_scene)  # fmt: skip
         if m.family == "baked":
-            sizes = [
-                scene_info[s].get("vertex_ao_bytes")
-                for s in per_scene
-                if scene_info[s].get("vertex_ao_bytes")
-            ]
+            per_vertex = 1 if m.name.endswith("-8bit") else 4
+            for scene, ps in per_scene.items():
+                if scene_info[scene].get("vertices"):
+                    ps["bytes"] = per_vertex * scene_info[scene]["vertices"]
+            sizes = [ps["bytes"] for ps in per_scene.values() if "bytes" in ps]
             entry["bytes"] = int(np.mean(sizes)) if sizes else None
-            entry["bytes_note"] = "4 B per vertex (mean over scenes)"
+            entry["bytes_note"] = f"{per_vertex} B per vertex (mean over scenes)"
         if m.name in model_times:
             entry["seconds_onnxruntime"] = model_times[m.name].get("seconds_onnxruntime")
             if "error" in model_times[m.name]:
@@ -683,7 +740,7 @@ def _bytes(v) -> str:
 
 
 def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
-    from .select import render_markdown as select_markdown
+    from .selection import render_markdown as select_markdown
 
     ms = result["methods"]
     d = result["dataset"]
@@ -713,7 +770,12 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
             f"{_fmt(e.get('dssim_ratio_vs_ssao'), '.2f')} | {_bytes(e.get('bytes'))} | {e['time_on']} |"
         )
     lines += ["", "`*` on the Pareto front of (time, RMSE / SSAO). Ratios are over SSAO on the same frames "
-              "(an MLP is measured on its own scene only)."]  # fmt: skip
+              "(an MLP or a field is measured on its own scene only)."]  # fmt: skip
+    one_sided = [n for n in method_order(ms) if ms[n].get("available") and ms[n].get("two_sided") is False]
+    if one_sided:
+        lines += ["", "Single-sided surfaces: " + ", ".join(one_sided) + " store one value per vertex and so show "
+                  "the same AO on both sides of an open sheet (the G-buffer turns the normal towards the viewer); "
+                  "the fields, MLPs, U-Nets, screen-space and traced methods can tell the sides apart."]  # fmt: skip
     ort = [(n, ms[n]["seconds_onnxruntime"]) for n in method_order(ms) if ms[n].get("seconds_onnxruntime")]
     if ort:
         lines += [
@@ -858,7 +920,7 @@ def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path
 
 def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     """Figures, the selection section, report.json and report.md (written last) under ``out``."""
-    from .select import select_from_results
+    from .selection import select_from_results
 
     sheets = result.pop("_sheets", {})
     figures: dict = {"contact_sheets": {}}

@@ -8,6 +8,7 @@ the cached ground truth. The selection is checked against a brute-force pick.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset, open_dat
 from pipeline.io import read_npz
 from pipeline.labels import LabelSettings
 from pipeline.metrics import masked_rmse, masked_ssim
-from pipeline.select import choose, select_from_results
+from pipeline.selection import choose, select_from_results
 
 # (name, hidden sizes, constant output)
 MLPS = (("mlp-16x8", (16, 8), 0.9), ("mlp-32x16", (32, 16), 0.97))
@@ -79,6 +80,14 @@ def workspace(tmp_path_factory):
         export_mlp(ckpt, exports / name)
     tiny_unet_checkpoint(root / "unet.pt")
     export_unet(root / "unet.pt", exports / "unet")
+    from export.field import export_checkpoint as export_field
+    from pipeline.field import FieldSettings
+    from pipeline.field import train as train_field
+
+    fs = FieldSettings(hidden=[8, 4], octaves=2, samples=2048, steps=40, check_every=20, holdout_views=1,
+                       holdout_size=(32, 32), labels=LabelSettings(rays=8))  # fmt: skip
+    train_field(fs, root / "field.pt", data=data, scene="spot")
+    export_field(root / "field.pt", exports / "field-8x4")
     (exports / "mlp-broken").mkdir()
     (exports / "mlp-broken" / "manifest.json").write_text("{not json")
     return root, data, exports
@@ -105,6 +114,8 @@ def test_report_lists_every_method(report):
         "mlp-16x8",
         "mlp-32x16",
         "unet",
+        "field-8x4",
+        "vertex-lsq-8bit",
     ):
         assert ms[name]["available"], (name, ms[name].get("reason"))
         assert np.isfinite(ms[name]["ssim"]) and np.isfinite(ms[name]["rmse"]) and ms[name]["seconds"] > 0
@@ -114,6 +125,14 @@ def test_report_lists_every_method(report):
     assert "mlp-64x32: no export" in md and "## Model selection" in md
     assert ms["mlp-16x8"]["scope"] == "spot" and set(ms["mlp-16x8"]["per_scene"]) == {"spot"}
     assert set(ms["unet"]["per_scene"]) == {"spot", "box"}
+    assert ms["field-8x4"]["scope"] == "spot" and ms["field-8x4"]["family"] == "field"
+    assert ms["field-8x4"]["bytes"] == 4 * ((18 * 8 + 8) + (8 * 4 + 4) + (4 + 1) + 6 + 6)
+    assert ms["field-8x4"]["two_sided"] and not ms["vertex-lsq"]["two_sided"]
+    assert "Single-sided surfaces: vertex-sampled, vertex-lsq, vertex-lsq-8bit" in md
+    # 8-bit storage: a quarter of the bytes, and the error moves by at most half a step of 1/255
+    for scene, ps in ms["vertex-lsq"]["per_scene"].items():
+        assert ms["vertex-lsq-8bit"]["per_scene"][scene]["bytes"] * 4 == ps["bytes"] == 4 * r["scenes"][scene]["vertices"]
+    assert abs(ms["vertex-lsq-8bit"]["rmse"] - ms["vertex-lsq"]["rmse"]) <= 0.5 / 255 + 1e-7
 
 
 def test_report_metrics_match_an_independent_computation(report, workspace):
@@ -164,36 +183,58 @@ def test_figures_are_real_pngs(report):
     assert r["figures"]["scatter"] == "speed_vs_error.png"
 
 
-def test_select_picks_the_smallest_model_meeting_the_target(report, workspace, tmp_path):
+def _expected_choice(r: dict, scene: str, target: float) -> tuple[str, bool, list[str]]:
+    """Brute force: every non-traced representation measured on the scene, by (bytes, time, name)."""
+    rows = []
+    for n, e in r["methods"].items():
+        ps = e.get("per_scene", {}).get(scene) if e.get("available") else None
+        if ps is None or e["family"] == "traced":
+            continue
+        b = ps.get("bytes", e["bytes"])
+        rows.append((math.inf if b is None else b, ps["seconds"], n, ps["ssim"]))
+    rows.sort()
+    passing = [row for row in rows if row[3] >= target]
+    chosen = passing[0][2] if passing else max(rows, key=lambda row: row[3])[2]
+    return chosen, bool(passing), [row[2] for row in rows]
+
+
+def test_select_picks_the_cheapest_representation_meeting_the_target(report, workspace, tmp_path):
     out, r = report
     root, data, exports = workspace
-    spot = {n: r["methods"][n] for n in ("mlp-16x8", "mlp-32x16", "unet")}
-    ssims = {n: e["per_scene"]["spot"]["ssim"] for n, e in spot.items()}
-    by_bytes = sorted(spot, key=lambda n: spot[n]["bytes"])
-    tried = [c["name"] for c in select_from_results(r, 0.0)["scenes"]["spot"]["tried"]]
-    assert tried == by_bytes[:1]  # target 0: the smallest passes at once
-    for target in sorted(ssims.values()) + [1.0]:
-        sel = select_from_results(r, target)["scenes"]["spot"]
-        passing = [n for n in by_bytes if ssims[n] >= target]
-        expected = passing[0] if passing else max(ssims, key=ssims.get)
-        assert sel["chosen"] == expected and sel["met_target"] == bool(passing)
-        largest = by_bytes[-1]
-        assert sel["largest"] == largest
-        assert sel["bytes_saved"] == spot[largest]["bytes"] - spot[expected]["bytes"]
+    for scene in ("spot", "box"):
+        ssims = sorted(e["per_scene"][scene]["ssim"] for e in r["methods"].values()
+                       if e.get("available") and scene in e.get("per_scene", {}) and e["family"] != "traced")  # fmt: skip
+        for target in [0.0, *ssims, 1.0]:
+            sel = select_from_results(r, target)["scenes"][scene]
+            chosen, met, order = _expected_choice(r, scene, target)
+            assert sel["chosen"] == chosen and sel["met_target"] == met, (scene, target)
+            assert [c["name"] for c in sel["tried"]] == order[: len(sel["tried"])]
+    spot = select_from_results(r, 0.0)["scenes"]["spot"]
+    assert {"ssao", "gtao", "vertex-lsq-8bit", "mlp-16x8", "field-8x4", "unet"} <= set(_expected_choice(r, "spot", 0)[2])
+    assert spot["bytes_saved"] == spot["largest_bytes"] - spot["bytes"]
     # the CLI: from the report's numbers, and measuring by itself (same ground truth settings)
     sel_path = tmp_path / "select.json"
     assert cli.main(["select", "--data", str(data), "--exports", str(exports), "--out", str(sel_path),
                      "--report", str(out / "report.json"), "--target", "0.5"]) == 0  # fmt: skip
     from_report = json.loads(sel_path.read_text())
-    assert from_report["scenes"]["box"]["chosen"] == "unet"  # the only model for a scene without an MLP
     measured = tmp_path / "measured.json"
     assert cli.main(["select", "--data", str(data), "--exports", str(exports), "--out", str(measured),
                      "--target", "0.5", "--set", "gt_rays=32", "--set", "frames_per_scene=2",
-                     "--set", "time_size=[40,32]", "--set", "repeats=1"]) == 0  # fmt: skip
+                     "--set", "time_size=[40,32]", "--set", "repeats=1", "--set", "bake_rays=8",
+                     "--set", "bake_samples_per_vertex=2", "--set", "trace_rays=[2,4]"]) == 0  # fmt: skip
     again = json.loads(measured.read_text())
     for scene in ("spot", "box"):
         a, b = from_report["scenes"][scene], again["scenes"][scene]
         assert a["chosen"] == b["chosen"] and a["ssim"] == pytest.approx(b["ssim"], abs=1e-6)
+
+
+def test_report_and_select_do_not_import_each_other():
+    import ast
+
+    for module, other in (("report", "select"), ("selection", "report"), ("selection", "select")):
+        tree = ast.parse((Path(__file__).parents[1] / "pipeline" / f"{module}.py").read_text())
+        names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        assert other not in names and f"pipeline.{other}" not in names, (module, other)
 
 
 def test_choose_handles_no_candidate_meeting_the_target():
@@ -214,7 +255,8 @@ def test_report_without_exports_and_bad_input(tmp_path, workspace, capsys):
                      "--set", "contact_sheets=false"]) == 0  # fmt: skip
     r = json.loads((out / "report.json").read_text())
     assert all(not r["methods"][n]["available"] for n in ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet"))
-    assert r["select"]["scenes"] == {}
+    assert all(c["family"] in ("screen-space", "baked") for e in r["select"]["scenes"].values() for c in
+               [r["methods"][t["name"]] for t in e["tried"]])  # fmt: skip
     assert cli.main(["report", "--data", str(tmp_path / "nothing"), "--out", str(out)]) == 2
     assert cli.main(["report", "--data", str(data), "--out", str(out), "--set", "bogus=1"]) == 2
     assert cli.main(["select", "--data", str(data), "--out", str(tmp_path / "s.txt")]) == 2
