@@ -45,6 +45,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import torch
@@ -71,11 +72,14 @@ class FieldSettings:
     # Hidden tanh widths (`--size 32x16`).
     hidden: list[int] = field(default_factory=lambda: [32, 16])
     # Frequency bands of the position encoding: pi * 2^k for k < octaves (0: raw position only).
-    octaves: int = 6
+    # 4 measured best on bunny at 64x32 (held-back RMSE 0.0305 / 0.0189 / 0.0178 / 0.0182 / 0.0183 for
+    # 0 / 2 / 4 / 6 / 8 octaves; bench/bench_field.py repeats the sweep on a low-poly mesh).
+    octaves: int = 4
     # Surface points (each labelled on both sides; invalid sides dropped).
     samples: int = 1 << 17
-    # Most samples on one face (stratified area sampling; every face gets at least one).
-    samples_per_face_cap: int = 64
+    # Most samples on one face (stratified area sampling; every face gets at least one). Effectively no cap:
+    # a low-poly mesh (a room of 36 faces) needs thousands of samples per face to show its contact shadows.
+    samples_per_face_cap: int = 1 << 30
     # Fraction of the valid samples held out for validation (early stopping / best weights).
     val_fraction: float = 0.2
     # Adam: steps, batch, peak learning rate (cosine decay to lr_final_fraction of it).
@@ -89,7 +93,8 @@ class FieldSettings:
     seed: int = 0
     # torch intra-op threads (1: deterministic and fastest for batches this small on 2 busy cores).
     threads: int = 1
-    # Held-back evaluation views (a separate orbit, never sampled) and their size.
+    # Held-back evaluation views (never sampled): "orbit" (another phase) or "interior" (rooms), and size.
+    cameras: Literal["orbit", "interior"] = "orbit"
     holdout_views: int = 4
     holdout_size: tuple[int, int] = (192, 192)
     yfov_deg: float = 40.0
@@ -235,7 +240,7 @@ def two_sided_samples(scene, settings: FieldSettings, progress: bool = False) ->
 
 def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
     """Fully labelled orbit views of another phase than any sampling (evaluation only)."""
-    from .camera import orbit
+    from .camera import interior, orbit
     from .dataset import frame_seed
     from .gbuffer import GBufferRenderer
     from .labels import Labeller
@@ -243,7 +248,10 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
     if settings.holdout_views < 1:
         return []
     w, h = settings.holdout_size
-    cams = orbit(scene, settings.holdout_views, w, h, settings.yfov_deg, seed=1)
+    if settings.cameras == "interior":
+        cams = interior(scene, settings.holdout_views, w, h, seed=1)
+    else:
+        cams = orbit(scene, settings.holdout_views, w, h, settings.yfov_deg, seed=1)
     labeller = Labeller(scene, settings.labels)
     frames = []
     with GBufferRenderer(scene) as renderer:
@@ -252,11 +260,24 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
             labeller.settings = replace(settings.labels, seed=frame_seed(settings.seed, 1, k))
             f["ao"], f["valid"] = labeller.label_frame(f)
             f["view"] = k
-            frames.append({key: f[key] for key in ("position", "normal_obj", "mask", "valid", "ao", "view")})
+            frames.append({key: f[key] for key in ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id",
+                                                   "yfov", "znear", "zfar")})  # fmt: skip
     return frames
 
 
+def check_settings(s: FieldSettings) -> None:
+    if s.steps < 1 or s.batch < 1 or s.check_every < 1:
+        raise NeuralaoError("steps, batch and check_every must be >= 1")
+    if not 0 <= s.octaves <= 16:
+        raise NeuralaoError(f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}")
+    if not s.hidden or min(s.hidden) < 1:
+        raise NeuralaoError(f"hidden widths must be positive, got {s.hidden}")
+    if s.samples < 16 or s.samples_per_face_cap < 1 or not 0.0 <= s.val_fraction < 1.0:
+        raise NeuralaoError("samples must be >= 16, samples_per_face_cap >= 1 and val_fraction in [0, 1)")
+
+
 def collect_samples(scene, settings: FieldSettings, progress: bool = False) -> FieldSamples:
+    check_settings(settings)
     t0 = time.perf_counter()
     position, normal, ao, (front, back, per_side) = two_sided_samples(scene, settings, progress)
     if len(ao) < 16:
@@ -310,8 +331,7 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
 
     if settings.threads > 0:
         torch.set_num_threads(settings.threads)
-    if settings.steps < 1 or settings.batch < 1 or settings.check_every < 1:
-        raise NeuralaoError("steps, batch and check_every must be >= 1")
+    check_settings(settings)
     torch.manual_seed(settings.seed)
     centre, inv_half = bounding_box(scene.vertices)
     model = FieldNet(settings.hidden, settings.octaves, centre, inv_half)
