@@ -119,6 +119,20 @@ class Method:
     reason: str = ""
     runner: object = None  # prepared per-frame predictor (model methods)
     ort_runner: object = None
+    # Fields: one export per mesh, one row per size: scene -> export folder (and prepared runners).
+    scene_exports: dict[str, Path] | None = None
+    runners: dict = field(default_factory=dict)
+
+    def applies_to(self, scene: str) -> bool:
+        if self.scene_exports is not None:
+            return scene in self.scene_exports
+        return self.scene is None or self.scene == scene
+
+    @property
+    def scope(self) -> str:
+        if self.scene_exports is not None:
+            return ", ".join(sorted(self.scene_exports))
+        return self.scene or "all scenes"
 
 
 # --------------------------------------------------------------------------- frames and ground truth
@@ -196,9 +210,20 @@ def discover_exports(exports: Path | None, scenes: list[str]) -> list[Method]:
             family = "unet" if name == "unet" else "mlp"
             where = Path(exports) / name if exports is not None else name
             methods.append(Method(name, family, "", "", "", available=False, reason=f"no export at {where}"))
+    fields: dict[str, Method] = {}
     for name, d in sorted(found.items()):
-        methods.append(_export_method(name, d, scenes))
-    return methods
+        m = _export_method(name, d, scenes)
+        if m.family != "field":
+            methods.append(m)
+        elif not m.available:
+            methods.append(m)  # listed with its reason under its folder's name
+        else:  # one row per size: every scene's field of that size
+            row = fields.setdefault(m.name, replace(m, scene=None, scene_exports={}))
+            if m.scene in row.scene_exports:
+                row.available, row.reason = False, f"two {m.name} exports for scene {m.scene!r}"
+            row.scene_exports[m.scene] = m.export
+            row.bytes = max(row.bytes or 0, m.bytes or 0)
+    return methods + list(fields.values())
 
 
 def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
@@ -218,11 +243,14 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
         return m
     if kind == "field":
         scene = manifest.get("scene")
-        m = Method(name, "field", f"AO field {manifest.get('model_size', '')}, {manifest.get('octaves')} octaves "
+        octaves = manifest.get("octaves")
+        row = f"field-{manifest.get('model_size', '')}" + ("" if octaves == 4 else f"-o{octaves}")
+        m = Method(row, "field", f"AO field {manifest.get('model_size', '')}, {manifest.get('octaves')} octaves "
                    "(object-space position + normal), one network per mesh", "GL fragment shader (generated GLSL)",
                    "GL fragment shader, clamped to [0, 1]", scene=scene, bytes=manifest.get("parameter_bytes"),
                    bytes_note="float32 weights + encoding constants", export=d)  # fmt: skip
         if scene not in scenes:
+            m.name = name
             m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
         return m
     if kind == "unet":
@@ -233,15 +261,18 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
 
 
 def _field_method(m: Method) -> None:
+    """Every scene's shader; onnxruntime (timing only) of the first."""
     from export.field import check_field_onnx
     from export.glsl import load_mlp_export
     from export.onnx_io import load_onnx, ort_session
 
-    manifest = json.loads((m.export / "manifest.json").read_text())
-    m.runner = load_mlp_export(m.export / manifest.get("glsl", "glsl"))
-    proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
-    check_field_onnx(proto, m.export)
-    m.ort_runner = ort_session(proto.SerializeToString())
+    for scene, d in sorted(m.scene_exports.items()):
+        manifest = json.loads((d / "manifest.json").read_text())
+        m.runners[scene] = load_mlp_export(d / manifest.get("glsl", "glsl"))
+        proto = load_onnx(d / manifest.get("onnx", "model.onnx"))
+        check_field_onnx(proto, d)
+        if m.ort_runner is None:
+            m.runner, m.ort_runner = m.runners[scene], ort_session(proto.SerializeToString())
 
 
 def baseline_methods(settings: ReportSettings) -> list[Method]:
@@ -310,7 +341,7 @@ def predict_model(m: Method, frame: dict) -> np.ndarray:
         from export.field import gbuffer_textures
         from runtime.glsl_runner import run_vector_fragment
 
-        raw = run_vector_fragment(m.runner, gbuffer_textures(frame))
+        raw = run_vector_fragment(m.runners[frame["scene"]], gbuffer_textures(frame))
         return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
     from export.unet import composite, run_padded
     from pipeline.unet import preprocess_frame
@@ -531,7 +562,7 @@ def evaluate(
             continue
         scene_info[scene_name] = {"split": ds.split_of(scene_name), "vertices": len(ctx.scene.vertices),
                                   "faces": len(ctx.scene.faces), "radius": ctx.radius, "frames": len(frames)}  # fmt: skip
-        applicable = [m for m in methods if m.available and (m.scene is None or m.scene == scene_name)]
+        applicable = [m for m in methods if m.available and m.applies_to(scene_name)]
         for fi, frame in enumerate(frames):
             key = {"dataset": ds.manifest.get("dataset_hash"), "scene": scene_name, "view": frame["view"],
                    "labels": settings_to_dict(label_settings), "gt_rays": settings.gt_rays, "seed": settings.seed}  # fmt: skip
@@ -629,7 +660,7 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
     out: dict = {}
     for m in methods:
         entry = {"family": m.family, "description": m.description, "available": m.available, "reason": m.reason,
-                 "time_on": m.time_on, "error_on": m.error_on, "scope": m.scene or "all scenes",
+                 "time_on": m.time_on, "error_on": m.error_on, "scope": m.scope,
                  "bytes": m.bytes, "bytes_note": m.bytes_note,
                  "two_sided": TWO_SIDED.get(m.family, True)}  # fmt: skip
         rows = [r for r in per_frame if m.name in r["methods"]]

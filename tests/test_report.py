@@ -84,10 +84,11 @@ def workspace(tmp_path_factory):
     from pipeline.field import FieldSettings
     from pipeline.field import train as train_field
 
-    fs = FieldSettings(hidden=[8, 4], octaves=2, samples=2048, steps=40, check_every=20, holdout_views=1,
+    fs = FieldSettings(hidden=[8, 4], octaves=4, samples=2048, steps=40, check_every=20, holdout_views=1,
                        holdout_size=(32, 32), labels=LabelSettings(rays=8))  # fmt: skip
-    train_field(fs, root / "field.pt", data=data, scene="spot")
-    export_field(root / "field.pt", exports / "field-8x4")
+    for scene in ("spot", "box"):  # one field per mesh; the report shows them as one row per size
+        train_field(fs, root / f"field-{scene}.pt", data=data, scene=scene)
+        export_field(root / f"field-{scene}.pt", exports / f"field-{scene}-8x4")
     (exports / "mlp-broken").mkdir()
     (exports / "mlp-broken" / "manifest.json").write_text("{not json")
     return root, data, exports
@@ -125,8 +126,9 @@ def test_report_lists_every_method(report):
     assert "mlp-64x32: no export" in md and "## Model selection" in md
     assert ms["mlp-16x8"]["scope"] == "spot" and set(ms["mlp-16x8"]["per_scene"]) == {"spot"}
     assert set(ms["unet"]["per_scene"]) == {"spot", "box"}
-    assert ms["field-8x4"]["scope"] == "spot" and ms["field-8x4"]["family"] == "field"
-    assert ms["field-8x4"]["bytes"] == 4 * ((18 * 8 + 8) + (8 * 4 + 4) + (4 + 1) + 6 + 6)
+    assert ms["field-8x4"]["scope"] == "box, spot" and ms["field-8x4"]["family"] == "field"
+    assert set(ms["field-8x4"]["per_scene"]) == {"spot", "box"} and "field-spot-8x4" not in ms
+    assert ms["field-8x4"]["bytes"] == 4 * ((30 * 8 + 8) + (8 * 4 + 4) + (4 + 1) + 6 + 12)
     assert ms["field-8x4"]["two_sided"] and not ms["vertex-lsq"]["two_sided"]
     assert "Single-sided surfaces: vertex-sampled, vertex-lsq, vertex-lsq-8bit" in md
     # 8-bit storage: a quarter of the bytes, and the error moves by at most half a step of 1/255
