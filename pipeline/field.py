@@ -442,11 +442,12 @@ def model_from_checkpoint(ckpt: dict) -> FieldNet:
 
 
 def resolve_source(data, scene_name, mesh, settings: FieldSettings):
-    """The Scene to train on and the label settings: a dataset scene takes the dataset's labels."""
+    """The Scene to train on, the settings and the held-back frames (None: render them): a dataset scene
+    takes the dataset's label settings and its held-back views of that scene."""
     from .scene import load_scene
 
     if mesh is not None:
-        return load_scene(mesh), settings
+        return load_scene(mesh), settings, None
     from .config import from_dict
     from .dataset import open_dataset
 
@@ -458,14 +459,19 @@ def resolve_source(data, scene_name, mesh, settings: FieldSettings):
     mesh_path = ds.manifest["scenes"][scene_name].get("mesh")
     if not mesh_path:
         raise NeuralaoError(f"scene {scene_name!r} of {data} has no single mesh to train a field on")
-    return load_scene(mesh_path, name=scene_name), replace(settings, labels=labels)
+    frames = [{k: f[k] for k in ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id", "yfov",
+                                 "znear", "zfar")} for f in ds.frames(scene=scene_name, holdout=True)]  # fmt: skip
+    return load_scene(mesh_path, name=scene_name), replace(settings, labels=labels, holdout_views=0), frames
 
 
 def train(settings: FieldSettings, out, data=None, scene=None, mesh=None, progress=False, samples=None) -> dict:
     """Mesh (or dataset scene) -> two-sided surface samples -> field -> metrics -> checkpoint at ``out``."""
-    scene_obj, settings = resolve_source(data, scene, mesh, settings)
+    scene_obj, settings, frames = resolve_source(data, scene, mesh, settings)
     if samples is None:
         samples = collect_samples(scene_obj, settings, progress)
+        if frames is not None:
+            samples.holdout = frames
+            samples.info["holdout_source"] = f"dataset {data}: held-back views of {scene}"
     model, info = train_model(samples, scene_obj, settings, progress)
     ckpt = make_checkpoint(model, settings, samples, compute_metrics(model, samples), info)
     if out is not None:

@@ -91,6 +91,8 @@ class ReportSettings:
     bake_samples_per_vertex: float = 8.0
     # Target masked SSIM of the model-selection section.
     target_ssim: float = 0.95
+    # Further targets shown side by side in the selection table.
+    select_targets: list[float] = field(default_factory=lambda: [0.9, 0.95])
     # Seed of ground-truth and low-ray tracing directions.
     seed: int = 0
     # Tracing threads (ground truth, baselines).
@@ -731,8 +733,9 @@ def check_settings(s: ReportSettings) -> None:
         raise NeuralaoError(f"time_size must be two positive integers, got {s.time_size}")
     if any(r < 1 for r in s.trace_rays):
         raise NeuralaoError(f"trace_rays must be positive, got {s.trace_rays}")
-    if not (0.0 < s.target_ssim <= 1.0):
-        raise NeuralaoError(f"target SSIM must be in (0, 1], got {s.target_ssim}")
+    for t in [s.target_ssim, *s.select_targets]:
+        if not (0.0 < t <= 1.0):
+            raise NeuralaoError(f"target SSIM must be in (0, 1], got {t}")
 
 
 def cpu_name() -> str:
@@ -772,6 +775,7 @@ def _bytes(v) -> str:
 
 def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
     from .selection import render_markdown as select_markdown
+    from .selection import render_targets_markdown as targets_markdown
 
     ms = result["methods"]
     d = result["dataset"]
@@ -839,6 +843,8 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
             lines += [f"![{s}]({p})", ""]
     if selection is not None:
         lines += ["", select_markdown(selection, heading="## Model selection")]
+    if result.get("select_at"):
+        lines += ["", targets_markdown({float(t): sel for t, sel in result["select_at"].items()})]
     lines += [
         "",
         "## How this was measured",
@@ -966,6 +972,7 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
             ).name
     selection = select_from_results(result, settings.target_ssim)
     result["select"] = selection
+    result["select_at"] = {str(t): select_from_results(result, t) for t in sorted(set(settings.select_targets))}
     result["figures"] = figures
     write_json(out / "report.json", result)
     write_text(out / "report.md", render_markdown(result, selection, figures))

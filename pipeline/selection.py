@@ -146,3 +146,30 @@ def render_markdown(selection: dict, heading: str = "# Model selection") -> str:
             + "; ".join(f"{n} ({r})" for n, r in selection["unavailable_models"].items()),
         ]
     return "\n".join(lines) + "\n"
+
+
+def render_targets_markdown(selections: dict[float, dict], heading: str = "## Selection at several targets") -> str:
+    """One row per scene, one column group per target: the choice, its bytes and time, and the savings."""
+    targets = sorted(selections)
+    scenes = sorted({sc for sel in selections.values() for sc in sel["scenes"]})
+    lines = [heading, "", "Per scene, the cheapest representation (bytes, then time) whose masked SSIM meets the target; "
+             "`(not met)`: nothing does, the best is shown. Saved: against the largest candidate of the scene.", "",
+             "| scene | " + " | ".join(f"target {t}: choice (SSIM) | bytes / time | saved vs largest" for t in targets) + " |",
+             "|---|" + "---|---:|---:|" * len(targets)]  # fmt: skip
+    for scene in scenes:
+        cells = []
+        for t in targets:
+            e = selections[t]["scenes"].get(scene)
+            if e is None:
+                cells += ["-", "-", "-"]
+                continue
+            cells.append(f"{e['chosen']} ({e['ssim']:.3f})" + ("" if e["met_target"] else " (not met)"))
+            cells.append(f"{_kib(e['bytes'])} / {_ms(e['seconds'])}")
+            saved = []
+            if "bytes_ratio" in e:
+                saved.append(f"{e['bytes_ratio']:.3f}x bytes")
+            if "time_ratio" in e:
+                saved.append(f"{e['time_ratio']:.2f}x time")
+            cells.append(", ".join(saved) or "-")
+        lines.append(f"| {scene} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

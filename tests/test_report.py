@@ -211,6 +211,10 @@ def test_select_picks_the_cheapest_representation_meeting_the_target(report, wor
             chosen, met, order = _expected_choice(r, scene, target)
             assert sel["chosen"] == chosen and sel["met_target"] == met, (scene, target)
             assert [c["name"] for c in sel["tried"]] == order[: len(sel["tried"])]
+    assert sorted(r["select_at"]) == ["0.9", "0.95"]
+    for t, sel in r["select_at"].items():
+        assert sel["scenes"] == select_from_results(r, float(t))["scenes"]
+    assert "## Selection at several targets" in (out / "report.md").read_text()
     spot = select_from_results(r, 0.0)["scenes"]["spot"]
     assert {"ssao", "gtao", "vertex-lsq-8bit", "mlp-16x8", "field-8x4", "unet"} <= set(_expected_choice(r, "spot", 0)[2])
     assert spot["bytes_saved"] == spot["largest_bytes"] - spot["bytes"]
