@@ -1178,11 +1178,15 @@ class ConcatValue:
 
 @dataclass
 class Epilogue:
-    """Per-texel step after a pass's body: an activation or a per-channel affine (batch norm)."""
+    """Per-texel step after a pass's body, on ``r`` (the vec4 of output layer gid.z).
+
+    form "act": ``act``; "affine": r * prm[arrays[0]] + prm[arrays[1]] (batch norm, arithmetic with
+    per-channel constants); "prelu": slope prm[arrays[0]] where r < 0; "rdiv": prm[arrays[0]] / r.
+    """
 
     act: Act | None = None
-    scale: str = ""  # param array names for the affine form
-    shift: str = ""
+    form: str = "act"
+    arrays: tuple[str, ...] = ()  # param array names, in the order above
 
 
 @dataclass
@@ -1190,9 +1194,9 @@ class Pass:
     """One compute dispatch: reads ``inputs`` (sampler2DArray src0..), writes ``output`` (image dst)."""
 
     index: int
-    kind: (
-        str  # pad | crop | conv | pool_avg | pool_max | resize_linear | resize_nearest | concat | elementwise
-    )
+    # pad | crop | conv | conv_depthwise | conv_transpose | pool_avg | pool_max | global_pool_avg |
+    # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary | spatial_pad
+    kind: str
     ops: list[str]
     inputs: list[Texture]
     output: Texture
@@ -1221,11 +1225,55 @@ def _spatial_pairs(values: list[int] | None, default: int, what: str) -> tuple[i
     return v[0], v[1]
 
 
+def _same_total(n: int, kernel: int, stride: int, dilation: int) -> int:
+    """Total auto_pad SAME padding so that the output has ceil(n / stride) samples. For a symbolic
+    size ``base * scale + n`` the result is the same: base * scale is a multiple of the stride (the
+    output's scale denominator enters the pad multiple), so only the offset ``n`` matters."""
+    return max(0, (-(-n // stride) - 1) * stride + dilation * (kernel - 1) + 1 - n)
+
+
+def _split_same(total: int, auto_pad: str) -> tuple[int, int]:
+    """(begin, end) padding: SAME_UPPER puts the odd sample at the end, SAME_LOWER at the beginning."""
+    begin = total // 2 if auto_pad == "SAME_UPPER" else total - total // 2
+    return begin, total - begin
+
+
+def _group_dense(w: np.ndarray, group: int) -> np.ndarray:
+    """Grouped conv weight (M, C / group, kH, kW) as the equivalent dense (M, C, kH, kW), block diagonal."""
+    m, cg = w.shape[:2]
+    mg = m // group
+    dense = np.zeros((m, cg * group) + w.shape[2:], w.dtype)
+    for g in range(group):
+        dense[g * mg : (g + 1) * mg, g * cg : (g + 1) * cg] = w[g * mg : (g + 1) * mg]
+    return dense
+
+
+def _constant_binary(op: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Arithmetic on two constants (exporters emit shape arithmetic): numpy; ONNX integer division truncates."""
+    if op == "Div" and np.issubdtype(a.dtype, np.integer) and np.issubdtype(b.dtype, np.integer):
+        return np.fix(a / b).astype(np.result_type(a, b))
+    return {"Add": np.add, "Sub": np.subtract, "Mul": np.multiply, "Div": np.divide}[op](a, b)
+
+
+CONV_KINDS = ("conv", "conv_depthwise", "conv_transpose")
+# Widest separable resize filter (taps per axis): antialiased cubic downscaling by 1/16.
+MAX_FILTER_TAPS = 64
+
+
+def _split_transpose(total: int, auto_pad: str) -> tuple[int, int]:
+    """ConvTranspose (begin, end) padding (ONNX spec, as onnxruntime does it): SAME_UPPER puts the odd
+    sample at the end; SAME_LOWER and an explicit output_shape without auto_pad at the beginning."""
+    begin = total // 2 if auto_pad == "SAME_UPPER" else total - total // 2
+    return begin, total - begin
+
+
 class ImageOps(OpTable):
     """ONNX -> compute passes over (1, C, H, W) images (GLSL 4.3 compute, texture storage)."""
 
-    OPS = ("Conv", "BatchNormalization", "Relu", "LeakyRelu", "Sigmoid", "Tanh", "Clip", "AveragePool",
-           "MaxPool", "Resize", "Concat", "Identity", "Constant")  # fmt: skip
+    OPS = ("Conv", "ConvTranspose", "BatchNormalization", "Relu", "LeakyRelu", "PRelu", "Sigmoid", "Tanh", "Clip",
+           "Elu", "Softplus", "HardSigmoid", "Sin", "Cos", "Add", "Sub", "Mul", "Div", "AveragePool", "MaxPool",
+           "GlobalAveragePool", "GlobalMaxPool", "Resize", "Upsample", "Pad", "Concat", "Identity",
+           "Constant")  # fmt: skip
     target = "compute (image)"
 
     def __init__(self, graph: OnnxGraph, metadata_multiple: int | None):
@@ -1234,6 +1282,8 @@ class ImageOps(OpTable):
         self.textures: list[Texture] = []
         self.producer: dict[str, Pass] = {}
         self.denominators: set[int] = {1}
+        self.global_reads: list[str] = []  # global pools over a dynamic size (padding would enter them)
+        self.param_count = 0
         dims = _dims(graph.input)
         name = graph.input.name
         if len(dims) != 4:
@@ -1320,18 +1370,22 @@ class ImageOps(OpTable):
             return None
         return p
 
-    def output_dim(self, d: Dim, kernel: int, stride: int, dilation: int, pad_total: int) -> Dim:
-        """floor((n + pads - dilation (k - 1) - 1) / stride) + 1, kept symbolic (exact when
-        stride divides Hp * scale, which the pad multiple guarantees)."""
-        c = pad_total - dilation * (kernel - 1) - 1
+    def output_dim(self, d: Dim, kernel: int, stride: int, dilation: int, pad_begin: int, pad_end: int,
+                   ceil_mode: int = 0) -> Dim:  # fmt: skip
+        """floor (or ceil) of (n + pads - dilation (k - 1) - 1) / stride, + 1, kept symbolic (exact when
+        stride divides Hp * scale, which the pad multiple guarantees). ceil_mode drops a last window
+        that would start in the trailing padding (as onnxruntime and PyTorch do)."""
+        c = pad_begin + pad_end - dilation * (kernel - 1) - 1
+        q = -(-(d.offset + c) // stride) if ceil_mode else (d.offset + c) // stride
+        if ceil_mode and q * stride >= d.offset + pad_begin:
+            q -= 1  # the same test for a symbolic size: base * scale cancels on both sides
         if d.scale == 0:
-            n = (d.offset + c) // stride + 1
-            if n < 1:
+            if q + 1 < 1:
                 raise self.fail(f"window larger than the padded input ({d.offset})")
-            return Dim(Fraction(0), n)
-        return Dim(d.scale / stride, (d.offset + c) // stride + 1)
+            return Dim(Fraction(0), q + 1)
+        return Dim(d.scale / stride, q + 1)
 
-    def _window(self, kernel_shape, strides, dilations, pads, auto_pad) -> tuple:
+    def _window(self, kernel_shape, strides, dilations, pads, auto_pad, dims: tuple[Dim, Dim]) -> tuple:
         kh, kw = _spatial_pairs(kernel_shape, 1, "kernel_shape")
         sy, sx = _spatial_pairs(strides, 1, "strides")
         dy, dx = _spatial_pairs(dilations, 1, "dilations")
@@ -1345,19 +1399,37 @@ class ImageOps(OpTable):
                 raise self.fail(f"pads must be 4 non-negative values, got {p}")
         elif auto_pad == "VALID":
             p = [0, 0, 0, 0]
-        elif auto_pad in ("SAME_UPPER", "SAME_LOWER") and sy == sx == 1:
-            th, tw = dy * (kh - 1), dx * (kw - 1)
-            if auto_pad == "SAME_UPPER":
-                p = [th // 2, tw // 2, th - th // 2, tw - tw // 2]
-            else:
-                p = [th - th // 2, tw - tw // 2, th // 2, tw // 2]
+        elif auto_pad in ("SAME_UPPER", "SAME_LOWER"):
+            p = [0, 0, 0, 0]
+            for i, (d, k, st, dl) in enumerate(zip(dims, (kh, kw), (sy, sx), (dy, dx), strict=True)):
+                p[i], p[i + 2] = _split_same(_same_total(d.offset, k, st, dl), auto_pad)
         else:
             raise self.unsupported("auto_pad", auto_pad)
         return (kh, kw), (sy, sx), (dy, dx), p  # p: top, left, bottom, right
 
-    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str) -> Texture:
+    def param_name(self, prefix: str) -> str:
+        """A parameter array name unique in the program (epilogues of several nodes share a pass)."""
+        self.param_count += 1
+        return f"{prefix}{self.param_count}"
+
+    def channel_const(self, value: Any, channels: int, what: str) -> np.ndarray:
+        """(channels,) float64 of a constant that broadcasts per channel over (1, C, H, W)."""
+        a = np.asarray(self.const(value, what), dtype=np.float64)
+        shape = (1,) * (4 - a.ndim) + a.shape if a.ndim <= 4 else a.shape
+        if len(shape) != 4 or shape[0] != 1 or shape[2:] != (1, 1) or shape[1] not in (1, channels):
+            raise self.fail(
+                f"constant {what} of shape {list(a.shape)} does not broadcast per channel over {channels} "
+                "channels (scalar, (C, 1, 1) or (1, C, 1, 1) expected)"
+            )
+        out = np.broadcast_to(a.reshape(-1), (channels,)).copy()
+        if not np.all(np.isfinite(out)):
+            raise self.fail(f"constant {what} has non-finite values")
+        return out
+
+    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str, index: int = 0) -> Texture:
+        """Append ``epi`` to the pass producing X (input ``index`` of the node) or to a new elementwise pass."""
         x = self.image(X, "X")
-        p = self.fusible_pass(0) if isinstance(X, Texture) else None
+        p = self.fusible_pass(index) if isinstance(X, Texture) else None
         if p is None:
             out = self.new_texture(x.channels, x.height, x.width)
             p = self.add_pass(Pass(0, "elementwise", [], [x], out))
@@ -1370,29 +1442,15 @@ class ImageOps(OpTable):
     def _activation(self, X: Any, act: Act) -> Texture:
         return self._elementwise(X, Epilogue(act=act), {}, act.op)
 
-    # -- handlers
-    def Conv(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None, pads=None,
-             strides=None) -> Texture:  # fmt: skip
-        parts = list(X.parts) if isinstance(X, ConcatValue) else [self.image(X, "X")]
-        w = self.const(W, "W").astype(np.float64)
-        if w.ndim != 4:
-            raise self.fail(f"W must be (M, C, kH, kW), got shape {list(w.shape)}")
-        if group != 1:
-            raise self.unsupported("group", group)
-        if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
-            raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
-        (kh, kw), (sy, sx), (dy, dx), p = self._window(list(w.shape[2:]), strides, dilations, pads, auto_pad)
-        cin = sum(t.channels for t in parts)
-        if w.shape[1] != cin:
-            raise self.fail(f"W takes {w.shape[1]} input channels, the input has {cin}")
+    def _conv_pass(self, kind: str, X: Any, parts: list[Texture], w: np.ndarray, bias: np.ndarray, window: tuple,
+                   h: Dim, wd: Dim) -> Texture:  # fmt: skip
+        """A conv-like pass; w is the (M, C, kH, kW) dense equivalent ((C, 1, kH, kW) for depthwise)."""
+        (kh, kw), (sy, sx), (dy, dx), p = window
         cout = w.shape[0]
-        bias = np.zeros(cout) if B is None else self.const(B, "B").astype(np.float64).reshape(-1)
         if bias.shape != (cout,):
             raise self.fail(f"B must have {cout} entries, got {bias.shape}")
         if not (np.all(np.isfinite(w)) and np.all(np.isfinite(bias))):
             raise self.fail("weights contain non-finite values")
-        h = self.output_dim(parts[0].height, kh, sy, dy, p[0] + p[2])
-        wd = self.output_dim(parts[0].width, kw, sx, dx, p[1] + p[3])
         out = self.new_texture(cout, h, wd)
         layer_offsets, off = [], 0
         for t in parts:
@@ -1400,13 +1458,88 @@ class ImageOps(OpTable):
                 raise self.fail("concatenated inputs differ in size")
             layer_offsets.append(off)
             off += t.layers
-        conv = Pass(0, "conv", ["Conv"], parts, out, nodes=[self.label])
+        conv = Pass(0, kind, [self.node.op_type], parts, out, nodes=[self.label])
         conv.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p,
                        "layer_offsets": layer_offsets, "in_layers": off}  # fmt: skip
         conv.fields["weight64"], conv.fields["bias64"] = w, bias  # packed by _pack_conv (after BN folding)
-        if isinstance(X, ConcatValue):
+        if isinstance(X, ConcatValue) and parts == X.parts:
             conv.ops.insert(0, "Concat")
         return self.add_pass(conv).output
+
+    def _conv_inputs(self, X: Any, W: Any, B: Any) -> tuple[list[Texture], np.ndarray, np.ndarray | None]:
+        parts = list(X.parts) if isinstance(X, ConcatValue) else [self.image(X, "X")]
+        w = self.const(W, "W").astype(np.float64)
+        if w.ndim != 4:
+            raise self.fail(f"W must be 4-D (2-D images), got shape {list(w.shape)}")
+        bias = None if B is None else self.const(B, "B").astype(np.float64).reshape(-1)
+        return parts, w, bias
+
+    # -- handlers
+    def Conv(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None, pads=None,
+             strides=None) -> Texture:  # fmt: skip
+        parts, w, bias = self._conv_inputs(X, W, B)
+        if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
+            raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
+        cin, cout = sum(t.channels for t in parts), w.shape[0]
+        if group < 1 or cout % group or w.shape[1] * group != cin:
+            raise self.fail(f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels")
+        dims = (parts[0].height, parts[0].width)
+        window = self._window(list(w.shape[2:]), strides, dilations, pads, auto_pad, dims)
+        (kh, kw), (sy, sx), (dy, dx), p = window
+        h = self.output_dim(dims[0], kh, sy, dy, p[0], p[2])
+        wd = self.output_dim(dims[1], kw, sx, dx, p[1], p[3])
+        bias = np.zeros(cout) if bias is None else bias
+        if group > 1 and group == cin == cout:  # depthwise: one vec4 weight per tap, no channel mixing
+            return self._conv_pass("conv_depthwise", X, [self.image(X, "X")], w, bias, window, h, wd)
+        w = _group_dense(w, group) if group > 1 else w
+        return self._conv_pass("conv", X, parts, w, bias, window, h, wd)
+
+    def ConvTranspose(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None,
+                      output_padding=None, output_shape=None, pads=None, strides=None) -> Texture:  # fmt: skip
+        parts, w, bias = self._conv_inputs(X, W, B)
+        cin = sum(t.channels for t in parts)
+        if group < 1 or w.shape[0] != cin or cin % group:
+            raise self.fail(f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels")
+        if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
+            raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
+        kh, kw = (int(v) for v in w.shape[2:])
+        sy, sx = _spatial_pairs(strides, 1, "strides")
+        dy, dx = _spatial_pairs(dilations, 1, "dilations")
+        adj = _spatial_pairs(output_padding, 0, "output_padding")
+        if min(sy, sx, dy, dx) < 1 or max(kh, kw) > MAX_KERNEL:
+            raise self.fail(f"strides and dilations must be positive, the kernel {kh}x{kw} at most {MAX_KERNEL}")
+        if auto_pad not in ("NOTSET", "", "VALID", "SAME_UPPER", "SAME_LOWER"):
+            raise self.unsupported("auto_pad", auto_pad)
+        shape = None if output_shape is None else [int(v) for v in output_shape][-2:]
+        if shape is not None and len(shape) != 2:
+            raise self.fail(f"output_shape {output_shape} must give H and W")
+        p = [0, 0, 0, 0] if pads is None or auto_pad not in ("NOTSET", "") else [int(v) for v in pads]
+        if len(p) != 4 or min(p) < 0:
+            raise self.fail(f"pads must be 4 non-negative values, got {p}")
+        dims = []
+        sizes = (parts[0].height, parts[0].width)
+        for i, (d, k, st, dl) in enumerate(zip(sizes, (kh, kw), (sy, sx), (dy, dx), strict=True)):
+            if adj[i] < 0 or adj[i] >= max(st, dl):
+                raise self.fail(f"output_padding {list(adj)} must be below the stride or the dilation")
+            full = dl * (k - 1) + 1 + adj[i] - st  # out = stride * n + full - pads
+            if shape is not None or auto_pad in ("SAME_UPPER", "SAME_LOWER"):
+                if shape is not None and d.scale != 0:
+                    raise self.fail("output_shape needs a static input size")
+                target = Dim(Fraction(0), shape[i]) if shape is not None else Dim(d.scale * st, d.offset * st)
+                total = max(0, st * d.offset + full - target.offset)
+                p[i], p[i + 2] = _split_transpose(total, auto_pad)
+                dims.append(target)
+            else:
+                dims.append(Dim(d.scale * st, d.offset * st + full - p[i] - p[i + 2]))
+            if dims[-1].scale == 0 and dims[-1].offset < 1:
+                raise self.fail(f"output size {dims[-1].offset} is not positive")
+        mg, cg = w.shape[1], cin // group
+        dense = np.zeros((mg * group, cin, kh, kw))  # the gather form: out[m] += W[c, m] * in[c]
+        for g in range(group):
+            dense[g * mg : (g + 1) * mg, g * cg : (g + 1) * cg] = w[g * cg : (g + 1) * cg].transpose(1, 0, 2, 3)
+        bias = np.zeros(mg * group) if bias is None else bias
+        window = ((kh, kw), (sy, sx), (dy, dx), p)
+        return self._conv_pass("conv_transpose", X, parts, dense, bias, window, dims[0], dims[1])
 
     def BatchNormalization(self, X, scale, B, input_mean, input_var, *, epsilon=1e-5, momentum=0.9,
                            training_mode=0, spatial=1) -> Texture:  # fmt: skip
@@ -1424,19 +1557,103 @@ class ImageOps(OpTable):
         shift = beta - mean * s
         if not (np.all(np.isfinite(s)) and np.all(np.isfinite(shift))):
             raise self.fail("batch-norm parameters give non-finite scale/shift")
-        p = self.fusible_pass(0) if isinstance(X, Texture) else None
-        if p is not None and p.kind == "conv" and not p.epilogue:
+        return self._affine(X, s, shift, "BatchNormalization")
+
+    def _affine(self, X: Any, s: np.ndarray, shift: np.ndarray, op: str, index: int = 0) -> Texture:
+        """X * s + shift per channel: folded into a producing conv without epilogue, else an epilogue."""
+        x = self.image(X, "X")
+        if not (np.all(np.isfinite(s)) and np.all(np.isfinite(shift))):
+            raise self.fail("per-channel scale/shift is non-finite")
+        p = self.fusible_pass(index) if isinstance(X, Texture) else None
+        if p is not None and p.kind in CONV_KINDS and not p.epilogue:
             # Fold into the conv: W' = W * s (per output channel), b' = b * s + shift.
             p.fields["weight64"] = p.fields["weight64"] * s[:, None, None, None]
             p.fields["bias64"] = p.fields["bias64"] * s + shift
-            p.ops.append("BatchNormalization")
+            p.ops.append(op)
             p.nodes.append(self.label)
-            p.folded_bn = True
+            p.folded_bn = p.folded_bn or op == "BatchNormalization"
             return p.output
-        k = self._affine_count = getattr(self, "_affine_count", 0) + 1
-        names = (f"bn_scale{k}", f"bn_shift{k}")
+        names = (self.param_name("scale"), self.param_name("shift"))
         params = {names[0]: _vec4_rows(s, x.layers), names[1]: _vec4_rows(shift, x.layers)}
-        return self._elementwise(X, Epilogue(scale=names[0], shift=names[1]), params, "BatchNormalization")
+        return self._elementwise(X, Epilogue(form="affine", arrays=names), params, op, index)
+
+    def _arithmetic(self, op: str, A: Any, B: Any) -> Any:
+        if isinstance(A, np.ndarray) and isinstance(B, np.ndarray):
+            return _constant_binary(op, A, B)
+        if not isinstance(A, np.ndarray) and not isinstance(B, np.ndarray):
+            return self._binary(op, A, B)
+        first = isinstance(A, np.ndarray)  # constant (op) image
+        X, index = (B, 1) if first else (A, 0)
+        x = self.image(X, "B" if first else "A")
+        c = self.channel_const(A if first else B, x.channels, "A" if first else "B")
+        one, zero = np.ones(x.channels), np.zeros(x.channels)
+        if op == "Add":
+            return self._affine(X, one, c, op, index)
+        if op == "Sub":
+            return self._affine(X, -one, c, op, index) if first else self._affine(X, one, -c, op, index)
+        if op == "Mul":
+            return self._affine(X, c, zero, op, index)
+        if not first:
+            with np.errstate(divide="ignore"):
+                return self._affine(X, 1.0 / c, zero, op, index)  # x * (1/c): within 1.5 ulp of x / c
+        name = self.param_name("numerator")
+        params = {name: _vec4_rows(c, x.layers)}
+        return self._elementwise(X, Epilogue(form="rdiv", arrays=(name,)), params, op, index)
+
+    def _binary(self, op: str, A: Any, B: Any) -> Texture:
+        """Two images: equal shapes, or one of them 1 x 1 in space and/or of one channel (broadcast)."""
+        a, b = self.image(A, "A"), self.image(B, "B")
+        channels = max(a.channels, b.channels)
+        point = (Dim(Fraction(0), 1), Dim(Fraction(0), 1))
+        big = a if (a.height, a.width) != point else b
+        fetch = []
+        for t in (a, b):
+            spatial = (t.height, t.width) == (big.height, big.width)
+            if not (spatial or (t.height, t.width) == point) or t.channels not in (1, channels):
+                raise self.fail(
+                    f"inputs of {a.channels}x{a.height.describe('H')}x{a.width.describe('W')} and "
+                    f"{b.channels}x{b.height.describe('H')}x{b.width.describe('W')} do not broadcast "
+                    "(equal shapes, 1x1 in space or one channel)"
+                )
+            full = t.channels == channels
+            fetch.append(("full" if full else "channel") if spatial else ("pixel" if full else "scalar"))
+        out = self.new_texture(channels, big.height, big.width)
+        ps = Pass(0, "binary", [op], [a, b], out, nodes=[self.label])
+        ps.fields = {"op": op, "fetch": fetch}
+        return self.add_pass(ps).output
+
+    def Add(self, A, B) -> Any:
+        return self._arithmetic("Add", A, B)
+
+    def Sub(self, A, B) -> Any:
+        return self._arithmetic("Sub", A, B)
+
+    def Mul(self, A, B) -> Any:
+        return self._arithmetic("Mul", A, B)
+
+    def Div(self, A, B) -> Any:
+        return self._arithmetic("Div", A, B)
+
+    def PRelu(self, X, slope) -> Texture:
+        x = self.image(X, "X")
+        name = self.param_name("slope")
+        params = {name: _vec4_rows(self.channel_const(slope, x.channels, "slope"), x.layers)}
+        return self._elementwise(X, Epilogue(form="prelu", arrays=(name,)), params, "PRelu")
+
+    def Elu(self, X, *, alpha=1.0) -> Texture:
+        return self._activation(X, Act("Elu", {"alpha": float(alpha)}))
+
+    def Softplus(self, X) -> Texture:
+        return self._activation(X, Act("Softplus"))
+
+    def HardSigmoid(self, X, *, alpha=0.2, beta=0.5) -> Texture:
+        return self._activation(X, Act("HardSigmoid", {"alpha": float(alpha), "beta": float(beta)}))
+
+    def Sin(self, input) -> Texture:  # noqa: A002
+        return self._activation(input, Act("Sin"))
+
+    def Cos(self, input) -> Texture:  # noqa: A002
+        return self._activation(input, Act("Cos"))
 
     def Relu(self, X) -> Texture:
         return self._activation(X, Act("Relu"))
@@ -1460,13 +1677,13 @@ class ImageOps(OpTable):
 
     def _pool(self, kind, X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode) -> Pass:
         x = self.image(X, "X")
-        (kh, kw), (sy, sx), (dy, dx), p = self._window(kernel_shape, strides, dilations, pads, auto_pad)
-        if (dy, dx) != (1, 1) and kind == "pool_avg":
-            raise self.unsupported("dilations", dilations)
-        if ceil_mode != 0:
-            raise self.unsupported("ceil_mode", ceil_mode)  # clipped last windows: not replicated
-        h = self.output_dim(x.height, kh, sy, dy, p[0] + p[2])
-        w = self.output_dim(x.width, kw, sx, dx, p[1] + p[3])
+        window = self._window(kernel_shape, strides, dilations, pads, auto_pad, (x.height, x.width))
+        (kh, kw), (sy, sx), (dy, dx), p = window
+        if ceil_mode not in (0, 1):
+            raise self.unsupported("ceil_mode", ceil_mode)
+        # SAME pads make the division exact, so ceil_mode cannot change its size; VALID takes it (onnxruntime)
+        h = self.output_dim(x.height, kh, sy, dy, p[0], p[2], ceil_mode)
+        w = self.output_dim(x.width, kw, sx, dx, p[1], p[3], ceil_mode)
         out = self.new_texture(x.channels, h, w)
         ps = Pass(0, kind, [self.node.op_type], [x], out, nodes=[self.label])
         ps.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p}
@@ -1477,15 +1694,70 @@ class ImageOps(OpTable):
         if count_include_pad not in (0, 1):
             raise self.unsupported("count_include_pad", count_include_pad)
         ps = self._pool("pool_avg", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode)
-        kh, kw = ps.fields["kernel"]
-        ps.fields["divisor"] = float(kh * kw) if count_include_pad else None
+        # count_include_pad=1 divides by the taps inside the padded input (not those past the pads,
+        # which ceil_mode windows can reach), as onnxruntime does.
+        ps.fields["include_pad"] = bool(count_include_pad)
         return ps.output
 
     def MaxPool(self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, pads=None,
                 storage_order=0, strides=None) -> Texture:  # fmt: skip
-        if storage_order != 0:
+        if storage_order not in (0, 1):  # it orders only the Indices output, which is refused
             raise self.unsupported("storage_order", storage_order)
         return self._pool("pool_max", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode).output
+
+    def _global_pool(self, kind: str, X: Any) -> Texture:
+        x = self.image(X, "X")
+        if x.height.scale != 0 or x.width.scale != 0:
+            self.global_reads.append(self.label)
+        point = Dim(Fraction(0), 1)
+        out = self.new_texture(x.channels, point, point)
+        return self.add_pass(Pass(0, kind, [self.node.op_type], [x], out, nodes=[self.label])).output
+
+    def GlobalAveragePool(self, X) -> Texture:
+        return self._global_pool("global_pool_avg", X)
+
+    def GlobalMaxPool(self, X) -> Texture:
+        return self._global_pool("global_pool_max", X)
+
+    PAD_MODES = ("constant", "reflect", "edge", "wrap")
+
+    def Pad(self, data, pads_input=None, constant_value=None, axes=None, *, mode="constant", pads=None,
+            value=0.0) -> Texture:  # fmt: skip
+        """Opset 11+: pads (here ``pads_input``: Python needs it apart from the opset-2 attribute of the
+        same ONNX name), constant_value and axes are inputs; opset 2: pads and value are attributes."""
+        x = self.image(data, "data")
+        if mode not in self.PAD_MODES:
+            raise self.unsupported("mode", mode)
+        if pads_input is not None:
+            pv = [int(v) for v in self.const(pads_input, "pads").reshape(-1)]
+        elif pads is not None:
+            pv = [int(v) for v in pads]
+        else:
+            raise self.fail("pads is missing")
+        if constant_value is not None:
+            cv = self.const(constant_value, "constant_value").astype(np.float64).reshape(-1)
+            if cv.size > 1:
+                raise self.fail("constant_value must be a scalar")
+            value = float(cv[0]) if cv.size else 0.0
+        if not np.isfinite(np.float32(value)):
+            raise self.fail(f"constant_value {value!r} is not finite")
+        ax = list(range(4)) if axes is None else [int(a) % 4 for a in self.const(axes, "axes").reshape(-1)]
+        if len(pv) != 2 * len(ax):
+            raise self.fail(f"{len(pv)} pads for {len(ax)} axes")
+        full = [0] * 8
+        for i, a in enumerate(ax):
+            full[a], full[a + 4] = pv[i], pv[i + len(ax)]
+        if any(full[k] for k in (0, 1, 4, 5)):
+            raise self.fail(f"only the spatial axes (H, W) may be padded, got pads {pv}")
+        top, left, bottom, right = full[2], full[3], full[6], full[7]
+        h = Dim(x.height.scale, x.height.offset + top + bottom)
+        w = Dim(x.width.scale, x.width.offset + left + right)
+        if (h.scale == 0 and h.offset < 1) or (w.scale == 0 and w.offset < 1):
+            raise self.fail(f"pads {pv} leave no pixels")
+        out = self.new_texture(x.channels, h, w)
+        ps = Pass(0, "spatial_pad", ["Pad"], [x], out, nodes=[self.label])
+        ps.fields = {"mode": mode, "pads": [top, left, bottom, right], "value": float(value)}
+        return self.add_pass(ps).output
 
     RESIZE_COORDS = (
         "half_pixel",
@@ -1493,28 +1765,30 @@ class ImageOps(OpTable):
         "align_corners",
         "asymmetric",
         "half_pixel_symmetric",
+        "tf_crop_and_resize",
     )
     NEAREST_MODES = ("round_prefer_floor", "round_prefer_ceil", "floor", "ceil")
+    KEEP_ASPECT = ("stretch", "not_larger", "not_smaller")
 
     def Resize(self, X, roi=None, scales=None, sizes=None, *, antialias=0, axes=None,
                coordinate_transformation_mode="half_pixel", cubic_coeff_a=-0.75, exclude_outside=0,
                extrapolation_value=0.0, keep_aspect_ratio_policy="stretch", mode="nearest",
                nearest_mode="round_prefer_floor") -> Texture:  # fmt: skip
         x = self.image(X, "X")
-        if mode not in ("nearest", "linear"):
+        coord = coordinate_transformation_mode
+        if mode not in ("nearest", "linear", "cubic"):
             raise self.unsupported("mode", mode)
-        if coordinate_transformation_mode not in self.RESIZE_COORDS:
-            raise self.unsupported("coordinate_transformation_mode", coordinate_transformation_mode)
+        if coord not in self.RESIZE_COORDS:
+            raise self.unsupported("coordinate_transformation_mode", coord)
         if mode == "nearest" and nearest_mode not in self.NEAREST_MODES:
             raise self.unsupported("nearest_mode", nearest_mode)
-        if antialias:
-            raise self.unsupported("antialias", antialias)
-        if exclude_outside:
-            raise self.unsupported("exclude_outside", exclude_outside)
-        if keep_aspect_ratio_policy != "stretch":
+        for name, v in (("antialias", antialias), ("exclude_outside", exclude_outside)):
+            if v not in (0, 1):
+                raise self.unsupported(name, v)
+        if keep_aspect_ratio_policy not in self.KEEP_ASPECT:
             raise self.unsupported("keep_aspect_ratio_policy", keep_aspect_ratio_policy)
         ax = [0, 1, 2, 3] if axes is None else [int(a) % 4 for a in axes]
-        full_scales = [1.0, 1.0, None, None]
+        full_scales: list[float | None] = [1.0, 1.0, None, None]
         full_sizes: list[int | None] = [None, None, None, None]
         sc = None if scales is None else self.const(scales, "scales").astype(np.float32).reshape(-1)
         sz = None if sizes is None else self.const(sizes, "sizes").astype(np.int64).reshape(-1)
@@ -1532,7 +1806,30 @@ class ImageOps(OpTable):
                 full_scales[a] = float(v)
             else:
                 full_sizes[a] = int(v)
-        if sc is not None:
+        roi_box = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]  # starts then ends, per axis (N, C, H, W)
+        if coord == "tf_crop_and_resize" and roi is not None and self.const(roi, "roi").size:
+            r = self.const(roi, "roi").astype(np.float32).reshape(-1)
+            if r.size != 2 * len(ax):
+                raise self.fail(f"roi has {r.size} values for {len(ax)} axes")
+            for i, a in enumerate(ax):
+                roi_box[a], roi_box[a + 4] = float(r[i]), float(r[i + len(ax)])
+            if roi_box[:2] != [0.0, 0.0] or roi_box[4:6] != [1.0, 1.0]:
+                raise self.fail("roi may crop only the spatial axes (H, W)")
+        in_sizes = [1, x.channels, x.height.offset, x.width.offset]
+        if sz is not None and keep_aspect_ratio_policy != "stretch":
+            if x.height.scale != 0 or x.width.scale != 0:
+                raise self.fail(f"keep_aspect_ratio_policy={keep_aspect_ratio_policy!r} needs a static input size")
+            ratios = [np.float32(full_sizes[a]) / np.float32(in_sizes[a]) for a in ax]
+            s = min(ratios) if keep_aspect_ratio_policy == "not_larger" else max(ratios)
+            for a in ax:
+                full_sizes[a] = int(math.floor(float(np.float32(s) * np.float32(in_sizes[a])) + 0.5))
+                full_scales[a] = float(s)
+            if full_sizes[0] not in (None, 1) or full_sizes[1] not in (None, x.channels):
+                raise self.fail("keep_aspect_ratio_policy would resize the batch or channel axis")
+            sc = np.asarray([full_scales[a] for a in ax], np.float32)  # the coordinates use this scale
+        if sz is not None and ((full_sizes[0] not in (None, 1)) or (full_sizes[1] not in (None, x.channels))):
+            raise self.fail("only the spatial axes (H, W) may be resized")
+        if sz is None:
             if full_scales[0] != 1.0 or full_scales[1] != 1.0:
                 raise self.fail("only the spatial axes (H, W) may be resized")
             for a in (2, 3):
@@ -1540,42 +1837,90 @@ class ImageOps(OpTable):
                     full_scales[a] = 1.0
                 if not full_scales[a] > 0:
                     raise self.fail(f"scale {full_scales[a]} must be positive")
-        else:
-            if (full_sizes[0] not in (None, 1)) or (full_sizes[1] not in (None, x.channels)):
-                raise self.fail("only the spatial axes (H, W) may be resized")
-        dims = []
-        scale_exprs = []
+        dims, scale_exprs, support = [], [], []
         for a, d in ((2, x.height), (3, x.width)):
+            crop = np.float32(roi_box[a + 4]) - np.float32(roi_box[a]) if coord == "tf_crop_and_resize" else 1.0
+            n = full_sizes[a]
+            if n is not None:
+                if n < 1:
+                    raise self.fail(f"size {n} must be positive")
+                dims.append(Dim(Fraction(0), int(n)))
+            elif d.scale == 0:
+                dims.append(Dim(Fraction(0), int(np.float32(d.offset) * np.float32(crop) * np.float32(full_scales[a]))))
+            else:
+                f = Fraction(float(np.float32(full_scales[a])))
+                if crop != 1.0 or f.denominator > 64 or (d.offset * f).denominator != 1:
+                    raise self.fail(
+                        f"scale {full_scales[a]} is not exact on a dynamic size; give sizes or a 1/2^k scale"
+                    )
+                dims.append(Dim(d.scale * f, int(d.offset * f)))
             if sc is not None:
-                s = np.float32(full_scales[a])
-                if d.scale == 0:
-                    dims.append(Dim(Fraction(0), int(np.float32(d.offset) * s)))
-                else:
-                    f = Fraction(float(s))
-                    if f.denominator > 64 or (d.offset * f).denominator != 1:
-                        raise self.fail(
-                            f"scale {float(s)} is not exact on a dynamic size; give sizes or a 1/2^k scale"
-                        )
-                    dims.append(Dim(d.scale * f, int(d.offset * f)))
+                s = float(np.float32(full_scales[a]))
                 scale_exprs.append(("literal", glsl_float(s)))
             else:
-                n = full_sizes[a]
-                if n is None:
-                    dims.append(d)
-                else:
-                    if n < 1:
-                        raise self.fail(f"size {n} must be positive")
-                    dims.append(Dim(Fraction(0), int(n)))
                 scale_exprs.append(("ratio", ""))
+                if n is None:
+                    s = 1.0
+                else:
+                    s = float(np.float32(n) / np.float32(d.offset)) if d.scale == 0 else None
+            support.append(s)
+        return self._resize_pass(x, dims, scale_exprs, support, mode, coord, nearest_mode, antialias,
+                                 cubic_coeff_a, exclude_outside, extrapolation_value, roi_box)  # fmt: skip
+
+    def _resize_pass(self, x: Texture, dims: list[Dim], scale_exprs: list, scales: list[float | None], mode: str,
+                     coord: str, nearest_mode: str, antialias: int, cubic_a: float, exclude_outside: int,
+                     extrapolation: float, roi_box: list[float]) -> Texture:  # fmt: skip
+        """scales: the per-axis scale when known at generation time (None: a ratio of dynamic sizes)."""
+        if mode == "nearest":
+            kind = "resize_nearest"
+        elif mode == "cubic" or (antialias and any(s is None or s < 1 for s in scales)):
+            kind = "resize_filter"
+        else:
+            kind = "resize_linear"  # antialias does not change upscaling (the kernel is not widened)
+        fields = {"mode": mode, "coord": coord, "nearest_mode": nearest_mode, "scales": scale_exprs,
+                  "extrapolation": float(extrapolation) if coord == "tf_crop_and_resize" else None,
+                  "roi": [roi_box[2], roi_box[3], roi_box[6], roi_box[7]]}  # fmt: skip
+        if kind == "resize_filter":
+            if antialias and any(s is None for s in scales):
+                raise self.fail("antialias with sizes needs a static input size (the filter width depends on the scale)")
+            widen = [min(s, 1.0) if antialias else 1.0 for s in scales]
+            reach = 2 if mode == "cubic" else 1
+            half = [math.ceil(reach / w) for w in widen]
+            if 2 * max(half) > MAX_FILTER_TAPS:
+                raise self.fail(f"antialiased scale {min(scales)} needs over {MAX_FILTER_TAPS} taps per axis")
+            fields.update(kernel=mode, cubic_coeff_a=float(cubic_a), exclude_outside=bool(exclude_outside),
+                          widen=widen, half=half)  # fmt: skip
         out = self.new_texture(x.channels, dims[0], dims[1])
-        kind = "resize_linear" if mode == "linear" else "resize_nearest"
-        ps = Pass(0, kind, ["Resize"], [x], out, nodes=[self.label])
-        ps.fields = {
-            "coord": coordinate_transformation_mode,
-            "nearest_mode": nearest_mode,
-            "scales": scale_exprs,
-        }
+        ps = Pass(0, kind, [self.node.op_type], [x], out, nodes=[self.label])
+        ps.fields = fields
         return self.add_pass(ps).output
+
+    def Upsample(self, X, scales_input=None, *, mode="nearest", scales=None) -> Texture:
+        """Opsets 7-9: scales as an attribute (7, 8) or an input (9; ``scales_input``, apart from the
+        attribute of the same ONNX name), each >= 1. Asymmetric coordinates, nearest rounds down."""
+        x = self.image(X, "X")
+        if mode not in ("nearest", "linear"):
+            raise self.unsupported("mode", mode)
+        if scales_input is not None:
+            sc = self.const(scales_input, "scales").astype(np.float32).reshape(-1)
+        elif scales is not None:
+            sc = np.asarray(scales, np.float32)
+        else:
+            raise self.fail("scales is missing")
+        if sc.size != 4 or sc[0] != 1 or sc[1] != 1 or not np.all(sc >= 1):
+            raise self.fail(f"scales {sc.tolist()} must be (1, 1, sH, sW) with sH, sW >= 1")
+        dims, exprs = [], []
+        for s, d in ((sc[2], x.height), (sc[3], x.width)):
+            if d.scale == 0:
+                dims.append(Dim(Fraction(0), int(np.float32(d.offset) * s)))
+            else:
+                f = Fraction(float(s))
+                if f.denominator > 64 or (d.offset * f).denominator != 1:
+                    raise self.fail(f"scale {float(s)} is not exact on a dynamic size")
+                dims.append(Dim(d.scale * f, int(d.offset * f)))
+            exprs.append(("literal", glsl_float(float(s))))
+        return self._resize_pass(x, dims, exprs, [float(sc[2]), float(sc[3])], mode, "asymmetric", "floor", 0,
+                                 -0.75, 0, 0.0, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0])  # fmt: skip
 
     def Concat(self, *inputs, axis) -> ConcatValue:
         if int(axis) not in (1, -3):
@@ -1600,10 +1945,17 @@ def _vec4_rows(v: np.ndarray, n4: int) -> np.ndarray:
 
 
 def _pack_conv(p: Pass) -> None:
-    """Conv weights as mat4 taps: element (r, c) of tap [oz, ky, kx, l] = W[4oz+r, channel(l, c), ky, kx]."""
+    """Conv weights as mat4 taps: element (r, c) of tap [oz, ky, kx, l] = W[4oz+r, channel(l, c), ky, kx].
+    Depthwise: one vec4 per tap [layer, ky, kx], lane r = W[4 layer + r, 0, ky, kx]."""
     w64, b64 = p.fields.pop("weight64"), p.fields.pop("bias64")
     cout, _, kh, kw = w64.shape
     ol, il = p.output.layers, p.fields["in_layers"]
+    if p.kind == "conv_depthwise":
+        packed = np.zeros((ol * 4, kh, kw), np.float64)
+        packed[:cout] = w64[:, 0]
+        taps = packed.reshape(ol, 4, kh, kw).transpose(0, 2, 3, 1)
+        p.params = {"weight": taps.reshape(-1, 4).astype(np.float32), "bias": _vec4_rows(b64, ol), **p.params}
+        return
     packed = np.zeros((ol * 4, il * 4, kh, kw), np.float64)  # (out padded, in padded by part)
     c0 = 0
     for t, loff in zip(p.inputs, p.fields["layer_offsets"], strict=True):
@@ -1617,6 +1969,102 @@ def _pack_conv(p: Pass) -> None:
 # ----------------------------------------------------------------------- compute writer
 
 
+def _resize_coords(p: Pass) -> list[str]:
+    """The source coordinate expression per axis (y, x) for a resize pass."""
+    f = p.fields
+    coords = []
+    for i, (axis, (kind, value)) in enumerate(zip("yx", f["scales"], strict=True)):
+        len_in = fill("float_of", v=f"in_size.{axis}")
+        len_out = fill("float_of", v=f"out_size.{axis}")
+        scale = fill("scale_literal", value=value) if kind == "literal" else fill("scale_ratio", len_out=len_out,
+                                                                                   len_in=len_in)  # fmt: skip
+        fields = {
+            "x": fill("float_of", v=f"gid.{axis}"),
+            "scale": scale,
+            "len_in": len_in,
+            "len_out": len_out,
+            "start": glsl_float(f["roi"][i]),
+            "end": glsl_float(f["roi"][i + 2]),
+        }
+        tpl = f"coord_{f['coord']}"
+        wanted = {"coord_half_pixel": ("x", "scale"), "coord_asymmetric": ("x", "scale"),
+                  "coord_pytorch_half_pixel": ("x", "scale", "len_out"),
+                  "coord_align_corners": ("x", "len_in", "len_out"),
+                  "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out"),
+                  "coord_tf_crop_and_resize": ("x", "len_in", "len_out", "start", "end")}[tpl]  # fmt: skip
+        coords.append(fill(tpl, **{k: fields[k] for k in wanted}))
+    return coords
+
+
+def _resize_body(p: Pass) -> str:
+    f = p.fields
+    coord_y, coord_x = _resize_coords(p)
+    if f["extrapolation"] is None:
+        outside = fill("resize_inside")
+        extrapolation = glsl_float(0.0)
+    else:
+        outside = fill("resize_outside")
+        extrapolation = glsl_float(f["extrapolation"])
+    common = {"coord_y": coord_y, "coord_x": coord_x, "outside": outside, "extrapolation": extrapolation}
+    if p.kind == "resize_linear":
+        return fill("resize_linear_body", **common)
+    if p.kind == "resize_nearest":
+        rt = f"round_{f['nearest_mode']}"
+        return fill("resize_nearest_body", round_y=fill(rt, v="fy"), round_x=fill(rt, v="fx"), **common)
+    weights = []
+    for axis, widen in zip("yx", f["widen"], strict=True):
+        t = fill("filter_arg", i=f"i{axis}", f=f"f{axis}", widen=glsl_float(widen))
+        if f["kernel"] == "cubic":
+            weights.append(fill("kernel_cubic", t=t, a=glsl_float(f["cubic_coeff_a"])))
+        else:
+            weights.append(fill("kernel_linear", t=t))
+    exclude = [fill(f"filter_exclude_{a}") if f["exclude_outside"] else fill(f"filter_edge_{a}") for a in "yx"]
+    return fill("resize_filter_body", half_y=f["half"][0], half_x=f["half"][1], taps_y=2 * f["half"][0],
+                taps_x=2 * f["half"][1], weight_y=weights[0], weight_x=weights[1], exclude_y=exclude[0],
+                exclude_x=exclude[1], **common)  # fmt: skip
+
+
+def _conv_body(p: Pass, offs: dict[str, int]) -> str:
+    f = p.fields
+    (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
+    window = {"bias_offset": offs["bias"], "kh": kh, "kw": kw, "sy": sy, "sx": sx, "dy": dy, "dx": dx,
+              "pad_top": pads[0], "pad_left": pads[1], "weight_offset": offs["weight"]}  # fmt: skip
+    if p.kind == "conv_depthwise":
+        return fill("conv_depthwise_body", **window)
+    sizes = "\n".join(fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
+    loops = "\n".join(
+        fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
+        for i, t in enumerate(p.inputs)
+    )
+    tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
+    return fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+
+
+def _pool_body(p: Pass) -> str:
+    f = p.fields
+    (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
+    if p.kind == "pool_max":
+        init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+    else:
+        init, acc = fill("pool_init_avg"), fill("pool_acc_avg")
+        finish = fill("pool_finish_padded") if f["include_pad"] else fill("pool_finish_count")
+    return fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
+                pad_left=pads[1], pad_bottom=pads[2], pad_right=pads[3], accumulate=acc, finish=finish)  # fmt: skip
+
+
+def _binary_body(p: Pass) -> str:
+    f = p.fields
+    fetch = [fill(f"fetch_{how}", src=f"src{i}") for i, how in enumerate(f["fetch"])]
+    guard = fill("binary_guard_div", channels=p.output.channels) if f["op"] == "Div" else fill("binary_guard_none")
+    return fill("binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=fill(f"binop_{f['op']}"))
+
+
+def _spatial_pad_body(p: Pass) -> str:
+    f = p.fields
+    mode = fill("pad_constant", value=glsl_float(f["value"])) if f["mode"] == "constant" else fill(f"pad_{f['mode']}")
+    return fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
+
+
 def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) -> str:
     d = DIALECTS["glsl430"]
     fmt = "rgba16f" if precision == "fp16" and p.kind != "crop" else "rgba32f"
@@ -1627,63 +2075,18 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
     if p.kind in ("pad", "crop"):
         decls.append(fill("uniform_int_decl", location=0, name="u_flip_y"))
     offs = p.param_offsets()
-    f = p.fields
-    if p.kind == "conv":
-        (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
-        sizes = "\n".join(fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
-        loops = "\n".join(
-            fill(
-                "conv_input_loop",
-                size=f"size{i}",
-                layers=t.layers,
-                src=f"src{i}",
-                layer_offset=f["layer_offsets"][i],
-            )
-            for i, t in enumerate(p.inputs)
-        )
-        body = fill("conv_body", sizes=sizes, bias_offset=offs["bias"], kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx,
-                    pad_top=pads[0], pad_left=pads[1], weight_offset=offs["weight"], tap_stride=4 * f["in_layers"],
-                    input_loops=loops)  # fmt: skip
+    if p.kind in CONV_KINDS:
+        body = _conv_body(p, offs)
     elif p.kind in ("pool_avg", "pool_max"):
-        (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
-        if p.kind == "pool_max":
+        body = _pool_body(p)
+    elif p.kind in ("global_pool_avg", "global_pool_max"):
+        if p.kind == "global_pool_max":
             init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
         else:
-            init, acc = fill("pool_init_avg"), fill("pool_acc_avg")
-            div = f["divisor"]
-            finish = (
-                fill("pool_finish_count")
-                if div is None
-                else fill("pool_finish_fixed", divisor=glsl_float(div))
-            )
-        body = fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
-                    pad_left=pads[1], accumulate=acc, finish=finish)  # fmt: skip
-    elif p.kind in ("resize_linear", "resize_nearest"):
-        coords = []
-        for axis, (kind, value) in zip("yx", f["scales"], strict=True):
-            comp = "y" if axis == "y" else "x"
-            len_in = fill("float_of", v=f"in_size.{comp}")
-            len_out = fill("float_of", v=f"out_size.{comp}")
-            scale = fill("scale_literal", value=value) if kind == "literal" else fill("scale_ratio", len_out=len_out,
-                                                                                       len_in=len_in)  # fmt: skip
-            fields = {
-                "x": fill("float_of", v=f"gid.{comp}"),
-                "scale": scale,
-                "len_in": len_in,
-                "len_out": len_out,
-            }
-            tpl = f"coord_{f['coord']}"
-            wanted = {"coord_half_pixel": ("x", "scale"), "coord_asymmetric": ("x", "scale"),
-                      "coord_pytorch_half_pixel": ("x", "scale", "len_out"),
-                      "coord_align_corners": ("x", "len_in", "len_out"),
-                      "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out")}[tpl]  # fmt: skip
-            coords.append(fill(tpl, **{k: fields[k] for k in wanted}))
-        if p.kind == "resize_linear":
-            body = fill("resize_linear_body", coord_y=coords[0], coord_x=coords[1])
-        else:
-            rt = f"round_{f['nearest_mode']}"
-            body = fill("resize_nearest_body", coord_y=coords[0], coord_x=coords[1], round_y=fill(rt, v="fy"),
-                        round_x=fill(rt, v="fx"))  # fmt: skip
+            init, acc, finish = fill("pool_init_avg"), fill("pool_acc_avg"), fill("global_finish_mean")
+        body = fill("global_pool_body", init=init, accumulate=acc, finish=finish)
+    elif p.kind.startswith("resize"):
+        body = _resize_body(p)
     elif p.kind == "concat":
         branches, begin = [], 0
         for i, t in enumerate(p.inputs):
@@ -1692,6 +2095,10 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         body = fill("concat_body", branches="\n".join(branches))
     elif p.kind == "elementwise":
         body = fill("elementwise_body")
+    elif p.kind == "binary":
+        body = _binary_body(p)
+    elif p.kind == "spatial_pad":
+        body = _spatial_pad_body(p)
     elif p.kind == "pad":
         body = fill("pad_reflect_body")
     elif p.kind == "crop":
@@ -1700,10 +2107,19 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         raise AssertionError(p.kind)
     epi = []
     for e in p.epilogue:
-        if e.act is not None:
+        if e.form == "act":
             epi.append(fill("epilogue_act", expr=e.act.expr("r")))
+        elif e.form == "affine":
+            epi.append(fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]]))
+        elif e.form == "prelu":
+            epi.append(fill("epilogue_prelu", slope_offset=offs[e.arrays[0]]))
         else:
-            epi.append(fill("epilogue_affine", scale_offset=offs[e.scale], shift_offset=offs[e.shift]))
+            epi.append(fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels))
+    prelude = [fill("prelude")]
+    if p.kind.startswith("resize"):
+        prelude.append(fill("prelude_div"))
+    if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
+        prelude.append(fill("prelude_cubic"))
     return fill(
         "compute_pass",
         header=d.header(),
@@ -1711,7 +2127,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         summary=" + ".join(p.ops),
         local_x=local_size[0],
         local_y=local_size[1],
-        prelude=fill("prelude") + ("\n\n" + fill("prelude_div") if p.kind.startswith("resize") else ""),
+        prelude="\n\n".join(prelude),
         declarations="\n".join(decls),
         out_layers=p.output.layers,
         body=body,
@@ -1795,9 +2211,14 @@ def generate_compute(
         table.add_pass(Pass(0, "crop", ["Crop"], [v], crop))
         outputs.append((name, v, crop))
     for p in table.passes:
-        if p.kind == "conv":
+        if p.kind in CONV_KINDS:
             _pack_conv(p)
     multiple = _pad_multiple(table)
+    if multiple > 1 and table.global_reads:
+        raise NeuralaoError(
+            f"{table.global_reads[0]}: a global pool over a dynamic size needs pad_multiple 1 (the padding "
+            f"would enter it), the graph needs {multiple}; give the input a static size"
+        )
     # Parameters: one float32 blob, each pass's range aligned for glBindBufferRange.
     blob = bytearray()
     ranges: dict[int, tuple[int, int]] = {}
@@ -1855,19 +2276,29 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
                                "as": "std430 readonly buffer { vec4 prm[]; } via glBindBufferRange",
                                "arrays": {n: {"offset_vec4": offs[n], "vec4s": int(a.shape[0])} for n, a in
                                           p.params.items()}}  # fmt: skip
-            if p.kind == "conv":
+            if p.kind == "conv_depthwise":
+                entry["params"]["layout"] = (
+                    "weight: vec4 per (layer, ky, kx), lane r = W[4*layer + r, 0, ky, kx]; bias: vec4 per layer"
+                )
+            elif p.kind in CONV_KINDS:
                 entry["params"]["layout"] = (
                     "weight: mat4 per (out_layer, ky, kx, in_layer) = 4 vec4 columns; column c = input lane, "
                     "row r = output lane: W[4*out_layer + r, channel(in_layer, c), ky, kx]; bias: vec4 per out_layer"
-                )
+                    + ("; ConvTranspose as a gather: W[m, c] = ONNX W[c, m] per group" if p.kind == "conv_transpose"
+                       else "")
+                )  # fmt: skip
+            if p.kind in CONV_KINDS:
                 entry["conv"] = {k: list(v) if isinstance(v, tuple) else v for k, v in p.fields.items()}
                 entry["folded_batch_norm"] = p.folded_bn
         if p.kind in ("pad", "crop"):
             entry["uniforms"] = {"u_flip_y": {"location": 0, "value": "0: texture row 0 = tensor row 0 (top); "
                                               "1: the texture is a bottom-up GL image (row 0 = bottom)"}}  # fmt: skip
         if p.kind.startswith("resize"):
-            entry["resize"] = {"coordinate_transformation_mode": p.fields["coord"],
+            entry["resize"] = {"mode": p.fields["mode"], "coordinate_transformation_mode": p.fields["coord"],
                                "nearest_mode": p.fields["nearest_mode"]}  # fmt: skip
+            for key in ("cubic_coeff_a", "exclude_outside", "extrapolation", "widen"):
+                if p.fields.get(key) is not None:
+                    entry["resize"][key] = p.fields[key]
         passes.append(entry)
     return {
         "kind": kind,

@@ -205,9 +205,29 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
                 }
             }"""
 
-_T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = ${init};
-    int count = 0;
+# ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
+_T["conv_transpose_body"] = """${sizes}
+    vec4 r = prm[${bias_offset} + gid.z];
+    for (int ky = 0; ky < ${kh}; ++ky) {
+        int ty = gid.y + ${pad_top} - ky * ${dy};
+        if (ty < 0 || ty % ${sy} != 0) {
+            continue;
+        }
+        int iy = ty / ${sy};
+        for (int kx = 0; kx < ${kw}; ++kx) {
+            int tx = gid.x + ${pad_left} - kx * ${dx};
+            if (tx < 0 || tx % ${sx} != 0) {
+                continue;
+            }
+            int ix = tx / ${sx};
+            int tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+${input_loops}
+        }
+    }"""
+
+# Depthwise conv (group = channels): output layer gid.z reads input layer gid.z only, one vec4 per tap.
+_T["conv_depthwise_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = prm[${bias_offset} + gid.z];
     for (int ky = 0; ky < ${kh}; ++ky) {
         int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
         if (iy < 0 || iy >= in_size.y) {
@@ -216,6 +236,30 @@ _T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
         for (int kx = 0; kx < ${kw}; ++kx) {
             int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
             if (ix < 0 || ix >= in_size.x) {
+                continue;
+            }
+            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+        }
+    }"""
+
+# count: taps inside the input; count_padded: taps inside the padded input (ceil_mode windows may
+# reach past the trailing pads; count_include_pad divides by count_padded, as onnxruntime does).
+_T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = ${init};
+    int count = 0;
+    int count_padded = 0;
+    for (int ky = 0; ky < ${kh}; ++ky) {
+        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+        if (iy < -${pad_top} || iy >= in_size.y + ${pad_bottom}) {
+            continue;
+        }
+        for (int kx = 0; kx < ${kw}; ++kx) {
+            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+            if (ix < -${pad_left} || ix >= in_size.x + ${pad_right}) {
+                continue;
+            }
+            count_padded += 1;
+            if (iy < 0 || iy >= in_size.y || ix < 0 || ix >= in_size.x) {
                 continue;
             }
             vec4 v = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
@@ -229,8 +273,20 @@ _T["pool_init_max"] = "vec4(-3.402823466e+38)"
 _T["pool_acc_avg"] = "r + v"
 _T["pool_acc_max"] = "max(r, v)"
 _T["pool_finish_count"] = "    r /= float(max(count, 1));"
-_T["pool_finish_fixed"] = "    r /= ${divisor};"
+_T["pool_finish_padded"] = "    r /= float(max(count_padded, 1));"
 _T["pool_finish_none"] = "    // max pool: no normalisation"
+
+# Global pools: one invocation per output layer walks the whole input (the output is 1 x 1).
+_T["global_pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = ${init};
+    for (int iy = 0; iy < in_size.y; ++iy) {
+        for (int ix = 0; ix < in_size.x; ++ix) {
+            vec4 v = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            r = ${accumulate};
+        }
+    }
+${finish}"""
+_T["global_finish_mean"] = "    r /= float(in_size.x * in_size.y);"
 
 # Resize: source coordinate per ONNX coordinate_transformation_mode (x: output index as float), the
 # float32 operations of the ONNX formulas in onnxruntime's order, each correctly rounded: a coordinate
@@ -252,6 +308,11 @@ _T["coord_asymmetric"] = "nao_div(${x}, ${scale})"
 _T["coord_half_pixel_symmetric"] = (
     "(${len_in} * 0.5 * (1.0 - nao_div(${len_out}, ${scale} * ${len_in})) + nao_div(${x} + 0.5, ${scale}) - 0.5)"
 )
+# tf_crop_and_resize: roi start / end literals of this axis, in onnxruntime's operation order.
+_T["coord_tf_crop_and_resize"] = (
+    "(${len_out} > 1.0 ? ${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - ${start}) * (${len_in} - 1.0), "
+    "${len_out} - 1.0) : 0.5 * (${start} + ${end}) * (${len_in} - 1.0))"
+)
 _T["scale_literal"] = "${value}"
 _T["scale_ratio"] = "nao_div(${len_out}, ${len_in})"
 _T["float_of"] = "float(${v})"
@@ -265,6 +326,7 @@ _T["round_ceil"] = "ceil(${v})"
 _T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
     precise float fy = ${coord_y};
     precise float fx = ${coord_x};
+${outside}
     fy = clamp(fy, 0.0, float(in_size.y - 1));
     fx = clamp(fx, 0.0, float(in_size.x - 1));
     int y0 = int(fy);
@@ -277,14 +339,78 @@ _T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
     vec4 b = texelFetch(src0, ivec3(x1, y0, gid.z), 0);
     vec4 c = texelFetch(src0, ivec3(x0, y1, gid.z), 0);
     vec4 d = texelFetch(src0, ivec3(x1, y1, gid.z), 0);
-    vec4 r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;"""
+    vec4 r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;
+    if (outside) {
+        r = vec4(${extrapolation});
+    }"""
 
 _T["resize_nearest_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
     precise float fy = ${coord_y};
     precise float fx = ${coord_x};
+${outside}
     int iy = clamp(int(${round_y}), 0, in_size.y - 1);
     int ix = clamp(int(${round_x}), 0, in_size.x - 1);
-    vec4 r = texelFetch(src0, ivec3(ix, iy, gid.z), 0);"""
+    vec4 r = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+    if (outside) {
+        r = vec4(${extrapolation});
+    }"""
+
+# tf_crop_and_resize: a source coordinate outside the input gives extrapolation_value.
+_T["resize_outside"] = (
+    "    bool outside = fy < 0.0 || fy > float(in_size.y - 1) || fx < 0.0 || fx > float(in_size.x - 1);"
+)
+_T["resize_inside"] = "    const bool outside = false;"
+
+# Separable filter (cubic, or linear / cubic widened by 1 / scale when antialiasing a downscale):
+# taps floor(f) - half + 1 .. floor(f) + half per axis, weights normalised by their sum (onnxruntime).
+_T["resize_filter_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    precise float fy = ${coord_y};
+    precise float fx = ${coord_x};
+${outside}
+    int y_first = int(floor(fy)) - ${half_y} + 1;
+    int x_first = int(floor(fx)) - ${half_x} + 1;
+    vec4 acc = vec4(0.0);
+    float wsum = 0.0;
+    for (int j = 0; j < ${taps_y}; ++j) {
+        int iy = y_first + j;
+        float wy = ${weight_y};
+${exclude_y}
+        iy = clamp(iy, 0, in_size.y - 1);
+        for (int i = 0; i < ${taps_x}; ++i) {
+            int ix = x_first + i;
+            float wx = ${weight_x};
+${exclude_x}
+            ix = clamp(ix, 0, in_size.x - 1);
+            acc += (wy * wx) * texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            wsum += wy * wx;
+        }
+    }
+    vec4 r = acc / wsum;
+    if (outside) {
+        r = vec4(${extrapolation});
+    }"""
+_T["filter_arg"] = "((float(${i}) - ${f}) * ${widen})"
+_T["kernel_linear"] = "max(0.0, 1.0 - abs(${t}))"
+_T["kernel_cubic"] = "nao_cubic(${t}, ${a})"
+_T["filter_exclude_y"] = """        if (iy < 0 || iy >= in_size.y) {
+            wy = 0.0;  // exclude_outside
+        }"""
+_T["filter_exclude_x"] = """            if (ix < 0 || ix >= in_size.x) {
+                wx = 0.0;  // exclude_outside
+            }"""
+_T["filter_edge_y"] = "        // taps outside the input read the edge texel"
+_T["filter_edge_x"] = "            // taps outside the input read the edge texel"
+# Keys cubic convolution kernel with coefficient a (ONNX cubic_coeff_a), support |t| < 2.
+_T["prelude_cubic"] = """float nao_cubic(float t, float a) {
+    float x = abs(t);
+    if (x <= 1.0) {
+        return ((a + 2.0) * x - (a + 3.0)) * x * x + 1.0;
+    }
+    if (x < 2.0) {
+        return ((x - 5.0) * x + 8.0) * x * a - 4.0 * a;
+    }
+    return 0.0;
+}"""
 
 _T["concat_body"] = """    vec4 r = vec4(0.0);
     for (int lane = 0; lane < 4; ++lane) {
@@ -296,6 +422,46 @@ _T["concat_branch"] = """        if (c >= ${begin} && c < ${end}) {
         }"""
 
 _T["elementwise_body"] = "    vec4 r = texelFetch(src0, gid, 0);"
+
+# Two images a (src0) and b (src1); a 1x1 or one-channel operand is broadcast.
+_T["binary_body"] = """    vec4 a = ${fetch_a};
+    vec4 b = ${fetch_b};
+${guard}
+    vec4 r = ${expr};"""
+_T["fetch_full"] = "texelFetch(${src}, gid, 0)"
+_T["fetch_pixel"] = "texelFetch(${src}, ivec3(0, 0, gid.z), 0)"
+_T["fetch_channel"] = "texelFetch(${src}, ivec3(gid.xy, 0), 0).xxxx"
+_T["fetch_scalar"] = "texelFetch(${src}, ivec3(0), 0).xxxx"
+# Padding lanes divide by 1, so they stay finite (a later conv multiplies them by zero weights).
+_T["binary_guard_div"] = (
+    "    b = mix(vec4(1.0), b, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), ivec4(${channels})));"
+)
+_T["binary_guard_none"] = "    // no guard"
+_T["binop_Add"] = "a + b"
+_T["binop_Sub"] = "a - b"
+_T["binop_Mul"] = "a * b"
+_T["binop_Div"] = "a / b"
+
+# ONNX Pad on H, W (negative pads crop): output texel (x, y) reads input (x - left, y - top).
+_T["spatial_pad_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    int x = gid.x - ${left};
+    int y = gid.y - ${top};
+${mode}"""
+_T["pad_constant"] = """    vec4 r = vec4(${value});
+    if (x >= 0 && x < in_size.x && y >= 0 && y < in_size.y) {
+        r = texelFetch(src0, ivec3(x, y, gid.z), 0);
+    }"""
+_T["pad_edge"] = (
+    "    vec4 r = texelFetch(src0, ivec3(clamp(x, 0, in_size.x - 1), clamp(y, 0, in_size.y - 1), gid.z), 0);"
+)
+# Reflect (edge sample not repeated) for any pad width: fold |x| into one period 2 (n - 1).
+_T["pad_reflect"] = """    ivec2 period = max(2 * (in_size - 1), ivec2(1));
+    ivec2 m = abs(ivec2(x, y)) % period;
+    vec4 r = texelFetch(src0, ivec3(min(m, period - m), gid.z), 0);"""
+# Wrap: GLSL leaves % of negative operands undefined, so negative indices count from the end.
+_T["pad_wrap"] = """    x = x >= 0 ? x % in_size.x : in_size.x - 1 - (-x - 1) % in_size.x;
+    y = y >= 0 ? y % in_size.y : in_size.y - 1 - (-y - 1) % in_size.y;
+    vec4 r = texelFetch(src0, ivec3(x, y, gid.z), 0);"""
 
 # Reflect padding at the bottom/right (numpy/torch "reflect": the edge sample is not repeated).
 _T["pad_reflect_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
@@ -313,6 +479,12 @@ _T["crop_body"] = """    int y = u_flip_y != 0 ? out_size.y - 1 - gid.y : gid.y;
 
 _T["epilogue_act"] = "    r = ${expr};"
 _T["epilogue_affine"] = "    r = r * prm[${scale_offset} + gid.z] + prm[${shift_offset} + gid.z];"
+_T["epilogue_prelu"] = "    r = mix(r * prm[${slope_offset} + gid.z], r, greaterThanEqual(r, vec4(0.0)));"
+# constant / x; padding lanes divide by 1 (they stay finite).
+_T["epilogue_rdiv"] = (
+    "    r = prm[${offset} + gid.z] / mix(vec4(1.0), r, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), "
+    "ivec4(${channels})));"
+)
 _T["epilogue_none"] = "    // no epilogue"
 
 # --------------------------------------------------------------------------- baseline: vertex-colour AO

@@ -53,18 +53,26 @@ def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dic
     return frames or None
 
 
-def check_exports(root: Path, data: Path | None = None) -> dict:
+# export kind -> module with parity(export_dir, frames, ...)
+PARITY_MODULES = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field", "onnx-glsl": "export.onnx_glsl"}
+
+
+def check_exports(root: Path, data: Path | None = None, inputs: Path | None = None, seed: int = 0,
+                  size: tuple[int, int] = (64, 48)) -> dict:  # fmt: skip
     import importlib
 
     results = {}
     for d in export_dirs(root):
         manifest = read_manifest(d)
         kind = manifest.get("kind")
-        if kind not in ("mlp", "unet", "field"):
+        if kind not in PARITY_MODULES:
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
-        module = importlib.import_module(f"export.{kind}")
+        module = importlib.import_module(PARITY_MODULES[kind])
         log.info("parity: %s (%s)", d.name, kind)
-        results[d.name] = module.parity(d, parity_frames(data, manifest))
+        if kind == "onnx-glsl":
+            results[d.name] = module.parity(d, inputs=inputs, seed=seed, size=size)
+        else:
+            results[d.name] = module.parity(d, parity_frames(data, manifest))
     return results
 
 
@@ -72,10 +80,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("exports", help="an export folder, or a folder of export folders")
     p.add_argument("--data", help="dataset folder whose frames to use (default: render frames)")
     p.add_argument("--out", help="write the figures as JSON here")
+    p.add_argument("--inputs", help="`neuralao glsl` exports: .npz of inputs (image: per graph input; vector: "
+                   "per texture, (H, W, 4)); default: seeded random inputs of the declared shapes")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="seed of the random inputs (default 0)")
+    p.add_argument("--size", type=int, nargs=2, default=(64, 48), metavar=("W", "H"),
+                   help="size of symbolic image dimensions / vector textures (default 64 48)")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
-    results = check_exports(Path(args.exports), Path(args.data) if args.data else None)
+    results = check_exports(Path(args.exports), Path(args.data) if args.data else None,
+                            Path(args.inputs) if args.inputs else None, args.seed, tuple(args.size))  # fmt: skip
     failed = [name for name, r in results.items() if not r.get("passed", False)]
     summary = {"exports": results, "passed": not failed}
     for name, r in results.items():

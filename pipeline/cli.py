@@ -19,12 +19,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "bake": ("pipeline.bake", "bake per-vertex AO into a PLY/GLB (vertex colours + float 'ao' property)"),
     "dataset": ("pipeline.dataset", "render and label a dataset from a config (resumable shards + manifest)"),
-    "train": ("pipeline.train", "train the baked MLP or the DeepAO U-Net"),
+    "train": ("pipeline.train", "train the baked MLP, the DeepAO U-Net or a per-mesh AO field"),
     "export": ("export.cli", "export a checkpoint to ONNX + generated GLSL"),
-    "parity": ("export.parity", "run generated GLSL against onnxruntime on real frames"),
+    "glsl": ("export.onnx_glsl", "generate GLSL (compute or fragment) from any ONNX model within the op set"),
+    "parity": ("export.parity", "run generated GLSL against onnxruntime on real frames or seeded inputs"),
     "infer": ("runtime.infer", "apply an exported ONNX model to a G-buffer frame"),
     "report": ("pipeline.report", "speed-vs-error report of every method on held-back frames"),
-    "select": ("pipeline.select", "pick the smallest model that meets an error target per scene"),
+    "select": ("pipeline.select", "pick the cheapest AO representation that meets an error target per scene"),
 }
 
 

@@ -29,6 +29,11 @@ class Tolerances:
     parity_unet_fp32: float = 1e-4
     # Generated GLSL with fp16 textures vs onnxruntime fp32.
     parity_fp16: float = 2e-3
+    # ... for multi-pass image graphs (`neuralao glsl --target image --precision fp16`), relative to
+    # max(1, |y|): every intermediate texture rounds to 2^-11 relative and later convs sum those errors
+    # with their weights; measured 3.1e-3 on the 5-pass residual test net (tests/test_onnx_glsl.py). An
+    # indexing or formula error is O(1).
+    parity_fp16_image: float = 1e-2
     # Single-op GLSL vs onnxruntime (fp32 arithmetic, different summation order).
     glsl_op_fp32: float = 1e-5
     # onnxruntime vs torch, OpenCV dnn vs onnxruntime (same fp32 math, different kernels).
@@ -65,6 +70,15 @@ class Tolerances:
     # LSQ surface RMSE must be below this fraction of the vertex-sampling RMSE (L2-optimal
     # piecewise-linear fit vs point samples; measured 0.64 on the 2x2-quad floor with a box, 256 rays).
     bake_lsq_vs_vertex_ratio: float = 0.8
+    # Composed scenes (pipeline/compose.py): gap between an object and what it rests on / touches,
+    # relative to the scene diagonal. Contacts come from float32 Embree hit distances in world
+    # coordinates <= ~2 (a few ulps, ~1e-6 absolute, ~3e-7 of a ~3-unit diagonal); a composer that
+    # only used bounding boxes, or dropped without the reverse rays, leaves gaps of >= 1e-3.
+    compose_contact_rel: float = 1e-5
+    # ... deepest point of one object inside a closed primitive, relative to the diagonal: edge-edge
+    # crossings are caught only at the composer's edge probes (24 per edge), so an edge may sink by
+    # up to ~ spacing x slope between probes; an object dropped through another sinks by its size.
+    compose_penetration_rel: float = 2e-3
 
 
 TOL = Tolerances()

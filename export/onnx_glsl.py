@@ -1,0 +1,262 @@
+"""`neuralao glsl MODEL.onnx`: GLSL for a user's own ONNX model, and its parity check.
+
+    neuralao glsl MODEL.onnx --target image|vector [--precision fp32|fp16] [--dialect ...]
+                  [--bind INPUT=TEXTURE.CHANNELS[xREPEATS] ...] --out DIR
+    neuralao parity DIR [--inputs X.npz] [--seed N] [--size W H]
+
+Targets (the op tables of :mod:`export.glsl`):
+
+* ``image``: an NCHW image network (1, C, H, W) -> images, H and W static or symbolic; GLSL 4.30
+  compute passes + ``weights.bin`` + a manifest of passes, textures and formats. ``fp16`` stores the
+  intermediate textures as RGBA16F (arithmetic stays fp32).
+* ``vector``: a per-pixel network, every input (N, k) bound to channels of a named RGBA32F texture
+  (``--bind position=position.xyz --bind normal=normal.xyz``; an input of width <= 4 without a
+  ``--bind`` reads the texture of its own name, channels ``xyzw[:k]``). The first texture's w channel
+  is the foreground mask. One fragment pass in GLSL 3.30, ES 3.00 and 4.30 (``--dialect`` keeps a
+  subset), weights in std140 uniform blocks. ``fp16`` is a run-time choice here (RGBA16F textures),
+  recorded for parity.
+
+The export folder (self-describing, every file atomic, ``manifest.json`` last)::
+
+    DIR/model.onnx        the source model, byte for byte
+    DIR/glsl/             the generated shaders, weights and the GLSL manifest
+    DIR/manifest.json     kind "onnx-glsl": target, precision, bindings, inputs, ops, hashes
+
+Parity runs the shaders read back from DIR against onnxruntime on seeded random inputs of the
+declared shapes (symbolic sizes from ``--size``), or on the arrays of an ``.npz`` (image: one array
+per graph input; vector: one (H, W, 4) array per texture).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import re
+from pathlib import Path
+
+import numpy as np
+import onnx
+
+from pipeline.constants import TOL
+from pipeline.errors import NeuralaoError
+from pipeline.io import read_npz, sha256_file, write_bytes, write_json
+
+from .onnx_io import load_onnx, ort_session
+
+log = logging.getLogger(__name__)
+
+KIND = "onnx-glsl"
+GLSL_DIR = "glsl"
+TARGETS = ("image", "vector")
+_BIND = re.compile(r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<channels>[xyzw]{1,4})(x(?P<rep>\d+))?$")
+
+
+def parse_bindings(texts: list[str]):
+    """``INPUT=TEXTURE.CHANNELS[xREPEATS]`` strings -> {input: InputBinding}."""
+    from .glsl import InputBinding
+
+    out = {}
+    for t in texts:
+        m = _BIND.match(t)
+        if not m:
+            raise NeuralaoError(f"--bind {t!r}: expected INPUT=TEXTURE.CHANNELS[xREPEATS], e.g. normal=gbuffer.xyz")
+        if m["input"] in out:
+            raise NeuralaoError(f"--bind: input {m['input']!r} bound twice")
+        out[m["input"]] = InputBinding(m["texture"], m["channels"], int(m["rep"] or 1))
+    return out
+
+
+def _input_dims(proto: onnx.ModelProto) -> dict[str, list]:
+    init = {t.name for t in proto.graph.initializer}
+    return {vi.name: [d.dim_value if d.HasField("dim_value") else (d.dim_param or None)
+                      for d in vi.type.tensor_type.shape.dim]
+            for vi in proto.graph.input if vi.name not in init}  # fmt: skip
+
+
+def default_bindings(proto: onnx.ModelProto, given: dict):
+    """Given bindings, completed for inputs of width <= 4 by the texture of the input's own name."""
+    from .glsl import InputBinding
+
+    out = dict(given)
+    for name, dims in _input_dims(proto).items():
+        if name in out:
+            continue
+        width = dims[-1] if dims else None
+        if len(dims) != 2 or not isinstance(width, int) or not 1 <= width <= 4:
+            raise NeuralaoError(f"input {name!r} of shape {dims} needs --bind {name}=TEXTURE.CHANNELS[xREPEATS]")
+        texture = re.sub(r"[^A-Za-z0-9_]", "_", name)
+        if not re.match(r"[A-Za-z_]", texture):
+            texture = "t_" + texture
+        out[name] = InputBinding(texture, "xyzw"[:width])
+    unknown = sorted(set(out) - set(_input_dims(proto)))
+    if unknown:
+        raise NeuralaoError(f"--bind names {unknown}, which are not graph inputs ({sorted(_input_dims(proto))})")
+    return out
+
+
+def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind: list[str] | None = None,
+                 dialects: list[str] | None = None) -> dict:  # fmt: skip
+    """Generate and write the export of a user's ONNX file; returns its manifest."""
+    from .glsl import DIALECTS, generate_compute, generate_vector_fragment, write_compute_export, write_mlp_export
+
+    if target not in TARGETS:
+        raise NeuralaoError(f"--target must be one of {TARGETS}, got {target!r}")
+    if precision not in ("fp32", "fp16"):
+        raise NeuralaoError(f"--precision must be fp32 or fp16, got {precision!r}")
+    onnx_path, out_dir = Path(onnx_path), Path(out_dir)
+    proto = load_onnx(onnx_path)
+    glsl_dir = out_dir / GLSL_DIR
+    extra: dict = {}
+    if target == "image":
+        if bind:
+            raise NeuralaoError("--bind applies to --target vector only")
+        if dialects and dialects != ["glsl430"]:
+            raise NeuralaoError("the image target is GLSL 4.30 compute only (--dialect glsl430)")
+        program = generate_compute(proto, precision=precision, kind="onnx")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_compute_export(program, glsl_dir)
+        extra["passes"] = len(program.manifest["passes"])
+    else:
+        unknown = sorted(set(dialects or []) - set(DIALECTS))
+        if unknown:
+            raise NeuralaoError(f"unknown --dialect {unknown} (choose from {sorted(DIALECTS)})")
+        bindings = default_bindings(proto, parse_bindings(bind or []))
+        shader = generate_vector_fragment(proto, bindings, kind="onnx",
+                                          description=f"neuralao GLSL of {onnx_path.name} (vector target)")  # fmt: skip
+        if dialects:
+            shader.sources = {k: v for k, v in shader.sources.items() if k in dialects}
+            shader.manifest["dialects"] = {k: v for k, v in shader.manifest["dialects"].items() if k in dialects}
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_mlp_export(shader, glsl_dir)
+        extra["bindings"] = {n: b.to_json() for n, b in bindings.items()}
+        extra["dialects"] = sorted(shader.sources)
+    write_bytes(out_dir / "model.onnx", onnx_path.read_bytes())
+    manifest = {
+        "kind": KIND,
+        "format_version": 1,
+        "target": target,
+        "precision": precision,
+        "onnx": "model.onnx",
+        "onnx_sha256": sha256_file(out_dir / "model.onnx"),
+        "source": str(onnx_path),
+        "glsl": GLSL_DIR,
+        "glsl_manifest_sha256": sha256_file(glsl_dir / "manifest.json"),
+        "inputs": {n: [str(d) if d is not None else None for d in dims] for n, dims in _input_dims(proto).items()},
+        "outputs": [o.name for o in proto.graph.output],
+        "ops": sorted({n.op_type for n in proto.graph.node}),
+        **extra,
+    }
+    write_json(out_dir / "manifest.json", manifest)
+    return manifest
+
+
+def read_manifest(export_dir: Path) -> dict:
+    try:
+        manifest = json.loads((Path(export_dir) / "manifest.json").read_text())
+    except FileNotFoundError:
+        raise NeuralaoError(f"no manifest.json in {export_dir}") from None
+    except json.JSONDecodeError:
+        raise NeuralaoError(f"{export_dir}/manifest.json is corrupt") from None
+    if manifest.get("kind") != KIND:
+        raise NeuralaoError(f"{export_dir} is not a `neuralao glsl` export (kind {manifest.get('kind')!r})")
+    return manifest
+
+
+def _shape(dims: list, size: tuple[int, int], what: str) -> tuple[int, ...]:
+    """Declared dims with symbolic ones filled: NCHW -> (1, C, H, W) with H, W from size (W, H)."""
+    out = []
+    for i, d in enumerate(dims):
+        if d is not None and str(d).isdigit():
+            out.append(int(d))
+        elif len(dims) == 4 and i in (2, 3):
+            out.append(size[1] if i == 2 else size[0])
+        elif i == 0:
+            out.append(1)
+        else:
+            raise NeuralaoError(f"{what}: dimension {i} is symbolic ({d!r}) and no rule fills it")
+    return tuple(out)
+
+
+def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int = 0,
+           size: tuple[int, int] = (64, 48)) -> dict:  # fmt: skip
+    """The export's shaders (read from disk) vs onnxruntime on seeded random or given inputs."""
+    from runtime.glsl_runner import run_compute_all, run_vector_fragment
+
+    from .glsl import load_compute_export, load_mlp_export
+
+    export_dir = Path(export_dir)
+    manifest = read_manifest(export_dir)
+    proto = load_onnx(export_dir / manifest["onnx"])
+    sess = ort_session(proto.SerializeToString())
+    given = read_npz(inputs) if inputs is not None else None
+    rng = np.random.default_rng(seed)
+    rows = []
+    if manifest["target"] == "image":
+        program = load_compute_export(export_dir / manifest["glsl"])
+        (name, dims), = manifest["inputs"].items()
+        x = given[name] if given is not None else rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
+        if given is not None and name not in given:
+            raise NeuralaoError(f"{inputs} has no array {name!r}")
+        x = np.asarray(x, np.float32)
+        ref = dict(zip(manifest["outputs"], sess.run(None, {name: x}), strict=True))
+        got = run_compute_all(program, x)
+        for o in manifest["outputs"]:
+            if got[o].shape != ref[o].shape:
+                raise NeuralaoError(f"output {o!r}: GLSL shape {got[o].shape}, onnxruntime {ref[o].shape}")
+            diff = np.abs(got[o] - ref[o])
+            if manifest["precision"] == "fp16":
+                diff = diff / np.maximum(1.0, np.abs(ref[o]))
+            rows.append({"output": o, "shape": list(ref[o].shape), "max_abs_err": float(diff.max())})
+        tol = TOL.parity_fp16_image if manifest["precision"] == "fp16" else TOL.parity_unet_fp32
+        masked = None
+    else:
+        shader = load_mlp_export(export_dir / manifest["glsl"], dialect=manifest["dialects"][0])
+        textures_names = [t["texture"] for t in shader.manifest["passes"][0]["inputs"]]
+        w, h = size
+        if given is not None:
+            missing = [t for t in textures_names if t not in given]
+            if missing:
+                raise NeuralaoError(f"{inputs} lacks the textures {missing}")
+            tex = {t: np.asarray(given[t], np.float32) for t in textures_names}
+        else:
+            tex = {t: rng.uniform(-1, 1, size=(h, w, 4)).astype(np.float32) for t in textures_names}
+            tex[textures_names[0]][..., 3] = rng.random((h, w)) > 0.1
+        masked = tex[textures_names[0]][..., 3] >= 0.5
+        feeds = {}
+        for n, b in manifest["bindings"].items():
+            lanes = ["xyzw".index(c) for c in b["channels"]]
+            feeds[n] = np.tile(tex[b["texture"]][masked][:, lanes], (1, b["repeats"])).astype(np.float32)
+        ref = sess.run(None, feeds)[0]
+        for d in manifest["dialects"]:
+            got = run_vector_fragment(load_mlp_export(export_dir / manifest["glsl"], dialect=d), tex,
+                                      fp16=manifest["precision"] == "fp16", dialect=d)  # fmt: skip
+            got = got[..., None] if got.ndim == 2 else got
+            diff = np.abs(got[masked] - ref.reshape(len(ref), -1))
+            if manifest["precision"] == "fp16":
+                diff = diff / np.maximum(1.0, np.abs(ref.reshape(len(ref), -1)))
+            bg = float(np.abs(got[~masked] - 1.0).max()) if (~masked).any() else 0.0
+            rows.append({"dialect": d, "pixels": int(masked.sum()), "max_abs_err": float(diff.max()) if diff.size else 0.0,
+                         "background_max_abs_err": bg})  # fmt: skip
+        tol = TOL.parity_fp16 if manifest["precision"] == "fp16" else TOL.parity_mlp_fp32
+    err = max(r["max_abs_err"] for r in rows)
+    bg_ok = all(r.get("background_max_abs_err", 0.0) == 0.0 for r in rows)
+    return {"kind": KIND, "target": manifest["target"], "precision": manifest["precision"],
+            "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {size[0]}x{size[1]})",
+            "max_abs_err": err, "tolerance": tol, "passed": bool(err <= tol and bg_ok), "checks": rows}  # fmt: skip
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", help="an ONNX file within the op set (see README: GLSL from ONNX)")
+    p.add_argument("--target", required=True, choices=TARGETS, help="image: NCHW compute passes; vector: per-pixel fragment pass")
+    p.add_argument("--precision", default="fp32", choices=("fp32", "fp16"), help="texture storage (default fp32)")
+    p.add_argument("--dialect", action="append", default=[], help="vector: keep only these of glsl330, es300, glsl430 (repeatable)")
+    p.add_argument("--bind", action="append", default=[], metavar="INPUT=TEXTURE.CHANNELS[xREPEATS]",
+                   help="vector: where an input comes from, e.g. normal=gbuffer.xyz or normals=gbuffer.xyzx16")  # fmt: skip
+    p.add_argument("--out", required=True, help="export folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    m = export_model(args.model, args.target, args.out, args.precision, args.bind, args.dialect or None)
+    log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
+    return 0
