@@ -485,21 +485,26 @@ class InputBinding:
 
 @dataclass
 class UniformBlock:
-    """One std140 uniform block of vec4 arrays. members: (identifier, (n, 4) float32, layout words)."""
+    """One std140 uniform block of vec4 / mat4 arrays.
+
+    members: (identifier, (n, 4) float32 rows of vec4s, layout words, GLSL type "vec4" | "mat4"); a
+    mat4 is 4 consecutive vec4 rows (its columns)."""
 
     name: str
     binding: int
-    members: list[tuple[str, np.ndarray, str]]
+    members: list[tuple[str, np.ndarray, str, str]]
 
     @property
     def data(self) -> np.ndarray:
+        if not self.members:
+            return np.zeros(0, np.float32)
         return np.ascontiguousarray(
             np.concatenate([m[1].reshape(-1) for m in self.members]).astype(np.float32)
         )
 
     @property
     def nbytes(self) -> int:
-        return int(self.data.nbytes)
+        return int(sum(m[1].nbytes for m in self.members))
 
 
 class VectorOps(OpTable):
@@ -760,39 +765,57 @@ def _fold_repeated_input(table: VectorOps) -> bool:
     return True
 
 
+def _dense_tiles(op: DenseOp) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """W (out, in) as mat4 tiles and the bias as vec4s: tiles (out4 * in4 * 4, 4) float32, tile j * in4 + i
+    holding W[4j .. 4j+3, 4i .. 4i+3] column-major (column c = the weights of input lane 4i + c), so
+    ``tile * src[i]`` is that block's contribution to outputs 4j .. 4j+3; bias (out4, 4)."""
+    out4, in4 = _ceil4(op.weight.shape[0]), _ceil4(op.weight.shape[1])
+    w = np.zeros((out4 * 4, in4 * 4), np.float32)
+    w[: op.weight.shape[0], : op.weight.shape[1]] = op.weight
+    b = np.zeros(out4 * 4, np.float32)
+    b[: op.bias.shape[0]] = op.bias
+    tiles = w.reshape(out4, 4, in4, 4).transpose(0, 2, 3, 1)  # [j, i, column c (input lane), row r (output)]
+    return tiles.reshape(-1, 4), b.reshape(-1, 4), out4, in4
+
+
 def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
-    """Dense layers (row chunks) and constant vectors to std140 blocks, each <= 16 KB."""
-    blocks: list[UniformBlock] = []
+    """Dense layers (mat4 tiles, in row chunks) and constant vectors, packed in order into std140 blocks
+    of at most 16 KB each (a member never spans two blocks; members are global names in GLSL)."""
+    members: list[tuple[str, np.ndarray, str, str]] = []  # (name, (n, 4) f32, layout, glsl type)
+    tile_vec4s = 4
     for li, op in enumerate(table.ops):
         if isinstance(op, DenseOp):
-            out4, in4 = _ceil4(op.weight.shape[0]), _ceil4(op.weight.shape[1])
-            rows4 = (MAX_UNIFORM_BLOCK_BYTES // 16) // (4 * in4 + 1)  # vec4 rows (x4 outputs) per block
+            tiles, b, out4, in4 = _dense_tiles(op)
+            rows4 = (MAX_UNIFORM_BLOCK_BYTES // 16) // (tile_vec4s * in4)  # output vec4s per weight chunk
             if rows4 < 1:
                 raise NeuralaoError(
                     f"layer {li}: input width {op.weight.shape[1]} does not fit a 16 KB uniform block"
                 )
-            w = np.zeros((out4 * 4, in4 * 4), np.float32)
-            w[: op.weight.shape[0], : op.weight.shape[1]] = op.weight
-            b = np.zeros(out4 * 4, np.float32)
-            b[: op.bias.shape[0]] = op.bias
             op.chunks = []
             for ci, j0 in enumerate(range(0, out4, rows4)):
                 j1 = min(out4, j0 + rows4)
-                wname, bname = f"w{li}_{ci}", f"b{li}_{ci}"
-                members = [
-                    (wname, w[4 * j0 : 4 * j1].reshape(-1, 4),
-                     f"rows {4 * j0}..{4 * j1 - 1} of W (out, in) row-major, in padded to {4 * in4}"),
-                    (bname, b[4 * j0 : 4 * j1].reshape(-1, 4), f"bias[{4 * j0}..{4 * j1 - 1}]"),
-                ]  # fmt: skip
-                blocks.append(UniformBlock(f"Layer{li}_{ci}", len(blocks), members))
-                op.chunks.append((j0, j1, wname, bname, len(blocks) - 1))
+                wname = f"w{li}_{ci}"
+                members.append((wname, tiles[j0 * in4 * 4 : j1 * in4 * 4],
+                                f"mat4 tiles of W (out, in) rows {4 * j0}..{4 * j1 - 1}: tile (j - {j0}) * {in4} + i = "
+                                f"W[4j..4j+3, 4i..4i+3] column-major (column c = input lane 4i + c)", "mat4"))  # fmt: skip
+                op.chunks.append((j0, j1, wname, f"b{li}", -1))
+            members.append((f"b{li}", b, f"bias[0..{4 * out4 - 1}]", "vec4"))
         elif isinstance(op, MapOp) and op.const is not None:
             c = np.zeros(op.dst.n4 * 4, np.float32)
             c[: op.const.shape[0]] = op.const
             op.const_member = f"c{li}"
-            blocks.append(
-                UniformBlock(f"Const{li}", len(blocks), [(op.const_member, c.reshape(-1, 4), "vector")])
-            )
+            members.append((op.const_member, c.reshape(-1, 4), "vector", "vec4"))
+    blocks: list[UniformBlock] = []
+    where: dict[str, int] = {}
+    for m in members:
+        nbytes = m[1].nbytes
+        if not blocks or blocks[-1].nbytes + nbytes > MAX_UNIFORM_BLOCK_BYTES:
+            blocks.append(UniformBlock(f"Weights{len(blocks)}", len(blocks), []))
+        blocks[-1].members.append(m)
+        where[m[0]] = blocks[-1].binding
+    for op in table.ops:
+        if isinstance(op, DenseOp):
+            op.chunks = [(j0, j1, w, b, where[w]) for j0, j1, w, b, _ in op.chunks]
     if len(blocks) > MAX_FRAGMENT_UNIFORM_BLOCKS:
         raise NeuralaoError(
             f"the network needs {len(blocks)} uniform blocks; the portable limit is {MAX_FRAGMENT_UNIFORM_BLOCKS}"
@@ -819,13 +842,45 @@ def _concat_copies(op: ConcatOp) -> list[str]:
     return out
 
 
-def _map_expr(op: MapOp) -> str:
-    expr = fill("index_j", name=op.src.ident)
+# Dense layers of at most this many mat4 tiles are written straight-line; larger ones loop over their
+# output vec4s (the loop kept rolled, see the template). Measured on llvmpipe (LLVM 15): straight-line code
+# compiles super-linearly in its length (a 100-tile layer took 61 s), while a rolled loop over rows with
+# the products of one row written out compiles in about a second and runs at the same speed.
+MAX_STRAIGHT_TILES = 32
+
+
+def _dense_rows(op: DenseOp) -> list[str]:
+    """A dense layer: per output vec4 j, act(bias[j] + sum_i tile[j, i] * src[i]) (mat4 x vec4 products).
+
+    Small layers: one statement per output vec4, every index a constant (the arrays stay in registers).
+    Large layers: a loop over the output vec4s of each chunk, its body the in4 products of one row."""
+    in4 = op.src.n4
+    rows = []
+    straight = (op.dst.n4 * in4) <= MAX_STRAIGHT_TILES
+    for j0, j1, wname, bname, _ in op.chunks:
+        if straight:
+            for j in range(j0, j1):
+                terms = [fill("mat_term", weight=wname, index=(j - j0) * in4 + i, src=op.src.ident, i=i) for i in range(in4)]
+                value = fill("dense_acc", bias=bname, j=j, terms=" + ".join(terms))
+                for act in op.epilogue:
+                    value = act.expr(value)
+                rows.append(fill("dense_row", dst=op.dst.ident, j=j, value=value))
+            continue
+        terms = [fill("mat_term", weight=wname, index=f"(j - {j0}) * {in4} + {i}", src=op.src.ident, i=i) for i in range(in4)]
+        value = fill("dense_acc", bias=bname, j="j", terms=" + ".join(terms))
+        for act in op.epilogue:
+            value = act.expr(value)
+        rows.append(fill("dense_loop", j_begin=j0, j_end=j1, row=fill("dense_row", dst=op.dst.ident, j="j", value=value)))
+    return rows
+
+
+def _map_expr(op: MapOp, j: int) -> str:
+    expr = fill("index_j", name=op.src.ident, j=j)
     operand = None
     if op.other is not None:
-        operand = fill("index_j", name=op.other.ident)
+        operand = fill("index_j", name=op.other.ident, j=j)
     elif op.const is not None:
-        operand = fill("index_j", name=op.const_member)
+        operand = fill("index_j", name=op.const_member, j=j)
     if operand is not None:
         a, b = (operand, expr) if op.swapped else (expr, operand)
         expr = fill("binop", a=a, b=b, op=op.binop)
@@ -840,7 +895,8 @@ def _write_vector_fragment(
     """The writer for the fragment target: IR -> template fills."""
     block_text = []
     for blk in blocks:
-        members = "\n".join(fill("ubo_member", name=m[0], count=m[1].shape[0]) for m in blk.members)
+        members = "\n".join(fill("ubo_member", type=m[3], name=m[0], count=m[1].shape[0] // (4 if m[3] == "mat4" else 1))
+                            for m in blk.members)  # fmt: skip
         block_text.append(
             fill("ubo_block", layout=d.ubo_layout(blk.binding), block=blk.name, members=members)
         )
@@ -858,19 +914,11 @@ def _write_vector_fragment(
                              c3=comps[3]))  # fmt: skip
     for op in table.ops:
         if isinstance(op, DenseOp):
-            in4 = op.src.n4
-            store = "acc"
-            for act in op.epilogue:
-                store = act.expr(store)
-            for j0, j1, wname, bname, _ in op.chunks:
-                body.append(
-                    fill("dense_chunk", j_begin=j0, j_end=j1, bias=bname, weight=wname, src=op.src.ident, dst=op.dst.ident,
-                         row_stride=4 * in4, in4=in4, in4_2=2 * in4, in4_3=3 * in4, store=store)
-                )  # fmt: skip
+            body.extend(_dense_rows(op))
         elif isinstance(op, ConcatOp):
             body.extend(_concat_copies(op))
         else:
-            body.append(fill("vec_map", count=op.dst.n4, dst=op.dst.ident, expr=_map_expr(op)))
+            body.extend(fill("vec_map", dst=op.dst.ident, j=j, expr=_map_expr(op, j)) for j in range(op.dst.n4))
     return fill(
         "vector_fragment",
         header=d.header(),
@@ -978,8 +1026,9 @@ def _mlp_manifest(
     ubo = []
     for b in blocks:
         offset, members = 0, []
-        for name, arr, layout in b.members:
-            members.append({"name": name, "offset": offset, "vec4s": int(arr.shape[0]), "layout": layout})
+        for name, arr, layout, glsl_type in b.members:
+            members.append({"name": name, "type": f"{glsl_type}[{arr.shape[0] // (4 if glsl_type == 'mat4' else 1)}]",
+                            "offset": offset, "vec4s": int(arr.shape[0]), "layout": layout})  # fmt: skip
             offset += int(arr.nbytes)
         ubo.append({"name": b.name, "binding": b.binding, "bytes": b.nbytes, "file": f"mlp_block{b.binding}.bin",
                     "sha256": _sha256(b.data.tobytes()), "members": members})  # fmt: skip
@@ -999,7 +1048,7 @@ def _mlp_manifest(
                 "outputs": [{"texture": "ao", "location": 0}],
                 "uniform_blocks": [b["name"] for b in ubo],
                 "uniforms": {
-                    "u_loop_guard": "int, leave at its default 0 (keeps loops rolled; see the shader)"
+                    "u_loop_guard": "int, leave at its default 0 (keeps the large layers' loops rolled; see the shader)"
                 },
             }
         ],
@@ -1012,7 +1061,7 @@ def _mlp_manifest(
             },
         },  # fmt: skip
         "uniform_blocks": ubo,
-        "uniform_block_rule": f"std140, vec4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes (the portable "
+        "uniform_block_rule": f"std140, vec4 / mat4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes (the portable "
         "GL_MAX_UNIFORM_BLOCK_SIZE); glsl330/es300 bind with glUniformBlockBinding(name -> binding)",
         "uniform_bytes": int(sum(b.nbytes for b in blocks)),
         "parameter_bytes_fp32": param_bytes,
@@ -1256,6 +1305,12 @@ def _constant_binary(op: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 CONV_KINDS = ("conv", "conv_depthwise", "conv_transpose")
+# Ops the image target evaluates on constants only (exporters compute pads, sizes and scales with
+# them: torch's F.pad and padding_mode="reflect" emit ConstantOfShape, Concat, Reshape, Slice,
+# Transpose and Cast; F.interpolate(size=x.shape[2:]) emits Shape, Gather, Unsqueeze on a static size).
+FOLDED_OPS = ("ConstantOfShape", "Reshape", "Slice", "Transpose", "Cast", "Shape", "Gather", "Unsqueeze", "Squeeze")
+# Largest constant a folded op may create (elements): shape arithmetic is tiny, a hostile one is not.
+MAX_FOLDED_ELEMENTS = 1 << 16
 # Widest separable resize filter (taps per axis): antialiased cubic downscaling by 1/16.
 MAX_FILTER_TAPS = 64
 
@@ -1271,9 +1326,9 @@ class ImageOps(OpTable):
     """ONNX -> compute passes over (1, C, H, W) images (GLSL 4.3 compute, texture storage)."""
 
     OPS = ("Conv", "ConvTranspose", "BatchNormalization", "Relu", "LeakyRelu", "PRelu", "Sigmoid", "Tanh", "Clip",
-           "Elu", "Softplus", "HardSigmoid", "Sin", "Cos", "Add", "Sub", "Mul", "Div", "AveragePool", "MaxPool",
-           "GlobalAveragePool", "GlobalMaxPool", "Resize", "Upsample", "Pad", "Concat", "Identity",
-           "Constant")  # fmt: skip
+           "Elu", "Softplus", "HardSigmoid", "HardSwish", "Sin", "Cos", "Add", "Sub", "Mul", "Div", "AveragePool",
+           "MaxPool", "GlobalAveragePool", "GlobalMaxPool", "Resize", "Upsample", "Pad", "Concat", "Identity",
+           "Constant", *FOLDED_OPS)  # fmt: skip
     target = "compute (image)"
 
     def __init__(self, graph: OnnxGraph, metadata_multiple: int | None):
@@ -1579,7 +1634,7 @@ class ImageOps(OpTable):
 
     def _arithmetic(self, op: str, A: Any, B: Any) -> Any:
         if isinstance(A, np.ndarray) and isinstance(B, np.ndarray):
-            return _constant_binary(op, A, B)
+            return np.asarray(_constant_binary(op, A, B))  # 0-d operands give a numpy scalar
         if not isinstance(A, np.ndarray) and not isinstance(B, np.ndarray):
             return self._binary(op, A, B)
         first = isinstance(A, np.ndarray)  # constant (op) image
@@ -1648,6 +1703,9 @@ class ImageOps(OpTable):
 
     def HardSigmoid(self, X, *, alpha=0.2, beta=0.5) -> Texture:
         return self._activation(X, Act("HardSigmoid", {"alpha": float(alpha), "beta": float(beta)}))
+
+    def HardSwish(self, X) -> Texture:
+        return self._activation(X, Act("HardSwish"))
 
     def Sin(self, input) -> Texture:  # noqa: A002
         return self._activation(input, Act("Sin"))
@@ -1922,7 +1980,9 @@ class ImageOps(OpTable):
         return self._resize_pass(x, dims, exprs, [float(sc[2]), float(sc[3])], mode, "asymmetric", "floor", 0,
                                  -0.75, 0, 0.0, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0])  # fmt: skip
 
-    def Concat(self, *inputs, axis) -> ConcatValue:
+    def Concat(self, *inputs, axis) -> ConcatValue | np.ndarray:
+        if inputs and all(isinstance(v, np.ndarray) for v in inputs):
+            return np.concatenate([np.atleast_1d(v) for v in inputs], axis=int(axis))  # shape arithmetic
         if int(axis) not in (1, -3):
             raise self.unsupported("axis", axis)
         parts: list[Texture] = []
@@ -1936,6 +1996,78 @@ class ImageOps(OpTable):
         if any(t.height != parts[0].height or t.width != parts[0].width for t in parts):
             raise self.fail("Concat inputs differ in spatial size")
         return ConcatValue(parts)
+
+    # -- constant folding (FOLDED_OPS): numpy on constants; an image input is refused by _folded
+    def _folded(self, value: Any, what: str) -> np.ndarray:
+        if not isinstance(value, np.ndarray):
+            raise self.fail(f"input {what} is an image tensor; the image target evaluates this op on constants only")
+        return value
+
+    def _small(self, a: np.ndarray) -> np.ndarray:
+        if a.size > MAX_FOLDED_ELEMENTS:
+            raise self.fail(f"folded constant of shape {list(a.shape)} exceeds {MAX_FOLDED_ELEMENTS} elements")
+        return a
+
+    def ConstantOfShape(self, input, *, value=None) -> np.ndarray:  # noqa: A002
+        shape = [int(v) for v in self._folded(input, "input").reshape(-1)]
+        fill_value = np.zeros(1, np.float32) if value is None else np.asarray(value).reshape(-1)
+        if fill_value.size != 1 or min(shape, default=0) < 0:
+            raise self.fail(f"value must hold one element and the shape {shape} be non-negative")
+        if math.prod(shape) > MAX_FOLDED_ELEMENTS:
+            raise self.fail(f"folded constant of shape {shape} exceeds {MAX_FOLDED_ELEMENTS} elements")
+        return np.full(shape, fill_value[0], fill_value.dtype)
+
+    def Reshape(self, data, shape, *, allowzero=0) -> np.ndarray:
+        d = self._folded(data, "data")
+        s = [int(v) for v in self._folded(shape, "shape").reshape(-1)]
+        if not allowzero:  # 0 copies the input's dimension
+            s = [d.shape[i] if v == 0 and i < d.ndim else v for i, v in enumerate(s)]
+        return d.reshape(s)
+
+    def Slice(self, data, starts, ends, axes=None, steps=None) -> np.ndarray:
+        d = self._folded(data, "data")
+        st, en = (self._folded(v, n).astype(np.int64).reshape(-1) for v, n in ((starts, "starts"), (ends, "ends")))
+        ax = range(st.size) if axes is None else [int(a) for a in self._folded(axes, "axes").reshape(-1)]
+        sp = [1] * st.size if steps is None else [int(v) for v in self._folded(steps, "steps").reshape(-1)]
+        index = [slice(None)] * d.ndim
+        for a, s, e, k in zip(ax, st, en, sp, strict=True):
+            if k == 0:
+                raise self.fail("Slice step 0")
+            # Python slices clamp out-of-range starts and ends as the ONNX spec does (onnx.reference too).
+            index[int(a) % d.ndim] = slice(int(s), int(e), k)
+        return d[tuple(index)]
+
+    def Transpose(self, data, *, perm=None) -> np.ndarray:
+        return np.transpose(self._folded(data, "data"), None if perm is None else [int(p) for p in perm])
+
+    def Cast(self, input, *, to, saturate=1) -> np.ndarray:  # noqa: A002  (saturate: float8 targets only)
+        return self._folded(input, "input").astype(onnx.helper.tensor_dtype_to_np_dtype(int(to)))
+
+    def Shape(self, data, *, end=None, start=0) -> np.ndarray:
+        """Of an image of static size only: (1, C, H, W)."""
+        if isinstance(data, np.ndarray):
+            return np.asarray(data.shape, np.int64)[start:end]
+        t = data.parts[0] if isinstance(data, ConcatValue) else self.image(data, "data")  # no concat pass
+        if t.height.scale != 0 or t.width.scale != 0:
+            raise self.fail("Shape of an image of dynamic size cannot be folded; give the input a static size")
+        return np.asarray([1, data.channels, t.height.offset, t.width.offset], np.int64)[start:end]
+
+    def Gather(self, data, indices, *, axis=0) -> np.ndarray:
+        d, i = self._folded(data, "data"), self._folded(indices, "indices").astype(np.int64)
+        return self._small(np.asarray(np.take(d, i, axis=int(axis))))  # 0-d indices give a numpy scalar
+
+    def Unsqueeze(self, data, axes_input=None, *, axes=None) -> np.ndarray:
+        """Opset 13+: axes is an input (``axes_input``); before: an attribute."""
+        ax = axes if axes_input is None else self._folded(axes_input, "axes").reshape(-1)
+        if ax is None:
+            raise self.fail("axes is missing")
+        return np.expand_dims(self._folded(data, "data"), tuple(int(a) for a in ax))
+
+    def Squeeze(self, data, axes_input=None, *, axes=None) -> np.ndarray:
+        """Opset 13+: axes is an input (``axes_input``); before: an attribute. None: every size-1 axis."""
+        ax = axes if axes_input is None else self._folded(axes_input, "axes").reshape(-1)
+        d = self._folded(data, "data")
+        return np.squeeze(d) if ax is None else np.squeeze(d, tuple(int(a) for a in ax))
 
 
 def _vec4_rows(v: np.ndarray, n4: int) -> np.ndarray:

@@ -73,6 +73,8 @@ _T["act_Cos"] = "cos(${x})"
 _T["act_Elu"] = "mix(${alpha} * (exp(min(${x}, vec4(0.0))) - 1.0), ${x}, greaterThanEqual(${x}, vec4(0.0)))"
 _T["act_Softplus"] = "(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x}))))"
 _T["act_HardSigmoid"] = "clamp(${alpha} * ${x} + ${beta}, 0.0, 1.0)"
+# HardSwish (opset 14; torch nn.Hardswish): x * HardSigmoid(x) with alpha 1/6, beta 1/2 (the spec's).
+_T["act_HardSwish"] = "(${x} * clamp(0.16666667 * ${x} + 0.5, 0.0, 1.0))"
 
 # --------------------------------------------------------------------------- fragment MLP
 
@@ -92,7 +94,7 @@ ${members}
 };"""
 _T["ubo_layout"] = "layout(std140) "
 _T["ubo_layout_binding"] = "layout(std140, binding = ${binding}) "
-_T["ubo_member"] = "    vec4 ${name}[${count}];"
+_T["ubo_member"] = "    ${type} ${name}[${count}];"
 
 _T["vector_fragment"] = """${header}
 // ${description}
@@ -102,10 +104,9 @@ ${prelude}
 
 ${samplers}
 
-// Always 0 (uniforms start at 0; never set it). Loop bounds read it so the shader compiler cannot
-// see a constant trip count: Mesa's llvmpipe fully unrolls constant loops and LLVM then spends
-// 26 s (16x8) to over 100 s (64x32) compiling this shader; rolled loops compile in 1-3 s and
-// give bit-identical output (measured in bench/bench_mlp.py: unfolded draws faster, folded ~1.3x slower).
+// Dense layers are mat4 x vec4 products of 4x4 weight tiles: small layers straight-line (constant
+// indices, registers), large ones a loop over output vec4s. u_loop_guard is always 0 (never set it):
+// loop bounds read it so llvmpipe cannot unroll them (LLVM then spent 26-100 s on one shader).
 uniform int u_loop_guard;
 
 ${blocks}
@@ -129,25 +130,19 @@ _T["texel_fetch"] = "    vec4 g${index} = texelFetch(${sampler}, ivec2(gl_FragCo
 _T["vec_decl"] = "    vec4 ${name}[${count}];"
 _T["input_tile"] = "    ${dst}[${index}] = vec4(${c0}, ${c1}, ${c2}, ${c3});"
 
-# One dense chunk: rows [4 * j_begin, 4 * j_end) of W (out, in), weights row-major as vec4s.
-_T["dense_chunk"] = """    for (int j = ${j_begin}; j < ${j_end} + u_loop_guard; ++j) {
-        vec4 acc = ${bias}[j - ${j_begin}];
-        int row = (j - ${j_begin}) * ${row_stride};
-        for (int i = 0; i < ${in4} + u_loop_guard; ++i) {
-            vec4 v = ${src}[i];
-            acc.x += dot(${weight}[row + i], v);
-            acc.y += dot(${weight}[row + ${in4} + i], v);
-            acc.z += dot(${weight}[row + ${in4_2} + i], v);
-            acc.w += dot(${weight}[row + ${in4_3} + i], v);
-        }
-        ${dst}[j] = ${store};
+# Dense layers, straight-line: output vec4 j = act(bias[j] + sum_i tile[j, i] * src[i]) (mat4 tiles).
+_T["mat_term"] = "${weight}[${index}] * ${src}[${i}]"
+_T["dense_acc"] = "(${bias}[${j}] + ${terms})"
+_T["dense_row"] = "    ${dst}[${j}] = ${value};"
+# A large layer: the rows of a chunk in a loop whose bound reads u_loop_guard (always 0: uniforms start
+# at 0; never set it), so the compiler cannot see a constant trip count and unroll it.
+_T["dense_loop"] = """    for (int j = ${j_begin}; j < ${j_end} + u_loop_guard; ++j) {
+    ${row}
     }"""
 
-_T["vec_map"] = """    for (int j = 0; j < ${count} + u_loop_guard; ++j) {
-        ${dst}[j] = ${expr};
-    }"""
+_T["vec_map"] = "    ${dst}[${j}] = ${expr};"
 
-_T["index_j"] = "${name}[j]"
+_T["index_j"] = "${name}[${j}]"
 _T["binop"] = "(${a} ${op} ${b})"
 _T["vec_copy"] = "    ${dst}[${di}] = ${src}[${si}];"
 _T["lane_copy"] = "    ${dst}[${di}].${dl} = ${src}[${si}].${sl};"
