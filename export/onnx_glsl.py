@@ -98,7 +98,13 @@ def default_bindings(proto: onnx.ModelProto, given: dict):
 def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind: list[str] | None = None,
                  dialects: list[str] | None = None) -> dict:  # fmt: skip
     """Generate and write the export of a user's ONNX file; returns its manifest."""
-    from .glsl import DIALECTS, generate_compute, generate_vector_fragment, write_compute_export, write_mlp_export
+    from .glsl import (
+        DIALECTS,
+        generate_compute,
+        generate_vector_fragment,
+        write_compute_export,
+        write_mlp_export,
+    )
 
     if target not in TARGETS:
         raise NeuralaoError(f"--target must be one of {TARGETS}, got {target!r}")

@@ -1,4 +1,5 @@
-"""Pinhole cameras: orbits around the bounding sphere, interior views, explicit poses from JSON.
+"""Pinhole cameras: orbits around the bounding sphere, interior views, close-ups of contact regions,
+explicit poses from JSON.
 
 Convention (OpenGL, as pyrender): ``pose`` is camera-to-world, the camera looks down its -z axis
 with +y up. Linear camera-space depth is the distance along the viewing axis, ``-z_cam``.
@@ -114,13 +115,20 @@ def _clip_planes(scene: Scene, eye: np.ndarray) -> tuple[float, float]:
 
 
 def orbit(
-    scene: Scene, views: int, width: int, height: int, yfov_deg: float = 40.0, seed: int = 0
+    scene: Scene,
+    views: int,
+    width: int,
+    height: int,
+    yfov_deg: float = 40.0,
+    seed: int = 0,
+    min_elevation_deg: float | None = None,
 ) -> list[Camera]:
     """``views`` cameras on a sphere around the bounding sphere, all looking at its centre.
 
     Directions follow a Fibonacci spiral (even coverage, deterministic), rotated by ``seed`` so
     different seeds give different but reproducible orbits. The distance fits the bounding sphere
-    into the narrower field of view.
+    into the narrower field of view. ``min_elevation_deg`` keeps the spiral above that elevation
+    (scenes standing on a ground plane, whose underside is no view at all); None: the whole sphere.
     """
     if views < 1:
         raise NeuralaoError(f"views must be >= 1, got {views}")
@@ -135,8 +143,9 @@ def orbit(
     phase = rng.uniform(0, 2 * math.pi) if seed else 0.0
     cams = []
     golden = math.pi * (3.0 - math.sqrt(5.0))
+    y_low = -1.0 if min_elevation_deg is None else math.sin(math.radians(min_elevation_deg))
     for k in range(views):
-        y = 1.0 - 2.0 * (k + 0.5) / views
+        y = 1.0 - (1.0 - y_low) * (k + 0.5) / views
         r = math.sqrt(max(0.0, 1.0 - y * y))
         th = golden * k + phase
         d = np.array([r * math.cos(th), y, r * math.sin(th)])
@@ -202,6 +211,84 @@ def interior(
         target[1] = lo[1] + size[1] * rng.uniform(0.05, 0.6)
         cams.append(Camera(look_at(eye, target), width, height, yfov, znear, zfar))
     return cams
+
+
+def _surface_samples(scene: Scene, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` area-weighted random surface points (count, 3) and their face normals (count, 3)."""
+    t = scene.triangles
+    area = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    tri = rng.choice(len(t), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    c = t[tri]
+    points = c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])
+    return points, scene.face_normals[tri]
+
+
+def _openness(es, local: np.ndarray, normals: np.ndarray, radius: float, rays: int, rng) -> np.ndarray:
+    """(n,) fraction of ``rays`` uniform hemisphere rays about each normal that escape within ``radius``."""
+    d = rng.normal(size=(len(local), rays, 3))
+    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    d *= np.sign(np.einsum("nrk,nk->nr", d, normals))[..., None]
+    o = np.repeat(local + normals * radius * 1e-3, rays, axis=0).astype(np.float32)
+    hit = es.run(o, d.reshape(-1, 3).astype(np.float32), query="OCCLUDED", dists=np.float32(radius))
+    return (np.asarray(hit).reshape(len(local), rays) < 0).mean(axis=1)
+
+
+def closeup(
+    scene: Scene, views: int, width: int, height: int, yfov_deg: float = 50.0, seed: int = 0
+) -> list[Camera]:
+    """Cameras close to contact regions (where AO varies most), seeded.
+
+    Contacts are found without knowing how the scene was built: area-weighted surface samples get
+    a 16-ray openness estimate within 5% of the diagonal along their authored normal; the most
+    occluded quarter of those that are still visible from somewhere (openness >= 0.2, so not inside
+    a closed part or under an object) are the targets. Each eye sits 5-15% of the diagonal from its
+    target, off the normal by up to ~50 degrees, and is kept only if it passes the interior check
+    (no surface closer than 1% of the diagonal along 26 directions) and sees its target unblocked.
+    """
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    if views < 1:
+        raise NeuralaoError(f"views must be >= 1, got {views}")
+    rng = np.random.default_rng(seed)
+    diag = scene.diagonal
+    es = rtcore_scene.EmbreeScene()
+    TriangleMesh(es, (scene.triangles - scene.center).astype(np.float32))
+    yfov = math.radians(yfov_deg)
+    min_clearance = 0.01 * diag
+    znear, zfar = min_clearance * 0.5, diag * 1.5
+    cams: list[Camera] = []
+    for _ in range(20):  # batches of candidates; deterministic for a given seed
+        points, normals = _surface_samples(scene, 64 * views, rng)
+        local = points - scene.center
+        open_ = _openness(es, local, normals, 0.05 * diag, 16, rng)
+        order = np.argsort(np.where(open_ >= 0.2, open_, np.inf), kind="stable")
+        keep = order[: max(1, len(order) // 4)]
+        keep = keep[np.isfinite(np.where(open_ >= 0.2, open_, np.inf)[keep])]
+        if not len(keep):
+            continue
+        keep = rng.permutation(keep)
+        tilt = rng.normal(size=(len(keep), 3)) * 0.6
+        direction = normals[keep] + tilt - normals[keep] * np.einsum("nk,nk->n", tilt, normals[keep])[:, None]
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        dist = rng.uniform(0.05, 0.15, size=len(keep)) * diag
+        eyes = points[keep] + direction * dist[:, None]
+        ok = _clearance(scene, eyes) > min_clearance
+        # Line of sight: the ray from the eye to its target must not stop short of it.
+        to_target = (points[keep] - eyes) / dist[:, None]
+        t = np.asarray(
+            es.run((eyes - scene.center).astype(np.float32), to_target.astype(np.float32), query="DISTANCE"),
+            np.float64,
+        )
+        ok &= t > dist * 0.98
+        for e, target in zip(eyes[ok], points[keep][ok], strict=True):
+            cams.append(Camera(look_at(e, target), width, height, yfov, znear, zfar))
+            if len(cams) == views:
+                return cams
+    raise NeuralaoError(f"scene {scene.name}: found only {len(cams)} of {views} close-up camera positions")
 
 
 def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -> list[Camera]:

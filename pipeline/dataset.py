@@ -11,11 +11,20 @@ the next one starts; a rerun skips shards whose file still matches its recorded 
 interrupted run resumes and ends with exactly the files an uninterrupted run writes. Every random
 choice (orbit phase, interior cameras, labeller directions) is derived from ``seed``, the scene's
 index and the view index, so the same config gives the same dataset hash.
+
+Composed scenes (:mod:`pipeline.compose`) are scenes too: a scene entry with ``compose`` settings
+instead of a ``mesh``, or a config-level ``composed`` generator that expands into ``count`` of them
+(after the listed scenes, so their indices, and with them every seed, do not move). A composed
+scene draws its meshes from its split's object meshes (:mod:`pipeline.splits`), and no mesh of a
+train scene may appear in a val or test scene: the splits are by mesh. With ``labels.radii_rel``
+every frame also stores ``ao_radii`` (H, W, k) and ``valid_radii`` (H, W, k), labelled at
+``radii`` (k,) scene units from one trace; without it shards, hashes and manifests are unchanged.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import logging
 from collections.abc import Iterator
@@ -25,12 +34,14 @@ from typing import Literal
 
 import numpy as np
 
-from .camera import Camera, interior, load_poses, orbit
+from .camera import Camera, closeup, interior, load_poses, orbit
+from .compose import ComposeSettings, compose
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import read_npz, remove_stale_temporaries, sha256_file, write_json, write_npz
-from .labels import LabelSettings
-from .scene import Scene, load_scene
+from .labels import Labeller, LabelSettings
+from .scene import Scene, load_scene, resolve_mesh_path
+from .splits import object_meshes
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +61,11 @@ FRAME_KEYS = (
     "znear",
     "zfar",
 )
+# Extra per-frame keys when labels.radii_rel is set: AO and validity at each radius, the radii.
+RADII_KEYS = ("ao_radii", "valid_radii", "radii")
+# Composed scenes stand on a floor: their orbits stay this far above the horizon.
+COMPOSED_MIN_ELEVATION_DEG = 10.0
+CameraKind = Literal["orbit", "interior", "closeup", "file"]
 
 
 @dataclass
@@ -57,9 +73,9 @@ class SceneSpec:
     """One scene of a dataset."""
 
     name: str  # short unique name used in shard names and reports
-    mesh: str  # mesh file, glTF folder, or a bare name under the shared mesh folder (e.g. "spot")
-    cameras: Literal["orbit", "interior", "file"] = (
-        "orbit"  # orbit around the bounding sphere, inside the box, or JSON poses
+    mesh: str = ""  # mesh file, glTF folder, or a bare name under the shared mesh folder (e.g. "spot")
+    cameras: CameraKind = (
+        "orbit"  # orbit around the bounding sphere, inside the box, close to contacts, or JSON poses
     )
     views: int = 16  # number of views (ignored for cameras="file")
     poses: str | None = None  # JSON camera file when cameras="file" (path relative to the config file)
@@ -67,6 +83,24 @@ class SceneSpec:
     split: Literal["train", "val", "test"] = (
         "train"  # scene-level split: the U-Net never trains on val/test scenes
     )
+    compose: ComposeSettings | None = None  # a composed scene (instead of ``mesh``); see pipeline.compose
+
+
+@dataclass
+class ComposedScenes:
+    """A generator of ``count`` composed scenes named ``<prefix>-<seed + i:04d>`` (i < count)."""
+
+    count: int = 0  # number of scenes
+    seed: int = 0  # scene i is composed with seed + i
+    prefix: str = "comp"  # scene name prefix (unique per generator)
+    cameras: list[Literal["orbit", "interior", "closeup"]] = field(
+        default_factory=lambda: ["orbit", "interior", "closeup"]
+    )  # camera kind of scene i: cameras[i % len(cameras)]; orbits get <= 2 walls, no ceiling and a
+    # 0.6x floor, interiors >= 3 walls (so a view from inside has a room around it)
+    views: int = 12  # views per scene
+    split: Literal["train", "val", "test"] = "train"  # split of every scene (and of the meshes drawn)
+    yfov_deg: float | None = None  # field of view; None: the camera kind's default
+    compose: ComposeSettings = field(default_factory=ComposeSettings)  # template (seed replaced)
 
 
 @dataclass
@@ -84,6 +118,7 @@ class DatasetSettings:
         8  # every k-th view of each scene is held back (never used for training; MLP evaluation)
     )
     frames_per_shard: int = 8  # frames per shard file (the unit of resumption)
+    composed: list[ComposedScenes] = field(default_factory=list)  # generators, expanded after ``scenes``
 
 
 def frame_seed(seed: int, scene_index: int, view: int) -> int:
@@ -97,23 +132,112 @@ def scene_cameras(
 ) -> list[Camera]:
     w, h = size
     if spec.cameras == "orbit":
-        return orbit(scene, spec.views, w, h, spec.yfov_deg or 40.0, seed=seed)
+        elevation = COMPOSED_MIN_ELEVATION_DEG if spec.compose is not None else None
+        return orbit(scene, spec.views, w, h, spec.yfov_deg or 40.0, seed=seed, min_elevation_deg=elevation)
     if spec.cameras == "interior":
         return interior(scene, spec.views, w, h, spec.yfov_deg or 60.0, seed=seed)
+    if spec.cameras == "closeup":
+        return closeup(scene, spec.views, w, h, spec.yfov_deg or 50.0, seed=seed)
     if not spec.poses:
         raise NeuralaoError(f"scene {spec.name}: cameras='file' needs 'poses'")
     path = Path(spec.poses)
     return load_poses(path if path.is_absolute() else config_dir / path, scene, w, h)
 
 
-def _validate(settings: DatasetSettings) -> None:
+def expand_scenes(settings: DatasetSettings) -> list[SceneSpec]:
+    """The listed scenes, then every generator's composed scenes (see :class:`ComposedScenes`)."""
+    specs = list(settings.scenes)
+    for gen in settings.composed:
+        if gen.count < 0 or not gen.cameras:
+            raise NeuralaoError(f"composed {gen.prefix!r}: count must be >= 0 and cameras non-empty")
+        for i in range(gen.count):
+            kind = gen.cameras[i % len(gen.cameras)]
+            c = gen.compose
+            if kind == "orbit":  # seen from outside: open on at least two sides, no lid, and a
+                # smaller floor (the orbit frames all of it) so the objects fill the view
+                walls = (min(c.walls[0], 2), min(c.walls[1], 2))
+                c = replace(c, walls=walls, ceiling=0.0, room=(0.6 * c.room[0], 0.6 * c.room[1]))
+            elif kind == "interior":
+                c = replace(c, walls=(max(c.walls[0], 3), max(c.walls[1], 3)))
+            spec = SceneSpec(
+                f"{gen.prefix}-{gen.seed + i:04d}", cameras=kind, views=gen.views, yfov_deg=gen.yfov_deg,
+                split=gen.split, compose=replace(c, seed=gen.seed + i),
+            )  # fmt: skip
+            specs.append(spec)
+    return specs
+
+
+def load_spec_scene(spec: SceneSpec, config_dir: Path = Path(".")) -> Scene:
+    """The scene of a config entry: its mesh (relative to the config file first), or its composition."""
+    if spec.compose is not None:
+        return compose(spec.compose, split=spec.split, name=spec.name)
+    local = config_dir / spec.mesh  # a path relative to the config file wins over a bare mesh name
+    return load_scene(local if local.exists() else spec.mesh, name=spec.name)
+
+
+def _spec_meshes(spec: SceneSpec, config_dir: Path) -> set[str]:
+    """Resolved paths of every mesh a scene may contain (a composed scene: its whole pool)."""
+    if spec.compose is None:
+        local = config_dir / spec.mesh
+        names = [str(local) if local.exists() else spec.mesh]
+    else:
+        names = spec.compose.meshes if spec.compose.meshes is not None else object_meshes(spec.split)
+    return {_resolved(n) for n in names}
+
+
+@functools.lru_cache(maxsize=1024)
+def _resolved(mesh: str) -> str:
+    return str(resolve_mesh_path(mesh).resolve())
+
+
+def scene_of(manifest: dict, name: str) -> Scene:
+    """Rebuild scene ``name`` of a dataset manifest (its mesh, or its composition from the settings)."""
+    from .config import from_dict
+
+    entry = manifest["scenes"][name]
+    if "compose" in entry:
+        return compose(from_dict(ComposeSettings, entry["compose"]), split=entry["split"], name=name)
+    return load_scene(entry["mesh"], name=name)
+
+
+def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Path) -> None:
     names = set()
-    for spec in settings.scenes:
+    for spec in specs:
         if spec.name in names:
             raise NeuralaoError(f"scene name {spec.name!r} appears twice in the dataset config")
         names.add(spec.name)
         if spec.cameras != "file" and spec.views < 1:
             raise NeuralaoError(f"scene {spec.name}: views must be >= 1")
+        if bool(spec.mesh) == (spec.compose is not None):
+            raise NeuralaoError(f"scene {spec.name}: give exactly one of 'mesh' and 'compose'")
+    train: set[str] = set()
+    held: dict[str, str] = {}
+    for spec in specs:
+        meshes = _spec_meshes(spec, config_dir)
+        if spec.split == "train":
+            train |= meshes
+        else:
+            held.update(dict.fromkeys(meshes, spec.name))
+    shared = sorted(train & set(held))
+    if shared:
+        raise NeuralaoError(
+            f"mesh {Path(shared[0]).name} is in a train scene and in {held[shared[0]]!r} "
+            f"({len(shared)} shared mesh(es)): val and test are split by mesh"
+        )
+
+
+def _config_dict(settings: DatasetSettings) -> dict:
+    """The resolved config, without the options added since format 1 while they are unused, so a
+    config that does not use them has the config hash (and manifest) it always had."""
+    config = settings_to_dict(settings)
+    if not config["composed"]:
+        del config["composed"]
+    if config["labels"]["radii_rel"] is None:
+        del config["labels"]["radii_rel"]
+    for scene in config["scenes"]:
+        if scene["compose"] is None:
+            del scene["compose"]
+    return config
 
 
 def build_dataset(
@@ -125,17 +249,18 @@ def build_dataset(
     from .gbuffer import GBufferRenderer
     from .labels import Labeller
 
-    if not settings.scenes:
+    specs = expand_scenes(settings)
+    if not specs:
         raise NeuralaoError("the dataset config lists no scenes")
     if settings.frames_per_shard < 1 or settings.holdout_every < 0:
         raise NeuralaoError("frames_per_shard must be >= 1 and holdout_every >= 0")
-    _validate(settings)
+    _validate(settings, specs, config_dir)
     out = Path(out)
     (out / "shards").mkdir(parents=True, exist_ok=True)
     for folder in (out, out / "shards"):  # a killed run (SIGKILL) leaves its half-written shard behind
         for stale in remove_stale_temporaries(folder):
             log.info("removed %s left by an interrupted run", stale.name)
-    config = settings_to_dict(settings)
+    config = _config_dict(settings)
     config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
     progress_path = out / "progress.json"
     done: dict[str, str] = {}
@@ -149,9 +274,10 @@ def build_dataset(
             log.warning("%s: config changed since the interrupted run; starting over", out)
     shards = []
     total_views = 0
-    for si, spec in enumerate(settings.scenes):
-        local = config_dir / spec.mesh  # a path relative to the config file wins over a bare mesh name
-        scene = load_scene(local if local.exists() else spec.mesh, name=spec.name)
+    frame_keys = FRAME_KEYS + (RADII_KEYS if settings.labels.radii_rel is not None else ())
+    radii_of: dict[str, list[float]] = {}
+    for si, spec in enumerate(specs):
+        scene = load_spec_scene(spec, config_dir)
         cams = scene_cameras(spec, scene, settings.size, frame_seed(settings.seed, si, -1), config_dir)
         total_views += len(cams)
         renderer = labeller = None
@@ -186,16 +312,21 @@ def build_dataset(
             for v in chunk:
                 frame = renderer.render(cams[v])
                 labeller.settings = replace(settings.labels, seed=frame_seed(settings.seed, si, v))
-                frame["ao"], frame["valid"] = labeller.label_frame(frame)
+                if labeller.radii is None:
+                    frame["ao"], frame["valid"] = labeller.label_frame(frame)
+                else:
+                    _label_with_radii(labeller, frame)
                 frames.append(frame)
                 bar.update(1)
-            arrays = {key: np.stack([np.asarray(f[key]) for f in frames]) for key in FRAME_KEYS}
+            arrays = {key: np.stack([np.asarray(f[key]) for f in frames]) for key in frame_keys}
             arrays["view"] = np.asarray(chunk, dtype=np.int32)
             arrays["holdout"] = np.asarray(entry["holdout"], dtype=bool)
             write_npz(path, **arrays)
             entry["sha256"] = done[rel] = sha256_file(path)
             write_json(progress_path, {"config_hash": config_hash, "shards": done})
             shards.append(entry)
+        if settings.labels.radii_rel is not None:
+            radii_of[spec.name] = [r * scene.diagonal for r in settings.labels.radii_rel]
         bar.close()
     dataset_hash = hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest()
     manifest = {
@@ -206,9 +337,9 @@ def build_dataset(
         "dataset_hash": dataset_hash,
         "frames": total_views,
         "size": list(settings.size),
-        "scenes": {s.name: {"split": s.split, "mesh": s.mesh, "cameras": s.cameras} for s in settings.scenes},
+        "scenes": {s.name: _scene_entry(s, radii_of.get(s.name)) for s in specs},
         "shards": shards,
-        "frame_keys": list(FRAME_KEYS),
+        "frame_keys": list(frame_keys),
         "conventions": {
             "ao": "accessibility in [0,1], 1 = open; 1 on background",
             "depth": "linear camera-space depth (-z_cam), 0 on background",
@@ -219,6 +350,29 @@ def build_dataset(
     write_json(out / "manifest.json", manifest)
     progress_path.unlink(missing_ok=True)
     return manifest
+
+
+def _label_with_radii(labeller: Labeller, frame: dict) -> None:
+    """Set ``ao``, ``valid``, ``ao_radii``, ``valid_radii`` and ``radii`` of a frame from one trace
+    when the max distance is one of the radii (bit-identical to :meth:`Labeller.label_frame`, which
+    tests/test_labels.py checks), else from that trace plus the usual one."""
+    frame["ao_radii"], frame["valid_radii"] = labeller.label_frame_radii(frame)
+    frame["radii"] = np.asarray(labeller.radii, dtype=np.float32)
+    if labeller.max_distance in labeller.radii:
+        j = labeller.radii.index(labeller.max_distance)
+        frame["ao"], frame["valid"] = frame["ao_radii"][..., j].copy(), frame["valid_radii"][..., j].copy()
+    else:
+        frame["ao"], frame["valid"] = labeller.label_frame(frame)
+
+
+def _scene_entry(spec: SceneSpec, radii: list[float] | None) -> dict:
+    """A scene's manifest entry; composed scenes add their compose settings, radii their radii."""
+    entry = {"split": spec.split, "mesh": spec.mesh, "cameras": spec.cameras}
+    if spec.compose is not None:
+        entry["compose"] = settings_to_dict(spec.compose)
+    if radii is not None:
+        entry["radii"] = radii  # scene units, one per labels.radii_rel
+    return entry
 
 
 class Dataset:
@@ -271,7 +425,8 @@ class Dataset:
     def frames(
         self, split: str | None = None, scene: str | None = None, holdout: bool | None = None
     ) -> Iterator[dict]:
-        """Yield frame dicts (COMMON G-buffer keys + ao, valid, pose...) with 'scene', 'view', 'split', 'holdout'."""
+        """Yield frame dicts (COMMON G-buffer keys + ao, valid, pose..., and RADII_KEYS where stored)
+        with 'scene', 'view', 'split', 'holdout'."""
         for entry in self.manifest["shards"]:
             if split is not None and entry["split"] != split:
                 continue
@@ -280,10 +435,11 @@ class Dataset:
             if holdout is not None and not any(h == holdout for h in entry["holdout"]):
                 continue
             arrays = self.load_shard(entry)
+            keys = [k for k in self.manifest.get("frame_keys", FRAME_KEYS) if k in arrays]
             for i in range(len(arrays["view"])):
                 if holdout is not None and bool(arrays["holdout"][i]) != holdout:
                     continue
-                frame = {k: arrays[k][i] for k in FRAME_KEYS}
+                frame = {k: arrays[k][i] for k in keys}
                 for k in ("yfov", "znear", "zfar"):
                     frame[k] = float(frame[k])
                 frame.update(

@@ -63,6 +63,8 @@ built per chunk of 2^16 into per-thread planar float32 buffers that Embree reads
 Query per configuration (what it costs is in bench/bench_labeller.py): binary without the back-face
 rule uses OCCLUDED (any hit, the fastest); binary with it uses INTERSECT (closest primitive id);
 obscurance uses DISTANCE, or INTERSECT with ``output`` (distance + primitive id) with the rule.
+Several radii (:meth:`Labeller.ao_radii_at_points`, :meth:`Labeller.label_frame_radii`) use one
+INTERSECT with ``output`` to the largest radius and derive every radius from the hit distances.
 """
 
 from __future__ import annotations
@@ -109,6 +111,9 @@ class LabelSettings:
     seed: int = 0
     # Threads tracing in parallel (embreex releases the GIL); results do not depend on it.
     workers: int = 2
+    # Extra AO radii (max distances) as fractions of the diagonal, all from one trace to the largest
+    # (Labeller.radii, label_frame_radii; the dataset's ao_radii); None: none, only ``ao``.
+    radii_rel: list[float] | None = None
 
 
 def _splitmix64(x: np.ndarray) -> np.ndarray:
@@ -231,6 +236,7 @@ class Labeller:
         if thr is not None and not math.isfinite(thr):
             raise NeuralaoError(f"backface_threshold must be finite or None, got {thr!r}")
         self.offset = s.offset_rel * diag
+        self.radii = None if s.radii_rel is None else _radii(s.radii_rel, diag)
         self.backface_rule = thr is not None and thr >= 0
         self._r_local = np.float32(self.max_distance / diag)
         self._h_local = self.half_distance / diag
@@ -293,6 +299,65 @@ class Labeller:
         valid[pix] = v & exact
         return ao.reshape(h, w), valid.reshape(h, w)
 
+    def ao_radii_at_points(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        radii: list[float] | np.ndarray | None = None,
+        progress: bool = False,
+        ids: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """AO at several max distances from one trace: :meth:`ao_at_points` once per radius, in one pass.
+
+        Every ray is traced once (INTERSECT, closest hit) to the largest radius; at radius r a ray
+        counts as blocked iff its closest hit is at distance <= r (binary), or contributes rho of
+        that distance iff it is < r (obscurance, same half distance), and the back-face rule counts
+        only the hits within r. With the same settings and seed this equals separate traces with
+        ``max_distance = r`` (tests/test_labels.py checks it bit for bit).
+
+        radii : (k,) scene units, positive; default :attr:`radii` (from ``settings.radii_rel``)
+        Returns ao (n, k) float32 in [0, 1] and valid (n, k) bool (the back-face rule per radius).
+        """
+        radii_local = self._radii_local(radii)
+        points = np.asarray(points, dtype=np.float64)
+        normals = np.asarray(normals, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
+            raise NeuralaoError(
+                f"points and normals must both be (n, 3); got {points.shape} and {normals.shape}"
+            )
+        ids = np.arange(len(points), dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
+        if ids.shape != (len(points),):
+            raise NeuralaoError(f"ids must be ({len(points)},), got {ids.shape}")
+        local = (points - self._center) / self._scale
+        return self._ao_local(local, normals, ids, progress, radii_local)
+
+    def label_frame_radii(
+        self, frame: dict, radii: list[float] | np.ndarray | None = None, progress: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`label_frame` at several radii from one trace (see :meth:`ao_radii_at_points`).
+
+        Returns ao (H, W, k) float32 (1 on background) and valid (H, W, k) bool (False on background).
+        """
+        radii_local = self._radii_local(radii)
+        local, normals, pix, exact = self._frame_points_local(frame)
+        h, w = np.shape(frame["tri_id"])
+        k = len(radii_local)
+        ao = np.ones((h * w, k), dtype=np.float32)
+        valid = np.zeros((h * w, k), dtype=bool)
+        ao[pix], v = self._ao_local(local, normals, pix, progress, radii_local)
+        valid[pix] = v & exact[:, None]
+        return ao.reshape(h, w, k), valid.reshape(h, w, k)
+
+    def _radii_local(self, radii: list[float] | np.ndarray | None) -> np.ndarray:
+        """(k,) float32 radii in local units (as ``_r_local``: scene units / diagonal, cast once)."""
+        if radii is None:
+            if self.radii is None:
+                raise NeuralaoError("no radii given and settings.radii_rel is None")
+            radii = self.radii
+        else:
+            radii = _radii(list(np.asarray(radii, dtype=np.float64).reshape(-1)), 1.0)
+        return np.array([np.float32(r / self._scale) for r in radii], dtype=np.float32)
+
     def visible_points(self, frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The float64 surface points :meth:`label_frame` labels.
 
@@ -350,12 +415,19 @@ class Labeller:
     # ------------------------------------------------------------------ internals
 
     def _ao_local(
-        self, local: np.ndarray, normals: np.ndarray, ids: np.ndarray, progress: bool
+        self,
+        local: np.ndarray,
+        normals: np.ndarray,
+        ids: np.ndarray,
+        progress: bool,
+        radii: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Core: points (n, 3) float64 in local units, normals (n, 3), ids (n,) -> ao (n,) f32, valid (n,) bool."""
+        """Core: points (n, 3) float64 in local units, normals (n, 3), ids (n,) -> ao (n,) f32, valid (n,) bool;
+        with ``radii`` (k,) float32 local: ao (n, k) f32 and valid (n, k) bool (:meth:`_trace_radii`)."""
         count = len(local)
-        ao = np.ones(count, dtype=np.float32)
-        valid = np.zeros(count, dtype=bool)
+        shape = (count,) if radii is None else (count, len(radii))
+        ao = np.ones(shape, dtype=np.float32)
+        valid = np.zeros(shape, dtype=bool)
         if count == 0:
             return ao, valid
         # Per-point set-up in blocks on the workers (numpy call overhead, ~1-10 us a call, makes it
@@ -371,13 +443,18 @@ class Labeller:
             origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], ok[lo:hi] = o, f, j, k
 
         def trace(lo: int, hi: int) -> None:
-            ao[lo:hi], valid[lo:hi] = self._trace(origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi])
+            if radii is None:
+                ao[lo:hi], valid[lo:hi] = self._trace(origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi])
+            else:
+                ao[lo:hi], valid[lo:hi] = self._trace_radii(
+                    origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], radii
+                )
 
         workers = self.settings.workers
         _run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
         _run_chunks(trace, count, self._chunk_points, workers, progress)
         ao[~np.isfinite(local).all(axis=1)] = 1.0
-        valid &= ok
+        valid &= ok if radii is None else ok[:, None]
         return ao, valid
 
     def _prepare(
@@ -477,6 +554,48 @@ class Labeller:
             back_ok = back / n_rays <= self._threshold
         return np.clip(ao, 0.0, 1.0), back_ok
 
+    def _trace_radii(
+        self, origins: np.ndarray, frames: np.ndarray, jitter: np.ndarray, radii: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_trace` at every radius of ``radii`` (k,) float32 local from one INTERSECT to the
+        largest -> ao (m, k) float32, back_ok (m, k) bool. Each radius repeats the single-radius
+        arithmetic of :meth:`_trace` for this configuration, so the results agree bit for bit."""
+        m, n_rays = len(origins), self._rays
+        dirs_p, orig_p, tmp, dists = self._buffers(m * n_rays)
+        self._directions(frames, jitter, dirs_p.reshape(3, m, n_rays), tmp.reshape(m, n_rays))
+        for k in range(3):
+            orig_p[k].reshape(m, n_rays)[:] = origins[:, k, None]
+        dirs, orig = dirs_p.T, orig_p.T
+        dists.fill(radii.max())
+        out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
+        prim, tfar = out["primID"], out["tfar"]
+        hit_idx = np.flatnonzero(prim >= 0)
+        hit_point, hit_t = hit_idx // n_rays, tfar[hit_idx]
+        if self.backface_rule:
+            fn = self._face_normals32[prim[hit_idx]]
+            facing = dirs_p[0, hit_idx] * fn[:, 0]
+            facing += dirs_p[1, hit_idx] * fn[:, 1]
+            facing += dirs_p[2, hit_idx] * fn[:, 2]
+            back_hit = facing > 0
+        ao = np.empty((m, len(radii)), np.float32)
+        back_ok = np.ones((m, len(radii)), dtype=bool)
+        for j, r in enumerate(radii):
+            within = hit_t <= r  # what a trace with tfar = r reports as a hit
+            if self._kernel == "binary":
+                hits = np.bincount(hit_point[within], minlength=m)
+                if self.backface_rule:
+                    ao[:, j] = np.clip((1.0 - hits / n_rays).astype(np.float32), 0.0, 1.0)
+                else:  # OCCLUDED path of _trace: escaped / N
+                    ao[:, j] = ((n_rays - hits) / n_rays).astype(np.float32)
+            else:
+                rho = np.where(tfar < r, 1.0 - np.exp2(-tfar / np.float32(self._h_local)), np.float32(1.0))
+                mean = rho.reshape(m, n_rays).mean(axis=1, dtype=np.float64).astype(np.float32)
+                ao[:, j] = np.clip(mean, 0.0, 1.0)
+            if self.backface_rule:
+                back = np.bincount(hit_point[within & back_hit], minlength=m)
+                back_ok[:, j] = back / n_rays <= self._threshold
+        return ao, back_ok
+
     def _directions(self, frames: np.ndarray, jitter: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:
         """Fill out (3, m, N) float32 with unit world directions; frames (3, 3, m, 1), jitter (m,) f32.
 
@@ -523,6 +642,13 @@ def _positive(name: str, value: float | None, rel: float, diag: float) -> float:
     if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
         raise NeuralaoError(f"{name} must be a positive finite distance, got {v!r}")
     return float(v)
+
+
+def _radii(values: list[float], diag: float) -> tuple[float, ...]:
+    """Resolve relative radii (``values * diag``), each positive and finite; at least one."""
+    if not isinstance(values, list | tuple) or not values:
+        raise NeuralaoError(f"radii must be a non-empty list of positive distances, got {values!r}")
+    return tuple(_positive("radius", None, float(v), diag) for v in values)
 
 
 def _run_chunks(

@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from helpers import box, floor_quad, merge
 
 from export.field import export_checkpoint, parity, random_inputs
 from export.onnx_io import load_onnx, run_onnxruntime
@@ -34,8 +35,6 @@ from pipeline.field import (
 from pipeline.gbuffer import GBufferRenderer
 from pipeline.labels import LabelSettings
 from pipeline.scene import load_scene
-
-from helpers import box, floor_quad, merge
 
 FAST = FieldSettings(hidden=[16, 8], octaves=3, samples=4096, steps=300, check_every=100, holdout_views=1,
                      holdout_size=(48, 48), labels=LabelSettings(rays=32))  # fmt: skip

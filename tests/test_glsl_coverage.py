@@ -233,6 +233,7 @@ def test_symbolic_sizes_same_ceil_and_transpose():
         ("Softplus", {}, 30.0),  # |x| to ~100: max(x, 0) + log(1 + exp(-|x|)) must not overflow
         ("HardSigmoid", {}, 3.0),
         ("HardSigmoid", {"alpha": 0.5, "beta": 0.1}, 3.0),
+        ("HardSwish", {}, 6.0),  # both kinks (x = -3, 3) and the linear tail
         ("Sin", {}, 3.0),
         ("Cos", {}, 3.0),
     ],
@@ -425,3 +426,60 @@ def test_refused_global_pool_on_padded_dynamic_input():
     nodes = [oh.make_node("AveragePool", ["x"], ["a"], name="half", kernel_shape=[2, 2], strides=[2, 2]),
              oh.make_node("GlobalAveragePool", ["a"], ["y"], name="gap")]  # fmt: skip
     _error(_model(nodes, in_shape=(1, C, "H", "W")), "GlobalAveragePool", "gap", "pad_multiple")
+
+
+# ----------------------------------------------------------------------------- constant folding (shape arithmetic)
+
+
+def _const(name, value):
+    return oh.make_node("Constant", [], [name], name=f"const {name}", value=nh.from_array(np.asarray(value)))
+
+
+def test_pad_with_pads_computed_as_torch_writes_them():
+    """torch.onnx.export of F.pad(x, (1, 2, 3, 0), mode="reflect") (and Conv2d(padding_mode="reflect")):
+    the pads come from ConstantOfShape, Concat, Reshape, Slice, Transpose, Reshape and Cast."""
+    nodes = [
+        _const("lrtb", np.array([1, 2, 3, 0], np.int64)), _const("n4", np.array([4], np.int64)),
+        oh.make_node("ConstantOfShape", ["n4"], ["zeros"], name="zeros", value=nh.from_array(np.zeros(1, np.int64))),
+        oh.make_node("Concat", ["lrtb", "zeros"], ["p8"], name="cat", axis=0),
+        _const("s2", np.array([-1, 2], np.int64)), oh.make_node("Reshape", ["p8", "s2"], ["p42"], name="pairs"),
+        _const("st", np.array([-1], np.int64)), _const("en", np.array([-(2**63) + 1], np.int64)),
+        _const("ax", np.array([0], np.int64)), _const("sp", np.array([-1], np.int64)),
+        oh.make_node("Slice", ["p42", "st", "en", "ax", "sp"], ["rev"], name="reverse"),
+        oh.make_node("Transpose", ["rev"], ["t"], name="transpose", perm=[1, 0]),
+        _const("flat", np.array([-1], np.int64)), oh.make_node("Reshape", ["t", "flat"], ["pf"], name="flatten"),
+        oh.make_node("Cast", ["pf"], ["pads"], name="cast", to=TensorProto.INT64),
+        oh.make_node("Pad", ["x", "pads"], ["y"], name="pad", mode="reflect"),
+    ]  # fmt: skip
+    program = _check(_model(nodes), _x())
+    assert _kinds(program) == [("spatial_pad", ["Pad"])]
+
+
+def test_resize_to_a_static_shape_read_with_shape_gather_unsqueeze():
+    """F.interpolate(pooled, size=x.shape[2:]) on a static input: Shape, Gather, Unsqueeze, Squeeze, Concat."""
+    nodes = [
+        oh.make_node("AveragePool", ["x"], ["a"], name="pool", kernel_shape=[2, 2], strides=[2, 2]),
+        oh.make_node("Shape", ["x"], ["shp"], name="shape"),
+        _const("i2", np.array(2, np.int64)), _const("i3", np.array([3], np.int64)), _const("z", np.array([0], np.int64)),
+        oh.make_node("Gather", ["shp", "i2"], ["h"], name="gather h"),
+        oh.make_node("Gather", ["shp", "i3"], ["w1"], name="gather w"),
+        oh.make_node("Squeeze", ["w1", "z"], ["w"], name="squeeze"),
+        oh.make_node("Unsqueeze", ["h", "z"], ["h1"], name="unsqueeze h"),
+        oh.make_node("Unsqueeze", ["w", "z"], ["w2"], name="unsqueeze w"),
+        oh.make_node("Shape", ["a"], ["nc"], name="shape nc", end=2),
+        oh.make_node("Concat", ["nc", "h1", "w2"], ["sizes"], name="sizes", axis=0),
+        oh.make_node("Resize", ["a", "", "", "sizes"], ["y"], name="resize", mode="linear"),
+    ]  # fmt: skip
+    program = _check(_model(nodes), _x())
+    assert [k for k, _ in _kinds(program)] == ["pool_avg", "resize_linear"]
+
+
+def test_folded_ops_refuse_images_and_dynamic_shapes():
+    _error(_model([_node("Reshape", ("x", "s"))], [("s", np.array([1, -1], np.int64))]), "Reshape", "my reshape",
+           "image tensor", "constants only")  # fmt: skip
+    _error(_model([_node("Transpose", perm=[0, 1, 3, 2])]), "Transpose", "my transpose", "constants only")
+    nodes = [oh.make_node("Shape", ["x"], ["s"], name="shape"),
+             oh.make_node("Resize", ["x", "", "", "s"], ["y"], name="resize")]  # fmt: skip
+    _error(_model(nodes, in_shape=(1, C, "H", "W")), "Shape", "shape", "dynamic size")
+    big = [oh.make_node("ConstantOfShape", ["n"], ["z"], name="big"), oh.make_node("Add", ["x", "z"], ["y"], name="add")]
+    _error(_model(big, [("n", np.array([1 << 20], np.int64))]), "ConstantOfShape", "big", "exceeds")

@@ -430,3 +430,62 @@ def test_label_frame_equals_visible_points_then_ao_at_points(spot):
     sub = pix[::3]
     a, v = lab.ao_at_points(points[::3], normals[::3], ids=sub)
     assert np.array_equal(a, ao.reshape(-1)[sub]) and np.array_equal(v & exact[::3], valid.reshape(-1)[sub])
+
+
+# ----------------------------------------------------------------------------- several radii, one trace
+
+RADII_REL = [0.02, 0.05, 0.1, 0.25, 0.6]
+
+
+@pytest.mark.parametrize("kernel", ["binary", "obscurance"])
+@pytest.mark.parametrize("threshold", [0.25, None])
+def test_radii_from_one_trace_equal_separate_traces(spot, spot_samples, kernel, threshold):
+    # One INTERSECT to the largest radius, then per radius: bit-identical to a separate trace with
+    # max_distance = r (the same rays, the same hit test, the same arithmetic), ao and validity.
+    pts, normals = spot_samples
+    settings = LabelSettings(
+        rays=64, kernel=kernel, backface_threshold=threshold, seed=3, radii_rel=RADII_REL
+    )
+    lab = Labeller(spot, settings)
+    ao, valid = lab.ao_radii_at_points(pts, normals)
+    assert ao.shape == valid.shape == (len(pts), len(RADII_REL)) and ao.dtype == np.float32
+    assert lab.radii == tuple(r * spot.diagonal for r in RADII_REL)
+    for j, r in enumerate(lab.radii):
+        lab.settings = replace(settings, max_distance=r)
+        ao_r, valid_r = lab.ao_at_points(pts, normals)
+        assert np.array_equal(ao[:, j], ao_r), f"radius {j}: {np.count_nonzero(ao[:, j] != ao_r)} differ"
+        assert np.array_equal(valid[:, j], valid_r)
+    # Something actually varies with the radius (else the equality above would be vacuous).
+    assert ao[:, 0].mean() > ao[:, -1].mean() + 0.02
+
+
+@pytest.mark.parametrize("kernel", ["binary", "obscurance"])
+def test_ao_does_not_increase_with_radius(spot, kernel):
+    # A ray blocked within r is blocked within any r' > r (binary); rho only drops as hits within
+    # reach are added (obscurance): so per pixel, and so on average, AO cannot rise with the radius.
+    frame = _spot_frame(spot, 32)
+    lab = Labeller(spot, LabelSettings(rays=32, kernel=kernel, seed=2, radii_rel=RADII_REL))
+    ao, valid = lab.label_frame_radii(frame)
+    fg = frame["tri_id"] >= 0
+    assert ao.shape == (*fg.shape, len(RADII_REL)) and np.all(ao[~fg] == 1.0) and not valid[~fg].any()
+    assert np.all(np.diff(ao, axis=-1) <= 0)
+    means = ao[fg].mean(axis=0)
+    assert np.all(np.diff(means) < 0), means
+    # The frame version is the points version on the visible points (as label_frame is).
+    points, normals, pix, exact = lab.visible_points(frame)
+    a, v = lab.ao_radii_at_points(points, normals, ids=pix)
+    assert np.array_equal(a, ao.reshape(-1, len(RADII_REL))[pix])
+    assert np.array_equal(v & exact[:, None], valid.reshape(-1, len(RADII_REL))[pix])
+
+
+def test_radii_settings_are_validated(spot):
+    lab = Labeller(spot, LabelSettings(rays=8))
+    assert lab.radii is None
+    with pytest.raises(NeuralaoError, match="radii"):
+        lab.ao_radii_at_points(np.zeros((1, 3)), np.ones((1, 3)))
+    for bad in ([], [0.1, -0.2], [float("nan")]):
+        with pytest.raises(NeuralaoError, match="radi"):
+            Labeller(spot, LabelSettings(rays=8, radii_rel=bad))
+    # Explicit radii (scene units) override the settings and need not be sorted.
+    a, _ = lab.ao_radii_at_points(spot.vertices[:5], spot.vertex_normals[:5], radii=[0.5, 0.1])
+    assert a.shape == (5, 2) and np.all(a[:, 0] <= a[:, 1])
