@@ -133,8 +133,8 @@ def render_markdown(selection: dict, heading: str = "# Model selection") -> str:
         for scene, e in selection["scenes"].items():
             tried = ", ".join(f"{c['name']} ({c['ssim']:.3f})" for c in e["tried"])
             chosen = e["chosen"] + ("" if e["met_target"] else " (target not met: best SSIM)")
-            saved_b = f"{_kib(e.get('bytes_saved'))} ({e['bytes_ratio']:.2f}x)" if "bytes_ratio" in e else "-"
-            saved_t = f"{_ms(e.get('seconds_saved'))} ({e['time_ratio']:.2f}x)" if "time_ratio" in e else "-"
+            saved_b = f"{_kib(e.get('bytes_saved'))} ({e['bytes_ratio']:.3g}x)" if "bytes_ratio" in e else "-"
+            saved_t = f"{_ms(e.get('seconds_saved'))} ({e['time_ratio']:.3g}x)" if "time_ratio" in e else "-"
             lines.append(
                 f"| {scene} | {chosen} | {e['ssim']:.3f} | {_kib(e['bytes'])} | {_ms(e['seconds'])} | {tried} | "
                 f"{e['largest']} | {saved_b} | {saved_t} |"
@@ -167,9 +167,9 @@ def render_targets_markdown(selections: dict[float, dict], heading: str = "## Se
             cells.append(f"{_kib(e['bytes'])} / {_ms(e['seconds'])}")
             saved = []
             if "bytes_ratio" in e:
-                saved.append(f"{e['bytes_ratio']:.3f}x bytes")
+                saved.append(f"{e['bytes_ratio']:.3g}x bytes")
             if "time_ratio" in e:
-                saved.append(f"{e['time_ratio']:.2f}x time")
+                saved.append(f"{e['time_ratio']:.3g}x time")
             cells.append(", ".join(saved) or "-")
         lines.append(f"| {scene} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
