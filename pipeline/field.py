@@ -452,19 +452,16 @@ def resolve_source(data, scene_name, mesh, settings: FieldSettings):
     if mesh is not None:
         return load_scene(mesh), settings, None
     from .config import from_dict
-    from .dataset import open_dataset
+    from .dataset import open_dataset, scene_of
 
     ds = open_dataset(data)
     if scene_name not in ds.scenes:
         raise NeuralaoError(f"scene {scene_name!r} is not in {data} (has {sorted(ds.scenes)})")
     labels = from_dict(LabelSettings, dict(ds.label_settings))
     labels = replace(labels, workers=settings.labels.workers)
-    mesh_path = ds.manifest["scenes"][scene_name].get("mesh")
-    if not mesh_path:
-        raise NeuralaoError(f"scene {scene_name!r} of {data} has no single mesh to train a field on")
     frames = [{k: f[k] for k in ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id", "yfov",
                                  "znear", "zfar")} for f in ds.frames(scene=scene_name, holdout=True)]  # fmt: skip
-    return load_scene(mesh_path, name=scene_name), replace(settings, labels=labels, holdout_views=0), frames
+    return scene_of(ds.manifest, scene_name), replace(settings, labels=labels, holdout_views=0), frames
 
 
 def train(settings: FieldSettings, out, data=None, scene=None, mesh=None, progress=False, samples=None) -> dict:

@@ -411,17 +411,16 @@ class SceneContext:
     def __init__(
         self,
         name: str,
-        mesh: str,
+        scene,
         label_settings,
         settings: ReportSettings,
         cache: Path | None,
         progress: bool,
     ):
         from .labels import Labeller
-        from .scene import load_scene
 
         self.name = name
-        self.scene = load_scene(mesh, name=name)
+        self.scene = scene
         self.labeller = Labeller(self.scene, label_settings)
         self.radius = self.labeller.max_distance
         self.settings = settings
@@ -528,7 +527,7 @@ def evaluate(
 
     from runtime import gl
 
-    from .dataset import open_dataset
+    from .dataset import open_dataset, scene_of
     from .metrics import masked_rmse, masked_ssim
 
     check_settings(settings)
@@ -554,9 +553,9 @@ def evaluate(
     total = sum(len(v) for v in frames_by_scene.values())
     bar = tqdm(total=total, desc="report", unit="frame", disable=not progress)
     for scene_name, frames in frames_by_scene.items():
-        mesh = ds.manifest["scenes"][scene_name]["mesh"]
         try:
-            ctx = SceneContext(scene_name, mesh, label_settings, settings, bake_cache, progress=False)
+            scene = scene_of(ds.manifest, scene_name)  # a mesh, or a composed scene rebuilt from its seed
+            ctx = SceneContext(scene_name, scene, label_settings, settings, bake_cache, progress=False)
         except NeuralaoError as e:
             log.warning("scene %s skipped: %s", scene_name, e)
             scene_info[scene_name] = {"skipped": str(e)}
