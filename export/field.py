@@ -256,16 +256,9 @@ def infer_frame(onnx_path, frame: dict) -> np.ndarray:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    path = export_dir / "manifest.json"
-    if not path.is_file():
-        raise NeuralaoError(f"no export manifest at {path}")
-    try:
-        manifest = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{path} is corrupt") from None
-    if manifest.get("kind") != "field":
-        raise NeuralaoError(f"{export_dir} is not a field export (kind {manifest.get('kind')!r})")
-    return manifest
+    from .parity import read_manifest as read_export_manifest
+
+    return read_export_manifest(export_dir, "field", "a field")
 
 
 def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ...] = DIALECTS) -> dict:

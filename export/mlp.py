@@ -337,16 +337,9 @@ def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    path = export_dir / "manifest.json"
-    if not path.is_file():
-        raise NeuralaoError(f"no export manifest at {path}")
-    try:
-        manifest = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{path} is corrupt") from None
-    if manifest.get("kind") != "mlp":
-        raise NeuralaoError(f"{export_dir} is not an MLP export (kind {manifest.get('kind')!r})")
-    return manifest
+    from .parity import read_manifest as read_export_manifest
+
+    return read_export_manifest(export_dir, "mlp", "an MLP")
 
 
 def render_parity_frames(mesh: str, views: int = 2, size: tuple[int, int] = (128, 128)) -> list[dict]:

@@ -30,7 +30,6 @@ per graph input; vector: one (H, W, 4) array per texture).
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import re
 from pathlib import Path
@@ -158,15 +157,9 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    try:
-        manifest = json.loads((Path(export_dir) / "manifest.json").read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"no manifest.json in {export_dir}") from None
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{export_dir}/manifest.json is corrupt") from None
-    if manifest.get("kind") != KIND:
-        raise NeuralaoError(f"{export_dir} is not a `neuralao glsl` export (kind {manifest.get('kind')!r})")
-    return manifest
+    from .parity import read_manifest as read_export_manifest
+
+    return read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
 
 
 def _shape(dims: list, size: tuple[int, int], what: str) -> tuple[int, ...]:

@@ -27,11 +27,18 @@ def export_dirs(root: Path) -> list[Path]:
     return dirs
 
 
-def read_manifest(d: Path) -> dict:
+def read_manifest(d: str | Path, kind: str | None = None, label: str = "") -> dict:
+    """An export folder's manifest.json; with ``kind``, one of that kind (``label`` names it in errors)."""
+    path = Path(d) / "manifest.json"
     try:
-        return json.loads((d / "manifest.json").read_text())
+        manifest = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise NeuralaoError(f"no export manifest at {path}") from None
     except json.JSONDecodeError:
-        raise NeuralaoError(f"{d / 'manifest.json'} is corrupt") from None
+        raise NeuralaoError(f"{path} is corrupt") from None
+    if kind is not None and manifest.get("kind") != kind:
+        raise NeuralaoError(f"{d} is not {label or kind} export (kind {manifest.get('kind')!r})")
+    return manifest
 
 
 def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dict] | None:

@@ -19,6 +19,27 @@ from .io import atomic_path
 REQUIRED_KEYS = ("model_args", "state_dict", "config")
 
 
+def per_mesh_checkpoint(kind: str, format_version: int, model: nn.Module, model_args: dict, config: dict,
+                        samples_info: dict, metrics: dict, train_info: dict, parameter_bytes: int) -> dict:
+    """The checkpoint of a per-mesh network (baked MLP, AO field): model, settings, samples, metrics."""
+    return {
+        "kind": kind,
+        "format_version": format_version,
+        "model_args": model_args,
+        "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+        "config": config,
+        "metrics": metrics,
+        "scene": samples_info.get("scene"),
+        "mesh": samples_info.get("mesh"),
+        "samples": samples_info,
+        "training": {k: v for k, v in train_info.items() if k != "seconds"},
+        "training_time_s": float(train_info["seconds"]),
+        "parameters": int(sum(p.numel() for p in model.parameters())),
+        "parameter_bytes": int(parameter_bytes),
+        "torch_version": str(torch.__version__),
+    }
+
+
 def save_checkpoint(path: str | Path, ckpt: dict) -> None:
     with atomic_path(path) as tmp:
         torch.save(ckpt, tmp)

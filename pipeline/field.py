@@ -52,7 +52,7 @@ import torch
 from torch import nn
 
 from .checkpoint import load_checkpoint as _load_checkpoint
-from .checkpoint import restore_model, save_checkpoint
+from .checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .labels import LabelSettings
@@ -415,22 +415,8 @@ def compute_metrics(model: FieldNet, samples: FieldSamples) -> dict:
 
 
 def make_checkpoint(model: FieldNet, settings: FieldSettings, samples: FieldSamples, metrics: dict, info: dict) -> dict:
-    return {
-        "kind": KIND,
-        "format_version": FORMAT_VERSION,
-        "model_args": model_args_dict(model),
-        "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
-        "config": settings_to_dict(settings),
-        "metrics": metrics,
-        "scene": samples.info.get("scene"),
-        "mesh": samples.info.get("mesh"),
-        "samples": samples.info,
-        "training": {k: v for k, v in info.items() if k != "seconds"},
-        "training_time_s": float(info["seconds"]),
-        "parameters": count_parameters(model),
-        "parameter_bytes": parameter_bytes(model),
-        "torch_version": str(torch.__version__),
-    }
+    return per_mesh_checkpoint(KIND, FORMAT_VERSION, model, model_args_dict(model), settings_to_dict(settings),
+                               samples.info, metrics, info, parameter_bytes(model))  # fmt: skip
 
 
 def load_checkpoint(path: str | Path) -> dict:

@@ -269,6 +269,11 @@ class Labeller:
                   (seed, id, normal), never on the batch it is in.
         Returns ao (n,) float32 in [0, 1] and valid (n,) bool.
         """
+        local, normals, ids = self._local_points(points, normals, ids)
+        return self._ao_local(local, normals, ids, progress)
+
+    def _local_points(self, points, normals, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Checked float64 points in local units, float64 normals and int64 ids (default arange(n))."""
         points = np.asarray(points, dtype=np.float64)
         normals = np.asarray(normals, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
@@ -278,8 +283,7 @@ class Labeller:
         ids = np.arange(len(points), dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
         if ids.shape != (len(points),):
             raise NeuralaoError(f"ids must be ({len(points)},), got {ids.shape}")
-        local = (points - self._center) / self._scale
-        return self._ao_local(local, normals, ids, progress)
+        return (points - self._center) / self._scale, normals, ids
 
     def label_frame(self, frame: dict, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """AO labels of a G-buffer frame.
@@ -319,16 +323,7 @@ class Labeller:
         Returns ao (n, k) float32 in [0, 1] and valid (n, k) bool (the back-face rule per radius).
         """
         radii_local = self._radii_local(radii)
-        points = np.asarray(points, dtype=np.float64)
-        normals = np.asarray(normals, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
-            raise NeuralaoError(
-                f"points and normals must both be (n, 3); got {points.shape} and {normals.shape}"
-            )
-        ids = np.arange(len(points), dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
-        if ids.shape != (len(points),):
-            raise NeuralaoError(f"ids must be ({len(points)},), got {ids.shape}")
-        local = (points - self._center) / self._scale
+        local, normals, ids = self._local_points(points, normals, ids)
         return self._ao_local(local, normals, ids, progress, radii_local)
 
     def label_frame_radii(

@@ -92,7 +92,6 @@ class _MLPPass:
         self.prog = _program(vertex=vert, fragment=frag)
         self.names = texture_names(shader)
         self.inputs = [gl.create_texture(self.w, self.h, self.internal) for _ in self.names]
-        self.gbuffer = self.inputs[0]
         self.out = gl.create_texture(self.w, self.h, self.internal)
         self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
         GL.glUseProgram(self.prog)
@@ -108,10 +107,6 @@ class _MLPPass:
             GL.glUniformBlockBinding(self.prog, index, binding)
             buf = gl.create_buffer(np.ascontiguousarray(data, np.float32), target=GL.GL_UNIFORM_BUFFER)
             self.ubos.append((binding, buf))
-
-    def upload(self, normal: np.ndarray, mask: np.ndarray) -> None:
-        g = np.concatenate([normal.astype(np.float32), mask.astype(np.float32)[..., None]], axis=-1)
-        gl.upload_texture(self.gbuffer, g, self.internal)
 
     def upload_all(self, textures: dict[str, np.ndarray]) -> None:
         for name, tex in zip(self.names, self.inputs, strict=True):
@@ -163,18 +158,8 @@ def run_mlp_fragment(
         raise NeuralaoError(
             f"expected normal_obj (H, W, 3) and mask (H, W), got {normal_obj.shape}, {mask.shape}"
         )
-    sh, vert, frag = _mlp(shader, dialect)
-    m = sh.output_width
-    if mask.size == 0:  # no pixel to draw (GL rejects zero-sized textures): an empty result
-        return np.ones(mask.shape if m == 1 else (*mask.shape, m), np.float32)
-    p = _MLPPass(sh, vert, frag, normal_obj.shape[0], normal_obj.shape[1], fp16)
-    try:
-        p.upload(normal_obj, mask)
-        p.draw()
-        out = p.read()
-    finally:
-        p.release()
-    return out[..., 0].copy() if m == 1 else out[..., :m].copy()
+    g = np.concatenate([normal_obj, mask.astype(np.float32)[..., None]], axis=-1)
+    return run_vector_fragment(shader, {"gbuffer": g}, fp16=fp16, dialect=dialect)
 
 
 def time_mlp_fragment(
@@ -187,16 +172,11 @@ def time_mlp_fragment(
     dialect: str | None = None,
 ) -> float:
     """Median seconds per full-screen MLP pass at width x height (random unit normals, all foreground)."""
-    sh, vert, frag = _mlp(shader, dialect)
     rng = np.random.default_rng(0)
     n = rng.normal(size=(height, width, 3)).astype(np.float32)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    p = _MLPPass(sh, vert, frag, height, width, fp16)
-    try:
-        p.upload(n, np.ones((height, width), bool))
-        return _median_time(p.draw, repeats, warmup)
-    finally:
-        p.release()
+    g = np.concatenate([n, np.ones((height, width, 1), np.float32)], axis=-1)
+    return time_vector_fragment(shader, height, width, repeats, warmup, fp16, dialect, textures={"gbuffer": g})
 
 
 def run_vector_fragment(
@@ -241,15 +221,18 @@ def time_vector_fragment(
     warmup: int = 3,
     fp16: bool = False,
     dialect: str | None = None,
+    textures: dict[str, np.ndarray] | None = None,
 ) -> float:
-    """Median seconds per full-screen pass at width x height: random inputs in [-1, 1], all foreground."""
+    """Median seconds per full-screen pass at width x height: the given textures, or random inputs in
+    [-1, 1] with every pixel foreground."""
     sh, vert, frag = _mlp(shader, dialect)
-    rng = np.random.default_rng(0)
-    textures = {}
-    for name in texture_names(sh):
-        t = rng.uniform(-1, 1, size=(height, width, 4)).astype(np.float32)
-        t[..., 3] = 1.0
-        textures[name] = t
+    if textures is None:
+        rng = np.random.default_rng(0)
+        textures = {}
+        for name in texture_names(sh):
+            t = rng.uniform(-1, 1, size=(height, width, 4)).astype(np.float32)
+            t[..., 3] = 1.0
+            textures[name] = t
     p = _MLPPass(sh, vert, frag, height, width, fp16)
     try:
         p.upload_all(textures)
