@@ -4,7 +4,8 @@ The model's kind comes from its ONNX metadata (``neuralao_kind``); each kind's m
 ``infer_frame(onnx_path, frame) -> ao (H, W) float32`` (AO in [0, 1], 1 on background):
 
 * ``mlp``:  :func:`export.mlp.infer_frame` (object-space normals, radius-zero input);
-* ``unet``: :func:`export.unet.infer_frame` (depth + camera-space normals).
+* ``unet``: :func:`export.unet.infer_frame` (depth + camera-space normals);
+* ``field``: :func:`export.field.infer_frame` (object-space position + normal).
 
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
 ``mask``, ...); a dataset shard (frames stacked on a first axis) works with ``--index K``.
@@ -28,7 +29,7 @@ from pipeline.io import read_npz, write_png
 log = logging.getLogger(__name__)
 
 # neuralao_kind -> module with infer_frame(onnx_path, frame)
-INFERERS = {"mlp": "export.mlp", "unet": "export.unet"}
+INFERERS = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field"}
 ALBEDO = np.array([0.82, 0.78, 0.72], dtype=np.float32)  # a light clay colour
 BACKGROUND = np.array([0.93, 0.94, 0.96], dtype=np.float32)
 LIGHT_CAM = np.array([-0.3, 0.4, 1.0]) / np.linalg.norm(

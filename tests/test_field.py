@@ -182,3 +182,27 @@ def test_cli_train_export_parity_and_bad_input(tmp_path, capsys):
     assert not (tmp_path / "x.pt").exists()
     errors = [ln for ln in capsys.readouterr().err.splitlines() if "error:" in ln]
     assert len(errors) == 3 and all(ln.startswith("neuralao ") for ln in errors)
+
+
+def test_infer_frame_matches_torch_and_cli(spot_run, tmp_path):
+    """`neuralao infer` on a field ONNX: onnxruntime on a rendered G-buffer equals the torch network."""
+    from PIL import Image
+
+    from export.field import infer_frame
+    from pipeline.camera import orbit
+    from pipeline.field import predict_frame
+    from pipeline.io import write_npz
+
+    root, _ = spot_run
+    scene = load_scene("spot")
+    with GBufferRenderer(scene) as r:
+        frame = r.render(orbit(scene, 1, 40, 30, seed=5)[0])
+    ao = infer_frame(root / "export" / "model.onnx", frame)
+    want = predict_frame(model_from_checkpoint(load_checkpoint(root / "spot.pt")), frame)
+    assert ao.shape == want.shape == (30, 40) and ao.dtype == np.float32
+    assert float(np.abs(ao - want).max()) <= TOL.onnx_vs_torch and (ao[~frame["mask"]] == 1).all()
+    write_npz(tmp_path / "f.npz", **{k: np.asarray(v) for k, v in frame.items()})
+    assert cli.main(["infer", str(root / "export" / "model.onnx"), str(tmp_path / "f.npz"), "--out",
+                     str(tmp_path / "ao.png")]) == 0  # fmt: skip
+    png = np.asarray(Image.open(tmp_path / "ao.png")).astype(float)
+    assert np.abs(png - (ao * 255 + 0.5).astype(np.uint8)).max() <= 1
