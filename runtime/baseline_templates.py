@@ -1,6 +1,6 @@
 """GLSL text of the screen-space AO baselines (SSAO, GTAO, the shared blur), as named templates.
 
-Same habit as :mod:`export.glsl_templates`: every shader string lives here, :func:`fill` substitutes
+Same habit as :mod:`export.glsl.templates`: every shader string lives here, :func:`fill` substitutes
 ``${name}`` fields strictly (a missing or unexpected field is an error), and
 :mod:`runtime.baselines` is the one writer. Values substituted are integers and float literals.
 
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from string import Template
 
-from export.glsl_templates import fill_from
+from export.glsl.templates import fill_from
 
 _T: dict[str, str] = {}
 

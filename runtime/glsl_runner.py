@@ -32,7 +32,7 @@ from export.glsl import (
     load_compute_export,
     load_mlp_export,
 )
-from export.glsl_templates import fill
+from export.glsl.templates import fill
 from pipeline.errors import NeuralaoError
 
 from . import gl

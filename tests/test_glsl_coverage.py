@@ -166,7 +166,7 @@ def test_global_pool(op):
 
 
 def _same_pads(n, k, s, d, upper):
-    """The ONNX spec's auto_pad SAME padding (begin, end), written out independently of export/glsl.py."""
+    """The ONNX spec's auto_pad SAME padding (begin, end), written out independently of export/glsl/."""
     total = max(0, (-(-n // s) - 1) * s + (k - 1) * d + 1 - n)
     small, big = total // 2, total - total // 2
     return (small, big) if upper else (big, small)

@@ -1,6 +1,6 @@
 """Every piece of GLSL text neuralao emits, as named templates, and the one function that fills them.
 
-hls4ml habit: templates here, structure in ``export/glsl.py`` (the writer), nothing else builds
+hls4ml habit: templates here, structure in the writers of ``export/glsl/``, nothing else builds
 shader text. Placeholders are ``${name}`` (:class:`string.Template`; ``$`` never occurs in GLSL, so
 braces need no escaping). :func:`fill` is strict: a missing or an unexpected field is an error, so a
 template and its caller cannot drift apart silently.
@@ -511,7 +511,7 @@ TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.item
 def fill_from(templates: dict[str, Template], template: str, what: str, /, **fields: object) -> str:
     """Fill ``templates[template]``: every placeholder must be given and nothing else (strict, so a
     template and its caller cannot drift apart). Values are converted with ``str``; the caller formats
-    floats (see ``glsl.glsl_float``). Shared by the generated shaders and the baselines'."""
+    floats (see ``export.glsl.graph.glsl_float``). Shared by the generated shaders and the baselines'."""
     try:
         tpl = templates[template]
     except KeyError:

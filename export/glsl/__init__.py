@@ -1,0 +1,135 @@
+"""GLSL generated from the ONNX graph: the baked-MLP fragment shader and the U-Net compute passes.
+
+Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + writer):
+
+* **Op tables.** :class:`VectorOps` (per-pixel dense networks, fragment target) and
+  :class:`ImageOps` (NCHW image networks, compute target) map an ONNX op type to a handler method
+  named exactly after the op, whose positional parameters are the op's inputs and whose
+  keyword-only parameters are the ONNX attributes with the ONNX defaults. Handlers lower the graph to
+  a small IR (dense layers / compute passes) and fuse on the way (bias, batch norm, activations,
+  concat into the consuming conv). An op not in the table, an attribute the handler does not take,
+  or an attribute value it cannot honour raises :class:`NeuralaoError` naming the op and the node.
+* **Dialects.** :class:`Dialect` is desktop GLSL 4.3 (explicit ``binding`` qualifiers);
+  :class:`GLSL330` and :class:`ES300` override only what differs (version line, precision
+  statements, no binding qualifiers: the host binds blocks and samplers, the manifest says where).
+* **Writer.** Only the ``_write_*`` functions of :mod:`.vector` and :mod:`.image` produce shader
+  text, and only by filling the named templates of :mod:`export.glsl.templates`. Identifiers are
+  generated (``t3``, ``w0_1``, ``src0``); ONNX node and tensor names go to the manifest, never into
+  shader source.
+
+Layout (each module imports only those above it):
+
+    templates.py    every GLSL string, as named templates, and :func:`fill`
+    graph.py        OnnxGraph / read_graph, the OpTable base (dispatch), glsl_float and small helpers
+    dialects.py     Dialect, GLSL330, ES300, DIALECTS, FRAGMENT_FILES
+    activations.py  Act (epilogue activations, both targets)
+    vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
+    image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
+    validate.py     glslangValidator
+    files.py        export folders: write_* / load_* for both targets, hashes checked
+
+Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
+
+    generate_mlp_fragment(model, dialect="glsl330", fold_repeated_input=True) -> MLPShader
+    write_mlp_export(shader, out_dir, validate=True) -> Path      (manifest.json path)
+    load_mlp_export(export_dir, dialect="glsl330") -> MLPShader
+    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8)) -> ComputeProgram
+    write_compute_export(program, out_dir, validate=True) -> Path
+    load_compute_export(export_dir) -> ComputeProgram
+    validate_glsl(source, stage) -> None                         (glslangValidator)
+
+The runner is :mod:`runtime.glsl_runner`.
+"""
+
+from .activations import Act
+from .dialects import DIALECTS, ES300, FRAGMENT_FILES, GLSL330, Dialect, get_dialect
+from .files import load_compute_export, load_mlp_export, write_compute_export, write_mlp_export
+from .graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
+from .image import (
+    CONV_KINDS,
+    FOLDED_OPS,
+    MAX_ARRAY_LAYERS,
+    MAX_FILTER_TAPS,
+    MAX_FOLDED_ELEMENTS,
+    MAX_KERNEL,
+    MAX_PARAM_BYTES,
+    MAX_TEXTURE_SIZE,
+    PARAM_ALIGN,
+    ComputeProgram,
+    ConcatValue,
+    Dim,
+    Epilogue,
+    ImageOps,
+    Pass,
+    Texture,
+    generate_compute,
+)
+from .validate import glslang_available, validate_glsl
+from .vector import (
+    MAX_FRAGMENT_UNIFORM_BLOCKS,
+    MAX_STRAIGHT_TILES,
+    MAX_UNIFORM_BLOCK_BYTES,
+    MAX_VECTOR_WIDTH,
+    ConcatOp,
+    DenseOp,
+    InputBinding,
+    MapOp,
+    MLPShader,
+    UniformBlock,
+    VectorOps,
+    VecValue,
+    generate_mlp_fragment,
+    generate_vector_fragment,
+)
+
+__all__ = [
+    "CONV_KINDS",
+    "DIALECTS",
+    "ES300",
+    "FOLDED_OPS",
+    "FORMAT_VERSION",
+    "FRAGMENT_FILES",
+    "GLSL330",
+    "MAX_ARRAY_LAYERS",
+    "MAX_FILTER_TAPS",
+    "MAX_FOLDED_ELEMENTS",
+    "MAX_FRAGMENT_UNIFORM_BLOCKS",
+    "MAX_KERNEL",
+    "MAX_PARAM_BYTES",
+    "MAX_STRAIGHT_TILES",
+    "MAX_TEXTURE_SIZE",
+    "MAX_UNIFORM_BLOCK_BYTES",
+    "MAX_VECTOR_WIDTH",
+    "PARAM_ALIGN",
+    "Act",
+    "ComputeProgram",
+    "ConcatOp",
+    "ConcatValue",
+    "DenseOp",
+    "Dialect",
+    "Dim",
+    "Epilogue",
+    "ImageOps",
+    "InputBinding",
+    "MLPShader",
+    "MapOp",
+    "OnnxGraph",
+    "OpTable",
+    "Pass",
+    "Texture",
+    "UniformBlock",
+    "VecValue",
+    "VectorOps",
+    "generate_compute",
+    "generate_mlp_fragment",
+    "generate_vector_fragment",
+    "get_dialect",
+    "glsl_float",
+    "glslang_available",
+    "load_compute_export",
+    "load_mlp_export",
+    "read_graph",
+    "validate_glsl",
+    "write_compute_export",
+    "write_mlp_export",
+]

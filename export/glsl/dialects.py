@@ -1,0 +1,56 @@
+"""The GLSL dialects: desktop 4.3 (explicit bindings) and the 3.30 / ES 3.00 overrides, and where each
+dialect's fragment-target files go."""
+
+from __future__ import annotations
+
+from pipeline.errors import NeuralaoError
+
+from .templates import fill
+
+
+class Dialect:
+    """Desktop GLSL 4.3 core: explicit ``binding`` qualifiers, no precision statements."""
+
+    name = "glsl430"
+    version = "430 core"
+    precision = "precision_none"
+    explicit_bindings = True
+
+    def header(self) -> str:
+        return fill("header", version=self.version, precision=fill(self.precision))
+
+    def ubo_layout(self, binding: int) -> str:
+        return fill("ubo_layout_binding", binding=binding) if self.explicit_bindings else fill("ubo_layout")
+
+    def sampler2d(self, name: str, binding: int) -> str:
+        if self.explicit_bindings:
+            return fill("sampler2d_decl_binding", name=name, binding=binding)
+        return fill("sampler2d_decl", name=name)
+
+
+class GLSL330(Dialect):
+    """Desktop GLSL 3.30 core: no binding qualifiers (the host binds blocks and samplers)."""
+
+    name = "glsl330"
+    version = "330 core"
+    explicit_bindings = False
+
+
+class ES300(GLSL330):
+    """GLSL ES 3.00: as 3.30, plus highp default precisions."""
+
+    name = "es300"
+    version = "300 es"
+    precision = "precision_es"
+
+
+DIALECTS: dict[str, Dialect] = {d.name: d() for d in (Dialect, GLSL330, ES300)}
+FRAGMENT_FILES = {"glsl330": ("mlp.vert", "mlp.frag"), "es300": ("mlp_es300.vert", "mlp_es300.frag"),
+                  "glsl430": ("mlp_430.vert", "mlp_430.frag")}  # fmt: skip
+
+
+def get_dialect(name: str) -> Dialect:
+    try:
+        return DIALECTS[name]
+    except KeyError:
+        raise NeuralaoError(f"unknown GLSL dialect {name!r} (expected one of {sorted(DIALECTS)})") from None

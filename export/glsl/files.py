@@ -1,0 +1,108 @@
+"""Export folders: write the shaders, parameter files and manifest.json of either target (each file
+atomically, the manifest last, every file hashed in it) and load them back, hashes checked."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import NeuralaoError
+from pipeline.io import write_bytes, write_json
+
+from .dialects import FRAGMENT_FILES
+from .graph import _sha256
+from .image import ComputeProgram
+from .validate import _can_validate, validate_glsl
+from .vector import MLPShader
+
+
+def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    manifest = dict(manifest)
+    manifest["files"] = {name: _sha256(data) for name, data in sorted(files.items())}
+    for name, data in files.items():
+        write_bytes(out_dir / name, data)
+    write_json(out_dir / "manifest.json", manifest)  # last: its presence marks a complete export
+    return out_dir / "manifest.json"
+
+
+def write_mlp_export(shader: MLPShader, out_dir: str | Path, validate: bool = True) -> Path:
+    """Write mlp.vert/.frag (GLSL 3.30), mlp_es300.vert/.frag, mlp_430.vert/.frag, one
+    mlp_block<binding>.bin per uniform block (float32 little-endian std140) and manifest.json,
+    each atomically. ``validate`` runs glslangValidator on every shader first (skipped with a log
+    line when it is not installed). Returns the manifest path."""
+    out_dir = Path(out_dir)
+    files: dict[str, bytes] = {}
+    validate = validate and _can_validate()
+    for name, (vert, frag) in shader.sources.items():
+        vname, fname = FRAGMENT_FILES[name]
+        if validate:
+            validate_glsl(vert, "vert")
+            validate_glsl(frag, "frag")
+        files[vname], files[fname] = vert.encode(), frag.encode()
+    for b in shader.manifest["uniform_blocks"]:
+        data = next(arr for (n, _, arr) in shader.uniform_blocks if n == b["name"])
+        files[b["file"]] = np.ascontiguousarray(data, dtype="<f4").tobytes()
+    return _write_export_files(out_dir, files, shader.manifest)
+
+
+def _read_export(export_dir: str | Path) -> tuple[Path, dict]:
+    d = Path(export_dir)
+    try:
+        manifest = json.loads((d / "manifest.json").read_text())
+    except FileNotFoundError:
+        raise NeuralaoError(f"no manifest.json in {d}") from None
+    except json.JSONDecodeError:
+        raise NeuralaoError(f"{d / 'manifest.json'} is corrupt") from None
+    return d, manifest
+
+
+def _read_checked(d: Path, manifest: dict, name: str) -> bytes:
+    try:
+        data = (d / name).read_bytes()
+    except FileNotFoundError:
+        raise NeuralaoError(f"export {d} lacks {name}") from None
+    want = manifest.get("files", {}).get(name)
+    if want is not None and _sha256(data) != want:
+        raise NeuralaoError(f"{d / name} does not match its manifest hash (modified or truncated)")
+    return data
+
+
+def load_mlp_export(export_dir: str | Path, dialect: str = "glsl330") -> MLPShader:
+    """Rebuild an :class:`MLPShader` from an export folder (what an engine reads)."""
+    d, manifest = _read_export(export_dir)
+    if manifest.get("format") != "neuralao-glsl-fragment":
+        raise NeuralaoError(f"{d} is not a fragment-shader export")
+    sources = {}
+    for name, files in manifest["dialects"].items():
+        sources[name] = (_read_checked(d, manifest, files["vertex"]).decode(),
+                         _read_checked(d, manifest, files["fragment"]).decode())  # fmt: skip
+    if dialect not in sources:
+        raise NeuralaoError(f"export {d} has no {dialect!r} shaders")
+    ubos = [(b["name"], int(b["binding"]), np.frombuffer(_read_checked(d, manifest, b["file"]), dtype="<f4").copy())
+            for b in manifest["uniform_blocks"]]  # fmt: skip
+    return MLPShader(sources[dialect][1], sources[dialect][0], ubos, manifest, dialect, sources)
+
+
+def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate: bool = True) -> Path:
+    """Write every pass as <name>.comp, weights.bin and manifest.json (atomically); returns the manifest path."""
+    files: dict[str, bytes] = {}
+    validate = validate and _can_validate()
+    for name, src in program.sources.items():
+        if validate:
+            validate_glsl(src, "comp")
+        files[name] = src.encode()
+    files["weights.bin"] = program.weights
+    return _write_export_files(Path(out_dir), files, program.manifest)
+
+
+def load_compute_export(export_dir: str | Path) -> ComputeProgram:
+    """Rebuild a :class:`ComputeProgram` from an export folder (manifest + shaders + weights.bin)."""
+    d, manifest = _read_export(export_dir)
+    if manifest.get("format") != "neuralao-glsl-compute":
+        raise NeuralaoError(f"{d} is not a compute-shader export")
+    sources = {p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in manifest["passes"]}
+    weights = _read_checked(d, manifest, manifest["weights"]["file"])
+    return ComputeProgram(sources, weights, manifest)
