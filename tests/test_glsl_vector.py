@@ -196,3 +196,29 @@ def test_image_target_does_not_fuse_into_a_value_already_read():
     got = run_compute(generate_compute(model), x)
     assert got.shape == ref.shape and got.dtype == ref.dtype
     assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+@pytest.mark.parametrize("weights", ["uniform", "constant"])
+def test_weights_as_uniform_blocks_or_constants_run_from_disk(weights, tmp_path):
+    """Both weight placements match onnxruntime, from the files on disk; constants need no blocks."""
+    from export.glsl import write_mlp_export
+
+    rng = np.random.default_rng(7)
+    nodes = [oh.make_node("Gemm", ["x", "w1", "b1"], ["h"], name="l1"),
+             oh.make_node("Tanh", ["h"], ["t"], name="t"),
+             oh.make_node("Gemm", ["t", "w2", "b2"], ["y"], name="l2")]  # fmt: skip
+    inits = [("w1", rng.normal(size=(3, 12))), ("b1", rng.normal(size=12)), ("w2", rng.normal(size=(12, 2))),
+             ("b2", rng.normal(size=2))]  # fmt: skip
+    model = _model(nodes, {"x": 3}, 2, inits)
+    shader = generate_vector_fragment(model, ONE, kind="test", weights=weights)
+    assert (shader.manifest["uniform_blocks"] == []) == (weights == "constant")
+    assert shader.manifest["weights"].startswith(weights)
+    assert ("const mat4 " in shader.fragment_source) == (weights == "constant")
+    write_mlp_export(shader, tmp_path / "e")
+    tex, mask = _textures(["gbuffer"])
+    ref = run_onnxruntime(model.SerializeToString(), {"x": tex["gbuffer"][..., :3].reshape(-1, 3)})[0]
+    for d in ("glsl330", "es300"):
+        got = run_vector_fragment(tmp_path / "e", tex, dialect=d)
+        assert float(np.abs(got[mask] - ref.reshape(H, W, 2)[mask]).max()) <= TOL.glsl_op_fp32
+    with pytest.raises(NeuralaoError, match="weights must be"):
+        generate_vector_fragment(model, ONE, weights="bogus")

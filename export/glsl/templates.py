@@ -98,7 +98,7 @@ _T["ubo_member"] = "    ${type} ${name}[${count}];"
 
 _T["vector_fragment"] = """${header}
 // ${description}
-// Generated from the ONNX graph; ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes.
+// Generated from the ONNX graph; ${weights}
 
 ${prelude}
 
@@ -124,6 +124,11 @@ ${body}
     o_result = ${result};
 }
 """
+
+_T["weights_uniform"] = "weights in ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes."
+_T["weights_constant"] = "weights as const arrays in this source (nothing to bind)."
+_T["const_array"] = "const ${type} ${name}[${count}] = ${type}[${count}](${items});"
+_T["const_item"] = "${type}(${values})"
 
 _T["texel_fetch"] = "    vec4 g${index} = texelFetch(${sampler}, ivec2(gl_FragCoord.xy), 0);"
 
