@@ -127,7 +127,7 @@ def test_mlp_out_of_range_inputs_stay_finite():
 def test_mlp_64x32_uniform_blocks_fit_16k(tmp_path):
     net = _torch_mlp((48, 64, 32, 1), seed=3)
     model = _export_mlp(net)
-    shader = generate_mlp_fragment(model, fold_repeated_input=False)
+    shader = generate_mlp_fragment(model, fold_repeated_input=False, weights="uniform")
     assert shader.manifest["parameter_bytes_fp32"] == 20996
     assert len(shader.uniform_blocks) >= 2
     assert all(arr.nbytes <= MAX_UNIFORM_BLOCK_BYTES for _, _, arr in shader.uniform_blocks)

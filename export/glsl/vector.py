@@ -457,6 +457,8 @@ def _concat_copies(op: ConcatOp) -> list[str]:
 # compiles super-linearly in its length (a 100-tile layer took 61 s), while a rolled loop over rows with
 # the products of one row written out compiles in about a second and runs at the same speed.
 MAX_STRAIGHT_TILES = 32
+# weights="auto" writes at most this many floats (padded tiles, biases, constants) as const arrays.
+MAX_CONSTANT_WEIGHTS = 8192
 
 
 def _dense_rows(op: DenseOp) -> list[str]:
@@ -564,7 +566,7 @@ def _write_fullscreen_vertex(d: Dialect) -> str:
 
 
 def generate_mlp_fragment(
-    model: onnx.ModelProto, dialect: str = "glsl330", fold_repeated_input: bool = True
+    model: onnx.ModelProto, dialect: str = "glsl330", fold_repeated_input: bool = True, weights: str = "auto"
 ) -> MLPShader:
     """Baked-MLP fragment shader from an ONNX graph (N, 3k) -> (N, m<=4), k normals repeated.
 
@@ -573,9 +575,9 @@ def generate_mlp_fragment(
     Erra et al.), evaluates the network and writes its m outputs to ``o_result`` (location 0);
     background pixels get 1. ``fold_repeated_input`` folds the k column blocks of the first layer
     into one (out, 3) matrix (same function, k times fewer multiply-adds); False keeps the literal
-    network. Weights: std140 uniform blocks, one or more per layer, each <= 16384 bytes.
+    network. ``weights``: see :func:`generate_vector_fragment` (uniform blocks are <= 16384 bytes each).
     """
-    return generate_vector_fragment(model, None, dialect, fold_repeated_input)
+    return generate_vector_fragment(model, None, dialect, fold_repeated_input, weights=weights)
 
 
 def generate_vector_fragment(
@@ -590,10 +592,12 @@ def generate_vector_fragment(
     """Fragment shader of any per-pixel network (N, k_i) inputs -> (N, m<=4) in the vector op set.
 
     ``weights``: "uniform" (std140 uniform blocks, swappable without recompiling), "constant" (``const``
-    arrays in the shader source: nothing to bind, and on llvmpipe a 16x8 MLP ran 6x faster, 28 -> 4.6 ms at
-    512x512, because the compiler folds them into the straight-line code), or "auto": constant when every
-    dense layer is straight-line (<= MAX_STRAIGHT_TILES tiles; looped layers index dynamically and
-    gained nothing), else uniform.
+    arrays in the shader source: nothing to bind, and the compiler folds them into the code), or "auto":
+    constant when every dense layer is straight-line and there are at most MAX_CONSTANT_WEIGHTS floats,
+    else uniform. Measured on llvmpipe at 512x512, one run (bench/bench_fragment.py): constant / uniform
+    speed-up MLP 16x8 6.0x, 32x16 7.1x, field 16x8 8.7x (straight-line); with looped layers MLP 64x32
+    0.99x and field 32x16 1.6x, but there the folding moved a random test graph to 1.05e-5 from
+    onnxruntime (over the 1e-5 gate), so auto keeps those in uniform blocks.
 
     ``bindings`` maps each graph input to channels of a named RGBA32F texture (sampler
     ``u_<texture>``, unit = the texture's order of first appearance); the first texture's w is the
@@ -624,8 +628,9 @@ def generate_vector_fragment(
     blocks = _assign_blocks(table)
     if weights not in ("auto", "uniform", "constant"):
         raise NeuralaoError(f"weights must be auto, uniform or constant, got {weights!r}")
+    n_weights = sum(int(b.data.size) for b in blocks)
     straight = all(op.dst.n4 * op.src.n4 <= MAX_STRAIGHT_TILES for op in table.ops if isinstance(op, DenseOp))
-    constant = weights == "constant" or (weights == "auto" and straight)
+    constant = weights == "constant" or (weights == "auto" and straight and n_weights <= MAX_CONSTANT_WEIGHTS)
     sources = {
         name: (_write_fullscreen_vertex(dl), _write_vector_fragment(table, blocks, result, dl, description, constant))
         for name, dl in DIALECTS.items()
