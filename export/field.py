@@ -41,8 +41,9 @@ from pipeline.field import (
     predict,
     size_name,
 )
-from pipeline.io import sha256_file, write_json
+from pipeline.io import write_json
 
+from .manifest import per_mesh_manifest
 from .onnx_io import get_metadata, load_onnx, ort_session, save_onnx
 
 log = logging.getLogger(__name__)
@@ -163,36 +164,16 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     glsl_manifest = write_glsl(proto, out_dir / GLSL_DIR,
                                f"neuralao AO field {size_name(model.hidden)} of {Path(str(ckpt.get('mesh') or '')).name}: "
                                f"{encoding_description(model)}")  # fmt: skip
-    manifest = {
-        "kind": "field",
-        "format_version": 1,
-        "onnx": "model.onnx",
-        "onnx_sha256": sha256_file(onnx_path),
-        "glsl": GLSL_DIR,
-        "glsl_manifest_sha256": sha256_file(out_dir / GLSL_DIR / "manifest.json"),
-        "glsl_summary": {"format": glsl_manifest.get("format"), "dialects": sorted(glsl_manifest.get("dialects", {})),
-                         "uniform_bytes": glsl_manifest.get("uniform_bytes")},  # fmt: skip
-        "exporter": f"torch.onnx.export(dynamo=False, opset={OPSET}) torch {torch.__version__}",
-        "ops": sorted({n.op_type for n in proto.graph.node}),
-        "inputs": [{"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
-                   {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"}],  # fmt: skip
-        "output": {"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": metadata["output"]},
-        "metadata": metadata,
-        "encoding": metadata["encoding"],
-        "octaves": model.octaves,
-        "model_size": f"{size_name(model.hidden)}",
-        "model_args": ckpt["model_args"],
-        "parameters": count_parameters(model),
-        "parameter_bytes": parameter_bytes(model),
-        "scene": ckpt.get("scene"),
-        "mesh": ckpt.get("mesh"),
-        "checks": checks,
-        "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path)},
-        "config": ckpt.get("config", {}),
-        "metrics": ckpt.get("metrics", {}),
-        "training_time_s": ckpt.get("training_time_s"),
-        "seconds": time.perf_counter() - t0,
-    }
+    summary = {"format": glsl_manifest.get("format"), "dialects": sorted(glsl_manifest.get("dialects", {})),
+               "uniform_bytes": glsl_manifest.get("uniform_bytes")}  # fmt: skip
+    manifest = per_mesh_manifest(
+        "field", out_dir, ckpt_path, ckpt, proto, OPSET, GLSL_DIR, summary, ckpt.get("metrics", {}), t0,
+        inputs=[{"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
+                {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"}],
+        output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": metadata["output"]},
+        metadata=metadata, encoding=metadata["encoding"], octaves=model.octaves, model_size=size_name(model.hidden),
+        parameters=count_parameters(model), parameter_bytes=parameter_bytes(model), checks=checks,
+    )  # fmt: skip
     write_json(out_dir / "manifest.json", manifest)
     log.info("exported %s: field %s, %d bytes, ort-vs-torch %.2g", out_dir, manifest["model_size"],
              manifest["parameter_bytes"], checks["onnxruntime_vs_torch"])  # fmt: skip

@@ -34,7 +34,7 @@ import torch
 
 from pipeline.constants import TOL
 from pipeline.errors import NeuralaoError
-from pipeline.io import sha256_file, write_json
+from pipeline.io import write_json
 from pipeline.mlp import (
     CIRCLE_SAMPLES,
     INPUTS,
@@ -48,6 +48,7 @@ from pipeline.mlp import (
     size_name,
 )
 
+from .manifest import per_mesh_manifest
 from .onnx_io import get_metadata, load_onnx, ort_session, run_opencv, save_onnx
 
 log = logging.getLogger(__name__)
@@ -231,37 +232,20 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     proto = export_onnx(model, onnx_path, metadata)
     checks = check_backends(model, onnx_path)
     glsl_manifest = write_glsl(proto, out_dir / GLSL_DIR)
-    manifest = {
-        "kind": "mlp",
-        "format_version": 1,
-        "onnx": "model.onnx",
-        "onnx_sha256": sha256_file(onnx_path),
-        "glsl": GLSL_DIR,
-        "glsl_manifest_sha256": sha256_file(out_dir / GLSL_DIR / "manifest.json"),
-        "glsl_summary": {
-            "format": glsl_manifest.get("format"),
-            "dialects": sorted(glsl_manifest.get("dialects", {})),
-            "uniform_bytes": glsl_manifest.get("uniform_bytes"),
-            "fold_repeated_input": glsl_manifest.get("network", {}).get("fold_repeated_input"),
-        },
-        "exporter": f"torch.onnx.export(dynamo=False, opset={OPSET}) torch {torch.__version__}",
-        "ops": sorted({n.op_type for n in proto.graph.node}),
-        "input": {"name": INPUT, "shape": ["N", INPUTS], "dtype": "float32", "semantics": INPUT_DESCRIPTION},
-        "output": {"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": OUTPUT_DESCRIPTION},
-        "metadata": metadata,
-        "model_size": size_name(model.hidden),
-        "model_args": ckpt["model_args"],
-        "parameters": count_parameters(model),
-        "parameter_bytes": parameter_bytes(model),
-        "scene": ckpt.get("scene"),
-        "mesh": ckpt.get("mesh"),
-        "checks": checks,
-        "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path)},
-        "config": ckpt.get("config", {}),
-        "metrics": {k: v for k, v in ckpt.get("metrics", {}).items() if k != "holdout_per_view"},
-        "training_time_s": ckpt.get("training_time_s"),
-        "seconds": time.perf_counter() - t0,
+    summary = {
+        "format": glsl_manifest.get("format"),
+        "dialects": sorted(glsl_manifest.get("dialects", {})),
+        "uniform_bytes": glsl_manifest.get("uniform_bytes"),
+        "fold_repeated_input": glsl_manifest.get("network", {}).get("fold_repeated_input"),
     }
+    metrics = {k: v for k, v in ckpt.get("metrics", {}).items() if k != "holdout_per_view"}
+    manifest = per_mesh_manifest(
+        "mlp", out_dir, ckpt_path, ckpt, proto, OPSET, GLSL_DIR, summary, metrics, t0,
+        input={"name": INPUT, "shape": ["N", INPUTS], "dtype": "float32", "semantics": INPUT_DESCRIPTION},
+        output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": OUTPUT_DESCRIPTION},
+        metadata=metadata, model_size=size_name(model.hidden), parameters=count_parameters(model),
+        parameter_bytes=parameter_bytes(model), checks=checks,
+    )  # fmt: skip
     write_json(out_dir / "manifest.json", manifest)
     log.info(
         "exported %s: %s, %d parameters, ort-vs-torch %.2g, opencv-vs-ort %.2g",
