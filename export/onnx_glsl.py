@@ -180,7 +180,7 @@ def _shape(dims: list, size: tuple[int, int], what: str) -> tuple[int, ...]:
 def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int = 0,
            size: tuple[int, int] = (64, 48)) -> dict:  # fmt: skip
     """The export's shaders (read from disk) vs onnxruntime on seeded random or given inputs."""
-    from runtime.glsl_runner import run_compute_all, run_vector_fragment
+    from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names
 
     from .glsl import load_compute_export, load_mlp_export
 
@@ -208,10 +208,9 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
                 diff = diff / np.maximum(1.0, np.abs(ref[o]))
             rows.append({"output": o, "shape": list(ref[o].shape), "max_abs_err": float(diff.max())})
         tol = TOL.parity_fp16_image if manifest["precision"] == "fp16" else TOL.parity_unet_fp32
-        masked = None
     else:
-        shader = load_mlp_export(export_dir / manifest["glsl"], dialect=manifest["dialects"][0])
-        textures_names = [t["texture"] for t in shader.manifest["passes"][0]["inputs"]]
+        shaders = {d: load_mlp_export(export_dir / manifest["glsl"], dialect=d) for d in manifest["dialects"]}
+        textures_names = texture_names(shaders[manifest["dialects"][0]])
         w, h = size
         if given is not None:
             missing = [t for t in textures_names if t not in given]
@@ -228,8 +227,7 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             feeds[n] = np.tile(tex[b["texture"]][masked][:, lanes], (1, b["repeats"])).astype(np.float32)
         ref = sess.run(None, feeds)[0]
         for d in manifest["dialects"]:
-            got = run_vector_fragment(load_mlp_export(export_dir / manifest["glsl"], dialect=d), tex,
-                                      fp16=manifest["precision"] == "fp16", dialect=d)  # fmt: skip
+            got = run_vector_fragment(shaders[d], tex, fp16=manifest["precision"] == "fp16", dialect=d)
             got = got[..., None] if got.ndim == 2 else got
             diff = np.abs(got[masked] - ref.reshape(len(ref), -1))
             if manifest["precision"] == "fp16":

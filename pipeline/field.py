@@ -56,13 +56,16 @@ from .checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .labels import LabelSettings
-from .mlp import parse_size, size_name
+from .mlp import count_parameters, parse_size, size_name  # count_parameters: trainable weights only
 
 log = logging.getLogger(__name__)
 
 KIND = "field"
 FORMAT_VERSION = 1
 INPUTS = ("position", "normal")  # ONNX input names, each (N, 3) float32
+# What a held-back frame keeps: the network's inputs, the labels, and what relabelling and the vertex
+# draw need (pose, camera, triangle ids).
+HOLDOUT_KEYS = ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id", "yfov", "znear", "zfar")
 
 
 @dataclass
@@ -180,11 +183,6 @@ def model_args_dict(model: FieldNet) -> dict:
     }
 
 
-def count_parameters(model: FieldNet) -> int:
-    """Trainable weights (the constants centre / inv_half / frequencies are 9 + 3 floats more, see bytes)."""
-    return int(sum(p.numel() for p in model.parameters()))
-
-
 def parameter_bytes(model: FieldNet) -> int:
     """float32 bytes of everything the shader stores: weights + the 6 normalisation constants + the
     non-zero frequencies (the shader's frequency matrix is padded, see the export manifest)."""
@@ -263,8 +261,7 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
             labeller.settings = replace(settings.labels, seed=frame_seed(settings.seed, 1, k))
             f["ao"], f["valid"] = labeller.label_frame(f)
             f["view"] = k
-            frames.append({key: f[key] for key in ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id",
-                                                   "yfov", "znear", "zfar")})  # fmt: skip
+            frames.append({key: f[key] for key in HOLDOUT_KEYS})
     return frames
 
 
@@ -445,8 +442,7 @@ def resolve_source(data, scene_name, mesh, settings: FieldSettings):
         raise NeuralaoError(f"scene {scene_name!r} is not in {data} (has {sorted(ds.scenes)})")
     labels = from_dict(LabelSettings, dict(ds.label_settings))
     labels = replace(labels, workers=settings.labels.workers)
-    frames = [{k: f[k] for k in ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id", "yfov",
-                                 "znear", "zfar")} for f in ds.frames(scene=scene_name, holdout=True)]  # fmt: skip
+    frames = [{k: f[k] for k in HOLDOUT_KEYS} for f in ds.frames(scene=scene_name, holdout=True)]
     return scene_of(ds.manifest, scene_name), replace(settings, labels=labels, holdout_views=0), frames
 
 
