@@ -645,6 +645,8 @@ def generate_vector_fragment(
         manifest["constant_bytes"] = manifest["uniform_bytes"]
         manifest["uniform_blocks"], manifest["uniform_bytes"] = [], 0
         manifest["passes"][0]["uniform_blocks"] = []
+        for layer in manifest["network"]["layers"]:
+            layer.pop("blocks", None)  # no block holds them: they are the constant_arrays
         ubos = []
     else:
         manifest["weights"] = "uniform: std140 uniform blocks (uniform_blocks), one .bin file each"
