@@ -194,10 +194,13 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
     if manifest["target"] == "image":
         program = load_compute_export(export_dir / manifest["glsl"])
         (name, dims), = manifest["inputs"].items()
-        x = given[name] if given is not None else rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
         if given is not None and name not in given:
             raise NeuralaoError(f"{inputs} has no array {name!r}")
+        x = given[name] if given is not None else rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
         x = np.asarray(x, np.float32)
+        static = [(i, int(d)) for i, d in enumerate(dims) if d is not None and str(d).isdigit()]
+        if x.ndim != len(dims) or any(x.shape[i] != d for i, d in static):
+            raise NeuralaoError(f"input {name!r} of shape {list(x.shape)} does not fit the declared {dims}")
         ref = dict(zip(manifest["outputs"], sess.run(None, {name: x}), strict=True))
         got = run_compute_all(program, x)
         for o in manifest["outputs"]:
@@ -217,6 +220,9 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             if missing:
                 raise NeuralaoError(f"{inputs} lacks the textures {missing}")
             tex = {t: np.asarray(given[t], np.float32) for t in textures_names}
+            shapes = {t.shape for t in tex.values()}
+            if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[2] != 4:
+                raise NeuralaoError(f"{inputs}: textures must all be (H, W, 4), got {sorted(shapes)}")
         else:
             tex = {t: rng.uniform(-1, 1, size=(h, w, 4)).astype(np.float32) for t in textures_names}
             tex[textures_names[0]][..., 3] = rng.random((h, w)) > 0.1

@@ -111,6 +111,14 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
         (["glsl", str(path), "--target", "vector", "--bind", "x=tex.xyq"], "expected INPUT=TEXTURE"),
         (["glsl", str(path), "--target", "image", "--bind", "x=t.xyz"], "vector only"),
     ]
+    img = tmp_path / "img"
+    assert cli.main(["glsl", str(path), "--target", "image", "--out", str(img)]) == 0
+    write_npz(tmp_path / "rank.npz", x=np.zeros((3, 8), np.float32))
+    write_npz(tmp_path / "other.npz", y=np.zeros((1, 3, 8, 8), np.float32))
+    for npz, needle in (("rank.npz", "does not fit"), ("other.npz", "has no array")):
+        assert cli.main(["parity", str(img), "--inputs", str(tmp_path / npz)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and needle in err[0], err
     for i, (args, needle) in enumerate(cases):
         out = tmp_path / f"out{i}"
         assert cli.main([*args, "--out", str(out)]) == 2, args
