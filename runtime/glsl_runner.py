@@ -9,9 +9,13 @@ files on disk, so the runner doubles as the check that an export is self-suffici
     time_vector_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_mlp_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_vertex_colour(scene, camera, repeats=30, ao=None) -> s/frame
-    run_compute(program_or_dir, x, flip_y=False) -> (1, C, H, W) f32      (first graph output)
-    run_compute_all(program_or_dir, x, flip_y=False) -> {onnx output name: (1, C, H, W) f32}
-    time_compute(program_or_dir, height, width, repeats=5) -> s/frame
+    run_compute(program_or_dir, x, flip_y=False, scalars=None) -> (1, C, H, W) f32   (first graph output)
+    run_compute_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
+    time_compute(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
+    scalar_inputs(program_or_dir) -> [ONNX names of the scalar graph inputs (uniforms)]
+
+``scalars`` gives each scalar graph input of a compute program (manifest ``uniforms``: e.g. the AO
+radius of a (1, 1, 1, 1) input) by its ONNX name: a float or any one-element array.
 
 Timings are medians of per-frame wall times, each frame closed by ``glFinish``.
 """
@@ -322,13 +326,40 @@ def _array_texture(width: int, height: int, layers: int, internal: int) -> int:
     return tex
 
 
-class _ComputeRun:
-    """Textures sized for one input resolution, compiled passes and the parameter buffer."""
+def scalar_values(manifest: dict, scalars: dict | None) -> dict[str, float]:
+    """{ONNX input name: float32 value} for every uniform of a compute manifest, from ``scalars``.
 
-    def __init__(self, program: ComputeProgram, height: int, width: int):
+    A missing or unknown name, or a value of more than one element, is a one-line NeuralaoError."""
+    names = [u["onnx_input"] for u in manifest.get("uniforms", [])]
+    given = dict(scalars or {})
+    unknown = sorted(set(given) - set(names))
+    if unknown:
+        raise NeuralaoError(f"scalars {unknown} are not scalar inputs of this program (it takes {names})")
+    missing = [n for n in names if n not in given]
+    if missing:
+        raise NeuralaoError(f"scalar input {missing[0]!r} not given (pass scalars={{{missing[0]!r}: value}})")
+    out = {}
+    for n in names:
+        v = np.asarray(given[n], dtype=np.float32)
+        if v.size != 1 or not np.isfinite(v).all():
+            raise NeuralaoError(f"scalar input {n!r} must be one finite value, got shape {list(v.shape)}")
+        out[n] = float(v.reshape(()))
+    return out
+
+
+class _ComputeRun:
+    """Textures sized for one input resolution, compiled passes and the parameter buffer.
+
+    scalars : {ONNX name: value} of the scalar inputs (uniforms); settable later by :meth:`set_scalars`,
+    needed before :meth:`dispatch`."""
+
+    def __init__(self, program: ComputeProgram, height: int, width: int, scalars: dict | None = None):
         gl.context()
         m = program.manifest
         self.manifest = m
+        self.scalars: dict[str, float] | None = None
+        if scalars is not None or not m.get("uniforms"):
+            self.set_scalars(scalars)
         multiple = int(m["pad"]["multiple"])
         static = m.get("static_input_size")
         if static is not None and [height, width] != list(static):
@@ -380,7 +411,12 @@ class _ComputeRun:
         GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
         GL.glTexSubImage3D(GL.GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, w, h, layers, GL.GL_RGBA, GL.GL_FLOAT, data)
 
+    def set_scalars(self, scalars: dict | None) -> None:
+        self.scalars = scalar_values(self.manifest, scalars)
+
     def dispatch(self, flip_y: bool = False) -> None:
+        if self.scalars is None:  # names the first missing input
+            self.set_scalars(None)
         barrier = GL.GL_TEXTURE_FETCH_BARRIER_BIT | GL.GL_SHADER_IMAGE_ACCESS_BARRIER_BIT
         for p, prog, groups in self.passes:
             GL.glUseProgram(prog)
@@ -394,7 +430,10 @@ class _ComputeRun:
                 GL.glBindBufferRange(
                     GL.GL_SHADER_STORAGE_BUFFER, prm["binding"], self.ssbo, prm["offset"], prm["bytes"]
                 )
-            if "uniforms" in p:
+            if p["kind"] == "uniform":
+                for u in p["uniforms"].values():
+                    GL.glUniform1f(u["location"], self.scalars[u["onnx_input"]])
+            elif "uniforms" in p:
                 GL.glUniform1i(p["uniforms"]["u_flip_y"]["location"], int(flip_y))
             GL.glDispatchCompute(*groups)
             GL.glMemoryBarrier(barrier)
@@ -420,17 +459,25 @@ def _compute_program(program_or_dir: ComputeProgram | str | Path) -> ComputeProg
     )
 
 
-def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False) -> dict:
+def scalar_inputs(program_or_dir: ComputeProgram | str | Path) -> list[str]:
+    """ONNX names of a compute program's scalar graph inputs (its uniforms), in graph order."""
+    return [u["onnx_input"] for u in _compute_program(program_or_dir).manifest.get("uniforms", [])]
+
+
+def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
+                    scalars: dict[str, float] | None = None) -> dict:  # fmt: skip
     """Run every pass on x : (1, C, H, W) float32; returns {onnx output name: (1, C_out, H, W) float32}.
 
     flip_y : the input/output textures are bottom-up GL images (here: x is given bottom row first).
+    scalars : {ONNX input name: float} for each scalar graph input (manifest ``uniforms``).
     """
     prog = _compute_program(program_or_dir)
     x = np.asarray(x, dtype=np.float32)
     want_c = prog.manifest["input"]["channels"]
     if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
         raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
-    run = _ComputeRun(prog, x.shape[2], x.shape[3])
+    values = scalar_values(prog.manifest, scalars)  # before any GL object exists
+    run = _ComputeRun(prog, x.shape[2], x.shape[3], values)
     try:
         run.upload(x)
         run.dispatch(flip_y)
@@ -440,20 +487,24 @@ def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, 
 
 
 def run_compute(
-    program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False
-) -> np.ndarray:
+    program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+) -> np.ndarray:  # fmt: skip
     """The first graph output of :func:`run_compute_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
     prog = _compute_program(program_or_dir)
-    return run_compute_all(prog, x, flip_y)[prog.manifest["outputs"][0]["onnx_name"]]
+    return run_compute_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
 
 
 def time_compute(
-    program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5, warmup: int = 1
-) -> float:
-    """Median seconds for all passes (pad, network, crop) at width x height, random input."""
+    program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5, warmup: int = 1,
+    scalars: dict[str, float] | None = None,
+) -> float:  # fmt: skip
+    """Median seconds for all passes (pad, network, crop) at width x height, random input; scalar
+    inputs from ``scalars``, 1.0 where not given (the cost does not depend on them)."""
     prog = _compute_program(program_or_dir)
     c = prog.manifest["input"]["channels"]
-    run = _ComputeRun(prog, height, width)
+    values = {n: 1.0 for n in scalar_inputs(prog)} | dict(scalars or {})
+    run = _ComputeRun(prog, height, width, values)
     try:
         run.upload(np.random.default_rng(0).normal(size=(1, c, height, width)).astype(np.float32))
         return _median_time(run.dispatch, repeats, warmup)

@@ -107,7 +107,8 @@ class Pass:
 
     index: int
     # pad | crop | conv | conv_depthwise | conv_transpose | pool_avg | pool_max | global_pool_avg |
-    # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary | spatial_pad
+    # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary | spatial_pad |
+    # uniform (a scalar graph input: writes uniform float fields["uniform"] to a 1x1 texture)
     kind: str
     ops: list[str]
     inputs: list[Texture]
@@ -128,6 +129,33 @@ class Pass:
             out[name] = off
             off += int(arr.shape[0])
         return out
+
+
+# Single-element graph inputs beside the image (each one becomes a uniform float).
+MAX_SCALAR_INPUTS = 64
+
+
+def _is_scalar_input(vi: onnx.ValueInfoProto) -> bool:
+    """A static shape of one element, rank 0 to 4: (), (1,), ..., (1, 1, 1, 1)."""
+    dims = _dims(vi)
+    return vi.type.tensor_type.HasField("shape") and len(dims) <= 4 and all(d == 1 for d in dims)
+
+
+def _split_inputs(graph: OnnxGraph) -> tuple[onnx.ValueInfoProto, list[onnx.ValueInfoProto]]:
+    """(the image input, the scalar inputs in graph order). The image is the one input that is not a
+    single-element scalar (the first input when every one is); anything else is refused, by name."""
+    inputs = graph.inputs or [graph.input]
+    if len(inputs) == 1:
+        return inputs[0], []
+    images = [vi for vi in inputs if not _is_scalar_input(vi)] or inputs[:1]
+    image = images[0]
+    if len(images) > 1:
+        vi = images[1]
+        raise NeuralaoError(
+            f"graph input {vi.name!r} of shape {_dims(vi) or 'unknown'}: the image target takes one image "
+            f"input ({image.name!r}) and single-element scalars ((1, 1, 1, 1), (1,) or ()) as uniforms"
+        )
+    return image, [vi for vi in inputs if vi is not image]
 
 
 def _spatial_pairs(values: list[int] | None, default: int, what: str) -> tuple[int, int]:
@@ -202,8 +230,9 @@ class ImageOps(OpTable):
         self.denominators: set[int] = {1}
         self.global_reads: list[str] = []  # global pools over a dynamic size (padding would enter them)
         self.param_count = 0
-        dims = _dims(graph.input)
-        name = graph.input.name
+        self.image_input, scalars = _split_inputs(graph)
+        dims = _dims(self.image_input)
+        name = self.image_input.name
         if len(dims) != 4:
             raise NeuralaoError(
                 f"image input {name!r} must have rank 4 (N, C, H, W), got shape {dims or 'unknown'}"
@@ -235,6 +264,19 @@ class ImageOps(OpTable):
         self.add_pass(Pass(0, "pad", ["Pad"], [raw], padded))
         self.env[name] = padded
         self.input_texture, self.padded_texture = raw, padded
+        # Scalar inputs: a 1x1 one-channel texture each, written from a uniform by its own pass, so
+        # every op that broadcasts a 1x1 image (the binary ops' "scalar" fetch) takes them unchanged.
+        self.uniforms: list[tuple[onnx.ValueInfoProto, Pass]] = []
+        self.scalar_ranks: dict[str, int] = {}  # texture ident -> declared ONNX rank (Shape folds rank 4 only)
+        point = Dim(Fraction(0), 1)
+        for k, vi in enumerate(scalars):
+            self.label = f"graph input {vi.name!r}"
+            t = self.new_texture(1, point, point, onnx_name=vi.name)
+            p = self.add_pass(Pass(0, "uniform", ["Uniform"], [], t))
+            p.fields = {"uniform": f"u_scalar{k}", "location": 0}
+            self.uniforms.append((vi, p))
+            self.scalar_ranks[t.ident] = len(_dims(vi))
+            self.env[vi.name] = t
 
     # -- IR helpers
     def new_texture(
@@ -911,6 +953,8 @@ class ImageOps(OpTable):
         if isinstance(data, np.ndarray):
             return np.asarray(data.shape, np.int64)[start:end]
         t = data.parts[0] if isinstance(data, ConcatValue) else self.image(data, "data")  # no concat pass
+        if self.scalar_ranks.get(t.ident, 4) != 4:
+            raise self.fail(f"Shape of the rank-{self.scalar_ranks[t.ident]} scalar input {t.onnx_name!r} cannot be folded")
         if t.height.scale != 0 or t.width.scale != 0:
             raise self.fail("Shape of an image of dynamic size cannot be folded; give the input a static size")
         return np.asarray([1, data.channels, t.height.offset, t.width.offset], np.int64)[start:end]
@@ -1060,15 +1104,22 @@ def _spatial_pad_body(p: Pass) -> str:
     return fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
 
 
+# Passes whose output stays RGBA32F under fp16 storage: the cropped outputs, and the scalar inputs
+# (an engine's radius keeps its float32 value).
+_FP32_KINDS = ("crop", "uniform")
+
+
 def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) -> str:
     d = DIALECTS["glsl430"]
-    fmt = "rgba16f" if precision == "fp16" and p.kind != "crop" else "rgba32f"
+    fmt = "rgba16f" if precision == "fp16" and p.kind not in _FP32_KINDS else "rgba32f"
     decls = [fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
     decls.append(fill("image_array_decl", binding=0, format=fmt))
     if p.params:
         decls.append(fill("params_decl", binding=0))
     if p.kind in ("pad", "crop"):
         decls.append(fill("uniform_int_decl", location=0, name="u_flip_y"))
+    if p.kind == "uniform":
+        decls.append(fill("uniform_float_decl", location=p.fields["location"], name=p.fields["uniform"]))
     offs = p.param_offsets()
     if p.kind in CONV_KINDS:
         body = _conv_body(p, offs)
@@ -1098,6 +1149,8 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         body = fill("pad_reflect_body")
     elif p.kind == "crop":
         body = fill("crop_body")
+    elif p.kind == "uniform":
+        body = fill("uniform_body", name=p.fields["uniform"])
     else:  # pragma: no cover - kinds are created above only
         raise AssertionError(p.kind)
     epi = []
@@ -1182,7 +1235,7 @@ def generate_compute(
     """
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
-    graph = read_graph(model)
+    graph = read_graph(model, max_inputs=1 + MAX_SCALAR_INPUTS)
     meta = graph.metadata.get("pad_multiple")
     try:
         meta_multiple = None if meta is None else int(json.loads(meta))
@@ -1233,12 +1286,27 @@ def generate_compute(
     return ComputeProgram(sources, bytes(blob), manifest)
 
 
+def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:
+    """What a graph input means: its doc_string, else metadata "<name>_description", "input_<name>" or "<name>"."""
+    keys = (f"{vi.name}_description", f"input_{vi.name}", vi.name)
+    return vi.doc_string or next((metadata[k] for k in keys if k in metadata), "")
+
+
+def _uniform_entry(vi: onnx.ValueInfoProto, p: Pass, metadata: dict[str, str]) -> dict:
+    """Manifest entry of a scalar graph input: the uniform an engine sets before the pass runs."""
+    return {"onnx_input": vi.name, "declared_shape": [int(d) for d in _dims(vi)], "meaning": _input_meaning(vi, metadata),
+            "glsl_name": p.fields["uniform"], "type": "float", "location": p.fields["location"], "pass": p.name,
+            "shader": f"{p.name}.comp", "texture": p.output.ident,
+            "set_with": "glUseProgram(the pass's program); glUniform1f(location, value) before its dispatch"}  # fmt: skip
+
+
 def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, multiple, local_size) -> dict:
     internal = "RGBA16F" if precision == "fp16" else "RGBA32F"
     textures = {}
+    fp32 = {p.output.ident for p in table.passes if p.kind in _FP32_KINDS}
     for t in table.textures:
         raw = t.base == "raw"
-        fmt = "RGBA32F" if raw else internal
+        fmt = "RGBA32F" if raw or t.ident in fp32 else internal
         textures[t.ident] = {"channels": t.channels, "layers": t.layers, "format": fmt,
                              "height": t.height.to_json("H" if raw else "Hp"),
                              "width": t.width.to_json("W" if raw else "Wp"),
@@ -1285,6 +1353,11 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             if p.kind in CONV_KINDS:
                 entry["conv"] = {k: list(v) if isinstance(v, tuple) else v for k, v in p.fields.items()}
                 entry["folded_batch_norm"] = p.folded_bn
+        if p.kind == "uniform":
+            vi = next(v for v, q in table.uniforms if q is p)
+            entry["uniforms"] = {p.fields["uniform"]: {"location": p.fields["location"], "type": "float",
+                                                       "onnx_input": vi.name,
+                                                       "value": f"graph input {vi.name!r} (glUniform1f)"}}  # fmt: skip
         if p.kind in ("pad", "crop"):
             entry["uniforms"] = {"u_flip_y": {"location": 0, "value": "0: texture row 0 = tensor row 0 (top); "
                                               "1: the texture is a bottom-up GL image (row 0 = bottom)"}}  # fmt: skip
@@ -1309,8 +1382,10 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "rows": "texel (x, y) = tensor[..., y, x]: row 0 is the tensor's first (top) row",
             "arithmetic": "fp32",
         },
-        "input": {"onnx_name": graph.input.name, "texture": table.input_texture.ident,
-                  "channels": table.input_texture.channels, "declared_shape": [str(v) for v in _dims(graph.input)]},
+        "input": {"onnx_name": table.image_input.name, "texture": table.input_texture.ident,
+                  "channels": table.input_texture.channels,
+                  "declared_shape": [str(v) for v in _dims(table.image_input)]},
+        "uniforms": [_uniform_entry(vi, p, graph.metadata) for vi, p in table.uniforms],
         "outputs": [{"onnx_name": n, "texture": crop.ident, "channels": crop.channels} for n, _, crop in outputs],
         "pad": {"multiple": multiple, "mode": "reflect", "side": "bottom,right", "pass": table.passes[0].name,
                 "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",

@@ -182,6 +182,7 @@ _T["params_decl"] = """layout(std430, binding = ${binding}) readonly buffer Para
     vec4 prm[];
 };"""
 _T["uniform_int_decl"] = "layout(location = ${location}) uniform int ${name};"
+_T["uniform_float_decl"] = "layout(location = ${location}) uniform float ${name};"
 _T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
 
 # Conv: one invocation = one output texel (4 output channels of layer gid.z).
@@ -420,6 +421,9 @@ ${branches}
 _T["concat_branch"] = """        if (c >= ${begin} && c < ${end}) {
             r[lane] = texelFetch(${src}, ivec3(gid.xy, (c - ${begin}) / 4), 0)[(c - ${begin}) % 4];
         }"""
+
+# A scalar graph input (a uniform) as a 1x1 one-channel texture; the padding lanes hold 0.
+_T["uniform_body"] = "    vec4 r = vec4(${name}, 0.0, 0.0, 0.0);"
 
 _T["elementwise_body"] = "    vec4 r = texelFetch(src0, gid, 0);"
 
