@@ -23,8 +23,11 @@ The export folder (self-describing, every file atomic, ``manifest.json`` last)::
     DIR/manifest.json     kind "onnx-glsl": target, precision, bindings, inputs, ops, hashes
 
 Parity runs the shaders read back from DIR against onnxruntime on seeded random inputs of the
-declared shapes (symbolic sizes from ``--size``), or on the arrays of an ``.npz`` (image: one array
-per graph input; vector: one (H, W, 4) array per texture).
+declared shapes (symbolic sizes from ``--size``; scalar inputs uniform in [0.1, 2]), or on the arrays of
+an ``.npz`` (image: one array per graph input, scalars included; vector: one (H, W, 4) array per texture).
+
+Image target inputs: one image (1, C, H, W) and any number of single-element scalars ((1, 1, 1, 1),
+(1,) or (), e.g. an AO radius), each a ``uniform float`` (the GLSL manifest's ``uniforms``).
 """
 
 from __future__ import annotations
@@ -122,6 +125,7 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         out_dir.mkdir(parents=True, exist_ok=True)
         write_compute_export(program, glsl_dir)
         extra["passes"] = len(program.manifest["passes"])
+        extra["uniforms"] = {u["onnx_input"]: u["glsl_name"] for u in program.manifest["uniforms"]}
     else:
         unknown = sorted(set(dialects or []) - set(DIALECTS))
         if unknown:
@@ -193,16 +197,27 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
     rows = []
     if manifest["target"] == "image":
         program = load_compute_export(export_dir / manifest["glsl"])
-        (name, dims), = manifest["inputs"].items()
-        if given is not None and name not in given:
-            raise NeuralaoError(f"{inputs} has no array {name!r}")
+        name = program.manifest["input"]["onnx_name"]
+        dims = manifest["inputs"][name]
+        scalar_names = [u["onnx_input"] for u in program.manifest.get("uniforms", [])]
+        if given is not None:
+            absent = [n for n in [name, *scalar_names] if n not in given]
+            if absent:
+                raise NeuralaoError(f"{inputs} has no array {absent[0]!r}")
         x = given[name] if given is not None else rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
         x = np.asarray(x, np.float32)
         static = [(i, int(d)) for i, d in enumerate(dims) if d is not None and str(d).isdigit()]
         if x.ndim != len(dims) or any(x.shape[i] != d for i, d in static):
             raise NeuralaoError(f"input {name!r} of shape {list(x.shape)} does not fit the declared {dims}")
-        ref = dict(zip(manifest["outputs"], sess.run(None, {name: x}), strict=True))
-        got = run_compute_all(program, x)
+        feeds = {name: x}
+        for n in scalar_names:  # a uniform each: one element, fed to onnxruntime in its declared shape
+            shape = _shape(manifest["inputs"][n], size, n)
+            v = np.asarray(given[n], np.float32) if given is not None else rng.uniform(0.1, 2.0, shape).astype(np.float32)
+            if v.size != 1:
+                raise NeuralaoError(f"scalar input {n!r} of shape {list(v.shape)} must hold one value")
+            feeds[n] = v.reshape(shape)
+        ref = dict(zip(manifest["outputs"], sess.run(None, feeds), strict=True))
+        got = run_compute_all(program, x, scalars={n: feeds[n] for n in scalar_names})
         for o in manifest["outputs"]:
             if got[o].shape != ref[o].shape:
                 raise NeuralaoError(f"output {o!r}: GLSL shape {got[o].shape}, onnxruntime {ref[o].shape}")

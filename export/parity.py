@@ -87,8 +87,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("exports", help="an export folder, or a folder of export folders")
     p.add_argument("--data", help="dataset folder whose frames to use (default: render frames)")
     p.add_argument("--out", help="write the figures as JSON here")
-    p.add_argument("--inputs", help="`neuralao glsl` exports: .npz of inputs (image: per graph input; vector: "
-                   "per texture, (H, W, 4)); default: seeded random inputs of the declared shapes")  # fmt: skip
+    p.add_argument("--inputs", help="`neuralao glsl` exports: .npz of inputs (image: per graph input, scalar "
+                   "inputs included, by ONNX name; vector: per texture, (H, W, 4)); default: seeded random inputs "
+                   "of the declared shapes, scalars uniform in [0.1, 2]")  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the random inputs (default 0)")
     p.add_argument("--size", type=int, nargs=2, default=(64, 48), metavar=("W", "H"),
                    help="size of symbolic image dimensions / vector textures (default 64 48)")  # fmt: skip

@@ -267,7 +267,8 @@ class ImageOps(OpTable):
         # Scalar inputs: a 1x1 one-channel texture each, written from a uniform by its own pass, so
         # every op that broadcasts a 1x1 image (the binary ops' "scalar" fetch) takes them unchanged.
         self.uniforms: list[tuple[onnx.ValueInfoProto, Pass]] = []
-        self.scalar_ranks: dict[str, int] = {}  # texture ident -> declared ONNX rank (Shape folds rank 4 only)
+        # texture ident -> declared ONNX rank of a scalar input (Shape folds rank 4 only)
+        self.scalar_ranks: dict[str, int] = {}
         point = Dim(Fraction(0), 1)
         for k, vi in enumerate(scalars):
             self.label = f"graph input {vi.name!r}"
