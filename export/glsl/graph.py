@@ -85,7 +85,7 @@ def _sha256(data: bytes) -> str:
 
 @dataclass
 class OnnxGraph:
-    """What the lowering needs from a model: constants, the one real input, outputs, fan-out."""
+    """What the lowering needs from a model: constants, the real inputs, outputs, fan-out."""
 
     model: onnx.ModelProto
     constants: dict[str, np.ndarray]

@@ -1190,7 +1190,7 @@ class ComputeProgram:
 
     sources : {shader file name: GLSL 4.30 compute source}, in pass order; weights : the bytes of
     weights.bin (float32 little-endian, each pass's range aligned to 256 bytes); manifest : dict
-    (passes, textures, weights, pad/crop; see :func:`write_compute_export`).
+    (passes, textures, weights, pad/crop, the scalar inputs' ``uniforms``; see :func:`write_compute_export`).
     """
 
     sources: dict[str, str]
@@ -1233,6 +1233,9 @@ def generate_compute(
     H and W may be symbolic: sizes are ``Hp * num/den + offset`` of the padded input, which is the
     input reflect-padded (bottom/right) to ``pad_multiple`` (metadata "pad_multiple", checked
     against what the graph needs) by the generated pad pass; crop passes cut outputs back to H x W.
+    Beside the image, graph inputs of one element ((1, 1, 1, 1), (1,) or ()) are scalars: each is a
+    ``uniform float`` that a "uniform" pass writes to a 1x1 one-channel RGBA32F texture (manifest
+    ``uniforms``: ONNX input, declared shape, meaning, GLSL name, location, pass).
     """
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
