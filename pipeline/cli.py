@@ -26,6 +26,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "infer": ("runtime.infer", "apply an exported ONNX model to a G-buffer frame"),
     "report": ("pipeline.report", "speed-vs-error report of every method on held-back frames"),
     "select": ("pipeline.select", "pick the cheapest AO representation that meets an error target per scene"),
+    "volumes": ("pipeline.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),
+    "probe": ("runtime.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
 }
 
 

@@ -272,6 +272,46 @@ class Labeller:
         local, normals, ids = self._local_points(points, normals, ids)
         return self._ao_local(local, normals, ids, progress)
 
+    def hits_along(
+        self, points: np.ndarray, directions: np.ndarray, progress: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Closest hits of caller-chosen rays (spherical samples of volume models, pipeline/volumes.py).
+
+        points     : (n, 3) float64 world positions; rays start exactly there (no offset: these are
+                     points in free space, not on a surface)
+        directions : (n, k, 3) unit directions, k rays per point
+        Returns dist (n, k) float32, scene units, ``inf`` where nothing is hit within
+        :attr:`max_distance`; back (n, k) bool, True where the first hit is a back face
+        (``dot(direction, n_tri) > 0``, the back-face rule's test).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        directions = np.asarray(directions, dtype=np.float32)
+        n = len(points)
+        if points.shape[1:] != (3,) or directions.ndim != 3 or directions.shape[::2] != (n, 3):
+            raise NeuralaoError(
+                f"points must be (n, 3) and directions (n, k, 3); got {points.shape} and {directions.shape}"
+            )
+        k = directions.shape[1]
+        local = ((points - self._center) / self._scale).astype(np.float32)
+        dist = np.full((n, k), np.inf, dtype=np.float32)
+        back = np.zeros((n, k), dtype=bool)
+
+        def trace(lo: int, hi: int) -> None:
+            orig = np.ascontiguousarray(np.repeat(local[lo:hi], k, axis=0))
+            dirs = np.ascontiguousarray(directions[lo:hi].reshape(-1, 3))
+            dists = np.full(len(dirs), self._r_local, dtype=np.float32)
+            out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
+            prim, tfar = out["primID"], out["tfar"]
+            hit = prim >= 0
+            fn = self._face_normals32[np.where(hit, prim, 0)]
+            facing = dirs[:, 0] * fn[:, 0] + dirs[:, 1] * fn[:, 1] + dirs[:, 2] * fn[:, 2]
+            dist[lo:hi] = np.where(hit, tfar * np.float32(self._scale), np.inf).reshape(hi - lo, k)
+            back[lo:hi] = (hit & (facing > 0)).reshape(hi - lo, k)
+
+        if n and k:
+            _run_chunks(trace, n, max(1, _CHUNK_RAYS // k), self.settings.workers, progress)
+        return dist, back
+
     def _local_points(self, points, normals, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Checked float64 points in local units, float64 normals and int64 ids (default arange(n))."""
         points = np.asarray(points, dtype=np.float64)

@@ -73,8 +73,9 @@ _STAGES = {
 }
 
 
-def compile_program(**sources: str) -> int:
-    """Compile and link a program from stage sources, e.g. ``compile_program(vertex=..., fragment=...)``.
+def compile_program(feedback: tuple[str, ...] = (), **sources: str) -> int:
+    """Compile and link a program from stage sources, e.g. ``compile_program(vertex=..., fragment=...)``;
+    ``feedback`` names vertex outputs captured by transform feedback (interleaved, set before linking).
 
     Raises :class:`NeuralaoError` with the first line of the driver's log on failure.
     """
@@ -90,6 +91,13 @@ def compile_program(**sources: str) -> int:
             raise NeuralaoError(f"{stage} shader failed to compile: {log.splitlines()[0] if log else '?'}")
         GL.glAttachShader(prog, sh)
         shaders.append(sh)
+    if feedback:
+        import ctypes
+
+        names = [ctypes.create_string_buffer(n.encode()) for n in feedback]
+        ptrs = (ctypes.c_char_p * len(names))(*[ctypes.addressof(b) for b in names])
+        ptrs = ctypes.cast(ptrs, ctypes.POINTER(ctypes.POINTER(ctypes.c_char)))
+        GL.glTransformFeedbackVaryings(prog, len(names), ptrs, GL.GL_INTERLEAVED_ATTRIBS)
     GL.glLinkProgram(prog)
     for sh in shaders:
         GL.glDeleteShader(sh)

@@ -22,6 +22,7 @@ Timings are medians of per-frame wall times, each frame closed by ``glFinish``.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import math
 import time
@@ -510,3 +511,64 @@ def time_compute(
         return _median_time(run.dispatch, repeats, warmup)
     finally:
         run.release()
+
+
+# --------------------------------------------------------------------------- vertex functions
+
+
+def run_vertex_feedback(
+    vertex: str,
+    fragment: str,
+    attributes: list[np.ndarray],
+    uniforms_vec4: dict[str, np.ndarray] | None = None,
+    varying: str = "v_ao",
+) -> np.ndarray:
+    """Run a vertex shader once per point and read one float output back (transform feedback).
+
+    attributes    : per location 0, 1, ...: (n, c) float32 arrays (c in 1..4)
+    uniforms_vec4 : uniform ``vec4`` arrays by name: (count, 4) float32
+    Returns (n,) float32, the vertex shader's ``varying`` for each point (rasterisation discarded).
+    """
+    ctx = gl.context()
+    n = len(attributes[0]) if attributes else 0
+    if n == 0 or any(len(a) != n for a in attributes):
+        raise NeuralaoError("attributes must be non-empty arrays of equal length")
+    prog = gl.compile_program(feedback=(varying,), vertex=vertex, fragment=fragment)
+    vao = GL.glGenVertexArrays(1)
+    GL.glBindVertexArray(vao)
+    bufs = []
+    try:
+        for loc, arr in enumerate(attributes):
+            a = np.ascontiguousarray(arr, dtype=np.float32).reshape(n, -1)
+            bufs.append(gl.create_buffer(a, target=GL.GL_ARRAY_BUFFER))
+            GL.glVertexAttribPointer(loc, a.shape[1], GL.GL_FLOAT, GL.GL_FALSE, 0, None)
+            GL.glEnableVertexAttribArray(loc)
+        out = gl.create_buffer(nbytes=4 * n, target=GL.GL_TRANSFORM_FEEDBACK_BUFFER)
+        bufs.append(out)
+        GL.glUseProgram(prog)
+        for name, value in (uniforms_vec4 or {}).items():
+            v = np.ascontiguousarray(value, dtype=np.float32).reshape(-1, 4)
+            loc = GL.glGetUniformLocation(prog, name)
+            if loc < 0:
+                raise NeuralaoError(f"uniform {name!r} is not in the program")
+            GL.glUniform4fv(loc, len(v), v)
+        GL.glEnable(GL.GL_RASTERIZER_DISCARD)
+        GL.glBindBufferBase(GL.GL_TRANSFORM_FEEDBACK_BUFFER, 0, out)
+        GL.glBeginTransformFeedback(GL.GL_POINTS)
+        GL.glDrawArrays(GL.GL_POINTS, 0, n)
+        GL.glEndTransformFeedback()
+        GL.glDisable(GL.GL_RASTERIZER_DISCARD)
+        gl.finish()
+        # Mapped read: glGetBufferSubData into a numpy array corrupted the heap for this target here.
+        GL.glBindBuffer(GL.GL_TRANSFORM_FEEDBACK_BUFFER, out)
+        ptr = GL.glMapBufferRange(GL.GL_TRANSFORM_FEEDBACK_BUFFER, 0, 4 * n, GL.GL_MAP_READ_BIT)
+        try:
+            return np.ctypeslib.as_array(ctypes.cast(ptr, ctypes.POINTER(ctypes.c_float)), shape=(n,)).copy()
+        finally:
+            GL.glUnmapBuffer(GL.GL_TRANSFORM_FEEDBACK_BUFFER)
+    finally:
+        GL.glBindBufferBase(GL.GL_TRANSFORM_FEEDBACK_BUFFER, 0, 0)
+        GL.glBindVertexArray(ctx.empty_vao)
+        GL.glDeleteVertexArrays(1, [vao])
+        GL.glDeleteBuffers(len(bufs), bufs)
+        GL.glDeleteProgram(prog)

@@ -1,0 +1,182 @@
+"""Evaluate per-region volume AO models (``neuralao volumes``) at points and normals, with temporal
+blending for objects that move between regions; the ``neuralao probe`` command.
+
+    probe = VolumeProbe(read_volumes("VOLUMES.json"))
+    ao = probe.ao(points, normals)                      # (n,) float32 in [0, 1], blended distances
+    ao = probe.ao(points, normals, order="linear")      # bands 0-1 only, as the paper's engine
+    path = blended_path(probe, positions, normals, dt=1/30, tau=0.2)   # one moving object, per frame
+
+Region lookup (as an engine's visibility system tags an object): the first region whose box holds
+the point; a point outside every box takes the nearest box (Euclidean distance to the box).
+
+Temporal blending (Sloan et al. 2013: the model is blended with the previous frame's, exponential
+decay): the state is the *packed model* the shader reads (export/volume_glsl.py), updated per frame as
+``state = target + (state - target) * exp(-dt / tau)``. Packed models are linear in their
+coefficients, so the blend of two models with the same centre is exactly the blend of their AO; across
+regions whose centres differ the centre is blended too, which keeps AO continuous in time (what the
+blend is for) but is not exactly the mix of the two functions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from export.volume_glsl import evaluate_packed, pack_volumes
+from pipeline import sh
+from pipeline.errors import NeuralaoError
+from pipeline.io import atomic_path
+from pipeline.labels import normalize_normals
+from pipeline.volumes import Volumes, design, read_volumes
+
+log = logging.getLogger(__name__)
+
+ORDERS = {"linear": sh.LINEAR, "quadratic": sh.QUADRATIC}
+
+
+class VolumeProbe:
+    """numpy evaluator of a :class:`pipeline.volumes.Volumes` (the reference for the GLSL function)."""
+
+    def __init__(self, volumes: Volumes):
+        self.volumes = volumes
+        self.lo = np.array([r.lo for r in volumes.regions], dtype=np.float64)
+        self.hi = np.array([r.hi for r in volumes.regions], dtype=np.float64)
+        self.centres = np.stack([m.centre for m in volumes.models])
+        self.coefficients = np.stack([m.coefficients for m in volumes.models])  # (R, 7, 2, 9)
+
+    def region_of(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3) -> (n,) int64: the first region holding each point, else the nearest box."""
+        p = np.asarray(points, np.float64)[:, None, :]
+        outside = np.maximum(self.lo[None] - p, 0.0) + np.maximum(p - self.hi[None], 0.0)
+        dist2 = (outside**2).sum(axis=2)  # (n, R): 0 inside
+        inside = dist2 <= 0.0
+        first = np.argmax(inside, axis=1)
+        return np.where(inside.any(axis=1), first, np.argmin(dist2, axis=1)).astype(np.int64)
+
+    def sh_at(self, points: np.ndarray, regions: np.ndarray | None = None) -> np.ndarray:
+        """AO-space SH (n, 2, 9) float64 of the models (of ``regions`` or the looked-up ones) at points."""
+        p = np.asarray(points, np.float64)
+        r = self.region_of(p) if regions is None else np.asarray(regions, np.int64)
+        out = np.empty((len(p), 2, sh.QUADRATIC))
+        for k in np.unique(r):
+            sel = r == k
+            out[sel] = np.einsum("nt,tdj->ndj", design(p[sel], self.centres[k]), self.coefficients[k])
+        return out
+
+    def ao(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        distance: str = "blend",
+        order: str = "quadratic",
+        regions: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """AO (n,) float32 in [0, 1] for unit normals (n, 3): ``distance`` short | long | blend (the
+        file's blend weight), ``order`` quadratic (9 SH) or linear (bands 0-1)."""
+        count = _order(order)
+        f = self.sh_at(points, regions)
+        w = {"short": (1.0, 0.0), "long": (0.0, 1.0), "blend": (1.0 - self.volumes.blend, self.volumes.blend)}
+        if distance not in w:
+            raise NeuralaoError(f"distance must be short, long or blend, got {distance!r}")
+        g = np.einsum("d,ndj->nj", np.array(w[distance]), f)[:, :count]
+        return np.clip(sh.evaluate(g, normals), 0.0, 1.0).astype(np.float32)
+
+
+def _order(order: str) -> int:
+    try:
+        return ORDERS[order]
+    except KeyError:
+        raise NeuralaoError(f"order must be 'linear' or 'quadratic', got {order!r}") from None
+
+
+class TemporalBlend:
+    """Exponential decay of a packed model towards the current region's (module doc)."""
+
+    def __init__(self, tau: float):
+        if not (math.isfinite(tau) and tau >= 0):
+            raise NeuralaoError(f"tau must be a finite time >= 0, got {tau!r}")
+        self.tau = float(tau)
+        self.state: np.ndarray | None = None
+
+    def step(self, target: np.ndarray, dt: float) -> np.ndarray:
+        """Advance by ``dt`` towards ``target`` (SIZE, 4); the first call adopts it. Returns the state."""
+        target = np.asarray(target, np.float64)
+        if self.state is None or self.tau == 0.0:
+            self.state = target.copy()
+        else:
+            self.state = target + (self.state - target) * math.exp(-float(dt) / self.tau)
+        return self.state
+
+
+def blended_path(
+    probe: VolumeProbe,
+    positions: np.ndarray,
+    normals: np.ndarray,
+    dt: float,
+    tau: float,
+    order: str = "linear",
+) -> np.ndarray:
+    """AO (T,) float64 of one object moving along ``positions`` (T, 3) with ``normals`` (T, 3), one
+    frame every ``dt``: per frame the packed model of its region, temporally blended with ``tau``
+    (0: no blending, the model switches at region boundaries), evaluated as the shader does."""
+    packed = pack_volumes(probe.volumes, order)
+    regions = probe.region_of(positions)
+    blend = TemporalBlend(tau)
+    states = np.stack([blend.step(packed[r], dt) for r in regions])
+    return evaluate_packed(states, positions, normals)
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("volumes", metavar="VOLUMES.json", help="models written by neuralao volumes")
+    p.add_argument("--points", required=True, metavar="P.npy", help="(n, 3) world positions")
+    p.add_argument("--normals", required=True, metavar="N.npy", help="(n, 3) normals (normalised here)")
+    p.add_argument("--out", required=True, metavar="AO.npy", help="(n,) float32 AO in [0, 1]")
+    p.add_argument("--distance", choices=("blend", "short", "long"), default="blend",
+                   help="which AO: the file's blend of the two distances (default), or one of them")  # fmt: skip
+    p.add_argument("--order", choices=tuple(ORDERS), default="quadratic", help="SH order (default quadratic)")
+
+
+def _load_rows(path: str, what: str) -> np.ndarray:
+    try:
+        a = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise NeuralaoError(f"{what} file not found: {path}") from None
+    except Exception as e:
+        raise NeuralaoError(f"cannot read {what} {path}: {type(e).__name__}") from None
+    if (
+        not isinstance(a, np.ndarray)
+        or a.ndim != 2
+        or a.shape[1] != 3
+        or not np.issubdtype(a.dtype, np.number)
+    ):
+        raise NeuralaoError(f"{what} {path} must be an (n, 3) numeric array, got {getattr(a, 'shape', '?')}")
+    return a.astype(np.float64)
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".npy":
+        raise NeuralaoError(f"--out must end in .npy, got {out.name!r}")
+    vol = read_volumes(args.volumes)
+    points = _load_rows(args.points, "points")
+    normals = _load_rows(args.normals, "normals")
+    if len(points) != len(normals):
+        raise NeuralaoError(f"points ({len(points)}) and normals ({len(normals)}) differ in length")
+    bad = int((~np.isfinite(points).all(axis=1)).sum())
+    if bad:
+        raise NeuralaoError(f"points {args.points} has {bad} rows with NaN or inf")
+    unit, ok = normalize_normals(normals)
+    if not ok.all():
+        log.warning("%d zero or non-finite normals evaluated as +z", int((~ok).sum()))
+    ao = VolumeProbe(vol).ao(points, unit, args.distance, args.order)
+    with atomic_path(out) as tmp:
+        np.save(tmp, ao)
+    log.info("probed %d points in %d regions -> %s", len(ao), len(vol.regions), out)
+    return 0
