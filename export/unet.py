@@ -30,9 +30,11 @@ from pipeline.unet import (
     PAD_MODE,
     PREPROCESS_DESCRIPTION,
     PREPROCESS_VERSION,
+    RADIUS_INPUT,
     UNet,
     count_parameters,
     pad_to_multiple,
+    frame_radius_param,
     predict,
     preprocess_frame,
 )
@@ -42,7 +44,9 @@ from .onnx_io import get_metadata, load_onnx, ort_session, run_opencv, save_onnx
 log = logging.getLogger(__name__)
 
 OPSET = 17
-INPUT, OUTPUT = "gbuffer", "ao"
+INPUT, RADIUS, OUTPUT = "gbuffer", RADIUS_INPUT, "ao"
+# Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
+CHECK_RHOS: tuple[float, ...] = (0.05, 0.4)
 # Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
 # 8, odd sizes that need padding on both axes (through the pad/crop wrapper).
 CHECK_SIZES: tuple[tuple[int, int], ...] = ((64, 64), (96, 72), (101, 67), (37, 53))
@@ -83,6 +87,14 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
         "ao_labels": dataset.get("labels") or {},
         "dataset_hash": dataset.get("dataset_hash") or "",
         "epochs": str(ckpt.get("epoch", 0)),
+        "scale": str(model.args.scale),
+        "trained_radii_rel": (dataset.get("labels") or {}).get("radii_rel") or [],
+        "training": {
+            "plan": ckpt.get("plan", {}),
+            "wall_seconds": ckpt.get("wall_seconds"),
+            "device": ckpt.get("device"),
+            "budget_minutes": ckpt.get("config", {}).get("budget_minutes"),
+        },
     }
     return meta
 
@@ -90,10 +102,14 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
 # ----------------------------------------------------------------------------------------------- exporters
 
 
-def _dummy(model: UNet, size: int = 64) -> torch.Tensor:
+def _dummy(model: UNet, size: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
     m = model.pad_multiple
     s = max(m, (size // m) * m)
-    return torch.zeros(1, model.args.in_channels, s, s)
+    return torch.zeros(1, model.args.in_channels, s, s), torch.full((1, 1, 1, 1), 0.1)
+
+
+def _input_names(model: UNet) -> list[str]:
+    return [INPUT, RADIUS] if model.args.radius_input else [INPUT]
 
 
 def export_onnx(model: UNet, path: str | Path, metadata: dict | None = None) -> onnx.ModelProto:
@@ -105,11 +121,11 @@ def export_onnx(model: UNet, path: str | Path, metadata: dict | None = None) -> 
     with torch.no_grad():
         torch.onnx.export(
             model,
-            (_dummy(model),),
+            _dummy(model),
             buf,
             dynamo=False,
             opset_version=OPSET,
-            input_names=[INPUT],
+            input_names=_input_names(model),
             output_names=[OUTPUT],
             dynamic_axes={INPUT: {2: "height", 3: "width"}, OUTPUT: {2: "height", 3: "width"}},
             do_constant_folding=True,
@@ -166,18 +182,19 @@ def export_onnx_dynamo(
         warnings.simplefilter("ignore")
         program = torch.onnx.export(
             model,
-            (_dummy(model),),
+            _dummy(model),
             dynamo=True,
-            input_names=[INPUT],
+            input_names=_input_names(model),
             output_names=[OUTPUT],
-            dynamic_shapes={"x": {2: m * h, 3: m * w}},
+            dynamic_shapes={"x": {2: m * h, 3: m * w}, "radius": None},
             optimize=False,
             verbose=False,
         )
     proto = constants_to_initializers(program.model_proto)
     for vi in list(proto.graph.input) + list(proto.graph.output):
         dims = vi.type.tensor_type.shape.dim
-        dims[2].dim_param, dims[3].dim_param = "height", "width"
+        if vi.name != RADIUS:
+            dims[2].dim_param, dims[3].dim_param = "height", "width"
     if path is not None:
         save_onnx(proto, path, metadata if metadata is not None else onnx_metadata(model))
     return proto
@@ -186,26 +203,37 @@ def export_onnx_dynamo(
 # ----------------------------------------------------------------------------------------------- runners
 
 
-def run_padded(fn: Callable[[np.ndarray], np.ndarray], x: np.ndarray, pad_multiple: int) -> np.ndarray:
-    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn`` on (1, 4, H', W'), crop -> (H, W) float32."""
+Runner = Callable[[np.ndarray, float], np.ndarray]
+
+
+def radius_array(rho: float) -> np.ndarray:
+    """The radius input (1, 1, 1, 1) float32 of the exported graph."""
+    return np.full((1, 1, 1, 1), rho, dtype=np.float32)
+
+
+def run_padded(fn: Runner, x: np.ndarray, pad_multiple: int, rho: float) -> np.ndarray:
+    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn(x (1, 4, H', W'), rho)``, crop -> (H, W) float32."""
     h, w = x.shape[-2:]
-    y = np.asarray(fn(pad_to_multiple(x, pad_multiple)[None]), dtype=np.float32)
+    y = np.asarray(fn(pad_to_multiple(x, pad_multiple)[None], float(rho)), dtype=np.float32)
     return y.reshape(y.shape[-2:])[:h, :w]
 
 
-def ort_runner(path_or_bytes) -> Callable[[np.ndarray], np.ndarray]:
+def ort_runner(path_or_bytes) -> Runner:
     sess = ort_session(path_or_bytes)
-    return lambda xp: sess.run(None, {INPUT: np.ascontiguousarray(xp, dtype=np.float32)})[0]
+    return lambda xp, rho: sess.run(
+        None, {INPUT: np.ascontiguousarray(xp, dtype=np.float32), RADIUS: radius_array(rho)}
+    )[0]
 
 
-def opencv_runner(path: str | Path) -> Callable[[np.ndarray], np.ndarray]:
-    return lambda xp: run_opencv(path, {INPUT: xp})
+def opencv_runner(path: str | Path) -> Runner:
+    return lambda xp, rho: run_opencv(path, {INPUT: xp, RADIUS: radius_array(rho)})
 
 
-def glsl_runner(glsl_dir: str | Path) -> Callable[[np.ndarray], np.ndarray]:
-    from runtime.glsl_runner import run_compute
+def glsl_runner(glsl_dir: str | Path) -> Runner:
+    from runtime.glsl_runner import load_compute_export, run_compute
 
-    return lambda xp: run_compute(glsl_dir, np.ascontiguousarray(xp, dtype=np.float32))
+    program = load_compute_export(glsl_dir)
+    return lambda xp, rho: run_compute(program, np.ascontiguousarray(xp, dtype=np.float32), scalars={RADIUS: rho})
 
 
 def random_input(width: int, height: int, seed: int = 0) -> np.ndarray:
@@ -239,12 +267,14 @@ def check_backends(
     rows = []
     for k, (w, h) in enumerate(sizes):
         x = random_input(w, h, seed + k)
-        ref_torch = predict(model, x)
-        y_ort = run_padded(ort, x, m)
-        y_cv = run_padded(cv, x, m)
+        rho = CHECK_RHOS[k % len(CHECK_RHOS)]
+        ref_torch = predict(model, x, rho)
+        y_ort = run_padded(ort, x, m, rho)
+        y_cv = run_padded(cv, x, m, rho)
         rows.append(
             {
                 "size": [w, h],
+                "rho": rho,
                 "onnxruntime_vs_torch": float(np.abs(y_ort - ref_torch).max()),
                 "opencv_vs_onnxruntime": float(np.abs(y_cv - y_ort).max()),
             }
@@ -343,15 +373,17 @@ def composite(y: np.ndarray, frame: dict) -> np.ndarray:
     return np.where(np.asarray(frame["mask"], dtype=bool), y, np.float32(1.0)).astype(np.float32)
 
 
-def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
-    """AO of one G-buffer frame with onnxruntime. frame: depth (H,W), normal_cam (H,W,3), mask (H,W).
+def infer_frame(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np.ndarray:
+    """AO of one G-buffer frame with onnxruntime. frame: depth (H,W), normal_cam (H,W,3), mask (H,W),
+    yfov; ``radius`` the AO radius in scene units (default: the largest radius the frame's labels have).
 
     Returns ao : (H, W) float32 in [0, 1], 1 on background. Any H, W >= pad_multiple.
     """
     proto = load_onnx(onnx_path)
     meta = check_unet_onnx(proto, onnx_path)
     x = preprocess_frame(frame)
-    y = run_padded(ort_runner(proto.SerializeToString()), x, int(meta["pad_multiple"]))
+    rho = frame_radius_param(frame, radius)
+    y = run_padded(ort_runner(proto.SerializeToString()), x, int(meta["pad_multiple"]), rho)
     return composite(y, frame)
 
 
@@ -424,9 +456,10 @@ def parity(
                 continue
             f = crop_frame(frame, w, h)
             x = preprocess_frame(f)
-            y_ort = run_padded(ort, x, m)
+            rho = CHECK_RHOS[len(rows) % len(CHECK_RHOS)]
+            y_ort = run_padded(ort, x, m, rho)
             t0 = time.perf_counter()
-            y_gl = run_padded(gl, x, m)
+            y_gl = run_padded(gl, x, m, rho)
             seconds = time.perf_counter() - t0
             fg = np.asarray(f["mask"], dtype=bool)
             rows.append(
@@ -434,6 +467,7 @@ def parity(
                     "frame": i,
                     "scene": str(frame.get("scene", "")),
                     "size": [w, h],
+                    "rho": rho,
                     "max_abs_err": float(np.abs(y_gl - y_ort).max()),
                     "max_abs_err_foreground": float(np.abs(y_gl - y_ort)[fg].max()) if fg.any() else 0.0,
                     "glsl_seconds": seconds,

@@ -228,6 +228,7 @@ def render_views(
         ):
             labeller.settings = replace(label_settings, seed=view_seed(label_settings.seed, k))
             frame = render_and_label(renderer, labeller, cam)
+            frame["radii"] = np.array([labeller.max_distance], np.float32)  # the labels' AO radius
             views.append(write_view(out, f"{prefix}{k:04d}", frame, labeller.settings.seed))
     finally:
         renderer.close()

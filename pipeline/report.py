@@ -331,8 +331,9 @@ def prepare_model(m: Method) -> None:
         )
 
 
-def predict_model(m: Method, frame: dict) -> np.ndarray:
-    """AO (H, W) float32 of a model method on one frame, background 1."""
+def predict_model(m: Method, frame: dict, radius: float | None = None) -> np.ndarray:
+    """AO (H, W) float32 of a model method on one frame, background 1 (``radius``: the AO radius in
+    scene units, for the U-Nets that take it as an input)."""
     mask = np.asarray(frame["mask"], bool)
     if m.family == "mlp":
         from runtime.glsl_runner import run_mlp_fragment
@@ -346,10 +347,11 @@ def predict_model(m: Method, frame: dict) -> np.ndarray:
         raw = run_vector_fragment(m.runners[frame["scene"]], gbuffer_textures(frame))
         return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
     from export.unet import composite, run_padded
-    from pipeline.unet import preprocess_frame
+    from pipeline.unet import frame_radius_param, preprocess_frame
 
     fn, multiple = m.ort_runner
-    return composite(np.clip(run_padded(fn, preprocess_frame(frame), multiple), 0.0, 1.0), frame)
+    rho = frame_radius_param(frame, radius)
+    return composite(np.clip(run_padded(fn, preprocess_frame(frame), multiple, rho), 0.0, 1.0), frame)
 
 
 def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
@@ -387,7 +389,7 @@ def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
         fn, multiple = m.ort_runner
         x = np.random.default_rng(0).normal(size=(4, h, w)).astype(np.float32)
         out["seconds_onnxruntime"] = _median_seconds(
-            lambda: run_padded(fn, x, multiple), max(1, min(repeats, 5))
+            lambda: run_padded(fn, x, multiple, 0.1), max(1, min(repeats, 5))
         )
     return out
 
@@ -491,7 +493,7 @@ def predict(m: Method, ctx: SceneContext, frame: dict) -> np.ndarray:
             ctx.labeller, frame, rays, seed=frame_key_seed(s.seed, m.name, ctx.name, frame["view"])
         )
         return ao
-    return predict_model(m, frame)
+    return predict_model(m, frame, ctx.radius)
 
 
 def time_method(m: Method, ctx: SceneContext, frame512: dict, camera) -> float:

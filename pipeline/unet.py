@@ -10,8 +10,16 @@ inference all use, and that the ONNX metadata states in words):
         n_x..z   camera-space unit normal, OpenGL convention (x right, y up, z towards the viewer),
                  flipped to face the viewer; 0 on background.
 
-Why the mean and not the median or the AO radius: a frame file carries no AO radius (it is a
-labeller setting in scene units), so a per-frame statistic keeps ``infer`` self-contained; the mean
+    radius   (a second input, not a channel) rho = R / (mean foreground depth * tan(yfov / 2)): the
+             AO radius R in scene units, as every engine's SSAO/GTAO takes it, made dimensionless
+             with the same mean depth and the vertical field of view. (1, 1, 1, 1) float32.
+             Inside the graph it becomes the per-pixel channel
+             clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP) = R / (z tan(yfov / 2)):
+             the radius's size on screen in units of half the screen height (background: the cap
+             or rho / floor). Labels exist at several radii per frame (one trace, ``ao_radii``), so
+             one network serves any radius in the trained range.
+
+Why the mean for depth: a per-frame statistic keeps the input free of scene scale; the mean
 (not the median) because a GPU gets it from one mip-chain reduction of depth and mask
 (``sum(depth) / sum(mask)``). It is computed on the whole frame BEFORE any crop, in training too.
 Background depth is 0 because no real surface can have it (znear > 0), whereas any positive constant
@@ -44,7 +52,11 @@ from torch import nn
 from .errors import NeuralaoError
 
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and ``infer`` checks it.
-PREPROCESS_VERSION = 1
+PREPROCESS_VERSION = 2
+# The radius channel (see the module docstring): a floor on normalised depth and a cap on the value.
+RADIUS_DEPTH_FLOOR = 1e-3
+RADIUS_CAP = 8.0
+RADIUS_INPUT = "radius"
 INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
 BACKGROUND_DEPTH = 0.0
 PAD_MODE = "reflect"
@@ -62,6 +74,10 @@ PREPROCESS_DESCRIPTION = {
     "flipped to face the viewer",
     "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and normal "
     "(0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
+    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), R = AO "
+    "radius in scene units (the distance beyond which nothing occludes); the graph feeds the network "
+    f"clip(rho / max(depth, {RADIUS_DEPTH_FLOOR:g}), 0, {RADIUS_CAP:g}) as a fifth channel",
+    "radius_glsl": "uniform float u_radius (the same rho), set per frame",
     "output_name": "ao",
     "output": "(1,1,H,W) accessibility in [0,1], 1 = open (sigmoid)",
     "pad_mode": PAD_MODE,
@@ -99,6 +115,32 @@ def preprocess(depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray) -> n
     x[0] = np.where(mask, depth / np.float32(scale), np.float32(BACKGROUND_DEPTH))
     x[1:] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
     return x
+
+
+def radius_param(radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float) -> float:
+    """rho = R / (mean foreground depth * tan(yfov / 2)) for AO radius R in scene units (> 0)."""
+    if not (np.isfinite(radius) and radius > 0):
+        raise NeuralaoError(f"the AO radius must be a positive number of scene units, got {radius}")
+    if not (np.isfinite(yfov) and 0 < yfov < np.pi):
+        raise NeuralaoError(f"yfov must lie in (0, pi) radians, got {yfov}")
+    return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
+
+
+def frame_radius(frame: dict, radius: float | None = None) -> float:
+    """The AO radius of a frame in scene units: ``radius`` if given, else the largest radius its labels
+    were traced at (``radii``), else an error asking for one."""
+    if radius is not None:
+        return float(radius)
+    if "radii" in frame and np.size(frame["radii"]):
+        return float(np.max(frame["radii"]))
+    raise NeuralaoError("the frame has no label radii; give the AO radius in scene units (--radius)")
+
+
+def frame_radius_param(frame: dict, radius: float | None = None) -> float:
+    """rho of :func:`radius_param` for a frame dict (depth, mask, yfov) at ``frame_radius(frame, radius)``."""
+    if "yfov" not in frame:
+        raise NeuralaoError("frame lacks yfov (needed for the radius input)")
+    return radius_param(frame_radius(frame, radius), frame["depth"], frame["mask"], float(frame["yfov"]))
 
 
 def preprocess_frame(frame: dict) -> np.ndarray:
@@ -153,10 +195,13 @@ def pad_to_multiple(x: np.ndarray, multiple: int) -> np.ndarray:
 class UNetArgs:
     """Architecture (stored in checkpoints as ``model_args``; rebuilds the model alone)."""
 
-    in_channels: int = 4  # depth + camera-space normal
+    in_channels: int = 4  # G-buffer channels: depth + camera-space normal
     widths: list[int] = field(default_factory=lambda: [4, 8, 16, 32])  # channels per level (paper: 4/8/16/32)
     negative_slope: float = 0.01  # LeakyReLU slope (paper: 0.01)
     bn_eps: float = 1e-5  # batch-norm epsilon (keeps near-zero running variance finite)
+    radius_input: bool = True  # the AO radius is a run-time input (an extra per-pixel channel, see RADIUS_*)
+    scale: int = 1  # 1 = full resolution; 2 / 4 = the U-Net runs at 1/2 / 1/4 resolution (see UNet)
+    refine_width: int = 4  # channels of the full-resolution refinement of the reduced-resolution variants
 
     @property
     def depth(self) -> int:
@@ -164,7 +209,7 @@ class UNetArgs:
 
     @property
     def pad_multiple(self) -> int:
-        return 2**self.depth
+        return self.scale * 2**self.depth
 
 
 def _conv3x3(cin: int, cout: int) -> nn.Conv2d:
@@ -172,9 +217,19 @@ def _conv3x3(cin: int, cout: int) -> nn.Conv2d:
 
 
 class UNet(nn.Module):
-    """The raw network: x (N, 4, H, W) float32 with H, W multiples of ``pad_multiple`` -> (N, 1, H, W) in [0, 1].
+    """The raw network: x (N, 4, H, W) float32 with H, W multiples of ``pad_multiple`` and the radius
+    parameter rho (N, 1, 1, 1) float32 -> AO (N, 1, H, W) in [0, 1].
 
-    This is exactly what is exported to ONNX (no padding inside).
+    This is exactly what is exported to ONNX (no padding inside). With ``radius_input`` the first
+    operation builds the radius channel ``clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP)``
+    (the screen-space radius in units of half the screen height at the pixel's depth) and
+    concatenates it to x; the depth channel is read by a fixed 1x1 channel-select convolution so the
+    graph needs no Slice. With ``scale`` s > 1 the G-buffer is point-sampled to 1/s resolution
+    (nearest, every s-th pixel), the U-Net runs there, its AO is upsampled bilinearly and a small
+    full-resolution refinement (3x3 conv on [upsampled AO, full-resolution G-buffer, upsampled
+    low-resolution depth] -> LeakyReLU -> 1x1 conv) adds a correction, clipped to [0, 1]: it sees
+    where the full-resolution depth and normals differ from what the low-resolution pass saw, so
+    AO does not bleed across depth and normal edges.
     """
 
     def __init__(self, args: UNetArgs | None = None):
@@ -184,10 +239,18 @@ class UNet(nn.Module):
             raise NeuralaoError(
                 f"U-Net widths must list at least two positive channel counts, got {args.widths}"
             )
+        if int(args.scale) not in (1, 2, 4) or int(args.refine_width) < 1:
+            raise NeuralaoError(
+                f"U-Net scale must be 1, 2 or 4 and refine_width >= 1, got {args.scale} and {args.refine_width}"
+            )
         w = [int(v) for v in args.widths]
         slope = args.negative_slope
+        cin = args.in_channels + (1 if args.radius_input else 0)
+        select = torch.zeros(1, args.in_channels, 1, 1)
+        select[0, 0] = 1.0  # channel 0 = normalised depth
+        self.register_buffer("select", select, persistent=False)
         self.down = nn.ModuleList(
-            nn.Sequential(_conv3x3(args.in_channels if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))
+            nn.Sequential(_conv3x3(cin if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))
             for i in range(len(w))
         )
         # up[i] brings level i+1 (width w[i+1]) to level i: upsample, conv w[i+1] -> w[i], BN, LeakyReLU.
@@ -202,12 +265,28 @@ class UNet(nn.Module):
             nn.Sequential(_conv3x3(2 * w[i], w[i]), nn.LeakyReLU(slope)) for i in range(len(w) - 1)
         )
         self.out = nn.Conv2d(w[0], 1, kernel_size=1)
+        if args.scale > 1:
+            rw = int(args.refine_width)
+            self.refine = nn.Sequential(
+                _conv3x3(1 + args.in_channels + 1, rw), nn.LeakyReLU(slope), nn.Conv2d(rw, 1, kernel_size=1)
+            )
 
     @property
     def pad_multiple(self) -> int:
         return self.args.pad_multiple
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def _depth(self, x: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(x, self.select)
+
+    def _with_radius(self, x: torch.Tensor, radius: torch.Tensor | None) -> torch.Tensor:
+        if not self.args.radius_input:
+            return x
+        if radius is None:
+            raise NeuralaoError("this U-Net takes the AO radius as an input; pass radius (N, 1, 1, 1)")
+        r = torch.clamp(radius / torch.clamp(self._depth(x), min=RADIUS_DEPTH_FLOOR), 0.0, RADIUS_CAP)
+        return torch.cat([x, r], dim=1)
+
+    def _unet(self, x: torch.Tensor) -> torch.Tensor:
         depth = self.args.depth
         skips = []
         for i, block in enumerate(self.down):
@@ -221,25 +300,36 @@ class UNet(nn.Module):
             x = self.fuse[i](torch.cat([x, skips[i]], dim=1))
         return torch.sigmoid(self.out(x))
 
+    def forward(self, x: torch.Tensor, radius: torch.Tensor | None = None) -> torch.Tensor:
+        s = int(self.args.scale)
+        if s == 1:
+            return self._unet(self._with_radius(x, radius))
+        low = F.interpolate(x, scale_factor=1.0 / s, mode="nearest")
+        ao = F.interpolate(self._unet(self._with_radius(low, radius)), scale_factor=float(s), mode="bilinear",
+                           align_corners=False)  # fmt: skip
+        d_up = F.interpolate(self._depth(low), scale_factor=float(s), mode="bilinear", align_corners=False)
+        return torch.clamp(ao + self.refine(torch.cat([ao, x, d_up], dim=1)), 0.0, 1.0)
+
 
 class PaddedUNet(nn.Module):
     """Any resolution: reflect-pad bottom/right to ``pad_multiple``, run the U-Net, crop back.
 
-    x : (N, 4, H, W) float32 -> (N, 1, H, W) float32. Same padding as :func:`pad_to_multiple`.
+    x : (N, 4, H, W) float32, radius : (N, 1, 1, 1) float32 -> (N, 1, H, W) float32. Same padding
+    as :func:`pad_to_multiple`.
     """
 
     def __init__(self, unet: UNet):
         super().__init__()
         self.unet = unet
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, radius: torch.Tensor | None = None) -> torch.Tensor:
         h, w = x.shape[-2:]
         m = self.unet.pad_multiple
         check_padable(h, w, m)
         ph, pw = pad_amount(h, w, m)
         if ph or pw:
             x = F.pad(x, (0, pw, 0, ph), mode="reflect")
-        return self.unet(x)[..., :h, :w]
+        return self.unet(x, radius)[..., :h, :w]
 
 
 def build_model(model_args: dict | UNetArgs | None = None) -> UNet:
@@ -248,7 +338,9 @@ def build_model(model_args: dict | UNetArgs | None = None) -> UNet:
         return UNet(model_args)
     from .config import from_dict
 
-    return UNet(from_dict(UNetArgs, dict(model_args)))
+    model_args = dict(model_args)
+    model_args.setdefault("radius_input", False)  # checkpoints from before the radius input
+    return UNet(from_dict(UNetArgs, model_args))
 
 
 def model_args_dict(args: UNetArgs) -> dict:
@@ -262,9 +354,15 @@ def count_parameters(model: nn.Module) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-def predict(model: UNet, x: np.ndarray) -> np.ndarray:
-    """Torch reference inference at any size. x : (4, H, W) float32 -> (H, W) float32 (raw network output)."""
+def radius_tensor(rho: float | None) -> torch.Tensor | None:
+    """The radius parameter as the network's (1, 1, 1, 1) float32 input (None stays None)."""
+    return None if rho is None else torch.full((1, 1, 1, 1), float(rho), dtype=torch.float32)
+
+
+def predict(model: UNet, x: np.ndarray, rho: float | None = None) -> np.ndarray:
+    """Torch reference inference at any size. x : (4, H, W) float32, rho : the radius parameter
+    (:func:`radius_param`; required by radius-input models) -> (H, W) float32 (raw network output)."""
     model.eval()
     with torch.no_grad():
-        y = PaddedUNet(model)(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None])
+        y = PaddedUNet(model)(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None], radius_tensor(rho))
     return y[0, 0].numpy()

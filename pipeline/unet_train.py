@@ -42,6 +42,7 @@ from .unet import (
     UNet,
     UNetArgs,
     build_model,
+    frame_radius_param,
     model_args_dict,
     preprocess_frame,
 )
@@ -75,8 +76,28 @@ class UNetTrainSettings:
     ssim_sigma: float = 1.5  # SSIM Gaussian window sigma (Wang et al. 2004)
     ssim_c1: float = 1e-4  # SSIM C1 = (0.01 L)^2 with L = 1
     ssim_c2: float = 9e-4  # SSIM C2 = (0.03 L)^2 with L = 1
-    seed: int = 0  # seeds weight init (torch.manual_seed) and the crop / flip / order generator
+    seed: int = 0  # seeds weight init (torch.manual_seed) and the crop / flip / order / radius generator
     threads: int = 0  # torch intra-op threads (0 = torch's default); fixed for bitwise-reproducible runs
+    # Architecture beyond the widths: the G-buffer resolution divisor of the variant (1, 2 or 4) and the
+    # width of its full-resolution refinement (see pipeline.unet.UNet).
+    scale: int = 1
+    refine_width: int = 4
+    # Learning-rate schedule over all steps: "constant", or "cosine" (linear warm-up over warmup_steps,
+    # then cosine decay to lr * min_lr_ratio at the last step).
+    lr_schedule: str = "constant"
+    warmup_steps: int = 0
+    min_lr_ratio: float = 0.05
+    # Wall-clock budget in minutes (0 = none: train `epochs` epochs). With a budget, a short calibration on
+    # a copy of the model (10 steps, one validation pass) measures the cost of an epoch and fixes the epoch
+    # count so the run ends within the budget; the plan is stored in the checkpoint, so a resumed run
+    # follows the same plan and ends with the same weights as an uninterrupted one. `epochs` is then an upper
+    # bound. A budget run's schedule should be "cosine" (the end is known in advance).
+    budget_minutes: float = 0.0
+    train_fraction: float = 1.0  # train on this fraction of the training scenes (the corpus-size study)
+    val_frames: int = 0  # validate on at most this many frames, evenly spaced (0 = all)
+    device: str = "auto"  # "auto" (CUDA when torch sees a device), "cpu" or "cuda"
+    init: str = ""  # checkpoint to start from (weights whose shapes match are copied; e.g. the full-res
+    # network for a reduced-resolution variant, whose refinement then starts from scratch)
 
 
 # ----------------------------------------------------------------------------------------------- loss
@@ -132,101 +153,144 @@ def _ssim_kw(settings: UNetTrainSettings) -> dict:
 
 @dataclass
 class FrameSet:
-    """Preprocessed frames in memory.
+    """Preprocessed frames in memory, with labels at K radii.
 
-    x : (N, 4, H, W) float32 network input; y : (N, 1, H, W) float32 AO labels;
-    m : (N, 1, H, W) float32 valid mask (0/1); names : N strings "scene/view".
+    x : (N, 4, H, W) float32 network input; y : (N, K, H, W) float16 AO labels (exact: binary-kernel
+    labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
+    radius parameters (:func:`pipeline.unet.radius_param`); radii : (N, K) float32 radii in scene
+    units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
     """
 
     x: torch.Tensor
     y: torch.Tensor
     m: torch.Tensor
+    rho: torch.Tensor
+    radii: torch.Tensor
     names: list[str]
     scenes: list[str]
 
     def __len__(self) -> int:
         return len(self.names)
 
+    def subset(self, index: list[int]) -> FrameSet:
+        i = torch.as_tensor(index, dtype=torch.int64)
+        return FrameSet(self.x[i], self.y[i], self.m[i], self.rho[i], self.radii[i],
+                        [self.names[k] for k in index], [self.scenes[k] for k in index])  # fmt: skip
 
-def frames_to_set(frames: list[dict]) -> FrameSet:
-    """Frame dicts (COMMON.md format, with ao and valid) -> :class:`FrameSet` (all frames one size)."""
-    if not frames:
-        raise NeuralaoError("no frames to train or validate on")
-    shapes = {f["depth"].shape for f in frames}
-    if len(shapes) != 1:
-        raise NeuralaoError(f"frames have different sizes {sorted(shapes)}; use one size per dataset")
-    xs, ys, ms, names, scenes = [], [], [], [], []
-    for i, f in enumerate(frames):
-        if "ao" not in f or "valid" not in f:
-            raise NeuralaoError(
-                f"frame {f.get('scene', '?')}/{f.get('view', i)} has no AO labels ('ao', 'valid')"
-            )
-        xs.append(preprocess_frame(f))
-        ys.append(np.asarray(f["ao"], dtype=np.float32)[None])
-        ms.append(
-            (np.asarray(f["valid"], dtype=bool) & np.asarray(f["mask"], dtype=bool)).astype(np.float32)[None]
+
+def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ao (K, H, W) float32, valid (K, H, W) bool, radii (K,) float32) of a frame's labels at every radius.
+
+    Frames from a dataset with ``labels.radii_rel`` carry ``ao_radii``/``valid_radii``/``radii``; others
+    are refused (the network takes the radius as an input, so it needs to know each label's radius).
+    """
+    name = f"{frame.get('scene', '?')}/{frame.get('view', '?')}"
+    if not all(k in frame for k in ("ao_radii", "valid_radii", "radii")):
+        raise NeuralaoError(
+            f"frame {name} has no labels at known radii (ao_radii, valid_radii, radii): "
+            "build the dataset with labels.radii_rel set"
         )
+    ao = np.moveaxis(np.asarray(frame["ao_radii"], dtype=np.float32), -1, 0)
+    valid = np.moveaxis(np.asarray(frame["valid_radii"], dtype=bool), -1, 0)
+    return ao, valid, np.asarray(frame["radii"], dtype=np.float32).reshape(-1)
+
+
+def frames_to_set(frames) -> FrameSet:
+    """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one size, one radius count).
+
+    ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
+    only the compact arrays are kept.
+    """
+    xs, ys, ms, rhos, radii, names, scenes = [], [], [], [], [], [], []
+    shape = count = None
+    for i, f in enumerate(frames):
+        if shape is None:
+            shape = f["depth"].shape
+        elif f["depth"].shape != shape:
+            raise NeuralaoError(f"frames have different sizes {shape} and {f['depth'].shape}; use one size per dataset")
+        ao, valid, r = frame_labels(f)
+        if count is None:
+            count = len(r)
+        elif len(r) != count:
+            raise NeuralaoError(f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset")
+        xs.append(torch.from_numpy(preprocess_frame(f)))
+        ys.append(torch.from_numpy(ao.astype(np.float16)))
+        ms.append(torch.from_numpy(valid & np.asarray(f["mask"], dtype=bool)[None]))
+        rhos.append([frame_radius_param(f, float(v)) for v in r])
+        radii.append(r)
         scene = str(f.get("scene", "frames"))
         names.append(f"{scene}/{f.get('view', i)}")
         scenes.append(scene)
-    return FrameSet(
-        torch.from_numpy(np.stack(xs)),
-        torch.from_numpy(np.stack(ys)),
-        torch.from_numpy(np.stack(ms)),
-        names,
-        scenes,
-    )
+    if not names:
+        raise NeuralaoError("no frames to train or validate on")
+    return FrameSet(torch.stack(xs), torch.stack(ys), torch.stack(ms),
+                    torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)), names, scenes)  # fmt: skip
 
 
-def load_dataset_frames(data: Path) -> tuple[FrameSet, FrameSet | None, dict]:
-    """Train frames (train scenes, held-back views excluded), validation frames and dataset info."""
+def load_dataset_frames(data: Path, train_fraction: float = 1.0) -> tuple[FrameSet, FrameSet | None, dict]:
+    """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
+
+    ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
+    the corpus-size study; validation is unchanged.
+    """
     from .dataset import open_dataset
 
     ds = open_dataset(data)
-    train = list(ds.frames(split="train", holdout=False))
-    if not train:
+    train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
+    if not train_scenes:
         raise NeuralaoError(f"dataset {data} has no training frames (no scene with split 'train')")
-    val = list(ds.frames(split="val"))
+    if not 0.0 < train_fraction <= 1.0:
+        raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
+    keep = train_scenes
+    if train_fraction < 1.0:
+        n = max(1, round(len(train_scenes) * train_fraction))
+        keep = [train_scenes[int(i * len(train_scenes) / n)] for i in range(n)]
+    keep_set = set(keep)
+    train = frames_to_set(f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set)
     val_source = "val scenes"
-    if not val:
-        val = list(ds.frames(split="train", holdout=True))
+    if any(e["split"] == "val" for e in ds.manifest["shards"]):
+        val = frames_to_set(ds.frames(split="val"))
+    else:
+        val = frames_to_set(ds.frames(split="train", holdout=True))
         val_source = "held-back views of the training scenes (the dataset has no val scene)"
     info = {
         "path": str(data),
         "name": ds.manifest.get("name"),
         "dataset_hash": ds.manifest.get("dataset_hash"),
         "labels": ds.manifest.get("config", {}).get("labels"),
-        "training_scenes": sorted({f["scene"] for f in train}),
-        "val_scenes": sorted({f["scene"] for f in val}),
+        "training_scenes": sorted(set(train.scenes)),
+        "val_scenes": sorted(set(val.scenes)),
         "val_source": val_source,
         "train_frames": len(train),
         "val_frames": len(val),
+        "train_fraction": train_fraction,
     }
-    return frames_to_set(train), (frames_to_set(val) if val else None), info
+    return train, val, info
 
 
 def _integral(m: torch.Tensor) -> torch.Tensor:
-    """(N, 1, H, W) mask -> (N, H+1, W+1) float64 summed-area table."""
-    s = torch.zeros(m.shape[0], m.shape[2] + 1, m.shape[3] + 1, dtype=torch.float64)
-    s[:, 1:, 1:] = m[:, 0].double().cumsum(1).cumsum(2)
+    """(N, H, W) bool mask -> (N, H+1, W+1) int32 summed-area table."""
+    s = torch.zeros(m.shape[0], m.shape[1] + 1, m.shape[2] + 1, dtype=torch.int32)
+    s[:, 1:, 1:] = m.to(torch.int32).cumsum(1).cumsum(2)
     return s
 
 
 @dataclass
 class EpochPlan:
-    """Which crop of which frame each sample of an epoch uses. All (S,) int64 / bool tensors."""
+    """Which crop of which frame, at which radius, each sample of an epoch uses. (S,) int64 / bool tensors."""
 
     frame: torch.Tensor
     top: torch.Tensor
     left: torch.Tensor
     hflip: torch.Tensor
     vflip: torch.Tensor
+    radius: torch.Tensor
 
 
 def plan_epoch(
     data: FrameSet, sat: torch.Tensor, settings: UNetTrainSettings, gen: torch.Generator
 ) -> EpochPlan:
-    """Draw the order, crops and flips of one epoch from ``gen`` (the only randomness in training)."""
+    """Draw the order, crops, flips and radii of one epoch from ``gen`` (the only randomness in training)."""
     n, _, h, w = data.x.shape
     c = settings.crop or min(h, w)
     if settings.crop and (settings.crop > h or settings.crop > w):
@@ -240,6 +304,7 @@ def plan_epoch(
     lefts = torch.randint(0, w - c + 1, (s, tries), generator=gen)
     hflip = (torch.rand(s, generator=gen) < 0.5) & settings.hflip
     vflip = (torch.rand(s, generator=gen) < 0.5) & settings.vflip
+    radius = torch.randint(0, data.y.shape[1], (s,), generator=gen)
     if settings.crop:
         fi = frames[:, None].expand(s, tries)
         fg = (
@@ -247,38 +312,54 @@ def plan_epoch(
             - sat[fi, tops, lefts + c]
             - sat[fi, tops + c, lefts]
             + sat[fi, tops, lefts]
-        ) / float(c * c)
+        ).double() / float(c * c)
         ok = fg >= settings.min_foreground
         pick = torch.where(ok.any(1), ok.to(torch.int64).argmax(1), fg.argmax(1))
         top, left = tops[torch.arange(s), pick], lefts[torch.arange(s), pick]
     else:
         top = left = torch.zeros(s, dtype=torch.int64)
-    return EpochPlan(frames, top, left, hflip, vflip)
+    return EpochPlan(frames, top, left, hflip, vflip, radius)
 
 
 def make_batch(
     data: FrameSet, plan: EpochPlan, idx: range, crop: int
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, list[str]]:
-    """Crops + flips for samples ``idx`` of ``plan``: x (B, 4, c, c), y (B, 1, c, c), m (B, 1, c, c), names."""
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[str]]:
+    """Crops + flips for samples ``idx`` of ``plan``: x (B, 4, c, c), rho (B, 1, 1, 1), y (B, 1, c, c)
+    float32, m (B, 1, c, c) float32 0/1, names."""
     from .unet import flip_input
 
-    xs, ys, ms, names = [], [], [], []
+    xs, rs, ys, ms, names = [], [], [], [], []
     h, w = data.x.shape[-2:]
     for k in idx:
-        f, t, l0 = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k])
+        f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
         ch, cw = (crop, crop) if crop else (h, w)
         x = data.x[f : f + 1, :, t : t + ch, l0 : l0 + cw]
-        y = data.y[f : f + 1, :, t : t + ch, l0 : l0 + cw]
-        m = data.m[f : f + 1, :, t : t + ch, l0 : l0 + cw]
+        y = data.y[f : f + 1, j : j + 1, t : t + ch, l0 : l0 + cw].float()
+        m = data.m[f : f + 1, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         if plan.hflip[k]:
             x, y, m = flip_input(x, horizontal=True), y.flip(-1), m.flip(-1)
         if plan.vflip[k]:
             x, y, m = flip_input(x, horizontal=False), y.flip(-2), m.flip(-2)
         xs.append(x)
+        rs.append(data.rho[f, j].view(1, 1, 1, 1))
         ys.append(y)
         ms.append(m)
         names.append(data.names[f])
-    return torch.cat(xs), torch.cat(ys), torch.cat(ms), names
+    return torch.cat(xs), torch.cat(rs), torch.cat(ys), torch.cat(ms), names
+
+
+def lr_at(settings: UNetTrainSettings, step: int, total: int) -> float:
+    """Learning rate of 0-based ``step`` of ``total`` under ``settings.lr_schedule``."""
+    if settings.lr_schedule == "constant":
+        return settings.lr
+    if settings.lr_schedule != "cosine":
+        raise NeuralaoError(f"lr_schedule must be 'constant' or 'cosine', got {settings.lr_schedule!r}")
+    if step < settings.warmup_steps:
+        return settings.lr * (step + 1) / settings.warmup_steps
+    span = max(1, total - settings.warmup_steps - 1)
+    t = min(1.0, (step - settings.warmup_steps) / span)
+    low = settings.lr * settings.min_lr_ratio
+    return low + 0.5 * (settings.lr - low) * (1.0 + math.cos(math.pi * t))
 
 
 # ----------------------------------------------------------------------------------------------- metrics
@@ -300,41 +381,53 @@ def _metric_fns():
     return masked_ssim, masked_rmse
 
 
-def evaluate(model: UNet, data: FrameSet) -> dict:
-    """Whole-frame validation: mean masked SSIM and RMSE over frames, and per scene.
+def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") -> dict:
+    """Whole-frame validation at every radius: mean masked SSIM and RMSE over (frame, radius) pairs,
+    per scene and per radius index.
 
     The prediction is composited like every consumer does (background -> 1) before scoring.
     """
     masked_ssim, masked_rmse = _metric_fns()
     model.eval()
     wrapper = PaddedUNet(model)
-    per_frame = []
+    per = []  # (scene, radius index, ssim, rmse)
     with torch.no_grad():
         for i in range(len(data)):
-            pred = wrapper(data.x[i : i + 1])[0, 0].numpy()
-            ref = data.y[i, 0].numpy()
-            mask = data.m[i, 0].numpy() > 0.5
-            if not mask.any():
-                continue
-            pred = np.where(data.x[i, 0].numpy() > 0, pred, 1.0).astype(np.float32)  # background -> 1
-            per_frame.append(
-                (data.scenes[i], float(masked_ssim(pred, ref, mask)), float(masked_rmse(pred, ref, mask)))
-            )
-    if not per_frame:
+            x = data.x[i : i + 1]
+            fg = x[0, 0].numpy() > 0
+            for j in range(data.y.shape[1]):
+                mask = data.m[i, j].numpy()
+                if not mask.any():
+                    continue
+                pred = wrapper(x.to(device), data.rho[i, j].view(1, 1, 1, 1).to(device))[0, 0].cpu().numpy()
+                pred = np.where(fg, pred, 1.0).astype(np.float32)  # background -> 1
+                ref = data.y[i, j].float().numpy()
+                per.append((data.scenes[i], j, float(masked_ssim(pred, ref, mask)), float(masked_rmse(pred, ref, mask))))
+    if not per:
         return {}
-    scenes = sorted({s for s, _, _ in per_frame})
+
+    def mean(rows, k):
+        return float(np.mean([r[k] for r in rows]))
+
+    scenes = sorted({r[0] for r in per})
+    radii = sorted({r[1] for r in per})
     return {
-        "val_ssim": float(np.mean([v for _, v, _ in per_frame])),
-        "val_rmse": float(np.mean([v for _, _, v in per_frame])),
-        "val_frames": len(per_frame),
-        "per_scene": {
-            s: {
-                "ssim": float(np.mean([v for t, v, _ in per_frame if t == s])),
-                "rmse": float(np.mean([v for t, _, v in per_frame if t == s])),
-            }
-            for s in scenes
-        },
-    }
+        "val_ssim": mean(per, 2),
+        "val_rmse": mean(per, 3),
+        "val_frames": len(data),
+        "val_pairs": len(per),
+        "per_scene": {s: {"ssim": mean([r for r in per if r[0] == s], 2), "rmse": mean([r for r in per if r[0] == s], 3)}
+                      for s in scenes},
+        "per_radius": [{"index": j, "ssim": mean([r for r in per if r[1] == j], 2), "rmse": mean([r for r in per if r[1] == j], 3)}
+                       for j in radii],
+    }  # fmt: skip
+
+
+def validation_subset(data: FrameSet | None, count: int) -> FrameSet | None:
+    """At most ``count`` frames of ``data``, evenly spaced (all when count is 0 or larger than the set)."""
+    if data is None or count <= 0 or count >= len(data):
+        return data
+    return data.subset([int(i * len(data) / count) for i in range(count)])
 
 
 # ----------------------------------------------------------------------------------------------- checkpoints
@@ -354,8 +447,11 @@ def model_from_checkpoint(ckpt: dict) -> UNet:
 
 
 def _resume_key(config: dict, dataset_hash: str | None) -> dict:
-    """What must match for a checkpoint to be continued: everything but the epoch count."""
-    return {"config": {k: v for k, v in config.items() if k != "epochs"}, "dataset_hash": dataset_hash}
+    """What must match for a checkpoint to be continued: everything but the device, and but the epoch
+    count under a constant learning rate without a budget (a continued run may then add epochs)."""
+    free = {"device"} | ({"epochs"} if config.get("lr_schedule", "constant") == "constant"
+                         and not config.get("budget_minutes") else set())  # fmt: skip
+    return {"config": {k: v for k, v in config.items() if k not in free}, "dataset_hash": dataset_hash}
 
 
 def _find_resumable(out: Path, key: dict, epochs: int) -> dict | None:
@@ -381,6 +477,75 @@ def _find_resumable(out: Path, key: dict, epochs: int) -> dict | None:
 # ----------------------------------------------------------------------------------------------- training
 
 
+def pick_device(name: str) -> torch.device:
+    """"auto" -> CUDA when torch sees a device, else the CPU; "cuda" without one is an error."""
+    if name not in ("auto", "cpu", "cuda"):
+        raise NeuralaoError(f"device must be auto, cpu or cuda, got {name!r}")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise NeuralaoError("device cuda asked but torch sees no CUDA device")
+    return torch.device("cuda" if name != "cpu" and torch.cuda.is_available() else "cpu")
+
+
+def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
+    return UNetArgs(in_channels=4, widths=list(settings.widths), negative_slope=settings.negative_slope,
+                    radius_input=True, scale=int(settings.scale), refine_width=int(settings.refine_width))  # fmt: skip
+
+
+def _init_weights(model: UNet, path: str) -> dict:
+    """Copy every tensor of checkpoint ``path`` whose name and shape match; returns what was copied."""
+    src = load_checkpoint(path)["state_dict"]
+    own = model.state_dict()
+    copied = {k: v for k, v in src.items() if k in own and own[k].shape == v.shape}
+    own.update(copied)
+    model.load_state_dict(own)
+    return {"path": str(path), "tensors": len(copied), "of": len(own)}
+
+
+def _step(model, opt, xb, rb, yb, mb, kw, where: str, lr: float) -> float:
+    if not (torch.isfinite(xb).all() and torch.isfinite(yb).all()):
+        raise NeuralaoError(f"non-finite (NaN/inf) input or label in {where}; fix the dataset")
+    loss = masked_ssim_loss(PaddedUNet(model)(xb, rb), yb, mb, **kw)
+    if not torch.isfinite(loss):
+        raise NeuralaoError(f"loss is {float(loss.detach())} in {where}; lower lr (now {lr:g}) or check the data")
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    return float(loss.detach())
+
+
+def calibrate(model: UNet, settings: UNetTrainSettings, train_set: FrameSet, val_set: FrameSet | None,
+              sat: torch.Tensor, device: torch.device, steps: int = 10) -> dict:
+    """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
+    with batches from a separate generator (the run's own state and randomness are untouched)."""
+    import copy
+
+    probe = copy.deepcopy(model)
+    opt = torch.optim.Adam(probe.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
+    plan = plan_epoch(train_set, sat, settings, torch.Generator().manual_seed(settings.seed + 7919))
+    kw = _ssim_kw(settings)
+    times = []
+    for k in range(steps + 2):
+        idx = range(k * settings.batch_size, min((k + 1) * settings.batch_size, len(plan.frame)))
+        if not len(idx):
+            break
+        xb, rb, yb, mb, _ = make_batch(train_set, plan, idx, settings.crop)
+        t0 = time.perf_counter()
+        probe.train()
+        _step(probe, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, "calibration", settings.lr)
+        times.append(time.perf_counter() - t0)
+    per_step = float(np.median(times[2:] or times))  # the first steps warm up allocators
+    t0 = time.perf_counter()
+    if val_set is not None:
+        evaluate(probe, val_set, device)
+    return {"seconds_per_step": per_step, "val_seconds": time.perf_counter() - t0}
+
+
+def plan_budget(settings: UNetTrainSettings, steps_per_epoch: int, cal: dict) -> int:
+    """Epochs that fit ``budget_minutes`` at the calibrated cost (at least 1, at most ``epochs``)."""
+    per_epoch = steps_per_epoch * cal["seconds_per_step"] + cal["val_seconds"]
+    return int(max(1, min(settings.epochs, math.floor(settings.budget_minutes * 60.0 / per_epoch))))
+
+
 def train(
     settings: UNetTrainSettings,
     train_set: FrameSet,
@@ -401,43 +566,69 @@ def train(
     out = Path(out)
     if settings.epochs < 1 or settings.batch_size < 1 or settings.crops_per_frame < 1:
         raise NeuralaoError("epochs, batch_size and crops_per_frame must be >= 1")
-    args = UNetArgs(in_channels=4, widths=list(settings.widths), negative_slope=settings.negative_slope)
+    if settings.budget_minutes < 0 or not math.isfinite(settings.budget_minutes):
+        raise NeuralaoError(f"budget_minutes must be >= 0, got {settings.budget_minutes}")
+    lr_at(settings, 0, 1)  # validates the schedule name
+    args = model_args_of(settings)
+    model = UNet(args)  # validates widths / scale
     if settings.crop and settings.crop % args.pad_multiple:
-        raise NeuralaoError(f"crop {settings.crop} must be a multiple of {args.pad_multiple} (2**depth)")
+        raise NeuralaoError(f"crop {settings.crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)")
     if out.exists() and not restart:
         load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
+    device = pick_device(settings.device)
     info = dict(dataset_info or {})
     info.setdefault("training_scenes", sorted(set(train_set.scenes)))
     info.setdefault("val_scenes", sorted(set(val_set.scenes)) if val_set is not None else [])
     config = settings_to_dict(settings)
     key = _resume_key(config, info.get("dataset_hash"))
+    val_set = validation_subset(val_set, settings.val_frames)
 
     prev_det = torch.are_deterministic_algorithms_enabled()
     prev_threads = torch.get_num_threads()
+    if device.type == "cuda":
+        import os
+
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS
     torch.use_deterministic_algorithms(True)
     if settings.threads:
         torch.set_num_threads(settings.threads)
     try:
         torch.manual_seed(settings.seed)
         model = UNet(args)
+        init_info = _init_weights(model, settings.init) if settings.init else None
+        model.to(device)
         opt = torch.optim.Adam(model.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
         gen = torch.Generator().manual_seed(settings.seed)
         history: list[dict] = []
-        start = 0
+        start, wall = 0, 0.0
+        plan_info: dict = {}
         resumed = None if restart else _find_resumable(out, key, settings.epochs)
+        sat = _integral(train_set.x[:, 0] > 0)
+        steps_per_epoch = -(-len(train_set) * settings.crops_per_frame // settings.batch_size)
         if resumed is not None:
             model.load_state_dict(resumed["state_dict"])
             opt.load_state_dict(resumed["optimizer"])
-            for g in opt.param_groups:  # a continued run may only change the epoch count
-                g["lr"] = settings.lr
             gen.set_state(resumed["rng"]["data"])
             torch.set_rng_state(resumed["rng"]["torch"])
             history = list(resumed["history"])
             start = int(resumed["epoch"])
-        sat = _integral(train_set.m)
+            wall = float(resumed.get("wall_seconds", 0.0))
+            if settings.budget_minutes > 0:  # a budget run follows the plan it made when it started
+                plan_info = dict(resumed.get("plan", {}))
+        if not plan_info:
+            epochs = settings.epochs
+            plan_info = {"epochs": epochs, "steps_per_epoch": steps_per_epoch}
+            if settings.budget_minutes > 0:
+                cal = calibrate(model, settings, train_set, val_set, sat, device)
+                epochs = plan_budget(settings, steps_per_epoch, cal)
+                plan_info = {"epochs": epochs, "steps_per_epoch": steps_per_epoch, "budget_minutes": settings.budget_minutes, **cal}
+                log.info("budget %.1f min: %.3f s/step, %.1f s/validation -> %d epochs of %d steps",
+                         settings.budget_minutes, cal["seconds_per_step"], cal["val_seconds"], epochs, steps_per_epoch)  # fmt: skip
+        epochs = int(plan_info["epochs"])
+        total_steps = epochs * steps_per_epoch
         kw = _ssim_kw(settings)
         ckpt = resumed
-        bar = tqdm(range(start, settings.epochs), desc="unet", unit="epoch", disable=not progress)
+        bar = tqdm(range(start, epochs), desc="unet", unit="epoch", disable=not progress)
         for epoch in bar:
             t0 = time.perf_counter()
             model.train()
@@ -446,39 +637,37 @@ def train(
             batches = [range(i, min(i + settings.batch_size, n)) for i in range(0, n, settings.batch_size)]
             losses = []
             for b, idx in enumerate(batches):
-                xb, yb, mb, names = make_batch(train_set, plan, idx, settings.crop)
-                where = (
-                    f"epoch {epoch + 1} batch {b + 1}/{len(batches)} (frames {', '.join(sorted(set(names)))})"
-                )
-                if not (torch.isfinite(xb).all() and torch.isfinite(yb).all()):
-                    raise NeuralaoError(f"non-finite (NaN/inf) input or label in {where}; fix the dataset")
-                loss = masked_ssim_loss(PaddedUNet(model)(xb), yb, mb, **kw)
-                if not torch.isfinite(loss):
-                    raise NeuralaoError(
-                        f"loss is {float(loss)} in {where}; lower lr (now {settings.lr:g}) or check the data"
-                    )
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                losses.append(float(loss.detach()))
+                step = epoch * steps_per_epoch + b
+                lr = lr_at(settings, step, total_steps)
+                for g in opt.param_groups:
+                    g["lr"] = lr
+                xb, rb, yb, mb, names = make_batch(train_set, plan, idx, settings.crop)
+                where = f"epoch {epoch + 1} batch {b + 1}/{len(batches)} (frames {', '.join(sorted(set(names)))})"
+                losses.append(_step(model, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, where, lr))
             train_seconds = time.perf_counter() - t0
-            metrics = evaluate(model, val_set) if val_set is not None else {}
+            metrics = evaluate(model, val_set, device) if val_set is not None else {}
+            seconds = time.perf_counter() - t0
+            wall += seconds
             record = {
                 "epoch": epoch + 1,
                 "train_loss": float(np.mean(losses)),
+                "lr": lr,
                 "train_seconds": train_seconds,
-                "seconds": time.perf_counter() - t0,
-                **{k: v for k, v in metrics.items() if k != "per_scene"},
+                "seconds": seconds,
+                "wall_seconds": wall,
+                **{k: v for k, v in metrics.items() if k not in ("per_scene", "per_radius")},
             }
             history.append(record)
             log.info(
-                "epoch %d/%d  loss %.4f  val ssim %s  rmse %s  (%.1f s)",
+                "epoch %d/%d  loss %.4f  lr %.2g  val ssim %s  rmse %s  (%.1f s, %.1f min in all)",
                 epoch + 1,
-                settings.epochs,
+                epochs,
                 record["train_loss"],
+                lr,
                 f"{metrics['val_ssim']:.4f}" if metrics else "-",
                 f"{metrics['val_rmse']:.4f}" if metrics else "-",
-                record["seconds"],
+                seconds,
+                wall / 60.0,
             )
             bar.set_postfix(
                 loss=f"{record['train_loss']:.4f}", val_ssim=f"{metrics.get('val_ssim', float('nan')):.4f}"
@@ -487,14 +676,18 @@ def train(
                 "kind": KIND,
                 "format_version": FORMAT_VERSION,
                 "model_args": model_args_dict(args),
-                "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+                "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
                 "config": config,
                 "preprocess": dict(PREPROCESS_DESCRIPTION),
                 "dataset": info,
                 "metrics": metrics,
                 "history": history,
                 "epoch": epoch + 1,
-                "complete": epoch + 1 == settings.epochs,
+                "plan": plan_info,
+                "init": init_info,
+                "wall_seconds": wall,
+                "device": device.type,
+                "complete": epoch + 1 == epochs,
                 "optimizer": opt.state_dict(),
                 "rng": {"data": gen.get_state(), "torch": torch.get_rng_state()},
                 "torch_version": str(torch.__version__),
@@ -527,6 +720,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
     add_set_option(p, "--set epochs=3")
+    p.add_argument("--budget", type=float, metavar="MINUTES",
+                   help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)")  # fmt: skip
     p.add_argument(
         "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
     )
@@ -534,8 +729,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    settings = load_settings(UNetTrainSettings, args.config, args.set)
-    train_set, val_set, info = load_dataset_frames(Path(args.data))
+    overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
+    settings = load_settings(UNetTrainSettings, args.config, overrides)
+    train_set, val_set, info = load_dataset_frames(Path(args.data), settings.train_fraction)
     log.info(
         "U-Net: %d training frames (%s), %d validation frames (%s)",
         len(train_set),

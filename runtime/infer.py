@@ -1,10 +1,12 @@
-"""`neuralao infer MODEL.onnx FRAME.npz --out AO.png [--composite OUT.png]`: apply an exported model to a G-buffer.
+"""`neuralao infer [MODEL.onnx] FRAME.npz --out AO.png [--radius R] [--composite OUT.png]`: apply an exported
+model to a G-buffer. Without MODEL.onnx the shipped U-Net (``runtime/models``, see ``runtime.models``) is used.
 
 The model's kind comes from its ONNX metadata (``neuralao_kind``); each kind's module provides
 ``infer_frame(onnx_path, frame) -> ao (H, W) float32`` (AO in [0, 1], 1 on background):
 
 * ``mlp``:  :func:`export.mlp.infer_frame` (object-space normals, radius-zero input);
-* ``unet``: :func:`export.unet.infer_frame` (depth + camera-space normals);
+* ``unet``: :func:`export.unet.infer_frame` (depth + camera-space normals; the AO radius ``--radius``
+  in scene units, by default the largest radius the frame's labels were traced at);
 * ``field``: :func:`export.field.infer_frame` (object-space position + normal).
 
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
@@ -70,10 +72,18 @@ def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarr
     return arrays
 
 
-def infer(onnx_path: str | Path, frame: dict) -> np.ndarray:
-    """AO (H, W) float32 of ``frame`` with the model's own inference function (by ONNX metadata kind)."""
-    module = importlib.import_module(INFERERS[model_kind(onnx_path)])
-    ao = np.asarray(module.infer_frame(Path(onnx_path), frame), dtype=np.float32)
+def infer(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np.ndarray:
+    """AO (H, W) float32 of ``frame`` with the model's own inference function (by ONNX metadata kind);
+    ``radius`` (scene units) goes to the models that take the AO radius as an input."""
+    kind = model_kind(onnx_path)
+    module = importlib.import_module(INFERERS[kind])
+    if kind == "unet":
+        ao = module.infer_frame(Path(onnx_path), frame, radius)
+    elif radius is not None:
+        raise NeuralaoError(f"--radius applies to U-Net models; {onnx_path} is a {kind} model (its radius is baked in)")
+    else:
+        ao = module.infer_frame(Path(onnx_path), frame)
+    ao = np.asarray(ao, dtype=np.float32)
     if ao.ndim != 2:
         raise NeuralaoError(f"model returned AO of shape {ao.shape}, expected (H, W)")
     return ao
@@ -112,18 +122,27 @@ def _mask(frame: dict) -> np.ndarray:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", help="exported ONNX model (model.onnx of an `neuralao export` folder)")
-    p.add_argument(
-        "frame", help="G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index"
-    )
+    p.add_argument("inputs", nargs="+", metavar="[MODEL.onnx] FRAME.npz",
+                   help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
+                   "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
+    p.add_argument("--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)")
     p.add_argument("--out", required=True, help="AO image to write (PNG, 8-bit grey, 1 = white = open)")
     p.add_argument("--composite", help="also write AO multiplied over a simple shaded render (PNG)")
     p.add_argument("--index", type=int, help="frame index inside a .npz of stacked frames (dataset shard)")
 
 
 def run(args: argparse.Namespace) -> int:
-    frame = load_frame(args.frame, args.index)
-    ao = infer(args.model, frame)
+    if len(args.inputs) > 2:
+        raise NeuralaoError(f"expected [MODEL.onnx] FRAME.npz, got {len(args.inputs)} paths")
+    if len(args.inputs) == 2:
+        model, frame_path = args.inputs
+    else:
+        from .shipped import default_model
+
+        model, frame_path = default_model("unet"), args.inputs[0]
+        log.info("model: %s (shipped default)", model)
+    frame = load_frame(frame_path, args.index)
+    ao = infer(model, frame, args.radius)
     write_png(args.out, ao)
     if args.composite:
         write_png(args.composite, composite(frame, ao))

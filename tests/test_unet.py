@@ -48,6 +48,7 @@ TINY = UNetTrainSettings(
     epochs=30, batch_size=4, lr=1e-2, crop=16, crops_per_frame=4, widths=[2, 4, 8], threads=1
 )
 FRAME_SIZE = (40, 36)  # width, height: not powers of two
+RHO = 0.3  # a radius parameter (rho = R / (mean depth tan(yfov/2))) for the model-only tests
 
 
 def _t(a) -> torch.Tensor:
@@ -65,7 +66,7 @@ def _random_x(h: int, w: int, seed: int = 0) -> np.ndarray:
     return np.concatenate([depth[None], n]).astype(np.float32)
 
 
-def _expected_parameters(widths, in_channels: int = 4) -> int:
+def _expected_parameters(widths, in_channels: int = 5) -> int:
     """Hand count: 3x3 convs (9 cin cout + cout), batch-norm scale + shift, the 1x1 output conv."""
     w = list(widths)
     down = sum(9 * (in_channels if i == 0 else w[i - 1]) * w[i] + w[i] for i in range(len(w)))
@@ -87,7 +88,7 @@ def dataset(tmp_path_factory):
             SceneSpec("box", "cornell_box", cameras="interior", views=2, split="val"),
         ],
         size=FRAME_SIZE,
-        labels=LabelSettings(rays=8),
+        labels=LabelSettings(rays=8, radii_rel=[0.125, 0.25]),
         holdout_every=4,
         frames_per_shard=4,
     )
@@ -128,17 +129,18 @@ def test_output_has_the_input_size_and_lies_in_unit_interval(h, w):
     model = UNet().eval()  # default widths 4/8/16/32: pad multiple 8
     assert model.pad_multiple == 8
     x = torch.from_numpy(np.stack([_random_x(h, w, 1), _random_x(h, w, 2)]))
+    r = torch.full((2, 1, 1, 1), RHO)
     with torch.no_grad():
-        y = PaddedUNet(model)(x)
+        y = PaddedUNet(model)(x, r)
     assert y.shape == (2, 1, h, w) and y.dtype == torch.float32
     assert torch.isfinite(y).all() and y.min() >= 0.0 and y.max() <= 1.0
     # Samples of a batch are independent (eval mode): batch row 1 == the second image alone.
-    np.testing.assert_allclose(y[1, 0].numpy(), predict(model, x[1].numpy()), rtol=0, atol=TOL.onnx_vs_torch)
+    np.testing.assert_allclose(y[1, 0].numpy(), predict(model, x[1].numpy(), RHO), rtol=0, atol=TOL.onnx_vs_torch)
     # The pad/crop wrapper == numpy reflect padding (bottom/right) + the raw network + crop.
     ph, pw = (-h) % 8, (-w) % 8
     xp = np.pad(x[0].numpy(), [(0, 0), (0, ph), (0, pw)], mode="reflect")
     with torch.no_grad():
-        raw = model(torch.from_numpy(xp)[None])
+        raw = model(torch.from_numpy(xp)[None], r[:1])
     assert raw.shape == (1, 1, h + ph, w + pw)
     # (batch of 1 vs batch of 2: same math, torch may pick other kernels -> fp32 rounding only)
     np.testing.assert_allclose(raw[0, 0, :h, :w].numpy(), y[0, 0].numpy(), rtol=0, atol=TOL.onnx_vs_torch)
@@ -148,12 +150,12 @@ def test_output_has_the_input_size_and_lies_in_unit_interval(h, w):
 def test_images_smaller_than_the_pad_multiple_are_a_clear_error(h, w):
     model = UNet().eval()
     with pytest.raises(NeuralaoError, match="smaller than the U-Net's pad multiple 8"):
-        predict(model, _random_x(h, w))
+        predict(model, _random_x(h, w), RHO)
 
 
 def test_parameter_count_matches_a_hand_count():
-    # 4/8/16/32 by hand: down 148+296+1168+4640, up (conv+BN) 300+1176+4656, fuse 292+1160+4624, out 5.
-    assert count_parameters(UNet()) == _expected_parameters([4, 8, 16, 32]) == 18465
+    # 4/8/16/32 by hand (5 input channels: G-buffer + radius): down 184+296+1168+4640, up (conv+BN) 300+1176+4656, fuse 292+1160+4624, out 5.
+    assert count_parameters(UNet()) == _expected_parameters([4, 8, 16, 32]) == 18501
     for widths in ([2, 4], [3, 5, 7], [2, 4, 8, 16, 32]):
         model = build_model(model_args_dict(UNetArgs(widths=widths)))  # via the checkpoint dict path
         assert count_parameters(model) == _expected_parameters(widths)
@@ -271,10 +273,12 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
     ssim, rmse = [], []
     for i in range(len(val_set)):
         x = val_set.x[i].numpy()
-        pred = np.where(x[0] > 0, predict(model, x), 1.0).astype(np.float32)
-        ref, mask = val_set.y[i, 0].numpy(), val_set.m[i, 0].numpy() > 0.5
-        ssim.append(metrics.masked_ssim(pred, ref, mask))
-        rmse.append(metrics.masked_rmse(pred, ref, mask))
+        for j in range(val_set.y.shape[1]):  # every label radius
+            pred = np.where(x[0] > 0, predict(model, x, float(val_set.rho[i, j])), 1.0).astype(np.float32)
+            ref, mask = val_set.y[i, j].float().numpy(), val_set.m[i, j].numpy()
+            ssim.append(metrics.masked_ssim(pred, ref, mask))
+            rmse.append(metrics.masked_rmse(pred, ref, mask))
+    assert len(ckpt["metrics"]["per_radius"]) == val_set.y.shape[1] == 2
     assert ckpt["metrics"]["val_ssim"] == pytest.approx(np.mean(ssim), abs=1e-12)
     assert ckpt["metrics"]["val_rmse"] == pytest.approx(np.mean(rmse), abs=1e-12)
     assert hist[-1]["val_ssim"] == ckpt["metrics"]["val_ssim"]
@@ -282,10 +286,13 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
 
 def _poisoned(data: FrameSet, frame: int, where: str, value: float) -> FrameSet:
     x, y = data.x.clone(), data.y.clone()
-    m = data.m[frame, 0] > 0.5
+    m = data.m[frame].all(0)  # valid at every radius
     r, c = (int(v) for v in torch.nonzero(m)[len(torch.nonzero(m)) // 2])  # a valid foreground pixel
-    (x[frame, 0] if where == "x" else y[frame, 0])[r, c] = value
-    return FrameSet(x, y, data.m, data.names, data.scenes)
+    if where == "x":
+        x[frame, 0, r, c] = value
+    else:
+        y[frame, :, r, c] = value
+    return FrameSet(x, y, data.m, data.rho, data.radii, data.names, data.scenes)
 
 
 @pytest.mark.parametrize(("where", "value"), [("x", float("nan")), ("y", float("inf"))])
@@ -389,7 +396,7 @@ def test_checkpoint_is_plain_data_and_round_trips(trained, frames):
         assert key in raw
     x = frames[1].x[0].numpy()
     np.testing.assert_array_equal(
-        predict(model_from_checkpoint(load_checkpoint(path)), x), predict(model_from_checkpoint(ckpt), x)
+        predict(model_from_checkpoint(load_checkpoint(path)), x, RHO), predict(model_from_checkpoint(ckpt), x, RHO)
     )
 
 
@@ -442,12 +449,13 @@ def test_onnx_has_dynamic_size_and_metadata(exported, trained):
     out, manifest = exported
     _, ckpt = trained
     proto = load_onnx(out / "model.onnx")
-    (inp,), (outp,) = proto.graph.input, proto.graph.output
-    assert inp.name == "gbuffer" and outp.name == "ao"
+    (inp, rad), (outp,) = proto.graph.input, proto.graph.output
+    assert inp.name == "gbuffer" and rad.name == "radius" and outp.name == "ao"
     for vi, channels in ((inp, 4), (outp, 1)):
         d = vi.type.tensor_type.shape.dim
         assert d[1].dim_value == channels
         assert (d[2].dim_param, d[3].dim_param) == ("height", "width") and not d[2].dim_value
+    assert [d.dim_value for d in rad.type.tensor_type.shape.dim] == [1, 1, 1, 1]
     meta = get_metadata(proto)
     assert meta["neuralao_kind"] == "unet" and meta["pad_multiple"] == 4  # JSON-decoded
     assert int(meta["preprocess_version"]) == PREPROCESS_VERSION and meta["pad_mode"] == "reflect"
@@ -456,6 +464,8 @@ def test_onnx_has_dynamic_size_and_metadata(exported, trained):
     assert meta["validation_error"]["val_ssim"] == pytest.approx(ckpt["metrics"]["val_ssim"])
     assert int(meta["epochs"]) == TINY.epochs and meta["dataset_hash"] == ckpt["dataset"]["dataset_hash"]
     assert "depth_units" in meta and "normal_space" in meta and "mask_convention" in meta
+    assert "rho = R / (mean foreground depth" in meta["radius_input"] and "u_radius" in meta["radius_glsl"]
+    assert meta["trained_radii_rel"] == [0.125, 0.25]
     assert "BatchNormalization" not in manifest["ops"]  # the TorchScript exporter folds it
     assert (out / "glsl").is_dir() and manifest["checks"]["onnxruntime_vs_torch"] <= TOL.onnx_vs_torch
 
@@ -469,9 +479,9 @@ def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
     model = model_from_checkpoint(load_checkpoint(trained[0]))
     x = _random_x(h, w, seed=w * h)
     x[:, :, : w // 5] = 0.0  # background columns
-    ref = predict(model, x)
-    y_ort = run_padded(ort_runner(out / "model.onnx"), x, 4)
-    y_cv = run_padded(opencv_runner(out / "model.onnx"), x, 4)
+    ref = predict(model, x, RHO)
+    y_ort = run_padded(ort_runner(out / "model.onnx"), x, 4, RHO)
+    y_cv = run_padded(opencv_runner(out / "model.onnx"), x, 4, RHO)
     assert y_ort.shape == y_cv.shape == ref.shape == (h, w)
     assert np.abs(y_ort - ref).max() <= TOL.onnx_vs_torch
     if min(h, w) > 4:
@@ -480,13 +490,14 @@ def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
         assert np.abs(y_cv - y_ort).max() <= TOL.opencv_vs_onnx
     assert np.ptp(ref) > 1e-3  # a non-constant output: the comparison means something
     if h % 4 == 0 and w % 4 == 0:  # the raw graph at this size, no padding involved
-        raw = run_onnxruntime(out / "model.onnx", {"gbuffer": x[None]})[0]
+        feed = {"gbuffer": x[None], "radius": np.full((1, 1, 1, 1), RHO, np.float32)}
+        raw = run_onnxruntime(out / "model.onnx", feed)[0]
         with torch.no_grad():
-            want = model(torch.from_numpy(x)[None]).numpy()
+            want = model(torch.from_numpy(x)[None], torch.full((1, 1, 1, 1), RHO)).numpy()
         assert raw.shape == (1, 1, h, w) and np.abs(raw - want).max() <= TOL.onnx_vs_torch
         if min(h, w) > 4:
             assert (
-                np.abs(run_opencv(out / "model.onnx", {"gbuffer": x[None]}) - raw).max() <= TOL.opencv_vs_onnx
+                np.abs(run_opencv(out / "model.onnx", feed) - raw).max() <= TOL.opencv_vs_onnx
             )
 
 
@@ -497,12 +508,16 @@ def test_infer_frame_composites_background(exported, trained, frames):
     model = model_from_checkpoint(load_checkpoint(trained[0]))
     val = frames[1]
     depth = val.x[0, 0].numpy() * 3.0  # any positive scale: preprocessing divides it out
-    frame = {"depth": depth, "normal_cam": np.moveaxis(val.x[0, 1:].numpy(), 0, -1), "mask": depth > 0}
-    ao = infer_frame(out / "model.onnx", frame)
-    assert ao.shape == depth.shape and np.all(ao[~frame["mask"]] == 1.0)
+    frame = {"depth": depth, "normal_cam": np.moveaxis(val.x[0, 1:].numpy(), 0, -1), "mask": depth > 0,
+             "yfov": 0.8}  # fmt: skip
     fg = frame["mask"]
+    with pytest.raises(NeuralaoError, match="--radius"):  # no label radii in the frame, none given
+        infer_frame(out / "model.onnx", frame)
+    ao = infer_frame(out / "model.onnx", frame, radius=0.5)
+    assert ao.shape == depth.shape and np.all(ao[~frame["mask"]] == 1.0)
+    rho = 0.5 / (float(depth[fg].astype(np.float64).mean()) * np.tan(0.4))  # R / (mean depth tan(yfov/2))
     assert (
-        np.abs(ao[fg] - predict(model, preprocess(depth, frame["normal_cam"], fg))[fg]).max()
+        np.abs(ao[fg] - predict(model, preprocess(depth, frame["normal_cam"], fg), rho)[fg]).max()
         <= TOL.onnx_vs_torch
     )
 
@@ -542,10 +557,90 @@ def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_pari
     x[1:, :, 12:25] *= 100.0  # normal length 100
     x[:, :4, :] = 0.0  # plus some background rows
     outputs = {
-        "torch": predict(model, x),
-        "onnxruntime": run_padded(ort_runner(out / "model.onnx"), x, 4),
-        "glsl": run_padded(glsl_runner(out / "glsl"), x, 4),
+        "torch": predict(model, x, RHO),
+        "onnxruntime": run_padded(ort_runner(out / "model.onnx"), x, 4, RHO),
+        "glsl": run_padded(glsl_runner(out / "glsl"), x, 4, RHO),
     }
     for name, y in outputs.items():
         assert y.shape == (h, w), name
         assert np.all(np.isfinite(y)) and y.min() >= 0.0 and y.max() <= 1.0, (name, y.min(), y.max())
+
+
+# ----------------------------------------------------------------------------------------------- budget, schedule
+
+
+def test_cosine_schedule_closed_form():
+    from pipeline.unet_train import lr_at
+
+    s = replace(TINY, lr=1e-2, lr_schedule="cosine", warmup_steps=4, min_lr_ratio=0.1)
+    total = 24
+    lrs = [lr_at(s, k, total) for k in range(total)]
+    assert lrs[:4] == pytest.approx([2.5e-3, 5e-3, 7.5e-3, 1e-2])  # linear warm-up
+    assert lrs[4] == pytest.approx(1e-2) and lrs[-1] == pytest.approx(1e-3)  # lr ... lr * min_lr_ratio
+    mid = 4 + (total - 4 - 1) / 2  # half-way through the decay: the mean of both ends
+    assert lr_at(s, int(mid), total) == pytest.approx(1e-3 + 0.5 * 9e-3 * (1 + math.cos(math.pi * 9 / 19)))
+    assert all(a >= b for a, b in zip(lrs[4:], lrs[5:]))  # non-increasing after the warm-up
+    assert lr_at(replace(s, lr_schedule="constant"), 17, total) == 1e-2
+    with pytest.raises(NeuralaoError, match="lr_schedule"):
+        lr_at(replace(s, lr_schedule="step"), 0, total)
+
+
+def test_budget_plan_fits_the_budget():
+    from pipeline.unet_train import plan_budget
+
+    s = replace(TINY, epochs=1000, budget_minutes=2.0)
+    cal = {"seconds_per_step": 0.5, "val_seconds": 3.0}  # 10 steps + validation = 8 s an epoch
+    assert plan_budget(s, 10, cal) == 15  # floor(120 / 8)
+    assert plan_budget(replace(s, epochs=7), 10, cal) == 7  # epochs is an upper bound
+    assert plan_budget(replace(s, budget_minutes=0.01), 10, cal) == 1  # at least one epoch
+
+
+def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeypatch):
+    """A budget run plans its epochs once (calibration), stores the plan, and an interrupted run
+    resumed later follows the stored plan (no new calibration) to the weights of an uninterrupted run."""
+    import pipeline.unet_train as ut
+
+    train_set, val_set, info = frames
+    settings = replace(TINY, epochs=3, widths=[2, 4], budget_minutes=60.0, lr_schedule="cosine", warmup_steps=2)
+    reference = train(settings, train_set, val_set, tmp_path / "ref.pt", info)
+    assert reference["plan"]["epochs"] == 3 and reference["plan"]["seconds_per_step"] > 0
+    assert [h["epoch"] for h in reference["history"]] == [1, 2, 3]
+    wall = [h["wall_seconds"] for h in reference["history"]]
+    assert wall == sorted(wall) and wall[-1] == pytest.approx(reference["wall_seconds"])
+    lrs = [h["lr"] for h in reference["history"]]
+    assert lrs[0] > lrs[1] > lrs[2] == pytest.approx(settings.lr * settings.min_lr_ratio)  # cosine to the end
+
+    out = tmp_path / "run.pt"
+
+    def stop_after_one(epoch, ckpt):
+        if epoch == 1:
+            raise _Interrupted
+
+    with pytest.raises(_Interrupted):
+        train(settings, train_set, val_set, out, info, on_epoch_end=stop_after_one)
+    assert load_checkpoint(partial_path(out))["plan"]["epochs"] == 3
+
+    def no_calibration(*a, **k):
+        raise AssertionError("a resumed budget run must not calibrate again")
+
+    monkeypatch.setattr(ut, "calibrate", no_calibration)
+    resumed = train(settings, train_set, val_set, out, info)
+    assert _state_equal(resumed["state_dict"], reference["state_dict"])
+    assert [h["train_loss"] for h in resumed["history"]] == [h["train_loss"] for h in reference["history"]]
+
+
+def test_reduced_resolution_variant_trains_and_starts_from_the_full_network(frames, trained, tmp_path):
+    """scale=2: the U-Net runs at half resolution with a full-resolution refinement; ``init`` copies
+    every weight of the full network whose shape matches (all but the refinement's)."""
+    train_set, val_set, info = frames
+    path, full = trained
+    settings = replace(TINY, epochs=2, scale=2, crop=16, init=str(path))
+    ckpt = train(settings, train_set, val_set, tmp_path / "half.pt", info)
+    assert ckpt["model_args"]["scale"] == 2 and ckpt["init"]["tensors"] == len(full["state_dict"])
+    model = model_from_checkpoint(ckpt)
+    assert model.pad_multiple == 8  # 2 (scale) * 2**2 (two pooling steps)
+    x = frames[1].x[0].numpy()
+    y = predict(model, x, RHO)
+    assert y.shape == x.shape[1:] and np.isfinite(y).all() and y.min() >= 0 and y.max() <= 1
+    with pytest.raises(NeuralaoError, match="scale must be 1, 2 or 4"):
+        UNet(UNetArgs(scale=3))

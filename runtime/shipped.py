@@ -1,0 +1,55 @@
+"""The shipped release exports under ``runtime/models/<name>/`` (ONNX + GLSL + manifest with provenance).
+
+``runtime/models/index.json`` (written by ``make models``, see ``pipeline/ship.py``) names every
+shipped model and, per model kind, the default that ``neuralao infer`` and ``neuralao report`` use
+when no other export is given.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from pipeline.errors import NeuralaoError
+
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+INDEX = MODELS_DIR / "index.json"
+
+
+def read_index(models_dir: Path = MODELS_DIR) -> dict:
+    """The index of shipped models; none shipped -> one-line error naming the make target."""
+    path = Path(models_dir) / "index.json"
+    if not path.is_file():
+        raise NeuralaoError(f"no shipped models ({path} is missing); run `make models` or give an export")
+    try:
+        index = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise NeuralaoError(f"{path} is not valid JSON: {e.msg}") from None
+    if not isinstance(index.get("models"), dict):
+        raise NeuralaoError(f"{path} lists no models")
+    return index
+
+
+def shipped_models(models_dir: Path = MODELS_DIR) -> dict[str, Path]:
+    """name -> export folder of every shipped model."""
+    index = read_index(models_dir)
+    return {name: Path(models_dir) / name for name in index["models"]}
+
+
+def default_export(kind: str, models_dir: Path = MODELS_DIR) -> Path:
+    """The export folder of the default shipped model of ``kind`` (e.g. "unet")."""
+    index = read_index(models_dir)
+    name = index.get("default", {}).get(kind)
+    if name is None:
+        raise NeuralaoError(f"no default shipped {kind} model in {Path(models_dir) / 'index.json'}")
+    folder = Path(models_dir) / name
+    if not (folder / "manifest.json").is_file():
+        raise NeuralaoError(f"shipped model {name} has no manifest at {folder / 'manifest.json'}")
+    return folder
+
+
+def default_model(kind: str, models_dir: Path = MODELS_DIR) -> Path:
+    """model.onnx of the default shipped model of ``kind``."""
+    folder = default_export(kind, models_dir)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    return folder / manifest.get("onnx", "model.onnx")
