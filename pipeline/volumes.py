@@ -274,7 +274,8 @@ def _triangles_cross_cells(scene: Scene, lo: np.ndarray, cell: np.ndarray, count
     a cell. Triangles on interior cell faces occupy both neighbours (regions never span a wall).
     """
     tri = scene.triangles
-    tmin = np.floor((tri.min(axis=1) - lo) / cell).astype(np.int64)
+    # ceil - 1: a triangle exactly on a cell face is a candidate for the cells on both sides
+    tmin = (np.ceil((tri.min(axis=1) - lo) / cell) - 1).astype(np.int64)
     tmax = np.floor((tri.max(axis=1) - lo) / cell).astype(np.int64)
     tmin = np.clip(tmin, 0, counts - 1)
     tmax = np.clip(tmax, 0, counts - 1)
