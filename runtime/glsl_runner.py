@@ -330,12 +330,10 @@ def _array_texture(width: int, height: int, layers: int, internal: int) -> int:
 def scalar_values(manifest: dict, scalars: dict | None) -> dict[str, float]:
     """{ONNX input name: float32 value} for every uniform of a compute manifest, from ``scalars``.
 
-    A missing or unknown name, or a value of more than one element, is a one-line NeuralaoError."""
+    A missing name, or a value of more than one element, is a one-line NeuralaoError; names the
+    program does not take are ignored (one dict serves exports with and without, e.g., a radius input)."""
     names = [u["onnx_input"] for u in manifest.get("uniforms", [])]
     given = dict(scalars or {})
-    unknown = sorted(set(given) - set(names))
-    if unknown:
-        raise NeuralaoError(f"scalars {unknown} are not scalar inputs of this program (it takes {names})")
     missing = [n for n in names if n not in given]
     if missing:
         raise NeuralaoError(f"scalar input {missing[0]!r} not given (pass scalars={{{missing[0]!r}: value}})")
