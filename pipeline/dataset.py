@@ -241,14 +241,23 @@ def _config_dict(settings: DatasetSettings) -> dict:
 
 
 def build_dataset(
-    settings: DatasetSettings, out: Path, config_dir: Path = Path("."), progress: bool = True
+    settings: DatasetSettings,
+    out: Path,
+    config_dir: Path = Path("."),
+    progress: bool = True,
+    engine=None,
 ) -> dict:
-    """Render and label every scene of ``settings`` into ``out``; resumable. Returns the manifest."""
+    """Render and label every scene of ``settings`` into ``out``; resumable. Returns the manifest.
+
+    ``engine`` (:mod:`pipeline.engine`; default: this process) runs the pending shards, one task each;
+    this process writes every shard (and ``progress.json``) as results arrive, so the files and the
+    dataset hash are the same on any engine.
+    """
     from tqdm import tqdm
 
-    from .gbuffer import GBufferRenderer
-    from .labels import Labeller
+    from .engine import LocalEngine
 
+    engine = engine or LocalEngine()
     specs = expand_scenes(settings)
     if not specs:
         raise NeuralaoError("the dataset config lists no scenes")
@@ -272,61 +281,69 @@ def build_dataset(
             done = state.get("shards", {})
         else:
             log.warning("%s: config changed since the interrupted run; starting over", out)
-    shards = []
-    total_views = 0
+    shards: list[dict] = []
+    pending: list[dict] = []  # entries of the shards the engine renders, in task order
     frame_keys = FRAME_KEYS + (RADII_KEYS if settings.labels.radii_rel is not None else ())
     radii_of: dict[str, list[float]] = {}
-    for si, spec in enumerate(specs):
-        scene = load_spec_scene(spec, config_dir)
-        cams = scene_cameras(spec, scene, settings.size, frame_seed(settings.seed, si, -1), config_dir)
-        total_views += len(cams)
-        renderer = labeller = None
-        views = list(range(len(cams)))
-        chunks = [
-            views[i : i + settings.frames_per_shard] for i in range(0, len(views), settings.frames_per_shard)
-        ]
-        bar = tqdm(total=len(views), desc=f"{spec.name}", unit="view", disable=not progress, leave=False)
-        for k, chunk in enumerate(chunks):
-            rel = f"shards/{spec.name}-{k:04d}.npz"
-            path = out / rel
-            entry = {
-                "file": rel,
-                "scene": spec.name,
-                "split": spec.split,
-                "views": chunk,
-                "holdout": [
-                    bool(settings.holdout_every and v % settings.holdout_every == settings.holdout_every - 1)
-                    for v in chunk
-                ],
-                "faces": int(len(scene.faces)),
-            }
-            if rel in done and path.exists() and sha256_file(path) == done[rel]:
-                entry["sha256"] = done[rel]
+    counts = {"views": 0}
+    bar = tqdm(total=0, desc="dataset", unit="view", disable=not progress)
+
+    def shard_tasks():
+        """Plan scene by scene (one scene in memory at a time); yield a task per shard not yet done."""
+        from .engine import Task
+
+        for si, spec in enumerate(specs):
+            scene = load_spec_scene(spec, config_dir)
+            cams = scene_cameras(spec, scene, settings.size, frame_seed(settings.seed, si, -1), config_dir)
+            counts["views"] += len(cams)
+            bar.total += len(cams)
+            bar.refresh()
+            if settings.labels.radii_rel is not None:
+                radii_of[spec.name] = [r * scene.diagonal for r in settings.labels.radii_rel]
+            context = None
+            views = list(range(len(cams)))
+            chunks = [
+                views[i : i + settings.frames_per_shard]
+                for i in range(0, len(views), settings.frames_per_shard)
+            ]
+            for k, chunk in enumerate(chunks):
+                rel = f"shards/{spec.name}-{k:04d}.npz"
+                path = out / rel
+                entry = {
+                    "file": rel,
+                    "scene": spec.name,
+                    "split": spec.split,
+                    "views": chunk,
+                    "holdout": [
+                        bool(
+                            settings.holdout_every
+                            and v % settings.holdout_every == settings.holdout_every - 1
+                        )
+                        for v in chunk
+                    ],
+                    "faces": int(len(scene.faces)),
+                }
                 shards.append(entry)
-                bar.update(len(chunk))
-                continue
-            if renderer is None:
-                renderer = GBufferRenderer(scene)
-                labeller = Labeller(scene, settings.labels)
-            frames = []
-            for v in chunk:
-                frame = renderer.render(cams[v])
-                labeller.settings = replace(settings.labels, seed=frame_seed(settings.seed, si, v))
-                if labeller.radii is None:
-                    frame["ao"], frame["valid"] = labeller.label_frame(frame)
-                else:
-                    _label_with_radii(labeller, frame)
-                frames.append(frame)
-                bar.update(1)
-            arrays = {key: np.stack([np.asarray(f[key]) for f in frames]) for key in frame_keys}
-            arrays["view"] = np.asarray(chunk, dtype=np.int32)
+                if rel in done and path.exists() and sha256_file(path) == done[rel]:
+                    entry["sha256"] = done[rel]
+                    bar.update(len(chunk))
+                    continue
+                context = context or _shard_context(scene, settings.labels, engine.threads)
+                seeds = [frame_seed(settings.seed, si, v) for v in chunk]
+                pending.append(entry)
+                yield Task(context, _render_shard, ([cams[v] for v in chunk], seeds, frame_keys))
+
+    try:
+        for i, arrays in engine.map(shard_tasks()):
+            entry = pending[i]
+            arrays["view"] = np.asarray(entry["views"], dtype=np.int32)
             arrays["holdout"] = np.asarray(entry["holdout"], dtype=bool)
+            path = out / entry["file"]
             write_npz(path, **arrays)
-            entry["sha256"] = done[rel] = sha256_file(path)
+            entry["sha256"] = done[entry["file"]] = sha256_file(path)
             write_json(progress_path, {"config_hash": config_hash, "shards": done})
-            shards.append(entry)
-        if settings.labels.radii_rel is not None:
-            radii_of[spec.name] = [r * scene.diagonal for r in settings.labels.radii_rel]
+            bar.update(len(entry["views"]))
+    finally:
         bar.close()
     dataset_hash = hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest()
     manifest = {
@@ -335,7 +352,7 @@ def build_dataset(
         "name": settings.name,
         "config": config,
         "dataset_hash": dataset_hash,
-        "frames": total_views,
+        "frames": counts["views"],
         "size": list(settings.size),
         "scenes": {s.name: _scene_entry(s, radii_of.get(s.name)) for s in specs},
         "shards": shards,
@@ -350,6 +367,45 @@ def build_dataset(
     write_json(out / "manifest.json", manifest)
     progress_path.unlink(missing_ok=True)
     return manifest
+
+
+class _ShardWorker:
+    """A worker's state for one scene: its G-buffer renderer and labeller (built where it runs)."""
+
+    def __init__(self, payload: tuple[Scene, LabelSettings]):
+        from .gbuffer import GBufferRenderer
+
+        scene, labels = payload
+        self.labels = labels
+        self.renderer = GBufferRenderer(scene)
+        self.labeller = Labeller(scene, labels)
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+def _shard_context(scene: Scene, labels: LabelSettings, threads: int | None):
+    """Scene + label settings (``threads`` labelling threads per task; None: the settings' own)."""
+    from .engine import Context, content_key, slim_scene
+
+    labels = labels if threads is None else replace(labels, workers=threads)
+    slim = slim_scene(scene)
+    return Context(content_key("shard", slim.vertices, slim.faces, labels), _ShardWorker, (slim, labels))
+
+
+def _render_shard(state: _ShardWorker, args: tuple) -> dict[str, np.ndarray]:
+    """Render and label the frames of one shard: cameras, per-view label seeds, the keys to stack."""
+    cams, seeds, frame_keys = args
+    frames = []
+    for cam, seed in zip(cams, seeds, strict=True):
+        frame = state.renderer.render(cam)
+        state.labeller.settings = replace(state.labels, seed=seed)
+        if state.labeller.radii is None:
+            frame["ao"], frame["valid"] = state.labeller.label_frame(frame)
+        else:
+            _label_with_radii(state.labeller, frame)
+        frames.append(frame)
+    return {key: np.stack([np.asarray(f[key]) for f in frames]) for key in frame_keys}
 
 
 def _label_with_radii(labeller: Labeller, frame: dict) -> None:
@@ -460,13 +516,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="output folder (resumes if an interrupted run is there)")
     add_set_option(p, "--set labels.rays=64")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    from .engine import add_engine_arguments
+
+    add_engine_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
+    from .engine import engine_from_args
+
     settings = load_settings(DatasetSettings, args.config, args.set)
-    manifest = build_dataset(
-        settings, Path(args.out), Path(args.config).resolve().parent, progress=not args.no_progress
-    )
+    with engine_from_args(args) as engine:
+        manifest = build_dataset(
+            settings, Path(args.out), Path(args.config).resolve().parent, not args.no_progress, engine
+        )
     log.info(
         "dataset %s: %d frames, %d shards, hash %s",
         args.out,
