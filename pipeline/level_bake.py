@@ -1,0 +1,764 @@
+"""`neuralao bake LEVEL.gltf --config CONFIG --out DIR`: ambient obscurance for a game level.
+
+The system of Sloan, Tranchida, Chen, Kavan 2013 ("Ambient Obscurance Baking on the GPU") on
+Embree, stage by stage (the rows of their Table 1; the bake log times each one):
+
+1. **geometry**: read and validate the level (:mod:`pipeline.level`), flatten every instance of
+   ``static`` (receivers, first) and ``blocker`` nodes into one opaque scene;
+2. **samples**: stratified surface samples on the receivers, a per-face cap (bake.surface_samples);
+3. **foliage**: shrub instances -> world bounding boxes with overlap-reduced densities, tree
+   instances -> triangles with their transmission (:mod:`pipeline.foliage`);
+4. **bvh**: the opaque Embree scene and the foliage scene;
+5. **trace**: obscurance at the short and the long half distance from one trace, attenuated by the
+   foliage (:class:`pipeline.level_trace.LevelLabeller`); resumable in blocks of samples;
+6. **decorators**: per tree model, local AO baked in isolation; per tree instance, the gold standard
+   (samples on the instance traced in place, trees opaque) and the 4 coefficients of the linear
+   global function of equation 3 (local x global), with global-only and in-place errors;
+7. **solve**: least-squares vertex values (Kavan et al. 2011) of both distances;
+8. **small decorators**: one scalar per grass clump and shrub, resampled from the baked terrain in
+   a small sphere (section 2.2.1);
+9. **lod**: a simplified LOD (fast-simplification) with AO transferred by resampling at its vertices
+   and by least squares over resampled surface samples, both measured against the gold standard;
+10. **output**: glTF (per-vertex COLOR_0 + float attributes, per-instance instancing attributes,
+   per-model local AO), the decorator vertex shader, the bake log (JSON + a markdown table).
+
+Resumability: stages 5-9 store their results under ``OUT/stages/`` (atomic npz files keyed by a
+hash of the level's bytes and the resolved settings); a rerun reuses every stage whose key matches
+and recomputes the rest, and ends with the same bytes as an uninterrupted run. The other stages are
+pure functions of their inputs and only cost seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import resource
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from .bake import SurfaceSamples, face_areas, fit_least_squares, interpolate, surface_samples
+from .config import load_settings, settings_to_dict
+from .errors import NeuralaoError
+from .foliage import Foliage, overlap_reduced
+from .io import (
+    read_npz,
+    remove_stale_temporaries,
+    sha256_file,
+    sha256_json,
+    write_json,
+    write_npz,
+    write_text,
+)
+from .labels import LabelSettings
+from .level import Level, LevelNode, flatten, read_level
+from .level_trace import LevelLabeller, resample_in_spheres
+from .scene import Scene, scene_from_arrays
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TraceSettings:
+    # Rays per surface sample, cosine-weighted (the paper: 256).
+    rays: int = 256
+    # Obscurance half distances in scene units (the paper: 2 m and 300 m), stored separately.
+    half_distance_short: float = 2.0
+    half_distance_long: float = 300.0
+    # Longest ray, scene units; None -> the level's bounding-box diagonal (nothing is out of reach).
+    max_distance: float | None = None
+    # Sample budget in samples per receiver vertex, spread over faces by area.
+    samples_per_vertex: float = 4.0
+    # At most this many samples on one face (Sloan et al.'s cap)...
+    samples_per_face_cap: int = 16
+    # ... and at least this many (0: the smallest faces may get none; the edge regulariser fills them).
+    min_samples_per_face: int = 1
+    # Least-squares edge regulariser weight (units of bake.REG_SCALE; the paper: alpha = 1).
+    alpha: float = 1.0
+    # Back-face rule threshold (the paper: 25%); None disables it.
+    backface_threshold: float | None = 0.25
+    # Samples per resumable trace block (one npz under OUT/stages/trace/ each).
+    block_samples: int = 262144
+    # Sparse solver of the least-squares systems ("direct": SuperLU, "cg": conjugate gradients).
+    solver: Literal["direct", "cg"] = "direct"
+
+
+@dataclass
+class BlendSettings:
+    # Weight of the long distance in the blend (the paper: 97% long, 3% short).
+    long_weight: float = 0.97
+    # Optional remap curve applied after the blend: [[x, y], ...], x increasing over [0, 1].
+    remap: list[list[float]] | None = None
+
+
+@dataclass
+class FoliageSettings:
+    # Shrubs as media boxes and trees as semi-transparent triangles in a second BVH.
+    enabled: bool = True
+    # Divide each box's density by 1 + its overlap with the other boxes (foliage module doc).
+    reduce_overlaps: bool = True
+    # Most foliage crossings followed along one ray (later ones are ignored).
+    max_hits: int = 32
+
+
+@dataclass
+class DecoratorSettings:
+    # Surface samples per tree instance for the gold standard and the fit of equation 3.
+    samples_per_instance: int = 2048
+    # Held-out samples per instance for the error table.
+    holdout_samples: int = 1024
+    # Rays of the local bake (model in isolation) and its sample budget per vertex.
+    local_rays: int = 256
+    local_samples_per_vertex: float = 8.0
+
+
+@dataclass
+class SmallDecoratorSettings:
+    # Radius of the resampling sphere around each grass clump / shrub base (scene units).
+    radius: float = 0.75
+    # Rays from the sphere's boundary toward its centre (an antipodally symmetric set).
+    rays: int = 32
+
+
+@dataclass
+class LodSettings:
+    # Make and bake one lower LOD of the receivers.
+    enabled: bool = True
+    # Fraction of faces the simplifier removes (the paper's LOD: 1.8M -> 0.8M faces, 0.55).
+    target_reduction: float = 0.55
+    # Resampling sphere radius, scene units; None -> 1.5 x the LOD's median edge length.
+    radius: float | None = None
+    # Rays per resampling sphere.
+    rays: int = 16
+    # Least-squares samples per LOD vertex.
+    samples_per_vertex: float = 4.0
+    # Held-out LOD samples for the error table.
+    holdout_samples: int = 4000
+
+
+@dataclass
+class LevelBakeSettings:
+    trace: TraceSettings = field(default_factory=TraceSettings)
+    blend: BlendSettings = field(default_factory=BlendSettings)
+    foliage: FoliageSettings = field(default_factory=FoliageSettings)
+    decorators: DecoratorSettings = field(default_factory=DecoratorSettings)
+    grass: SmallDecoratorSettings = field(default_factory=SmallDecoratorSettings)
+    lod: LodSettings = field(default_factory=LodSettings)
+    # Seed of every sample position and ray direction.
+    seed: int = 0
+    # Tracing threads (embreex releases the GIL).
+    workers: int = 2
+    # File name of the baked level inside --out (.glb or .gltf).
+    output: str = "level_baked.glb"
+
+
+def check_settings(s: LevelBakeSettings) -> None:
+    t = s.trace
+    for name, v in (("trace.rays", t.rays), ("trace.block_samples", t.block_samples), ("workers", s.workers),
+                    ("grass.rays", s.grass.rays), ("lod.rays", s.lod.rays), ("decorators.local_rays", s.decorators.local_rays),
+                    ("decorators.samples_per_instance", s.decorators.samples_per_instance),
+                    ("decorators.holdout_samples", s.decorators.holdout_samples), ("foliage.max_hits", s.foliage.max_hits)):  # fmt: skip
+        if v < 1:
+            raise NeuralaoError(f"{name} must be >= 1, got {v}")
+    for name, v in (("trace.half_distance_short", t.half_distance_short), ("trace.half_distance_long", t.half_distance_long),
+                    ("trace.samples_per_vertex", t.samples_per_vertex), ("grass.radius", s.grass.radius),
+                    ("lod.samples_per_vertex", s.lod.samples_per_vertex)):  # fmt: skip
+        if not (math.isfinite(v) and v > 0):
+            raise NeuralaoError(f"{name} must be a positive number, got {v}")
+    if t.max_distance is not None and not (math.isfinite(t.max_distance) and t.max_distance > 0):
+        raise NeuralaoError(f"trace.max_distance must be positive, got {t.max_distance}")
+    if not 0 <= t.min_samples_per_face <= t.samples_per_face_cap or t.samples_per_face_cap < 1:
+        raise NeuralaoError("need 0 <= trace.min_samples_per_face <= trace.samples_per_face_cap, cap >= 1")
+    if not 0.0 <= s.blend.long_weight <= 1.0:
+        raise NeuralaoError(f"blend.long_weight must be in [0, 1], got {s.blend.long_weight}")
+    if s.blend.remap is not None:
+        curve = np.asarray(s.blend.remap, np.float64)
+        if curve.ndim != 2 or curve.shape[1] != 2 or len(curve) < 2 or not np.isfinite(curve).all():
+            raise NeuralaoError("blend.remap must be a list of at least two [x, y] pairs")
+        if not (np.diff(curve[:, 0]) > 0).all() or curve[0, 0] > 0 or curve[-1, 0] < 1:
+            raise NeuralaoError("blend.remap x values must increase and cover [0, 1]")
+    if not 0.0 < s.lod.target_reduction < 1.0:
+        raise NeuralaoError(f"lod.target_reduction must be in (0, 1), got {s.lod.target_reduction}")
+    if Path(s.output).suffix.lower() not in (".glb", ".gltf") or Path(s.output).name != s.output:
+        raise NeuralaoError(f"output must be a file name ending in .glb or .gltf, got {s.output!r}")
+
+
+def blend(short: np.ndarray, long: np.ndarray, s: BlendSettings) -> np.ndarray:
+    """Per-level blend (long_weight * long + (1 - long_weight) * short) and the optional remap curve."""
+    b = s.long_weight * np.asarray(long, np.float64) + (1.0 - s.long_weight) * np.asarray(short, np.float64)
+    if s.remap is not None:
+        curve = np.asarray(s.remap, np.float64)
+        b = np.interp(b, curve[:, 0], curve[:, 1])
+    return np.clip(b, 0.0, 1.0).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- bake log and stages
+
+
+class BakeLog:
+    """Timed stages, each stored (or not) under OUT/stages/ with the bake's key."""
+
+    def __init__(self, out: Path, key: str):
+        self.out, self.key = out, key
+        self.stages: list[dict[str, Any]] = []
+        self.dir = out / "stages"
+        self.dir.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(self.dir)
+        remove_stale_temporaries(out)
+
+    def timed(self, name: str, description: str, fn, **counts):
+        t0 = time.perf_counter()
+        result = fn()
+        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
+                            "reused": False, **counts})  # fmt: skip
+        return result
+
+    def stored(self, name: str, description: str, fn, **counts) -> dict[str, np.ndarray]:
+        """``fn() -> dict of arrays``, stored as stages/NAME.npz; reused when its key matches."""
+        path = self.dir / f"{name}.npz"
+        t0 = time.perf_counter()
+        if path.is_file():
+            data = read_npz(path)
+            if str(data.pop("_key", "")) == self.key:
+                self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
+                                    "reused": True, **counts})  # fmt: skip
+                return data
+        data = fn()
+        write_npz(path, _key=np.array(self.key), **data)
+        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
+                            "reused": False, **counts})  # fmt: skip
+        return data
+
+    def note(self, name: str, **counts) -> None:
+        for st in self.stages:
+            if st["stage"] == name:
+                st.update(counts)
+
+
+def level_key(path: Path, settings: LevelBakeSettings) -> str:
+    """Hash of the level's bytes (the .gltf / .glb and every external buffer) and the settings."""
+    import json
+
+    files = [sha256_file(path)]
+    if path.suffix.lower() == ".gltf":
+        try:
+            doc = json.loads(path.read_text())
+            for b in doc.get("buffers", []):
+                uri = b.get("uri", "")
+                if uri and not uri.startswith("data:") and (path.parent / uri).is_file():
+                    files.append(sha256_file(path.parent / uri))
+        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
+            pass  # read_level reports it
+    return sha256_json({"files": files, "settings": settings_to_dict(settings), "version": 1})
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+@dataclass
+class LevelGeometry:
+    level: Level
+    receivers: Scene  # static instances (vertex / face order = flatten order)
+    opaque: Scene  # receivers first, then blockers
+    static_spans: list  # (node k, instance j, first vertex, first face) per static instance
+    static_nodes: list[LevelNode]
+    trees: list[LevelNode]
+    shrubs: list[LevelNode]
+    grass: list[LevelNode]
+
+
+def build_geometry(level: Level) -> LevelGeometry:
+    static = level.nodes_with("static")
+    rv, rf, spans = flatten(level, static)
+    bv, bf, _ = flatten(level, level.nodes_with("blocker"))
+    receivers = scene_from_arrays(rv, rf, "receivers", level.source, drop_degenerate=False)
+    opaque = scene_from_arrays(np.concatenate([rv, bv]), np.concatenate([rf, bf + len(rv)]), "opaque", level.source,
+                               drop_degenerate=False)  # fmt: skip
+    return LevelGeometry(level, receivers, opaque, spans, static, level.nodes_with("tree"), level.nodes_with("shrub"),
+                         level.nodes_with("grass"))  # fmt: skip
+
+
+def receiver_samples(scene: Scene, t: TraceSettings, seed: int) -> SurfaceSamples:
+    """bake.surface_samples with the level's per-face floor (0 allowed) and cap."""
+    areas = face_areas(scene)
+    total = t.samples_per_vertex * len(scene.vertices)
+    counts = np.clip(
+        np.rint(total * areas / areas.sum()), t.min_samples_per_face, t.samples_per_face_cap
+    ).astype(np.int64)
+    counts[areas <= 0] = 0
+    return surface_samples(scene, total, t.samples_per_face_cap, seed, counts=counts)
+
+
+def instance_boxes(level: Level, nodes: list[LevelNode]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World AABBs lo (b, 3), hi (b, 3) of every instance of ``nodes`` and each one's density (b,)."""
+    lo, hi, dens = [], [], []
+    for node in nodes:
+        v = level.meshes[node.mesh].vertices
+        homo = np.c_[v, np.ones(len(v))]
+        world = np.einsum("vc,krc->kvr", homo, node.transforms[:, :3])
+        lo.append(world.min(axis=1))
+        hi.append(world.max(axis=1))
+        dens.append(np.full(len(node.transforms), node.params.get("density", 1.0)))
+    if not lo:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(lo), np.concatenate(hi), np.concatenate(dens)
+
+
+def build_foliage(
+    g: LevelGeometry, labeller: LevelLabeller, s: FoliageSettings, include_trees: bool = True
+) -> Foliage:
+    lo, hi, dens = instance_boxes(g.level, g.shrubs)
+    if s.reduce_overlaps:
+        dens = overlap_reduced(lo, hi, dens)
+    tv, tf, trans = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0)
+    if include_trees and g.trees:
+        tv, tf, spans = flatten(g.level, g.trees)
+        per_face = [
+            np.full(len(g.level.meshes[g.trees[k].mesh].faces), g.trees[k].params["transmission"])
+            for k, _, _, _ in spans
+        ]
+        trans = np.concatenate(per_face)
+    return Foliage(lo, hi, dens, tv, tf, trans, labeller._center, labeller._scale, s.max_hits)
+
+
+def label_settings(s: LevelBakeSettings, diagonal: float, rays: int | None = None) -> LabelSettings:
+    return LabelSettings(rays=rays or s.trace.rays, max_distance=s.trace.max_distance or diagonal, kernel="obscurance",
+                         half_distance=s.trace.half_distance_long, backface_threshold=s.trace.backface_threshold,
+                         seed=s.seed, workers=s.workers)  # fmt: skip
+
+
+def halves(s: LevelBakeSettings) -> list[float]:
+    return [s.trace.half_distance_short, s.trace.half_distance_long]
+
+
+# --------------------------------------------------------------------------- trace (resumable blocks)
+
+
+def trace_samples(log_: BakeLog, labeller: LevelLabeller, foliage, samples: SurfaceSamples, s: LevelBakeSettings,
+                  progress: bool) -> dict[str, np.ndarray]:  # fmt: skip
+    """Two-distance obscurance at every sample, in blocks stored under stages/trace/."""
+    block = s.trace.block_samples
+    folder = log_.dir / "trace"
+    folder.mkdir(exist_ok=True)
+    remove_stale_temporaries(folder)
+    n = len(samples)
+    ao = np.empty((n, 2), np.float32)
+    valid = np.empty(n, bool)
+    reused = 0
+    from tqdm import tqdm
+
+    starts = list(range(0, n, block))
+    for lo in tqdm(starts, desc="trace blocks", disable=not progress, leave=False):
+        hi = min(lo + block, n)
+        path = folder / f"block_{lo // block:05d}.npz"
+        if path.is_file():
+            data = read_npz(path)
+            if str(data.get("_key", "")) == log_.key and len(data["valid"]) == hi - lo:
+                ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
+                reused += 1
+                continue
+        a, v = labeller.obscurance(samples.points[lo:hi], samples.normals[lo:hi], halves(s), foliage,
+                                   ids=np.arange(lo, hi, dtype=np.int64))  # fmt: skip
+        write_npz(path, _key=np.array(log_.key), ao=a, valid=v)
+        ao[lo:hi], valid[lo:hi] = a, v
+    return {"ao": ao, "valid": valid, "reused_blocks": np.array(reused), "blocks": np.array(len(starts))}
+
+
+# --------------------------------------------------------------------------- decorators (section 2.2)
+
+
+def linear_basis(points: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """(k, 4) rows [1, x - ox, y - oy, z - oz]: the 3-D linear global function's basis."""
+    return np.c_[np.ones(len(points)), np.asarray(points) - np.asarray(origin)]
+
+
+def fit_global(
+    points: np.ndarray, origin: np.ndarray, local: np.ndarray, target: np.ndarray, weights: np.ndarray
+) -> np.ndarray:
+    """Equation 3: y (4,) minimising sum_i w_i (f_i - G_y(s_i) L_i)^2, G_y(p) = y . [1, p - origin]."""
+    a = linear_basis(points, origin) * np.asarray(local, np.float64)[:, None]
+    sw = np.sqrt(np.asarray(weights, np.float64))
+    y, *_ = np.linalg.lstsq(a * sw[:, None], np.asarray(target, np.float64) * sw, rcond=None)
+    return y
+
+
+def transform_samples(samples: SurfaceSamples, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space samples -> world points (k, 3) and unit normals (k, 3) under the 4x4 ``m``."""
+    p = samples.points @ m[:3, :3].T + m[:3, 3]
+    n = samples.normals @ np.linalg.inv(m[:3, :3])
+    return p, n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def bake_decorators(
+    g: LevelGeometry, s: LevelBakeSettings, foliage_settings: FoliageSettings
+) -> dict[str, np.ndarray]:
+    """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors."""
+    if not g.trees:
+        return {"models": np.zeros(0, np.int64)}
+    level = g.level
+    # The gold standard sees the trees as opaque geometry (every instance baked in place).
+    tv, tf, _ = flatten(level, g.trees)
+    gold = scene_from_arrays(np.concatenate([g.opaque.vertices, tv]), np.concatenate([g.opaque.faces, tf + len(g.opaque.vertices)]),
+                             "gold", drop_degenerate=False)  # fmt: skip
+    gold_labeller = LevelLabeller(gold, label_settings(s, g.opaque.diagonal))
+    gold_foliage = (
+        build_foliage(g, gold_labeller, foliage_settings, include_trees=False)
+        if foliage_settings.enabled
+        else None
+    )
+    d = s.decorators
+    out: dict[str, Any] = {}
+    models = sorted({n.mesh for n in g.trees})
+    coeffs, coeffs_global, err = [], [], {"local_x_global": [], "global_only": [], "in_place": [], "local_only": [],
+                                          "local_x_global_vs_in_place": []}  # fmt: skip
+    uid = 0
+    for mi in models:
+        mesh = level.meshes[mi]
+        model = scene_from_arrays(mesh.vertices, mesh.faces, mesh.name, drop_degenerate=False)
+        loc_lab = LevelLabeller(
+            model,
+            replace(
+                label_settings(s, g.opaque.diagonal, d.local_rays),
+                max_distance=s.trace.max_distance or g.opaque.diagonal,
+            ),
+        )
+        loc_samples = surface_samples(model, d.local_samples_per_vertex * len(model.vertices), 32, s.seed)
+        a, v = loc_lab.obscurance(loc_samples.points, loc_samples.normals, halves(s))
+        local_two = fit_least_squares(model, loc_samples, a, v, s.trace.alpha)
+        local = blend(local_two[:, 0], local_two[:, 1], s.blend)
+        out[f"local_{mi}"] = local
+        train = surface_samples(model, d.samples_per_instance, 64, s.seed + 1)
+        hold = surface_samples(model, d.holdout_samples, 64, s.seed + 2)
+        l_train = interpolate(model, local, train.face, train.bary)
+        for node in (n for n in g.trees if n.mesh == mi):
+            for m in node.transforms:
+                pt, nt = transform_samples(train, m)
+                ph, nh = transform_samples(hold, m)
+                ids = np.arange(len(pt) + len(ph), dtype=np.int64) + uid * (1 << 24)
+                uid += 1
+                ao, valid = gold_labeller.obscurance(
+                    np.r_[pt, ph], np.r_[nt, nh], halves(s), gold_foliage, ids=ids
+                )
+                f = blend(ao[:, 0], ao[:, 1], s.blend).astype(np.float64)
+                ft, vt, fh, vh = f[: len(pt)], valid[: len(pt)], f[len(pt) :], valid[len(pt) :]
+                origin = m[:3, 3]
+                y = fit_global(pt[vt], origin, l_train[vt], ft[vt], train.weights[vt])
+                y1 = fit_global(pt[vt], origin, np.ones(vt.sum()), ft[vt], train.weights[vt])
+                coeffs.append(y)
+                coeffs_global.append(y1)
+                # In place: the instance's own least-squares vertex bake (what per-vertex storage buys).
+                inplace = fit_least_squares(model, train, ft, vt, s.trace.alpha)
+                world_v = model.vertices @ m[:3, :3].T + m[:3, 3]
+                # What the shader shows: the per-vertex product, interpolated by the rasteriser.
+                prod = np.clip(local * (linear_basis(world_v, origin) @ y), 0, 1)
+                w = hold.weights[vh] / hold.weights[vh].sum()
+                preds = {"local_x_global": interpolate(model, prod, hold.face, hold.bary),
+                         "global_only": np.clip(linear_basis(ph, origin) @ y1, 0, 1),
+                         "in_place": interpolate(model, inplace, hold.face, hold.bary),
+                         "local_only": interpolate(model, local, hold.face, hold.bary)}  # fmt: skip
+                for k, p in preds.items():
+                    err[k].append(float(np.sqrt(np.sum(w * (p[vh] - fh[vh]) ** 2))))
+                err["local_x_global_vs_in_place"].append(
+                    float(np.sqrt(np.sum(w * (preds["local_x_global"][vh] - preds["in_place"][vh]) ** 2)))
+                )
+    out["models"] = np.array(models, np.int64)
+    out["coefficients"] = np.array(coeffs)
+    out["coefficients_global_only"] = np.array(coeffs_global)
+    for k, v in err.items():
+        out[f"rmse_{k}"] = np.array(v)
+    return out
+
+
+# --------------------------------------------------------------------------- LOD (section 2.2.1)
+
+
+def simplify(scene: Scene, reduction: float) -> Scene:
+    import fast_simplification
+
+    v, f = fast_simplification.simplify(
+        scene.vertices.astype(np.float32), scene.faces.astype(np.int32), target_reduction=reduction
+    )
+    return scene_from_arrays(np.asarray(v, np.float64), np.asarray(f, np.int64), "lod1", scene.source)
+
+
+def median_edge(scene: Scene) -> float:
+    t = scene.triangles
+    return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
+
+
+def bake_lod(g: LevelGeometry, opaque_labeller: LevelLabeller, high_ao: np.ndarray, samples: SurfaceSamples,
+             traced: np.ndarray, traced_valid: np.ndarray, s: LevelBakeSettings) -> dict[str, np.ndarray]:  # fmt: skip
+    """LOD1 of the receivers and its AO by (a) resampling at its vertices, (b) least squares over
+    resampled surface samples; both against the gold standard at held-out LOD samples."""
+    from scipy.spatial import cKDTree
+
+    lod = simplify(g.receivers, s.lod.target_reduction)
+    radius = s.lod.radius or 1.5 * median_edge(lod)
+    values = np.r_[high_ao, np.full(len(g.opaque.vertices) - len(high_ao), np.nan)]
+    at_vertices, _ = resample_in_spheres(opaque_labeller, values, lod.vertices, radius, s.lod.rays)
+    lod_samples = surface_samples(lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3)
+    at_samples, _ = resample_in_spheres(opaque_labeller, values, lod_samples.points, radius, s.lod.rays)
+    ok = np.isfinite(at_samples)
+    lsq = fit_least_squares(
+        lod, lod_samples, np.where(ok, at_samples, 0.0), ok, s.trace.alpha, s.trace.solver
+    )
+    fill = float(np.nanmean(at_vertices)) if np.isfinite(at_vertices).any() else 1.0
+    vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
+    # Gold standard at held-out LOD points: the traced samples of the full-resolution surface within the
+    # sphere, weighted by area and by distance to the boundary (no vertex bake, no resampling rays).
+    hold = surface_samples(
+        lod, s.lod.holdout_samples, 4, s.seed + 4, counts=_holdout_counts(lod, s.lod.holdout_samples, s.seed)
+    )
+    f = blend(traced[:, 0], traced[:, 1], s.blend).astype(np.float64)
+    tree = cKDTree(samples.points[traced_valid])
+    fw, sw = f[traced_valid], samples.weights[traced_valid]
+    ref = np.full(len(hold), np.nan)
+    for i, nb in enumerate(tree.query_ball_point(hold.points, radius)):
+        if nb:
+            nb = np.asarray(nb)
+            w = sw[nb] * np.maximum(
+                radius - np.linalg.norm(samples.points[traced_valid][nb] - hold.points[i], axis=1), 0
+            )
+            if w.sum() > 0:
+                ref[i] = np.sum(w * fw[nb]) / w.sum()
+    m = np.isfinite(ref)
+    w = hold.weights[m] / hold.weights[m].sum()
+    errs = {k: float(np.sqrt(np.sum(w * (interpolate(lod, v, hold.face, hold.bary)[m] - ref[m]) ** 2)))
+            for k, v in (("vertex", vert), ("least_squares", lsq))}  # fmt: skip
+    return {"vertices": lod.vertices, "faces": lod.faces, "ao_vertex": vert, "ao_least_squares": lsq,
+            "radius": np.array(radius), "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
+            "rmse_vertex": np.array(errs["vertex"]), "rmse_least_squares": np.array(errs["least_squares"]),
+            "holdout": np.array(int(m.sum()))}  # fmt: skip
+
+
+def _holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
+    """Held-out sample counts: ``total`` faces drawn by area (seeded), one sample each."""
+    areas = face_areas(scene)
+    rng = np.random.default_rng(seed + 99)
+    pick = rng.choice(len(areas), size=min(total, len(areas)), replace=False, p=areas / areas.sum())
+    counts = np.zeros(len(areas), np.int64)
+    counts[pick] = 1
+    return counts
+
+
+# --------------------------------------------------------------------------- the bake
+
+
+def bake_level(
+    path: str | Path, settings: LevelBakeSettings, out: str | Path, progress: bool = False
+) -> dict:
+    """Bake the level at ``path`` into the folder ``out``; returns the bake log (also OUT/bake_log.json)."""
+    from .level_output import write_outputs
+
+    check_settings(settings)
+    path, out = Path(path), Path(out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} is a file; a level bake writes a folder")
+    t_start = time.perf_counter()
+    key = level_key(path, settings) if path.is_file() else ""
+    level = read_level(path)
+    out.mkdir(parents=True, exist_ok=True)
+    blog = BakeLog(out, key)
+    s = settings
+    g = blog.timed("geometry", "Process geometry", lambda: build_geometry(level))
+    blog.note("geometry", vertices=len(g.receivers.vertices), faces=len(g.receivers.faces),
+              occluder_faces=len(g.opaque.faces))  # fmt: skip
+    samples = blog.timed("samples", "Sample mesh", lambda: receiver_samples(g.receivers, s.trace, s.seed))
+    blog.note("samples", samples=len(samples))
+    labeller = blog.timed(
+        "bvh",
+        "Embree BVH build (opaque)",
+        lambda: LevelLabeller(g.opaque, label_settings(s, g.opaque.diagonal)),
+    )
+    foliage = None
+    if s.foliage.enabled:
+        foliage = blog.timed("foliage", "Flatten trees, shrub 'fog' boxes + foliage BVH",
+                             lambda: build_foliage(g, labeller, s.foliage))  # fmt: skip
+        blog.note("foliage", trees=sum(len(n.transforms) for n in g.trees), shrub_boxes=foliage.n_boxes)
+    traced = blog.stored("trace", "Ray trace samples (2 distances, foliage)",
+                         lambda: trace_samples(blog, labeller, foliage, samples, s, progress),
+                         samples=len(samples), rays=len(samples) * s.trace.rays)  # fmt: skip
+    deco = blog.stored("decorators", "Trees: local AO, in-place gold standard, eq. 3 fits",
+                       lambda: bake_decorators(g, s, s.foliage), instances=sum(len(n.transforms) for n in g.trees))  # fmt: skip
+    solved = blog.stored("solve", "Least squares solve (both distances)", lambda: _solve(g, samples, traced, s),
+                         vertices=len(g.receivers.vertices))  # fmt: skip
+    final = blend(solved["short"], solved["long"], s.blend)
+    small = blog.stored("small_decorators", "Resample grass clumps and shrubs",
+                        lambda: _small_decorators(g, labeller, final, s))  # fmt: skip
+    lod = None
+    if s.lod.enabled:
+        lod = blog.stored("lod", "LOD: simplify, resample, least squares solve",
+                          lambda: bake_lod(g, labeller, final, samples, traced["ao"], traced["valid"], s))  # fmt: skip
+        blog.note("lod", lod_vertices=len(lod["vertices"]), lod_faces=len(lod["faces"]),
+                  resample_points=int(lod["resample_points"]))  # fmt: skip
+    blend_err = blog.stored("blend_check", "Two-distance blend vs blended-kernel traces (error table)",
+                            lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s))  # fmt: skip
+    blog.timed(
+        "output",
+        "Write glTF, shader, log",
+        lambda: write_outputs(out / s.output, out, g, s, solved, final, deco, small, lod),
+    )
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    info = {
+        "level": str(path), "key": key, "settings": settings_to_dict(s), "stages": blog.stages,
+        "seconds_total": time.perf_counter() - t_start, "peak_rss_bytes": int(peak),
+        "counts": {**level.counts(), "receiver_vertices": len(g.receivers.vertices), "receiver_faces": len(g.receivers.faces),
+                   "samples": len(samples), "invalid_samples": int((~traced["valid"]).sum())},
+        "errors": _error_tables(deco, lod, blend_err),
+        "load_average": list(os.getloadavg()), "cpu_count": os.cpu_count(),
+    }  # fmt: skip
+    write_json(out / "bake_log.json", info)
+    write_text(out / "bake_log.md", bake_log_markdown(info))
+    return info
+
+
+def _solve(
+    g: LevelGeometry, samples: SurfaceSamples, traced: dict, s: LevelBakeSettings
+) -> dict[str, np.ndarray]:
+    v = fit_least_squares(g.receivers, samples, traced["ao"], traced["valid"], s.trace.alpha, s.trace.solver)
+    return {"short": v[:, 0], "long": v[:, 1]}
+
+
+def _small_decorators(
+    g: LevelGeometry, labeller: LevelLabeller, final: np.ndarray, s: LevelBakeSettings
+) -> dict[str, np.ndarray]:
+    values = np.r_[final, np.full(len(g.opaque.vertices) - len(final), np.nan)]
+    out: dict[str, np.ndarray] = {}
+    for role, nodes in (("grass", g.grass), ("shrub", g.shrubs)):
+        for k, node in enumerate(nodes):
+            centres = node.transforms[:, :3, 3]
+            v, _ = resample_in_spheres(labeller, values, centres, s.grass.radius, s.grass.rays)
+            missing = ~np.isfinite(v)
+            out[f"{role}_{k}"] = np.where(missing, 1.0, v).astype(np.float32)
+            out[f"{role}_{k}_missing"] = np.array(int(missing.sum()))
+    return out
+
+
+def _blend_check(
+    g, labeller, foliage, samples, traced, solved, s: LevelBakeSettings, count: int = 2000
+) -> dict:
+    """The error table of the two-distance blend: (a) same rays: blend of the two columns vs one trace
+    whose kernel is the blend (rho_b = w rho_long + (1 - w) rho_short: the mean is linear, so any
+    difference is float rounding); (b) the stored per-vertex blend vs a 4x-ray blended-kernel reference
+    at held-out samples (the bake's error); (c) per-vertex blend vs least squares of blended samples."""
+    rng = np.random.default_rng(s.seed + 7)
+    pick = np.sort(rng.choice(len(samples), size=min(count, len(samples)), replace=False))
+    pts, nrm = samples.points[pick], samples.normals[pick]
+    w = s.blend.long_weight
+    plain = replace(s.blend, remap=None)
+    two = blend(traced["ao"][pick, 0], traced["ao"][pick, 1], plain)
+    kern = _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=pick)
+    ref_lab = LevelLabeller(
+        g.opaque, replace(label_settings(s, g.opaque.diagonal, 4 * s.trace.rays), seed=s.seed + 1000)
+    )
+    ref_two, ref_valid = ref_lab.obscurance(pts, nrm, halves(s), foliage)
+    ref = w * ref_two[:, 1].astype(np.float64) + (1 - w) * ref_two[:, 0]
+    per_vertex = blend(solved["short"], solved["long"], plain)
+    pred = interpolate(g.receivers, per_vertex, samples.face[pick], samples.bary[pick])
+    m = ref_valid & traced["valid"][pick]
+    blended_samples = blend(traced["ao"][:, 0], traced["ao"][:, 1], plain)
+    lsq_blended = fit_least_squares(
+        g.receivers, samples, blended_samples, traced["valid"], s.trace.alpha, s.trace.solver
+    )
+    return {
+        "same_rays_max_abs": np.array(float(np.abs(two - kern).max())),
+        "bake_rmse_vs_reference": np.array(float(np.sqrt(np.mean((pred[m] - ref[m]) ** 2)))),
+        "samples_rmse_vs_reference": np.array(float(np.sqrt(np.mean((two[m] - ref[m]) ** 2)))),
+        "per_vertex_blend_vs_lsq_of_blend_max_abs": np.array(float(np.abs(per_vertex - lsq_blended).max())),
+        "count": np.array(int(m.sum())),
+    }
+
+
+def _blended_kernel_trace(
+    labeller: LevelLabeller, foliage, points, normals, s: LevelBakeSettings, ids
+) -> np.ndarray:
+    """One trace with the blended kernel rho_b(d) = w (1 - 2^(-d/h_long)) + (1 - w) (1 - 2^(-d/h_short))
+    per ray (escaped rays: 1), averaged per sample: a separate path from :meth:`LevelLabeller.obscurance`
+    that shares only the rays (:meth:`Labeller.rays`)."""
+    orig, dirs = labeller.rays(points, normals, ids=ids)
+    r = labeller._r_local
+    out = labeller._embree.run(
+        orig, dirs, query="INTERSECT", dists=np.full(len(orig), r, np.float32), output=1
+    )
+    t = out["tfar"].astype(np.float64)
+    hs, hl = (h / labeller._scale for h in halves(s))
+    w = s.blend.long_weight
+    rho = np.where(t < r, w * (1 - 2.0 ** (-t / hl)) + (1 - w) * (1 - 2.0 ** (-t / hs)), 1.0)
+    if foliage is not None and not foliage.empty:
+        start = np.repeat(foliage.origin_density(orig[:: labeller.settings.rays]), labeller.settings.rays)
+        rho = rho * foliage.transmittance(orig, dirs, np.minimum(out["tfar"], r), start)
+    return rho.reshape(len(points), -1).mean(axis=1)
+
+
+def _error_tables(deco: dict, lod: dict | None, blend_err: dict) -> dict:
+    out: dict[str, Any] = {"blend": {k: float(v) for k, v in blend_err.items()}}
+    if len(deco.get("models", [])):
+        out["decorators"] = {
+            k[5:]: {"mean": float(np.mean(v)), "max": float(np.max(v))}
+            for k, v in deco.items()
+            if k.startswith("rmse_")
+        }
+        out["decorators"]["instances"] = int(len(deco["coefficients"]))
+    if lod is not None:
+        out["lod"] = {"rmse_vertex": float(lod["rmse_vertex"]), "rmse_least_squares": float(lod["rmse_least_squares"]),
+                      "holdout": int(lod["holdout"]), "radius": float(lod["radius"])}  # fmt: skip
+    return out
+
+
+def bake_log_markdown(info: dict) -> str:
+    """A table like Table 1 of Sloan et al. 2013 (stage, counts, seconds) plus totals and errors."""
+    c = info["counts"]
+    lines = [f"Bake of {Path(info['level']).name}: {c['receiver_vertices']:,} V {c['receiver_faces']:,} F, "
+             f"{c['samples']:,} samples, {info['settings']['trace']['rays']} rays", "",
+             "| Description | Time (s) | reused |", "|---|---:|:---:|"]  # fmt: skip
+    for st in info["stages"]:
+        extra = {k: v for k, v in st.items() if k not in ("stage", "description", "seconds", "reused")}
+        detail = ", ".join(f"{k} {v:,}" if isinstance(v, int) else f"{k} {v}" for k, v in extra.items())
+        lines.append(
+            f"| {st['description']}{' (' + detail + ')' if detail else ''} | {st['seconds']:.2f} | {'yes' if st['reused'] else ''} |"
+        )
+    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | |", "",
+              f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
+              f"on {info['cpu_count']} cores.", ""]  # fmt: skip
+    e = info["errors"]
+    if "decorators" in e:
+        d = e["decorators"]
+        lines += ["| decorators (trees, RMSE vs traced gold standard) | mean | max |", "|---|---:|---:|"]
+        for k in ("in_place", "local_x_global", "global_only", "local_only", "local_x_global_vs_in_place"):
+            lines.append(f"| {k.replace('_', ' ')} | {d[k]['mean']:.4f} | {d[k]['max']:.4f} |")
+        lines.append("")
+    if "lod" in e:
+        lines += ["| LOD transfer (RMSE vs gold standard) | RMSE |", "|---|---:|",
+                  f"| resampled at LOD vertices | {e['lod']['rmse_vertex']:.4f} |",
+                  f"| least squares over resampled samples | {e['lod']['rmse_least_squares']:.4f} |", ""]  # fmt: skip
+    b = e["blend"]
+    lines += ["| two-distance blend | value |", "|---|---:|",
+              f"| same rays: blend of two columns vs blended-kernel trace, max abs | {b['same_rays_max_abs']:.2e} |",
+              f"| per-vertex blend vs least squares of blended samples, max abs | {b['per_vertex_blend_vs_lsq_of_blend_max_abs']:.2e} |",
+              f"| samples (blend) vs 4x-ray blended reference, RMSE | {b['samples_rmse_vs_reference']:.4f} |",
+              f"| baked vertices (blend) vs 4x-ray blended reference, RMSE | {b['bake_rmse_vs_reference']:.4f} |", ""]  # fmt: skip
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def load_level_settings(config: str | Path, overrides: list[str] | None = None) -> LevelBakeSettings:
+    s = load_settings(LevelBakeSettings, config, overrides)
+    check_settings(s)
+    return s
+
+
+def run_level(args: argparse.Namespace) -> int:
+    """The level branch of `neuralao bake` (pipeline.bake.run hands over when --config is given)."""
+    settings = load_level_settings(args.config, getattr(args, "set", None))
+    info = bake_level(args.mesh, settings, args.out, progress=True)
+    c = info["counts"]
+    log.info("baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
+             args.mesh, c["receiver_vertices"], c["receiver_faces"], c["samples"], info["seconds_total"], args.out)  # fmt: skip
+    return 0

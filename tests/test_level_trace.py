@@ -1,0 +1,198 @@
+"""Level tracing: two distances from one trace, foliage closed forms, sphere resampling, the
+per-instance linear global fit (equation 3 of Sloan et al. 2013)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import floor_quad, mc_bound, merge
+from scipy.special import expn
+
+from pipeline.bake import fit_least_squares, surface_samples
+from pipeline.foliage import Foliage, overlap_reduced
+from pipeline.labels import Labeller, LabelSettings
+from pipeline.level import read_level
+from pipeline.level_bake import TraceSettings, build_geometry, fit_global, linear_basis, receiver_samples
+from pipeline.level_gen import settings_for, write_level
+from pipeline.level_trace import LevelLabeller, resample_in_spheres, sphere_directions
+from pipeline.scene import scene_from_arrays
+
+
+@pytest.fixture(scope="module")
+def tiny_geometry(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lv")
+    write_level(out, settings_for("tiny", seed=1), "tiny")
+    return build_geometry(read_level(out / "level.gltf"))
+
+
+def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
+    g = tiny_geometry
+    samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
+    st = LabelSettings(rays=32, kernel="obscurance", max_distance=g.opaque.diagonal, seed=5, workers=2)
+    ao, valid = LevelLabeller(g.opaque, st).obscurance(samples.points, samples.normals, [2.0, 300.0])
+    for j, h in enumerate((2.0, 300.0)):
+        a, v = Labeller(g.opaque, replace(st, half_distance=h)).ao_at_points(samples.points, samples.normals)
+        np.testing.assert_array_equal(ao[:, j], a)
+        np.testing.assert_array_equal(valid, v)
+    assert (ao[:, 0] >= ao[:, 1]).all()  # a longer half distance only darkens
+    assert (~valid).any()  # the tiny level's soup (houses, sunk buildings) has invalid samples
+
+
+def test_foliage_attenuates_only_where_there_is_foliage(tiny_geometry):
+    from pipeline.level_bake import FoliageSettings, build_foliage
+
+    g = tiny_geometry
+    samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
+    lab = LevelLabeller(g.opaque, LabelSettings(rays=32, kernel="obscurance", max_distance=g.opaque.diagonal))
+    plain, _ = lab.obscurance(samples.points, samples.normals, [2.0, 300.0])
+    fol, _ = lab.obscurance(
+        samples.points, samples.normals, [2.0, 300.0], build_foliage(g, lab, FoliageSettings())
+    )
+    assert (fol <= plain + 1e-7).all()
+    darker = (plain - fol).max(axis=1) > 1e-3
+    assert 0 < darker.sum() < len(samples)
+
+
+def _slab_scene(half=200.0):
+    return merge(floor_quad(half, 0.0), name="floor")
+
+
+@pytest.mark.parametrize("sigma_h", [0.3, 1.0, 2.5])
+def test_point_inside_a_wide_slab_of_media_closed_form(sigma_h):
+    """Obscurance with no opaque occluder at the bottom of a slab of thickness H, density sigma:
+    AO = (1/pi) int exp(-sigma H / cos) cos dw = 2 E_3(sigma H)."""
+    scene = _slab_scene()
+    lab = LevelLabeller(scene, LabelSettings(rays=256, kernel="obscurance", max_distance=2 * scene.diagonal))
+    h, half = 1.0, 200.0
+    fol = Foliage([[-half, -half, -0.01]], [[half, half, h]], [sigma_h / h], np.zeros((0, 3)), np.zeros((0, 3), int),
+                  np.zeros(0), lab._center, lab._scale, max_hits=8)  # fmt: skip
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(-5, 5, (16, 2)), np.zeros(16)]
+    ao, _ = lab.obscurance(pts, np.tile([0.0, 0.0, 1.0], (16, 1)), [1.0], fol)
+    expected = 2 * expn(3, sigma_h)
+    assert np.abs(ao[:, 0] - expected).max() < mc_bound(expected, 256)
+    assert abs(ao[:, 0].mean() - expected) < mc_bound(expected, 256 * 16)
+    # Above the slab, facing up: no ray crosses it, visibility is exactly 1.
+    above, _ = lab.obscurance(pts + [0, 0, 2 * h], np.tile([0.0, 0.0, 1.0], (16, 1)), [1.0], fol)
+    assert (above == 1.0).all()
+
+
+def _box_foliage(lo, hi, density, max_hits=8):
+    return Foliage(np.atleast_2d(lo), np.atleast_2d(hi), np.atleast_1d(density), np.zeros((0, 3)), np.zeros((0, 3), int),
+                   np.zeros(0), np.zeros(3), 1.0, max_hits)  # fmt: skip
+
+
+@pytest.mark.parametrize("origin, end, length", [((-5, 0.1, 0.2), 10.0, 2.0), ((-5, 0.1, 0.2), 5.0, 1.0),
+                                                 ((-5, 0.1, 0.2), 3.0, 0.0), ((0, 0.1, 0.2), 10.0, 1.0),
+                                                 ((0, 0.1, 0.2), 0.5, 0.5)])  # fmt: skip
+def test_one_box_of_known_density_and_length(origin, end, length):
+    """exp(-density x length inside the box) for a ray in +x through [-1, 1]^3 (scaled down into local
+    units), starting outside or inside, ending before, inside or after the box."""
+    k = 0.05  # keep the box inside the local frame's unit scale
+    fol = _box_foliage([-k, -k, -k], [k, k, k], 1.7 / k)
+    o = np.array([origin], np.float32) * k
+    start = fol.origin_density(o)
+    t = fol.transmittance(o, np.array([[1, 0, 0]], np.float32), np.array([end * k]), start)
+    np.testing.assert_allclose(t, np.exp(-1.7 * length), rtol=1e-4, atol=1e-6)
+
+
+def test_overlapping_boxes_have_reduced_densities_and_add_up_along_a_ray():
+    """Two overlapping boxes: each density becomes sigma / (1 + shared fraction); a ray in +x from outside
+    crosses 2k of each, one from inside both crosses k of one and 1.5k of the other."""
+    k = 0.05
+    lo = np.array([[-k, -k, -k], [-0.5 * k, -0.9 * k, -1.1 * k]])  # no shared planes
+    hi = lo + 2 * k
+    dens = overlap_reduced(lo, hi, np.array([3.0, 3.0]) / k)
+    share = 1.5 * 1.9 * 1.9 / 8  # intersection 1.5k x 1.9k x 1.9k of two 8k^3 boxes
+    np.testing.assert_allclose(dens, 3.0 / k / (1 + share))
+    fol = Foliage(lo, hi, dens, np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros(0), np.zeros(3), 1.0)
+    o = np.array([[-0.2, 0.001, 0.002], [0.0, 0.001, 0.002]], np.float32)  # outside; inside both
+    d = np.array([[1, 0, 0], [1, 0, 0]], np.float32)
+    t = fol.transmittance(o, d, np.array([1.0, 1.0]), fol.origin_density(o))
+    np.testing.assert_allclose(t, np.exp(-np.array([4.0, 1.0 + 1.5]) * 3.0 / (1 + share)), rtol=1e-5)
+    # Disjoint boxes keep their density.
+    np.testing.assert_array_equal(
+        overlap_reduced(lo + [[0, 0, 0], [5, 0, 0]], hi + [[0, 0, 0], [5, 0, 0]], np.array([3.0, 3.0])),
+        [3.0, 3.0],
+    )
+
+
+@pytest.mark.parametrize("layers, expected", [(1, 0.5), (2, 0.25), (3, 0.125)])
+def test_trees_attenuate_by_their_transmission_per_hit(layers, expected):
+    """Tree triangles (here wide horizontal sheets over the point) multiply visibility by 0.5 per hit."""
+    scene = _slab_scene()
+    lab = LevelLabeller(scene, LabelSettings(rays=64, kernel="obscurance", max_distance=2 * scene.diagonal))
+    sheets = [floor_quad(150.0, 1.0 + i, up=bool(i % 2)) for i in range(layers)]
+    tv = np.concatenate([v for v, _ in sheets])
+    tf = np.concatenate([f + 4 * i for i, (_, f) in enumerate(sheets)])
+    fol = Foliage(
+        np.zeros((0, 3)),
+        np.zeros((0, 3)),
+        np.zeros(0),
+        tv,
+        tf,
+        np.full(len(tf), 0.5),
+        lab._center,
+        lab._scale,
+    )
+    ao, _ = lab.obscurance(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]), [3.0], fol)
+    # Rays escaping below the sheets' rim (at most atan(1 / 150) from the horizon) see fewer layers.
+    assert abs(ao[0, 0] - expected) < 2e-3
+
+
+def test_sphere_resampling_recovers_a_planted_linear_function():
+    """Per-vertex values a + b x + c y on the plane z = 0; a sphere centred at height h: the hits of the
+    sign-symmetric direction set lie symmetrically about the foot point, so the weighted mean is exactly
+    the value there; and every hit equals the analytic ray-plane intersection."""
+    n = 20
+    t = np.linspace(-3, 3, n + 1)
+    xx, yy = np.meshgrid(t, t, indexing="ij")
+    v = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], 1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    plane = scene_from_arrays(v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]), "plane")
+    f = 0.3 + 0.05 * v[:, 0] - 0.02 * v[:, 1]
+    lab = LevelLabeller(plane, LabelSettings(rays=8))
+    centres = np.array([[0.31, -0.47, 0.2], [1.1, 0.9, -0.35], [-2.0, 1.3, 0.0]])
+    r = 0.75
+    got, weight = resample_in_spheres(lab, f, centres, r, rays=64)
+    np.testing.assert_allclose(got, 0.3 + 0.05 * centres[:, 0] - 0.02 * centres[:, 1], atol=1e-9)
+    # Independent reference: the analytic hits c + s u (s = -h / u_z) of the rays from c + r u toward c,
+    # weighted by r - |s|.
+    u = sphere_directions(64)
+    for ci, w_sum in zip(centres, weight, strict=True):
+        ok = np.abs(u[:, 2]) > 1e-12
+        s = -ci[2] / u[ok, 2]  # hit = c + s u
+        inside = np.abs(s) <= r
+        w = r - np.abs(s[inside])
+        np.testing.assert_allclose(w_sum, w.sum(), rtol=1e-6)
+
+
+def test_linear_global_fit_recovers_a_planted_function_exactly():
+    rng = np.random.default_rng(4)
+    pts = rng.uniform(-3, 3, (500, 3)) + [10.0, 2.0, -7.0]
+    origin = np.array([10.0, 2.0, -7.0])
+    local = rng.uniform(0.2, 1.0, 500)
+    y = np.array([0.7, 0.03, -0.05, 0.01])
+    f = local * (linear_basis(pts, origin) @ y)
+    np.testing.assert_allclose(fit_global(pts, origin, local, f, rng.uniform(0.5, 1.5, 500)), y, atol=1e-12)
+    # And with L = 1 (global only) it is an ordinary linear fit.
+    np.testing.assert_allclose(
+        fit_global(pts, origin, np.ones(500), linear_basis(pts, origin) @ y, np.ones(500)), y, atol=1e-12
+    )
+
+
+def test_least_squares_columns_and_cg_match_separate_direct_fits(tiny_geometry):
+    g = tiny_geometry
+    samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)
+    rng = np.random.default_rng(0)
+    vals = rng.uniform(0, 1, (len(samples), 2))
+    valid = rng.uniform(size=len(samples)) > 0.1
+    both = fit_least_squares(g.receivers, samples, vals, valid)
+    for j in range(2):
+        np.testing.assert_array_equal(both[:, j], fit_least_squares(g.receivers, samples, vals[:, j], valid))
+    np.testing.assert_allclose(
+        fit_least_squares(g.receivers, samples, vals, valid, solver="cg"), both, atol=1e-5
+    )
