@@ -123,6 +123,11 @@ def load_settings(cls: type[T], preset: str | Path | None = None, overrides: lis
             raise NeuralaoError(f"config file {path} is not valid JSON: {e.msg} at line {e.lineno}") from None
         if not isinstance(data, dict):
             raise NeuralaoError(f"config file {path} must hold a JSON object")
+    return from_dict(cls, apply_overrides(data, overrides))
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[str, Any]:
+    """Apply ``key=value`` overrides to ``data`` in place (dotted keys nest); returns ``data``."""
     for item in overrides or []:
         key, value = parse_override(item)
         node = data
@@ -130,7 +135,7 @@ def load_settings(cls: type[T], preset: str | Path | None = None, overrides: lis
         for p in parts[:-1]:
             node = node.setdefault(p, {})
         node[parts[-1]] = value
-    return from_dict(cls, data)
+    return data
 
 
 def settings_to_dict(settings: Any) -> dict[str, Any]:
