@@ -77,7 +77,7 @@ def test_scalar_input_with_an_image(op, scalar_first, shape):
     r = np.full(shape, 0.7, np.float32)
     program = _check(model, {"x": x, "r": r}, "x")
     (u,) = program.manifest["uniforms"]
-    assert u["onnx_input"] == "r" and u["glsl_name"] == "u_scalar0" and u["declared_shape"] == shape
+    assert u["onnx_input"] == "r" and u["glsl_name"] == "u_r" and u["declared_shape"] == shape
     assert f"uniform float {u['glsl_name']};" in program.sources[u["shader"]]
 
 
@@ -92,6 +92,22 @@ def test_scalar_first_input_static_image_and_fused_scalar_arithmetic():
     assert kinds == ["pad", "uniform", "binary", "crop"], kinds
     assert program.manifest["passes"][1]["ops"] == ["Uniform", "Mul", "Clip"]
     assert program.manifest["input"]["onnx_name"] == "x"
+
+
+def test_uniform_names_plain_identifiers_only():
+    """u_<name> for a plain identifier; any other ONNX name stays out of the shader (u_scalar<k>)."""
+    names = ["radius", "r; } void main() {", "a__b", "scalar1"]
+    nodes, prev = [], "x"
+    for i, n in enumerate(names):
+        nodes.append(oh.make_node("Mul", [prev, n], [f"m{i}"], name=f"mul{i}"))
+        prev = f"m{i}"
+    nodes.append(oh.make_node("Identity", [prev], ["y"], name="out"))
+    model = _model(nodes, [("x", [1, 2, 3, 4])] + [(n, [1]) for n in names])
+    feeds = {"x": _x((1, 2, 3, 4))} | {n: np.full([1], 0.5 + i, np.float32) for i, n in enumerate(names)}
+    program = _check(model, feeds, "x")
+    got = [u["glsl_name"] for u in program.manifest["uniforms"]]
+    assert got == ["u_radius", "u_scalar1", "u_scalar2", "u_scalar1_1"], got
+    assert not any(n in src for src in program.sources.values() for n in names[1:3])
 
 
 def _radius_net(half: str | None = None):
@@ -200,7 +216,7 @@ def test_glsl_and_parity_cli_with_a_radius_input(tmp_path, capsys):
     out = tmp_path / "img"
     assert cli.main(["glsl", str(path), "--target", "image", "--out", str(out)]) == 0
     manifest = json.loads((out / "manifest.json").read_text())
-    assert manifest["uniforms"] == {"radius": "u_scalar0"}
+    assert manifest["uniforms"] == {"radius": "u_radius"}
     glsl = json.loads((out / "glsl" / "manifest.json").read_text())
     assert [u["onnx_input"] for u in glsl["uniforms"]] == ["radius"]
     assert cli.main(["parity", str(out), "--size", "16", "12", "--out", str(tmp_path / "p.json")]) == 0

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any
@@ -141,6 +142,20 @@ def _is_scalar_input(vi: onnx.ValueInfoProto) -> bool:
     return vi.type.tensor_type.HasField("shape") and len(dims) <= 4 and all(d == 1 for d in dims)
 
 
+# An ONNX name that can be a GLSL identifier as it is (no "__": reserved in GLSL), at most 32 characters.
+_SAFE_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*$")
+
+
+def _uniform_name(onnx_name: str, index: int, used: set[str]) -> str:
+    """``u_<name>`` for a plain identifier (what an engine programmer expects: u_radius), else the
+    generated ``u_scalar<index>``: other ONNX names never reach shader source."""
+    name = f"u_{onnx_name}" if _SAFE_NAME.match(onnx_name) and len(onnx_name) <= 32 else f"u_scalar{index}"
+    base, n = name, 1
+    while name in used:  # an input literally named scalar<k> beside a generated u_scalar<k>
+        name, n = f"{base}_{n}", n + 1
+    return name
+
+
 def _split_inputs(graph: OnnxGraph) -> tuple[onnx.ValueInfoProto, list[onnx.ValueInfoProto]]:
     """(the image input, the scalar inputs in graph order). The image is the one input that is not a
     single-element scalar (the first input when every one is); anything else is refused, by name."""
@@ -270,11 +285,13 @@ class ImageOps(OpTable):
         # texture ident -> declared ONNX rank of a scalar input (Shape folds rank 4 only)
         self.scalar_ranks: dict[str, int] = {}
         point = Dim(Fraction(0), 1)
+        used: set[str] = set()
         for k, vi in enumerate(scalars):
             self.label = f"graph input {vi.name!r}"
             t = self.new_texture(1, point, point, onnx_name=vi.name)
             p = self.add_pass(Pass(0, "uniform", ["Uniform"], [], t))
-            p.fields = {"uniform": f"u_scalar{k}", "location": 0}
+            p.fields = {"uniform": _uniform_name(vi.name, k, used), "location": 0}
+            used.add(p.fields["uniform"])
             self.uniforms.append((vi, p))
             self.scalar_ranks[t.ident] = len(_dims(vi))
             self.env[vi.name] = t
@@ -1291,8 +1308,9 @@ def generate_compute(
 
 
 def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:
-    """What a graph input means: its doc_string, else metadata "<name>_description", "input_<name>" or "<name>"."""
-    keys = (f"{vi.name}_description", f"input_{vi.name}", vi.name)
+    """What a graph input means: its doc_string, else metadata "<name>_description", "<name>_input",
+    "input_<name>" or "<name>" (the first present)."""
+    keys = (f"{vi.name}_description", f"{vi.name}_input", f"input_{vi.name}", vi.name)
     return vi.doc_string or next((metadata[k] for k in keys if k in metadata), "")
 
 
