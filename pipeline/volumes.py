@@ -98,6 +98,8 @@ class VolumeSettings:
     beta: float = 1.0
     # Block-coordinate-descent sweeps of the regularisation.
     iterations: int = 8
+    # Regularisation: agreement points per shared face, a k x k grid (1: the face centre b_ij, the paper).
+    boundary_grid: int = 1
     # Free-space regions: grid cells along the level's longest axis.
     grid: int = 16
     # Free-space regions: at most this many cells along any axis of one region.
@@ -475,9 +477,12 @@ def regularise(
     grams: list[np.ndarray | None],
     beta: float,
     iterations: int,
+    boundary_grid: int = 1,
 ) -> tuple[list[RegionModel], list[float]]:
     """Block coordinate descent on E (module doc). Regions with ``grams[i] is None`` (fallbacks) are
-    neither updated nor used as neighbours. Returns new models and E before and after every sweep."""
+    neither updated nor used as neighbours. ``boundary_grid`` k: the agreement term at the boundary
+    centre (k = 1, the paper's b_ij) or at a k x k grid over the shared face (:func:`boundary_points`),
+    each point weighted w_ij / k^2. Returns new models and E before and after every sweep."""
     if beta < 0 or not math.isfinite(beta):
         raise NeuralaoError(f"beta must be a finite number >= 0, got {beta!r}")
     active = [g is not None for g in grams]
@@ -485,14 +490,19 @@ def regularise(
     mean_area = float(np.mean([e.area for e in live])) if live else 1.0
     nbrs: list[list[tuple[int, float, np.ndarray]]] = [[] for _ in regions]
     for e in live:
-        w = e.area / mean_area
-        nbrs[e.i].append((e.j, w, np.asarray(e.centre)))
-        nbrs[e.j].append((e.i, w, np.asarray(e.centre)))
+        pts = (
+            np.asarray(e.centre)[None, :]
+            if boundary_grid <= 1
+            else boundary_points(regions[e.i], regions[e.j], boundary_grid)
+        )
+        w = e.area / mean_area / len(pts)
+        nbrs[e.i].append((e.j, w, pts))
+        nbrs[e.j].append((e.i, w, pts))
     orig = [m.coefficients.reshape(7, -1) for m in models]
     theta = [t.copy() for t in orig]
 
-    def row(i: int, b: np.ndarray) -> np.ndarray:
-        return design(b[None, :], models[i].centre)[0]
+    def rows(i: int, b: np.ndarray) -> np.ndarray:
+        return design(b, models[i].centre)
 
     def energy() -> float:
         e = 0.0
@@ -502,7 +512,7 @@ def regularise(
             d = theta[i] - orig[i]
             e += float(np.einsum("tc,ts,sc->", d, g, d))
             for j, w, b in nbrs[i]:
-                e += beta * w * float(((row(i, b) @ theta[i] - row(j, b) @ theta[j]) ** 2).sum())
+                e += beta * w * float(((rows(i, b) @ theta[i] - rows(j, b) @ theta[j]) ** 2).sum())
         return e
 
     history = [energy()]
@@ -514,9 +524,9 @@ def regularise(
             a = g.copy()
             rhs = g @ orig[i]
             for j, w, b in nbrs[i]:
-                r = row(i, b)
-                a += 2.0 * beta * w * np.outer(r, r)
-                rhs += 2.0 * beta * w * np.outer(r, row(j, b) @ theta[j])
+                r = rows(i, b)
+                a += 2.0 * beta * w * (r.T @ r)
+                rhs += 2.0 * beta * w * (r.T @ (rows(j, b) @ theta[j]))
             theta[i] = np.linalg.solve(a, rhs)
         history.append(energy())
     out = [replace(m, coefficients=theta[i].reshape(m.coefficients.shape)) for i, m in enumerate(models)]
@@ -565,6 +575,40 @@ def fill_fallbacks(
     return out
 
 
+def boundary_points(a: Region, b: Region, k: int = 5) -> np.ndarray:
+    """(k * k, 3) float64: a k x k grid of cell centres over the boundary two boxes share (the face
+    they touch on, or the overlap's cross-section across its thinnest axis, as :func:`connect`)."""
+    lo, hi = np.maximum(a.lo, b.lo), np.minimum(a.hi, b.hi)
+    thin = int(np.argmin(np.maximum(hi - lo, 0.0)))
+    u, v = (ax for ax in range(3) if ax != thin)
+    t = (np.arange(k) + 0.5) / k
+    tu, tv = np.meshgrid(t, t, indexing="ij")
+    pts = np.tile((lo + hi) / 2.0, (k * k, 1))
+    pts[:, u] = lo[u] + tu.ravel() * (hi[u] - lo[u])
+    pts[:, v] = lo[v] + tv.ravel() * (hi[v] - lo[v])
+    return pts
+
+
+def face_jumps(
+    regions: list[Region],
+    edges: list[Edge],
+    models: list[RegionModel],
+    blend: float,
+    count: int = sh.QUADRATIC,
+) -> np.ndarray:
+    """(len(edges),) like :func:`boundary_jumps`, averaged (RMS) over an 8 x 8 grid on each shared face
+    instead of its centre only (8: no grid point is the centre or a 3 x 3 regularisation point): the
+    popping a character crossing anywhere on the face sees."""
+    out = np.zeros(len(edges))
+    w = np.array([1.0 - blend, blend])
+    for k, e in enumerate(edges):
+        pts = boundary_points(regions[e.i], regions[e.j], 8)
+        diff = model_at(models[e.i], pts) - model_at(models[e.j], pts)
+        f = np.einsum("d,ndj->nj", w, diff)[:, :count]
+        out[k] = math.sqrt(float((f**2).sum(axis=1).mean()) / (4.0 * math.pi))
+    return out
+
+
 def boundary_jumps(
     edges: list[Edge], models: list[RegionModel], blend: float, count: int = sh.QUADRATIC
 ) -> np.ndarray:
@@ -584,7 +628,16 @@ def boundary_jumps(
 
 
 def check_settings(s: VolumeSettings) -> None:
-    for name in ("samples", "directions", "iterations", "grid", "max_region_cells", "cell_rays", "workers"):
+    for name in (
+        "samples",
+        "directions",
+        "iterations",
+        "boundary_grid",
+        "grid",
+        "max_region_cells",
+        "cell_rays",
+        "workers",
+    ):
         v = getattr(s, name)
         if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "iterations" else 1):
             raise NeuralaoError(f"{name} must be a positive integer, got {v!r}")
@@ -616,8 +669,10 @@ def bake_volumes(
 ) -> tuple[Volumes, dict]:
     """Regions (given, or from free space) -> sampled, fitted, regularised models.
 
-    Returns the :class:`Volumes` and ``extras``: per-region samples (``points``, ``coeffs``, ``valid``)
-    and the unregularised models (``models_unregularised``), for benchmarks and tests.
+    Returns the :class:`Volumes` and ``extras``: per-region samples (``points``, ``coeffs``, ``valid``),
+    the per-region fits (``fits``, None without a valid sample) and Gram matrices (``grams``) to
+    regularise again with another beta, the unregularised models with fallbacks
+    (``models_unregularised``) and the boundary jumps (``jumps_before``, ``jumps_after``).
     """
     from tqdm import tqdm
 
@@ -659,7 +714,7 @@ def bake_volumes(
         m if m is not None else RegionModel(r.centre, np.zeros((7, 2, 9)))
         for m, r in zip(fits, regions, strict=True)
     ]
-    regular, history = regularise(regions, edges, placeholder, grams, s.beta, s.iterations)
+    regular, history = regularise(regions, edges, placeholder, grams, s.beta, s.iterations, s.boundary_grid)
     unreg = fill_fallbacks(regions, edges, fits)
     final = fill_fallbacks(
         regions, edges, [m if g is not None else None for m, g in zip(regular, grams, strict=True)]
@@ -683,6 +738,8 @@ def bake_volumes(
         "energy": history,
         "jump_before": _summary(jumps_before, edges),
         "jump_after": _summary(jumps_after, edges),
+        "face_jump_before": _summary(face_jumps(regions, edges, unreg, s.blend), edges),
+        "face_jump_after": _summary(face_jumps(regions, edges, final, s.blend), edges),
         "seconds": {
             "regions": t_regions,
             "trace": t_trace,
@@ -697,8 +754,8 @@ def bake_volumes(
                "bounds": scene.bounds.tolist(), "faces": int(len(scene.faces))},
         stats=stats,
     )  # fmt: skip
-    return vol, {"samples": samples, "models_unregularised": unreg, "jumps_before": jumps_before,
-                 "jumps_after": jumps_after}  # fmt: skip
+    return vol, {"samples": samples, "fits": fits, "grams": grams, "models_unregularised": unreg,
+                 "jumps_before": jumps_before, "jumps_after": jumps_after}  # fmt: skip
 
 
 def _summary(jumps: np.ndarray, edges: list[Edge]) -> dict:

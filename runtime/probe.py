@@ -11,10 +11,11 @@ the point; a point outside every box takes the nearest box (Euclidean distance t
 
 Temporal blending (Sloan et al. 2013: the model is blended with the previous frame's, exponential
 decay): the state is the *packed model* the shader reads (export/volume_glsl.py), updated per frame as
-``state = target + (state - target) * exp(-dt / tau)``. Packed models are linear in their
-coefficients, so the blend of two models with the same centre is exactly the blend of their AO; across
-regions whose centres differ the centre is blended too, which keeps AO continuous in time (what the
-blend is for) but is not exactly the mix of the two functions.
+``state = target + (state - target) * exp(-dt / tau)`` on the CPU, once per object. Two models with
+different centres do not mix exactly by blending their numbers (the centre would be blended too, and
+AO dips or overshoots at a switch: measured in bench/bench_volumes.py), so by default both are first
+linearised at the object's position (:func:`anchored`): linear functions re-centred at one point blend
+exactly. The shader and the layout stay the same.
 """
 
 from __future__ import annotations
@@ -93,22 +94,59 @@ def _order(order: str) -> int:
         raise NeuralaoError(f"order must be 'linear' or 'quadratic', got {order!r}") from None
 
 
-class TemporalBlend:
-    """Exponential decay of a packed model towards the current region's (module doc)."""
+def anchored(packed: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+    """The packed model linearised at ``anchor`` (3,): centre = anchor, constant = the model's value
+    there, each axis's +/- derivative = the one on the anchor's side of the model centre. Same layout
+    (SIZE, 4), so the same shader; exact at the anchor and on the anchor's side of every centre plane.
+    A model that is already linear (equal +/- derivatives) is only re-centred: the same function."""
+    u = np.array(packed, dtype=np.float64)
+    d = np.asarray(anchor, np.float64) - u[0, :3]
+    k = (len(u) - 1) // 7
+    out = np.zeros_like(u)
+    out[0, :3] = anchor
+    for c in range(k):
+        t = u[1 + 7 * c : 8 + 7 * c]
+        value = t[0].copy()
+        for axis in range(3):
+            slope = t[1 + 2 * axis] if d[axis] >= 0 else t[2 + 2 * axis]
+            value += d[axis] * slope
+            out[2 + 2 * axis + 7 * c] = out[3 + 2 * axis + 7 * c] = slope
+        out[1 + 7 * c] = value
+    return out
 
-    def __init__(self, tau: float):
+
+class TemporalBlend:
+    """Exponential decay towards the current region's packed model (module doc).
+
+    ``mode="anchored"`` (default): target and state are linearised at the object's anchor each frame
+    (:func:`anchored`), so the state is always exactly ``w * f_new + (1 - w) * f_old`` of the functions
+    it has seen (no overshoot when the two models' centres differ), at the cost of the kink at a
+    model's centre inside the object's extent. ``mode="parameters"``: the packed numbers themselves,
+    centre included, are blended (kinks kept, but across centres not exactly a mix of the functions).
+    """
+
+    def __init__(self, tau: float, mode: str = "anchored"):
         if not (math.isfinite(tau) and tau >= 0):
             raise NeuralaoError(f"tau must be a finite time >= 0, got {tau!r}")
+        if mode not in ("anchored", "parameters"):
+            raise NeuralaoError(f"temporal blend mode must be anchored or parameters, got {mode!r}")
         self.tau = float(tau)
+        self.mode = mode
         self.state: np.ndarray | None = None
 
-    def step(self, target: np.ndarray, dt: float) -> np.ndarray:
-        """Advance by ``dt`` towards ``target`` (SIZE, 4); the first call adopts it. Returns the state."""
+    def step(self, target: np.ndarray, dt: float, anchor: np.ndarray | None = None) -> np.ndarray:
+        """Advance by ``dt`` towards ``target`` (SIZE, 4); the first call adopts it. ``anchor`` (3,):
+        the object's position (required in anchored mode). Returns the state to upload."""
         target = np.asarray(target, np.float64)
+        if self.mode == "anchored":
+            if anchor is None:
+                raise NeuralaoError("anchored temporal blending needs the object's anchor position")
+            target = anchored(target, anchor)
         if self.state is None or self.tau == 0.0:
             self.state = target.copy()
-        else:
-            self.state = target + (self.state - target) * math.exp(-float(dt) / self.tau)
+            return self.state
+        prev = anchored(self.state, anchor) if self.mode == "anchored" else self.state
+        self.state = target + (prev - target) * math.exp(-float(dt) / self.tau)
         return self.state
 
 
@@ -119,14 +157,15 @@ def blended_path(
     dt: float,
     tau: float,
     order: str = "linear",
+    mode: str = "anchored",
 ) -> np.ndarray:
-    """AO (T,) float64 of one object moving along ``positions`` (T, 3) with ``normals`` (T, 3), one
-    frame every ``dt``: per frame the packed model of its region, temporally blended with ``tau``
-    (0: no blending, the model switches at region boundaries), evaluated as the shader does."""
+    """AO (T,) float64 of one object moving along ``positions`` (T, 3) (its anchor) with ``normals``
+    (T, 3), one frame every ``dt``: per frame the packed model of its region, temporally blended with
+    ``tau`` (0: none, the model switches at region boundaries), evaluated as the shader does."""
     packed = pack_volumes(probe.volumes, order)
     regions = probe.region_of(positions)
-    blend = TemporalBlend(tau)
-    states = np.stack([blend.step(packed[r], dt) for r in regions])
+    blend = TemporalBlend(tau, mode)
+    states = np.stack([blend.step(packed[r], dt, p) for r, p in zip(regions, positions, strict=True)])
     return evaluate_packed(states, positions, normals)
 
 

@@ -351,6 +351,28 @@ def test_temporal_blending_decays_exponentially_across_a_region_switch():
         TemporalBlend(-1.0)
 
 
+def test_anchored_blend_mixes_models_with_different_centres_exactly():
+    # Two sloped models centred far apart: the anchored blend is exactly w f_new + (1 - w) f_old at the
+    # object's position; blending the packed numbers (centre included) is not.
+    vol = two_constant_regions(0.3, 0.6)
+    y00 = sh.basis(np.eye(3)[:1], 1)[0, 0]
+    for m, centre, slope in ((vol.models[0], (-0.5, 0, 0), 0.2), (vol.models[1], (0.7, 0, 0), -0.3)):
+        m.centre = np.array(centre, dtype=float)
+        m.coefficients[1, :, 0] = m.coefficients[2, :, 0] = slope / y00  # d AO / dx on both sides
+    probe = VolumeProbe(vol)
+    pos = np.stack([np.linspace(-0.9, 0.9, 40), np.zeros(40), np.zeros(40)], axis=1)
+    n = np.tile([0.0, 1.0, 0.0], (40, 1))
+    f_old = 0.3 + 0.2 * (pos[:, 0] + 0.5)
+    f_new = 0.6 - 0.3 * (pos[:, 0] - 0.7)
+    switch = int(np.argmax(pos[:, 0] >= 0))
+    k = np.arange(40) - switch + 1
+    w = np.where(k > 0, 1 - np.exp(-np.maximum(k, 0) * 0.05 / 0.25), 0.0)
+    exact = w * f_new + (1 - w) * f_old
+    assert np.allclose(blended_path(probe, pos, n, dt=0.05, tau=0.25), exact, atol=1e-12)
+    params = blended_path(probe, pos, n, dt=0.05, tau=0.25, mode="parameters")
+    assert np.abs(params - exact).max() > 0.01
+
+
 def test_volumes_and_probe_commands_end_to_end(tmp_path):
     scene = room_with_crate()
     obj = tmp_path / "level.obj"
