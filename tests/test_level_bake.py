@@ -1,0 +1,215 @@
+"""Level bakes end to end on the tiny generated level: outputs, resumable stages, determinism, the
+decorator vertex shader on Mesa, and the error tables' direction."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline import cli
+from pipeline.bake import interpolate, vertex_colours
+from pipeline.level import quat_to_matrix, read_gltf_json
+from pipeline.level_bake import bake_level, load_level_settings
+from pipeline.level_gen import settings_for, write_level
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    root = tmp_path_factory.mktemp("level")
+    level, cfg = write_level(root / "in", settings_for("tiny", seed=2), "tiny")
+    info = bake_level(level, load_level_settings(cfg), root / "out")
+    return root, level, cfg, info
+
+
+def _glb(root):
+    doc, get = read_gltf_json(root / "out" / "level_baked.glb")
+    return doc, get
+
+
+def test_outputs_hold_every_signal(baked):
+    root, level, cfg, info = baked
+    doc, get = _glb(root)
+    assert "EXT_mesh_gpu_instancing" in doc["extensionsUsed"]
+    statics = [
+        n for n in doc["nodes"] if n.get("extras", {}).get("role") == "static" and "lod" not in n["extras"]
+    ]
+    verts = 0
+    for n in statics:
+        attrs = doc["meshes"][n["mesh"]]["primitives"][0]["attributes"]
+        ao, colour = get(attrs["_AO"]), get(attrs["COLOR_0"])
+        short, long_ = get(attrs["_AO_SHORT"]), get(attrs["_AO_LONG"])
+        np.testing.assert_array_equal(np.rint(colour[:, 0] * 255), vertex_colours(ao)[:, 0])
+        np.testing.assert_allclose(
+            ao, np.clip(0.97 * long_ + 0.03 * short, 0, 1), atol=1e-6
+        )  # the per-level blend
+        # 2 m obscurance is lighter than 300 m at every sample; a least-squares fit can overshoot a little.
+        assert short.mean() > long_.mean() and (short >= long_ - 0.1).all()
+        verts += len(ao)
+    assert verts == info["counts"]["receiver_vertices"]
+    trees = [n for n in doc["nodes"] if n.get("extras", {}).get("role") == "tree"]
+    inst = trees[0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]
+    assert get(inst["_AO_GLOBAL"]).shape == (3, 4)
+    local = get(doc["meshes"][trees[0]["mesh"]]["primitives"][0]["attributes"]["_AO_LOCAL"])
+    assert ((local >= 0) & (local <= 1)).all() and local.std() > 0.01
+    grass = next(n for n in doc["nodes"] if n.get("extras", {}).get("role") == "grass")
+    g_ao = get(grass["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["_AO"])
+    assert g_ao.shape == (20,) and ((g_ao > 0) & (g_ao <= 1)).all()
+    assert any(n.get("extras", {}).get("lod") == 1 for n in doc["nodes"])
+    # A second consumer reads it: trimesh loads every mesh.
+    loaded = trimesh.load(root / "out" / "level_baked.glb", force="scene")
+    assert len(loaded.geometry) == len(doc["meshes"])
+    stages = [s["stage"] for s in info["stages"]]
+    for name in (
+        "geometry",
+        "samples",
+        "bvh",
+        "foliage",
+        "trace",
+        "decorators",
+        "solve",
+        "small_decorators",
+        "lod",
+        "output",
+    ):
+        assert name in stages
+    assert (root / "out" / "bake_log.md").read_text().count("|") > 40
+
+
+def test_grass_matches_the_terrain_under_it(baked):
+    """A clump's scalar is the terrain AO near its base: compare with the baked terrain interpolated at
+    the clump's foot (vertical projection onto the terrain grid)."""
+    root, level, cfg, info = baked
+    doc, get = _glb(root)
+    terrain = next(n for n in doc["nodes"] if n["name"] == "terrain")
+    attrs = doc["meshes"][terrain["mesh"]]["primitives"][0]["attributes"]
+    v, ao = get(attrs["POSITION"]).astype(np.float64), get(attrs["_AO"])
+    grass = next(n for n in doc["nodes"] if n.get("extras", {}).get("role") == "grass")
+    ia = grass["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]
+    pos, g_ao = get(ia["TRANSLATION"]), get(ia["_AO"])
+    nearest = np.argmin(np.linalg.norm(v[None, :, [0, 2]] - pos[:, None, [0, 2]], axis=2), axis=1)
+    assert np.abs(g_ao - ao[nearest]).mean() < 0.05
+
+
+def test_decorator_shader_on_mesa_matches_the_model(baked):
+    """The generated vertex shader, run by transform feedback, against numpy evaluating the glTF's own
+    attributes: local AO x (y0 + y . (p_world - t)), with p_world from an independent quaternion."""
+    from runtime.decorator_runner import run_decorator_vertex_shader
+
+    root, *_ = baked
+    doc, get = _glb(root)
+    tree = next(n for n in doc["nodes"] if n.get("extras", {}).get("role") == "tree")
+    prim = doc["meshes"][tree["mesh"]]["primitives"][0]["attributes"]
+    ia = tree["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]
+    p, local = get(prim["POSITION"]), get(prim["_AO_LOCAL"])
+    t, q, s, y = get(ia["TRANSLATION"]), get(ia["ROTATION"]), get(ia["SCALE"]), get(ia["_AO_GLOBAL"])
+    source = (root / "out" / "shaders" / "decorator.vert").read_text()
+    ao, world = run_decorator_vertex_shader(source, p, local, t, q, s, y)
+    for j in range(len(t)):
+        m = trimesh.transformations.quaternion_matrix([q[j, 3], q[j, 0], q[j, 1], q[j, 2]])[:3, :3]
+        w = (p * s[j]) @ m.T + t[j]
+        np.testing.assert_allclose(world[j], w, atol=1e-4)
+        expected = np.clip(local * (y[j, 0] + (w - t[j]) @ y[j, 1:]), 0, 1)
+        np.testing.assert_allclose(ao[j], expected, atol=1e-5)
+    np.testing.assert_allclose(quat_to_matrix(q[:1])[0], trimesh.transformations.quaternion_matrix(
+        [q[0, 3], q[0, 0], q[0, 1], q[0, 2]])[:3, :3], atol=1e-6)  # fmt: skip
+
+
+def test_error_tables_point_the_right_way(baked):
+    *_, info = baked
+    e = info["errors"]
+    d = e["decorators"]
+    assert d["instances"] == 3
+    assert d["local_x_global"]["mean"] < d["global_only"]["mean"]  # the local AO helps
+    assert d["in_place"]["mean"] < d["local_x_global"]["mean"]  # per-vertex per-instance is the gold standard
+    assert e["lod"]["rmse_least_squares"] < e["lod"]["rmse_vertex"]  # section 2.2.1's claim
+    assert e["blend"]["same_rays_max_abs"] < 1e-6  # the mean is linear: blend == blended kernel
+
+
+def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
+    root, level, cfg, info = baked
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    again = bake_level(level, load_level_settings(cfg), out)
+    reused = {s["stage"] for s in again["stages"] if s["reused"]}
+    assert reused == {"trace", "decorators", "solve", "small_decorators", "lod", "blend_check"}
+    assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
+    # A run killed mid-way: a trace block, the solve and the output gone, a temporary left behind.
+    (out / "stages" / "solve.npz").unlink()
+    (out / "stages" / "trace.npz").unlink()
+    (out / "stages" / "trace" / "block_00000.npz").unlink()
+    (out / "level_baked.glb").unlink()
+    (out / "stages" / ".solve.npz.abc.tmp.npz").write_bytes(b"partial")
+    third = bake_level(level, load_level_settings(cfg), out)
+    assert not (out / "stages" / ".solve.npz.abc.tmp.npz").exists()
+    assert {s["stage"] for s in third["stages"] if s["reused"]} == reused - {"trace", "solve"}
+    assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
+
+
+def test_changed_settings_invalidate_stored_stages(baked, tmp_path):
+    root, level, cfg, _ = baked
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    s = load_level_settings(cfg, ["blend.long_weight=0.5", "lod.enabled=false"])
+    info = bake_level(level, s, out)
+    assert not any(st["reused"] for st in info["stages"])
+    doc, get = read_gltf_json(out / "level_baked.glb")
+    terrain = next(n for n in doc["nodes"] if n["name"] == "terrain")
+    a = doc["meshes"][terrain["mesh"]]["primitives"][0]["attributes"]
+    np.testing.assert_allclose(
+        get(a["_AO"]), np.clip(0.5 * get(a["_AO_LONG"]) + 0.5 * get(a["_AO_SHORT"]), 0, 1), atol=1e-6
+    )
+    assert not any(n.get("extras", {}).get("lod") for n in doc["nodes"])
+
+
+def test_remap_curve_is_applied_after_the_blend(baked, tmp_path):
+    root, level, cfg, _ = baked
+    s = load_level_settings(cfg, ["blend.remap=[[0, 0], [0.5, 0.8], [1, 1]]", "lod.enabled=false"])
+    bake_level(level, s, tmp_path / "o")
+    doc, get = read_gltf_json(tmp_path / "o" / "level_baked.glb")
+    terrain = next(n for n in doc["nodes"] if n["name"] == "terrain")
+    a = doc["meshes"][terrain["mesh"]]["primitives"][0]["attributes"]
+    b = np.clip(0.97 * get(a["_AO_LONG"]).astype(np.float64) + 0.03 * get(a["_AO_SHORT"]), 0, 1)
+    np.testing.assert_allclose(get(a["_AO"]), np.interp(b, [0, 0.5, 1], [0, 0.8, 1]), atol=1e-6)
+
+
+@pytest.mark.parametrize("override, message", [
+    ("trace.rays=0", "trace.rays must be >= 1"),
+    ("blend.long_weight=1.5", "blend.long_weight must be in [0, 1]"),
+    ("blend.remap=[[0.2, 0], [1, 1]]", "cover [0, 1]"),
+    ("output=../x.glb", "output must be a file name"),
+    ("trace.solver=lu", "is not one of"),
+])  # fmt: skip
+def test_bad_settings_are_one_line_errors(baked, override, message, capsys):
+    root, level, cfg, _ = baked
+    code = cli.main(["bake", str(level), "--config", str(cfg), "--set", override, "--out", str(root / "bad")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0]
+
+
+def test_cli_level_bake_matches_the_library(baked, tmp_path):
+    root, level, cfg, _ = baked
+    assert cli.main(["bake", str(level), "--config", str(cfg), "--out", str(tmp_path / "cli")]) == 0
+    assert (tmp_path / "cli" / "level_baked.glb").read_bytes() == (
+        root / "out" / "level_baked.glb"
+    ).read_bytes()
+    log = json.loads((tmp_path / "cli" / "bake_log.json").read_text())
+    assert log["counts"]["samples"] > 0 and log["peak_rss_bytes"] > 0
+
+
+def test_lod_least_squares_interpolates_the_fit(baked):
+    """The LOD's stored values reproduce what least squares fitted (sanity of the stage's arrays)."""
+    root, *_ = baked
+    from pipeline.io import read_npz
+    from pipeline.scene import scene_from_arrays
+
+    lod = read_npz(root / "out" / "stages" / "lod.npz")
+    scene = scene_from_arrays(lod["vertices"], lod["faces"], "lod", drop_degenerate=False)
+    assert len(scene.faces) < 0.6 * 1260 + 10
+    vals = interpolate(
+        scene, lod["ao_least_squares"], np.arange(len(scene.faces)), np.full((len(scene.faces), 3), 1 / 3)
+    )
+    assert ((vals >= 0) & (vals <= 1)).all()
