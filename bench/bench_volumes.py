@@ -1,6 +1,6 @@
 """Benchmark the per-region volume AO models (Sloan et al. 2013 section 2.3; pipeline/volumes.py).
 
-    .venv/bin/python bench/bench_volumes.py --out build/bench [--plot build/volumes/path.png]
+    .venv/bin/python bench/bench_volumes.py --out build/bench [--plot build/bench/volumes_path.png]
         [--seed 3] [--probes 1000] [--directions 1024] [--grid 16]
 
 1. Ground plane: AO above an infinite plane at height z with half distance h, exact by quadrature,
@@ -15,7 +15,8 @@
    (no spatial model: the SH truncation floor); boundary jumps at boundary centres and over faces.
 3. Cost: bake time (regions, trace, fit, regularisation) and bytes per region.
 4. A path that crosses several regions: AO per frame (30 fps, 1.5 units/s) traced, model without
-   temporal blending and with tau = 0.15 s; drawn to ``--plot`` (PNG, matplotlib) if given.
+   temporal blending and with tau = 0.15 s (anchored, and blending the packed numbers); drawn to
+   ``--plot`` (PNG, matplotlib; default DIR/volumes_path.png).
 
 Writes DIR/volumes.json and DIR/volumes.md.
 """
@@ -379,7 +380,9 @@ def markdown(r: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("build/bench"))
-    ap.add_argument("--plot", type=Path, default=None, help="PNG of AO along the path")
+    ap.add_argument(
+        "--plot", type=Path, default=None, help="PNG of AO along the path (default OUT/volumes_path.png)"
+    )
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--probes", type=int, default=1000)
     ap.add_argument("--ref-rays", type=int, default=1024)
@@ -394,8 +397,7 @@ def main(argv: list[str] | None = None) -> int:
     result["path"] = path_study(vol, lab, args.ref_rays, args.tau)
     write_json(args.out / "volumes.json", result)
     write_text(args.out / "volumes.md", markdown(result))
-    if args.plot:
-        plot_path(result["path"], args.plot)
+    plot_path(result["path"], args.plot or args.out / "volumes_path.png")
     sys.stdout.write(markdown(result))
     return 0
 

@@ -195,7 +195,8 @@ def write_volume_glsl(vol, out_dir: str | Path, order: str = "linear") -> dict:
         "bytes_per_region": int(packed[0].nbytes),
         "layout": "[0].xyz centre; [1 + 7k + t] chunk k of term t (mean,+x,-x,+y,-y,+z,-z), SH constants folded in",
         "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in vol.regions],
-        "temporal_blend": "engine side: model = target + (previous - target) * exp(-dt / tau) per frame",
+        "temporal_blend": "engine side, per object and frame: linearise target and previous state at the object's "
+        "position (runtime.probe.anchored), then state = target + (previous - target) * exp(-dt / tau)",
     }
     write_text(out / "nao_volume.glsl", volume_function(order, vol.blend))
     write_bytes(out / "models.bin", packed.astype("<f4").tobytes())
