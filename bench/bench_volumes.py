@@ -272,13 +272,26 @@ def path_study(vol: Volumes, lab, ref_rays: int, tau: float) -> dict:
     hard = blended_path(probe, pos, n, dt=1 / 30, tau=0.0, order="linear")
     soft = blended_path(probe, pos, n, dt=1 / 30, tau=tau, order="linear")
     params = blended_path(probe, pos, n, dt=1 / 30, tau=tau, order="linear", mode="parameters")
+    quadratic = blended_path(probe, pos, n, dt=1 / 30, tau=0.0, order="quadratic")
     regions = probe.region_of(pos)
+    switch = np.diff(regions) != 0  # frame k -> k + 1 changes region
+
+    def steps(a: np.ndarray) -> dict:
+        d = np.abs(np.diff(a))
+        return {
+            "at_switches": float(d[switch].max(initial=0.0)),
+            "elsewhere": float(d[~switch].max(initial=0.0)),
+        }
+
     return {
         "x": pos[:, 0].tolist(),
         "traced": ref.tolist(),
         "no_blend": hard.tolist(),
         "blend": soft.tolist(),
         "blend_parameters": params.tolist(),
+        "no_blend_quadratic": quadratic.tolist(),
+        "steps": {"no_blend": steps(hard), "blend": steps(soft), "blend_parameters": steps(params)},
+        "rmse_no_blend_quadratic": float(np.sqrt(np.mean((quadratic - ref) ** 2))),
         "ref_rays": ref_rays,
         "tau": tau,
         "regions": regions.tolist(),
@@ -305,6 +318,7 @@ def plot_path(path: dict, out: Path) -> None:
     for k in np.flatnonzero(np.diff(r) != 0):
         ax.axvline((x[k] + x[k + 1]) / 2, color="0.85", lw=0.8, zorder=0)
     ax.plot(x, path["traced"], color="k", lw=1.2, label=f"traced ({path['ref_rays']} rays)")
+    ax.plot(x, path["no_blend_quadratic"], color="0.55", lw=1.0, label="model, quadratic SH, no blending")
     ax.plot(x, path["no_blend"], color="tab:red", lw=1.0, drawstyle="steps-mid", label="model, no blending")
     ax.plot(
         x,
@@ -322,7 +336,7 @@ def plot_path(path: dict, out: Path) -> None:
         label="same, blending packed numbers",
     )
     ax.set_xlabel("x along the path (units; 30 fps at 1.5 units/s; grey lines: region switches)")
-    ax.set_ylabel("AO (linear SH, blended distances)")
+    ax.set_ylabel("AO (linear SH unless noted; blended distances)")
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     with atomic_path(out) as tmp:
@@ -369,6 +383,10 @@ def markdown(r: dict) -> str:
               + ", ".join(f"{k} {v:.0f} ms" for k, v in lv["per_region_ms"].items()) + ".",
               "Bytes per region: " + ", ".join(f"{k} {v} B" for k, v in lv["bytes_per_region"].items()) + "."]  # fmt: skip
     p = r["path"]
+    st = p["steps"]
+    lines += ["", "Largest frame-to-frame AO change along the path, at region switches / elsewhere: "
+              + "; ".join(f"{k} {v['at_switches']:.4f} / {v['elsewhere']:.4f}" for k, v in st.items())
+              + f". RMSE vs traced, quadratic SH without blending: {p['rmse_no_blend_quadratic']:.4f}."]  # fmt: skip
     lines += ["", f"Path: {len(p['x'])} frames, {p['switches']} region switches; largest frame-to-frame AO step "
               f"{p['max_step_no_blend']:.4f} without blending, {p['max_step_blend']:.4f} with tau = {p['tau']} s; "
               f"RMSE vs traced {p['rmse_no_blend']:.4f} / {p['rmse_blend']:.4f}; blending the packed numbers "

@@ -31,7 +31,13 @@ Pipeline (:func:`bake_volumes`)
    difference of the two models over region i's valid samples (``(t - t0)^T G_i (t - t0)``, G_i the
    normalised Gram matrix of the design); ``w_ij`` are boundary areas divided by their mean (scale
    free). Block coordinate descent: each sweep minimises E exactly over one region's 7 x 18 block with
-   the others fixed (a 7 x 7 solve), in region order; E never increases (tested).
+   the others fixed (a 7 x 7 solve), in region order; E never increases (tested). The paper's b_ij is
+   the boundary centre (``boundary_grid = 1``): the models then agree at that one point and not across
+   the rest of the face (measured: the jump over the face does not drop), so by default the agreement
+   term is spread over a 3 x 3 grid on each shared face, each point weighted w_ij / 9.
+
+Levels: ``neuralao volumes LEVEL`` takes a glTF level of the level bake (pipeline/level.py; its
+static and blocker instances are the occluders, foliage is not) or any mesh file (pipeline/scene.py).
 
 Bad input and fallbacks (never NaN)
 -----------------------------------
