@@ -33,8 +33,8 @@ from pipeline.unet import (
     RADIUS_INPUT,
     UNet,
     count_parameters,
-    pad_to_multiple,
     frame_radius_param,
+    pad_to_multiple,
     predict,
     preprocess_frame,
 )

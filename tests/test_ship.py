@@ -1,0 +1,161 @@
+"""`neuralao ship` (pipeline/ship.py): train -> export -> parity -> test-split error -> provenance ->
+atomic install under runtime/models, on a tiny real dataset with train / val / test splits by mesh.
+Also the shipped models themselves (runtime/models): the radius input behaves like a radius."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.constants import TOL
+from pipeline.errors import NeuralaoError
+
+TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "batch_size": 4, "lr": 0.01, "crop": 16, "crops_per_frame": 2,
+              "threads": 1, "lr_schedule": "cosine", "budget_minutes": 30.0}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.labels import LabelSettings
+
+    out = tmp_path_factory.mktemp("ship-ds")
+    settings = DatasetSettings(
+        name="tiny-ship",
+        scenes=[
+            SceneSpec("spot", "spot", views=4, split="train"),
+            SceneSpec("box", "cornell_box", cameras="interior", views=2, split="val"),
+            SceneSpec("cow", "cow", views=2, split="test"),
+        ],
+        size=(48, 40),
+        labels=LabelSettings(rays=8, radii_rel=[0.0625, 0.25]),
+        holdout_every=4,
+        frames_per_shard=4,
+    )
+    build_dataset(settings, out, progress=False)
+    return out
+
+
+def _settings(corpus: Path, tmp: Path, **kw):
+    from pipeline.ship import ShipSettings
+
+    base = dict(dataset=str(corpus), checkpoints=str(tmp / "ckpt"), out=str(tmp / "models"),
+                default={"unet": "u-full"}, time_sizes=[[32, 32]], time_repeats=1,
+                models=[{"name": "u-full", "train": dict(TINY_TRAIN)},
+                        {"name": "u-half", "init": "u-full", "train": {**TINY_TRAIN, "scale": 2, "epochs": 2}}])  # fmt: skip
+    base.update(kw)
+    return ShipSettings(**base)
+
+
+@pytest.fixture(scope="module")
+def shipped(corpus, tmp_path_factory):
+    from pipeline.ship import ship
+
+    tmp = tmp_path_factory.mktemp("ship")
+    settings = _settings(corpus, tmp)
+    return settings, ship(settings), tmp
+
+
+def test_ship_installs_self_describing_exports(shipped, corpus):
+    from export.onnx_io import get_metadata, load_onnx
+    from pipeline.dataset import open_dataset
+    from runtime.shipped import default_export, default_model, shipped_models
+
+    settings, index, tmp = shipped
+    models = Path(settings.out)
+    assert sorted(shipped_models(models)) == ["u-full", "u-half"]
+    assert default_export("unet", models) == models / "u-full"
+    assert default_model("unet", models) == models / "u-full" / "model.onnx"
+    assert not list(models.glob(".*"))  # no temporary or old folders left behind
+    ds_hash = open_dataset(corpus).manifest["dataset_hash"]
+    for name in ("u-full", "u-half"):
+        manifest = json.loads((models / name / "manifest.json").read_text())
+        prov = manifest["provenance"]
+        assert prov["dataset_hash"] == ds_hash and prov["commit"] and prov["epochs"] == (3 if name == "u-full" else 2)
+        assert prov["budget_minutes"] == 30.0 and prov["plan"]["epochs"] == prov["epochs"]
+        assert prov["test_scenes"] == ["cow"] and "spot" not in prov["test_per_scene"]  # split by mesh
+        assert 0 < prov["test"]["ssim"] <= 1 and set(prov["test"]["per_radius"]) == {"0.0625", "0.25"}
+        assert prov["parity"]["glsl_vs_onnxruntime"] <= TOL.parity_unet_fp32
+        assert prov["parity"]["onnxruntime_vs_torch"] <= TOL.onnx_vs_torch
+        assert len(prov["history"]) == prov["epochs"] and prov["gl_seconds"]["32x32"] > 0
+        meta = get_metadata(load_onnx(models / name / "model.onnx"))
+        assert meta["provenance"]["dataset_hash"] == ds_hash and meta["provenance"]["test"] == prov["test"]
+        assert sum(f.stat().st_size for f in (models / name).rglob("*") if f.is_file()) == index["models"][name]["bytes"]
+        assert index["models"][name]["bytes"] < settings.max_bytes
+    assert json.loads((models / "u-half" / "manifest.json").read_text())["metadata"]["scale"] == 2
+    assert set(index["baselines"]) == {"ssao", "gtao"} and index["baselines"]["gtao"]["test"]["pairs"] > 0
+
+
+def test_ship_test_figures_are_the_installed_models_own(shipped, corpus):
+    """Recompute the test error of the installed ONNX file independently of the ship run."""
+    from pipeline.dataset import open_dataset
+    from pipeline.metrics import masked_ssim
+    from pipeline.split_eval import unet_predictor
+
+    settings, _, _ = shipped
+    onnx = Path(settings.out) / "u-full" / "model.onnx"
+    prov = json.loads((onnx.parent / "manifest.json").read_text())["provenance"]
+    predict = unet_predictor(onnx)
+    scores = []
+    for f in open_dataset(corpus).frames(split="test"):
+        for j, r in enumerate(f["radii"]):
+            mask = f["mask"] & f["valid_radii"][..., j]
+            scores.append(masked_ssim(predict(f, float(r)), f["ao_radii"][..., j], mask))
+    assert prov["test"]["ssim"] == pytest.approx(float(np.mean(scores)), abs=1e-12)
+
+
+def test_ship_rerun_resumes_and_writes_the_same_onnx(shipped, corpus):
+    from pipeline.ship import ship
+
+    settings, _, _ = shipped
+    path = Path(settings.out) / "u-half" / "model.onnx"
+    before = path.read_bytes()
+    ship(settings, only=["u-half"])  # the checkpoint is complete: no training, same weights and metadata
+    assert path.read_bytes() == before
+
+
+def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
+    from pipeline.ship import ship
+
+    with pytest.raises(NeuralaoError, match="is not one of"):
+        ship(_settings(corpus, tmp_path, default={"unet": "nope"}))
+    with pytest.raises(NeuralaoError, match="not an earlier model"):
+        ship(_settings(corpus, tmp_path, default={}, models=[{"name": "a", "init": "b", "train": TINY_TRAIN}]))
+    with pytest.raises(NeuralaoError, match="no corpus"):
+        ship(_settings(tmp_path / "none", tmp_path))
+    small = _settings(corpus, tmp_path, max_bytes=1000, default={}, models=[{"name": "u", "train": {**TINY_TRAIN, "epochs": 1}}])
+    with pytest.raises(NeuralaoError, match="over the 1000 limit"):
+        ship(small)
+    assert not (tmp_path / "models" / "u").exists() and not list((tmp_path / "models").glob(".*"))
+
+
+def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
+    """The shipped default U-Net on real test-split frames: a larger radius input never brightens the
+    frame on average (more geometry can occlude)."""
+    from runtime.shipped import MODELS_DIR, default_model
+
+    if not (MODELS_DIR / "index.json").is_file():
+        pytest.skip("no model shipped yet (make models)")
+    from export.onnx_io import load_onnx
+    from export.unet import check_unet_onnx, ort_runner, run_padded
+    from pipeline.camera import orbit
+    from pipeline.gbuffer import render_gbuffer
+    from pipeline.scene import load_scene
+    from pipeline.unet import preprocess_frame, radius_param
+
+    onnx = default_model("unet")
+    proto = load_onnx(onnx)
+    m = int(check_unet_onnx(proto, onnx)["pad_multiple"])
+    run = ort_runner(proto.SerializeToString())
+    for mesh in ("lucy", "KnightArmor"):  # test-split meshes (configs/full.json)
+        scene = load_scene(mesh)
+        frame = render_gbuffer(scene, orbit(scene, 3, 128, 128, seed=3)[0])
+        x, fg = preprocess_frame(frame), frame["mask"]
+        means = []
+        for rel in (1 / 32, 1 / 16, 1 / 8, 1 / 4):
+            rho = radius_param(rel * scene.diagonal, frame["depth"], fg, frame["yfov"])
+            means.append(float(run_padded(run, x, m, rho)[fg].mean()))
+        assert np.all(np.diff(means) <= 1e-4), (mesh, means)
