@@ -254,7 +254,10 @@ def level_accuracy(
             "glsl_quadratic (22 vec4)": 352,
         },
     }
-    return result, vol, lab
+    unregularised = Volumes(
+        vol.regions, vol.edges, extra["models_unregularised"], vol.half_distances, vol.blend, s
+    )
+    return result, vol, lab, unregularised
 
 
 def path_through(vol: Volumes) -> np.ndarray:
@@ -264,7 +267,7 @@ def path_through(vol: Volumes) -> np.ndarray:
     return np.stack([x, np.full_like(x, 1.0), np.full_like(x, 0.1)], axis=1)
 
 
-def path_study(vol: Volumes, lab, ref_rays: int, tau: float) -> dict:
+def path_study(vol: Volumes, lab, ref_rays: int, tau: float, unregularised: Volumes) -> dict:
     pos = path_through(vol)
     n = np.tile([0.0, 0.0, -1.0], (len(pos), 1))  # a face looking along -z (towards the partition's side)
     probe = VolumeProbe(vol)
@@ -273,6 +276,9 @@ def path_study(vol: Volumes, lab, ref_rays: int, tau: float) -> dict:
     soft = blended_path(probe, pos, n, dt=1 / 30, tau=tau, order="linear")
     params = blended_path(probe, pos, n, dt=1 / 30, tau=tau, order="linear", mode="parameters")
     quadratic = blended_path(probe, pos, n, dt=1 / 30, tau=0.0, order="quadratic")
+    raw = VolumeProbe(unregularised)
+    hard_raw = blended_path(raw, pos, n, dt=1 / 30, tau=0.0, order="linear")
+    soft_raw = blended_path(raw, pos, n, dt=1 / 30, tau=tau, order="linear")
     regions = probe.region_of(pos)
     switch = np.diff(regions) != 0  # frame k -> k + 1 changes region
 
@@ -290,7 +296,14 @@ def path_study(vol: Volumes, lab, ref_rays: int, tau: float) -> dict:
         "blend": soft.tolist(),
         "blend_parameters": params.tolist(),
         "no_blend_quadratic": quadratic.tolist(),
-        "steps": {"no_blend": steps(hard), "blend": steps(soft), "blend_parameters": steps(params)},
+        "steps": {
+            "no_blend": steps(hard),
+            "blend": steps(soft),
+            "blend_parameters": steps(params),
+            "unregularised_no_blend": steps(hard_raw),
+            "unregularised_blend": steps(soft_raw),
+        },  # fmt: skip
+        "unregularised_no_blend": hard_raw.tolist(),
         "rmse_no_blend_quadratic": float(np.sqrt(np.mean((quadratic - ref) ** 2))),
         "ref_rays": ref_rays,
         "tau": tau,
@@ -411,8 +424,8 @@ def main(argv: list[str] | None = None) -> int:
     result = {"ground_plane": ground_plane(args.directions)}
     scene = synthetic_level(args.seed)
     s = VolumeSettings(directions=args.directions, grid=args.grid)
-    result["level"], vol, lab = level_accuracy(scene, s, args.probes, args.ref_rays)
-    result["path"] = path_study(vol, lab, args.ref_rays, args.tau)
+    result["level"], vol, lab, unregularised = level_accuracy(scene, s, args.probes, args.ref_rays)
+    result["path"] = path_study(vol, lab, args.ref_rays, args.tau, unregularised)
     write_json(args.out / "volumes.json", result)
     write_text(args.out / "volumes.md", markdown(result))
     plot_path(result["path"], args.plot or args.out / "volumes_path.png")

@@ -375,12 +375,23 @@ def check_settings(settings: BakeSettings) -> None:
         raise NeuralaoError(f"--samples-per-vertex must be > 0, got {settings.samples_per_vertex}")
 
 
-def bake(scene: Scene, settings: BakeSettings | None = None, progress: bool = False) -> BakeResult:
-    """Per-vertex AO of ``scene``: BakeResult.ao (n_vertices,) float32 in [0, 1]."""
+def bake(
+    scene: Scene, settings: BakeSettings | None = None, progress: bool = False, engine=None, store=None
+) -> BakeResult:
+    """Per-vertex AO of ``scene``: BakeResult.ao (n_vertices,) float32 in [0, 1].
+
+    ``engine`` (:mod:`pipeline.engine`, e.g. a RayEngine): trace the samples as chunk tasks on it
+    (bit-identical result; ``store`` keeps finished chunks for a rerun); None: threads here.
+    """
     settings = settings or BakeSettings()
     check_settings(settings)
     t0 = time.perf_counter()
-    labeller = Labeller(scene, settings.label_settings())
+    if engine is None:
+        labeller = Labeller(scene, settings.label_settings())
+    else:
+        from .engine import EngineLabeller
+
+        labeller = EngineLabeller(scene, settings.label_settings(), engine, store)
     if settings.method == "vertex":
         result = bake_vertex(scene, labeller, progress)
     else:
@@ -528,6 +539,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
     p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb", help="output mesh with per-vertex AO")
+    from .engine import add_engine_arguments
+
+    add_engine_arguments(p, chunks=True)
 
 
 def settings_from_args(args: argparse.Namespace) -> BakeSettings:
@@ -563,9 +577,19 @@ def run(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--out must end in .ply or .glb, got {out.name!r}")
     if out.exists() and out.is_dir():
         raise NeuralaoError(f"--out {out} is a folder")
+    from .engine import ResultStore, engine_from_args
+
+    engine = engine_from_args(args)
     scene = load_scene(args.mesh)
-    result = bake(scene, settings, progress=True)
+    if engine.name == "local":  # threads in this process, exactly as before engines existed
+        result = bake(scene, settings, progress=True)
+    else:  # chunks on the cluster; finished ones kept beside OUT until it is written (resume)
+        store = ResultStore(out.parent / f".{out.name}.chunks")
+        with engine:
+            result = bake(scene, settings, progress=True, engine=engine, store=store)
     write_baked_mesh(out, scene, result.ao)
+    if engine.name != "local":
+        store.clear()
     i = result.info
     log.info(
         "baked %s (%d vertices, %s, %d samples, %d invalid) in %.1f s -> %s",

@@ -55,6 +55,8 @@ STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
 # (ray.init itself retries for minutes).
 CONNECT_TIMEOUT_S = 5.0
+# Rays per bake task: ~0.2-0.4 s of tracing on one core, so Ray's ~1 ms per task is noise.
+CHUNK_RAYS = 1 << 21
 # Environment a worker process needs to render and trace like the driver (GL platform, threads).
 FORWARDED_ENV = ("PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "OMP_WAIT_POLICY", "NEURALAO_MESHES")
 
@@ -118,6 +120,7 @@ class Engine:
     name = "engine"
     workers = 1  # tasks running at once
     threads: int | None = None  # threads per task (labelling); None: what the task's settings say
+    chunk_rays: int | None = None  # rays per bake task (EngineLabeller); None: CHUNK_RAYS
 
     def __init__(self) -> None:
         self.completed = 0  # tasks finished (or loaded from a store) by the latest map
@@ -125,13 +128,17 @@ class Engine:
     def map(self, tasks: Iterable[Task], store: ResultStore | None = None) -> Iterator[tuple[int, Any]]:
         """Yield ``(index, result)`` for every task, in completion order. ``tasks`` is consumed lazily
         (a few ahead of the workers), so a generator may load one scene at a time."""
-        self.completed = 0
+        self.completed = self.reused = 0
         pending = self._skip_stored(tasks, store)
         for index, task, result in self._run(pending):
-            if store is not None and task is not None and task.key is not None:
+            if task is None:
+                self.reused += 1
+            elif store is not None and task.key is not None:
                 store.put(task.key, result)
             self.completed += 1
             yield index, result
+        if self.reused:
+            log.info("%d of %d tasks done by an earlier run (%s)", self.reused, self.completed, store.folder)
 
     def _skip_stored(self, tasks: Iterable[Task], store: ResultStore | None):
         """(index, task) of the tasks a store lacks; stored ones come back through ``self._stored``."""
@@ -191,14 +198,16 @@ class _Worker:
 
         # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
         # task of a context on this actor pulls it from the object store.
-        state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
         try:
+            state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
             return fn(state, args)
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
 
-    def pid(self) -> int:
-        return os.getpid()
+    def where(self) -> tuple[int, str]:
+        import ray
+
+        return os.getpid(), ray.get_runtime_context().get_node_id()
 
 
 @dataclass(frozen=True)
@@ -234,9 +243,9 @@ class RayEngine(Engine):
         self._actors = [actor.remote(env) for _ in range(self.workers)]
         self._payloads: dict[str, Any] = {}  # context key -> ObjectRef of its payload
 
-    def worker_pids(self) -> list[int]:
-        """Process ids of the actors (tests kill one mid-run)."""
-        return self._ray.get([a.pid.remote() for a in self._actors])
+    def worker_info(self) -> list[tuple[int, str]]:
+        """(process id, node id) of every actor (tests check placement and kill one mid-run)."""
+        return self._ray.get([a.where.remote() for a in self._actors])
 
     def _payload_ref(self, ctx: Context, live: set[str]):
         if ctx.key not in self._payloads:
@@ -330,10 +339,6 @@ def _connect(address: str | None):
                 pass
         except OSError as e:
             raise NeuralaoError(f"cannot reach a Ray cluster at {address}: {e.strerror or e}") from None
-        if host in ("127.0.0.1", "localhost"):
-            # A loopback cluster: find this machine's raylet on loopback too (Ray would look for it
-            # on the machine's outward address).
-            kwargs["_node_ip_address"] = "127.0.0.1"
     elif address is None:  # a private instance on loopback ("local": never join a stale cluster file)
         address = "local"
         kwargs.update(include_dashboard=False, _node_ip_address="127.0.0.1")
@@ -419,12 +424,11 @@ class EngineLabeller:
     """
 
     def __init__(self, scene, settings, engine: Engine, store: ResultStore | None = None,
-                 chunk_rays: int = 1 << 21):  # fmt: skip
+                 chunk_rays: int | None = None):  # fmt: skip
         from .labels import _positive
 
         self.scene, self.settings, self.engine, self.store = scene, settings, engine, store
-        # Rays per task: ~0.3 s of tracing on one core, so Ray's ~ms per task is noise.
-        self.chunk_rays = chunk_rays
+        self.chunk_rays = chunk_rays or engine.chunk_rays or CHUNK_RAYS  # rays per task
         self.max_distance = _positive(
             "max_distance", settings.max_distance, settings.max_distance_rel, scene.diagonal
         )
@@ -460,7 +464,8 @@ class EngineLabeller:
 # --------------------------------------------------------------------------- command line
 
 
-def add_engine_arguments(p: argparse.ArgumentParser) -> None:
+def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> None:
+    """--engine, --address, --ray-workers (and --chunk-rays for commands that trace point chunks)."""
     p.add_argument("--engine", choices=("local", "ray"), default="local",
                    help="where the work runs: this process (default) or a Ray cluster")  # fmt: skip
     p.add_argument("--address", default=None, metavar="HOST:PORT",
@@ -468,11 +473,19 @@ def add_engine_arguments(p: argparse.ArgumentParser) -> None:
                    "machine; default: a private local Ray instance")  # fmt: skip
     p.add_argument("--ray-workers", type=int, default=None, metavar="N",
                    help="Ray actors to start (default: one per CPU of the cluster)")  # fmt: skip
+    if chunks:
+        p.add_argument("--chunk-rays", type=int, default=None, metavar="N",
+                       help=f"rays per task (default {CHUNK_RAYS}); changes scheduling, never results")  # fmt: skip
 
 
 def engine_from_args(args: argparse.Namespace) -> Engine:
+    chunk_rays = getattr(args, "chunk_rays", None)
+    if chunk_rays is not None and chunk_rays < 1:
+        raise NeuralaoError(f"--chunk-rays must be >= 1, got {chunk_rays}")
     if args.engine == "local":
-        if args.address is not None or args.ray_workers is not None:
-            raise NeuralaoError("--address and --ray-workers need --engine ray")
+        if args.address is not None or args.ray_workers is not None or chunk_rays is not None:
+            raise NeuralaoError("--address, --ray-workers and --chunk-rays need --engine ray")
         return LocalEngine()
-    return RayEngine(args.address, args.ray_workers)
+    engine = RayEngine(args.address, args.ray_workers)
+    engine.chunk_rays = chunk_rays
+    return engine

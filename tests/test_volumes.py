@@ -137,10 +137,10 @@ def test_ground_plane_finite_distance_matches_quadrature():
     for count in (sh.LINEAR, sh.QUADRATIC):
         traced = sh.evaluate(np.repeat(coeffs[:1, 0, :count], len(n), 0), n)
         projected = plane_ao_quadrature(z, h, n, order=count)
-        assert np.abs(traced - projected).max() < 5e-3  # MC projection vs exact projection
+        assert np.abs(traced - projected).max() < 5e-3  # MC vs exact projection: measured 1.2e-3, 1.5e-3
     err_lin = np.abs(plane_ao_quadrature(z, h, n, 4) - exact).max()
     err_quad = np.abs(plane_ao_quadrature(z, h, n, 9) - exact).max()
-    assert err_quad < err_lin  # finite distances need band 2 (the README gives the numbers)
+    assert err_quad < 0.2 * err_lin  # finite distances need band 2: measured 0.048 vs 0.0031 (README)
 
 
 def closed_room():
@@ -177,7 +177,7 @@ def test_box_room_is_brightest_at_the_centre_and_darkens_towards_every_wall():
                 )
                 ref += (vol.blend if k else 1 - vol.blend) * lab.ao_at_points(pts, facing)[0]
             assert (np.diff(ref) < 0).all()
-            # piecewise-linear in position: AO curves near a wall (measured max 0.06, mean 0.035)
+            # piecewise-linear in position: AO curves near a wall (measured max 0.080 at 0.25 from it, mean 0.039)
             assert np.abs(ao - ref).max() < 0.1 and np.abs(ao - ref).mean() < 0.05
 
 
@@ -225,7 +225,7 @@ def test_model_tracks_traced_ao_and_regularisation_trades_fit_for_continuity():
         name: float(np.sqrt(np.mean((p.ao(pts, n) - ref) ** 2)))
         for name, p in (("reg", probe), ("raw", unreg))
     }
-    assert rmse["raw"] < 0.06 and rmse["reg"] < 0.07, rmse
+    assert rmse["raw"] < 0.03 and rmse["reg"] < 0.03, rmse  # measured 0.0205 and 0.0219
 
 
 # --------------------------------------------------------------------------- regions
