@@ -6,13 +6,22 @@ Frames: per scene, the dataset's held-back views (``holdout``: never used to tra
 topped up with other views of ``val`` / ``test`` scenes (which no model trained on), at most
 ``frames_per_scene``. Ground truth: the frames relabelled with ``gt_rays`` (1024) Embree rays with
 the dataset's own label settings (kernel, max distance, back-face rule) and a seed of their own; when
-the dataset was labelled with at least that many rays its labels are used as they are. Relabelled
-ground truth is cached under ``OUT/gt/`` (keyed by the dataset hash, frame and settings).
+the dataset was labelled with at least that many rays (at every radius needed) its labels are used as
+they are. Relabelled ground truth is cached under ``OUT/gt/`` (keyed by the dataset hash, frame,
+settings and radii).
+
+Radii: the main figures are at the labels' max distance. The methods that take the AO radius at run
+time (SSAO, GTAO, the U-Nets: ``RADIUS_FAMILIES``) are also evaluated at every radius of
+``radii_rel`` (x the scene diagonal; default the dataset's ``labels.radii_rel``), each given the same
+radius (the U-Net as its radius input rho, :func:`pipeline.unet.frame_radius_param`), against ground
+truth at that radius; the ground truth at all radii comes from ONE trace to the largest
+(:meth:`pipeline.labels.Labeller.label_frame_radii`, equal to separate traces bit for bit). Methods
+with a baked-in radius (vertex bakes, MLPs, fields, traced) are evaluated at the max distance only.
 
 Methods (each one run on every frame it applies to):
 
 * ``ssao``, ``gtao``: the screen-space baselines of :mod:`runtime.baselines` (GLSL fragment passes),
-  radius = the labels' max distance;
+  radius = the labels' max distance (and every radius of ``radii_rel``);
 * ``vertex-sampled``, ``vertex-lsq``: AO baked per vertex (:mod:`pipeline.bake`: sampled at vertices,
   or least-squares fitted to surface samples) with ``bake_rays`` rays, shown as a vertex-colour draw
   shows it (barycentric interpolation per pixel);
@@ -22,7 +31,12 @@ Methods (each one run on every frame it applies to):
   generated GLSL fragment shader on the frame's object-space normals, output clamped to [0, 1]);
 * ``field-<size>``: every exported AO field (:mod:`pipeline.field`), on the frames of the scene it was
   trained for: its generated GLSL fragment shader on the frame's object-space position + normal;
-* ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame.
+* ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame;
+  half / quarter-resolution variants (manifest metadata ``scale`` 2 / 4) are rows like any U-Net;
+* ``shipped:<name>``: the release U-Nets of ``runtime/models/`` (:mod:`runtime.shipped`), included when
+  no ``--exports`` is given, or in addition with ``--shipped``; their training curves, corpus-size
+  study and test figures (from ``index.json`` and the manifests' provenance) are plotted by
+  :mod:`pipeline.report_plots`. None shipped: the report says so in one line.
 
 Error: masked SSIM (:func:`pipeline.metrics.masked_ssim`) and RMSE over foreground pixels whose
 ground truth is valid, averaged over frames. Time: seconds per frame at ``time_size`` (512 x 512),
@@ -36,7 +50,8 @@ over SSAO's on the same frames.
 
 Outputs (every file atomic): ``report.md`` (tables), ``report.json`` (everything, per scene and per
 frame), ``speed_vs_error.png`` (scatter with the Pareto front), ``contact_<scene>.png`` (ground
-truth | each method, and the error heat maps). Methods whose export is missing or broken are listed
+truth | each method, and the error heat maps); with shipped models ``learning_curves.png``,
+``corpus_size.png`` and ``shipped_front.png`` (each skipped when its data is absent). Methods whose export is missing or broken are listed
 as not available; the report never fails because a model is absent.
 """
 
@@ -59,6 +74,7 @@ from runtime.baselines import GTAOSettings, SSAOSettings
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
+from .report_plots import shipped_markdown, write_shipped_plots
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +83,9 @@ EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
 BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
 FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, "mlp": 3, "field": 4, "unet": 5}
 MODEL_FAMILIES = ("mlp", "field", "unet")  # methods loaded from exports
+# Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
+RADIUS_FAMILIES = ("screen-space", "unet")
+SHIPPED_PREFIX = "shipped:"  # row-name prefix of the release models of runtime/models
 # Which methods can show a single-sided surface differently from its two sides (the G-buffer turns
 # the normal towards the viewer): per-vertex bakes store one value per vertex, so both sides of an
 # open sheet show the same AO; networks fed the viewer-facing normal and screen-space methods can differ.
@@ -99,9 +118,13 @@ class ReportSettings:
     workers: int = 2
     # Write a contact sheet per scene.
     contact_sheets: bool = True
-    # Screen-space baseline settings (radius: the labels' max distance).
+    # Screen-space baseline settings (radius: the labels' max distance, and each of radii_rel).
     ssao: SSAOSettings = field(default_factory=SSAOSettings)
     gtao: GTAOSettings = field(default_factory=GTAOSettings)
+    # AO radii (fractions of the scene diagonal) at which SSAO, GTAO and the U-Nets are also evaluated,
+    # all given the same radius, ground truth at every one from one trace; None: the dataset's
+    # labels.radii_rel, else its max_distance_rel. The main table stays at the labels' max distance.
+    radii_rel: list[float] | None = None
 
 
 @dataclass
@@ -124,6 +147,8 @@ class Method:
     # Fields: one export per mesh, one row per size: scene -> export folder (and prepared runners).
     scene_exports: dict[str, Path] | None = None
     runners: dict = field(default_factory=dict)
+    scale: int = 1  # U-Nets: 1 = full resolution, 2 / 4 = run at 1/2 / 1/4 resolution
+    shipped: str | None = None  # name under runtime/models when a shipped release model
 
     def applies_to(self, scene: str) -> bool:
         if self.scene_exports is not None:
@@ -166,35 +191,103 @@ def frame_key_seed(seed: int, *parts) -> int:
     return zlib.crc32("/".join(str(p) for p in (seed, *parts)).encode()) & 0x7FFFFFFF
 
 
+def radius_key(rel: float) -> str:
+    """The JSON / table key of a relative radius: ``0.0625`` -> "0.0625"."""
+    return f"{float(rel):g}"
+
+
+def report_radii_rel(settings: ReportSettings, label_settings) -> list[float]:
+    """Relative radii of the per-radius evaluation, ascending: ``settings.radii_rel``, else the
+    dataset's ``labels.radii_rel``, else its ``max_distance_rel`` (none when the max distance is
+    absolute: then only the max distance is evaluated)."""
+    if settings.radii_rel is not None:
+        rels = settings.radii_rel
+    elif label_settings.radii_rel:
+        rels = label_settings.radii_rel
+    else:
+        rels = [] if label_settings.max_distance is not None else [label_settings.max_distance_rel]
+    return sorted({float(r) for r in rels})
+
+
+@dataclass
+class GroundTruth:
+    """Ground truth of one frame at several radii (one trace): ``ao`` (H, W, k) float32, ``valid``
+    (H, W, k) bool at ``radii`` (k,) scene units; column ``main`` is the labels' max distance."""
+
+    ao: np.ndarray
+    valid: np.ndarray
+    radii: tuple[float, ...]
+    main: int
+    source: str
+
+    def at(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """(ao (H, W) float32, valid (H, W) bool) at radius column ``j``."""
+        return self.ao[..., j], self.valid[..., j]
+
+
+def _dataset_columns(
+    frame: dict, radii: tuple[float, ...], main: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The dataset's own labels at every radius of ``radii`` (``ao`` at the max distance, ``ao_radii``
+    at its ``radii``), or None when a radius is not among them."""
+    have = np.asarray(frame.get("radii", []), np.float64).reshape(-1)  # float32 in the shards
+    ao, valid = [], []
+    for j, r in enumerate(radii):
+        if j == main:
+            ao.append(frame["ao"])
+            valid.append(frame["valid"])
+            continue
+        hit = np.flatnonzero(np.isclose(have, r, rtol=1e-6, atol=0.0))
+        if not len(hit):
+            return None
+        ao.append(frame["ao_radii"][..., hit[0]])
+        valid.append(frame["valid_radii"][..., hit[0]])
+    return np.stack(ao, axis=-1).astype(np.float32), np.stack(valid, axis=-1).astype(bool)
+
+
 def ground_truth(
-    labeller, frame: dict, ds_rays: int, settings: ReportSettings, cache: Path | None, key: dict
-):
-    """(ao (H, W) float32, valid (H, W) bool, source str) for one frame; cached when relabelled."""
+    labeller,
+    frame: dict,
+    ds_rays: int,
+    settings: ReportSettings,
+    cache: Path | None,
+    key: dict,
+    radii: tuple[float, ...] | None = None,
+    main: int = 0,
+) -> GroundTruth:
+    """Ground truth of one frame at ``radii`` (k,) scene units (default: the labels' max distance
+    alone; column ``main`` must be the max distance): the dataset's labels when they have
+    ``gt_rays`` rays and every radius, else ONE ``gt_rays`` trace to the largest radius
+    (:meth:`Labeller.label_frame_radii`, equal to a trace per radius bit for bit), cached as
+    ``ao`` / ``valid`` (H, W) at the max distance + ``ao_radii`` / ``valid_radii`` (H, W, k), ``radii``."""
+    radii = (labeller.max_distance,) if radii is None else tuple(float(r) for r in radii)
     if ds_rays >= settings.gt_rays:
-        return (
-            np.asarray(frame["ao"], np.float32),
-            np.asarray(frame["valid"], bool),
-            f"dataset labels ({ds_rays} rays)",
-        )
-    digest = sha256_json(key)[:16]
+        cols = _dataset_columns(frame, radii, main)
+        if cols is not None:
+            return GroundTruth(*cols, radii, main, f"dataset labels ({ds_rays} rays)")
+    digest = sha256_json({**key, "radii": list(radii)})[:16]
     path = cache / f"{frame['scene']}-{int(frame['view']):04d}-{digest}.npz" if cache else None
     if path is not None and path.is_file():
         try:
             z = read_npz(path)
-            return z["ao"], z["valid"].astype(bool), f"relabelled, {settings.gt_rays} rays (cached)"
-        except NeuralaoError:
+            if z["ao_radii"].shape[-1] == len(radii):
+                return GroundTruth(z["ao_radii"], z["valid_radii"].astype(bool), radii, main,
+                                   f"relabelled, {settings.gt_rays} rays (cached)")  # fmt: skip
+            log.warning("ground-truth cache %s has other radii; relabelling", path)
+        except (NeuralaoError, KeyError):
             log.warning("ground-truth cache %s unreadable; relabelling", path)
     saved = labeller.settings
     labeller.settings = replace(
         saved, rays=settings.gt_rays, seed=frame_key_seed(settings.seed, "gt", frame["scene"], frame["view"])
     )
     try:
-        ao, valid = labeller.label_frame(frame)
+        ao, valid = labeller.label_frame_radii(frame, radii)
     finally:
         labeller.settings = saved
     if path is not None:
-        write_npz(path, ao=ao, valid=valid)
-    return ao, valid, f"relabelled, {settings.gt_rays} rays"
+        write_npz(path, ao=ao[..., main], valid=valid[..., main], ao_radii=ao, valid_radii=valid,
+                  radii=np.asarray(radii, np.float64))  # fmt: skip
+    return GroundTruth(ao, valid, radii, main, f"relabelled, {settings.gt_rays} rays")
 
 
 # --------------------------------------------------------------------------- methods
@@ -256,10 +349,44 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
             m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
         return m
     if kind == "unet":
-        return Method(name, "unet", "DeepAO screen-space U-Net (Zhang et al.)", "GL compute shaders (generated GLSL)",
+        scale = _unet_scale(manifest)
+        at = "" if scale == 1 else f", run at 1/{scale} resolution (depth- and normal-aware upsampling)"
+        return Method(name, "unet", f"DeepAO screen-space U-Net (Zhang et al.){at}", "GL compute shaders (generated GLSL)",
                       "onnxruntime (GLSL parity-checked)", bytes=manifest.get("bytes_fp32"),
-                      bytes_note="float32 weights", export=d)  # fmt: skip
+                      bytes_note="float32 weights", export=d, scale=scale)  # fmt: skip
     return Method(name, "unknown", "", "", "", available=False, reason=f"unknown export kind {kind!r}")
+
+
+def _unet_scale(manifest: dict) -> int:
+    """Resolution divisor of a U-Net export (manifest metadata ``scale``; 1 when absent)."""
+    try:
+        return int((manifest.get("metadata") or {}).get("scale", 1))
+    except (TypeError, ValueError):
+        return 1
+
+
+def discover_shipped(models_dir: Path, scenes: list[str]) -> tuple[list[Method], dict]:
+    """The shipped U-Nets of ``models_dir`` (runtime/models) as rows ``shipped:<name>``, and the
+    summary of the index (:func:`pipeline.report_plots.shipped_summary`; its ``note`` says why none)."""
+    from .report_plots import shipped_summary
+
+    summary = shipped_summary(models_dir)
+    methods = []
+    for name, info in summary["models"].items():
+        if info.get("kind", "unet") != "unet":
+            continue
+        row = SHIPPED_PREFIX + name
+        folder = Path(info["folder"])
+        if not (folder / "manifest.json").is_file():
+            m = Method(
+                row, "unet", "", "", "", available=False, reason=f"no manifest at {folder / 'manifest.json'}"
+            )
+        else:
+            m = _export_method(row, folder, scenes)
+            m.description += f"; shipped release model {name} (runtime/models)"
+        m.shipped = name
+        methods.append(m)
+    return methods, summary
 
 
 def _field_method(m: Method) -> None:
@@ -408,7 +535,13 @@ def _median_seconds(fn, repeats: int) -> float:
 
 
 class SceneContext:
-    """The scene's mesh, labeller, bakes and timing frame, built lazily."""
+    """The scene's mesh, labeller, radii, bakes and timing frame, built lazily.
+
+    ``radius``: the labels' max distance (scene units), the radius of the main figures;
+    ``radii``: (k,) scene units of the per-radius evaluation (``radii_rel`` x diagonal);
+    ``trace_radii``: ``radii`` (columns 0..k-1) plus the max distance when it is not one of them, the
+    radii of the one ground-truth trace; ``main``: the max distance's column.
+    """
 
     def __init__(
         self,
@@ -418,6 +551,7 @@ class SceneContext:
         settings: ReportSettings,
         cache: Path | None,
         progress: bool,
+        radii_rel: list[float] | None = None,
     ):
         from .labels import Labeller
 
@@ -425,6 +559,16 @@ class SceneContext:
         self.scene = scene
         self.labeller = Labeller(self.scene, label_settings)
         self.radius = self.labeller.max_distance
+        diag = float(scene.diagonal)
+        self.radii_rel = list(radii_rel or [])
+        # rel * diag, as Labeller resolves radii_rel; the max distance itself where they agree, so its
+        # column is exactly the single-radius label (bit for bit)
+        self.radii = tuple(
+            self.radius if math.isclose(float(r) * diag, self.radius, rel_tol=1e-9) else float(r) * diag
+            for r in self.radii_rel
+        )
+        self.trace_radii = self.radii if self.radius in self.radii else (*self.radii, self.radius)
+        self.main = self.trace_radii.index(self.radius)
         self.settings = settings
         self.cache = cache
         self.progress = progress
@@ -478,13 +622,15 @@ class SceneContext:
             return r.render(cam), cam
 
 
-def predict(m: Method, ctx: SceneContext, frame: dict) -> np.ndarray:
-    """AO (H, W) float32 of method ``m`` on ``frame``."""
+def predict(m: Method, ctx: SceneContext, frame: dict, radius: float | None = None) -> np.ndarray:
+    """AO (H, W) float32 of method ``m`` on ``frame``; ``radius`` (scene units, default the labels'
+    max distance) for the methods that take one (RADIUS_FAMILIES)."""
     from runtime.baselines import run_screen_space, traced_ao, vertex_ao_image
 
     s = ctx.settings
+    radius = ctx.radius if radius is None else radius
     if m.family == "screen-space":
-        return run_screen_space(frame, m.name, ctx.radius, s.ssao if m.name == "ssao" else s.gtao)
+        return run_screen_space(frame, m.name, radius, s.ssao if m.name == "ssao" else s.gtao)
     if m.family == "baked":
         return vertex_ao_image(ctx.scene, ctx.baked(m.name), frame)
     if m.family == "traced":
@@ -493,7 +639,7 @@ def predict(m: Method, ctx: SceneContext, frame: dict) -> np.ndarray:
             ctx.labeller, frame, rays, seed=frame_key_seed(s.seed, m.name, ctx.name, frame["view"])
         )
         return ao
-    return predict_model(m, frame, ctx.radius)
+    return predict_model(m, frame, radius)
 
 
 def time_method(m: Method, ctx: SceneContext, frame512: dict, camera) -> float:
@@ -522,9 +668,12 @@ def evaluate(
     families: set[str] | None = None,
     progress: bool = True,
     keep_images: bool = True,
+    shipped: str | Path | None = None,
 ) -> dict:
     """Measure every method (or only ``families``) on the evaluation frames; returns the result dict
-    (the content of report.json, without the figures). ``out`` holds the caches (None: no cache)."""
+    (the content of report.json, without the figures). ``out`` holds the caches (None: no cache).
+    ``exports``: a folder of export folders (None: none); ``shipped``: a shipped-models folder
+    (runtime/models) whose U-Nets are added as ``shipped:<name>`` rows (None: not looked at)."""
     from tqdm import tqdm
 
     from runtime import gl
@@ -539,7 +688,14 @@ def evaluate(
         raise NeuralaoError(f"dataset {data} has no frame to evaluate on")
     label_settings = label_settings_of(ds, settings.workers)
     ds_rays = int(label_settings.rays)
-    methods = [*baseline_methods(settings), *discover_exports(Path(exports) if exports else None, ds.scenes)]
+    radii_rel = report_radii_rel(settings, label_settings)
+    methods = baseline_methods(settings)
+    if exports is not None:
+        methods += discover_exports(Path(exports), ds.scenes)
+    shipped_info = None
+    if shipped is not None:
+        shipped_methods, shipped_info = discover_shipped(Path(shipped), ds.scenes)
+        methods += shipped_methods
     if families is not None:
         methods = [m for m in methods if m.family in families]
     for m in methods:
@@ -557,22 +713,31 @@ def evaluate(
     for scene_name, frames in frames_by_scene.items():
         try:
             scene = scene_of(ds.manifest, scene_name)  # a mesh, or a composed scene rebuilt from its seed
-            ctx = SceneContext(scene_name, scene, label_settings, settings, bake_cache, progress=False)
+            ctx = SceneContext(scene_name, scene, label_settings, settings, bake_cache, progress=False,
+                               radii_rel=radii_rel)  # fmt: skip
         except NeuralaoError as e:
             log.warning("scene %s skipped: %s", scene_name, e)
             scene_info[scene_name] = {"skipped": str(e)}
             bar.update(len(frames))
             continue
         scene_info[scene_name] = {"split": ds.split_of(scene_name), "vertices": len(ctx.scene.vertices),
-                                  "faces": len(ctx.scene.faces), "radius": ctx.radius, "frames": len(frames)}  # fmt: skip
+                                  "faces": len(ctx.scene.faces), "radius": ctx.radius, "radii": list(ctx.radii),
+                                  "frames": len(frames)}  # fmt: skip
         applicable = [m for m in methods if m.available and m.applies_to(scene_name)]
         for fi, frame in enumerate(frames):
             key = {"dataset": ds.manifest.get("dataset_hash"), "scene": scene_name, "view": frame["view"],
                    "labels": settings_to_dict(label_settings), "gt_rays": settings.gt_rays, "seed": settings.seed}  # fmt: skip
-            gt, gt_valid, gt_source = ground_truth(ctx.labeller, frame, ds_rays, settings, gt_cache, key)
-            mask = np.asarray(frame["mask"], bool) & gt_valid
+            truth = ground_truth(
+                ctx.labeller, frame, ds_rays, settings, gt_cache, key, ctx.trace_radii, ctx.main
+            )
+            gt, gt_valid = truth.at(truth.main)
+            fg = np.asarray(frame["mask"], bool)
+            mask = fg & gt_valid
             row = {"scene": scene_name, "view": int(frame["view"]), "split": frame["split"], "holdout": bool(frame["holdout"]),
-                   "pixels": int(mask.sum()), "gt": gt_source, "methods": {}}  # fmt: skip
+                   "pixels": int(mask.sum()), "gt": truth.source, "methods": {}}  # fmt: skip
+            if ctx.radii:  # the same frame at every radius of radii_rel: RADIUS_FAMILIES only
+                row["radii"] = {radius_key(rel): {"radius": r, "pixels": int((fg & truth.valid[..., j]).sum()), "methods": {}}
+                                for j, (rel, r) in enumerate(zip(ctx.radii_rel, ctx.radii, strict=True))}  # fmt: skip
             if not mask.any():
                 row["skipped"] = "no valid foreground pixel"
                 per_frame.append(row)
@@ -582,6 +747,7 @@ def evaluate(
             for m in applicable:
                 try:
                     pred = predict(m, ctx, frame)
+                    at_radii = score_radii(m, ctx, frame, truth, pred) if m.family in RADIUS_FAMILIES else {}
                 except Exception as e:  # one method failing must not sink the report
                     if m.family not in MODEL_FAMILIES:
                         raise
@@ -594,6 +760,8 @@ def evaluate(
                     "ssim": masked_ssim(pred, gt, mask),
                     "rmse": masked_rmse(pred, gt, mask),
                 }
+                for k, scores in at_radii.items():
+                    row["radii"][k]["methods"][m.name] = scores
                 if fi == 0 and keep_images:
                     images[m.name] = pred
             if fi == 0 and keep_images:
@@ -651,11 +819,61 @@ def evaluate(
         "scenes": scene_info,
         "frames": per_frame,
         "model_times": model_times,
+        "radii_rel": radii_rel,
+        "radius_families": list(RADIUS_FAMILIES),
         "methods": summarise(methods, per_frame, per_scene_time, scene_info, model_times),
+        "shipped": shipped_info,
     }
     result["pareto"] = pareto_front(result["methods"])
     result["_sheets"] = sheets
     return result
+
+
+def score_radii(m: Method, ctx: SceneContext, frame: dict, truth: GroundTruth, pred: np.ndarray) -> dict:
+    """radius key -> {ssim, rmse} of ``m`` given each radius of ``ctx.radii`` against the ground truth
+    at that radius (``pred``: its output at the max distance, reused where a radius equals it)."""
+    from .metrics import masked_rmse, masked_ssim
+
+    fg = np.asarray(frame["mask"], bool)
+    out = {}
+    for j, (rel, r) in enumerate(zip(ctx.radii_rel, ctx.radii, strict=True)):
+        gt, valid = truth.at(j)
+        mask = fg & valid
+        if not mask.any():
+            continue
+        p = pred if r == ctx.radius else predict(m, ctx, frame, r)
+        out[radius_key(rel)] = {"ssim": masked_ssim(p, gt, mask), "rmse": masked_rmse(p, gt, mask)}
+    return out
+
+
+def summarise_radii(name: str, per_frame: list[dict]) -> dict:
+    """radius key -> mean SSIM / RMSE of ``name`` over the frames scored at that radius (and per scene),
+    with its RMSE and (1 - SSIM) over SSAO's on the same frames at the same radius."""
+    keys = sorted({k for r in per_frame for k in r.get("radii", {})}, key=float)
+    out: dict = {}
+    for k in keys:
+        rows = [
+            r["radii"][k]["methods"]
+            for r in per_frame
+            if name in r.get("radii", {}).get(k, {}).get("methods", {})
+        ]
+        if not rows:
+            continue
+        scenes = [r["scene"] for r in per_frame if name in r.get("radii", {}).get(k, {}).get("methods", {})]
+        e = {"radius_rel": float(k), "frames": len(rows), "ssim": float(np.mean([r[name]["ssim"] for r in rows])),
+             "rmse": float(np.mean([r[name]["rmse"] for r in rows]))}  # fmt: skip
+        if all("ssao" in r for r in rows):
+            s_rmse = float(np.mean([r["ssao"]["rmse"] for r in rows]))
+            s_dssim = float(np.mean([1.0 - r["ssao"]["ssim"] for r in rows]))
+            e["rmse_ratio_vs_ssao"] = e["rmse"] / s_rmse if s_rmse > 0 else None
+            e["dssim_ratio_vs_ssao"] = (1.0 - e["ssim"]) / s_dssim if s_dssim > 0 else None
+        e["per_scene"] = {
+            s: {"ssim": float(np.mean([r[name]["ssim"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s])),
+                "rmse": float(np.mean([r[name]["rmse"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s]))}
+            for s in dict.fromkeys(scenes)
+        }  # fmt: skip
+        out[k] = e
+    return out
 
 
 def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> dict:
@@ -666,6 +884,10 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
                  "time_on": m.time_on, "error_on": m.error_on, "scope": m.scope,
                  "bytes": m.bytes, "bytes_note": m.bytes_note,
                  "two_sided": TWO_SIDED.get(m.family, True)}  # fmt: skip
+        if m.family == "unet":
+            entry["scale"] = m.scale
+        if m.shipped is not None:
+            entry["shipped"] = m.shipped
         rows = [r for r in per_frame if m.name in r["methods"]]
         if not m.available or not rows:
             if m.available:
@@ -695,6 +917,10 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
             sizes = [ps["bytes"] for ps in per_scene.values() if "bytes" in ps]
             entry["bytes"] = int(np.mean(sizes)) if sizes else None
             entry["bytes_note"] = f"{per_vertex} B per vertex (mean over scenes)"
+        if m.family in RADIUS_FAMILIES:
+            per_radius = summarise_radii(m.name, per_frame)
+            if per_radius:
+                entry["per_radius"] = per_radius
         if m.name in model_times:
             entry["seconds_onnxruntime"] = model_times[m.name].get("seconds_onnxruntime")
             if "error" in model_times[m.name]:
@@ -737,6 +963,8 @@ def check_settings(s: ReportSettings) -> None:
     for t in [s.target_ssim, *s.select_targets]:
         if not (0.0 < t <= 1.0):
             raise NeuralaoError(f"target SSIM must be in (0, 1], got {t}")
+    if s.radii_rel is not None and any(not (math.isfinite(r) and r > 0) for r in s.radii_rel):
+        raise NeuralaoError(f"radii_rel must be positive fractions of the scene diagonal, got {s.radii_rel}")
 
 
 def cpu_name() -> str:
@@ -836,6 +1064,8 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
     skipped = {s: i["skipped"] for s, i in result["scenes"].items() if "skipped" in i}
     if skipped:
         lines += [""] + [f"- scene {s} skipped: {why}" for s, why in skipped.items()]
+    lines += radius_markdown(result)
+    lines += shipped_markdown(result.get("shipped"), figures)
     if figures:
         lines += ["", "## Figures", ""]
         if figures.get("scatter"):
@@ -860,6 +1090,43 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         "- Bytes: float32 weights for the networks, 4 bytes per vertex for baked AO, shader constants for SSAO/GTAO.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def radius_markdown(result: dict) -> list[str]:
+    """The per-radius section: every RADIUS_FAMILIES method at each radius of ``radii_rel``."""
+    ms = result["methods"]
+    keys = [radius_key(r) for r in result.get("radii_rel") or []]
+    rows = [n for n in method_order(ms) if ms[n].get("available") and ms[n].get("per_radius")]
+    labels = result["dataset"]["labels"]
+    main = (
+        f"r = {labels['max_distance_rel']:g}"
+        if labels.get("max_distance") is None
+        else f"{labels['max_distance']:g} scene units"
+    )
+    if not keys or not rows:
+        return ["", f"Per-radius evaluation: none (only the labels' max distance, {main})."]
+    lines = [
+        "",
+        "## Per radius (SSAO, GTAO and the U-Nets given the same radius)",
+        "",
+        f"Radius r as a fraction of each scene's diagonal; ground truth at every radius from one "
+        f"{result['settings']['gt_rays']}-ray trace. The tables above are at the labels' max distance ({main}); "
+        "the vertex bakes, MLPs, fields and traced rows have that radius baked in. "
+        "Cells: SSIM / RMSE (RMSE / SSAO's RMSE at the same radius).",
+        "",
+        "| method | " + " | ".join(f"r = {k}" for k in keys) + " |",
+        "|---|" + "---:|" * len(keys),
+    ]
+    for n in rows:
+        cells = []
+        for k in keys:
+            e = ms[n]["per_radius"].get(k)
+            ratio = (
+                f" ({e['rmse_ratio_vs_ssao']:.2f}x)" if e and e.get("rmse_ratio_vs_ssao") is not None else ""
+            )
+            cells.append(f"{e['ssim']:.3f} / {e['rmse']:.4f}{ratio}" if e else "-")
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def scatter_plot(result: dict, path: Path) -> Path | None:
@@ -965,6 +1232,7 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     scatter = scatter_plot(result, out / "speed_vs_error.png")
     if scatter is not None:
         figures["scatter"] = scatter.name
+    figures.update(write_shipped_plots(result.get("shipped"), out))
     if settings.contact_sheets:
         order = method_order(result["methods"])
         for scene, sheet in sheets.items():
@@ -973,7 +1241,9 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
             ).name
     selection = select_from_results(result, settings.target_ssim)
     result["select"] = selection
-    result["select_at"] = {str(t): select_from_results(result, t) for t in sorted(set(settings.select_targets))}
+    result["select_at"] = {
+        str(t): select_from_results(result, t) for t in sorted(set(settings.select_targets))
+    }
     result["figures"] = figures
     write_json(out / "report.json", result)
     write_text(out / "report.md", render_markdown(result, selection, figures))
@@ -989,6 +1259,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--exports",
         help="folder of export folders (mlp-16x8, mlp-32x16, mlp-64x32, unet); missing ones are listed as not available",
     )
+    shipped = p.add_mutually_exclusive_group()
+    shipped.add_argument("--shipped", action="store_true", default=None,
+                         help="also report the shipped U-Nets (runtime/models) when --exports is given "
+                              "(without --exports they are included by default)")  # fmt: skip
+    shipped.add_argument(
+        "--no-shipped", dest="shipped", action="store_false", help="leave the shipped U-Nets out"
+    )
+    p.add_argument("--models", help="folder of shipped models with index.json (default runtime/models)")
     p.add_argument("--out", required=True, help="output folder: report.md, report.json, PNG figures, caches")
     p.add_argument("--config", help="JSON preset of report settings")
     p.add_argument("--gt-rays", type=int, help="ground-truth rays per pixel (default 1024)")
@@ -1015,13 +1293,25 @@ def settings_from_args(args: argparse.Namespace) -> ReportSettings:
     return settings
 
 
+def shipped_folder(args: argparse.Namespace) -> Path | None:
+    """The shipped-models folder to report on: by default only when no --exports is given."""
+    from runtime.shipped import MODELS_DIR
+
+    include = getattr(args, "shipped", None)
+    if include is None:
+        include = not getattr(args, "exports", None)
+    if not include:
+        return None
+    return Path(args.models) if getattr(args, "models", None) else MODELS_DIR
+
+
 def run(args: argparse.Namespace) -> int:
     settings = settings_from_args(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    result = evaluate(args.data, args.exports, settings, out, progress=True)
+    result = evaluate(args.data, args.exports, settings, out, progress=True, shipped=shipped_folder(args))
     write_report(result, out, settings)
     ms = result["methods"]
     for n in method_order(ms):
