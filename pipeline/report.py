@@ -74,7 +74,7 @@ from runtime.baselines import GTAOSettings, SSAOSettings
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
-from .report_plots import shipped_markdown, write_shipped_plots
+from .report_plots import shipped_markdown, shipped_note, write_shipped_plots
 
 log = logging.getLogger(__name__)
 
@@ -1326,5 +1326,7 @@ def run(args: argparse.Namespace) -> int:
             )
         else:
             log.info("%-15s not available: %s", n, e.get("reason"))
+    if result.get("shipped") is not None and not result["shipped"]["models"]:
+        log.info("%s", shipped_note(result["shipped"]))
     log.info("report: %s", out / "report.md")
     return 0

@@ -279,13 +279,21 @@ def _f(v, spec: str) -> str:
     return format(v, spec) if _finite(v) else "-"
 
 
+def shipped_note(shipped: dict) -> str:
+    """One line saying why no shipped model is reported."""
+    note = (shipped.get("note") or "none listed").rstrip(".")
+    return (
+        note[0].upper() + note[1:] if note.startswith("no shipped model") else f"No shipped model: {note}"
+    ) + "."
+
+
 def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
     """The report's "Shipped models" section (lines): one line when none is shipped."""
     if shipped is None:
         return []
     lines = ["", "## Shipped models (runtime/models)", ""]
     if not shipped.get("models"):
-        return lines + [f"No shipped model: {shipped.get('note') or 'none listed'}."]
+        return lines + [shipped_note(shipped)]
     default = shipped.get("default", {}).get("unet")
     lines += [
         f"From `{shipped['folder']}/index.json` (their own test split, every radius; `neuralao ship`). "

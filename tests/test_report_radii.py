@@ -139,6 +139,13 @@ def test_ground_truth_at_several_radii_equals_separate_traces(workspace):
     other = ground_truth(labeller, frame, 8, settings, cache, {"k": 1}, radii[1:], main=1)
     assert not other.source.endswith("(cached)") and len(list(cache.glob("*.npz"))) == 2
     np.testing.assert_array_equal(other.ao, truth.ao[..., 1:])
+    # enough rays in the dataset: its own labels at its radii; a radius it lacks -> relabelled
+    own = ground_truth(labeller, frame, 16, settings, None, {}, (radii[0], radii[2]), main=1)
+    assert own.source.startswith("dataset labels")
+    np.testing.assert_array_equal(own.ao, np.stack([frame["ao_radii"][..., 0], frame["ao"]], axis=-1))
+    assert ground_truth(labeller, frame, 16, settings, None, {}, radii, main=2).source.startswith(
+        "relabelled"
+    )
 
 
 def test_every_radius_method_is_scored_at_every_radius(result, workspace):
