@@ -326,7 +326,7 @@ def plot_path(path: dict, out: Path) -> None:
     import matplotlib.pyplot as plt
 
     x = np.asarray(path["x"])
-    fig, ax = plt.subplots(figsize=(8, 3.6), dpi=120)
+    fig, ax = plt.subplots(figsize=(8, 4.0), dpi=120)
     r = np.asarray(path["regions"])
     for k in np.flatnonzero(np.diff(r) != 0):
         ax.axvline((x[k] + x[k + 1]) / 2, color="0.85", lw=0.8, zorder=0)
@@ -349,8 +349,8 @@ def plot_path(path: dict, out: Path) -> None:
         label="same, blending packed numbers",
     )
     ax.set_xlabel("x along the path (units; 30 fps at 1.5 units/s; grey lines: region switches)")
-    ax.set_ylabel("AO (linear SH unless noted; blended distances)")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.set_ylabel("AO (linear SH unless noted)")
+    ax.legend(loc="lower center", fontsize=7, ncol=2)
     fig.tight_layout()
     with atomic_path(out) as tmp:
         fig.savefig(tmp, format="png")
