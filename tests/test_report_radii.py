@@ -260,22 +260,25 @@ def test_no_shipped_model_is_one_line(tmp_path, workspace):
 
 
 def test_shipped_models_are_the_default_without_exports(tmp_path):
-    from pipeline.report import shipped_folder
+    from pipeline.report import add_arguments, shipped_folder
     from runtime.shipped import MODELS_DIR
 
-    def ns(**kw):
-        return argparse.Namespace(**{"exports": None, "shipped": None, "models": None, **kw})
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
 
-    assert shipped_folder(ns()) == MODELS_DIR
-    assert shipped_folder(ns(exports="x")) is None
-    assert shipped_folder(ns(exports="x", shipped=True, models=str(tmp_path))) == tmp_path
-    assert shipped_folder(ns(shipped=False)) is None
+    def folder(*args):
+        return shipped_folder(parser.parse_args(["--data", "d", "--out", "o", *args]))
+
+    assert folder() == MODELS_DIR and folder("--shipped") == MODELS_DIR
+    assert folder("--exports", "x") is None and folder("--no-shipped") is None
+    assert folder("--exports", "x", "--shipped", "--models", str(tmp_path)) == tmp_path
 
 
-def test_radii_setting_is_checked(workspace, tmp_path):
+def test_radii_setting_is_checked(tmp_path, capsys):
     from pipeline import cli
 
-    _, data, _ = workspace
     assert (
-        cli.main(["report", "--data", str(data), "--out", str(tmp_path), "--set", "radii_rel=[0.1,-1]"]) == 2
+        cli.main(["report", "--data", str(tmp_path), "--out", str(tmp_path), "--set", "radii_rel=[0.1,-1]"])
+        == 2
     )
+    assert "radii_rel must be positive" in capsys.readouterr().err
