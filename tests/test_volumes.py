@@ -304,6 +304,11 @@ def test_region_inside_geometry_falls_back_to_its_neighbours_never_nan():
     assert np.allclose(VolumeProbe(vol).ao(points_in(lonely, 20, 0), unit_vectors(20, 1)), 1.0)
     with pytest.raises(NeuralaoError, match="no region has a valid sample"):
         bake_volumes(scene, FAST, [inside])
+    # an empty region (nothing around it to hit): valid, AO exactly 1 for every normal
+    far = Region("far", (100.0, 100.0, 100.0), (101.0, 101.0, 101.0))  # beyond the longest ray
+    vol, _ = bake_volumes(scene, FAST, [free, far])
+    assert vol.models[1].fallback is None and vol.models[1].valid_samples == 64
+    assert np.allclose(VolumeProbe(vol).ao(points_in(far, 20, 2), unit_vectors(20, 3)), 1.0, atol=1e-6)
 
 
 # --------------------------------------------------------------------------- run time
@@ -387,7 +392,10 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
             "--set", "grid=6", "--glsl", str(glsl)]  # fmt: skip
     assert cli.main(args) == 0
     vol = read_volumes(out)
-    assert len(vol.regions) >= 2 and (glsl / "nao_volume.glsl").is_file()
+    assert len(vol.regions) >= 2
+    from export.volume_glsl import volume_function
+
+    assert (glsl / "nao_volume.glsl").read_text() == volume_function("linear", vol.blend)  # what Mesa ran
     manifest = json.loads((glsl / "manifest.json").read_text())
     assert (
         (glsl / "models.bin").stat().st_size
