@@ -18,8 +18,9 @@ Pipeline (:func:`bake_volumes`)
    the whole sphere): points inside closed geometry or behind single-sided walls are dropped.
 3. **Spherical obscurance** at two half distances (short, long): each ray gives
    ``rho(d) = 1 - 2^(-d / h)`` (= 1 - exp(a d), a = ln 0.5 / h) for a hit at distance d, 1 for a miss;
-   projected to quadratic SH (9 coefficients per distance, 18 channels) and convolved with the clamped
-   cosine (:mod:`pipeline.sh`), so ``AO(n) = sum_j f_j Y_j(n)`` for any unit normal n.
+   projected to quadratic SH (9 coefficients per distance, 18 channels; ``rho - 1`` is projected and the
+   exact SH of V = 1 added, so open space is exactly AO 1) and convolved with the clamped cosine
+   (:mod:`pipeline.sh`), so ``AO(n) = sum_j f_j Y_j(n)`` for any unit normal n.
 4. **The compact model** (eq. 4): ``f(p) = v_mean + sum_i (p - c)_i v_{2i + s_i}`` with ``s_i = 0``
    where ``(p - c)_i >= 0`` and 1 otherwise; 7 vectors of 18 channels and a centre c. For a fixed c the
    7 vectors are a linear least-squares fit to the valid samples (one design matrix, 18 right-hand
@@ -417,7 +418,10 @@ def spherical_ao(
     h = np.asarray(halves, dtype=np.float64)
     with np.errstate(invalid="ignore", over="ignore"):
         rho = np.where(np.isfinite(d), 1.0 - np.exp2(-d / h), 1.0)  # (n, k, 2)
-    coeffs = sh.convolve_clamped_cosine(sh.project_uniform(rho, dirs))
+    # Control variate: the SH of V = 1 is known exactly (AO 1), so only rho - 1 (non-zero on hits) is
+    # projected by Monte Carlo: open space is exactly AO 1 and the projection noise shrinks with the
+    # fraction of rays that hit something.
+    coeffs = sh.convolve_clamped_cosine(sh.project_uniform(rho - 1.0, dirs)) + open_coefficients()
     valid = back.mean(axis=1) <= settings.backface_threshold
     return coeffs, valid
 
