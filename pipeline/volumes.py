@@ -46,7 +46,7 @@ Bad input and fallbacks (never NaN)
   not touch, a region index out of range: one-line :class:`NeuralaoError`.
 * A region with no valid sample (fully inside geometry, or behind walls): ``fallback = "neighbours"``,
   a constant model equal to the area-weighted mean of its resolved neighbours' models at the shared
-  boundary centres (propagated breadth first); with no resolved neighbour at all ``fallback = "open"``
+  boundary centres (propagated from neighbour to neighbour); with no resolved neighbour at all ``fallback = "open"``
   (AO = 1 for every normal), with a warning. Fallback regions take no part in the regularisation.
 * A region with fewer valid samples than the 7 unknowns, or all on one side of the centre on an axis:
   the minimum-norm least-squares solution (undetermined derivatives are 0: flat extrapolation).
@@ -559,10 +559,10 @@ def open_coefficients() -> np.ndarray:
 
 
 def fill_fallbacks(
-    regions: list[Region], edges: list[Edge], models: list[RegionModel | None]
+    regions: list[Region], edges: list[Edge], models: list[RegionModel | None], warn: bool = True
 ) -> list[RegionModel]:
-    """Constant models for regions without valid samples (module doc), breadth first from resolved ones."""
-    resolved = [m is not None for m in models]
+    """Constant models for the regions whose model is None (no valid sample; module doc): sweeps in
+    region order fill each one that has a model next to it, until nothing changes; the rest are open."""
     out = list(models)
     changed = True
     while changed:
@@ -573,7 +573,7 @@ def fill_fallbacks(
             acc, total = np.zeros((2, sh.QUADRATIC)), 0.0
             for e in edges:
                 j = e.j if e.i == i else e.i if e.j == i else None
-                if j is None or out[j] is None or (not resolved[j] and out[j].fallback == "open"):
+                if j is None or out[j] is None:
                     continue
                 acc += e.area * model_at(out[j], np.asarray(e.centre)[None, :])[0]
                 total += e.area
@@ -584,9 +584,10 @@ def fill_fallbacks(
                 changed = True
     for i, m in enumerate(out):
         if m is None:
-            log.warning(
-                "region %d (%s) has no valid sample and no resolved neighbour: AO 1", i, regions[i].name
-            )
+            if warn:
+                log.warning(
+                    "region %d (%s) has no valid sample and no resolved neighbour: AO 1", i, regions[i].name
+                )
             coeffs = np.zeros((7, 2, sh.QUADRATIC))
             coeffs[0] = open_coefficients()
             out[i] = RegionModel(regions[i].centre, coeffs, "fallback", 0, 0.0, "open")
@@ -736,7 +737,7 @@ def bake_volumes(
         for m, r in zip(fits, regions, strict=True)
     ]
     regular, history = regularise(regions, edges, placeholder, grams, s.beta, s.iterations, s.boundary_grid)
-    unreg = fill_fallbacks(regions, edges, fits)
+    unreg = fill_fallbacks(regions, edges, fits, warn=False)
     final = fill_fallbacks(
         regions, edges, [m if g is not None else None for m, g in zip(regular, grams, strict=True)]
     )
