@@ -31,6 +31,8 @@ import numpy as np
 
 from .errors import NeuralaoError
 
+# Box candidates per point tested vectorised in origin_density (more take the exact slow path).
+_NEAREST = 8
 # Step past a crossed surface before tracing on (local units, diagonal = 1): 100x the float32
 # rounding of local coordinates (~3e-8), far below any box or tree feature.
 _STEP = 3e-6
@@ -81,6 +83,9 @@ class Foliage:
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
+        # Kept for pickling (see __reduce__): the Embree scene is rebuilt where a copy is unpickled.
+        self._args = (boxes_lo, boxes_hi, density, tree_vertices, tree_faces, tree_transmission, center, scale,
+                      max_hits)  # fmt: skip
         self.center, self.scale = np.asarray(center, np.float64), float(scale)
         bv, bf = box_triangles(np.reshape(boxes_lo, (-1, 3)), np.reshape(boxes_hi, (-1, 3)))
         tv = np.reshape(np.asarray(tree_vertices, np.float64), (-1, 3))
@@ -119,6 +124,11 @@ class Foliage:
                 np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED", dists=1.0
             )
 
+    def __reduce__(self):
+        """Pickle as the constructor's inputs (an Embree scene does not pickle): Ray workers of
+        pipeline.engine get a working copy through the object store."""
+        return (Foliage, self._args)
+
     def _walk(self, orig: np.ndarray, dirs: np.ndarray, end: np.ndarray):
         """Every crossing within (0, end): yields (ray index (h,), t (h,) float64, prim (h,))."""
         active = np.arange(len(orig))
@@ -141,17 +151,28 @@ class Foliage:
 
     def origin_density(self, origins: np.ndarray) -> np.ndarray:
         """(m,) summed density (per local unit) of the boxes containing each local origin (m, 3): an
-        exact point-in-box test on the candidates a KD-tree of box centres returns (a ray walk would
-        count coplanar faces of two boxes, crossed at the same t, once)."""
+        exact point-in-box test on the box centres a KD-tree finds within reach (a ray walk would
+        count coplanar faces of two boxes, crossed at the same t, once). Vectorised over the nearest
+        ``_NEAREST`` candidates; points with more candidates than that take an exact slow path."""
         origins = np.asarray(origins, np.float64).reshape(-1, 3)
         out = np.zeros(len(origins))
         if self.n_boxes == 0 or not len(origins):
             return out
-        for i, cand in enumerate(self._box_tree.query_ball_point(origins, self._box_reach)):
-            if cand:
-                c = np.asarray(cand)
-                inside = ((self._lo[c] <= origins[i]) & (origins[i] <= self._hi[c])).all(axis=1)
-                out[i] = self._box_sigma[c[inside]].sum()
+        k = min(_NEAREST, self.n_boxes)
+        _, idx = self._box_tree.query(origins, k=k, distance_upper_bound=self._box_reach)
+        idx = idx.reshape(len(origins), k)
+        missing = idx >= self.n_boxes
+        safe = np.where(missing, 0, idx)
+        o = origins[:, None, :]
+        inside = ~missing & ((self._lo[safe] <= o) & (o <= self._hi[safe])).all(axis=2)
+        out = (inside * self._box_sigma[safe]).sum(axis=1)
+        crowded = np.flatnonzero(~missing[:, -1]) if k < self.n_boxes else np.zeros(0, np.int64)
+        for i, cand in zip(
+            crowded, self._box_tree.query_ball_point(origins[crowded], self._box_reach), strict=True
+        ):
+            c = np.asarray(cand, np.int64)
+            hit = ((self._lo[c] <= origins[i]) & (origins[i] <= self._hi[c])).all(axis=1)
+            out[i] = self._box_sigma[c[hit]].sum()
         return out
 
     def transmittance(

@@ -24,6 +24,8 @@ from .scene import Scene
 
 # Rays per chunk of caller-chosen rays (as the labeller's own chunks).
 _CHUNK = 1 << 16
+# Rays per block of resampling spheres (keeps the hit arrays at tens of MB).
+_RESAMPLE_RAYS = 1 << 20
 
 
 class LevelLabeller(Labeller):
@@ -135,6 +137,33 @@ class LevelLabeller(Labeller):
         return prim, t
 
 
+def _resample_block(
+    labeller: LevelLabeller, cols: np.ndarray, centers: np.ndarray, rad: np.ndarray, u: np.ndarray
+):
+    """resample_in_spheres for one block of centres: values (p, c) (NaN: no hit), weight sums (p,)."""
+    from .bake import interpolate
+
+    k = len(u)
+    origins = (centers[:, None, :] + rad[:, None, None] * u[None]).reshape(-1, 3)
+    dirs = np.tile(-u, (len(centers), 1))
+    prim, t = labeller.closest_hits(origins, dirs, np.repeat(2 * rad, k))
+    hit = prim >= 0
+    owner = np.repeat(np.arange(len(centers)), k)[hit]
+    points = origins[hit] + t[hit, None] * dirs[hit]
+    w = np.maximum(rad[owner] - np.linalg.norm(points - centers[owner], axis=1), 0.0)
+    face = prim[hit]
+    bary = barycentric(labeller.scene, face, points)
+    out = np.empty((len(centers), cols.shape[1]))
+    for j in range(cols.shape[1]):
+        vals = interpolate(labeller.scene, cols[:, j], face, bary)
+        keep = np.isfinite(vals)  # hits on faces without values (e.g. blockers) are left out
+        out[:, j] = np.bincount(owner[keep], weights=(w * vals)[keep], minlength=len(centers))
+        total = np.bincount(owner[keep], weights=w[keep], minlength=len(centers))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(total[:, None] > 0, out / total[:, None], np.nan)
+    return out, total
+
+
 def sphere_directions(k: int) -> np.ndarray:
     """(8 * ceil(k / 8), 3) float64 unit directions: a Fibonacci set in the positive octant, reflected
     into all eight, so the set is symmetric under every sign flip of x, y or z. On an axis-aligned
@@ -177,29 +206,19 @@ def resample_in_spheres(
     labeller : traces ``labeller.scene`` (whose vertices ``vertex_values`` (n,) or (n, c) belong to)
     centers (p, 3) float64, radius scalar or (p,) scene units.
     Returns values (p,) or (p, c) float64 (NaN where no ray hit) and hit weights' sum (p,).
+    Hits on faces whose values are NaN (blockers, which carry no AO) are left out.
     """
-    from .bake import interpolate
-
     centers = np.asarray(centers, np.float64).reshape(-1, 3)
     rad = np.broadcast_to(np.asarray(radius, np.float64), (len(centers),))
     if not (np.isfinite(rad).all() and (rad > 0).all()):
         raise NeuralaoError("resampling radius must be positive and finite")
-    u = sphere_directions(rays)
-    k = len(u)
-    origins = (centers[:, None, :] + rad[:, None, None] * u[None]).reshape(-1, 3)
-    dirs = np.tile(-u, (len(centers), 1))
-    prim, t = labeller.closest_hits(origins, dirs, np.repeat(2 * rad, k))
-    hit = prim >= 0
-    owner = np.repeat(np.arange(len(centers)), k)[hit]
-    points = origins[hit] + t[hit, None] * dirs[hit]
-    w = np.maximum(rad[owner] - np.linalg.norm(points - centers[owner], axis=1), 0.0)
     values = np.asarray(vertex_values, np.float64)
     cols = values.reshape(len(values), -1)
-    bary = barycentric(labeller.scene, prim[hit], points)
-    out = np.zeros((len(centers), cols.shape[1]))
-    for c in range(cols.shape[1]):
-        np.add.at(out[:, c], owner, w * interpolate(labeller.scene, cols[:, c], prim[hit], bary))
-    total = np.bincount(owner, weights=w, minlength=len(centers))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(total[:, None] > 0, out / total[:, None], np.nan)
+    u = sphere_directions(rays)
+    out = np.full((len(centers), cols.shape[1]), np.nan)
+    total = np.zeros(len(centers))
+    block = max(1, _RESAMPLE_RAYS // len(u))  # bounded memory: a few MB of rays per block
+    for lo in range(0, len(centers), block):
+        c, r = centers[lo : lo + block], rad[lo : lo + block]
+        out[lo : lo + block], total[lo : lo + block] = _resample_block(labeller, cols, c, r, u)
     return (out[:, 0] if values.ndim == 1 else out), total

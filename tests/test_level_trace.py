@@ -196,3 +196,17 @@ def test_least_squares_columns_and_cg_match_separate_direct_fits(tiny_geometry):
     np.testing.assert_allclose(
         fit_least_squares(g.receivers, samples, vals, valid, solver="cg"), both, atol=1e-5
     )
+
+
+def test_origin_density_matches_brute_force_with_crowded_boxes():
+    """The KD-tree candidates (vectorised nearest 8, exact fallback beyond) against testing every box."""
+    rng = np.random.default_rng(9)
+    lo = rng.uniform(-0.1, 0.05, (60, 3))
+    hi = lo + rng.uniform(0.02, 0.12, (60, 3))
+    dens = rng.uniform(0.5, 2.0, 60)
+    fol = Foliage(lo, hi, dens, np.zeros((0, 3)), np.zeros((0, 3), int), np.zeros(0), np.zeros(3), 1.0)
+    pts = rng.uniform(-0.1, 0.15, (500, 3))
+    inside = ((lo[None] <= pts[:, None]) & (pts[:, None] <= hi[None])).all(axis=2)
+    brute = (inside * dens[None]).sum(axis=1)
+    assert inside.sum(axis=1).max() > 8  # the slow path is exercised
+    np.testing.assert_allclose(fol.origin_density(pts), brute, rtol=1e-12)
