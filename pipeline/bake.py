@@ -259,10 +259,15 @@ def fit_least_squares(
     values: np.ndarray,
     valid: np.ndarray,
     alpha: float = 1.0,
+    solver: Literal["direct", "cg"] = "direct",
 ) -> np.ndarray:
     """Per-vertex values (n,) float32 in [0, 1] minimising the module-doc energy.
 
-    values : (k,) sample AO; valid : (k,) bool, invalid samples are left out entirely.
+    values : (k,) sample AO, or (k, c) for c signals fitted with one factorisation (the level
+    baker's two obscurance distances; result (n, c)); valid : (k,) bool, invalid samples are left
+    out entirely. ``solver="cg"``: Jacobi-preconditioned conjugate gradients (relative residual
+    1e-10) instead of SuperLU, for million-vertex levels where the direct factor's fill-in costs
+    more memory and time than the well-conditioned system needs.
     """
     import scipy.sparse as sp
     from scipy.sparse.linalg import splu
@@ -270,7 +275,7 @@ def fit_least_squares(
     if not (math.isfinite(alpha) and alpha >= 0):
         raise NeuralaoError(f"alpha must be a finite number >= 0, got {alpha}")
     values = np.asarray(values, dtype=np.float64)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(values)
+    valid = np.asarray(valid, dtype=bool) & np.isfinite(values).reshape(len(values), -1).all(axis=1)
     n = len(scene.vertices)
     b = interpolation_matrix(scene, samples)[valid]
     w = samples.weights[valid]
@@ -282,13 +287,33 @@ def fit_least_squares(
     if alpha > 0:
         edges, ew = edge_weights(scene)
         a = a + (alpha * REG_SCALE) * edge_laplacian(n, edges, ew)
-    prior = float(np.average(f, weights=w)) if len(f) else 1.0
+    prior = np.average(f, weights=w, axis=0) if len(f) else np.ones(f.shape[1:])
     diag = a.diagonal()
     ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
     a = (a + ridge * sp.identity(n, format="csc")).tocsc()
     rhs = rhs + ridge * prior
-    v = splu(a).solve(rhs)
+    if solver == "direct":
+        v = splu(a).solve(rhs)
+    elif solver == "cg":
+        v = _solve_cg(a, rhs)
+    else:
+        raise NeuralaoError(f"solver must be 'direct' or 'cg', got {solver!r}")
     return np.clip(v, 0.0, 1.0).astype(np.float32)
+
+
+def _solve_cg(a, rhs: np.ndarray) -> np.ndarray:
+    """Jacobi-preconditioned CG on the SPD normal equations, one column of ``rhs`` at a time."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import cg
+
+    precond = sp.diags(1.0 / a.diagonal())
+    cols = rhs.reshape(len(rhs), -1)
+    out = np.empty_like(cols)
+    for j in range(cols.shape[1]):
+        out[:, j], info = cg(a, cols[:, j], rtol=1e-10, atol=0.0, maxiter=10000, M=precond)
+        if info != 0:
+            raise NeuralaoError(f"least-squares CG did not converge ({info} iterations)")
+    return out.reshape(rhs.shape)
 
 
 def fill_invalid(scene: Scene, values: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -538,7 +563,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--seed", type=int, default=0, help="seed of sample positions and ray directions (default 0)"
     )
     p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
-    p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb", help="output mesh with per-vertex AO")
+    p.add_argument("--config", default=None, metavar="CONFIG.json",
+                   help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
+                        "(pipeline.level_bake.LevelBakeSettings); --out is then a folder")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)")  # fmt: skip
+    p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb|DIR",
+                   help="output mesh with per-vertex AO (a folder with --config)")  # fmt: skip
     from .engine import add_engine_arguments
 
     add_engine_arguments(p, chunks=True)
@@ -570,7 +601,30 @@ def settings_from_args(args: argparse.Namespace) -> BakeSettings:
     return settings
 
 
+# Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
+_MESH_ONLY_FLAGS = ("rays", "max_distance", "kernel", "half_distance", "method", "alpha",
+                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers")  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "config", None) is not None:
+        from .level_bake import run_level
+
+        if Path(args.mesh).suffix.lower() not in (".gltf", ".glb"):
+            raise NeuralaoError(f"--config bakes a level: expected a .gltf or .glb file, got {args.mesh!r}")
+        defaults = argparse.ArgumentParser()
+        add_arguments(defaults)
+        base = defaults.parse_args([args.mesh, "--out", args.out])
+        given = [f for f in _MESH_ONLY_FLAGS if getattr(args, f) != getattr(base, f)]
+        if given:
+            raise NeuralaoError(
+                f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
+            )
+        if getattr(args, "engine", "local") != "local":
+            raise NeuralaoError("level bakes run locally only (--engine ray is for single meshes and datasets)")
+        return run_level(args)
+    if args.set:
+        raise NeuralaoError("--set needs --config (level bakes only)")
     settings = settings_from_args(args)
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
