@@ -31,6 +31,8 @@ import numpy as np
 
 from .errors import NeuralaoError
 
+# Box candidates per point tested vectorised in origin_density (more take the exact slow path).
+_NEAREST = 8
 # Step past a crossed surface before tracing on (local units, diagonal = 1): 100x the float32
 # rounding of local coordinates (~3e-8), far below any box or tree feature.
 _STEP = 3e-6
@@ -149,17 +151,28 @@ class Foliage:
 
     def origin_density(self, origins: np.ndarray) -> np.ndarray:
         """(m,) summed density (per local unit) of the boxes containing each local origin (m, 3): an
-        exact point-in-box test on the candidates a KD-tree of box centres returns (a ray walk would
-        count coplanar faces of two boxes, crossed at the same t, once)."""
+        exact point-in-box test on the box centres a KD-tree finds within reach (a ray walk would
+        count coplanar faces of two boxes, crossed at the same t, once). Vectorised over the nearest
+        ``_NEAREST`` candidates; points with more candidates than that take an exact slow path."""
         origins = np.asarray(origins, np.float64).reshape(-1, 3)
         out = np.zeros(len(origins))
         if self.n_boxes == 0 or not len(origins):
             return out
-        for i, cand in enumerate(self._box_tree.query_ball_point(origins, self._box_reach)):
-            if cand:
-                c = np.asarray(cand)
-                inside = ((self._lo[c] <= origins[i]) & (origins[i] <= self._hi[c])).all(axis=1)
-                out[i] = self._box_sigma[c[inside]].sum()
+        k = min(_NEAREST, self.n_boxes)
+        _, idx = self._box_tree.query(origins, k=k, distance_upper_bound=self._box_reach)
+        idx = idx.reshape(len(origins), k)
+        missing = idx >= self.n_boxes
+        safe = np.where(missing, 0, idx)
+        o = origins[:, None, :]
+        inside = ~missing & ((self._lo[safe] <= o) & (o <= self._hi[safe])).all(axis=2)
+        out = (inside * self._box_sigma[safe]).sum(axis=1)
+        crowded = np.flatnonzero(~missing[:, -1]) if k < self.n_boxes else np.zeros(0, np.int64)
+        for i, cand in zip(
+            crowded, self._box_tree.query_ball_point(origins[crowded], self._box_reach), strict=True
+        ):
+            c = np.asarray(cand, np.int64)
+            hit = ((self._lo[c] <= origins[i]) & (origins[i] <= self._hi[c])).all(axis=1)
+            out[i] = self._box_sigma[c[hit]].sum()
         return out
 
     def transmittance(

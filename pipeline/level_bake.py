@@ -212,32 +212,40 @@ class BakeLog:
         remove_stale_temporaries(out)
 
     def timed(self, name: str, description: str, fn, **counts):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _cpu_seconds()
         result = fn()
-        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
-                            "reused": False, **counts})  # fmt: skip
+        self._record(name, description, t0, c0, False, counts)
         return result
 
     def stored(self, name: str, description: str, fn, **counts) -> dict[str, np.ndarray]:
         """``fn() -> dict of arrays``, stored as stages/NAME.npz; reused when its key matches."""
         path = self.dir / f"{name}.npz"
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), _cpu_seconds()
         if path.is_file():
             data = read_npz(path)
             if str(data.pop("_key", "")) == self.key:
-                self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
-                                    "reused": True, **counts})  # fmt: skip
+                self._record(name, description, t0, c0, True, counts)
                 return data
         data = fn()
         write_npz(path, _key=np.array(self.key), **data)
-        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
-                            "reused": False, **counts})  # fmt: skip
+        self._record(name, description, t0, c0, False, counts)
         return data
+
+    def _record(self, name, description, t0, c0, reused, counts) -> None:
+        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
+                            "cpu_seconds": _cpu_seconds() - c0, "reused": reused, **counts})  # fmt: skip
 
     def note(self, name: str, **counts) -> None:
         for st in self.stages:
             if st["stage"] == name:
                 st.update(counts)
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU seconds of this process, all threads (on a shared machine, CPU time / cores
+    estimates the wall time the same work would take with the cores to itself)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 def level_key(path: Path, settings: LevelBakeSettings) -> str:
@@ -409,7 +417,9 @@ def _trace_samples_on(engine, log_: BakeLog, labeller: LevelLabeller, foliage, s
             ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
         else:
             pending.append((lo, hi, path))
-    settings = labeller.settings if engine.threads is None else replace(labeller.settings, workers=engine.threads)
+    settings = (
+        labeller.settings if engine.threads is None else replace(labeller.settings, workers=engine.threads)
+    )
     ctx = Context(f"level-trace/{log_.key}/{settings.workers}", _level_tracer,
                   (slim_scene(labeller.scene), settings, foliage))  # fmt: skip
     tasks = (Task(ctx, _trace_block, (samples.points[lo:hi], samples.normals[lo:hi],
@@ -552,18 +562,22 @@ def bake_lod(g: LevelGeometry, opaque_labeller: LevelLabeller, high_ao: np.ndarr
     resampled surface samples; both against the gold standard at held-out LOD samples."""
     from scipy.spatial import cKDTree
 
+    t0 = time.perf_counter()
     lod = simplify(g.receivers, s.lod.target_reduction)
+    t1 = time.perf_counter()
     radius = s.lod.radius or 1.5 * median_edge(lod)
     values = np.r_[high_ao, np.full(len(g.opaque.vertices) - len(high_ao), np.nan)]
     at_vertices, _ = resample_in_spheres(opaque_labeller, values, lod.vertices, radius, s.lod.rays)
     lod_samples = surface_samples(lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3)
     at_samples, _ = resample_in_spheres(opaque_labeller, values, lod_samples.points, radius, s.lod.rays)
     ok = np.isfinite(at_samples)
+    t2 = time.perf_counter()
     lsq = fit_least_squares(
         lod, lod_samples, np.where(ok, at_samples, 0.0), ok, s.trace.alpha, s.trace.solver
     )
     fill = float(np.nanmean(at_vertices)) if np.isfinite(at_vertices).any() else 1.0
     vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
+    t3 = time.perf_counter()
     # Gold standard at held-out LOD points: the traced samples of the full-resolution surface within the
     # sphere, weighted by area and by distance to the boundary (no vertex bake, no resampling rays).
     hold = surface_samples(
@@ -585,10 +599,13 @@ def bake_lod(g: LevelGeometry, opaque_labeller: LevelLabeller, high_ao: np.ndarr
     w = hold.weights[m] / hold.weights[m].sum()
     errs = {k: float(np.sqrt(np.sum(w * (interpolate(lod, v, hold.face, hold.bary)[m] - ref[m]) ** 2)))
             for k, v in (("vertex", vert), ("least_squares", lsq))}  # fmt: skip
+    # Baseline: one constant (the reference's mean) for the whole LOD.
+    errs["constant"] = float(np.sqrt(np.sum(w * (ref[m] - np.sum(w * ref[m])) ** 2)))
     return {"vertices": lod.vertices, "faces": lod.faces, "ao_vertex": vert, "ao_least_squares": lsq,
             "radius": np.array(radius), "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
-            "rmse_vertex": np.array(errs["vertex"]), "rmse_least_squares": np.array(errs["least_squares"]),
-            "holdout": np.array(int(m.sum()))}  # fmt: skip
+            "rmse_vertex": np.array(errs["vertex"]), "rmse_constant": np.array(errs["constant"]), "rmse_least_squares": np.array(errs["least_squares"]),
+            "holdout": np.array(int(m.sum())), "seconds_simplify": np.array(t1 - t0), "seconds_resample": np.array(t2 - t1),
+            "seconds_solve": np.array(t3 - t2), "seconds_reference": np.array(time.perf_counter() - t3)}  # fmt: skip
 
 
 def _holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
@@ -616,7 +633,7 @@ def bake_level(
     path, out = Path(path), Path(out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} is a file; a level bake writes a folder")
-    t_start = time.perf_counter()
+    t_start, c_start = time.perf_counter(), _cpu_seconds()
     key = level_key(path, settings) if path.is_file() else ""
     level = read_level(path)
     out.mkdir(parents=True, exist_ok=True)
@@ -652,7 +669,8 @@ def bake_level(
         lod = blog.stored("lod", "LOD: simplify, resample, least squares solve",
                           lambda: bake_lod(g, labeller, final, samples, traced["ao"], traced["valid"], s))  # fmt: skip
         blog.note("lod", lod_vertices=len(lod["vertices"]), lod_faces=len(lod["faces"]),
-                  resample_points=int(lod["resample_points"]))  # fmt: skip
+                  resample_points=int(lod["resample_points"]),
+                  **{k: float(lod[k]) for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")})  # fmt: skip
     blend_err = blog.stored("blend_check", "Two-distance blend vs blended-kernel traces (error table)",
                             lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s))  # fmt: skip
     blog.timed(
@@ -663,7 +681,7 @@ def bake_level(
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     info = {
         "level": str(path), "key": key, "settings": settings_to_dict(s), "stages": blog.stages,
-        "seconds_total": time.perf_counter() - t_start, "peak_rss_bytes": int(peak),
+        "seconds_total": time.perf_counter() - t_start, "cpu_seconds_total": _cpu_seconds() - c_start, "peak_rss_bytes": int(peak),
         "counts": {**level.counts(), "receiver_vertices": len(g.receivers.vertices), "receiver_faces": len(g.receivers.faces),
                    "samples": len(samples), "invalid_samples": int((~traced["valid"]).sum())},
         "errors": _error_tables(deco, lod, blend_err),
@@ -696,6 +714,10 @@ def _small_decorators(
     return out
 
 
+# Largest level on which the blend check also fits the blended samples by least squares.
+_BLEND_LSQ_CHECK_VERTICES = 300_000
+
+
 def _blend_check(
     g, labeller, foliage, samples, traced, solved, s: LevelBakeSettings, count: int = 2000
 ) -> dict:
@@ -718,15 +740,19 @@ def _blend_check(
     per_vertex = blend(solved["short"], solved["long"], plain)
     pred = interpolate(g.receivers, per_vertex, samples.face[pick], samples.bary[pick])
     m = ref_valid & traced["valid"][pick]
-    blended_samples = blend(traced["ao"][:, 0], traced["ao"][:, 1], plain)
-    lsq_blended = fit_least_squares(
-        g.receivers, samples, blended_samples, traced["valid"], s.trace.alpha, s.trace.solver
-    )
+    # (c) needs a third full least-squares solve: only on levels small enough for it to be cheap.
+    vertex_gap = np.nan
+    if len(g.receivers.vertices) <= _BLEND_LSQ_CHECK_VERTICES:
+        blended_samples = blend(traced["ao"][:, 0], traced["ao"][:, 1], plain)
+        lsq_blended = fit_least_squares(
+            g.receivers, samples, blended_samples, traced["valid"], s.trace.alpha, s.trace.solver
+        )
+        vertex_gap = float(np.abs(per_vertex - lsq_blended).max())
     return {
         "same_rays_max_abs": np.array(float(np.abs(two - kern).max())),
         "bake_rmse_vs_reference": np.array(float(np.sqrt(np.mean((pred[m] - ref[m]) ** 2)))),
         "samples_rmse_vs_reference": np.array(float(np.sqrt(np.mean((two[m] - ref[m]) ** 2)))),
-        "per_vertex_blend_vs_lsq_of_blend_max_abs": np.array(float(np.abs(per_vertex - lsq_blended).max())),
+        "per_vertex_blend_vs_lsq_of_blend_max_abs": np.array(vertex_gap),
         "count": np.array(int(m.sum())),
     }
 
@@ -763,6 +789,7 @@ def _error_tables(deco: dict, lod: dict | None, blend_err: dict) -> dict:
         out["decorators"]["instances"] = int(len(deco["coefficients"]))
     if lod is not None:
         out["lod"] = {"rmse_vertex": float(lod["rmse_vertex"]), "rmse_least_squares": float(lod["rmse_least_squares"]),
+                      "rmse_constant": float(lod["rmse_constant"]),
                       "holdout": int(lod["holdout"]), "radius": float(lod["radius"])}  # fmt: skip
     return out
 
@@ -772,16 +799,21 @@ def bake_log_markdown(info: dict) -> str:
     c = info["counts"]
     lines = [f"Bake of {Path(info['level']).name}: {c['receiver_vertices']:,} V {c['receiver_faces']:,} F, "
              f"{c['samples']:,} samples, {info['settings']['trace']['rays']} rays", "",
-             "| Description | Time (s) | reused |", "|---|---:|:---:|"]  # fmt: skip
+             "| Description | Time (s) | CPU (s) | reused |", "|---|---:|---:|:---:|"]  # fmt: skip
+    skip = ("stage", "description", "seconds", "cpu_seconds", "reused")
     for st in info["stages"]:
-        extra = {k: v for k, v in st.items() if k not in ("stage", "description", "seconds", "reused")}
-        detail = ", ".join(f"{k} {v:,}" if isinstance(v, int) else f"{k} {v}" for k, v in extra.items())
-        lines.append(
-            f"| {st['description']}{' (' + detail + ')' if detail else ''} | {st['seconds']:.2f} | {'yes' if st['reused'] else ''} |"
+        extra = {k: v for k, v in st.items() if k not in skip}
+        detail = ", ".join(
+            f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}"
+            for k, v in extra.items()
         )
-    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | |", "",
+        lines.append(
+            f"| {st['description']}{' (' + detail + ')' if detail else ''} | {st['seconds']:.2f} | "
+            f"{st['cpu_seconds']:.1f} | {'yes' if st['reused'] else ''} |"
+        )
+    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | |", "",
               f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
-              f"on {info['cpu_count']} cores.", ""]  # fmt: skip
+              f"on {info['cpu_count']} cores (CPU s: all threads of this process).", ""]  # fmt: skip
     e = info["errors"]
     if "decorators" in e:
         d = e["decorators"]
@@ -792,7 +824,8 @@ def bake_log_markdown(info: dict) -> str:
     if "lod" in e:
         lines += ["| LOD transfer (RMSE vs gold standard) | RMSE |", "|---|---:|",
                   f"| resampled at LOD vertices | {e['lod']['rmse_vertex']:.4f} |",
-                  f"| least squares over resampled samples | {e['lod']['rmse_least_squares']:.4f} |", ""]  # fmt: skip
+                  f"| least squares over resampled samples | {e['lod']['rmse_least_squares']:.4f} |",
+                  f"| (baseline: one constant) | {e['lod']['rmse_constant']:.4f} |", ""]  # fmt: skip
     b = e["blend"]
     lines += ["| two-distance blend | value |", "|---|---:|",
               f"| same rays: blend of two columns vs blended-kernel trace, max abs | {b['same_rays_max_abs']:.2e} |",
