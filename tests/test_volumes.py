@@ -422,7 +422,21 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
     assert all(
         np.array_equal(a.coefficients, b.coefficients) for a, b in zip(vol.models, again.models, strict=True)
     )
+    # given regions and edges, settings from a preset file
+    (tmp_path / "regions.json").write_text(json.dumps({
+        "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in four_regions()],
+        "edges": [[0, 1], [0, 2]]}))  # fmt: skip
+    (tmp_path / "preset.json").write_text(json.dumps({"samples": 4, "directions": 64}))
+    given = tmp_path / "given.json"
+    assert cli.main(["volumes", str(obj), "--out", str(given), "--regions", str(tmp_path / "regions.json"),
+                     "--config", str(tmp_path / "preset.json")]) == 0  # fmt: skip
+    g = read_volumes(given)
+    assert [r.name for r in g.regions] == [r.name for r in four_regions()]
+    assert [(e.i, e.j) for e in g.edges] == [(0, 1), (0, 2)] and g.settings.directions == 64
     # bad input: one line, exit 2, nothing written
+    assert cli.main(["volumes", str(obj), "--out", str(tmp_path / "x.json"), "--set", "beta=-1"]) == 2
+    assert cli.main(["volumes", str(obj), "--out", str(tmp_path / "x.json"), "--set", "bogus=1"]) == 2
+    assert not (tmp_path / "x.json").exists()
     np.save(tmp_path / "bad.npy", np.zeros((5, 2)))
     bad = tmp_path / "bad_ao.npy"
     probe_args = ["probe", str(out), "--normals", str(tmp_path / "n.npy"), "--out", str(bad), "--points"]
