@@ -45,7 +45,7 @@ DEMO_TARGET := 0.75
 PARITY := $(BUILD)/parity.json
 REPORT := $(BUILD)/report/report.md
 
-.PHONY: help setup system-deps dataset corpus train export parity report select demo test bench lint clean
+.PHONY: help setup system-deps dataset corpus models train export parity report select demo test bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -82,6 +82,14 @@ $(CORPUS): $(FULL_CONFIG) | $(STAMP)
 	$(NEURALAO) dataset $(FULL_CONFIG) --out build/full/dataset
 
 corpus: $(CORPUS) ## Render and label the composed-scene training corpus (configs/full.json; resumable)
+
+# The shipped U-Nets (issue 9): configs/models.json trains each model on the corpus with its wall-clock
+# budget (resumable: checkpoints under build/ship), exports, checks parity, evaluates the test split
+# against SSAO/GTAO at every radius and installs runtime/models/<name>/ + index.json. Hours on 2 cores
+# (the sum of the budgets plus the corpus); `make models MODELS="unet-30min"` ships only those.
+MODELS_CONFIG := configs/models.json
+models: $(CORPUS) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
+	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
 
 $(BUILD)/models/mlp-%.pt: $(DATASET)
 	$(NEURALAO) train mlp --data $(BUILD)/dataset --scene $(MLP_SCENE) --size $* --out $@

@@ -192,6 +192,9 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     provenance = {
         "dataset_hash": info.get("dataset_hash"),
         "dataset": str(settings.dataset),
+        "train_frames": info.get("train_frames"),
+        "train_fraction": info.get("train_fraction"),
+        "training_scenes": len(info.get("training_scenes", [])),
         "commit": commit,
         "config": str(spec.name),
         "epochs": ckpt.get("epoch"),
