@@ -55,8 +55,9 @@ STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
 # (ray.init itself retries for minutes).
 CONNECT_TIMEOUT_S = 5.0
-# Rays per bake task: ~0.2-0.4 s of tracing on one core, so Ray's ~1 ms per task is noise.
-CHUNK_RAYS = 1 << 21
+# Rays per bake task: ~0.1-0.2 s of tracing on one core, so Ray's ~3 ms per task is noise, and
+# enough tasks that the last ones balance across workers.
+CHUNK_RAYS = 1 << 20
 # Environment a worker process needs to render and trace like the driver (GL platform, threads).
 FORWARDED_ENV = ("PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "OMP_WAIT_POLICY", "NEURALAO_MESHES")
 
@@ -236,6 +237,9 @@ class RayEngine(Engine):
         cpus = int(ray.cluster_resources().get("CPU", 0))
         if cpus < 1 and workers is None:
             raise NeuralaoError(f"the Ray cluster at {address or 'local'} has no CPUs")
+        if workers is not None and workers > cpus:
+            # Each actor holds one CPU: more than the cluster has would wait for ever.
+            raise NeuralaoError(f"--ray-workers {workers} is more than the {cpus} CPUs of the Ray cluster")
         self.workers = workers or cpus
         env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
         env.setdefault("OMP_NUM_THREADS", "1")  # one CPU per actor
