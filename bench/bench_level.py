@@ -95,11 +95,13 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--preset", default="table1")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", default="build/bench/level")
+    p.add_argument(
+        "--out", default="build/bench", help="results go to OUT/level/PRESET/ (default build/bench)"
+    )
     p.add_argument("--set", action="append", default=[], help="bake setting override, e.g. trace.rays=64")
     p.add_argument("--fresh", action="store_true", help="delete the bake folder first (time every stage)")
     args = p.parse_args()
-    out = Path(args.out) / args.preset
+    out = Path(args.out) / "level" / args.preset
     load_before = list(os.getloadavg())
     t0 = time.perf_counter()
     level, cfg = write_level(out / "level", settings_for(args.preset, args.seed), args.preset)

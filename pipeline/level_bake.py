@@ -292,14 +292,40 @@ def build_geometry(level: Level) -> LevelGeometry:
 
 
 def receiver_samples(scene: Scene, t: TraceSettings, seed: int) -> SurfaceSamples:
-    """bake.surface_samples with the level's per-face floor (0 allowed) and cap."""
+    """bake.surface_samples with the level's per-face floor (0 allowed) and cap.
+
+    Samples per unit area are water-filled: the density ``rho`` is chosen so that
+    ``sum clip(rho * area, floor, cap) = total``, i.e. what the cap takes from large faces (big walls,
+    distant geometry) goes to the rest, the playable area (Sloan et al.: "this causes more samples to
+    be focused in the playable area"). A face's expected count is rounded *stochastically*
+    (floor(x + u), u uniform, seeded), so faces that all expect fewer than half a sample (a finely
+    tessellated terrain) still get their share on average instead of none at all.
+    """
     areas = face_areas(scene)
     total = t.samples_per_vertex * len(scene.vertices)
-    counts = np.clip(
-        np.rint(total * areas / areas.sum()), t.min_samples_per_face, t.samples_per_face_cap
-    ).astype(np.int64)
+    expected = _water_filled(areas, total, t.min_samples_per_face, t.samples_per_face_cap)
+    u = np.random.default_rng(seed + 0x5A3).uniform(size=len(areas))
+    counts = np.clip(np.floor(expected + u), t.min_samples_per_face, t.samples_per_face_cap).astype(np.int64)
     counts[areas <= 0] = 0
     return surface_samples(scene, total, t.samples_per_face_cap, seed, counts=counts)
+
+
+def _water_filled(areas: np.ndarray, total: float, floor: int, cap: int) -> np.ndarray:
+    """(m,) expected counts clip(rho * area, floor, cap) summing to ``total`` (bisection on rho; all
+    faces at ``cap`` if even that is below ``total``)."""
+
+    def count(rho: float) -> float:
+        return float(np.clip(rho * areas, floor, cap).sum())
+
+    lo, hi = 0.0, total / max(float(areas.sum()), 1e-300)
+    while count(hi) < total and hi < 1e300:
+        if count(hi) >= cap * len(areas):
+            break
+        hi *= 2.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if count(mid) < total else (lo, mid)
+    return np.clip(hi * areas, floor, cap)
 
 
 def instance_boxes(level: Level, nodes: list[LevelNode]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -82,7 +82,7 @@ BAKE_CONFIGS: dict[str, dict] = {
              "decorators": {"samples_per_instance": 256, "holdout_samples": 256, "local_rays": 64},
              "lod": {"target_reduction": 0.5, "holdout_samples": 400}},
     "small": {"trace": {"rays": 128}},
-    "table1": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 8, "min_samples_per_face": 0}},
+    "table1": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0}},
 }  # fmt: skip
 
 

@@ -46,10 +46,14 @@ def test_outputs_hold_every_signal(baked):
         np.testing.assert_allclose(
             ao, np.clip(0.97 * long_ + 0.03 * short, 0, 1), atol=1e-6
         )  # the per-level blend
-        # 2 m obscurance is lighter than 300 m at every sample; a least-squares fit can overshoot a little.
-        assert short.mean() > long_.mean() and (short >= long_ - 0.1).all()
+        assert short.mean() > long_.mean()  # per vertex only on average: least squares may overshoot
         verts += len(ao)
     assert verts == info["counts"]["receiver_vertices"]
+    # Per sample, 2 m obscurance is never darker than 300 m (rho_short(d) >= rho_long(d) for every ray).
+    from pipeline.io import read_npz
+
+    traced = read_npz(root / "out" / "stages" / "trace.npz")["ao"]
+    assert (traced[:, 0] >= traced[:, 1]).all()
     trees = [n for n in doc["nodes"] if n.get("extras", {}).get("role") == "tree"]
     inst = trees[0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]
     assert get(inst["_AO_GLOBAL"]).shape == (3, 4)

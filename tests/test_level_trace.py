@@ -210,3 +210,25 @@ def test_origin_density_matches_brute_force_with_crowded_boxes():
     brute = (inside * dens[None]).sum(axis=1)
     assert inside.sum(axis=1).max() > 8  # the slow path is exercised
     np.testing.assert_allclose(fol.origin_density(pts), brute, rtol=1e-12)
+
+
+def test_small_faces_keep_their_share_of_samples():
+    """With no per-face floor, a fine grid beside one big quad gets samples in proportion to its area
+    (stochastic rounding); plain rounding would give every grid face 0."""
+    fine = floor_quad(1.0)  # 2 faces of area 2
+    n = 40
+    t = np.linspace(0, 1, n + 1)
+    xx, yy = np.meshgrid(t, t, indexing="ij")
+    v = np.stack([xx.ravel() + 5, yy.ravel(), np.zeros(xx.size)], 1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    grid = (v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]))
+    scene = merge(fine, grid)
+    total_area = 4.0 + 1.0
+    settings = TraceSettings(
+        samples_per_vertex=800 / len(scene.vertices), samples_per_face_cap=1000, min_samples_per_face=0
+    )
+    s = receiver_samples(scene, settings, seed=0)
+    on_grid = (s.face >= 2).sum()
+    expected = 800 * 1.0 / total_area  # 0.05 per grid face, 160 in all
+    assert abs(on_grid - expected) < 5 * np.sqrt(expected)
