@@ -568,6 +568,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(pipeline.level_bake.LevelBakeSettings); --out is then a folder")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)")  # fmt: skip
+    p.add_argument("--to", choices=("vertex", "texture"), default="vertex",
+                   help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
+                        "pipeline.texture_bake) (default vertex)")  # fmt: skip
+    from .texture_bake import add_arguments as add_texture_arguments
+
+    add_texture_arguments(p)
     p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb|DIR",
                    help="output mesh with per-vertex AO (a folder with --config)")  # fmt: skip
     from .engine import add_engine_arguments
@@ -603,7 +609,20 @@ def settings_from_args(args: argparse.Namespace) -> BakeSettings:
 
 # Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
 _MESH_ONLY_FLAGS = ("rays", "max_distance", "kernel", "half_distance", "method", "alpha",
-                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers")  # fmt: skip
+                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers",
+                    "to", "resolution", "margin", "uv")  # fmt: skip
+# Flags of the vertex bake only, and of the texture bake only (refused with the other --to).
+_VERTEX_ONLY_FLAGS = ("method", "alpha", "samples_per_vertex", "samples_per_face_cap")
+_TEXTURE_ONLY_FLAGS = ("resolution", "margin", "uv")
+
+
+def _refused_flag(args: argparse.Namespace) -> str | None:
+    """The first flag given that the chosen ``--to`` has no use for, or None."""
+    defaults = argparse.ArgumentParser()
+    add_arguments(defaults)
+    base = defaults.parse_args([args.mesh, "--out", args.out])
+    other = _VERTEX_ONLY_FLAGS if args.to == "texture" else _TEXTURE_ONLY_FLAGS
+    return next((f for f in other if getattr(args, f) != getattr(base, f)), None)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -625,6 +644,14 @@ def run(args: argparse.Namespace) -> int:
         return run_level(args)
     if args.set:
         raise NeuralaoError("--set needs --config (level bakes only)")
+    if _refused_flag(args) is not None:
+        raise NeuralaoError(f"--{_refused_flag(args).replace('_', '-')} does not apply to --to {args.to}")
+    if args.to == "texture":
+        if getattr(args, "engine", "local") != "local":
+            raise NeuralaoError("texture bakes run locally (--engine ray is for vertex bakes and datasets)")
+        from .texture_bake import run_texture
+
+        return run_texture(args)
     settings = settings_from_args(args)
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
