@@ -14,9 +14,12 @@ interleaved rounds, as ratios to the local engine at the same worker count (goal
 Per-task costs measured on the same instance: the round trip of an empty task, the first task of a
 new context (payload through the object store + Embree build on the worker) and the trace cost per
 ray on one core. The projection for Table 1 of Sloan et al. 2013 (6.7 M samples x 256 rays) on N
-machines of C cores: ``T(N) = serial + rays * c_ray / (N C e) + tasks * t_task / (N C) + N * t_ctx``
-(serial stages stay on the driver; ``e`` the measured Ray / local ratio; every machine pulls the
-scene once), using a bench_level.json of bench/bench_level.py for the serial stages when one exists.
+machines of C cores, with ``tasks = TASKS_PER_CORE * N * C`` blocks (trace.block_samples chosen to
+match; the default 262,144 would make 26 tasks and leave cores idle beyond 26):
+``T(N) = serial + ceil(tasks / (N C)) * block * rays * c_ray / e + tasks * t_task / (N C) + t_ctx``
+(serial stages stay on the driver; ``e`` the measured Ray / local ratio of the level trace; ``t_ctx``
+the first-task cost scaled by faces, paid once per actor, in parallel on every machine), using a
+bench_level.json of bench/bench_level.py for the serial stages when one exists.
 
 Writes OUT/bench_ray.json and OUT/bench_ray.md. The machine's load average is recorded before and
 after: on a shared machine absolute numbers move, ratios within one run still compare.
@@ -43,9 +46,12 @@ from pipeline.engine import Context, LocalEngine, RayEngine, Task, content_key, 
 from pipeline.io import write_json, write_text  # noqa: E402
 from pipeline.scene import load_scene  # noqa: E402
 
-# Table 1 of Sloan et al. 2013: the trace row's workload (6.7 M samples, 256 rays a sample).
+# Table 1 of Sloan et al. 2013: the trace row's workload (6.7 M samples, 256 rays a sample, 1.8 M faces).
 TABLE1_SAMPLES = 6_700_000
 TABLE1_RAYS = 256
+TABLE1_FACES = 1_800_000
+# Tasks per core in the projection: enough that the last round of tasks balances (block size follows).
+TASKS_PER_CORE = 4
 
 
 def _noop_state(payload):
@@ -140,6 +146,7 @@ def measure(args) -> dict:
     fresh = Context(content_key("bench", time.time()), lab_ctx.build, lab_ctx.payload)
     t_ctx = timed(lambda: list(one.map([Task(fresh, _noop, 0)]))) - t_task
     payload_bytes = scene.vertices.nbytes + scene.faces.nbytes
+    faces = len(scene.faces)
     one.close()
     ray.shutdown()
     load_after = list(os.getloadavg())
@@ -159,7 +166,7 @@ def measure(args) -> dict:
         "mesh": args.mesh, "rays": args.rays, "samples_per_vertex": args.samples_per_vertex,
         "dataset": {"scenes": 2, "views": args.views, "size": [128, 128], "rays": args.dataset_rays},
         "repeats": args.repeats, "runs": runs, "rows": rows, "work": work,
-        "seconds_start_ray": t_start_ray, "t_task_s": t_task, "t_context_s": t_ctx, "payload_bytes": payload_bytes,
+        "seconds_start_ray": t_start_ray, "t_task_s": t_task, "t_context_s": t_ctx, "payload_bytes": payload_bytes, "faces": faces,
         "c_ray_bake_s": c_ray, "c_ray_level_s": c_ray_level,
         "load_average_before": load_before, "load_average_after": load_after, "cpu_count": os.cpu_count(),
     }  # fmt: skip
@@ -167,33 +174,30 @@ def measure(args) -> dict:
 
 def projection(result: dict, level_json: Path | None, cores: int, machines: list[int]) -> dict:
     """Table 1's trace (and serial stages when a bench_level.json exists) on N machines x C cores."""
+    import math
+
     rays = TABLE1_SAMPLES * TABLE1_RAYS
-    efficiency = min(
+    efficiency = next(
         r["ray_over_local"] for r in result["rows"] if r["workload"] == "level" and r["workers"] == 2
     )
     c_ray = result["c_ray_level_s"]
-    block = 262144  # LevelBakeSettings' default trace.block_samples
-    tasks = -(-TABLE1_SAMPLES // block)
+    t_ctx = result["t_context_s"] * TABLE1_FACES / result["faces"]  # BVH build ~ linear in faces: upper bound
     serial, source = 0.0, "not measured (no bench_level.json): trace stage only"
     if level_json is not None and level_json.is_file():
-        bench = json.loads(level_json.read_text())
-        stages = bench.get("info", bench).get("stages", [])
-        serial = sum(s["seconds"] for s in stages if s["stage"] not in ("trace",))
-        trace = next((s for s in stages if s["stage"] == "trace"), None)
-        counts = bench.get("info", bench).get("counts", {})
-        if trace and not trace.get("reused") and counts.get("samples"):
-            c_ray = trace["seconds"] / (counts["samples"] * bench["info"]["settings"]["trace"]["rays"]) * 2
-            source = f"{level_json}: serial stages and the trace cost per ray (x2: it ran on 2 threads)"
-        else:
-            source = f"{level_json}: serial stages; trace cost per ray from the tiny level here"
+        info = json.loads(level_json.read_text()).get("info", {})
+        stages = info.get("stages", [])
+        serial = sum(s["seconds"] for s in stages if s["stage"] != "trace")
+        source = f"{level_json} (every stage but the trace, on this machine)"
     rows = []
     for n in machines:
-        trace_s = rays * c_ray / (n * cores * efficiency)
-        overhead = tasks * result["t_task_s"] / (n * cores) + n * result["t_context_s"]
-        rows.append({"machines": n, "cores": n * cores, "trace_s": trace_s, "overhead_s": overhead,
-                     "serial_s": serial, "total_s": serial + trace_s + overhead})  # fmt: skip
-    return {"rays": rays, "tasks": tasks, "c_ray_s": c_ray, "efficiency": efficiency, "cores_per_machine": cores,
-            "serial_source": source, "rows": rows, "paper_trace_s": 35.1}  # fmt: skip
+        tasks = TASKS_PER_CORE * n * cores
+        block = math.ceil(TABLE1_SAMPLES / tasks)
+        trace_s = math.ceil(tasks / (n * cores)) * block * TABLE1_RAYS * c_ray / efficiency
+        overhead = tasks * result["t_task_s"] / (n * cores) + t_ctx
+        rows.append({"machines": n, "cores": n * cores, "tasks": tasks, "block_samples": block, "trace_s": trace_s,
+                     "overhead_s": overhead, "serial_s": serial, "total_s": serial + trace_s + overhead})  # fmt: skip
+    return {"rays": rays, "c_ray_s": c_ray, "efficiency": efficiency, "t_context_table1_s": t_ctx,
+            "cores_per_machine": cores, "serial_source": source, "rows": rows, "paper_trace_s": 35.1}  # fmt: skip
 
 
 def markdown(result: dict, proj: dict) -> str:
@@ -220,17 +224,19 @@ def markdown(result: dict, proj: dict) -> str:
         f"Starting the private Ray instance: {result['seconds_start_ray']:.1f} s (not in the rows).",
         "",
         f"## Projection: Table 1 trace ({TABLE1_SAMPLES / 1e6:.1f} M samples x {TABLE1_RAYS} rays = "
-        f"{proj['rays'] / 1e9:.2f} G rays, {proj['tasks']} tasks of 262,144 samples) on N machines x "
-        f"{proj['cores_per_machine']} cores",
+        f"{proj['rays'] / 1e9:.2f} G rays) on N machines x {proj['cores_per_machine']} cores, "
+        f"{TASKS_PER_CORE} trace blocks per core",
         "",
         f"Efficiency e = {proj['efficiency']:.2f} (level trace, Ray / local at 2 workers); serial stages: "
-        f"{proj['serial_source']}. The paper's trace row: {proj['paper_trace_s']} s on one K20.",
+        f"{proj['serial_source']}; per-ray cost {proj['c_ray_s'] * 1e9:.0f} ns per core as measured here; first-task "
+        f"cost scaled to 1.8 M faces {proj['t_context_table1_s']:.1f} s. The paper's trace row: "
+        f"{proj['paper_trace_s']} s on one K20.",
         "",
-        "| machines | cores | trace s | Ray overhead s | serial s | total s |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| machines | cores | tasks | samples / task | trace s | Ray overhead s | serial s | total s |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in proj["rows"]:
-        lines.append(f"| {r['machines']} | {r['cores']} | {r['trace_s']:.1f} | {r['overhead_s']:.2f} | "
+        lines.append(f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | {r['trace_s']:.1f} | {r['overhead_s']:.2f} | "
                      f"{r['serial_s']:.1f} | {r['total_s']:.1f} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
@@ -247,9 +253,12 @@ def main() -> None:
     p.add_argument("--level-block", type=int, default=2048, help="samples per level trace task")
     p.add_argument("--cores-per-machine", type=int, default=16)
     p.add_argument("--level-json", default="build/bench/level/table1/bench_level.json")
+    p.add_argument(
+        "--project-only", action="store_true", help="recompute the projection from OUT/bench_ray.json"
+    )
     args = p.parse_args()
     out = Path(args.out)
-    result = measure(args)
+    result = json.loads((out / "bench_ray.json").read_text()) if args.project_only else measure(args)
     proj = projection(result, Path(args.level_json) if args.level_json else None, args.cores_per_machine,
                       [1, 2, 4, 8, 16, 32])  # fmt: skip
     result["projection"] = proj
