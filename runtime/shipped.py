@@ -16,9 +16,9 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 INDEX = MODELS_DIR / "index.json"
 
 
-def read_index(models_dir: Path = MODELS_DIR) -> dict:
+def read_index(models_dir: Path | None = None) -> dict:
     """The index of shipped models; none shipped -> one-line error naming the make target."""
-    path = Path(models_dir) / "index.json"
+    path = Path(models_dir or MODELS_DIR) / "index.json"
     if not path.is_file():
         raise NeuralaoError(f"no shipped models ({path} is missing); run `make models` or give an export")
     try:
@@ -30,14 +30,16 @@ def read_index(models_dir: Path = MODELS_DIR) -> dict:
     return index
 
 
-def shipped_models(models_dir: Path = MODELS_DIR) -> dict[str, Path]:
+def shipped_models(models_dir: Path | None = None) -> dict[str, Path]:
     """name -> export folder of every shipped model."""
+    models_dir = Path(models_dir or MODELS_DIR)
     index = read_index(models_dir)
-    return {name: Path(models_dir) / name for name in index["models"]}
+    return {name: models_dir / name for name in index["models"]}
 
 
-def default_export(kind: str, models_dir: Path = MODELS_DIR) -> Path:
+def default_export(kind: str, models_dir: Path | None = None) -> Path:
     """The export folder of the default shipped model of ``kind`` (e.g. "unet")."""
+    models_dir = Path(models_dir or MODELS_DIR)
     index = read_index(models_dir)
     name = index.get("default", {}).get(kind)
     if name is None:
@@ -48,7 +50,7 @@ def default_export(kind: str, models_dir: Path = MODELS_DIR) -> Path:
     return folder
 
 
-def default_model(kind: str, models_dir: Path = MODELS_DIR) -> Path:
+def default_model(kind: str, models_dir: Path | None = None) -> Path:
     """model.onnx of the default shipped model of ``kind``."""
     folder = default_export(kind, models_dir)
     manifest = json.loads((folder / "manifest.json").read_text())

@@ -159,3 +159,26 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
             rho = radius_param(rel * scene.diagonal, frame["depth"], fg, frame["yfov"])
             means.append(float(run_padded(run, x, m, rho)[fg].mean()))
         assert np.all(np.diff(means) <= 1e-4), (mesh, means)
+
+
+def test_infer_uses_the_shipped_default_when_given_only_a_frame(shipped, corpus, tmp_path, monkeypatch):
+    import runtime.shipped as sh
+    from pipeline.cli import main
+    from pipeline.dataset import open_dataset
+    from pipeline.io import write_npz
+    from pipeline.split_eval import unet_predictor
+
+    settings, _, _ = shipped
+    frame = next(iter(open_dataset(corpus).frames(split="test")))
+    path = tmp_path / "frame.npz"
+    write_npz(path, **{k: np.asarray(v) for k, v in frame.items() if k not in ("scene", "split", "holdout")})
+    monkeypatch.setattr(sh, "MODELS_DIR", tmp_path / "nothing")
+    assert main(["infer", str(path), "--out", str(tmp_path / "none.png")]) == 2  # one-line error: none shipped
+    monkeypatch.setattr(sh, "MODELS_DIR", Path(settings.out))
+    radius = float(frame["radii"][0])
+    assert main(["infer", str(path), "--radius", str(radius), "--out", str(tmp_path / "ao.png")]) == 0
+    from PIL import Image
+
+    got = np.asarray(Image.open(tmp_path / "ao.png"), dtype=np.float32) / 255.0
+    want = unet_predictor(Path(settings.out) / "u-full" / "model.onnx")(frame, radius)
+    assert np.abs(got - want).max() <= 0.5 / 255 + 1e-6  # the 8-bit PNG of the default model's AO
