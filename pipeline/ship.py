@@ -134,6 +134,9 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
                    "gl_seconds": times[name]} for name in methods}  # fmt: skip
 
 
+_LOADED: dict = {}  # the training / validation frames of the last (dataset, train_fraction) loaded
+
+
 def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str) -> dict:
     """Train, export, check and install one model; returns its index entry."""
     from .unet_train import UNetTrainSettings, load_dataset_frames, train
@@ -148,10 +151,13 @@ def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoin
     ts = from_dict(UNetTrainSettings, train_cfg, prefix=f"models.{spec.name}.train.")
     ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
     ckpt_path.parent.mkdir(parents=True, exist_ok=True)
-    train_set, val_set, info = load_dataset_frames(data, ts.train_fraction)
+    key = (str(data), ts.train_fraction)
+    if _LOADED.get("key") != key:  # the corpus is ~13 GB on disk: load it once per training fraction
+        _LOADED.clear()
+        _LOADED.update(key=key, sets=load_dataset_frames(data, ts.train_fraction))
+    train_set, val_set, info = _LOADED["sets"]
     log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
-    del train_set, val_set
     checkpoints[spec.name] = ckpt_path
 
     out = _path(settings.out)
@@ -264,6 +270,7 @@ def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
         index["models"][spec.name] = ship_model(settings, spec, data, checkpoints, commit)
         index.update(default=dict(settings.default), commit=commit, settings=settings_to_dict(settings))
         write_json(index_path, index)  # after every model: a later failure keeps what was installed
+    _LOADED.clear()
     index["baselines"] = baseline_figures(settings, data)
     index["seconds"] = time.perf_counter() - t0
     write_json(index_path, index)
