@@ -257,6 +257,7 @@ def build_dataset(
 
     from .engine import LocalEngine
 
+    own_engine = engine is None
     engine = engine or LocalEngine()
     specs = expand_scenes(settings)
     if not specs:
@@ -345,6 +346,8 @@ def build_dataset(
             bar.update(len(entry["views"]))
     finally:
         bar.close()
+        if own_engine:
+            engine.close()
     dataset_hash = hashlib.sha256("".join(s["sha256"] for s in shards).encode()).hexdigest()
     manifest = {
         "format": "neuralao-dataset",

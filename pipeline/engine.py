@@ -108,11 +108,16 @@ class _StateCache:
             return self._states[key]
         while len(self._states) >= self.size:
             _, old = self._states.popitem(last=False)
-            close = getattr(old, "close", None)
-            if close is not None:
+            if (close := getattr(old, "close", None)) is not None:
                 close()
         state = self._states[key] = build()
         return state
+
+    def clear(self) -> None:
+        while self._states:
+            _, old = self._states.popitem(last=False)
+            if (close := getattr(old, "close", None)) is not None:
+                close()
 
 
 class Engine:
@@ -184,6 +189,9 @@ class LocalEngine(Engine):
             state = self._cache.get(ctx.key, lambda ctx=ctx: ctx.build(ctx.payload))
             yield index, task, task.fn(state, task.args)
         yield from self._drain_stored()
+
+    def close(self) -> None:
+        self._cache.clear()  # e.g. a dataset's GL renderer
 
 
 class _Worker:
