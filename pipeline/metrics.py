@@ -92,3 +92,25 @@ def image_ssim(pred: np.ndarray, ref: np.ndarray) -> float:
     if pred.ndim != 2 or pred.shape != ref.shape:
         raise NeuralaoError(f"image_ssim needs two (H, W) images of one size; got {pred.shape}, {ref.shape}")
     return float(ssim_map(pred, ref).mean())
+
+
+def masked_flip(pred: np.ndarray, ref: np.ndarray, mask: np.ndarray, ppd: float | None = None) -> float:
+    """Mean NVIDIA FLIP error (Andersson et al. 2020; the ``flip-evaluator`` package, LDR) over mask pixels.
+
+    pred, ref : (H, W) float AO in [0, 1]; mask : (H, W) bool. FLIP compares *displayed* images in
+    [0, 1], so the AO values are taken as the grey an AO buffer shows (replicated to RGB, sRGB-encoded
+    as FLIP's LDR mode assumes), clipped to [0, 1], with the background set to 1 (open) in *both*
+    images: like :func:`masked_ssim`, background can neither help nor hurt, and FLIP's spatial filters
+    see the same surround in both. The error map (0 = identical, 1 = maximal) is averaged over the mask
+    only. ``ppd``: pixels per degree of visual angle; None: FLIP's default (67.02, a 0.7 m view of a 0.7 m
+    wide 3840-pixel monitor).
+    """
+    import flip_evaluator
+
+    pred, ref, mask = _check(pred, ref, mask)
+    as_rgb = lambda a: np.repeat(np.clip(np.where(mask, a, 1.0), 0.0, 1.0)[..., None], 3, axis=2)  # noqa: E731
+    error, _, _ = flip_evaluator.evaluate(
+        as_rgb(ref).astype(np.float32), as_rgb(pred).astype(np.float32), "LDR",
+        applyMagma=False, computeMeanError=False, parameters={} if ppd is None else {"ppd": float(ppd)},
+    )  # fmt: skip
+    return float(np.asarray(error, np.float64).reshape(mask.shape)[mask].mean())

@@ -118,6 +118,9 @@ class ReportSettings:
     workers: int = 2
     # Write a contact sheet per scene.
     contact_sheets: bool = True
+    # Also score every frame with NVIDIA FLIP (pipeline.metrics.masked_flip, flip-evaluator; background
+    # set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on one core.
+    flip: bool = True
     # Screen-space baseline settings (radius: the labels' max distance, and each of radii_rel).
     ssao: SSAOSettings = field(default_factory=SSAOSettings)
     gtao: GTAOSettings = field(default_factory=GTAOSettings)
@@ -679,7 +682,7 @@ def evaluate(
     from runtime import gl
 
     from .dataset import open_dataset, scene_of
-    from .metrics import masked_rmse, masked_ssim
+    from .metrics import masked_flip, masked_rmse, masked_ssim
 
     check_settings(settings)
     ds = open_dataset(data)
@@ -760,6 +763,8 @@ def evaluate(
                     "ssim": masked_ssim(pred, gt, mask),
                     "rmse": masked_rmse(pred, gt, mask),
                 }
+                if settings.flip:
+                    row["methods"][m.name]["flip"] = masked_flip(pred, gt, mask)
                 for k, scores in at_radii.items():
                     row["radii"][k]["methods"][m.name] = scores
                 if fi == 0 and keep_images:
@@ -909,6 +914,8 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
         times = [per_scene_time[s][m.name] for s in per_scene if m.name in per_scene_time.get(s, {})]
         entry.update(frames=len(rows), ssim=float(np.mean(ssim)), rmse=float(np.mean(rmse)),
                      seconds=float(np.median(times)) if times else None, per_scene=per_scene)  # fmt: skip
+        flip = [r["methods"][m.name].get("flip") for r in rows]
+        entry["flip"] = float(np.mean(flip)) if all(f is not None for f in flip) else None
         if m.family == "baked":
             per_vertex = 1 if m.name.endswith("-8bit") else 4
             for scene, ps in per_scene.items():
@@ -1019,8 +1026,8 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         f"Times: {w}x{h} frames, GL on {result['device']['gl_renderer']} ({result['device']['gl_platform']}); "
         f"CPU: {result['device']['cpu']}.",
         "",
-        f"| method | scope | frames | SSIM | RMSE | ms / frame ({w}x{h}) | time / SSAO | RMSE / SSAO | (1-SSIM) / SSAO | bytes | timed on |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        f"| method | scope | frames | SSIM | RMSE | FLIP | ms / frame ({w}x{h}) | time / SSAO | RMSE / SSAO | (1-SSIM) / SSAO | bytes | timed on |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for n in method_order(ms):
         e = ms[n]
@@ -1029,12 +1036,14 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         pareto = " *" if n in result.get("pareto", []) else ""
         lines.append(
             f"| {n}{pareto} | {e['scope']} | {e['frames']} | {_fmt(e['ssim'], '.3f')} | {_fmt(e['rmse'], '.4f')} | "
-            f"{_fmt(e['seconds'] * 1e3 if e.get('seconds') is not None else None, '.2f')} | "
+            f"{_fmt(e.get('flip'), '.4f')} | {_fmt(e['seconds'] * 1e3 if e.get('seconds') is not None else None, '.2f')} | "
             f"{_fmt(e.get('time_ratio_vs_ssao'), '.2f')} | {_fmt(e.get('rmse_ratio_vs_ssao'), '.2f')} | "
             f"{_fmt(e.get('dssim_ratio_vs_ssao'), '.2f')} | {_bytes(e.get('bytes'))} | {e['time_on']} |"
         )
     lines += ["", "`*` on the Pareto front of (time, RMSE / SSAO). Ratios are over SSAO on the same frames "
-              "(an MLP or a field is measured on its own scene only)."]  # fmt: skip
+              "(an MLP or a field is measured on its own scene only). FLIP: NVIDIA's perceptual error "
+              "(flip-evaluator, LDR, 67 pixels per degree; 0 = identical), AO shown as grey with the "
+              "background set to 1 in both images, averaged over the foreground."]  # fmt: skip
     one_sided = [n for n in method_order(ms) if ms[n].get("available") and ms[n].get("two_sided") is False]
     if one_sided:
         lines += ["", "Single-sided surfaces: " + ", ".join(one_sided) + " store one value per vertex and so show "

@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 
+import flip_evaluator
 import numpy as np
 import pytest
 import torch
@@ -149,7 +150,7 @@ def test_report_metrics_match_an_independent_computation(report, workspace):
     box_rows = [f for f in r["frames"] if f["scene"] == "box"]
     assert sorted(f["view"] for f in box_rows) == [0, 1]  # val scene: held-back view 1, topped up with view 0
     for name, _, value in MLPS:
-        ssim, rmse = [], []
+        ssim, rmse, flip = [], [], []
         for row in spot_rows:
             frame = frames[("spot", row["view"])]
             (gt_file,) = (out / "gt").glob(f"spot-{row['view']:04d}-*.npz")
@@ -158,8 +159,13 @@ def test_report_metrics_match_an_independent_computation(report, workspace):
             pred = np.where(frame["mask"], np.float32(value), np.float32(1.0))
             ssim.append(masked_ssim(pred, gt["ao"], mask))
             rmse.append(masked_rmse(pred, gt["ao"], mask))
+            # FLIP straight from flip-evaluator: grey -> RGB, background 1 in both, mean over the mask
+            rgb = lambda a, m=mask: np.repeat(np.where(m, a, 1.0)[..., None], 3, 2).astype(np.float32)  # noqa: E731
+            error = flip_evaluator.evaluate(rgb(gt["ao"]), rgb(pred), "LDR", applyMagma=False)[0][..., 0]
+            flip.append(float(error[mask].mean()))
         assert abs(r["methods"][name]["ssim"] - np.mean(ssim)) < 1e-5
         assert abs(r["methods"][name]["rmse"] - np.mean(rmse)) < 1e-5
+        assert abs(r["methods"][name]["flip"] - np.mean(flip)) < 1e-5
 
 
 def test_ratios_are_over_ssao_on_the_same_frames(report):
