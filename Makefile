@@ -50,17 +50,22 @@ REPORT := $(BUILD)/report/report.md
 help: ## Show this help
 	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
 
-system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator
-	@if ! dpkg -s libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools >/dev/null 2>&1; then \
+# chromium + chromium-driver: the headless browser of the viewer test (tests/test_viewer.py, selenium).
+SYSTEM_PACKAGES := libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools chromium chromium-driver
+
+system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator, headless Chromium
+	@if ! dpkg -s $(SYSTEM_PACKAGES) >/dev/null 2>&1; then \
 	  echo "installing system packages (apt-get)"; \
 	  apt-get update -qq; \
-	  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools >/dev/null; \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_PACKAGES) >/dev/null; \
 	fi
 
 $(STAMP): pyproject.toml
 	$(MAKE) system-deps
 	test -x $(PY) || $(PYTHON_SYSTEM) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
+	# opencv-python-headless (older pins) and opencv-contrib-python-headless both install cv2/: keep one.
+	$(PY) -m pip uninstall -q -y opencv-python-headless 2>/dev/null || true
 	$(PY) -m pip install -q -e '.[dev]'
 	# pyrender pins PyOpenGL 3.1.0, which lacks OSMesaCreateContextAttribs: replace it (pip warns).
 	$(PY) -m pip install -q --no-deps 'PyOpenGL==3.1.10'

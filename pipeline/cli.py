@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "select": ("pipeline.select", "pick the cheapest AO representation that meets an error target per scene"),
     "volumes": ("pipeline.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),
     "probe": ("runtime.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
+    "view": ("runtime.viewer", "write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders"),
 }
 
 

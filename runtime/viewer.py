@@ -1,0 +1,267 @@
+"""`neuralao view`: a self-contained static WebGL2 page that shows a mesh with its AO.
+
+    neuralao view INPUT [INPUT ...] [--mesh MESH] --out DIR [--size W H] [--serve [--port P]]
+
+Each INPUT becomes one entry of the page's method switch:
+
+* a **vertex bake** (``neuralao bake ... --out X.ply|X.glb``): per-vertex float AO, interpolated;
+* a **texture bake** (``neuralao bake ... --to texture --out X.glb``): the occlusionTexture sampled
+  bilinearly (LINEAR, CLAMP_TO_EDGE) at the mesh's TEXCOORD_0, red channel;
+* an **MLP or field export folder** (``neuralao export``): its generated GLSL ES 3.00 fragment shader
+  (``glsl/mlp_es300.*``) run unchanged as a full-screen pass over the page's own float G-buffer, with its
+  uniform blocks (if any) bound by name as its manifest says. Its mesh is ``--mesh``, else the mesh
+  recorded in the export's manifest.
+
+The page (``DIR/index.html`` + ``viewer.js`` + ``scene.js``, no network access, no CDN: plain WebGL2,
+no third-party code) draws every frame in three passes:
+
+1. G-buffer: the mesh into RGBA32F targets (``EXT_color_buffer_float``): object-space position
+   (w = 1 on the foreground) and the object-space normal (area-weighted vertex normals turned to each
+   triangle's side, interpolated, renormalised, negated on back faces: the project's G-buffer
+   convention, pipeline/gbuffer.py), plus the AO of the baked methods;
+2. AO: for a shader method the generated pass; its sampler named ``u_position`` reads the position
+   target, any other (``u_normal``, the MLP's ``u_gbuffer``) the normal target (xyz normal, w mask);
+3. display: AO as grey on a dark background, to the canvas.
+
+An orbit camera (drag to rotate, wheel to zoom, keys 1-9 pick a method) and, for tests, a small API on
+``window.neuralao``: ``setPose(azimuth_deg, elevation_deg, distance_in_diagonals)``, ``setMethod(i)`` and
+``capture()``, which renders and returns the float targets (position, normal, AO; bottom row first) as
+base64 float32. All data (geometry, textures, shader sources, weights) is inlined as base64 in
+``scene.js``, so the page works from ``file://`` as well as over ``--serve``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import NeuralaoError
+from pipeline.io import write_text
+
+log = logging.getLogger(__name__)
+
+ASSETS = Path(__file__).resolve().parent / "viewer"
+STATIC_FILES = ("index.html", "viewer.js")
+FORMAT = "neuralao-viewer"
+FORMAT_VERSION = 1
+
+
+@dataclass
+class ViewerMethod:
+    """One entry of the method switch.
+
+    positions : (3m, 3) float32 corners of the de-indexed triangles (object space)
+    normals   : (3m, 3) float32 vertex normals turned to their triangle's side
+    ao        : (3m,) float32 per-corner AO (vertex bakes) or None
+    uv        : (3m, 2) float32 glTF UVs (origin top left) or None; texture : PNG bytes or None
+    shader    : {"vertex", "fragment", "inputs", "blocks"} of a generated pass, or None
+    """
+
+    name: str
+    kind: str  # vertex | texture | shader
+    positions: np.ndarray
+    normals: np.ndarray
+    ao: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    texture: bytes | None = None
+    shader: dict | None = None
+    info: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def corner_arrays(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """De-indexed corners (3m, 3) float32 and their normals (3m, 3) float32 (module doc, pass 1)."""
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64)
+    t = v[f]
+    fn = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])  # area weighted
+    vn = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(vn, f[:, k], fn)
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+    corner_n = vn[f]  # (m, 3, 3)
+    side = np.sign(np.einsum("mkd,md->mk", corner_n, fn))
+    corner_n = corner_n * np.where(side < 0, -1.0, 1.0)[..., None]
+    unit_fn = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    zero = np.linalg.norm(corner_n, axis=2) < 1e-12
+    corner_n[zero] = np.broadcast_to(unit_fn[:, None, :], corner_n.shape)[zero]
+    return t.reshape(-1, 3).astype(np.float32), corner_n.reshape(-1, 3).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def method_from_bake(path: Path) -> ViewerMethod:
+    """A vertex bake (.ply/.glb with float AO) or a texture bake (.glb with an occlusionTexture)."""
+    from pipeline.bake import read_baked_mesh
+    from pipeline.texture_bake import read_texture_glb
+
+    if path.suffix.lower() == ".glb":
+        try:
+            mesh, red = read_texture_glb(path)
+        except NeuralaoError:
+            mesh = None
+        if mesh is not None:
+            import io
+
+            from PIL import Image
+
+            pos, nrm = corner_arrays(mesh.vertices, mesh.faces)
+            uv = mesh.uv[mesh.faces].reshape(-1, 2)
+            uv_gltf = np.c_[uv[:, 0], 1.0 - uv[:, 1]].astype(np.float32)
+            buf = io.BytesIO()
+            Image.fromarray(np.rint(red * 255).astype(np.uint8), mode="L").save(buf, format="PNG")
+            return ViewerMethod(f"texture bake {red.shape[1]}x{red.shape[0]} ({path.name})", "texture", pos, nrm,
+                                uv=uv_gltf, texture=buf.getvalue())  # fmt: skip
+    vertices, faces, ao, _ = read_baked_mesh(path)
+    pos, nrm = corner_arrays(vertices, faces)
+    return ViewerMethod(
+        f"vertex bake ({path.name})", "vertex", pos, nrm, ao=ao[faces].reshape(-1).astype(np.float32)
+    )
+
+
+def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
+    """An MLP or field export: its ES 3.00 fragment pass, on ``mesh`` (default: the export's own mesh)."""
+    from export.glsl.files import load_mlp_export
+    from pipeline.scene import load_scene
+
+    try:
+        top = json.loads((folder / "manifest.json").read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        raise NeuralaoError(f"{folder} is not an export folder (no readable manifest.json)") from None
+    glsl_dir = folder / "glsl"
+    if not (glsl_dir / "manifest.json").exists():
+        raise NeuralaoError(
+            f"{folder} has no glsl/ fragment export (only MLP and field exports can be viewed)"
+        )
+    shader = load_mlp_export(glsl_dir, dialect="es300")
+    manifest = shader.manifest
+    mesh_path = mesh or top.get("mesh") or manifest.get("source_model_metadata", {}).get("training_mesh")
+    if not mesh_path:
+        raise NeuralaoError(f"{folder}: no mesh recorded in the export; pass --mesh")
+    scene = load_scene(mesh_path)
+    pos, nrm = corner_arrays(scene.vertices, scene.faces)
+    inputs = [
+        {"sampler": i["sampler"], "unit": int(i["unit"]), "source": "position" if i["texture"] == "position" else "normal"}
+        for i in manifest["passes"][0]["inputs"]
+    ]  # fmt: skip
+    blocks = [
+        {"name": name, "binding": int(binding), "data": _b64(np.ascontiguousarray(arr, "<f4").tobytes())}
+        for name, binding, arr in shader.uniform_blocks
+    ]
+    kind = manifest.get("kind") or top.get("kind") or "mlp"
+    size = top.get("model_size") or top.get("size") or ""
+    return ViewerMethod(
+        f"{kind} {size} ES 3.00 shader ({folder.name})".replace("  ", " "), "shader", pos, nrm,
+        shader={"vertex": shader.vertex_source, "fragment": shader.fragment_source, "inputs": inputs,
+                "blocks": blocks},
+        info={"export": str(folder), "mesh": str(mesh_path), "onnx": str(folder / "model.onnx")},
+    )  # fmt: skip
+
+
+def load_method(path: str, mesh: str | None) -> ViewerMethod:
+    p = Path(path)
+    if p.is_dir():
+        return method_from_export(p, mesh)
+    if not p.exists():
+        raise NeuralaoError(f"no such file or folder: {path}")
+    if p.suffix.lower() not in (".ply", ".glb"):
+        raise NeuralaoError(f"{p.name}: expected a bake (.ply/.glb) or an export folder")
+    return method_from_bake(p)
+
+
+# --------------------------------------------------------------------------- page
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
+def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
+    """The page's data (scene.js): methods with base64 arrays, the framing bounds, the canvas size."""
+    allpos = np.concatenate([m.positions for m in methods])
+    lo, hi = allpos.min(axis=0).astype(np.float64), allpos.max(axis=0).astype(np.float64)
+    out = []
+    for m in methods:
+        e = {"name": m.name, "kind": m.kind, "count": len(m.positions),
+             "positions": _b64(m.positions.astype("<f4").tobytes()), "normals": _b64(m.normals.astype("<f4").tobytes())}  # fmt: skip
+        if m.ao is not None:
+            e["ao"] = _b64(m.ao.astype("<f4").tobytes())
+        if m.uv is not None:
+            e["uv"] = _b64(m.uv.astype("<f4").tobytes())
+            e["texture"] = "data:image/png;base64," + _b64(m.texture)
+        if m.shader is not None:
+            e["shader"] = m.shader
+        e["info"] = m.info
+        out.append(e)
+    return {"format": FORMAT, "format_version": FORMAT_VERSION, "methods": out,
+            "bounds": [lo.tolist(), hi.tolist()], "size": [int(size[0]), int(size[1])]}  # fmt: skip
+
+
+def write_page(methods: list[ViewerMethod], out: Path, size: tuple[int, int] = (640, 480)) -> Path:
+    """index.html + viewer.js (static, from runtime/viewer/) + scene.js (the data); returns index.html."""
+    if not methods:
+        raise NeuralaoError("nothing to view")
+    out.mkdir(parents=True, exist_ok=True)
+    payload = scene_payload(methods, size)
+    write_text(out / "scene.js", "window.NEURALAO_SCENE = " + json.dumps(payload) + ";\n")
+    for name in STATIC_FILES:
+        write_text(out / name, (ASSETS / name).read_text())
+    write_text(out / "scene.json", json.dumps({k: v for k, v in payload.items() if k != "methods"} |
+                                              {"methods": [{"name": m.name, "kind": m.kind, **m.info} for m in methods]},
+                                              indent=2) + "\n")  # fmt: skip
+    return out / "index.html"
+
+
+def serve(folder: Path, port: int) -> None:
+    """Serve ``folder`` on http://127.0.0.1:PORT until interrupted."""
+    import functools
+    import http.server
+
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(folder))
+    with http.server.ThreadingHTTPServer(("127.0.0.1", port), handler) as httpd:
+        log.info(
+            "serving %s on http://127.0.0.1:%d/index.html (Ctrl-C stops)", folder, httpd.server_address[1]
+        )
+        httpd.serve_forever()
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("inputs", nargs="+", metavar="EXPORT_OR_BAKE",
+                   help="vertex bakes (.ply/.glb), texture bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
+    p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
+    p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
+    p.add_argument("--size", type=int, nargs=2, default=[640, 480], metavar=("W", "H"),
+                   help="canvas size in pixels (default 640 480)")  # fmt: skip
+    p.add_argument("--serve", action="store_true", help="serve the page on http://127.0.0.1:PORT afterwards")
+    p.add_argument(
+        "--port", type=int, default=8000, help="port for --serve (default 8000; 0 = any free port)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    w, h = args.size
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise NeuralaoError(f"--size must be in 1..8192, got {w} {h}")
+    if not 0 <= args.port <= 65535:
+        raise NeuralaoError(f"--port must be in 0..65535, got {args.port}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} is a file")
+    methods = [load_method(i, args.mesh) for i in args.inputs]
+    page = write_page(methods, out, (w, h))
+    log.info("viewer: %d method(s) -> %s", len(methods), page)
+    if args.serve:
+        serve(out, args.port)
+    return 0

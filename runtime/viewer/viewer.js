@@ -1,0 +1,323 @@
+// neuralao viewer: plain WebGL2, no dependencies. See runtime/viewer.py for the passes and the data.
+"use strict";
+
+(function () {
+  const S = window.NEURALAO_SCENE;
+  const canvas = document.getElementById("view");
+  const status = document.getElementById("status");
+  const params = new URLSearchParams(window.location.search);
+  const W = parseInt(params.get("w") || S.size[0], 10);
+  const H = parseInt(params.get("h") || S.size[1], 10);
+  canvas.width = W;
+  canvas.height = H;
+  const gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: true });
+  const api = { ready: false, error: null };
+  window.neuralao = api;
+  function fail(msg) {
+    api.error = msg;
+    status.textContent = "error: " + msg;
+    throw new Error(msg);
+  }
+  if (!gl) fail("WebGL2 is not available");
+  if (!gl.getExtension("EXT_color_buffer_float")) fail("EXT_color_buffer_float is not available (float targets)");
+
+  // ------------------------------------------------------------------ small helpers
+  function b64floats(s) {
+    const bin = atob(s);
+    const bytes = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
+    return new Float32Array(bytes.buffer);
+  }
+  function b64bytes(f32) {
+    const u8 = new Uint8Array(f32.buffer);
+    let s = "";
+    for (let i = 0; i < u8.length; i += 0x8000) s += String.fromCharCode.apply(null, u8.subarray(i, i + 0x8000));
+    return btoa(s);
+  }
+  function compile(type, src, what) {
+    const sh = gl.createShader(type);
+    gl.shaderSource(sh, src);
+    gl.compileShader(sh);
+    if (!gl.getShaderParameter(sh, gl.COMPILE_STATUS)) fail(what + ": " + gl.getShaderInfoLog(sh));
+    return sh;
+  }
+  function program(vs, fs, what) {
+    const p = gl.createProgram();
+    gl.attachShader(p, compile(gl.VERTEX_SHADER, vs, what + " (vertex)"));
+    gl.attachShader(p, compile(gl.FRAGMENT_SHADER, fs, what + " (fragment)"));
+    gl.linkProgram(p);
+    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) fail(what + ": " + gl.getProgramInfoLog(p));
+    return p;
+  }
+  function floatTarget(w, h) {
+    const t = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, w, h);
+    for (const k of [gl.TEXTURE_MIN_FILTER, gl.TEXTURE_MAG_FILTER]) gl.texParameteri(gl.TEXTURE_2D, k, gl.NEAREST);
+    return t;
+  }
+  // column-major 4x4 matrices
+  function mul(a, b) {
+    const o = new Float32Array(16);
+    for (let c = 0; c < 4; c++) for (let r = 0; r < 4; r++) {
+      let s = 0;
+      for (let k = 0; k < 4; k++) s += a[k * 4 + r] * b[c * 4 + k];
+      o[c * 4 + r] = s;
+    }
+    return o;
+  }
+  function perspective(fovy, aspect, near, far) {
+    const f = 1 / Math.tan(fovy / 2), o = new Float32Array(16);
+    o[0] = f / aspect; o[5] = f; o[10] = (far + near) / (near - far); o[11] = -1; o[14] = 2 * far * near / (near - far);
+    return o;
+  }
+  function lookAt(eye, at, up) {
+    const z = norm(sub(eye, at)), x = norm(cross(up, z)), y = cross(z, x);
+    return new Float32Array([x[0], y[0], z[0], 0, x[1], y[1], z[1], 0, x[2], y[2], z[2], 0,
+      -dot(x, eye), -dot(y, eye), -dot(z, eye), 1]);
+  }
+  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const norm = (a) => { const l = Math.hypot(a[0], a[1], a[2]) || 1; return [a[0] / l, a[1] / l, a[2] / l]; };
+
+  // ------------------------------------------------------------------ fixed programs
+  const GBUFFER_VS = `#version 300 es
+precision highp float;
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in float a_ao;
+layout(location = 3) in vec2 a_uv;
+uniform mat4 u_mvp;
+out vec3 v_position; out vec3 v_normal; out float v_ao; out vec2 v_uv;
+void main() {
+  v_position = a_position; v_normal = a_normal; v_ao = a_ao; v_uv = a_uv;
+  gl_Position = u_mvp * vec4(a_position, 1.0);
+}`;
+  const GBUFFER_FS = `#version 300 es
+precision highp float;
+precision highp sampler2D;
+in vec3 v_position; in vec3 v_normal; in float v_ao; in vec2 v_uv;
+uniform int u_mode;            // 0: vertex AO, 1: texture AO (red channel), 2: none (a shader pass follows)
+uniform sampler2D u_occlusion;
+layout(location = 0) out vec4 o_position;
+layout(location = 1) out vec4 o_normal;
+layout(location = 2) out vec4 o_ao;
+void main() {
+  vec3 n = normalize(v_normal);
+  if (!gl_FrontFacing) n = -n;   // viewer-facing, as pipeline/gbuffer.py
+  o_position = vec4(v_position, 1.0);
+  o_normal = vec4(n, 1.0);
+  float ao = u_mode == 0 ? v_ao : (u_mode == 1 ? texture(u_occlusion, v_uv).r : 1.0);
+  o_ao = vec4(ao, 0.0, 0.0, 1.0);
+}`;
+  const FULLSCREEN_VS = `#version 300 es
+void main() {
+  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+  gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}`;
+  const DISPLAY_FS = `#version 300 es
+precision highp float;
+precision highp sampler2D;
+uniform sampler2D u_ao;
+uniform sampler2D u_position;
+out vec4 o_colour;
+void main() {
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  float mask = texelFetch(u_position, p, 0).w;
+  float ao = clamp(texelFetch(u_ao, p, 0).r, 0.0, 1.0);
+  // AO written to the display as is (as AO maps are viewed: 0.5 shows as mid grey); background dark
+  vec3 c = mask >= 0.5 ? vec3(ao) : vec3(0.114, 0.122, 0.137);
+  o_colour = vec4(c, 1.0);
+}`;
+  const gbufferProg = program(GBUFFER_VS, GBUFFER_FS, "G-buffer");
+  const displayProg = program(FULLSCREEN_VS, DISPLAY_FS, "display");
+  const emptyVAO = gl.createVertexArray();
+
+  // ------------------------------------------------------------------ targets
+  const tPosition = floatTarget(W, H), tNormal = floatTarget(W, H), tBaked = floatTarget(W, H), tShader = floatTarget(W, H);
+  const depth = gl.createRenderbuffer();
+  gl.bindRenderbuffer(gl.RENDERBUFFER, depth);
+  gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT32F, W, H);
+  const fbGbuffer = gl.createFramebuffer();
+  gl.bindFramebuffer(gl.FRAMEBUFFER, fbGbuffer);
+  [tPosition, tNormal, tBaked].forEach((t, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0));
+  gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, depth);
+  gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1, gl.COLOR_ATTACHMENT2]);
+  if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) fail("G-buffer framebuffer incomplete");
+  const fbShader = gl.createFramebuffer();
+  gl.bindFramebuffer(gl.FRAMEBUFFER, fbShader);
+  gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tShader, 0);
+  if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) fail("AO framebuffer incomplete");
+
+  // ------------------------------------------------------------------ methods
+  function attribute(loc, data, size) {
+    const b = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, b);
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
+  }
+  let pending = 0;
+  const methods = S.methods.map((m) => {
+    const vao = gl.createVertexArray();
+    gl.bindVertexArray(vao);
+    attribute(0, b64floats(m.positions), 3);
+    attribute(1, b64floats(m.normals), 3);
+    if (m.ao) attribute(2, b64floats(m.ao), 1); else gl.vertexAttrib1f(2, 1.0);
+    if (m.uv) attribute(3, b64floats(m.uv), 2); else gl.vertexAttrib2f(3, 0.0, 0.0);
+    gl.bindVertexArray(null);
+    const out = { name: m.name, kind: m.kind, count: m.count, vao: vao };
+    if (m.texture) {
+      // glTF: UV (0, 0) is the image's top-left texel, the first row uploaded (no flip); LINEAR, CLAMP_TO_EDGE.
+      out.texture = gl.createTexture();
+      pending++;
+      const img = new Image();
+      img.onload = () => {
+        gl.bindTexture(gl.TEXTURE_2D, out.texture);
+        gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+        gl.texImage2D(gl.TEXTURE_2D, 0, gl.R8, img.width, img.height, 0, gl.RED, gl.UNSIGNED_BYTE, decodeRed(img));
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+        if (--pending === 0) start();
+      };
+      img.onerror = () => fail("cannot decode the occlusion texture of " + m.name);
+      img.src = m.texture;
+    }
+    if (m.shader) {
+      out.prog = program(m.shader.vertex, m.shader.fragment, "generated shader of " + m.name);
+      out.inputs = m.shader.inputs;
+      out.blocks = m.shader.blocks.map((b) => {
+        const buf = gl.createBuffer();
+        gl.bindBuffer(gl.UNIFORM_BUFFER, buf);
+        gl.bufferData(gl.UNIFORM_BUFFER, b64floats(b.data), gl.STATIC_DRAW);
+        const index = gl.getUniformBlockIndex(out.prog, b.name);
+        if (index !== gl.INVALID_INDEX) gl.uniformBlockBinding(out.prog, index, b.binding);
+        return { binding: b.binding, buffer: buf };
+      });
+    }
+    return out;
+  });
+  // exact 8-bit texel values, whatever the browser's colour management: read the PNG through a 2D canvas
+  function decodeRed(img) {
+    const c = document.createElement("canvas");
+    c.width = img.width; c.height = img.height;
+    const ctx = c.getContext("2d", { colorSpace: "srgb", willReadFrequently: true });
+    ctx.drawImage(img, 0, 0);
+    const rgba = ctx.getImageData(0, 0, img.width, img.height).data;
+    const red = new Uint8Array(img.width * img.height);
+    for (let i = 0; i < red.length; i++) red[i] = rgba[4 * i];
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    return red;
+  }
+
+  // ------------------------------------------------------------------ camera
+  const lo = S.bounds[0], hi = S.bounds[1];
+  const centre = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2];
+  const diag = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
+  const pose = { azimuth: 30, elevation: 20, distance: 1.6 };  // degrees, degrees, diagonals
+  let current = 0;
+  function mvp() {
+    const az = pose.azimuth * Math.PI / 180, el = pose.elevation * Math.PI / 180, r = pose.distance * diag;
+    const eye = [centre[0] + r * Math.cos(el) * Math.sin(az), centre[1] + r * Math.sin(el), centre[2] + r * Math.cos(el) * Math.cos(az)];
+    const near = Math.max(r - diag, r * 0.01), far = r + diag;
+    return mul(perspective(45 * Math.PI / 180, W / H, near, far), lookAt(eye, centre, [0, 1, 0]));
+  }
+
+  // ------------------------------------------------------------------ frame
+  function render() {
+    const m = methods[current];
+    gl.viewport(0, 0, W, H);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fbGbuffer);
+    gl.clearBufferfv(gl.COLOR, 0, new Float32Array([0, 0, 0, 0]));
+    gl.clearBufferfv(gl.COLOR, 1, new Float32Array([0, 0, 0, 0]));
+    gl.clearBufferfv(gl.COLOR, 2, new Float32Array([1, 0, 0, 0]));
+    gl.clearBufferfi(gl.DEPTH_STENCIL, 0, 1.0, 0);
+    gl.enable(gl.DEPTH_TEST);
+    gl.disable(gl.CULL_FACE);
+    gl.useProgram(gbufferProg);
+    gl.uniformMatrix4fv(gl.getUniformLocation(gbufferProg, "u_mvp"), false, mvp());
+    gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_mode"), m.kind === "vertex" ? 0 : m.kind === "texture" ? 1 : 2);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D, m.texture || null);
+    gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_occlusion"), 0);
+    gl.bindVertexArray(m.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, m.count);
+    gl.disable(gl.DEPTH_TEST);
+    let aoTex = tBaked;
+    if (m.prog) {  // the generated pass, unchanged, over the G-buffer
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fbShader);
+      gl.useProgram(m.prog);
+      for (const i of m.inputs) {
+        gl.activeTexture(gl.TEXTURE0 + i.unit);
+        gl.bindTexture(gl.TEXTURE_2D, i.source === "position" ? tPosition : tNormal);
+        gl.uniform1i(gl.getUniformLocation(m.prog, i.sampler), i.unit);
+      }
+      for (const b of m.blocks) gl.bindBufferBase(gl.UNIFORM_BUFFER, b.binding, b.buffer);
+      gl.bindVertexArray(emptyVAO);
+      gl.drawArrays(gl.TRIANGLES, 0, 3);
+      aoTex = tShader;
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.useProgram(displayProg);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D, aoTex);
+    gl.uniform1i(gl.getUniformLocation(displayProg, "u_ao"), 0);
+    gl.activeTexture(gl.TEXTURE1);
+    gl.bindTexture(gl.TEXTURE_2D, tPosition);
+    gl.uniform1i(gl.getUniformLocation(displayProg, "u_position"), 1);
+    gl.bindVertexArray(emptyVAO);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+    gl.bindVertexArray(null);
+    status.textContent = m.name;
+    return aoTex;
+  }
+  function readTexture(tex) {
+    const fb = gl.createFramebuffer();
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tex, 0);
+    const out = new Float32Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.FLOAT, out);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.deleteFramebuffer(fb);
+    return out;
+  }
+
+  // ------------------------------------------------------------------ UI
+  const select = document.getElementById("method");
+  methods.forEach((m, i) => { const o = document.createElement("option"); o.value = i; o.textContent = (i + 1) + ". " + m.name; select.appendChild(o); });
+  select.onchange = () => { current = parseInt(select.value, 10); render(); };
+  let drag = null;
+  canvas.addEventListener("mousedown", (e) => { drag = [e.clientX, e.clientY]; });
+  window.addEventListener("mouseup", () => { drag = null; });
+  window.addEventListener("mousemove", (e) => {
+    if (!drag) return;
+    pose.azimuth -= (e.clientX - drag[0]) * 0.4;
+    pose.elevation = Math.max(-89, Math.min(89, pose.elevation + (e.clientY - drag[1]) * 0.4));
+    drag = [e.clientX, e.clientY];
+    render();
+  });
+  canvas.addEventListener("wheel", (e) => { e.preventDefault(); pose.distance = Math.max(0.3, Math.min(10, pose.distance * Math.exp(e.deltaY * 0.001))); render(); }, { passive: false });
+  window.addEventListener("keydown", (e) => {
+    const k = parseInt(e.key, 10);
+    if (k >= 1 && k <= methods.length) { current = k - 1; select.value = current; render(); }
+  });
+
+  // ------------------------------------------------------------------ test API
+  api.methods = methods.map((m) => ({ name: m.name, kind: m.kind }));
+  api.size = [W, H];
+  api.setPose = (azimuth, elevation, distance) => { pose.azimuth = azimuth; pose.elevation = elevation; pose.distance = distance; render(); };
+  api.setMethod = (i) => { current = i; select.value = i; render(); };
+  api.capture = () => {
+    const aoTex = render();
+    gl.finish();
+    const dbg = gl.getExtension("WEBGL_debug_renderer_info");
+    const renderer = dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+    return { width: W, height: H, method: methods[current].name, renderer: renderer,
+      position: b64bytes(readTexture(tPosition)), normal: b64bytes(readTexture(tNormal)), ao: b64bytes(readTexture(aoTex)) };
+  };
+  function start() { render(); api.ready = true; }
+  if (pending === 0) start();
+})();
