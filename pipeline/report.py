@@ -116,8 +116,11 @@ class ReportSettings:
     seed: int = 0
     # Tracing threads (ground truth, baselines).
     workers: int = 2
-    # Write a contact sheet per scene.
+    # Write a contact sheet per scene (pipeline.report_figures: cropped, one row per method, error inset).
     contact_sheets: bool = True
+    # Write a viewer page per scene (`neuralao view`: its least-squares bake and its MLP / field shaders)
+    # under OUT/viewer/, linked from report.html.
+    viewer_pages: bool = True
     # Also score every frame with NVIDIA FLIP (pipeline.metrics.masked_flip, flip-evaluator; background
     # set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on one core.
     flip: bool = True
@@ -771,7 +774,9 @@ def evaluate(
                     images[m.name] = pred
             if fi == 0 and keep_images:
                 sheets[scene_name] = {"gt": gt, "mask": mask, "fg": np.asarray(frame["mask"], bool),
-                                      "view": int(frame["view"]), "images": images}  # fmt: skip
+                                      "view": int(frame["view"]), "images": images, "scene": ctx.scene,
+                                      "bakes": {k: v for k, v in ctx.bakes.items() if k == "vertex-lsq"},
+                                      "exports": _scene_exports(applicable, scene_name)}  # fmt: skip
             per_frame.append(row)
             bar.update(1)
         # timing at time_size, from the first frame's pose
@@ -1081,6 +1086,9 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
             lines += [f"![speed vs error]({figures['scatter']})", ""]
         for s, p in figures.get("contact_sheets", {}).items():
             lines += [f"![{s}]({p})", ""]
+        if figures.get("viewer"):
+            lines += ["WebGL2 viewer pages (`neuralao view`; also linked from report.html): "
+                      + ", ".join(f"[{s}]({p})" for s, p in figures["viewer"].items()), ""]
     if selection is not None:
         lines += ["", select_markdown(selection, heading="## Model selection")]
     if result.get("select_at"):
@@ -1192,44 +1200,22 @@ def scatter_plot(result: dict, path: Path) -> Path | None:
     return path
 
 
+def _scene_exports(methods: list[Method], scene: str) -> dict[str, str]:
+    """Method name -> export folder of the per-mesh networks (MLP, field) that apply to ``scene``."""
+    out = {}
+    for m in methods:
+        if m.family == "field" and m.scene_exports and scene in m.scene_exports:
+            out[m.name] = str(m.scene_exports[scene])
+        elif m.family == "mlp" and m.export is not None and m.scene == scene:
+            out[m.name] = str(m.export)
+    return out
+
+
 def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
-    """Ground truth | each method (top) and |method - ground truth| heat maps (bottom)."""
-    import matplotlib
+    """The scene's contact sheet (:func:`pipeline.report_figures.contact_sheet`)."""
+    from .report_figures import contact_sheet as readable_sheet
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = [n for n in order if n in sheet["images"]]
-    cols = 1 + len(names)
-    fig, axes = plt.subplots(2, cols, figsize=(1.9 * cols, 4.2), dpi=100, squeeze=False)
-    fg, mask, gt = sheet["fg"], sheet["mask"], sheet["gt"]
-    grey = np.where(fg, gt, 0.5)
-    axes[0, 0].imshow(grey, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-    axes[0, 0].set_title("ground truth", fontsize=8)
-    invalid = fg & ~mask
-    axes[1, 0].imshow(
-        np.where(invalid, 1.0, np.where(fg, 0.6, 0.2)), cmap="gray", vmin=0, vmax=1, interpolation="nearest"
-    )
-    axes[1, 0].set_title("invalid GT (white)", fontsize=8)
-    im = None
-    for k, n in enumerate(names, start=1):
-        pred = sheet["images"][n]
-        axes[0, k].imshow(np.where(fg, pred, 0.5), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-        axes[0, k].set_title(n, fontsize=8)
-        err = np.ma.masked_array(np.abs(pred - gt), mask=~mask)
-        im = axes[1, k].imshow(err, cmap="magma", vmin=0.0, vmax=0.5, interpolation="nearest")
-        rmse = float(np.sqrt(np.mean((pred[mask] - gt[mask]) ** 2))) if mask.any() else float("nan")
-        axes[1, k].set_title(f"|error| rmse {rmse:.3f}", fontsize=7)
-    for ax in axes.ravel():
-        ax.set_xticks([])
-        ax.set_yticks([])
-    if im is not None:
-        fig.colorbar(im, ax=axes[1, :].tolist(), fraction=0.02, pad=0.01)
-    fig.suptitle(f"{scene}, view {sheet['view']}", fontsize=9)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return path
+    return readable_sheet(scene, sheet, order, path)
 
 
 def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
@@ -1253,8 +1239,13 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     result["select_at"] = {
         str(t): select_from_results(result, t) for t in sorted(set(settings.select_targets))
     }
+    from .report_figures import write_html, write_viewer_pages
+
+    viewer_links = write_viewer_pages(sheets, out) if settings.viewer_pages else {}
+    figures["viewer"] = viewer_links
     result["figures"] = figures
     write_json(out / "report.json", result)
+    write_html(result, out, figures, viewer_links)
     write_text(out / "report.md", render_markdown(result, selection, figures))
     return result
 

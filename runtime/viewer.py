@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import hashlib
 import json
 import logging
 from dataclasses import dataclass, field
@@ -186,13 +187,18 @@ def _b64(data: bytes) -> str:
 
 
 def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
-    """The page's data (scene.js): methods with base64 arrays, the framing bounds, the canvas size."""
+    """The page's data (scene.js): meshes (shared by the methods on them) and methods as base64 float32,
+    the framing bounds, the canvas size."""
     allpos = np.concatenate([m.positions for m in methods])
     lo, hi = allpos.min(axis=0).astype(np.float64), allpos.max(axis=0).astype(np.float64)
-    out = []
+    out, geometries, index = [], [], {}
     for m in methods:
-        e = {"name": m.name, "kind": m.kind, "count": len(m.positions),
-             "positions": _b64(m.positions.astype("<f4").tobytes()), "normals": _b64(m.normals.astype("<f4").tobytes())}  # fmt: skip
+        pos, nrm = m.positions.astype("<f4").tobytes(), m.normals.astype("<f4").tobytes()
+        key = hashlib.sha256(pos + nrm).hexdigest()
+        if key not in index:  # methods on the same mesh share one copy of it
+            index[key] = len(geometries)
+            geometries.append({"count": len(m.positions), "positions": _b64(pos), "normals": _b64(nrm)})
+        e = {"name": m.name, "kind": m.kind, "geometry": index[key]}
         if m.ao is not None:
             e["ao"] = _b64(m.ao.astype("<f4").tobytes())
         if m.uv is not None:
@@ -202,7 +208,7 @@ def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
             e["shader"] = m.shader
         e["info"] = m.info
         out.append(e)
-    return {"format": FORMAT, "format_version": FORMAT_VERSION, "methods": out,
+    return {"format": FORMAT, "format_version": FORMAT_VERSION, "methods": out, "geometries": geometries,
             "bounds": [lo.tolist(), hi.tolist()], "size": [int(size[0]), int(size[1])]}  # fmt: skip
 
 
@@ -215,7 +221,7 @@ def write_page(methods: list[ViewerMethod], out: Path, size: tuple[int, int] = (
     write_text(out / "scene.js", "window.NEURALAO_SCENE = " + json.dumps(payload) + ";\n")
     for name in STATIC_FILES:
         write_text(out / name, (ASSETS / name).read_text())
-    write_text(out / "scene.json", json.dumps({k: v for k, v in payload.items() if k != "methods"} |
+    write_text(out / "scene.json", json.dumps({k: v for k, v in payload.items() if k not in ("methods", "geometries")} |
                                               {"methods": [{"name": m.name, "kind": m.kind, **m.info} for m in methods]},
                                               indent=2) + "\n")  # fmt: skip
     return out / "index.html"

@@ -189,6 +189,16 @@ def test_figures_are_real_pngs(report):
         with Image.open(out / name) as im:
             assert im.format == "PNG" and im.size[0] > 200 and im.size[1] > 200
     assert r["figures"]["scatter"] == "speed_vs_error.png"
+    # report.html links a viewer page per scene: its least-squares bake and the scene's MLP / field shaders
+    page = (out / "report.html").read_text()
+    assert "report.md" in page and "<th>FLIP</th>" in page
+    for scene in ("spot", "box"):
+        link = r["figures"]["viewer"][scene]
+        assert f'href="{link}"' in page and (out / link).is_file()
+        kinds = [m["name"] for m in json.loads((out / link).with_name("scene.json").read_text())["methods"]]
+        assert kinds[0] == "vertex-lsq (report bake)" and any(k.startswith("field-8x4") for k in kinds), kinds
+    spot = json.loads((out / r["figures"]["viewer"]["spot"]).with_name("scene.json").read_text())["methods"]
+    assert {"mlp-16x8 ES 3.00 shader", "mlp-32x16 ES 3.00 shader"} <= {m["name"] for m in spot}
 
 
 def _expected_choice(r: dict, scene: str, target: float) -> tuple[str, bool, list[str]]:

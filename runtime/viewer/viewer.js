@@ -158,12 +158,27 @@ void main() {
     gl.enableVertexAttribArray(loc);
     gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
   }
+  function buffer(data) {
+    const b = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, b);
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    return b;
+  }
+  function bindBuffer(loc, b, size) {
+    gl.bindBuffer(gl.ARRAY_BUFFER, b);
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
+  }
+  // one copy of each mesh, shared by the methods drawn on it
+  const geometries = S.geometries.map((g) => ({ count: g.count, positions: buffer(b64floats(g.positions)), normals: buffer(b64floats(g.normals)) }));
   let pending = 0;
   const methods = S.methods.map((m) => {
+    const g = geometries[m.geometry];
+    m.count = g.count;
     const vao = gl.createVertexArray();
     gl.bindVertexArray(vao);
-    attribute(0, b64floats(m.positions), 3);
-    attribute(1, b64floats(m.normals), 3);
+    bindBuffer(0, g.positions, 3);
+    bindBuffer(1, g.normals, 3);
     if (m.ao) attribute(2, b64floats(m.ao), 1); else gl.vertexAttrib1f(2, 1.0);
     if (m.uv) attribute(3, b64floats(m.uv), 2); else gl.vertexAttrib2f(3, 0.0, 0.0);
     gl.bindVertexArray(null);

@@ -1,0 +1,48 @@
+"""pipeline.report_figures: crops to the object and finds the worst error window (planted cases)."""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image
+
+from pipeline.report_figures import CROP_MARGIN, contact_sheet, crop_box, worst_window
+
+
+def test_crop_box_is_the_foreground_bounding_box_plus_the_margin():
+    fg = np.zeros((64, 80), bool)
+    fg[20:30, 10:50] = True
+    rs, cs = crop_box(fg)
+    assert (rs.start, rs.stop, cs.start, cs.stop) == (
+        20 - CROP_MARGIN,
+        30 + CROP_MARGIN,
+        10 - CROP_MARGIN,
+        50 + CROP_MARGIN,
+    )
+    fg[:, :] = False
+    fg[0, 79] = True  # clipped at the image border
+    rs, cs = crop_box(fg)
+    assert (rs.start, rs.stop, cs.start, cs.stop) == (0, 1 + CROP_MARGIN, 79 - CROP_MARGIN, 80)
+    assert crop_box(np.zeros((5, 6), bool)) == (slice(0, 5), slice(0, 6))
+
+
+def test_worst_window_finds_a_planted_error_block_and_ignores_invalid_pixels():
+    err = np.random.default_rng(0).random((50, 60)) * 0.05
+    err[31:39, 12:20] = 0.9
+    valid = np.ones_like(err, bool)
+    assert worst_window(err, valid, 8) == (31, 12)
+    valid[31:39, 12:20] = False  # the block is invalid ground truth: not the worst any more
+    r, c = worst_window(err, valid, 8)
+    assert not (r == 31 and c == 12)
+
+
+def test_contact_sheet_has_one_row_per_method(tmp_path):
+    yy, xx = np.mgrid[:64, :64]
+    fg = (yy - 32) ** 2 + (xx - 32) ** 2 < 15**2
+    gt = np.where(fg, 0.6, 1.0)
+    sheet = {"gt": gt, "mask": fg, "fg": fg, "view": 0, "images": {"a": gt, "b": gt * 0.5, "c": gt}}
+    h = []
+    for names in (["a"], ["a", "b", "c"]):
+        with Image.open(contact_sheet("s", sheet, names, tmp_path / f"{len(names)}.png")) as im:
+            assert im.format == "PNG"
+            h.append(im.size[1])
+    assert h[1] > 1.8 * h[0]  # rows grow with the methods
