@@ -639,9 +639,7 @@ def run(args: argparse.Namespace) -> int:
             raise NeuralaoError(
                 f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
             )
-        if getattr(args, "engine", "local") != "local":
-            raise NeuralaoError("level bakes run locally only (--engine ray is for single meshes and datasets)")
-        return run_level(args)
+        return run_level(args)  # --engine ray: the trace blocks become tasks (pipeline.level_bake)
     if args.set:
         raise NeuralaoError("--set needs --config (level bakes only)")
     if _refused_flag(args) is not None:
