@@ -235,3 +235,43 @@ def test_cli_bad_input_is_a_one_line_error(tmp_path, capsys, extra, message):
 def test_cli_texture_needs_a_glb(tmp_path, capsys):
     assert cli.main(["bake", "cornell_box", "--to", "texture", "--out", str(tmp_path / "x.ply")]) == 2
     assert ".glb" in capsys.readouterr().err
+
+
+def _glb_json(path):
+    data = path.read_bytes()
+    jlen, _ = struct.unpack_from("<II", data, 12)
+    gltf = json.loads(data[20 : 20 + jlen])
+    blen, _ = struct.unpack_from("<II", data, 20 + jlen)
+    binary = data[28 + jlen : 28 + jlen + blen]
+
+    def image(texture_index):
+        view = gltf["bufferViews"][gltf["images"][gltf["textures"][texture_index]["source"]]["bufferView"]]
+        start = view.get("byteOffset", 0)
+        return np.asarray(Image.open(io.BytesIO(binary[start : start + view["byteLength"]])).convert("RGB"))
+
+    return gltf, image
+
+
+def test_cli_keeps_the_source_base_colour_texture_with_mesh_uvs(tmp_path):
+    from trimesh.visual.material import PBRMaterial
+
+    mesh = corner_mesh()
+    colour = np.zeros((8, 8, 3), np.uint8)
+    colour[:, :4] = (200, 30, 30)
+    material = PBRMaterial(baseColorTexture=Image.fromarray(colour), roughnessFactor=0.4)
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False,
+                         visual=trimesh.visual.TextureVisuals(uv=mesh.uv, material=material))  # fmt: skip
+    src = tmp_path / "textured.glb"
+    src.write_bytes(tm.export(file_type="glb"))
+    out = tmp_path / "baked.glb"
+    args = ["bake", str(src), "--to", "texture", "--resolution", "32", "--rays", "16", "--max-distance", "1"]
+    assert cli.main([*args, "--out", str(out)]) == 0
+    gltf, image = _glb_json(out)
+    (mat,) = gltf["materials"]
+    pbr = mat["pbrMetallicRoughness"]
+    assert pbr["roughnessFactor"] == pytest.approx(0.4)
+    np.testing.assert_array_equal(image(pbr["baseColorTexture"]["index"]), colour)
+    ao = image(mat["occlusionTexture"]["index"])[:, :, 0]
+    assert ao.shape == (32, 32) and ao.min() < 200  # the contact shadow is in the red channel
+    uv_accessor = gltf["accessors"][gltf["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"]]
+    assert uv_accessor["count"] == 8  # the mesh's own UVs (8 vertices), not an atlas
