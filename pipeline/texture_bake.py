@@ -42,7 +42,7 @@ import numpy as np
 
 from .config import settings_to_dict
 from .errors import NeuralaoError
-from .io import atomic_path, write_png
+from .io import atomic_path, write_bytes, write_png
 from .labels import Labeller, LabelSettings
 from .scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
 
@@ -465,13 +465,21 @@ def png_path_for(out: str | Path) -> Path:
 
 def write_texture_glb(path: str | Path, mesh: UVMesh, image: np.ndarray) -> Path:
     """Write ``mesh`` with UVs and the AO map as its material's occlusionTexture to .glb, atomically."""
+    path = Path(path)
+    if path.suffix.lower() != ".glb":
+        raise NeuralaoError(f"--to texture writes a .glb, got {path.name!r}")
+    data = texture_glb_bytes(mesh, image)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def texture_glb_bytes(mesh: UVMesh, image: np.ndarray) -> bytes:
+    """The .glb of :func:`write_texture_glb` in memory."""
     import trimesh
     from PIL import Image
     from trimesh.visual.material import PBRMaterial
 
-    path = Path(path)
-    if path.suffix.lower() != ".glb":
-        raise NeuralaoError(f"--to texture writes a .glb, got {path.name!r}")
     grey = Image.fromarray(quantise(image), mode="L")
     if mesh.material is not None:
         material = mesh.material.to_pbr() if hasattr(mesh.material, "to_pbr") else mesh.material
@@ -487,10 +495,7 @@ def write_texture_glb(path: str | Path, mesh: UVMesh, image: np.ndarray) -> Path
         process=False,
         validate=False,
     )
-    data = tm.export(file_type="glb")
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data)
-    return path
+    return tm.export(file_type="glb")
 
 
 def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
@@ -569,8 +574,9 @@ def run_texture(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--out {out} is a folder")
     mesh = load_uv_mesh(args.mesh, settings)
     result = bake_texture(mesh, settings, progress=True)
+    data = texture_glb_bytes(mesh, result.ao)  # built before anything is written: both files or neither
     write_png(png_path_for(out), quantise(result.ao))
-    write_texture_glb(out, mesh, result.ao)
+    write_bytes(out, data)
     i = result.info
     log.info(
         "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",
