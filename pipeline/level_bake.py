@@ -605,20 +605,23 @@ def bake_lod(g: LevelGeometry, opaque_labeller: LevelLabeller, high_ao: np.ndarr
     vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
     t3 = time.perf_counter()
     # Gold standard at held-out LOD points: the traced samples of the full-resolution surface within the
-    # sphere, weighted by area and by distance to the boundary (no vertex bake, no resampling rays).
+    # sphere and facing the same way, weighted by area and by distance to the boundary (no vertex bake,
+    # no resampling rays).
     hold = surface_samples(
         lod, s.lod.holdout_samples, 4, s.seed + 4, counts=_holdout_counts(lod, s.lod.holdout_samples, s.seed)
     )
     f = blend(traced[:, 0], traced[:, 1], s.blend).astype(np.float64)
-    tree = cKDTree(samples.points[traced_valid])
+    pts, nrm = samples.points[traced_valid], samples.normals[traced_valid]
     fw, sw = f[traced_valid], samples.weights[traced_valid]
+    tree = cKDTree(pts)
     ref = np.full(len(hold), np.nan)
     for i, nb in enumerate(tree.query_ball_point(hold.points, radius)):
         if nb:
             nb = np.asarray(nb)
-            w = sw[nb] * np.maximum(
-                radius - np.linalg.norm(samples.points[traced_valid][nb] - hold.points[i], axis=1), 0
-            )
+            # The same surface only: samples facing within 60 degrees of the LOD point's normal (a
+            # wall beside a terrain point is nearby but is not what the LOD face stands for).
+            w = sw[nb] * np.maximum(radius - np.linalg.norm(pts[nb] - hold.points[i], axis=1), 0)
+            w = w * (nrm[nb] @ hold.normals[i] > 0.5)
             if w.sum() > 0:
                 ref[i] = np.sum(w * fw[nb]) / w.sum()
     m = np.isfinite(ref)
