@@ -46,10 +46,12 @@ TOL_SHADER = {
 # read-back float32 position. Every pixel strictly inside a triangle (barycentrics > 1e-3) is held to
 # it; pixels on an edge may belong to either triangle, and where the mesh duplicates vertices at UV
 # seams (spot.obj) the two sides carry different vertex AO, so there only the 99th percentile is.
-TOL_VERTEX = 2e-3
-# Texture bake: GPU bilinear filtering quantises its weights (8 fractional bits in SwiftShader) and
-# the texel a pixel lands in can differ at chart seams; bound the 99th percentile and the mean.
-TOL_TEXTURE_P99, TOL_TEXTURE_MEAN = 3.0 / 255, 2e-3
+# Measured under SwiftShader: inside max 6e-7, 99th percentile 2.5e-7.
+TOL_VERTEX = 1e-5
+# Texture bake: the GPU's LINEAR lookup of the 8-bit map vs pipeline.texture_bake.sample_bilinear. The
+# texel a pixel lands in can differ at chart seams (one pixel measured at 0.078), so the 99th
+# percentile and the mean are bounded. Measured under SwiftShader: p99 1.3e-6, mean <= 7e-5.
+TOL_TEXTURE_P99, TOL_TEXTURE_MEAN = 1e-4, 1e-3
 
 
 def _random_checkpoints(root: Path) -> tuple[Path, Path]:
