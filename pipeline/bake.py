@@ -72,7 +72,7 @@ import numpy as np
 from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path
-from .labels import Labeller, LabelSettings, hammersley, sample_shifts
+from .labels import Labeller, LabelSettings, check_label_args, hammersley, sample_shifts
 from .scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
@@ -582,15 +582,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def settings_from_args(args: argparse.Namespace) -> BakeSettings:
-    if args.rays < 1:
-        raise NeuralaoError(f"--rays must be >= 1, got {args.rays}")
-    if args.workers < 1:
-        raise NeuralaoError(f"--workers must be >= 1, got {args.workers}")
-    for flag, value in (("--max-distance", args.max_distance), ("--half-distance", args.half_distance)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
-    if args.half_distance is not None and args.kernel != "obscurance":
-        raise NeuralaoError("--half-distance only applies to --kernel obscurance")
+    check_label_args(args)
     settings = BakeSettings(
         rays=args.rays,
         max_distance=args.max_distance,

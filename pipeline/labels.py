@@ -707,3 +707,17 @@ def _run_chunks(
                 bar.update(futures[f])
     finally:
         bar.close()
+
+
+def check_label_args(args) -> None:
+    """The labelling flags every tracing command shares (--rays, --workers, --max-distance,
+    --half-distance, --kernel): a bad value is a one-line error."""
+    if args.rays < 1:
+        raise NeuralaoError(f"--rays must be >= 1, got {args.rays}")
+    if args.workers < 1:
+        raise NeuralaoError(f"--workers must be >= 1, got {args.workers}")
+    for flag, value in (("--max-distance", args.max_distance), ("--half-distance", args.half_distance)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
+    if args.half_distance is not None and args.kernel != "obscurance":
+        raise NeuralaoError("--half-distance only applies to --kernel obscurance")

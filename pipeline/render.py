@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -28,7 +27,7 @@ from .camera import Camera, load_poses, orbit
 from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import write_json, write_npz, write_png
-from .labels import LabelSettings
+from .labels import LabelSettings, check_label_args
 from .scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
@@ -95,17 +94,9 @@ def _check_args(args: argparse.Namespace) -> None:
         raise NeuralaoError(f"--size must be between 1 and {MAX_SIZE} in each dimension, got {w} {h}")
     if args.cameras is None and args.views < 1:
         raise NeuralaoError(f"--views must be >= 1, got {args.views}")
-    if args.rays < 1:
-        raise NeuralaoError(f"--rays must be >= 1, got {args.rays}")
-    for flag, value in (("--max-distance", args.max_distance), ("--half-distance", args.half_distance)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
-    if args.half_distance is not None and args.kernel != "obscurance":
-        raise NeuralaoError("--half-distance only applies to --kernel obscurance")
+    check_label_args(args)
     if not (0 < args.yfov < 180):
         raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
-    if args.workers < 1:
-        raise NeuralaoError(f"--workers must be >= 1, got {args.workers}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} exists and is not a folder")

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +42,7 @@ import numpy as np
 from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path, write_bytes, write_png
-from .labels import Labeller, LabelSettings
+from .labels import Labeller, LabelSettings, check_label_args
 from .scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
 
 log = logging.getLogger(__name__)
@@ -541,15 +540,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
     d = TextureBakeSettings()
-    if args.rays < 1:
-        raise NeuralaoError(f"--rays must be >= 1, got {args.rays}")
-    if args.workers < 1:
-        raise NeuralaoError(f"--workers must be >= 1, got {args.workers}")
-    for flag, value in (("--max-distance", args.max_distance), ("--half-distance", args.half_distance)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
-    if args.half_distance is not None and args.kernel != "obscurance":
-        raise NeuralaoError("--half-distance only applies to --kernel obscurance")
+    check_label_args(args)
     s = TextureBakeSettings(
         resolution=d.resolution if args.resolution is None else args.resolution,
         margin=d.margin if args.margin is None else args.margin,
