@@ -50,11 +50,14 @@ import numpy as np
 # Before torch loads: OpenMP threads that spin while another process holds a core made 2-thread torch
 # 20-50x slower here (360 ms instead of 7 ms for a 128x128 forward); passive waiting removes that.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# Compile times are reported: Mesa's on-disk shader cache would hide them on a rerun.
+os.environ.setdefault("MESA_SHADER_CACHE_DISABLE", "true")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from export.glsl.image import CONV_BLOCK  # noqa: E402
 from pipeline.errors import NeuralaoError  # noqa: E402
 from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.report import cpu_name
+from pipeline.report import cpu_name  # noqa: E402
 
 log = logging.getLogger("bench_unet")
 # The radius parameter rho of the timed runs (the cost does not depend on it).
@@ -62,6 +65,15 @@ BENCH_RHO = 0.1
 
 LARGE_PIXELS = 1_000_000  # sizes above this get --glsl-repeats-large GLSL rounds
 WARMUP_SIZE = 64  # padded side of the untimed JIT warm-up for power-of-two sizes (else 3 x multiple)
+
+
+def parse_block(text: str) -> tuple[int, int, int]:
+    """ "8,4,2" -> (8, 4, 2)."""
+    try:
+        x, y, layers = (int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a conv block looks like 8,4,2, got {text!r}") from None
+    return x, y, layers
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -154,8 +166,11 @@ def glsl_rounds(repeats: int, n: int) -> set[int]:
     return {int(round(v)) for v in np.linspace(0, repeats - 1, n)}
 
 
-def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int) -> dict:
-    """Interleaved rounds of torch / onnxruntime / GLSL on one input; medians, ratios, differences."""
+def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, others: dict | None = None) -> dict:
+    """Interleaved rounds of torch / onnxruntime / GLSL on one input; medians, ratios, differences.
+
+    others : {label: ComputeProgram} of the same graph generated with other conv blocks, timed in the
+    same rounds (``glsl_variants``)."""
     import torch
 
     from export.unet import run_padded
@@ -185,8 +200,20 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int) -> 
 
     out_spec = program.manifest["outputs"][0]
     run = _ComputeRun(program, h, w, scalars={"radius": BENCH_RHO})
+    variants = {label: _ComputeRun(prog, h, w, scalars={"radius": BENCH_RHO}) for label, prog in (others or {}).items()}
     x_gl = np.ascontiguousarray(x[None])
     glsl_out: dict[str, np.ndarray] = {}
+
+    def run_variant(label: str) -> float:
+        v = variants[label]
+        v.upload(x_gl)
+        gl.finish()
+        t0 = time.perf_counter()
+        v.dispatch()
+        gl.finish()
+        t1 = time.perf_counter()
+        glsl_out[label] = v.read(out_spec["texture"], out_spec["channels"])[0, 0]
+        return t1 - t0
 
     def run_glsl() -> dict[str, float]:
         t0 = time.perf_counter()
@@ -206,14 +233,21 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int) -> 
         run_torch1()
         fns = {"torch": run_torch, "torch_1thread": run_torch1, "onnxruntime": run_ort}
         times: dict[str, list] = {"torch": [], "torch_1thread": [], "onnxruntime": [], "glsl": []}
+        times.update({label: [] for label in variants})
         with_glsl = glsl_rounds(repeats, glsl_n)
+        for label in variants:  # untimed first dispatch at this size
+            run_variant(label)
         for r in range(repeats):
-            order = ["torch", "onnxruntime", "glsl", "torch_1thread"]
-            order = order[r % 4 :] + order[: r % 4]
+            order = ["torch", "onnxruntime", "glsl", "torch_1thread", *variants]
+            order = order[r % len(order) :] + order[: r % len(order)]
             for name in order:
                 if name == "glsl":
                     if r in with_glsl:
                         times["glsl"].append(run_glsl())
+                    continue
+                if name in variants:
+                    if r in with_glsl:
+                        times[name].append(run_variant(name))
                     continue
                 t0 = time.perf_counter()
                 fns[name]()
@@ -225,6 +259,8 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int) -> 
             )  # fmt: skip
     finally:
         run.release()
+        for v in variants.values():
+            v.release()
     y_gl = glsl_out["y"][:h, :w]
     med = lambda v: float(np.median(v))  # noqa: E731
     g = {k: med([t[k] for t in times["glsl"]]) for k in ("upload", "dispatch", "readback", "total")}
@@ -256,6 +292,10 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int) -> 
             "onnxruntime": [1e3 * t for t in times["onnxruntime"]],
             "glsl": [{k: 1e3 * v for k, v in t.items()} for t in times["glsl"]],
         },
+        "glsl_variants": {label: {"ms": 1e3 * med(times[label]), "ratio_ort": med(times[label]) / t_ort,
+                                  "speedup_of_default": med(times[label]) / g["dispatch"],
+                                  "max_abs_vs_ort": float(np.abs(glsl_out[label][:h, :w] - y_ort).max())}
+                          for label in variants},  # fmt: skip
         "max_abs_glsl_vs_ort": float(np.abs(y_gl - y_ort).max()),
         "max_abs_ort_vs_torch": float(np.abs(y_ort - y_torch).max()),
     }
@@ -427,6 +467,30 @@ def markdown(result: dict) -> str:
             f"{r['rounds']} ({r['glsl_rounds']}) | {r['max_abs_glsl_vs_ort']:.1e} | "
             f"{r['max_abs_ort_vs_torch']:.1e} |"
         )
+    labels = list(result["sizes"][0].get("glsl_variants", {})) if result["sizes"] else []
+    if labels:
+        default = "x".join(map(str, result["conv_block"]))
+        lines += [
+            "",
+            f"## Generated conv passes: texels x texels x output layers per invocation (default {default})",
+            "",
+            "The same graph generated with other conv blocks, timed in the same rounds (dispatch only). "
+            "Speed-up = that block's time / the default's. Compile = untimed first run(s) at the warm-up "
+            "size(s), shader cache off.",
+            "",
+            "| conv block | " + " | ".join(f"{r['size'][0]}x{r['size'][1]} ms (/ ORT)" for r in result["sizes"])
+            + " | speed-up of the default | compile s | max abs vs ORT |",
+            "|---|" + "---|" * (len(result["sizes"]) + 3),
+            f"| **{default}** (default) | " + " | ".join(f"{r['glsl_ms']:.0f} ({r['ratio_glsl_ort']:.1f})" for r in result["sizes"])
+            + f" | 1 | {result['glsl_warmup_s']:.1f} | {max(r['max_abs_glsl_vs_ort'] for r in result['sizes']):.1e} |",
+        ]
+        for label in labels:
+            v = [r["glsl_variants"][label] for r in result["sizes"]]
+            lines.append(
+                f"| {label} | " + " | ".join(f"{x['ms']:.0f} ({x['ratio_ort']:.1f})" for x in v)
+                + " | " + ", ".join(f"{x['speedup_of_default']:.1f}x" for x in v)
+                + f" | {result['glsl_variant_warmup_s'][label]:.1f} | {max(x['max_abs_vs_ort'] for x in v):.1e} |"
+            )
     lines += [
         "",
         "GLSL upload / readback ms: "
@@ -494,6 +558,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train-views", type=int, default=32, help="orbit views per mesh of the tiny dataset")
     p.add_argument("--train-rays", type=int, default=64, help="AO rays per pixel of the tiny dataset")
     p.add_argument("--no-train", action="store_true", help="skip the training timing")
+    p.add_argument("--compare-blocks", nargs="*", type=parse_block, default=[(1, 1, 1)], metavar="X,Y,L",
+                   help="conv blocks (texels x, y, output layers per invocation) timed beside the default "
+                        f"{CONV_BLOCK} in the same rounds (default: 1,1,1, one texel of one layer)")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     if args.repeats < 1 or args.glsl_repeats_large < 1 or args.epochs < 1:
@@ -523,13 +590,25 @@ def run(args: argparse.Namespace) -> int:
     log.info("exported: %d parameters, %d GLSL passes (%.1f s)", n_params, ex["glsl_passes"], ex["seconds"])
     ort = ort_runner(ex["onnx"])
     info = gl.context().info
+    default_block = tuple(CONV_BLOCK)
+    others = {}
+    from export.glsl import generate_compute
+    from export.onnx_io import load_onnx
+
+    for blk in args.compare_blocks:
+        if blk != default_block:
+            others["x".join(map(str, blk))] = generate_compute(load_onnx(ex["onnx"]), conv_block=blk)
     warm_s, warmed = 0.0, set()
+    warm_variants = {label: 0.0 for label in others}
+    warmed_variants: dict[str, set] = {label: set() for label in others}
     rows = []
     for w, h in args.sizes:
         warm_s += warm_glsl(program, w, h, warmed)
+        for label, prog in others.items():
+            warm_variants[label] += warm_glsl(prog, w, h, warmed_variants[label])
         x, input_source, fg = make_input(args.mesh, w, h, args.seed)
         glsl_n = args.repeats if w * h <= LARGE_PIXELS else args.glsl_repeats_large
-        row = time_size(model, ort, program, x, args.repeats, glsl_n)
+        row = time_size(model, ort, program, x, args.repeats, glsl_n, others)
         row["input"], row["foreground"] = input_source, fg
         rows.append(row)
         log.info(
@@ -559,6 +638,8 @@ def run(args: argparse.Namespace) -> int:
         },
         "export": ex,
         "glsl_warmup_s": warm_s,
+        "conv_block": list(default_block),
+        "glsl_variant_warmup_s": warm_variants,
         "glsl_warmup_sizes": sorted(warmed),
         "settings": {
             "repeats": args.repeats,

@@ -396,7 +396,8 @@ class _ComputeRun:
             prog = _program(compute=program.sources[p["shader"]])
             tex, tw, th, layers, internal = self.textures[p["output"]["texture"]]
             lx, ly, _ = p["local_size"]
-            groups = (-(-tw // lx), -(-th // ly), layers)
+            bx, by, bl = p.get("block", [1, 1, 1])  # texels x, y and layers per invocation
+            groups = (-(-tw // (lx * bx)), -(-th // (ly * by)), layers // bl)
             self.passes.append((p, prog, groups))
 
     def upload(self, x: np.ndarray) -> None:

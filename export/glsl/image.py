@@ -26,6 +26,10 @@ MAX_TEXTURE_SIZE = 16384
 MAX_ARRAY_LAYERS = 2048
 MAX_PARAM_BYTES = 1 << 27
 MAX_KERNEL = 15
+# Dense conv passes: texels x, texels y and output layers per invocation (bench/bench_unet.py measures
+# the choices); at most MAX_BLOCK_ACCUMULATORS vec4 accumulators per invocation.
+CONV_BLOCK = (8, 4, 2)
+MAX_BLOCK_ACCUMULATORS = 64
 # Alignment of each pass's parameter range in weights.bin (>= any GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT).
 PARAM_ALIGN = 256
 
@@ -1093,8 +1097,34 @@ def _conv_body(p: Pass, offs: dict[str, int]) -> str:
         fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
         for i, t in enumerate(p.inputs)
     )
+    if p.kind == "conv" and f.get("block", (1, 1, 1)) != (1, 1, 1):
+        return _conv_block_body(p, window)
     tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
     return fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+
+
+def _conv_block_body(p: Pass, window: dict) -> str:
+    """A conv whose invocation computes a block of texels x output layers (fields["block"])."""
+    f = p.fields
+    bx, by, bl = f["block"]
+    texels = bx * by
+    acc = "\n".join(fill("conv_block_acc", o=o, p=k, bias_offset=window["bias_offset"])
+                    for o in range(bl) for k in range(texels))  # fmt: skip
+    coords = "\n".join(fill("conv_block_coord", p=k, px=k % bx, py=k // bx, sx=window["sx"], sy=window["sy"],
+                             dx=window["dx"], dy=window["dy"], pad_left=window["pad_left"], pad_top=window["pad_top"])
+                        for k in range(texels))  # fmt: skip
+    layer_stride = window["kh"] * window["kw"] * 4 * f["in_layers"]  # vec4s between output layers' taps
+    loops = []
+    for i, t in enumerate(p.inputs):
+        fetches = "\n".join(fill("conv_block_fetch", p=k, src=f"src{i}") for k in range(texels))
+        products = []
+        for o in range(bl):
+            products.append(fill("conv_block_weight", o=o, off=o * layer_stride))
+            products.extend(fill("conv_block_fma", o=o, p=k) for k in range(texels))
+        loops.append(fill("conv_block_input_loop", layers=t.layers, layer_offset=f["layer_offsets"][i],
+                          fetches=fetches, products="\n".join(products)))  # fmt: skip
+    return fill("conv_block_body", acc_init=acc, kh=window["kh"], kw=window["kw"], weight_offset=window["weight_offset"],
+                tap_stride=4 * f["in_layers"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
 
 
 def _pool_body(p: Pass) -> str:
@@ -1171,21 +1201,24 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         body = fill("uniform_body", name=p.fields["uniform"])
     else:  # pragma: no cover - kinds are created above only
         raise AssertionError(p.kind)
-    epi = []
-    for e in p.epilogue:
-        if e.form == "act":
-            epi.append(fill("epilogue_act", expr=e.act.expr("r")))
-        elif e.form == "affine":
-            epi.append(fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]]))
-        elif e.form == "prelu":
-            epi.append(fill("epilogue_prelu", slope_offset=offs[e.arrays[0]]))
-        else:
-            epi.append(fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels))
     prelude = [fill("prelude")]
     if p.kind.startswith("resize"):
         prelude.append(fill("prelude_div"))
     if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
         prelude.append(fill("prelude_cubic"))
+    epi = _epilogue(p, offs, "gid.z")
+    if p.kind == "conv" and p.fields.get("block", (1, 1, 1)) != (1, 1, 1):
+        bx, by, bl = p.fields["block"]
+        stores = []
+        for o in range(bl):
+            for k in range(bx * by):
+                epi_o = _epilogue(p, offs, "at.z")
+                stores.append(fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k,
+                                   epilogue="\n".join("    " + line for line in epi_o.split("\n"))))  # fmt: skip
+        return fill("compute_pass_block", header=d.header(), pass_index=p.index, summary=" + ".join(p.ops),
+                    block_x=bx, block_y=by, block_layers=bl, local_x=local_size[0], local_y=local_size[1],
+                    prelude="\n\n".join(prelude), declarations="\n".join(decls), body=body,
+                    stores="\n".join(stores))  # fmt: skip
     return fill(
         "compute_pass",
         header=d.header(),
@@ -1197,8 +1230,23 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         declarations="\n".join(decls),
         out_layers=p.output.layers,
         body=body,
-        epilogue="\n".join(epi) if epi else fill("epilogue_none"),
+        epilogue=epi,
     )
+
+
+def _epilogue(p: Pass, offs: dict[str, int], z: str) -> str:
+    """The pass's per-texel epilogue on ``r``; ``z`` is the GLSL expression of the output layer."""
+    epi = []
+    for e in p.epilogue:
+        if e.form == "act":
+            epi.append(fill("epilogue_act", expr=e.act.expr("r")))
+        elif e.form == "affine":
+            epi.append(fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z))
+        elif e.form == "prelu":
+            epi.append(fill("epilogue_prelu", slope_offset=offs[e.arrays[0]], z=z))
+        else:
+            epi.append(fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels, z=z))
+    return "\n".join(epi) if epi else fill("epilogue_none")
 
 
 @dataclass
@@ -1237,9 +1285,19 @@ def _pad_multiple(table: ImageOps) -> int:
     return meta
 
 
+def _conv_block(block: tuple[int, int, int], layers: int) -> tuple[int, int, int]:
+    """(texels x, texels y, output layers) per invocation of a conv pass: the layer count is the
+    largest divisor of ``layers`` not above the requested one (every invocation fills whole layers)."""
+    bx, by, bl = (int(v) for v in block)
+    if bx < 1 or by < 1 or bl < 1 or bx * by * bl > MAX_BLOCK_ACCUMULATORS:
+        raise NeuralaoError(f"conv block {list(block)} must be positive with at most {MAX_BLOCK_ACCUMULATORS} accumulators")
+    return bx, by, max(d for d in range(1, min(bl, layers) + 1) if layers % d == 0)
+
+
 def generate_compute(
-    model: onnx.ModelProto, precision: str = "fp32", kind: str = "unet", local_size: tuple[int, int] = (8, 8)
-) -> ComputeProgram:
+    model: onnx.ModelProto, precision: str = "fp32", kind: str = "unet", local_size: tuple[int, int] = (8, 8),
+    conv_block: tuple[int, int, int] = CONV_BLOCK,
+) -> ComputeProgram:  # fmt: skip
     """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
 
     Storage: every tensor is a 2-D array texture, 4 channels per texel (channel c in layer c // 4,
@@ -1253,6 +1311,8 @@ def generate_compute(
     Beside the image, graph inputs of one element ((1, 1, 1, 1), (1,) or ()) are scalars: each is a
     ``uniform float`` that a "uniform" pass writes to a 1x1 one-channel RGBA32F texture (manifest
     ``uniforms``: ONNX input, declared shape, meaning, GLSL name, location, pass).
+    conv_block : (texels x, texels y, output layers) that one invocation of a (dense) conv pass
+    computes; (1, 1, 1) is one texel of one layer. The manifest's ``dispatch`` states the groups.
     """
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
@@ -1282,6 +1342,8 @@ def generate_compute(
     for p in table.passes:
         if p.kind in CONV_KINDS:
             _pack_conv(p)
+        if p.kind == "conv":
+            p.fields["block"] = _conv_block(conv_block, p.output.layers)
     multiple = _pad_multiple(table)
     if multiple > 1 and table.global_reads:
         raise NeuralaoError(
@@ -1339,6 +1401,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
     passes = []
     for p in table.passes:
         offs = p.param_offsets()
+        block = p.fields.get("block", (1, 1, 1)) if p.kind == "conv" else (1, 1, 1)
         entry = {
             "name": p.name,
             "shader": f"{p.name}.comp",
@@ -1350,10 +1413,11 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "output": {"texture": p.output.ident, "binding": 0, "as": "image2DArray writeonly, layered",
                        "format": textures[p.output.ident]["format"].lower()},
             "local_size": [local_size[0], local_size[1], 1],
+            "block": list(block),
             "dispatch": {"size_of": p.output.ident,
-                         "groups": [f"ceil(width({p.output.ident}) / {local_size[0]})",
-                                    f"ceil(height({p.output.ident}) / {local_size[1]})",
-                                    f"layers({p.output.ident}) = {p.output.layers}"]},
+                         "groups": [f"ceil(width({p.output.ident}) / {local_size[0] * block[0]})",
+                                    f"ceil(height({p.output.ident}) / {local_size[1] * block[1]})",
+                                    f"layers({p.output.ident}) / {block[2]} = {p.output.layers // block[2]}"]},
         }  # fmt: skip
         if p.index in ranges:
             off, size = ranges[p.index]

@@ -206,6 +206,62 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
                 }
             }"""
 
+# Conv, blocked: one invocation = a ${block_x} x ${block_y} block of output texels x ${block_layers}
+# output layers (z0 = block_layers * gid.z ..). Each input texel fetched feeds every output layer of
+# the block and each mat4 of weights every texel of it; accumulators a<o>_<p> are straight-line
+# registers (layer o, texel p), the tap and input-layer loops stay loops.
+_T["compute_pass_block"] = """${header}
+// neuralao compute pass ${pass_index}: ${summary}
+// One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) from layer ${block_layers} * gid.z.
+layout(local_size_x = ${local_x}, local_size_y = ${local_y}, local_size_z = 1) in;
+
+${prelude}
+
+${declarations}
+
+void main() {
+    ivec3 gid = ivec3(gl_GlobalInvocationID);
+    ivec2 out_size = imageSize(dst).xy;
+    ivec2 base = gid.xy * ivec2(${block_x}, ${block_y});
+    int z0 = gid.z * ${block_layers};
+    if (base.x >= out_size.x || base.y >= out_size.y) {
+        return;
+    }
+${body}
+${stores}
+}
+"""
+
+_T["conv_block_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+${acc_init}
+    for (int ky = 0; ky < ${kh}; ++ky) {
+        for (int kx = 0; kx < ${kw}; ++kx) {
+            int tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+${coords}
+${input_loops}
+        }
+    }"""
+_T["conv_block_acc"] = "    vec4 a${o}_${p} = prm[${bias_offset} + z0 + ${o}];"
+# Zero padding without a branch: the coordinate is clamped into the input and the texel scaled by
+# k = 1 inside, 0 outside (texels are finite, so 0 * texel is 0).
+_T["conv_block_coord"] = """            ivec2 q${p} = ivec2((base.x + ${px}) * ${sx} - ${pad_left} + kx * ${dx}, (base.y + ${py}) * ${sy} - ${pad_top} + ky * ${dy});
+            float k${p} = all(greaterThanEqual(q${p}, ivec2(0))) && all(lessThan(q${p}, in_size)) ? 1.0 : 0.0;
+            q${p} = clamp(q${p}, ivec2(0), in_size - 1);"""
+_T["conv_block_input_loop"] = """            for (int l = 0; l < ${layers}; ++l) {
+                int o = tap + (${layer_offset} + l) * 4;
+${fetches}
+${products}
+            }"""
+_T["conv_block_fetch"] = "                vec4 v${p} = texelFetch(${src}, ivec3(q${p}, l), 0) * k${p};"
+_T["conv_block_weight"] = "                mat4 m${o} = mat4(prm[o + ${off}], prm[o + ${off} + 1], prm[o + ${off} + 2], prm[o + ${off} + 3]);"
+_T["conv_block_fma"] = "                a${o}_${p} += m${o} * v${p};"
+_T["conv_block_store"] = """    if (base.x + ${px} < out_size.x && base.y + ${py} < out_size.y) {
+        ivec3 at = ivec3(base.x + ${px}, base.y + ${py}, z0 + ${o});
+        vec4 r = a${o}_${p};
+${epilogue}
+        imageStore(dst, at, r);
+    }"""
+
 # ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
 _T["conv_transpose_body"] = """${sizes}
     vec4 r = prm[${bias_offset} + gid.z];
@@ -482,11 +538,12 @@ _T["crop_body"] = """    int y = u_flip_y != 0 ? out_size.y - 1 - gid.y : gid.y;
     vec4 r = texelFetch(src0, ivec3(gid.x, y, gid.z), 0);"""
 
 _T["epilogue_act"] = "    r = ${expr};"
-_T["epilogue_affine"] = "    r = r * prm[${scale_offset} + gid.z] + prm[${shift_offset} + gid.z];"
-_T["epilogue_prelu"] = "    r = mix(r * prm[${slope_offset} + gid.z], r, greaterThanEqual(r, vec4(0.0)));"
+# ${z}: the output layer (gid.z, or at.z in a blocked conv's stores).
+_T["epilogue_affine"] = "    r = r * prm[${scale_offset} + ${z}] + prm[${shift_offset} + ${z}];"
+_T["epilogue_prelu"] = "    r = mix(r * prm[${slope_offset} + ${z}], r, greaterThanEqual(r, vec4(0.0)));"
 # constant / x; padding lanes divide by 1 (they stay finite).
 _T["epilogue_rdiv"] = (
-    "    r = prm[${offset} + gid.z] / mix(vec4(1.0), r, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), "
+    "    r = prm[${offset} + ${z}] / mix(vec4(1.0), r, lessThan(ivec4(4 * ${z}) + ivec4(0, 1, 2, 3), "
     "ivec4(${channels})));"
 )
 _T["epilogue_none"] = "    // no epilogue"
