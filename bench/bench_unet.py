@@ -5,7 +5,9 @@
 
 GitHub issue 4: inference cost at 512x512 and 1920x1080 for torch CPU, onnxruntime CPU and the
 generated GLSL compute passes on Mesa llvmpipe, in one run; parameters and bytes of the model;
-training time per epoch.
+training time per epoch. Issue 11: the same graph generated with other conv blocks
+(``--compare-blocks``: texels x, y and output layers per invocation; by default the steps from one
+texel of one layer to the default block) timed in the same rounds, with their compile times.
 
 1. Model: the paper architecture (``pipeline.unet`` defaults, widths 4/8/16/32) with a seeded random
    init, or ``--checkpoint`` (loaded weights_only by the project's loader). Timing does not depend on
@@ -558,9 +560,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train-views", type=int, default=32, help="orbit views per mesh of the tiny dataset")
     p.add_argument("--train-rays", type=int, default=64, help="AO rays per pixel of the tiny dataset")
     p.add_argument("--no-train", action="store_true", help="skip the training timing")
-    p.add_argument("--compare-blocks", nargs="*", type=parse_block, default=[(1, 1, 1)], metavar="X,Y,L",
+    p.add_argument("--compare-blocks", nargs="*", type=parse_block, default=[(1, 1, 1), (4, 4, 1), (8, 4, 1)],
+                   metavar="X,Y,L",
                    help="conv blocks (texels x, y, output layers per invocation) timed beside the default "
-                        f"{CONV_BLOCK} in the same rounds (default: 1,1,1, one texel of one layer)")  # fmt: skip
+                        f"{CONV_BLOCK} in the same rounds; the default list is the steps to it: one texel of "
+                        "one layer (before), 4x4 texels, 8x4 texels")  # fmt: skip
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     if args.repeats < 1 or args.glsl_repeats_large < 1 or args.epochs < 1:
