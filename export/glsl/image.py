@@ -1108,10 +1108,10 @@ def _conv_block_body(p: Pass, window: dict) -> str:
     f = p.fields
     bx, by, bl = f["block"]
     texels = bx * by
-    acc = "\n".join(fill("conv_block_acc", o=o, p=k, bias_offset=window["bias_offset"])
-                    for o in range(bl) for k in range(texels))  # fmt: skip
-    coords = "\n".join(fill("conv_block_coord", p=k, px=k % bx, py=k // bx, sx=window["sx"], sy=window["sy"],
-                             dx=window["dx"], dy=window["dy"], pad_left=window["pad_left"], pad_top=window["pad_top"])
+    acc = [fill("conv_block_bias", o=o, bias_offset=window["bias_offset"]) for o in range(bl)]
+    acc += [fill("conv_block_acc", names=", ".join(fill("conv_block_acc_name", o=o, p=k) for k in range(texels)))
+            for o in range(bl)]  # fmt: skip
+    coords = "\n".join(fill("conv_block_coord", p=k, qx=(k % bx) * window["sx"], qy=(k // bx) * window["sy"])
                         for k in range(texels))  # fmt: skip
     layer_stride = window["kh"] * window["kw"] * 4 * f["in_layers"]  # vec4s between output layers' taps
     loops = []
@@ -1120,11 +1120,15 @@ def _conv_block_body(p: Pass, window: dict) -> str:
         products = []
         for o in range(bl):
             products.append(fill("conv_block_weight", o=o, off=o * layer_stride))
-            products.extend(fill("conv_block_fma", o=o, p=k) for k in range(texels))
+            for k0 in range(0, texels, 4):  # four accumulations a line
+                fmas = " ".join(fill("conv_block_fma", o=o, p=k) for k in range(k0, min(k0 + 4, texels)))
+                products.append(fill("conv_block_fmas", fmas=fmas))
         loops.append(fill("conv_block_input_loop", layers=t.layers, layer_offset=f["layer_offsets"][i],
                           fetches=fetches, products="\n".join(products)))  # fmt: skip
-    return fill("conv_block_body", acc_init=acc, kh=window["kh"], kw=window["kw"], weight_offset=window["weight_offset"],
-                tap_stride=4 * f["in_layers"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
+    return fill("conv_block_body", acc_init="\n".join(acc), kh=window["kh"], kw=window["kw"],
+                weight_offset=window["weight_offset"], tap_stride=4 * f["in_layers"], sx=window["sx"],
+                sy=window["sy"], dx=window["dx"], dy=window["dy"], pad_left=window["pad_left"],
+                pad_top=window["pad_top"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
 
 
 def _pool_body(p: Pass) -> str:
@@ -1209,15 +1213,11 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
     epi = _epilogue(p, offs, "gid.z")
     if p.kind == "conv" and p.fields.get("block", (1, 1, 1)) != (1, 1, 1):
         bx, by, bl = p.fields["block"]
-        stores = []
-        for o in range(bl):
-            for k in range(bx * by):
-                epi_o = _epilogue(p, offs, "at.z")
-                stores.append(fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k,
-                                   epilogue="\n".join("    " + line for line in epi_o.split("\n"))))  # fmt: skip
+        stores = [fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k) for o in range(bl) for k in range(bx * by)]
+        epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z").split("\n"))
         return fill("compute_pass_block", header=d.header(), pass_index=p.index, summary=" + ".join(p.ops),
                     block_x=bx, block_y=by, block_layers=bl, local_x=local_size[0], local_y=local_size[1],
-                    prelude="\n\n".join(prelude), declarations="\n".join(decls), body=body,
+                    prelude="\n\n".join(prelude), declarations="\n".join(decls), epilogue=epi_z, body=body,
                     stores="\n".join(stores))  # fmt: skip
     return fill(
         "compute_pass",

@@ -209,7 +209,8 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
 # Conv, blocked: one invocation = a ${block_x} x ${block_y} block of output texels x ${block_layers}
 # output layers (z0 = block_layers * gid.z ..). Each input texel fetched feeds every output layer of
 # the block and each mat4 of weights every texel of it; accumulators a<o>_<p> are straight-line
-# registers (layer o, texel p), the tap and input-layer loops stay loops.
+# registers (layer o, texel p), the tap and input-layer loops stay loops. Helper functions keep the
+# source short (the compiler inlines them).
 _T["compute_pass_block"] = """${header}
 // neuralao compute pass ${pass_index}: ${summary}
 // One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) from layer ${block_layers} * gid.z.
@@ -219,12 +220,31 @@ ${prelude}
 
 ${declarations}
 
+// Zero padding without a branch: q is clamped into the input; returns 1 inside, 0 outside (texels
+// are finite, so 0 * texel is 0).
+float nao_clip(inout ivec2 q, ivec2 size) {
+    float k = all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, size)) ? 1.0 : 0.0;
+    q = clamp(q, ivec2(0), size - 1);
+    return k;
+}
+
+mat4 nao_tap(int o) {
+    return mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+}
+
+// Epilogue and store of output texel xy, layer z (skipped outside the output: partial blocks).
+void nao_store(ivec2 xy, int z, vec4 r) {
+    if (all(lessThan(xy, imageSize(dst).xy))) {
+${epilogue}
+        imageStore(dst, ivec3(xy, z), r);
+    }
+}
+
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
-    ivec2 out_size = imageSize(dst).xy;
     ivec2 base = gid.xy * ivec2(${block_x}, ${block_y});
     int z0 = gid.z * ${block_layers};
-    if (base.x >= out_size.x || base.y >= out_size.y) {
+    if (any(greaterThanEqual(base, imageSize(dst).xy))) {
         return;
     }
 ${body}
@@ -237,30 +257,25 @@ ${acc_init}
     for (int ky = 0; ky < ${kh}; ++ky) {
         for (int kx = 0; kx < ${kw}; ++kx) {
             int tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+            ivec2 qb = base * ivec2(${sx}, ${sy}) + ivec2(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
 ${coords}
 ${input_loops}
         }
     }"""
-_T["conv_block_acc"] = "    vec4 a${o}_${p} = prm[${bias_offset} + z0 + ${o}];"
-# Zero padding without a branch: the coordinate is clamped into the input and the texel scaled by
-# k = 1 inside, 0 outside (texels are finite, so 0 * texel is 0).
-_T["conv_block_coord"] = """            ivec2 q${p} = ivec2((base.x + ${px}) * ${sx} - ${pad_left} + kx * ${dx}, (base.y + ${py}) * ${sy} - ${pad_top} + ky * ${dy});
-            float k${p} = all(greaterThanEqual(q${p}, ivec2(0))) && all(lessThan(q${p}, in_size)) ? 1.0 : 0.0;
-            q${p} = clamp(q${p}, ivec2(0), in_size - 1);"""
+_T["conv_block_bias"] = "    vec4 b${o} = prm[${bias_offset} + z0 + ${o}];"
+_T["conv_block_acc"] = "    vec4 ${names};"
+_T["conv_block_acc_name"] = "a${o}_${p} = b${o}"
+_T["conv_block_coord"] = "            ivec2 q${p} = qb + ivec2(${qx}, ${qy}); float k${p} = nao_clip(q${p}, in_size);"
 _T["conv_block_input_loop"] = """            for (int l = 0; l < ${layers}; ++l) {
                 int o = tap + (${layer_offset} + l) * 4;
 ${fetches}
 ${products}
             }"""
 _T["conv_block_fetch"] = "                vec4 v${p} = texelFetch(${src}, ivec3(q${p}, l), 0) * k${p};"
-_T["conv_block_weight"] = "                mat4 m${o} = mat4(prm[o + ${off}], prm[o + ${off} + 1], prm[o + ${off} + 2], prm[o + ${off} + 3]);"
-_T["conv_block_fma"] = "                a${o}_${p} += m${o} * v${p};"
-_T["conv_block_store"] = """    if (base.x + ${px} < out_size.x && base.y + ${py} < out_size.y) {
-        ivec3 at = ivec3(base.x + ${px}, base.y + ${py}, z0 + ${o});
-        vec4 r = a${o}_${p};
-${epilogue}
-        imageStore(dst, at, r);
-    }"""
+_T["conv_block_weight"] = "                mat4 m${o} = nao_tap(o + ${off});"
+_T["conv_block_fma"] = "a${o}_${p} += m${o} * v${p};"
+_T["conv_block_fmas"] = "                ${fmas}"
+_T["conv_block_store"] = "    nao_store(base + ivec2(${px}, ${py}), z0 + ${o}, a${o}_${p});"
 
 # ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
 _T["conv_transpose_body"] = """${sizes}
