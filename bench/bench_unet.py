@@ -206,29 +206,24 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
     x_gl = np.ascontiguousarray(x[None])
     glsl_out: dict[str, np.ndarray] = {}
 
-    def run_variant(label: str) -> float:
-        v = variants[label]
-        v.upload(x_gl)
-        gl.finish()
+    def run_program(r, key: str) -> dict[str, float]:
         t0 = time.perf_counter()
-        v.dispatch()
+        r.upload(x_gl)
         gl.finish()
         t1 = time.perf_counter()
-        glsl_out[label] = v.read(out_spec["texture"], out_spec["channels"])[0, 0]
-        return t1 - t0
-
-    def run_glsl() -> dict[str, float]:
-        t0 = time.perf_counter()
-        run.upload(x_gl)
-        gl.finish()
-        t1 = time.perf_counter()
-        run.dispatch()
+        r.dispatch()
         gl.finish()
         t2 = time.perf_counter()
-        y = run.read(out_spec["texture"], out_spec["channels"])
+        y = r.read(out_spec["texture"], out_spec["channels"])
         t3 = time.perf_counter()
-        glsl_out["y"] = y[0, 0]
+        glsl_out[key] = y[0, 0]
         return {"upload": t1 - t0, "dispatch": t2 - t1, "readback": t3 - t2, "total": t3 - t0}
+
+    def run_glsl() -> dict[str, float]:
+        return run_program(run, "y")
+
+    def run_variant(label: str) -> float:  # dispatch only
+        return run_program(variants[label], label)["dispatch"]
 
     try:
         y_torch, y_ort = run_torch(), run_ort()  # untimed warm-up (and the outputs for the sanity check)
@@ -599,9 +594,10 @@ def run(args: argparse.Namespace) -> int:
     from export.glsl import generate_compute
     from export.onnx_io import load_onnx
 
+    proto = load_onnx(ex["onnx"])
     for blk in args.compare_blocks:
         if blk != default_block:
-            others["x".join(map(str, blk))] = generate_compute(load_onnx(ex["onnx"]), conv_block=blk)
+            others["x".join(map(str, blk))] = generate_compute(proto, conv_block=blk)
     warm_s, warmed = 0.0, set()
     warm_variants = {label: 0.0 for label in others}
     warmed_variants: dict[str, set] = {label: set() for label in others}

@@ -1097,10 +1097,16 @@ def _conv_body(p: Pass, offs: dict[str, int]) -> str:
         fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
         for i, t in enumerate(p.inputs)
     )
-    if p.kind == "conv" and f.get("block", (1, 1, 1)) != (1, 1, 1):
+    if _blocked(p):
         return _conv_block_body(p, window)
     tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
     return fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+
+
+def _blocked(p: Pass) -> bool:
+    """A dense conv pass whose invocation computes more than one texel of one layer (fields["block"],
+    set for every dense conv by :func:`generate_compute`)."""
+    return p.kind == "conv" and p.fields["block"] != (1, 1, 1)
 
 
 def _conv_block_body(p: Pass, window: dict) -> str:
@@ -1211,7 +1217,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
     if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
         prelude.append(fill("prelude_cubic"))
     epi = _epilogue(p, offs, "gid.z")
-    if p.kind == "conv" and p.fields.get("block", (1, 1, 1)) != (1, 1, 1):
+    if _blocked(p):
         bx, by, bl = p.fields["block"]
         stores = [fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k) for o in range(bl) for k in range(bx * by)]
         epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z").split("\n"))
@@ -1401,7 +1407,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
     passes = []
     for p in table.passes:
         offs = p.param_offsets()
-        block = p.fields.get("block", (1, 1, 1)) if p.kind == "conv" else (1, 1, 1)
+        block = p.fields["block"] if p.kind == "conv" else (1, 1, 1)
         entry = {
             "name": p.name,
             "shader": f"{p.name}.comp",
