@@ -86,7 +86,7 @@ def markdown(result: dict) -> str:
         "",
         f"Trace: {result['trace_mrays_per_s']:.2f} M rays/s. Peak memory (RSS) {info['peak_rss_bytes'] / 2**30:.1f} GiB. "
         f"{result['cpu_count']} cores; load average {result['load_before'][0]:.2f} before, {result['load_after'][0]:.2f} after "
-        f"(1-min), so other jobs shared the cores.",
+        f"(1-min; the bake itself accounts for up to {result['cpu_count']}: above that, other jobs shared the cores).",
     ]
     return "\n".join(lines) + "\n"
 
