@@ -187,10 +187,11 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
     t_ctx = result["t_context_s"] * TABLE1_FACES / result["faces"]  # BVH build ~ linear in faces: upper bound
     serial, source = 0.0, "not measured (no bench_level.json): trace stage only"
     if level_json is not None and level_json.is_file():
-        info = json.loads(level_json.read_text()).get("info", {})
-        stages = info.get("stages", [])
-        serial = sum(s["seconds"] for s in stages if s["stage"] != "trace")
-        source = f"{level_json} (every stage but the trace, on this machine)"
+        data = json.loads(level_json.read_text())
+        stages = data.get("bake", data.get("info", {})).get("stages", [])
+        # every production stage but the trace (the error-table check is not part of a bake's work)
+        serial = sum(s["seconds"] for s in stages if s["stage"] not in ("trace", "blend_check"))
+        source = f"{level_json} (every production stage but the trace, on the driver, on this machine)"
     rows = []
     for n in machines:
         tasks = TASKS_PER_CORE * n * cores
@@ -208,8 +209,10 @@ def markdown(result: dict, proj: dict) -> str:
         "# Ray vs local engine at equal cores",
         "",
         f"load average before {result['load_average_before']}, after {result['load_average_after']} "
-        f"({result['cpu_count']} CPUs; a background job shared them: compare ratios, not seconds). "
-        f"Best of {result['repeats']} interleaved rounds. Ray: fresh actors per round (process start excluded, "
+        f"({result['cpu_count']} CPUs; "
+        + ("a background job shared them: compare ratios, not seconds). "
+           if result["load_average_before"][0] > 0.5 * result["cpu_count"] else "idle before the run). ")
+        + f"Best of {result['repeats']} interleaved rounds. Ray: fresh actors per round (process start excluded, "
         "their imports, GL context and scene states included, as in one CLI run); Ray warm: the same work "
         "again on those actors.",
         "",

@@ -74,8 +74,24 @@ class LevelLabeller(Labeller):
         ao[~np.isfinite(local).all(axis=1)] = 1.0
         return ao, valid & ok
 
+    # Early out of the back-face rule: after each of these points of the ray loop, samples whose back-face
+    # hits already exceed the threshold (so are invalid whatever the rest would hit) trace no more rays.
+    # Valid samples trace every ray and their AO is bit for bit the full trace's (tests/test_level_trace.py).
+    early_out = True
+
+    def _checkpoints(self, n_rays: int) -> list[int]:
+        """Ray counts after which the back-face rule is checked: the first count that can prove a sample
+        invalid, half the rays, all of them (just ``[n_rays]`` without the rule or the early out)."""
+        if not (self.backface_rule and self.early_out):
+            return [n_rays]
+        first = int(np.floor(self._threshold * n_rays)) + 1
+        return sorted({p for p in (max(first, 8), n_rays // 2) if 0 < p < n_rays} | {n_rays})
+
     def _trace_halves(self, origins, frames, jitter, h_local, foliage):
-        """One INTERSECT per ray; rho at each half distance (the arithmetic of ``Labeller._trace``)."""
+        """One INTERSECT per ray; rho at each half distance (the arithmetic of ``Labeller._trace``).
+
+        Rays go in rounds (:meth:`_checkpoints`): a sample the back-face rule has already rejected traces
+        no more rounds, and its AO (unused: it is invalid) is the mean over the rays it traced."""
         m, n_rays = len(origins), self._rays
         dirs_p, orig_p, tmp, dists = self._buffers(m * n_rays)
         self._directions(frames, jitter, dirs_p.reshape(3, m, n_rays), tmp.reshape(m, n_rays))
@@ -83,32 +99,66 @@ class LevelLabeller(Labeller):
             orig_p[c].reshape(m, n_rays)[:] = origins[:, c, None]
         dirs, orig = dirs_p.T, orig_p.T
         r = self._r_local
-        dists.fill(r)
-        out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
-        prim, tfar = out["primID"], np.array(out["tfar"])
-        back_ok = np.ones(m, dtype=bool)
-        if self.backface_rule:
-            hit_idx = np.flatnonzero(prim >= 0)
-            fn = self._face_normals32[prim[hit_idx]]
-            facing = dirs_p[0, hit_idx] * fn[:, 0]
-            facing += dirs_p[1, hit_idx] * fn[:, 1]
-            facing += dirs_p[2, hit_idx] * fn[:, 2]
-            back = np.bincount(hit_idx[facing > 0] // n_rays, minlength=m)
-            back_ok = back / n_rays <= self._threshold
+        tfar = np.full(m * n_rays, r, np.float32)  # untraced rays read as misses
+        back = np.zeros(m, np.int64)
+        done = np.full(m, n_rays)  # rays traced per sample
+        active, lo = np.arange(m), 0
+        for hi in self._checkpoints(n_rays):
+            if not len(active):
+                break
+            if lo == 0 and hi == n_rays:  # one round: every ray of every sample, no gather
+                ids, o, d = None, orig, dirs
+                dists.fill(r)
+                t_in = dists
+            else:
+                ids = (active[:, None] * n_rays + np.arange(lo, hi)).ravel()
+                o, d, t_in = orig[ids], dirs[ids], np.full(len(ids), r, np.float32)
+            out = self._embree.run(o, d, query="INTERSECT", dists=t_in, output=1)
+            prim = out["primID"]
+            if ids is None:
+                tfar[:] = out["tfar"]
+            else:
+                tfar[ids] = out["tfar"]
+            if self.backface_rule:
+                hit_idx = np.flatnonzero(prim >= 0)
+                ray = hit_idx if ids is None else ids[hit_idx]
+                fn = self._face_normals32[prim[hit_idx]]
+                facing = dirs_p[0, ray] * fn[:, 0]
+                facing += dirs_p[1, ray] * fn[:, 1]
+                facing += dirs_p[2, ray] * fn[:, 2]
+                back += np.bincount(ray[facing > 0] // n_rays, minlength=m)
+            if hi < n_rays:
+                stop = back[active] / n_rays > self._threshold
+                done[active[stop]] = hi
+                active = active[~stop]
+            lo = hi
+        back_ok = back / n_rays <= self._threshold if self.backface_rule else np.ones(m, dtype=bool)
+        partial = np.flatnonzero(done < n_rays)
         vis = None
         if foliage is not None and not foliage.empty:
             start = np.repeat(foliage.origin_density(origins), n_rays)
-            vis = foliage.transmittance(
-                np.ascontiguousarray(orig), np.ascontiguousarray(dirs), np.minimum(tfar, r), start
-            )
+            if not len(partial):
+                vis = foliage.transmittance(
+                    np.ascontiguousarray(orig), np.ascontiguousarray(dirs), np.minimum(tfar, r), start
+                )
+            else:
+                traced = np.flatnonzero((np.arange(n_rays)[None, :] < done[:, None]).ravel())
+                vis = np.ones(m * n_rays, np.float32)
+                vis[traced] = foliage.transmittance(
+                    orig[traced], dirs[traced], np.minimum(tfar[traced], r), start[traced]
+                )
         ao = np.empty((m, len(h_local)), np.float32)
         for j, h in enumerate(h_local):
             rho = np.where(tfar < r, 1.0 - np.exp2(-tfar / np.float32(h)), np.float32(1.0))
             if vis is not None:
                 rho = rho * vis
-            ao[:, j] = np.clip(
-                rho.reshape(m, n_rays).mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0
-            )
+            rho = rho.reshape(m, n_rays)
+            ao[:, j] = np.clip(rho.mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0)
+            for k in np.unique(done[partial]):  # rejected samples: the mean over the rays they traced
+                rows = partial[done[partial] == k]
+                ao[rows, j] = np.clip(
+                    rho[rows, :k].mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0
+                )
         return ao, back_ok
 
     def closest_hits(

@@ -34,10 +34,33 @@ def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
     ao, valid = LevelLabeller(g.opaque, st).obscurance(samples.points, samples.normals, [2.0, 300.0])
     for j, h in enumerate((2.0, 300.0)):
         a, v = Labeller(g.opaque, replace(st, half_distance=h)).ao_at_points(samples.points, samples.normals)
-        np.testing.assert_array_equal(ao[:, j], a)
         np.testing.assert_array_equal(valid, v)
+        # valid samples: bit for bit (rejected ones stop tracing early, their AO is not used)
+        np.testing.assert_array_equal(ao[valid, j], a[valid])
     assert (ao[:, 0] >= ao[:, 1]).all()  # a longer half distance only darkens
     assert (~valid).any()  # the tiny level's soup (houses, sunk buildings) has invalid samples
+
+
+@pytest.mark.parametrize("rays, threshold", [(32, 0.25), (64, 0.1), (48, 0.5)])
+def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, threshold):
+    """The early out of the back-face rule (rounds of rays, rejected samples stop) gives the same valid
+    flags and bit-identical AO of every valid sample as tracing every ray, with foliage on."""
+    from pipeline.level_bake import FoliageSettings, build_foliage
+
+    g = tiny_geometry
+    samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=3)
+    st = LabelSettings(rays=rays, kernel="obscurance", max_distance=g.opaque.diagonal, seed=2,
+                       backface_threshold=threshold, workers=2)  # fmt: skip
+    fast, full = LevelLabeller(g.opaque, st), LevelLabeller(g.opaque, st)
+    full.early_out = False
+    assert len(fast._checkpoints(rays)) > 1 and full._checkpoints(rays) == [rays]
+    fol = build_foliage(g, fast, FoliageSettings())
+    a, v = fast.obscurance(samples.points, samples.normals, [2.0, 300.0], fol)
+    b, w = full.obscurance(samples.points, samples.normals, [2.0, 300.0], fol)
+    np.testing.assert_array_equal(v, w)
+    assert (~v).any() and v.any()
+    np.testing.assert_array_equal(a[v], b[v])
+    assert np.isfinite(a).all() and (a >= 0).all() and (a <= 1).all()
 
 
 def test_foliage_attenuates_only_where_there_is_foliage(tiny_geometry):
