@@ -134,7 +134,7 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
                    "gl_seconds": times[name]} for name in methods}  # fmt: skip
 
 
-_LOADED: dict = {}  # the training / validation frames of the last (dataset, train_fraction) loaded
+_LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
 
 
 def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str) -> dict:
@@ -151,11 +151,12 @@ def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoin
     ts = from_dict(UNetTrainSettings, train_cfg, prefix=f"models.{spec.name}.train.")
     ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
     ckpt_path.parent.mkdir(parents=True, exist_ok=True)
-    key = (str(data), ts.train_fraction)
-    if _LOADED.get("key") != key:  # the corpus is ~13 GB on disk: load it once per training fraction
+    if _LOADED.get("data") != str(data):  # the corpus is ~13 GB on disk: read it once, all of it
         _LOADED.clear()
-        _LOADED.update(key=key, sets=load_dataset_frames(data, ts.train_fraction))
+        _LOADED.update(data=str(data), sets=load_dataset_frames(data))
     train_set, val_set, info = _LOADED["sets"]
+    if ts.train_fraction != 1.0:  # the corpus-size models: a subset cut from the frames in memory
+        train_set, val_set, info = load_dataset_frames(data, ts.train_fraction, loaded=_LOADED["sets"])
     log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
     checkpoints[spec.name] = ckpt_path

@@ -227,11 +227,26 @@ def frames_to_set(frames) -> FrameSet:
                     torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)), names, scenes)  # fmt: skip
 
 
-def load_dataset_frames(data: Path, train_fraction: float = 1.0) -> tuple[FrameSet, FrameSet | None, dict]:
+def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
+    """The training scenes a ``train_fraction`` keeps: every k-th of the sorted scenes (all at 1)."""
+    if not 0.0 < train_fraction <= 1.0:
+        raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
+    scenes = sorted(train_scenes)
+    if train_fraction == 1.0:
+        return scenes
+    n = max(1, round(len(scenes) * train_fraction))
+    return [scenes[int(i * len(scenes) / n)] for i in range(n)]
+
+
+def load_dataset_frames(
+    data: Path, train_fraction: float = 1.0, loaded: tuple | None = None
+) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
     ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
-    the corpus-size study; validation is unchanged.
+    the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
+    dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
+    instead of read from disk again.
     """
     from .dataset import open_dataset
 
@@ -239,20 +254,19 @@ def load_dataset_frames(data: Path, train_fraction: float = 1.0) -> tuple[FrameS
     train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
     if not train_scenes:
         raise NeuralaoError(f"dataset {data} has no training frames (no scene with split 'train')")
-    if not 0.0 < train_fraction <= 1.0:
-        raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
-    keep = train_scenes
-    if train_fraction < 1.0:
-        n = max(1, round(len(train_scenes) * train_fraction))
-        keep = [train_scenes[int(i * len(train_scenes) / n)] for i in range(n)]
-    keep_set = set(keep)
-    train = frames_to_set(f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set)
+    keep_set = set(kept_training_scenes(train_scenes, train_fraction))
     val_source = "val scenes"
-    if any(e["split"] == "val" for e in ds.manifest["shards"]):
-        val = frames_to_set(ds.frames(split="val"))
-    else:
-        val = frames_to_set(ds.frames(split="train", holdout=True))
+    has_val = any(e["split"] == "val" for e in ds.manifest["shards"])
+    if not has_val:
         val_source = "held-back views of the training scenes (the dataset has no val scene)"
+    if loaded is not None:
+        full, val, full_info = loaded
+        if full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash"):
+            raise NeuralaoError("load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1")
+        train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
+    else:
+        train = frames_to_set(f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set)
+        val = frames_to_set(ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True))
     info = {
         "path": str(data),
         "name": ds.manifest.get("name"),

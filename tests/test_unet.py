@@ -644,3 +644,32 @@ def test_reduced_resolution_variant_trains_and_starts_from_the_full_network(fram
     assert y.shape == x.shape[1:] and np.isfinite(y).all() and y.min() >= 0 and y.max() <= 1
     with pytest.raises(NeuralaoError, match="scale must be 1, 2 or 4"):
         UNet(UNetArgs(scale=3))
+
+
+def test_corpus_fraction_cut_from_the_loaded_corpus_equals_a_fresh_load(tmp_path):
+    """ship keeps one corpus in memory and cuts the corpus-size subsets from it: same frames, same order,
+    same info as reading that fraction from disk."""
+    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.labels import LabelSettings
+
+    settings = DatasetSettings(
+        name="tiny-fractions",
+        scenes=[SceneSpec(n, n, views=2, split="train") for n in ("spot", "cow", "bunny")]
+        + [SceneSpec("box", "cornell_box", cameras="interior", views=1, split="val")],
+        size=(32, 32),
+        labels=LabelSettings(rays=4, radii_rel=[0.125, 0.25]),
+        frames_per_shard=1,
+    )
+    build_dataset(settings, tmp_path, progress=False)
+    full = load_dataset_frames(tmp_path)
+    assert full[2]["training_scenes"] == ["bunny", "cow", "spot"]
+    for fraction in (0.34, 0.5, 1.0):
+        fresh, cut = load_dataset_frames(tmp_path, fraction), load_dataset_frames(tmp_path, fraction, loaded=full)
+        assert cut[2] == fresh[2]
+        for a, b in ((fresh[0], cut[0]), (fresh[1], cut[1])):
+            assert a.names == b.names and a.scenes == b.scenes
+            for k in ("x", "y", "m", "rho", "radii"):
+                assert torch.equal(getattr(a, k), getattr(b, k)), k
+    assert len(load_dataset_frames(tmp_path, 0.34)[2]["training_scenes"]) == 1
+    with pytest.raises(NeuralaoError, match="train_fraction 1"):
+        load_dataset_frames(tmp_path, 0.5, loaded=load_dataset_frames(tmp_path, 0.5))
