@@ -1,0 +1,157 @@
+"""GL time of every shipped U-Net (runtime/models) beside SSAO and GTAO, in the same rounds.
+
+    PYOPENGL_PLATFORM=osmesa .venv/bin/python bench/bench_shipped.py --out build/bench \
+        [--models runtime/models] [--sizes 512x512 1920x1080] [--rounds 3] [--mesh sponza_partial]
+
+``neuralao ship`` records a model's GL time when it installs it, under whatever load the machine had
+then, so times of models shipped in different runs do not compare. This bench times all of them and
+the two screen-space baselines in interleaved rounds (the order rotates each round) and reports
+medians and ratios from the same rounds:
+
+* each shipped model: its generated GLSL compute passes (pad, network, crop; dispatch only, the input
+  already resident, as in an engine) through ``runtime.glsl_runner.time_compute`` on random input (the
+  cost does not depend on the input or the radius uniform);
+* SSAO and GTAO: ``runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (first orbit
+  camera) at each size, radius 1/4 of the scene diagonal (the largest label radius), blur included.
+
+Ratios: to the index's default model (the issue-9 bound is a variant at <= 1/4 of the full network's
+time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship`` measured them).
+Writes DIR/shipped.json and DIR/shipped.md. No shipped models: one line, exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pipeline.errors import NeuralaoError  # noqa: E402
+from pipeline.io import write_json, write_text  # noqa: E402
+from pipeline.report import cpu_name  # noqa: E402
+
+LARGE_PIXELS = 1_000_000  # sizes above this get --large-repeats timed dispatches a round
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must look like 1920x1080, got {text!r}") from None
+    return w, h
+
+
+def measure(args) -> dict:
+    from pipeline.camera import orbit
+    from pipeline.gbuffer import GBufferRenderer
+    from pipeline.scene import load_scene
+    from runtime.baselines import time_screen_space
+    from runtime.glsl_runner import time_compute
+    from runtime.shipped import read_index
+
+    models_dir = Path(args.models)
+    index = read_index(models_dir)
+    names = sorted(index["models"])
+    default = index.get("default", {}).get("unet")
+    scene = load_scene(args.mesh)
+    radius = 0.25 * scene.diagonal
+    frames = {}
+    with GBufferRenderer(scene) as r:
+        for w, h in args.sizes:
+            frames[(w, h)] = r.render(orbit(scene, 1, w, h)[0])
+    methods = [*names, "ssao", "gtao"]
+    times: dict[str, dict[str, list[float]]] = {m: {} for m in methods}
+    for w, h in args.sizes:  # untimed first run of each: compiles (or reads Mesa's cache), JIT variants
+        for m in methods:
+            if m in ("ssao", "gtao"):
+                time_screen_space(frames[(w, h)], m, radius, repeats=1, warmup=1)
+            else:
+                time_compute(models_dir / m / "glsl", h, w, repeats=1, warmup=0)
+    for k in range(args.rounds):
+        order = methods[k % len(methods) :] + methods[: k % len(methods)]
+        for w, h in args.sizes:
+            reps = args.large_repeats if w * h > LARGE_PIXELS else args.repeats
+            for m in order:
+                if m in ("ssao", "gtao"):
+                    t = time_screen_space(frames[(w, h)], m, radius, repeats=4 * reps, warmup=1)
+                else:
+                    t = time_compute(models_dir / m / "glsl", h, w, repeats=reps, warmup=1)
+                times[m].setdefault(f"{w}x{h}", []).append(t)
+    rows = {}
+    for m in methods:
+        info = index["models"].get(m) or index.get("baselines", {}).get(m, {})
+        test = info.get("test", {})
+        med = {s: float(np.median(v)) for s, v in times[m].items()}
+        rows[m] = {"ms": {s: 1e3 * v for s, v in med.items()}, "rounds": times[m],
+                   "test_ssim": test.get("ssim"), "test_rmse": test.get("rmse"),
+                   "scale": info.get("scale"), "widths": info.get("widths"), "init": info.get("init")}  # fmt: skip
+    for row in rows.values():
+        for ref in (default, "gtao"):
+            if ref in rows:
+                row[f"over_{ref}"] = {s: row["ms"][s] / rows[ref]["ms"][s] for s in row["ms"]}
+    from runtime import gl
+
+    return {"cpu": cpu_name(), "gl_renderer": gl.context().info.renderer, "models": str(models_dir), "default": default, "mesh": args.mesh,
+            "sizes": [f"{w}x{h}" for w, h in args.sizes], "rounds": args.rounds, "rows": rows}  # fmt: skip
+
+
+def markdown(result: dict) -> str:
+    sizes, default = result["sizes"], result["default"]
+    head = " | ".join(f"{s} ms | / {default} | / GTAO" for s in sizes)
+    lines = [
+        "# Shipped U-Nets vs SSAO and GTAO: GL time in the same rounds",
+        "",
+        f"GL on {result['gl_renderer']} ({result['cpu']}); median of "
+        f"{result['rounds']} interleaved rounds; SSAO / GTAO on a {result['mesh']} G-buffer at radius "
+        "1/4 of its diagonal. Test SSIM / RMSE: the test split, from index.json.",
+        "",
+        f"| method | scale | widths | test SSIM | test RMSE | {head} |",
+        "|---|---:|---|---:|---:|" + "---:|" * (3 * len(sizes)),
+    ]
+
+    def f(v, spec):
+        return "-" if v is None else format(v, spec)
+
+    order = sorted(result["rows"], key=lambda m: (m in ("ssao", "gtao"), -result["rows"][m]["ms"][sizes[0]]))
+    for m in order:
+        r = result["rows"][m]
+        cells = " | ".join(
+            f"{r['ms'][s]:,.1f} | {f(r.get(f'over_{default}', {}).get(s), '.2f')}x | "
+            f"{f(r.get('over_gtao', {}).get(s), '.2f')}x"
+            for s in sizes
+        )
+        widths = "/".join(str(w) for w in r["widths"]) if r.get("widths") else "-"
+        lines.append(f"| {m} | {f(r.get('scale'), 'd')} | {widths} | {f(r['test_ssim'], '.4f')} | "
+                     f"{f(r['test_rmse'], '.4f')} | {cells} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="build/bench")
+    p.add_argument("--models", default=str(Path(__file__).resolve().parents[1] / "runtime" / "models"))
+    p.add_argument("--sizes", nargs="+", type=parse_size, default=[(512, 512), (1920, 1080)])
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--repeats", type=int, default=3, help="timed dispatches per model per round")
+    p.add_argument("--large-repeats", type=int, default=1, help="the same above one megapixel")
+    p.add_argument("--mesh", default="sponza_partial")
+    args = p.parse_args()
+    if not (Path(args.models) / "index.json").is_file():
+        print(f"bench_shipped: no shipped models in {args.models} (run `make models`); nothing to time")
+        return
+    try:
+        result = measure(args)
+    except NeuralaoError as e:
+        sys.exit(f"bench_shipped: {e}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "shipped.json", result)
+    write_text(out / "shipped.md", markdown(result))
+    print(markdown(result))
+
+
+if __name__ == "__main__":
+    main()
