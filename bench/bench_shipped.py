@@ -48,6 +48,7 @@ def measure(args) -> dict:
     from pipeline.camera import interior
     from pipeline.gbuffer import GBufferRenderer
     from pipeline.scene import load_scene
+    from runtime import gl
     from runtime.baselines import time_screen_space
     from runtime.glsl_runner import time_compute
     from runtime.shipped import read_index
@@ -63,23 +64,22 @@ def measure(args) -> dict:
         for w, h in args.sizes:
             frames[(w, h)] = r.render(interior(scene, 1, w, h, seed=args.seed)[0])
     methods = [*names, "ssao", "gtao"]
+
+    def seconds(m: str, w: int, h: int, repeats: int, warmup: int) -> float:
+        if m in ("ssao", "gtao"):  # a pass is ~10x cheaper than a U-Net: 4x the repeats
+            return time_screen_space(frames[(w, h)], m, radius, repeats=4 * repeats, warmup=max(warmup, 1))
+        return time_compute(models_dir / m / "glsl", h, w, repeats=repeats, warmup=warmup)
+
     times: dict[str, dict[str, list[float]]] = {m: {} for m in methods}
     for w, h in args.sizes:  # untimed first run of each: compiles (or reads Mesa's cache), JIT variants
         for m in methods:
-            if m in ("ssao", "gtao"):
-                time_screen_space(frames[(w, h)], m, radius, repeats=1, warmup=1)
-            else:
-                time_compute(models_dir / m / "glsl", h, w, repeats=1, warmup=0)
+            seconds(m, w, h, 1, 0)
     for k in range(args.rounds):
         order = methods[k % len(methods) :] + methods[: k % len(methods)]
         for w, h in args.sizes:
             reps = args.large_repeats if w * h > LARGE_PIXELS else args.repeats
             for m in order:
-                if m in ("ssao", "gtao"):
-                    t = time_screen_space(frames[(w, h)], m, radius, repeats=4 * reps, warmup=1)
-                else:
-                    t = time_compute(models_dir / m / "glsl", h, w, repeats=reps, warmup=1)
-                times[m].setdefault(f"{w}x{h}", []).append(t)
+                times[m].setdefault(f"{w}x{h}", []).append(seconds(m, w, h, reps, 1))
     rows = {}
     for m in methods:
         info = index["models"].get(m) or index.get("baselines", {}).get(m, {})
@@ -92,8 +92,6 @@ def measure(args) -> dict:
         for ref in (default, "gtao"):
             if ref in rows:
                 row[f"over_{ref}"] = {s: row["ms"][s] / rows[ref]["ms"][s] for s in row["ms"]}
-    from runtime import gl
-
     foreground = {f"{w}x{h}": float(np.mean(frames[(w, h)]["mask"])) for w, h in args.sizes}
     return {"foreground": foreground, "cpu": cpu_name(), "gl_renderer": gl.context().info.renderer, "models": str(models_dir), "default": default, "mesh": args.mesh,
             "sizes": [f"{w}x{h}" for w, h in args.sizes], "rounds": args.rounds, "rows": rows}  # fmt: skip
@@ -143,6 +141,8 @@ def main() -> None:
     p.add_argument("--mesh", default="sponza_partial")
     p.add_argument("--seed", type=int, default=0, help="seed of the interior camera")
     args = p.parse_args()
+    if min(args.rounds, args.repeats, args.large_repeats) < 1:
+        p.error("--rounds, --repeats and --large-repeats must be at least 1")
     if not (Path(args.models) / "index.json").is_file():
         print(f"bench_shipped: no shipped models in {args.models} (run `make models`); nothing to time")
         return

@@ -232,9 +232,7 @@ def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list
     if not 0.0 < train_fraction <= 1.0:
         raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
     scenes = sorted(train_scenes)
-    if train_fraction == 1.0:
-        return scenes
-    n = max(1, round(len(scenes) * train_fraction))
+    n = max(1, round(len(scenes) * train_fraction))  # n = all of them at 1
     return [scenes[int(i * len(scenes) / n)] for i in range(n)]
 
 
