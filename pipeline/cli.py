@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "parity": ("export.parity", "run generated GLSL against onnxruntime on real frames or seeded inputs"),
     "infer": ("runtime.infer", "apply an exported ONNX model to a G-buffer frame"),
     "report": ("pipeline.report", "speed-vs-error report of every method on held-back frames"),
+    "evaluate": ("pipeline.evaluate", "score screen-space AO (U-Nets, SSAO, GTAO) by category and resolution on test meshes"),
     "ship": ("pipeline.ship", "train, export, check and install the release models (runtime/models) from a config"),
     "select": ("pipeline.select", "pick the cheapest AO representation that meets an error target per scene"),
     "volumes": ("pipeline.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),

@@ -210,6 +210,59 @@ void main() {
 }
 """
 
+# Depth- and normal-aware (joint bilateral) upsampling of AO computed at a reduced internal
+# resolution: the high-resolution pixel blends the 4 x 4 nearest low-resolution texels, each weighted
+# by a Gaussian of its distance in low-resolution texels, by how close the pixel's point lies to the
+# texel's tangent plane (relative to depth) and by how well the normals agree; background texels get
+# no weight. A small floor keeps the spatially nearest foreground texels in charge where no texel
+# matches (thin parts the low resolution missed). No foreground texel in reach -> 1 (open).
+# Low-resolution texels are point samples of the high-resolution G-buffer: texel t of a low axis of
+# n texels is high pixel floor((t + 0.5) * N / n), so its position is that pixel's exact position.
+_T["upsample_fragment"] = """#version 430 core
+// neuralao: joint bilateral upsampling of low-resolution AO to the G-buffer's resolution.
+layout(binding = 0) uniform sampler2D u_position;      // high res: xyz camera-space position, w mask
+layout(binding = 1) uniform sampler2D u_normal;        // high res: xyz camera-space unit normal
+layout(binding = 4) uniform sampler2D u_low_ao;        // low res: AO
+layout(binding = 5) uniform sampler2D u_low_position;  // low res: point-sampled u_position
+layout(binding = 6) uniform sampler2D u_low_normal;    // low res: point-sampled u_normal
+layout(location = 0) out float o_ao;
+
+const float SPATIAL_SIGMA = ${spatial_sigma};  // low-resolution texels
+const float PLANE_SIGMA = ${plane_sigma};      // tangent-plane distance / depth
+const float NORMAL_POWER = ${normal_power};
+const float FLOOR = ${floor};
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 pw = texelFetch(u_position, px, 0);
+    if (pw.w < 0.5) { o_ao = 1.0; return; }
+    vec3 n = texelFetch(u_normal, px, 0).xyz;
+    float depth = max(-pw.z, 1e-30);
+    ivec2 hi = textureSize(u_position, 0);
+    ivec2 lo = textureSize(u_low_ao, 0);
+    vec2 uv = (vec2(px) + 0.5) * vec2(lo) / vec2(hi) - 0.5;
+    ivec2 base = ivec2(floor(uv)) - 1;
+    float sum = 0.0;
+    float total = 0.0;
+    for (int y = 0; y < 4; ++y) {
+        for (int x = 0; x < 4; ++x) {
+            ivec2 q = clamp(base + ivec2(x, y), ivec2(0), lo - 1);
+            vec4 qw = texelFetch(u_low_position, q, 0);
+            if (qw.w < 0.5) continue;
+            vec2 d = vec2(base + ivec2(x, y)) - uv;
+            float spatial = exp(-dot(d, d) / (2.0 * SPATIAL_SIGMA * SPATIAL_SIGMA));
+            vec3 qn = texelFetch(u_low_normal, q, 0).xyz;
+            float plane = abs(dot(qn, pw.xyz - qw.xyz)) / (PLANE_SIGMA * depth);
+            float agree = pow(max(dot(qn, n), 0.0), NORMAL_POWER);
+            float w = spatial * (FLOOR + exp(-plane * plane) * agree);
+            sum += w * texelFetch(u_low_ao, q, 0).r;
+            total += w;
+        }
+    }
+    o_ao = total > 0.0 ? sum / total : 1.0;
+}
+"""
+
 TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.items()}
 
 

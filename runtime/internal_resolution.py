@@ -1,0 +1,262 @@
+"""Screen-space AO at an internal resolution: point-sample the G-buffer down, run the network there,
+upsample its AO with a depth- and normal-aware (joint bilateral) filter.
+
+Why: the U-Net's receptive field is fixed in pixels, while its radius input is measured in units of
+half the screen height. Trained on frames ``train_height`` pixels tall, it has learned how many
+pixels a radius covers at that height. At 1920x1080 the same radius covers about four times more
+pixels, at 128x128 half as many. Running the network on a G-buffer resampled to the height it was
+trained at shows it the geometry at the scale it knows, at any output resolution, and at 1080p it
+costs the network a sixteenth of the pixels.
+
+Conventions (the same in the numpy reference here and in the GLSL pass of
+:mod:`runtime.baseline_templates` ``upsample_fragment``, which the tests hold to each other):
+
+* low-resolution texel ``t`` of an axis of ``n`` texels is the high-resolution pixel
+  ``floor((t + 0.5) * N / n)`` of that axis of ``N`` pixels, counted in GL order (row 0 at the
+  bottom), so the low G-buffer holds exact samples, never blends across edges;
+* a high-resolution pixel blends the 4 x 4 nearest low texels: weight = spatial Gaussian (in low
+  texels) x (floor + tangent-plane agreement x normal agreement), background texels excluded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.errors import NeuralaoError
+
+
+@dataclass(frozen=True)
+class UpsampleSettings:
+    """Weights of the joint bilateral upsampling (shared by the numpy reference and the GLSL pass)."""
+
+    spatial_sigma: float = 0.6  # Gaussian sigma of the distance to a low texel, in low texels
+    plane_sigma: float = 0.03  # tangent-plane distance (relative to depth) at which weight drops by 1/e
+    normal_power: float = 8.0  # exponent of the normals' cosine
+    floor: float = 1e-3  # share of the spatial weight kept where geometry disagrees (thin parts)
+
+
+def internal_size(width: int, height: int, internal_height: int | None) -> tuple[int, int]:
+    """(w, h) the network runs at for a ``width`` x ``height`` frame: ``internal_height`` rows (same
+    aspect ratio, at least 1 column); None or a height >= ``height`` -> the frame's own size."""
+    if internal_height is None or internal_height >= height:
+        return int(width), int(height)
+    if internal_height < 1:
+        raise NeuralaoError(f"internal height must be >= 1, got {internal_height}")
+    return max(1, round(width * internal_height / height)), int(internal_height)
+
+
+def sample_index(low: int, high: int) -> np.ndarray:
+    """(low,) int: the high-resolution pixel each low texel samples along one axis (GL order)."""
+    return np.floor((np.arange(low) + 0.5) * high / low).astype(np.int64)
+
+
+def downsample_frame(frame: dict, width: int, height: int) -> dict:
+    """Point-sample every image channel of ``frame`` to ``width`` x ``height`` (scalars kept).
+
+    Rows are counted in GL order (bottom up) to match the GLSL pass, so numpy's top-down rows are
+    flipped around the sampling.
+    """
+    h, w = np.shape(frame["depth"])
+    rows = h - 1 - sample_index(height, h)[::-1]  # GL-order sampling, expressed in top-down rows
+    cols = sample_index(width, w)
+    out = {}
+    for k, v in frame.items():
+        if isinstance(v, np.ndarray) and v.ndim >= 2 and v.shape[:2] == (h, w):
+            out[k] = np.ascontiguousarray(v[rows][:, cols])
+        else:
+            out[k] = v
+    return out
+
+
+def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera-space positions (H, W, 3), unit normals (H, W, 3) and mask (H, W) of a frame, float64."""
+    from .baselines import camera_space_position
+
+    mask = np.asarray(frame["mask"], bool)
+    pos = np.where(mask[..., None], camera_space_position(frame), 0.0).astype(np.float64)
+    n = np.nan_to_num(np.asarray(frame["normal_cam"], np.float64))
+    return pos, np.where(mask[..., None], n, 0.0), mask
+
+
+def upsample_ao(
+    ao_low: np.ndarray, low: dict, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+) -> np.ndarray:
+    """Joint bilateral upsampling of ``ao_low`` (h, w), computed on ``low`` (the point-sampled
+    frame), to ``frame``'s resolution. Returns (H, W) float32, 1 on background.
+
+    The numpy reference of the ``upsample_fragment`` GLSL pass (same taps, weights and order of
+    conventions), evaluated in float64.
+    """
+    hp, hn, hm = _positions(frame)
+    lp, ln, lm = _positions(low)
+    # GL order (row 0 at the bottom) throughout, as the fragment shader sees it.
+    hp, hn, hm, lp, ln, lm = (a[::-1] for a in (hp, hn, hm, lp, ln, lm))
+    a_low = np.asarray(ao_low, np.float64)[::-1]
+    H, W = hm.shape
+    h, w = lm.shape
+    v = (np.arange(H) + 0.5) * h / H - 0.5
+    u = (np.arange(W) + 0.5) * w / W - 0.5
+    by, bx = np.floor(v).astype(np.int64) - 1, np.floor(u).astype(np.int64) - 1
+    depth = np.maximum(-hp[..., 2], 1e-30)
+    s = settings
+    total = np.zeros((H, W))
+    acc = np.zeros((H, W))
+    for ty in range(4):
+        qy_raw = by + ty
+        qy = np.clip(qy_raw, 0, h - 1)
+        dy = (qy_raw - v)[:, None]
+        for tx in range(4):
+            qx_raw = bx + tx
+            qx = np.clip(qx_raw, 0, w - 1)
+            dx = (qx_raw - u)[None, :]
+            spatial = np.exp(-(dx * dx + dy * dy) / (2.0 * s.spatial_sigma**2))
+            q_pos, q_n = lp[qy][:, qx], ln[qy][:, qx]
+            plane = np.abs(np.sum(q_n * (hp - q_pos), axis=-1)) / (s.plane_sigma * depth)
+            agree = np.maximum(np.sum(q_n * hn, axis=-1), 0.0) ** s.normal_power
+            weight = spatial * (s.floor + np.exp(-plane * plane) * agree) * lm[qy][:, qx]
+            acc += weight * a_low[qy][:, qx]
+            total += weight
+    out = np.where(total > 0, acc / np.where(total > 0, total, 1.0), 1.0)
+    return np.where(hm, out, 1.0)[::-1].astype(np.float32)
+
+
+def at_internal_resolution(
+    predict, internal_height: int | None, settings: UpsampleSettings = UpsampleSettings()
+):
+    """Wrap ``predict(frame, radius) -> ao (H, W)`` so it runs at ``internal_height`` rows and is
+    upsampled to the frame's size; frames no taller than that run as they are."""
+
+    def scaled(frame: dict, radius: float) -> np.ndarray:
+        h, w = np.shape(frame["depth"])
+        lw, lh = internal_size(w, h, internal_height)
+        if (lw, lh) == (w, h):
+            return predict(frame, radius)
+        low = downsample_frame(frame, lw, lh)
+        return upsample_ao(predict(low, radius), low, frame, settings)
+
+    return scaled
+
+
+def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
+    """The GLSL fragment shader of the upsampling pass with ``settings`` baked in."""
+    from .baseline_templates import fill
+
+    lit = lambda x: repr(float(x))  # noqa: E731  (a float literal GLSL accepts: 0.6, 1e-3, 8.0)
+    for name in ("spatial_sigma", "plane_sigma"):
+        if not (math.isfinite(getattr(settings, name)) and getattr(settings, name) > 0):
+            raise NeuralaoError(f"upsample {name} must be a positive number, got {getattr(settings, name)}")
+    return fill(
+        "upsample_fragment",
+        spatial_sigma=lit(settings.spatial_sigma),
+        plane_sigma=lit(settings.plane_sigma),
+        normal_power=lit(settings.normal_power),
+        floor=lit(settings.floor),
+    )
+
+
+class UpsamplePass:
+    """The GLSL upsampling pass for one (low, high) pair of sizes, on the headless GL context.
+
+    ``upload(ao_low, low, frame)`` sends the low AO and both G-buffers, ``draw()`` runs the pass,
+    ``read()`` returns (H, W) float32 in numpy's top-down rows. Release with :meth:`release`.
+    """
+
+    def __init__(
+        self,
+        low_size: tuple[int, int],
+        size: tuple[int, int],
+        settings: UpsampleSettings = UpsampleSettings(),
+    ):
+        from OpenGL import GL
+
+        from . import gl
+        from .baselines import _program
+
+        gl.context()
+        self.GL, self.gl = GL, gl
+        (self.lw, self.lh), (self.w, self.h) = (int(v) for v in low_size), (int(v) for v in size)
+        self.prog = _program(upsample_source(settings))
+        self.vao = gl.context().empty_vao
+        make = lambda w, h, fmt: gl.create_texture(w, h, fmt)  # noqa: E731
+        self.position, self.normal = make(self.w, self.h, GL.GL_RGBA32F), make(self.w, self.h, GL.GL_RGBA32F)
+        self.low_ao = make(self.lw, self.lh, GL.GL_R32F)
+        self.low_position = make(self.lw, self.lh, GL.GL_RGBA32F)
+        self.low_normal = make(self.lw, self.lh, GL.GL_RGBA32F)
+        self.out = make(self.w, self.h, GL.GL_R32F)
+        self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def upload(self, ao_low: np.ndarray, low: dict, frame: dict) -> None:
+        from .baselines import gbuffer_textures
+
+        GL, gl = self.GL, self.gl
+        pos, nrm = gbuffer_textures(frame)
+        lpos, lnrm = gbuffer_textures(low)
+        if pos.shape[:2] != (self.h, self.w) or lpos.shape[:2] != (self.lh, self.lw):
+            raise NeuralaoError(
+                f"frames are {pos.shape[1]}x{pos.shape[0]} and {lpos.shape[1]}x{lpos.shape[0]}, "
+                f"this pass was made for {self.w}x{self.h} and {self.lw}x{self.lh}"
+            )
+        for tex, data, fmt in (
+            (self.position, pos, GL.GL_RGBA32F),
+            (self.normal, nrm, GL.GL_RGBA32F),
+            (self.low_position, lpos, GL.GL_RGBA32F),
+            (self.low_normal, lnrm, GL.GL_RGBA32F),
+            (self.low_ao, np.asarray(ao_low, np.float32)[..., None], GL.GL_R32F),
+        ):
+            gl.upload_texture(tex, data, fmt)
+
+    def draw(self) -> None:
+        GL = self.GL
+        for cap in (GL.GL_DEPTH_TEST, GL.GL_BLEND, GL.GL_CULL_FACE, GL.GL_SCISSOR_TEST):
+            GL.glDisable(cap)
+        GL.glViewport(0, 0, self.w, self.h)
+        GL.glBindVertexArray(self.vao)
+        units = (
+            (0, self.position),
+            (1, self.normal),
+            (4, self.low_ao),
+            (5, self.low_position),
+            (6, self.low_normal),
+        )
+        for unit, tex in units:
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, tex)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self.fbo)
+        GL.glUseProgram(self.prog)
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, 3)
+        GL.glActiveTexture(GL.GL_TEXTURE0)
+        GL.glUseProgram(0)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def read(self) -> np.ndarray:
+        return self.gl.read_texture(self.out, self.w, self.h, self.GL.GL_R32F)[..., 0].copy()
+
+    def release(self) -> None:
+        GL = self.GL
+        GL.glDeleteFramebuffers(1, [self.fbo])
+        GL.glDeleteTextures(
+            6, [self.position, self.normal, self.low_ao, self.low_position, self.low_normal, self.out]
+        )
+
+    def __enter__(self) -> UpsamplePass:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def run_upsample_gl(
+    ao_low: np.ndarray, low: dict, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+) -> np.ndarray:
+    """:func:`upsample_ao` run as the GLSL pass on Mesa. Returns (H, W) float32, 1 on background."""
+    h, w = np.shape(frame["depth"])
+    lh, lw = np.shape(low["depth"])
+    with UpsamplePass((lw, lh), (w, h), settings) as p:
+        p.upload(ao_low, low, frame)
+        p.draw()
+        out = p.read()
+    return np.where(np.asarray(frame["mask"], bool), out, np.float32(1.0)).astype(np.float32)
