@@ -79,6 +79,15 @@ class Tolerances:
     # crossings are caught only at the composer's edge probes (24 per edge), so an edge may sink by
     # up to ~ spacing x slope between probes; an object dropped through another sinks by its size.
     compose_penetration_rel: float = 2e-3
+    # Joint bilateral upsampling (runtime/internal_resolution.py): the GLSL pass vs its float64 numpy
+    # reference on AO in [0, 1]. Same taps and integer sampling; the weights' exp/pow in float32 differ
+    # by a few ulps (measured max 1.3e-5); a wrong tap, flip or weight moves values by > 1e-2.
+    upsample_glsl_vs_numpy: float = 1e-4
+    # The same view at 256 and at 1024 pixels, the 1024 AO averaged over 4 x 4 foreground blocks, with
+    # the network at the internal height 256: mean |difference| over foreground (tests/
+    # test_internal_resolution.py). Measured 0.0008-0.019 on test meshes (GTAO itself: 0.003-0.032); a
+    # network run at the frame's own resolution differs by 0.036-0.12.
+    resolution_independence_mean_abs: float = 0.025
 
 
 TOL = Tolerances()

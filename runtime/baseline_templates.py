@@ -241,7 +241,11 @@ void main() {
     ivec2 hi = textureSize(u_position, 0);
     ivec2 lo = textureSize(u_low_ao, 0);
     vec2 uv = (vec2(px) + 0.5) * vec2(lo) / vec2(hi) - 0.5;
-    ivec2 base = ivec2(floor(uv)) - 1;
+    // floor(uv) in integers (exact where uv is a whole number; int division truncates toward 0)
+    ivec2 num = (2 * px + 1) * lo - hi;
+    ivec2 fl = ivec2(num.x >= 0 ? num.x / (2 * hi.x) : -((-num.x + 2 * hi.x - 1) / (2 * hi.x)),
+                     num.y >= 0 ? num.y / (2 * hi.y) : -((-num.y + 2 * hi.y - 1) / (2 * hi.y)));
+    ivec2 base = fl - 1;
     float sum = 0.0;
     float total = 0.0;
     for (int y = 0; y < 4; ++y) {
@@ -260,6 +264,26 @@ void main() {
         }
     }
     o_ao = total > 0.0 ? sum / total : 1.0;
+}
+"""
+
+# The G-buffer at the internal resolution: each low texel copies one high pixel (point sampling,
+# never a blend across an edge), the pixel floor((t + 0.5) * N / n) per axis, as the upsampling
+# pass and runtime.internal_resolution.downsample_frame assume.
+_T["downsample_fragment"] = """#version 430 core
+// neuralao: point-sampled G-buffer at the internal resolution (two targets: position, normal).
+layout(binding = 0) uniform sampler2D u_position;  // high res: xyz camera-space position, w mask
+layout(binding = 1) uniform sampler2D u_normal;    // high res: xyz camera-space unit normal
+layout(location = 0) out vec4 o_position;
+layout(location = 1) out vec4 o_normal;
+
+void main() {
+    ivec2 t = ivec2(gl_FragCoord.xy);
+    ivec2 hi = textureSize(u_position, 0);
+    ivec2 lo = ivec2(${low_width}, ${low_height});
+    ivec2 q = min(((2 * t + 1) * hi) / (2 * lo), hi - 1);  // floor((t + 0.5) * hi / lo), exactly
+    o_position = texelFetch(u_position, q, 0);
+    o_normal = texelFetch(u_normal, q, 0);
 }
 """
 

@@ -50,7 +50,7 @@ def internal_size(width: int, height: int, internal_height: int | None) -> tuple
 
 def sample_index(low: int, high: int) -> np.ndarray:
     """(low,) int: the high-resolution pixel each low texel samples along one axis (GL order)."""
-    return np.floor((np.arange(low) + 0.5) * high / low).astype(np.int64)
+    return ((2 * np.arange(low, dtype=np.int64) + 1) * high) // (2 * low)
 
 
 def downsample_frame(frame: dict, width: int, height: int) -> dict:
@@ -82,24 +82,27 @@ def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def upsample_ao(
-    ao_low: np.ndarray, low: dict, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings()
 ) -> np.ndarray:
-    """Joint bilateral upsampling of ``ao_low`` (h, w), computed on ``low`` (the point-sampled
-    frame), to ``frame``'s resolution. Returns (H, W) float32, 1 on background.
+    """Joint bilateral upsampling of ``ao_low`` (h, w), computed on the point-sampled ``frame``
+    (:func:`downsample_frame`), to ``frame``'s resolution. Returns (H, W) float32, 1 on background.
 
-    The numpy reference of the ``upsample_fragment`` GLSL pass (same taps, weights and order of
-    conventions), evaluated in float64.
+    The numpy reference of the ``upsample_fragment`` GLSL pass (same taps, weights and integer
+    sampling), in float64. A low texel's position and normal are those of the high pixel it sampled.
     """
     hp, hn, hm = _positions(frame)
-    lp, ln, lm = _positions(low)
     # GL order (row 0 at the bottom) throughout, as the fragment shader sees it.
-    hp, hn, hm, lp, ln, lm = (a[::-1] for a in (hp, hn, hm, lp, ln, lm))
+    hp, hn, hm = hp[::-1], hn[::-1], hm[::-1]
     a_low = np.asarray(ao_low, np.float64)[::-1]
     H, W = hm.shape
-    h, w = lm.shape
+    h, w = a_low.shape
+    rows, cols = sample_index(h, H), sample_index(w, W)
+    lp, ln, lm = (a[rows][:, cols] for a in (hp, hn, hm))
     v = (np.arange(H) + 0.5) * h / H - 0.5
     u = (np.arange(W) + 0.5) * w / W - 0.5
-    by, bx = np.floor(v).astype(np.int64) - 1, np.floor(u).astype(np.int64) - 1
+    # floor(v), floor(u) in integers, as the shader computes them
+    by = ((2 * np.arange(H, dtype=np.int64) + 1) * h - H) // (2 * H) - 1
+    bx = ((2 * np.arange(W, dtype=np.int64) + 1) * w - W) // (2 * W) - 1
     depth = np.maximum(-hp[..., 2], 1e-30)
     s = settings
     total = np.zeros((H, W))
@@ -135,7 +138,7 @@ def at_internal_resolution(
         if (lw, lh) == (w, h):
             return predict(frame, radius)
         low = downsample_frame(frame, lw, lh)
-        return upsample_ao(predict(low, radius), low, frame, settings)
+        return upsample_ao(predict(low, radius), frame, settings)
 
     return scaled
 
@@ -158,11 +161,9 @@ def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
 
 
 class UpsamplePass:
-    """The GLSL upsampling pass for one (low, high) pair of sizes, on the headless GL context.
-
-    ``upload(ao_low, low, frame)`` sends the low AO and both G-buffers, ``draw()`` runs the pass,
-    ``read()`` returns (H, W) float32 in numpy's top-down rows. Release with :meth:`release`.
-    """
+    """The GLSL upsampling pass for one (low, high) pair of sizes, on the headless GL context: its
+    textures (high G-buffer, low AO, low G-buffer targets) and program. :class:`ScalingPasses` fills
+    the textures; ``draw()`` runs the pass, ``read()`` returns (H, W) float32 in top-down rows."""
 
     def __init__(
         self,
@@ -188,26 +189,6 @@ class UpsamplePass:
         self.out = make(self.w, self.h, GL.GL_R32F)
         self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-
-    def upload(self, ao_low: np.ndarray, low: dict, frame: dict) -> None:
-        from .baselines import gbuffer_textures
-
-        GL, gl = self.GL, self.gl
-        pos, nrm = gbuffer_textures(frame)
-        lpos, lnrm = gbuffer_textures(low)
-        if pos.shape[:2] != (self.h, self.w) or lpos.shape[:2] != (self.lh, self.lw):
-            raise NeuralaoError(
-                f"frames are {pos.shape[1]}x{pos.shape[0]} and {lpos.shape[1]}x{lpos.shape[0]}, "
-                f"this pass was made for {self.w}x{self.h} and {self.lw}x{self.lh}"
-            )
-        for tex, data, fmt in (
-            (self.position, pos, GL.GL_RGBA32F),
-            (self.normal, nrm, GL.GL_RGBA32F),
-            (self.low_position, lpos, GL.GL_RGBA32F),
-            (self.low_normal, lnrm, GL.GL_RGBA32F),
-            (self.low_ao, np.asarray(ao_low, np.float32)[..., None], GL.GL_R32F),
-        ):
-            gl.upload_texture(tex, data, fmt)
 
     def draw(self) -> None:
         GL = self.GL
@@ -249,14 +230,117 @@ class UpsamplePass:
         self.release()
 
 
-def run_upsample_gl(
-    ao_low: np.ndarray, low: dict, frame: dict, settings: UpsampleSettings = UpsampleSettings()
-) -> np.ndarray:
-    """:func:`upsample_ao` run as the GLSL pass on Mesa. Returns (H, W) float32, 1 on background."""
+def downsample_source(low_size: tuple[int, int]) -> str:
+    """The GLSL fragment shader that point-samples the G-buffer to ``low_size`` (two targets)."""
+    from .baseline_templates import fill
+
+    return fill("downsample_fragment", low_width=int(low_size[0]), low_height=int(low_size[1]))
+
+
+class ScalingPasses:
+    """Both GL passes around a network run at the internal resolution: the point-sampling pass (high
+    G-buffer -> low position and normal targets) and the upsampling pass (low AO -> high AO). The
+    network reads the low targets and writes ``low_ao``; :meth:`draw` runs both passes back to back,
+    as a frame does (the network's own passes go between them)."""
+
+    def __init__(
+        self,
+        low_size: tuple[int, int],
+        size: tuple[int, int],
+        settings: UpsampleSettings = UpsampleSettings(),
+    ):
+        from OpenGL import GL
+
+        from . import gl
+        from .baselines import _program
+
+        self.up = UpsamplePass(low_size, size, settings)
+        self.GL, self.gl = GL, gl
+        self.prog = _program(downsample_source(low_size))
+        up = self.up
+        self.fbo = gl.create_framebuffer([up.low_position, up.low_normal], up.lw, up.lh, depth=False)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def upload(self, frame: dict, ao_low: np.ndarray | None = None) -> None:
+        from .baselines import gbuffer_textures
+
+        pos, nrm = gbuffer_textures(frame)
+        up, GL = self.up, self.GL
+        if pos.shape[:2] != (up.h, up.w):
+            raise NeuralaoError(
+                f"frame is {pos.shape[1]}x{pos.shape[0]}, these passes were made for {up.w}x{up.h}"
+            )
+        self.gl.upload_texture(up.position, pos, GL.GL_RGBA32F)
+        self.gl.upload_texture(up.normal, nrm, GL.GL_RGBA32F)
+        if ao_low is not None:
+            self.gl.upload_texture(up.low_ao, np.asarray(ao_low, np.float32)[..., None], GL.GL_R32F)
+
+    def downsample(self) -> None:
+        GL, up = self.GL, self.up
+        for cap in (GL.GL_DEPTH_TEST, GL.GL_BLEND, GL.GL_CULL_FACE, GL.GL_SCISSOR_TEST):
+            GL.glDisable(cap)
+        GL.glViewport(0, 0, up.lw, up.lh)
+        GL.glBindVertexArray(up.vao)
+        for unit, tex in ((0, up.position), (1, up.normal)):
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, tex)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self.fbo)
+        GL.glDrawBuffers(2, [GL.GL_COLOR_ATTACHMENT0, GL.GL_COLOR_ATTACHMENT1])
+        GL.glUseProgram(self.prog)
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, 3)
+        GL.glUseProgram(0)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def draw(self) -> None:
+        self.downsample()
+        self.up.draw()
+
+    def read_low(self) -> tuple[np.ndarray, np.ndarray]:
+        """(h, w, 4) position and normal targets of the point-sampling pass, top-down rows."""
+        up, GL = self.up, self.GL
+        return (self.gl.read_texture(up.low_position, up.lw, up.lh, GL.GL_RGBA32F),
+                self.gl.read_texture(up.low_normal, up.lw, up.lh, GL.GL_RGBA32F))  # fmt: skip
+
+    def release(self) -> None:
+        self.GL.glDeleteFramebuffers(1, [self.fbo])
+        self.up.release()
+
+    def __enter__(self) -> ScalingPasses:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def time_scaling_passes(frame: dict, low_size: tuple[int, int], repeats: int = 10, warmup: int = 2) -> float:
+    """Median seconds of the point-sampling and upsampling passes on the GPU for ``frame``'s size
+    (G-buffer resident, as in an engine; each timed frame ends with ``glFinish``)."""
+    import time
+
     h, w = np.shape(frame["depth"])
-    lh, lw = np.shape(low["depth"])
-    with UpsamplePass((lw, lh), (w, h), settings) as p:
-        p.upload(ao_low, low, frame)
+    with ScalingPasses(low_size, (w, h)) as p:
+        p.upload(frame, np.full((int(low_size[1]), int(low_size[0])), 0.5, np.float32))
+        for _ in range(warmup):
+            p.draw()
+        p.gl.finish()
+        times = []
+        for _ in range(max(1, repeats)):
+            t0 = time.perf_counter()
+            p.draw()
+            p.gl.finish()
+            times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def run_upsample_gl(
+    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+) -> np.ndarray:
+    """:func:`upsample_ao` as the GL passes run it on Mesa (point sampling, then upsampling).
+    Returns (H, W) float32, 1 on background."""
+    h, w = np.shape(frame["depth"])
+    lh, lw = np.shape(ao_low)
+    with ScalingPasses((lw, lh), (w, h), settings) as p:
+        p.upload(frame, ao_low)
         p.draw()
-        out = p.read()
+        out = p.up.read()
     return np.where(np.asarray(frame["mask"], bool), out, np.float32(1.0)).astype(np.float32)
