@@ -649,16 +649,22 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and out.is_dir():
         raise NeuralaoError(f"--out {out} is a folder")
     from .engine import ResultStore, engine_from_args
+    from .scene_bake import bakes_as_scene, read_gltf_scene, write_vertex_scene
 
     engine = engine_from_args(args)
-    scene = load_scene(args.mesh)
+    # a glTF to a .glb is baked as a scene (pipeline.scene_bake): nodes, materials and textures kept
+    gltf = read_gltf_scene(args.mesh) if bakes_as_scene(args.mesh, out) else None
+    scene = load_scene(args.mesh) if gltf is None else gltf.world
     if engine.name == "local":  # threads in this process, exactly as before engines existed
         result = bake(scene, settings, progress=True)
     else:  # chunks on the cluster; finished ones kept beside OUT until it is written (resume)
         store = ResultStore(out.parent / f".{out.name}.chunks")
         with engine:
             result = bake(scene, settings, progress=True, engine=engine, store=store)
-    write_baked_mesh(out, scene, result.ao)
+    if gltf is None:
+        write_baked_mesh(out, scene, result.ao)
+    else:
+        write_vertex_scene(out, gltf, result.ao, {"settings": result.info["settings"]})
     if engine.name != "local":
         store.clear()
     i = result.info

@@ -282,8 +282,9 @@ class _Gltf:
             )
         return data
 
-    def accessor(self, index: Any, where: str) -> np.ndarray:
-        """Accessor ``index`` as a (count, width) or (count,) array (normalised integers -> float)."""
+    def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:
+        """Accessor ``index`` as a (count, width) or (count,) array (normalised integers -> float,
+        unless ``normalize`` is False: then the stored integers, e.g. to copy an attribute as it is)."""
         accs = self.doc.get("accessors", [])
         if not isinstance(index, int) or not 0 <= index < len(accs):
             raise NeuralaoError(f"{where}: accessor {index!r} is not in the file ({len(accs)} accessors)")
@@ -311,7 +312,7 @@ class _Gltf:
             shape=(count, width),
             strides=(stride, dtype.itemsize),
         ).copy()
-        if a.get("normalized") and dtype.kind in "iu":
+        if normalize and a.get("normalized") and dtype.kind in "iu":
             arr = np.maximum(arr / float(np.iinfo(dtype).max), -1.0)
         return arr[:, 0] if width == 1 else arr
 
@@ -506,6 +507,27 @@ class GltfWriter:
             "bufferViews": [],
         }
         self._blob = bytearray()
+
+    @classmethod
+    def from_document(cls, doc: dict[str, Any], blob: bytes) -> GltfWriter:
+        """A writer that edits an existing document: ``doc`` (JSON whose bufferViews all point into
+        buffer 0) and ``blob`` (buffer 0's bytes); new data is appended after ``blob``."""
+        w = cls()
+        w.doc = doc
+        for key in ("accessors", "bufferViews"):
+            doc.setdefault(key, [])
+        w._blob = bytearray(blob)
+        return w
+
+    def buffer_view(self, data: bytes) -> int:
+        """A bufferView holding ``data`` as is (an image), 4-byte aligned; returns its index."""
+        while len(self._blob) % 4:
+            self._blob.append(0)
+        self.doc.setdefault("bufferViews", []).append(
+            {"buffer": 0, "byteOffset": len(self._blob), "byteLength": len(data)}
+        )
+        self._blob.extend(data)
+        return len(self.doc["bufferViews"]) - 1
 
     def accessor(
         self, array: np.ndarray, kind: str | None = None, normalized: bool = False, target: int | None = None

@@ -372,6 +372,28 @@ def _grow_mask(mask: np.ndarray, steps: int) -> np.ndarray:
 # --------------------------------------------------------------------------- baking
 
 
+def texel_image(
+    n: int, pixel: np.ndarray, ao: np.ndarray, valid: np.ndarray, margin: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The AO map from labelled texels (module doc, step 4): image (n, n) float32, covered (n, n) bool.
+
+    pixel (k,) int64 flat texel indices, ao (k,) float, valid (k,) bool. Invalid texels and the gutter
+    of ``margin`` texels are dilated from the valid ones; texels outside every chart and gutter are 1.
+    """
+    flat = np.zeros(n * n, np.float64)
+    known = np.zeros(n * n, bool)
+    flat[pixel] = ao
+    known[pixel] = valid
+    covered = np.zeros(n * n, bool)
+    covered[pixel] = True
+    covered = covered.reshape(n, n)
+    target = _grow_mask(covered, margin)
+    fill = float(ao[valid].mean()) if valid.any() else 1.0
+    image = dilate(flat.reshape(n, n), known.reshape(n, n), target, fill)
+    image[~target] = 1.0  # outside every chart and gutter: open (never sampled)
+    return image, covered
+
+
 def bake_texture(
     mesh: UVMesh, settings: TextureBakeSettings | None = None, progress: bool = False
 ) -> TextureBakeResult:
@@ -394,17 +416,7 @@ def bake_texture(
         points, scene.face_normals[texels.face], progress=progress, ids=texels.pixel
     )
     t2 = time.perf_counter()
-    flat = np.zeros(n * n, np.float64)
-    known = np.zeros(n * n, bool)
-    flat[texels.pixel] = ao
-    known[texels.pixel] = valid
-    covered = np.zeros(n * n, bool)
-    covered[texels.pixel] = True
-    covered = covered.reshape(n, n)
-    target = _grow_mask(covered, settings.margin)
-    fill = float(ao[valid].mean()) if valid.any() else 1.0
-    image = dilate(flat.reshape(n, n), known.reshape(n, n), target, fill)
-    image[~target] = 1.0  # outside every chart and gutter: open (never sampled)
+    image, covered = texel_image(n, texels.pixel, ao, valid, settings.margin)
     info = {
         "resolution": n,
         "uv_source": mesh.uv_source,
@@ -563,6 +575,10 @@ def run_texture(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--to texture writes a .glb, got --out {out.name!r}")
     if out.exists() and out.is_dir():
         raise NeuralaoError(f"--out {out} is a folder")
+    from .scene_bake import bakes_as_scene, run_texture_scene
+
+    if bakes_as_scene(args.mesh, out):  # nodes, materials and textures kept (pipeline.scene_bake)
+        return run_texture_scene(args.mesh, out, settings)
     mesh = load_uv_mesh(args.mesh, settings)
     result = bake_texture(mesh, settings, progress=True)
     data = texture_glb_bytes(mesh, result.ao)  # built before anything is written: both files or neither

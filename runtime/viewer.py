@@ -7,6 +7,10 @@ Each INPUT becomes one entry of the page's method switch:
 * a **vertex bake** (``neuralao bake ... --out X.ply|X.glb``): per-vertex float AO, interpolated;
 * a **texture bake** (``neuralao bake ... --to texture --out X.glb``): the occlusionTexture sampled
   bilinearly (LINEAR, CLAMP_TO_EDGE) at the mesh's TEXCOORD_0, red channel;
+* a **scene bake** (``neuralao bake SCENE.gltf|SCENE.glb ... --out X.glb``, pipeline/scene_bake.py): every
+  node's primitives in world space, each drawn with its material's base colour (factor x texture)
+  times its AO (``_AO`` per vertex, or the occlusionTexture on its TEXCOORD set), so the page shows the
+  materials the bake kept;
 * an **MLP or field export folder** (``neuralao export``): its generated GLSL ES 3.00 fragment shader
   (``glsl/mlp_es300.*``) run unchanged as a full-screen pass over the page's own float G-buffer, with its
   uniform blocks (if any) bound by name as its manifest says. Its mesh is ``--mesh``, else the mesh
@@ -21,7 +25,7 @@ no third-party code) draws every frame in three passes:
    convention, pipeline/gbuffer.py), plus the AO of the baked methods;
 2. AO: for a shader method the generated pass; its sampler named ``u_position`` reads the position
    target, any other (``u_normal``, the MLP's ``u_gbuffer``) the normal target (xyz normal, w mask);
-3. display: AO as grey on a dark background, to the canvas.
+3. display: AO as grey on a dark background, to the canvas (a scene bake: base colour x AO, sRGB).
 
 An orbit camera (drag to rotate, wheel to zoom, keys 1-9 pick a method) and, for tests, a small API on
 ``window.neuralao``: ``setPose(azimuth_deg, elevation_deg, distance_in_diagonals)``, ``setMethod(i)`` and
@@ -62,6 +66,9 @@ class ViewerMethod:
     ao        : (3m,) float32 per-corner AO (vertex bakes) or None
     uv        : (3m, 2) float32 glTF UVs (origin top left) or None; texture : PNG bytes or None
     shader    : {"vertex", "fragment", "inputs", "blocks"} of a generated pass, or None
+    uv_base   : (3m, 2) float32 glTF UVs of the base colour textures (scene bakes) or None
+    parts     : scene bakes: one draw per primitive, {"first", "count", "factor" (RGBA base colour
+                factor), "base" / "occlusion" (PNG or JPEG data URIs, or absent)}; None otherwise
     """
 
     name: str
@@ -73,6 +80,8 @@ class ViewerMethod:
     texture: bytes | None = None
     shader: dict | None = None
     info: dict = field(default_factory=dict)
+    uv_base: np.ndarray | None = None
+    parts: list[dict] | None = None
 
 
 # --------------------------------------------------------------------------- geometry
@@ -106,6 +115,8 @@ def method_from_bake(path: Path) -> ViewerMethod:
     from pipeline.texture_bake import read_texture_glb
 
     if path.suffix.lower() == ".glb":
+        if _is_scene_bake(path):
+            return method_from_scene_bake(path)
         try:
             mesh, red = read_texture_glb(path)
         except NeuralaoError:
@@ -127,6 +138,84 @@ def method_from_bake(path: Path) -> ViewerMethod:
     return ViewerMethod(
         f"vertex bake ({path.name})", "vertex", pos, nrm, ao=ao[faces].reshape(-1).astype(np.float32)
     )
+
+
+def _is_scene_bake(path: Path) -> bool:
+    """Whether a .glb's JSON says it is a scene bake (``asset.extras.neuralao.bake == "scene"``)."""
+    import struct
+
+    with open(path, "rb") as f:
+        head = f.read(20)
+        if len(head) < 20 or head[:4] != b"glTF":
+            return False
+        try:
+            doc = json.loads(f.read(struct.unpack_from("<I", head, 12)[0]))
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            return False
+    extras = doc.get("asset", {}).get("extras", {}) if isinstance(doc, dict) else {}
+    return (
+        isinstance(extras, dict)
+        and isinstance(extras.get("neuralao"), dict)
+        and extras["neuralao"].get("bake") == "scene"
+    )
+
+
+def method_from_scene_bake(path: Path) -> ViewerMethod:
+    """A scene bake: one part per primitive of every written node, in world space (module doc)."""
+    from pipeline.scene_bake import read_gltf_scene
+
+    gs = read_gltf_scene(path)
+    doc, to = gs.doc, gs.doc["asset"]["extras"]["neuralao"].get("to", "vertex")
+    pos, nrm, ao, uv, uv_base, parts = [], [], [], [], [], []
+    for p in (p for p in gs.pieces if p.written):
+        prim = doc["meshes"][p.mesh]["primitives"][p.primitive]
+        attrs = prim["attributes"]
+        faces = p.faces[:, ::-1] if p.mirrored else p.faces  # front faces as glTF defines them
+        a, n = corner_arrays(p.world_vertices(), faces)
+        material = doc.get("materials", [])[prim["material"]] if "material" in prim else {}
+        pbr = material.get("pbrMetallicRoughness", {})
+        part = {
+            "first": sum(len(x) for x in pos),
+            "count": len(a),
+            "factor": pbr.get("baseColorFactor", [1.0] * 4),
+        }
+        ao.append(_corners(gs, attrs, "_AO", faces, 1, 1.0)[:, 0])
+        uv.append(np.zeros((len(a), 2), np.float32))
+        uv_base.append(np.zeros((len(a), 2), np.float32))
+        for key, slot, out in (("occlusion", material.get("occlusionTexture"), uv),
+                               ("base", pbr.get("baseColorTexture"), uv_base)):  # fmt: skip
+            if slot is not None:
+                part[key] = _texture_uri(gs, slot["index"])
+                out[-1] = _corners(gs, attrs, f"TEXCOORD_{slot.get('texCoord', 0)}", faces, 2, 0.0)
+        pos.append(a)
+        nrm.append(n)
+        parts.append(part)
+    return ViewerMethod(
+        f"scene {to} bake, {len(parts)} primitives ({path.name})", "scene", np.concatenate(pos), np.concatenate(nrm),
+        ao=np.concatenate(ao), uv=np.concatenate(uv), uv_base=np.concatenate(uv_base), parts=parts,
+        info={"bake": str(path), "to": to},
+    )  # fmt: skip
+
+
+def _corners(gs, attrs: dict, name: str, faces: np.ndarray, width: int, default: float) -> np.ndarray:
+    """(3m, width) float32 attribute ``name`` at the corners of ``faces`` (m, 3), or ``default``."""
+    if name not in attrs:
+        return np.full((3 * len(faces), width), default, np.float32)
+    values = np.asarray(gs.gltf.accessor(attrs[name], f"{gs.path.name} {name}"), np.float32)
+    return values[faces].reshape(-1, width)
+
+
+def _texture_uri(gs, texture: int) -> str:
+    """A data URI of texture ``texture``'s image (embedded in a bufferView or a data URI)."""
+    image = gs.doc["images"][gs.doc["textures"][texture]["source"]]
+    if "uri" in image:
+        if not image["uri"].startswith("data:"):
+            raise NeuralaoError(f"{gs.path.name}: image {image['uri']!r} is not embedded")
+        return image["uri"]
+    view = gs.doc["bufferViews"][image["bufferView"]]
+    start = int(view.get("byteOffset", 0))
+    data = gs.gltf.buffers[view.get("buffer", 0)][start : start + int(view["byteLength"])]
+    return f"data:{image.get('mimeType', 'image/png')};base64," + _b64(data)
 
 
 def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
@@ -203,7 +292,11 @@ def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
             e["ao"] = _b64(m.ao.astype("<f4").tobytes())
         if m.uv is not None:
             e["uv"] = _b64(m.uv.astype("<f4").tobytes())
+        if m.texture is not None:
             e["texture"] = "data:image/png;base64," + _b64(m.texture)
+        if m.parts is not None:
+            e["parts"] = m.parts
+            e["uv_base"] = _b64(m.uv_base.astype("<f4").tobytes())
         if m.shader is not None:
             e["shader"] = m.shader
         e["info"] = m.info
@@ -245,7 +338,7 @@ def serve(folder: Path, port: int) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("inputs", nargs="+", metavar="EXPORT_OR_BAKE",
-                   help="vertex bakes (.ply/.glb), texture bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
+                   help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
     p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
     p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
     p.add_argument("--size", type=int, nargs=2, default=[640, 480], metavar=("W", "H"),

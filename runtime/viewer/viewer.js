@@ -88,21 +88,25 @@ layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in float a_ao;
 layout(location = 3) in vec2 a_uv;
+layout(location = 4) in vec2 a_uv_base;
 uniform mat4 u_mvp;
-out vec3 v_position; out vec3 v_normal; out float v_ao; out vec2 v_uv;
+out vec3 v_position; out vec3 v_normal; out float v_ao; out vec2 v_uv; out vec2 v_uv_base;
 void main() {
-  v_position = a_position; v_normal = a_normal; v_ao = a_ao; v_uv = a_uv;
+  v_position = a_position; v_normal = a_normal; v_ao = a_ao; v_uv = a_uv; v_uv_base = a_uv_base;
   gl_Position = u_mvp * vec4(a_position, 1.0);
 }`;
   const GBUFFER_FS = `#version 300 es
 precision highp float;
 precision highp sampler2D;
-in vec3 v_position; in vec3 v_normal; in float v_ao; in vec2 v_uv;
+in vec3 v_position; in vec3 v_normal; in float v_ao; in vec2 v_uv; in vec2 v_uv_base;
 uniform int u_mode;            // 0: vertex AO, 1: texture AO (red channel), 2: none (a shader pass follows)
 uniform sampler2D u_occlusion;
+uniform sampler2D u_base;      // scene bakes: base colour texture (sRGB texture: sampled as linear), else white
+uniform vec4 u_factor;         // scene bakes: baseColorFactor (linear), else white
 layout(location = 0) out vec4 o_position;
 layout(location = 1) out vec4 o_normal;
 layout(location = 2) out vec4 o_ao;
+layout(location = 3) out vec4 o_albedo;
 void main() {
   vec3 n = normalize(v_normal);
   if (!gl_FrontFacing) n = -n;   // viewer-facing, as pipeline/gbuffer.py
@@ -110,6 +114,7 @@ void main() {
   o_normal = vec4(n, 1.0);
   float ao = u_mode == 0 ? v_ao : (u_mode == 1 ? texture(u_occlusion, v_uv).r : 1.0);
   o_ao = vec4(ao, 0.0, 0.0, 1.0);
+  o_albedo = u_factor * texture(u_base, v_uv_base);
 }`;
   const FULLSCREEN_VS = `#version 300 es
 void main() {
@@ -121,13 +126,16 @@ precision highp float;
 precision highp sampler2D;
 uniform sampler2D u_ao;
 uniform sampler2D u_position;
+uniform sampler2D u_albedo;
+uniform int u_colour;          // 1: base colour x AO (scene bakes, linear -> sRGB); 0: AO as grey
 out vec4 o_colour;
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
   float mask = texelFetch(u_position, p, 0).w;
   float ao = clamp(texelFetch(u_ao, p, 0).r, 0.0, 1.0);
   // AO written to the display as is (as AO maps are viewed: 0.5 shows as mid grey); background dark
-  vec3 c = mask >= 0.5 ? vec3(ao) : vec3(0.114, 0.122, 0.137);
+  vec3 shade = u_colour == 1 ? pow(texelFetch(u_albedo, p, 0).rgb * ao, vec3(1.0 / 2.2)) : vec3(ao);
+  vec3 c = mask >= 0.5 ? shade : vec3(0.114, 0.122, 0.137);
   o_colour = vec4(c, 1.0);
 }`;
   const gbufferProg = program(GBUFFER_VS, GBUFFER_FS, "G-buffer");
@@ -136,14 +144,15 @@ void main() {
 
   // ------------------------------------------------------------------ targets
   const tPosition = floatTarget(W, H), tNormal = floatTarget(W, H), tBaked = floatTarget(W, H), tShader = floatTarget(W, H);
+  const tAlbedo = floatTarget(W, H);
   const depth = gl.createRenderbuffer();
   gl.bindRenderbuffer(gl.RENDERBUFFER, depth);
   gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT32F, W, H);
   const fbGbuffer = gl.createFramebuffer();
   gl.bindFramebuffer(gl.FRAMEBUFFER, fbGbuffer);
-  [tPosition, tNormal, tBaked].forEach((t, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0));
+  [tPosition, tNormal, tBaked, tAlbedo].forEach((t, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0));
   gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, depth);
-  gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1, gl.COLOR_ATTACHMENT2]);
+  gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1, gl.COLOR_ATTACHMENT2, gl.COLOR_ATTACHMENT3]);
   if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) fail("G-buffer framebuffer incomplete");
   const fbShader = gl.createFramebuffer();
   gl.bindFramebuffer(gl.FRAMEBUFFER, fbShader);
@@ -169,6 +178,10 @@ void main() {
     gl.enableVertexAttribArray(loc);
     gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
   }
+  const white = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, white);
+  gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, 1, 1, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array([255, 255, 255, 255]));
+  const WHITE = new Float32Array([1, 1, 1, 1]);
   // one copy of each mesh, shared by the methods drawn on it
   const geometries = S.geometries.map((g) => ({ count: g.count, positions: buffer(b64floats(g.positions)), normals: buffer(b64floats(g.normals)) }));
   let pending = 0;
@@ -181,25 +194,14 @@ void main() {
     bindBuffer(1, g.normals, 3);
     if (m.ao) attribute(2, b64floats(m.ao), 1); else gl.vertexAttrib1f(2, 1.0);
     if (m.uv) attribute(3, b64floats(m.uv), 2); else gl.vertexAttrib2f(3, 0.0, 0.0);
+    if (m.uv_base) attribute(4, b64floats(m.uv_base), 2); else gl.vertexAttrib2f(4, 0.0, 0.0);
     gl.bindVertexArray(null);
     const out = { name: m.name, kind: m.kind, count: m.count, vao: vao };
-    if (m.texture) {
-      // glTF: UV (0, 0) is the image's top-left texel, the first row uploaded (no flip); LINEAR, CLAMP_TO_EDGE.
-      out.texture = gl.createTexture();
-      pending++;
-      const img = new Image();
-      img.onload = () => {
-        gl.bindTexture(gl.TEXTURE_2D, out.texture);
-        gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
-        gl.texImage2D(gl.TEXTURE_2D, 0, gl.R8, img.width, img.height, 0, gl.RED, gl.UNSIGNED_BYTE, decodeRed(img));
-        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
-        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
-        gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
-        if (--pending === 0) start();
-      };
-      img.onerror = () => fail("cannot decode the occlusion texture of " + m.name);
-      img.src = m.texture;
+    if (m.texture) out.texture = occlusionTexture(m.texture, m.name);
+    if (m.parts) {  // scene bakes: one draw per primitive with its own material
+      out.parts = m.parts.map((p) => ({ first: p.first, count: p.count, factor: new Float32Array(p.factor),
+        occlusion: p.occlusion ? occlusionTexture(p.occlusion, m.name) : null,
+        base: p.base ? colourTexture(p.base, m.name) : white }));
     }
     if (m.shader) {
       out.prog = program(m.shader.vertex, m.shader.fragment, "generated shader of " + m.name);
@@ -215,6 +217,43 @@ void main() {
     }
     return out;
   });
+  // glTF: UV (0, 0) is the image's top-left texel, the first row uploaded (no flip); LINEAR, CLAMP_TO_EDGE.
+  function occlusionTexture(uri, what) {
+    const t = gl.createTexture();
+    pending++;
+    const img = new Image();
+    img.onload = () => {
+      gl.bindTexture(gl.TEXTURE_2D, t);
+      gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.R8, img.width, img.height, 0, gl.RED, gl.UNSIGNED_BYTE, decodeRed(img));
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+      if (--pending === 0) start();
+    };
+    img.onerror = () => fail("cannot decode an occlusion texture of " + what);
+    img.src = uri;
+    return t;
+  }
+  // base colour: sRGB-encoded, sampled as linear (SRGB8_ALPHA8), repeating as glTF's default sampler
+  function colourTexture(uri, what) {
+    const t = gl.createTexture();
+    pending++;
+    const img = new Image();
+    img.onload = () => {
+      gl.bindTexture(gl.TEXTURE_2D, t);
+      gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.SRGB8_ALPHA8, gl.RGBA, gl.UNSIGNED_BYTE, img);
+      gl.generateMipmap(gl.TEXTURE_2D);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR_MIPMAP_LINEAR);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      if (--pending === 0) start();
+    };
+    img.onerror = () => fail("cannot decode a base colour texture of " + what);
+    img.src = uri;
+    return t;
+  }
   // exact 8-bit texel values, whatever the browser's colour management: read the PNG through a 2D canvas
   function decodeRed(img) {
     const c = document.createElement("canvas");
@@ -249,17 +288,26 @@ void main() {
     gl.clearBufferfv(gl.COLOR, 0, new Float32Array([0, 0, 0, 0]));
     gl.clearBufferfv(gl.COLOR, 1, new Float32Array([0, 0, 0, 0]));
     gl.clearBufferfv(gl.COLOR, 2, new Float32Array([1, 0, 0, 0]));
+    gl.clearBufferfv(gl.COLOR, 3, new Float32Array([1, 1, 1, 1]));
     gl.clearBufferfi(gl.DEPTH_STENCIL, 0, 1.0, 0);
     gl.enable(gl.DEPTH_TEST);
     gl.disable(gl.CULL_FACE);
     gl.useProgram(gbufferProg);
     gl.uniformMatrix4fv(gl.getUniformLocation(gbufferProg, "u_mvp"), false, mvp());
-    gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_mode"), m.kind === "vertex" ? 0 : m.kind === "texture" ? 1 : 2);
-    gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D, m.texture || null);
     gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_occlusion"), 0);
+    gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_base"), 1);
     gl.bindVertexArray(m.vao);
-    gl.drawArrays(gl.TRIANGLES, 0, m.count);
+    const parts = m.parts || [{ first: 0, count: m.count, factor: WHITE, occlusion: m.texture || null, base: white }];
+    for (const p of parts) {
+      const mode = m.kind === "vertex" ? 0 : m.kind === "texture" ? 1 : m.kind === "scene" ? (p.occlusion ? 1 : 0) : 2;
+      gl.uniform1i(gl.getUniformLocation(gbufferProg, "u_mode"), mode);
+      gl.uniform4fv(gl.getUniformLocation(gbufferProg, "u_factor"), p.factor);
+      gl.activeTexture(gl.TEXTURE0);
+      gl.bindTexture(gl.TEXTURE_2D, p.occlusion);
+      gl.activeTexture(gl.TEXTURE1);
+      gl.bindTexture(gl.TEXTURE_2D, p.base);
+      gl.drawArrays(gl.TRIANGLES, p.first, p.count);
+    }
     gl.disable(gl.DEPTH_TEST);
     let aoTex = tBaked;
     if (m.prog) {  // the generated pass, unchanged, over the G-buffer
@@ -283,6 +331,10 @@ void main() {
     gl.activeTexture(gl.TEXTURE1);
     gl.bindTexture(gl.TEXTURE_2D, tPosition);
     gl.uniform1i(gl.getUniformLocation(displayProg, "u_position"), 1);
+    gl.activeTexture(gl.TEXTURE2);
+    gl.bindTexture(gl.TEXTURE_2D, tAlbedo);
+    gl.uniform1i(gl.getUniformLocation(displayProg, "u_albedo"), 2);
+    gl.uniform1i(gl.getUniformLocation(displayProg, "u_colour"), m.kind === "scene" ? 1 : 0);
     gl.bindVertexArray(emptyVAO);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     gl.bindVertexArray(null);
@@ -331,7 +383,8 @@ void main() {
     const dbg = gl.getExtension("WEBGL_debug_renderer_info");
     const renderer = dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
     return { width: W, height: H, method: methods[current].name, renderer: renderer,
-      position: b64bytes(readTexture(tPosition)), normal: b64bytes(readTexture(tNormal)), ao: b64bytes(readTexture(aoTex)) };
+      position: b64bytes(readTexture(tPosition)), normal: b64bytes(readTexture(tNormal)), ao: b64bytes(readTexture(aoTex)),
+      albedo: b64bytes(readTexture(tAlbedo)) };
   };
   function start() { render(); api.ready = true; }
   if (pending === 0) start();
