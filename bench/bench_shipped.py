@@ -11,6 +11,10 @@ medians and ratios from the same rounds:
 * each shipped model: its generated GLSL compute passes (pad, network, crop; dispatch only, the input
   already resident, as in an engine) through ``runtime.glsl_runner.time_compute`` on random input (the
   cost does not depend on the input or the radius uniform);
+* ``<model>@h<N>``: the same network at an internal height of N rows (same aspect ratio) between the
+  point-sampling and upsampling passes of ``runtime.internal_resolution`` (both timed at the frame's
+  size), as a frame at a resolution taller than N runs it; N from ``--internal-height`` or the
+  model's manifest (``internal_height``);
 * SSAO and GTAO: ``runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (a seeded
   interior camera: all foreground, as in a game frame; they skip background pixels) at each size, radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
@@ -36,6 +40,13 @@ from pipeline.report import cpu_name  # noqa: E402
 LARGE_PIXELS = 1_000_000  # sizes above this get --large-repeats timed dispatches a round
 
 
+def _manifest(folder: Path) -> dict:
+    import json
+
+    path = folder / "manifest.json"
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
 def parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -51,11 +62,12 @@ def measure(args) -> dict:
     from runtime import gl
     from runtime.baselines import time_screen_space
     from runtime.glsl_runner import time_compute
+    from runtime.internal_resolution import internal_size, time_scaling_passes
     from runtime.shipped import read_index
 
     models_dir = Path(args.models)
     index = read_index(models_dir)
-    names = sorted(index["models"])
+    names = sorted(index["models"]) if not args.only else [n for n in args.only if n in index["models"]]
     default = index.get("default", {}).get("unet")
     scene = load_scene(args.mesh)
     radius = 0.25 * scene.diagonal
@@ -63,11 +75,24 @@ def measure(args) -> dict:
     with GBufferRenderer(scene) as r:
         for w, h in args.sizes:
             frames[(w, h)] = r.render(interior(scene, 1, w, h, seed=args.seed)[0])
-    methods = [*names, "ssao", "gtao"]
+    # model@h<N>: the network at N rows (same aspect), between the point-sampling and upsampling passes
+    internal = {}
+    for m in names:
+        height = args.internal_height or _manifest(models_dir / m).get("internal_height")
+        if height:
+            internal[f"{m}@h{int(height)}"] = (m, int(height))
+    methods = [*names, *internal, "ssao", "gtao"]
 
     def seconds(m: str, w: int, h: int, repeats: int, warmup: int) -> float:
         if m in ("ssao", "gtao"):  # a pass is ~10x cheaper than a U-Net: 4x the repeats
             return time_screen_space(frames[(w, h)], m, radius, repeats=4 * repeats, warmup=max(warmup, 1))
+        if m in internal:
+            model, height = internal[m]
+            lw, lh = internal_size(w, h, height)
+            if (lw, lh) == (w, h):
+                return time_compute(models_dir / model / "glsl", h, w, repeats=repeats, warmup=warmup)
+            net = time_compute(models_dir / model / "glsl", lh, lw, repeats=repeats, warmup=warmup)
+            return net + time_scaling_passes(frames[(w, h)], (lw, lh), repeats=2 * repeats, warmup=max(warmup, 1))
         return time_compute(models_dir / m / "glsl", h, w, repeats=repeats, warmup=warmup)
 
     times: dict[str, dict[str, list[float]]] = {m: {} for m in methods}
@@ -82,7 +107,7 @@ def measure(args) -> dict:
                 times[m].setdefault(f"{w}x{h}", []).append(seconds(m, w, h, reps, 1))
     rows = {}
     for m in methods:
-        info = index["models"].get(m) or index.get("baselines", {}).get(m, {})
+        info = index["models"].get(internal.get(m, (m,))[0]) or index.get("baselines", {}).get(m, {})
         test = info.get("test", {})
         med = {s: float(np.median(v)) for s, v in times[m].items()}
         rows[m] = {"ms": {s: 1e3 * v for s, v in med.items()}, "rounds": times[m],
@@ -140,6 +165,9 @@ def main() -> None:
     p.add_argument("--large-repeats", type=int, default=1, help="the same above one megapixel")
     p.add_argument("--mesh", default="sponza_partial")
     p.add_argument("--seed", type=int, default=0, help="seed of the interior camera")
+    p.add_argument("--only", nargs="+", help="time only these shipped models (default: all)")
+    p.add_argument("--internal-height", type=int, default=None,
+                   help="also time each model at this internal height (default: the height its manifest declares)")  # fmt: skip
     args = p.parse_args()
     if min(args.rounds, args.repeats, args.large_repeats) < 1:
         p.error("--rounds, --repeats and --large-repeats must be at least 1")

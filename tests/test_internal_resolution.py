@@ -156,3 +156,24 @@ def test_shipped_unet_mean_ao_does_not_increase_with_radius(default_unet):
         for r in (1 / 32, 1 / 16, 1 / 8, 1 / 4)
     ]
     assert all(b <= a for a, b in zip(means[:-1], means[1:], strict=True)), means
+
+
+def test_infer_frame_follows_the_declared_internal_height(default_unet, tmp_path):
+    """`infer` runs a U-Net at the height its export declares (manifest ``internal_height``)."""
+    import json
+    import shutil
+
+    from export.unet import declared_internal_height, infer_frame
+
+    src = default_model("unet")
+    shutil.copy(src, tmp_path / "model.onnx")
+    manifest = json.loads((src.parent / "manifest.json").read_text()) | {"internal_height": 64}
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    assert declared_internal_height(tmp_path / "model.onnx") == 64
+    scene = load_scene("spot")
+    frame = render_gbuffer(scene, orbit(scene, 3, 192, 128, seed=1)[1])
+    radius = 0.125 * scene.diagonal
+    want = at_internal_resolution(default_unet, 64)(frame, radius)
+    np.testing.assert_array_equal(infer_frame(tmp_path / "model.onnx", frame, radius), want)
+    np.testing.assert_array_equal(infer_frame(tmp_path / "model.onnx", frame, radius, internal_height=None),
+                                  default_unet(frame, radius))  # fmt: skip
