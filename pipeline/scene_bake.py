@@ -5,7 +5,8 @@ several nodes may share, primitives with their own materials and textures. It is
 
 1. **Read.** The default scene's nodes are walked depth first; every triangle primitive (mode 4, 5
    or 6) of every node with a mesh is a *piece*: the primitive's positions under the node's world
-   matrix (a mirroring matrix reverses the winding, as glTF specifies). A node with
+   matrix (a mirroring matrix reverses the winding, as glTF specifies; a skinned mesh is taken in
+   its bind pose, with a warning). A node with
    ``EXT_mesh_gpu_instancing`` adds each instance as an occluder but is not written (per-instance AO
    of instanced decorations is the level bake's job, ``--config``). Points and lines are skipped.
 2. **Trace.** The pieces form one world-space :class:`~pipeline.scene.Scene` in one Embree scene, so
@@ -213,11 +214,15 @@ def read_gltf_scene(path: str | Path) -> GltfScene:
                 skipped["instanced nodes (occluders only)"] = (
                     skipped.get("instanced nodes (occluders only)", 0) + 1
                 )
+            if "skin" in node:  # glTF poses a skinned mesh by its joints; the bake sees the bind pose
+                log.warning("%s: skinned; baked in its bind pose under the node's transform", where)
             pieces += _primitive_pieces(g, i, mi, transforms, inst is None, skipped)
         for c in reversed(node.get("children", [])):
             stack.append((c, world))
     if not any(p.written for p in pieces):
         raise NeuralaoError(f"{path.name} has no node with a triangle mesh in its scene")
+    for what, count in skipped.items():
+        log.warning("%s: %d %s not baked", path.name, count, what)
     return GltfScene(path, g, pieces, _world_scene(pieces, path), skipped)
 
 
@@ -571,19 +576,13 @@ def _glb(path: str | Path) -> Path:
 def run_texture_scene(mesh: str, out: Path, settings) -> int:
     """``neuralao bake SCENE.gltf --to texture --out OUT.glb`` (settings: TextureBakeSettings)."""
     gs = read_gltf_scene(mesh)
-    _log_skipped(gs)
     images, layouts, info = bake_texture_scene(gs, settings, progress=True)
     write_texture_scene(
         out, gs, images, layouts, {"settings": info["settings"], "uv_sources": info["uv_sources"]}
     )
     log.info(
-        "baked %s (%d nodes' primitives, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
-        gs.path.name, sum(p.written for p in gs.pieces), info["maps"], info["resolution"], info["resolution"],
+        "baked %s (%d primitives in %d nodes, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
+        gs.path.name, sum(p.written for p in gs.pieces), len({p.node for p in gs.pieces if p.written}), info["maps"], info["resolution"], info["resolution"],
         info["texels_covered"], info["invalid_texels"], info["seconds"], out,
     )  # fmt: skip
     return 0
-
-
-def _log_skipped(gs: GltfScene) -> None:
-    for what, count in gs.skipped.items():
-        log.warning("%s: %d %s not baked", gs.path.name, count, what)

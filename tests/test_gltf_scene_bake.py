@@ -70,7 +70,7 @@ def cube(half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def write_gltf(path, meshes: list[dict], nodes: list[dict], roots: list[int], materials=(), images=()):
-    """A glTF from parts. meshes: [{"name", "primitives": [{"v", "f", "uv"?, "material"?}]}]; nodes:
+    """A glTF from parts. meshes: [{"name", "primitives": [{"v", "f", "uv"?, "colour"?, "material"?}]}]; nodes:
     glTF node dicts as they are; images: PNG bytes, one texture each (embedded in .glb, files beside a
     .gltf). Returns the path."""
     w = GltfWriter("neuralao tests")
@@ -80,6 +80,8 @@ def write_gltf(path, meshes: list[dict], nodes: list[dict], roots: list[int], ma
             attrs = {"POSITION": w.accessor(np.asarray(p["v"], np.float32), target=ARRAY)}
             if "uv" in p:
                 attrs["TEXCOORD_0"] = w.accessor(np.asarray(p["uv"], np.float32), target=ARRAY)
+            if "colour" in p:
+                attrs["COLOR_0"] = w.accessor(np.asarray(p["colour"], np.float32), target=ARRAY)
             prim = {"attributes": attrs, "mode": 4,
                     "indices": w.accessor(np.asarray(p["f"], np.uint32).reshape(-1), target=ELEMENTS)}  # fmt: skip
             if "material" in p:
@@ -126,10 +128,11 @@ def image_of(doc: dict, binary: bytes, texture: int) -> np.ndarray:
 # --------------------------------------------------------------------------- closed form
 
 
-def planes_gltf(path, ceiling: str = "rotated"):
+def planes_gltf(path, ceiling: str = "rotated", colour: np.ndarray | None = None):
     """Floor and ceiling (one grid mesh each, authored at z = 0 facing +z) under a root node that
     scales by 0.5 and translates: world floor at z = 1, ceiling H above it facing down, half-size 4.
-    ``ceiling``: "rotated" (180 degrees about x) or "mirrored" (scale z by -1: glTF flips the winding)."""
+    ``ceiling``: "rotated" (180 degrees about x) or "mirrored" (scale z by -1: glTF flips the winding);
+    ``colour``: an RGBA COLOR_0 for every floor vertex."""
     v, f, uv = grid(8.0, 8)
     turn = {"rotation": [1.0, 0.0, 0.0, 0.0]} if ceiling == "rotated" else {"scale": [1.0, 1.0, -1.0]}
     nodes = [
@@ -137,7 +140,8 @@ def planes_gltf(path, ceiling: str = "rotated"):
         {"name": "floor", "mesh": 0},
         {"name": "ceiling", "mesh": 1, "translation": [0.0, 0.0, 2 * H], **turn},
     ]
-    meshes = [{"name": "floor", "primitives": [{"v": v, "f": f, "uv": uv}]},
+    floor = {"v": v, "f": f, "uv": uv} | ({} if colour is None else {"colour": np.tile(colour, (len(v), 1))})
+    meshes = [{"name": "floor", "primitives": [floor]},
               {"name": "ceiling", "primitives": [{"v": v, "f": f, "uv": uv}]}]  # fmt: skip
     return write_gltf(path, meshes, nodes, [0])
 
@@ -175,43 +179,51 @@ def test_vertex_bake_matches_the_parallel_planes_closed_form(tmp_path, ceiling):
     assert doc["nodes"][0]["scale"] == [0.5, 0.5, 0.5] and doc["nodes"][0]["children"] == [1, 2]
 
 
-def test_texture_bake_matches_the_parallel_planes_closed_form(tmp_path):
+def texel_points(get, prim: dict, texcoord: int, n: int) -> np.ndarray:
+    """(n, n, 3) object-space points of the texel centres of an n x n map on UV set ``texcoord`` of a
+    baked primitive (NaN where no UV triangle holds the centre), read back from the file."""
+    from pipeline.texture_bake import rasterise
+
+    st = get(prim["attributes"][f"TEXCOORD_{texcoord}"])
+    faces = get(prim["indices"]).astype(np.int64).reshape(-1, 3)
+    positions = get(prim["attributes"]["POSITION"]).astype(np.float64)
+    texels = rasterise(np.c_[st[:, 0], 1.0 - st[:, 1]], faces, n)  # glTF v down -> trimesh v up
+    out = np.full((n * n, 3), np.nan)
+    out[texels.pixel] = np.einsum("kc,kcd->kd", texels.bary, positions[faces[texels.face]])
+    return out.reshape(n, n, 3)
+
+
+@pytest.mark.parametrize("uv", ["mesh", "xatlas"])
+def test_texture_bake_matches_the_parallel_planes_closed_form(tmp_path, uv):
+    """On the planes' own UVs, and on an xatlas lightmap set added beside them (TEXCOORD_1)."""
     src = planes_gltf(tmp_path / "planes.glb")
     out = tmp_path / "baked.glb"
     rays, n = 256, 64
-    args = [
-        "bake",
-        str(src),
-        "--to",
-        "texture",
-        "--resolution",
-        str(n),
-        "--rays",
-        str(rays),
-        "--max-distance",
-        str(R),
-    ]
-    assert cli.main([*args, "--out", str(out)]) == 0
+    args = ["bake", str(src), "--to", "texture", "--resolution", str(n), "--rays", str(rays),
+            "--max-distance", str(R), "--uv", uv, "--out", str(out)]  # fmt: skip
+    assert cli.main(args) == 0
     doc, binary = glb_parts(out)
+    _, get = read_gltf_json(out)
     expected = (H / R) ** 2
-    # texel centres -> local grid coordinates through the mesh's own UVs: u = 0.05 + 0.9 (x + 8) / 16
-    c = (np.arange(n) + 0.5) / n
-    x = (c - 0.05) / 0.9 * 16 - 8
-    y = -((c - 0.05) / 0.9 * 16 - 8)  # row 0 is v = 0: the top of the image is y = +8
-    xx, yy = np.meshgrid(x, y)  # (row, col) -> x from the column, y from the row
-    inside = interior(np.stack([xx.ravel(), yy.ravel()], 1)).reshape(n, n)
-    assert inside.sum() > 200
     measured = {}
     for node in doc["nodes"][1:]:
-        material = doc["materials"][doc["meshes"][node["mesh"]]["primitives"][0]["material"]]
-        assert "texCoord" not in material["occlusionTexture"]  # the mesh's own TEXCOORD_0
+        prim = doc["meshes"][node["mesh"]]["primitives"][0]
+        material = doc["materials"][prim["material"]]
+        texcoord = material["occlusionTexture"].get("texCoord", 0)
+        assert texcoord == (0 if uv == "mesh" else 1)  # a lightmap set goes beside the mesh's own
+        assert "TEXCOORD_0" in prim["attributes"]
+        points = texel_points(get, prim, texcoord, n)
+        inside = interior(np.nan_to_num(points, nan=1e9).reshape(-1, 3)).reshape(n, n)
+        assert inside.sum() > 200
         red = image_of(doc, binary, material["occlusionTexture"]["index"])[:, :, 0] / 255.0
         assert red.shape == (n, n)
         assert np.all(np.abs(red[inside] - expected) <= mc_bound(expected, rays) + QUANT), node["name"]
         # the mean of all interior texels: Monte-Carlo noise averages out, a bias would not
         assert abs(red[inside].mean() - expected) <= mc_bound(expected, rays * inside.sum()) + QUANT
-        measured[node["name"]] = float(red[inside].mean())
-    print(f"\nparallel planes, texture {n}x{n}: mean interior AO {measured}, closed form {expected}")
+        measured[node["name"]] = round(float(red[inside].mean()), 4)
+    print(
+        f"\nparallel planes, texture {n}x{n} on {uv} UVs: mean interior AO {measured}, closed form {expected}"
+    )
 
 
 def test_each_plane_alone_is_open(tmp_path):
@@ -250,6 +262,22 @@ def test_obscurance_matches_its_closed_form_through_the_transforms(tmp_path):
               f"closed form {expected:.4f}")  # fmt: skip
 
 
+def test_authored_vertex_colours_are_kept_and_darkened(tmp_path):
+    """glTF multiplies the base colour by COLOR_0, so a primitive's own vertex colour times AO is what
+    renders the bake; _AO keeps the AO alone."""
+    colour = np.array([1.0, 0.5, 0.25, 0.75])
+    src = planes_gltf(tmp_path / "planes.glb", colour=colour)
+    out = tmp_path / "baked.glb"
+    assert cli.main(["bake", str(src), "--method", "vertex", "--rays", "64", "--max-distance", str(R),
+                     "--out", str(out)]) == 0  # fmt: skip
+    doc, get = read_gltf_json(out)
+    attrs = doc["meshes"][doc["nodes"][1]["mesh"]]["primitives"][0]["attributes"]
+    ao, got = get(attrs["_AO"]), get(attrs["COLOR_0"])
+    assert ao.min() < 0.3
+    np.testing.assert_allclose(got[:, :3], colour[:3] * ao[:, None], atol=0.5 / 255 + 1e-6)
+    np.testing.assert_allclose(got[:, 3], colour[3], atol=0.5 / 255 + 1e-6)
+
+
 # --------------------------------------------------------------------------- materials, hierarchy, instances
 
 
@@ -265,7 +293,7 @@ def checker(n: int = 8) -> np.ndarray:
 def room_gltf(path):
     """Three nodes with meshes, two materials, a shared mesh, a hierarchy (Y up):
     room -> floor (red_paint, a grid rotated from z-up), crate_a (blue_checker: blue factor x checker
-    texture + a flat normal map) -> crate_b (crate_a's mesh, stacked on it off-centre)."""
+    texture + a flat normal map) -> crate_b (crate_a's mesh, floating 0.25 above it, off-centre)."""
     fv, ff, fuv = grid(2.0, 8)
     cv, cf, cuv = cube(0.5)
     materials = [
@@ -279,7 +307,7 @@ def room_gltf(path):
         {"name": "room", "children": [1, 2]},
         {"name": "floor", "mesh": 0, "rotation": ROOT_TO_Y_UP},
         {"name": "crate_a", "mesh": 1, "translation": [0.0, 0.5, 0.0], "children": [3]},
-        {"name": "crate_b", "mesh": 1, "translation": [0.35, 1.0, 0.2]},
+        {"name": "crate_b", "mesh": 1, "translation": [0.3, 1.25, 0.1]},
     ]
     meshes = [{"name": "floor_mesh", "primitives": [{"v": fv, "f": ff, "uv": fuv, "material": 0}]},
               {"name": "crate_mesh", "primitives": [{"v": cv, "f": cf, "uv": cuv, "material": 1}]}]  # fmt: skip
@@ -287,11 +315,11 @@ def room_gltf(path):
     return write_gltf(path, meshes, nodes, [0], materials, [png(checker()), png(flat_normal)])
 
 
-def bake_room(tmp_path, to: str, suffix: str = ".glb", rays: int = 32, resolution: int = 32):
+def bake_room(tmp_path, to: str, suffix: str = ".glb", rays: int = 32, resolution: int = 32, more=()):
     src = room_gltf(tmp_path / f"room{suffix}")
     out = tmp_path / f"room_{to}.glb"
     extra = ["--method", "vertex"] if to == "vertex" else ["--to", "texture", "--resolution", str(resolution)]
-    assert cli.main(["bake", str(src), "--rays", str(rays), *extra, "--out", str(out)]) == 0
+    assert cli.main(["bake", str(src), "--rays", str(rays), *extra, *more, "--out", str(out)]) == 0
     return src, out
 
 
@@ -301,7 +329,7 @@ def test_materials_names_and_hierarchy_survive(tmp_path, to, suffix):
     doc, binary = glb_parts(out)
     assert [n["name"] for n in doc["nodes"]] == ["room", "floor", "crate_a", "crate_b"]
     assert doc["nodes"][0]["children"] == [1, 2] and doc["nodes"][2]["children"] == [3]
-    assert doc["nodes"][1]["rotation"] == ROOT_TO_Y_UP and doc["nodes"][3]["translation"] == [0.35, 1.0, 0.2]
+    assert doc["nodes"][1]["rotation"] == ROOT_TO_Y_UP and doc["nodes"][3]["translation"] == [0.3, 1.25, 0.1]
     assert doc["scenes"][doc.get("scene", 0)]["name"] == "test scene"
     assert doc["asset"]["extras"]["neuralao"]["to"] == to
     by_node = {n["name"]: doc["meshes"][n["mesh"]]["primitives"][0] for n in doc["nodes"][1:]}
@@ -323,7 +351,7 @@ def test_materials_names_and_hierarchy_survive(tmp_path, to, suffix):
     # trimesh reads the same scene: names, placement and materials
     scene = trimesh.load(str(out))
     assert {"floor", "crate_a", "crate_b"} <= set(scene.graph.nodes_geometry)
-    np.testing.assert_allclose(scene.graph["crate_b"][0][:3, 3], [0.35, 1.5, 0.2], atol=1e-6)
+    np.testing.assert_allclose(scene.graph["crate_b"][0][:3, 3], [0.3, 1.75, 0.1], atol=1e-6)
     for name in ("floor", "crate_a", "crate_b"):
         geometry = scene.geometry[scene.graph[name][1]]
         material = geometry.visual.material
@@ -336,7 +364,7 @@ def test_materials_names_and_hierarchy_survive(tmp_path, to, suffix):
 
 
 def test_a_shared_mesh_gets_its_own_ao_per_instance(tmp_path):
-    src, out = bake_room(tmp_path, "vertex", rays=64)
+    src, out = bake_room(tmp_path, "vertex", rays=64, more=["--max-distance", "1.0"])
     doc, get = read_gltf_json(out)
     source, _ = read_gltf_json(src)
     assert source["nodes"][2]["mesh"] == source["nodes"][3]["mesh"] == 1
@@ -346,11 +374,11 @@ def test_a_shared_mesh_gets_its_own_ao_per_instance(tmp_path):
     pa, pb = doc["meshes"][a]["primitives"][0], doc["meshes"][b]["primitives"][0]
     assert pa["attributes"]["POSITION"] == pb["attributes"]["POSITION"]  # geometry still shared
     ao_a, ao_b = get(pa["attributes"]["_AO"]), get(pb["attributes"]["_AO"])
-    # crate_a's top is under crate_b, crate_b's bottom rests on crate_a: the two differ where they touch
-    top_a = get(pa["attributes"]["POSITION"])[:, 1] > 0.49
-    assert ao_a[top_a].mean() < ao_b[top_a].mean() - 0.2
-    # and the world-space trace saw crate_b: crate_a's top corners under it are darker than an open top
-    print(f"\ncrate_a top AO {ao_a[top_a].round(2)}, crate_b top AO {ao_b[top_a].round(2)}")
+    # crate_b floats 0.25 above crate_a: crate_a's top face is under it, crate_b's top is open
+    faces = get(pa["indices"]).reshape(-1, 3)
+    top = np.unique(faces[(get(pa["attributes"]["POSITION"])[faces][..., 1] > 0.49).all(axis=1)])
+    print(f"\ncrate_a top-face AO {ao_a[top].round(2)}, crate_b top-face AO {ao_b[top].round(2)}")
+    assert ao_a[top].mean() < ao_b[top].mean() - 0.3 and ao_b[top].min() > 0.95
 
 
 def test_scene_bake_reads_the_same_world_as_the_flattened_loader(tmp_path):
@@ -409,7 +437,7 @@ def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
         assert [m["kind"] for m in methods] == ["scene", "scene"]
         blue = np.asarray(BLUE[:3])
         for i, m in enumerate(methods):
-            driver.execute_script(f"window.neuralao.setMethod({i}); window.neuralao.setPose(35, 30, 0.9);")
+            driver.execute_script(f"window.neuralao.setMethod({i}); window.neuralao.setPose(35, 15, 1.0);")
             c = driver.execute_script("return window.neuralao.capture()")
             h, w = c["height"], c["width"]
             img = {k: np.frombuffer(__import__("base64").b64decode(c[k]), np.float32).reshape(h, w, 4)[::-1]
