@@ -45,10 +45,10 @@ DEMO_TARGET := 0.75
 PARITY := $(BUILD)/parity.json
 REPORT := $(BUILD)/report/report.md
 
-.PHONY: help setup system-deps dataset corpus models train export parity report select demo test bench lint clean
+.PHONY: help setup system-deps dataset corpus corpus2 models train export parity report select demo test bench lint clean
 
 help: ## Show this help
-	@grep -hE '^[a-zA-Z_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
+	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
 
 # chromium + chromium-driver: the headless browser of the viewer test (tests/test_viewer.py, selenium).
 SYSTEM_PACKAGES := libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools chromium chromium-driver
@@ -87,6 +87,17 @@ $(CORPUS): $(FULL_CONFIG) | $(STAMP)
 	$(NEURALAO) dataset $(FULL_CONFIG) --out build/full/dataset
 
 corpus: $(CORPUS) ## Render and label the composed-scene training corpus (configs/full.json; resumable)
+
+# The corpus that covers use (configs/corpus.json): every object mesh alone on an orbit (train meshes
+# in train, val/test meshes in val/test), the interiors and composed rooms of configs/full.json, frames
+# of 128x128, 256x256, 384x384 and 320x180 (one size per shard) at 30-90 degree fields of view; AO at
+# 4 radii, split by mesh. 2,768 frames, 209 Mpx; resumable; about 3 h on 2 idle cores.
+CORPUS2_CONFIG := configs/corpus.json
+CORPUS2 := build/corpus/dataset/manifest.json
+$(CORPUS2): $(CORPUS2_CONFIG) | $(STAMP)
+	$(NEURALAO) dataset $(CORPUS2_CONFIG) --out build/corpus/dataset
+
+corpus2: $(CORPUS2) ## Render and label the corpus of isolated objects, rooms, sizes and fields of view (configs/corpus.json)
 
 # The shipped U-Nets (issue 9): configs/models.json trains each model on the corpus with its wall-clock
 # budget (resumable: checkpoints under build/ship), exports, checks parity, evaluates the test split

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,6 +123,7 @@ def orbit(
     yfov_deg: float = 40.0,
     seed: int = 0,
     min_elevation_deg: float | None = None,
+    frames: Sequence[tuple[int, int, float]] | None = None,
 ) -> list[Camera]:
     """``views`` cameras on a sphere around the bounding sphere, all looking at its centre.
 
@@ -129,29 +131,32 @@ def orbit(
     different seeds give different but reproducible orbits. The distance fits the bounding sphere
     into the narrower field of view. ``min_elevation_deg`` keeps the spiral above that elevation
     (scenes standing on a ground plane, whose underside is no view at all); None: the whole sphere.
+    ``frames``: per view (width, height, yfov_deg) instead of the three arguments (one orbit seen at
+    several sizes and fields of view; each view's distance fits its own field of view).
     """
     if views < 1:
         raise NeuralaoError(f"views must be >= 1, got {views}")
-    yfov = math.radians(yfov_deg)
-    aspect = width / height
-    half = min(yfov, 2 * math.atan(math.tan(yfov / 2) * aspect)) / 2
+    if frames is not None and len(frames) != views:
+        raise NeuralaoError(f"orbit: {len(frames)} frame sizes for {views} views")
+    frames = frames if frames is not None else [(width, height, yfov_deg)] * views
     # The tightest sphere about the box centre that holds every vertex (<= half the diagonal),
     # so objects fill the frame instead of their bounding box's circumsphere.
     radius = float(np.linalg.norm(scene.vertices - scene.center, axis=1).max())
-    dist = radius / math.sin(half) * 1.02
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0, 2 * math.pi) if seed else 0.0
     cams = []
     golden = math.pi * (3.0 - math.sqrt(5.0))
     y_low = -1.0 if min_elevation_deg is None else math.sin(math.radians(min_elevation_deg))
-    for k in range(views):
+    for k, (w, h, fov_deg) in enumerate(frames):
         y = 1.0 - (1.0 - y_low) * (k + 0.5) / views
         r = math.sqrt(max(0.0, 1.0 - y * y))
         th = golden * k + phase
         d = np.array([r * math.cos(th), y, r * math.sin(th)])
-        eye = scene.center + d * dist
+        yfov = math.radians(fov_deg)
+        half = min(yfov, 2 * math.atan(math.tan(yfov / 2) * (w / h))) / 2
+        eye = scene.center + d * (radius / math.sin(half) * 1.02)
         znear, zfar = _clip_planes(scene, eye)
-        cams.append(Camera(look_at(eye, scene.center), width, height, yfov, znear, zfar))
+        cams.append(Camera(look_at(eye, scene.center), w, h, yfov, znear, zfar))
     return cams
 
 

@@ -19,6 +19,15 @@ scene draws its meshes from its split's object meshes (:mod:`pipeline.splits`), 
 train scene may appear in a val or test scene: the splits are by mesh. With ``labels.radii_rel``
 every frame also stores ``ao_radii`` (H, W, k) and ``valid_radii`` (H, W, k), labelled at
 ``radii`` (k,) scene units from one trace; without it shards, hashes and manifests are unchanged.
+
+Frames of several sizes and fields of view (a network's receptive field is fixed in pixels while
+the AO radius on screen is not, so a corpus of one size and one field of view does not cover use):
+``sizes`` draws each shard's frame size from a list (a shard stacks frames of one size), and
+``yfov_range_deg`` draws each view's vertical field of view from a range, both seeded by ``seed``,
+the scene's index and the view (the shard's first view for its size). Set on the dataset they apply
+to every scene; a scene's or a generator's own setting wins. Orbits refit their distance to each
+view's field of view. Without them, shards, hashes and manifests are unchanged; with them, every
+shard entry of the manifest records its ``size`` [w, h].
 """
 
 from __future__ import annotations
@@ -27,7 +36,8 @@ import argparse
 import functools
 import hashlib
 import logging
-from collections.abc import Iterator
+import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -66,6 +76,11 @@ RADII_KEYS = ("ao_radii", "valid_radii", "radii")
 # Composed scenes stand on a floor: their orbits stay this far above the horizon.
 COMPOSED_MIN_ELEVATION_DEG = 10.0
 CameraKind = Literal["orbit", "interior", "closeup", "file"]
+# Streams of a view's generator (see view_look): one per kind of draw, so adding one moves no other.
+_YFOV_STREAM, _SIZE_STREAM = 1, 2
+# A frame size (width, height) and a range of vertical fields of view in degrees.
+Size = tuple[int, int]
+FovRange = tuple[float, float]
 
 
 @dataclass
@@ -84,6 +99,10 @@ class SceneSpec:
         "train"  # scene-level split: the U-Net never trains on val/test scenes
     )
     compose: ComposeSettings | None = None  # a composed scene (instead of ``mesh``); see pipeline.compose
+    sizes: list[Size] | None = None  # frame sizes drawn per shard; None: the dataset's (sizes, else size)
+    # Vertical fields of view (degrees) drawn per view; None: yfov_deg if set, else the dataset's range,
+    # else the camera kind's default. Not for cameras="file" (poses carry their own).
+    yfov_range_deg: FovRange | None = None
 
 
 @dataclass
@@ -101,6 +120,8 @@ class ComposedScenes:
     split: Literal["train", "val", "test"] = "train"  # split of every scene (and of the meshes drawn)
     yfov_deg: float | None = None  # field of view; None: the camera kind's default
     compose: ComposeSettings = field(default_factory=ComposeSettings)  # template (seed replaced)
+    sizes: list[Size] | None = None  # every scene's SceneSpec.sizes (None: the dataset's)
+    yfov_range_deg: FovRange | None = None  # every scene's SceneSpec.yfov_range_deg
 
 
 @dataclass
@@ -119,6 +140,11 @@ class DatasetSettings:
     )
     frames_per_shard: int = 8  # frames per shard file (the unit of resumption)
     composed: list[ComposedScenes] = field(default_factory=list)  # generators, expanded after ``scenes``
+    # Frame sizes (width, height) each shard draws one of (repeat an entry to weight it); None: ``size``.
+    sizes: list[Size] | None = None
+    # Vertical fields of view (degrees) drawn uniformly per view for scenes without yfov_deg or their own
+    # range (cameras="file" keeps its poses' own); None: every scene's yfov_deg or its camera default.
+    yfov_range_deg: FovRange | None = None
 
 
 def frame_seed(seed: int, scene_index: int, view: int) -> int:
@@ -127,21 +153,74 @@ def frame_seed(seed: int, scene_index: int, view: int) -> int:
     return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
 
 
+# What a scene's view v is rendered at: (width, height, yfov_deg), yfov_deg None = the camera's own.
+ViewLook = Callable[[int], tuple[int, int, float | None]]
+
+
+def _view_rng(seed: int, scene_index: int, view: int, stream: int) -> np.random.Generator:
+    return np.random.default_rng([frame_seed(seed, scene_index, view), stream])
+
+
+def view_look(settings: DatasetSettings, spec: SceneSpec, scene_index: int) -> ViewLook | None:
+    """The size and field of view of each view of scene ``scene_index``, or None when it draws neither
+    (its frames are then rendered exactly as before these settings existed).
+
+    A view's field of view comes from its own generator; its size from its shard's first view, so a
+    shard holds frames of one size.
+    """
+    sizes = spec.sizes if spec.sizes is not None else settings.sizes
+    fovs = spec.yfov_range_deg
+    if fovs is None and not spec.yfov_deg and spec.cameras != "file":
+        fovs = settings.yfov_range_deg
+    if sizes is None and fovs is None:
+        return None
+    per_shard = settings.frames_per_shard
+
+    def look(v: int) -> tuple[int, int, float | None]:
+        w, h = settings.size
+        if sizes is not None:
+            shard_rng = _view_rng(settings.seed, scene_index, v - v % per_shard, _SIZE_STREAM)
+            w, h = sizes[int(shard_rng.integers(len(sizes)))]
+        if fovs is None:
+            return int(w), int(h), None
+        return int(w), int(h), float(_view_rng(settings.seed, scene_index, v, _YFOV_STREAM).uniform(*fovs))
+
+    return look
+
+
 def scene_cameras(
-    spec: SceneSpec, scene: Scene, size: tuple[int, int], seed: int, config_dir: Path
+    spec: SceneSpec,
+    scene: Scene,
+    size: tuple[int, int],
+    seed: int,
+    config_dir: Path,
+    look: ViewLook | None = None,
 ) -> list[Camera]:
+    """The cameras of a scene at ``size``, or each at its own size and field of view with ``look``."""
     w, h = size
     if spec.cameras == "orbit":
         elevation = COMPOSED_MIN_ELEVATION_DEG if spec.compose is not None else None
-        return orbit(scene, spec.views, w, h, spec.yfov_deg or 40.0, seed=seed, min_elevation_deg=elevation)
+        yfov = spec.yfov_deg or 40.0
+        frames = None if look is None else [(w_, h_, f or yfov) for w_, h_, f in map(look, range(spec.views))]
+        return orbit(scene, spec.views, w, h, yfov, seed=seed, min_elevation_deg=elevation, frames=frames)
     if spec.cameras == "interior":
-        return interior(scene, spec.views, w, h, spec.yfov_deg or 60.0, seed=seed)
-    if spec.cameras == "closeup":
-        return closeup(scene, spec.views, w, h, spec.yfov_deg or 50.0, seed=seed)
-    if not spec.poses:
-        raise NeuralaoError(f"scene {spec.name}: cameras='file' needs 'poses'")
-    path = Path(spec.poses)
-    return load_poses(path if path.is_absolute() else config_dir / path, scene, w, h)
+        cams = interior(scene, spec.views, w, h, spec.yfov_deg or 60.0, seed=seed)
+    elif spec.cameras == "closeup":
+        cams = closeup(scene, spec.views, w, h, spec.yfov_deg or 50.0, seed=seed)
+    else:
+        if not spec.poses:
+            raise NeuralaoError(f"scene {spec.name}: cameras='file' needs 'poses'")
+        path = Path(spec.poses)
+        cams = load_poses(path if path.is_absolute() else config_dir / path, scene, w, h)
+    if look is None:
+        return cams
+    # Interior, close-up and file poses do not depend on the frame, so only the frame changes.
+    return [_framed(cam, *look(v)) for v, cam in enumerate(cams)]
+
+
+def _framed(cam: Camera, width: int, height: int, yfov_deg: float | None) -> Camera:
+    yfov = cam.yfov if yfov_deg is None else math.radians(yfov_deg)
+    return replace(cam, width=width, height=height, yfov=yfov)
 
 
 def expand_scenes(settings: DatasetSettings) -> list[SceneSpec]:
@@ -161,7 +240,8 @@ def expand_scenes(settings: DatasetSettings) -> list[SceneSpec]:
                 c = replace(c, walls=(max(c.walls[0], 3), max(c.walls[1], 3)))
             spec = SceneSpec(
                 f"{gen.prefix}-{gen.seed + i:04d}", cameras=kind, views=gen.views, yfov_deg=gen.yfov_deg,
-                split=gen.split, compose=replace(c, seed=gen.seed + i),
+                split=gen.split, compose=replace(c, seed=gen.seed + i), sizes=gen.sizes,
+                yfov_range_deg=gen.yfov_range_deg,
             )  # fmt: skip
             specs.append(spec)
     return specs
@@ -181,7 +261,8 @@ def _spec_meshes(spec: SceneSpec, config_dir: Path) -> set[str]:
         local = config_dir / spec.mesh
         names = [str(local) if local.exists() else spec.mesh]
     else:
-        names = spec.compose.meshes if spec.compose.meshes is not None else object_meshes(spec.split)
+        c = spec.compose
+        names = c.meshes if c.meshes is not None else object_meshes(spec.split, c.pool)
     return {_resolved(n) for n in names}
 
 
@@ -200,7 +281,17 @@ def scene_of(manifest: dict, name: str) -> Scene:
     return load_scene(entry["mesh"], name=name)
 
 
+def _check_looks(where: str, sizes: list[Size] | None, fovs: FovRange | None) -> None:
+    if sizes is not None and (not sizes or any(w < 1 or h < 1 for w, h in sizes)):
+        raise NeuralaoError(f"{where}: sizes must be a non-empty list of [width, height] >= 1, got {sizes}")
+    if fovs is not None and not 0.0 < fovs[0] <= fovs[1] < 180.0:
+        raise NeuralaoError(
+            f"{where}: yfov_range_deg must be [lo, hi] with 0 < lo <= hi < 180, got {list(fovs)}"
+        )
+
+
 def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Path) -> None:
+    _check_looks("dataset", settings.sizes, settings.yfov_range_deg)
     names = set()
     for spec in specs:
         if spec.name in names:
@@ -210,6 +301,9 @@ def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Pat
             raise NeuralaoError(f"scene {spec.name}: views must be >= 1")
         if bool(spec.mesh) == (spec.compose is not None):
             raise NeuralaoError(f"scene {spec.name}: give exactly one of 'mesh' and 'compose'")
+        _check_looks(f"scene {spec.name}", spec.sizes, spec.yfov_range_deg)
+        if spec.cameras == "file" and spec.yfov_range_deg is not None:
+            raise NeuralaoError(f"scene {spec.name}: cameras='file' takes its fields of view from the poses")
     train: set[str] = set()
     held: dict[str, str] = {}
     for spec in specs:
@@ -237,7 +331,20 @@ def _config_dict(settings: DatasetSettings) -> dict:
     for scene in config["scenes"]:
         if scene["compose"] is None:
             del scene["compose"]
+    for node in [config, *config["scenes"], *config.get("composed", [])]:
+        for key in ("sizes", "yfov_range_deg"):
+            if node[key] is None:
+                del node[key]
+        if node.get("compose") is not None:
+            _drop_first_pool(node["compose"])
     return config
+
+
+def _drop_first_pool(compose: dict) -> dict:
+    """Compose settings without ``pool`` at revision 1 (the pool before the setting existed)."""
+    if compose.get("pool") == 1:
+        del compose["pool"]
+    return compose
 
 
 def build_dataset(
@@ -286,6 +393,8 @@ def build_dataset(
     pending: list[dict] = []  # entries of the shards the engine renders, in task order
     frame_keys = FRAME_KEYS + (RADII_KEYS if settings.labels.radii_rel is not None else ())
     radii_of: dict[str, list[float]] = {}
+    # Any scene drawing sizes or fields of view: every shard entry then records its frame size.
+    looks = any(view_look(settings, spec, si) is not None for si, spec in enumerate(specs))
     counts = {"views": 0}
     bar = tqdm(total=0, desc="dataset", unit="view", disable=not progress)
 
@@ -295,7 +404,10 @@ def build_dataset(
 
         for si, spec in enumerate(specs):
             scene = load_spec_scene(spec, config_dir)
-            cams = scene_cameras(spec, scene, settings.size, frame_seed(settings.seed, si, -1), config_dir)
+            look = view_look(settings, spec, si)
+            cams = scene_cameras(
+                spec, scene, settings.size, frame_seed(settings.seed, si, -1), config_dir, look
+            )
             counts["views"] += len(cams)
             bar.total += len(cams)
             bar.refresh()
@@ -324,6 +436,8 @@ def build_dataset(
                     ],
                     "faces": int(len(scene.faces)),
                 }
+                if looks:
+                    entry["size"] = [cams[chunk[0]].width, cams[chunk[0]].height]
                 shards.append(entry)
                 if rel in done and path.exists() and sha256_file(path) == done[rel]:
                     entry["sha256"] = done[rel]
@@ -357,6 +471,7 @@ def build_dataset(
         "dataset_hash": dataset_hash,
         "frames": counts["views"],
         "size": list(settings.size),
+        **({"sizes": sorted({tuple(s["size"]) for s in shards})} if looks else {}),
         "scenes": {s.name: _scene_entry(s, radii_of.get(s.name)) for s in specs},
         "shards": shards,
         "frame_keys": list(frame_keys),
@@ -428,7 +543,7 @@ def _scene_entry(spec: SceneSpec, radii: list[float] | None) -> dict:
     """A scene's manifest entry; composed scenes add their compose settings, radii their radii."""
     entry = {"split": spec.split, "mesh": spec.mesh, "cameras": spec.cameras}
     if spec.compose is not None:
-        entry["compose"] = settings_to_dict(spec.compose)
+        entry["compose"] = _drop_first_pool(settings_to_dict(spec.compose))
     if radii is not None:
         entry["radii"] = radii  # scene units, one per labels.radii_rel
     return entry

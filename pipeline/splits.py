@@ -13,6 +13,10 @@ objects, while interiors are scenes of their own.
   interior) so model selection sees the same variety.
 * Sponza and sponza_partial are the same atrium (the partial OBJ is a truncated copy of it), so
   they share a split.
+* The glTF props added to the shared meshes later (thin strands, shells, small objects in contact)
+  all train: val and test stay as they were, so earlier scores still compare. They joined at pool
+  revision 2 (:data:`ADDED`): a composed scene draws from its split's pool at the revision its
+  settings name, so adding meshes here never changes the scenes of an existing config.
 """
 
 from __future__ import annotations
@@ -23,6 +27,15 @@ from .errors import NeuralaoError
 
 Split = Literal["train", "val", "test"]
 
+# Object meshes that joined a split after the first corpus, by the pool revision they joined at
+# (revision 1: every other object mesh). See object_meshes.
+ADDED: dict[int, tuple[str, ...]] = {
+    # glTF props with thin parts, open shells and small objects in contact (all train)
+    2: ("Avocado", "ClearcoatWicker", "GlassBrokenWindow", "GlassHurricaneCandleHolder", "IridescenceLamp",
+        "IridescentDishWithOlives", "LightsPunctualLamp", "MosquitoInAmber", "WaterBottle"),
+}  # fmt: skip
+LATEST_POOL = max(ADDED)
+
 # Object meshes, by split (bare names under pipeline.scene.mesh_root()).
 OBJECTS: dict[str, tuple[str, ...]] = {
     "train": (
@@ -30,6 +43,7 @@ OBJECTS: dict[str, tuple[str, ...]] = {
         "2CylinderEngine", "ReciprocatingSaw", "FlightHelmet", "BrainStem", "Spaceship",
         "SheenChair", "GlamVelvetSofa", "StainedGlassLamp", "ToyCar", "BoomBox", "Corset",
         "MaterialsVariantsShoe", "CesiumMan", "Fox", "BarramundiFish",
+        *ADDED[2],
     ),
     "val": ("happy_buddha", "fandisk", "AnisotropyBarnLamp", "GlassVaseFlowers", "RiggedFigure"),
     "test": ("lucy", "horse", "KnightArmor", "RetroUFO", "CesiumMilkTruck"),
@@ -43,11 +57,15 @@ INTERIORS: dict[str, tuple[str, ...]] = {
 }
 
 
-def object_meshes(split: str) -> tuple[str, ...]:
-    """The object meshes of ``split`` ("train", "val" or "test"): what the composer may place."""
+def object_meshes(split: str, revision: int = LATEST_POOL) -> tuple[str, ...]:
+    """The object meshes of ``split`` ("train", "val" or "test") at pool ``revision`` (those that had
+    joined by then; the latest: all of them): what the composer may place."""
     if split not in OBJECTS:
         raise NeuralaoError(f"unknown split {split!r}; use one of {', '.join(OBJECTS)}")
-    return OBJECTS[split]
+    if not 1 <= revision <= LATEST_POOL:
+        raise NeuralaoError(f"mesh pool revision must lie in [1, {LATEST_POOL}], got {revision}")
+    later = {m for r, names in ADDED.items() if r > revision for m in names}
+    return tuple(m for m in OBJECTS[split] if m not in later)
 
 
 def split_of(mesh: str) -> str | None:

@@ -3,8 +3,9 @@
 Data: frames of the dataset's ``train`` scenes (held-back views excluded), preprocessed ONCE per
 whole frame with :func:`pipeline.unet.preprocess` (so the depth normalisation of a crop is that of
 its frame, exactly as at run time), then random square crops with horizontal / vertical flips
-(flips negate n_x / n_y). Validation: whole frames of the ``val`` scenes every epoch (held-back
-views of the training scenes when the dataset has no val scene).
+(flips negate n_x / n_y). Frames may differ in size (a corpus of several resolutions): crops are
+the same size whatever the frame, so a batch mixes them. Validation: whole frames of the ``val``
+scenes every epoch (held-back views of the training scenes when the dataset has no val scene).
 
 Loss: 1 - SSIM (Gaussian window 11, sigma 1.5, C1 = 1e-4, C2 = 9e-4) averaged over the pixels
 whose label is valid; before SSIM the prediction is replaced by the label outside the mask, so
@@ -159,11 +160,13 @@ class FrameSet:
     labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
     radius parameters (:func:`pipeline.unet.radius_param`); radii : (N, K) float32 radii in scene
     units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
+    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that
+    indexes them by frame (``x[i]``) takes both.
     """
 
-    x: torch.Tensor
-    y: torch.Tensor
-    m: torch.Tensor
+    x: torch.Tensor | list[torch.Tensor]
+    y: torch.Tensor | list[torch.Tensor]
+    m: torch.Tensor | list[torch.Tensor]
     rho: torch.Tensor
     radii: torch.Tensor
     names: list[str]
@@ -172,9 +175,17 @@ class FrameSet:
     def __len__(self) -> int:
         return len(self.names)
 
+    @property
+    def sizes(self) -> list[tuple[int, int]]:
+        """(H, W) of every frame."""
+        if isinstance(self.x, torch.Tensor):
+            return [tuple(self.x.shape[-2:])] * len(self)
+        return [tuple(x.shape[-2:]) for x in self.x]
+
     def subset(self, index: list[int]) -> FrameSet:
         i = torch.as_tensor(index, dtype=torch.int64)
-        return FrameSet(self.x[i], self.y[i], self.m[i], self.rho[i], self.radii[i],
+        x, y, m = (a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index] for a in (self.x, self.y, self.m))  # fmt: skip
+        return FrameSet(x, y, m, self.rho[i], self.radii[i],
                         [self.names[k] for k in index], [self.scenes[k] for k in index])  # fmt: skip
 
 
@@ -196,18 +207,15 @@ def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def frames_to_set(frames) -> FrameSet:
-    """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one size, one radius count).
+    """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
+    every frame has one size, else per-frame lists).
 
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept.
     """
     xs, ys, ms, rhos, radii, names, scenes = [], [], [], [], [], [], []
-    shape = count = None
+    count = None
     for i, f in enumerate(frames):
-        if shape is None:
-            shape = f["depth"].shape
-        elif f["depth"].shape != shape:
-            raise NeuralaoError(f"frames have different sizes {shape} and {f['depth'].shape}; use one size per dataset")
         ao, valid, r = frame_labels(f)
         if count is None:
             count = len(r)
@@ -223,8 +231,10 @@ def frames_to_set(frames) -> FrameSet:
         scenes.append(scene)
     if not names:
         raise NeuralaoError("no frames to train or validate on")
-    return FrameSet(torch.stack(xs), torch.stack(ys), torch.stack(ms),
-                    torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)), names, scenes)  # fmt: skip
+    if len({x.shape for x in xs}) == 1:
+        xs, ys, ms = torch.stack(xs), torch.stack(ys), torch.stack(ms)
+    return FrameSet(xs, ys, ms, torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)),
+                    names, scenes)  # fmt: skip
 
 
 def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
@@ -288,6 +298,37 @@ def _integral(m: torch.Tensor) -> torch.Tensor:
 
 
 @dataclass
+class Foreground:
+    """Summed-area tables of every frame's foreground, end to end: entry (i, j) of frame f (0 <= i <= H_f,
+    0 <= j <= W_f) is ``table[offset[f] + i * stride[f] + j]`` with stride W_f + 1. table : (T,) int32;
+    offset, stride : (N,) int64. One flat table holds frames of any sizes with one gather per lookup."""
+
+    table: torch.Tensor
+    offset: torch.Tensor
+    stride: torch.Tensor
+
+    @classmethod
+    def of(cls, data: FrameSet) -> Foreground:
+        if isinstance(data.x, torch.Tensor):
+            tables = [_integral(data.x[:, 0] > 0)]
+        else:
+            tables = [_integral(x[None, 0] > 0) for x in data.x]
+        sizes = torch.tensor([(h + 1) * (w + 1) for h, w in data.sizes], dtype=torch.int64)
+        offset = torch.cumsum(sizes, 0) - sizes
+        stride = torch.tensor([w + 1 for _, w in data.sizes], dtype=torch.int64)
+        return cls(torch.cat([t.reshape(-1) for t in tables]), offset, stride)
+
+    def count(self, frame: torch.Tensor, top: torch.Tensor, left: torch.Tensor, c: int) -> torch.Tensor:
+        """Foreground pixels in the c x c squares at (top, left) of ``frame`` (broadcast int64 tensors)."""
+        base, row = self.offset[frame], self.stride[frame]
+
+        def at(i, j):
+            return self.table[base + i * row + j]
+
+        return at(top + c, left + c) - at(top, left + c) - at(top + c, left) + at(top, left)
+
+
+@dataclass
 class EpochPlan:
     """Which crop of which frame, at which radius, each sample of an epoch uses. (S,) int64 / bool tensors."""
 
@@ -300,31 +341,35 @@ class EpochPlan:
 
 
 def plan_epoch(
-    data: FrameSet, sat: torch.Tensor, settings: UNetTrainSettings, gen: torch.Generator
+    data: FrameSet, fg_table: Foreground, settings: UNetTrainSettings, gen: torch.Generator
 ) -> EpochPlan:
     """Draw the order, crops, flips and radii of one epoch from ``gen`` (the only randomness in training)."""
-    n, _, h, w = data.x.shape
+    n = len(data)
+    sizes = sorted(set(data.sizes))
+    h, w = sizes[0]
+    if not settings.crop and len(sizes) > 1:
+        raise NeuralaoError(f"crop 0 (whole frames) needs frames of one size, not {len(sizes)}: set a crop")
     c = settings.crop or min(h, w)
-    if settings.crop and (settings.crop > h or settings.crop > w):
-        raise NeuralaoError(
-            f"crop {settings.crop} is larger than the frames ({w}x{h}); set crop<= {min(h, w)} or 0"
-        )
+    small_h, small_w = min(sizes, key=min)  # the frame with the shortest side
+    if settings.crop and settings.crop > min(small_h, small_w):
+        raise NeuralaoError(f"crop {settings.crop} is larger than the frames ({small_w}x{small_h}); "
+                            f"set crop<= {min(small_h, small_w)} or 0")  # fmt: skip
     frames = torch.cat([torch.randperm(n, generator=gen) for _ in range(settings.crops_per_frame)])
     s = len(frames)
     tries = 8
-    tops = torch.randint(0, h - c + 1, (s, tries), generator=gen)
-    lefts = torch.randint(0, w - c + 1, (s, tries), generator=gen)
+    if len(sizes) == 1:
+        tops = torch.randint(0, h - c + 1, (s, tries), generator=gen)
+        lefts = torch.randint(0, w - c + 1, (s, tries), generator=gen)
+    else:  # each frame's own range: uniform draws scaled to it (float64: never reaches the range's end)
+        hw = torch.tensor(data.sizes, dtype=torch.float64)[frames] - c + 1
+        tops = (torch.rand((s, tries), generator=gen, dtype=torch.float64) * hw[:, :1]).long()
+        lefts = (torch.rand((s, tries), generator=gen, dtype=torch.float64) * hw[:, 1:]).long()
     hflip = (torch.rand(s, generator=gen) < 0.5) & settings.hflip
     vflip = (torch.rand(s, generator=gen) < 0.5) & settings.vflip
-    radius = torch.randint(0, data.y.shape[1], (s,), generator=gen)
+    radius = torch.randint(0, data.rho.shape[1], (s,), generator=gen)
     if settings.crop:
         fi = frames[:, None].expand(s, tries)
-        fg = (
-            sat[fi, tops + c, lefts + c]
-            - sat[fi, tops, lefts + c]
-            - sat[fi, tops + c, lefts]
-            + sat[fi, tops, lefts]
-        ).double() / float(c * c)
+        fg = fg_table.count(fi, tops, lefts, c).double() / float(c * c)
         ok = fg >= settings.min_foreground
         pick = torch.where(ok.any(1), ok.to(torch.int64).argmax(1), fg.argmax(1))
         top, left = tops[torch.arange(s), pick], lefts[torch.arange(s), pick]
@@ -341,13 +386,12 @@ def make_batch(
     from .unet import flip_input
 
     xs, rs, ys, ms, names = [], [], [], [], []
-    h, w = data.x.shape[-2:]
     for k in idx:
         f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
-        ch, cw = (crop, crop) if crop else (h, w)
-        x = data.x[f : f + 1, :, t : t + ch, l0 : l0 + cw]
-        y = data.y[f : f + 1, j : j + 1, t : t + ch, l0 : l0 + cw].float()
-        m = data.m[f : f + 1, j : j + 1, t : t + ch, l0 : l0 + cw].float()
+        ch, cw = (crop, crop) if crop else data.x[f].shape[-2:]
+        x = data.x[f][None, :, t : t + ch, l0 : l0 + cw]
+        y = data.y[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
+        m = data.m[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         if plan.hflip[k]:
             x, y, m = flip_input(x, horizontal=True), y.flip(-1), m.flip(-1)
         if plan.vflip[k]:
@@ -405,15 +449,15 @@ def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") ->
     per = []  # (scene, radius index, ssim, rmse)
     with torch.no_grad():
         for i in range(len(data)):
-            x = data.x[i : i + 1]
+            x = data.x[i][None]
             fg = x[0, 0].numpy() > 0
-            for j in range(data.y.shape[1]):
-                mask = data.m[i, j].numpy()
+            for j in range(data.rho.shape[1]):
+                mask = data.m[i][j].numpy()
                 if not mask.any():
                     continue
                 pred = wrapper(x.to(device), data.rho[i, j].view(1, 1, 1, 1).to(device))[0, 0].cpu().numpy()
                 pred = np.where(fg, pred, 1.0).astype(np.float32)  # background -> 1
-                ref = data.y[i, j].float().numpy()
+                ref = data.y[i][j].float().numpy()
                 per.append((data.scenes[i], j, float(masked_ssim(pred, ref, mask)), float(masked_rmse(pred, ref, mask))))
     if not per:
         return {}
@@ -526,7 +570,7 @@ def _step(model, opt, xb, rb, yb, mb, kw, where: str, lr: float) -> float:
 
 
 def calibrate(model: UNet, settings: UNetTrainSettings, train_set: FrameSet, val_set: FrameSet | None,
-              sat: torch.Tensor, device: torch.device, steps: int = 10) -> dict:
+              sat: Foreground, device: torch.device, steps: int = 10) -> dict:
     """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
     with batches from a separate generator (the run's own state and randomness are untouched)."""
     import copy
@@ -615,7 +659,7 @@ def train(
         start, wall = 0, 0.0
         plan_info: dict = {}
         resumed = None if restart else _find_resumable(out, key, settings.epochs)
-        sat = _integral(train_set.x[:, 0] > 0)
+        sat = Foreground.of(train_set)
         steps_per_epoch = -(-len(train_set) * settings.crops_per_frame // settings.batch_size)
         if resumed is not None:
             model.load_state_dict(resumed["state_dict"])

@@ -21,7 +21,7 @@ from pipeline.constants import TOL
 from pipeline.dataset import DatasetSettings, _validate, build_dataset, expand_scenes, scene_of
 from pipeline.errors import NeuralaoError
 from pipeline.scene import mesh_root
-from pipeline.splits import INTERIORS, OBJECTS, all_meshes, object_meshes
+from pipeline.splits import ADDED, INTERIORS, OBJECTS, all_meshes, object_meshes
 
 # Small train meshes (a few thousand faces at most) so the geometry checks stay fast.
 SMALL = ["suzanne", "spot", "Fox", "beetle", "GlamVelvetSofa"]
@@ -170,11 +170,20 @@ def test_wall_and_corner_objects_are_flush(compositions):
 
 
 def test_composer_draws_only_train_meshes():
-    used = set()
-    for seed in range(300):
-        used |= {o.source for o in plan(ComposeSettings(seed=seed)).objects if o.kind == "mesh"}
-    assert used and used <= set(OBJECTS["train"])
-    assert len(used) >= len(OBJECTS["train"]) - 2  # the pool is actually drawn from, not one mesh
+    for pool in (1, 2):
+        used = set()
+        for seed in range(300):
+            used |= {
+                o.source for o in plan(ComposeSettings(seed=seed, pool=pool)).objects if o.kind == "mesh"
+            }
+        train = set(object_meshes("train", pool))
+        assert used and used <= train <= set(OBJECTS["train"])
+        assert len(used) >= len(train) - 2  # the pool is actually drawn from, not one mesh
+    # Revision 1 (the default) is the pool before meshes were added, so older configs keep their scenes.
+    assert set(object_meshes("train", 1)) == set(OBJECTS["train"]) - set(ADDED[2])
+    assert object_meshes("train") == OBJECTS["train"] and object_meshes("val", 1) == OBJECTS["val"]
+    with pytest.raises(NeuralaoError, match="revision"):
+        object_meshes("train", 3)
     val = {o.source for o in plan(ComposeSettings(seed=1, mesh_fraction=1.0), split="val").objects}
     assert val <= set(OBJECTS["val"])
 

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +113,191 @@ def test_corrupt_shard_detected(reference, tmp_path):
     shard.write_bytes(data[: len(data) // 2])  # truncated
     with pytest.raises(NeuralaoError, match="corrupt"):
         list(open_dataset(copy).frames())
+
+
+# ---------------------------------------------------------------- sizes and fields of view
+
+# Frames of three sizes (one per shard, drawn) and fields of view drawn per view, on an isolated orbit,
+# an interior with its own sizes and a composed generator with its own range; one scene keeps yfov_deg.
+MIXED = {
+    "name": "mixed",
+    "seed": 3,
+    "size": [24, 24],
+    "sizes": [[32, 24], [16, 16], [40, 16]],
+    "yfov_range_deg": [30, 90],
+    "holdout_every": 4,
+    "frames_per_shard": 2,
+    "labels": {"rays": 8, "radii_rel": [0.125, 0.25]},
+    "scenes": [
+        {"name": "suzanne", "mesh": "suzanne", "cameras": "orbit", "views": 6, "split": "train"},
+        {"name": "spot", "mesh": "spot", "cameras": "orbit", "views": 2, "yfov_deg": 50, "split": "train"},
+        {"name": "box", "mesh": "cornell_box", "cameras": "interior", "views": 2, "split": "val",
+         "sizes": [[24, 16]]},
+    ],
+    "composed": [{"count": 1, "seed": 1, "views": 2, "cameras": ["closeup"], "yfov_range_deg": [40, 45],
+                  "compose": {"meshes": ["Fox", "beetle"], "objects": [2, 3]}}],
+}  # fmt: skip
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stopping_engine(after: int):
+    """A local engine that dies after ``after`` shards (an interrupted run, in-process)."""
+    from pipeline.engine import LocalEngine
+
+    class Stopping(LocalEngine):
+        def _run(self, pending):
+            for k, item in enumerate(super()._run(pending)):
+                if k == after:
+                    raise _Stop
+                yield item
+
+    return Stopping()
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory):
+    from pipeline.config import from_dict
+    from pipeline.dataset import DatasetSettings, build_dataset
+
+    root = tmp_path_factory.mktemp("mixed")
+    build_dataset(from_dict(DatasetSettings, MIXED), root / "a", progress=False)
+    return root
+
+
+def test_mixed_sizes_and_fields_of_view(mixed):
+    ds = open_dataset(mixed / "a")
+    sizes = {tuple(s) for s in ds.manifest["sizes"]}
+    assert len(sizes) >= 3 and sizes <= {(32, 24), (16, 16), (40, 16), (24, 16)}
+    fovs = {}
+    for entry in ds.manifest["shards"]:  # a shard holds one size, the one its entry names
+        arrays = ds.load_shard(entry)
+        w, h = entry["size"]
+        assert arrays["depth"].shape[1:] == (h, w) and arrays["ao_radii"].shape[1:3] == (h, w)
+        fovs.setdefault(entry["scene"], []).extend(np.degrees(arrays["yfov"]).tolist())
+        if entry["scene"] == "box":
+            assert entry["size"] == [24, 16]  # the scene's own sizes win over the dataset's
+    assert len({s["size"][0] for s in ds.manifest["shards"] if s["scene"] == "suzanne"}) >= 2
+    assert all(30 <= f <= 90 for f in fovs["suzanne"] + fovs["box"]) and len(set(fovs["suzanne"])) == 6
+    assert np.allclose(fovs["spot"], 50.0)  # a scene's yfov_deg wins over the dataset's range
+    assert all(40 <= f <= 45 for f in fovs["comp-0001"])  # the generator's own range
+    for f in ds.frames(scene="suzanne"):  # every orbit view fits its own field of view: none is empty
+        assert f["mask"].any() and not f["mask"].all()
+
+
+def test_mixed_dataset_same_hash_twice_and_after_resume(mixed, tmp_path):
+    from pipeline.config import from_dict
+    from pipeline.dataset import DatasetSettings, build_dataset
+
+    reference = json.loads((mixed / "a" / "manifest.json").read_text())
+    settings = from_dict(DatasetSettings, MIXED)
+    assert (
+        build_dataset(settings, tmp_path / "b", progress=False)["dataset_hash"] == reference["dataset_hash"]
+    )
+    out = tmp_path / "c"
+    with pytest.raises(_Stop):
+        build_dataset(settings, out, progress=False, engine=_stopping_engine(3))
+    assert len(json.loads((out / "progress.json").read_text())["shards"]) == 3
+    resumed = build_dataset(settings, out, progress=False)
+    assert resumed["dataset_hash"] == reference["dataset_hash"] and resumed["shards"] == reference["shards"]
+
+
+def test_loader_trains_on_mixed_sizes(mixed, tmp_path):
+    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+
+    train_set, val_set, info = load_dataset_frames(mixed / "a")
+    assert len(set(train_set.sizes)) >= 2 and isinstance(train_set.x, list)
+    assert [tuple(x.shape[-2:]) for x in train_set.x] == [tuple(y.shape[-2:]) for y in train_set.y]
+    settings = UNetTrainSettings(epochs=1, batch_size=4, crop=16, crops_per_frame=1, widths=[4, 8], threads=1)
+    ckpt = train(settings, train_set, val_set, tmp_path / "u.pt", info)
+    assert np.isfinite(ckpt["history"][0]["train_loss"]) and np.isfinite(ckpt["metrics"]["val_ssim"])
+    sub = train_set.subset([0, len(train_set) - 1])
+    assert sub.sizes == [train_set.sizes[0], train_set.sizes[-1]]
+    with pytest.raises(NeuralaoError, match="one size"):
+        train(replace(settings, crop=0), train_set, val_set, tmp_path / "w.pt", info)
+    with pytest.raises(NeuralaoError, match="larger than the frames"):
+        train(replace(settings, crop=24), train_set, val_set, tmp_path / "w.pt", info)
+
+
+def test_settings_unused_leave_config_and_cameras_as_before():
+    """Configs without the size / field-of-view / pool settings keep their config hash and cameras."""
+    from pipeline.camera import orbit
+    from pipeline.config import load_settings
+    from pipeline.dataset import DatasetSettings, _config_dict, expand_scenes, view_look
+    from pipeline.scene import load_scene
+
+    root = Path(__file__).resolve().parents[1] / "configs"
+    for name in ("full.json", "demo.json"):
+        settings = load_settings(DatasetSettings, root / name)
+        text = json.dumps(_config_dict(settings))
+        assert not any(k in text for k in ('"sizes"', '"yfov_range_deg"', '"pool"')), name
+        assert all(view_look(settings, s, i) is None for i, s in enumerate(expand_scenes(settings)))
+    scene = load_scene("suzanne")
+    plain = orbit(scene, 5, 32, 24, 40.0, seed=9)
+    framed = orbit(scene, 5, 0, 0, 0.0, seed=9, frames=[(32, 24, 40.0)] * 5)
+    for a, b in zip(plain, framed, strict=True):
+        assert np.array_equal(a.pose, b.pose) and a.to_dict() == b.to_dict()
+
+
+def test_bad_sizes_and_ranges_are_rejected():
+    from pipeline.config import from_dict
+    from pipeline.dataset import DatasetSettings, _validate, expand_scenes
+
+    def check(config):
+        settings = from_dict(DatasetSettings, config)
+        _validate(settings, expand_scenes(settings), Path("."))
+
+    scene = {"name": "spot", "mesh": "spot"}
+    with pytest.raises(NeuralaoError, match="unknown setting"):
+        check({"scenes": [scene], "size_list": [[8, 8]]})
+    with pytest.raises(NeuralaoError, match="does not match"):
+        check({"scenes": [scene], "sizes": [[8, 8, 8]]})
+    with pytest.raises(NeuralaoError, match="sizes"):
+        check({"scenes": [{**scene, "sizes": []}]})
+    with pytest.raises(NeuralaoError, match="yfov_range_deg"):
+        check({"scenes": [scene], "yfov_range_deg": [90, 30]})
+    with pytest.raises(NeuralaoError, match="poses"):
+        check({"scenes": [{**scene, "cameras": "file", "poses": "p.json", "yfov_range_deg": [30, 60]}]})
+
+
+# ---------------------------------------------------------------- the corpus config
+
+
+def test_corpus_config_isolates_every_mesh_and_splits_by_mesh():
+    """configs/corpus.json: every object mesh alone on an orbit (no floor) in its own split, interiors
+    and composed rooms as configs/full.json, several sizes and fields of view; the split check holds."""
+    from pipeline.config import from_dict, load_settings
+    from pipeline.dataset import DatasetSettings, _validate, expand_scenes
+    from pipeline.splits import INTERIORS, OBJECTS, object_meshes
+
+    root = Path(__file__).resolve().parents[1] / "configs"
+    settings = load_settings(DatasetSettings, root / "corpus.json")
+    specs = expand_scenes(settings)
+    _validate(settings, specs, root)
+    alone = {s.mesh: s.split for s in specs if s.compose is None and s.cameras == "orbit"}
+    assert alone == {m: split for split, names in OBJECTS.items() for m in names}
+    rooms = {s.mesh: s.split for s in specs if s.compose is None and s.cameras == "interior"}
+    assert rooms == {m: split for split, names in INTERIORS.items() for m in names}
+    composed = [s for s in specs if s.compose is not None]
+    assert {s.split for s in composed} == {"train", "val", "test"} and {s.cameras for s in composed} == {
+        "orbit", "interior", "closeup"}  # fmt: skip
+    assert all(object_meshes(s.split, s.compose.pool) == OBJECTS[s.split] for s in composed)  # latest pool
+    assert len(set(map(tuple, settings.sizes))) >= 4 and any(w != h for w, h in settings.sizes)
+    assert settings.labels.rays == 256 and settings.labels.radii_rel == [0.03125, 0.0625, 0.125, 0.25]
+    # The split stays by mesh: a val mesh alone in a train scene is refused, as in a composed pool.
+    data = json.loads((root / "corpus.json").read_text())
+    leak = next(s for s in data["scenes"] if s["mesh"] == "fandisk")
+    leak["split"] = "train"
+    bad = from_dict(DatasetSettings, data)
+    with pytest.raises(NeuralaoError, match="fandisk.*split by mesh"):
+        _validate(bad, expand_scenes(bad), root)
+    data = {"scenes": [{"name": "Avocado", "mesh": "Avocado", "split": "val"}],
+            "composed": [{"count": 1, "views": 1, "compose": {"pool": 2}}]}  # fmt: skip
+    bad = from_dict(DatasetSettings, data)
+    with pytest.raises(NeuralaoError, match="Avocado"):  # pool 2 holds the added props
+        _validate(bad, expand_scenes(bad), root)
+    data["composed"][0]["compose"]["pool"] = 1
+    ok = from_dict(DatasetSettings, data)
+    _validate(ok, expand_scenes(ok), root)
