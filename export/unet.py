@@ -28,6 +28,7 @@ from pipeline.constants import TOL
 from pipeline.errors import NeuralaoError
 from pipeline.io import sha256_file, write_json
 from pipeline.unet import (
+    HYBRID_DESCRIPTION,
     PAD_MODE,
     PREPROCESS_DESCRIPTION,
     PREPROCESS_VERSION,
@@ -78,6 +79,7 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
     meta = {
         "neuralao_kind": "unet",
         **PREPROCESS_DESCRIPTION,
+        **(HYBRID_DESCRIPTION if model.args.gtao_input else {}),
         "pad_multiple": str(model.pad_multiple),
         "pad_mode": PAD_MODE,
         "model_args": {"widths": list(model.args.widths), "negative_slope": model.args.negative_slope},
@@ -241,8 +243,9 @@ def glsl_runner(glsl_dir: str | Path) -> Runner:
     )
 
 
-def random_input(width: int, height: int, seed: int = 0) -> np.ndarray:
-    """A G-buffer-like network input (4, H, W) float32: smooth depth around 1, unit normals, a background band."""
+def random_input(width: int, height: int, seed: int = 0, channels: int = 4) -> np.ndarray:
+    """A G-buffer-like network input (C, H, W) float32: smooth depth around 1, unit normals, a background
+    band; with ``channels`` 5 a GTAO-like fifth channel in [0, 1] (1 on background)."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
     depth = (
@@ -255,6 +258,10 @@ def random_input(width: int, height: int, seed: int = 0) -> np.ndarray:
     n /= np.linalg.norm(n, axis=0, keepdims=True)
     x = np.concatenate([depth[None], n]).astype(np.float32)
     x[:, :, : max(1, width // 8)] = 0.0  # background: depth 0, normal 0
+    if channels == 5:
+        gtao = np.clip(0.7 + 0.3 * np.cos(xx / 9.0) * np.sin(yy / 6.0), 0.0, 1.0).astype(np.float32)
+        gtao[:, : max(1, width // 8)] = 1.0
+        x = np.concatenate([x, gtao[None]])
     return x
 
 
@@ -272,7 +279,7 @@ def check_backends(
     m = model.pad_multiple
     rows, ref_max = [], 0.0
     for k, (w, h) in enumerate(sizes):
-        x = random_input(w, h, seed + k)
+        x = random_input(w, h, seed + k, model.args.in_channels)
         rho = CHECK_RHOS[k % len(CHECK_RHOS)]
         ref_torch = predict(model, x, rho)
         ref_max = max(ref_max, float(np.abs(ref_torch).max()))
@@ -404,20 +411,22 @@ def declared_internal_height(onnx_path: str | Path, proto: onnx.ModelProto | Non
     return height
 
 
-def infer_frame(
-    onnx_path: str | Path,
-    frame: dict,
-    radius: float | None = None,
-    internal_height: int | str | None = "model",
-) -> np.ndarray:
-    """AO of one G-buffer frame with onnxruntime. frame: depth (H,W), normal_cam (H,W,3), mask (H,W),
-    yfov; ``radius`` the AO radius in scene units (default: the largest radius the frame's labels have).
-    ``internal_height``: "model" (the height the export declares, see :func:`declared_internal_height`),
-    None (the frame's own size) or a number of rows; frames taller than it are point-sampled down and
-    the AO upsampled (:mod:`runtime.internal_resolution`).
+def is_hybrid(meta: dict) -> bool:
+    """True for a U-Net that refines GTAO (its input channels end with ``gtao``)."""
+    return str(meta.get("input_channels", "")).split(",")[-1] == "gtao"
 
-    Returns ao : (H, W) float32 in [0, 1], 1 on background. Any H, W >= pad_multiple.
+
+def frame_predictor(onnx_path: str | Path, internal_height: int | str | None = "model"):
+    """``predict(frame, radius) -> ao (H, W) float32`` of a U-Net export with onnxruntime.
+
+    frame: depth (H,W), normal_cam (H,W,3), mask (H,W), yfov; radius in scene units (None: the largest
+    radius the frame's labels have). ``internal_height``: "model" (the height the export declares, see
+    :func:`declared_internal_height`), None (the frame's own size) or a number of rows; frames taller
+    than it are point-sampled down and the AO upsampled (:mod:`runtime.internal_resolution`). A hybrid
+    gets GTAO at the same radius (runtime.baselines, at the frame's resolution) as its fifth channel,
+    and at an internal resolution its correction to GTAO is what is upsampled.
     """
+    from runtime.baselines import run_gtao
     from runtime.internal_resolution import at_internal_resolution
 
     proto = load_onnx(onnx_path)
@@ -426,11 +435,32 @@ def infer_frame(
         internal_height = declared_internal_height(onnx_path, proto)
     run = ort_runner(proto.SerializeToString())
     multiple = int(meta["pad_multiple"])
+    hybrid = is_hybrid(meta)
 
     def predict(f: dict, r: float | None) -> np.ndarray:
-        return composite(run_padded(run, preprocess_frame(f), multiple, frame_radius_param(f, r)), f)
+        x = preprocess_frame(f, f["gtao"] if hybrid else None)
+        return composite(run_padded(run, x, multiple, frame_radius_param(f, r)), f)
 
-    return at_internal_resolution(predict, internal_height)(frame, radius)
+    scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
+    if not hybrid:
+        return scaled
+
+    def predict_hybrid(frame: dict, radius: float | None) -> np.ndarray:
+        from pipeline.unet import frame_radius
+
+        return scaled(frame | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
+
+    return predict_hybrid
+
+
+def infer_frame(
+    onnx_path: str | Path,
+    frame: dict,
+    radius: float | None = None,
+    internal_height: int | str | None = "model",
+) -> np.ndarray:
+    """AO (H, W) float32 in [0, 1] (1 on background) of one G-buffer frame: :func:`frame_predictor`."""
+    return frame_predictor(onnx_path, internal_height)(frame, radius)
 
 
 # ----------------------------------------------------------------------------------------------- parity

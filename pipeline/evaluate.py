@@ -135,8 +135,6 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
     """A predictor per internal-resolution policy of one U-Net export folder (onnxruntime)."""
     import json
 
-    from runtime.internal_resolution import at_internal_resolution
-
     from .split_eval import unet_predictor
 
     manifest_path = folder / "manifest.json"
@@ -147,12 +145,11 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
         raise NeuralaoError(
             f"{folder}: evaluate scores screen-space U-Nets, this export is {manifest.get('kind')!r}"
         )
-    base = unet_predictor(folder / manifest.get("onnx", "model.onnx"))
+    onnx_path = folder / manifest.get("onnx", "model.onnx")
     out = {}
     for policy in policies:
-        height = internal_height_of(policy, manifest)
         label = folder.name if policy == "model" else f"{folder.name}@{policy}"
-        out[label] = at_internal_resolution(base, height)
+        out[label] = unet_predictor(onnx_path, internal_height_of(policy, manifest))
     return out
 
 

@@ -21,22 +21,12 @@ from .metrics import masked_rmse, masked_ssim
 Predictor = Callable[[dict, float], np.ndarray]
 
 
-def unet_predictor(onnx_path: str | Path) -> Predictor:
-    """onnxruntime inference of a U-Net export at a given radius (``export.unet.infer_frame``'s path)."""
-    from export.onnx_io import load_onnx
-    from export.unet import check_unet_onnx, composite, ort_runner, run_padded
+def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = None) -> Predictor:
+    """onnxruntime inference of a U-Net export at a given radius (:func:`export.unet.frame_predictor`);
+    ``internal_height`` None runs it at the frame's own size, "model" at the height it declares."""
+    from export.unet import frame_predictor
 
-    from .unet import frame_radius_param, preprocess_frame
-
-    proto = load_onnx(onnx_path)
-    multiple = int(check_unet_onnx(proto, onnx_path)["pad_multiple"])
-    run = ort_runner(proto.SerializeToString())
-
-    def predict(frame: dict, radius: float) -> np.ndarray:
-        y = run_padded(run, preprocess_frame(frame), multiple, frame_radius_param(frame, radius))
-        return composite(np.clip(y, 0.0, 1.0), frame)
-
-    return predict
+    return frame_predictor(onnx_path, internal_height)
 
 
 def screen_space_predictor(method: str, settings=None) -> Predictor:
@@ -46,13 +36,17 @@ def screen_space_predictor(method: str, settings=None) -> Predictor:
     return lambda frame, radius: run_screen_space(frame, method, radius, settings)
 
 
-def evaluate_frames(frames: Iterable[dict], methods: dict[str, Predictor], radii_rel: list[float] | None = None) -> dict:
+def evaluate_frames(
+    frames: Iterable[dict], methods: dict[str, Predictor], radii_rel: list[float] | None = None
+) -> dict:
     """Scores of every method on ``frames`` (dicts with ao_radii, valid_radii, radii) at every radius."""
     rows: dict[str, list[tuple[str, int, float, float]]] = {name: [] for name in methods}
     frames_seen = 0
     for frame in frames:
         if not all(k in frame for k in ("ao_radii", "valid_radii", "radii")):
-            raise NeuralaoError(f"frame {frame.get('scene')}/{frame.get('view')} has no labels at several radii")
+            raise NeuralaoError(
+                f"frame {frame.get('scene')}/{frame.get('view')} has no labels at several radii"
+            )
         frames_seen += 1
         fg = np.asarray(frame["mask"], bool)
         for j, radius in enumerate(np.asarray(frame["radii"], np.float64).reshape(-1)):
@@ -62,7 +56,9 @@ def evaluate_frames(frames: Iterable[dict], methods: dict[str, Predictor], radii
             gt = np.asarray(frame["ao_radii"][..., j], np.float32)
             for name, fn in methods.items():
                 pred = fn(frame, float(radius))
-                rows[name].append((str(frame.get("scene")), j, masked_ssim(pred, gt, mask), masked_rmse(pred, gt, mask)))
+                rows[name].append(
+                    (str(frame.get("scene")), j, masked_ssim(pred, gt, mask), masked_rmse(pred, gt, mask))
+                )
     if frames_seen == 0:
         raise NeuralaoError("no frame to evaluate on")
 

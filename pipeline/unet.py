@@ -58,6 +58,8 @@ RADIUS_DEPTH_FLOOR = 1e-3
 RADIUS_CAP = 8.0
 RADIUS_INPUT = "radius"
 INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
+# The hybrid's input: the G-buffer channels and GTAO's AO at the same radius (1 on background).
+HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
 BACKGROUND_DEPTH = 0.0
 PAD_MODE = "reflect"
 
@@ -82,6 +84,15 @@ PREPROCESS_DESCRIPTION = {
     "output": "(1,1,H,W) accessibility in [0,1], 1 = open (sigmoid)",
     "pad_mode": PAD_MODE,
     "pad_side": "bottom,right",
+}
+
+# Added to the metadata of a hybrid (GTAO-input) U-Net.
+HYBRID_DESCRIPTION = {
+    "input_layout": "NCHW float32, N=1, C=5, H and W multiples of pad_multiple (pad, run, crop)",
+    "input_channels": ",".join(HYBRID_CHANNELS),
+    "gtao_channel": "channel 4: GTAO's AO at the same radius R (the engine's GTAO pass, run first), 1 on "
+    "background; the network outputs clip(gtao + correction, 0, 1)",
+    "output": "(1,1,H,W) accessibility in [0,1], 1 = open (GTAO + a learned correction, clipped)",
 }
 
 
@@ -143,12 +154,20 @@ def frame_radius_param(frame: dict, radius: float | None = None) -> float:
     return radius_param(frame_radius(frame, radius), frame["depth"], frame["mask"], float(frame["yfov"]))
 
 
-def preprocess_frame(frame: dict) -> np.ndarray:
-    """``preprocess`` on a frame dict (keys depth, normal_cam, mask). Returns (4, H, W) float32."""
+def preprocess_frame(frame: dict, gtao: np.ndarray | None = None) -> np.ndarray:
+    """``preprocess`` on a frame dict (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
+    (5, H, W) with ``gtao`` (H, W) as the hybrid's fifth channel (1 on background)."""
     missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]
     if missing:
         raise NeuralaoError(f"frame lacks G-buffer channel(s) {', '.join(missing)}")
-    return preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
+    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
+    if gtao is None:
+        return x
+    gtao = np.asarray(gtao, np.float32)
+    if gtao.shape != x.shape[1:]:
+        raise NeuralaoError(f"GTAO image is {gtao.shape}, the G-buffer {x.shape[1:]}")
+    mask = np.asarray(frame["mask"], bool)
+    return np.concatenate([x, np.where(mask, gtao, np.float32(1.0))[None]], axis=0)
 
 
 def flip_input(x: torch.Tensor, horizontal: bool) -> torch.Tensor:
@@ -202,6 +221,9 @@ class UNetArgs:
     radius_input: bool = True  # the AO radius is a run-time input (an extra per-pixel channel, see RADIUS_*)
     scale: int = 1  # 1 = full resolution; 2 / 4 = the U-Net runs at 1/2 / 1/4 resolution (see UNet)
     refine_width: int = 4  # channels of the full-resolution refinement of the reduced-resolution variants
+    # Hybrid: GTAO's AO at the same radius is a fifth input channel and the network predicts a
+    # correction to it: ao = clip(gtao + conv(x), 0, 1) (GTAO stays a GL pass the engine runs first).
+    gtao_input: bool = False
 
     @property
     def depth(self) -> int:
@@ -239,6 +261,11 @@ class UNet(nn.Module):
             raise NeuralaoError(
                 f"U-Net widths must list at least two positive channel counts, got {args.widths}"
             )
+        if args.gtao_input and (int(args.scale) != 1 or int(args.in_channels) != len(HYBRID_CHANNELS)):
+            raise NeuralaoError(
+                f"a GTAO-input U-Net takes {len(HYBRID_CHANNELS)} channels ({', '.join(HYBRID_CHANNELS)}) at "
+                f"scale 1, got in_channels {args.in_channels} and scale {args.scale}"
+            )
         if int(args.scale) not in (1, 2, 4) or int(args.refine_width) < 1:
             raise NeuralaoError(
                 f"U-Net scale must be 1, 2 or 4 and refine_width >= 1, got {args.scale} and {args.refine_width}"
@@ -249,6 +276,10 @@ class UNet(nn.Module):
         select = torch.zeros(1, args.in_channels, 1, 1)
         select[0, 0] = 1.0  # channel 0 = normalised depth
         self.register_buffer("select", select, persistent=False)
+        if args.gtao_input:
+            guide = torch.zeros(1, cin, 1, 1)  # _unet sees the radius channel appended after GTAO
+            guide[0, len(INPUT_CHANNELS)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
+            self.register_buffer("guide", guide, persistent=False)
         self.down = nn.ModuleList(
             nn.Sequential(_conv3x3(cin if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))
             for i in range(len(w))
@@ -287,6 +318,7 @@ class UNet(nn.Module):
         return torch.cat([x, r], dim=1)
 
     def _unet(self, x: torch.Tensor) -> torch.Tensor:
+        gtao = F.conv2d(x, self.guide) if self.args.gtao_input else None
         depth = self.args.depth
         skips = []
         for i, block in enumerate(self.down):
@@ -298,6 +330,8 @@ class UNet(nn.Module):
             x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
             x = self.up[i](x)
             x = self.fuse[i](torch.cat([x, skips[i]], dim=1))
+        if gtao is not None:
+            return torch.clamp(gtao + self.out(x), 0.0, 1.0)
         return torch.sigmoid(self.out(x))
 
     def forward(self, x: torch.Tensor, radius: torch.Tensor | None = None) -> torch.Tensor:
@@ -364,5 +398,7 @@ def predict(model: UNet, x: np.ndarray, rho: float | None = None) -> np.ndarray:
     (:func:`radius_param`; required by radius-input models) -> (H, W) float32 (raw network output)."""
     model.eval()
     with torch.no_grad():
-        y = PaddedUNet(model)(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None], radius_tensor(rho))
+        y = PaddedUNet(model)(
+            torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None], radius_tensor(rho)
+        )
     return y[0, 0].numpy()

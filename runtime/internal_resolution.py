@@ -82,13 +82,15 @@ def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def upsample_ao(
-    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
 ) -> np.ndarray:
     """Joint bilateral upsampling of ``ao_low`` (h, w), computed on the point-sampled ``frame``
     (:func:`downsample_frame`), to ``frame``'s resolution. Returns (H, W) float32, 1 on background.
 
     The numpy reference of the ``upsample_fragment`` GLSL pass (same taps, weights and integer
     sampling), in float64. A low texel's position and normal are those of the high pixel it sampled.
+    ``empty``: the value of a foreground pixel with no foreground texel in reach (1: open AO; 0 for an
+    upsampled correction).
     """
     hp, hn, hm = _positions(frame)
     # GL order (row 0 at the bottom) throughout, as the fragment shader sees it.
@@ -122,15 +124,23 @@ def upsample_ao(
             weight = spatial * (s.floor + np.exp(-plane * plane) * agree) * lm[qy][:, qx]
             acc += weight * a_low[qy][:, qx]
             total += weight
-    out = np.where(total > 0, acc / np.where(total > 0, total, 1.0), 1.0)
+    out = np.where(total > 0, acc / np.where(total > 0, total, 1.0), empty)
     return np.where(hm, out, 1.0)[::-1].astype(np.float32)
 
 
 def at_internal_resolution(
-    predict, internal_height: int | None, settings: UpsampleSettings = UpsampleSettings()
+    predict,
+    internal_height: int | None,
+    settings: UpsampleSettings = UpsampleSettings(),
+    residual_of: str | None = None,
 ):
     """Wrap ``predict(frame, radius) -> ao (H, W)`` so it runs at ``internal_height`` rows and is
-    upsampled to the frame's size; frames no taller than that run as they are."""
+    upsampled to the frame's size; frames no taller than that run as they are.
+
+    ``residual_of``: the key of a full-resolution AO image in the frame that ``predict`` refines (a
+    hybrid's "gtao"): then the network's *correction* (its AO minus the point-sampled input) is what
+    is upsampled, and it is added to the full-resolution image, so the input's own detail survives.
+    """
 
     def scaled(frame: dict, radius: float) -> np.ndarray:
         h, w = np.shape(frame["depth"])
@@ -138,7 +148,12 @@ def at_internal_resolution(
         if (lw, lh) == (w, h):
             return predict(frame, radius)
         low = downsample_frame(frame, lw, lh)
-        return upsample_ao(predict(low, radius), frame, settings)
+        if residual_of is None:
+            return upsample_ao(predict(low, radius), frame, settings)
+        correction = predict(low, radius) - np.asarray(low[residual_of], np.float32)
+        up = upsample_ao(correction, frame, settings, empty=0.0)
+        ao = np.clip(np.asarray(frame[residual_of], np.float32) + up, 0.0, 1.0)
+        return np.where(np.asarray(frame["mask"], bool), ao, np.float32(1.0)).astype(np.float32)
 
     return scaled
 

@@ -1,0 +1,126 @@
+"""The hybrid U-Net: GTAO's AO as a fifth input channel, a learned correction as the output.
+
+GTAO stays a GL pass (runtime.baselines); the ONNX model takes its output as an input, so parity is
+checked on a real GTAO image: torch against onnxruntime, and the generated GLSL against onnxruntime
+on the same five-channel input. With the correction zeroed the model is GTAO exactly (closed form),
+at the frame's resolution and at an internal resolution (where the correction, not the AO, is
+upsampled).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from pipeline.camera import orbit
+from pipeline.constants import TOL
+from pipeline.errors import NeuralaoError
+from pipeline.gbuffer import render_gbuffer
+from pipeline.scene import load_scene
+from pipeline.unet import HYBRID_CHANNELS, UNet, UNetArgs, frame_radius_param, predict, preprocess_frame
+from runtime.baselines import run_gtao
+
+WIDTHS = [4, 8, 16]
+
+
+def _hybrid(seed: int = 0) -> UNet:
+    torch.manual_seed(seed)
+    model = UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True)).eval()
+    with torch.no_grad():  # a correction of visible size, so the comparisons mean something
+        model.out.weight.mul_(4.0)
+    return model
+
+
+@pytest.fixture(scope="module")
+def frame():
+    scene = load_scene("spot")
+    f = render_gbuffer(scene, orbit(scene, 3, 96, 64, seed=1)[1])
+    radius = 0.125 * scene.diagonal
+    f["gtao"] = run_gtao(f, radius)
+    return f, radius
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    from export.unet import export_onnx, write_glsl
+
+    out = tmp_path_factory.mktemp("hybrid")
+    model = _hybrid()
+    proto = export_onnx(model, out / "model.onnx")
+    write_glsl(proto, out / "glsl")
+    return model, out
+
+
+def test_hybrid_needs_five_channels_at_scale_one():
+    with pytest.raises(NeuralaoError, match="5 channels"):
+        UNet(UNetArgs(in_channels=4, widths=WIDTHS, gtao_input=True))
+    with pytest.raises(NeuralaoError, match="scale"):
+        UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True, scale=2))
+
+
+def test_metadata_names_the_gtao_channel(exported):
+    from export.onnx_io import get_metadata, load_onnx
+    from export.unet import is_hybrid
+
+    meta = get_metadata(load_onnx(exported[1] / "model.onnx"))
+    assert meta["input_channels"] == ",".join(HYBRID_CHANNELS) and is_hybrid(meta)
+
+
+def test_zero_correction_is_gtao_exactly(frame):
+    f, radius = frame
+    model = _hybrid()
+    with torch.no_grad():
+        model.out.weight.zero_()
+        model.out.bias.zero_()
+    x = preprocess_frame(f, f["gtao"])
+    y = predict(model, x, frame_radius_param(f, radius))
+    np.testing.assert_array_equal(y[f["mask"]], f["gtao"][f["mask"]])
+
+
+def test_onnxruntime_matches_torch_on_real_gtao(exported, frame):
+    from export.unet import ort_runner, run_padded
+
+    model, out = exported
+    f, radius = frame
+    x = preprocess_frame(f, f["gtao"])
+    rho = frame_radius_param(f, radius)
+    ref = predict(model, x, rho)
+    got = run_padded(ort_runner(out / "model.onnx"), x, model.pad_multiple, rho)
+    assert np.ptp(ref[f["mask"]] - f["gtao"][f["mask"]]) > 1e-2  # the correction is not nothing
+    assert np.abs(got - ref).max() <= TOL.onnx_vs_torch(1.0, 8)
+
+
+def test_glsl_matches_onnxruntime_on_real_gtao(exported, frame):
+    """Parity of the generated compute passes on the same five-channel input (a real GTAO image)."""
+    from export.unet import glsl_runner, ort_runner, run_padded
+
+    model, out = exported
+    f, radius = frame
+    x = preprocess_frame(f, f["gtao"])
+    rho = frame_radius_param(f, radius)
+    want = run_padded(ort_runner(out / "model.onnx"), x, model.pad_multiple, rho)
+    got = run_padded(glsl_runner(out / "glsl"), x, model.pad_multiple, rho)
+    assert got.shape == want.shape
+    assert np.abs(got - want).max() <= TOL.parity_unet_fp32
+
+
+@pytest.mark.parametrize("internal", [None, 32])
+def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp_path, frame, internal):
+    """A zero-correction hybrid through the whole inference path returns the full-resolution GTAO,
+    also at an internal resolution (the correction is upsampled, not the AO)."""
+    from export.unet import export_onnx, frame_predictor
+
+    model = _hybrid()
+    with torch.no_grad():
+        model.out.weight.zero_()
+        model.out.bias.zero_()
+    export_onnx(model, tmp_path / "model.onnx")
+    (tmp_path / "manifest.json").write_text(json.dumps({"internal_height": internal}))
+    f, radius = frame
+    plain = {k: v for k, v in f.items() if k != "gtao"}
+    ao = frame_predictor(tmp_path / "model.onnx")(plain, radius)
+    np.testing.assert_allclose(ao[f["mask"]], f["gtao"][f["mask"]], atol=1e-6)
+    assert np.all(ao[~f["mask"]] == 1.0)
