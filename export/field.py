@@ -5,9 +5,10 @@ object-space position in the mesh's own units (the graph normalises it by the bo
 ``normal`` (N, 3) float32 = the viewer-facing object-space unit normal; output ``ao`` (N, 1) float32,
 linear and unclamped. Ops: Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh.
 
-The fragment shader reads two RGBA32F G-buffer textures, ``u_position`` (xyz object-space position,
-w foreground mask) and ``u_normal`` (xyz object-space normal), and writes the AO; everything it needs
-(weights, normalisation, frequencies) is in std140 uniform blocks described by its manifest.
+The fragment shader reads two RGBA32F G-buffer textures, ``position`` (xyz object-space position,
+w foreground mask; sampler ``u_tex0``) and ``normal`` (xyz object-space normal; ``u_tex1``), and writes
+the AO; everything it needs (weights, normalisation, frequencies) is in std140 uniform blocks described
+by its manifest.
 
 Export layout (``export_checkpoint``)::
 
@@ -44,7 +45,7 @@ from pipeline.field import (
 from pipeline.io import write_json
 
 from .manifest import per_mesh_manifest
-from .onnx_io import get_metadata, load_onnx, ort_session, save_onnx
+from .onnx_io import get_metadata, load_onnx, ort_session, save_onnx, weighted_layers
 
 log = logging.getLogger(__name__)
 
@@ -121,20 +122,24 @@ def random_inputs(model: FieldNet, n: int, seed: int) -> tuple[np.ndarray, np.nd
 
 
 def check_backends(model: FieldNet, onnx_path: Path, seed: int = 0) -> dict:
-    """onnxruntime vs torch on random inputs at CHECK_BATCHES; raises above TOL.onnx_vs_torch."""
+    """onnxruntime vs torch on random inputs at CHECK_BATCHES; raises above TOL.onnx_vs_torch (the rule
+    for these outputs and this depth)."""
     sess = ort_session(onnx_path)
-    rows = []
+    rows, ref_max = [], 0.0
     for k, n in enumerate(CHECK_BATCHES):
         p, nrm = random_inputs(model, n, seed + k)
         y = sess.run(None, {POSITION: p, NORMAL: nrm})[0]
         if y.shape != (n, 1):
             raise NeuralaoError(f"exported field returned shape {y.shape} for N={n}")
-        rows.append({"batch": n, "onnxruntime_vs_torch": float(np.abs(y[:, 0] - predict(model, p, nrm)).max())})
+        ref = predict(model, p, nrm)
+        ref_max = max(ref_max, float(np.abs(ref).max()))
+        rows.append({"batch": n, "onnxruntime_vs_torch": float(np.abs(y[:, 0] - ref).max())})
     worst = max(r["onnxruntime_vs_torch"] for r in rows)
-    if worst > TOL.onnx_vs_torch:
-        raise NeuralaoError(f"onnxruntime differs from torch by {worst:.3g} > {TOL.onnx_vs_torch:g}")
+    tol = TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path))
+    if worst > tol:
+        raise NeuralaoError(f"onnxruntime differs from torch by {worst:.3g} > {tol:.3g}")
     return {"inputs": "positions in the bounding box grown by 10%, random unit normals", "checks": rows,
-            "onnxruntime_vs_torch": worst, "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch},
+            "onnxruntime_vs_torch": worst, "tolerance": {"onnxruntime_vs_torch": tol},
             "opencv": "not checked: OpenCV dnn is the MLP's second consumer; the field's Sin/Cos graph is "
                       "checked against torch and the generated GLSL"}  # fmt: skip
 

@@ -12,7 +12,8 @@ Targets (the op tables of :mod:`export.glsl`):
 * ``vector``: a per-pixel network, every input (N, k) bound to channels of a named RGBA32F texture
   (``--bind position=position.xyz --bind normal=normal.xyz``; an input of width <= 4 without a
   ``--bind`` reads the texture of its own name, channels ``xyzw[:k]``). The first texture's w channel
-  is the foreground mask. One fragment pass in GLSL 3.30, ES 3.00 and 4.30 (``--dialect`` keeps a
+  is the foreground mask. Texture and input names live in the manifest only: the shader's samplers are
+  ``u_tex<unit>``, so no name the user chose reaches shader source. One fragment pass in GLSL 3.30, ES 3.00 and 4.30 (``--dialect`` keeps a
   subset), weights in std140 uniform blocks. ``fp16`` is a run-time choice here (RGBA16F textures),
   recorded for parity.
 
@@ -23,8 +24,10 @@ The export folder (self-describing, every file atomic, ``manifest.json`` last)::
     DIR/manifest.json     kind "onnx-glsl": target, precision, bindings, inputs, ops, hashes
 
 Parity runs the shaders read back from DIR against onnxruntime on seeded random inputs of the
-declared shapes (symbolic sizes from ``--size``; scalar inputs uniform in [0.1, 2]), or on the arrays of
-an ``.npz`` (image: one array per graph input, scalars included; vector: one (H, W, 4) array per texture).
+declared shapes (symbolic sizes from ``--size``, checked against the program and a memory bound before
+anything is allocated, refused when it disagrees with a static size; scalar inputs uniform in [0.1, 2]),
+or on the arrays of an ``.npz`` (image: one array per graph input, scalars included; vector: one (H, W, 4)
+array per texture). A vector model exported with a static batch N runs in chunks of N pixels.
 
 Image target inputs: one image (1, C, H, W) and any number of single-element scalars ((1, 1, 1, 1),
 (1,) or (), e.g. an AO radius), each a ``uniform float`` (the GLSL manifest's ``uniforms``).
@@ -77,24 +80,48 @@ def _input_dims(proto: onnx.ModelProto) -> dict[str, list]:
 
 
 def default_bindings(proto: onnx.ModelProto, given: dict):
-    """Given bindings, completed for inputs of width <= 4 by the texture of the input's own name."""
+    """Given bindings, completed for inputs of width <= 4 by the texture of the input's own name.
+
+    The texture name is the ONNX name as it is (ONNX input names are unique, so two inputs never share
+    a texture by accident); it names the texture for the host and in the manifest only, the shader's
+    samplers are generated (``u_tex<unit>``)."""
     from .glsl import InputBinding
 
+    dims_of = _input_dims(proto)
+    unknown = sorted(set(given) - set(dims_of))
+    if unknown:
+        raise NeuralaoError(f"--bind names {unknown}, which are not graph inputs ({sorted(dims_of)})")
     out = dict(given)
-    for name, dims in _input_dims(proto).items():
+    bound = {b.texture: n for n, b in given.items()}
+    for name, dims in dims_of.items():
         if name in out:
             continue
         width = dims[-1] if dims else None
         if len(dims) != 2 or not isinstance(width, int) or not 1 <= width <= 4:
             raise NeuralaoError(f"input {name!r} of shape {dims} needs --bind {name}=TEXTURE.CHANNELS[xREPEATS]")
-        texture = re.sub(r"[^A-Za-z0-9_]", "_", name)
-        if not re.match(r"[A-Za-z_]", texture):
-            texture = "t_" + texture
-        out[name] = InputBinding(texture, "xyzw"[:width])
-    unknown = sorted(set(out) - set(_input_dims(proto)))
-    if unknown:
-        raise NeuralaoError(f"--bind names {unknown}, which are not graph inputs ({sorted(_input_dims(proto))})")
+        if name in bound:
+            raise NeuralaoError(f"input {name!r} would read the texture of its own name, which --bind gives to "
+                                f"{bound[name]!r}; bind {name!r} too (--bind {name}=TEXTURE.CHANNELS)")  # fmt: skip
+        out[name] = InputBinding(name, "xyzw"[:width])
     return out
+
+
+def _refuse_image_model(proto: onnx.ModelProto) -> None:
+    """The vector target takes (N, k) inputs: an (N, C, H, W) input means an image model."""
+    for name, dims in _input_dims(proto).items():
+        if len(dims) == 4:
+            raise NeuralaoError(f"input {name!r} of shape {dims} is an image (N, C, H, W): this is an image "
+                                "model, use --target image (--target vector takes per-pixel (N, k) inputs)")  # fmt: skip
+
+
+def _check_out_dir(out_dir: Path) -> None:
+    """--out must be a folder or not exist yet (nor any file stand where a parent folder must go)."""
+    for d in (out_dir, *out_dir.parents):
+        if d.exists():
+            if not d.is_dir():
+                what = "--out" if d == out_dir else f"--out {out_dir}: its parent"
+                raise NeuralaoError(f"{what} {d} is a file, not a folder: choose a folder for the export")
+            return
 
 
 def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind: list[str] | None = None,
@@ -113,6 +140,7 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"--precision must be fp32 or fp16, got {precision!r}")
     onnx_path, out_dir = Path(onnx_path), Path(out_dir)
+    _check_out_dir(out_dir)
     proto = load_onnx(onnx_path)
     glsl_dir = out_dir / GLSL_DIR
     extra: dict = {}
@@ -130,9 +158,12 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         unknown = sorted(set(dialects or []) - set(DIALECTS))
         if unknown:
             raise NeuralaoError(f"unknown --dialect {unknown} (choose from {sorted(DIALECTS)})")
-        bindings = default_bindings(proto, parse_bindings(bind or []))
+        given = parse_bindings(bind or [])
+        _refuse_image_model(proto)
+        bindings = default_bindings(proto, given)
+        # the file name stays out of the shader (it is the manifest's "source"), as the input names do
         shader = generate_vector_fragment(proto, bindings, kind="onnx",
-                                          description=f"neuralao GLSL of {onnx_path.name} (vector target)")  # fmt: skip
+                                          description="neuralao GLSL of a user's ONNX model (vector target)")  # fmt: skip
         if dialects:
             shader.sources = {k: v for k, v in shader.sources.items() if k in dialects}
             shader.manifest["dialects"] = {k: v for k, v in shader.manifest["dialects"].items() if k in dialects}
@@ -166,6 +197,18 @@ def read_manifest(export_dir: Path) -> dict:
     return read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
 
 
+# Seeded inputs are this size (W, H) unless --size says otherwise (image: rounded up to what the program takes).
+DEFAULT_SIZE = (64, 48)
+# Parity holds the inputs, every texture of the program and onnxruntime's tensors at once; a --size whose
+# textures (or, for the vector target, per-pixel tensors) would pass this many bytes is refused before
+# anything is allocated (a mistyped 100000 100000 asked for 298 GiB).
+PARITY_MAX_BYTES = 2 << 30
+
+
+def _gib(n: float) -> str:
+    return f"{n / (1 << 30):.3g} GiB"
+
+
 def _shape(dims: list, size: tuple[int, int], what: str) -> tuple[int, ...]:
     """Declared dims with symbolic ones filled: NCHW -> (1, C, H, W) with H, W from size (W, H)."""
     out = []
@@ -181,15 +224,99 @@ def _shape(dims: list, size: tuple[int, int], what: str) -> tuple[int, ...]:
     return tuple(out)
 
 
+def _static(d) -> int | None:
+    return int(d) if d is not None and str(d).isdigit() else None
+
+
+def _positive_size(size: tuple[int, int], what: str = "--size") -> tuple[int, int]:
+    w, h = (int(v) for v in size)
+    if w < 1 or h < 1:
+        raise NeuralaoError(f"{what} {w} {h}: width and height must be at least 1")
+    return w, h
+
+
+def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tuple[int, int]:
+    """(W, H) of the seeded image input: the declared static size, else ``size``, else DEFAULT_SIZE
+    rounded up to the multiples the program takes; checked against the program and PARITY_MAX_BYTES."""
+    from runtime.glsl_runner import size_multiples, texture_sizes
+
+    fixed = (_static(dims[3]), _static(dims[2])) if len(dims) == 4 else (None, None)
+    if size is None:
+        mh, mw = size_multiples(manifest)
+        low = int(manifest["pad"]["multiple"])
+        w, h = (max(-(-v // m) * m, -(-low // m) * m) for v, m in zip(DEFAULT_SIZE, (mw, mh), strict=True))
+        w, h = fixed[0] or w, fixed[1] or h
+    else:
+        w, h = _positive_size(size)
+        if any(f is not None and f != v for f, v in zip(fixed, (w, h), strict=True)):
+            want = " ".join(str(f) if f is not None else "?" for f in fixed)
+            raise NeuralaoError(f"--size {w} {h}: this export's input {dims} is static ({want}); "
+                                "--size is taken only when it equals the static size (or omit it)")  # fmt: skip
+    textures = texture_sizes(manifest, h, w, max_bytes=PARITY_MAX_BYTES)
+    log.debug("parity at %dx%d: %s of textures", w, h, _gib(sum(t[3] for t in textures.values())))
+    return w, h
+
+
+def _vector_size(glsl: dict, n_textures: int, size: tuple[int, int] | None,
+                 what: str = "--size") -> tuple[int, int]:  # fmt: skip
+    """(W, H) of the textures, checked against the texture limit and PARITY_MAX_BYTES (textures, the
+    per-pixel inputs and the widest layer, twice: onnxruntime holds an operand and a result). ``what``
+    names where the size came from in errors."""
+    from .glsl import MAX_TEXTURE_SIZE
+
+    w, h = DEFAULT_SIZE if size is None else _positive_size(size, what)
+    if w > MAX_TEXTURE_SIZE or h > MAX_TEXTURE_SIZE:
+        raise NeuralaoError(f"{what} {w} {h}: textures are at most {MAX_TEXTURE_SIZE} wide and high")
+    net = glsl["network"]
+    widths = [layer.get("out", layer.get("width", 0)) for layer in net["layers"]] + [net["output_width"]]
+    per_pixel = 16 * (n_textures + 1) + 4 * (net["input_width"] + 2 * max(widths))
+    if w * h * per_pixel > PARITY_MAX_BYTES:
+        raise NeuralaoError(f"{what} {w} {h} needs about {_gib(w * h * per_pixel)} ({per_pixel} bytes a pixel), "
+                            f"over parity's bound of {_gib(PARITY_MAX_BYTES)}: choose a smaller size")  # fmt: skip
+    return w, h
+
+
+def _static_batch(manifest: dict) -> int | None:
+    """The static batch N of a vector export's inputs (e.g. an MLP exported for N = 4096), else None."""
+    batches = {_static(manifest["inputs"][n][0]) for n in manifest["bindings"]} - {None}
+    if len(batches) > 1:
+        raise NeuralaoError(f"the inputs declare different static batch sizes {sorted(batches)}")
+    return batches.pop() if batches else None
+
+
+def _run_per_pixel(sess, feeds: dict[str, np.ndarray], batch: int | None, width: int) -> np.ndarray:
+    """onnxruntime on (n, k) per-pixel feeds -> (n, width): in one run, or with a static batch N in
+    chunks of N rows, the last one padded with zero rows (their results dropped)."""
+    n = len(next(iter(feeds.values())))
+    if n == 0:
+        return np.zeros((0, width), np.float32)
+    if batch is None:
+        return sess.run(None, feeds)[0].reshape(n, -1)
+    parts = []
+    for i in range(0, n, batch):
+        chunk = {k: v[i : i + batch] for k, v in feeds.items()}
+        rows = len(next(iter(chunk.values())))
+        pad = batch - rows
+        chunk = {k: np.concatenate([v, np.zeros((pad, v.shape[1]), v.dtype)]) for k, v in chunk.items()}
+        parts.append(sess.run(None, chunk)[0].reshape(batch, -1)[:rows])
+    return np.concatenate(parts)
+
+
 def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int = 0,
-           size: tuple[int, int] = (64, 48)) -> dict:  # fmt: skip
-    """The export's shaders (read from disk) vs onnxruntime on seeded random or given inputs."""
-    from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names
+           size: tuple[int, int] | None = None) -> dict:  # fmt: skip
+    """The export's shaders (read from disk) vs onnxruntime on seeded random or given inputs.
+
+    ``size`` (W, H): of symbolic image dimensions / vector textures, checked before anything is
+    allocated; None: the static size, else DEFAULT_SIZE (rounded up to the program's multiples).
+    It must equal a static size, and is refused with ``inputs`` (whose arrays fix the size)."""
+    from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names, texture_sizes
 
     from .glsl import load_compute_export, load_mlp_export
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)
+    if inputs is not None and size is not None:
+        raise NeuralaoError("--size applies to seeded inputs; with --inputs the arrays give the size")
     proto = load_onnx(export_dir / manifest["onnx"])
     sess = ort_session(proto.SerializeToString())
     given = read_npz(inputs) if inputs is not None else None
@@ -204,14 +331,18 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             absent = [n for n in [name, *scalar_names] if n not in given]
             if absent:
                 raise NeuralaoError(f"{inputs} has no array {absent[0]!r}")
-        x = given[name] if given is not None else rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
-        x = np.asarray(x, np.float32)
+            x = np.asarray(given[name], np.float32)
+        else:
+            size = _image_size(program.manifest, dims, size)
+            x = rng.standard_normal(_shape(dims, size, name)).astype(np.float32)
         static = [(i, int(d)) for i, d in enumerate(dims) if d is not None and str(d).isdigit()]
         if x.ndim != len(dims) or any(x.shape[i] != d for i, d in static):
             raise NeuralaoError(f"input {name!r} of shape {list(x.shape)} does not fit the declared {dims}")
+        if given is not None:
+            texture_sizes(program.manifest, x.shape[2], x.shape[3], max_bytes=PARITY_MAX_BYTES)
         feeds = {name: x}
         for n in scalar_names:  # a uniform each: one element, fed to onnxruntime in its declared shape
-            shape = _shape(manifest["inputs"][n], size, n)
+            shape = _shape(manifest["inputs"][n], (1, 1), n)
             v = np.asarray(given[n], np.float32) if given is not None else rng.uniform(0.1, 2.0, shape).astype(np.float32)
             if v.size != 1:
                 raise NeuralaoError(f"scalar input {n!r} of shape {list(v.shape)} must hold one value")
@@ -226,10 +357,11 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
                 diff = diff / np.maximum(1.0, np.abs(ref[o]))
             rows.append({"output": o, "shape": list(ref[o].shape), "max_abs_err": float(diff.max())})
         tol = TOL.parity_fp16_image if manifest["precision"] == "fp16" else TOL.parity_unet_fp32
+        shown = f"{x.shape[-1]}x{x.shape[-2]}"
     else:
         shaders = {d: load_mlp_export(export_dir / manifest["glsl"], dialect=d) for d in manifest["dialects"]}
-        textures_names = texture_names(shaders[manifest["dialects"][0]])
-        w, h = size
+        first = shaders[manifest["dialects"][0]]
+        textures_names = texture_names(first)
         if given is not None:
             missing = [t for t in textures_names if t not in given]
             if missing:
@@ -238,7 +370,10 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             shapes = {t.shape for t in tex.values()}
             if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[2] != 4:
                 raise NeuralaoError(f"{inputs}: textures must all be (H, W, 4), got {sorted(shapes)}")
+            h, w = next(iter(shapes))[:2]
+            _vector_size(first.manifest, len(textures_names), (w, h), f"{inputs}: textures of W H =")
         else:
+            w, h = _vector_size(first.manifest, len(textures_names), size)
             tex = {t: rng.uniform(-1, 1, size=(h, w, 4)).astype(np.float32) for t in textures_names}
             tex[textures_names[0]][..., 3] = rng.random((h, w)) > 0.1
         masked = tex[textures_names[0]][..., 3] >= 0.5
@@ -246,21 +381,22 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
         for n, b in manifest["bindings"].items():
             lanes = ["xyzw".index(c) for c in b["channels"]]
             feeds[n] = np.tile(tex[b["texture"]][masked][:, lanes], (1, b["repeats"])).astype(np.float32)
-        ref = sess.run(None, feeds)[0]
+        ref = _run_per_pixel(sess, feeds, _static_batch(manifest), first.output_width)
         for d in manifest["dialects"]:
             got = run_vector_fragment(shaders[d], tex, fp16=manifest["precision"] == "fp16", dialect=d)
             got = got[..., None] if got.ndim == 2 else got
-            diff = np.abs(got[masked] - ref.reshape(len(ref), -1))
+            diff = np.abs(got[masked] - ref)
             if manifest["precision"] == "fp16":
-                diff = diff / np.maximum(1.0, np.abs(ref.reshape(len(ref), -1)))
+                diff = diff / np.maximum(1.0, np.abs(ref))
             bg = float(np.abs(got[~masked] - 1.0).max()) if (~masked).any() else 0.0
             rows.append({"dialect": d, "pixels": int(masked.sum()), "max_abs_err": float(diff.max()) if diff.size else 0.0,
                          "background_max_abs_err": bg})  # fmt: skip
         tol = TOL.parity_fp16 if manifest["precision"] == "fp16" else TOL.parity_mlp_fp32
+        shown = f"{w}x{h}"
     err = max(r["max_abs_err"] for r in rows)
     bg_ok = all(r.get("background_max_abs_err", 0.0) == 0.0 for r in rows)
     return {"kind": KIND, "target": manifest["target"], "precision": manifest["precision"],
-            "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {size[0]}x{size[1]})",
+            "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {shown})",
             "max_abs_err": err, "tolerance": tol, "passed": bool(err <= tol and bg_ok), "checks": rows}  # fmt: skip
 
 

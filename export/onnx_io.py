@@ -53,6 +53,17 @@ def save_onnx(
     return path
 
 
+# Ops whose outputs are long float32 sums (dot products over a fan-in): where rounding accumulates.
+WEIGHTED_OPS = ("Conv", "ConvTranspose", "Gemm", "MatMul")
+
+
+def weighted_layers(model: onnx.ModelProto | str | os.PathLike) -> int:
+    """How many Conv / ConvTranspose / Gemm / MatMul nodes the graph has: the depth of the tolerance
+    rule TOL.onnx_vs_torch (a count, so an upper bound on the longest chain of them)."""
+    proto = model if isinstance(model, onnx.ModelProto) else onnx.load(str(model))
+    return sum(n.op_type in WEIGHTED_OPS for n in proto.graph.node)
+
+
 def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
     """Load and check an ONNX file; a missing or corrupt file is a one-line error."""
     p = Path(path)

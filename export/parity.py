@@ -65,15 +65,23 @@ PARITY_MODULES = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.f
 
 
 def check_exports(root: Path, data: Path | None = None, inputs: Path | None = None, seed: int = 0,
-                  size: tuple[int, int] = (64, 48)) -> dict:  # fmt: skip
+                  size: tuple[int, int] | None = None) -> dict:  # fmt: skip
+    """Parity of every export under ``root``. ``inputs``, ``seed`` and ``size`` (W, H; None: the
+    export's own) apply to `neuralao glsl` exports, and are refused for the others, which run on frames."""
     import importlib
 
-    results = {}
-    for d in export_dirs(root):
-        manifest = read_manifest(d)
+    dirs = export_dirs(root)
+    manifests = {d: read_manifest(d) for d in dirs}
+    for d, manifest in manifests.items():
         kind = manifest.get("kind")
         if kind not in PARITY_MODULES:
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
+        if kind != "onnx-glsl" and (size is not None or inputs is not None):
+            raise NeuralaoError(f"{d} is a {kind} export, checked on rendered or --data frames: "
+                                "--size and --inputs apply to `neuralao glsl` exports only")  # fmt: skip
+    results = {}
+    for d, manifest in manifests.items():
+        kind = manifest["kind"]
         module = importlib.import_module(PARITY_MODULES[kind])
         log.info("parity: %s (%s)", d.name, kind)
         if kind == "onnx-glsl":
@@ -91,13 +99,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "inputs included, by ONNX name; vector: per texture, (H, W, 4)); default: seeded random inputs "
                    "of the declared shapes, scalars uniform in [0.1, 2]")  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of the random inputs (default 0)")
-    p.add_argument("--size", type=int, nargs=2, default=(64, 48), metavar=("W", "H"),
-                   help="size of symbolic image dimensions / vector textures (default 64 48)")  # fmt: skip
+    p.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
+                   help="size of symbolic image dimensions / vector textures (default 64 48, rounded up to the "
+                   "multiples an image program takes); must equal a static input size")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
     results = check_exports(Path(args.exports), Path(args.data) if args.data else None,
-                            Path(args.inputs) if args.inputs else None, args.seed, tuple(args.size))  # fmt: skip
+                            Path(args.inputs) if args.inputs else None, args.seed,
+                            tuple(args.size) if args.size else None)  # fmt: skip
     failed = [name for name, r in results.items() if not r.get("passed", False)]
     summary = {"exports": results, "passed": not failed}
     for name, r in results.items():

@@ -216,7 +216,7 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
         "test_scenes": test["scenes"],
         "test_frames": test["frames"],
         "parity": {"glsl_vs_onnxruntime": par["max_abs_err"], "onnxruntime_vs_torch": manifest["checks"]["onnxruntime_vs_torch"],
-                   "tolerance_glsl": TOL.parity_unet_fp32, "tolerance_onnx": TOL.onnx_vs_torch},
+                   "tolerance_glsl": TOL.parity_unet_fp32, "tolerance_onnx": manifest["checks"]["tolerance"]["onnxruntime_vs_torch"]},
         "gl_seconds": gl_seconds,
         "history": [{k: h.get(k) for k in ("epoch", "wall_seconds", "val_ssim", "val_rmse", "train_loss", "lr")}
                     for h in ckpt.get("history", [])],

@@ -13,6 +13,7 @@ files on disk, so the runner doubles as the check that an export is self-suffici
     run_compute_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
     time_compute(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
     scalar_inputs(program_or_dir) -> [ONNX names of the scalar graph inputs (uniforms)]
+    texture_sizes(manifest, height, width) -> {texture id: (w, h, layers, bytes)}   (checks the size first)
 
 ``scalars`` gives each scalar graph input of a compute program (manifest ``uniforms``: e.g. the AO
 radius of a (1, 1, 1, 1) input) by its ONNX name: a float or any one-element array.
@@ -32,6 +33,7 @@ import numpy as np
 
 from export.glsl import (
     DIALECTS,
+    MAX_TEXTURE_SIZE,
     ComputeProgram,
     MLPShader,
     load_compute_export,
@@ -100,10 +102,10 @@ class _MLPPass:
         self.out = gl.create_texture(self.w, self.h, self.internal)
         self.fbo = gl.create_framebuffer([self.out], self.w, self.h, depth=False)
         GL.glUseProgram(self.prog)
-        for unit, name in enumerate(self.names):
-            loc = GL.glGetUniformLocation(self.prog, f"u_{name}")
+        for inp in shader.manifest["passes"][0]["inputs"]:  # the sampler's name is the manifest's
+            loc = GL.glGetUniformLocation(self.prog, inp["sampler"])
             if loc >= 0:
-                GL.glUniform1i(loc, unit)
+                GL.glUniform1i(loc, int(inp["unit"]))
         self.ubos = []
         for name, binding, data in shader.uniform_blocks:
             index = GL.glGetUniformBlockIndex(self.prog, name)
@@ -318,6 +320,54 @@ def _size(dim: dict, sizes: dict[str, int]) -> int:
     return v // dim["den"] + dim["offset"]
 
 
+def size_multiples(manifest: dict) -> tuple[int, int]:
+    """(height, width) multiples a compute program's input size must be: textures sized from the unpadded
+    H and W (the cropped outputs, e.g. ``W*1/8``) must come out whole; padded sizes always do."""
+    out = {"H": 1, "W": 1}
+    for t in manifest["textures"].values():
+        for dim in (t["height"], t["width"]):
+            if dim["of"] in out:
+                need = dim["den"] // math.gcd(dim["num"], dim["den"])
+                out[dim["of"]] = math.lcm(out[dim["of"]], need)
+    return out["H"], out["W"]
+
+
+def texture_sizes(manifest: dict, height: int, width: int, max_size: int = MAX_TEXTURE_SIZE,
+                  max_bytes: int | None = None) -> dict:  # fmt: skip
+    """{texture id: (width, height, layers, bytes)} of a compute program at an input of width x height,
+    checked before anything is allocated: the program's fixed size if it has one, at least the pad
+    multiple, whole texture sizes (:func:`size_multiples`), all textures together within ``max_bytes``
+    (when given), each within 1..max_size. Raises NeuralaoError (one line) otherwise."""
+    multiple = int(manifest["pad"]["multiple"])
+    static = manifest.get("static_input_size")
+    if static is not None and [height, width] != list(static):
+        raise NeuralaoError(
+            f"this program was generated for a fixed {static[1]}x{static[0]} input, got {width}x{height}"
+        )
+    if height < multiple or width < multiple:
+        raise NeuralaoError(f"image {width}x{height} is smaller than the pad multiple {multiple}")
+    mh, mw = size_multiples(manifest)
+    if height % mh or width % mw:
+        raise NeuralaoError(f"image {width}x{height}: the width must be a multiple of {mw} and the height of {mh} "
+                            "(output textures are sized from them by the program's strides)")  # fmt: skip
+    hp, wp = math.ceil(height / multiple) * multiple, math.ceil(width / multiple) * multiple
+    sizes = {"H": height, "W": width, "Hp": hp, "Wp": wp}
+    out = {}
+    for ident, t in manifest["textures"].items():
+        tw, th = _size(t["width"], sizes), _size(t["height"], sizes)
+        texel = 16 if t["format"] == "RGBA32F" else 8
+        out[ident] = (tw, th, int(t["layers"]), tw * th * int(t["layers"]) * texel)
+    total = sum(t[3] for t in out.values())
+    if max_bytes is not None and total > max_bytes:
+        raise NeuralaoError(f"a {width}x{height} image needs {total / (1 << 30):.3g} GiB of textures, over the "
+                            f"bound of {max_bytes / (1 << 30):.3g} GiB: choose a smaller size")  # fmt: skip
+    for ident, (tw, th, _, _) in out.items():
+        if not (1 <= tw <= max_size and 1 <= th <= max_size):
+            raise NeuralaoError(f"texture {ident} would be {tw}x{th} for a {width}x{height} image, "
+                                f"outside 1..{max_size}")  # fmt: skip
+    return out
+
+
 def _array_texture(width: int, height: int, layers: int, internal: int) -> int:
     tex = GL.glGenTextures(1)
     GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
@@ -359,30 +409,11 @@ class _ComputeRun:
         self.scalars: dict[str, float] | None = None
         if scalars is not None or not m.get("uniforms"):
             self.set_scalars(scalars)
-        multiple = int(m["pad"]["multiple"])
-        static = m.get("static_input_size")
-        if static is not None and [height, width] != list(static):
-            raise NeuralaoError(
-                f"this program was generated for a fixed {static[1]}x{static[0]} input, got {width}x{height}"
-            )
-        if height < multiple or width < multiple:
-            raise NeuralaoError(f"image {width}x{height} is smaller than the pad multiple {multiple}")
-        hp, wp = math.ceil(height / multiple) * multiple, math.ceil(width / multiple) * multiple
-        self.sizes = {"H": height, "W": width, "Hp": hp, "Wp": wp}
-        max_size = int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE))
+        sizes = texture_sizes(m, height, width, int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)))
         self.textures: dict[str, tuple[int, int, int, int, int]] = {}  # id -> (tex, w, h, layers, internal)
-        for ident, t in m["textures"].items():
-            tw, th = _size(t["width"], self.sizes), _size(t["height"], self.sizes)
-            if not (1 <= tw <= max_size and 1 <= th <= max_size):
-                raise NeuralaoError(f"texture {ident} would be {tw}x{th}, outside 1..{max_size}")
-            internal = _IMAGE_FORMATS[t["format"]]
-            self.textures[ident] = (
-                _array_texture(tw, th, t["layers"], internal),
-                tw,
-                th,
-                t["layers"],
-                internal,
-            )
+        for ident, (tw, th, layers, _) in sizes.items():
+            internal = _IMAGE_FORMATS[m["textures"][ident]["format"]]
+            self.textures[ident] = (_array_texture(tw, th, layers, internal), tw, th, layers, internal)
         self.ssbo = None
         if program.weights:
             align = int(GL.glGetIntegerv(GL.GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT))

@@ -23,8 +23,8 @@ no third-party code) draws every frame in three passes:
    (w = 1 on the foreground) and the object-space normal (area-weighted vertex normals turned to each
    triangle's side, interpolated, renormalised, negated on back faces: the project's G-buffer
    convention, pipeline/gbuffer.py), plus the AO of the baked methods;
-2. AO: for a shader method the generated pass; its sampler named ``u_position`` reads the position
-   target, any other (``u_normal``, the MLP's ``u_gbuffer``) the normal target (xyz normal, w mask);
+2. AO: for a shader method the generated pass; its input texture named ``position`` in the manifest
+   reads the position target, any other (``normal``, the MLP's ``gbuffer``) the normal target (xyz normal, w mask);
 3. display: AO as grey on a dark background, to the canvas (a scene bake: base colour x AO, sRGB).
 
 An orbit camera (drag to rotate, wheel to zoom, keys 1-9 pick a method) and, for tests, a small API on

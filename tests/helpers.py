@@ -95,3 +95,18 @@ def mc_bound(p: float | np.ndarray, samples: int | np.ndarray) -> float | np.nda
 def segment_fraction(c: float) -> float:
     """Fraction of the unit disk's area with x > c (0 <= c <= 1): (acos c - c sqrt(1 - c^2)) / pi."""
     return (math.acos(c) - c * math.sqrt(1.0 - c * c)) / math.pi
+
+
+def onnx_vs_torch_tol(ref: np.ndarray | float, model) -> float:
+    """TOL.onnx_vs_torch's rule for reference values ``ref`` (any shape, or its max |value|) of ``model``:
+    an ONNX ModelProto or .onnx path (depth: its Conv / ConvTranspose / Gemm / MatMul nodes), a torch
+    module (its Conv2d / ConvTranspose2d / Linear modules) or the depth as an int."""
+    if isinstance(model, int):
+        depth = model
+    elif hasattr(model, "modules"):  # a torch module, counted without importing torch here
+        depth = sum(type(m).__name__ in ("Conv2d", "ConvTranspose2d", "Linear") for m in model.modules())
+    else:
+        from export.onnx_io import weighted_layers
+
+        depth = weighted_layers(model)
+    return TOL.onnx_vs_torch(float(np.max(np.abs(ref))), depth)

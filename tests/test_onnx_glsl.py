@@ -107,7 +107,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
         (["glsl", str(bad), "--target", "image"], "cannot"),
         (["glsl", str(tmp_path / "missing.onnx"), "--target", "image"], "missing.onnx"),
         (["glsl", str(soft), "--target", "image"], "Softmax"),
-        (["glsl", str(path), "--target", "vector"], "needs --bind"),
+        (["glsl", str(path), "--target", "vector"], "image model, use --target image"),
         (["glsl", str(path), "--target", "vector", "--bind", "x=tex.xyq"], "expected INPUT=TEXTURE"),
         (["glsl", str(path), "--target", "image", "--bind", "x=t.xyz"], "vector only"),
     ]

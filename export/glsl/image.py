@@ -18,7 +18,17 @@ from pipeline.errors import NeuralaoError
 
 from .activations import Act, _clip_bounds
 from .dialects import DIALECTS
-from .graph import FORMAT_VERSION, OnnxGraph, OpTable, _ceil4, _dims, _sha256, glsl_float, read_graph
+from .graph import (
+    FORMAT_VERSION,
+    OnnxGraph,
+    OpTable,
+    _ceil4,
+    _dims,
+    _node_label,
+    _sha256,
+    glsl_float,
+    read_graph,
+)
 from .templates import fill
 
 # Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
@@ -932,8 +942,31 @@ class ImageOps(OpTable):
 
     def _small(self, a: np.ndarray) -> np.ndarray:
         if a.size > MAX_FOLDED_ELEMENTS:
-            raise self.fail(f"folded constant of shape {list(a.shape)} exceeds {MAX_FOLDED_ELEMENTS} elements")
+            raise self._too_large(list(a.shape))
         return a
+
+    def _too_large(self, shape: list[int]) -> NeuralaoError:
+        """The folded-constant limit, naming the constant and the node that would use it (through any
+        further folded ops): that is the layer the user recognises (a Conv weight, a Gemm matrix)."""
+        assert self.node is not None
+        name = self.node.output[0]
+        users, seen, todo = [], {name}, [name]
+        while todo and len(users) < 3:
+            tensor = todo.pop(0)
+            for k, node in enumerate(self.graph.nodes):
+                if tensor not in node.input:
+                    continue
+                if node.op_type in (*FOLDED_OPS, "Identity") and node.output and node.output[0] not in seen:
+                    seen.add(node.output[0])
+                    todo.append(node.output[0])
+                else:
+                    users.append(f"{_node_label(node, k)} (input {list(node.input).index(tensor)})")
+        used_by = f"used by {', '.join(users)}" if users else "used by no op the image target lowers"
+        return self.fail(
+            f"the constant {name!r} of shape {shape} ({math.prod(shape):,} elements), {used_by}, exceeds the "
+            f"{MAX_FOLDED_ELEMENTS:,}-element limit on constants computed inside the graph: store it as an "
+            "initializer (constant folding, e.g. onnxsim, does that)"
+        )
 
     def ConstantOfShape(self, input, *, value=None) -> np.ndarray:  # noqa: A002
         shape = [int(v) for v in self._folded(input, "input").reshape(-1)]
@@ -941,7 +974,7 @@ class ImageOps(OpTable):
         if fill_value.size != 1 or min(shape, default=0) < 0:
             raise self.fail(f"value must hold one element and the shape {shape} be non-negative")
         if math.prod(shape) > MAX_FOLDED_ELEMENTS:
-            raise self.fail(f"folded constant of shape {shape} exceeds {MAX_FOLDED_ELEMENTS} elements")
+            raise self._too_large(shape)
         return np.full(shape, fill_value[0], fill_value.dtype)
 
     def Reshape(self, data, shape, *, allowzero=0) -> np.ndarray:

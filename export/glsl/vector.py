@@ -82,8 +82,11 @@ class ConcatOp:
 @dataclass(frozen=True)
 class InputBinding:
     """Where one graph input of the fragment target comes from: ``channels`` (a subset of "xyzw") of
-    the RGBA32F texture ``texture`` (sampler ``u_<texture>``), repeated ``repeats`` times, so the
-    input width is ``len(channels) * repeats``. The first texture's w channel is the mask."""
+    the RGBA32F texture ``texture``, repeated ``repeats`` times, so the input width is
+    ``len(channels) * repeats``. The first texture's w channel is the mask.
+
+    ``texture`` is a name for the host and the manifest only: the shader's sampler is generated from
+    the texture unit (:func:`sampler_name`), so no user-chosen name reaches shader source."""
 
     texture: str
     channels: str = "xyz"
@@ -91,6 +94,17 @@ class InputBinding:
 
     def to_json(self) -> dict:
         return {"texture": self.texture, "channels": self.channels, "repeats": self.repeats}
+
+
+def sampler_name(unit: int) -> str:
+    """The GLSL sampler of input texture ``unit`` (units in order of the textures' first appearance)."""
+    return f"u_tex{unit}"
+
+
+def _comment_text(text: str) -> str:
+    """``text`` safe inside a ``//`` comment: printable ASCII on one line, no backslash (a trailing one
+    would continue the comment onto the next line)."""
+    return "".join(c if " " <= c <= "~" and c != "\\" else "?" for c in text)
 
 
 @dataclass
@@ -526,9 +540,9 @@ def _write_vector_fragment(
         block_text.append(
             fill("ubo_block", layout=d.ubo_layout(blk.binding), block=blk.name, members=members)
         )
-    samplers = "\n".join(d.sampler2d(f"u_{t}", unit) for unit, t in enumerate(table.textures))
+    samplers = "\n".join(d.sampler2d(sampler_name(unit), unit) for unit in range(len(table.textures)))
     fetches = "\n".join(
-        fill("texel_fetch", index=unit, sampler=f"u_{t}") for unit, t in enumerate(table.textures) if unit
+        fill("texel_fetch", index=unit, sampler=sampler_name(unit)) for unit in range(1, len(table.textures))
     )
     body = [fill("vec_decl", name=v.ident, count=v.n4) for v in table.values]
     for value, (_, b) in zip(table.inputs, table.bindings.items(), strict=True):
@@ -548,12 +562,12 @@ def _write_vector_fragment(
     return fill(
         "vector_fragment",
         header=d.header(),
-        description=description,
+        description=_comment_text(description),
         weights=fill("weights_constant") if constant_weights else fill("weights_uniform", n_blocks=len(blocks),
                                                                          max_block_bytes=MAX_UNIFORM_BLOCK_BYTES),
         prelude=fill("prelude"),
         samplers=samplers,
-        mask_sampler=f"u_{table.textures[0]}",
+        mask_sampler=sampler_name(0),
         fetches=fetches,
         blocks="\n".join(_const_arrays(blocks)) if constant_weights else "\n\n".join(block_text),
         body="\n".join(body),
@@ -571,7 +585,7 @@ def generate_mlp_fragment(
     """Baked-MLP fragment shader from an ONNX graph (N, 3k) -> (N, m<=4), k normals repeated.
 
     The shader reads the object-space normal (xyz) and a mask (w >= 0.5: foreground) from an
-    RGBA32F G-buffer texture ``u_gbuffer`` (unit 0), feeds the normal k times (radius zero, as in
+    RGBA32F G-buffer texture "gbuffer" (unit 0, sampler ``u_tex0``), feeds the normal k times (radius zero, as in
     Erra et al.), evaluates the network and writes its m outputs to ``o_result`` (location 0);
     background pixels get 1. ``fold_repeated_input`` folds the k column blocks of the first layer
     into one (out, 3) matrix (same function, k times fewer multiply-adds); False keeps the literal
@@ -599,9 +613,9 @@ def generate_vector_fragment(
     0.99x and field 32x16 1.6x, but there the folding moved a random test graph to 1.05e-5 from
     onnxruntime (over the 1e-5 gate), so auto keeps those in uniform blocks.
 
-    ``bindings`` maps each graph input to channels of a named RGBA32F texture (sampler
-    ``u_<texture>``, unit = the texture's order of first appearance); the first texture's w is the
-    foreground mask (>= 0.5). None: the baked-MLP layout (see :func:`generate_mlp_fragment`).
+    ``bindings`` maps each graph input to channels of a named RGBA32F texture (unit = the texture's
+    order of first appearance, sampler ``u_tex<unit>``: texture and ONNX names stay in the manifest,
+    never in shader source); the first texture's w is the foreground mask (>= 0.5). None: the baked-MLP layout (see :func:`generate_mlp_fragment`).
     Background pixels get 1; the m outputs go to ``o_result`` (location 0).
     """
     d = get_dialect(dialect)
@@ -618,13 +632,11 @@ def generate_vector_fragment(
         raise NeuralaoError(f"output width {result.width} > 4: a fragment pass writes one vec4 per pixel")
     input_width = table.input.width
     folded = _fold_repeated_input(table) if fold_repeated_input else False
-    if not description:
-        description = (
-            f"neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed {table.repeats} times."
-            if bindings is None
-            else f"neuralao per-pixel network ({kind}): inputs "
-            + ", ".join(f"{n} = {b.texture}.{b.channels}" for n, b in table.bindings.items())
-        )
+    if not description and bindings is None:
+        description = f"neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed {table.repeats} times."
+    elif not description:  # inputs by position: their names stay in the manifest
+        units = [f"#{i} = unit {table.textures.index(b.texture)}.{b.channels}" for i, b in enumerate(table.bindings.values())]  # fmt: skip
+        description = f"neuralao per-pixel network ({kind}): inputs {', '.join(units)} (names: manifest network.bindings)"
     blocks = _assign_blocks(table)
     if weights not in ("auto", "uniform", "constant"):
         raise NeuralaoError(f"weights must be auto, uniform or constant, got {weights!r}")
@@ -694,7 +706,7 @@ def _mlp_manifest(
                 "name": "mlp",
                 "type": "fullscreen_triangle",
                 "draw": "glDrawArrays(GL_TRIANGLES, 0, 3) with an empty VAO, viewport = G-buffer size",
-                "inputs": [{"texture": t, "sampler": f"u_{t}", "unit": unit, "fetch": "texelFetch"}
+                "inputs": [{"texture": t, "sampler": sampler_name(unit), "unit": unit, "fetch": "texelFetch"}
                            for unit, t in enumerate(table.textures)],
                 "outputs": [{"texture": "ao", "location": 0}],
                 "uniform_blocks": [b["name"] for b in ubo],
