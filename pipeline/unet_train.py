@@ -99,6 +99,13 @@ class UNetTrainSettings:
     device: str = "auto"  # "auto" (CUDA when torch sees a device), "cpu" or "cuda"
     init: str = ""  # checkpoint to start from (weights whose shapes match are copied; e.g. the full-res
     # network for a reduced-resolution variant, whose refinement then starts from scratch)
+    # Rows the network runs at: taller frames are point-sampled down to it (labels too), as inference
+    # does (runtime.internal_resolution), so the radius input always means the same number of pixels.
+    # 0 = every frame at its own size. Exported models declare it (metadata internal_height).
+    internal_height: int = 256
+    # Hybrid: GTAO's AO at each label radius (runtime.baselines, computed on the frame before any
+    # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
+    gtao_input: bool = False
 
 
 # ----------------------------------------------------------------------------------------------- loss
@@ -161,7 +168,8 @@ class FrameSet:
     radius parameters (:func:`pipeline.unet.radius_param`); radii : (N, K) float32 radii in scene
     units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
     Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that
-    indexes them by frame (``x[i]``) takes both.
+    indexes them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the
+    network's input for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
     """
 
     x: torch.Tensor | list[torch.Tensor]
@@ -171,6 +179,7 @@ class FrameSet:
     radii: torch.Tensor
     names: list[str]
     scenes: list[str]
+    g: torch.Tensor | list[torch.Tensor] | None = None  # hybrid: GTAO (N, K, H, W) float16 at each radius
 
     def __len__(self) -> int:
         return len(self.names)
@@ -184,9 +193,17 @@ class FrameSet:
 
     def subset(self, index: list[int]) -> FrameSet:
         i = torch.as_tensor(index, dtype=torch.int64)
-        x, y, m = (a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index] for a in (self.x, self.y, self.m))  # fmt: skip
-        return FrameSet(x, y, m, self.rho[i], self.radii[i],
-                        [self.names[k] for k in index], [self.scenes[k] for k in index])  # fmt: skip
+        pick = lambda a: None if a is None else a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index]  # noqa: E731
+        return FrameSet(pick(self.x), pick(self.y), pick(self.m), self.rho[i], self.radii[i],
+                        [self.names[k] for k in index], [self.scenes[k] for k in index], pick(self.g))  # fmt: skip
+
+
+def network_input(data: FrameSet, f: int, j: int) -> torch.Tensor:
+    """(C, H, W) float32 input of frame ``f`` at radius index ``j``: the G-buffer channels, and for a
+    hybrid set GTAO at that radius as the fifth."""
+    if data.g is None:
+        return data.x[f]
+    return torch.cat([data.x[f], data.g[f][j : j + 1].float()], dim=0)
 
 
 def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -206,24 +223,41 @@ def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ao, valid, np.asarray(frame["radii"], dtype=np.float32).reshape(-1)
 
 
-def frames_to_set(frames) -> FrameSet:
+def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> FrameSet:
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
     every frame has one size, else per-frame lists).
 
+    ``internal_height`` > 0: frames taller than it are point-sampled to it first, labels included
+    (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not change, it is
+    relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame as rendered
+    (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept.
     """
-    xs, ys, ms, rhos, radii, names, scenes = [], [], [], [], [], [], []
+    from runtime.internal_resolution import downsample_frame, internal_size
+
+    xs, ys, ms, gs, rhos, radii, names, scenes = [], [], [], [], [], [], [], []
     count = None
     for i, f in enumerate(frames):
-        ao, valid, r = frame_labels(f)
+        _, _, r = frame_labels(f)
         if count is None:
             count = len(r)
         elif len(r) != count:
             raise NeuralaoError(f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset")
+        if gtao:
+            from runtime.baselines import run_gtao
+
+            f = f | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
+        h, w = np.shape(f["depth"])
+        lw, lh = internal_size(w, h, internal_height or None)
+        if (lw, lh) != (w, h):
+            f = downsample_frame(f, lw, lh)
+        ao, valid, r = frame_labels(f)
         xs.append(torch.from_numpy(preprocess_frame(f)))
         ys.append(torch.from_numpy(ao.astype(np.float16)))
         ms.append(torch.from_numpy(valid & np.asarray(f["mask"], dtype=bool)[None]))
+        if gtao:
+            gs.append(torch.from_numpy(np.moveaxis(f["gtao_radii"], -1, 0).astype(np.float16)))
         rhos.append([frame_radius_param(f, float(v)) for v in r])
         radii.append(r)
         scene = str(f.get("scene", "frames"))
@@ -231,10 +265,12 @@ def frames_to_set(frames) -> FrameSet:
         scenes.append(scene)
     if not names:
         raise NeuralaoError("no frames to train or validate on")
+    g = gs if gtao else None
     if len({x.shape for x in xs}) == 1:
         xs, ys, ms = torch.stack(xs), torch.stack(ys), torch.stack(ms)
+        g = torch.stack(gs) if gtao else None
     return FrameSet(xs, ys, ms, torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)),
-                    names, scenes)  # fmt: skip
+                    names, scenes, g)  # fmt: skip
 
 
 def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
@@ -247,14 +283,14 @@ def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list
 
 
 def load_dataset_frames(
-    data: Path, train_fraction: float = 1.0, loaded: tuple | None = None
+    data: Path, train_fraction: float = 1.0, loaded: tuple | None = None, internal_height: int = 0, gtao: bool = False
 ) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
     ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
     the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
     dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
-    instead of read from disk again.
+    instead of read from disk again. ``internal_height`` and ``gtao``: see :func:`frames_to_set`.
     """
     from .dataset import open_dataset
 
@@ -269,12 +305,15 @@ def load_dataset_frames(
         val_source = "held-back views of the training scenes (the dataset has no val scene)"
     if loaded is not None:
         full, val, full_info = loaded
-        if full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash"):
+        if (full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
+                or full_info.get("internal_height") != internal_height or full_info.get("gtao") != gtao):  # fmt: skip
             raise NeuralaoError("load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1")
         train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
     else:
-        train = frames_to_set(f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set)
-        val = frames_to_set(ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True))
+        train = frames_to_set((f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
+                              internal_height, gtao)  # fmt: skip
+        val = frames_to_set(ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
+                            internal_height, gtao)  # fmt: skip
     info = {
         "path": str(data),
         "name": ds.manifest.get("name"),
@@ -286,6 +325,8 @@ def load_dataset_frames(
         "train_frames": len(train),
         "val_frames": len(val),
         "train_fraction": train_fraction,
+        "internal_height": internal_height,
+        "gtao": gtao,
     }
     return train, val, info
 
@@ -389,7 +430,7 @@ def make_batch(
     for k in idx:
         f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
         ch, cw = (crop, crop) if crop else data.x[f].shape[-2:]
-        x = data.x[f][None, :, t : t + ch, l0 : l0 + cw]
+        x = network_input(data, f, j)[None, :, t : t + ch, l0 : l0 + cw]
         y = data.y[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         m = data.m[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         if plan.hflip[k]:
@@ -449,12 +490,12 @@ def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") ->
     per = []  # (scene, radius index, ssim, rmse)
     with torch.no_grad():
         for i in range(len(data)):
-            x = data.x[i][None]
-            fg = x[0, 0].numpy() > 0
+            fg = data.x[i][0].numpy() > 0
             for j in range(data.rho.shape[1]):
                 mask = data.m[i][j].numpy()
                 if not mask.any():
                     continue
+                x = network_input(data, i, j)[None]
                 pred = wrapper(x.to(device), data.rho[i, j].view(1, 1, 1, 1).to(device))[0, 0].cpu().numpy()
                 pred = np.where(fg, pred, 1.0).astype(np.float32)  # background -> 1
                 ref = data.y[i][j].float().numpy()
@@ -543,8 +584,9 @@ def pick_device(name: str) -> torch.device:
 
 
 def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
-    return UNetArgs(in_channels=4, widths=list(settings.widths), negative_slope=settings.negative_slope,
-                    radius_input=True, scale=int(settings.scale), refine_width=int(settings.refine_width))  # fmt: skip
+    return UNetArgs(in_channels=5 if settings.gtao_input else 4, widths=list(settings.widths),
+                    negative_slope=settings.negative_slope, radius_input=True, scale=int(settings.scale),
+                    refine_width=int(settings.refine_width), gtao_input=bool(settings.gtao_input))  # fmt: skip
 
 
 def _init_weights(model: UNet, path: str) -> dict:
@@ -787,7 +829,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
     settings = load_settings(UNetTrainSettings, args.config, overrides)
-    train_set, val_set, info = load_dataset_frames(Path(args.data), settings.train_fraction)
+    train_set, val_set, info = load_dataset_frames(Path(args.data), settings.train_fraction,
+                                                   internal_height=settings.internal_height, gtao=settings.gtao_input)  # fmt: skip
     log.info(
         "U-Net: %d training frames (%s), %d validation frames (%s)",
         len(train_set),

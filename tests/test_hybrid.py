@@ -124,3 +124,68 @@ def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp
     ao = frame_predictor(tmp_path / "model.onnx")(plain, radius)
     np.testing.assert_allclose(ao[f["mask"]], f["gtao"][f["mask"]], atol=1e-6)
     assert np.all(ao[~f["mask"]] == 1.0)
+
+
+# ------------------------------------------------------------------------------------------ training
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory):
+    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.labels import LabelSettings
+
+    out = tmp_path_factory.mktemp("hybrid-ds")
+    settings = DatasetSettings(
+        name="tiny-hybrid",
+        scenes=[
+            SceneSpec("spot", "spot", views=3, split="train"),
+            SceneSpec("box", "cornell_box", cameras="interior", views=1, split="val"),
+        ],
+        size=(64, 48),
+        labels=LabelSettings(rays=8, radii_rel=[0.125, 0.25]),
+        holdout_every=0,
+        frames_per_shard=4,
+    )
+    build_dataset(settings, out, progress=False)
+    return out
+
+
+def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset):
+    from pipeline.dataset import open_dataset
+    from pipeline.unet_train import frames_to_set, network_input
+    from runtime.internal_resolution import downsample_frame
+
+    frames = list(open_dataset(tiny_dataset).frames(split="train"))
+    data = frames_to_set(frames, internal_height=24, gtao=True)
+    assert (
+        data.x.shape == (3, 4, 24, 32) and data.g.shape == (3, 2, 24, 32) and data.y.shape == (3, 2, 24, 32)
+    )
+    f = frames[0]
+    low = downsample_frame(f, 32, 24)
+    np.testing.assert_array_equal(
+        data.y[0].float().numpy(), np.moveaxis(low["ao_radii"], -1, 0).astype(np.float16)
+    )
+    # GTAO runs on the frame as rendered, then is point-sampled with it (as at inference)
+    full = run_gtao(f, float(f["radii"][1]))
+    np.testing.assert_array_equal(
+        data.g[0][1].numpy(),
+        downsample_frame({"depth": f["depth"], "a": full}, 32, 24)["a"].astype(np.float16),
+    )
+    assert network_input(data, 0, 1).shape == (5, 24, 32)
+    assert frames_to_set(frames, internal_height=256).x.shape == (3, 4, 48, 64)  # never upsampled
+
+
+def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
+    from export.onnx_io import get_metadata, load_onnx
+    from export.unet import export_checkpoint, is_hybrid
+    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+
+    ts = UNetTrainSettings(epochs=2, batch_size=2, crop=16, crops_per_frame=1, widths=[4, 8], gtao_input=True,
+                           internal_height=32, threads=1, seed=0)  # fmt: skip
+    train_set, val_set, info = load_dataset_frames(tiny_dataset, internal_height=32, gtao=True)
+    ckpt = train(ts, train_set, val_set, tmp_path / "h.pt", info, progress=False)
+    assert ckpt["model_args"]["gtao_input"] and ckpt["model_args"]["in_channels"] == 5
+    assert np.isfinite(ckpt["metrics"]["val_ssim"])
+    manifest = export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
+    meta = get_metadata(load_onnx(tmp_path / "export" / "model.onnx"))
+    assert is_hybrid(meta) and str(meta["internal_height"]) == "32" and manifest["internal_height"] == 32
