@@ -115,11 +115,14 @@ $(BUILD)/models/field-%.pt: $(DATASET)
 	stem='$*'; $(NEURALAO) train field --data $(BUILD)/dataset --scene "$${stem%-*}" --size "$${stem##*-}" \
 	  --set steps=$(FIELD_STEPS) --no-progress --out $@
 
+# The demo's frames are 128 rows: its U-Nets run at that height (a 256-row internal height would
+# point-sample every frame up, 4x the pixels, for no gain on frames of one size).
+DEMO_INTERNAL_HEIGHT := 128
 $(UNET_CKPT): $(DATASET)
-	$(NEURALAO) train unet --data $(BUILD)/dataset --out $@
+	$(NEURALAO) train unet --data $(BUILD)/dataset --set internal_height=$(DEMO_INTERNAL_HEIGHT) --out $@
 
 $(UNET_SMALL_CKPT): $(DATASET)
-	$(NEURALAO) train unet --data $(BUILD)/dataset --set 'widths=[2,4,8,16]' --out $@
+	$(NEURALAO) train unet --data $(BUILD)/dataset --set 'widths=[2,4,8,16]' --set internal_height=$(DEMO_INTERNAL_HEIGHT) --out $@
 
 train: $(MLP_CKPTS) $(UNET_CKPT) $(UNET_SMALL_CKPT) $(FIELD_CKPTS) ## Train the MLPs, two U-Net widths and the per-scene AO fields
 

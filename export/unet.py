@@ -91,8 +91,8 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
         "dataset_hash": dataset.get("dataset_hash") or "",
         "epochs": str(ckpt.get("epoch", 0)),
         "scale": str(model.args.scale),
-        # rows the network was trained at; taller frames run point-sampled to it (runtime.internal_resolution)
-        "internal_height": str(ckpt.get("config", {}).get("internal_height") or ""),
+        # rows the training frames were resampled to; inference resamples to it (runtime.internal_resolution)
+        "internal_height": str(dataset.get("internal_height") or ""),
         "trained_radii_rel": (dataset.get("labels") or {}).get("radii_rel") or [],
         "training": {
             "plan": ckpt.get("plan", {}),
@@ -348,7 +348,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
         "preprocess_version": PREPROCESS_VERSION,
         "parameters": n_params,
         "bytes_fp32": 4 * n_params,
-        "internal_height": ckpt.get("config", {}).get("internal_height"),
+        "internal_height": (ckpt.get("dataset") or {}).get("internal_height") or None,
         "checks": checks,
         "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")},
         "config": ckpt.get("config", {}),

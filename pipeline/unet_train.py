@@ -99,9 +99,9 @@ class UNetTrainSettings:
     device: str = "auto"  # "auto" (CUDA when torch sees a device), "cpu" or "cuda"
     init: str = ""  # checkpoint to start from (weights whose shapes match are copied; e.g. the full-res
     # network for a reduced-resolution variant, whose refinement then starts from scratch)
-    # Rows the network runs at: taller frames are point-sampled down to it (labels too), as inference
-    # does (runtime.internal_resolution), so the radius input always means the same number of pixels.
-    # 0 = every frame at its own size. Exported models declare it (metadata internal_height).
+    # Rows the network runs at: every frame is point-sampled to it (labels too; shorter frames up), as
+    # inference does (runtime.internal_resolution), so the radius input always means the same number of
+    # pixels. 0 = every frame at its own size. Exported models declare it (metadata internal_height).
     internal_height: int = 256
     # Hybrid: GTAO's AO at each label radius (runtime.baselines, computed on the frame before any
     # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
@@ -227,7 +227,7 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
     every frame has one size, else per-frame lists).
 
-    ``internal_height`` > 0: frames taller than it are point-sampled to it first, labels included
+    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels included
     (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not change, it is
     relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame as rendered
     (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
@@ -243,7 +243,9 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
         if count is None:
             count = len(r)
         elif len(r) != count:
-            raise NeuralaoError(f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset")
+            raise NeuralaoError(
+                f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset"
+            )
         if gtao:
             from runtime.baselines import run_gtao
 
@@ -283,7 +285,11 @@ def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list
 
 
 def load_dataset_frames(
-    data: Path, train_fraction: float = 1.0, loaded: tuple | None = None, internal_height: int = 0, gtao: bool = False
+    data: Path,
+    train_fraction: float = 1.0,
+    loaded: tuple | None = None,
+    internal_height: int = 0,
+    gtao: bool = False,
 ) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
@@ -307,7 +313,9 @@ def load_dataset_frames(
         full, val, full_info = loaded
         if (full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
                 or full_info.get("internal_height") != internal_height or full_info.get("gtao") != gtao):  # fmt: skip
-            raise NeuralaoError("load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1")
+            raise NeuralaoError(
+                "load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1"
+            )
         train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
     else:
         train = frames_to_set((f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
@@ -499,7 +507,14 @@ def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") ->
                 pred = wrapper(x.to(device), data.rho[i, j].view(1, 1, 1, 1).to(device))[0, 0].cpu().numpy()
                 pred = np.where(fg, pred, 1.0).astype(np.float32)  # background -> 1
                 ref = data.y[i][j].float().numpy()
-                per.append((data.scenes[i], j, float(masked_ssim(pred, ref, mask)), float(masked_rmse(pred, ref, mask))))
+                per.append(
+                    (
+                        data.scenes[i],
+                        j,
+                        float(masked_ssim(pred, ref, mask)),
+                        float(masked_rmse(pred, ref, mask)),
+                    )
+                )
     if not per:
         return {}
 
@@ -575,7 +590,7 @@ def _find_resumable(out: Path, key: dict, epochs: int) -> dict | None:
 
 
 def pick_device(name: str) -> torch.device:
-    """"auto" -> CUDA when torch sees a device, else the CPU; "cuda" without one is an error."""
+    """ "auto" -> CUDA when torch sees a device, else the CPU; "cuda" without one is an error."""
     if name not in ("auto", "cpu", "cuda"):
         raise NeuralaoError(f"device must be auto, cpu or cuda, got {name!r}")
     if name == "cuda" and not torch.cuda.is_available():
@@ -604,15 +619,24 @@ def _step(model, opt, xb, rb, yb, mb, kw, where: str, lr: float) -> float:
         raise NeuralaoError(f"non-finite (NaN/inf) input or label in {where}; fix the dataset")
     loss = masked_ssim_loss(PaddedUNet(model)(xb, rb), yb, mb, **kw)
     if not torch.isfinite(loss):
-        raise NeuralaoError(f"loss is {float(loss.detach())} in {where}; lower lr (now {lr:g}) or check the data")
+        raise NeuralaoError(
+            f"loss is {float(loss.detach())} in {where}; lower lr (now {lr:g}) or check the data"
+        )
     opt.zero_grad(set_to_none=True)
     loss.backward()
     opt.step()
     return float(loss.detach())
 
 
-def calibrate(model: UNet, settings: UNetTrainSettings, train_set: FrameSet, val_set: FrameSet | None,
-              sat: Foreground, device: torch.device, steps: int = 10) -> dict:
+def calibrate(
+    model: UNet,
+    settings: UNetTrainSettings,
+    train_set: FrameSet,
+    val_set: FrameSet | None,
+    sat: Foreground,
+    device: torch.device,
+    steps: int = 10,
+) -> dict:
     """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
     with batches from a separate generator (the run's own state and randomness are untouched)."""
     import copy
@@ -629,7 +653,17 @@ def calibrate(model: UNet, settings: UNetTrainSettings, train_set: FrameSet, val
         xb, rb, yb, mb, _ = make_batch(train_set, plan, idx, settings.crop)
         t0 = time.perf_counter()
         probe.train()
-        _step(probe, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, "calibration", settings.lr)
+        _step(
+            probe,
+            opt,
+            xb.to(device),
+            rb.to(device),
+            yb.to(device),
+            mb.to(device),
+            kw,
+            "calibration",
+            settings.lr,
+        )
         times.append(time.perf_counter() - t0)
     per_step = float(np.median(times[2:] or times))  # the first steps warm up allocators
     t0 = time.perf_counter()
@@ -670,7 +704,9 @@ def train(
     args = model_args_of(settings)
     model = UNet(args)  # validates widths / scale
     if settings.crop and settings.crop % args.pad_multiple:
-        raise NeuralaoError(f"crop {settings.crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)")
+        raise NeuralaoError(
+            f"crop {settings.crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)"
+        )
     if out.exists() and not restart:
         load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
     device = pick_device(settings.device)
@@ -719,7 +755,12 @@ def train(
             if settings.budget_minutes > 0:
                 cal = calibrate(model, settings, train_set, val_set, sat, device)
                 epochs = plan_budget(settings, steps_per_epoch, cal)
-                plan_info = {"epochs": epochs, "steps_per_epoch": steps_per_epoch, "budget_minutes": settings.budget_minutes, **cal}
+                plan_info = {
+                    "epochs": epochs,
+                    "steps_per_epoch": steps_per_epoch,
+                    "budget_minutes": settings.budget_minutes,
+                    **cal,
+                }
                 log.info("budget %.1f min: %.3f s/step, %.1f s/validation -> %d epochs of %d steps",
                          settings.budget_minutes, cal["seconds_per_step"], cal["val_seconds"], epochs, steps_per_epoch)  # fmt: skip
         epochs = int(plan_info["epochs"])
@@ -740,8 +781,14 @@ def train(
                 for g in opt.param_groups:
                     g["lr"] = lr
                 xb, rb, yb, mb, names = make_batch(train_set, plan, idx, settings.crop)
-                where = f"epoch {epoch + 1} batch {b + 1}/{len(batches)} (frames {', '.join(sorted(set(names)))})"
-                losses.append(_step(model, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, where, lr))
+                where = (
+                    f"epoch {epoch + 1} batch {b + 1}/{len(batches)} (frames {', '.join(sorted(set(names)))})"
+                )
+                losses.append(
+                    _step(
+                        model, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, where, lr
+                    )
+                )
             train_seconds = time.perf_counter() - t0
             metrics = evaluate(model, val_set, device) if val_set is not None else {}
             seconds = time.perf_counter() - t0

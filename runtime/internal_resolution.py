@@ -2,11 +2,13 @@
 upsample its AO with a depth- and normal-aware (joint bilateral) filter.
 
 Why: the U-Net's receptive field is fixed in pixels, while its radius input is measured in units of
-half the screen height. Trained on frames ``train_height`` pixels tall, it has learned how many
+half the screen height. Trained on frames ``internal_height`` pixels tall, it has learned how many
 pixels a radius covers at that height. At 1920x1080 the same radius covers about four times more
 pixels, at 128x128 half as many. Running the network on a G-buffer resampled to the height it was
-trained at shows it the geometry at the scale it knows, at any output resolution, and at 1080p it
-costs the network a sixteenth of the pixels.
+trained at (down, or up for shorter frames) shows it the geometry at the scale it knows, at any
+output resolution, and at 1080p it costs the network a sixteenth of the pixels. Measured with the
+shipped default at 128x128 on the test categories: SSIM 0.728 / RMSE 0.119 run as is, 0.773 / 0.104
+point-sampled up to 256 rows.
 
 Conventions (the same in the numpy reference here and in the GLSL pass of
 :mod:`runtime.baseline_templates` ``upsample_fragment``, which the tests hold to each other):
@@ -40,8 +42,10 @@ class UpsampleSettings:
 
 def internal_size(width: int, height: int, internal_height: int | None) -> tuple[int, int]:
     """(w, h) the network runs at for a ``width`` x ``height`` frame: ``internal_height`` rows (same
-    aspect ratio, at least 1 column); None or a height >= ``height`` -> the frame's own size."""
-    if internal_height is None or internal_height >= height:
+    aspect ratio, at least 1 column), whether the frame is taller or shorter (shorter frames are
+    point-sampled *up*), so the network always sees a radius cover the same number of pixels;
+    None -> the frame's own size."""
+    if internal_height is None:
         return int(width), int(height)
     if internal_height < 1:
         raise NeuralaoError(f"internal height must be >= 1, got {internal_height}")
@@ -135,7 +139,8 @@ def at_internal_resolution(
     residual_of: str | None = None,
 ):
     """Wrap ``predict(frame, radius) -> ao (H, W)`` so it runs at ``internal_height`` rows and is
-    upsampled to the frame's size; frames no taller than that run as they are.
+    resampled to the frame's size (frames shorter than that are point-sampled up, and the AO
+    resampled back down with the same filter).
 
     ``residual_of``: the key of a full-resolution AO image in the frame that ``predict`` refines (a
     hybrid's "gtao"): then the network's *correction* (its AO minus the point-sampled input) is what

@@ -172,7 +172,8 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
         downsample_frame({"depth": f["depth"], "a": full}, 32, 24)["a"].astype(np.float16),
     )
     assert network_input(data, 0, 1).shape == (5, 24, 32)
-    assert frames_to_set(frames, internal_height=256).x.shape == (3, 4, 48, 64)  # never upsampled
+    assert frames_to_set(frames, internal_height=96).x.shape == (3, 4, 96, 128)  # shorter frames go up
+    assert frames_to_set(frames).x.shape == (3, 4, 48, 64)  # 0: as rendered
 
 
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):

@@ -53,9 +53,9 @@ def test_sample_index_is_the_pixel_under_each_texel_centre():
         assert np.all(idx <= centre) and np.all(centre < idx + 1)  # floor of the centre, exactly
 
 
-def test_internal_size_keeps_aspect_and_never_upsamples():
+def test_internal_size_keeps_aspect_both_ways():
     assert internal_size(1920, 1080, 256) == (455, 256)
-    assert internal_size(128, 128, 256) == (128, 128)
+    assert internal_size(128, 128, 256) == (256, 256)
     assert internal_size(640, 480, None) == (640, 480)
 
 

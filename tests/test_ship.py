@@ -13,7 +13,7 @@ import pytest
 from pipeline.constants import TOL
 from pipeline.errors import NeuralaoError
 
-TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "batch_size": 4, "lr": 0.01, "crop": 16, "crops_per_frame": 2,
+TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "internal_height": 40, "batch_size": 4, "lr": 0.01, "crop": 16, "crops_per_frame": 2,
               "threads": 1, "lr_schedule": "cosine", "budget_minutes": 30.0}  # fmt: skip
 
 
