@@ -225,13 +225,13 @@ def _pixels(res: str) -> int:
     return int(w) * int(h)
 
 
-def markdown(summary: dict, reference: str = "gtao") -> str:
+def markdown(summary: dict, reference: str = "gtao", level: int = 3) -> str:
     """Tables of categories x resolutions, one per metric, every method a column."""
     methods = list(summary)
     cats = sorted({c for m in methods for c in summary[m]["cells"]})
     lines = []
     for metric, better in (("ssim", "higher"), ("rmse", "lower"), ("flip", "lower")):
-        lines += [f"### {metric.upper()} ({better} is better)", "", "| category | resolution | " + " | ".join(methods) + " |",
+        lines += [f"{'#' * level} {metric.upper()} ({better} is better)", "", "| category | resolution | " + " | ".join(methods) + " |",
                   "|---|---|" + "---:|" * len(methods)]  # fmt: skip
         for cat in cats:
             ress = sorted({r for m in methods for r in summary[m]["cells"].get(cat, {})}, key=_pixels)

@@ -100,6 +100,7 @@ def shipped_summary(models_dir: str | Path) -> dict:
             "test": entry.get("test") or prov.get("test") or {},
             "gl_seconds": entry.get("gl_seconds") or prov.get("gl_seconds") or {},
             "history": entry.get("history") or prov.get("history") or [],
+            "evaluation": manifest.get("evaluation"),  # `neuralao evaluate --write-manifest`: by category x resolution
         }
     if not out["models"]:
         out["note"] = f"{folder / 'index.json'} lists no models"
@@ -317,6 +318,13 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
         t = (b.get("gl_seconds") or {}).get("512x512")
         lines.append(f"| {name} (baseline) | - | - | - | - | - | {_f(test.get('ssim'), '.4f')} | "
                      f"{_f(test.get('rmse'), '.4f')} | {_f(t * 1e3 if _finite(t) else None, '.1f')} | - |")  # fmt: skip
+    for name, m in shipped["models"].items():
+        evaluation = m.get("evaluation")
+        if evaluation and evaluation.get("methods"):
+            from .evaluate import markdown as evaluation_markdown
+
+            lines += ["", f"### {name} where users run it (`neuralao evaluate`: test meshes by category and resolution)", ""]
+            lines += evaluation_markdown(evaluation["methods"], level=4).splitlines()
     captions = {
         "learning_curves": "learning curves (validation SSIM against wall-clock minutes)",
         "corpus_size": "test SSIM against corpus size",
