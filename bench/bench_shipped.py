@@ -15,6 +15,7 @@ medians and ratios from the same rounds:
   point-sampling and upsampling passes of ``runtime.internal_resolution`` (both timed at the frame's
   size), as a frame at a resolution taller than N runs it; N from ``--internal-height`` or the
   model's manifest (``internal_height``);
+* a hybrid (GTAO as its fifth input channel): the GTAO pass at the frame's size is added to its time;
 * SSAO and GTAO: ``runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (a seeded
   interior camera: all foreground, as in a game frame; they skip background pixels) at each size, radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
@@ -83,16 +84,33 @@ def measure(args) -> dict:
             internal[f"{m}@h{int(height)}"] = (m, int(height))
     methods = [*names, *internal, "ssao", "gtao"]
 
+    # a hybrid reads GTAO's output: its frame time includes the GTAO pass at the frame's size
+    hybrid = {
+        m
+        for m in names
+        if _manifest(models_dir / m).get("metadata", {}).get("input_channels", "").endswith(",gtao")
+    }
+
     def seconds(m: str, w: int, h: int, repeats: int, warmup: int) -> float:
         if m in ("ssao", "gtao"):  # a pass is ~10x cheaper than a U-Net: 4x the repeats
             return time_screen_space(frames[(w, h)], m, radius, repeats=4 * repeats, warmup=max(warmup, 1))
+        if internal.get(m, (m,))[0] in hybrid:
+            gtao = time_screen_space(
+                frames[(w, h)], "gtao", radius, repeats=2 * repeats, warmup=max(warmup, 1)
+            )
+            return gtao + network_seconds(m, w, h, repeats, warmup)
+        return network_seconds(m, w, h, repeats, warmup)
+
+    def network_seconds(m: str, w: int, h: int, repeats: int, warmup: int) -> float:
         if m in internal:
             model, height = internal[m]
             lw, lh = internal_size(w, h, height)
             if (lw, lh) == (w, h):
                 return time_compute(models_dir / model / "glsl", h, w, repeats=repeats, warmup=warmup)
             net = time_compute(models_dir / model / "glsl", lh, lw, repeats=repeats, warmup=warmup)
-            return net + time_scaling_passes(frames[(w, h)], (lw, lh), repeats=2 * repeats, warmup=max(warmup, 1))
+            return net + time_scaling_passes(
+                frames[(w, h)], (lw, lh), repeats=2 * repeats, warmup=max(warmup, 1)
+            )
         return time_compute(models_dir / m / "glsl", h, w, repeats=repeats, warmup=warmup)
 
     times: dict[str, dict[str, list[float]]] = {m: {} for m in methods}
