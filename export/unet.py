@@ -313,6 +313,34 @@ def check_backends(
 # ----------------------------------------------------------------------------------------------- export
 
 
+def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
+    """The two fragment passes around the network at its internal height (runtime.internal_resolution)
+    as files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them."""
+    from pipeline.io import write_text
+    from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
+
+    folder = glsl_dir / "internal"
+    sources = {"vertex": "fullscreen.vert", "downsample": "downsample.frag", "upsample": "upsample.frag"}
+    for key, text in (
+        ("vertex", vertex_source()),
+        ("downsample", downsample_source()),
+        ("upsample", upsample_source()),
+    ):
+        write_text(folder / sources[key], text)
+    steps = [
+        f"downsample.frag at (round(W * {height} / H), {height}): the G-buffer's position (xyz camera space, w mask) "
+        "and normal textures point-sampled into two RGBA32F targets (uniform u_low_size = that size)",
+        "the network's compute passes at that size, input built from the two targets (depth = -z / mean foreground "
+        "depth, camera-space normal" + (", GTAO point-sampled the same way" if hybrid else "") + ")",
+        "upsample.frag at W x H: the network's AO (u_low_ao)"
+        + (" minus the point-sampled GTAO, i.e. its correction," if hybrid else "")
+        + " upsampled with the full-resolution G-buffer as guide",
+    ]
+    if hybrid:
+        steps.append("AO = clamp(GTAO + upsampled correction, 0, 1) at W x H")
+    return {"height": height, "folder": "internal", "sources": sources, "steps": steps}
+
+
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:
     """Generate the compute passes from the ONNX graph and write them (and their manifest) to ``out_dir``."""
     from .glsl import generate_compute, write_compute_export
@@ -333,6 +361,8 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     proto = export_onnx(model, onnx_path, metadata)
     checks = check_backends(model, onnx_path)
     glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
+    height = (ckpt.get("dataset") or {}).get("internal_height") or None
+    internal = write_internal_passes(glsl_dir, int(height), model.args.gtao_input) if height else None
     n_params = count_parameters(model)
     manifest = {
         "kind": "unet",
@@ -349,6 +379,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
         "parameters": n_params,
         "bytes_fp32": 4 * n_params,
         "internal_height": (ckpt.get("dataset") or {}).get("internal_height") or None,
+        "internal_resolution": internal,
         "checks": checks,
         "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")},
         "config": ckpt.get("config", {}),

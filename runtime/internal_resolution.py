@@ -250,11 +250,19 @@ class UpsamplePass:
         self.release()
 
 
-def downsample_source(low_size: tuple[int, int]) -> str:
-    """The GLSL fragment shader that point-samples the G-buffer to ``low_size`` (two targets)."""
+def vertex_source() -> str:
+    """The full-screen-triangle vertex shader both passes draw with (3 vertices, empty VAO)."""
     from .baseline_templates import fill
 
-    return fill("downsample_fragment", low_width=int(low_size[0]), low_height=int(low_size[1]))
+    return fill("fullscreen_vertex")
+
+
+def downsample_source() -> str:
+    """The GLSL fragment shader that point-samples the G-buffer to the internal resolution (two
+    targets; ``uniform ivec2 u_low_size`` = that resolution)."""
+    from .baseline_templates import fill
+
+    return fill("downsample_fragment")
 
 
 class ScalingPasses:
@@ -276,7 +284,7 @@ class ScalingPasses:
 
         self.up = UpsamplePass(low_size, size, settings)
         self.GL, self.gl = GL, gl
-        self.prog = _program(downsample_source(low_size))
+        self.prog = _program(downsample_source())
         up = self.up
         self.fbo = gl.create_framebuffer([up.low_position, up.low_normal], up.lw, up.lh, depth=False)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
@@ -307,6 +315,7 @@ class ScalingPasses:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self.fbo)
         GL.glDrawBuffers(2, [GL.GL_COLOR_ATTACHMENT0, GL.GL_COLOR_ATTACHMENT1])
         GL.glUseProgram(self.prog)
+        GL.glUniform2i(GL.glGetUniformLocation(self.prog, "u_low_size"), up.lw, up.lh)
         GL.glDrawArrays(GL.GL_TRIANGLES, 0, 3)
         GL.glUseProgram(0)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)

@@ -190,3 +190,23 @@ def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     manifest = export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
     meta = get_metadata(load_onnx(tmp_path / "export" / "model.onnx"))
     assert is_hybrid(meta) and str(meta["internal_height"]) == "32" and manifest["internal_height"] == 32
+
+
+def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
+    """An export trained at an internal height ships the two fragment passes an engine runs around the
+    network, and they compile on Mesa."""
+    from export.unet import export_checkpoint
+    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from runtime import gl
+
+    ts = UNetTrainSettings(epochs=1, batch_size=2, crop=16, crops_per_frame=1, widths=[2, 4], internal_height=32,
+                           threads=1, seed=0)  # fmt: skip
+    train_set, val_set, info = load_dataset_frames(tiny_dataset, internal_height=32)
+    train(ts, train_set, val_set, tmp_path / "u.pt", info, progress=False)
+    manifest = export_checkpoint(tmp_path / "u.pt", tmp_path / "export")
+    passes = manifest["internal_resolution"]
+    assert passes["height"] == 32 and len(passes["steps"]) == 3
+    folder = tmp_path / "export" / "glsl" / passes["folder"]
+    vertex = (folder / passes["sources"]["vertex"]).read_text()
+    for key in ("downsample", "upsample"):
+        assert gl.compile_program(vertex=vertex, fragment=(folder / passes["sources"][key]).read_text()) > 0
