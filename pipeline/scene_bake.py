@@ -57,7 +57,7 @@ import numpy as np
 
 from .config import settings_to_dict
 from .errors import NeuralaoError
-from .level import GltfWriter, _Gltf, _instances, check_transforms, node_matrix
+from .level import GltfWriter, _Gltf, _instances, check_transforms, gltf_label, node_matrix
 from .scene import Scene, resolve_mesh_path, scene_from_arrays
 
 log = logging.getLogger(__name__)
@@ -147,7 +147,7 @@ def _primitive_pieces(g: _Gltf, node: int, mi: int, transforms: np.ndarray, writ
     mesh = g.doc["meshes"][mi]
     out = []
     for k, prim in enumerate(mesh.get("primitives", [])):
-        where = f"{g.path.name} mesh {mi} ({mesh.get('name', '')!r}) primitive {k}"
+        where = f"{g.path.name} {gltf_label('mesh', mi, mesh)} primitive {k}"
         attrs = prim.get("attributes", {})
         if "POSITION" not in attrs:
             raise NeuralaoError(f"{where}: no POSITION attribute")
@@ -201,7 +201,7 @@ def read_gltf_scene(path: str | Path) -> GltfScene:
             raise NeuralaoError(f"{path.name}: node {i} is reached twice (a cycle or a shared child)")
         seen.add(i)
         node = nodes[i]
-        where = f"{path.name} node {i} ({node.get('name', '')!r})"
+        where = f"{path.name} {gltf_label('node', i, node)}"
         world = parent @ node_matrix(node, where)
         if "mesh" in node:
             mi = node["mesh"]
@@ -276,9 +276,7 @@ def primitive_layout(gs: GltfScene, piece: Piece, settings) -> Layout:
 
     prim = gs.doc["meshes"][piece.mesh]["primitives"][piece.primitive]
     attrs = prim.get("attributes", {})
-    where = (
-        f"mesh {piece.mesh} ({gs.doc['meshes'][piece.mesh].get('name', '')!r}) primitive {piece.primitive}"
-    )
+    where = f"{gltf_label('mesh', piece.mesh, gs.doc['meshes'][piece.mesh])} primitive {piece.primitive}"
     why = "it has no TEXCOORD_0"
     if settings.uv != "xatlas" and "TEXCOORD_0" in attrs:
         st = np.asarray(gs.gltf.accessor(attrs["TEXCOORD_0"], where), np.float64)
@@ -382,7 +380,7 @@ def _merged_writer(gs: GltfScene) -> GltfWriter:
     w = GltfWriter.from_document(doc, bytes(blob))
     for i, image in enumerate(doc.get("images", [])):
         uri = image.get("uri")
-        if uri is None:
+        if not isinstance(uri, str):
             continue
         if uri.startswith("data:"):
             head, _, payload = uri.partition(",")
@@ -393,9 +391,12 @@ def _merged_writer(gs: GltfScene) -> GltfWriter:
             )
             mime = head[5:].split(";")[0] or None
         else:
-            source = gs.path.parent / urllib.parse.unquote(uri)
-            if not source.is_file():
-                log.warning("%s: image %d (%s) not found; its uri is kept as it is", gs.path.name, i, uri)
+            folder = gs.path.parent.resolve()
+            source = (folder / urllib.parse.unquote(uri)).resolve()
+            if not source.is_relative_to(folder) or not source.is_file():  # never a file outside the folder
+                log.warning(
+                    "%s: image %d (%s) not found beside the file; its uri is kept", gs.path.name, i, uri
+                )
                 continue
             data, mime = source.read_bytes(), mimetypes.guess_type(source.name)[0]
         image.pop("uri")

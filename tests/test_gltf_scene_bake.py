@@ -469,3 +469,30 @@ def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
     for k, shot in enumerate(shots):
         sheet.paste(shot, (320 * k, 0))
     sheet.save(out / "gltf-scene-bake.png")
+
+
+def test_images_outside_the_gltf_folder_are_not_embedded(tmp_path):
+    """An image uri that leaves the file's folder is kept as it is, never read into the output."""
+    (tmp_path / "secret.png").write_bytes(png(np.zeros((2, 2, 3))))
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    src = room_gltf(folder / "room.gltf")
+    doc = json.loads(src.read_text())
+    doc["images"][1]["uri"] = "../secret.png"
+    src.write_text(json.dumps(doc))
+    out = tmp_path / "baked.glb"
+    assert cli.main(["bake", str(src), "--method", "vertex", "--rays", "8", "--out", str(out)]) == 0
+    baked, _ = glb_parts(out)
+    assert baked["images"][1] == {"uri": "../secret.png"} and "bufferView" in baked["images"][0]
+
+
+def test_compressed_geometry_is_a_one_line_error(tmp_path, capsys):
+    src = planes_gltf(tmp_path / "planes.glb")
+    doc, binary = glb_parts(src)
+    doc["extensionsRequired"] = doc["extensionsUsed"] = ["KHR_draco_mesh_compression"]
+    w = GltfWriter.from_document(doc, binary)
+    w.write(tmp_path / "draco.glb")
+    out = tmp_path / "baked.glb"
+    assert cli.main(["bake", str(tmp_path / "draco.glb"), "--rays", "8", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "KHR_draco_mesh_compression" in err and "\n" not in err and not out.exists()
