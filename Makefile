@@ -45,7 +45,7 @@ DEMO_TARGET := 0.75
 PARITY := $(BUILD)/parity.json
 REPORT := $(BUILD)/report/report.md
 
-.PHONY: help setup system-deps dataset corpus corpus2 models train export parity report select demo test bench lint clean
+.PHONY: help setup system-deps dataset corpus corpus-full experiments evaluate models train export parity report select demo test bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -81,31 +81,47 @@ dataset: $(DATASET) ## Render and label the default scenes (G-buffers + Embree A
 # The composed-scene corpus of issue 9 (configs/full.json: 2,420 train frames from 180 composed scenes
 # plus the Sponza interiors, val/test split by mesh, 256x256, AO at 4 radii). Resumable; ~1.6 h at the
 # rate measured on 2 cores shared with a training job.
+# The training corpus (configs/corpus.json): every object mesh alone on an orbit (train meshes in
+# train, val/test meshes in val/test), the interiors and composed rooms, frames of 128x128, 256x256,
+# 384x384 and 320x180 (one size per shard) at 30-90 degree fields of view; AO at 4 radii, split by
+# mesh. 2,768 frames, 209 Mpx; resumable.
+CORPUS_CONFIG := configs/corpus.json
+CORPUS := build/corpus/dataset/manifest.json
+$(CORPUS): $(CORPUS_CONFIG) | $(STAMP)
+	$(NEURALAO) dataset $(CORPUS_CONFIG) --out build/corpus/dataset
+
+corpus: $(CORPUS) ## Render and label the training corpus: isolated objects, rooms, sizes, fields of view (resumable)
+
+# The composed-room corpus the earlier budget and corpus-size experiments trained on (configs/full.json).
 FULL_CONFIG := configs/full.json
-CORPUS := build/full/dataset/manifest.json
-$(CORPUS): $(FULL_CONFIG) | $(STAMP)
+CORPUS_FULL := build/full/dataset/manifest.json
+$(CORPUS_FULL): $(FULL_CONFIG) | $(STAMP)
 	$(NEURALAO) dataset $(FULL_CONFIG) --out build/full/dataset
 
-corpus: $(CORPUS) ## Render and label the composed-scene training corpus (configs/full.json; resumable)
+corpus-full: $(CORPUS_FULL) ## Render and label the composed-room corpus of the experiments (configs/full.json)
 
-# The corpus that covers use (configs/corpus.json): every object mesh alone on an orbit (train meshes
-# in train, val/test meshes in val/test), the interiors and composed rooms of configs/full.json, frames
-# of 128x128, 256x256, 384x384 and 320x180 (one size per shard) at 30-90 degree fields of view; AO at
-# 4 radii, split by mesh. 2,768 frames, 209 Mpx; resumable; about 3 h on 2 idle cores.
-CORPUS2_CONFIG := configs/corpus.json
-CORPUS2 := build/corpus/dataset/manifest.json
-$(CORPUS2): $(CORPUS2_CONFIG) | $(STAMP)
-	$(NEURALAO) dataset $(CORPUS2_CONFIG) --out build/corpus/dataset
-
-corpus2: $(CORPUS2) ## Render and label the corpus of isolated objects, rooms, sizes and fields of view (configs/corpus.json)
-
-# The shipped U-Nets (issue 9): configs/models.json trains each model on the corpus with its wall-clock
-# budget (resumable: checkpoints under build/ship), exports, checks parity, evaluates the test split
-# against SSAO/GTAO at every radius and installs runtime/models/<name>/ + index.json. Hours on 2 cores
-# (the sum of the budgets plus the corpus); `make models MODELS="unet-30min"` ships only those.
+# The release U-Nets: configs/models.json trains each model on the corpus with its wall-clock budget
+# (resumable: checkpoints under build/ship), exports, checks parity, evaluates the test split against
+# SSAO/GTAO at every radius and installs runtime/models/<name>/ + index.json; `make models MODELS=...`
+# ships only those. `make evaluate` then scores them where users run them (configs/eval.json).
 MODELS_CONFIG := configs/models.json
+MODELS ?=
 models: $(CORPUS) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
 	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
+
+# The budget and corpus-size experiments (configs/experiments.json) on the composed-room corpus;
+# exports go to build/experiments/models (not shipped); their figures are in docs/results.md.
+EXPERIMENTS_CONFIG := configs/experiments.json
+experiments: $(CORPUS_FULL) $(EXPERIMENTS_CONFIG) | $(STAMP) ## Train and export the budget and corpus-size experiment U-Nets
+	$(NEURALAO) ship $(EXPERIMENTS_CONFIG) $(if $(MODELS),--only $(MODELS))
+
+# Every shipped U-Net, SSAO and GTAO on test meshes by category (scans, glTF assets, low-poly interiors,
+# composed rooms) x resolution (128, 256, 512, 1920x1080) at every radius: SSIM, RMSE, FLIP; the
+# labels are built once (resumable, build/eval/frames) and each model's manifest gets its table.
+EVAL_CONFIG := configs/eval.json
+SHIPPED_DIRS = $(patsubst %/manifest.json,%,$(wildcard runtime/models/*/manifest.json))
+evaluate: $(EVAL_CONFIG) | $(STAMP) ## Score the shipped U-Nets against SSAO/GTAO by category x resolution (configs/eval.json)
+	$(NEURALAO) evaluate $(EVAL_CONFIG) --models $(SHIPPED_DIRS) --out build/eval --write-manifest
 
 $(BUILD)/models/mlp-%.pt: $(DATASET)
 	$(NEURALAO) train mlp --data $(BUILD)/dataset --scene $(MLP_SCENE) --size $* --out $@
