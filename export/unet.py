@@ -529,6 +529,16 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
     return frames
 
 
+def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
+    """GTAO (runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
+    :func:`pipeline.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
+    from pipeline.unet import depth_scale
+    from runtime.baselines import run_gtao
+
+    radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))
+    return run_gtao(frame, radius)
+
+
 def parity(
     export_dir: str | Path, frames: list[dict] | None = None, sizes: Sequence[tuple[int, int]] | None = None
 ) -> dict:
@@ -554,6 +564,7 @@ def parity(
     frames = frames if frames else render_parity_frames()
     sizes = list(PARITY_SIZES if sizes is None else sizes)
     ort, gl = ort_runner(proto.SerializeToString()), glsl_runner(glsl_dir)
+    hybrid = is_hybrid(meta)
     rows = []
     for i, frame in enumerate(frames):
         h0, w0 = frame["depth"].shape
@@ -562,8 +573,9 @@ def parity(
                 rows.append({"frame": i, "size": [w, h], "skipped": f"larger than the {w0}x{h0} frame"})
                 continue
             f = crop_frame(frame, w, h)
-            x = preprocess_frame(f)
             rho = CHECK_RHOS[len(rows) % len(CHECK_RHOS)]
+            # a hybrid's fifth channel: GTAO on the same frame at the radius rho stands for
+            x = preprocess_frame(f, _gtao_at_rho(f, rho) if hybrid else None)
             y_ort = run_padded(ort, x, m, rho)
             t0 = time.perf_counter()
             y_gl = run_padded(gl, x, m, rho)

@@ -182,3 +182,20 @@ def test_infer_uses_the_shipped_default_when_given_only_a_frame(shipped, corpus,
     got = np.asarray(Image.open(tmp_path / "ao.png"), dtype=np.float32) / 255.0
     want = unet_predictor(Path(settings.out) / "u-full" / "model.onnx")(frame, radius)
     assert np.abs(got - want).max() <= 0.5 / 255 + 1e-6  # the 8-bit PNG of the default model's AO
+
+
+def test_ship_installs_a_hybrid_at_its_internal_height(corpus, tmp_path):
+    """A GTAO-refining U-Net trained at an internal height goes through the whole release path: its
+    parity runs on five-channel frames with real GTAO, its test split is scored with GTAO run first,
+    and its export carries the internal-resolution passes."""
+    from pipeline.ship import ship
+
+    hybrid = {**TINY_TRAIN, "gtao_input": True, "internal_height": 32, "epochs": 2}
+    settings = _settings(corpus, tmp_path, default={"unet": "u-gtao"}, models=[{"name": "u-gtao", "train": hybrid}])
+    index = ship(settings)
+    entry = index["models"]["u-gtao"]
+    manifest = json.loads((tmp_path / "models" / "u-gtao" / "manifest.json").read_text())
+    assert manifest["metadata"]["input_channels"].endswith(",gtao") and manifest["internal_height"] == 32
+    assert (tmp_path / "models" / "u-gtao" / "glsl" / "internal" / "upsample.frag").is_file()
+    assert manifest["provenance"]["parity"]["glsl_vs_onnxruntime"] <= TOL.parity_unet_fp32
+    assert np.isfinite(entry["test"]["ssim"]) and np.isfinite(entry["test"]["rmse"])
