@@ -512,7 +512,10 @@ def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, 
     try:
         run.upload(x)
         run.dispatch(flip_y)
-        return {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
+        out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
+        # outputs that are not images ((1, 1000) logits after a Gemm): the manifest gives their shape
+        return {o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
+                for o in prog.manifest["outputs"]}  # fmt: skip
     finally:
         run.release()
 

@@ -36,6 +36,8 @@ class Act:
         if self.op == "HardSigmoid":
             return fill("act_HardSigmoid", x=x, alpha=glsl_float(self.params["alpha"]),
                         beta=glsl_float(self.params["beta"]))  # fmt: skip
+        if self.op == "Pow":
+            return _pow_expr(x, self.params["e"])
         return fill(f"act_{self.op}", x=x)
 
     def numpy(self, x: np.ndarray) -> np.ndarray:
@@ -72,3 +74,15 @@ def _clip_bounds(min_: np.ndarray | None, max_: np.ndarray | None) -> dict[str, 
                 raise ValueError("Clip bounds must be scalars")
             out[key] = float(arr.reshape(()))
     return out
+
+
+def _pow_expr(x: str, e: float) -> str:
+    """x ** e: products for small integer exponents (exact as onnxruntime's std::pow, and defined for
+    negative x), sqrt for 0.5, else pow() (GLSL leaves it undefined for x < 0, where ONNX gives NaN)."""
+    if e == int(e) and abs(e) <= 4:
+        n = int(abs(e))
+        product = fill("act_Pow_one") if n == 0 else fill("pow_product", factors=" * ".join([x] * n))
+        return fill("act_Pow_reciprocal", x=product) if e < 0 else product
+    if e == 0.5:
+        return fill("act_Sqrt", x=x)
+    return fill("act_Pow", x=x, e=glsl_float(e))

@@ -30,6 +30,18 @@ from .graph import (
     read_graph,
 )
 from .templates import fill
+from .views import (
+    Atom,
+    Axes,
+    axes_shape,
+    coordinates,
+    image_axes,
+    is_image,
+    per_channel,
+    reduction,
+    reshape,
+    transpose,
+)
 
 # Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
 MAX_TEXTURE_SIZE = 16384
@@ -104,11 +116,29 @@ class ConcatValue:
 
 
 @dataclass
+class View:
+    """An image tensor read through Reshape / Transpose / Flatten (see :mod:`.views`): ``texture``
+    holds the data, ``axes`` the atoms of each logical axis. Static sizes only."""
+
+    texture: Texture
+    axes: Axes
+
+    @property
+    def shape(self) -> list[int]:
+        return axes_shape(self.axes)
+
+    @property
+    def channels(self) -> int:
+        return self.texture.channels
+
+
+@dataclass
 class Epilogue:
     """Per-texel step after a pass's body, on ``r`` (the vec4 of output layer gid.z).
 
     form "act": ``act``; "affine": r * prm[arrays[0]] + prm[arrays[1]] (batch norm, arithmetic with
-    per-channel constants); "prelu": slope prm[arrays[0]] where r < 0; "rdiv": prm[arrays[0]] / r.
+    per-channel constants); "prelu": slope prm[arrays[0]] where r < 0; "rdiv": prm[arrays[0]] / r;
+    "guard": padding lanes set to 0 (after an activation that can make them non-finite).
     """
 
     act: Act | None = None
@@ -123,7 +153,9 @@ class Pass:
     index: int
     # pad | crop | conv | conv_depthwise | conv_transpose | pool_avg | pool_max | global_pool_avg |
     # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary | spatial_pad |
-    # uniform (a scalar graph input: writes uniform float fields["uniform"] to a 1x1 texture)
+    # uniform (a scalar graph input: writes uniform float fields["uniform"] to a 1x1 texture) | gather (a view
+    # materialised: DepthToSpace, channel shuffles) | reduce | moments (mean and 1/std per group) | normalize |
+    # softmax | lrn | pool_lp | global_pool_lp
     kind: str
     ops: list[str]
     inputs: list[Texture]
@@ -228,9 +260,13 @@ CONV_KINDS = ("conv", "conv_depthwise", "conv_transpose")
 # Ops the image target evaluates on constants only (exporters compute pads, sizes and scales with
 # them: torch's F.pad and padding_mode="reflect" emit ConstantOfShape, Concat, Reshape, Slice,
 # Transpose and Cast; F.interpolate(size=x.shape[2:]) emits Shape, Gather, Unsqueeze on a static size).
-FOLDED_OPS = ("ConstantOfShape", "Reshape", "Slice", "Transpose", "Cast", "Shape", "Gather", "Unsqueeze", "Squeeze")
-# Largest constant a folded op may create (elements): shape arithmetic is tiny, a hostile one is not.
-MAX_FOLDED_ELEMENTS = 1 << 16
+# Reshape, Transpose, Squeeze, Unsqueeze and Shape also take image tensors (a View); Expand, Tile and Range
+# build weights from small constants (onnx's light models make every weight with ConstantOfShape).
+FOLDED_OPS = ("ConstantOfShape", "Reshape", "Slice", "Transpose", "Cast", "Shape", "Gather", "Unsqueeze", "Squeeze",
+              "Expand", "Tile", "Range")  # fmt: skip
+# Largest constant a folded op may create (elements): as many float32 as weights.bin can hold, so a weight
+# built inside the graph is as welcome as an initializer; a hostile shape (2^40 elements) is still refused.
+MAX_FOLDED_ELEMENTS = MAX_PARAM_BYTES // 4
 # Widest separable resize filter (taps per axis): antialiased cubic downscaling by 1/16.
 MAX_FILTER_TAPS = 64
 
@@ -248,7 +284,12 @@ class ImageOps(OpTable):
     OPS = ("Conv", "ConvTranspose", "BatchNormalization", "Relu", "LeakyRelu", "PRelu", "Sigmoid", "Tanh", "Clip",
            "Elu", "Softplus", "HardSigmoid", "HardSwish", "Sin", "Cos", "Add", "Sub", "Mul", "Div", "AveragePool",
            "MaxPool", "GlobalAveragePool", "GlobalMaxPool", "Resize", "Upsample", "Pad", "Concat", "Identity",
-           "Constant", *FOLDED_OPS)  # fmt: skip
+           "Constant", *FOLDED_OPS, "Erf", "Gelu", "Mish", "Sqrt", "Exp", "Log", "Abs", "Neg", "Reciprocal", "Sign",
+           "Softsign", "Floor", "Ceil", "Pow", "Sum", "Mean", "Min", "Max", "Dropout", "DepthToSpace",
+           "SpaceToDepth", "Flatten", "InstanceNormalization", "GroupNormalization", "LayerNormalization",
+           "ReduceMean", "ReduceMax", "ReduceMin", "ReduceSum", "ReduceL1", "ReduceL2", "ReduceSumSquare",
+           "ReduceProd", "ReduceLogSum", "Softmax", "LogSoftmax", "LRN", "LpPool", "GlobalLpPool", "Gemm",
+           "MatMul")  # fmt: skip
     target = "compute (image)"
 
     def __init__(self, graph: OnnxGraph, metadata_multiple: int | None):
@@ -334,9 +375,11 @@ class ImageOps(OpTable):
         return p
 
     def image(self, value: Any, what: str) -> Texture:
-        """A real texture for ``value`` (materialising a pending concatenation)."""
+        """A real texture for ``value`` (materialising a pending concatenation or a view)."""
         if isinstance(value, ConcatValue):
             return self.materialise(value)
+        if isinstance(value, View):
+            return self.materialise_view(value, what)
         if not isinstance(value, Texture):
             raise self.fail(f"input {what} must be an image tensor, not a constant")
         return value
@@ -418,10 +461,12 @@ class ImageOps(OpTable):
             raise self.fail(f"constant {what} has non-finite values")
         return out
 
-    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str, index: int = 0) -> Texture:
-        """Append ``epi`` to the pass producing X (input ``index`` of the node) or to a new elementwise pass."""
+    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str,
+                     index: int | None = 0) -> Texture:  # fmt: skip
+        """Append ``epi`` to the pass producing X (input ``index`` of the node) or to a new elementwise pass
+        (always when ``index`` is None: X is not one of the node's inputs as they stand)."""
         x = self.image(X, "X")
-        p = self.fusible_pass(index) if isinstance(X, Texture) else None
+        p = self.fusible_pass(index) if isinstance(X, Texture) and index is not None else None
         if p is None:
             out = self.new_texture(x.channels, x.height, x.width)
             p = self.add_pass(Pass(0, "elementwise", [], [x], out))
@@ -551,12 +596,12 @@ class ImageOps(OpTable):
             raise self.fail("batch-norm parameters give non-finite scale/shift")
         return self._affine(X, s, shift, "BatchNormalization")
 
-    def _affine(self, X: Any, s: np.ndarray, shift: np.ndarray, op: str, index: int = 0) -> Texture:
+    def _affine(self, X: Any, s: np.ndarray, shift: np.ndarray, op: str, index: int | None = 0) -> Texture:
         """X * s + shift per channel: folded into a producing conv without epilogue, else an epilogue."""
         x = self.image(X, "X")
         if not (np.all(np.isfinite(s)) and np.all(np.isfinite(shift))):
             raise self.fail("per-channel scale/shift is non-finite")
-        p = self.fusible_pass(index) if isinstance(X, Texture) else None
+        p = self.fusible_pass(index) if isinstance(X, Texture) and index is not None else None
         if p is not None and p.kind in CONV_KINDS and not p.epilogue:
             # Fold into the conv: W' = W * s (per output channel), b' = b * s + shift.
             p.fields["weight64"] = p.fields["weight64"] * s[:, None, None, None]
@@ -934,6 +979,486 @@ class ImageOps(OpTable):
             raise self.fail("Concat inputs differ in spatial size")
         return ConcatValue(parts)
 
+    # -- views (Reshape / Transpose / Flatten of image tensors; see views.py)
+    def static_size(self, t: Texture) -> tuple[int, int]:
+        if t.height.scale != 0 or t.width.scale != 0:
+            raise self.fail("reshaping or transposing an image tensor needs a static image size; give the input one")
+        return t.height.offset, t.width.offset
+
+    def view(self, value: Any, what: str) -> View:
+        if isinstance(value, View):
+            return value
+        t = self.image(value, what)
+        h, w = self.static_size(t)
+        return View(t, image_axes(t.channels, h, w))
+
+    def simplify(self, v: View) -> View | Texture:
+        """The texture itself where the view reads it element for element."""
+        h, w = self._digit_sizes(v.texture)
+        return v.texture if is_image(v.axes, v.texture.channels, h, w) else v
+
+    def reshape_view(self, v: View, shape: list[int], allowzero: int) -> View | Texture:
+        s = [v.shape[i] if d == 0 and not allowzero and i < len(v.shape) else d for i, d in enumerate(shape)]
+        if s.count(-1) > 1:
+            raise self.fail(f"shape {shape} has more than one -1")
+        if -1 in s:
+            known = math.prod(d for d in s if d != -1)
+            s[s.index(-1)] = math.prod(v.shape) // known if known else 0
+        axes = reshape(v.axes, s)
+        if isinstance(axes, str):
+            raise self.fail(axes)
+        return self.simplify(View(v.texture, axes))
+
+    def materialise_view(self, v: View, what: str) -> Texture:
+        """A texture holding the view as a (1, C, H, W) image (a gather pass unless it already is one)."""
+        if not isinstance(self.simplify(v), View):
+            return v.texture
+        if len(v.shape) != 4 or v.axes[0]:
+            raise self.fail(f"input {what} of shape {v.shape} is not an image (1, C, H, W)")
+        _, c, h, w = v.shape
+        return self._gather(v.texture, v.axes, Dim(Fraction(0), h), Dim(Fraction(0), w))
+
+    def _gather(self, src: Texture, axes: Axes, h: Dim, w: Dim) -> Texture:
+        """Output texel (x, y, channel c) reads the input element the atoms of axes[1:] (c, y, x) give."""
+        out = self.new_texture(axes_shape(axes[1:2])[0], h, w)
+        ps = Pass(0, "gather", [self.node.op_type], [src], out, nodes=[self.label])
+        ps.fields = {"digits": [[(a.axis, a.size, a.stride) for a in run] for run in axes[1:]]}
+        return self.add_pass(ps).output
+
+    def Flatten(self, input, *, axis=1) -> View | Texture:  # noqa: A002
+        v = self.view(input, "input")
+        a = int(axis) % (len(v.shape) + 1)
+        return self.reshape_view(v, [math.prod(v.shape[:a]), math.prod(v.shape[a:])], 1)
+
+    def DepthToSpace(self, input, *, blocksize, mode="DCR") -> Texture:  # noqa: A002
+        b = int(blocksize)
+        t = self.image(input, "input")
+        if mode not in ("DCR", "CRD"):
+            raise self.unsupported("mode", mode)
+        if b < 1 or t.channels % (b * b):
+            raise self.fail(f"{t.channels} channels do not split into blocks of {b}x{b}")
+        c = t.channels // (b * b)
+        h, w = self._digit_sizes(t)
+        axes = image_axes(t.channels, h, w)
+        if mode == "DCR":
+            axes = self._steps(axes, [1, b, b, c, h, w], [0, 3, 4, 1, 5, 2])
+        else:
+            axes = self._steps(axes, [1, c, b, b, h, w], [0, 1, 4, 2, 5, 3])
+        axes = self._steps(axes, [1, c, h * b, w * b], [0, 1, 2, 3])
+        return self._gather(t, axes, Dim(t.height.scale * b, t.height.offset * b), Dim(t.width.scale * b, t.width.offset * b))
+
+    def SpaceToDepth(self, input, *, blocksize, mode="DCR") -> Texture:  # noqa: A002
+        """mode (opset 25): DCR puts the block offset outermost in the channels (the older opsets'
+        only layout), CRD innermost."""
+        b = int(blocksize)
+        t = self.image(input, "input")
+        h, w = self._digit_sizes(t)
+        if mode not in ("DCR", "CRD"):
+            raise self.unsupported("mode", mode)
+        if b < 1 or (t.height.scale == 0 and (h % b or w % b)):
+            raise self.fail(f"a {h}x{w} image does not split into blocks of {b}x{b}")
+        perm = [0, 3, 5, 1, 2, 4] if mode == "DCR" else [0, 1, 3, 5, 2, 4]
+        axes = self._steps(image_axes(t.channels, h, w), [1, t.channels, h // b, b, w // b, b], perm)
+        axes = self._steps(axes, [1, t.channels * b * b, h // b, w // b], [0, 1, 2, 3])
+        dims = [Dim(d.scale / b, Fraction(d.offset, b)) for d in (t.height, t.width)]
+        if any(d.offset.denominator != 1 for d in dims):
+            raise self.fail(f"the image size does not split into blocks of {b}x{b}")
+        return self._gather(t, axes, *(Dim(d.scale, int(d.offset)) for d in dims))
+
+    def _digit_sizes(self, t: Texture) -> tuple[int, int]:
+        """H and W for the atoms of an image: the static sizes, or for a dynamic image a stand-in (2^24,
+        divisible by every block size up to 2^12) that never reaches the shader. Only ops that keep it
+        whole use it: a space/depth rearrangement leaves a spatial digit outermost in its output axis,
+        which the gather reads without a modulo; whole-axis reductions never read it."""
+        if t.height.scale or t.width.scale:
+            return 1 << 24, 1 << 24
+        return t.height.offset, t.width.offset
+
+    def _steps(self, axes: Axes, shape: list[int], perm: list[int]) -> Axes:
+        axes = reshape(axes, shape)
+        if isinstance(axes, str):
+            raise self.fail(axes)
+        return transpose(axes, perm)
+
+    # -- reductions, normalisations, softmax
+    @property
+    def opset(self) -> int:
+        return next((int(o.version) for o in self.graph.model.opset_import if o.domain in ("", "ai.onnx")), 1)
+
+    def _axes_list(self, rank: int, axes_input: Any, axes: Any) -> list[int] | None:
+        """The reduced axes, normalised; None when none are given."""
+        if axes_input is not None:
+            ax = [int(a) for a in self._folded(axes_input, "axes").reshape(-1)]
+        elif axes is not None:
+            ax = [int(a) for a in axes]
+        else:
+            return None
+        if any(not -rank <= a < rank for a in ax):
+            raise self.fail(f"axes {ax} out of range for rank {rank}")
+        return sorted({a % rank for a in ax})
+
+    def _reduction(self, v: View, reduced: list[int]):
+        r = reduction(v.axes, reduced, v.texture.channels)
+        if isinstance(r, str):
+            raise self.fail(r)
+        return r
+
+    def _reduced_dims(self, t: Texture, spatial: tuple[bool, bool]) -> tuple[Dim, Dim]:
+        point = Dim(Fraction(0), 1)
+        if any(spatial) and (t.height.scale or t.width.scale):
+            self.global_reads.append(self.label)
+        return (point if spatial[0] else t.height), (point if spatial[1] else t.width)
+
+    def _member_params(self, base: np.ndarray, offsets: np.ndarray) -> dict[str, np.ndarray]:
+        names = (self.param_name("base"), self.param_name("offsets"))
+        return {names[0]: _vec4_rows(base.astype(np.float64), _ceil4(len(base))),
+                names[1]: _vec4_rows(offsets.astype(np.float64), _ceil4(len(offsets)))}  # fmt: skip
+
+    def _reduce(self, op: str, data: Any, axes_input: Any, axes: Any, keepdims: int, noop: int) -> Any:
+        if isinstance(data, np.ndarray):
+            raise self.fail("input data is a constant; the image target reduces image tensors only")
+        v = self.dense_view(data, "data")
+        rank = len(v.shape)
+        ax = self._axes_list(rank, axes_input, axes)
+        if not ax:
+            if noop:
+                return data
+            ax = list(range(rank))
+        r = self._reduction(v, ax)
+        h, w = self._reduced_dims(v.texture, r.spatial)
+        out = self.new_texture(r.groups, h, w)
+        ps = Pass(0, "reduce", [self.node.op_type], [v.texture], out, nodes=[self.label])
+        ps.params = self._member_params(r.base, r.offsets)
+        ps.fields = {"op": op, "spatial": r.spatial, "groups": r.groups, "members": len(r.offsets),
+                     "tables": tuple(ps.params)}  # fmt: skip
+        self.add_pass(ps)
+        kept = r.kept if keepdims else tuple(run for i, run in enumerate(r.kept) if i not in ax)
+        result = self.simplify(View(out, kept))
+        if isinstance(result, View) and (out.height.scale or out.width.scale):
+            raise self.fail("a reduction of an image of dynamic size must keep its dimensions (keepdims=1)")
+        return result
+
+    def dense_view(self, value: Any, what: str) -> View:
+        """A view of ``value``; a dynamic-size image is read as (1, C, H, W) with stand-in spatial sizes
+        (only whole-axis reductions of it are allowed, which never read the stand-ins)."""
+        if not isinstance(value, View):
+            t = self.image(value, what)
+            if t.height.scale or t.width.scale:
+                return View(t, image_axes(t.channels, *self._digit_sizes(t)))
+        return self.view(value, what)
+
+    def ReduceMean(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("Mean", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceSum(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("Sum", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceMax(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("Max", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceMin(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("Min", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceL1(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("L1", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceL2(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("L2", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceSumSquare(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("SumSquare", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceProd(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("Prod", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def ReduceLogSum(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
+        return self._reduce("LogSum", data, axes_input, axes, keepdims, noop_with_empty_axes)
+
+    def _normalize(self, X: Any, reduced_from: int | list[int], epsilon: float, scale: Any, shift: Any,
+                   align: str, op: str) -> Any:  # fmt: skip
+        """(x - mean) / sqrt(var + epsilon) over the logical axes ``reduced_from`` (an int: that axis and
+        all after it), then * scale + shift. align "trailing": scale / shift broadcast numpy-style over the
+        trailing axes (LayerNormalization); "axis1": they are (shape[1],) (Instance-, GroupNormalization)."""
+        v = self.dense_view(X, "X")
+        rank = len(v.shape)
+        reduced = list(range(reduced_from % rank, rank)) if isinstance(reduced_from, int) else reduced_from
+        r = self._reduction(v, reduced)
+        h, w = self._reduced_dims(v.texture, r.spatial)
+        t = v.texture
+        stats = self.new_texture(2 * r.groups, h, w)
+        ps = Pass(0, "moments", [op], [t], stats, nodes=[self.label])
+        ps.params = self._member_params(r.base, r.offsets)
+        ps.fields = {"spatial": r.spatial, "groups": r.groups, "members": len(r.offsets),
+                     "epsilon": float(np.float32(epsilon)), "tables": tuple(ps.params)}  # fmt: skip
+        self.add_pass(ps)
+        out = self.new_texture(t.channels, t.height, t.width)
+        norm = Pass(0, "normalize", [op], [t, stats], out, nodes=[self.label])
+        group = self.param_name("group")
+        norm.params = {group: _vec4_rows(r.group_of.astype(np.float64), t.layers)}
+        norm.fields = {"groups": r.groups, "spatial": r.spatial, "group": group}
+        self.add_pass(norm)
+        sc, sh = (self._broadcast_channel(v, val, align, what) if val is not None else None
+                  for val, what in ((scale, "scale"), (shift, "B")))  # fmt: skip
+        if sc is not None or sh is not None:
+            sc = np.ones(t.channels) if sc is None else sc
+            sh = np.zeros(t.channels) if sh is None else sh
+            names = (self.param_name("scale"), self.param_name("shift"))
+            norm.params.update({names[0]: _vec4_rows(sc, t.layers), names[1]: _vec4_rows(sh, t.layers)})
+            norm.epilogue.append(Epilogue(form="affine", arrays=names))
+        return out if isinstance(X, Texture) or not isinstance(X, View) else self.simplify(View(out, v.axes))
+
+    def _broadcast_channel(self, v: View, value: Any, align: str, what: str) -> np.ndarray:
+        a = self.const(value, what).astype(np.float64)
+        if align == "axis1":
+            a = a.reshape([1, -1] + [1] * (len(v.shape) - 2)) if a.size > 1 else a.reshape(())
+        out = per_channel(v.axes, a, v.texture.channels)
+        if isinstance(out, str):
+            raise self.fail(f"{what}: {out}")
+        if not np.all(np.isfinite(out)):
+            raise self.fail(f"{what} has non-finite values")
+        return out
+
+    def InstanceNormalization(self, input, scale, B, *, epsilon=1e-5) -> Any:  # noqa: A002
+        return self._normalize(input, 2, epsilon, scale, B, "axis1", "InstanceNormalization")
+
+    def GroupNormalization(self, X, scale, bias, *, epsilon=1e-5, num_groups, stash_type=1) -> Any:
+        v = self.dense_view(X, "X")
+        if len(v.shape) != 4:
+            raise self.fail(f"X of shape {v.shape} is not an image (1, C, H, W)")
+        c, g = v.shape[1], int(num_groups)
+        if g < 1 or c % g:
+            raise self.fail(f"{c} channels do not split into {g} groups")
+        sc, sh = (self.const(a, n).astype(np.float64).reshape(-1) for a, n in ((scale, "scale"), (bias, "bias")))
+        if sc.size == g and g != c:  # opset 18: one value per group
+            sc, sh = np.repeat(sc, c // g), np.repeat(sh, c // g)
+        grouped = self._steps(v.axes, [1, g, c // g, v.shape[2], v.shape[3]], [0, 1, 2, 3, 4])
+        out = self._normalize(View(v.texture, grouped), 2, epsilon, None, None, "axis1", "GroupNormalization")
+        t = out.texture if isinstance(out, View) else out
+        return self._affine_view(View(t, v.axes), sc.reshape(1, c, 1, 1), sh.reshape(1, c, 1, 1), X)
+
+    def _affine_view(self, v: View, scale: np.ndarray, shift: np.ndarray, like: Any) -> Any:
+        s = self._broadcast_channel(v, scale, "trailing", "scale")
+        b = self._broadcast_channel(v, shift, "trailing", "bias")
+        p = self.producer[v.texture.ident]
+        names = (self.param_name("scale"), self.param_name("shift"))
+        p.params.update({names[0]: _vec4_rows(s, v.texture.layers), names[1]: _vec4_rows(b, v.texture.layers)})
+        p.epilogue.append(Epilogue(form="affine", arrays=names))
+        return self.simplify(v) if isinstance(like, View) else v.texture
+
+    def LayerNormalization(self, X, Scale, B=None, *, axis=-1, epsilon=1e-5, stash_type=1) -> Any:
+        return self._normalize(X, int(axis), epsilon, Scale, B, "trailing", "LayerNormalization")
+
+    def _softmax(self, input: Any, axis: int | None, log: bool) -> Any:
+        v = self.dense_view(input, "input")
+        rank = len(v.shape)
+        if axis is None:
+            axis = -1 if self.opset >= 13 else 1
+        a = int(axis) % rank
+        reduced = [a] if self.opset >= 13 else list(range(a, rank))  # before 13: the flattened tail
+        r = self._reduction(v, reduced)
+        if any(r.spatial):
+            raise self.fail(f"softmax over axes {reduced} of shape {v.shape} reaches the image's height or width; "
+                            "the image target takes it over channels only")
+        t = v.texture
+        out = self.new_texture(t.channels, t.height, t.width)
+        ps = Pass(0, "softmax", [self.node.op_type], [t], out, nodes=[self.label])
+        ps.params = self._member_params(r.base[r.group_of], r.offsets)
+        ps.fields = {"log": log, "members": len(r.offsets), "tables": tuple(ps.params)}
+        self.add_pass(ps)
+        return out if not isinstance(input, View) else self.simplify(View(out, v.axes))
+
+    def Softmax(self, input, *, axis=None) -> Any:  # noqa: A002
+        return self._softmax(input, axis, False)
+
+    def LogSoftmax(self, input, *, axis=None) -> Any:  # noqa: A002
+        return self._softmax(input, axis, True)
+
+    def LRN(self, X, *, alpha=1e-4, beta=0.75, bias=1.0, size) -> Texture:
+        x = self.image(X, "X")
+        n = int(size)
+        if n < 1:
+            raise self.fail(f"size {n} must be positive")
+        out = self.new_texture(x.channels, x.height, x.width)
+        ps = Pass(0, "lrn", ["LRN"], [x], out, nodes=[self.label])
+        ps.fields = {"before": (n - 1) // 2, "after": n - 1 - (n - 1) // 2, "alpha": float(np.float32(alpha) / n),
+                     "beta": float(beta), "bias": float(bias)}  # fmt: skip
+        return self.add_pass(ps).output
+
+    def LpPool(self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, p=2, pads=None,
+               strides=None) -> Texture:  # fmt: skip
+        if float(p) <= 0:
+            raise self.unsupported("p", p)
+        ps = self._pool("pool_lp", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode)
+        ps.fields["p"] = float(p)
+        return ps.output
+
+    def GlobalLpPool(self, X, *, p=2) -> Texture:
+        if float(p) <= 0:
+            raise self.unsupported("p", p)
+        out = self._global_pool("global_pool_lp", X)
+        self.producer[out.ident].fields["p"] = float(p)
+        return out
+
+    def Gemm(self, A, B, C=None, *, alpha=1.0, beta=1.0, transA=0, transB=0) -> Any:
+        if isinstance(A, np.ndarray) and isinstance(B, np.ndarray):
+            a, b = (A.T if transA else A), (B.T if transB else B)
+            return alpha * (a @ b) + (0 if C is None else beta * C)
+        if transA:
+            raise self.unsupported("transA", transA)
+        b = self.const(B, "B").astype(np.float64)
+        b = b.T if transB else b  # (features, outputs)
+        bias = None if C is None else beta * self.const(C, "C").astype(np.float64)
+        return self._dense(A, alpha * b, bias)
+
+    def MatMul(self, A, B) -> Any:
+        if isinstance(A, np.ndarray) and isinstance(B, np.ndarray):
+            return A @ B
+        return self._dense(A, self.const(B, "B").astype(np.float64), None)
+
+    def _dense(self, A: Any, b: np.ndarray, bias: np.ndarray | None) -> Any:
+        """(1, F) @ (F, K) on a flattened image: a conv whose kernel covers the whole image."""
+        v = self.view(A, "A")
+        if len(v.shape) != 2 or v.shape[0] != 1 or b.ndim != 2 or b.shape[0] != v.shape[1]:
+            raise self.fail(f"A of shape {v.shape} and B of shape {list(b.shape)}: the image target takes "
+                            "(1, F) @ (F, K) on a flattened image")
+        t = v.texture
+        h, w = t.height.offset, t.width.offset
+        if max(h, w) > MAX_KERNEL:
+            raise self.fail(f"a dense layer over a {h}x{w} image needs a kernel beyond {MAX_KERNEL}x{MAX_KERNEL}")
+        k = b.shape[1]
+        xyz = coordinates(v.axes[1:])
+        weight = np.zeros((k, t.channels, h, w))
+        weight[:, xyz["c"], xyz["y"], xyz["x"]] = b.T
+        bias_k = np.zeros(k)
+        if bias is not None:
+            try:
+                bias_k = np.broadcast_to(bias, (1, k)).reshape(k).copy()
+            except ValueError:
+                raise self.fail(f"C of shape {list(bias.shape)} does not broadcast to (1, {k})") from None
+        window = ((h, w), (1, 1), (1, 1), [0, 0, 0, 0])
+        point = Dim(Fraction(0), 1)
+        out = self._conv_pass("conv", t, [t], weight, bias_k, window, point, point)
+        return View(out, ((), (Atom("c", k, 1),) if k > 1 else ()))
+
+    # -- elementwise additions
+    def Erf(self, input) -> Any:  # noqa: A002
+        return self._activation_any(input, Act("Erf"))
+
+    def Gelu(self, X, *, approximate="none") -> Any:
+        if approximate not in ("none", "tanh"):
+            raise self.unsupported("approximate", approximate)
+        return self._activation_any(X, Act("Gelu" if approximate == "none" else "GeluTanh"))
+
+    def Mish(self, X) -> Any:
+        return self._activation_any(X, Act("Mish"))
+
+    def Sqrt(self, X) -> Any:
+        return self._activation_any(X, Act("Sqrt"))
+
+    def Exp(self, input) -> Any:  # noqa: A002
+        return self._activation_any(input, Act("Exp"))
+
+    def Log(self, input) -> Any:  # noqa: A002
+        return self._activation_any(input, Act("Log"))
+
+    def Abs(self, X) -> Any:
+        return self._activation_any(X, Act("Abs"))
+
+    def Neg(self, X) -> Any:
+        return self._activation_any(X, Act("Neg"))
+
+    def Reciprocal(self, X) -> Any:
+        return self._activation_any(X, Act("Reciprocal"))
+
+    def Sign(self, input) -> Any:  # noqa: A002
+        return self._activation_any(input, Act("Sign"))
+
+    def Softsign(self, input) -> Any:  # noqa: A002
+        return self._activation_any(input, Act("Softsign"))
+
+    def Floor(self, X) -> Any:
+        return self._activation_any(X, Act("Floor"))
+
+    def Ceil(self, X) -> Any:
+        return self._activation_any(X, Act("Ceil"))
+
+    def Pow(self, X, Y) -> Any:
+        if isinstance(X, np.ndarray) and isinstance(Y, np.ndarray):
+            return np.power(X, Y)
+        e = self.const(Y, "Y")
+        if e.size != 1:
+            raise self.fail(f"the exponent Y of shape {list(e.shape)} must be a scalar")
+        return self._activation_any(X, Act("Pow", {"e": float(e.reshape(()))}))
+
+    def _activation_any(self, X: Any, act: Act, index: int | None = 0) -> Any:
+        """An activation on an image, a pending concatenation or a view (the view keeps its atoms);
+        ``index``: X's input position for fusion (None: X is an intermediate value of this node)."""
+        if isinstance(X, np.ndarray):
+            raise self.fail("the input is a constant; the image target applies this op to image tensors")
+        if isinstance(X, View):
+            out = self._elementwise(X.texture, Epilogue(act=act), {}, act.op, index=None)
+            result: Any = View(out, X.axes)
+        else:
+            out = result = self._elementwise(X, Epilogue(act=act), {}, act.op, index)
+        if act.op in _GUARDED and out.channels % 4:
+            p = self.producer[out.ident]
+            p.epilogue.append(Epilogue(form="guard"))
+        if act.op in ("Erf", "Gelu"):
+            self.producer[out.ident].fields["erf"] = True
+        return result
+
+    def Dropout(self, data, ratio_input=None, training_mode=None, *, is_test=1, ratio=0.5, seed=0) -> Any:
+        """Inference: the identity. Opset 12+: ratio and training_mode are inputs (``ratio_input``);
+        before, ratio (and is_test) are attributes."""
+        if training_mode is not None and (not isinstance(training_mode, np.ndarray) or training_mode.any()):
+            raise self.fail("training_mode must be a constant false: the image target runs inference")
+        if not is_test:
+            raise self.unsupported("is_test", is_test)
+        return data
+
+    def _variadic(self, op: str, inputs: tuple) -> Any:
+        if not inputs:
+            raise self.fail("no inputs")
+        if all(isinstance(v, np.ndarray) for v in inputs):
+            f = {"Add": np.add, "Max": np.maximum, "Min": np.minimum}[op]
+            out = inputs[0]
+            for v in inputs[1:]:
+                out = f(out, v)
+            return out
+        acc = inputs[0]
+        for v in inputs[1:]:
+            acc = self._pair(op, acc, v)
+        return acc
+
+    def _pair(self, op: str, a: Any, b: Any) -> Any:
+        """One step of a variadic op; no fusion into the inputs' passes (a is an intermediate value)."""
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+            c, x = (a, b) if isinstance(a, np.ndarray) else (b, a)
+            if op == "Add":
+                t = self.image(x, "data_0")
+                return self._affine(t, np.ones(t.channels), self.channel_const(c, t.channels, "data_0"), "Sum", None)
+            if c.size != 1:
+                raise self.fail(f"{op} with a constant of shape {list(c.shape)}: the image target takes scalars only")
+            bound = {"lo": float(c.reshape(()))} if op == "Max" else {"hi": float(c.reshape(()))}
+            return self._activation_any(x, Act("Clip", bound), None)
+        return self._binary(op, a, b)
+
+    def Sum(self, *data_0) -> Any:
+        return self._variadic("Add", data_0)
+
+    def Max(self, *data_0) -> Any:
+        return self._variadic("Max", data_0)
+
+    def Min(self, *data_0) -> Any:
+        return self._variadic("Min", data_0)
+
+    def Mean(self, *data_0) -> Any:
+        total = self._variadic("Add", data_0)
+        if len(data_0) == 1 or isinstance(total, np.ndarray):
+            return total / len(data_0) if isinstance(total, np.ndarray) else total
+        x = self.image(total, "sum")
+        return self._affine(x, np.full(x.channels, 1.0 / len(data_0)), np.zeros(x.channels), "Mean", None)
+
     # -- constant folding (FOLDED_OPS): numpy on constants; an image input is refused by _folded
     def _folded(self, value: Any, what: str) -> np.ndarray:
         if not isinstance(value, np.ndarray):
@@ -964,8 +1489,8 @@ class ImageOps(OpTable):
         used_by = f"used by {', '.join(users)}" if users else "used by no op the image target lowers"
         return self.fail(
             f"the constant {name!r} of shape {shape} ({math.prod(shape):,} elements), {used_by}, exceeds the "
-            f"{MAX_FOLDED_ELEMENTS:,}-element limit on constants computed inside the graph: store it as an "
-            "initializer (constant folding, e.g. onnxsim, does that)"
+            f"{MAX_FOLDED_ELEMENTS:,}-element limit on constants computed inside the graph (what weights.bin "
+            "can hold)"
         )
 
     def ConstantOfShape(self, input, *, value=None) -> np.ndarray:  # noqa: A002
@@ -977,12 +1502,13 @@ class ImageOps(OpTable):
             raise self._too_large(shape)
         return np.full(shape, fill_value[0], fill_value.dtype)
 
-    def Reshape(self, data, shape, *, allowzero=0) -> np.ndarray:
-        d = self._folded(data, "data")
+    def Reshape(self, data, shape, *, allowzero=0) -> Any:
         s = [int(v) for v in self._folded(shape, "shape").reshape(-1)]
+        if not isinstance(data, np.ndarray):
+            return self.reshape_view(self.view(data, "data"), s, allowzero)
         if not allowzero:  # 0 copies the input's dimension
-            s = [d.shape[i] if v == 0 and i < d.ndim else v for i, v in enumerate(s)]
-        return d.reshape(s)
+            s = [data.shape[i] if v == 0 and i < data.ndim else v for i, v in enumerate(s)]
+        return data.reshape(s)
 
     def Slice(self, data, starts, ends, axes=None, steps=None) -> np.ndarray:
         d = self._folded(data, "data")
@@ -997,15 +1523,23 @@ class ImageOps(OpTable):
             index[int(a) % d.ndim] = slice(int(s), int(e), k)
         return d[tuple(index)]
 
-    def Transpose(self, data, *, perm=None) -> np.ndarray:
-        return np.transpose(self._folded(data, "data"), None if perm is None else [int(p) for p in perm])
+    def Transpose(self, data, *, perm=None) -> Any:
+        if not isinstance(data, np.ndarray):
+            v = self.view(data, "data")
+            order = list(range(len(v.shape)))[::-1] if perm is None else [int(p) % len(v.shape) for p in perm]
+            if sorted(order) != list(range(len(v.shape))):
+                raise self.fail(f"perm {order} is not a permutation of {len(v.shape)} axes")
+            return self.simplify(View(v.texture, transpose(v.axes, order)))
+        return np.transpose(data, None if perm is None else [int(p) for p in perm])
 
     def Cast(self, input, *, to, saturate=1) -> np.ndarray:  # noqa: A002  (saturate: float8 targets only)
         return self._folded(input, "input").astype(onnx.helper.tensor_dtype_to_np_dtype(int(to)))
 
     def Shape(self, data, *, end=None, start=0) -> np.ndarray:
-        """Of an image of static size only: (1, C, H, W)."""
+        """Of an image of static size only: (1, C, H, W), or a view's logical shape."""
         if isinstance(data, np.ndarray):
+            return np.asarray(data.shape, np.int64)[start:end]
+        if isinstance(data, View):
             return np.asarray(data.shape, np.int64)[start:end]
         t = data.parts[0] if isinstance(data, ConcatValue) else self.image(data, "data")  # no concat pass
         if self.scalar_ranks.get(t.ident, 4) != 4:
@@ -1023,13 +1557,53 @@ class ImageOps(OpTable):
         ax = axes if axes_input is None else self._folded(axes_input, "axes").reshape(-1)
         if ax is None:
             raise self.fail("axes is missing")
-        return np.expand_dims(self._folded(data, "data"), tuple(int(a) for a in ax))
+        if not isinstance(data, np.ndarray):
+            v = self.view(data, "data")
+            rank = len(v.shape) + len(ax)
+            where = sorted(int(a) % rank for a in ax)
+            shape, rest = [], iter(v.shape)
+            for i in range(rank):
+                shape.append(1 if i in where else next(rest))
+            return self.reshape_view(v, shape, 1)
+        return np.expand_dims(data, tuple(int(a) for a in ax))
 
     def Squeeze(self, data, axes_input=None, *, axes=None) -> np.ndarray:
         """Opset 13+: axes is an input (``axes_input``); before: an attribute. None: every size-1 axis."""
         ax = axes if axes_input is None else self._folded(axes_input, "axes").reshape(-1)
-        d = self._folded(data, "data")
-        return np.squeeze(d) if ax is None else np.squeeze(d, tuple(int(a) for a in ax))
+        if not isinstance(data, np.ndarray):
+            v = self.view(data, "data")
+            gone = {i for i, n in enumerate(v.shape) if n == 1} if ax is None else {int(a) % len(v.shape) for a in ax}
+            if any(v.shape[i] != 1 for i in gone):
+                raise self.fail(f"cannot squeeze axes {sorted(gone)} of shape {v.shape}")
+            return self.reshape_view(v, [n for i, n in enumerate(v.shape) if i not in gone], 1)
+        return np.squeeze(data) if ax is None else np.squeeze(data, tuple(int(a) for a in ax))
+
+    def Expand(self, input, shape) -> np.ndarray:  # noqa: A002
+        d, s = self._folded(input, "input"), [int(v) for v in self._folded(shape, "shape").reshape(-1)]
+        out = np.broadcast_shapes(d.shape, tuple(s))
+        if math.prod(out) > MAX_FOLDED_ELEMENTS:
+            raise self._too_large(list(out))
+        return np.broadcast_to(d, out).copy()
+
+    def Tile(self, input, repeats) -> np.ndarray:  # noqa: A002
+        d, r = self._folded(input, "input"), [int(v) for v in self._folded(repeats, "repeats").reshape(-1)]
+        if math.prod(d.shape) * math.prod(r) > MAX_FOLDED_ELEMENTS:
+            raise self._too_large([a * b for a, b in zip(d.shape, r, strict=False)])
+        return np.tile(d, r)
+
+    def Range(self, start, limit, delta) -> np.ndarray:
+        a, b, k = (self._folded(v, n).reshape(()) for v, n in ((start, "start"), (limit, "limit"), (delta, "delta")))
+        if k == 0:
+            raise self.fail("Range delta 0")
+        n = max(int(np.ceil((b - a) / k)), 0)
+        if n > MAX_FOLDED_ELEMENTS:
+            raise self._too_large([n])
+        return (a + np.arange(n, dtype=np.result_type(a, b, k)) * k).astype(np.result_type(a, b, k))
+
+
+# Activations that can turn a padding lane's finite junk into inf or NaN (which a later conv's zero
+# weights would not cancel): their passes zero the padding lanes.
+_GUARDED = ("Sqrt", "Log", "Reciprocal", "Exp", "Pow")
 
 
 def _vec4_rows(v: np.ndarray, n4: int) -> np.ndarray:
@@ -1170,11 +1744,22 @@ def _conv_block_body(p: Pass, window: dict) -> str:
                 pad_top=window["pad_top"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
 
 
+def _lp_steps(p: float) -> tuple[str, str]:
+    """(accumulate, finish) templates of an Lp pool."""
+    if p == 1:
+        return fill("pool_acc_l1"), fill("pool_finish_l1")
+    if p == 2:
+        return fill("pool_acc_l2"), fill("pool_finish_l2")
+    return fill("pool_acc_lp", p=glsl_float(p)), fill("pool_finish_lp", inv_p=glsl_float(1.0 / p))
+
+
 def _pool_body(p: Pass) -> str:
     f = p.fields
     (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
     if p.kind == "pool_max":
         init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+    elif p.kind == "pool_lp":
+        init, (acc, finish) = fill("pool_init_lp"), _lp_steps(f["p"])
     else:
         init, acc = fill("pool_init_avg"), fill("pool_acc_avg")
         finish = fill("pool_finish_padded") if f["include_pad"] else fill("pool_finish_count")
@@ -1187,6 +1772,76 @@ def _binary_body(p: Pass) -> str:
     fetch = [fill(f"fetch_{how}", src=f"src{i}") for i, how in enumerate(f["fetch"])]
     guard = fill("binary_guard_div", channels=p.output.channels) if f["op"] == "Div" else fill("binary_guard_none")
     return fill("binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=fill(f"binop_{f['op']}"))
+
+
+def _gather_body(p: Pass) -> str:
+    digits = []
+    for run in p.fields["digits"]:
+        lines = []
+        for i, (axis, size, stride) in enumerate(reversed(run)):  # innermost first
+            coord = {"c": "z", "y": "y", "x": "x"}[axis]
+            last = i == len(run) - 1
+            lines.append(fill("gather_digit_last", coord=coord, stride=stride) if last else
+                         fill("gather_digit", coord=coord, size=size, stride=stride))  # fmt: skip
+        digits.append("\n".join(lines))
+    return fill("gather_body", channels=p.output.channels, digits_c=digits[0], digits_y=digits[1],
+                digits_x=digits[2])  # fmt: skip
+
+
+def _window_bounds(spatial: tuple[bool, bool]) -> dict[str, str]:
+    """The member loops' pixel range: the whole image on a reduced axis, else the output texel's own."""
+    out = {}
+    for axis, reduced in zip("yx", spatial, strict=True):
+        out[f"{axis}_begin"] = "0" if reduced else f"gid.{axis}"
+        out[f"{axis}_end"] = f"in_size.{axis}" if reduced else f"gid.{axis} + 1"
+    return out
+
+
+_REDUCE_STEPS = {"Sum": ("zero", "sum", "none"), "Mean": ("zero", "sum", "mean"), "Max": ("max", "max", "none"),
+                 "Min": ("min", "min", "none"), "L1": ("zero", "abs", "none"), "L2": ("zero", "square", "sqrt"),
+                 "SumSquare": ("zero", "square", "none"), "Prod": ("one", "prod", "none"),
+                 "LogSum": ("zero", "sum", "log")}  # fmt: skip
+
+
+def _reduce_body(p: Pass, offs: dict[str, int]) -> str:
+    f = p.fields
+    init, acc, finish = _REDUCE_STEPS[f["op"]]
+    bounds = _window_bounds(f["spatial"])
+    base, offsets = f["tables"]
+    loops = fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=fill(f"reduce_acc_{acc}"),
+                 **bounds)  # fmt: skip
+    return fill("reduce_body", groups=f["groups"], base_offset=offs[base], members=f["members"],
+                init=fill(f"reduce_init_{init}"), loops=loops, finish=fill(f"reduce_finish_{finish}"), **bounds)  # fmt: skip
+
+
+def _moments_body(p: Pass, offs: dict[str, int]) -> str:
+    f = p.fields
+    bounds = _window_bounds(f["spatial"])
+    base, offsets = f["tables"]
+    loops = [fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=fill(acc), **bounds)
+             for acc in ("reduce_acc_sum", "moments_acc_square")]  # fmt: skip
+    return fill("moments_body", channels=p.output.channels, groups=f["groups"], base_offset=offs[base],
+                members=f["members"], sum_loops=loops[0], square_loops=loops[1],
+                epsilon=glsl_float(f["epsilon"]), **bounds)  # fmt: skip
+
+
+def _normalize_body(p: Pass, offs: dict[str, int]) -> str:
+    f = p.fields
+    sy, sx = ("0" if reduced else f"gid.{axis}" for axis, reduced in zip("yx", f["spatial"], strict=True))
+    return fill("normalize_body", group_offset=offs[f["group"]], groups=f["groups"], stats_x=sx, stats_y=sy)
+
+
+def _softmax_body(p: Pass, offs: dict[str, int]) -> str:
+    f = p.fields
+    base, offsets = f["tables"]
+    return fill("softmax_body", channels=p.output.channels, base_offset=offs[base], offsets_offset=offs[offsets],
+                members=f["members"], finish=fill("log_softmax_finish" if f["log"] else "softmax_finish"))  # fmt: skip
+
+
+def _lrn_body(p: Pass) -> str:
+    f = p.fields
+    return fill("lrn_body", channels=p.output.channels, before=f["before"], after=f["after"],
+                bias=glsl_float(f["bias"]), alpha=glsl_float(f["alpha"]), beta=glsl_float(f["beta"]))  # fmt: skip
 
 
 def _spatial_pad_body(p: Pass) -> str:
@@ -1214,11 +1869,13 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
     offs = p.param_offsets()
     if p.kind in CONV_KINDS:
         body = _conv_body(p, offs)
-    elif p.kind in ("pool_avg", "pool_max"):
+    elif p.kind in ("pool_avg", "pool_max", "pool_lp"):
         body = _pool_body(p)
-    elif p.kind in ("global_pool_avg", "global_pool_max"):
+    elif p.kind in ("global_pool_avg", "global_pool_max", "global_pool_lp"):
         if p.kind == "global_pool_max":
             init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+        elif p.kind == "global_pool_lp":
+            init, (acc, finish) = fill("pool_init_lp"), _lp_steps(p.fields["p"])
         else:
             init, acc, finish = fill("pool_init_avg"), fill("pool_acc_avg"), fill("global_finish_mean")
         body = fill("global_pool_body", init=init, accumulate=acc, finish=finish)
@@ -1242,6 +1899,18 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         body = fill("crop_body")
     elif p.kind == "uniform":
         body = fill("uniform_body", name=p.fields["uniform"])
+    elif p.kind == "gather":
+        body = _gather_body(p)
+    elif p.kind == "reduce":
+        body = _reduce_body(p, offs)
+    elif p.kind == "moments":
+        body = _moments_body(p, offs)
+    elif p.kind == "normalize":
+        body = _normalize_body(p, offs)
+    elif p.kind == "softmax":
+        body = _softmax_body(p, offs)
+    elif p.kind == "lrn":
+        body = _lrn_body(p)
     else:  # pragma: no cover - kinds are created above only
         raise AssertionError(p.kind)
     prelude = [fill("prelude")]
@@ -1249,6 +1918,8 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
         prelude.append(fill("prelude_div"))
     if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
         prelude.append(fill("prelude_cubic"))
+    if p.fields.get("erf"):
+        prelude.append(fill("prelude_erf"))
     epi = _epilogue(p, offs, "gid.z")
     if _blocked(p):
         bx, by, bl = p.fields["block"]
@@ -1283,6 +1954,8 @@ def _epilogue(p: Pass, offs: dict[str, int], z: str) -> str:
             epi.append(fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z))
         elif e.form == "prelu":
             epi.append(fill("epilogue_prelu", slope_offset=offs[e.arrays[0]], z=z))
+        elif e.form == "guard":
+            epi.append(fill("epilogue_guard", channels=p.output.channels, z=z))
         else:
             epi.append(fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels, z=z))
     return "\n".join(epi) if epi else fill("epilogue_none")
@@ -1308,6 +1981,15 @@ class ComputeProgram:
     @property
     def precision(self) -> str:
         return str(self.manifest["precision"])
+
+
+def _image_shape(shape: list[int]) -> list[int]:
+    """A (1, C, H, W) shape whose elements, row-major, are those of ``shape`` in order."""
+    if len(shape) > 4:
+        return [1, math.prod(shape[:-2]), shape[-2], shape[-1]]
+    if shape and shape[0] == 1:
+        return shape + [1] * (4 - len(shape))
+    return [1] + shape + [1] * (3 - len(shape))
 
 
 def _pad_multiple(table: ImageOps) -> int:
@@ -1365,12 +2047,16 @@ def generate_compute(
         raise NeuralaoError(f"metadata pad_multiple {meta_multiple} must be positive")
     table = ImageOps(graph, meta_multiple)
     table.run()
-    outputs = []
+    outputs, shapes = [], {}
     for name in graph.outputs:
         v = table.env[name]
+        table.label = f"graph output {name!r}"
         if isinstance(v, ConcatValue):
-            table.label = f"graph output {name!r}"
             v = table.materialise(v)
+        if isinstance(v, View):  # read back as a (1, C, H, W) texture in the same element order
+            shapes[name] = v.shape
+            table.node = onnx.helper.make_node("Identity", [], [], name=f"output {name}")
+            v = table.image(table.reshape_view(v, _image_shape(v.shape), 1), "output")
         if not isinstance(v, Texture):
             raise NeuralaoError(f"graph output {name!r} is a constant, not an image")
         # Same size rule as the padded tensor, but of the raw input: H * num/den + offset (exact
@@ -1405,6 +2091,9 @@ def generate_compute(
     manifest = _compute_manifest(
         table, graph, outputs, ranges, bytes(blob), precision, kind, multiple, local_size
     )
+    for entry in manifest["outputs"]:
+        if entry["onnx_name"] in shapes:
+            entry["shape"] = shapes[entry["onnx_name"]]
     return ComputeProgram(sources, bytes(blob), manifest)
 
 

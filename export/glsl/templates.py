@@ -76,6 +76,38 @@ _T["act_HardSigmoid"] = "clamp(${alpha} * ${x} + ${beta}, 0.0, 1.0)"
 # HardSwish (opset 14; torch nn.Hardswish): x * HardSigmoid(x) with alpha 1/6, beta 1/2 (the spec's).
 _T["act_HardSwish"] = "(${x} * clamp(0.16666667 * ${x} + 0.5, 0.0, 1.0))"
 
+# Erf (NR's erfc, fractional error < 1.2e-7, for |x| >= 0.5; the Maclaurin series below, where 1 - erfc
+# would lose the relative accuracy of small values); Gelu's two forms and Mish after ONNX's definitions.
+_T["prelude_erf"] = """vec4 nao_erf(vec4 x) {
+    vec4 z = abs(x);
+    vec4 t = 1.0 / (1.0 + 0.5 * z);
+    vec4 p = -z * z - 1.26551223 + t * (1.00002368 + t * (0.37409196 + t * (0.09678418 + t * (-0.18628806
+        + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277))))))));
+    vec4 big = sign(x) * (1.0 - t * exp(p));
+    vec4 x2 = x * x;
+    vec4 small = 1.1283791671 * x * (1.0 + x2 * (-0.3333333333 + x2 * (0.1 + x2 * (-0.0238095238
+        + x2 * (0.0046296296 + x2 * -0.0007575758)))));
+    return mix(big, small, lessThan(z, vec4(0.5)));
+}"""
+_T["act_Erf"] = "nao_erf(${x})"
+_T["act_Gelu"] = "(0.5 * ${x} * (1.0 + nao_erf(${x} * 0.70710678118654752)))"
+_T["act_GeluTanh"] = "(0.5 * ${x} * (1.0 + nao_tanh(0.79788456080286536 * (${x} + 0.044715 * ${x} * ${x} * ${x}))))"
+_T["act_Mish"] = "(${x} * nao_tanh(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x})))))"
+_T["act_Sqrt"] = "sqrt(${x})"
+_T["act_Exp"] = "exp(${x})"
+_T["act_Log"] = "log(${x})"
+_T["act_Abs"] = "abs(${x})"
+_T["act_Neg"] = "(-${x})"
+_T["act_Reciprocal"] = "(1.0 / ${x})"
+_T["act_Sign"] = "sign(${x})"
+_T["act_Softsign"] = "(${x} / (1.0 + abs(${x})))"
+_T["act_Floor"] = "floor(${x})"
+_T["act_Ceil"] = "ceil(${x})"
+_T["act_Pow"] = "pow(${x}, vec4(${e}))"
+_T["act_Pow_one"] = "vec4(1.0)"
+_T["act_Pow_reciprocal"] = "(1.0 / ${x})"
+_T["pow_product"] = "(${factors})"
+
 # --------------------------------------------------------------------------- fragment MLP
 
 _T["fullscreen_vertex"] = """${header}
@@ -347,6 +379,14 @@ _T["pool_acc_max"] = "max(r, v)"
 _T["pool_finish_count"] = "    r /= float(max(count, 1));"
 _T["pool_finish_padded"] = "    r /= float(max(count_padded, 1));"
 _T["pool_finish_none"] = "    // max pool: no normalisation"
+# Lp pools: the sum of |x|^p over the window (padding adds nothing), then its p-th root.
+_T["pool_init_lp"] = "vec4(0.0)"
+_T["pool_acc_l1"] = "r + abs(v)"
+_T["pool_acc_l2"] = "r + v * v"
+_T["pool_acc_lp"] = "r + pow(abs(v), vec4(${p}))"
+_T["pool_finish_l1"] = "    // L1: the sum itself"
+_T["pool_finish_l2"] = "    r = sqrt(r);"
+_T["pool_finish_lp"] = "    r = pow(r, vec4(${inv_p}));"
 
 # Global pools: one invocation per output layer walks the whole input (the output is 1 x 1).
 _T["global_pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
@@ -516,6 +556,8 @@ _T["binop_Add"] = "a + b"
 _T["binop_Sub"] = "a - b"
 _T["binop_Mul"] = "a * b"
 _T["binop_Div"] = "a / b"
+_T["binop_Max"] = "max(a, b)"
+_T["binop_Min"] = "min(a, b)"
 
 # ONNX Pad on H, W (negative pads crop): output texel (x, y) reads input (x - left, y - top).
 _T["spatial_pad_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
@@ -562,6 +604,148 @@ _T["epilogue_rdiv"] = (
     "ivec4(${channels})));"
 )
 _T["epilogue_none"] = "    // no epilogue"
+# Padding lanes (channels >= ${channels}) to 0 after an activation that could make them inf or NaN.
+_T["epilogue_guard"] = (
+    "    r = mix(vec4(0.0), r, lessThan(ivec4(4 * ${z}) + ivec4(0, 1, 2, 3), ivec4(${channels})));"
+)
+
+# Gather (a view materialised: DepthToSpace, SpaceToDepth, channel shuffles, transposes): each output
+# coordinate is split into its digits, innermost first; each digit moves one source coordinate (s.z:
+# the channel) by its stride. The outermost digit of an axis takes the rest of the index (no modulo).
+_T["gather_body"] = """    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int c = gid.z * 4 + lane;
+        if (c >= ${channels}) {
+            break;
+        }
+        ivec3 s = ivec3(0);  // source x, y, channel
+        int v = c;
+${digits_c}
+        v = gid.y;
+${digits_y}
+        v = gid.x;
+${digits_x}
+        r[lane] = texelFetch(src0, ivec3(s.xy, s.z / 4), 0)[s.z % 4];
+    }"""
+_T["gather_digit"] = """        s.${coord} += (v % ${size}) * ${stride};
+        v /= ${size};"""
+_T["gather_digit_last"] = "        s.${coord} += v * ${stride};"
+
+# Member loops of a reduction (reduce, moments): the pixels of the output texel's window (the whole
+# image on a reduced axis) x the members of channel group g (prm tables: base per group, offsets).
+_T["member_loops"] = """        for (int iy = ${y_begin}; iy < ${y_end}; ++iy) {
+            for (int ix = ${x_begin}; ix < ${x_end}; ++ix) {
+                for (int k = 0; k < ${members}; ++k) {
+                    int c = base + int(prm[${offsets_offset} + k / 4][k % 4]);
+                    float v = texelFetch(src0, ivec3(ix, iy, c / 4), 0)[c % 4];
+                    ${statement}
+                }
+            }
+        }"""
+_T["reduce_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int g = gid.z * 4 + lane;
+        if (g >= ${groups}) {
+            break;
+        }
+        int base = int(prm[${base_offset} + g / 4][g % 4]);
+        float n = float(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
+        float s = ${init};
+${loops}
+        r[lane] = ${finish};
+    }"""
+_T["reduce_init_zero"] = "0.0"
+_T["reduce_init_one"] = "1.0"
+_T["reduce_init_max"] = "-3.402823466e+38"
+_T["reduce_init_min"] = "3.402823466e+38"
+_T["reduce_acc_sum"] = "s += v;"
+_T["reduce_acc_square"] = "s += v * v;"
+_T["reduce_acc_abs"] = "s += abs(v);"
+_T["reduce_acc_max"] = "s = max(s, v);"
+_T["reduce_acc_min"] = "s = min(s, v);"
+_T["reduce_acc_prod"] = "s *= v;"
+_T["reduce_finish_none"] = "s"
+_T["reduce_finish_mean"] = "s / n"
+_T["reduce_finish_sqrt"] = "sqrt(s)"
+_T["reduce_finish_log"] = "log(s)"
+
+# Moments: channel j < groups holds the mean of group j, channel groups + j its 1 / sqrt(var + epsilon)
+# (two passes over the members: the mean, then the squared deviations from it, as onnxruntime does).
+_T["moments_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int j = gid.z * 4 + lane;
+        if (j >= ${channels}) {
+            break;
+        }
+        int g = j % ${groups};
+        int base = int(prm[${base_offset} + g / 4][g % 4]);
+        float n = float(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
+        float s = 0.0;
+${sum_loops}
+        float mean = s / n;
+        if (j < ${groups}) {
+            r[lane] = mean;
+            continue;
+        }
+        s = 0.0;
+${square_loops}
+        r[lane] = 1.0 / sqrt(s / n + ${epsilon});
+    }"""
+_T["moments_acc_square"] = "s += (v - mean) * (v - mean);"
+
+# Normalize: src0 the image, src1 its moments (mean at channel g, 1/std at groups + g); the group of
+# each channel in prm (padding lanes: group 0, so they stay finite).
+_T["normalize_body"] = """    vec4 x = texelFetch(src0, gid, 0);
+    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int g = int(prm[${group_offset} + gid.z][lane]);
+        int h = g + ${groups};
+        float mean = texelFetch(src1, ivec3(${stats_x}, ${stats_y}, g / 4), 0)[g % 4];
+        float rstd = texelFetch(src1, ivec3(${stats_x}, ${stats_y}, h / 4), 0)[h % 4];
+        r[lane] = (x[lane] - mean) * rstd;
+    }"""
+
+# Softmax over the channels of a group at one pixel (prm: the group's first channel per channel, offsets).
+_T["softmax_body"] = """    vec4 x = texelFetch(src0, gid, 0);
+    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int c = gid.z * 4 + lane;
+        if (c >= ${channels}) {
+            break;
+        }
+        int base = int(prm[${base_offset} + gid.z][lane]);
+        float m = -3.402823466e+38;
+        for (int k = 0; k < ${members}; ++k) {
+            int q = base + int(prm[${offsets_offset} + k / 4][k % 4]);
+            m = max(m, texelFetch(src0, ivec3(gid.xy, q / 4), 0)[q % 4]);
+        }
+        float s = 0.0;
+        for (int k = 0; k < ${members}; ++k) {
+            int q = base + int(prm[${offsets_offset} + k / 4][k % 4]);
+            s += exp(texelFetch(src0, ivec3(gid.xy, q / 4), 0)[q % 4] - m);
+        }
+        r[lane] = ${finish};
+    }"""
+_T["softmax_finish"] = "exp(x[lane] - m) / s"
+_T["log_softmax_finish"] = "x[lane] - m - log(s)"
+
+# LRN across channels: x / (bias + alpha / size * sum of squares over the window) ^ beta.
+_T["lrn_body"] = """    vec4 x = texelFetch(src0, gid, 0);
+    vec4 r = vec4(0.0);
+    for (int lane = 0; lane < 4; ++lane) {
+        int c = gid.z * 4 + lane;
+        if (c >= ${channels}) {
+            break;
+        }
+        float s = 0.0;
+        for (int k = max(c - ${before}, 0); k <= min(c + ${after}, ${channels} - 1); ++k) {
+            float v = texelFetch(src0, ivec3(gid.xy, k / 4), 0)[k % 4];
+            s += v * v;
+        }
+        r[lane] = x[lane] / pow(${bias} + ${alpha} * s, ${beta});
+    }"""
 
 # --------------------------------------------------------------------------- baseline: vertex-colour AO
 
