@@ -34,8 +34,9 @@ Methods (each one run on every frame it applies to):
 * ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame;
   half / quarter-resolution variants (manifest metadata ``scale`` 2 / 4) are rows like any U-Net;
 * ``shipped:<name>``: the release U-Nets of ``runtime/models/`` (:mod:`runtime.shipped`), included when
-  no ``--exports`` is given, or in addition with ``--shipped``; their training curves, corpus-size
-  study and test figures (from ``index.json`` and the manifests' provenance) are plotted by
+  no ``--exports`` is given, or in addition with ``--shipped``: by default the ``default`` and ``fast``
+  models only (:func:`pick_shipped`; ``--shipped all`` or names for others); their training curves,
+  corpus-size study and test figures (from ``index.json`` and the manifests' provenance) are plotted by
   :mod:`pipeline.report_plots`. None shipped: the report says so in one line.
 
 Error: masked SSIM (:func:`pipeline.metrics.masked_ssim`) and RMSE over foreground pixels whose
@@ -86,6 +87,8 @@ MODEL_FAMILIES = ("mlp", "field", "unet")  # methods loaded from exports
 # Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
 RADIUS_FAMILIES = ("screen-space", "unet")
 SHIPPED_PREFIX = "shipped:"  # row-name prefix of the release models of runtime/models
+# Shipped rows a report shows unless told otherwise: the default model and the fast one (pick_shipped).
+SHIPPED_PICKS = ("default", "fast")
 # Which methods can show a single-sided surface differently from its two sides (the G-buffer turns
 # the normal towards the viewer): per-vertex bakes store one value per vertex, so both sides of an
 # open sheet show the same AO; networks fed the viewer-facing normal and screen-space methods can differ.
@@ -116,8 +119,21 @@ class ReportSettings:
     seed: int = 0
     # Tracing threads (ground truth, baselines).
     workers: int = 2
-    # Write a contact sheet per scene (pipeline.report_figures: cropped, one row per method, error inset).
+    # Write a contact sheet per scene (pipeline.report_figures: cropped, methods side by side, error inset).
     contact_sheets: bool = True
+    # The methods a contact sheet shows, in order (those present in the report); "shipped:default" and
+    # "shipped:fast" stand for the shipped rows of those roles, "field" / "mlp" for the smallest of each.
+    contact_methods: list[str] = field(
+        default_factory=lambda: [
+            "ssao",
+            "gtao",
+            "vertex-lsq",
+            "field",
+            "unet",
+            "shipped:default",
+            "shipped:fast",
+        ]
+    )
     # Write a viewer page per scene (`neuralao view`: its least-squares bake and its MLP / field shaders)
     # under OUT/viewer/, linked from report.html.
     viewer_pages: bool = True
@@ -371,12 +387,49 @@ def _unet_scale(manifest: dict) -> int:
         return 1
 
 
-def discover_shipped(models_dir: Path, scenes: list[str]) -> tuple[list[Method], dict]:
-    """The shipped U-Nets of ``models_dir`` (runtime/models) as rows ``shipped:<name>``, and the
-    summary of the index (:func:`pipeline.report_plots.shipped_summary`; its ``note`` says why none)."""
+def pick_shipped(summary: dict, picks: list[str] | tuple[str, ...] | None) -> list[str]:
+    """Names of the shipped U-Nets to report: ``picks`` holds roles and names. ``default``: the model
+    index.json names default; ``fast``: ``index.json`` ``fast`` (per kind) if it names one, else the
+    U-Net with the smallest GL time at 512x512 other than the default; ``all`` (or None): every one.
+    A pick that matches nothing is left out with a log line (the report never fails on it)."""
+    models = {n: m for n, m in summary["models"].items() if m.get("kind", "unet") == "unet"}
+    if picks is None or "all" in picks:
+        return list(models)
+    default = (summary.get("default") or {}).get("unet")
+    chosen: list[str] = []
+    for pick in picks:
+        if pick == "default":
+            name = default
+        elif pick == "fast":
+            name = (summary.get("fast") or {}).get("unet")
+            if name is None:
+                timed = [(float((m.get("gl_seconds") or {}).get("512x512") or math.inf), n)
+                         for n, m in models.items() if n != default]  # fmt: skip
+                name = min(timed)[1] if timed else None
+        else:
+            name = pick
+        if name in models and name not in chosen:
+            chosen.append(name)
+        elif name not in models:
+            log.info("shipped %s: no such model in %s", pick, summary.get("folder"))
+    return chosen
+
+
+def discover_shipped(
+    models_dir: Path, scenes: list[str], picks: list[str] | tuple[str, ...] | None = None
+) -> tuple[list[Method], dict]:
+    """The shipped U-Nets of ``models_dir`` (runtime/models) picked by :func:`pick_shipped` (None:
+    every one) as rows ``shipped:<name>``, and the summary of the index
+    (:func:`pipeline.report_plots.shipped_summary`, its models cut to the picked ones and their
+    ``roles``; its ``note`` says why none)."""
     from .report_plots import shipped_summary
 
     summary = shipped_summary(models_dir)
+    names = pick_shipped(summary, picks)
+    others = [n for n in summary["models"] if n not in names]
+    summary["models"] = {n: summary["models"][n] for n in names}
+    summary["roles"] = {p: n for p in ("default", "fast") for n in pick_shipped({**summary}, [p])}
+    summary["not_shown"] = others
     methods = []
     for name, info in summary["models"].items():
         if info.get("kind", "unet") != "unet":
@@ -675,11 +728,13 @@ def evaluate(
     progress: bool = True,
     keep_images: bool = True,
     shipped: str | Path | None = None,
+    shipped_picks: list[str] | tuple[str, ...] | None = None,
 ) -> dict:
     """Measure every method (or only ``families``) on the evaluation frames; returns the result dict
     (the content of report.json, without the figures). ``out`` holds the caches (None: no cache).
     ``exports``: a folder of export folders (None: none); ``shipped``: a shipped-models folder
-    (runtime/models) whose U-Nets are added as ``shipped:<name>`` rows (None: not looked at)."""
+    (runtime/models) whose U-Nets are added as ``shipped:<name>`` rows (None: not looked at), those of
+    ``shipped_picks`` (roles or names, :func:`pick_shipped`; None: every one)."""
     from tqdm import tqdm
 
     from runtime import gl
@@ -700,7 +755,7 @@ def evaluate(
         methods += discover_exports(Path(exports), ds.scenes)
     shipped_info = None
     if shipped is not None:
-        shipped_methods, shipped_info = discover_shipped(Path(shipped), ds.scenes)
+        shipped_methods, shipped_info = discover_shipped(Path(shipped), ds.scenes, shipped_picks)
         methods += shipped_methods
     if families is not None:
         methods = [m for m in methods if m.family in families]
@@ -1211,6 +1266,25 @@ def _scene_exports(methods: list[Method], scene: str) -> dict[str, str]:
     return out
 
 
+def contact_order(result: dict, wanted: list[str]) -> list[str]:
+    """The methods of a contact sheet: ``wanted`` (ReportSettings.contact_methods) resolved against the
+    report's rows: ``shipped:default`` / ``shipped:fast`` to the shipped rows of those roles, ``field`` /
+    ``mlp`` to the smallest row of that family; names not in the report are left out. Empty: every row."""
+    ms = result["methods"]
+    roles = (result.get("shipped") or {}).get("roles") or {}
+    order: list[str] = []
+    for name in wanted:
+        role = name[len(SHIPPED_PREFIX) :] if name.startswith(SHIPPED_PREFIX) else None
+        if role in ("default", "fast"):
+            name = SHIPPED_PREFIX + roles.get(role, "")
+        elif name in MODEL_FAMILIES and name not in ms:
+            rows = sorted((ms[n].get("bytes") or 0, n) for n in ms if ms[n].get("family") == name)
+            name = rows[0][1] if rows else name
+        if name in ms and ms[name].get("available", True) and name not in order:
+            order.append(name)
+    return order or method_order(ms)
+
+
 def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
     """The scene's contact sheet (:func:`pipeline.report_figures.contact_sheet`)."""
     from .report_figures import contact_sheet as readable_sheet
@@ -1229,7 +1303,7 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
         figures["scatter"] = scatter.name
     figures.update(write_shipped_plots(result.get("shipped"), out))
     if settings.contact_sheets:
-        order = method_order(result["methods"])
+        order = contact_order(result, settings.contact_methods)
         for scene, sheet in sheets.items():
             figures["contact_sheets"][scene] = contact_sheet(
                 scene, sheet, order, out / f"contact_{scene}.png"
@@ -1260,9 +1334,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="folder of export folders (mlp-16x8, mlp-32x16, mlp-64x32, unet); missing ones are listed as not available",
     )
     shipped = p.add_mutually_exclusive_group()
-    shipped.add_argument("--shipped", action="store_true", default=None,
-                         help="also report the shipped U-Nets (runtime/models) when --exports is given "
-                              "(without --exports they are included by default)")  # fmt: skip
+    shipped.add_argument("--shipped", nargs="?", const=",".join(SHIPPED_PICKS), default=None, metavar="WHICH",
+                         help="also report shipped U-Nets (runtime/models) when --exports is given (without "
+                              "--exports they are included by default): a comma list of roles (default, fast) "
+                              "and model names, or all (default: default,fast)")  # fmt: skip
     shipped.add_argument(
         "--no-shipped", dest="shipped", action="store_false", help="leave the shipped U-Nets out"
     )
@@ -1305,13 +1380,25 @@ def shipped_folder(args: argparse.Namespace) -> Path | None:
     return Path(args.models) if getattr(args, "models", None) else MODELS_DIR
 
 
+def shipped_picks(args: argparse.Namespace) -> list[str]:
+    """The shipped rows asked for (``--shipped WHICH``): roles and names; default and fast by default."""
+    which = getattr(args, "shipped", None)
+    picks = [p.strip() for p in (which if isinstance(which, str) else ",".join(SHIPPED_PICKS)).split(",")]
+    if not all(picks):
+        raise NeuralaoError(
+            f"--shipped {which!r}: expected a comma list of default, fast, all or model names"
+        )
+    return picks
+
+
 def run(args: argparse.Namespace) -> int:
     settings = settings_from_args(args)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    result = evaluate(args.data, args.exports, settings, out, progress=True, shipped=shipped_folder(args))
+    result = evaluate(args.data, args.exports, settings, out, progress=True, shipped=shipped_folder(args),
+                      shipped_picks=shipped_picks(args))  # fmt: skip
     write_report(result, out, settings)
     ms = result["methods"]
     for n in method_order(ms):

@@ -1,9 +1,11 @@
-"""Readable report figures: contact sheets cropped to the object, one row per method, a zoomed error inset.
+"""Readable report figures: contact sheets cropped to the object, a handful of methods side by side, a
+zoomed error inset.
 
-A sheet (:func:`contact_sheet`) has a first row with the ground truth, the pixels whose ground truth is
-invalid, and the colour scale, then one row per method: its AO, ``|AO - ground truth|`` as a heat map with
-the worst window outlined, and that window magnified (ground truth left, method right, nearest-neighbour,
-so every pixel stays a pixel). Every panel is cropped to the bounding box of the object (the foreground
+A sheet (:func:`contact_sheet`) has a first column with the ground truth, the pixels whose ground truth is
+invalid, and the colour scale, then one column per method: its AO, ``|AO - ground truth|`` as a heat map
+with the worst window outlined, and that window magnified (ground truth left, method right,
+nearest-neighbour, so every pixel stays a pixel). The report picks the methods
+(``ReportSettings.contact_methods``). Every panel is cropped to the bounding box of the object (the foreground
 mask plus a small margin), which at 128x128 orbit views is often a third of the frame or less.
 """
 
@@ -43,7 +45,11 @@ def worst_window(error: np.ndarray, valid: np.ndarray, size: int) -> tuple[int, 
 
 
 def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
-    """The module doc's sheet for one view: sheet = {"gt", "mask", "fg", "view", "images": {name: (H, W)}}."""
+    """The module doc's sheet for one view: sheet = {"gt", "mask", "fg", "view", "images": {name: (H, W)}}.
+
+    Methods side by side: a column each (ground truth first), three rows: the AO, ``|AO - GT|`` with
+    the worst window outlined, and that window magnified (the ground truth's column shows it for the
+    first method's window; each method's column its own window, GT | method)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -55,46 +61,41 @@ def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path
     fg, mask, gt = sheet["fg"][rs, cs], sheet["mask"][rs, cs], sheet["gt"][rs, cs]
     h, w = fg.shape
     win = max(8, min(h, w) // 4)
-    rows = 1 + len(names)
-    panel = 1.8
-    fig, axes = plt.subplots(rows, 3, figsize=(3 * panel + 1.4, rows * panel), dpi=100, squeeze=False,
-                             gridspec_kw={"width_ratios": [1, 1, 2]})  # fmt: skip
+    cols = 1 + len(names)
+    panel = 1.9
+    fig, axes = plt.subplots(3, cols, figsize=(cols * panel, 3 * panel + 0.5), dpi=100, squeeze=False)
     bg = 0.5
     axes[0, 0].imshow(np.where(fg, gt, bg), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-    axes[0, 0].set_title("ground truth", fontsize=8)
-    axes[0, 1].imshow(np.where(fg & ~mask, 1.0, np.where(fg, 0.6, 0.2)), cmap="gray", vmin=0, vmax=1,
+    axes[0, 0].set_title("ground truth", fontsize=9)
+    axes[1, 0].imshow(np.where(fg & ~mask, 1.0, np.where(fg, 0.6, 0.2)), cmap="gray", vmin=0, vmax=1,
                       interpolation="nearest")  # fmt: skip
-    axes[0, 1].set_title("invalid GT (white)", fontsize=8)
-    scale = axes[0, 2].imshow(np.linspace(0, ERROR_VMAX, 256)[None, :], cmap="magma", aspect="auto",
-                              extent=(0, ERROR_VMAX, 0, 1))  # fmt: skip
-    axes[0, 2].set_title("|error| colour scale (AO units)", fontsize=8)
-    axes[0, 2].set_xticks([0, ERROR_VMAX / 2, ERROR_VMAX])
-    axes[0, 2].tick_params(labelsize=7)
-    del scale
+    axes[1, 0].set_xlabel("invalid GT (white)", fontsize=8)
+    axes[2, 0].imshow(np.linspace(0, ERROR_VMAX, 256)[:, None][::-1], cmap="magma", aspect="auto",
+                      extent=(0, 1, 0, ERROR_VMAX))  # fmt: skip
+    axes[2, 0].set_xlabel(f"|error| scale, 0-{ERROR_VMAX:g}", fontsize=8)
+    axes[2, 0].tick_params(labelsize=7)
     for k, n in enumerate(names, start=1):
         pred = sheet["images"][n][rs, cs]
         err = np.abs(pred - gt)
         rmse = float(np.sqrt(np.mean(err[mask] ** 2))) if mask.any() else float("nan")
-        axes[k, 0].imshow(np.where(fg, pred, bg), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-        axes[k, 0].set_ylabel(f"{n}\nRMSE {rmse:.3f}", fontsize=8, rotation=0, ha="right", va="center")
-        axes[k, 1].imshow(np.ma.masked_array(err, mask=~mask), cmap="magma", vmin=0, vmax=ERROR_VMAX,
+        axes[0, k].imshow(np.where(fg, pred, bg), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        axes[0, k].set_title(f"{n}\nRMSE {rmse:.3f}", fontsize=9)
+        axes[1, k].imshow(np.ma.masked_array(err, mask=~mask), cmap="magma", vmin=0, vmax=ERROR_VMAX,
                           interpolation="nearest")  # fmt: skip
         r, c = worst_window(err, mask, win)
-        axes[k, 1].add_patch(Rectangle((c - 0.5, r - 0.5), win, win, fill=False, edgecolor="#39d0ff", lw=1.0))
+        axes[1, k].add_patch(Rectangle((c - 0.5, r - 0.5), win, win, fill=False, edgecolor="#39d0ff", lw=1.0))
         zoom_gt = np.where(fg, gt, bg)[r : r + win, c : c + win]
         zoom_pred = np.where(fg, pred, bg)[r : r + win, c : c + win]
         gap = np.full((zoom_gt.shape[0], 1), 1.0)
-        axes[k, 2].imshow(np.concatenate([zoom_gt, gap, zoom_pred], axis=1), cmap="gray", vmin=0, vmax=1,
+        axes[2, k].imshow(np.concatenate([zoom_gt, gap, zoom_pred], axis=1), cmap="gray", vmin=0, vmax=1,
                           interpolation="nearest")  # fmt: skip
-        if k == 1:
-            axes[k, 0].set_title("AO", fontsize=8)
-            axes[k, 1].set_title("|AO - GT|, worst window", fontsize=8)
-            axes[k, 2].set_title(f"worst {win}x{win} window: GT | method", fontsize=8)
+        axes[2, k].set_xlabel("worst window: GT | method", fontsize=8)
     for ax in axes.ravel():
-        ax.set_xticks([]) if ax is not axes[0, 2] else None
-        ax.set_yticks([])
-    fig.suptitle(f"{scene}, view {sheet['view']} (cropped to the object)", fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.25 / rows))
+        ax.set_xticks([])
+        if ax is not axes[2, 0]:
+            ax.set_yticks([])
+    fig.suptitle(f"{scene}, view {sheet['view']} (cropped to the object)", fontsize=10)
+    fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)

@@ -68,7 +68,14 @@ def shipped_summary(models_dir: str | Path) -> dict:
     from .errors import NeuralaoError
 
     folder = Path(models_dir)
-    out: dict = {"folder": str(folder), "models": {}, "baselines": {}, "default": {}, "note": None}
+    out: dict = {
+        "folder": str(folder),
+        "models": {},
+        "baselines": {},
+        "default": {},
+        "fast": {},
+        "note": None,
+    }
     try:
         index = read_index(folder)
     except NeuralaoError as e:
@@ -76,6 +83,7 @@ def shipped_summary(models_dir: str | Path) -> dict:
         return out
     out["baselines"] = index.get("baselines") or {}
     out["default"] = index.get("default") or {}
+    out["fast"] = index.get("fast") or {}  # per kind, the fast model's name (optional in index.json)
     for name, entry in index["models"].items():
         entry = entry if isinstance(entry, dict) else {}
         manifest = _read_json(folder / name / "manifest.json") or {}
@@ -298,7 +306,12 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
     default = shipped.get("default", {}).get("unet")
     lines += [
         f"From `{shipped['folder']}/index.json` (their own test split, every radius; `neuralao ship`). "
-        "Rows `shipped:<name>` of the tables above are the same models on this report's frames.",
+        "Rows `shipped:<name>` of the tables above are the same models on this report's frames."
+        + (
+            f" Not shown: {', '.join(shipped['not_shown'])} (`neuralao report --shipped all` adds them)."
+            if shipped.get("not_shown")
+            else ""
+        ),
         "",
         "| model | scale | widths | budget (min) | epochs | train fraction | test SSIM | test RMSE | GL ms (512x512) | bytes |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",

@@ -35,7 +35,7 @@ def test_worst_window_finds_a_planted_error_block_and_ignores_invalid_pixels():
     assert not (r == 31 and c == 12)
 
 
-def test_contact_sheet_has_one_row_per_method(tmp_path):
+def test_contact_sheet_has_one_column_per_method(tmp_path):
     yy, xx = np.mgrid[:64, :64]
     fg = (yy - 32) ** 2 + (xx - 32) ** 2 < 15**2
     gt = np.where(fg, 0.6, 1.0)
@@ -44,5 +44,23 @@ def test_contact_sheet_has_one_row_per_method(tmp_path):
     for names in (["a"], ["a", "b", "c"]):
         with Image.open(contact_sheet("s", sheet, names, tmp_path / f"{len(names)}.png")) as im:
             assert im.format == "PNG"
-            h.append(im.size[1])
-    assert h[1] > 1.8 * h[0]  # rows grow with the methods
+            h.append(im.size[0])
+    assert h[1] > 1.8 * h[0]  # columns grow with the methods
+
+
+def test_shipped_picks_default_and_fast_by_role_or_by_gl_time():
+    from pipeline.report import contact_order, pick_shipped
+
+    models = {n: {"kind": "unet", "gl_seconds": {"512x512": t}} for n, t in (("big", 0.8), ("mid", 0.3), ("tiny", 0.1))}
+    summary = {"folder": "m", "models": models, "default": {"unet": "big"}, "fast": {}}
+    assert pick_shipped(summary, ["default", "fast"]) == ["big", "tiny"]  # fast: least GL time
+    assert pick_shipped({**summary, "fast": {"unet": "mid"}}, ["default", "fast"]) == ["big", "mid"]
+    assert pick_shipped(summary, ["all"]) == ["big", "mid", "tiny"] == pick_shipped(summary, None)
+    assert pick_shipped(summary, ["mid", "nonesuch"]) == ["mid"]
+    result = {
+        "methods": {n: {"family": f, "bytes": b} for n, f, b in (("gtao", "screen-space", 256), ("field-32x16", "field", 6000),
+                    ("field-16x8", "field", 2600), ("shipped:tiny", "unet", 1), ("mlp-16x8", "mlp", 10))},  # fmt: skip
+        "shipped": {"roles": {"default": "big", "fast": "tiny"}},
+    }
+    assert contact_order(result, ["gtao", "field", "shipped:default", "shipped:fast"]) == [
+        "gtao", "field-16x8", "shipped:tiny"]  # fmt: skip
