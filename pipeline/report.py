@@ -143,6 +143,8 @@ class ReportSettings:
     # Screen-space baseline settings (radius: the labels' max distance, and each of radii_rel).
     ssao: SSAOSettings = field(default_factory=SSAOSettings)
     gtao: GTAOSettings = field(default_factory=GTAOSettings)
+    # Export folders the report expects under --exports: each one missing is a row "not available".
+    expected_exports: list[str] = field(default_factory=lambda: list(EXPECTED_EXPORTS))
     # AO radii (fractions of the scene diagonal) at which SSAO, GTAO and the U-Nets are also evaluated,
     # all given the same radius, ground truth at every one from one trace; None: the dataset's
     # labels.radii_rel, else its max_distance_rel. The main table stays at the labels' max distance.
@@ -315,14 +317,17 @@ def ground_truth(
 # --------------------------------------------------------------------------- methods
 
 
-def discover_exports(exports: Path | None, scenes: list[str]) -> list[Method]:
-    """Model methods from export folders (kind mlp / unet); absent or broken ones are unavailable."""
+def discover_exports(
+    exports: Path | None, scenes: list[str], expected: list[str] | tuple[str, ...] = EXPECTED_EXPORTS
+) -> list[Method]:
+    """Model methods from export folders (kind mlp / unet); broken ones and absent ``expected`` ones
+    are unavailable."""
     methods: list[Method] = []
     found: dict[str, Path] = {}
     if exports is not None and Path(exports).is_dir():
         for m in sorted(Path(exports).glob("*/manifest.json")):
             found[m.parent.name] = m.parent
-    for name in EXPECTED_EXPORTS:
+    for name in expected:
         if name not in found:
             family = "unet" if name == "unet" else "mlp"
             where = Path(exports) / name if exports is not None else name
@@ -752,7 +757,7 @@ def evaluate(
     radii_rel = report_radii_rel(settings, label_settings)
     methods = baseline_methods(settings)
     if exports is not None:
-        methods += discover_exports(Path(exports), ds.scenes)
+        methods += discover_exports(Path(exports), ds.scenes, settings.expected_exports)
     shipped_info = None
     if shipped is not None:
         shipped_methods, shipped_info = discover_shipped(Path(shipped), ds.scenes, shipped_picks)
