@@ -26,7 +26,7 @@ BUILD := build/demo
 DATASET := $(BUILD)/dataset/manifest.json
 # The demo keeps every stage and one model of each kind small enough to run in minutes on 2 cores:
 # the smallest baked MLP, the paper's U-Net for a fixed number of epochs, and a field for three scenes
-# (an object, a room, a validation mesh). Larger sizes: `neuralao train ... --size 64x32` (README).
+# (an object, a room, a validation mesh). Larger sizes: `neuralao train ... --size 64x32`.
 MLP_SIZES := 16x8
 # The baked MLP is one network per mesh (as in the paper): the demo trains it for this scene.
 MLP_SCENE := bunny
@@ -42,7 +42,7 @@ FIELD_CKPTS := $(foreach sc,$(FIELD_SCENES),$(foreach s,$(FIELD_SIZES),$(BUILD)/
 EXPORTS := $(foreach s,$(MLP_SIZES),$(BUILD)/export/mlp-$(s)/manifest.json) $(BUILD)/export/unet/manifest.json \
 	$(patsubst $(BUILD)/models/%.pt,$(BUILD)/export/%/manifest.json,$(FIELD_CKPTS))
 # The demo's models train for minutes on 2 cores, and none reaches the production target of masked
-# SSIM 0.95 (see the README), so the demo selects at 0.75 to show the smallest-first choice at work.
+# SSIM 0.95 (docs/results.md), so the demo selects at 0.75 to show the smallest-first choice at work.
 DEMO_TARGET := 0.75
 PARITY := $(BUILD)/parity.json
 REPORT := $(BUILD)/report/report.md
