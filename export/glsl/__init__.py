@@ -23,6 +23,7 @@ Layout (each module imports only those above it):
     graph.py        OnnxGraph / read_graph, the OpTable base (dispatch), glsl_float and small helpers
     dialects.py     Dialect, GLSL330, ES300, DIALECTS, FRAGMENT_FILES
     activations.py  Act (epilogue activations, both targets)
+    views.py        image tensors through Reshape / Transpose as index digits (atoms), no shader text
     vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
     image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
     validate.py     glslangValidator
@@ -62,6 +63,7 @@ from .image import (
     ImageOps,
     Pass,
     Texture,
+    View,
     generate_compute,
 )
 from .validate import glslang_available, validate_glsl
@@ -120,6 +122,7 @@ __all__ = [
     "UniformBlock",
     "VecValue",
     "VectorOps",
+    "View",
     "generate_compute",
     "generate_mlp_fragment",
     "generate_vector_fragment",
