@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.out:
         write_json(args.out, summary)
+        log.info("figures: %s", args.out)
     if failed:
         raise NeuralaoError(f"parity above tolerance for: {', '.join(failed)}")
     return 0

@@ -72,4 +72,5 @@ def run(args: argparse.Namespace) -> int:
         )
     if not selection["scenes"]:
         log.info("nothing measured: nothing to select")
+    log.info("selection: %s", out)
     return 0

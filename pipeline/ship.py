@@ -299,4 +299,6 @@ def run(args: argparse.Namespace) -> int:
         log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
     for name, entry in index.get("baselines", {}).items():
         log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
+    log.info("installed %s under %s (index: %s)", ", ".join(index["models"]) or "nothing", settings.out,
+             Path(settings.out) / "index.json")  # fmt: skip
     return 0
