@@ -21,6 +21,11 @@ arrive. Engines:
   (``max_restarts=-1``, ``max_task_retries=-1``); a task raising :class:`NeuralaoError` fails the
   run with that message.
 
+Big data that many tasks of one context read but the context does not own (the level's baked vertex
+values, read by every resampling task) travels as :class:`Shared` inside a task's ``args`` tuple: Ray
+puts it in the object store once and each actor fetches it once (the latest few are cached by key);
+locally the value is passed as is.
+
 A :class:`ResultStore` (optional) keeps finished results on disk, so a driver that is killed and
 rerun skips every task it already has (the dataset stage has its own, the shards themselves).
 
@@ -79,6 +84,28 @@ class Task:
     fn: Callable[[Any, Any], Any]  # module-level function: (state, args) -> picklable result
     args: Any  # picklable, small (points, cameras); big shared data belongs in the context
     key: str | None = None  # result key in a ResultStore (None: never stored)
+
+
+@dataclass(frozen=True)
+class Shared:
+    """A top-level item of a task's ``args`` tuple that many tasks read (module doc): the function
+    receives ``value``; ``key`` is a content hash of it (equal keys must mean equal values)."""
+
+    key: str
+    value: Any
+
+
+@dataclass(frozen=True)
+class _SharedRef:
+    key: str
+    boxed: list  # [ObjectRef]: boxed so Ray does not fetch it for every task
+
+
+def _unshare(args: Any) -> Any:
+    """``args`` with every top-level :class:`Shared` replaced by its value (the local engine)."""
+    if isinstance(args, tuple):
+        return tuple(a.value if isinstance(a, Shared) else a for a in args)
+    return args
 
 
 def content_key(*parts: Any) -> str:
@@ -174,20 +201,27 @@ class Engine:
 
 
 class LocalEngine(Engine):
-    """Every task in this process, in input order (the state of the latest context is kept)."""
+    """Every task in this process, in input order (the state of the latest context is kept).
+
+    states : context key -> a state this process already holds (the level baker's own labeller), used
+             for tasks of that context instead of building one; never closed here."""
 
     name = "local"
 
-    def __init__(self) -> None:
+    def __init__(self, states: dict[str, Any] | None = None) -> None:
         super().__init__()
         self._cache = _StateCache(1)
+        self._states = dict(states or {})
 
     def _run(self, pending):
         for index, task in pending:
             yield from self._drain_stored()
             ctx = task.context
-            state = self._cache.get(ctx.key, lambda ctx=ctx: ctx.build(ctx.payload))
-            yield index, task, task.fn(state, task.args)
+            if ctx.key in self._states:
+                state = self._states[ctx.key]
+            else:
+                state = self._cache.get(ctx.key, lambda ctx=ctx: ctx.build(ctx.payload))
+            yield index, task, task.fn(state, _unshare(task.args))
         yield from self._drain_stored()
 
     def close(self) -> None:
@@ -201,14 +235,18 @@ class _Worker:
     def __init__(self, env: dict[str, str]):
         os.environ.update(env)  # before anything imports PyOpenGL
         self._cache = _StateCache(STATES_PER_WORKER)
+        self._shared = _StateCache(STATES_PER_WORKER)  # Shared values by key
 
     def run(self, key: str, boxed_payload: list, build, fn, args):
         import ray
 
         # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
-        # task of a context on this actor pulls it from the object store.
+        # task of a context on this actor pulls it from the object store. Shared args likewise.
         try:
             state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
+            if isinstance(args, tuple):
+                args = tuple(self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
+                             if isinstance(a, _SharedRef) else a for a in args)  # fmt: skip
             return fn(state, args)
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
@@ -259,12 +297,22 @@ class RayEngine(Engine):
         """(process id, node id) of every actor (tests check placement and kill one mid-run)."""
         return self._ray.get([a.where.remote() for a in self._actors])
 
+    def _put(self, key: str, value: Any, live: set[str]):
+        """The object-store ref of ``value`` (put once per key; refs no task in flight needs are dropped)."""
+        if key not in self._payloads:
+            for old in [k for k in self._payloads if k not in live]:
+                del self._payloads[old]  # no task in flight needs it any more
+            self._payloads[key] = self._ray.put(value)
+        return self._payloads[key]
+
     def _payload_ref(self, ctx: Context, live: set[str]):
-        if ctx.key not in self._payloads:
-            for key in [k for k in self._payloads if k not in live]:
-                del self._payloads[key]  # no task in flight needs it any more
-            self._payloads[ctx.key] = self._ray.put(ctx.payload)
-        return self._payloads[ctx.key]
+        return self._put(ctx.key, ctx.payload, live)
+
+    def _remote_args(self, args: Any, live: set[str]) -> Any:
+        if not isinstance(args, tuple):
+            return args
+        return tuple(_SharedRef(a.key, [self._put("shared/" + a.key, a.value, live)])
+                     if isinstance(a, Shared) else a for a in args)  # fmt: skip
 
     def _run(self, pending):
         ray = self._ray
@@ -282,15 +330,17 @@ class RayEngine(Engine):
                         break
                     index, task = nxt
                     ctx = task.context
-                    live = {t.context.key for _, t, _ in inflight.values()}
+                    # Refs still needed: every context and Shared value of the tasks in flight and this one.
+                    live = {k for _, t, _ in inflight.values() for k in _ref_keys(t)} | set(_ref_keys(task))
                     ref = self._payload_ref(ctx, live)
+                    args = self._remote_args(task.args, live)
                     # Prefer an actor that already holds this context's state, then the least loaded.
                     a = min(
                         range(len(load)),
                         key=lambda i: (load[i] >= TASKS_PER_WORKER, ctx.key not in holds[i], load[i]),
                     )
                     holds[a].add(ctx.key)
-                    out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, task.args)
+                    out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, args)
                     inflight[out] = (index, task, a)
                     load[a] += 1
                 yield from self._drain_stored()
@@ -317,6 +367,12 @@ class RayEngine(Engine):
             self._ray.kill(a)
         self._actors = []
         self._payloads.clear()
+
+
+def _ref_keys(task: Task) -> list[str]:
+    """Object-store keys a task needs: its context's and its Shared values'."""
+    shared = [a for a in task.args if isinstance(a, Shared)] if isinstance(task.args, tuple) else []
+    return [task.context.key, *("shared/" + a.key for a in shared)]
 
 
 def _get(ray, ref):

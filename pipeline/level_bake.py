@@ -38,6 +38,7 @@ import resource
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 import numpy as np
@@ -84,8 +85,13 @@ class TraceSettings:
     backface_threshold: float | None = 0.25
     # Samples per resumable trace block (one npz under OUT/stages/trace/ each).
     block_samples: int = 262144
-    # Sparse solver of the least-squares systems ("direct": SuperLU, "cg": conjugate gradients).
-    solver: Literal["direct", "cg"] = "direct"
+    # Sparse solver of the least-squares systems: "components" (exact: the system is block diagonal over
+    # connected components; each block a task, SuperLU below component_vertices and multigrid CG above);
+    # or one solve of the whole system: "direct" (SuperLU), "cg" (Jacobi CG), "amg" (multigrid CG).
+    solver: Literal["components", "direct", "cg", "amg"] = "components"
+    # "components": blocks of at least this many vertices use multigrid CG (SuperLU's fill-in grows
+    # faster than linearly on a terrain grid), and smaller components are packed into tasks of this size.
+    component_vertices: int = 100_000
 
 
 @dataclass
@@ -153,13 +159,16 @@ class LevelBakeSettings:
     seed: int = 0
     # Tracing threads (embreex releases the GIL).
     workers: int = 2
+    # Rays per resampling task (LOD, grass, shrubs) on an engine: scheduling only, never the result.
+    task_rays: int = 1 << 20
     # File name of the baked level inside --out (.glb or .gltf).
     output: str = "level_baked.glb"
 
 
 def check_settings(s: LevelBakeSettings) -> None:
     t = s.trace
-    for name, v in (("trace.rays", t.rays), ("trace.block_samples", t.block_samples), ("workers", s.workers),
+    for name, v in (("trace.rays", t.rays), ("trace.block_samples", t.block_samples), ("workers", s.workers), ("task_rays", s.task_rays),
+                    ("trace.component_vertices", t.component_vertices),
                     ("grass.rays", s.grass.rays), ("lod.rays", s.lod.rays), ("decorators.local_rays", s.decorators.local_rays),
                     ("decorators.samples_per_instance", s.decorators.samples_per_instance),
                     ("decorators.holdout_samples", s.decorators.holdout_samples), ("foliage.max_hits", s.foliage.max_hits)):  # fmt: skip
@@ -212,6 +221,7 @@ class BakeLog:
         remove_stale_temporaries(out)
 
     def timed(self, name: str, description: str, fn, **counts):
+        _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
         result = fn()
         self._record(name, description, t0, c0, False, counts)
@@ -220,6 +230,7 @@ class BakeLog:
     def stored(self, name: str, description: str, fn, **counts) -> dict[str, np.ndarray]:
         """``fn() -> dict of arrays``, stored as stages/NAME.npz; reused when its key matches."""
         path = self.dir / f"{name}.npz"
+        _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
         if path.is_file():
             data = read_npz(path)
@@ -229,16 +240,50 @@ class BakeLog:
         data = fn()
         write_npz(path, _key=np.array(self.key), **data)
         self._record(name, description, t0, c0, False, counts)
+        import shutil
+
+        shutil.rmtree(self.dir / f"{name}.parts", ignore_errors=True)  # its task results (parts)
         return data
+
+    def parts(self, name: str):
+        """The :class:`pipeline.engine.ResultStore` of stage ``name``'s task results: each is written as
+        it arrives, so a killed bake's rerun skips them; removed once the stage's own file is written."""
+        from .engine import ResultStore
+
+        return ResultStore(self.dir / f"{name}.parts")
 
     def _record(self, name, description, t0, c0, reused, counts) -> None:
         self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
                             "cpu_seconds": _cpu_seconds() - c0, "reused": reused, **counts})  # fmt: skip
+        if (peak := _peak_rss()) is not None:
+            self.stages[-1]["peak_rss_bytes"] = peak
 
     def note(self, name: str, **counts) -> None:
         for st in self.stages:
             if st["stage"] == name:
                 st.update(counts)
+
+
+def _peak_rss() -> int | None:
+    """This process's peak resident memory (bytes) since the last :func:`_reset_peak_rss` (Linux's
+    VmHWM); None where /proc does not tell it."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak_rss() -> None:
+    """Start a new peak (Linux: writing 5 to clear_refs resets VmHWM), so each stage reports its own."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        pass
 
 
 def _cpu_seconds() -> float:
@@ -421,12 +466,26 @@ def _trace_block(state, args) -> dict[str, np.ndarray]:
     return {"ao": ao, "valid": valid}
 
 
+def opaque_context(key: str, labeller: LevelLabeller, foliage, engine=None):
+    """The engine context of the opaque labeller and the foliage (trace, resampling): workers rebuild
+    both from the object store; with ``engine`` None, a context the driver's own state stands for."""
+    from .engine import Context, slim_scene
+
+    if engine is None:
+        return Context(f"level-trace/{key}/here", _level_tracer, None)
+    settings = (
+        labeller.settings if engine.threads is None else replace(labeller.settings, workers=engine.threads)
+    )
+    return Context(f"level-trace/{key}/{settings.workers}", _level_tracer,
+                   (slim_scene(labeller.scene), settings, foliage))  # fmt: skip
+
+
 def _trace_samples_on(engine, log_: BakeLog, labeller: LevelLabeller, foliage, samples: SurfaceSamples,
                       s: LevelBakeSettings, progress: bool) -> dict[str, np.ndarray]:  # fmt: skip
     """:func:`trace_samples` with the missing blocks as engine tasks (same block files, same bytes)."""
     from tqdm import tqdm
 
-    from .engine import Context, Task, slim_scene
+    from .engine import Task
 
     block, n = s.trace.block_samples, len(samples)
     folder = log_.dir / "trace"
@@ -443,11 +502,7 @@ def _trace_samples_on(engine, log_: BakeLog, labeller: LevelLabeller, foliage, s
             ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
         else:
             pending.append((lo, hi, path))
-    settings = (
-        labeller.settings if engine.threads is None else replace(labeller.settings, workers=engine.threads)
-    )
-    ctx = Context(f"level-trace/{log_.key}/{settings.workers}", _level_tracer,
-                  (slim_scene(labeller.scene), settings, foliage))  # fmt: skip
+    ctx = opaque_context(log_.key, labeller, foliage, engine)
     tasks = (Task(ctx, _trace_block, (samples.points[lo:hi], samples.normals[lo:hi],
                                       np.arange(lo, hi, dtype=np.int64), halves(s))) for lo, hi, _ in pending)  # fmt: skip
     with tqdm(total=len(pending), desc="trace blocks", disable=not progress, leave=False) as bar:
@@ -485,83 +540,143 @@ def transform_samples(samples: SurfaceSamples, m: np.ndarray) -> tuple[np.ndarra
     return p, n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
+_DECORATOR_ERRORS = ("local_x_global", "global_only", "in_place", "local_only", "local_x_global_vs_in_place")
+
+
+def gold_scene(g: LevelGeometry) -> Scene:
+    """The decorators' gold standard scene: the opaque level plus every tree instance, opaque."""
+    tv, tf, _ = flatten(g.level, g.trees)
+    return scene_from_arrays(np.concatenate([g.opaque.vertices, tv]), np.concatenate([g.opaque.faces, tf + len(g.opaque.vertices)]),
+                             "gold", drop_degenerate=False)  # fmt: skip
+
+
+@dataclass
+class _TreeModel:
+    """What every in-place task of one tree model reads (a :class:`pipeline.engine.Shared` value)."""
+
+    model: Scene  # the model's mesh (object space)
+    train: SurfaceSamples  # fit samples (object space)
+    hold: SurfaceSamples  # held-out samples (object space)
+    local: np.ndarray  # (v,) float32 local AO per model vertex (blended)
+    l_train: np.ndarray  # (train,) float64 local AO at the fit samples
+
+
+def _tree_model(g: LevelGeometry, mi: int, s: LevelBakeSettings) -> _TreeModel:
+    """Local AO of tree model ``mi`` baked in isolation (both distances, least squares, blended)."""
+    d = s.decorators
+    mesh = g.level.meshes[mi]
+    model = scene_from_arrays(mesh.vertices, mesh.faces, mesh.name, drop_degenerate=False)
+    loc_lab = LevelLabeller(
+        model,
+        replace(
+            label_settings(s, g.opaque.diagonal, d.local_rays),
+            max_distance=s.trace.max_distance or g.opaque.diagonal,
+        ),
+    )
+    loc_samples = surface_samples(model, d.local_samples_per_vertex * len(model.vertices), 32, s.seed)
+    a, v = loc_lab.obscurance(loc_samples.points, loc_samples.normals, halves(s))
+    local_two = fit_least_squares(model, loc_samples, a, v, s.trace.alpha)
+    local = blend(local_two[:, 0], local_two[:, 1], s.blend)
+    train = surface_samples(model, d.samples_per_instance, 64, s.seed + 1)
+    hold = surface_samples(model, d.holdout_samples, 64, s.seed + 2)
+    from .engine import slim_scene
+
+    return _TreeModel(
+        slim_scene(model), train, hold, local, interpolate(model, local, train.face, train.bary)
+    )
+
+
+def _tree_instance(state, args) -> dict[str, np.ndarray]:
+    """Engine task: one tree instance traced in place (gold labeller + foliage without trees) and its
+    equation-3 fits and errors. args: (_TreeModel (Shared), 4x4 transform, instance number, settings)."""
+    gold_labeller, gold_foliage = state
+    tm, m, uid, s = args
+    model, train, hold, local, l_train = tm.model, tm.train, tm.hold, tm.local, tm.l_train
+    pt, nt = transform_samples(train, m)
+    ph, nh = transform_samples(hold, m)
+    ids = np.arange(len(pt) + len(ph), dtype=np.int64) + uid * (1 << 24)
+    ao, valid = gold_labeller.obscurance(np.r_[pt, ph], np.r_[nt, nh], halves(s), gold_foliage, ids=ids)
+    f = blend(ao[:, 0], ao[:, 1], s.blend).astype(np.float64)
+    ft, vt, fh, vh = f[: len(pt)], valid[: len(pt)], f[len(pt) :], valid[len(pt) :]
+    origin = m[:3, 3]
+    y = fit_global(pt[vt], origin, l_train[vt], ft[vt], train.weights[vt])
+    y1 = fit_global(pt[vt], origin, np.ones(vt.sum()), ft[vt], train.weights[vt])
+    # In place: the instance's own least-squares vertex bake (what per-vertex storage buys).
+    inplace = fit_least_squares(model, train, ft, vt, s.trace.alpha)
+    world_v = model.vertices @ m[:3, :3].T + m[:3, 3]
+    # What the shader shows: the per-vertex product, interpolated by the rasteriser.
+    prod = np.clip(local * (linear_basis(world_v, origin) @ y), 0, 1)
+    w = hold.weights[vh] / hold.weights[vh].sum()
+    preds = {"local_x_global": interpolate(model, prod, hold.face, hold.bary),
+             "global_only": np.clip(linear_basis(ph, origin) @ y1, 0, 1),
+             "in_place": interpolate(model, inplace, hold.face, hold.bary),
+             "local_only": interpolate(model, local, hold.face, hold.bary)}  # fmt: skip
+    err = {k: float(np.sqrt(np.sum(w * (p[vh] - fh[vh]) ** 2))) for k, p in preds.items()}
+    err["local_x_global_vs_in_place"] = float(
+        np.sqrt(np.sum(w * (preds["local_x_global"][vh] - preds["in_place"][vh]) ** 2))
+    )
+    return {"y": y, "y1": y1, "errors": np.array([err[k] for k in _DECORATOR_ERRORS])}
+
+
 def bake_decorators(
-    g: LevelGeometry, s: LevelBakeSettings, foliage_settings: FoliageSettings
-) -> dict[str, np.ndarray]:
-    """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors."""
+    g: LevelGeometry, s: LevelBakeSettings, foliage_settings: FoliageSettings, engine=None,
+    store=None, key: str = "",
+) -> dict[str, np.ndarray]:  # fmt: skip
+    """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
+
+    The local AO of each model is baked here; every instance's in-place trace and fits is a task of
+    ``engine`` (None: this process, with the gold labeller built here), results kept in ``store``
+    (:class:`pipeline.engine.ResultStore`) as they arrive. Instances are numbered (and traced with
+    ray ids) in a fixed order, so the result is the same bytes wherever the tasks run."""
+    from .engine import Context, LocalEngine, Shared, Task, content_key, slim_scene
+
     if not g.trees:
         return {"models": np.zeros(0, np.int64)}
-    level = g.level
-    # The gold standard sees the trees as opaque geometry (every instance baked in place).
-    tv, tf, _ = flatten(level, g.trees)
-    gold = scene_from_arrays(np.concatenate([g.opaque.vertices, tv]), np.concatenate([g.opaque.faces, tf + len(g.opaque.vertices)]),
-                             "gold", drop_degenerate=False)  # fmt: skip
-    gold_labeller = LevelLabeller(gold, label_settings(s, g.opaque.diagonal))
-    gold_foliage = (
-        build_foliage(g, gold_labeller, foliage_settings, include_trees=False)
-        if foliage_settings.enabled
-        else None
-    )
-    d = s.decorators
-    out: dict[str, Any] = {}
+    settings = label_settings(s, g.opaque.diagonal)
+    gold = gold_scene(g)
+    if engine is not None and engine.threads is not None:
+        settings = replace(settings, workers=engine.threads)
+    ctx_key = f"level-gold/{key or content_key(gold.vertices, gold.faces)}/{settings.workers}"
+    if engine is None:
+        # The gold standard sees the trees as opaque geometry (every instance baked in place).
+        gold_labeller = LevelLabeller(gold, settings)
+        gold_foliage = (build_foliage(g, gold_labeller, foliage_settings, include_trees=False)
+                        if foliage_settings.enabled else None)  # fmt: skip
+        runner = LocalEngine(states={ctx_key: (gold_labeller, gold_foliage)})
+        payload = None
+    else:
+        runner = engine
+        # Foliage lives in a labeller's local frame: the gold labeller's (its scene's centre and
+        # diagonal), without building its BVH here.
+        frame = SimpleNamespace(_center=np.asarray(gold.center, np.float64), _scale=float(gold.diagonal))
+        gold_foliage = (build_foliage(g, frame, foliage_settings, include_trees=False)
+                        if foliage_settings.enabled else None)  # fmt: skip
+        payload = (slim_scene(gold), settings, gold_foliage)
+    ctx = Context(ctx_key, _level_tracer, payload)
     models = sorted({n.mesh for n in g.trees})
-    coeffs, coeffs_global, err = [], [], {"local_x_global": [], "global_only": [], "in_place": [], "local_only": [],
-                                          "local_x_global_vs_in_place": []}  # fmt: skip
-    uid = 0
+    out: dict[str, Any] = {}
+    jobs = []  # (shared model, transform, uid) in the order of the result rows
     for mi in models:
-        mesh = level.meshes[mi]
-        model = scene_from_arrays(mesh.vertices, mesh.faces, mesh.name, drop_degenerate=False)
-        loc_lab = LevelLabeller(
-            model,
-            replace(
-                label_settings(s, g.opaque.diagonal, d.local_rays),
-                max_distance=s.trace.max_distance or g.opaque.diagonal,
-            ),
-        )
-        loc_samples = surface_samples(model, d.local_samples_per_vertex * len(model.vertices), 32, s.seed)
-        a, v = loc_lab.obscurance(loc_samples.points, loc_samples.normals, halves(s))
-        local_two = fit_least_squares(model, loc_samples, a, v, s.trace.alpha)
-        local = blend(local_two[:, 0], local_two[:, 1], s.blend)
-        out[f"local_{mi}"] = local
-        train = surface_samples(model, d.samples_per_instance, 64, s.seed + 1)
-        hold = surface_samples(model, d.holdout_samples, 64, s.seed + 2)
-        l_train = interpolate(model, local, train.face, train.bary)
+        tm = _tree_model(g, mi, s)
+        out[f"local_{mi}"] = tm.local
+        shared = Shared(content_key(key, "tree-model", mi), tm)
         for node in (n for n in g.trees if n.mesh == mi):
             for m in node.transforms:
-                pt, nt = transform_samples(train, m)
-                ph, nh = transform_samples(hold, m)
-                ids = np.arange(len(pt) + len(ph), dtype=np.int64) + uid * (1 << 24)
-                uid += 1
-                ao, valid = gold_labeller.obscurance(
-                    np.r_[pt, ph], np.r_[nt, nh], halves(s), gold_foliage, ids=ids
-                )
-                f = blend(ao[:, 0], ao[:, 1], s.blend).astype(np.float64)
-                ft, vt, fh, vh = f[: len(pt)], valid[: len(pt)], f[len(pt) :], valid[len(pt) :]
-                origin = m[:3, 3]
-                y = fit_global(pt[vt], origin, l_train[vt], ft[vt], train.weights[vt])
-                y1 = fit_global(pt[vt], origin, np.ones(vt.sum()), ft[vt], train.weights[vt])
-                coeffs.append(y)
-                coeffs_global.append(y1)
-                # In place: the instance's own least-squares vertex bake (what per-vertex storage buys).
-                inplace = fit_least_squares(model, train, ft, vt, s.trace.alpha)
-                world_v = model.vertices @ m[:3, :3].T + m[:3, 3]
-                # What the shader shows: the per-vertex product, interpolated by the rasteriser.
-                prod = np.clip(local * (linear_basis(world_v, origin) @ y), 0, 1)
-                w = hold.weights[vh] / hold.weights[vh].sum()
-                preds = {"local_x_global": interpolate(model, prod, hold.face, hold.bary),
-                         "global_only": np.clip(linear_basis(ph, origin) @ y1, 0, 1),
-                         "in_place": interpolate(model, inplace, hold.face, hold.bary),
-                         "local_only": interpolate(model, local, hold.face, hold.bary)}  # fmt: skip
-                for k, p in preds.items():
-                    err[k].append(float(np.sqrt(np.sum(w * (p[vh] - fh[vh]) ** 2))))
-                err["local_x_global_vs_in_place"].append(
-                    float(np.sqrt(np.sum(w * (preds["local_x_global"][vh] - preds["in_place"][vh]) ** 2)))
-                )
+                jobs.append((shared, np.asarray(m, np.float64), len(jobs)))
+
+    def tasks():
+        for shared, m, uid in jobs:
+            yield Task(ctx, _tree_instance, (shared, m, uid, s), content_key(ctx_key, shared.key, m, uid))
+
+    rows: list[dict | None] = [None] * len(jobs)
+    for i, r in runner.map(tasks(), store):
+        rows[i] = r
     out["models"] = np.array(models, np.int64)
-    out["coefficients"] = np.array(coeffs)
-    out["coefficients_global_only"] = np.array(coeffs_global)
-    for k, v in err.items():
-        out[f"rmse_{k}"] = np.array(v)
+    out["coefficients"] = np.array([r["y"] for r in rows])
+    out["coefficients_global_only"] = np.array([r["y1"] for r in rows])
+    errors = np.array([r["errors"] for r in rows]).reshape(len(rows), len(_DECORATOR_ERRORS))
+    for j, k in enumerate(_DECORATOR_ERRORS):
+        out[f"rmse_{k}"] = errors[:, j]
     return out
 
 
@@ -582,24 +697,28 @@ def median_edge(scene: Scene) -> float:
     return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
 
 
-def bake_lod(g: LevelGeometry, opaque_labeller: LevelLabeller, high_ao: np.ndarray, samples: SurfaceSamples,
+def bake_lod(g: LevelGeometry, resample: Resampler | LevelLabeller, high_ao: np.ndarray, samples: SurfaceSamples,
              traced: np.ndarray, traced_valid: np.ndarray, s: LevelBakeSettings) -> dict[str, np.ndarray]:  # fmt: skip
     """LOD1 of the receivers and its AO by (a) resampling at its vertices, (b) least squares over
-    resampled surface samples; both against the gold standard at held-out LOD samples."""
+    resampled surface samples; both against the gold standard at held-out LOD samples.
+
+    ``resample``: a :class:`Resampler` (its blocks are engine tasks), or the opaque labeller (here)."""
     from scipy.spatial import cKDTree
 
+    if isinstance(resample, LevelLabeller):
+        resample = Resampler.here(resample)
     t0 = time.perf_counter()
     lod = simplify(g.receivers, s.lod.target_reduction)
     t1 = time.perf_counter()
     radius = s.lod.radius or 1.5 * median_edge(lod)
-    values = np.r_[high_ao, np.full(len(g.opaque.vertices) - len(high_ao), np.nan)]
-    at_vertices, _ = resample_in_spheres(opaque_labeller, values, lod.vertices, radius, s.lod.rays)
+    values = resample.share(np.r_[high_ao, np.full(len(g.opaque.vertices) - len(high_ao), np.nan)])
+    at_vertices = resample(values, lod.vertices, radius, s.lod.rays, "lod-vertices")
     lod_samples = surface_samples(lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3)
-    at_samples, _ = resample_in_spheres(opaque_labeller, values, lod_samples.points, radius, s.lod.rays)
+    at_samples = resample(values, lod_samples.points, radius, s.lod.rays, "lod-samples")
     ok = np.isfinite(at_samples)
     t2 = time.perf_counter()
-    lsq = fit_least_squares(
-        lod, lod_samples, np.where(ok, at_samples, 0.0), ok, s.trace.alpha, s.trace.solver
+    lsq = fit_level(
+        lod, lod_samples, np.where(ok, at_samples, 0.0), ok, s.trace, resample.engine, resample.store, "lod"
     )
     fill = float(np.nanmean(at_vertices)) if np.isfinite(at_vertices).any() else 1.0
     vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
@@ -655,7 +774,8 @@ def bake_level(
 ) -> dict:
     """Bake the level at ``path`` into the folder ``out``; returns the bake log (also OUT/bake_log.json).
 
-    ``engine`` (:mod:`pipeline.engine`): runs the trace stage's blocks (None: threads here)."""
+    ``engine`` (:mod:`pipeline.engine`): runs the trace stage's blocks, the trees' in-place traces and
+    fits, and the resampling of grass, shrubs and the LOD as tasks (None: here, with threads)."""
     from .level_output import write_outputs
 
     check_settings(settings)
@@ -687,16 +807,25 @@ def bake_level(
                          lambda: trace_samples(blog, labeller, foliage, samples, s, progress, engine),
                          samples=len(samples), rays=len(samples) * s.trace.rays)  # fmt: skip
     deco = blog.stored("decorators", "Trees: local AO, in-place gold standard, eq. 3 fits",
-                       lambda: bake_decorators(g, s, s.foliage), instances=sum(len(n.transforms) for n in g.trees))  # fmt: skip
-    solved = blog.stored("solve", "Least squares solve (both distances)", lambda: _solve(g, samples, traced, s),
+                       lambda: bake_decorators(g, s, s.foliage, engine, blog.parts("decorators"), key),
+                       instances=sum(len(n.transforms) for n in g.trees))  # fmt: skip
+    solved = blog.stored("solve", "Least squares solve (both distances)",
+                         lambda: _solve(g, samples, traced, s, engine, blog.parts("solve")),
                          vertices=len(g.receivers.vertices))  # fmt: skip
     final = blend(solved["short"], solved["long"], s.blend)
+    ctx = opaque_context(key, labeller, foliage, engine)
+
+    def resampler(stage: str) -> Resampler:
+        if engine is None:
+            return Resampler.here(labeller, foliage, ctx.key, blog.parts(stage), s.task_rays)
+        return Resampler(engine, ctx, blog.parts(stage), s.task_rays)
+
     small = blog.stored("small_decorators", "Resample grass clumps and shrubs",
-                        lambda: _small_decorators(g, labeller, final, s))  # fmt: skip
+                        lambda: _small_decorators(g, resampler("small_decorators"), final, s))  # fmt: skip
     lod = None
     if s.lod.enabled:
         lod = blog.stored("lod", "LOD: simplify, resample, least squares solve",
-                          lambda: bake_lod(g, labeller, final, samples, traced["ao"], traced["valid"], s))  # fmt: skip
+                          lambda: bake_lod(g, resampler("lod"), final, samples, traced["ao"], traced["valid"], s))  # fmt: skip
         blog.note("lod", lod_vertices=len(lod["vertices"]), lod_faces=len(lod["faces"]),
                   resample_points=int(lod["resample_points"]),
                   **{k: float(lod[k]) for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")})  # fmt: skip
@@ -707,7 +836,11 @@ def bake_level(
         "Write glTF, shader, log",
         lambda: write_outputs(out / s.output, out, g, s, solved, final, deco, small, lod),
     )
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    # ru_maxrss is the whole run's peak (the stages' own peaks are in their rows: VmHWM is reset per stage).
+    peak = max(
+        [resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024]
+        + [st.get("peak_rss_bytes", 0) for st in blog.stages]
+    )
     info = {
         "level": str(path), "key": key, "settings": settings_to_dict(s), "stages": blog.stages,
         "seconds_total": time.perf_counter() - t_start, "cpu_seconds_total": _cpu_seconds() - c_start, "peak_rss_bytes": int(peak),
@@ -722,25 +855,146 @@ def bake_level(
 
 
 def _solve(
-    g: LevelGeometry, samples: SurfaceSamples, traced: dict, s: LevelBakeSettings
+    g: LevelGeometry, samples: SurfaceSamples, traced: dict, s: LevelBakeSettings, engine=None, store=None
 ) -> dict[str, np.ndarray]:
-    v = fit_least_squares(g.receivers, samples, traced["ao"], traced["valid"], s.trace.alpha, s.trace.solver)
+    v = fit_level(g.receivers, samples, traced["ao"], traced["valid"], s.trace, engine, store, "receivers")
     return {"short": v[:, 0], "long": v[:, 1]}
 
 
-def _small_decorators(
-    g: LevelGeometry, labeller: LevelLabeller, final: np.ndarray, s: LevelBakeSettings
-) -> dict[str, np.ndarray]:
-    values = np.r_[final, np.full(len(g.opaque.vertices) - len(final), np.nan)]
+def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, t: TraceSettings,
+              engine=None, store=None, tag: str = "") -> np.ndarray:  # fmt: skip
+    """:func:`pipeline.bake.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
+
+    "components": the normal equations are assembled here, split into their connected components (the
+    matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
+    and each block, or a pack of small ones, is a task of ``engine`` (None: this process), its result
+    kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32."""
+    from .bake import normal_equations
+    from .engine import Context, LocalEngine, Task, content_key
+
+    if t.solver != "components":
+        return fit_least_squares(scene, samples, values, valid, t.alpha, t.solver)
+    a, rhs = normal_equations(scene, samples, values, valid, t.alpha)
+    blocks = component_blocks(a, t.component_vertices)
+    a = a.tocsr()
+    ctx = Context("level-solve", _no_state, None)
+
+    def tasks():
+        for idx, method in blocks:
+            sub = a[idx][:, idx].tocsc()
+            yield Task(
+                ctx,
+                _solve_block,
+                (sub, rhs[idx], method),
+                content_key("solve", tag, idx, method, sub.data, rhs[idx]),
+            )
+
+    out = np.empty(rhs.shape)
+    for i, r in (engine or LocalEngine()).map(tasks(), store):
+        out[blocks[i][0]] = r["v"]
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def component_blocks(a, big: int) -> list[tuple[np.ndarray, str]]:
+    """The connected components of the sparse symmetric ``a`` as solve tasks: (vertex indices (ascending)
+    int64, "amg" | "direct"). A component of at least ``big`` vertices is a task of its own solved by
+    multigrid CG; smaller ones (SuperLU) are packed, largest first, into tasks of about ``big`` vertices."""
+    from scipy.sparse.csgraph import connected_components
+
+    _, label = connected_components(a, directed=False)
+    sizes = np.bincount(label)
+    members = np.split(np.argsort(label, kind="stable"), np.cumsum(sizes)[:-1])
+    blocks, pack, packed = [], [], 0
+    for c in np.argsort(-sizes, kind="stable"):
+        if sizes[c] >= big:
+            blocks.append((members[c], "amg"))
+            continue
+        pack.append(members[c])
+        packed += sizes[c]
+        if packed >= big:
+            blocks.append((np.sort(np.concatenate(pack)), "direct"))
+            pack, packed = [], 0
+    if pack:
+        blocks.append((np.sort(np.concatenate(pack)), "direct"))
+    return blocks
+
+
+def _no_state(payload) -> None:
+    return None
+
+
+def _solve_block(state, args) -> dict[str, np.ndarray]:
+    """Engine task: one block of the normal equations (csc matrix, rhs, "direct" | "amg") -> {"v": solution}."""
+    from scipy.sparse.linalg import splu
+
+    from .bake import _solve_amg
+
+    a, rhs, method = args
+    return {"v": splu(a).solve(rhs) if method == "direct" else _solve_amg(a, rhs)}
+
+
+def _small_decorators(g: LevelGeometry, resample: Resampler, final: np.ndarray, s: LevelBakeSettings
+                      ) -> dict[str, np.ndarray]:  # fmt: skip
+    values = resample.share(np.r_[final, np.full(len(g.opaque.vertices) - len(final), np.nan)])
     out: dict[str, np.ndarray] = {}
     for role, nodes in (("grass", g.grass), ("shrub", g.shrubs)):
         for k, node in enumerate(nodes):
             centres = node.transforms[:, :3, 3]
-            v, _ = resample_in_spheres(labeller, values, centres, s.grass.radius, s.grass.rays)
+            v = resample(values, centres, s.grass.radius, s.grass.rays, f"{role}-{k}")
             missing = ~np.isfinite(v)
             out[f"{role}_{k}"] = np.where(missing, 1.0, v).astype(np.float32)
             out[f"{role}_{k}_missing"] = np.array(int(missing.sum()))
     return out
+
+
+def _resample_task(state, args) -> dict[str, np.ndarray]:
+    """Engine task: :func:`resample_in_spheres` of one block of centres on the opaque labeller."""
+    labeller, _ = state
+    values, centers, radius, rays = args
+    v, total = resample_in_spheres(labeller, values, centers, radius, rays)
+    return {"values": v, "total": total}
+
+
+class Resampler:
+    """:func:`resample_in_spheres` with the centres split into blocks of ``task_rays`` rays,
+    each a task of ``engine`` on the opaque labeller's context (the trace's, so workers reuse its state);
+    a centre's value depends only on its own rays, so the bytes never depend on where blocks run.
+    ``store``: finished blocks kept on disk (a killed bake's rerun skips them)."""
+
+    def __init__(self, engine, context, store=None, task_rays: int = 1 << 20):
+        self.engine, self.context, self.store, self.task_rays = engine, context, store, task_rays
+
+    @classmethod
+    def here(cls, labeller: LevelLabeller, foliage=None, key: str = "here", store=None,
+             task_rays: int = 1 << 20) -> Resampler:  # fmt: skip
+        """Blocks run in this process on ``labeller`` (its threads)."""
+        from .engine import Context, LocalEngine
+
+        ctx = Context(key, _level_tracer, None)
+        return cls(LocalEngine(states={key: (labeller, foliage)}), ctx, store, task_rays)
+
+    @staticmethod
+    def share(values: np.ndarray):
+        """Per-vertex values of the opaque scene as a :class:`pipeline.engine.Shared` (sent once)."""
+        from .engine import Shared, content_key
+
+        return Shared(content_key("opaque-values", values), np.asarray(values, np.float64))
+
+    def __call__(self, values, centers: np.ndarray, radius: float, rays: int, tag: str) -> np.ndarray:
+        """values: :meth:`share` of (n,) vertex values; centers (p, 3) -> (p,) float64 (NaN: no hit)."""
+        from .engine import Task, content_key
+        from .level_trace import sphere_directions
+
+        centers = np.asarray(centers, np.float64).reshape(-1, 3)
+        step = max(1, self.task_rays // len(sphere_directions(rays)))
+        bounds = [(lo, min(lo + step, len(centers))) for lo in range(0, len(centers), step)]
+        tasks = (Task(self.context, _resample_task, (values, centers[lo:hi], radius, rays),
+                      content_key(self.context.key, values.key, tag, lo, hi, radius, rays)) for lo, hi in bounds)  # fmt: skip
+        out = np.full(len(centers), np.nan)
+        for i, r in self.engine.map(tasks, self.store):
+            lo, hi = bounds[i]
+            out[lo:hi] = r["values"]
+        return out
 
 
 # Largest level on which the blend check also fits the blended samples by least squares.
@@ -773,9 +1027,7 @@ def _blend_check(
     vertex_gap = np.nan
     if len(g.receivers.vertices) <= _BLEND_LSQ_CHECK_VERTICES:
         blended_samples = blend(traced["ao"][:, 0], traced["ao"][:, 1], plain)
-        lsq_blended = fit_least_squares(
-            g.receivers, samples, blended_samples, traced["valid"], s.trace.alpha, s.trace.solver
-        )
+        lsq_blended = fit_level(g.receivers, samples, blended_samples, traced["valid"], s.trace)
         vertex_gap = float(np.abs(per_vertex - lsq_blended).max())
     return {
         # over valid samples: the trace stops early on samples the back-face rule rejects
@@ -829,19 +1081,20 @@ def bake_log_markdown(info: dict) -> str:
     c = info["counts"]
     lines = [f"Bake of {Path(info['level']).name}: {c['receiver_vertices']:,} V {c['receiver_faces']:,} F, "
              f"{c['samples']:,} samples, {info['settings']['trace']['rays']} rays", "",
-             "| Description | Time (s) | CPU (s) | reused |", "|---|---:|---:|:---:|"]  # fmt: skip
-    skip = ("stage", "description", "seconds", "cpu_seconds", "reused")
+             "| Description | Time (s) | CPU (s) | peak RSS (MiB) | reused |", "|---|---:|---:|---:|:---:|"]  # fmt: skip
+    skip = ("stage", "description", "seconds", "cpu_seconds", "reused", "peak_rss_bytes")
     for st in info["stages"]:
         extra = {k: v for k, v in st.items() if k not in skip}
         detail = ", ".join(
             f"{k} {v:,}" if isinstance(v, int) else f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}"
             for k, v in extra.items()
         )
+        rss = f"{st['peak_rss_bytes'] / 2**20:,.0f}" if "peak_rss_bytes" in st else ""
         lines.append(
             f"| {st['description']}{' (' + detail + ')' if detail else ''} | {st['seconds']:.2f} | "
-            f"{st['cpu_seconds']:.1f} | {'yes' if st['reused'] else ''} |"
+            f"{st['cpu_seconds']:.1f} | {rss} | {'yes' if st['reused'] else ''} |"
         )
-    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | |", "",
+    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | **{info['peak_rss_bytes'] / 2**20:,.0f}** | |", "",
               f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
               f"on {info['cpu_count']} cores (CPU s: all threads of this process).", ""]  # fmt: skip
     e = info["errors"]

@@ -6,8 +6,9 @@ triangle soup), a ring of blocker walls, and EXT_mesh_gpu_instancing nodes of tr
 grass clumps standing on the terrain. Every random choice comes from one ``numpy`` generator seeded
 by ``seed``, so a preset and a seed give the same bytes.
 
-Presets: ``tiny`` (tests, ~3k faces), ``small`` (a demo, ~60k faces) and ``table1`` (the scale of
-Table 1 of Sloan et al. 2013: >= 1.5M vertices and >= 1.8M faces of baked geometry).
+Presets: ``tiny`` (tests, ~3k faces), ``small`` (a demo, ~60k faces), ``table1`` (the scale of
+Table 1 of Sloan et al. 2013: >= 1.5M vertices and >= 1.8M faces of baked geometry) and ``world10x``
+(ten times Table 1, ~18M faces, the same mix over ten times the area).
 """
 
 from __future__ import annotations
@@ -74,6 +75,11 @@ PRESETS: dict[str, dict] = {
     "table1": {"terrain_size": 600.0, "terrain_cells": 660, "terrain_height": 12.0, "houses": 6000, "house_boxes": 5,
                "trees": 46, "shrubs": 7856, "grass": 20000, "crown_subdivisions": 2,
                "buildings": [{"mesh": "Sponza", "count": 2, "scale": 1.0}, {"mesh": "sponza_partial", "count": 2, "scale": 0.02}]},
+    # Ten times table1: ten times the area (600 m x sqrt(10)) and of every count. Faces: terrain 2 x 2087^2 = 8.71M,
+    # 60,000 houses x 5 boxes x 12 = 3.6M, 20 + 20 Sponzas 5.92M: 18.2M (table1: 0.87M + 0.36M + 0.59M = 1.82M).
+    "world10x": {"terrain_size": 1897.0, "terrain_cells": 2087, "terrain_height": 12.0, "houses": 60000, "house_boxes": 5,
+                 "trees": 460, "shrubs": 78560, "grass": 200000, "crown_subdivisions": 2,
+                 "buildings": [{"mesh": "Sponza", "count": 20, "scale": 1.0}, {"mesh": "sponza_partial", "count": 20, "scale": 0.02}]},
 }  # fmt: skip
 
 # The bake config each preset is written with (pipeline.level_bake.LevelBakeSettings keys).
@@ -83,6 +89,9 @@ BAKE_CONFIGS: dict[str, dict] = {
              "lod": {"target_reduction": 0.5, "holdout_samples": 400}},
     "small": {"trace": {"rays": 128}},
     "table1": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0}},
+    # SuperLU's fill-in at 16M vertices is out of reach: the multigrid-preconditioned solve (linear in vertices).
+    "world10x": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0,
+                           "solver": "amg"}},
 }  # fmt: skip
 
 

@@ -219,3 +219,31 @@ def test_lod_least_squares_interpolates_the_fit(baked):
         scene, lod["ao_least_squares"], np.arange(len(scene.faces)), np.full((len(scene.faces), 3), 1 / 3)
     )
     assert ((vals >= 0) & (vals <= 1)).all()
+
+
+def test_world10x_preset_is_ten_times_table1():
+    """The 10x world keeps table1's mix (terrain, houses, buildings, trees, shrubs, grass) at ten times the
+    counts and area, ~18M faces, without generating it: faces from the settings and the shared meshes."""
+    from pipeline.level_gen import BAKE_CONFIGS
+    from pipeline.scene import load_scene
+
+    def faces(s):
+        buildings = sum(len(load_scene(b.mesh).faces) * b.count for b in s.buildings)
+        return 2 * s.terrain_cells**2 + s.houses * s.house_boxes * 12 + buildings
+
+    t, w = settings_for("table1"), settings_for("world10x")
+    assert faces(t) == 1_823_058  # Table 1's row, as baked
+    assert 18_000_000 <= faces(w) <= 18_500_000
+    for name in ("houses", "trees", "shrubs", "grass"):
+        assert getattr(w, name) == 10 * getattr(t, name), name
+    assert abs((w.terrain_size / t.terrain_size) ** 2 - 10) < 0.01
+    assert load_level_settings_dict(BAKE_CONFIGS["world10x"]).trace.solver == "amg"
+
+
+def load_level_settings_dict(data):
+    from pipeline.config import from_dict
+    from pipeline.level_bake import LevelBakeSettings, check_settings
+
+    s = from_dict(LevelBakeSettings, data)
+    check_settings(s)
+    return s

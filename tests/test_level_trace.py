@@ -207,7 +207,7 @@ def test_linear_global_fit_recovers_a_planted_function_exactly():
     )
 
 
-def test_least_squares_columns_and_cg_match_separate_direct_fits(tiny_geometry):
+def test_least_squares_columns_cg_and_amg_match_separate_direct_fits(tiny_geometry):
     g = tiny_geometry
     samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)
     rng = np.random.default_rng(0)
@@ -216,9 +216,73 @@ def test_least_squares_columns_and_cg_match_separate_direct_fits(tiny_geometry):
     both = fit_least_squares(g.receivers, samples, vals, valid)
     for j in range(2):
         np.testing.assert_array_equal(both[:, j], fit_least_squares(g.receivers, samples, vals[:, j], valid))
-    np.testing.assert_allclose(
-        fit_least_squares(g.receivers, samples, vals, valid, solver="cg"), both, atol=1e-5
-    )
+    for solver in ("cg", "amg"):
+        np.testing.assert_allclose(
+            fit_least_squares(g.receivers, samples, vals, valid, solver=solver),
+            both,
+            atol=1e-5,
+            err_msg=solver,
+        )
+
+
+def test_edge_weights_match_unique_rows(tiny_geometry):
+    """The 1-D keyed edge list (the fast path) is the lexicographic unique-rows one, weights bit for bit."""
+    from pipeline.bake import edge_weights, face_areas
+
+    sc = tiny_geometry.receivers
+    e = np.concatenate([sc.faces[:, [0, 1]], sc.faces[:, [1, 2]], sc.faces[:, [2, 0]]])
+    w = np.tile(face_areas(sc) / 3.0, 3)
+    e.sort(axis=1)
+    keep = e[:, 0] != e[:, 1]
+    rows, inverse = np.unique(e[keep], axis=0, return_inverse=True)
+    ref = np.bincount(inverse.reshape(-1), weights=w[keep], minlength=len(rows))
+    edges, weights = edge_weights(sc)
+    np.testing.assert_array_equal(edges, rows)
+    np.testing.assert_array_equal(weights, ref / ref.sum())
+
+
+def test_component_solve_is_the_global_solve(tiny_geometry):
+    """The normal equations are block diagonal over connected components: solving the blocks (SuperLU, or
+    multigrid CG for blocks of at least component_vertices) gives the global SuperLU solution."""
+    from scipy.sparse.csgraph import connected_components
+
+    from pipeline.bake import normal_equations
+    from pipeline.level_bake import TraceSettings, component_blocks, fit_level
+
+    g = tiny_geometry
+    samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)
+    rng = np.random.default_rng(1)
+    vals = rng.uniform(0, 1, (len(samples), 2))
+    valid = rng.uniform(size=len(samples)) > 0.3
+    direct = fit_least_squares(g.receivers, samples, vals, valid)
+    a, _ = normal_equations(g.receivers, samples, vals, valid)
+    count = connected_components(a, directed=False)[0]
+    blocks = component_blocks(a, 200)
+    assert count > 3 and [m for _, m in blocks].count("amg") >= 1  # the terrain (625 vertices)
+    assert np.array_equal(np.sort(np.concatenate([i for i, _ in blocks])), np.arange(len(g.receivers.vertices)))
+    np.testing.assert_array_equal(fit_level(g.receivers, samples, vals, valid, TraceSettings()), direct)
+    split = fit_level(g.receivers, samples, vals, valid, TraceSettings(component_vertices=200))
+    np.testing.assert_allclose(split, direct, atol=1e-6)
+
+
+def test_fast_resampling_matches_the_geometric_reference(tiny_geometry):
+    """The trace-speed weighting (Embree's barycentrics, weight r - |r - t|, row sums) against projected
+    world hit points and bincount, on the tiny level with blockers (NaN values) in reach."""
+    from pipeline.level_trace import _resample_block, _resample_block_geometric
+
+    g = tiny_geometry
+    lab = LevelLabeller(g.opaque, LabelSettings(rays=8))
+    rng = np.random.default_rng(3)
+    vals = np.r_[rng.uniform(0, 1, (len(g.receivers.vertices), 2)),
+                 np.full((len(g.opaque.vertices) - len(g.receivers.vertices), 2), np.nan)]  # fmt: skip
+    centres = g.receivers.vertices[rng.choice(len(g.receivers.vertices), 300, replace=False)]
+    rad, u = np.full(300, 0.9), sphere_directions(32)
+    got, w = _resample_block(lab, vals, centres, rad, u)
+    ref, w_ref = _resample_block_geometric(lab, vals, centres, rad, u)
+    np.testing.assert_array_equal(np.isfinite(got), np.isfinite(ref))
+    assert np.isfinite(got).mean() > 0.9
+    np.testing.assert_allclose(w, w_ref, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(got[np.isfinite(got)], ref[np.isfinite(ref)], atol=1e-4)  # float32 hits
 
 
 def test_origin_density_matches_brute_force_with_crowded_boxes():

@@ -144,28 +144,104 @@ def test_two_node_bake_is_byte_identical(ray_engine, local_bake, tmp_path, monke
     assert (tmp_path / "spot.ply").read_bytes() == data
 
 
-def test_two_node_level_bake_is_byte_identical(cluster, tmp_path):
-    """`neuralao bake LEVEL --config ... --engine ray`: the level baker's trace blocks (opaque labeller +
-    foliage rebuilt on the workers) as tasks; outputs and blocks equal the local library run's."""
+# Small tasks on the tiny level (scheduling only): several resampling tasks per stage, one per tree.
+LEVEL_TASKS = ["trace.block_samples=256", "task_rays=4096"]
+
+
+@pytest.fixture(scope="module")
+def local_level(tmp_path_factory):
     from pipeline.level_bake import bake_level, load_level_settings
     from pipeline.level_gen import settings_for, write_level
 
-    level, cfg = write_level(tmp_path / "in", settings_for("tiny", seed=2), "tiny")
-    block = ["trace.block_samples=256"]
-    local = bake_level(level, load_level_settings(cfg, block), tmp_path / "local")
-    p = _cli("bake", str(level), "--config", str(cfg), "--set", block[0], "--out", str(tmp_path / "ray"),
-             "--engine", "ray", "--address", cluster)  # fmt: skip
-    _, err = p.communicate(timeout=120)
-    assert p.returncode == 0, err
-    files = sorted(p.relative_to(tmp_path / "local") for p in (tmp_path / "local").rglob("*") if p.is_file())
-    # Outputs and trace blocks; the bake log and other stage files record timings.
+    root = tmp_path_factory.mktemp("level")
+    level, cfg = write_level(root / "in", settings_for("tiny", seed=2), "tiny")
+    info = bake_level(level, load_level_settings(cfg, LEVEL_TASKS), root / "local")
+    return level, cfg, root / "local", info
+
+
+def _stage_arrays(out: Path) -> dict[str, np.ndarray]:
+    """Every array of every stored stage but the timings (seconds_*) and the trace's reuse count."""
+    from pipeline.io import read_npz
+
+    arrays = {}
+    for f in sorted((out / "stages").glob("*.npz")):
+        for k, v in read_npz(f).items():
+            if not k.startswith("seconds_") and k != "reused_blocks":
+                arrays[f"{f.stem}/{k}"] = v
+    return arrays
+
+
+def _assert_same_level_bake(out: Path, local: Path, info: dict) -> None:
+    files = sorted(p.relative_to(local) for p in local.rglob("*") if p.is_file())
+    # Outputs and trace blocks; the bake log and the stage files record timings (compared array by array).
     files = [
         f for f in files if f.parts[0] != "stages" and f.name[:8] != "bake_log" or f.parent.name == "trace"
     ]
-    assert sum(f.name.startswith("block_") for f in files) == local["counts"]["samples"] // 256 + 1 > 2
+    assert sum(f.name.startswith("block_") for f in files) == info["counts"]["samples"] // 256 + 1 > 2
     assert any(f.suffix == ".glb" for f in files)
     for f in files:
-        assert (tmp_path / "ray" / f).read_bytes() == (tmp_path / "local" / f).read_bytes(), f
+        assert (out / f).read_bytes() == (local / f).read_bytes(), f
+    mine, theirs = _stage_arrays(out), _stage_arrays(local)
+    assert mine.keys() == theirs.keys() and {"lod/ao_least_squares", "decorators/coefficients"} <= mine.keys()
+    for k, v in theirs.items():
+        np.testing.assert_array_equal(mine[k], v, err_msg=k)
+    assert not list((out / "stages").glob("*.parts")), "task results are removed once their stage is stored"
+
+
+def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(cluster, local_level, tmp_path):
+    """`neuralao bake LEVEL --config ... --engine ray`: trace blocks, trees' in-place traces and fits, grass,
+    shrub and LOD resampling as tasks (states rebuilt on the workers); the driver is killed once the LOD
+    stage has kept task results, and the rerun ends with the local library run's bytes."""
+    level, cfg, local, info = local_level
+    out = tmp_path / "ray"
+    args = [
+        "bake",
+        str(level),
+        "--config",
+        str(cfg),
+        "--out",
+        str(out),
+        "--engine",
+        "ray",
+        "--address",
+        cluster,
+    ]
+    for kv in LEVEL_TASKS:
+        args += ["--set", kv]
+    parts = out / "stages" / "lod.parts"
+    p = _cli(*args, start_new_session=True)
+    _kill_when(p, lambda: len(list(parts.glob("[!.]*.npz"))) >= 2, timeout=120)
+    assert p.returncode == -signal.SIGKILL and not (out / "level_baked.glb").exists()
+    assert (out / "stages" / "decorators.npz").is_file()
+    p = _cli(*args)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 0, err
+    assert re.search(r"(\d+) of (\d+) tasks done by an earlier run", err), err[-300:]
+    _assert_same_level_bake(out, local, info)
+
+
+def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, tmp_path):
+    """An actor SIGKILLed while the trees' in-place tasks run is restarted (its state rebuilt) and the
+    bake's bytes do not change."""
+    from pipeline.level_bake import bake_level, load_level_settings
+
+    level, cfg, local, info = local_level
+    out = tmp_path / "ray"
+    pid = ray_engine.worker_info()[1][0]
+    result: dict = {}
+    run = threading.Thread(target=lambda: result.update(
+        info=bake_level(level, load_level_settings(cfg, LEVEL_TASKS), out, engine=ray_engine)))  # fmt: skip
+    run.start()
+    deadline = time.time() + 90
+    while not list((out / "stages" / "decorators.parts").glob("[!.]*.npz")) and run.is_alive():
+        assert time.time() < deadline, "no tree task finished"
+        time.sleep(0.005)
+    assert run.is_alive(), "the bake finished before a worker could be killed"
+    os.kill(pid, signal.SIGKILL)
+    run.join(180)
+    assert not run.is_alive() and "info" in result
+    assert ray_engine.worker_info()[1][0] != pid, "the killed actor was restarted"
+    _assert_same_level_bake(out, local, info)
 
 
 def test_worker_killed_mid_run_changes_nothing(ray_engine, local_bake, monkeypatch):
