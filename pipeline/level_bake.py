@@ -812,6 +812,7 @@ def bake_level(
     solved = blog.stored("solve", "Least squares solve (both distances)",
                          lambda: _solve(g, samples, traced, s, engine, blog.parts("solve")),
                          vertices=len(g.receivers.vertices))  # fmt: skip
+    blog.note("solve", **{k: float(v) for k, v in solved.items() if k.startswith("seconds_")})
     final = blend(solved["short"], solved["long"], s.blend)
     ctx = opaque_context(key, labeller, foliage, engine)
 
@@ -857,26 +858,34 @@ def bake_level(
 def _solve(
     g: LevelGeometry, samples: SurfaceSamples, traced: dict, s: LevelBakeSettings, engine=None, store=None
 ) -> dict[str, np.ndarray]:
-    v = fit_level(g.receivers, samples, traced["ao"], traced["valid"], s.trace, engine, store, "receivers")
-    return {"short": v[:, 0], "long": v[:, 1]}
+    timing: dict[str, float] = {}
+    v = fit_level(
+        g.receivers, samples, traced["ao"], traced["valid"], s.trace, engine, store, "receivers", timing
+    )
+    return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
 
 
 def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, t: TraceSettings,
-              engine=None, store=None, tag: str = "") -> np.ndarray:  # fmt: skip
+              engine=None, store=None, tag: str = "", timing: dict | None = None) -> np.ndarray:  # fmt: skip
     """:func:`pipeline.bake.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
 
     "components": the normal equations are assembled here, split into their connected components (the
     matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
     and each block, or a pack of small ones, is a task of ``engine`` (None: this process), its result
-    kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32."""
+    kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
+    ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
+    block (what a cluster cannot split further; each task times itself, a stored one as it took then)."""
     from .bake import normal_equations
     from .engine import Context, LocalEngine, Task, content_key
 
     if t.solver != "components":
         return fit_least_squares(scene, samples, values, valid, t.alpha, t.solver)
+    t0 = time.perf_counter()
     a, rhs = normal_equations(scene, samples, values, valid, t.alpha)
     blocks = component_blocks(a, t.component_vertices)
     a = a.tocsr()
+    timing = {} if timing is None else timing
+    timing.update(assembly=time.perf_counter() - t0, blocks=0.0, largest_block=0.0)
     ctx = Context("level-solve", _no_state, None)
 
     def tasks():
@@ -892,6 +901,9 @@ def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: 
     out = np.empty(rhs.shape)
     for i, r in (engine or LocalEngine()).map(tasks(), store):
         out[blocks[i][0]] = r["v"]
+        took = float(r.get("seconds", 0.0))
+        timing["blocks"] += took
+        timing["largest_block"] = max(timing["largest_block"], took)
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
@@ -930,7 +942,9 @@ def _solve_block(state, args) -> dict[str, np.ndarray]:
     from .bake import _solve_amg
 
     a, rhs, method = args
-    return {"v": splu(a).solve(rhs) if method == "direct" else _solve_amg(a, rhs)}
+    t0 = time.perf_counter()
+    v = splu(a).solve(rhs) if method == "direct" else _solve_amg(a, rhs)
+    return {"v": v, "seconds": np.array(time.perf_counter() - t0)}
 
 
 def _small_decorators(g: LevelGeometry, resample: Resampler, final: np.ndarray, s: LevelBakeSettings

@@ -259,7 +259,9 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
     count = connected_components(a, directed=False)[0]
     blocks = component_blocks(a, 200)
     assert count > 3 and [m for _, m in blocks].count("amg") >= 1  # the terrain (625 vertices)
-    assert np.array_equal(np.sort(np.concatenate([i for i, _ in blocks])), np.arange(len(g.receivers.vertices)))
+    assert np.array_equal(
+        np.sort(np.concatenate([i for i, _ in blocks])), np.arange(len(g.receivers.vertices))
+    )
     np.testing.assert_array_equal(fit_level(g.receivers, samples, vals, valid, TraceSettings()), direct)
     split = fit_level(g.receivers, samples, vals, valid, TraceSettings(component_vertices=200))
     np.testing.assert_allclose(split, direct, atol=1e-6)
