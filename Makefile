@@ -58,9 +58,10 @@ help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
 
 # chromium + chromium-driver: the headless browser of the viewer test (tests/test_viewer.py, selenium).
-SYSTEM_PACKAGES := libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools chromium chromium-driver
+SYSTEM_PACKAGES := libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools chromium chromium-driver \
+  mesa-vulkan-drivers spirv-cross gcc libegl-dev libgl-dev
 
-system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator, headless Chromium
+system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator, headless Chromium, lavapipe (Vulkan, for WGSL), SPIRV-Cross, EGL/GL headers (C host)
 	@if ! dpkg -s $(SYSTEM_PACKAGES) >/dev/null 2>&1; then \
 	  echo "installing system packages (apt-get)"; \
 	  apt-get update -qq; \

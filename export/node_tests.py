@@ -64,22 +64,25 @@ def _with_initializers(model: onnx.ModelProto, inputs: list[np.ndarray]) -> onnx
     return m
 
 
-def run_case(case: Any) -> NodeResult:
-    """Lower, run and compare one node test case."""
+def run_case(case: Any, dialect: str = "glsl430") -> NodeResult:
+    """Lower, run and compare one node test case; ``dialect`` glsl430 runs on GL, wgsl on WebGPU."""
     from export.glsl import generate_compute
     from runtime.glsl_runner import run_compute_all
+    from runtime.wgsl_runner import run_wgsl_all
+
+    run_program = run_wgsl_all if dialect == "wgsl" else run_compute_all
 
     op = case.model.graph.node[0].op_type
     inputs, expected = case.data_sets[0]
     model = _with_initializers(case.model, list(inputs))
     try:
-        program = generate_compute(model)
+        program = generate_compute(model, dialect=dialect)
     except NeuralaoError as e:
         return NodeResult(case.name, op, "refused", str(e))
     except Exception as e:  # noqa: BLE001 - a crash is an outcome to count, not to hide
         return NodeResult(case.name, op, "crashed", f"{type(e).__name__}: {e}")
     try:
-        got = run_compute_all(program, np.asarray(inputs[0], np.float32))
+        got = run_program(program, np.asarray(inputs[0], np.float32))
     except NeuralaoError as e:  # e.g. an input too small for the export's pad multiple
         return NodeResult(case.name, op, "refused", str(e))
     except Exception as e:  # noqa: BLE001
@@ -115,9 +118,9 @@ def _max_err(got: dict, want: dict) -> float:
                 for n, w in want.items()), default=0.0)  # fmt: skip
 
 
-def run_node_tests(ops: tuple[str, ...]) -> list[NodeResult]:
-    """Every single-node test case of ``ops``, in onnx's order."""
-    return [run_case(c) for c in node_cases(ops)]
+def run_node_tests(ops: tuple[str, ...], dialect: str = "glsl430") -> list[NodeResult]:
+    """Every single-node test case of ``ops``, in onnx's order, through ``dialect`` (glsl430 or wgsl)."""
+    return [run_case(c, dialect) for c in node_cases(ops)]
 
 
 def counts_by_op(results: list[NodeResult]) -> dict[str, Counter]:

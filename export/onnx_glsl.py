@@ -1,6 +1,6 @@
 """`neuralao glsl MODEL.onnx`: GLSL for a user's own ONNX model, and its parity check.
 
-    neuralao glsl MODEL.onnx --target image|vector [--precision fp32|fp16] [--dialect ...]
+    neuralao glsl MODEL.onnx --target image|vector|wgsl [--precision fp32|fp16] [--dialect ...] [--hlsl-msl]
                   [--bind INPUT=TEXTURE.CHANNELS[xREPEATS] ...] --out DIR
     neuralao parity DIR [--inputs X.npz] [--seed N] [--size W H]
 
@@ -9,6 +9,8 @@ Targets (the op tables of :mod:`export.glsl`):
 * ``image``: an NCHW image network (1, C, H, W) -> images, H and W static or symbolic; GLSL 4.30
   compute passes + ``weights.bin`` + a manifest of passes, textures and formats. ``fp16`` stores the
   intermediate textures as RGBA16F (arithmetic stays fp32).
+* ``wgsl``: the image target's passes in WGSL for WebGPU (same op table, writer and manifest; folder
+  ``wgsl/``, format ``neuralao-wgsl-compute``); parity runs them with ``wgpu`` (lavapipe here).
 * ``vector``: a per-pixel network, every input (N, k) bound to channels of a named RGBA32F texture
   (``--bind position=position.xyz --bind normal=normal.xyz``; an input of width <= 4 without a
   ``--bind`` reads the texture of its own name, channels ``xyzw[:k]``). The first texture's w channel
@@ -53,7 +55,8 @@ log = logging.getLogger(__name__)
 
 KIND = "onnx-glsl"
 GLSL_DIR = "glsl"
-TARGETS = ("image", "vector")
+TARGETS = ("image", "vector", "wgsl")
+SHADER_DIRS = {"image": GLSL_DIR, "vector": GLSL_DIR, "wgsl": "wgsl"}
 _BIND = re.compile(r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<channels>[xyzw]{1,4})(x(?P<rep>\d+))?$")
 
 
@@ -125,8 +128,9 @@ def _check_out_dir(out_dir: Path) -> None:
 
 
 def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind: list[str] | None = None,
-                 dialects: list[str] | None = None) -> dict:  # fmt: skip
-    """Generate and write the export of a user's ONNX file; returns its manifest."""
+                 dialects: list[str] | None = None, hlsl_msl: bool = False) -> dict:  # fmt: skip
+    """Generate and write the export of a user's ONNX file; returns its manifest. ``hlsl_msl`` (image
+    target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross)."""
     from .glsl import (
         DIALECTS,
         generate_compute,
@@ -139,21 +143,25 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         raise NeuralaoError(f"--target must be one of {TARGETS}, got {target!r}")
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"--precision must be fp32 or fp16, got {precision!r}")
+    if hlsl_msl and target != "image":
+        raise NeuralaoError("--hlsl-msl applies to --target image (HLSL and MSL are made from its GLSL)")
     onnx_path, out_dir = Path(onnx_path), Path(out_dir)
     _check_out_dir(out_dir)
     proto = load_onnx(onnx_path)
-    glsl_dir = out_dir / GLSL_DIR
+    glsl_dir = out_dir / SHADER_DIRS[target]
     extra: dict = {}
-    if target == "image":
+    if target in ("image", "wgsl"):
         if bind:
             raise NeuralaoError("--bind applies to --target vector only")
         if dialects and dialects != ["glsl430"]:
             raise NeuralaoError("the image target is GLSL 4.30 compute only (--dialect glsl430)")
-        program = generate_compute(proto, precision=precision, kind="onnx")
+        dialect = "wgsl" if target == "wgsl" else "glsl430"
+        program = generate_compute(proto, precision=precision, kind="onnx", dialect=dialect)
         out_dir.mkdir(parents=True, exist_ok=True)
-        write_compute_export(program, glsl_dir)
+        write_compute_export(program, glsl_dir, cross=hlsl_msl)
         extra["passes"] = len(program.manifest["passes"])
-        extra["uniforms"] = {u["onnx_input"]: u["glsl_name"] for u in program.manifest["uniforms"]}
+        name_key = "wgsl_name" if target == "wgsl" else "glsl_name"
+        extra["uniforms"] = {u["onnx_input"]: u[name_key] for u in program.manifest["uniforms"]}
     else:
         unknown = sorted(set(dialects or []) - set(DIALECTS))
         if unknown:
@@ -180,7 +188,7 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         "onnx": "model.onnx",
         "onnx_sha256": sha256_file(out_dir / "model.onnx"),
         "source": str(onnx_path),
-        "glsl": GLSL_DIR,
+        "glsl": SHADER_DIRS[target],  # the shader folder (WGSL too, under this key for older readers)
         "glsl_manifest_sha256": sha256_file(glsl_dir / "manifest.json"),
         "inputs": {n: [str(d) if d is not None else None for d in dims] for n, dims in _input_dims(proto).items()},
         "outputs": [o.name for o in proto.graph.output],
@@ -310,6 +318,7 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
     allocated; None: the static size, else DEFAULT_SIZE (rounded up to the program's multiples).
     It must equal a static size, and is refused with ``inputs`` (whose arrays fix the size)."""
     from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names, texture_sizes
+    from runtime.wgsl_runner import run_wgsl_all
 
     from .glsl import load_compute_export, load_mlp_export
 
@@ -322,7 +331,7 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
     given = read_npz(inputs) if inputs is not None else None
     rng = np.random.default_rng(seed)
     rows = []
-    if manifest["target"] == "image":
+    if manifest["target"] in ("image", "wgsl"):
         program = load_compute_export(export_dir / manifest["glsl"])
         name = program.manifest["input"]["onnx_name"]
         dims = manifest["inputs"][name]
@@ -348,7 +357,8 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
                 raise NeuralaoError(f"scalar input {n!r} of shape {list(v.shape)} must hold one value")
             feeds[n] = v.reshape(shape)
         ref = dict(zip(manifest["outputs"], sess.run(None, feeds), strict=True))
-        got = run_compute_all(program, x, scalars={n: feeds[n] for n in scalar_names})
+        runner = run_wgsl_all if manifest["target"] == "wgsl" else run_compute_all
+        got = runner(program, x, scalars={n: feeds[n] for n in scalar_names})
         for o in manifest["outputs"]:
             if got[o].shape != ref[o].shape:
                 raise NeuralaoError(f"output {o!r}: GLSL shape {got[o].shape}, onnxruntime {ref[o].shape}")
@@ -402,15 +412,18 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="an ONNX file within the op set (see README: GLSL from ONNX)")
-    p.add_argument("--target", required=True, choices=TARGETS, help="image: NCHW compute passes; vector: per-pixel fragment pass")
+    p.add_argument("--target", required=True, choices=TARGETS, help="image: NCHW GLSL compute passes; wgsl: the same in WGSL (WebGPU); vector: per-pixel fragment pass")
     p.add_argument("--precision", default="fp32", choices=("fp32", "fp16"), help="texture storage (default fp32)")
     p.add_argument("--dialect", action="append", default=[], help="vector: keep only these of glsl330, es300, glsl430 (repeatable)")
     p.add_argument("--bind", action="append", default=[], metavar="INPUT=TEXTURE.CHANNELS[xREPEATS]",
                    help="vector: where an input comes from, e.g. normal=gbuffer.xyz or normals=gbuffer.xyzx16")  # fmt: skip
+    p.add_argument("--hlsl-msl", action="store_true",
+                   help="image: also write HLSL and MSL of every pass beside its GLSL (SPIR-V + SPIRV-Cross)")
     p.add_argument("--out", required=True, help="export folder")
 
 
 def run(args: argparse.Namespace) -> int:
-    m = export_model(args.model, args.target, args.out, args.precision, args.bind, args.dialect or None)
+    m = export_model(args.model, args.target, args.out, args.precision, args.bind, args.dialect or None,
+                     args.hlsl_msl)
     log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
     return 0

@@ -12,6 +12,9 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
 * **Dialects.** :class:`Dialect` is desktop GLSL 4.3 (explicit ``binding`` qualifiers);
   :class:`GLSL330` and :class:`ES300` override only what differs (version line, precision
   statements, no binding qualifiers: the host binds blocks and samplers, the manifest says where).
+  :class:`WGSL` (compute target, WebGPU) overrides the template table it fills from and the binding
+  slots: the same op table, passes, writer and manifest write WGSL (``generate_compute(dialect="wgsl")``).
+  HLSL and MSL are not written here: :mod:`.cross` makes them from the GLSL through SPIR-V.
 * **Writer.** Only the ``_write_*`` functions of :mod:`.vector` and :mod:`.image` produce shader
   text, and only by filling the named templates of :mod:`export.glsl.templates`. Identifiers are
   generated (``t3``, ``w0_1``, ``src0``); ONNX node and tensor names go to the manifest, never into
@@ -19,14 +22,15 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
 
 Layout (each module imports only those above it):
 
-    templates.py    every GLSL string, as named templates, and :func:`fill`
+    templates.py    every GLSL string, as named templates, :func:`fill`; the WGSL overrides, :func:`fill_wgsl`
     graph.py        OnnxGraph / read_graph, the OpTable base (dispatch), glsl_float and small helpers
-    dialects.py     Dialect, GLSL330, ES300, DIALECTS, FRAGMENT_FILES
+    dialects.py     Dialect, GLSL330, ES300, WGSL, DIALECTS, COMPUTE_DIALECTS, FRAGMENT_FILES
     activations.py  Act (epilogue activations, both targets)
     views.py        image tensors through Reshape / Transpose as index digits (atoms), no shader text
     vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
     image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
     validate.py     glslangValidator
+    cross.py        HLSL / MSL from the GLSL passes (glslangValidator -> SPIR-V -> SPIRV-Cross)
     files.py        export folders: write_* / load_* for both targets, hashes checked
 
 Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
@@ -34,16 +38,18 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
     generate_mlp_fragment(model, dialect="glsl330", fold_repeated_input=True) -> MLPShader
     write_mlp_export(shader, out_dir, validate=True) -> Path      (manifest.json path)
     load_mlp_export(export_dir, dialect="glsl330") -> MLPShader
-    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8)) -> ComputeProgram
-    write_compute_export(program, out_dir, validate=True) -> Path
+    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8), dialect="glsl430"|"wgsl")
+        -> ComputeProgram
+    write_compute_export(program, out_dir, validate=True, cross=False) -> Path   (cross: + HLSL, MSL)
     load_compute_export(export_dir) -> ComputeProgram
     validate_glsl(source, stage) -> None                         (glslangValidator)
 
-The runner is :mod:`runtime.glsl_runner`.
+The runners are :mod:`runtime.glsl_runner` (GL) and :mod:`runtime.wgsl_runner` (WebGPU).
 """
 
 from .activations import Act
-from .dialects import DIALECTS, ES300, FRAGMENT_FILES, GLSL330, Dialect, get_dialect
+from .cross import cross_compile, spirv_cross_available, validate_hlsl
+from .dialects import COMPUTE_DIALECTS, DIALECTS, ES300, FRAGMENT_FILES, GLSL330, WGSL, Dialect, get_dialect
 from .files import load_compute_export, load_mlp_export, write_compute_export, write_mlp_export
 from .graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
 from .image import (
@@ -85,6 +91,7 @@ from .vector import (
 )
 
 __all__ = [
+    "COMPUTE_DIALECTS",
     "CONV_KINDS",
     "DIALECTS",
     "ES300",
@@ -123,6 +130,8 @@ __all__ = [
     "VecValue",
     "VectorOps",
     "View",
+    "WGSL",
+    "cross_compile",
     "generate_compute",
     "generate_mlp_fragment",
     "generate_vector_fragment",
@@ -132,7 +141,9 @@ __all__ = [
     "load_compute_export",
     "load_mlp_export",
     "read_graph",
+    "spirv_cross_available",
     "validate_glsl",
+    "validate_hlsl",
     "write_compute_export",
     "write_mlp_export",
 ]

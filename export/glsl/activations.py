@@ -3,6 +3,7 @@ reference)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,8 +19,9 @@ class Act:
     op: str
     params: dict[str, float] = field(default_factory=dict)
 
-    def expr(self, x: str) -> str:
-        """GLSL vec4 expression applying this activation to the vec4 expression ``x``."""
+    def expr(self, x: str, fill: Callable[..., str] = fill) -> str:
+        """vec4 expression applying this activation to the vec4 expression ``x``; ``fill`` picks the
+        language's templates (GLSL by default, ``Dialect.fill`` of the compute dialect)."""
         if self.op == "LeakyRelu":
             return fill("act_LeakyRelu", x=x, alpha=glsl_float(self.params["alpha"]))
         if self.op == "Clip":
@@ -37,7 +39,7 @@ class Act:
             return fill("act_HardSigmoid", x=x, alpha=glsl_float(self.params["alpha"]),
                         beta=glsl_float(self.params["beta"]))  # fmt: skip
         if self.op == "Pow":
-            return _pow_expr(x, self.params["e"])
+            return _pow_expr(x, self.params["e"], fill)
         return fill(f"act_{self.op}", x=x)
 
     def numpy(self, x: np.ndarray) -> np.ndarray:
@@ -76,7 +78,7 @@ def _clip_bounds(min_: np.ndarray | None, max_: np.ndarray | None) -> dict[str, 
     return out
 
 
-def _pow_expr(x: str, e: float) -> str:
+def _pow_expr(x: str, e: float, fill: Callable[..., str] = fill) -> str:
     """x ** e: products for small integer exponents (exact as onnxruntime's std::pow, and defined for
     negative x), sqrt for 0.5, else pow() (GLSL leaves it undefined for x < 0, where ONNX gives NaN)."""
     if e == int(e) and abs(e) <= 4:

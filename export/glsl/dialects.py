@@ -1,11 +1,11 @@
-"""The GLSL dialects: desktop 4.3 (explicit bindings) and the 3.30 / ES 3.00 overrides, and where each
-dialect's fragment-target files go."""
+"""The shading-language dialects: desktop GLSL 4.3 (explicit bindings), the 3.30 / ES 3.00 overrides
+and where each dialect's fragment-target files go, and WGSL (WebGPU) for the compute target."""
 
 from __future__ import annotations
 
 from pipeline.errors import NeuralaoError
 
-from .templates import fill
+from .templates import fill, fill_wgsl
 
 
 class Dialect:
@@ -15,9 +15,21 @@ class Dialect:
     version = "430 core"
     precision = "precision_none"
     explicit_bindings = True
+    # compute target: shader file suffix and manifest format
+    extension = ".comp"
+    compute_format = "neuralao-glsl-compute"
+
+    def fill(self, template: str, /, **fields: object) -> str:
+        """Fill one of this dialect's templates (strict, see :func:`export.glsl.templates.fill`)."""
+        return fill(template, **fields)
 
     def header(self) -> str:
         return fill("header", version=self.version, precision=fill(self.precision))
+
+    def compute_slots(self, n_inputs: int) -> dict[str, int]:
+        """Where a compute pass's resources go: input i at binding i (texture unit), the output image,
+        the params buffer and the uniform at their own bindings / location."""
+        return {"output": 0, "params": 0, "uniform": 0}
 
     def ubo_layout(self, binding: int) -> str:
         return fill("ubo_layout_binding", binding=binding) if self.explicit_bindings else fill("ubo_layout")
@@ -44,7 +56,26 @@ class ES300(GLSL330):
     precision = "precision_es"
 
 
+class WGSL(Dialect):
+    """WGSL for WebGPU, compute target only: the same writer and template names, WGSL text
+    (``templates._W``); one bind group whose bindings run inputs, output, params, uniform."""
+
+    name = "wgsl"
+    extension = ".wgsl"
+    compute_format = "neuralao-wgsl-compute"
+
+    def fill(self, template: str, /, **fields: object) -> str:
+        return fill_wgsl(template, **fields)
+
+    def header(self) -> str:
+        return fill_wgsl("header")
+
+    def compute_slots(self, n_inputs: int) -> dict[str, int]:
+        return {"output": n_inputs, "params": n_inputs + 1, "uniform": n_inputs + 2}
+
+
 DIALECTS: dict[str, Dialect] = {d.name: d() for d in (Dialect, GLSL330, ES300)}
+COMPUTE_DIALECTS: dict[str, Dialect] = {"glsl430": DIALECTS["glsl430"], "wgsl": WGSL()}
 FRAGMENT_FILES = {"glsl330": ("mlp.vert", "mlp.frag"), "es300": ("mlp_es300.vert", "mlp_es300.frag"),
                   "glsl430": ("mlp_430.vert", "mlp_430.frag")}  # fmt: skip
 

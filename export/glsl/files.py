@@ -11,6 +11,7 @@ import numpy as np
 from pipeline.errors import NeuralaoError
 from pipeline.io import write_bytes, write_json
 
+from .cross import HLSL_SHADER_MODEL, MSL_VERSION, PARAMS_REGISTER_SHIFT, cross_compile, validate_hlsl
 from .dialects import FRAGMENT_FILES
 from .graph import _sha256
 from .image import ComputeProgram
@@ -86,22 +87,51 @@ def load_mlp_export(export_dir: str | Path, dialect: str = "glsl330") -> MLPShad
     return MLPShader(sources[dialect][1], sources[dialect][0], ubos, manifest, dialect, sources)
 
 
-def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate: bool = True) -> Path:
-    """Write every pass as <name>.comp, weights.bin and manifest.json (atomically); returns the manifest path."""
+def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate: bool = True,
+                         cross: bool = False) -> Path:  # fmt: skip
+    """Write every pass as <name>.comp (GLSL) or <name>.wgsl, weights.bin and manifest.json (atomically);
+    returns the manifest path. ``cross``: also <name>.hlsl and <name>.metal beside each GLSL pass
+    (SPIR-V + SPIRV-Cross, :mod:`.cross`); the HLSL is compiled back with glslang's HLSL front end when
+    ``validate``. The manifest's ``cross_compiled`` says how they were made and checked."""
     files: dict[str, bytes] = {}
     validate = validate and _can_validate()
+    manifest = program.manifest
+    if cross and manifest.get("format") != "neuralao-glsl-compute":
+        raise NeuralaoError(
+            "HLSL / MSL are made from the GLSL passes: export the image target (GLSL) for them"
+        )
     for name, src in program.sources.items():
-        if validate:
+        if validate and name.endswith(".comp"):  # WGSL is checked by the WebGPU runtime that compiles it
             validate_glsl(src, "comp")
         files[name] = src.encode()
+    if cross:
+        manifest = json.loads(json.dumps(manifest))
+        for entry in manifest["passes"]:
+            out = cross_compile(program.sources[entry["shader"]])
+            if validate:
+                validate_hlsl(out["hlsl"])
+            stem = entry["shader"].removesuffix(".comp")
+            entry["hlsl"], entry["msl"] = f"{stem}.hlsl", f"{stem}.metal"
+            files[entry["hlsl"]], files[entry["msl"]] = out["hlsl"].encode(), out["msl"].encode()
+        manifest["cross_compiled"] = {
+            "how": "GLSL -> SPIR-V (glslangValidator -G, SSBO bindings shifted by "
+                   f"{PARAMS_REGISTER_SHIFT}) -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / "
+                   f"--msl --msl-version {MSL_VERSION}",
+            "hlsl": "entry main, [numthreads] as local_size; input i: Texture2DArray t<i> (+ SamplerState s<i>, "
+                    f"unused: Load only); output: RWTexture2DArray u0; params: ByteAddressBuffer t{PARAMS_REGISTER_SHIFT}"
+                    " at the pass's weights.bin range; u_flip_y / scalar uniforms: $Globals cbuffer",
+            "msl": "kernel main0; output texture(0), input i texture(i + 1); the params (device) and uniform "
+                   "(constant) buffers take [[buffer(k)]] in declaration order: see main0's signature",
+            "validated": "HLSL compiled back by glslang's HLSL front end" if validate else "not validated",
+        }  # fmt: skip
     files["weights.bin"] = program.weights
-    return _write_export_files(Path(out_dir), files, program.manifest)
+    return _write_export_files(Path(out_dir), files, manifest)
 
 
 def load_compute_export(export_dir: str | Path) -> ComputeProgram:
     """Rebuild a :class:`ComputeProgram` from an export folder (manifest + shaders + weights.bin)."""
     d, manifest = _read_export(export_dir)
-    if manifest.get("format") != "neuralao-glsl-compute":
+    if manifest.get("format") not in ("neuralao-glsl-compute", "neuralao-wgsl-compute"):
         raise NeuralaoError(f"{d} is not a compute-shader export")
     sources = {p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in manifest["passes"]}
     weights = _read_checked(d, manifest, manifest["weights"]["file"])

@@ -17,7 +17,7 @@ import onnx
 from pipeline.errors import NeuralaoError
 
 from .activations import Act, _clip_bounds
-from .dialects import DIALECTS
+from .dialects import COMPUTE_DIALECTS, Dialect
 from .graph import (
     FORMAT_VERSION,
     OnnxGraph,
@@ -29,7 +29,6 @@ from .graph import (
     glsl_float,
     read_graph,
 )
-from .templates import fill
 from .views import (
     Atom,
     Axes,
@@ -1637,17 +1636,17 @@ def _pack_conv(p: Pass) -> None:
 # ----------------------------------------------------------------------- compute writer
 
 
-def _resize_coords(p: Pass) -> list[str]:
+def _resize_coords(p: Pass, d: Dialect) -> list[str]:
     """The source coordinate expression per axis (y, x) for a resize pass."""
     f = p.fields
     coords = []
     for i, (axis, (kind, value)) in enumerate(zip("yx", f["scales"], strict=True)):
-        len_in = fill("float_of", v=f"in_size.{axis}")
-        len_out = fill("float_of", v=f"out_size.{axis}")
-        scale = fill("scale_literal", value=value) if kind == "literal" else fill("scale_ratio", len_out=len_out,
+        len_in = d.fill("float_of", v=f"in_size.{axis}")
+        len_out = d.fill("float_of", v=f"out_size.{axis}")
+        scale = d.fill("scale_literal", value=value) if kind == "literal" else d.fill("scale_ratio", len_out=len_out,
                                                                                    len_in=len_in)  # fmt: skip
         fields = {
-            "x": fill("float_of", v=f"gid.{axis}"),
+            "x": d.fill("float_of", v=f"gid.{axis}"),
             "scale": scale,
             "len_in": len_in,
             "len_out": len_out,
@@ -1660,54 +1659,54 @@ def _resize_coords(p: Pass) -> list[str]:
                   "coord_align_corners": ("x", "len_in", "len_out"),
                   "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out"),
                   "coord_tf_crop_and_resize": ("x", "len_in", "len_out", "start", "end")}[tpl]  # fmt: skip
-        coords.append(fill(tpl, **{k: fields[k] for k in wanted}))
+        coords.append(d.fill(tpl, **{k: fields[k] for k in wanted}))
     return coords
 
 
-def _resize_body(p: Pass) -> str:
+def _resize_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    coord_y, coord_x = _resize_coords(p)
+    coord_y, coord_x = _resize_coords(p, d)
     if f["extrapolation"] is None:
-        outside = fill("resize_inside")
+        outside = d.fill("resize_inside")
         extrapolation = glsl_float(0.0)
     else:
-        outside = fill("resize_outside")
+        outside = d.fill("resize_outside")
         extrapolation = glsl_float(f["extrapolation"])
     common = {"coord_y": coord_y, "coord_x": coord_x, "outside": outside, "extrapolation": extrapolation}
     if p.kind == "resize_linear":
-        return fill("resize_linear_body", **common)
+        return d.fill("resize_linear_body", **common)
     if p.kind == "resize_nearest":
         rt = f"round_{f['nearest_mode']}"
-        return fill("resize_nearest_body", round_y=fill(rt, v="fy"), round_x=fill(rt, v="fx"), **common)
+        return d.fill("resize_nearest_body", round_y=d.fill(rt, v="fy"), round_x=d.fill(rt, v="fx"), **common)
     weights = []
     for axis, widen in zip("yx", f["widen"], strict=True):
-        t = fill("filter_arg", i=f"i{axis}", f=f"f{axis}", widen=glsl_float(widen))
+        t = d.fill("filter_arg", i=f"i{axis}", f=f"f{axis}", widen=glsl_float(widen))
         if f["kernel"] == "cubic":
-            weights.append(fill("kernel_cubic", t=t, a=glsl_float(f["cubic_coeff_a"])))
+            weights.append(d.fill("kernel_cubic", t=t, a=glsl_float(f["cubic_coeff_a"])))
         else:
-            weights.append(fill("kernel_linear", t=t))
-    exclude = [fill(f"filter_exclude_{a}") if f["exclude_outside"] else fill(f"filter_edge_{a}") for a in "yx"]
-    return fill("resize_filter_body", half_y=f["half"][0], half_x=f["half"][1], taps_y=2 * f["half"][0],
+            weights.append(d.fill("kernel_linear", t=t))
+    exclude = [d.fill(f"filter_exclude_{a}") if f["exclude_outside"] else d.fill(f"filter_edge_{a}") for a in "yx"]
+    return d.fill("resize_filter_body", half_y=f["half"][0], half_x=f["half"][1], taps_y=2 * f["half"][0],
                 taps_x=2 * f["half"][1], weight_y=weights[0], weight_x=weights[1], exclude_y=exclude[0],
                 exclude_x=exclude[1], **common)  # fmt: skip
 
 
-def _conv_body(p: Pass, offs: dict[str, int]) -> str:
+def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
     window = {"bias_offset": offs["bias"], "kh": kh, "kw": kw, "sy": sy, "sx": sx, "dy": dy, "dx": dx,
               "pad_top": pads[0], "pad_left": pads[1], "weight_offset": offs["weight"]}  # fmt: skip
     if p.kind == "conv_depthwise":
-        return fill("conv_depthwise_body", **window)
-    sizes = "\n".join(fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
+        return d.fill("conv_depthwise_body", **window)
+    sizes = "\n".join(d.fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
     loops = "\n".join(
-        fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
+        d.fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
         for i, t in enumerate(p.inputs)
     )
     if _blocked(p):
-        return _conv_block_body(p, window)
+        return _conv_block_body(p, window, d)
     tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
-    return fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+    return d.fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
 
 
 def _blocked(p: Pass) -> bool:
@@ -1716,75 +1715,76 @@ def _blocked(p: Pass) -> bool:
     return p.kind == "conv" and p.fields["block"] != (1, 1, 1)
 
 
-def _conv_block_body(p: Pass, window: dict) -> str:
+def _conv_block_body(p: Pass, window: dict, d: Dialect) -> str:
     """A conv whose invocation computes a block of texels x output layers (fields["block"])."""
     f = p.fields
     bx, by, bl = f["block"]
     texels = bx * by
-    acc = [fill("conv_block_bias", o=o, bias_offset=window["bias_offset"]) for o in range(bl)]
-    acc += [fill("conv_block_acc", names=", ".join(fill("conv_block_acc_name", o=o, p=k) for k in range(texels)))
+    acc = [d.fill("conv_block_bias", o=o, bias_offset=window["bias_offset"]) for o in range(bl)]
+    sep = d.fill("conv_block_acc_sep")
+    acc += [d.fill("conv_block_acc", names=sep.join(d.fill("conv_block_acc_name", o=o, p=k) for k in range(texels)))
             for o in range(bl)]  # fmt: skip
-    coords = "\n".join(fill("conv_block_coord", p=k, qx=(k % bx) * window["sx"], qy=(k // bx) * window["sy"])
+    coords = "\n".join(d.fill("conv_block_coord", p=k, qx=(k % bx) * window["sx"], qy=(k // bx) * window["sy"])
                         for k in range(texels))  # fmt: skip
     layer_stride = window["kh"] * window["kw"] * 4 * f["in_layers"]  # vec4s between output layers' taps
     loops = []
     for i, t in enumerate(p.inputs):
-        fetches = "\n".join(fill("conv_block_fetch", p=k, src=f"src{i}") for k in range(texels))
+        fetches = "\n".join(d.fill("conv_block_fetch", p=k, src=f"src{i}") for k in range(texels))
         products = []
         for o in range(bl):
-            products.append(fill("conv_block_weight", o=o, off=o * layer_stride))
+            products.append(d.fill("conv_block_weight", o=o, off=o * layer_stride))
             for k0 in range(0, texels, 4):  # four accumulations a line
-                fmas = " ".join(fill("conv_block_fma", o=o, p=k) for k in range(k0, min(k0 + 4, texels)))
-                products.append(fill("conv_block_fmas", fmas=fmas))
-        loops.append(fill("conv_block_input_loop", layers=t.layers, layer_offset=f["layer_offsets"][i],
+                fmas = " ".join(d.fill("conv_block_fma", o=o, p=k) for k in range(k0, min(k0 + 4, texels)))
+                products.append(d.fill("conv_block_fmas", fmas=fmas))
+        loops.append(d.fill("conv_block_input_loop", layers=t.layers, layer_offset=f["layer_offsets"][i],
                           fetches=fetches, products="\n".join(products)))  # fmt: skip
-    return fill("conv_block_body", acc_init="\n".join(acc), kh=window["kh"], kw=window["kw"],
+    return d.fill("conv_block_body", acc_init="\n".join(acc), kh=window["kh"], kw=window["kw"],
                 weight_offset=window["weight_offset"], tap_stride=4 * f["in_layers"], sx=window["sx"],
                 sy=window["sy"], dx=window["dx"], dy=window["dy"], pad_left=window["pad_left"],
                 pad_top=window["pad_top"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
 
 
-def _lp_steps(p: float) -> tuple[str, str]:
+def _lp_steps(p: float, d: Dialect) -> tuple[str, str]:
     """(accumulate, finish) templates of an Lp pool."""
     if p == 1:
-        return fill("pool_acc_l1"), fill("pool_finish_l1")
+        return d.fill("pool_acc_l1"), d.fill("pool_finish_l1")
     if p == 2:
-        return fill("pool_acc_l2"), fill("pool_finish_l2")
-    return fill("pool_acc_lp", p=glsl_float(p)), fill("pool_finish_lp", inv_p=glsl_float(1.0 / p))
+        return d.fill("pool_acc_l2"), d.fill("pool_finish_l2")
+    return d.fill("pool_acc_lp", p=glsl_float(p)), d.fill("pool_finish_lp", inv_p=glsl_float(1.0 / p))
 
 
-def _pool_body(p: Pass) -> str:
+def _pool_body(p: Pass, d: Dialect) -> str:
     f = p.fields
     (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
     if p.kind == "pool_max":
-        init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+        init, acc, finish = d.fill("pool_init_max"), d.fill("pool_acc_max"), d.fill("pool_finish_none")
     elif p.kind == "pool_lp":
-        init, (acc, finish) = fill("pool_init_lp"), _lp_steps(f["p"])
+        init, (acc, finish) = d.fill("pool_init_lp"), _lp_steps(f["p"], d)
     else:
-        init, acc = fill("pool_init_avg"), fill("pool_acc_avg")
-        finish = fill("pool_finish_padded") if f["include_pad"] else fill("pool_finish_count")
-    return fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
+        init, acc = d.fill("pool_init_avg"), d.fill("pool_acc_avg")
+        finish = d.fill("pool_finish_padded") if f["include_pad"] else d.fill("pool_finish_count")
+    return d.fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
                 pad_left=pads[1], pad_bottom=pads[2], pad_right=pads[3], accumulate=acc, finish=finish)  # fmt: skip
 
 
-def _binary_body(p: Pass) -> str:
+def _binary_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    fetch = [fill(f"fetch_{how}", src=f"src{i}") for i, how in enumerate(f["fetch"])]
-    guard = fill("binary_guard_div", channels=p.output.channels) if f["op"] == "Div" else fill("binary_guard_none")
-    return fill("binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=fill(f"binop_{f['op']}"))
+    fetch = [d.fill(f"fetch_{how}", src=f"src{i}") for i, how in enumerate(f["fetch"])]
+    guard = d.fill("binary_guard_div", channels=p.output.channels) if f["op"] == "Div" else d.fill("binary_guard_none")
+    return d.fill("binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=d.fill(f"binop_{f['op']}"))
 
 
-def _gather_body(p: Pass) -> str:
+def _gather_body(p: Pass, d: Dialect) -> str:
     digits = []
     for run in p.fields["digits"]:
         lines = []
         for i, (axis, size, stride) in enumerate(reversed(run)):  # innermost first
             coord = {"c": "z", "y": "y", "x": "x"}[axis]
             last = i == len(run) - 1
-            lines.append(fill("gather_digit_last", coord=coord, stride=stride) if last else
-                         fill("gather_digit", coord=coord, size=size, stride=stride))  # fmt: skip
+            lines.append(d.fill("gather_digit_last", coord=coord, stride=stride) if last else
+                         d.fill("gather_digit", coord=coord, size=size, stride=stride))  # fmt: skip
         digits.append("\n".join(lines))
-    return fill("gather_body", channels=p.output.channels, digits_c=digits[0], digits_y=digits[1],
+    return d.fill("gather_body", channels=p.output.channels, digits_c=digits[0], digits_y=digits[1],
                 digits_x=digits[2])  # fmt: skip
 
 
@@ -1803,51 +1803,51 @@ _REDUCE_STEPS = {"Sum": ("zero", "sum", "none"), "Mean": ("zero", "sum", "mean")
                  "LogSum": ("zero", "sum", "log")}  # fmt: skip
 
 
-def _reduce_body(p: Pass, offs: dict[str, int]) -> str:
+def _reduce_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     init, acc, finish = _REDUCE_STEPS[f["op"]]
     bounds = _window_bounds(f["spatial"])
     base, offsets = f["tables"]
-    loops = fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=fill(f"reduce_acc_{acc}"),
+    loops = d.fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=d.fill(f"reduce_acc_{acc}"),
                  **bounds)  # fmt: skip
-    return fill("reduce_body", groups=f["groups"], base_offset=offs[base], members=f["members"],
-                init=fill(f"reduce_init_{init}"), loops=loops, finish=fill(f"reduce_finish_{finish}"), **bounds)  # fmt: skip
+    return d.fill("reduce_body", groups=f["groups"], base_offset=offs[base], members=f["members"],
+                init=d.fill(f"reduce_init_{init}"), loops=loops, finish=d.fill(f"reduce_finish_{finish}"), **bounds)  # fmt: skip
 
 
-def _moments_body(p: Pass, offs: dict[str, int]) -> str:
+def _moments_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     bounds = _window_bounds(f["spatial"])
     base, offsets = f["tables"]
-    loops = [fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=fill(acc), **bounds)
+    loops = [d.fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=d.fill(acc), **bounds)
              for acc in ("reduce_acc_sum", "moments_acc_square")]  # fmt: skip
-    return fill("moments_body", channels=p.output.channels, groups=f["groups"], base_offset=offs[base],
+    return d.fill("moments_body", channels=p.output.channels, groups=f["groups"], base_offset=offs[base],
                 members=f["members"], sum_loops=loops[0], square_loops=loops[1],
                 epsilon=glsl_float(f["epsilon"]), **bounds)  # fmt: skip
 
 
-def _normalize_body(p: Pass, offs: dict[str, int]) -> str:
+def _normalize_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     sy, sx = ("0" if reduced else f"gid.{axis}" for axis, reduced in zip("yx", f["spatial"], strict=True))
-    return fill("normalize_body", group_offset=offs[f["group"]], groups=f["groups"], stats_x=sx, stats_y=sy)
+    return d.fill("normalize_body", group_offset=offs[f["group"]], groups=f["groups"], stats_x=sx, stats_y=sy)
 
 
-def _softmax_body(p: Pass, offs: dict[str, int]) -> str:
+def _softmax_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     base, offsets = f["tables"]
-    return fill("softmax_body", channels=p.output.channels, base_offset=offs[base], offsets_offset=offs[offsets],
-                members=f["members"], finish=fill("log_softmax_finish" if f["log"] else "softmax_finish"))  # fmt: skip
+    return d.fill("softmax_body", channels=p.output.channels, base_offset=offs[base], offsets_offset=offs[offsets],
+                members=f["members"], finish=d.fill("log_softmax_finish" if f["log"] else "softmax_finish"))  # fmt: skip
 
 
-def _lrn_body(p: Pass) -> str:
+def _lrn_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    return fill("lrn_body", channels=p.output.channels, before=f["before"], after=f["after"],
+    return d.fill("lrn_body", channels=p.output.channels, before=f["before"], after=f["after"],
                 bias=glsl_float(f["bias"]), alpha=glsl_float(f["alpha"]), beta=glsl_float(f["beta"]))  # fmt: skip
 
 
-def _spatial_pad_body(p: Pass) -> str:
+def _spatial_pad_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    mode = fill("pad_constant", value=glsl_float(f["value"])) if f["mode"] == "constant" else fill(f"pad_{f['mode']}")
-    return fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
+    mode = d.fill("pad_constant", value=glsl_float(f["value"])) if f["mode"] == "constant" else d.fill(f"pad_{f['mode']}")
+    return d.fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
 
 
 # Passes whose output stays RGBA32F under fp16 storage: the cropped outputs, and the scalar inputs
@@ -1855,81 +1855,83 @@ def _spatial_pad_body(p: Pass) -> str:
 _FP32_KINDS = ("crop", "uniform")
 
 
-def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) -> str:
-    d = DIALECTS["glsl430"]
+def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d: Dialect) -> str:
+    """One pass's shader source in dialect ``d`` (GLSL 4.30 compute or WGSL)."""
     fmt = "rgba16f" if precision == "fp16" and p.kind not in _FP32_KINDS else "rgba32f"
-    decls = [fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
-    decls.append(fill("image_array_decl", binding=0, format=fmt))
+    slots = d.compute_slots(len(p.inputs))
+    decls = [d.fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
+    decls.append(d.fill("image_array_decl", binding=slots["output"], format=d.fill(f"storage_format_{fmt}")))
     if p.params:
-        decls.append(fill("params_decl", binding=0))
+        decls.append(d.fill("params_decl", binding=slots["params"]))
     if p.kind in ("pad", "crop"):
-        decls.append(fill("uniform_int_decl", location=0, name="u_flip_y"))
+        decls.append(d.fill("uniform_int_decl", slot=slots["uniform"], name="u_flip_y"))
     if p.kind == "uniform":
-        decls.append(fill("uniform_float_decl", location=p.fields["location"], name=p.fields["uniform"]))
+        slot = p.fields["location"] if d.name == "glsl430" else slots["uniform"]
+        decls.append(d.fill("uniform_float_decl", slot=slot, name=p.fields["uniform"]))
     offs = p.param_offsets()
     if p.kind in CONV_KINDS:
-        body = _conv_body(p, offs)
+        body = _conv_body(p, offs, d)
     elif p.kind in ("pool_avg", "pool_max", "pool_lp"):
-        body = _pool_body(p)
+        body = _pool_body(p, d)
     elif p.kind in ("global_pool_avg", "global_pool_max", "global_pool_lp"):
         if p.kind == "global_pool_max":
-            init, acc, finish = fill("pool_init_max"), fill("pool_acc_max"), fill("pool_finish_none")
+            init, acc, finish = d.fill("pool_init_max"), d.fill("pool_acc_max"), d.fill("pool_finish_none")
         elif p.kind == "global_pool_lp":
-            init, (acc, finish) = fill("pool_init_lp"), _lp_steps(p.fields["p"])
+            init, (acc, finish) = d.fill("pool_init_lp"), _lp_steps(p.fields["p"], d)
         else:
-            init, acc, finish = fill("pool_init_avg"), fill("pool_acc_avg"), fill("global_finish_mean")
-        body = fill("global_pool_body", init=init, accumulate=acc, finish=finish)
+            init, acc, finish = d.fill("pool_init_avg"), d.fill("pool_acc_avg"), d.fill("global_finish_mean")
+        body = d.fill("global_pool_body", init=init, accumulate=acc, finish=finish)
     elif p.kind.startswith("resize"):
-        body = _resize_body(p)
+        body = _resize_body(p, d)
     elif p.kind == "concat":
         branches, begin = [], 0
         for i, t in enumerate(p.inputs):
-            branches.append(fill("concat_branch", begin=begin, end=begin + t.channels, src=f"src{i}"))
+            branches.append(d.fill("concat_branch", begin=begin, end=begin + t.channels, src=f"src{i}"))
             begin += t.channels
-        body = fill("concat_body", branches="\n".join(branches))
+        body = d.fill("concat_body", branches="\n".join(branches))
     elif p.kind == "elementwise":
-        body = fill("elementwise_body")
+        body = d.fill("elementwise_body")
     elif p.kind == "binary":
-        body = _binary_body(p)
+        body = _binary_body(p, d)
     elif p.kind == "spatial_pad":
-        body = _spatial_pad_body(p)
+        body = _spatial_pad_body(p, d)
     elif p.kind == "pad":
-        body = fill("pad_reflect_body")
+        body = d.fill("pad_reflect_body")
     elif p.kind == "crop":
-        body = fill("crop_body")
+        body = d.fill("crop_body")
     elif p.kind == "uniform":
-        body = fill("uniform_body", name=p.fields["uniform"])
+        body = d.fill("uniform_body", name=p.fields["uniform"])
     elif p.kind == "gather":
-        body = _gather_body(p)
+        body = _gather_body(p, d)
     elif p.kind == "reduce":
-        body = _reduce_body(p, offs)
+        body = _reduce_body(p, offs, d)
     elif p.kind == "moments":
-        body = _moments_body(p, offs)
+        body = _moments_body(p, offs, d)
     elif p.kind == "normalize":
-        body = _normalize_body(p, offs)
+        body = _normalize_body(p, offs, d)
     elif p.kind == "softmax":
-        body = _softmax_body(p, offs)
+        body = _softmax_body(p, offs, d)
     elif p.kind == "lrn":
-        body = _lrn_body(p)
+        body = _lrn_body(p, d)
     else:  # pragma: no cover - kinds are created above only
         raise AssertionError(p.kind)
-    prelude = [fill("prelude")]
+    prelude = [d.fill("prelude")]
     if p.kind.startswith("resize"):
-        prelude.append(fill("prelude_div"))
+        prelude.append(d.fill("prelude_div"))
     if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
-        prelude.append(fill("prelude_cubic"))
+        prelude.append(d.fill("prelude_cubic"))
     if p.fields.get("erf"):
-        prelude.append(fill("prelude_erf"))
-    epi = _epilogue(p, offs, "gid.z")
+        prelude.append(d.fill("prelude_erf"))
+    epi = _epilogue(p, offs, "gid.z", d)
     if _blocked(p):
         bx, by, bl = p.fields["block"]
-        stores = [fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k) for o in range(bl) for k in range(bx * by)]
-        epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z").split("\n"))
-        return fill("compute_pass_block", header=d.header(), pass_index=p.index, summary=" + ".join(p.ops),
+        stores = [d.fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k) for o in range(bl) for k in range(bx * by)]
+        epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z", d).split("\n"))
+        return d.fill("compute_pass_block", header=d.header(), pass_index=p.index, summary=" + ".join(p.ops),
                     block_x=bx, block_y=by, block_layers=bl, local_x=local_size[0], local_y=local_size[1],
                     prelude="\n\n".join(prelude), declarations="\n".join(decls), epilogue=epi_z, body=body,
                     stores="\n".join(stores))  # fmt: skip
-    return fill(
+    return d.fill(
         "compute_pass",
         header=d.header(),
         pass_index=p.index,
@@ -1944,21 +1946,21 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int]) ->
     )
 
 
-def _epilogue(p: Pass, offs: dict[str, int], z: str) -> str:
+def _epilogue(p: Pass, offs: dict[str, int], z: str, d: Dialect) -> str:
     """The pass's per-texel epilogue on ``r``; ``z`` is the GLSL expression of the output layer."""
     epi = []
     for e in p.epilogue:
         if e.form == "act":
-            epi.append(fill("epilogue_act", expr=e.act.expr("r")))
+            epi.append(d.fill("epilogue_act", expr=e.act.expr("r", d.fill)))
         elif e.form == "affine":
-            epi.append(fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z))
+            epi.append(d.fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z))
         elif e.form == "prelu":
-            epi.append(fill("epilogue_prelu", slope_offset=offs[e.arrays[0]], z=z))
+            epi.append(d.fill("epilogue_prelu", slope_offset=offs[e.arrays[0]], z=z))
         elif e.form == "guard":
-            epi.append(fill("epilogue_guard", channels=p.output.channels, z=z))
+            epi.append(d.fill("epilogue_guard", channels=p.output.channels, z=z))
         else:
-            epi.append(fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels, z=z))
-    return "\n".join(epi) if epi else fill("epilogue_none")
+            epi.append(d.fill("epilogue_rdiv", offset=offs[e.arrays[0]], channels=p.output.channels, z=z))
+    return "\n".join(epi) if epi else d.fill("epilogue_none")
 
 
 @dataclass
@@ -2017,9 +2019,10 @@ def _conv_block(block: tuple[int, int, int], layers: int) -> tuple[int, int, int
 
 def generate_compute(
     model: onnx.ModelProto, precision: str = "fp32", kind: str = "unet", local_size: tuple[int, int] = (8, 8),
-    conv_block: tuple[int, int, int] = CONV_BLOCK,
+    conv_block: tuple[int, int, int] = CONV_BLOCK, dialect: str = "glsl430",
 ) -> ComputeProgram:  # fmt: skip
     """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
+    ``dialect="wgsl"`` writes the same passes in WGSL (WebGPU; see :func:`_wgsl_manifest`).
 
     Storage: every tensor is a 2-D array texture, 4 channels per texel (channel c in layer c // 4,
     lane c % 4), RGBA32F (``precision="fp32"``) or RGBA16F (``"fp16"``: storage only, arithmetic
@@ -2037,6 +2040,9 @@ def generate_compute(
     """
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
+    if dialect not in COMPUTE_DIALECTS:
+        raise NeuralaoError(f"compute dialect must be one of {sorted(COMPUTE_DIALECTS)}, got {dialect!r}")
+    d = COMPUTE_DIALECTS[dialect]
     graph = read_graph(model, max_inputs=1 + MAX_SCALAR_INPUTS)
     meta = graph.metadata.get("pad_multiple")
     try:
@@ -2087,14 +2093,56 @@ def generate_compute(
         blob.extend(data)
     if len(blob) > MAX_PARAM_BYTES:
         raise NeuralaoError(f"parameters need {len(blob)} bytes, over the SSBO limit {MAX_PARAM_BYTES}")
-    sources = {f"{p.name}.comp": _write_compute_pass(p, precision, local_size) for p in table.passes}
+    sources = {}
+    for p in table.passes:
+        try:
+            sources[f"{p.name}{d.extension}"] = _write_compute_pass(p, precision, local_size, d)
+        except KeyError as e:  # a template the dialect lacks: that pass kind is not written in it yet
+            raise NeuralaoError(f"{d.name}: pass {p.name} ({' + '.join(p.ops)}, nodes {', '.join(p.nodes) or '-'}) "
+                                f"cannot be written: {e.args[0]}") from None  # fmt: skip
     manifest = _compute_manifest(
         table, graph, outputs, ranges, bytes(blob), precision, kind, multiple, local_size
     )
     for entry in manifest["outputs"]:
         if entry["onnx_name"] in shapes:
             entry["shape"] = shapes[entry["onnx_name"]]
+    if d.name == "wgsl":
+        _wgsl_manifest(manifest, d)
     return ComputeProgram(sources, bytes(blob), manifest)
+
+
+def _wgsl_manifest(manifest: dict, d: Dialect) -> None:
+    """Restate the GLSL manifest for the WGSL sources: file names, bind-group slots, WebGPU types.
+    Textures, sizes, dispatch and weights.bin are the same (256-byte ranges suit WebGPU's
+    minStorageBufferOffsetAlignment)."""
+    manifest["format"] = d.compute_format
+    manifest.pop("glsl", None)
+    manifest["wgsl"] = "WebGPU compute, one bind group (group 0) per pass"
+    manifest["storage"]["type"] = "texture 2d-array, 4 channels per texel (rgba32float / rgba16float)"
+    manifest["barrier"] = "none needed: WebGPU orders the dispatches of one command encoder"
+    for entry in manifest["passes"]:
+        n = len(entry["inputs"])
+        slots = d.compute_slots(n)
+        entry["shader"] = entry["name"] + d.extension
+        for inp in entry["inputs"]:
+            inp["as"] = "texture_2d_array<f32> (textureLoad), sampleType unfilterable-float"
+        fmt = {"rgba32f": "rgba32float", "rgba16f": "rgba16float"}[entry["output"]["format"]]
+        entry["output"].update(binding=slots["output"], format=fmt,
+                               **{"as": f"texture_storage_2d_array<{fmt}, write>"})  # fmt: skip
+        if "params" in entry:
+            entry["params"]["binding"] = slots["params"]
+            entry["params"]["as"] = ("var<storage, read> prm: array<vec4<f32>>, bound at the range's offset and "
+                                     "size")  # fmt: skip
+        for name, u in entry.get("uniforms", {}).items():
+            u.pop("location", None)
+            u["binding"] = slots["uniform"]
+            u["as"] = f"var<uniform> {name}: {'i32' if name == 'u_flip_y' else 'f32'} (a 16-byte uniform buffer)"
+    for u in manifest["uniforms"]:
+        u["shader"] = u["pass"] + d.extension
+        u.pop("location", None)
+        u["wgsl_name"] = u.pop("glsl_name")
+        u["binding"] = next(p["uniforms"][u["wgsl_name"]]["binding"] for p in manifest["passes"] if p["name"] == u["pass"])
+        u["set_with"] = "queue.writeBuffer of one f32 into the pass's uniform buffer before its dispatch"
 
 
 def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:

@@ -1,0 +1,213 @@
+"""Headless executor for the generated WGSL compute passes: WebGPU through ``wgpu`` (wgpu-native),
+on Mesa's lavapipe Vulkan driver here (any WebGPU adapter elsewhere).
+
+The WGSL twin of :func:`runtime.glsl_runner.run_compute`, driven only by what an engine reads: the
+``.wgsl`` sources, ``weights.bin`` and the manifest (format ``neuralao-wgsl-compute``).
+
+    run_wgsl_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
+    run_wgsl(program_or_dir, x, flip_y=False, scalars=None) -> (1, C_out, H, W) f32   (first graph output)
+    time_wgsl(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
+    adapter_info() -> {"device": ..., "backend": ...}
+
+Timings are medians of per-frame wall times; each frame is one command buffer with every pass,
+closed by reading one texel of the output back (the queue has finished by then).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from export.glsl import ComputeProgram, load_compute_export
+from pipeline.errors import NeuralaoError
+
+from .glsl_runner import scalar_values, texture_sizes
+
+log = logging.getLogger(__name__)
+
+_FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
+
+
+@functools.cache
+def _device():
+    """The process-wide WebGPU device (imported lazily: ``wgpu`` is needed only for WGSL runs)."""
+    try:
+        import wgpu
+    except ImportError:  # pragma: no cover - pinned in pyproject
+        raise NeuralaoError("running WGSL needs the wgpu package (pip install wgpu)") from None
+    adapter = wgpu.gpu.request_adapter_sync(power_preference="high-performance")
+    if adapter is None:
+        raise NeuralaoError("no WebGPU adapter (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)")
+    return wgpu, adapter, adapter.request_device_sync(required_limits={})
+
+
+def adapter_info() -> dict[str, str]:
+    """The adapter WGSL runs on: {"device": ..., "backend": ..., "description": ...}."""
+    _, adapter, _ = _device()
+    info = adapter.info
+    return {"device": info["device"], "backend": info["backend_type"], "description": info["description"]}
+
+
+def _program(program_or_dir: ComputeProgram | str | Path) -> ComputeProgram:
+    prog = (
+        program_or_dir if isinstance(program_or_dir, ComputeProgram) else load_compute_export(program_or_dir)
+    )
+    if prog.manifest.get("format") != "neuralao-wgsl-compute":
+        raise NeuralaoError("not a WGSL program (generate it with dialect='wgsl' / --target wgsl)")
+    return prog
+
+
+_PIPELINES: dict[tuple[str, str], tuple] = {}
+
+
+def _pipeline(source: str, layout_key: str) -> tuple:
+    """(bind group layout, compute pipeline) of a pass (layout_key: its layout entries as JSON), cached
+    for the process: compiling is the slow part on lavapipe."""
+    key = (source, layout_key)
+    if key not in _PIPELINES:
+        wgpu, _, dev = _device()
+        bgl = dev.create_bind_group_layout(entries=json.loads(layout_key))
+        pipeline = dev.create_compute_pipeline(
+            layout=dev.create_pipeline_layout(bind_group_layouts=[bgl]),
+            compute={"module": dev.create_shader_module(code=source), "entry_point": "main"},
+        )
+        _PIPELINES[key] = (bgl, pipeline)
+    return _PIPELINES[key]
+
+
+class _WgslRun:
+    """Textures for one input size, one pipeline and bind group per pass, the weights buffer."""
+
+    def __init__(
+        self, prog: ComputeProgram, height: int, width: int, scalars: dict[str, float], flip_y: bool
+    ):
+        wgpu, _, dev = _device()
+        self.wgpu, self.dev, self.m = wgpu, dev, prog.manifest
+        tu = wgpu.TextureUsage
+        self.textures = {}
+        for ident, (tw, th, layers, _) in texture_sizes(self.m, height, width).items():
+            fmt, texel = _FORMATS[self.m["textures"][ident]["format"]]
+            tex = dev.create_texture(size=(tw, th, layers), format=fmt, dimension="2d",
+                                     usage=tu.TEXTURE_BINDING | tu.STORAGE_BINDING | tu.COPY_DST | tu.COPY_SRC)  # fmt: skip
+            self.textures[ident] = (tex, tex.create_view(dimension="2d-array"), tw, th, layers, texel)
+        bu = wgpu.BufferUsage
+        weights = prog.weights or b"\0" * 16
+        self.weights = dev.create_buffer_with_data(data=weights, usage=bu.STORAGE)
+        self.passes = []
+        for p in self.m["passes"]:
+            self.passes.append(self._pass(prog.sources[p["shader"]], p, scalars, flip_y))
+
+    def _uniform(self, value: float | int, dtype: str):
+        data = np.zeros(4, dtype)
+        data[0] = value
+        return self.dev.create_buffer_with_data(data=data.tobytes(), usage=self.wgpu.BufferUsage.UNIFORM)
+
+    def _pass(self, source: str, p: dict, scalars: dict[str, float], flip_y: bool):
+        wgpu, dev = self.wgpu, self.dev
+        stage = wgpu.ShaderStage.COMPUTE
+        layout, group = [], []
+        for inp in p["inputs"]:
+            layout.append({"binding": inp["binding"], "visibility": stage,
+                           "texture": {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}})  # fmt: skip
+            group.append({"binding": inp["binding"], "resource": self.textures[inp["texture"]][1]})
+        out = p["output"]
+        layout.append({"binding": out["binding"], "visibility": stage,
+                       "storage_texture": {"access": "write-only", "format": out["format"],
+                                           "view_dimension": "2d-array"}})  # fmt: skip
+        group.append({"binding": out["binding"], "resource": self.textures[out["texture"]][1]})
+        if "params" in p:
+            prm = p["params"]
+            layout.append(
+                {"binding": prm["binding"], "visibility": stage, "buffer": {"type": "read-only-storage"}}
+            )
+            group.append({"binding": prm["binding"], "resource": {"buffer": self.weights, "offset": prm["offset"],
+                                                                  "size": prm["bytes"]}})  # fmt: skip
+        for name, u in p.get("uniforms", {}).items():
+            buf = (self._uniform(int(flip_y), "<i4") if name == "u_flip_y"
+                   else self._uniform(scalars[u["onnx_input"]], "<f4"))  # fmt: skip
+            layout.append({"binding": u["binding"], "visibility": stage, "buffer": {"type": "uniform"}})
+            group.append({"binding": u["binding"], "resource": {"buffer": buf, "offset": 0, "size": 16}})
+        bgl, pipeline = _pipeline(source, json.dumps(layout))
+        _, _, tw, th, layers, _ = self.textures[out["texture"]]
+        lx, ly, _ = p["local_size"]
+        bx, by, bl = p.get("block", [1, 1, 1])
+        groups = (-(-tw // (lx * bx)), -(-th // (ly * by)), layers // bl)
+        return pipeline, dev.create_bind_group(layout=bgl, entries=group), groups
+
+    def upload(self, x: np.ndarray) -> None:
+        tex, _, w, h, layers, texel = self.textures[self.m["input"]["texture"]]
+        data = np.zeros((layers * 4, h, w), np.float32)
+        data[: x.shape[1]] = x[0]
+        data = np.ascontiguousarray(data.reshape(layers, 4, h, w).transpose(0, 2, 3, 1))
+        self.dev.queue.write_texture({"texture": tex}, data.tobytes(), {"bytes_per_row": w * 16, "rows_per_image": h},
+                                     (w, h, layers))  # fmt: skip
+
+    def dispatch(self) -> None:
+        enc = self.dev.create_command_encoder()
+        cp = enc.begin_compute_pass()
+        for pipeline, group, groups in self.passes:  # one pass encoder: WebGPU orders the dispatches
+            cp.set_pipeline(pipeline)
+            cp.set_bind_group(0, group)
+            cp.dispatch_workgroups(*groups)
+        cp.end()
+        self.dev.queue.submit([enc.finish()])
+
+    def read(self, ident: str, channels: int, size: tuple[int, int] | None = None) -> np.ndarray:
+        tex, _, w, h, layers, _ = self.textures[ident]
+        w, h = size or (w, h)
+        raw = self.dev.queue.read_texture({"texture": tex}, {"bytes_per_row": w * 16, "rows_per_image": h},
+                                          (w, h, layers))  # fmt: skip
+        buf = np.frombuffer(raw, np.float32).reshape(layers, h, w, 4)
+        return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
+
+
+def run_wgsl_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
+                 scalars: dict[str, float] | None = None) -> dict:  # fmt: skip
+    """Run every WGSL pass on x : (1, C, H, W) float32; {onnx output name: (1, C_out, H, W) float32}."""
+    prog = _program(program_or_dir)
+    x = np.asarray(x, dtype=np.float32)
+    want_c = prog.manifest["input"]["channels"]
+    if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
+        raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
+    run = _WgslRun(prog, x.shape[2], x.shape[3], scalar_values(prog.manifest, scalars), flip_y)
+    run.upload(x)
+    run.dispatch()
+    out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
+    return {o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
+            for o in prog.manifest["outputs"]}  # fmt: skip
+
+
+def run_wgsl(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
+             scalars: dict[str, float] | None = None) -> np.ndarray:  # fmt: skip
+    """The first graph output of :func:`run_wgsl_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
+    prog = _program(program_or_dir)
+    return run_wgsl_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
+
+
+def time_wgsl(program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5,
+              warmup: int = 1, scalars: dict[str, float] | None = None) -> float:  # fmt: skip
+    """Median seconds for all passes at width x height (random input; scalar inputs 1.0 unless given)."""
+    prog = _program(program_or_dir)
+    values = {u["onnx_input"]: 1.0 for u in prog.manifest.get("uniforms", [])} | dict(scalars or {})
+    run = _WgslRun(prog, height, width, scalar_values(prog.manifest, values), False)
+    c = prog.manifest["input"]["channels"]
+    run.upload(np.random.default_rng(0).normal(size=(1, c, height, width)).astype(np.float32))
+    out = prog.manifest["outputs"][0]
+
+    def frame() -> None:
+        run.dispatch()
+        run.read(out["texture"], 1, size=(1, 1))  # waits for the queue
+
+    for _ in range(warmup):
+        frame()
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        frame()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
