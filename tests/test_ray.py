@@ -210,13 +210,14 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
         args += ["--set", kv]
     parts = out / "stages" / "lod.parts"
     p = _cli(*args, start_new_session=True)
-    _kill_when(p, lambda: len(list(parts.glob("[!.]*.npz"))) >= 2, timeout=120)
+    _kill_when(p, lambda: any(parts.glob("[!.]*.npz")), timeout=120)
     assert p.returncode == -signal.SIGKILL and not (out / "level_baked.glb").exists()
     assert (out / "stages" / "decorators.npz").is_file()
     p = _cli(*args)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 0, err
-    assert re.search(r"(\d+) of (\d+) tasks done by an earlier run", err), err[-300:]
+    reused = {st["stage"] for st in json.loads((out / "bake_log.json").read_text())["stages"] if st["reused"]}
+    assert {"trace", "decorators", "solve", "small_decorators"} <= reused, reused
     _assert_same_level_bake(out, local, info)
 
 
