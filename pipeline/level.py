@@ -36,6 +36,7 @@ import numpy as np
 
 from .errors import NeuralaoError
 from .io import atomic_path
+from .scene import gltf_resource
 
 ROLES = ("static", "blocker", "tree", "shrub", "grass")
 # Parameters each role accepts in extras, with their defaults (Sloan et al.: trees attenuate 50%).
@@ -178,10 +179,20 @@ def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return m[:, :3, 3].copy(), matrix_to_quat(rot), s
 
 
+def gltf_label(kind: str, index: int, item: Any) -> str:
+    """How every message names a glTF node, mesh or other indexed item: ``node 3 'Chair'`` when it
+    has a name, ``node 3 (unnamed)`` when it has none (the index is always there: names repeat)."""
+    name = item.get("name") if isinstance(item, dict) else None
+    return f"{kind} {index} {str(name)!r}" if name not in (None, "") else f"{kind} {index} (unnamed)"
+
+
 def node_matrix(node: dict, where: str) -> np.ndarray:
     """The local 4x4 of a glTF node (``matrix`` column-major, or TRS)."""
     if "matrix" in node:
-        vals = np.asarray(node["matrix"], np.float64)
+        try:
+            vals = np.asarray(node["matrix"], np.float64)
+        except (TypeError, ValueError):
+            vals = np.zeros(0)
         if vals.shape != (16,):
             raise NeuralaoError(f"{where}: matrix must have 16 numbers")
         return vals.reshape(4, 4).T
@@ -266,13 +277,15 @@ class _Gltf:
             if glb_bin is None:
                 raise NeuralaoError(f"level {self.path}: buffer {index} has no uri and there is no GLB chunk")
             data = glb_bin
-        elif uri.startswith("data:"):
+        elif isinstance(uri, str) and uri.startswith("data:"):
             try:
                 data = base64.b64decode(uri.split(",", 1)[1])
             except Exception:
                 raise NeuralaoError(f"level {self.path}: buffer {index} has a bad data URI") from None
         else:
-            p = self.path.parent / uri
+            if not isinstance(uri, str):
+                raise NeuralaoError(f"level {self.path}: buffer {index} uri must be a string, got {uri!r}")
+            p = gltf_resource(self.path, uri)  # never a file outside the glTF's folder
             if not p.is_file():
                 raise NeuralaoError(f"level {self.path}: buffer {index} file not found: {uri}")
             data = p.read_bytes()
@@ -378,7 +391,7 @@ def _mesh(g: _Gltf, index: int, where: str) -> LevelMesh:
     name = str(spec.get("name", f"mesh{index}"))
     verts, faces, offset = [], [], 0
     for p, prim in enumerate(spec.get("primitives", [])):
-        w = f"{where} mesh {name!r} primitive {p}"
+        w = f"{where} {gltf_label('mesh', index, spec)} primitive {p}"
         mode = prim.get("mode", 4)
         if mode != 4:
             raise NeuralaoError(f"{w}: mode {mode} is not supported (triangles only, mode 4)")
@@ -436,7 +449,7 @@ def read_level(path: str | Path) -> Level:
         seen.add(i)
         node = nodes[i]
         name = str(node.get("name", f"node{i}"))
-        where = f"level {path.name} node {i} ({name!r})"
+        where = f"level {path.name} {gltf_label('node', i, node)}"
         world = parent @ node_matrix(node, where)
         role, params = _role_and_params(node, inherited, where)
         if "mesh" in node:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -98,8 +99,36 @@ def _read_geometries(path: Path) -> list:
         loaded = trimesh.load(str(path), force="scene", process=False)
         return list(loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded])
     except Exception as e:  # trimesh raises many types for corrupt files
+        # trimesh's resolver refused a file outside the glTF's folder (its text names its own Python API)
+        escaped = _ESCAPED.match(str(e))
+        if escaped:
+            raise NeuralaoError(outside_folder_message(path, escaped.group(1))) from None
         first = str(e).splitlines()[0][:200] if str(e) else ""
         raise NeuralaoError(f"cannot read mesh {path}: {type(e).__name__}: {first}") from None
+
+
+# trimesh's FilePathResolver: "'NAME' escapes resolver root 'ROOT' ..."
+_ESCAPED = re.compile(r"^'(.*)' escapes resolver root ")
+
+
+def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
+    """The one-line refusal of a glTF resource (buffer or image) outside the glTF's own folder."""
+    folder = Path(gltf).resolve().parent
+    return (
+        f"{Path(gltf).name} refers to {uri!r}, which is outside its folder {folder}: only files in the "
+        "glTF's folder or below it are read; copy the file there and point the uri at it, or use a .glb"
+    )
+
+
+def gltf_resource(gltf: str | os.PathLike, uri: str) -> Path:
+    """The file a glTF's relative ``uri`` names (percent-decoded), refused when it leaves the glTF's folder."""
+    from urllib.parse import unquote
+
+    folder = Path(gltf).resolve().parent
+    target = (folder / unquote(uri)).resolve()
+    if not target.is_relative_to(folder):
+        raise NeuralaoError(outside_folder_message(gltf, uri))
+    return target
 
 
 def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate: bool = True) -> Scene:
@@ -125,6 +154,11 @@ def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate
     return scene_from_arrays(vertices, faces_arr, name or path.stem, str(path), drop_degenerate)
 
 
+# Largest |coordinate| of a mesh: the G-buffer's float32 transforms render meshes up to 1e30 across at
+# any offset within it and draw nothing at 1e38; ray distances in scene units are float32 too (measured).
+MAX_COORDINATE = 1e30
+
+
 def scene_from_arrays(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -143,6 +177,12 @@ def scene_from_arrays(
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
         raise NeuralaoError(f"mesh {what} has {bad} vertices with NaN or inf coordinates")
+    reach = float(np.abs(vertices).max())
+    if reach > MAX_COORDINATE:
+        raise NeuralaoError(
+            f"mesh {what} has coordinates up to {reach:.3g}: meshes must lie within +-{MAX_COORDINATE:g} "
+            "(float32 G-buffers and ray distances overflow past it); rescale the mesh"
+        )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise NeuralaoError(f"mesh {what} has face indices outside [0, {len(vertices)})")
     dropped = 0
