@@ -52,7 +52,7 @@ DEMO_REPORT_FLAGS := --gt-rays 512 --frames-per-scene 3 --time-size 256 256 --re
 	--set 'expected_exports=[$(subst $(space),$(comma),$(foreach s,$(MLP_SIZES),"mlp-$(s)") "unet")]'
 VIEWER_PNG := $(BUILD)/viewer.png
 
-.PHONY: help setup system-deps dataset corpus corpus-full experiments evaluate models train export parity report select demo test bench lint clean
+.PHONY: help setup system-deps dataset corpus corpus-full experiments evaluate models train export parity report select demo host test bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -177,6 +177,16 @@ select: $(EXPORTS) ## Pick the smallest model meeting the error target per scene
 
 demo: $(REPORT) $(VIEWER_PNG) ## Set up if needed, then dataset -> train -> export -> parity -> report on the default scenes
 	@echo "demo done: $(REPORT) (and report.html, contact sheets, viewer pages in $(BUILD)/report/), $(VIEWER_PNG)"
+
+# The C reference host (runtime/host/): EGL (surfaceless Mesa) + OpenGL 4.3 compute, no Python.
+HOST := build/host/neuralao_host
+HOST_CFLAGS := -O2 -std=c11 -Wall -Wextra -Werror
+
+host: $(HOST) ## Build the standalone C host that runs a shipped export on a raw float32 G-buffer
+
+$(HOST): runtime/host/neuralao_host.c
+	mkdir -p $(@D)
+	$${CC:-cc} $(HOST_CFLAGS) -o $@ $< -lEGL -lOpenGL -lm
 
 test: $(STAMP) ## Set up if needed, then run the test suite
 	$(PY) -m pytest -n 2 --dist loadfile

@@ -38,7 +38,9 @@ def _input(size: int) -> np.ndarray:
     rng = np.random.default_rng(0)
     depth = rng.uniform(0.5, 1.5, (1, 1, size, size))
     normal = rng.normal(size=(1, 3, size, size))
-    return np.concatenate([depth, normal / np.linalg.norm(normal, axis=1, keepdims=True)], 1).astype(np.float32)
+    return np.concatenate([depth, normal / np.linalg.norm(normal, axis=1, keepdims=True)], 1).astype(
+        np.float32
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,7 +73,13 @@ def main(argv: list[str] | None = None) -> int:
     n = args.time_size
     gl_s = time_compute(generate_compute(model), n, n, repeats=args.repeats, scalars=scalars)
     wgsl_s = time_wgsl(generate_compute(model, dialect="wgsl"), n, n, repeats=args.repeats, scalars=scalars)
-    timing = {"model": default, "size": [n, n], "repeats": args.repeats, "glsl_llvmpipe_s": gl_s, "wgsl_lavapipe_s": wgsl_s}
+    timing = {
+        "model": default,
+        "size": [n, n],
+        "repeats": args.repeats,
+        "glsl_llvmpipe_s": gl_s,
+        "wgsl_lavapipe_s": wgsl_s,
+    }
     result = {"date": time.strftime("%Y-%m-%d"), "cpu": cpu_name(), "adapter": adapter_info(), "parity_size": args.size,
               "parity": rows, "timing": timing}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
@@ -79,7 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     lines = ["| model | passes | WGSL vs onnxruntime | GLSL vs onnxruntime |", "|---|---|---|---|"]
     for r in rows:
         name = f"{r['model']} (default)" if r["default"] else r["model"]
-        lines.append(f"| {name} | {r['passes']} | {r['wgsl_max_abs_err']:.1e} | {r['glsl_max_abs_err']:.1e} |")
+        lines.append(
+            f"| {name} | {r['passes']} | {r['wgsl_max_abs_err']:.1e} | {r['glsl_max_abs_err']:.1e} |"
+        )
     lines += ["", f"{default} at {n}x{n}: GLSL on llvmpipe {gl_s * 1e3:.0f} ms, WGSL on lavapipe {wgsl_s * 1e3:.0f} ms "
               f"(median of {args.repeats}; {result['cpu']}; {result['adapter']['description']})"]  # fmt: skip
     write_text(args.out / "wgsl.md", "\n".join(lines) + "\n")
