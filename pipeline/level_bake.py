@@ -466,7 +466,19 @@ def _trace_block(state, args) -> dict[str, np.ndarray]:
     return {"ao": ao, "valid": valid}
 
 
-def opaque_context(key: str, labeller: LevelLabeller, foliage, engine=None):
+class LabellerFrame:
+    """The driver's stand-in for the opaque :class:`LevelLabeller` when an engine traces: the scene, its
+    label settings and the local frame (``_center``, ``_scale``) the foliage is built in, no Embree scene."""
+
+    def __init__(self, scene: Scene, settings: LabelSettings):
+        self.scene, self.settings = scene, settings
+        self._center = np.asarray(scene.center, dtype=np.float64)
+        self._scale = float(scene.diagonal)
+        if not (math.isfinite(self._scale) and self._scale > 0):
+            raise NeuralaoError(f"scene {scene.name} has no extent (diagonal {self._scale})")
+
+
+def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, engine=None):
     """The engine context of the opaque labeller and the foliage (trace, resampling): workers rebuild
     both from the object store; with ``engine`` None, a context the driver's own state stands for."""
     from .engine import Context, slim_scene
@@ -793,10 +805,14 @@ def bake_level(
               occluder_faces=len(g.opaque.faces))  # fmt: skip
     samples = blog.timed("samples", "Sample mesh", lambda: receiver_samples(g.receivers, s.trace, s.seed))
     blog.note("samples", samples=len(samples))
+    # With an engine every trace runs on the workers, so the driver keeps no Embree scene (a few GiB for a
+    # world of tens of millions of faces), only the opaque scene's frame.
     labeller = blog.timed(
         "bvh",
         "Embree BVH build (opaque)",
-        lambda: LevelLabeller(g.opaque, label_settings(s, g.opaque.diagonal)),
+        lambda: (LevelLabeller if engine is None else LabellerFrame)(
+            g.opaque, label_settings(s, g.opaque.diagonal)
+        ),
     )
     foliage = None
     if s.foliage.enabled:
@@ -831,7 +847,7 @@ def bake_level(
                   resample_points=int(lod["resample_points"]),
                   **{k: float(lod[k]) for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")})  # fmt: skip
     blend_err = blog.stored("blend_check", "Two-distance blend vs blended-kernel traces (error table)",
-                            lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s))  # fmt: skip
+                            lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s, engine=engine, key=key))  # fmt: skip
     blog.timed(
         "output",
         "Write glTF, shader, log",
@@ -1016,23 +1032,43 @@ _BLEND_LSQ_CHECK_VERTICES = 300_000
 
 
 def _blend_check(
-    g, labeller, foliage, samples, traced, solved, s: LevelBakeSettings, count: int = 2000
+    g,
+    labeller,
+    foliage,
+    samples,
+    traced,
+    solved,
+    s: LevelBakeSettings,
+    count: int = 2000,
+    engine=None,
+    key: str = "",
 ) -> dict:
     """The error table of the two-distance blend: (a) same rays (valid samples): blend of the two columns vs one trace
     whose kernel is the blend (rho_b = w rho_long + (1 - w) rho_short: the mean is linear, so any
     difference is float rounding); (b) the stored per-vertex blend vs a 4x-ray blended-kernel reference
-    at held-out samples (the bake's error); (c) per-vertex blend vs least squares of blended samples."""
+    at held-out samples (the bake's error); (c) per-vertex blend vs least squares of blended samples.
+    With ``engine`` the two traces are its tasks (the reference labeller is built on a worker)."""
     rng = np.random.default_rng(s.seed + 7)
     pick = np.sort(rng.choice(len(samples), size=min(count, len(samples)), replace=False))
     pts, nrm = samples.points[pick], samples.normals[pick]
     w = s.blend.long_weight
     plain = replace(s.blend, remap=None)
     two = blend(traced["ao"][pick, 0], traced["ao"][pick, 1], plain)
-    kern = _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=pick)
-    ref_lab = LevelLabeller(
-        g.opaque, replace(label_settings(s, g.opaque.diagonal, 4 * s.trace.rays), seed=s.seed + 1000)
-    )
-    ref_two, ref_valid = ref_lab.obscurance(pts, nrm, halves(s), foliage)
+    ref_settings = replace(label_settings(s, g.opaque.diagonal, 4 * s.trace.rays), seed=s.seed + 1000)
+    if engine is None:
+        kern = _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=pick)
+        ref_two, ref_valid = LevelLabeller(g.opaque, ref_settings).obscurance(pts, nrm, halves(s), foliage)
+    else:
+        from .engine import Context, Task, slim_scene
+
+        if engine.threads is not None:
+            ref_settings = replace(ref_settings, workers=engine.threads)
+        ref_ctx = Context(f"level-reference/{key}/{ref_settings.workers}", _level_tracer,
+                          (slim_scene(g.opaque), ref_settings, foliage))  # fmt: skip
+        tasks = [Task(opaque_context(key, labeller, foliage, engine), _blend_kernel_task, (pts, nrm, pick, s)),
+                 Task(ref_ctx, _obscurance_task, (pts, nrm, halves(s)))]  # fmt: skip
+        done = dict(engine.map(tasks))
+        kern, ref_two, ref_valid = done[0]["kern"], done[1]["ao"], done[1]["valid"]
     ref = w * ref_two[:, 1].astype(np.float64) + (1 - w) * ref_two[:, 0]
     per_vertex = blend(solved["short"], solved["long"], plain)
     pred = interpolate(g.receivers, per_vertex, samples.face[pick], samples.bary[pick])
@@ -1051,6 +1087,19 @@ def _blend_check(
         "per_vertex_blend_vs_lsq_of_blend_max_abs": np.array(vertex_gap),
         "count": np.array(int(m.sum())),
     }
+
+
+def _blend_kernel_task(state, args) -> dict[str, np.ndarray]:
+    labeller, foliage = state
+    pts, nrm, ids, s = args
+    return {"kern": _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=ids)}
+
+
+def _obscurance_task(state, args) -> dict[str, np.ndarray]:
+    labeller, foliage = state
+    pts, nrm, half = args
+    ao, valid = labeller.obscurance(pts, nrm, half, foliage)
+    return {"ao": ao, "valid": valid}
 
 
 def _blended_kernel_trace(
