@@ -1,13 +1,14 @@
 """onnx's node tests and light models through the GLSL image target: passed, refused, wrong.
 
-    .venv/bin/python bench/bench_conformance.py --out build/bench [--no-light]
+    .venv/bin/python bench/bench_conformance.py --out build/bench [--no-light] [--dialect glsl430|wgsl]
 
 Node tests: every single-node case onnx ships for an op in the image target's table (see
 export/node_tests.py for the rules: the first input is the image, the others become initializers; the
 test's own tolerance). Light models: onnx's ``light`` variants of eight classic CNNs (weights made by
 ConstantOfShape), at their 224 x 224 input, against onnxruntime on a seeded input.
 
-Writes DIR/conformance.json and DIR/conformance.md (the tables of docs/shader-conformance.md).
+Writes DIR/conformance.json and DIR/conformance.md (the tables of docs/shader-conformance.md);
+``--dialect wgsl`` runs the WGSL passes on WebGPU (wgpu) instead and writes conformance-wgsl.*.
 """
 
 from __future__ import annotations
@@ -58,21 +59,23 @@ def node_table(results) -> tuple[str, dict]:
     return "\n".join(lines), {op: dict(c) for op, c in counts.items()}
 
 
-def light_models() -> list[dict]:
+def light_models(dialect: str = "glsl430") -> list[dict]:
     from onnx.backend.test import __file__ as test_init
 
     from export.glsl import generate_compute
     from export.onnx_io import run_onnxruntime
     from pipeline.errors import NeuralaoError
     from runtime.glsl_runner import run_compute_all
+    from runtime.wgsl_runner import run_wgsl_all
 
+    run_program = run_wgsl_all if dialect == "wgsl" else run_compute_all
     rows = []
     for path in sorted((Path(test_init).parent / "data" / "light").glob("*.onnx")):
         model = onnx.load(path)
         name = path.stem.removeprefix("light_")
         t0 = time.perf_counter()
         try:
-            program = generate_compute(model)
+            program = generate_compute(model, dialect=dialect)
         except NeuralaoError as e:
             rows.append({"model": name, "outcome": "refused", "reason": str(e)})
             continue
@@ -81,7 +84,7 @@ def light_models() -> list[dict]:
         x = np.random.default_rng(0).normal(size=[d.dim_value for d in vi.type.tensor_type.shape.dim]).astype(np.float32)
         ref = run_onnxruntime(model.SerializeToString(), {vi.name: x})[0]
         t1 = time.perf_counter()
-        got = next(iter(run_compute_all(program, x).values()))
+        got = next(iter(run_program(program, x).values()))
         err = float(np.abs(got - ref).max()) if got.shape == ref.shape else float("inf")
         rows.append({"model": name, "outcome": "passed" if err <= 1e-4 * max(1.0, float(np.abs(ref).max())) else "wrong",
                      "max_abs_err": err, "max_abs_ref": float(np.abs(ref).max()), "passes": len(program.manifest["passes"]),
@@ -104,23 +107,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--no-light", action="store_true", help="skip the light models (minutes on llvmpipe)")
+    ap.add_argument("--dialect", default="glsl430", choices=("glsl430", "wgsl"),
+                    help="glsl430: GLSL on GL (llvmpipe); wgsl: WGSL on WebGPU (wgpu, lavapipe)")
     args = ap.parse_args()
     from export.glsl import ImageOps
     from export.node_tests import run_node_tests
 
     t0 = time.perf_counter()
-    results = run_node_tests(ImageOps.OPS)
+    results = run_node_tests(ImageOps.OPS, args.dialect)
     table, counts = node_table(results)
     seconds = time.perf_counter() - t0
-    light = [] if args.no_light else light_models()
-    report = {"cpu": cpu_name(), "node_tests": counts, "node_seconds": round(seconds, 1), "light": light,
+    light = [] if args.no_light else light_models(args.dialect)
+    stem = "conformance-wgsl" if args.dialect == "wgsl" else "conformance"
+    report = {"cpu": cpu_name(), "dialect": args.dialect, "node_tests": counts, "node_seconds": round(seconds, 1), "light": light,
               "cases": [r.__dict__ for r in results]}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
-    write_json(args.out / "conformance.json", report)
+    write_json(args.out / f"{stem}.json", report)
     md = [f"Node tests ({len(results)} cases, {seconds:.0f} s on {cpu_name()}):", "", table]
     if light:
         md += ["", "Light models:", "", light_table(light)]
-    write_text(args.out / "conformance.md", "\n".join(md) + "\n")
+    write_text(args.out / f"{stem}.md", "\n".join(md) + "\n")
     print("\n".join(md))
 
 

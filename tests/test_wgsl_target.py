@@ -98,6 +98,7 @@ def test_single_ops_wgsl_vs_onnxruntime(name):
     assert err <= tol, f"{name}: max abs err {err:.3g} > {tol}"
 
 
+@pytest.mark.slow
 def test_shipped_default_wgsl_vs_onnxruntime(tmp_path):
     """The shipped default U-Net, exported to WGSL and read back from disk, on an odd size (pad + crop)."""
     _adapter_or_skip()
