@@ -52,7 +52,7 @@ DEMO_REPORT_FLAGS := --gt-rays 512 --frames-per-scene 2 --time-size 256 256 --re
 	--set 'expected_exports=[$(subst $(space),$(comma),$(foreach s,$(MLP_SIZES),"mlp-$(s)") "unet")]'
 VIEWER_PNG := $(BUILD)/viewer.png
 
-.PHONY: help setup system-deps dataset corpus corpus-full experiments evaluate models train export parity report select demo host test bench lint clean
+.PHONY: help setup system-deps dataset corpus corpus-full experiments evaluate models train export parity report select demo host test fuzz bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -190,6 +190,13 @@ $(HOST): runtime/host/neuralao_host.c
 
 test: $(STAMP) ## Set up if needed, then run the test suite
 	$(PY) -m pytest -n 2 --dist loadfile
+
+# tests/test_cli_fuzz.py runs 500 seeded cases in `make test`; this runs more, from a fresh seed each time
+# (printed; NEURALAO_FUZZ_SEED=N replays a run).
+FUZZ_EXAMPLES ?= 5000
+fuzz: $(STAMP) ## CLI fuzz harness with FUZZ_EXAMPLES (5000) cases from a fresh seed (NEURALAO_FUZZ_SEED replays)
+	seed=$${NEURALAO_FUZZ_SEED:-$$RANDOM$$RANDOM}; echo "fuzz seed $$seed"; \
+	NEURALAO_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) NEURALAO_FUZZ_SEED=$$seed $(PY) -m pytest tests/test_cli_fuzz.py -q
 
 bench: $(STAMP) ## Run benchmarks under bench/ (JSON + markdown tables in build/bench)
 	mkdir -p build/bench

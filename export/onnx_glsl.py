@@ -202,7 +202,13 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
 def read_manifest(export_dir: Path) -> dict:
     from .parity import read_manifest as read_export_manifest
 
-    return read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
+    manifest = read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
+    missing = [k for k in ("onnx", "glsl", "target", "inputs", "outputs", "precision") if k not in manifest]
+    if missing or manifest["target"] not in TARGETS:
+        what = f"has no {', '.join(missing)}" if missing else f"has target {manifest['target']!r}"
+        path = Path(export_dir) / "manifest.json"
+        raise NeuralaoError(f"{path} {what}: not a `neuralao glsl` export manifest")
+    return manifest
 
 
 # Seeded inputs are this size (W, H) unless --size says otherwise (image: rounded up to what the program takes).
@@ -260,7 +266,10 @@ def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tup
             want = " ".join(str(f) if f is not None else "?" for f in fixed)
             raise NeuralaoError(f"--size {w} {h}: this export's input {dims} is static ({want}); "
                                 "--size is taken only when it equals the static size (or omit it)")  # fmt: skip
-    textures = texture_sizes(manifest, h, w, max_bytes=PARITY_MAX_BYTES)
+    try:
+        textures = texture_sizes(manifest, h, w, max_bytes=PARITY_MAX_BYTES)
+    except NeuralaoError as e:  # name the flag when the size came from it
+        raise NeuralaoError(f"--size {w} {h}: {e}" if size is not None else str(e)) from None
     log.debug("parity at %dx%d: %s of textures", w, h, _gib(sum(t[3] for t in textures.values())))
     return w, h
 

@@ -73,6 +73,7 @@ from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path
 from .labels import Labeller, LabelSettings, check_label_args, hammersley, sample_shifts
+from .limits import MAX_CAP, SAMPLE_BYTES, check_count, check_int_range, check_seed
 from .scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
@@ -408,6 +409,9 @@ def bake_least_squares(
     """Least-squares vertex baking of stratified surface samples (module doc)."""
     t0 = time.perf_counter()
     total = settings.samples_per_vertex * len(scene.vertices)
+    # The samples' arrays are allocated before anything else: their number must fit (pipeline.limits).
+    check_count("--samples-per-vertex", math.ceil(min(total, 2.0**62)) + len(scene.faces), bytes_each=SAMPLE_BYTES,
+                each="per surface sample", shown=f"{settings.samples_per_vertex:g} on {len(scene.vertices)} vertices")  # fmt: skip
     samples = surface_samples(scene, total, settings.samples_per_face_cap, settings.seed)
     t1 = time.perf_counter()
     ao, valid = labeller.ao_at_points(samples.points, samples.normals, progress=progress)
@@ -431,10 +435,10 @@ def check_settings(settings: BakeSettings) -> None:
         raise NeuralaoError(f"method must be 'vertex' or 'least-squares', got {settings.method!r}")
     if not (math.isfinite(settings.alpha) and settings.alpha >= 0):
         raise NeuralaoError(f"--alpha must be a finite number >= 0, got {settings.alpha}")
-    if settings.samples_per_face_cap < 1:
-        raise NeuralaoError(f"--samples-per-face-cap must be >= 1, got {settings.samples_per_face_cap}")
+    check_int_range("--samples-per-face-cap", settings.samples_per_face_cap, 1, MAX_CAP)
     if not (math.isfinite(settings.samples_per_vertex) and settings.samples_per_vertex > 0):
         raise NeuralaoError(f"--samples-per-vertex must be > 0, got {settings.samples_per_vertex}")
+    check_seed("--seed", settings.seed)
 
 
 def bake(
@@ -541,12 +545,17 @@ def read_baked_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarra
     import trimesh
 
     path = Path(path)
+    if path.is_file() and path.stat().st_size == 0:
+        raise NeuralaoError(f"{path} is empty: it has no geometry")
     try:
         loaded = trimesh.load(str(path), process=False)
     except Exception as e:
-        raise NeuralaoError(f"cannot read {path}: {type(e).__name__}: {e}") from None
+        first = str(e).splitlines()[0][:200] if str(e) else ""
+        raise NeuralaoError(f"cannot read {path}: {type(e).__name__}: {first}") from None
     if isinstance(loaded, trimesh.Scene):
         geoms = list(loaded.geometry.values())
+        if not geoms:
+            raise NeuralaoError(f"{path} has no geometry (no mesh in the file)")
         if len(geoms) != 1:
             raise NeuralaoError(f"{path} holds {len(geoms)} meshes, expected one")
         loaded = geoms[0]

@@ -8,6 +8,7 @@ import argparse
 import importlib
 import logging
 import sys
+from typing import NoReturn
 
 from .errors import NeuralaoError
 
@@ -35,8 +36,16 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the command's error contract: a usage error is one line on stderr, exit 2
+    (the usage text stays in ``--help``). Subparsers are built with the same class."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser(load: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="neuralao",
         description="Neural ambient occlusion: meshes -> AO labels -> models -> ONNX -> GLSL.",
     )
@@ -60,7 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     for noisy in ("trimesh", "OpenGL"):  # library chatter (triangulating faces, accelerate module)
         logging.getLogger(noisy).setLevel(logging.DEBUG if args.verbose else logging.WARNING)
     if not args.command:
-        parser.print_help()
+        sys.stderr.write(
+            f"neuralao: error: no command given, one of {', '.join(COMMANDS)} (see neuralao --help)\n"
+        )
         return 2
     module = importlib.import_module(COMMANDS[args.command][0])
     try:
@@ -71,6 +82,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write(f"neuralao {args.command}: interrupted\n")
         return 130
+    except Exception as e:  # a bug, not bad input: still one line (the traceback with -v), exit 1
+        if args.verbose:
+            raise
+        first = str(e).splitlines()[0][:300] if str(e) else ""
+        sys.stderr.write(
+            f"neuralao {args.command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n"
+        )
+        return 1
 
 
 if __name__ == "__main__":

@@ -130,11 +130,23 @@ def apply_overrides(data: dict[str, Any], overrides: list[str] | None) -> dict[s
     """Apply ``key=value`` overrides to ``data`` in place (dotted keys nest); returns ``data``."""
     for item in overrides or []:
         key, value = parse_override(item)
-        node = data
+        node: Any = data
         parts = key.split(".")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = value
+        for depth, p in enumerate(parts):
+            last = depth == len(parts) - 1
+            if isinstance(node, list):  # a list entry by index: scenes.0.views=4
+                if not (p.isdigit() and int(p) < len(node)):
+                    where = ".".join(parts[:depth]) or "the settings"
+                    raise NeuralaoError(
+                        f"override {key!r}: {where} is a list of {len(node)}; {p!r} is not an index in it"
+                    )
+                p = int(p)
+            elif not isinstance(node, dict):
+                raise NeuralaoError(f"override {key!r}: {'.'.join(parts[:depth])} is not a mapping")
+            if last:
+                node[p] = value
+            else:
+                node = node.setdefault(p, {}) if isinstance(node, dict) else node[p]
     return data
 
 

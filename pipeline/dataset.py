@@ -639,10 +639,44 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_engine_arguments(p)
 
 
+def check_counts(settings: DatasetSettings, out: Path) -> None:
+    """Every count of the config within what the machine can hold, before anything is expanded or
+    allocated (pipeline.limits): scenes and views (a camera each), frame sizes (a shard's frames are
+    in memory together), the frames on disk, seeds."""
+    from .limits import (
+        MAX_CAP,
+        PIXEL_DISK_BYTES,
+        check_count,
+        check_disk,
+        check_int_range,
+        check_pixels,
+        check_seed,
+    )
+
+    scene_bytes = 4096  # a scene entry or a camera, before anything is rendered
+    check_seed("seed", settings.seed)
+    check_count("frames_per_shard", settings.frames_per_shard)
+    check_int_range("holdout_every", settings.holdout_every, 0, MAX_CAP)
+    check_count("composed count", sum(max(g.count, 0) for g in settings.composed) + 1, bytes_each=scene_bytes,
+                each="a scene entry")  # fmt: skip
+    sizes = [tuple(settings.size), *(settings.sizes or [])]
+    views = 0
+    for item in [*settings.scenes, *settings.composed]:
+        where = f"scene {item.name}" if isinstance(item, SceneSpec) else f"composed {item.prefix!r}"
+        check_count(f"{where}: views", item.views, low=0, bytes_each=scene_bytes, each="a camera")
+        sizes += list(item.sizes or [])
+        views += item.views * (item.count if isinstance(item, ComposedScenes) else 1)
+    for w, h in sizes:
+        check_pixels("size", w, h, frames=settings.frames_per_shard)
+    w, h = max(w for w, _ in sizes), max(h for _, h in sizes)
+    check_disk("views", views * w * h * PIXEL_DISK_BYTES, out, f"{views} at up to {w} {h}")
+
+
 def run(args: argparse.Namespace) -> int:
     from .engine import engine_from_args
 
     settings = load_settings(DatasetSettings, args.config, args.set)
+    check_counts(settings, Path(args.out))
     with engine_from_args(args) as engine:
         manifest = build_dataset(
             settings, Path(args.out), Path(args.config).resolve().parent, not args.no_progress, engine

@@ -56,6 +56,15 @@ from .checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .labels import LabelSettings
+from .limits import (
+    MAX_CAP,
+    SAMPLE_BYTES,
+    THREAD_BYTES,
+    check_count,
+    check_int_range,
+    check_pixels,
+    check_seed,
+)
 from .mlp import count_parameters, parse_size, size_name  # count_parameters: trainable weights only
 
 log = logging.getLogger(__name__)
@@ -266,8 +275,21 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
 
 
 def check_settings(s: FieldSettings) -> None:
-    if s.steps < 1 or s.batch < 1 or s.check_every < 1:
-        raise NeuralaoError("steps, batch and check_every must be >= 1")
+    for name in ("steps", "batch", "check_every", "samples", "samples_per_face_cap", "holdout_views"):
+        check_int_range(name, getattr(s, name), 0 if name == "holdout_views" else 1, MAX_CAP)
+    check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
+    # What the counts allocate, before any of it is (pipeline.limits): every surface sample twice (both
+    # sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
+    check_count("samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples))  # fmt: skip
+    check_count("batch", s.batch, bytes_each=64 * (sum(s.hidden) + 6 + 6 * max(s.octaves, 0)) + 64,
+                each="per batch row")  # fmt: skip
+    if s.holdout_views:
+        check_pixels("holdout_size", *s.holdout_size, frames=s.holdout_views)
+    check_count("hidden", max(s.hidden or [1]) ** 2 * len(s.hidden or [1]), bytes_each=64, each="per weight",
+                shown=str(list(s.hidden)))  # fmt: skip
+    check_seed("seed", s.seed)
+    if not (math.isfinite(s.lr) and s.lr > 0 and math.isfinite(s.lr_final_fraction) and s.lr_final_fraction >= 0):  # fmt: skip
+        raise NeuralaoError(f"lr must be a finite number > 0 and lr_final_fraction >= 0, got {s.lr}, {s.lr_final_fraction}")  # fmt: skip
     if not 0 <= s.octaves <= 16:
         raise NeuralaoError(f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}")
     if not s.hidden or min(s.hidden) < 1:
@@ -356,7 +378,7 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
         pred = model(tp[idx], tn[idx]).reshape(-1)
         loss = torch.mean((pred - ty[idx]) ** 2)
         if not torch.isfinite(loss):
-            raise NeuralaoError(f"training diverged at step {step} (loss {float(loss)})")
+            raise NeuralaoError(f"training diverged at step {step} (loss {float(loss)}); try a smaller lr than {settings.lr:g}")  # fmt: skip
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -364,6 +386,8 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
             with torch.no_grad():
                 val = float(torch.sqrt(torch.mean((model(vp, vn).reshape(-1) - vy) ** 2))) if len(vy) else float(loss)
             history.append({"step": step, "val_rmse": val, "seconds": time.perf_counter() - t0})
+            if not math.isfinite(val):  # the weights are gone (NaN or inf): no best model to keep
+                raise NeuralaoError(f"training diverged at step {step} (validation RMSE {val}); try a smaller lr than {settings.lr:g}")  # fmt: skip
             if val < best[0]:
                 best = (val, {k: v.detach().clone() for k, v in model.state_dict().items()}, step)
     model.load_state_dict(best[1])
@@ -466,9 +490,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--mesh", help="mesh file or name under the shared mesh folder")
     src.add_argument("--data", help="dataset folder (with --scene)")
     src.add_argument("--scene", help="scene name in the dataset")
-    p.add_argument("--size", default=None, help="hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default 32x16)")
-    p.add_argument("--octaves", type=int, help="position-encoding frequency bands (default 6)")
-    p.add_argument("--rays", type=int, help="AO rays per surface sample (default 256)")
+    d = FieldSettings()  # the help states the real defaults
+    p.add_argument("--size", default=None,
+                   help=f"hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default {size_name(d.hidden)})")  # fmt: skip
+    p.add_argument("--octaves", type=int, help=f"position-encoding frequency bands (default {d.octaves})")
+    p.add_argument("--rays", type=int, help=f"AO rays per surface sample (default {d.labels.rays})")
     p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
     p.add_argument("--config", help="JSON preset of FieldSettings")
     add_set_option(p, "--set steps=3000")

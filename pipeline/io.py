@@ -102,8 +102,8 @@ def read_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Load every array of an npz (no pickles); a truncated or corrupt file is a one-line error."""
     from .errors import NeuralaoError
 
-    try:
-        with np.load(path, allow_pickle=False) as z:
+    try:  # our own handle: np.load leaves its file open when the zip directory is unreadable
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
     except FileNotFoundError:
         raise NeuralaoError(f"file not found: {path}") from None
@@ -120,6 +120,58 @@ def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
         img = (np.clip(np.nan_to_num(img), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     with atomic_path(path) as tmp:
         Image.fromarray(img).save(tmp, format="PNG")
+
+
+def write_exr(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Write an (H, W) or (H, W, 3|4) float image as an OpenEXR file: float32 channels (Y, or R G B [A]),
+    uncompressed scanlines, written atomically. Values are stored as they are (no clamping or
+    quantisation): the point of EXR output is the full float32 AO.
+
+    The layout (OpenEXR 2 single-part scanline file): magic and version, a header of typed attributes
+    ending in a zero byte, one uint64 offset per scanline, then each scanline as int32 y, int32 byte
+    count and the line's pixels channel by channel, channels in alphabetical order.
+    """
+    import struct
+
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.ndim != 3 or img.shape[2] not in (1, 3, 4) or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"EXR image must be (H, W) or (H, W, 3|4), got {np.shape(image)}")
+    h, w, c = img.shape
+    names = {1: ["Y"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}[c]
+    order = sorted(range(c), key=lambda k: names[k])  # channels are stored alphabetically
+
+    def attr(name: str, kind: str, value: bytes) -> bytes:
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+    FLOAT = 2  # OpenEXR pixel type
+    chlist = (
+        b"".join(names[k].encode() + b"\0" + struct.pack("<iB3xii", FLOAT, 0, 1, 1) for k in order) + b"\0"
+    )
+    window = struct.pack("<iiii", 0, 0, w - 1, h - 1)
+    header = b"".join([
+        struct.pack("<ii", 20000630, 2),
+        attr("channels", "chlist", chlist),
+        attr("compression", "compression", b"\0"),  # NO_COMPRESSION
+        attr("dataWindow", "box2i", window),
+        attr("displayWindow", "box2i", window),
+        attr("lineOrder", "lineOrder", b"\0"),  # INCREASING_Y
+        attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+        attr("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
+        attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+        b"\0",
+    ])  # fmt: skip
+    line_bytes = w * c * 4
+    first = len(header) + 8 * h
+    offsets = np.arange(h, dtype="<u8") * (8 + line_bytes) + first
+    planar = np.ascontiguousarray(img[:, :, order].transpose(0, 2, 1), dtype="<f4")  # (H, C, W)
+    lines = np.empty((h, 8 + line_bytes), np.uint8)
+    lines[:, :4] = np.arange(h, dtype="<i4").view(np.uint8).reshape(h, 4)
+    lines[:, 4:8] = np.frombuffer(struct.pack("<i", line_bytes), np.uint8)
+    lines[:, 8:] = planar.reshape(h, -1).view(np.uint8)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(header + offsets.tobytes() + lines.tobytes())
 
 
 def sha256_file(path: str | os.PathLike, chunk: int = 1 << 20) -> str:

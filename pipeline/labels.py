@@ -80,6 +80,7 @@ import numpy as np
 
 from .camera import Camera
 from .errors import NeuralaoError
+from .limits import RAY_BYTES, RAY_TABLE_BYTES, THREAD_BYTES, check_count, check_seed
 from .scene import Scene
 
 # Rays per work item: big enough that Python overhead per chunk (~50 us) is < 1% of the trace,
@@ -227,6 +228,9 @@ class Labeller:
                 raise NeuralaoError(
                     f"{name} must be a{' positive' if name != 'seed' else 'n'} integer, got {value!r}"
                 )
+        # Before the ray tables and buffers are allocated: what they take must fit (pipeline.limits).
+        check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
+        check_rays("rays", s.rays, s.workers)
         diag = self._scale
         self.max_distance = _positive("max_distance", s.max_distance, s.max_distance_rel, diag)
         self.half_distance = _positive("half_distance", s.half_distance, s.half_distance_rel, diag)
@@ -709,13 +713,20 @@ def _run_chunks(
         bar.close()
 
 
+def check_rays(name: str, rays: int, workers: int) -> int:
+    """Rays per sample within what the labeller's buffers can hold: ``max(rays, chunk)`` rays per
+    tracing thread plus the ray tables (pipeline.limits)."""
+    return check_count(name, rays, bytes_each=RAY_BYTES * max(int(workers), 1) + RAY_TABLE_BYTES,
+                       each=f"per ray on {workers} tracing thread(s)")  # fmt: skip
+
+
 def check_label_args(args) -> None:
     """The labelling flags every tracing command shares (--rays, --workers, --max-distance,
     --half-distance, --kernel): a bad value is a one-line error."""
-    if args.rays < 1:
-        raise NeuralaoError(f"--rays must be >= 1, got {args.rays}")
-    if args.workers < 1:
-        raise NeuralaoError(f"--workers must be >= 1, got {args.workers}")
+    check_count("--workers", args.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
+    check_rays("--rays", args.rays, args.workers)
+    if getattr(args, "seed", None) is not None:
+        check_seed("--seed", args.seed)
     for flag, value in (("--max-distance", args.max_distance), ("--half-distance", args.half_distance)):
         if value is not None and not (math.isfinite(value) and value > 0):
             raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")

@@ -155,7 +155,9 @@ def parse_size(text: str) -> list[int]:
     except ValueError:
         widths = []
     if not widths or any(w < 1 for w in widths):
-        raise NeuralaoError(f"network size must look like 16x8 (positive hidden widths), got {text!r}")
+        raise NeuralaoError(
+            f"--size (the network size) must look like 16x8 (positive hidden widths), got {text!r}"
+        )
     return widths
 
 
@@ -763,17 +765,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument(
         "--mesh", help="mesh file or name under the shared mesh folder: render and label only the samples"
     )
-    src.add_argument("--views", type=int, help="mesh source: orbit views to sample (default 128)")
+    d = MLPSettings()  # the help states the real defaults
+    src.add_argument("--views", type=int, help=f"mesh source: orbit views to sample (default {d.views})")
     src.add_argument(
         "--resolution",
         type=int,
         nargs=2,
         metavar=("W", "H"),
-        help="mesh source: view size in pixels (default 256 256)",
+        help=f"mesh source: view size in pixels (default {d.size[0]} {d.size[1]})",
     )
-    src.add_argument("--rays", type=int, help="mesh source: AO rays per sample (default 256)")
+    src.add_argument("--rays", type=int, help=f"mesh source: AO rays per sample (default {d.labels.rays})")
     p.add_argument(
-        "--size", default=None, help="hidden layer widths XxY, e.g. 16x8, 32x16, 64x32 (default 16x8)"
+        "--size",
+        default=None,
+        help=f"hidden layer widths XxY, e.g. 16x8, 32x16, 64x32 (default {size_name(d.hidden)})",
     )
     p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
     p.add_argument("--config", help="JSON preset of MLPSettings")

@@ -28,6 +28,7 @@ from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import write_json, write_npz, write_png
 from .labels import LabelSettings, check_label_args
+from .limits import PIXEL_DISK_BYTES, check_count, check_disk, check_finite_arrays, check_pixels, check_seed
 from .scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
@@ -88,12 +89,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
 
 
+# Memory one orbit view takes before anything is rendered (its Camera and its summary in render.json).
+VIEW_BYTES = 4096
+
+
 def _check_args(args: argparse.Namespace) -> None:
     w, h = args.size
-    if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
-        raise NeuralaoError(f"--size must be between 1 and {MAX_SIZE} in each dimension, got {w} {h}")
-    if args.cameras is None and args.views < 1:
-        raise NeuralaoError(f"--views must be >= 1, got {args.views}")
+    check_pixels("--size", w, h, max_side=MAX_SIZE)
+    if args.cameras is None:
+        check_count("--views", args.views, bytes_each=VIEW_BYTES, each="a camera and its summary")
+        check_disk("--views", args.views * w * h * PIXEL_DISK_BYTES, args.out, f"{args.views} at {w} {h}")
+    check_seed("--seed", args.seed)
     check_label_args(args)
     if not (0 < args.yfov < 180):
         raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
@@ -219,6 +225,7 @@ def render_views(
         ):
             labeller.settings = replace(label_settings, seed=view_seed(label_settings.seed, k))
             frame = render_and_label(renderer, labeller, cam)
+            check_finite_arrays(frame, f"{scene.name} view {k}", "G-buffer channel")
             frame["radii"] = np.array([labeller.max_distance], np.float32)  # the labels' AO radius
             views.append(write_view(out, f"{prefix}{k:04d}", frame, labeller.settings.seed))
     finally:

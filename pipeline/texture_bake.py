@@ -43,6 +43,7 @@ from .config import settings_to_dict
 from .errors import NeuralaoError
 from .io import atomic_path, write_bytes, write_png
 from .labels import Labeller, LabelSettings, check_label_args
+from .limits import SAMPLE_BYTES, check_count
 from .scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
 
 log = logging.getLogger(__name__)
@@ -104,6 +105,9 @@ class TextureBakeSettings:
 def check_settings(s: TextureBakeSettings) -> None:
     if isinstance(s.resolution, bool) or not isinstance(s.resolution, int) or not 4 <= s.resolution <= 8192:
         raise NeuralaoError(f"--resolution must be an integer in [4, 8192], got {s.resolution!r}")
+    check_count(
+        "--resolution", s.resolution**2, bytes_each=SAMPLE_BYTES, each="per texel", shown=str(s.resolution)
+    )
     if isinstance(s.margin, bool) or not isinstance(s.margin, int) or not 0 <= s.margin <= s.resolution // 4:
         raise NeuralaoError(f"--margin must be an integer in [0, resolution / 4], got {s.margin!r}")
     if s.uv not in ("auto", "mesh", "xatlas"):
@@ -202,7 +206,14 @@ def xatlas_layout(
     import xatlas
 
     atlas = xatlas.Atlas()
-    atlas.add_mesh(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32))
+    # xatlas works in float32: centred and scaled to a unit box, so a mesh at 1e38 (whose float32 face
+    # normals overflow, and on which xatlas never returns) or at 1e-30 charts like one at 1. The atlas
+    # does not depend on the mesh's scale or position.
+    v = np.asarray(vertices, np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    half = (hi / 2.0 - lo / 2.0).max()  # halves first: finite even for a mesh spanning -1e308..1e308
+    unit = (v - (lo / 2.0 + hi / 2.0)) / max(float(half), 1e-300)
+    atlas.add_mesh(unit.astype(np.float32), np.asarray(faces, np.uint32))
     pack = xatlas.PackOptions()
     pack.resolution = int(resolution)
     pack.padding = int(margin)
@@ -555,7 +566,8 @@ def settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
     check_label_args(args)
     s = TextureBakeSettings(
         resolution=d.resolution if args.resolution is None else args.resolution,
-        margin=d.margin if args.margin is None else args.margin,
+        # The default gutter shrinks with a small texture (it may be at most a quarter of it).
+        margin=min(d.margin, (args.resolution or d.resolution) // 4) if args.margin is None else args.margin,
         uv=args.uv or d.uv,
         rays=args.rays,
         max_distance=args.max_distance,

@@ -70,6 +70,7 @@ from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import write_json
 from .labels import Labeller, LabelSettings, sample_shifts
+from .limits import MAX_CAP, THREAD_BYTES, check_count, check_int_range, check_seed
 from .scene import Scene, load_scene, resolve_mesh_path
 
 log = logging.getLogger(__name__)
@@ -661,6 +662,29 @@ def check_settings(s: VolumeSettings) -> None:
         v = getattr(s, name)
         if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "iterations" else 1):
             raise NeuralaoError(f"{name} must be a positive integer, got {v!r}")
+    # What each count allocates (pipeline.limits), checked before any of it is: a region's samples^3
+    # points trace `directions` rays each (directions, distances, the obscurance and its SH projection,
+    # ~256 B a ray); the free-space grid is up to grid^3 cells, each tracing cell_rays rays.
+    check_int_range("iterations", s.iterations, 0, MAX_CAP)
+    check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
+    check_count("directions", s.directions, bytes_each=256, each="per ray of one sample")
+    check_count("samples", s.samples**3, bytes_each=256 * s.directions, shown=f"{s.samples} ({s.samples**3} per region)",
+                each=f"per sample of {s.directions} directions")  # fmt: skip
+    check_count("cell_rays", s.cell_rays, bytes_each=32, each="per ray of one cell")
+    check_count("grid", s.grid**3, bytes_each=64 + 32 * s.cell_rays, shown=f"{s.grid} (up to {s.grid**3} cells)",
+                each=f"per cell of {s.cell_rays} rays")  # fmt: skip
+    check_count(
+        "boundary_grid",
+        s.boundary_grid**2,
+        bytes_each=1024,
+        shown=str(s.boundary_grid),
+        each="per boundary point",
+    )
+    check_count("max_region_cells", s.max_region_cells, bytes_each=1)
+    check_count(
+        "min_cells", s.min_cells**3, bytes_each=64 + 32 * s.cell_rays, shown=str(s.min_cells), each="per cell"
+    )
+    check_seed("seed", s.seed)
     if not (math.isfinite(s.beta) and s.beta >= 0):
         raise NeuralaoError(f"beta must be a finite number >= 0, got {s.beta!r}")
     if not (0.0 <= s.blend <= 1.0):

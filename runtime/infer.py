@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.errors import NeuralaoError
-from pipeline.io import read_npz, write_png
+from pipeline.io import atomic_path, read_npz, write_exr, write_png
+from pipeline.limits import check_finite_arrays, check_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +73,25 @@ def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarr
     return arrays
 
 
+# G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/render.py).
+IMAGE_CHANNELS = {"depth": (), "mask": (), "tri_id": (), "ao": (), "valid": (), "normal_cam": (3,),
+                  "normal_obj": (3,), "position": (3,)}  # fmt: skip
+
+
+def check_frame(frame: dict, path: str | Path) -> None:
+    """Refuse a frame whose G-buffer channels disagree in shape, or whose floating channels hold NaN
+    or inf (a model would turn them into finite-looking AO): one line naming the file and the channel."""
+    shapes = {k: np.shape(v) for k, v in frame.items() if k in IMAGE_CHANNELS}
+    full = [k for k in IMAGE_CHANNELS if k in shapes and len(shapes[k]) == 2 + len(IMAGE_CHANNELS[k])]
+    ref = shapes[full[0]][:2] if full else None
+    for k, shape in shapes.items():
+        if ref is None or shape != (*ref, *IMAGE_CHANNELS[k]):
+            want = "(H, W" + "".join(f", {n}" for n in IMAGE_CHANNELS[k]) + ")"
+            raise NeuralaoError(f"{path}: G-buffer channel {k!r} has shape {shape}, expected {want}"
+                                + (f" with (H, W) = {ref}" if ref else ""))  # fmt: skip
+    check_finite_arrays(frame, str(path), "G-buffer channel")
+
+
 def infer(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np.ndarray:
     """AO (H, W) float32 of ``frame`` with the model's own inference function (by ONNX metadata kind);
     ``radius`` (scene units) goes to the models that take the AO radius as an input."""
@@ -86,7 +106,35 @@ def infer(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np
     ao = np.asarray(ao, dtype=np.float32)
     if ao.ndim != 2:
         raise NeuralaoError(f"model returned AO of shape {ao.shape}, expected (H, W)")
+    if not np.isfinite(ao).all():
+        bad = int((~np.isfinite(ao)).sum())
+        raise NeuralaoError(f"{onnx_path}: the model's AO is not finite at {bad} pixel(s)")
     return ao
+
+
+# Output formats by suffix: PNG (8-bit, clamped to [0, 1]), NumPy .npy and OpenEXR (float32 as computed).
+OUTPUT_SUFFIXES = (".png", ".npy", ".exr")
+
+
+def check_output(flag: str, path: str | Path) -> None:
+    """``path`` must end in a supported suffix and not be a folder (checked before any work)."""
+    p = Path(path)
+    if p.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise NeuralaoError(f"{flag} {p.name!r}: unsupported format (use {', '.join(OUTPUT_SUFFIXES)})")
+    if p.is_dir():
+        raise NeuralaoError(f"{flag} {p} is a folder")
+
+
+def write_image(path: str | Path, image: np.ndarray) -> None:
+    """Write an (H, W) or (H, W, 3) float image in the format of ``path``'s suffix, atomically."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".png":
+        write_png(path, image)
+    elif suffix == ".exr":
+        write_exr(path, image)
+    else:
+        with atomic_path(path) as tmp:
+            np.save(tmp, np.asarray(image, dtype=np.float32))
 
 
 def shaded(frame: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -126,8 +174,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
                    "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
     p.add_argument("--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)")
-    p.add_argument("--out", required=True, help="AO image to write (PNG, 8-bit grey, 1 = white = open)")
-    p.add_argument("--composite", help="also write AO multiplied over a simple shaded render (PNG)")
+    p.add_argument("--out", required=True, help="AO image to write: .png (8-bit grey, 1 = white = open), "
+                   ".npy or .exr (float32 as computed)")  # fmt: skip
+    p.add_argument("--composite", help="also write AO over a simple shaded render (.png, .npy or .exr)")
     p.add_argument("--index", type=int, help="frame index inside a .npz of stacked frames (dataset shard)")
 
 
@@ -141,11 +190,17 @@ def run(args: argparse.Namespace) -> int:
 
         model, frame_path = default_model("unet"), args.inputs[0]
         log.info("model: %s (shipped default)", model)
-    frame = load_frame(frame_path, args.index)
-    ao = infer(model, frame, args.radius)
-    write_png(args.out, ao)
+    check_output("--out", args.out)
     if args.composite:
-        write_png(args.composite, composite(frame, ao))
+        check_output("--composite", args.composite)
+    if args.radius is not None:
+        check_finite_number("--radius", args.radius, low=0.0)
+    frame = load_frame(frame_path, args.index)
+    check_frame(frame, frame_path)
+    ao = infer(model, frame, args.radius)
+    write_image(args.out, ao)
+    if args.composite:
+        write_image(args.composite, composite(frame, ao))
     fg = _mask(frame) if ao.shape == _mask(frame).shape else np.ones(ao.shape, bool)
     log.info("wrote %s (%dx%d, mean foreground AO %.3f)%s", args.out, ao.shape[1], ao.shape[0],
              float(ao[fg].mean()) if fg.any() else 1.0, f" and {args.composite}" if args.composite else "")  # fmt: skip

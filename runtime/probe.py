@@ -32,11 +32,15 @@ from pipeline import sh
 from pipeline.errors import NeuralaoError
 from pipeline.io import atomic_path
 from pipeline.labels import normalize_normals
+from pipeline.limits import check_count
 from pipeline.volumes import Volumes, design, read_volumes
 
 log = logging.getLogger(__name__)
 
 ORDERS = {"linear": sh.LINEAR, "quadratic": sh.QUADRATIC}
+# Bytes per point and region of the lookup (nearest points of every box, their differences), the
+# design rows and the SH evaluation: what `probe` allocates for each row of --points.
+_POINT_BYTES = 256
 
 
 class VolumeProbe:
@@ -50,13 +54,21 @@ class VolumeProbe:
         self.coefficients = np.stack([m.coefficients for m in volumes.models])  # (R, 7, 2, 9)
 
     def region_of(self, points: np.ndarray) -> np.ndarray:
-        """(n, 3) -> (n,) int64: the first region holding each point, else the nearest box."""
-        p = np.asarray(points, np.float64)[:, None, :]
-        outside = np.maximum(self.lo[None] - p, 0.0) + np.maximum(p - self.hi[None], 0.0)
-        dist2 = (outside**2).sum(axis=2)  # (n, R): 0 inside
-        inside = dist2 <= 0.0
+        """(n, 3) -> (n,) int64: the first region holding each point, else the nearest box.
+
+        Far from the level, squared distances cannot tell the boxes apart: at 1e30 every |p - q|^2 is
+        1e60 to the last bit (and past 1e154 it overflows), so the first box would win. The nearest box
+        is instead the one with the smallest |p - q_r|^2 - |p - q_0|^2 = (q_0 - q_r) . (2p - q_0 - q_r),
+        q_r = the point of box r nearest to p (a clamp: exact), which keeps the differences between
+        boxes at any distance; p is scaled by its largest coordinate first so nothing overflows."""
+        p = np.asarray(points, np.float64)
+        q = np.clip(p[:, None, :], self.lo[None], self.hi[None])  # (n, R, 3) nearest point of each box
+        inside = (q == p[:, None, :]).all(axis=2)
+        scale = np.maximum(np.abs(p).max(axis=1, initial=0.0), 1.0)[:, None, None]
+        q0 = q[:, :1]
+        excess = ((q0 - q) / scale * (2.0 * (p[:, None, :] / scale) - (q0 + q) / scale)).sum(axis=2)
         first = np.argmax(inside, axis=1)
-        return np.where(inside.any(axis=1), first, np.argmin(dist2, axis=1)).astype(np.int64)
+        return np.where(inside.any(axis=1), first, np.argmin(excess, axis=1)).astype(np.int64)
 
     def sh_at(self, points: np.ndarray, regions: np.ndarray | None = None) -> np.ndarray:
         """AO-space SH (n, 2, 9) float64 of the models (of ``regions`` or the looked-up ones) at points."""
@@ -65,7 +77,15 @@ class VolumeProbe:
         out = np.empty((len(p), 2, sh.QUADRATIC))
         for k in np.unique(r):
             sel = r == k
-            out[sel] = np.einsum("nt,tdj->ndj", design(p[sel], self.centres[k]), self.coefficients[k])
+            with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+                out[sel] = np.einsum("nt,tdj->ndj", design(p[sel], self.centres[k]), self.coefficients[k])
+        bad = ~np.isfinite(out).all(axis=(1, 2))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise NeuralaoError(
+                f"point {i} {p[i].tolist()} is too far from region {self.volumes.regions[r[i]].name!r} for its "
+                f"model to be evaluated ({int(bad.sum())} such point(s)): the model overflows float64 there"
+            )
         return out
 
     def ao(
@@ -207,7 +227,11 @@ def run(args: argparse.Namespace) -> int:
     points = _load_rows(args.points, "points")
     normals = _load_rows(args.normals, "normals")
     if len(points) != len(normals):
-        raise NeuralaoError(f"points ({len(points)}) and normals ({len(normals)}) differ in length")
+        raise NeuralaoError(
+            f"--points {args.points} has {len(points)} rows and --normals {args.normals} has {len(normals)}"
+        )
+    check_count("--points", len(points), low=0, bytes_each=_POINT_BYTES * len(vol.regions),
+                each=f"per point and region, {len(vol.regions)} regions")  # fmt: skip
     bad = int((~np.isfinite(points).all(axis=1)).sum())
     if bad:
         raise NeuralaoError(f"points {args.points} has {bad} rows with NaN or inf")
