@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -40,6 +41,7 @@ FORMAT_VERSION = 1
 BACKGROUND = np.array([0.5, 0.5, 0.5], dtype=np.float32)
 INVALID_TINT = np.array([0.9, 0.15, 0.1], dtype=np.float32)
 MAX_SIZE = 8192
+DEFAULT_YFOV_DEG = 40.0  # orbit cameras' vertical field of view
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -77,8 +79,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--cameras", metavar="POSES.json", default=None, help="explicit camera poses instead of an orbit"
     )
     p.add_argument(
-        "--yfov", type=float, default=40.0, help="orbit vertical field of view in degrees (default 40)"
-    )
+        "--yfov", type=float, default=None, metavar="DEG",
+        help="orbit vertical field of view in degrees (default 40)",
+    )  # fmt: skip
+    p.add_argument("--yfov-rad", type=float, default=None, metavar="RAD", help="the same in radians")
     p.add_argument(
         "--normals", choices=("smooth", "flat"), default="smooth", help="G-buffer normals (default smooth)"
     )
@@ -101,7 +105,15 @@ def _check_args(args: argparse.Namespace) -> None:
         check_disk("--views", args.views * w * h * PIXEL_DISK_BYTES, args.out, f"{args.views} at {w} {h}")
     check_seed("--seed", args.seed)
     check_label_args(args)
-    if not (0 < args.yfov < 180):
+    if args.yfov is not None and args.yfov_rad is not None:
+        raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
+    if args.yfov_rad is not None:
+        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
+            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
+        args.yfov = math.degrees(args.yfov_rad)
+    if args.yfov is None:
+        args.yfov = DEFAULT_YFOV_DEG
+    if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
         raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -10,7 +10,10 @@ The model's kind comes from its ONNX metadata (``neuralao_kind``); each kind's m
 * ``field``: :func:`export.field.infer_frame` (object-space position + normal).
 
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
-``mask``, ...); a dataset shard (frames stacked on a first axis) works with ``--index K``.
+``mask``, ``yfov`` in radians, ...) or as a user's exporter writes it from the keys docs/formats.md
+lists (a U-Net needs ``depth`` and ``normal_cam``; ``mask`` defaults to ``depth > 0``; the field of view
+comes from the frame or ``--yfov`` degrees / ``--yfov-rad``); a dataset shard (frames stacked on a first
+axis) works with ``--index K``.
 
 The composite is what a person looks at: a plain material lit by a headlight (Lambert, from the
 frame's camera-space normals) plus ambient, multiplied by the AO, over a light grey background.
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +80,38 @@ def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarr
 # G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/render.py).
 IMAGE_CHANNELS = {"depth": (), "mask": (), "tri_id": (), "ao": (), "valid": (), "normal_cam": (3,),
                   "normal_obj": (3,), "position": (3,)}  # fmt: skip
+
+
+def complete_frame(frame: dict, kind: str, yfov: float | None, path: str | Path) -> dict:
+    """The frame with what the command line supplies: ``yfov`` (radians; replaces the frame's, with a
+    warning when they differ) and ``mask`` = ``depth > 0`` when the frame has none. A U-Net frame
+    without a field of view is a one-line error naming ``--yfov``."""
+    frame = dict(frame)
+    if yfov is not None:
+        if "yfov" in frame and not math.isclose(float(frame["yfov"]), yfov, rel_tol=1e-6):
+            log.warning("%s: using the given field of view %.4g deg, not the frame's %.4g deg", path,
+                        math.degrees(yfov), math.degrees(float(frame["yfov"])))  # fmt: skip
+        frame["yfov"] = yfov
+    if "mask" not in frame and "depth" in frame and "tri_id" not in frame:
+        frame["mask"] = np.asarray(frame["depth"]) > 0
+    if kind == "unet" and "yfov" not in frame:
+        raise NeuralaoError(f"{path} has no yfov: give the vertical field of view with --yfov DEG (or --yfov-rad RAD)")
+    return frame
+
+
+def field_of_view(args: argparse.Namespace) -> float | None:
+    """``--yfov`` (degrees) or ``--yfov-rad`` as radians in (0, pi); None when neither is given."""
+    if args.yfov is not None and args.yfov_rad is not None:
+        raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
+    if args.yfov is not None:
+        if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
+            raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
+        return math.radians(args.yfov)
+    if args.yfov_rad is not None:
+        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
+            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
+        return float(args.yfov_rad)
+    return None
 
 
 def check_frame(frame: dict, path: str | Path) -> None:
@@ -174,6 +210,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
                    "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
     p.add_argument("--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)")
+    p.add_argument("--yfov", type=float, metavar="DEG", help="vertical field of view in degrees, for frames that "
+                   "lack yfov (U-Net; replaces the frame's)")  # fmt: skip
+    p.add_argument("--yfov-rad", type=float, metavar="RAD", help="the same in radians")
     p.add_argument("--out", required=True, help="AO image to write: .png (8-bit grey, 1 = white = open), "
                    ".npy or .exr (float32 as computed)")  # fmt: skip
     p.add_argument("--composite", help="also write AO over a simple shaded render (.png, .npy or .exr)")
@@ -195,7 +234,8 @@ def run(args: argparse.Namespace) -> int:
         check_output("--composite", args.composite)
     if args.radius is not None:
         check_finite_number("--radius", args.radius, low=0.0)
-    frame = load_frame(frame_path, args.index)
+    yfov = field_of_view(args)
+    frame = complete_frame(load_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
     check_frame(frame, frame_path)
     ao = infer(model, frame, args.radius)
     write_image(args.out, ao)

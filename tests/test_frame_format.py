@@ -1,0 +1,93 @@
+"""The G-buffer frame format of docs/formats.md, from both sides: a frame written by `neuralao render`
+is read by `neuralao infer` unchanged, and so is a frame a user's own exporter writes from the
+documented keys alone (depth, normal_cam; yfov and the radius on the command line). One unit for the
+field of view on the command line: degrees (`--yfov`), radians only when asked (`--yfov-rad`)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipeline import cli
+
+H, W = 40, 48
+
+
+def _infer(args: list[str]) -> int:
+    return cli.main(["infer", *args])
+
+
+def _user_frame(path, **extra) -> dict:
+    """A floor 4 units away with a box top 1 unit closer, every pixel foreground: only the keys the
+    format says a user must write (depth: linear -z_cam in scene units; normal_cam: unit, facing the
+    viewer), plus ``extra``."""
+    depth = np.full((H, W), 4.0, np.float32)
+    depth[12:28, 16:32] = 3.0
+    normal = np.zeros((H, W, 3), np.float32)
+    normal[..., 2] = 1.0
+    arrays = {"depth": depth, "normal_cam": normal, **extra}
+    np.savez(path, **arrays)
+    return arrays
+
+
+def test_a_frame_written_by_render_is_read_by_infer_unchanged(tmp_path):
+    out = tmp_path / "r"
+    assert cli.main(["render", "spot", "--views", "1", "--size", str(W), str(H), "--rays", "8", "--yfov", "50",
+                     "--out", str(out)]) == 0  # fmt: skip
+    frame = np.load(out / "view_0000.npz")
+    assert math.isclose(float(frame["yfov"]), math.radians(50))  # the frame stores radians
+    assert json.loads((out / "render.json").read_text())["settings"]["yfov_deg"] == 50
+    assert _infer([str(out / "view_0000.npz"), "--out", str(tmp_path / "ao.npy")]) == 0
+    ao = np.load(tmp_path / "ao.npy")
+    mask = frame["mask"]
+    assert ao.shape == (H, W) and np.isfinite(ao).all() and mask.any()
+    assert ao.min() >= 0 and ao.max() <= 1 and (ao[~mask] == 1).all()
+
+
+def test_a_frame_from_the_documented_keys_alone_is_read_by_infer(tmp_path):
+    _user_frame(tmp_path / "mine.npz")
+    args = ["--radius", "0.5", "--out"]
+    assert _infer([str(tmp_path / "mine.npz"), "--yfov", "60", *args, str(tmp_path / "a.npy")]) == 0
+    a = np.load(tmp_path / "a.npy")
+    assert a.shape == (H, W) and np.isfinite(a).all() and a.min() >= 0 and a.max() <= 1
+    assert np.ptp(a) > 0  # the box's edges change the AO: the depth really went in
+    # the same field of view in radians, on the command line or stored in the frame as render stores it
+    assert _infer([str(tmp_path / "mine.npz"), "--yfov-rad", repr(math.radians(60)), *args,
+                   str(tmp_path / "b.npy")]) == 0  # fmt: skip
+    _user_frame(tmp_path / "with_fov.npz", yfov=np.float64(math.radians(60)), mask=np.ones((H, W), bool))
+    assert _infer([str(tmp_path / "with_fov.npz"), *args, str(tmp_path / "c.npy")]) == 0
+    np.testing.assert_allclose(np.load(tmp_path / "b.npy"), a, atol=1e-6)
+    np.testing.assert_allclose(np.load(tmp_path / "c.npy"), a, atol=1e-6)
+
+
+def test_a_missing_field_of_view_or_radius_names_the_flag(tmp_path, capsys):
+    _user_frame(tmp_path / "mine.npz")
+    assert _infer([str(tmp_path / "mine.npz"), "--radius", "0.5", "--out", str(tmp_path / "a.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--yfov" in err
+    assert _infer([str(tmp_path / "mine.npz"), "--yfov", "60", "--out", str(tmp_path / "a.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--radius" in err
+    assert not (tmp_path / "a.png").exists()
+
+
+@pytest.mark.parametrize("flags", [["--yfov", "180"], ["--yfov", "0"], ["--yfov-rad", "3.2"], ["--yfov", "60", "--yfov-rad", "1"]])  # fmt: skip
+def test_bad_fields_of_view_are_one_line_errors(tmp_path, capsys, flags):
+    _user_frame(tmp_path / "mine.npz")
+    assert _infer([str(tmp_path / "mine.npz"), *flags, "--radius", "0.5", "--out", str(tmp_path / "a.png")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not (tmp_path / "a.png").exists()
+
+
+def test_render_takes_the_field_of_view_in_degrees_or_radians(tmp_path, capsys):
+    base = ["render", "spot", "--views", "1", "--size", "16", "16", "--rays", "4"]
+    assert cli.main([*base, "--yfov-rad", repr(math.radians(30)), "--out", str(tmp_path / "rad")]) == 0
+    assert cli.main([*base, "--yfov", "30", "--out", str(tmp_path / "deg")]) == 0
+    for name in ("rad", "deg"):
+        assert math.isclose(float(np.load(tmp_path / name / "view_0000.npz")["yfov"]), math.radians(30))
+    capsys.readouterr()
+    assert cli.main([*base, "--yfov", "30", "--yfov-rad", "0.5", "--out", str(tmp_path / "both")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
