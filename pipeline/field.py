@@ -278,6 +278,9 @@ def check_settings(s: FieldSettings) -> None:
     for name in ("steps", "batch", "check_every", "samples", "samples_per_face_cap", "holdout_views"):
         check_int_range(name, getattr(s, name), 0 if name == "holdout_views" else 1, MAX_CAP)
     check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
+    # Every check_every-th step keeps a validation record in the history (and the checkpoint).
+    check_count("steps", s.steps // s.check_every + 1, bytes_each=512, each="a validation record of the history",
+                shown=f"{s.steps} (checked every {s.check_every})")  # fmt: skip
     # What the counts allocate, before any of it is (pipeline.limits): every surface sample twice (both
     # sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
     check_count("samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples))  # fmt: skip

@@ -70,7 +70,7 @@ from .config import add_set_option, load_settings, settings_to_dict
 from .errors import NeuralaoError
 from .io import write_json
 from .labels import Labeller, LabelSettings, sample_shifts
-from .limits import MAX_CAP, THREAD_BYTES, check_count, check_int_range, check_seed
+from .limits import THREAD_BYTES, check_count, check_seed
 from .scene import Scene, load_scene, resolve_mesh_path
 
 log = logging.getLogger(__name__)
@@ -665,7 +665,7 @@ def check_settings(s: VolumeSettings) -> None:
     # What each count allocates (pipeline.limits), checked before any of it is: a region's samples^3
     # points trace `directions` rays each (directions, distances, the obscurance and its SH projection,
     # ~256 B a ray); the free-space grid is up to grid^3 cells, each tracing cell_rays rays.
-    check_int_range("iterations", s.iterations, 0, MAX_CAP)
+    check_count("iterations", s.iterations, low=0, bytes_each=64, each="an energy record of the history")
     check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
     check_count("directions", s.directions, bytes_each=256, each="per ray of one sample")
     check_count("samples", s.samples**3, bytes_each=256 * s.directions, shown=f"{s.samples} ({s.samples**3} per region)",

@@ -181,6 +181,22 @@ def test_infer_refuses_unknown_output_formats_with_the_supported_ones(files, tmp
         ),
         (["train", "field", "--mesh", "@tet.obj", "--set", "batch=1000000000000", "--out", "@f.pt"], "batch"),
         (
+            [
+                "train",
+                "field",
+                "--mesh",
+                "@tet.obj",
+                "--set",
+                "steps=2147483648",
+                "--set",
+                "check_every=1",
+                "--out",
+                "@f.pt",
+            ],
+            "steps",
+        ),  # fmt: skip
+        (["volumes", "@tet.obj", "--set", "iterations=1000000000000", "--out", "@v.json"], "iterations"),
+        (
             ["train", "field", "--mesh", "@tet.obj", "--set", "holdout_views=100000000", "--out", "@f.pt"],
             "holdout_size",
         ),
