@@ -729,6 +729,31 @@ def model_from_checkpoint(ckpt: dict) -> BakedMLP:
 # ----------------------------------------------------------------------------------------------- driver
 
 
+def check_counts(s: MLPSettings) -> None:
+    """Every count of the settings within what the machine can hold, before anything is rendered or
+    allocated (pipeline.limits): the orbit's views and their samples, the view and held-back sizes,
+    the batch, the network and the validation history; seed and threads."""
+    from .limits import SAMPLE_BYTES, THREAD_BYTES, check_count, check_pixels, check_seed
+
+    check_count(
+        "views", s.views, bytes_each=4096 + SAMPLE_BYTES * max(s.samples_per_view, 1), each="a view's samples"
+    )
+    check_count("samples_per_view", s.views * s.samples_per_view, bytes_each=SAMPLE_BYTES, each="per sample",
+                shown=f"{s.samples_per_view} on {s.views} views")  # fmt: skip
+    check_pixels("size", *s.size)
+    if s.holdout_views:
+        check_pixels("holdout_size", *s.holdout_size, frames=s.holdout_views)
+    check_count(
+        "adam_batch", s.adam_batch, bytes_each=64 * (INPUTS + sum(s.hidden or [1])), each="per batch row"
+    )
+    check_count("hidden", max(s.hidden or [1]) ** 2 * len(s.hidden or [1]) * max(s.lbfgs_history, 1), bytes_each=64,
+                each="per weight and L-BFGS pair", shown=str(list(s.hidden)))  # fmt: skip
+    check_count("max_iterations", s.max_iterations // max(s.check_every, 1) + 1, bytes_each=512,
+                each="a validation record of the history", shown=str(s.max_iterations))  # fmt: skip
+    check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
+    check_seed("seed", s.seed)
+
+
 def train(
     settings: MLPSettings,
     out: str | Path | None,
@@ -742,6 +767,7 @@ def train(
 
     ``samples`` may be passed in to train several sizes on the same samples. Returns the checkpoint dict.
     """
+    check_counts(settings)
     if samples is None:
         if mesh is not None:
             samples = samples_from_mesh(mesh, settings, progress)

@@ -196,6 +196,8 @@ def test_infer_refuses_unknown_output_formats_with_the_supported_ones(files, tmp
             "steps",
         ),  # fmt: skip
         (["volumes", "@tet.obj", "--set", "iterations=1000000000000", "--out", "@v.json"], "iterations"),
+        (["train", "mlp", "--mesh", "@tet.obj", "--views", "1000000000000", "--out", "@m.pt"], "views"),
+        (["train", "mlp", "--mesh", "@tet.obj", "--resolution", "8", "100000", "--out", "@m.pt"], "size"),
         (
             ["train", "field", "--mesh", "@tet.obj", "--set", "holdout_views=100000000", "--out", "@f.pt"],
             "holdout_size",
