@@ -105,6 +105,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pipeline.limits import check_seed
+
+    check_seed("--seed", args.seed)  # before any export is read: numpy refuses a negative seed with a traceback
     results = check_exports(Path(args.exports), Path(args.data) if args.data else None,
                             Path(args.inputs) if args.inputs else None, args.seed,
                             tuple(args.size) if args.size else None)  # fmt: skip

@@ -275,6 +275,10 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
 
 
 def check_settings(s: FieldSettings) -> None:
+    if not 0 <= s.octaves <= 16:
+        raise NeuralaoError(f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}")
+    if not s.hidden or min(s.hidden) < 1:
+        raise NeuralaoError(f"hidden widths must be positive, got {s.hidden}")
     for name in ("steps", "batch", "check_every", "samples", "samples_per_face_cap", "holdout_views"):
         check_int_range(name, getattr(s, name), 0 if name == "holdout_views" else 1, MAX_CAP)
     check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
@@ -293,10 +297,6 @@ def check_settings(s: FieldSettings) -> None:
     check_seed("seed", s.seed)
     if not (math.isfinite(s.lr) and s.lr > 0 and math.isfinite(s.lr_final_fraction) and s.lr_final_fraction >= 0):  # fmt: skip
         raise NeuralaoError(f"lr must be a finite number > 0 and lr_final_fraction >= 0, got {s.lr}, {s.lr_final_fraction}")  # fmt: skip
-    if not 0 <= s.octaves <= 16:
-        raise NeuralaoError(f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}")
-    if not s.hidden or min(s.hidden) < 1:
-        raise NeuralaoError(f"hidden widths must be positive, got {s.hidden}")
     if s.samples < 16 or s.samples_per_face_cap < 1 or not 0.0 <= s.val_fraction < 1.0:
         raise NeuralaoError("samples must be >= 16, samples_per_face_cap >= 1 and val_fraction in [0, 1)")
 

@@ -393,3 +393,26 @@ def test_texture_bake_of_a_mesh_at_float32_limits_finishes(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-500:]
     assert (tmp_path / "t.glb").stat().st_size > 0
+
+
+def test_fuzz_findings_are_one_line_refusals(tmp_path, capsys):
+    # Found by make fuzz: a negative parity seed reached numpy (ValueError traceback); a huge --octaves
+    # was reported as an impossible batch.
+    from onnx import TensorProto
+    from onnx import helper as oh
+
+    x = oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4, "h", "w"])
+    y = oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, "h", "w"])
+    graph = oh.make_graph([oh.make_node("Relu", ["x"], ["y"], name="relu")], "g", [x], [y])
+    (tmp_path / "relu.onnx").write_bytes(
+        oh.make_model(graph, opset_imports=[oh.make_opsetid("", 19)]).SerializeToString()
+    )
+    assert (
+        main(["glsl", str(tmp_path / "relu.onnx"), "--target", "image", "--out", str(tmp_path / "export")])
+        == 0
+    )
+    assert "--seed" in refusal(capsys, ["parity", str(tmp_path / "export"), "--seed", "-1"])
+    (tmp_path / "tet.obj").write_text(TET)
+    msg = refusal(capsys, ["train", "field", "--mesh", str(tmp_path / "tet.obj"), "--octaves", "1000000000000",
+                           "--out", str(tmp_path / "f.pt")])  # fmt: skip
+    assert "octaves" in msg and "batch" not in msg
