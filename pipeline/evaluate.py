@@ -284,9 +284,19 @@ def evaluate(settings: EvalSettings, out: Path, models: list[Path], policies: li
         log.info(
             "%s: labels ready in %.0f s, scored in %.0f s", key, build_times[key], time.perf_counter() - t0
         )
-    summary = summarise(rows, list(methods), list(settings.radii_rel))
+        result = _write_tables(
+            out, settings, policies, models, list(methods), rows, build_times
+        )  # done so far
+    return result
+
+
+def _write_tables(
+    out: Path, settings: EvalSettings, policies, models, methods: list[str], rows, build_times
+) -> dict:
+    """evaluation.json and evaluation.md of the rows scored so far (rewritten after each resolution)."""
+    summary = summarise(rows, methods, list(settings.radii_rel))
     result = {"config": settings_to_dict(settings), "policies": policies, "methods": summary, "rows": rows,
-              "models": [str(m) for m in models], "build_seconds": build_times}  # fmt: skip
+              "models": [str(m) for m in models], "build_seconds": dict(build_times)}  # fmt: skip
     write_json(out / "evaluation.json", result)
     write_text(out / "evaluation.md", markdown(summary))
     return result
