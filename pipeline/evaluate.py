@@ -103,6 +103,24 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
                            labels=labels, seed=settings.seed, holdout_every=0, frames_per_shard=1 if w * h > 1 << 20 else 4)  # fmt: skip
 
 
+def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress: bool) -> None:
+    """The labelled frames of one resolution: kept when ``folder`` holds a finished dataset of exactly
+    this config (its manifest's config), else built or resumed by the dataset stage."""
+    import json
+
+    from .dataset import _config_dict
+
+    manifest = folder / "manifest.json"
+    if manifest.is_file():
+        try:
+            done = json.loads(manifest.read_text()).get("config")
+        except json.JSONDecodeError:
+            done = None
+        if done == json.loads(json.dumps(_config_dict(ds), default=str)):
+            return
+    build_dataset(ds, folder, config_dir, progress)
+
+
 def check_settings(settings: EvalSettings) -> None:
     if not settings.categories or not settings.resolutions:
         raise NeuralaoError("the evaluation config needs at least one category and one resolution")
@@ -274,7 +292,7 @@ def evaluate(settings: EvalSettings, out: Path, models: list[Path], policies: li
         w, h = (int(v) for v in res.size)
         key = f"{w}x{h}"
         t0 = time.perf_counter()
-        build_dataset(dataset_settings(settings, res), out / "frames" / key, config_dir, progress)
+        ensure_frames(dataset_settings(settings, res), out / "frames" / key, config_dir, progress)
         build_times[key] = time.perf_counter() - t0
         t0 = time.perf_counter()
         for frame in open_dataset(out / "frames" / key).frames(split="test"):
