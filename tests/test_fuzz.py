@@ -379,7 +379,7 @@ def _op_concat(g: _ImageGraph, x: _T, pool: list[_T]) -> _T:
 
 def _op_unsupported(g: _ImageGraph, x: _T) -> _T:
     """Ops outside the compute table: a clean error."""
-    op = str(g.rng.choice(["Log", "Erf", "Softmax", "Exp"]))
+    op = str(g.rng.choice(["Round", "Hardmax", "Tan", "Atan"]))  # outside the table (Log, Erf, Softmax, Exp joined it)
     out = g.fresh("v")
     g.node(op, [x.name], out, reject=True)
     return _T(out, x.bound, x.c, x.h, x.w)
