@@ -9,6 +9,7 @@ crop) and writes AO (H x W float32, 1 on background).
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import subprocess
 from pathlib import Path
@@ -46,7 +47,7 @@ def test_c_host_matches_python_runner(tmp_path):
     gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
     radius, yfov = 0.1, float(frame["yfov"])
     r = subprocess.run([str(host), str(export), str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius),
-                        repr(yfov), str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=300)  # fmt: skip
+                        repr(math.degrees(yfov)), str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=300)  # fmt: skip
     assert r.returncode == 0, r.stderr
     ao = np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
 

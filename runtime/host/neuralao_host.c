@@ -254,14 +254,15 @@ static Texture *find_texture(Texture *t, int n, const char *id) {
 
 int main(int argc, char **argv) {
     if (argc != 8) {
-        fprintf(stderr, "usage: neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV OUT.f32\n"
+        fprintf(stderr, "usage: neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV_DEG OUT.f32\n"
                         "  GBUFFER.f32: HEIGHT x WIDTH x (depth, nx, ny, nz, mask) float32, row 0 on top\n");
         return 2;
     }
     const int W = atoi(argv[3]), H = atoi(argv[4]);
-    const double radius = atof(argv[5]), yfov = atof(argv[6]);
+    const double radius = atof(argv[5]), yfov_deg = atof(argv[6]);
+    const double yfov = yfov_deg * 3.14159265358979323846 / 180.0; /* degrees, as on every neuralao command */
     if (W < 1 || H < 1) die("WIDTH and HEIGHT must be positive");
-    if (!(radius > 0) || !(yfov > 0 && yfov < 3.14159265358979323846)) die("RADIUS must be > 0 and YFOV in (0, pi) radians");
+    if (!(radius > 0) || !(yfov_deg > 0 && yfov_deg < 180)) die("RADIUS must be > 0 and YFOV_DEG in (0, 180) degrees");
 
     /* the export: glsl/manifest.json under EXPORT_DIR, or EXPORT_DIR/manifest.json itself */
     char dir[4096], path[4200];
