@@ -49,7 +49,14 @@ from pipeline.mlp import (
 )
 
 from .manifest import per_mesh_manifest
-from .onnx_io import get_metadata, load_onnx, ort_session, run_opencv, save_onnx, weighted_layers
+from .onnx_io import (
+    backend_checks,
+    get_metadata,
+    load_onnx,
+    ort_session,
+    run_opencv,
+    save_onnx,
+)
 
 log = logging.getLogger(__name__)
 
@@ -189,22 +196,8 @@ def check_backends(model: BakedMLP, onnx_path: str | Path, seed: int = 0) -> dic
                     "opencv_vs_onnxruntime": float(np.abs(y_cv.reshape(-1) - y_ort[:, 0]).max()),
                 }
             )
-    result = {
-        "inputs": "random unit normals (16 independent per row, and radius-zero rows)",
-        "checks": rows,
-        "onnxruntime_vs_torch": max(r["onnxruntime_vs_torch"] for r in rows),
-        "opencv_vs_onnxruntime": max(r["opencv_vs_onnxruntime"] for r in rows),
-        "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path)),
-                      "opencv_vs_onnxruntime": TOL.opencv_vs_onnx},
-    }  # fmt: skip
-    if result["onnxruntime_vs_torch"] > result["tolerance"]["onnxruntime_vs_torch"]:
-        raise NeuralaoError(f"onnxruntime differs from torch by {result['onnxruntime_vs_torch']:.3g} > "
-                            f"{result['tolerance']['onnxruntime_vs_torch']:.3g}")  # fmt: skip
-    if result["opencv_vs_onnxruntime"] > TOL.opencv_vs_onnx:
-        raise NeuralaoError(
-            f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"
-        )
-    return result
+    return backend_checks(rows, ref_max, onnx_path, checks=rows,
+                          inputs="random unit normals (16 independent per row, and radius-zero rows)")  # fmt: skip
 
 
 # ----------------------------------------------------------------------------------------------- export

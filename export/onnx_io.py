@@ -64,6 +64,30 @@ def weighted_layers(model: onnx.ModelProto | str | os.PathLike) -> int:
     return sum(n.op_type in WEIGHTED_OPS for n in proto.graph.node)
 
 
+def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLike, **describe: Any) -> dict:
+    """The export gate of a family's ``check_backends``: ``rows`` of per-input differences
+    (``onnxruntime_vs_torch``, ``opencv_vs_onnxruntime``) -> the result dict (``describe`` entries, worst of
+    each, their tolerances: TOL.onnx_vs_torch for ``ref_max`` and the graph's depth, TOL.opencv_vs_onnx);
+    either difference over its tolerance is a one-line error."""
+    from pipeline.constants import TOL
+
+    result = {
+        **describe,
+        "onnxruntime_vs_torch": max(r["onnxruntime_vs_torch"] for r in rows),
+        "opencv_vs_onnxruntime": max(r["opencv_vs_onnxruntime"] for r in rows),
+        "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path)),
+                      "opencv_vs_onnxruntime": TOL.opencv_vs_onnx},
+    }  # fmt: skip
+    if result["onnxruntime_vs_torch"] > result["tolerance"]["onnxruntime_vs_torch"]:
+        raise NeuralaoError(f"onnxruntime differs from torch by {result['onnxruntime_vs_torch']:.3g} > "
+                            f"{result['tolerance']['onnxruntime_vs_torch']:.3g}")  # fmt: skip
+    if result["opencv_vs_onnxruntime"] > TOL.opencv_vs_onnx:
+        raise NeuralaoError(
+            f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"
+        )
+    return result
+
+
 def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
     """Load and check an ONNX file; a missing or corrupt file is a one-line error."""
     p = Path(path)
