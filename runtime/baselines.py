@@ -326,16 +326,7 @@ def time_screen_space(
     h, w = np.shape(frame["mask"])
     with ScreenSpaceAO(method, w, h, radius, settings) as p:
         p.upload(frame)
-        for _ in range(warmup):
-            p.draw()
-        gl.finish()
-        times = []
-        for _ in range(max(1, repeats)):
-            t0 = time.perf_counter()
-            p.draw()
-            gl.finish()
-            times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+        return gl.median_frame_seconds(p.draw, repeats, warmup)
 
 
 # --------------------------------------------------------------------------- baked vertex AO

@@ -8,6 +8,8 @@ renderers and shader runners in neuralao share it.
 from __future__ import annotations
 
 import os
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -210,3 +212,18 @@ def read_buffer(buf: int, nbytes: int, dtype=np.float32, target=GL.GL_SHADER_STO
 def finish() -> None:
     """Block until the GL has finished (for timing)."""
     GL.glFinish()
+
+
+def median_frame_seconds(frame: Callable[[], None], repeats: int, warmup: int) -> float:
+    """Median wall seconds of ``frame()`` (GL work issued by it), after ``warmup`` untimed calls; each
+    timed call ends with ``glFinish`` so the GPU's work is inside the measurement."""
+    for _ in range(warmup):
+        frame()
+    finish()
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        frame()
+        finish()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))

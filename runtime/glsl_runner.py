@@ -26,7 +26,6 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -56,19 +55,6 @@ def _program(**sources: str) -> int:
     if key not in _PROGRAMS:
         _PROGRAMS[key] = gl.compile_program(**sources)
     return _PROGRAMS[key]
-
-
-def _median_time(frame, repeats: int, warmup: int) -> float:
-    for _ in range(warmup):
-        frame()
-    gl.finish()
-    times = []
-    for _ in range(max(1, repeats)):
-        t0 = time.perf_counter()
-        frame()
-        gl.finish()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 # --------------------------------------------------------------------------- fragment MLP
@@ -243,7 +229,7 @@ def time_vector_fragment(
     p = _MLPPass(sh, vert, frag, height, width, fp16)
     try:
         p.upload_all(textures)
-        return _median_time(p.draw, repeats, warmup)
+        return gl.median_frame_seconds(p.draw, repeats, warmup)
     finally:
         p.release()
 
@@ -295,7 +281,7 @@ def time_vertex_colour(
         GL.glDrawElements(GL.GL_TRIANGLES, count, GL.GL_UNSIGNED_INT, None)
 
     try:
-        return _median_time(frame, repeats, warmup)
+        return gl.median_frame_seconds(frame, repeats, warmup)
     finally:
         GL.glDisable(GL.GL_DEPTH_TEST)
         GL.glBindVertexArray(ctx.empty_vao)
@@ -541,7 +527,7 @@ def time_compute(
     run = _ComputeRun(prog, height, width, values)
     try:
         run.upload(np.random.default_rng(0).normal(size=(1, c, height, width)).astype(np.float32))
-        return _median_time(run.dispatch, repeats, warmup)
+        return gl.median_frame_seconds(run.dispatch, repeats, warmup)
     finally:
         run.release()
 

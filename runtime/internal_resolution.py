@@ -344,21 +344,10 @@ class ScalingPasses:
 def time_scaling_passes(frame: dict, low_size: tuple[int, int], repeats: int = 10, warmup: int = 2) -> float:
     """Median seconds of the point-sampling and upsampling passes on the GPU for ``frame``'s size
     (G-buffer resident, as in an engine; each timed frame ends with ``glFinish``)."""
-    import time
-
     h, w = np.shape(frame["depth"])
     with ScalingPasses(low_size, (w, h)) as p:
         p.upload(frame, np.full((int(low_size[1]), int(low_size[0])), 0.5, np.float32))
-        for _ in range(warmup):
-            p.draw()
-        p.gl.finish()
-        times = []
-        for _ in range(max(1, repeats)):
-            t0 = time.perf_counter()
-            p.draw()
-            p.gl.finish()
-            times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+        return p.gl.median_frame_seconds(p.draw, repeats, warmup)
 
 
 def run_upsample_gl(
