@@ -32,7 +32,7 @@ from .dataset import ComposedScenes, DatasetSettings, SceneSpec, build_dataset, 
 from .errors import NeuralaoError
 from .io import write_json, write_text
 from .labels import LabelSettings
-from .metrics import masked_flip, masked_rmse, masked_ssim
+from .split_eval import score_frame
 from .splits import split_of
 
 log = logging.getLogger(__name__)
@@ -196,24 +196,6 @@ def category_of(scene: str, settings: EvalSettings) -> str:
         if scene.startswith(f"{cat.name}-"):
             return cat.name
     raise NeuralaoError(f"scene {scene!r} belongs to no category")
-
-
-def score_frame(frame: dict, methods: dict[str, Predictor], flip: bool = True) -> list[dict]:
-    """One row per (method, radius) of a labelled frame: ssim, rmse, flip over valid foreground."""
-    rows = []
-    fg = np.asarray(frame["mask"], bool)
-    for j, radius in enumerate(np.asarray(frame["radii"], np.float64).reshape(-1)):
-        mask = fg & np.asarray(frame["valid_radii"][..., j], bool)
-        if not mask.any():
-            continue
-        gt = np.asarray(frame["ao_radii"][..., j], np.float32)
-        for name, fn in methods.items():
-            pred = fn(frame, float(radius))
-            if not np.isfinite(pred[mask]).all():
-                raise NeuralaoError(f"{name} returned non-finite AO on {frame['scene']}/{frame['view']}")
-            rows.append({"method": name, "radius": j, "ssim": masked_ssim(pred, gt, mask), "rmse": masked_rmse(pred, gt, mask),
-                         "flip": masked_flip(pred, gt, mask) if flip else float("nan")})  # fmt: skip
-    return rows
 
 
 def summarise(rows: list[dict], methods: list[str], radii_rel: list[float]) -> dict:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import NeuralaoError
-from .metrics import masked_rmse, masked_ssim
+from .metrics import masked_flip, masked_rmse, masked_ssim
 
 # predictor(frame, radius in scene units) -> AO (H, W) float32, 1 on background
 Predictor = Callable[[dict, float], np.ndarray]
@@ -36,6 +36,26 @@ def screen_space_predictor(method: str, settings=None) -> Predictor:
     return lambda frame, radius: run_screen_space(frame, method, radius, settings)
 
 
+def score_frame(frame: dict, methods: dict[str, Predictor], flip: bool = True) -> list[dict]:
+    """One row {method, radius (index), ssim, rmse, flip} per (method, radius) of a labelled frame, over
+    its valid foreground pixels at that radius; a radius with none is skipped. ``flip`` False: FLIP nan.
+    A method returning non-finite AO on those pixels is a one-line error."""
+    rows = []
+    fg = np.asarray(frame["mask"], bool)
+    for j, radius in enumerate(np.asarray(frame["radii"], np.float64).reshape(-1)):
+        mask = fg & np.asarray(frame["valid_radii"][..., j], bool)
+        if not mask.any():
+            continue
+        gt = np.asarray(frame["ao_radii"][..., j], np.float32)
+        for name, fn in methods.items():
+            pred = fn(frame, float(radius))
+            if not np.isfinite(pred[mask]).all():
+                raise NeuralaoError(f"{name} returned non-finite AO on {frame.get('scene')}/{frame.get('view')}")
+            rows.append({"method": name, "radius": j, "ssim": masked_ssim(pred, gt, mask), "rmse": masked_rmse(pred, gt, mask),
+                         "flip": masked_flip(pred, gt, mask) if flip else float("nan")})  # fmt: skip
+    return rows
+
+
 def evaluate_frames(
     frames: Iterable[dict], methods: dict[str, Predictor], radii_rel: list[float] | None = None
 ) -> dict:
@@ -48,17 +68,8 @@ def evaluate_frames(
                 f"frame {frame.get('scene')}/{frame.get('view')} has no labels at several radii"
             )
         frames_seen += 1
-        fg = np.asarray(frame["mask"], bool)
-        for j, radius in enumerate(np.asarray(frame["radii"], np.float64).reshape(-1)):
-            mask = fg & np.asarray(frame["valid_radii"][..., j], bool)
-            if not mask.any():
-                continue
-            gt = np.asarray(frame["ao_radii"][..., j], np.float32)
-            for name, fn in methods.items():
-                pred = fn(frame, float(radius))
-                rows[name].append(
-                    (str(frame.get("scene")), j, masked_ssim(pred, gt, mask), masked_rmse(pred, gt, mask))
-                )
+        for row in score_frame(frame, methods, flip=False):
+            rows[row["method"]].append((str(frame.get("scene")), row["radius"], row["ssim"], row["rmse"]))
     if frames_seen == 0:
         raise NeuralaoError("no frame to evaluate on")
 
