@@ -50,7 +50,9 @@ def score_frame(frame: dict, methods: dict[str, Predictor], flip: bool = True) -
         for name, fn in methods.items():
             pred = fn(frame, float(radius))
             if not np.isfinite(pred[mask]).all():
-                raise NeuralaoError(f"{name} returned non-finite AO on {frame.get('scene')}/{frame.get('view')}")
+                raise NeuralaoError(
+                    f"{name} returned non-finite AO on {frame.get('scene')}/{frame.get('view')}"
+                )
             rows.append({"method": name, "radius": j, "ssim": masked_ssim(pred, gt, mask), "rmse": masked_rmse(pred, gt, mask),
                          "flip": masked_flip(pred, gt, mask) if flip else float("nan")})  # fmt: skip
     return rows

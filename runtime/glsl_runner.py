@@ -169,7 +169,9 @@ def time_mlp_fragment(
     n = rng.normal(size=(height, width, 3)).astype(np.float32)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
     g = np.concatenate([n, np.ones((height, width, 1), np.float32)], axis=-1)
-    return time_vector_fragment(shader, height, width, repeats, warmup, fp16, dialect, textures={"gbuffer": g})
+    return time_vector_fragment(
+        shader, height, width, repeats, warmup, fp16, dialect, textures={"gbuffer": g}
+    )
 
 
 def run_vector_fragment(
