@@ -24,8 +24,8 @@ import onnx
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.report import cpu_name  # noqa: E402
+from pipeline.evaluation.report import cpu_name  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
 
 OUTCOMES = ("passed", "matches_onnxruntime", "refused", "wrong", "crashed")
 
@@ -64,7 +64,7 @@ def light_models(dialect: str = "glsl430") -> list[dict]:
 
     from export.glsl import generate_compute
     from export.onnx_io import run_onnxruntime
-    from pipeline.errors import NeuralaoError
+    from pipeline.foundation.errors import NeuralaoError
     from runtime.glsl_runner import run_compute_all
     from runtime.wgsl_runner import run_wgsl_all
 

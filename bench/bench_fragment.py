@@ -26,13 +26,13 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.report import cpu_name  # noqa: E402
+from pipeline.evaluation.report import cpu_name  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
 
 
 def mlp_graph(hidden) -> onnx.ModelProto:
     from export.mlp import onnx_bytes
-    from pipeline.mlp import BakedMLP
+    from pipeline.models.mlp import BakedMLP
 
     torch.manual_seed(0)
     return onnx.load_from_string(onnx_bytes(BakedMLP(hidden)))
@@ -40,7 +40,7 @@ def mlp_graph(hidden) -> onnx.ModelProto:
 
 def field_graph(hidden) -> onnx.ModelProto:
     from export.field import onnx_bytes
-    from pipeline.field import FieldNet
+    from pipeline.models.field import FieldNet
 
     torch.manual_seed(0)
     return onnx.load_from_string(onnx_bytes(FieldNet(hidden, 4, [0, 0, 0], [1, 1, 1])))
@@ -75,9 +75,9 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--repeats", type=int, default=10)
     args = ap.parse_args()
-    from pipeline.camera import orbit
-    from pipeline.gbuffer import GBufferRenderer
-    from pipeline.scene import load_scene
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
+    from pipeline.geometry.camera import orbit
+    from pipeline.geometry.scene import load_scene
     from runtime.baselines import time_screen_space
 
     scene = load_scene("bunny")

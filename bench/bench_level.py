@@ -3,8 +3,8 @@
     .venv/bin/python bench/bench_level.py                       # the table1 preset (minutes)
     .venv/bin/python bench/bench_level.py --preset small        # a quick run
 
-Generates the seeded synthetic level (pipeline/level_gen.py), bakes it with `neuralao bake LEVEL
---config` semantics (pipeline/level_bake.py) and writes OUT/bench_level.json and OUT/bench_level.md:
+Generates the seeded synthetic level (pipeline/geometry/level_gen.py), bakes it with `neuralao bake LEVEL
+--config` semantics (pipeline/bakes/level.py) and writes OUT/bench_level.json and OUT/bench_level.md:
 every stage's seconds beside the paper's row (NVIDIA K20, OptiX), the ratio, peak memory, rays per
 second and the machine's load average before and after (other jobs on a shared machine slow it).
 The bake folder keeps its stages, so a second run of the same command only reruns what is stale
@@ -23,9 +23,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.level_bake import bake_level, load_level_settings  # noqa: E402
-from pipeline.level_gen import settings_for, write_level  # noqa: E402
+from pipeline.bakes.level import bake_level, load_level_settings  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
 
 # Table 1 of the paper: description, seconds (on a K20), our stage(s).
 PAPER = [

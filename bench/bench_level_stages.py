@@ -31,10 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bake import fit_least_squares, surface_samples  # noqa: E402
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.level import read_level  # noqa: E402
-from pipeline.level_bake import (  # noqa: E402
+from pipeline.bakes.level import (  # noqa: E402
     blend,
     build_geometry,
     halves,
@@ -44,8 +41,11 @@ from pipeline.level_bake import (  # noqa: E402
     receiver_samples,
     simplify,
 )
-from pipeline.level_gen import settings_for, write_level  # noqa: E402
-from pipeline.level_trace import (  # noqa: E402
+from pipeline.bakes.vertex import fit_least_squares, surface_samples  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.geometry.level_files import read_level  # noqa: E402
+from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from pipeline.tracing.level_tracer import (  # noqa: E402
     _RESAMPLE_RAYS,
     LevelLabeller,
     _resample_block,
@@ -164,8 +164,8 @@ def main(argv=None) -> int:
 def _try_fit(g, samples, ao, valid, s, solver):
     from dataclasses import replace
 
-    from pipeline.errors import NeuralaoError
-    from pipeline.level_bake import fit_level
+    from pipeline.bakes.level import fit_level
+    from pipeline.foundation.errors import NeuralaoError
 
     try:
         return fit_level(g.receivers, samples, ao, valid, replace(s.trace, solver=solver))

@@ -20,7 +20,7 @@ Per mesh (samples are drawn once and shared by the three sizes):
 6. The paper's Table 2 protocol (``--paper-views``, default 2): whole-image SSIM at 1920x1080 (camera on
    an orbit around the bounding sphere, a third phase), the generated GLSL at radius zero against
    ray-traced AO. scikit-image's ``structural_similarity`` (Gaussian sigma 1.5, population covariance,
-   data range 1) is the reference; ``pipeline.metrics.image_ssim`` and the masked SSIM beside it. In the
+   data range 1) is the reference; ``pipeline.foundation.metrics.image_ssim`` and the masked SSIM beside it. In the
    same run, at 1920x1080: each MLP's shader time against SSAO's (the paper: NN-16x8 about 0.12x).
 
 Writes DIR/mlp.json and DIR/mlp.md (checkpoints and exports under DIR/mlp/).
@@ -41,13 +41,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from export.mlp import export_checkpoint, parity  # noqa: E402
-from pipeline.camera import orbit  # noqa: E402
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.labels import Labeller, LabelSettings  # noqa: E402
-from pipeline.metrics import masked_rmse, masked_ssim  # noqa: E402
-from pipeline.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
-from pipeline.report import cpu_name
-from pipeline.scene import load_scene  # noqa: E402
+from pipeline.evaluation.report import cpu_name
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.foundation.metrics import masked_rmse, masked_ssim  # noqa: E402
+from pipeline.geometry.camera import orbit  # noqa: E402
+from pipeline.geometry.scene import load_scene  # noqa: E402
+from pipeline.models.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
+from pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
 
 # Erra et al. 2017, Table 2: SSIM against ray-traced AO for NN-16x8, NN-32x16, NN-64x32.
 PAPER_SSIM = {
@@ -160,8 +160,8 @@ def paper_protocol(rows: list[dict], sizes: list[str], views: int, size: tuple[i
     """Table 2 as the paper measures it: whole-image SSIM at ``size`` on orbit views, plus GL times vs SSAO."""
     from skimage.metrics import structural_similarity
 
-    from pipeline.gbuffer import GBufferRenderer
-    from pipeline.metrics import SSIM_SIGMA, image_ssim
+    from pipeline.foundation.metrics import SSIM_SIGMA, image_ssim
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
     from runtime.baselines import run_screen_space, time_screen_space
     from runtime.glsl_runner import run_mlp_fragment, time_mlp_fragment, time_vector_fragment
 
@@ -207,7 +207,7 @@ def paper_markdown(p: dict, sizes: list[str]) -> list[str]:
     w, h = p["size"]
     lines = ["", f"## The paper's protocol: whole-image SSIM at {w}x{h}, {p['views']} orbit views per mesh", "",
              "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, data "
-             "range 1, border of 5 px excluded); `ours`: pipeline.metrics.image_ssim on the same images (edge "
+             "range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same images (edge "
              "replicated, border kept); masked: foreground pixels only. SSAO on the same frames for scale.", "",
              "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | masked SSIM |",
              "|---|---:|---|---:|---:|---:|---:|"]  # fmt: skip
@@ -371,7 +371,7 @@ def main(argv: list[str] | None = None) -> int:
         print(markdown(result))
         return 0
     rows = [bench_mesh(m, base, args.sizes, out / "mlp", not args.no_ablation) for m in args.meshes]
-    from pipeline.config import settings_to_dict
+    from pipeline.foundation.settings import settings_to_dict
 
     result = {
         "cpu": cpu_name(),

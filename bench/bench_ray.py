@@ -42,11 +42,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from pipeline.bake import BakeSettings, bake  # noqa: E402
-from pipeline.dataset import DatasetSettings, build_dataset  # noqa: E402
-from pipeline.engine import Context, LocalEngine, RayEngine, Task, content_key, labeller_context  # noqa: E402
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.scene import load_scene  # noqa: E402
+from pipeline.bakes.vertex import BakeSettings, bake  # noqa: E402
+from pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
+from pipeline.engines.engine import Context, LocalEngine, RayEngine, Task, content_key, labeller_context  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.geometry.scene import load_scene  # noqa: E402
 
 # Table 1 of Sloan et al. 2013: the trace row's workload (6.7 M samples, 256 rays a sample, 1.8 M faces).
 TABLE1_SAMPLES = 6_700_000
@@ -71,7 +71,7 @@ def timed(fn) -> float:
 
 
 def dataset_settings(rays: int, views: int) -> DatasetSettings:
-    from pipeline.config import from_dict
+    from pipeline.foundation.settings import from_dict
 
     return from_dict(DatasetSettings, {
         "name": "bench-ray", "seed": 1, "size": [128, 128], "frames_per_shard": 1, "labels": {"rays": rays},
@@ -85,8 +85,8 @@ def measure(args) -> dict:
     scene = load_scene(args.mesh)
     bake_s = BakeSettings(rays=args.rays, samples_per_vertex=args.samples_per_vertex)
     ds = dataset_settings(args.dataset_rays, args.views)
-    from pipeline.level_bake import bake_level, load_level_settings
-    from pipeline.level_gen import settings_for, write_level
+    from pipeline.bakes.level import bake_level, load_level_settings
+    from pipeline.geometry.level_gen import settings_for, write_level
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_ray_"))
     level, cfg = write_level(tmp / "level", settings_for("tiny", seed=2), "tiny")

@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.errors import NeuralaoError  # noqa: E402
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.report import cpu_name  # noqa: E402
+from pipeline.evaluation.report import cpu_name  # noqa: E402
+from pipeline.foundation.errors import NeuralaoError  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
 
 LARGE_PIXELS = 1_000_000  # sizes above this get --large-repeats timed dispatches a round
 
@@ -57,9 +57,9 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def measure(args) -> dict:
-    from pipeline.camera import interior
-    from pipeline.gbuffer import GBufferRenderer
-    from pipeline.scene import load_scene
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
+    from pipeline.geometry.camera import interior
+    from pipeline.geometry.scene import load_scene
     from runtime import gl
     from runtime.baselines import time_screen_space
     from runtime.glsl_runner import time_compute

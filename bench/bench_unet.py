@@ -9,12 +9,12 @@ training time per epoch. Issue 11: the same graph generated with other conv bloc
 (``--compare-blocks``: texels x, y and output layers per invocation; by default the steps from one
 texel of one layer to the default block) timed in the same rounds, with their compile times.
 
-1. Model: the paper architecture (``pipeline.unet`` defaults, widths 4/8/16/32) with a seeded random
+1. Model: the paper architecture (``pipeline.models.unet`` defaults, widths 4/8/16/32) with a seeded random
    init, or ``--checkpoint`` (loaded weights_only by the project's loader). Timing does not depend on
    the weights. Exported with the project's own path: ``export.unet.export_onnx`` (TorchScript
    exporter, batch norm folded) and ``export.unet.write_glsl`` (fp32 compute passes) into DIR/unet/.
-2. Input per size: a real G-buffer frame of ``--mesh`` (pipeline.gbuffer, first camera of a 4-view
-   orbit) preprocessed with ``pipeline.unet.preprocess_frame``; seeded random depth / normals with a
+2. Input per size: a real G-buffer frame of ``--mesh`` (pipeline.gbuffers.rasterizer, first camera of a 4-view
+   orbit) preprocessed with ``pipeline.models.unet.preprocess_frame``; seeded random depth / normals with a
    background band (``export.unet.random_input``) only if rendering fails (the table says which).
 3. Per size, ``--repeats`` interleaved rounds (the order rotates each round) of
    (a) torch: ``PaddedUNet`` forward in eval mode under no_grad (pad, network, crop, as deployed);
@@ -29,9 +29,9 @@ texel of one layer to the default block) timed in the same rounds, with their co
    texture class (llvmpipe JIT-compiles a shader variant per power-of-two-ness of the textures), and
    one untimed torch and onnxruntime run. ``OMP_WAIT_POLICY=PASSIVE`` unless set (spinning OpenMP
    threads made 2-thread torch 20-50x slower while other processes held a core).
-4. Training time per epoch: ``pipeline.unet_train.train`` for ``--epochs`` epochs (default settings:
+4. Training time per epoch: ``pipeline.models.unet_train.train`` for ``--epochs`` epochs (default settings:
    64-px crops, 2 crops per training frame, batch 16) on ``--data`` if given, otherwise on a tiny
-   dataset built here with ``pipeline.dataset`` (four small meshes at 128x128, 32 views, 64 rays),
+   dataset built here with ``pipeline.datasets.dataset`` (four small meshes at 128x128, 32 views, 64 rays),
    reused on later runs when its config is unchanged.
 
 Writes DIR/unet.json and DIR/unet.md (ONNX, GLSL, dataset and checkpoint under DIR/unet/).
@@ -57,9 +57,9 @@ os.environ.setdefault("MESA_SHADER_CACHE_DISABLE", "true")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from export.glsl.image import CONV_BLOCK  # noqa: E402
-from pipeline.errors import NeuralaoError  # noqa: E402
-from pipeline.io import write_json, write_text  # noqa: E402
-from pipeline.report import cpu_name  # noqa: E402
+from pipeline.evaluation.report import cpu_name  # noqa: E402
+from pipeline.foundation.errors import NeuralaoError  # noqa: E402
+from pipeline.foundation.io import write_json, write_text  # noqa: E402
 
 log = logging.getLogger("bench_unet")
 # The radius parameter rho of the timed runs (the cost does not depend on it).
@@ -96,7 +96,7 @@ def build(checkpoint: Path | None, seed: int):
     """(UNet in eval mode, description, checkpoint dict or None)."""
     import torch
 
-    from pipeline.unet import UNet, UNetArgs
+    from pipeline.models.unet import UNet, UNetArgs
 
     if checkpoint is not None:
         from export.unet import load_model
@@ -140,17 +140,17 @@ def export(model, ckpt: dict | None, out: Path) -> dict:
 
 def make_input(mesh: str, width: int, height: int, seed: int) -> tuple[np.ndarray, str, float]:
     """(x (4, H, W) float32 network input, its source in words, foreground fraction)."""
-    from pipeline.unet import preprocess_frame
+    from pipeline.models.unet import preprocess_frame
 
     try:
-        from pipeline.camera import orbit
-        from pipeline.gbuffer import render_gbuffer
-        from pipeline.scene import load_scene
+        from pipeline.gbuffers.rasterizer import render_gbuffer
+        from pipeline.geometry.camera import orbit
+        from pipeline.geometry.scene import load_scene
 
         scene = load_scene(mesh)
         frame = render_gbuffer(scene, orbit(scene, 4, width, height, seed=1)[0])
         x = preprocess_frame(frame)
-        return x, f"G-buffer of `{scene.name}` (pipeline.gbuffer)", float(np.mean(frame["mask"]))
+        return x, f"G-buffer of `{scene.name}` (pipeline.gbuffers.rasterizer)", float(np.mean(frame["mask"]))
     except (ImportError, NeuralaoError) as e:
         log.warning("cannot render %s (%s); using a random input", mesh, e)
         from export.unet import random_input
@@ -176,7 +176,7 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
     import torch
 
     from export.unet import run_padded
-    from pipeline.unet import PaddedUNet
+    from pipeline.models.unet import PaddedUNet
     from runtime import gl
     from runtime.glsl_runner import _ComputeRun
 
@@ -337,8 +337,8 @@ def warm_glsl(program, width: int, height: int, done: set) -> float:
 
 
 def tiny_dataset_settings(meshes: list[str], views: int, rays: int):
-    from pipeline.dataset import DatasetSettings, SceneSpec
-    from pipeline.labels import LabelSettings
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec
+    from pipeline.tracing.labeller import LabelSettings
 
     scenes = [
         SceneSpec(
@@ -355,8 +355,8 @@ def tiny_dataset_settings(meshes: list[str], views: int, rays: int):
 
 def tiny_dataset(out: Path, meshes: list[str], views: int, rays: int) -> dict:
     """Build (or reuse, when its config is unchanged) a small dataset; returns where and how long."""
-    from pipeline.config import settings_to_dict
-    from pipeline.dataset import build_dataset
+    from pipeline.datasets.dataset import build_dataset
+    from pipeline.foundation.settings import settings_to_dict
 
     settings = tiny_dataset_settings(meshes, views, rays)
     config = json.loads(json.dumps(settings_to_dict(settings)))
@@ -373,10 +373,10 @@ def tiny_dataset(out: Path, meshes: list[str], views: int, rays: int) -> dict:
 
 
 def training_cost(args: argparse.Namespace, out: Path) -> dict:
-    """Seconds per epoch of pipeline.unet_train.train (default settings, ``--epochs`` epochs)."""
+    """Seconds per epoch of pipeline.models.unet_train.train (default settings, ``--epochs`` epochs)."""
     import torch
 
-    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
     if args.no_train:
         return {"skipped": "--no-train"}
@@ -498,7 +498,7 @@ def markdown(result: dict) -> str:
         + ". Shader JIT warm-up (untimed, small sizes of the same texture class: "
         + f"{', '.join(f'{a}x{b}' for a, b in result['glsl_warmup_sizes'])}): {result['glsl_warmup_s']:.1f} s.",
         "",
-        "## Training time per epoch (`pipeline.unet_train.train`, default settings)",
+        "## Training time per epoch (`pipeline.models.unet_train.train`, default settings)",
         "",
     ]
     t = result["training"]
@@ -575,7 +575,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from export.unet import ort_runner
-    from pipeline.unet import count_parameters
+    from pipeline.models.unet import count_parameters
     from runtime import gl
 
     t_start = time.perf_counter()

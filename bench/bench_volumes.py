@@ -1,4 +1,4 @@
-"""Benchmark the per-region volume AO models (Sloan et al. 2013 section 2.3; pipeline/volumes.py).
+"""Benchmark the per-region volume AO models (Sloan et al. 2013 section 2.3; pipeline/bakes/volumes.py).
 
     .venv/bin/python bench/bench_volumes.py --out build/bench [--plot build/bench/volumes_path.png]
         [--seed 3] [--probes 1000] [--directions 1024] [--grid 16]
@@ -7,7 +7,7 @@
    against its exact linear-SH (bands 0-1) and quadratic-SH (bands 0-2) projections convolved with the
    clamped cosine, over 2,000 normals, for z / h from 0.05 to unbounded (h -> inf: the step, exactly
    linear); plus the traced 1024-direction projection at z / h = 1.
-2. Synthetic level: a composed room (pipeline/compose.py: floor, 4 walls, ceiling, meshes and
+2. Synthetic level: a composed room (pipeline/geometry/compose.py: floor, 4 walls, ceiling, meshes and
    primitives of the train split) split by a partition wall 0.1 thick with a doorway; regions from the
    free space. RMSE of blended AO against traced cosine-weighted obscurance (labeller, ``--ref-rays``,
    both half distances, same blend) at random valid probe positions with random normals: quadratic and
@@ -34,12 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline import sh  # noqa: E402
-from pipeline.compose import ComposeSettings, compose  # noqa: E402
-from pipeline.io import atomic_path, write_json, write_text  # noqa: E402
-from pipeline.labels import LabelSettings  # noqa: E402
-from pipeline.scene import Scene, scene_from_arrays  # noqa: E402
-from pipeline.volumes import (  # noqa: E402
+from pipeline.bakes.volumes import (  # noqa: E402
     Volumes,
     VolumeSettings,
     bake_volumes,
@@ -49,7 +44,12 @@ from pipeline.volumes import (  # noqa: E402
     make_labeller,
     spherical_ao,
 )
-from pipeline.volumes import regularise as regularise_models  # noqa: E402
+from pipeline.bakes.volumes import regularise as regularise_models  # noqa: E402
+from pipeline.foundation import sh  # noqa: E402
+from pipeline.foundation.io import atomic_path, write_json, write_text  # noqa: E402
+from pipeline.geometry.compose import ComposeSettings, compose  # noqa: E402
+from pipeline.geometry.scene import Scene, scene_from_arrays  # noqa: E402
+from pipeline.tracing.labeller import LabelSettings  # noqa: E402
 from runtime.probe import VolumeProbe, blended_path  # noqa: E402
 
 BETAS = (0.0, 0.25, 1.0, 4.0, 16.0)

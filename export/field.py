@@ -1,6 +1,6 @@
 """Neural-field export: ONNX (two inputs, dynamic N) + generated GLSL fragment shader + manifest; parity.
 
-The ONNX graph is :class:`pipeline.field.FieldNet` as is: inputs ``position`` (N, 3) float32 = the
+The ONNX graph is :class:`pipeline.models.field.FieldNet` as is: inputs ``position`` (N, 3) float32 = the
 object-space position in the mesh's own units (the graph normalises it by the bounding box itself) and
 ``normal`` (N, 3) float32 = the viewer-facing object-space unit normal; output ``ao`` (N, 1) float32,
 linear and unclamped. Ops: Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh.
@@ -31,9 +31,12 @@ import numpy as np
 import onnx
 import torch
 
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.field import (
+from export.manifest import per_mesh_manifest
+from export.onnx_io import get_metadata, load_onnx, ort_session, save_onnx, weighted_layers
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_json
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.field import (
     FieldNet,
     count_parameters,
     load_checkpoint,
@@ -42,10 +45,6 @@ from pipeline.field import (
     predict,
     size_name,
 )
-from pipeline.io import write_json
-
-from .manifest import per_mesh_manifest
-from .onnx_io import get_metadata, load_onnx, ort_session, save_onnx, weighted_layers
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +57,7 @@ TEXTURES = {"position": "xyz object-space position, w mask (>= 0.5 foreground)",
 
 
 def bindings():
-    from .glsl import InputBinding
+    from export.glsl import InputBinding
 
     return {POSITION: InputBinding("position", "xyz"), NORMAL: InputBinding("normal", "xyz")}
 
@@ -145,7 +144,7 @@ def check_backends(model: FieldNet, onnx_path: Path, seed: int = 0) -> dict:
 
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, description: str) -> dict:
-    from .glsl import generate_vector_fragment, write_mlp_export
+    from export.glsl import generate_vector_fragment, write_mlp_export
 
     shader = generate_vector_fragment(proto, bindings(), kind="field", description=description)
     for name, text in TEXTURES.items():
@@ -242,7 +241,7 @@ def infer_frame(onnx_path, frame: dict) -> np.ndarray:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    from .parity import read_manifest as read_export_manifest
+    from export.parity import read_manifest as read_export_manifest
 
     return read_export_manifest(export_dir, "field", "a field")
 
@@ -253,10 +252,9 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
     Raw outputs compared on every foreground pixel (gate TOL.parity_mlp_fp32); background must be
     exactly 1. No fp16 variant: half-float positions would move points by ~1e-3 of the box, which is
     a different input, not storage rounding. Returns figures with ``passed``."""
+    from export.glsl import load_mlp_export
+    from export.mlp import render_parity_frames
     from runtime.glsl_runner import run_vector_fragment
-
-    from .glsl import load_mlp_export
-    from .mlp import render_parity_frames
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)

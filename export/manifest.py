@@ -13,7 +13,7 @@ from pathlib import Path
 import onnx
 import torch
 
-from pipeline.io import sha256_file
+from pipeline.foundation.io import sha256_file
 
 
 def per_mesh_manifest(kind: str, out_dir: Path, ckpt_path: Path, ckpt: dict, proto: onnx.ModelProto, opset: int,

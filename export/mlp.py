@@ -1,6 +1,6 @@
 """Baked-MLP export: ONNX (dynamic N) + generated GLSL fragment shader + manifest; backend checks, parity, inference.
 
-The ONNX graph is the raw :class:`pipeline.mlp.BakedMLP`: input ``normals`` (N, 48) float32 = 16
+The ONNX graph is the raw :class:`pipeline.models.mlp.BakedMLP`: input ``normals`` (N, 48) float32 = 16
 object-space unit normals, xyz interleaved, output ``ao`` (N, 1) float32 = accessibility. The output
 is the network's **linear, unclamped** value (no Clip node: the GLSL generator emits exactly the
 graph, and a UNORM / clamped render target or the consumer clamps); everything here that produces
@@ -32,10 +32,19 @@ import numpy as np
 import onnx
 import torch
 
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_json
-from pipeline.mlp import (
+from export.manifest import per_mesh_manifest
+from export.onnx_io import (
+    backend_checks,
+    get_metadata,
+    load_onnx,
+    ort_session,
+    run_opencv,
+    save_onnx,
+)
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_json
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.mlp import (
     CIRCLE_SAMPLES,
     INPUTS,
     BakedMLP,
@@ -46,16 +55,6 @@ from pipeline.mlp import (
     predict,
     radius_zero_inputs,
     size_name,
-)
-
-from .manifest import per_mesh_manifest
-from .onnx_io import (
-    backend_checks,
-    get_metadata,
-    load_onnx,
-    ort_session,
-    run_opencv,
-    save_onnx,
 )
 
 log = logging.getLogger(__name__)
@@ -208,7 +207,7 @@ def write_glsl(proto: onnx.ModelProto, out_dir: Path) -> dict:
 
     Returns the GLSL export's manifest (as written).
     """
-    from .glsl import generate_mlp_fragment, write_mlp_export
+    from export.glsl import generate_mlp_fragment, write_mlp_export
 
     shader = generate_mlp_fragment(proto, dialect="glsl330")
     path = write_mlp_export(shader, out_dir)
@@ -316,16 +315,16 @@ def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    from .parity import read_manifest as read_export_manifest
+    from export.parity import read_manifest as read_export_manifest
 
     return read_export_manifest(export_dir, "mlp", "an MLP")
 
 
 def render_parity_frames(mesh: str, views: int = 2, size: tuple[int, int] = (128, 128)) -> list[dict]:
     """Real G-buffer frames of the training mesh: ``views`` orbit cameras (seed 2, not training cameras)."""
-    from pipeline.camera import orbit
-    from pipeline.gbuffer import GBufferRenderer
-    from pipeline.scene import load_scene
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
+    from pipeline.geometry.camera import orbit
+    from pipeline.geometry.scene import load_scene
 
     scene = load_scene(mesh)
     with GBufferRenderer(scene) as renderer:
@@ -351,9 +350,8 @@ def parity(
     (seconds for 16x8, minutes for 64x32 uncached; Mesa's disk cache keeps it afterwards).
     Returns figures with ``passed``.
     """
+    from export.glsl import load_mlp_export
     from runtime.glsl_runner import run_mlp_fragment
-
-    from .glsl import load_mlp_export
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)

@@ -27,7 +27,7 @@ import numpy as np
 import onnx
 from onnx import numpy_helper
 
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
 
 log = logging.getLogger(__name__)
 

@@ -45,11 +45,10 @@ from pathlib import Path
 import numpy as np
 import onnx
 
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.io import read_npz, sha256_file, write_bytes, write_json
-
-from .onnx_io import load_onnx, ort_session
+from export.onnx_io import load_onnx, ort_session
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import read_npz, sha256_file, write_bytes, write_json
+from pipeline.foundation.tolerances import TOL
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +61,7 @@ _BIND = re.compile(r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<
 
 def parse_bindings(texts: list[str]):
     """``INPUT=TEXTURE.CHANNELS[xREPEATS]`` strings -> {input: InputBinding}."""
-    from .glsl import InputBinding
+    from export.glsl import InputBinding
 
     out = {}
     for t in texts:
@@ -88,7 +87,7 @@ def default_bindings(proto: onnx.ModelProto, given: dict):
     The texture name is the ONNX name as it is (ONNX input names are unique, so two inputs never share
     a texture by accident); it names the texture for the host and in the manifest only, the shader's
     samplers are generated (``u_tex<unit>``)."""
-    from .glsl import InputBinding
+    from export.glsl import InputBinding
 
     dims_of = _input_dims(proto)
     unknown = sorted(set(given) - set(dims_of))
@@ -131,7 +130,7 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
                  dialects: list[str] | None = None, hlsl_msl: bool = False) -> dict:  # fmt: skip
     """Generate and write the export of a user's ONNX file; returns its manifest. ``hlsl_msl`` (image
     target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross)."""
-    from .glsl import (
+    from export.glsl import (
         DIALECTS,
         generate_compute,
         generate_vector_fragment,
@@ -200,7 +199,7 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    from .parity import read_manifest as read_export_manifest
+    from export.parity import read_manifest as read_export_manifest
 
     manifest = read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
     missing = [k for k in ("onnx", "glsl", "target", "inputs", "outputs", "precision") if k not in manifest]
@@ -279,7 +278,7 @@ def _vector_size(glsl: dict, n_textures: int, size: tuple[int, int] | None,
     """(W, H) of the textures, checked against the texture limit and PARITY_MAX_BYTES (textures, the
     per-pixel inputs and the widest layer, twice: onnxruntime holds an operand and a result). ``what``
     names where the size came from in errors."""
-    from .glsl import MAX_TEXTURE_SIZE
+    from export.glsl import MAX_TEXTURE_SIZE
 
     w, h = DEFAULT_SIZE if size is None else _positive_size(size, what)
     if w > MAX_TEXTURE_SIZE or h > MAX_TEXTURE_SIZE:
@@ -326,10 +325,9 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
     ``size`` (W, H): of symbolic image dimensions / vector textures, checked before anything is
     allocated; None: the static size, else DEFAULT_SIZE (rounded up to the program's multiples).
     It must equal a static size, and is refused with ``inputs`` (whose arrays fix the size)."""
+    from export.glsl import load_compute_export, load_mlp_export
     from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names, texture_sizes
     from runtime.wgsl_runner import run_wgsl_all
-
-    from .glsl import load_compute_export, load_mlp_export
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)

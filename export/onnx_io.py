@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import onnx
 
-from pipeline.errors import NeuralaoError
-from pipeline.io import atomic_path
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import atomic_path
 
 
 def set_metadata(model: onnx.ModelProto, metadata: dict[str, Any]) -> None:
@@ -69,7 +69,7 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
     (``onnxruntime_vs_torch``, ``opencv_vs_onnxruntime``) -> the result dict (``describe`` entries, worst of
     each, their tolerances: TOL.onnx_vs_torch for ``ref_max`` and the graph's depth, TOL.opencv_vs_onnx);
     either difference over its tolerance is a one-line error."""
-    from pipeline.constants import TOL
+    from pipeline.foundation.tolerances import TOL
 
     result = {
         **describe,

@@ -12,8 +12,8 @@ import json
 import logging
 from pathlib import Path
 
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_json
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_json
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +45,7 @@ def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dic
     """Dataset frames for one export: held-back views of the MLP's scene, or validation-split frames."""
     if data is None:
         return None
-    from pipeline.dataset import open_dataset
+    from pipeline.datasets.dataset import open_dataset
 
     ds = open_dataset(data)
     if manifest["kind"] in ("mlp", "field") and manifest.get("scene") in ds.scenes:
@@ -105,7 +105,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.limits import check_seed
+    from pipeline.foundation.limits import check_seed
 
     check_seed("--seed", args.seed)  # before any export is read: numpy refuses a negative seed with a traceback
     results = check_exports(Path(args.exports), Path(args.data) if args.data else None,

@@ -1,8 +1,8 @@
 """U-Net export: ONNX (dynamic H, W) + generated GLSL + manifest; backend checks, GLSL parity, inference.
 
-The ONNX graph is the raw :class:`pipeline.unet.UNet` (H, W multiples of ``pad_multiple``); padding
+The ONNX graph is the raw :class:`pipeline.models.unet.UNet` (H, W multiples of ``pad_multiple``); padding
 stays outside it. Every consumer here goes through :func:`run_padded`: preprocess the frame with
-:func:`pipeline.unet.preprocess_frame`, reflect-pad bottom/right to the multiple, run, crop back,
+:func:`pipeline.models.unet.preprocess_frame`, reflect-pad bottom/right to the multiple, run, crop back,
 and set background pixels to AO 1. The metadata of the ONNX file states all of it in words.
 
 Exporters: the TorchScript exporter (``dynamo=False``, the shipped model.onnx) folds batch norm into
@@ -24,10 +24,18 @@ import numpy as np
 import onnx
 import torch
 
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.io import sha256_file, write_json
-from pipeline.unet import (
+from export.onnx_io import (
+    backend_checks,
+    get_metadata,
+    load_onnx,
+    ort_session,
+    run_opencv,
+    save_onnx,
+)
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import sha256_file, write_json
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.unet import (
     HYBRID_DESCRIPTION,
     PAD_MODE,
     PREPROCESS_DESCRIPTION,
@@ -39,15 +47,6 @@ from pipeline.unet import (
     pad_to_multiple,
     predict,
     preprocess_frame,
-)
-
-from .onnx_io import (
-    backend_checks,
-    get_metadata,
-    load_onnx,
-    ort_session,
-    run_opencv,
-    save_onnx,
 )
 
 log = logging.getLogger(__name__)
@@ -68,7 +67,7 @@ PARITY_SIZES: tuple[tuple[int, int], ...] = ((96, 72), (101, 67))
 
 def load_model(ckpt_path: str | Path) -> tuple[UNet, dict]:
     """(model in eval mode, checkpoint dict) from a U-Net checkpoint (weights_only load, kind checked)."""
-    from pipeline.unet_train import load_checkpoint, model_from_checkpoint
+    from pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
 
     ckpt = load_checkpoint(ckpt_path)
     return model_from_checkpoint(ckpt), ckpt
@@ -309,7 +308,7 @@ def check_backends(
 def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
     """The two fragment passes around the network at its internal height (runtime.internal_resolution)
     as files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them."""
-    from pipeline.io import write_text
+    from pipeline.foundation.io import write_text
     from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
     folder = glsl_dir / "internal"
@@ -336,7 +335,7 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:
     """Generate the compute passes from the ONNX graph and write them (and their manifest) to ``out_dir``."""
-    from .glsl import generate_compute, write_compute_export
+    from export.glsl import generate_compute, write_compute_export
 
     program = generate_compute(proto, precision=precision)
     write_compute_export(program, out_dir)
@@ -470,7 +469,7 @@ def frame_predictor(onnx_path: str | Path, internal_height: int | str | None = "
         return scaled
 
     def predict_hybrid(frame: dict, radius: float | None) -> np.ndarray:
-        from pipeline.unet import frame_radius
+        from pipeline.models.unet import frame_radius
 
         return scaled(frame | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
 
@@ -507,9 +506,9 @@ def crop_frame(frame: dict, width: int, height: int) -> dict:
 
 def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
     """Two real G-buffer frames (an orbit of a closed mesh, an interior view) when no dataset is given."""
-    from pipeline.camera import interior, orbit
-    from pipeline.gbuffer import render_gbuffer
-    from pipeline.scene import load_scene
+    from pipeline.gbuffers.rasterizer import render_gbuffer
+    from pipeline.geometry.camera import interior, orbit
+    from pipeline.geometry.scene import load_scene
 
     w, h = size
     frames = []
@@ -524,8 +523,8 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
 
 def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
     """GTAO (runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
-    :func:`pipeline.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
-    from pipeline.unet import depth_scale
+    :func:`pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
+    from pipeline.models.unet import depth_scale
     from runtime.baselines import run_gtao
 
     radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))

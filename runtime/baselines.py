@@ -11,7 +11,7 @@
   what a vertex-colour draw of the mesh shows; its cost is timed with a real GL vertex-colour draw
   (:func:`runtime.glsl_runner.time_vertex_colour`).
 * **Just trace it**: Embree AO of every pixel at a low ray count (4, 16, 64) through
-  :class:`pipeline.labels.Labeller` (CPU, ``workers`` threads): the quality a real-time ray tracer
+  :class:`pipeline.tracing.labeller.Labeller` (CPU, ``workers`` threads): the quality a real-time ray tracer
   at that budget would reach, timed on this machine's CPU.
 
 Both screen-space passes are GLSL fragment shaders (text in :mod:`runtime.baseline_templates`)
@@ -31,11 +31,10 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
-
-from . import gl
-from .baseline_templates import fill
-from .gl import GL
+from pipeline.foundation.errors import NeuralaoError
+from runtime import gl
+from runtime.baseline_templates import fill
+from runtime.gl import GL
 
 Method = Literal["ssao", "gtao"]
 
@@ -377,7 +376,7 @@ def vertex_ao_image(scene, vertex_ao: np.ndarray, frame: dict) -> np.ndarray:
 
 def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: int = 20) -> float:
     """Median seconds per frame of the GL vertex-colour draw of the mesh (the engine's baked AO)."""
-    from .glsl_runner import time_vertex_colour
+    from runtime.glsl_runner import time_vertex_colour
 
     return time_vertex_colour(scene, camera, repeats=repeats, ao=vertex_ao)
 
@@ -388,7 +387,7 @@ def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: 
 def traced_ao(labeller, frame: dict, rays: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """Embree AO of every foreground pixel at ``rays`` rays (the labeller's kernel and distances).
 
-    labeller : pipeline.labels.Labeller of the frame's scene (its settings are restored afterwards).
+    labeller : pipeline.tracing.labeller.Labeller of the frame's scene (its settings are restored afterwards).
     Returns ao (H, W) float32 (1 on background), valid (H, W) bool and the wall seconds of the trace.
     """
     if rays < 1:

@@ -1,4 +1,4 @@
-"""Run the generated decorator vertex shader (export/decorator_glsl.py) headless on Mesa.
+"""Run the generated decorator vertex shader (export/glsl/decorator.py) headless on Mesa.
 
 The shader runs unchanged: every vertex of every instance is drawn as a point
 (``glDrawArraysInstanced``) with the rasteriser discarded, and transform feedback captures its
@@ -13,9 +13,8 @@ import ctypes
 import numpy as np
 from OpenGL import GL
 
-from pipeline.errors import NeuralaoError
-
-from . import gl
+from pipeline.foundation.errors import NeuralaoError
+from runtime import gl
 
 
 def _program(vertex: str, varyings: list[str]) -> int:

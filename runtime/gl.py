@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 

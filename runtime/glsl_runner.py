@@ -39,10 +39,9 @@ from export.glsl import (
     load_mlp_export,
 )
 from export.glsl.templates import fill
-from pipeline.errors import NeuralaoError
-
-from . import gl
-from .gl import GL
+from pipeline.foundation.errors import NeuralaoError
+from runtime import gl
+from runtime.gl import GL
 
 log = logging.getLogger(__name__)
 
@@ -242,7 +241,7 @@ def time_vertex_colour(
     """Median seconds per frame of the plain baked-AO draw: the mesh with one float per vertex as its
     colour, depth-tested, into an RGBA8 target of the camera's size (the engine's cheapest AO).
 
-    scene : pipeline.scene.Scene; camera : pipeline.camera.Camera; ao : (n_vertices,) float32 or None
+    scene : pipeline.geometry.scene.Scene; camera : pipeline.geometry.camera.Camera; ao : (n_vertices,) float32 or None
     (then a deterministic pattern; the cost does not depend on the values).
     """
     ctx = gl.context()

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
-from pipeline.io import atomic_path, read_npz, write_exr, write_png
-from pipeline.limits import check_finite_arrays, check_finite_number
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import atomic_path, read_npz, write_exr, write_png
+from pipeline.foundation.limits import check_finite_arrays, check_finite_number
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +77,7 @@ def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarr
     return arrays
 
 
-# G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/render.py).
+# G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/cli/render.py).
 IMAGE_CHANNELS = {"depth": (), "mask": (), "tri_id": (), "ao": (), "valid": (), "normal_cam": (3,),
                   "normal_obj": (3,), "position": (3,)}  # fmt: skip
 
@@ -225,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
     if len(args.inputs) == 2:
         model, frame_path = args.inputs
     else:
-        from .shipped import default_model
+        from runtime.shipped import default_model
 
         model, frame_path = default_model("unet"), args.inputs[0]
         log.info("model: %s (shipped default)", model)

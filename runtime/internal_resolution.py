@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ def downsample_frame(frame: dict, width: int, height: int) -> dict:
 
 def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera-space positions (H, W, 3), unit normals (H, W, 3) and mask (H, W) of a frame, float64."""
-    from .baselines import camera_space_position
+    from runtime.baselines import camera_space_position
 
     mask = np.asarray(frame["mask"], bool)
     pos = np.where(mask[..., None], camera_space_position(frame), 0.0).astype(np.float64)
@@ -165,7 +165,7 @@ def at_internal_resolution(
 
 def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
     """The GLSL fragment shader of the upsampling pass with ``settings`` baked in."""
-    from .baseline_templates import fill
+    from runtime.baseline_templates import fill
 
     lit = lambda x: repr(float(x))  # noqa: E731  (a float literal GLSL accepts: 0.6, 1e-3, 8.0)
     for name in ("spatial_sigma", "plane_sigma"):
@@ -193,8 +193,8 @@ class UpsamplePass:
     ):
         from OpenGL import GL
 
-        from . import gl
-        from .baselines import _program
+        from runtime import gl
+        from runtime.baselines import _program
 
         gl.context()
         self.GL, self.gl = GL, gl
@@ -252,7 +252,7 @@ class UpsamplePass:
 
 def vertex_source() -> str:
     """The full-screen-triangle vertex shader both passes draw with (3 vertices, empty VAO)."""
-    from .baseline_templates import fill
+    from runtime.baseline_templates import fill
 
     return fill("fullscreen_vertex")
 
@@ -260,7 +260,7 @@ def vertex_source() -> str:
 def downsample_source() -> str:
     """The GLSL fragment shader that point-samples the G-buffer to the internal resolution (two
     targets; ``uniform ivec2 u_low_size`` = that resolution)."""
-    from .baseline_templates import fill
+    from runtime.baseline_templates import fill
 
     return fill("downsample_fragment")
 
@@ -279,8 +279,8 @@ class ScalingPasses:
     ):
         from OpenGL import GL
 
-        from . import gl
-        from .baselines import _program
+        from runtime import gl
+        from runtime.baselines import _program
 
         self.up = UpsamplePass(low_size, size, settings)
         self.GL, self.gl = GL, gl
@@ -290,7 +290,7 @@ class ScalingPasses:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
     def upload(self, frame: dict, ao_low: np.ndarray | None = None) -> None:
-        from .baselines import gbuffer_textures
+        from runtime.baselines import gbuffer_textures
 
         pos, nrm = gbuffer_textures(frame)
         up, GL = self.up, self.GL

@@ -10,7 +10,7 @@ Region lookup (as an engine's visibility system tags an object): the first regio
 the point; a point outside every box takes the nearest box (Euclidean distance to the box).
 
 Temporal blending (Sloan et al. 2013: the model is blended with the previous frame's, exponential
-decay): the state is the *packed model* the shader reads (export/volume_glsl.py), updated per frame as
+decay): the state is the *packed model* the shader reads (export/glsl/volume.py), updated per frame as
 ``state = target + (state - target) * exp(-dt / tau)`` on the CPU, once per object. Two models with
 different centres do not mix exactly by blending their numbers (the centre would be blended too, and
 AO dips or overshoots at a switch: measured in bench/bench_volumes.py), so by default both are first
@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from export.volume_glsl import evaluate_packed, pack_volumes
-from pipeline import sh
-from pipeline.errors import NeuralaoError
-from pipeline.io import atomic_path
-from pipeline.labels import normalize_normals
-from pipeline.limits import check_count
-from pipeline.volumes import Volumes, design, read_volumes
+from export.glsl.volume import evaluate_packed, pack_volumes
+from pipeline.bakes.volumes import Volumes, design, read_volumes
+from pipeline.foundation import sh
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import atomic_path
+from pipeline.foundation.limits import check_count
+from pipeline.tracing.labeller import normalize_normals
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ _POINT_BYTES = 256
 
 
 class VolumeProbe:
-    """numpy evaluator of a :class:`pipeline.volumes.Volumes` (the reference for the GLSL function)."""
+    """numpy evaluator of a :class:`pipeline.bakes.volumes.Volumes` (the reference for the GLSL function)."""
 
     def __init__(self, volumes: Volumes):
         self.volumes = volumes

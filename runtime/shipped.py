@@ -1,6 +1,6 @@
 """The shipped release exports under ``runtime/models/<name>/`` (ONNX + GLSL + manifest with provenance).
 
-``runtime/models/index.json`` (written by ``make models``, see ``pipeline/ship.py``) names every
+``runtime/models/index.json`` (written by ``make models``, see ``pipeline/release/ship.py``) names every
 shipped model and, per model kind, the default that ``neuralao infer`` and ``neuralao report`` use
 when no other export is given.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 INDEX = MODELS_DIR / "index.json"

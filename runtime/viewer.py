@@ -7,7 +7,7 @@ Each INPUT becomes one entry of the page's method switch:
 * a **vertex bake** (``neuralao bake ... --out X.ply|X.glb``): per-vertex float AO, interpolated;
 * a **texture bake** (``neuralao bake ... --to texture --out X.glb``): the occlusionTexture sampled
   bilinearly (LINEAR, CLAMP_TO_EDGE) at the mesh's TEXCOORD_0, red channel;
-* a **scene bake** (``neuralao bake SCENE.gltf|SCENE.glb ... --out X.glb``, pipeline/scene_bake.py): every
+* a **scene bake** (``neuralao bake SCENE.gltf|SCENE.glb ... --out X.glb``, pipeline/bakes/gltf_scene.py): every
   node's primitives in world space, each drawn with its material's base colour (factor x texture)
   times its AO (``_AO`` per vertex, or the occlusionTexture on its TEXCOORD set), so the page shows the
   materials the bake kept;
@@ -22,7 +22,7 @@ no third-party code) draws every frame in three passes:
 1. G-buffer: the mesh into RGBA32F targets (``EXT_color_buffer_float``): object-space position
    (w = 1 on the foreground) and the object-space normal (area-weighted vertex normals turned to each
    triangle's side, interpolated, renormalised, negated on back faces: the project's G-buffer
-   convention, pipeline/gbuffer.py), plus the AO of the baked methods;
+   convention, pipeline/gbuffers/rasterizer.py), plus the AO of the baked methods;
 2. AO: for a shader method the generated pass; its input texture named ``position`` in the manifest
    reads the position target, any other (``normal``, the MLP's ``gbuffer``) the normal target (xyz normal, w mask);
 3. display: AO as grey on a dark background, to the canvas (a scene bake: base colour x AO, sRGB).
@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_text
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_text
 
 log = logging.getLogger(__name__)
 
@@ -111,8 +111,8 @@ def corner_arrays(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
 
 def method_from_bake(path: Path) -> ViewerMethod:
     """A vertex bake (.ply/.glb with float AO) or a texture bake (.glb with an occlusionTexture)."""
-    from pipeline.bake import read_baked_mesh
-    from pipeline.texture_bake import read_texture_glb
+    from pipeline.bakes.texture import read_texture_glb
+    from pipeline.bakes.vertex import read_baked_mesh
 
     if path.suffix.lower() == ".glb":
         if _is_scene_bake(path):
@@ -162,7 +162,7 @@ def _is_scene_bake(path: Path) -> bool:
 
 def method_from_scene_bake(path: Path) -> ViewerMethod:
     """A scene bake: one part per primitive of every written node, in world space (module doc)."""
-    from pipeline.scene_bake import read_gltf_scene
+    from pipeline.bakes.gltf_scene import read_gltf_scene
 
     gs = read_gltf_scene(path)
     doc, to = gs.doc, gs.doc["asset"]["extras"]["neuralao"].get("to", "vertex")
@@ -221,7 +221,7 @@ def _texture_uri(gs, texture: int) -> str:
 def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
     """An MLP or field export: its ES 3.00 fragment pass, on ``mesh`` (default: the export's own mesh)."""
     from export.glsl.files import load_mlp_export
-    from pipeline.scene import load_scene
+    from pipeline.geometry.scene import load_scene
 
     try:
         top = json.loads((folder / "manifest.json").read_text())

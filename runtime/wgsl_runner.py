@@ -24,9 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from export.glsl import ComputeProgram, load_compute_export
-from pipeline.errors import NeuralaoError
-
-from .glsl_runner import scalar_values, texture_sizes
+from pipeline.foundation.errors import NeuralaoError
+from runtime.glsl_runner import scalar_values, texture_sizes
 
 log = logging.getLogger(__name__)
 

@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from pipeline.constants import TOL
-from pipeline.scene import Scene, scene_from_arrays
+from pipeline.foundation.tolerances import TOL
+from pipeline.geometry.scene import Scene, scene_from_arrays
 
 
 def quad(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ import trimesh
 from helpers import box, merge
 
 from pipeline import cli
-from pipeline.bake import (
+from pipeline.bakes.vertex import (
     BakeSettings,
     bake,
     fit_least_squares,
@@ -26,9 +26,9 @@ from pipeline.bake import (
     surface_samples,
     write_baked_mesh,
 )
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.scene import scene_from_arrays
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.geometry.scene import scene_from_arrays
 
 
 def grid_plane(half: float = 1.0, n: int = 2):

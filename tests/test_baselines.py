@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from helpers import floor_quad, merge, wall_quad
 
-from pipeline.camera import Camera, look_at
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.gbuffer import GBufferRenderer
-from pipeline.labels import Labeller, LabelSettings
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import Camera, look_at
+from pipeline.tracing.labeller import Labeller, LabelSettings
 from runtime.baselines import (
     GTAOSettings,
     SSAOSettings,

@@ -1,7 +1,7 @@
 """The command-line contract on inputs that used to get through: non-finite G-buffers, output formats,
 counts past what the machine can hold, probe points far from the level, help text defaults, and
 messages a command-line user can act on. Each test runs the real command in-process
-(:func:`pipeline.cli.main`) and checks the exit status, the one stderr line and the files left behind.
+(:func:`pipeline.cli.main.main`) and checks the exit status, the one stderr line and the files left behind.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline import sh
-from pipeline.cli import main
-from pipeline.io import read_npz
+from pipeline.cli.main import main
+from pipeline.foundation import sh
+from pipeline.foundation.io import read_npz
 
 TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 UNET = "runtime/models/unet-15min/model.onnx"
@@ -258,7 +258,7 @@ def test_usage_errors_and_a_missing_command_are_one_line(capsys):
 
 def _two_regions(slope: float = 0.0):
     """Boxes x in [-1, 0] and [0.5, 1.5] with constant AO 0.2 and 0.9 (``slope``: d AO / dx on the right)."""
-    from pipeline.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
+    from pipeline.bakes.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
 
     regions = [Region("left", (-1, -1, -1), (0, 1, 1)), Region("right", (0.5, -1, -1), (1.5, 1, 1))]
     y0 = sh.basis(np.eye(3)[:1], 1)[0, 0]
@@ -285,8 +285,8 @@ def test_probe_far_from_the_level_uses_the_nearest_region(distance):
 
 
 def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
-    from pipeline.io import write_json
-    from pipeline.volumes import to_json
+    from pipeline.bakes.volumes import to_json
+    from pipeline.foundation.io import write_json
 
     write_json(tmp_path / "v.json", to_json(_two_regions(slope=3.0)))
     np.save(tmp_path / "p.npy", np.array([[1.0, 0, 0], [1.7e308, 0, 0]]))
@@ -302,8 +302,8 @@ def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
 
 @pytest.mark.parametrize("model", ["field", "mlp"])
 def test_train_help_states_the_real_defaults(capsys, model):
-    from pipeline.field import FieldSettings
-    from pipeline.mlp import MLPSettings, size_name
+    from pipeline.models.field import FieldSettings
+    from pipeline.models.mlp import MLPSettings, size_name
 
     with pytest.raises(SystemExit):
         main(["train", model, "--help"])
@@ -368,7 +368,7 @@ def test_unnamed_gltf_nodes_are_named_one_way_in_every_message(tmp_path, capsys)
 
 @pytest.mark.parametrize("content", [b"", "no meshes"])
 def test_view_of_a_bake_without_geometry_says_so(tmp_path, capsys, content):
-    from pipeline.level import GltfWriter
+    from pipeline.geometry.level_files import GltfWriter
 
     path = tmp_path / "empty.glb"
     if content:

@@ -13,11 +13,11 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.cli import main
-from pipeline.config import from_dict
-from pipeline.dataset import open_dataset
-from pipeline.errors import NeuralaoError
-from pipeline.evaluate import EvalSettings, check_settings, score_frame
+from pipeline.cli.main import main
+from pipeline.datasets.dataset import open_dataset
+from pipeline.evaluation.categories import EvalSettings, check_settings, score_frame
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import from_dict
 from runtime.shipped import default_export
 
 CONFIG = {
@@ -78,7 +78,7 @@ def test_labels_scored_against_themselves_are_perfect(evaluated):
 
 
 def test_manifest_gets_the_table_and_the_report_shows_it(evaluated):
-    from pipeline.report_plots import shipped_markdown
+    from pipeline.evaluation.plots import shipped_markdown
 
     _, model, result = evaluated
     manifest = json.loads((model / "manifest.json").read_text())

@@ -21,8 +21,8 @@ from export.glsl import generate_compute
 from export.onnx_glsl import parity
 from export.onnx_io import run_onnxruntime
 from pipeline import cli
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_vector_fragment
 
 OPSET = 17

@@ -16,8 +16,10 @@ from helpers import box, floor_quad, merge, onnx_vs_torch_tol
 from export.field import export_checkpoint, parity, random_inputs
 from export.onnx_io import load_onnx, run_onnxruntime
 from pipeline import cli
-from pipeline.constants import TOL
-from pipeline.field import (
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.scene import load_scene
+from pipeline.models.field import (
     FieldNet,
     FieldSettings,
     bounding_box,
@@ -32,9 +34,7 @@ from pipeline.field import (
     train,
     train_model,
 )
-from pipeline.gbuffer import GBufferRenderer
-from pipeline.labels import LabelSettings
-from pipeline.scene import load_scene
+from pipeline.tracing.labeller import LabelSettings
 
 FAST = FieldSettings(hidden=[16, 8], octaves=3, samples=4096, steps=300, check_every=100, holdout_views=1,
                      holdout_size=(48, 48), labels=LabelSettings(rays=32))  # fmt: skip
@@ -70,8 +70,8 @@ def test_bounding_box_maps_to_unit_cube_and_survives_flat_axes():
 def test_smooth_normals_match_the_gbuffer():
     """The training inputs use the normals the G-buffer shows: at a pixel's exact surface point the
     interpolated normal of :func:`smooth_normals_at` equals the rendered normal_obj."""
-    from pipeline.camera import orbit
-    from pipeline.labels import Labeller
+    from pipeline.geometry.camera import orbit
+    from pipeline.tracing.labeller import Labeller
 
     scene = load_scene("spot")
     cam = orbit(scene, 1, 64, 64, seed=3)[0]
@@ -164,7 +164,7 @@ def test_single_sided_plane_with_a_box_on_one_side():
     top, bottom = predict(model, p, up), predict(model, p, -up)
     assert np.mean(bottom) > 0.95 and np.mean(top) < np.mean(bottom) - 0.15, (np.mean(top), np.mean(bottom))
     # the field agrees with the labeller on both sides
-    from pipeline.labels import Labeller
+    from pipeline.tracing.labeller import Labeller
 
     ref_top, _ = Labeller(scene, LabelSettings(rays=256)).ao_at_points(p.astype(np.float64), up.astype(np.float64))
     assert float(np.sqrt(np.mean((np.clip(top, 0, 1) - ref_top) ** 2))) < 0.08
@@ -190,9 +190,9 @@ def test_infer_frame_matches_torch_and_cli(spot_run, tmp_path):
     from PIL import Image
 
     from export.field import infer_frame
-    from pipeline.camera import orbit
-    from pipeline.field import predict_frame
-    from pipeline.io import write_npz
+    from pipeline.foundation.io import write_npz
+    from pipeline.geometry.camera import orbit
+    from pipeline.models.field import predict_frame
 
     root, _ = spot_run
     scene = load_scene("spot")

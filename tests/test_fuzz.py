@@ -31,8 +31,8 @@ from onnx import numpy_helper as nh
 
 from export.glsl import generate_compute, generate_mlp_fragment
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute_all, run_mlp_fragment
 
 OPSET = 19
@@ -678,10 +678,10 @@ MESH_RAYS = 64
 
 @pytest.mark.parametrize("seed", MESH_SEEDS)
 def test_random_mesh_labels_and_gbuffer_finite_and_scale_invariant(seed):
-    from pipeline.camera import Camera, orbit
-    from pipeline.gbuffer import GBufferRenderer
-    from pipeline.labels import Labeller, LabelSettings
-    from pipeline.scene import scene_from_arrays
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
+    from pipeline.geometry.camera import Camera, orbit
+    from pipeline.geometry.scene import scene_from_arrays
+    from pipeline.tracing.labeller import Labeller, LabelSettings
 
     rng = np.random.default_rng(2000 + seed)
     verts, faces, kind = _random_mesh(seed)

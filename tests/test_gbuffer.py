@@ -16,11 +16,11 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline.camera import Camera, interior, look_at, orbit
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.gbuffer import GBufferRenderer, render_gbuffer
-from pipeline.scene import Scene, load_scene, scene_from_arrays
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import GBufferRenderer, render_gbuffer
+from pipeline.geometry.camera import Camera, interior, look_at, orbit
+from pipeline.geometry.scene import Scene, load_scene, scene_from_arrays
 
 W, H = 96, 64
 FRAME_KEYS = ("depth", "normal_cam", "normal_obj", "position", "mask", "tri_id")
@@ -303,9 +303,9 @@ def test_bad_cameras_and_options_raise(scenes):
 _SUBPROCESS_RENDER = """
 import json, sys
 import numpy as np
-from pipeline.camera import orbit
-from pipeline.gbuffer import render_gbuffer
-from pipeline.scene import load_scene
+from pipeline.geometry.camera import orbit
+from pipeline.gbuffers.rasterizer import render_gbuffer
+from pipeline.geometry.scene import load_scene
 from runtime.gl import context
 scene = load_scene("spot")
 frame = render_gbuffer(scene, orbit(scene, 2, {w}, {h}, seed=4)[1])

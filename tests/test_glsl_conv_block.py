@@ -15,8 +15,8 @@ from onnx import numpy_helper as nh
 from export.glsl import generate_compute
 from export.glsl.image import CONV_BLOCK, MAX_BLOCK_ACCUMULATORS
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute
 
 H, W = 29, 37  # odd: partial blocks on both edges for every block size below

@@ -37,7 +37,7 @@ from torch import nn
 from export.glsl import ImageOps, VectorOps
 from export.onnx_io import run_onnxruntime, weighted_layers
 from pipeline import cli
-from pipeline.constants import TOL
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute_all
 
 OPSET = 17

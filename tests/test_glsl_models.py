@@ -26,7 +26,7 @@ from export.glsl import (
     write_mlp_export,
 )
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute, run_mlp_fragment
 
 # ----------------------------------------------------------------------------- baked MLP

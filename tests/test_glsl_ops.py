@@ -16,8 +16,8 @@ from onnx import numpy_helper as nh
 
 from export.glsl import generate_compute, generate_mlp_fragment, validate_glsl
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute, run_mlp_fragment
 
 OPSET = 19

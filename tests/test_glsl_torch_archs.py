@@ -31,7 +31,7 @@ from torch import nn
 
 from export.glsl import generate_compute
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute_all
 
 

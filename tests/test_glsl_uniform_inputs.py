@@ -20,9 +20,9 @@ from export.glsl import generate_compute, validate_glsl, write_compute_export
 from export.onnx_glsl import parity
 from export.onnx_io import run_onnxruntime
 from pipeline import cli
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_npz
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_npz
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute, run_compute_all, scalar_inputs, time_compute
 
 OPSET = 17  # the U-Net exporter's opset

@@ -19,8 +19,8 @@ import pytest
 
 from export.onnx_io import run_onnxruntime
 from export.unet import composite, glsl_runner, radius_array, render_parity_frames, run_padded
-from pipeline.constants import TOL
-from pipeline.unet import pad_to_multiple, preprocess, radius_param
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.unet import pad_to_multiple, preprocess, radius_param
 from runtime.shipped import INDEX, MODELS_DIR
 
 REPO = Path(__file__).resolve().parents[1]

@@ -15,12 +15,19 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.camera import orbit
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.gbuffer import render_gbuffer
-from pipeline.scene import load_scene
-from pipeline.unet import HYBRID_CHANNELS, UNet, UNetArgs, frame_radius_param, predict, preprocess_frame
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import render_gbuffer
+from pipeline.geometry.camera import orbit
+from pipeline.geometry.scene import load_scene
+from pipeline.models.unet import (
+    HYBRID_CHANNELS,
+    UNet,
+    UNetArgs,
+    frame_radius_param,
+    predict,
+    preprocess_frame,
+)
 from runtime.baselines import run_gtao
 
 WIDTHS = [4, 8, 16]
@@ -131,8 +138,8 @@ def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp
 
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
-    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.labels import LabelSettings
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("hybrid-ds")
     settings = DatasetSettings(
@@ -151,8 +158,8 @@ def tiny_dataset(tmp_path_factory):
 
 
 def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset):
-    from pipeline.dataset import open_dataset
-    from pipeline.unet_train import frames_to_set, network_input
+    from pipeline.datasets.dataset import open_dataset
+    from pipeline.models.unet_train import frames_to_set, network_input
     from runtime.internal_resolution import downsample_frame
 
     frames = list(open_dataset(tiny_dataset).frames(split="train"))
@@ -179,7 +186,7 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     from export.onnx_io import get_metadata, load_onnx
     from export.unet import export_checkpoint, is_hybrid
-    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
     ts = UNetTrainSettings(epochs=2, batch_size=2, crop=16, crops_per_frame=1, widths=[4, 8], gtao_input=True,
                            internal_height=32, threads=1, seed=0)  # fmt: skip
@@ -196,7 +203,7 @@ def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     """An export trained at an internal height ships the two fragment passes an engine runs around the
     network, and they compile on Mesa."""
     from export.unet import export_checkpoint
-    from pipeline.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
     from runtime import gl
 
     ts = UNetTrainSettings(epochs=1, batch_size=2, crop=16, crops_per_frame=1, widths=[2, 4], internal_height=32,

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.camera import interior, orbit
-from pipeline.constants import TOL
-from pipeline.gbuffer import render_gbuffer
-from pipeline.scene import load_scene
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import render_gbuffer
+from pipeline.geometry.camera import interior, orbit
+from pipeline.geometry.scene import load_scene
 from runtime.baselines import gbuffer_textures
 from runtime.internal_resolution import (
     ScalingPasses,
@@ -125,7 +125,7 @@ def _block_mean(a: np.ndarray, mask: np.ndarray, k: int) -> tuple[np.ndarray, np
 
 @pytest.fixture(scope="module")
 def default_unet():
-    from pipeline.split_eval import unet_predictor
+    from pipeline.evaluation.test_split import unet_predictor
 
     return unet_predictor(default_model("unet"))
 

@@ -11,10 +11,10 @@ import pytest
 import trimesh
 
 from pipeline import cli
-from pipeline.bake import interpolate, vertex_colours
-from pipeline.level import quat_to_matrix, read_gltf_json
-from pipeline.level_bake import bake_level, load_level_settings
-from pipeline.level_gen import settings_for, write_level
+from pipeline.bakes.level import bake_level, load_level_settings
+from pipeline.bakes.vertex import interpolate, vertex_colours
+from pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
+from pipeline.geometry.level_gen import settings_for, write_level
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +50,7 @@ def test_outputs_hold_every_signal(baked):
         verts += len(ao)
     assert verts == info["counts"]["receiver_vertices"]
     # Per sample, 2 m obscurance is never darker than 300 m (rho_short(d) >= rho_long(d) for every ray).
-    from pipeline.io import read_npz
+    from pipeline.foundation.io import read_npz
 
     traced = read_npz(root / "out" / "stages" / "trace.npz")["ao"]
     assert (traced[:, 0] >= traced[:, 1]).all()
@@ -209,8 +209,8 @@ def test_cli_level_bake_matches_the_library(baked, tmp_path):
 def test_lod_least_squares_interpolates_the_fit(baked):
     """The LOD's stored values reproduce what least squares fitted (sanity of the stage's arrays)."""
     root, *_ = baked
-    from pipeline.io import read_npz
-    from pipeline.scene import scene_from_arrays
+    from pipeline.foundation.io import read_npz
+    from pipeline.geometry.scene import scene_from_arrays
 
     lod = read_npz(root / "out" / "stages" / "lod.npz")
     scene = scene_from_arrays(lod["vertices"], lod["faces"], "lod", drop_degenerate=False)
@@ -224,8 +224,8 @@ def test_lod_least_squares_interpolates_the_fit(baked):
 def test_world10x_preset_is_ten_times_table1():
     """The 10x world keeps table1's mix (terrain, houses, buildings, trees, shrubs, grass) at ten times the
     counts and area, ~18M faces, without generating it: faces from the settings and the shared meshes."""
-    from pipeline.level_gen import BAKE_CONFIGS
-    from pipeline.scene import load_scene
+    from pipeline.geometry.level_gen import BAKE_CONFIGS
+    from pipeline.geometry.scene import load_scene
 
     def faces(s):
         buildings = sum(len(load_scene(b.mesh).faces) * b.count for b in s.buildings)
@@ -241,8 +241,8 @@ def test_world10x_preset_is_ten_times_table1():
 
 
 def load_level_settings_dict(data):
-    from pipeline.config import from_dict
-    from pipeline.level_bake import LevelBakeSettings, check_settings
+    from pipeline.bakes.level import LevelBakeSettings, check_settings
+    from pipeline.foundation.settings import from_dict
 
     s = from_dict(LevelBakeSettings, data)
     check_settings(s)

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.errors import NeuralaoError
-from pipeline.level import GltfWriter, decompose, read_level, trs_matrices
-from pipeline.level_gen import settings_for, write_level
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.geometry.level_files import GltfWriter, decompose, read_level, trs_matrices
+from pipeline.geometry.level_gen import settings_for, write_level
 
 
 @pytest.fixture(scope="module")

@@ -10,14 +10,14 @@ import pytest
 from helpers import floor_quad, mc_bound, merge
 from scipy.special import expn
 
-from pipeline.bake import fit_least_squares, surface_samples
-from pipeline.foliage import Foliage, overlap_reduced
-from pipeline.labels import Labeller, LabelSettings
-from pipeline.level import read_level
-from pipeline.level_bake import TraceSettings, build_geometry, fit_global, linear_basis, receiver_samples
-from pipeline.level_gen import settings_for, write_level
-from pipeline.level_trace import LevelLabeller, resample_in_spheres, sphere_directions
-from pipeline.scene import scene_from_arrays
+from pipeline.bakes.level import TraceSettings, build_geometry, fit_global, linear_basis, receiver_samples
+from pipeline.bakes.vertex import fit_least_squares, surface_samples
+from pipeline.geometry.level_files import read_level
+from pipeline.geometry.level_gen import settings_for, write_level
+from pipeline.geometry.scene import scene_from_arrays
+from pipeline.tracing.foliage import Foliage, overlap_reduced
+from pipeline.tracing.labeller import Labeller, LabelSettings
+from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
 def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, threshold):
     """The early out of the back-face rule (rounds of rays, rejected samples stop) gives the same valid
     flags and bit-identical AO of every valid sample as tracing every ray, with foliage on."""
-    from pipeline.level_bake import FoliageSettings, build_foliage
+    from pipeline.bakes.level import FoliageSettings, build_foliage
 
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=3)
@@ -64,7 +64,7 @@ def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, thresh
 
 
 def test_foliage_attenuates_only_where_there_is_foliage(tiny_geometry):
-    from pipeline.level_bake import FoliageSettings, build_foliage
+    from pipeline.bakes.level import FoliageSettings, build_foliage
 
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
@@ -227,7 +227,7 @@ def test_least_squares_columns_cg_and_amg_match_separate_direct_fits(tiny_geomet
 
 def test_edge_weights_match_unique_rows(tiny_geometry):
     """The 1-D keyed edge list (the fast path) is the lexicographic unique-rows one, weights bit for bit."""
-    from pipeline.bake import edge_weights, face_areas
+    from pipeline.bakes.vertex import edge_weights, face_areas
 
     sc = tiny_geometry.receivers
     e = np.concatenate([sc.faces[:, [0, 1]], sc.faces[:, [1, 2]], sc.faces[:, [2, 0]]])
@@ -246,8 +246,8 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
     multigrid CG for blocks of at least component_vertices) gives the global SuperLU solution."""
     from scipy.sparse.csgraph import connected_components
 
-    from pipeline.bake import normal_equations
-    from pipeline.level_bake import TraceSettings, component_blocks, fit_level
+    from pipeline.bakes.level import TraceSettings, component_blocks, fit_level
+    from pipeline.bakes.vertex import normal_equations
 
     g = tiny_geometry
     samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)
@@ -270,7 +270,7 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
 def test_fast_resampling_matches_the_geometric_reference(tiny_geometry):
     """The trace-speed weighting (Embree's barycentrics, weight r - |r - t|, row sums) against projected
     world hit points and bincount, on the tiny level with blockers (NaN values) in reach."""
-    from pipeline.level_trace import _resample_block, _resample_block_geometric
+    from pipeline.tracing.level_tracer import _resample_block, _resample_block_geometric
 
     g = tiny_geometry
     lab = LevelLabeller(g.opaque, LabelSettings(rays=8))

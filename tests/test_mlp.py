@@ -1,4 +1,4 @@
-"""Baked MLP (pipeline/mlp.py): sizes, circle sampling, samples from meshes and datasets, training, checkpoints."""
+"""Baked MLP (pipeline/models/mlp.py): sizes, circle sampling, samples from meshes and datasets, training, checkpoints."""
 
 from __future__ import annotations
 
@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.cli import main as cli_main
-from pipeline.config import load_settings
-from pipeline.errors import NeuralaoError
-from pipeline.labels import LabelSettings
-from pipeline.mlp import (
+from pipeline.cli.main import main as cli_main
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import load_settings
+from pipeline.models.mlp import (
     INPUTS,
     BakedMLP,
     MLPSettings,
@@ -34,6 +33,7 @@ from pipeline.mlp import (
     train,
     train_model,
 )
+from pipeline.tracing.labeller import LabelSettings
 
 # A tiny mesh-source problem: spot, 12 views at 96x96 (6,144 samples), 32 rays; 2 held-back views at 64x64.
 TINY = MLPSettings(
@@ -130,10 +130,10 @@ def test_radius_zero_inputs_repeat_the_normal():
 
 def test_mesh_source_labels_equal_label_frame(spot_samples):
     """Labelling only drawn pixels gives exactly what labelling the whole frame gives there."""
-    from pipeline.camera import orbit
-    from pipeline.gbuffer import render_gbuffer
-    from pipeline.labels import Labeller
-    from pipeline.scene import load_scene
+    from pipeline.gbuffers.rasterizer import render_gbuffer
+    from pipeline.geometry.camera import orbit
+    from pipeline.geometry.scene import load_scene
+    from pipeline.tracing.labeller import Labeller
 
     scene = load_scene("spot")
     frame = render_gbuffer(scene, orbit(scene, 3, 48, 48)[1])
@@ -177,7 +177,7 @@ def test_split_is_seeded_and_validated():
 
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
-    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
 
     out = tmp_path_factory.mktemp("ds")
     settings = DatasetSettings(
@@ -191,7 +191,7 @@ def tiny_dataset(tmp_path_factory):
 
 
 def test_dataset_source_never_samples_held_back_views(tiny_dataset):
-    from pipeline.dataset import open_dataset
+    from pipeline.datasets.dataset import open_dataset
 
     settings = replace(TINY, samples_per_view=64)
     s = samples_from_dataset(tiny_dataset, "spot", settings)

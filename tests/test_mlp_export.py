@@ -25,12 +25,11 @@ from export.mlp import (
     render_parity_frames,
 )
 from export.onnx_io import get_metadata, run_onnxruntime, run_opencv
-from pipeline.cli import main as cli_main
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_npz
-from pipeline.labels import LabelSettings
-from pipeline.mlp import (
+from pipeline.cli.main import main as cli_main
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_npz
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.mlp import (
     BakedMLP,
     MLPSettings,
     load_checkpoint,
@@ -39,6 +38,7 @@ from pipeline.mlp import (
     radius_zero_inputs,
     train,
 )
+from pipeline.tracing.labeller import LabelSettings
 
 SMALL = MLPSettings(
     hidden=[16, 8],
@@ -260,7 +260,7 @@ def test_parity_renders_frames_of_the_training_mesh_by_default(exported):
 def test_any_size_exports_and_matches(tmp_path, spot_frame):
     """A non-paper size (5x3) and a wider one (20x12: layers of 5 and 3 vec4s) through the whole chain.
     (64x32 is exported and checked by the benchmark: llvmpipe needs minutes to compile it uncached.)"""
-    from pipeline.mlp import make_checkpoint, save_checkpoint
+    from pipeline.models.mlp import make_checkpoint, save_checkpoint
 
     for hidden in ([5, 3], [20, 12]):
         torch.manual_seed(1)

@@ -19,8 +19,8 @@ from onnx import numpy_helper as nh
 from export.onnx_glsl import parity
 from export.onnx_io import run_onnxruntime
 from pipeline import cli
-from pipeline.constants import TOL
-from pipeline.io import write_npz
+from pipeline.foundation.io import write_npz
+from pipeline.foundation.tolerances import TOL
 from runtime.glsl_runner import run_compute
 
 OPSET = 19

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipeline.camera import Camera
-from pipeline.cli import main
-from pipeline.gbuffer import GBufferRenderer
-from pipeline.io import read_npz
-from pipeline.labels import Labeller, LabelSettings
-from pipeline.render import view_seed
-from pipeline.scene import load_scene
+from pipeline.cli.main import main
+from pipeline.cli.render import view_seed
+from pipeline.foundation.io import read_npz
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import Camera
+from pipeline.geometry.scene import load_scene
+from pipeline.tracing.labeller import Labeller, LabelSettings
 
 W, H, VIEWS, RAYS = 40, 28, 2, 16
 FRAME = {

@@ -19,15 +19,15 @@ import pytest
 import torch
 from PIL import Image
 
-from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
-from pipeline.labels import LabelSettings
-from pipeline.metrics import masked_rmse, masked_ssim
+from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
+from pipeline.foundation.metrics import masked_rmse, masked_ssim
+from pipeline.tracing.labeller import LabelSettings
 
 RADII = [0.0625, 0.25]  # the dataset's labels.radii_rel; max_distance_rel is 0.25
 
 
 def _fast_settings(**kw):
-    from pipeline.report import ReportSettings
+    from pipeline.evaluation.report import ReportSettings
 
     base = dict(gt_rays=16, frames_per_scene=2, time_size=(32, 32), repeats=1, trace_rays=[2], bake_rays=8,
                 bake_samples_per_vertex=2.0, contact_sheets=False)  # fmt: skip
@@ -41,8 +41,8 @@ def _history(minutes: float, epochs: int, top: float) -> list[dict]:
 
 
 def _tiny_unet(path: Path, scale: int) -> None:
-    from pipeline.unet import UNetArgs, build_model, model_args_dict
-    from pipeline.unet_train import KIND
+    from pipeline.models.unet import UNetArgs, build_model, model_args_dict
+    from pipeline.models.unet_train import KIND
 
     torch.manual_seed(0)
     args = UNetArgs(widths=[2, 4], scale=scale)
@@ -94,7 +94,7 @@ def workspace(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def result(workspace):
-    from pipeline.report import evaluate, write_report
+    from pipeline.evaluation.report import evaluate, write_report
 
     root, data, models = workspace
     out = root / "out"
@@ -110,9 +110,9 @@ def test_ground_truth_at_several_radii_equals_separate_traces(workspace):
     the cache holds the same arrays and is keyed on the radii."""
     from dataclasses import replace
 
-    from pipeline.dataset import scene_of
-    from pipeline.labels import Labeller
-    from pipeline.report import frame_key_seed, ground_truth, label_settings_of
+    from pipeline.datasets.dataset import scene_of
+    from pipeline.evaluation.report import frame_key_seed, ground_truth, label_settings_of
+    from pipeline.tracing.labeller import Labeller
 
     root, data, _ = workspace
     ds = open_dataset(data)
@@ -171,7 +171,7 @@ def test_ssao_gets_the_radius_it_is_scored_at(result, workspace):
     GTAO at the larger radius is darker on average, as the ground truth is. (This SSAO is not: at a
     radius of a pixel or two its fixed relative depth bias lets tilted neighbours self-occlude, so its
     mean AO rises with the radius on these 32x32 frames; the per-radius table shows that.)"""
-    from pipeline.io import read_npz
+    from pipeline.foundation.io import read_npz
     from runtime.baselines import run_screen_space
 
     out, r = result
@@ -215,7 +215,7 @@ def test_shipped_plots_are_pngs_and_listed(result):
 def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
     """Three models differing only in train_fraction -> one series of three points; learning curves from
     the index entries' own history; a model without data adds nothing."""
-    from pipeline.report_plots import corpus_size_series, shipped_summary, write_shipped_plots
+    from pipeline.evaluation.plots import corpus_size_series, shipped_summary, write_shipped_plots
 
     models = tmp_path / "models"
     index = {"models": {}, "default": {"unet": "full"}}
@@ -248,7 +248,7 @@ def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
 
 
 def test_no_shipped_model_is_one_line(tmp_path, workspace):
-    from pipeline.report import evaluate, render_markdown
+    from pipeline.evaluation.report import evaluate, render_markdown
 
     _, data, _ = workspace
     r = evaluate(data, None, _fast_settings(frames_per_scene=1), None, families={"screen-space"}, progress=False,
@@ -260,7 +260,7 @@ def test_no_shipped_model_is_one_line(tmp_path, workspace):
 
 
 def test_shipped_models_are_the_default_without_exports(tmp_path):
-    from pipeline.report import add_arguments, shipped_folder
+    from pipeline.evaluation.report import add_arguments, shipped_folder
     from runtime.shipped import MODELS_DIR
 
     parser = argparse.ArgumentParser()

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.errors import NeuralaoError
-from pipeline.scene import load_scene, mesh_root, scene_from_arrays
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.geometry.scene import load_scene, mesh_root, scene_from_arrays
 
 
 def test_loads_obj_with_expected_counts():

@@ -1,4 +1,4 @@
-"""`neuralao ship` (pipeline/ship.py): train -> export -> parity -> test-split error -> provenance ->
+"""`neuralao ship` (pipeline/release/ship.py): train -> export -> parity -> test-split error -> provenance ->
 atomic install under runtime/models, on a tiny real dataset with train / val / test splits by mesh.
 Also the shipped models themselves (runtime/models): the radius input behaves like a radius."""
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
 
 TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "internal_height": 40, "batch_size": 4, "lr": 0.01, "crop": 16, "crops_per_frame": 2,
               "threads": 1, "lr_schedule": "cosine", "budget_minutes": 30.0}  # fmt: skip
@@ -19,8 +19,8 @@ TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "internal_height": 40, "batch_size"
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):
-    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.labels import LabelSettings
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("ship-ds")
     settings = DatasetSettings(
@@ -40,7 +40,7 @@ def corpus(tmp_path_factory):
 
 
 def _settings(corpus: Path, tmp: Path, **kw):
-    from pipeline.ship import ShipSettings
+    from pipeline.release.ship import ShipSettings
 
     base = dict(dataset=str(corpus), checkpoints=str(tmp / "ckpt"), out=str(tmp / "models"),
                 default={"unet": "u-full"}, time_sizes=[[32, 32]], time_repeats=1,
@@ -52,7 +52,7 @@ def _settings(corpus: Path, tmp: Path, **kw):
 
 @pytest.fixture(scope="module")
 def shipped(corpus, tmp_path_factory):
-    from pipeline.ship import ship
+    from pipeline.release.ship import ship
 
     tmp = tmp_path_factory.mktemp("ship")
     settings = _settings(corpus, tmp)
@@ -61,7 +61,7 @@ def shipped(corpus, tmp_path_factory):
 
 def test_ship_installs_self_describing_exports(shipped, corpus):
     from export.onnx_io import get_metadata, load_onnx
-    from pipeline.dataset import open_dataset
+    from pipeline.datasets.dataset import open_dataset
     from runtime.shipped import default_export, default_model, shipped_models
 
     settings, index, tmp = shipped
@@ -91,9 +91,9 @@ def test_ship_installs_self_describing_exports(shipped, corpus):
 
 def test_ship_test_figures_are_the_installed_models_own(shipped, corpus):
     """Recompute the test error of the installed ONNX file independently of the ship run."""
-    from pipeline.dataset import open_dataset
-    from pipeline.metrics import masked_ssim
-    from pipeline.split_eval import unet_predictor
+    from pipeline.datasets.dataset import open_dataset
+    from pipeline.evaluation.test_split import unet_predictor
+    from pipeline.foundation.metrics import masked_ssim
 
     settings, _, _ = shipped
     onnx = Path(settings.out) / "u-full" / "model.onnx"
@@ -108,7 +108,7 @@ def test_ship_test_figures_are_the_installed_models_own(shipped, corpus):
 
 
 def test_ship_rerun_resumes_and_writes_the_same_onnx(shipped, corpus):
-    from pipeline.ship import ship
+    from pipeline.release.ship import ship
 
     settings, _, _ = shipped
     path = Path(settings.out) / "u-half" / "model.onnx"
@@ -118,7 +118,7 @@ def test_ship_rerun_resumes_and_writes_the_same_onnx(shipped, corpus):
 
 
 def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
-    from pipeline.ship import ship
+    from pipeline.release.ship import ship
 
     with pytest.raises(NeuralaoError, match="is not one of"):
         ship(_settings(corpus, tmp_path, default={"unet": "nope"}))
@@ -141,10 +141,10 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
         pytest.skip("no model shipped yet (make models)")
     from export.onnx_io import load_onnx
     from export.unet import check_unet_onnx, ort_runner, run_padded
-    from pipeline.camera import orbit
-    from pipeline.gbuffer import render_gbuffer
-    from pipeline.scene import load_scene
-    from pipeline.unet import preprocess_frame, radius_param
+    from pipeline.gbuffers.rasterizer import render_gbuffer
+    from pipeline.geometry.camera import orbit
+    from pipeline.geometry.scene import load_scene
+    from pipeline.models.unet import preprocess_frame, radius_param
 
     onnx = default_model("unet")
     proto = load_onnx(onnx)
@@ -163,10 +163,10 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
 
 def test_infer_uses_the_shipped_default_when_given_only_a_frame(shipped, corpus, tmp_path, monkeypatch):
     import runtime.shipped as sh
-    from pipeline.cli import main
-    from pipeline.dataset import open_dataset
-    from pipeline.io import write_npz
-    from pipeline.split_eval import unet_predictor
+    from pipeline.cli.main import main
+    from pipeline.datasets.dataset import open_dataset
+    from pipeline.evaluation.test_split import unet_predictor
+    from pipeline.foundation.io import write_npz
 
     settings, _, _ = shipped
     frame = next(iter(open_dataset(corpus).frames(split="test")))
@@ -188,7 +188,7 @@ def test_ship_installs_a_hybrid_at_its_internal_height(corpus, tmp_path):
     """A GTAO-refining U-Net trained at an internal height goes through the whole release path: its
     parity runs on five-channel frames with real GTAO, its test split is scored with GTAO run first,
     and its export carries the internal-resolution passes."""
-    from pipeline.ship import ship
+    from pipeline.release.ship import ship
 
     hybrid = {**TINY_TRAIN, "gtao_input": True, "internal_height": 32, "epochs": 2}
     settings = _settings(corpus, tmp_path, default={"unet": "u-gtao"}, models=[{"name": "u-gtao", "train": hybrid}])

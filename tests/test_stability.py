@@ -12,12 +12,12 @@ from onnx import numpy_helper as nh
 
 from export.glsl import generate_compute
 from export.onnx_io import run_onnxruntime
-from pipeline.camera import orbit
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.gbuffer import render_gbuffer
-from pipeline.labels import Labeller, LabelSettings
-from pipeline.scene import load_scene, mesh_root
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import render_gbuffer
+from pipeline.geometry.camera import orbit
+from pipeline.geometry.scene import load_scene, mesh_root
+from pipeline.tracing.labeller import Labeller, LabelSettings
 from runtime.glsl_runner import run_compute
 
 

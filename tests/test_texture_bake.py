@@ -1,4 +1,4 @@
-"""AO texture bakes (pipeline/texture_bake.py) against the closed form of a floor beside a wall.
+"""AO texture bakes (pipeline/bakes/texture.py) against the closed form of a floor beside a wall.
 
 The scene is the labeller's wall test (tests/test_labels.py): a floor and a wall meeting at a right
 angle. A point at distance s from the other plane has binary AO 1 - segment_fraction(s / R) for s < R
@@ -21,9 +21,7 @@ from helpers import mc_bound, segment_fraction
 from PIL import Image
 
 from pipeline import cli
-from pipeline.bake import BakeSettings, bake
-from pipeline.errors import NeuralaoError
-from pipeline.texture_bake import (
+from pipeline.bakes.texture import (
     TextureBakeSettings,
     UVMesh,
     bake_texture,
@@ -38,6 +36,8 @@ from pipeline.texture_bake import (
     scene_with_uvs,
     write_texture_glb,
 )
+from pipeline.bakes.vertex import BakeSettings, bake
+from pipeline.foundation.errors import NeuralaoError
 
 R = 1.0  # max distance
 UV_SCALE = 0.11  # UV units per scene unit (square texels on both planes)

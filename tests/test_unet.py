@@ -1,4 +1,4 @@
-"""DeepAO U-Net (pipeline/unet.py, pipeline/unet_train.py, export/unet.py): model shapes and size,
+"""DeepAO U-Net (pipeline/models/unet.py, pipeline/models/unet_train.py, export/unet.py): model shapes and size,
 the masked SSIM loss, training on a tiny real dataset (NaN stop, resumption), checkpoints, and the
 export through onnxruntime, OpenCV dnn and the generated GLSL on Mesa.
 
@@ -17,10 +17,10 @@ import pytest
 import torch
 from helpers import onnx_vs_torch_tol
 
-from pipeline import metrics
-from pipeline.constants import TOL
-from pipeline.errors import NeuralaoError
-from pipeline.unet import (
+from pipeline.foundation import metrics
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.tolerances import TOL
+from pipeline.models.unet import (
     PREPROCESS_VERSION,
     PaddedUNet,
     UNet,
@@ -31,7 +31,7 @@ from pipeline.unet import (
     predict,
     preprocess,
 )
-from pipeline.unet_train import (
+from pipeline.models.unet_train import (
     KIND,
     FrameSet,
     UNetTrainSettings,
@@ -78,8 +78,8 @@ def _expected_parameters(widths, in_channels: int = 5) -> int:
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
-    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.labels import LabelSettings
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("unet-ds")
     settings = DatasetSettings(
@@ -270,7 +270,7 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
         ckpt["dataset"]["training_scenes"] == ["spot"]
         and ckpt["dataset"]["dataset_hash"] == info["dataset_hash"]
     )
-    # The recorded validation metrics == pipeline.metrics on the composited prediction (background 1).
+    # The recorded validation metrics == pipeline.foundation.metrics on the composited prediction (background 1).
     model = model_from_checkpoint(load_checkpoint(path))
     ssim, rmse = [], []
     for i in range(len(val_set)):
@@ -379,9 +379,9 @@ def test_interrupted_training_resumes_to_the_same_weights(frames, tmp_path):
 
 
 def _mlp_checkpoint(path):
-    from pipeline.mlp import KIND as MLP_KIND
-    from pipeline.mlp import BakedMLP
-    from pipeline.mlp import model_args_dict as mlp_args
+    from pipeline.models.mlp import KIND as MLP_KIND
+    from pipeline.models.mlp import BakedMLP
+    from pipeline.models.mlp import model_args_dict as mlp_args
 
     model = BakedMLP(hidden=[8, 4])
     torch.save({"kind": MLP_KIND, "format_version": 1, "model_args": mlp_args(model), "config": {},
@@ -574,7 +574,7 @@ def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_pari
 
 
 def test_cosine_schedule_closed_form():
-    from pipeline.unet_train import lr_at
+    from pipeline.models.unet_train import lr_at
 
     s = replace(TINY, lr=1e-2, lr_schedule="cosine", warmup_steps=4, min_lr_ratio=0.1)
     total = 24
@@ -590,7 +590,7 @@ def test_cosine_schedule_closed_form():
 
 
 def test_budget_plan_fits_the_budget():
-    from pipeline.unet_train import plan_budget
+    from pipeline.models.unet_train import plan_budget
 
     s = replace(TINY, epochs=1000, budget_minutes=2.0)
     cal = {"seconds_per_step": 0.5, "val_seconds": 3.0}  # 10 steps + validation = 8 s an epoch
@@ -602,7 +602,7 @@ def test_budget_plan_fits_the_budget():
 def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeypatch):
     """A budget run plans its epochs once (calibration), stores the plan, and an interrupted run
     resumed later follows the stored plan (no new calibration) to the weights of an uninterrupted run."""
-    import pipeline.unet_train as ut
+    import pipeline.models.unet_train as ut
 
     train_set, val_set, info = frames
     settings = replace(TINY, epochs=3, widths=[2, 4], budget_minutes=60.0, lr_schedule="cosine", warmup_steps=2)
@@ -653,8 +653,8 @@ def test_reduced_resolution_variant_trains_and_starts_from_the_full_network(fram
 def test_corpus_fraction_cut_from_the_loaded_corpus_equals_a_fresh_load(tmp_path):
     """ship keeps one corpus in memory and cuts the corpus-size subsets from it: same frames, same order,
     same info as reading that fraction from disk."""
-    from pipeline.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.labels import LabelSettings
+    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from pipeline.tracing.labeller import LabelSettings
 
     settings = DatasetSettings(
         name="tiny-fractions",

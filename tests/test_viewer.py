@@ -5,7 +5,7 @@ method against an independent computation on the *same* G-buffer:
 
 * the generated ES 3.00 field and MLP shaders against onnxruntime on the read-back position / normal;
 * the vertex bake against the bake file's per-vertex AO interpolated at the read-back positions;
-* the texture bake against a bilinear lookup (pipeline.texture_bake.sample_bilinear) of the .glb's map.
+* the texture bake against a bilinear lookup (pipeline.bakes.texture.sample_bilinear) of the .glb's map.
 
 WebGL here runs on SwiftShader (Chromium's CPU Vulkan / GL implementation): the bound stated and
 checked is TOL_SHADER (see the constant). Screenshots of every method go to NEURALAO_ARTIFACTS (if set)
@@ -48,7 +48,7 @@ TOL_SHADER = {
 # seams (spot.obj) the two sides carry different vertex AO, so there only the 99th percentile is.
 # Measured under SwiftShader: inside max 6e-7, 99th percentile 2.5e-7.
 TOL_VERTEX = 1e-5
-# Texture bake: the GPU's LINEAR lookup of the 8-bit map vs pipeline.texture_bake.sample_bilinear. The
+# Texture bake: the GPU's LINEAR lookup of the 8-bit map vs pipeline.bakes.texture.sample_bilinear. The
 # texel a pixel lands in can differ at chart seams (one pixel measured at 0.078), so the 99th
 # percentile and the mean are bounded. Measured under SwiftShader: p99 1.3e-6, mean <= 7e-5.
 TOL_TEXTURE_P99, TOL_TEXTURE_MEAN = 1e-4, 1e-3
@@ -56,18 +56,18 @@ TOL_TEXTURE_P99, TOL_TEXTURE_MEAN = 1e-4, 1e-3
 
 def _random_checkpoints(root: Path) -> tuple[Path, Path]:
     """A seeded, untrained field (16x8) and MLP (16x8) of spot: non-trivial functions, no training time."""
-    from pipeline.checkpoint import per_mesh_checkpoint, save_checkpoint
-    from pipeline.field import FORMAT_VERSION as FIELD_VERSION
-    from pipeline.field import KIND as FIELD_KIND
-    from pipeline.field import FieldNet, bounding_box
-    from pipeline.field import model_args_dict as field_args
-    from pipeline.field import parameter_bytes as field_bytes
-    from pipeline.mlp import FORMAT_VERSION as MLP_VERSION
-    from pipeline.mlp import KIND as MLP_KIND
-    from pipeline.mlp import BakedMLP
-    from pipeline.mlp import model_args_dict as mlp_args
-    from pipeline.mlp import parameter_bytes as mlp_bytes
-    from pipeline.scene import load_scene
+    from pipeline.geometry.scene import load_scene
+    from pipeline.models.checkpoint import per_mesh_checkpoint, save_checkpoint
+    from pipeline.models.field import FORMAT_VERSION as FIELD_VERSION
+    from pipeline.models.field import KIND as FIELD_KIND
+    from pipeline.models.field import FieldNet, bounding_box
+    from pipeline.models.field import model_args_dict as field_args
+    from pipeline.models.field import parameter_bytes as field_bytes
+    from pipeline.models.mlp import FORMAT_VERSION as MLP_VERSION
+    from pipeline.models.mlp import KIND as MLP_KIND
+    from pipeline.models.mlp import BakedMLP
+    from pipeline.models.mlp import model_args_dict as mlp_args
+    from pipeline.models.mlp import parameter_bytes as mlp_bytes
 
     scene = load_scene("spot")
     info = {"scene": "spot", "mesh": scene.source}
@@ -205,8 +205,8 @@ def _locate(vertices, faces, points):
 
 
 def test_vertex_and_texture_bakes_match_their_files(browser, page):
-    from pipeline.bake import read_baked_mesh
-    from pipeline.texture_bake import point_uvs, read_texture_glb, sample_bilinear
+    from pipeline.bakes.texture import point_uvs, read_texture_glb, sample_bilinear
+    from pipeline.bakes.vertex import read_baked_mesh
 
     methods = _methods(browser)
     vertices, faces, vertex_ao, _ = read_baked_mesh(page / "vertex.glb")

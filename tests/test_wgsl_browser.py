@@ -25,7 +25,7 @@ from onnx import numpy_helper as nh
 
 from export.glsl import ComputeProgram, generate_compute
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
+from pipeline.foundation.tolerances import TOL
 from runtime.shipped import INDEX, MODELS_DIR
 
 CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")

@@ -20,7 +20,7 @@ from onnx import numpy_helper as nh
 
 from export.glsl import generate_compute, write_compute_export
 from export.onnx_io import run_onnxruntime
-from pipeline.constants import TOL
+from pipeline.foundation.tolerances import TOL
 from runtime.shipped import INDEX, MODELS_DIR
 
 wgpu = pytest.importorskip("wgpu")

@@ -47,12 +47,21 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
 The runners are :mod:`runtime.glsl_runner` (GL) and :mod:`runtime.wgsl_runner` (WebGPU).
 """
 
-from .activations import Act
-from .cross import cross_compile, spirv_cross_available, validate_hlsl
-from .dialects import COMPUTE_DIALECTS, DIALECTS, ES300, FRAGMENT_FILES, GLSL330, WGSL, Dialect, get_dialect
-from .files import load_compute_export, load_mlp_export, write_compute_export, write_mlp_export
-from .graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
-from .image import (
+from export.glsl.activations import Act
+from export.glsl.cross import cross_compile, spirv_cross_available, validate_hlsl
+from export.glsl.dialects import (
+    COMPUTE_DIALECTS,
+    DIALECTS,
+    ES300,
+    FRAGMENT_FILES,
+    GLSL330,
+    WGSL,
+    Dialect,
+    get_dialect,
+)
+from export.glsl.files import load_compute_export, load_mlp_export, write_compute_export, write_mlp_export
+from export.glsl.graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
+from export.glsl.image import (
     CONV_KINDS,
     FOLDED_OPS,
     MAX_ARRAY_LAYERS,
@@ -72,8 +81,8 @@ from .image import (
     View,
     generate_compute,
 )
-from .validate import glslang_available, validate_glsl
-from .vector import (
+from export.glsl.validate import glslang_available, validate_glsl
+from export.glsl.vector import (
     MAX_FRAGMENT_UNIFORM_BLOCKS,
     MAX_STRAIGHT_TILES,
     MAX_UNIFORM_BLOCK_BYTES,

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .graph import glsl_float
-from .templates import fill
+from export.glsl.graph import glsl_float
+from export.glsl.templates import fill
 
 
 @dataclass

@@ -3,9 +3,8 @@ and where each dialect's fragment-target files go, and WGSL (WebGPU) for the com
 
 from __future__ import annotations
 
-from pipeline.errors import NeuralaoError
-
-from .templates import fill, fill_wgsl
+from export.glsl.templates import fill, fill_wgsl
+from pipeline.foundation.errors import NeuralaoError
 
 
 class Dialect:

@@ -8,15 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import NeuralaoError
-from pipeline.io import write_bytes, write_json
-
-from .cross import HLSL_SHADER_MODEL, MSL_VERSION, PARAMS_REGISTER_SHIFT, cross_compile, validate_hlsl
-from .dialects import FRAGMENT_FILES
-from .graph import _sha256
-from .image import ComputeProgram
-from .validate import _can_validate, validate_glsl
-from .vector import MLPShader
+from export.glsl.cross import (
+    HLSL_SHADER_MODEL,
+    MSL_VERSION,
+    PARAMS_REGISTER_SHIFT,
+    cross_compile,
+    validate_hlsl,
+)
+from export.glsl.dialects import FRAGMENT_FILES
+from export.glsl.graph import _sha256
+from export.glsl.image import ComputeProgram
+from export.glsl.validate import _can_validate, validate_glsl
+from export.glsl.vector import MLPShader
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_bytes, write_json
 
 
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:

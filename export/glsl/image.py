@@ -14,11 +14,9 @@ from typing import Any
 import numpy as np
 import onnx
 
-from pipeline.errors import NeuralaoError
-
-from .activations import Act, _clip_bounds
-from .dialects import COMPUTE_DIALECTS, Dialect
-from .graph import (
+from export.glsl.activations import Act, _clip_bounds
+from export.glsl.dialects import COMPUTE_DIALECTS, Dialect
+from export.glsl.graph import (
     FORMAT_VERSION,
     OnnxGraph,
     OpTable,
@@ -29,7 +27,7 @@ from .graph import (
     glsl_float,
     read_graph,
 )
-from .views import (
+from export.glsl.views import (
     Atom,
     Axes,
     axes_shape,
@@ -41,6 +39,7 @@ from .views import (
     reshape,
     transpose,
 )
+from pipeline.foundation.errors import NeuralaoError
 
 # Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
 MAX_TEXTURE_SIZE = 16384

@@ -10,12 +10,20 @@ from typing import Any
 import numpy as np
 import onnx
 
-from pipeline.errors import NeuralaoError
-
-from .activations import Act, _clip_bounds
-from .dialects import DIALECTS, FRAGMENT_FILES, Dialect, get_dialect
-from .graph import FORMAT_VERSION, OnnxGraph, OpTable, _ceil4, _dims, _sha256, glsl_float, read_graph
-from .templates import fill
+from export.glsl.activations import Act, _clip_bounds
+from export.glsl.dialects import DIALECTS, FRAGMENT_FILES, Dialect, get_dialect
+from export.glsl.graph import (
+    FORMAT_VERSION,
+    OnnxGraph,
+    OpTable,
+    _ceil4,
+    _dims,
+    _sha256,
+    glsl_float,
+    read_graph,
+)
+from export.glsl.templates import fill
+from pipeline.foundation.errors import NeuralaoError
 
 # Portable minimum GL_MAX_UNIFORM_BLOCK_SIZE (GL 3.3+, ES 3.0): every uniform block stays below it.
 MAX_UNIFORM_BLOCK_BYTES = 16384

@@ -109,7 +109,7 @@ layout(location = 2) out vec4 o_ao;
 layout(location = 3) out vec4 o_albedo;
 void main() {
   vec3 n = normalize(v_normal);
-  if (!gl_FrontFacing) n = -n;   // viewer-facing, as pipeline/gbuffer.py
+  if (!gl_FrontFacing) n = -n;   // viewer-facing, as pipeline/gbuffers/rasterizer.py
   o_position = vec4(v_position, 1.0);
   o_normal = vec4(n, 1.0);
   float ao = u_mode == 0 ? v_ao : (u_mode == 1 ? texture(u_occlusion, v_uv).r : 1.0);

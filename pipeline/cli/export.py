@@ -1,0 +1,34 @@
+"""`neuralao export MODEL.pt --out DIR`: ONNX + generated GLSL + manifest, by checkpoint kind."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+from pathlib import Path
+
+from pipeline.foundation.errors import NeuralaoError
+
+EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field"}
+
+
+def checkpoint_kind(path: str | Path) -> str:
+    """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
+    from pipeline.models.checkpoint import read_checkpoint
+
+    kind = read_checkpoint(path).get("kind")
+    if kind not in EXPORTERS:
+        raise NeuralaoError(
+            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})"
+        )
+    return kind
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", help="checkpoint written by `neuralao train` (MODEL.pt)")
+    p.add_argument("--out", required=True, help="export folder: model.onnx, GLSL shaders, manifest.json")
+
+
+def run(args: argparse.Namespace) -> int:
+    kind = checkpoint_kind(args.model)
+    importlib.import_module(EXPORTERS[kind]).export_checkpoint(Path(args.model), Path(args.out))
+    return 0

@@ -1,0 +1,76 @@
+"""`neuralao select`: per scene, the cheapest AO representation that meets an SSIM target.
+
+The rule is :mod:`pipeline.evaluation.selection`; the measurements are the report's
+(:func:`pipeline.evaluation.report.evaluate` without the traced references): pass ``--report report.json`` to
+reuse a finished report's numbers, otherwise every representation is run here on the same frames
+with the same ground truth (cached under ``--gt-cache``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from pipeline.evaluation.report import ReportSettings, check_settings, evaluate
+from pipeline.evaluation.selection import CANDIDATE_FAMILIES, DEFAULT_TARGET, select_from_results
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_json
+from pipeline.foundation.settings import add_set_option, load_settings
+
+log = logging.getLogger(__name__)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="dataset folder (its held-back views are the test)")
+    p.add_argument("--exports", help="folder of export folders (mlp-*, field-*, unet*)")
+    p.add_argument("--out", required=True, help="select.json to write")
+    p.add_argument(
+        "--target", type=float, default=DEFAULT_TARGET, help=f"masked SSIM target (default {DEFAULT_TARGET})"
+    )
+    p.add_argument(
+        "--report", help="reuse the measurements of this report.json instead of running the methods"
+    )
+    p.add_argument("--gt-cache", help="ground-truth cache folder (default: gt-cache next to --out)")
+    add_set_option(p, "--set gt_rays=256 (a report setting for the measurement)")
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise NeuralaoError(f"--out must be a .json file, got {out.name!r}")
+    if not (0.0 < args.target <= 1.0):
+        raise NeuralaoError(f"--target must be in (0, 1], got {args.target}")
+    if args.report:
+        path = Path(args.report)
+        try:
+            result = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise NeuralaoError(f"report not found: {path}") from None
+        except json.JSONDecodeError:
+            raise NeuralaoError(f"{path} is not valid JSON") from None
+        if result.get("format") != "neuralao-report":
+            raise NeuralaoError(f"{path} is not a neuralao report.json")
+    else:
+        settings = load_settings(ReportSettings, None, list(args.set))
+        check_settings(settings)
+        cache = Path(args.gt_cache) if args.gt_cache else out.parent / "gt-cache"
+        result = evaluate(
+            args.data, args.exports, settings, cache, families=set(CANDIDATE_FAMILIES), keep_images=False
+        )
+        result.pop("_sheets", None)
+    selection = select_from_results(result, args.target)
+    write_json(out, selection)
+    for scene, e in selection["scenes"].items():
+        log.info(
+            "%-16s %-14s ssim %.3f%s",
+            scene,
+            e["chosen"],
+            e["ssim"],
+            "" if e["met_target"] else " (target not met)",
+        )
+    if not selection["scenes"]:
+        log.info("nothing measured: nothing to select")
+    log.info("selection: %s", out)
+    return 0

@@ -1,0 +1,1 @@
+"""Datasets: rendered and labelled frames in resumable shards."""

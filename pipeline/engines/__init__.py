@@ -1,0 +1,1 @@
+"""Execution engines (local threads, Ray) that run tasks; no domain code."""

@@ -1,0 +1,559 @@
+"""Execution engines: map a function over independent tasks, in this process or on a Ray cluster.
+
+The whole interface is :meth:`Engine.map` over :class:`Task` objects. A task names
+
+* a :class:`Context`: what many tasks share (a scene and its label settings). A worker builds it
+  once into a *state* (an Embree scene, a GL renderer) with ``context.build(context.payload)`` and
+  keeps it, keyed by ``context.key`` (a content hash), for every later task of that context;
+* ``fn(state, args) -> result``: a module-level function (pickled by reference), pure given its
+  inputs, so where and how often it runs never changes the result.
+
+``map`` yields ``(index, result)`` pairs, ``index`` being the task's position in the input, in
+completion order; callers that write files do so themselves, on the driver, atomically, as results
+arrive. Engines:
+
+* :class:`LocalEngine` (the default): runs each task in this process, in order, keeping the state of
+  the latest context. No Ray import.
+* :class:`RayEngine`: one actor per worker (``num_cpus=1``), each caching the states of its latest
+  contexts. Payloads travel through the object store (put once, fetched once per actor that needs
+  them): workers need no shared filesystem, only the installed package. Results return through the
+  object store. An actor whose process dies is restarted and its pending tasks are retried
+  (``max_restarts=-1``, ``max_task_retries=-1``); a task raising :class:`NeuralaoError` fails the
+  run with that message.
+
+Big data that many tasks of one context read but the context does not own (the level's baked vertex
+values, read by every resampling task) travels as :class:`Shared` inside a task's ``args`` tuple: Ray
+puts it in the object store once and each actor fetches it once (the latest few are cached by key);
+locally the value is passed as is.
+
+A :class:`ResultStore` (optional) keeps finished results on disk, so a driver that is killed and
+rerun skips every task it already has (the dataset stage has its own, the shards themselves).
+
+How the tests, the benchmark and the CLI use it: ``--engine local|ray [--address ADDR]
+[--ray-workers N]`` (:func:`add_engine_arguments`, :func:`engine_from_args`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import hashlib
+import logging
+import os
+import socket
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import read_npz, remove_stale_temporaries, write_npz
+
+log = logging.getLogger(__name__)
+
+# Tasks queued per actor: one running, one waiting, so an actor never idles while a result travels.
+TASKS_PER_WORKER = 2
+# States an actor keeps (least recently used goes first): a level bake alternates few meshes.
+STATES_PER_WORKER = 2
+# Seconds to wait for a TCP connection to the cluster address before calling it unreachable
+# (ray.init itself retries for minutes).
+CONNECT_TIMEOUT_S = 5.0
+# Rays per bake task: ~0.1-0.2 s of tracing on one core, so Ray's ~3 ms per task is noise, and
+# enough tasks that the last ones balance across workers.
+CHUNK_RAYS = 1 << 20
+# Environment a worker process needs to render and trace like the driver (GL platform, threads).
+FORWARDED_ENV = ("PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "OMP_WAIT_POLICY", "NEURALAO_MESHES")
+
+
+@dataclass(frozen=True)
+class Context:
+    """State shared by tasks, built once per worker and cached by ``key``."""
+
+    key: str  # content hash of everything ``build`` reads: equal keys must build equal states
+    build: Callable[[Any], Any]  # module-level function: payload -> state (may have a close())
+    payload: Any  # picklable input of ``build`` (numpy arrays, dataclasses), not a path
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work: ``fn(state of context, args)``."""
+
+    context: Context
+    fn: Callable[[Any, Any], Any]  # module-level function: (state, args) -> picklable result
+    args: Any  # picklable, small (points, cameras); big shared data belongs in the context
+    key: str | None = None  # result key in a ResultStore (None: never stored)
+
+
+@dataclass(frozen=True)
+class Shared:
+    """A top-level item of a task's ``args`` tuple that many tasks read (module doc): the function
+    receives ``value``; ``key`` is a content hash of it (equal keys must mean equal values)."""
+
+    key: str
+    value: Any
+
+
+@dataclass(frozen=True)
+class _SharedRef:
+    key: str
+    boxed: list  # [ObjectRef]: boxed so Ray does not fetch it for every task
+
+
+def _unshare(args: Any) -> Any:
+    """``args`` with every top-level :class:`Shared` replaced by its value (the local engine)."""
+    if isinstance(args, tuple):
+        return tuple(a.value if isinstance(a, Shared) else a for a in args)
+    return args
+
+
+def content_key(*parts: Any) -> str:
+    """sha256 over numpy arrays (dtype, shape, bytes) and reprs of everything else."""
+    h = hashlib.sha256()
+    for part in parts:
+        if isinstance(part, np.ndarray):
+            a = np.ascontiguousarray(part)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a.tobytes())
+        else:
+            h.update(repr(part).encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+class _StateCache:
+    """The states of the latest ``size`` contexts, least recently used evicted (and closed)."""
+
+    def __init__(self, size: int):
+        self.size = size
+        self._states: collections.OrderedDict[str, Any] = collections.OrderedDict()
+
+    def get(self, key: str, build: Callable[[], Any]) -> Any:
+        if key in self._states:
+            self._states.move_to_end(key)
+            return self._states[key]
+        while len(self._states) >= self.size:
+            _, old = self._states.popitem(last=False)
+            if (close := getattr(old, "close", None)) is not None:
+                close()
+        state = self._states[key] = build()
+        return state
+
+    def clear(self) -> None:
+        while self._states:
+            _, old = self._states.popitem(last=False)
+            if (close := getattr(old, "close", None)) is not None:
+                close()
+
+
+class Engine:
+    """Runs tasks; see the module doc. Subclasses implement :meth:`_run`."""
+
+    name = "engine"
+    workers = 1  # tasks running at once
+    threads: int | None = None  # threads per task (labelling); None: what the task's settings say
+    chunk_rays: int | None = None  # rays per bake task (EngineLabeller); None: CHUNK_RAYS
+
+    def __init__(self) -> None:
+        self.completed = 0  # tasks finished (or loaded from a store) by the latest map
+
+    def map(self, tasks: Iterable[Task], store: ResultStore | None = None) -> Iterator[tuple[int, Any]]:
+        """Yield ``(index, result)`` for every task, in completion order. ``tasks`` is consumed lazily
+        (a few ahead of the workers), so a generator may load one scene at a time."""
+        self.completed = self.reused = 0
+        pending = self._skip_stored(tasks, store)
+        for index, task, result in self._run(pending):
+            if task is None:
+                self.reused += 1
+            elif store is not None and task.key is not None:
+                store.put(task.key, result)
+            self.completed += 1
+            yield index, result
+        if self.reused:
+            log.info("%d of %d tasks done by an earlier run (%s)", self.reused, self.completed, store.folder)
+
+    def _skip_stored(self, tasks: Iterable[Task], store: ResultStore | None):
+        """(index, task) of the tasks a store lacks; stored ones come back through ``self._stored``."""
+        self._stored: collections.deque[tuple[int, Any]] = collections.deque()
+        for index, task in enumerate(tasks):
+            if store is not None and task.key is not None and (hit := store.get(task.key)) is not None:
+                self._stored.append((index, hit))
+                continue
+            yield index, task
+
+    def _drain_stored(self) -> Iterator[tuple[int, Task | None, Any]]:
+        while self._stored:
+            index, result = self._stored.popleft()
+            yield index, None, result
+
+    def _run(self, pending: Iterator[tuple[int, Task]]) -> Iterator[tuple[int, Task | None, Any]]:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release workers (a no-op locally)."""
+
+    def __enter__(self) -> Engine:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class LocalEngine(Engine):
+    """Every task in this process, in input order (the state of the latest context is kept).
+
+    states : context key -> a state this process already holds (the level baker's own labeller), used
+             for tasks of that context instead of building one; never closed here."""
+
+    name = "local"
+
+    def __init__(self, states: dict[str, Any] | None = None) -> None:
+        super().__init__()
+        self._cache = _StateCache(1)
+        self._states = dict(states or {})
+
+    def _run(self, pending):
+        for index, task in pending:
+            yield from self._drain_stored()
+            ctx = task.context
+            if ctx.key in self._states:
+                state = self._states[ctx.key]
+            else:
+                state = self._cache.get(ctx.key, lambda ctx=ctx: ctx.build(ctx.payload))
+            yield index, task, task.fn(state, _unshare(task.args))
+        yield from self._drain_stored()
+
+    def close(self) -> None:
+        self._cache.clear()  # e.g. a dataset's GL renderer
+
+
+class _Worker:
+    """Body of the Ray actor (wrapped by ``ray.remote`` in :class:`RayEngine`, so importing this
+    module never imports Ray): caches states by context key, runs tasks."""
+
+    def __init__(self, env: dict[str, str]):
+        os.environ.update(env)  # before anything imports PyOpenGL
+        self._cache = _StateCache(STATES_PER_WORKER)
+        self._shared = _StateCache(STATES_PER_WORKER)  # Shared values by key
+
+    def run(self, key: str, boxed_payload: list, build, fn, args):
+        import ray
+
+        # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
+        # task of a context on this actor pulls it from the object store. Shared args likewise.
+        try:
+            state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
+            if isinstance(args, tuple):
+                args = tuple(self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
+                             if isinstance(a, _SharedRef) else a for a in args)  # fmt: skip
+            return fn(state, args)
+        except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
+            return _Failure(str(e))
+
+    def where(self) -> tuple[int, str]:
+        import ray
+
+        return os.getpid(), ray.get_runtime_context().get_node_id()
+
+
+@dataclass(frozen=True)
+class _Failure:
+    message: str
+
+
+class RayEngine(Engine):
+    """Tasks on Ray actors; see the module doc.
+
+    address : "HOST:PORT" of a running cluster (``ray start --head``), "auto" for the one on this
+              machine, or None to start a private local Ray instance for this run.
+    workers : actors to start (each num_cpus=1); None: one per CPU of the cluster.
+    """
+
+    name = "ray"
+    threads = 1  # each actor holds one CPU
+
+    def __init__(self, address: str | None = None, workers: int | None = None):
+        super().__init__()
+        if workers is not None and workers < 1:
+            raise NeuralaoError(f"--ray-workers must be >= 1, got {workers}")
+        self.address = address
+        self._ray = _connect(address)
+        ray = self._ray
+        cpus = int(ray.cluster_resources().get("CPU", 0))
+        if cpus < 1 and workers is None:
+            raise NeuralaoError(f"the Ray cluster at {address or 'local'} has no CPUs")
+        if workers is not None and workers > cpus:
+            # Each actor holds one CPU: more than the cluster has would wait for ever.
+            raise NeuralaoError(f"--ray-workers {workers} is more than the {cpus} CPUs of the Ray cluster")
+        self.workers = workers or cpus
+        env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
+        env.setdefault("OMP_NUM_THREADS", "1")  # one CPU per actor
+        actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_Worker)
+        self._actors = [actor.remote(env) for _ in range(self.workers)]
+        self._payloads: dict[str, Any] = {}  # context key -> ObjectRef of its payload
+
+    def worker_info(self) -> list[tuple[int, str]]:
+        """(process id, node id) of every actor (tests check placement and kill one mid-run)."""
+        return self._ray.get([a.where.remote() for a in self._actors])
+
+    def _put(self, key: str, value: Any, live: set[str]):
+        """The object-store ref of ``value`` (put once per key; refs no task in flight needs are dropped)."""
+        if key not in self._payloads:
+            for old in [k for k in self._payloads if k not in live]:
+                del self._payloads[old]  # no task in flight needs it any more
+            self._payloads[key] = self._ray.put(value)
+        return self._payloads[key]
+
+    def _payload_ref(self, ctx: Context, live: set[str]):
+        return self._put(ctx.key, ctx.payload, live)
+
+    def _remote_args(self, args: Any, live: set[str]) -> Any:
+        if not isinstance(args, tuple):
+            return args
+        return tuple(_SharedRef(a.key, [self._put("shared/" + a.key, a.value, live)])
+                     if isinstance(a, Shared) else a for a in args)  # fmt: skip
+
+    def _run(self, pending):
+        ray = self._ray
+        inflight: dict[Any, tuple[int, Task, int]] = {}  # ref -> (index, task, actor)
+        load = [0] * len(self._actors)
+        holds: list[set[str]] = [set() for _ in self._actors]  # context keys each actor was sent
+        capacity = TASKS_PER_WORKER * len(self._actors)
+        exhausted = False
+        try:
+            while True:
+                while not exhausted and len(inflight) < capacity:
+                    nxt = next(pending, None)
+                    if nxt is None:
+                        exhausted = True
+                        break
+                    index, task = nxt
+                    ctx = task.context
+                    # Refs still needed: every context and Shared value of the tasks in flight and this one.
+                    live = {k for _, t, _ in inflight.values() for k in _ref_keys(t)} | set(_ref_keys(task))
+                    ref = self._payload_ref(ctx, live)
+                    args = self._remote_args(task.args, live)
+                    # Prefer an actor that already holds this context's state, then the least loaded.
+                    a = min(
+                        range(len(load)),
+                        key=lambda i: (load[i] >= TASKS_PER_WORKER, ctx.key not in holds[i], load[i]),
+                    )
+                    holds[a].add(ctx.key)
+                    out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, args)
+                    inflight[out] = (index, task, a)
+                    load[a] += 1
+                yield from self._drain_stored()
+                if not inflight:
+                    if exhausted:
+                        return
+                    continue
+                (ready,), _ = ray.wait(list(inflight), num_returns=1)
+                index, task, a = inflight.pop(ready)
+                load[a] -= 1
+                result = _get(ray, ready)
+                if isinstance(result, _Failure):
+                    raise NeuralaoError(result.message)
+                yield index, task, result
+        finally:
+            for ref in inflight:  # an abandoned run (error, interrupt): drop its queued work
+                try:
+                    ray.cancel(ref, force=False)
+                except Exception:  # noqa: BLE001 - best effort; close() kills the actors anyway
+                    pass
+
+    def close(self) -> None:
+        for a in getattr(self, "_actors", []):
+            self._ray.kill(a)
+        self._actors = []
+        self._payloads.clear()
+
+
+def _ref_keys(task: Task) -> list[str]:
+    """Object-store keys a task needs: its context's and its Shared values'."""
+    shared = [a for a in task.args if isinstance(a, Shared)] if isinstance(task.args, tuple) else []
+    return [task.context.key, *("shared/" + a.key for a in shared)]
+
+
+def _get(ray, ref):
+    from ray.exceptions import RayActorError, RayError, RayTaskError
+
+    try:
+        return ray.get(ref)
+    except RayTaskError as e:
+        cause = e.cause if isinstance(getattr(e, "cause", None), Exception) else None
+        raise NeuralaoError(f"a Ray task failed: {type(cause or e).__name__}: {cause or e}") from None
+    except RayActorError as e:
+        raise NeuralaoError(f"a Ray worker was lost and could not be restarted: {e}") from None
+    except RayError as e:
+        raise NeuralaoError(f"Ray failed: {type(e).__name__}: {e}") from None
+
+
+def _connect(address: str | None):
+    """``ray`` after ray.init (an existing connection is reused); unreachable -> NeuralaoError."""
+    try:
+        import ray
+    except ImportError:
+        raise NeuralaoError("--engine ray needs the 'ray' package (pip install -e .)") from None
+    if ray.is_initialized():
+        return ray
+    kwargs: dict[str, Any] = {"logging_level": "ERROR", "log_to_driver": False}
+    if address not in (None, "auto"):
+        host, _, port = address.rpartition(":")
+        if not host or not port.isdigit():
+            raise NeuralaoError(f"--address must be HOST:PORT, got {address!r}")
+        try:
+            with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
+                pass
+        except OSError as e:
+            raise NeuralaoError(f"cannot reach a Ray cluster at {address}: {e.strerror or e}") from None
+    elif address is None:  # a private instance on loopback ("local": never join a stale cluster file)
+        address = "local"
+        kwargs.update(include_dashboard=False, _node_ip_address="127.0.0.1")
+    try:
+        ray.init(address=address, **kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as e:
+        raise NeuralaoError(f"cannot connect to Ray at {address or 'a new local instance'}: {e}") from None
+    return ray
+
+
+class ResultStore:
+    """Finished task results (dicts of numpy arrays) as ``<folder>/<key>.npz``, written atomically,
+    so a rerun after a killed driver skips them. :meth:`clear` removes the folder when the run is done."""
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(self.folder)  # a killed driver's half-written result
+
+    def _path(self, key: str) -> Path:
+        return self.folder / f"{key}.npz"
+
+    def get(self, key: str) -> dict[str, np.ndarray] | None:
+        path = self._path(key)
+        if not path.is_file():
+            return None
+        try:
+            return read_npz(path)
+        except NeuralaoError:
+            return None  # unreadable: recompute
+
+    def put(self, key: str, result: dict[str, np.ndarray]) -> None:
+        write_npz(self._path(key), **result)
+
+    def clear(self) -> None:
+        import shutil
+
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- AO at points, as tasks
+
+
+def slim_scene(scene):
+    """The scene's vertices, faces and name only (no cached triangles / normals): what a worker needs."""
+    from pipeline.geometry.scene import Scene
+
+    return Scene(np.asarray(scene.vertices, np.float64), np.asarray(scene.faces, np.int64), scene.name)
+
+
+def _build_labeller(payload):
+    from pipeline.tracing.labeller import Labeller
+
+    scene, settings = payload
+    return Labeller(scene, settings)
+
+
+def _trace_chunk(labeller, args) -> dict[str, np.ndarray]:
+    points, normals, ids = args
+    ao, valid = labeller.ao_at_points(points, normals, ids=ids)
+    return {"ao": ao, "valid": valid}
+
+
+def labeller_context(scene, settings, threads: int | None = None) -> Context:
+    """A worker-side :class:`~pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene`` with ``threads``
+    threads (None: ``settings.workers``; labels never depend on it)."""
+    from dataclasses import replace
+
+    if threads is not None:
+        settings = replace(settings, workers=threads)
+    slim = slim_scene(scene)
+    key = content_key("labeller", slim.vertices, slim.faces, settings)
+    return Context(key, _build_labeller, (slim, settings))
+
+
+class EngineLabeller:
+    """What the bakers use of a :class:`~pipeline.tracing.labeller.Labeller` (``ao_at_points``, ``settings``,
+    ``max_distance``), with the tracing split into chunks of points mapped over an engine.
+
+    A point's rays depend only on (seed, id, normal), never on its chunk, so the result is bit-identical
+    to ``Labeller(scene, settings).ao_at_points(points, normals)``. With ``store``, finished chunks
+    are kept on disk (keyed by scene, settings and the chunk's points) and a rerun skips them.
+    """
+
+    def __init__(self, scene, settings, engine: Engine, store: ResultStore | None = None,
+                 chunk_rays: int | None = None):  # fmt: skip
+        from pipeline.tracing.labeller import _positive
+
+        self.scene, self.settings, self.engine, self.store = scene, settings, engine, store
+        self.chunk_rays = chunk_rays or engine.chunk_rays or CHUNK_RAYS  # rays per task
+        self.max_distance = _positive(
+            "max_distance", settings.max_distance, settings.max_distance_rel, scene.diagonal
+        )
+        self._context = labeller_context(scene, settings, engine.threads)
+
+    def ao_at_points(self, points: np.ndarray, normals: np.ndarray, progress: bool = False):
+        """points, normals (n, 3) float64 -> ao (n,) float32, valid (n,) bool (ids = arange(n))."""
+        from tqdm import tqdm
+
+        points = np.asarray(points, np.float64)
+        normals = np.asarray(normals, np.float64)
+        n = len(points)
+        step = max(1, self.chunk_rays // self.settings.rays)
+        bounds = [(lo, min(lo + step, n)) for lo in range(0, n, step)]
+        ctx = self._context
+
+        def tasks():
+            for lo, hi in bounds:
+                p, q = points[lo:hi], normals[lo:hi]
+                key = content_key(ctx.key, p, q, lo) if self.store is not None else None
+                yield Task(ctx, _trace_chunk, (p, q, np.arange(lo, hi, dtype=np.int64)), key)
+
+        ao = np.ones(n, np.float32)
+        valid = np.zeros(n, bool)
+        with tqdm(total=n, unit="pt", desc="AO labels", disable=not progress, leave=False) as bar:
+            for i, result in self.engine.map(tasks(), self.store):
+                lo, hi = bounds[i]
+                ao[lo:hi], valid[lo:hi] = result["ao"], result["valid"]
+                bar.update(hi - lo)
+        return ao, valid
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> None:
+    """--engine, --address, --ray-workers (and --chunk-rays for commands that trace point chunks)."""
+    p.add_argument("--engine", choices=("local", "ray"), default="local",
+                   help="where the work runs: this process (default) or a Ray cluster")  # fmt: skip
+    p.add_argument("--address", default=None, metavar="HOST:PORT",
+                   help="Ray cluster address (`ray start --head` prints it); 'auto': the cluster on this "
+                   "machine; default: a private local Ray instance")  # fmt: skip
+    p.add_argument("--ray-workers", type=int, default=None, metavar="N",
+                   help="Ray actors to start (default: one per CPU of the cluster)")  # fmt: skip
+    if chunks:
+        p.add_argument("--chunk-rays", type=int, default=None, metavar="N",
+                       help=f"rays per task (default {CHUNK_RAYS}); changes scheduling, never results")  # fmt: skip
+
+
+def engine_from_args(args: argparse.Namespace) -> Engine:
+    chunk_rays = getattr(args, "chunk_rays", None)
+    if chunk_rays is not None and chunk_rays < 1:
+        raise NeuralaoError(f"--chunk-rays must be >= 1, got {chunk_rays}")
+    if args.engine == "local":
+        if args.address is not None or args.ray_workers is not None or chunk_rays is not None:
+            raise NeuralaoError("--address, --ray-workers and --chunk-rays need --engine ray")
+        return LocalEngine()
+    engine = RayEngine(args.address, args.ray_workers)
+    engine.chunk_rays = chunk_rays
+    return engine

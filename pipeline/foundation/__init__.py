@@ -1,0 +1,1 @@
+"""Foundation: errors, atomic file io, settings dataclasses with --set, the tolerance table, limits, metrics, spherical harmonics. Imports nothing above it."""

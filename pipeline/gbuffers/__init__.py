@@ -1,0 +1,1 @@
+"""G-buffers: the float G-buffer rasterizer on the headless GL context."""

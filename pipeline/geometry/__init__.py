@@ -1,0 +1,1 @@
+"""Geometry: scenes, cameras, composed rooms, mesh splits, level files and synthetic levels."""

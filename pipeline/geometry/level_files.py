@@ -1,0 +1,651 @@
+"""Game levels as glTF 2.0: reading, validation and a small deterministic glTF writer.
+
+A level is a glTF scene whose nodes reference shared meshes, instanced through the node hierarchy
+and through ``EXT_mesh_gpu_instancing`` (per-instance TRANSLATION / ROTATION / SCALE accessors,
+composed after the node's world matrix, as the extension specifies). Each node carries its role in
+``extras`` (inherited by its children unless they set their own):
+
+==========  ==================================================================================
+role        meaning in the bake (Sloan et al. 2013)
+==========  ==================================================================================
+static      terrain and buildings: opaque, baked per vertex (least squares), written with AO
+blocker     opaque occluder that receives no AO and is not written (collision, distant skyline)
+tree        large decorator: semi-transparent to other surfaces (``transmission`` per hit,
+            default 0.5); its own AO is local AO per model x a per-instance linear global fit
+shrub       small decorator: a box of participating media (``density`` per scene unit, default
+            1.0) in the foliage BVH; gets one AO scalar per instance, resampled from the terrain
+grass       small decorator: not an occluder; one AO scalar per clump resampled from the terrain
+==========  ==================================================================================
+
+Everything the reader rejects is a one-line :class:`NeuralaoError` naming the node, mesh or
+accessor: a missing or truncated buffer, a mesh index outside the file, a non-triangle primitive,
+unknown roles or parameters in ``extras``, a non-finite or zero-scale (singular) transform.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import atomic_path
+from pipeline.geometry.scene import gltf_resource
+
+ROLES = ("static", "blocker", "tree", "shrub", "grass")
+# Parameters each role accepts in extras, with their defaults (Sloan et al.: trees attenuate 50%).
+ROLE_PARAMS: dict[str, dict[str, float]] = {
+    "static": {},
+    "blocker": {},
+    "tree": {"transmission": 0.5},
+    "shrub": {"density": 1.0},
+    "grass": {},
+}
+INSTANCING = "EXT_mesh_gpu_instancing"
+# Keys of a node's extras the reader understands (anything else there is an error: a typo such as
+# "densty" would otherwise silently bake with the default).
+_EXTRAS_KEYS = {"role", "transmission", "density", "name"}
+# An instance whose |det| of the 3x3 part is below this fraction of (its largest axis scale)^3 is
+# singular (a zero scale on some axis): its normals and its box would be undefined.
+_SINGULAR_REL = 1e-9
+
+_COMPONENT = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
+
+
+@dataclass
+class LevelMesh:
+    """One shared mesh: vertices (n, 3) float64 object space, faces (m, 3) int64."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+
+
+@dataclass
+class LevelNode:
+    """A node with a mesh: its role, parameters and world matrices (one per instance).
+
+    transforms : (k, 4, 4) float64 object -> world (k = 1 without EXT_mesh_gpu_instancing)
+    """
+
+    index: int
+    name: str
+    role: str
+    mesh: int
+    transforms: np.ndarray
+    params: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Level:
+    meshes: list[LevelMesh]
+    nodes: list[LevelNode]
+    source: str = ""
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def nodes_with(self, *roles: str) -> list[LevelNode]:
+        return [n for n in self.nodes if n.role in roles]
+
+    def counts(self) -> dict[str, int]:
+        """Instances and flattened vertices / faces per role."""
+        out: dict[str, int] = {}
+        for n in self.nodes:
+            m, k = self.meshes[n.mesh], len(n.transforms)
+            for key, v in (("instances", k), ("vertices", k * len(m.vertices)), ("faces", k * len(m.faces))):
+                out[f"{n.role}_{key}"] = out.get(f"{n.role}_{key}", 0) + v
+        return out
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """glTF quaternions (k, 4) [x, y, z, w] -> rotation matrices (k, 3, 3) float64 (normalised first)."""
+    q = np.asarray(q, np.float64).reshape(-1, 4)
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    if not (np.isfinite(q).all() and (norm > 0).all()):
+        raise NeuralaoError("rotation quaternion is zero or not finite")
+    x, y, z, w = (q / norm).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
+
+
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """Rotation matrices (k, 3, 3) -> unit quaternions (k, 4) [x, y, z, w] with w >= 0 (Shepperd)."""
+    r = np.asarray(r, np.float64).reshape(-1, 3, 3)
+    tr = np.trace(r, axis1=1, axis2=2)
+    cand = np.stack(
+        [
+            np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1], 1 + tr], -1),
+            np.stack([1 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2], r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0], r[:, 2, 1] - r[:, 1, 2]], -1),
+            np.stack([r[:, 0, 1] + r[:, 1, 0], 1 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2], r[:, 1, 2] + r[:, 2, 1], r[:, 0, 2] - r[:, 2, 0]], -1),
+            np.stack([r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1], 1 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1], r[:, 1, 0] - r[:, 0, 1]], -1),
+        ],
+        axis=1,
+    )  # fmt: skip
+    diag = np.stack([tr, r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]], -1)
+    q = cand[np.arange(len(r)), np.argmax(diag, axis=1)]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, 3:] < 0, -q, q)
+
+
+def trs_matrices(t=None, r=None, s=None, count: int = 1) -> np.ndarray:
+    """(k, 4, 4) float64 = T @ R @ S from translations (k, 3), quaternions (k, 4), scales (k, 3)."""
+    m = np.tile(np.eye(4), (count, 1, 1))
+    rot = quat_to_matrix(r) if r is not None else np.tile(np.eye(3), (count, 1, 1))
+    scale = np.ones((count, 3)) if s is None else np.asarray(s, np.float64).reshape(count, 3)
+    m[:, :3, :3] = rot * scale[:, None, :]
+    if t is not None:
+        m[:, :3, 3] = np.asarray(t, np.float64).reshape(count, 3)
+    return m
+
+
+def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(k, 4, 4) TRS matrices -> translations (k, 3), quaternions (k, 4), scales (k, 3) float64.
+
+    Exact for T @ R @ S with positive scales (what the reader and the generator produce); a matrix
+    with shear or a reflection is a :class:`NeuralaoError` (EXT_mesh_gpu_instancing cannot hold it).
+    """
+    m = np.asarray(m, np.float64).reshape(-1, 4, 4)
+    a = m[:, :3, :3]
+    s = np.linalg.norm(a, axis=1)
+    rot = a / s[:, None, :]
+    if (
+        not np.allclose(np.einsum("kji,kjl->kil", rot, rot), np.eye(3), atol=1e-6)
+        or (np.linalg.det(rot) < 0).any()
+    ):
+        raise NeuralaoError("an instance transform has shear or a reflection; it cannot be written as TRS")
+    return m[:, :3, 3].copy(), matrix_to_quat(rot), s
+
+
+def gltf_label(kind: str, index: int, item: Any) -> str:
+    """How every message names a glTF node, mesh or other indexed item: ``node 3 'Chair'`` when it
+    has a name, ``node 3 (unnamed)`` when it has none (the index is always there: names repeat)."""
+    name = item.get("name") if isinstance(item, dict) else None
+    return f"{kind} {index} {str(name)!r}" if name not in (None, "") else f"{kind} {index} (unnamed)"
+
+
+def node_matrix(node: dict, where: str) -> np.ndarray:
+    """The local 4x4 of a glTF node (``matrix`` column-major, or TRS)."""
+    if "matrix" in node:
+        try:
+            vals = np.asarray(node["matrix"], np.float64)
+        except (TypeError, ValueError):
+            vals = np.zeros(0)
+        if vals.shape != (16,):
+            raise NeuralaoError(f"{where}: matrix must have 16 numbers")
+        return vals.reshape(4, 4).T
+    t = node.get("translation")
+    r = node.get("rotation")
+    s = node.get("scale")
+    for key, v, n in (("translation", t, 3), ("rotation", r, 4), ("scale", s, 3)):
+        if v is not None and (not isinstance(v, list) or len(v) != n):
+            raise NeuralaoError(f"{where}: {key} must be a list of {n} numbers")
+    try:
+        return trs_matrices(t, r, s)[0]
+    except NeuralaoError as e:
+        raise NeuralaoError(f"{where}: {e}") from None
+
+
+def check_transforms(m: np.ndarray, where: str) -> None:
+    """Finite and non-singular (no zero-scale axis) 4x4 matrices (k, 4, 4)."""
+    if not np.isfinite(m).all():
+        bad = int(np.flatnonzero(~np.isfinite(m).reshape(len(m), -1).all(axis=1))[0])
+        raise NeuralaoError(f"{where}: instance {bad} has a non-finite transform")
+    a = m[:, :3, :3]
+    det = np.abs(np.linalg.det(a))
+    big = np.linalg.norm(a, axis=1).max(axis=1)
+    singular = ~(det > _SINGULAR_REL * big**3) | (big == 0)
+    if singular.any():
+        raise NeuralaoError(
+            f"{where}: instance {int(np.flatnonzero(singular)[0])} has a zero scale (singular transform)"
+        )
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _Gltf:
+    """Parsed JSON + buffers of a .gltf (external or data-URI buffers) or a .glb file."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        raw = path.read_bytes()
+        glb_bin = None
+        if raw[:4] == b"glTF":
+            glb_bin, text = self._split_glb(raw)
+        else:
+            text = raw
+        try:
+            self.doc = json.loads(text)
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise NeuralaoError(f"level {path} is not valid glTF JSON: {e}") from None
+        if not isinstance(self.doc, dict):
+            raise NeuralaoError(f"level {path}: the glTF root must be a JSON object")
+        version = str(self.doc.get("asset", {}).get("version", ""))
+        if not version.startswith("2"):
+            raise NeuralaoError(f"level {path}: glTF asset.version must be 2.x, got {version!r}")
+        self.buffers = [self._buffer(i, b, glb_bin) for i, b in enumerate(self.doc.get("buffers", []))]
+
+    def _split_glb(self, raw: bytes) -> tuple[bytes | None, bytes]:
+        if len(raw) < 20:
+            raise NeuralaoError(f"level {self.path}: truncated GLB header")
+        magic, version, length = struct.unpack_from("<III", raw, 0)
+        if magic != _GLB_MAGIC or version != 2 or length > len(raw):
+            raise NeuralaoError(
+                f"level {self.path}: bad or truncated GLB (version {version}, length {length})"
+            )
+        pos, text, binary = 12, None, None
+        while pos + 8 <= length:
+            size, kind = struct.unpack_from("<II", raw, pos)
+            chunk = raw[pos + 8 : pos + 8 + size]
+            if len(chunk) != size:
+                raise NeuralaoError(f"level {self.path}: truncated GLB chunk")
+            if kind == _JSON_CHUNK:
+                text = chunk
+            elif kind == _BIN_CHUNK:
+                binary = chunk
+            pos += 8 + size
+        if text is None:
+            raise NeuralaoError(f"level {self.path}: GLB has no JSON chunk")
+        return binary, text
+
+    def _buffer(self, index: int, spec: dict, glb_bin: bytes | None) -> bytes:
+        uri = spec.get("uri")
+        if uri is None:
+            if glb_bin is None:
+                raise NeuralaoError(f"level {self.path}: buffer {index} has no uri and there is no GLB chunk")
+            data = glb_bin
+        elif isinstance(uri, str) and uri.startswith("data:"):
+            try:
+                data = base64.b64decode(uri.split(",", 1)[1])
+            except Exception:
+                raise NeuralaoError(f"level {self.path}: buffer {index} has a bad data URI") from None
+        else:
+            if not isinstance(uri, str):
+                raise NeuralaoError(f"level {self.path}: buffer {index} uri must be a string, got {uri!r}")
+            p = gltf_resource(self.path, uri)  # never a file outside the glTF's folder
+            if not p.is_file():
+                raise NeuralaoError(f"level {self.path}: buffer {index} file not found: {uri}")
+            data = p.read_bytes()
+        if len(data) < int(spec.get("byteLength", 0)):
+            raise NeuralaoError(
+                f"level {self.path}: buffer {index} has {len(data)} bytes, byteLength says {spec.get('byteLength')}"
+            )
+        return data
+
+    def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:
+        """Accessor ``index`` as a (count, width) or (count,) array (normalised integers -> float,
+        unless ``normalize`` is False: then the stored integers, e.g. to copy an attribute as it is)."""
+        accs = self.doc.get("accessors", [])
+        if not isinstance(index, int) or not 0 <= index < len(accs):
+            raise NeuralaoError(f"{where}: accessor {index!r} is not in the file ({len(accs)} accessors)")
+        a = accs[index]
+        try:
+            dtype = np.dtype(_COMPONENT[a["componentType"]]).newbyteorder("<")
+            width = _WIDTH[a["type"]]
+            count = int(a["count"])
+            view = self.doc["bufferViews"][a["bufferView"]]
+            buf = self.buffers[view["buffer"]]
+        except (KeyError, IndexError, TypeError):
+            raise NeuralaoError(
+                f"{where}: accessor {index} is malformed (or sparse, which is not supported)"
+            ) from None
+        offset = int(view.get("byteOffset", 0)) + int(a.get("byteOffset", 0))
+        item = dtype.itemsize * width
+        stride = int(view.get("byteStride", item))
+        end = offset + (count - 1) * stride + item if count else offset
+        if end > len(buf) or end > int(view.get("byteOffset", 0)) + int(view.get("byteLength", 0)):
+            raise NeuralaoError(
+                f"{where}: accessor {index} runs past the end of its buffer (truncated file?)"
+            )
+        arr = np.lib.stride_tricks.as_strided(
+            np.frombuffer(buf, dtype=dtype, count=max(0, (end - offset) // dtype.itemsize), offset=offset),
+            shape=(count, width),
+            strides=(stride, dtype.itemsize),
+        ).copy()
+        if normalize and a.get("normalized") and dtype.kind in "iu":
+            arr = np.maximum(arr / float(np.iinfo(dtype).max), -1.0)
+        return arr[:, 0] if width == 1 else arr
+
+
+def _role_and_params(node: dict, inherited: tuple[str, dict] | None, where: str) -> tuple[str, dict]:
+    extras = node.get("extras", {})
+    if not isinstance(extras, dict):
+        raise NeuralaoError(f"{where}: extras must be a JSON object, got {type(extras).__name__}")
+    unknown = sorted(set(extras) - _EXTRAS_KEYS)
+    if unknown:
+        raise NeuralaoError(
+            f"{where}: unknown key(s) in extras: {', '.join(unknown)} (known: {', '.join(sorted(_EXTRAS_KEYS))})"
+        )
+    if "role" not in extras:
+        role, params = inherited if inherited else ("static", {})
+        if set(extras) & {"transmission", "density"}:
+            raise NeuralaoError(f"{where}: extras set parameters but no role")
+        return role, params
+    role = extras["role"]
+    if role not in ROLES:
+        raise NeuralaoError(f"{where}: unknown role {role!r} in extras (one of {', '.join(ROLES)})")
+    params = dict(ROLE_PARAMS[role])
+    for key in ("transmission", "density"):
+        if key not in extras:
+            continue
+        if key not in params:
+            raise NeuralaoError(f"{where}: role {role!r} takes no {key!r}")
+        v = extras[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise NeuralaoError(f"{where}: {key} must be a finite number, got {v!r}")
+        if key == "transmission" and not 0.0 <= v <= 1.0:
+            raise NeuralaoError(f"{where}: transmission must be in [0, 1], got {v}")
+        if key == "density" and v < 0:
+            raise NeuralaoError(f"{where}: density must be >= 0, got {v}")
+        params[key] = float(v)
+    return role, params
+
+
+def _instances(g: _Gltf, node: dict, where: str) -> np.ndarray | None:
+    ext = node.get("extensions", {}).get(INSTANCING)
+    if ext is None:
+        return None
+    attrs = ext.get("attributes", {})
+    known = {"TRANSLATION", "ROTATION", "SCALE"}
+    if not attrs or not (set(attrs) & known):
+        raise NeuralaoError(f"{where}: {INSTANCING} has no TRANSLATION, ROTATION or SCALE attribute")
+    arrays = {k: g.accessor(attrs[k], f"{where} {INSTANCING}.{k}") for k in known if k in attrs}
+    counts = {len(v) for v in arrays.values()}
+    if len(counts) != 1:
+        raise NeuralaoError(f"{where}: {INSTANCING} attributes have different counts {sorted(counts)}")
+    count = counts.pop()
+    for k, w in (("TRANSLATION", 3), ("ROTATION", 4), ("SCALE", 3)):
+        if k in arrays and arrays[k].shape != (count, w):
+            raise NeuralaoError(f"{where}: {INSTANCING}.{k} must be VEC{w}")
+    try:
+        return trs_matrices(arrays.get("TRANSLATION"), arrays.get("ROTATION"), arrays.get("SCALE"), count)
+    except NeuralaoError as e:
+        raise NeuralaoError(f"{where}: {INSTANCING}: {e}") from None
+
+
+def _mesh(g: _Gltf, index: int, where: str) -> LevelMesh:
+    spec = g.doc["meshes"][index]
+    name = str(spec.get("name", f"mesh{index}"))
+    verts, faces, offset = [], [], 0
+    for p, prim in enumerate(spec.get("primitives", [])):
+        w = f"{where} {gltf_label('mesh', index, spec)} primitive {p}"
+        mode = prim.get("mode", 4)
+        if mode != 4:
+            raise NeuralaoError(f"{w}: mode {mode} is not supported (triangles only, mode 4)")
+        if "POSITION" not in prim.get("attributes", {}):
+            raise NeuralaoError(f"{w}: no POSITION attribute")
+        v = g.accessor(prim["attributes"]["POSITION"], w).astype(np.float64)
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise NeuralaoError(f"{w}: POSITION must be VEC3")
+        f = g.accessor(prim["indices"], w).astype(np.int64) if "indices" in prim else np.arange(len(v))
+        if f.ndim != 1 or len(f) % 3:
+            raise NeuralaoError(f"{w}: index count {len(f)} is not a multiple of 3")
+        if len(f) and (f.min() < 0 or f.max() >= len(v)):
+            raise NeuralaoError(f"{w}: indices outside [0, {len(v)})")
+        if not np.isfinite(v).all():
+            raise NeuralaoError(f"{w}: POSITION has NaN or inf")
+        verts.append(v)
+        faces.append(f.reshape(-1, 3) + offset)
+        offset += len(v)
+    if not faces or offset == 0 or sum(len(f) for f in faces) == 0:
+        raise NeuralaoError(f"{where}: mesh {name!r} has no triangles")
+    return LevelMesh(name, np.concatenate(verts), np.concatenate(faces))
+
+
+def read_level(path: str | Path) -> Level:
+    """Read and validate a level (.gltf or .glb). Nodes with meshes become :class:`LevelNode` entries
+    in depth-first order of the default scene (or of all root nodes when no scene is given)."""
+    path = Path(path)
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        raise NeuralaoError(f"a level must be a .gltf or .glb file, got {path.name!r}")
+    if not path.is_file():
+        raise NeuralaoError(f"level file not found: {path}")
+    g = _Gltf(path)
+    doc = g.doc
+    nodes = doc.get("nodes", [])
+    n_meshes = len(doc.get("meshes", []))
+    scenes = doc.get("scenes", [])
+    if scenes:
+        si = doc.get("scene", 0)
+        if not isinstance(si, int) or not 0 <= si < len(scenes):
+            raise NeuralaoError(f"level {path}: scene {si!r} is not in the file")
+        roots = scenes[si].get("nodes", [])
+    else:
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    meshes: dict[int, LevelMesh] = {}
+    out: list[LevelNode] = []
+    seen: set[int] = set()
+    stack = [(r, np.eye(4), None) for r in reversed(roots)]
+    while stack:
+        i, parent, inherited = stack.pop()
+        if not isinstance(i, int) or not 0 <= i < len(nodes):
+            raise NeuralaoError(f"level {path}: node {i!r} is not in the file ({len(nodes)} nodes)")
+        if i in seen:
+            raise NeuralaoError(f"level {path}: node {i} is reached twice (a cycle or a shared child)")
+        seen.add(i)
+        node = nodes[i]
+        name = str(node.get("name", f"node{i}"))
+        where = f"level {path.name} {gltf_label('node', i, node)}"
+        world = parent @ node_matrix(node, where)
+        role, params = _role_and_params(node, inherited, where)
+        if "mesh" in node:
+            mi = node["mesh"]
+            if not isinstance(mi, int) or not 0 <= mi < n_meshes:
+                raise NeuralaoError(f"{where}: references mesh {mi!r}, the file has {n_meshes}")
+            if mi not in meshes:
+                meshes[mi] = _mesh(g, mi, where)
+            inst = _instances(g, node, where)
+            transforms = world[None] if inst is None else world[None] @ inst
+            check_transforms(transforms, where)
+            out.append(LevelNode(i, name, role, mi, transforms, params))
+        elif node.get("extensions", {}).get(INSTANCING) is not None:
+            raise NeuralaoError(f"{where}: {INSTANCING} on a node without a mesh")
+        for c in reversed(node.get("children", [])):
+            stack.append((c, world, (role, params)))
+    if not out:
+        raise NeuralaoError(f"level {path} has no node with a mesh")
+    # Re-index meshes densely in first-use order.
+    order = {mi: k for k, mi in enumerate(dict.fromkeys(n.mesh for n in out))}
+    for n in out:
+        n.mesh = order[n.mesh]
+    level_meshes = [meshes[mi] for mi in order]
+    if not any(n.role == "static" for n in out):
+        raise NeuralaoError(f"level {path} has no static node (nothing to bake)")
+    extras = doc.get("extras", {}) if isinstance(doc.get("extras", {}), dict) else {}
+    return Level(level_meshes, out, str(path), extras)
+
+
+def flatten(
+    level: Level, nodes: list[LevelNode]
+) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int, int]]]:
+    """World-space vertices (n, 3) float64, faces (m, 3) int64 of every instance of ``nodes``, and
+    per instance (node index in ``level.nodes`` order of ``nodes``, instance, first vertex, first face)."""
+    verts, faces, spans = [], [], []
+    nv = nf = 0
+    for k, node in enumerate(nodes):
+        mesh = level.meshes[node.mesh]
+        homo = np.c_[mesh.vertices, np.ones(len(mesh.vertices))]
+        for j, m in enumerate(node.transforms):
+            verts.append(homo @ m[:3].T)
+            faces.append(mesh.faces + nv)
+            spans.append((k, j, nv, nf))
+            nv += len(mesh.vertices)
+            nf += len(mesh.faces)
+    if not verts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), []
+    return np.concatenate(verts), np.concatenate(faces), spans
+
+
+# --------------------------------------------------------------------------- writing
+
+
+class GltfWriter:
+    """Accumulates meshes, nodes and binary data; writes .glb or .gltf + .bin atomically.
+
+    Deterministic: the same calls give the same bytes (sorted JSON keys, 4-byte aligned views).
+    """
+
+    def __init__(self, generator: str = "neuralao"):
+        self.doc: dict[str, Any] = {
+            "asset": {"version": "2.0", "generator": generator},
+            "scene": 0,
+            "scenes": [{"nodes": []}],
+            "nodes": [],
+            "meshes": [],
+            "accessors": [],
+            "bufferViews": [],
+        }
+        self._blob = bytearray()
+
+    @classmethod
+    def from_document(cls, doc: dict[str, Any], blob: bytes) -> GltfWriter:
+        """A writer that edits an existing document: ``doc`` (JSON whose bufferViews all point into
+        buffer 0) and ``blob`` (buffer 0's bytes); new data is appended after ``blob``."""
+        w = cls()
+        w.doc = doc
+        for key in ("accessors", "bufferViews"):
+            doc.setdefault(key, [])
+        w._blob = bytearray(blob)
+        return w
+
+    def buffer_view(self, data: bytes) -> int:
+        """A bufferView holding ``data`` as is (an image), 4-byte aligned; returns its index."""
+        while len(self._blob) % 4:
+            self._blob.append(0)
+        self.doc.setdefault("bufferViews", []).append(
+            {"buffer": 0, "byteOffset": len(self._blob), "byteLength": len(data)}
+        )
+        self._blob.extend(data)
+        return len(self.doc["bufferViews"]) - 1
+
+    def accessor(
+        self, array: np.ndarray, kind: str | None = None, normalized: bool = False, target: int | None = None
+    ) -> int:
+        arr = np.ascontiguousarray(array)
+        if arr.dtype == np.float64:
+            arr = arr.astype(np.float32)
+        if arr.dtype == np.int64:
+            arr = arr.astype(np.uint32)
+        code = {np.dtype(v): k for k, v in _COMPONENT.items()}[arr.dtype]
+        width = 1 if arr.ndim == 1 else arr.shape[1]
+        kind = kind or {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}[width]
+        while len(self._blob) % 4:
+            self._blob.append(0)
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self._blob), "byteLength": arr.nbytes}
+        if target is not None:
+            view["target"] = target
+        self._blob.extend(arr.astype(arr.dtype.newbyteorder("<"), copy=False).tobytes())
+        self.doc["bufferViews"].append(view)
+        acc: dict[str, Any] = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": code,
+                               "count": int(arr.shape[0]), "type": kind}  # fmt: skip
+        if normalized:
+            acc["normalized"] = True
+        if kind == "VEC3" and code == 5126 and len(arr):  # POSITION needs min / max
+            acc["min"] = [float(x) for x in arr.min(axis=0)]
+            acc["max"] = [float(x) for x in arr.max(axis=0)]
+        self.doc["accessors"].append(acc)
+        return len(self.doc["accessors"]) - 1
+
+    def mesh(
+        self,
+        name: str,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        attributes: dict[str, np.ndarray] | None = None,
+    ) -> int:
+        """A one-primitive triangle mesh; ``attributes`` name -> (n,) or (n, c) arrays (uint8 ->
+        normalised, e.g. COLOR_0)."""
+        attrs = {"POSITION": self.accessor(np.asarray(vertices, np.float32), target=34962)}
+        for key, arr in (attributes or {}).items():
+            arr = np.asarray(arr)
+            attrs[key] = self.accessor(arr, normalized=arr.dtype == np.uint8, target=34962)
+        idx = self.accessor(np.asarray(faces, np.uint32).reshape(-1), target=34963)
+        self.doc["meshes"].append(
+            {"name": name, "primitives": [{"attributes": attrs, "indices": idx, "mode": 4}]}
+        )
+        return len(self.doc["meshes"]) - 1
+
+    def node(self, name: str, mesh: int | None = None, matrix: np.ndarray | None = None, extras: dict | None = None,
+             instances: dict[str, np.ndarray] | None = None) -> int:  # fmt: skip
+        """A root node; ``instances``: EXT_mesh_gpu_instancing attributes (TRANSLATION, ROTATION,
+        SCALE and custom ``_NAME`` per-instance attributes)."""
+        node: dict[str, Any] = {"name": name}
+        if mesh is not None:
+            node["mesh"] = mesh
+        if matrix is not None and not np.allclose(matrix, np.eye(4)):
+            node["matrix"] = [float(x) for x in np.asarray(matrix, np.float64).T.reshape(-1)]
+        if extras:
+            node["extras"] = extras
+        if instances:
+            attrs = {k: self.accessor(np.asarray(v, np.float32)) for k, v in instances.items()}
+            node["extensions"] = {INSTANCING: {"attributes": attrs}}
+            used = self.doc.setdefault("extensionsUsed", [])
+            if INSTANCING not in used:
+                used.append(INSTANCING)
+        self.doc["nodes"].append(node)
+        self.doc["scenes"][0]["nodes"].append(len(self.doc["nodes"]) - 1)
+        return len(self.doc["nodes"]) - 1
+
+    def _json(self, uri: str | None) -> bytes:
+        while len(self._blob) % 4:
+            self._blob.append(0)
+        buf: dict[str, Any] = {"byteLength": len(self._blob)}
+        if uri is not None:
+            buf["uri"] = uri
+        doc = dict(self.doc, buffers=[buf])
+        return json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()
+
+    def write(self, path: str | Path) -> Path:
+        """Write ``path`` (.glb: one file; .gltf: the .bin next to it first, then the .gltf)."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".glb":
+            text = self._json(None)
+            text += b" " * (-len(text) % 4)
+            blob = bytes(self._blob)
+            total = 12 + 8 + len(text) + 8 + len(blob)
+            data = (
+                struct.pack("<III", _GLB_MAGIC, 2, total) + struct.pack("<II", len(text), _JSON_CHUNK) + text
+            )
+            data += struct.pack("<II", len(blob), _BIN_CHUNK) + blob
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(data)
+        elif suffix == ".gltf":
+            bin_path = path.with_suffix(".bin")
+            with atomic_path(bin_path) as tmp:
+                tmp.write_bytes(bytes(self._blob))
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(self._json(bin_path.name))
+        else:
+            raise NeuralaoError(f"glTF output must end in .gltf or .glb, got {path.name!r}")
+        return path
+
+
+def read_gltf_json(path: str | Path) -> tuple[dict, Any]:
+    """The JSON of a .gltf/.glb and an accessor reader ``get(index) -> array`` (for outputs and tests)."""
+    g = _Gltf(Path(path))
+    return g.doc, lambda i: g.accessor(i, str(path))

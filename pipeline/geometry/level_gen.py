@@ -1,0 +1,326 @@
+"""`neuralao level`: seeded synthetic game levels (glTF + bake config) for tests and benchmarks.
+
+A level (Y up, metres) holds a terrain heightfield, buildings (shared test meshes placed as nodes
+that reference one mesh, plus procedural houses made of overlapping boxes with split vertices:
+triangle soup), a ring of blocker walls, and EXT_mesh_gpu_instancing nodes of trees, shrubs and
+grass clumps standing on the terrain. Every random choice comes from one ``numpy`` generator seeded
+by ``seed``, so a preset and a seed give the same bytes.
+
+Presets: ``tiny`` (tests, ~3k faces), ``small`` (a demo, ~60k faces), ``table1`` (the scale of
+Table 1 of Sloan et al. 2013: >= 1.5M vertices and >= 1.8M faces of baked geometry) and ``world10x``
+(ten times Table 1, ~18M faces, the same mix over ten times the area).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_json
+from pipeline.foundation.settings import add_set_option, apply_overrides, from_dict, settings_to_dict
+from pipeline.geometry.level_files import GltfWriter, quat_to_matrix
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class BuildingSpec:
+    # Shared test mesh name (resolved like every scene name: ../shared/assets/meshes/<name>).
+    mesh: str = "cornell_box"
+    # How many placements (nodes referencing the one mesh).
+    count: int = 1
+    # Uniform scale applied to the mesh.
+    scale: float = 1.0
+
+
+@dataclass
+class LevelGenSettings:
+    # Terrain side length (m) and cells per side (vertices = (cells + 1)^2, faces = 2 cells^2).
+    terrain_size: float = 40.0
+    terrain_cells: int = 24
+    # Height amplitude of the terrain (m).
+    terrain_height: float = 2.0
+    # Procedural houses: count, boxes per house (split vertices: 24 per box).
+    houses: int = 2
+    house_boxes: int = 3
+    # Buildings from the shared meshes.
+    buildings: list[BuildingSpec] = field(default_factory=lambda: [BuildingSpec("cornell_box", 1, 2.0)])
+    # Instanced decorators.
+    trees: int = 3
+    shrubs: int = 12
+    grass: int = 20
+    # Shrub media density (per metre inside the box) and tree transmission per hit.
+    shrub_density: float = 0.8
+    tree_transmission: float = 0.5
+    # Sphere subdivisions of tree crowns and shrubs (1: 80 faces, 2: 320).
+    crown_subdivisions: int = 1
+    # Blocker walls around the terrain (height, m; 0 = none).
+    blocker_height: float = 6.0
+    # Seed of every random choice.
+    seed: int = 0
+
+
+PRESETS: dict[str, dict] = {
+    "tiny": {},
+    "small": {"terrain_size": 120.0, "terrain_cells": 120, "houses": 40, "trees": 12, "shrubs": 200, "grass": 400,
+              "buildings": [{"mesh": "cornell_box", "count": 4, "scale": 3.0}, {"mesh": "sponza_partial", "count": 1, "scale": 0.01}]},
+    # Table 1 of Sloan et al.: 1.5M V / 1.8M F of geometry, 46 trees, 7856 shrub proxies.
+    "table1": {"terrain_size": 600.0, "terrain_cells": 660, "terrain_height": 12.0, "houses": 6000, "house_boxes": 5,
+               "trees": 46, "shrubs": 7856, "grass": 20000, "crown_subdivisions": 2,
+               "buildings": [{"mesh": "Sponza", "count": 2, "scale": 1.0}, {"mesh": "sponza_partial", "count": 2, "scale": 0.02}]},
+    # Ten times table1: ten times the area (600 m x sqrt(10)) and of every count. Faces: terrain 2 x 2087^2 = 8.71M,
+    # 60,000 houses x 5 boxes x 12 = 3.6M, 20 + 20 Sponzas 5.92M: 18.2M (table1: 0.87M + 0.36M + 0.59M = 1.82M).
+    "world10x": {"terrain_size": 1897.0, "terrain_cells": 2087, "terrain_height": 12.0, "houses": 60000, "house_boxes": 5,
+                 "trees": 460, "shrubs": 78560, "grass": 200000, "crown_subdivisions": 2,
+                 "buildings": [{"mesh": "Sponza", "count": 20, "scale": 1.0}, {"mesh": "sponza_partial", "count": 20, "scale": 0.02}]},
+}  # fmt: skip
+
+# The bake config each preset is written with (pipeline.bakes.level.LevelBakeSettings keys).
+BAKE_CONFIGS: dict[str, dict] = {
+    "tiny": {"trace": {"rays": 64, "samples_per_vertex": 2.0, "samples_per_face_cap": 4},
+             "decorators": {"samples_per_instance": 256, "holdout_samples": 256, "local_rays": 64},
+             "lod": {"target_reduction": 0.5, "holdout_samples": 400}},
+    "small": {"trace": {"rays": 128}},
+    "table1": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0}},
+    # SuperLU's fill-in at 16M vertices is out of reach: the multigrid-preconditioned solve (linear in vertices).
+    "world10x": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0,
+                           "solver": "amg"}},
+}  # fmt: skip
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def terrain_height(x: np.ndarray, z: np.ndarray, s: LevelGenSettings, phases: np.ndarray) -> np.ndarray:
+    """Smooth seeded heightfield: a sum of 4 sinusoid pairs of decreasing wavelength."""
+    h = np.zeros_like(np.asarray(x, np.float64))
+    for k in range(4):
+        w = 2 * math.pi * (k + 1) / s.terrain_size
+        h += s.terrain_height / (k + 1) * np.sin(w * x + phases[k, 0]) * np.cos(w * z + phases[k, 1])
+    return h
+
+
+def terrain(s: LevelGenSettings, phases: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = s.terrain_cells
+    t = np.linspace(-s.terrain_size / 2, s.terrain_size / 2, n + 1)
+    xx, zz = np.meshgrid(t, t, indexing="ij")
+    v = np.stack([xx.ravel(), terrain_height(xx, zz, s, phases).ravel(), zz.ravel()], axis=1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    # (a, d, c) / (a, c, b) winds counter-clockwise seen from +Y: normals point up.
+    return v, np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
+
+
+def box_soup(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned box with split vertices (24 V, 12 F, outward normals): flat-shaded game geometry."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    verts, faces = [], []
+    for axis in range(3):
+        for side in (0, 1):
+            u, w = [(axis + 1) % 3, (axis + 2) % 3]
+            quad = []
+            for a, b in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                p = lo.copy()
+                p[axis] = (lo, hi)[side][axis]
+                p[u] = (lo, hi)[a][u]
+                p[w] = (lo, hi)[b][w]
+                quad.append(p)
+            base = len(verts)
+            verts.extend(quad)
+            f = [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+            faces.extend(f if side == 1 else [r[::-1] for r in f])
+    return np.array(verts), np.array(faces, np.int64)
+
+
+def ellipsoid(center, radii, subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    return np.asarray(m.vertices) * np.asarray(radii) + np.asarray(center), np.asarray(m.faces, np.int64)
+
+
+def prism(radius: float, height: float, sides: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Closed vertical prism (trunk), base at y = 0, outward normals."""
+    a = np.linspace(0, 2 * math.pi, sides, endpoint=False)
+    ring = np.stack([radius * np.cos(a), np.zeros(sides), -radius * np.sin(a)], 1)
+    v = np.concatenate([ring, ring + [0, height, 0], [[0, 0, 0], [0, height, 0]]])
+    f = []
+    for i in range(sides):
+        j = (i + 1) % sides
+        f += [
+            [i, j, sides + j],
+            [i, sides + j, sides + i],
+            [2 * sides, j, i],
+            [2 * sides + 1, sides + i, sides + j],
+        ]
+    return v, np.array(f, np.int64)
+
+
+def merge_parts(*parts) -> tuple[np.ndarray, np.ndarray]:
+    verts, faces, off = [], [], 0
+    for v, f in parts:
+        verts.append(v)
+        faces.append(f + off)
+        off += len(v)
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+def house(rng: np.random.Generator, boxes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Overlapping boxes (body, wings, chimney...), base at y = -0.3 (sunk into the terrain)."""
+    parts = []
+    w, d, h = rng.uniform(4, 9), rng.uniform(4, 9), rng.uniform(3, 7)
+    parts.append(box_soup([-w / 2, -0.3, -d / 2], [w / 2, h, d / 2]))
+    for _ in range(boxes - 1):
+        cx, cz = rng.uniform(-w / 2, w / 2), rng.uniform(-d / 2, d / 2)
+        bw, bd, bh = rng.uniform(1, w / 1.5), rng.uniform(1, d / 1.5), rng.uniform(1, h * 1.3)
+        parts.append(box_soup([cx - bw / 2, -0.3, cz - bd / 2], [cx + bw / 2, bh, cz + bd / 2]))
+    return merge_parts(*parts)
+
+
+def tree_model(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """Trunk + a crown of five overlapping leaf clusters (interpenetrating closed parts: the crown
+    shades itself, which is what the per-model local AO captures)."""
+    clusters = [ellipsoid(c, r, subdivisions) for c, r in (
+        ([0, 6.2, 0], [1.6, 1.5, 1.6]), ([1.3, 5.0, 0.2], [1.3, 1.1, 1.2]), ([-1.2, 5.1, -0.4], [1.2, 1.1, 1.3]),
+        ([0.2, 4.9, 1.3], [1.2, 1.0, 1.1]), ([-0.1, 5.0, -1.4], [1.1, 1.0, 1.2]))]  # fmt: skip
+    return merge_parts(prism(0.3, 5.0), *clusters)
+
+
+def shrub_model(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
+    return ellipsoid([0, 0.35, 0], [0.8, 0.55, 0.8], subdivisions)
+
+
+def grass_model() -> tuple[np.ndarray, np.ndarray]:
+    """Three crossed blades (thin quads), 0.4 m tall."""
+    parts = []
+    for k in range(3):
+        a = k * math.pi / 3
+        c, s = 0.15 * math.cos(a), 0.15 * math.sin(a)
+        v = np.array([[-c, 0, -s], [c, 0, s], [c, 0.4, s], [-c, 0.4, -s]])
+        parts.append((v, np.array([[0, 1, 2], [0, 2, 3]], np.int64)))
+    return merge_parts(*parts)
+
+
+def _yaw_quats(rng: np.random.Generator, n: int) -> np.ndarray:
+    yaw = rng.uniform(0, 2 * math.pi, n)
+    return np.stack([np.zeros(n), np.sin(yaw / 2), np.zeros(n), np.cos(yaw / 2)], 1)
+
+
+def _scatter(
+    rng: np.random.Generator, n: int, s: LevelGenSettings, phases: np.ndarray, margin: float, sink: float
+):
+    half = s.terrain_size / 2 - margin
+    x, z = rng.uniform(-half, half, n), rng.uniform(-half, half, n)
+    return np.stack([x, terrain_height(x, z, s, phases) - sink, z], 1)
+
+
+# --------------------------------------------------------------------------- level
+
+
+def generate(s: LevelGenSettings) -> GltfWriter:
+    """The glTF of a synthetic level for settings ``s`` (deterministic for ``s.seed``)."""
+    from pipeline.geometry.scene import load_scene
+
+    check(s)
+    rng = np.random.default_rng(s.seed)
+    phases = rng.uniform(0, 2 * math.pi, (4, 2))
+    g = GltfWriter("neuralao level generator")
+    g.doc["extras"] = {"generator": settings_to_dict(s)}
+    tv, tf = terrain(s, phases)
+    g.node("terrain", g.mesh("terrain", tv, tf), extras={"role": "static"})
+    for k, b in enumerate(s.buildings):
+        sc = load_scene(b.mesh)
+        # Base on y = 0, centred in x / z (Y up), so a placement sits on the terrain.
+        v = (sc.vertices - [sc.center[0], sc.bounds[0, 1], sc.center[2]]) * b.scale
+        mesh = g.mesh(f"building_{b.mesh}", v, sc.faces)
+        half = np.abs(v).max(axis=0)[[0, 2]].max()
+        pos = _scatter(rng, b.count, s, phases, min(half, s.terrain_size / 3), 0.5)
+        for j, p in enumerate(pos):
+            m = np.eye(4)
+            yaw = rng.choice([0.0, 0.5, 1.0, 1.5]) * math.pi
+            m[:3, :3] = [[math.cos(yaw), 0, math.sin(yaw)], [0, 1, 0], [-math.sin(yaw), 0, math.cos(yaw)]]
+            m[:3, 3] = p
+            g.node(f"building_{k}_{j}", mesh, matrix=np.round(m, 12), extras={"role": "static"})
+    if s.houses:
+        # A handful of house models, each placed several times (shared meshes, as in a game).
+        models = [g.mesh(f"house{i}", *house(rng, s.house_boxes)) for i in range(min(s.houses, 16))]
+        pos = _scatter(rng, s.houses, s, phases, 8.0, 0.0)
+        quats = _yaw_quats(rng, s.houses)
+        for i, (p, q) in enumerate(zip(pos, quats, strict=True)):
+            m = np.eye(4)
+            m[:3, :3] = quat_to_matrix(q)[0]
+            m[:3, 3] = p
+            g.node(f"house_{i}", models[i % len(models)], matrix=m, extras={"role": "static"})
+    if s.blocker_height > 0:
+        h, t = s.terrain_size / 2, 2.0
+        walls = [box_soup([-h - t, -s.terrain_height * 2, -h - t], [h + t, s.blocker_height, -h]),
+                 box_soup([-h - t, -s.terrain_height * 2, h], [h + t, s.blocker_height, h + t]),
+                 box_soup([-h - t, -s.terrain_height * 2, -h], [-h, s.blocker_height, h]),
+                 box_soup([h, -s.terrain_height * 2, -h], [h + t, s.blocker_height, h])]  # fmt: skip
+        g.node("blocker_walls", g.mesh("walls", *merge_parts(*walls)), extras={"role": "blocker"})
+    for role, count, model, extras, margin, sink in (
+        ("tree", s.trees, tree_model(s.crown_subdivisions), {"transmission": s.tree_transmission}, 6.0, 0.1),
+        ("shrub", s.shrubs, shrub_model(s.crown_subdivisions), {"density": s.shrub_density}, 3.0, 0.1),
+        ("grass", s.grass, grass_model(), {}, 2.0, 0.05),
+    ):
+        if count == 0:
+            continue
+        pos = _scatter(rng, count, s, phases, margin, sink)
+        inst = {"TRANSLATION": pos, "ROTATION": _yaw_quats(rng, count),
+                "SCALE": np.repeat(rng.uniform(0.8, 1.25, (count, 1)), 3, axis=1)}  # fmt: skip
+        g.node(f"{role}s", g.mesh(role, *model), extras={"role": role, **extras}, instances=inst)
+    return g
+
+
+def check(s: LevelGenSettings) -> None:
+    for name in ("terrain_cells", "houses", "house_boxes", "trees", "shrubs", "grass"):
+        v = getattr(s, name)
+        if v < (1 if name in ("terrain_cells", "house_boxes") else 0):
+            raise NeuralaoError(
+                f"{name} must be >= {1 if name in ('terrain_cells', 'house_boxes') else 0}, got {v}"
+            )
+    if not s.terrain_size > 0:
+        raise NeuralaoError(f"terrain_size must be > 0, got {s.terrain_size}")
+    for b in s.buildings:
+        if b.count < 0 or not b.scale > 0:
+            raise NeuralaoError(f"building {b.mesh!r}: count must be >= 0 and scale > 0")
+
+
+def write_level(out: str | Path, s: LevelGenSettings, preset: str = "tiny") -> tuple[Path, Path]:
+    """Write OUT/level.gltf (+ level.bin) and OUT/bake.json (the preset's bake config)."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} is a file, expected a folder")
+    path = generate(s).write(out / "level.gltf")
+    cfg = out / "bake.json"
+    write_json(cfg, BAKE_CONFIGS.get(preset, {}))
+    return path, cfg
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", choices=sorted(PRESETS), default="tiny", help="level size (default tiny)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    add_set_option(p, "houses=10")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for level.gltf, level.bin, bake.json")
+
+
+def settings_for(preset: str, seed: int = 0, overrides: list[str] | None = None) -> LevelGenSettings:
+    """A preset's settings with ``seed`` and ``key=value`` overrides (unknown keys rejected)."""
+    if preset not in PRESETS:
+        raise NeuralaoError(f"unknown preset {preset!r} (one of {', '.join(sorted(PRESETS))})")
+    data = json.loads(json.dumps({**PRESETS[preset], "seed": seed}))
+    return from_dict(LevelGenSettings, apply_overrides(data, overrides))
+
+
+def run(args: argparse.Namespace) -> int:
+    s = settings_for(args.preset, args.seed, args.set)
+    path, cfg = write_level(args.out, s, args.preset)
+    log.info("wrote %s and %s", path, cfg)
+    return 0

@@ -1,0 +1,404 @@
+"""DeepAO screen-space U-Net (Zhang et al. 2020): input preprocessing, the model, the pad/crop wrapper.
+
+Input contract (``preprocess``; the ONE function that training, export checks, parity and
+inference all use, and that the ONNX metadata states in words):
+
+    x : (4, H, W) float32, channels [depth, n_x, n_y, n_z]
+        depth    linear camera-space depth (-z_cam) divided by the frame's MEAN foreground depth,
+                 so the input does not depend on scene scale (scaling a scene, or moving the camera
+                 away proportionally, gives the same input); 0 on background.
+        n_x..z   camera-space unit normal, OpenGL convention (x right, y up, z towards the viewer),
+                 flipped to face the viewer; 0 on background.
+
+    radius   (a second input, not a channel) rho = R / (mean foreground depth * tan(yfov / 2)): the
+             AO radius R in scene units, as every engine's SSAO/GTAO takes it, made dimensionless
+             with the same mean depth and the vertical field of view. (1, 1, 1, 1) float32.
+             Inside the graph it becomes the per-pixel channel
+             clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP) = R / (z tan(yfov / 2)):
+             the radius's size on screen in units of half the screen height (background: the cap
+             or rho / floor). Labels exist at several radii per frame (one trace, ``ao_radii``), so
+             one network serves any radius in the trained range.
+
+Why the mean for depth: a per-frame statistic keeps the input free of scene scale; the mean
+(not the median) because a GPU gets it from one mip-chain reduction of depth and mask
+(``sum(depth) / sum(mask)``). It is computed on the whole frame BEFORE any crop, in training too.
+Background depth is 0 because no real surface can have it (znear > 0), whereas any positive constant
+could coincide with a real far wall; with the zero normal it marks background unambiguously.
+
+Model (``UNet``): encoder level i = 3x3 conv (stride 1) + LeakyReLU(0.01), then 2x2 average pool;
+decoder level i = bilinear x2 upsample, 3x3 conv halving the channels, batch norm, LeakyReLU,
+concatenation with the encoder skip, then a 3x3 fusion conv back to the level's width + LeakyReLU
+(so every decoder conv input has twice the width of its output, as in the classic U-Net);
+last layer a 1x1 conv to one channel and a sigmoid, so the output lies in [0, 1] for any input
+(Sigmoid exports as one ONNX op the GLSL generator supports). Widths default to 4/8/16/32
+(``depth = len(widths) - 1`` pooling steps).
+
+Any resolution: the ONNX graph needs H and W multiples of ``2 ** depth`` (``pad_multiple``). The
+consumer reflect-pads bottom/right to that multiple and crops the output back (``pad_to_multiple`` /
+``PaddedUNet`` here; the GLSL manifest carries the same pad/crop passes). Padding stays out of the
+ONNX graph.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from pipeline.foundation.errors import NeuralaoError
+
+# Bumped whenever ``preprocess`` changes meaning; exported models record it and ``infer`` checks it.
+PREPROCESS_VERSION = 2
+# The radius channel (see the module docstring): a floor on normalised depth and a cap on the value.
+RADIUS_DEPTH_FLOOR = 1e-3
+RADIUS_CAP = 8.0
+RADIUS_INPUT = "radius"
+INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
+# The hybrid's input: the G-buffer channels and GTAO's AO at the same radius (1 on background).
+HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
+BACKGROUND_DEPTH = 0.0
+PAD_MODE = "reflect"
+
+# Written verbatim into the ONNX metadata and the export manifest (input semantics, units).
+PREPROCESS_DESCRIPTION = {
+    "preprocess_version": str(PREPROCESS_VERSION),
+    "input_name": "gbuffer",
+    "input_layout": "NCHW float32, N=1, C=4, H and W multiples of pad_multiple (pad, run, crop)",
+    "input_channels": ",".join(INPUT_CHANNELS),
+    "depth_units": "linear camera-space depth (-z_cam) divided by the mean depth over foreground pixels "
+    "of the whole frame (dimensionless, scene-scale invariant)",
+    "depth_normalisation": "depth / mean(depth[mask]); background 0",
+    "normal_space": "camera space, OpenGL convention (x right, y up, z towards the viewer), unit length, "
+    "flipped to face the viewer",
+    "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and normal "
+    "(0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
+    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), R = AO "
+    "radius in scene units (the distance beyond which nothing occludes); the graph feeds the network "
+    f"clip(rho / max(depth, {RADIUS_DEPTH_FLOOR:g}), 0, {RADIUS_CAP:g}) as a fifth channel",
+    "radius_glsl": "uniform float u_radius (the same rho), set per frame",
+    "output_name": "ao",
+    "output": "(1,1,H,W) accessibility in [0,1], 1 = open (sigmoid)",
+    "pad_mode": PAD_MODE,
+    "pad_side": "bottom,right",
+}
+
+# Added to the metadata of a hybrid (GTAO-input) U-Net.
+HYBRID_DESCRIPTION = {
+    "input_layout": "NCHW float32, N=1, C=5, H and W multiples of pad_multiple (pad, run, crop)",
+    "input_channels": ",".join(HYBRID_CHANNELS),
+    "gtao_channel": "channel 4: GTAO's AO at the same radius R (the engine's GTAO pass, run first), 1 on "
+    "background; the network outputs clip(gtao + correction, 0, 1)",
+    "output": "(1,1,H,W) accessibility in [0,1], 1 = open (GTAO + a learned correction, clipped)",
+}
+
+
+def depth_scale(depth: np.ndarray, mask: np.ndarray) -> float:
+    """Mean foreground depth of a frame; 1.0 when there is no foreground.
+
+    depth : (H, W) float32, mask : (H, W) bool. Returns a Python float (float64 accumulation).
+    """
+    fg = np.asarray(depth, dtype=np.float64)[np.asarray(mask, dtype=bool)]
+    if fg.size == 0:
+        return 1.0
+    return float(fg.mean())
+
+
+def preprocess(depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """G-buffer channels -> network input.
+
+    depth : (H, W) float32 linear depth, 0 on background; normal_cam : (H, W, 3) float32;
+    mask : (H, W) bool foreground. Returns x : (4, H, W) float32 (see the module docstring).
+    Non-finite G-buffer values pass through (training then stops on them naming the batch).
+    """
+    depth = np.asarray(depth, dtype=np.float32)
+    normal_cam = np.asarray(normal_cam, dtype=np.float32)
+    mask = np.asarray(mask, dtype=bool)
+    if depth.ndim != 2 or normal_cam.shape != depth.shape + (3,) or mask.shape != depth.shape:
+        raise NeuralaoError(
+            f"G-buffer shapes do not match: depth {depth.shape}, normal_cam {normal_cam.shape}, mask {mask.shape}"
+        )
+    scale = depth_scale(depth, mask)
+    x = np.empty((4,) + depth.shape, dtype=np.float32)
+    x[0] = np.where(mask, depth / np.float32(scale), np.float32(BACKGROUND_DEPTH))
+    x[1:] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
+    return x
+
+
+def radius_param(radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float) -> float:
+    """rho = R / (mean foreground depth * tan(yfov / 2)) for AO radius R in scene units (> 0)."""
+    if not (np.isfinite(radius) and radius > 0):
+        raise NeuralaoError(f"the AO radius must be a positive number of scene units, got {radius}")
+    if not (np.isfinite(yfov) and 0 < yfov < np.pi):
+        raise NeuralaoError(f"yfov must lie in (0, pi) radians, got {yfov}")
+    return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
+
+
+def frame_radius(frame: dict, radius: float | None = None) -> float:
+    """The AO radius of a frame in scene units: ``radius`` if given, else the largest radius its labels
+    were traced at (``radii``), else an error asking for one."""
+    if radius is not None:
+        return float(radius)
+    if "radii" in frame and np.size(frame["radii"]):
+        return float(np.max(frame["radii"]))
+    raise NeuralaoError("the frame has no label radii; give the AO radius in scene units (--radius)")
+
+
+def frame_radius_param(frame: dict, radius: float | None = None) -> float:
+    """rho of :func:`radius_param` for a frame dict (depth, mask, yfov) at ``frame_radius(frame, radius)``."""
+    if "yfov" not in frame:
+        raise NeuralaoError("frame lacks yfov (needed for the radius input)")
+    return radius_param(frame_radius(frame, radius), frame["depth"], frame["mask"], float(frame["yfov"]))
+
+
+def preprocess_frame(frame: dict, gtao: np.ndarray | None = None) -> np.ndarray:
+    """``preprocess`` on a frame dict (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
+    (5, H, W) with ``gtao`` (H, W) as the hybrid's fifth channel (1 on background)."""
+    missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]
+    if missing:
+        raise NeuralaoError(f"frame lacks G-buffer channel(s) {', '.join(missing)}")
+    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
+    if gtao is None:
+        return x
+    gtao = np.asarray(gtao, np.float32)
+    if gtao.shape != x.shape[1:]:
+        raise NeuralaoError(f"GTAO image is {gtao.shape}, the G-buffer {x.shape[1:]}")
+    mask = np.asarray(frame["mask"], bool)
+    return np.concatenate([x, np.where(mask, gtao, np.float32(1.0))[None]], axis=0)
+
+
+def flip_input(x: torch.Tensor, horizontal: bool) -> torch.Tensor:
+    """Mirror network inputs (N, 4, H, W): a horizontal flip negates n_x, a vertical flip negates n_y.
+
+    Mirroring the image about a camera axis mirrors the 3D scene, and the AO of a mirrored scene is
+    the mirrored AO, so both flips are exact augmentations (labels are flipped with ``torch.flip``).
+    """
+    dim, channel = (-1, 1) if horizontal else (-2, 2)
+    out = x.flip(dim)
+    sign = torch.ones(x.shape[1], dtype=x.dtype, device=x.device)
+    sign[channel] = -1.0
+    return out * sign.view(1, -1, 1, 1)
+
+
+def pad_amount(height: int, width: int, multiple: int) -> tuple[int, int]:
+    """Rows and columns to add (bottom, right) so both sizes become multiples of ``multiple``."""
+    return (-height) % multiple, (-width) % multiple
+
+
+def check_padable(height: int, width: int, multiple: int) -> None:
+    if height < multiple or width < multiple:
+        raise NeuralaoError(
+            f"image {width}x{height} is smaller than the U-Net's pad multiple {multiple} (reflect padding needs at least that)"
+        )
+
+
+def pad_to_multiple(x: np.ndarray, multiple: int) -> np.ndarray:
+    """Reflect-pad the last two axes at the bottom/right to multiples of ``multiple``.
+
+    x : (..., H, W) float32 -> (..., H', W') float32; the original is ``out[..., :H, :W]``.
+    Same as ``torch.nn.functional.pad(mode="reflect")`` (edge sample not repeated).
+    """
+    h, w = x.shape[-2:]
+    check_padable(h, w, multiple)
+    ph, pw = pad_amount(h, w, multiple)
+    if ph == 0 and pw == 0:
+        return np.ascontiguousarray(x, dtype=np.float32)
+    widths = [(0, 0)] * (x.ndim - 2) + [(0, ph), (0, pw)]
+    return np.pad(np.asarray(x, dtype=np.float32), widths, mode="reflect")
+
+
+@dataclass
+class UNetArgs:
+    """Architecture (stored in checkpoints as ``model_args``; rebuilds the model alone)."""
+
+    in_channels: int = 4  # G-buffer channels: depth + camera-space normal
+    widths: list[int] = field(default_factory=lambda: [4, 8, 16, 32])  # channels per level (paper: 4/8/16/32)
+    negative_slope: float = 0.01  # LeakyReLU slope (paper: 0.01)
+    bn_eps: float = 1e-5  # batch-norm epsilon (keeps near-zero running variance finite)
+    radius_input: bool = True  # the AO radius is a run-time input (an extra per-pixel channel, see RADIUS_*)
+    scale: int = 1  # 1 = full resolution; 2 / 4 = the U-Net runs at 1/2 / 1/4 resolution (see UNet)
+    refine_width: int = 4  # channels of the full-resolution refinement of the reduced-resolution variants
+    # Hybrid: GTAO's AO at the same radius is a fifth input channel and the network predicts a
+    # correction to it: ao = clip(gtao + conv(x), 0, 1) (GTAO stays a GL pass the engine runs first).
+    gtao_input: bool = False
+
+    @property
+    def depth(self) -> int:
+        return len(self.widths) - 1
+
+    @property
+    def pad_multiple(self) -> int:
+        return self.scale * 2**self.depth
+
+
+def _conv3x3(cin: int, cout: int) -> nn.Conv2d:
+    return nn.Conv2d(cin, cout, kernel_size=3, padding=1)
+
+
+class UNet(nn.Module):
+    """The raw network: x (N, 4, H, W) float32 with H, W multiples of ``pad_multiple`` and the radius
+    parameter rho (N, 1, 1, 1) float32 -> AO (N, 1, H, W) in [0, 1].
+
+    This is exactly what is exported to ONNX (no padding inside). With ``radius_input`` the first
+    operation builds the radius channel ``clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP)``
+    (the screen-space radius in units of half the screen height at the pixel's depth) and
+    concatenates it to x; the depth channel is read by a fixed 1x1 channel-select convolution so the
+    graph needs no Slice. With ``scale`` s > 1 the G-buffer is point-sampled to 1/s resolution
+    (nearest, every s-th pixel), the U-Net runs there, its AO is upsampled bilinearly and a small
+    full-resolution refinement (3x3 conv on [upsampled AO, full-resolution G-buffer, upsampled
+    low-resolution depth] -> LeakyReLU -> 1x1 conv) adds a correction, clipped to [0, 1]: it sees
+    where the full-resolution depth and normals differ from what the low-resolution pass saw, so
+    AO does not bleed across depth and normal edges.
+    """
+
+    def __init__(self, args: UNetArgs | None = None):
+        super().__init__()
+        self.args = args = args or UNetArgs()
+        if len(args.widths) < 2 or any(int(w) < 1 for w in args.widths):
+            raise NeuralaoError(
+                f"U-Net widths must list at least two positive channel counts, got {args.widths}"
+            )
+        if args.gtao_input and (int(args.scale) != 1 or int(args.in_channels) != len(HYBRID_CHANNELS)):
+            raise NeuralaoError(
+                f"a GTAO-input U-Net takes {len(HYBRID_CHANNELS)} channels ({', '.join(HYBRID_CHANNELS)}) at "
+                f"scale 1, got in_channels {args.in_channels} and scale {args.scale}"
+            )
+        if int(args.scale) not in (1, 2, 4) or int(args.refine_width) < 1:
+            raise NeuralaoError(
+                f"U-Net scale must be 1, 2 or 4 and refine_width >= 1, got {args.scale} and {args.refine_width}"
+            )
+        w = [int(v) for v in args.widths]
+        slope = args.negative_slope
+        cin = args.in_channels + (1 if args.radius_input else 0)
+        select = torch.zeros(1, args.in_channels, 1, 1)
+        select[0, 0] = 1.0  # channel 0 = normalised depth
+        self.register_buffer("select", select, persistent=False)
+        if args.gtao_input:
+            guide = torch.zeros(1, cin, 1, 1)  # _unet sees the radius channel appended after GTAO
+            guide[0, len(INPUT_CHANNELS)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
+            self.register_buffer("guide", guide, persistent=False)
+        self.down = nn.ModuleList(
+            nn.Sequential(_conv3x3(cin if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))
+            for i in range(len(w))
+        )
+        # up[i] brings level i+1 (width w[i+1]) to level i: upsample, conv w[i+1] -> w[i], BN, LeakyReLU.
+        self.up = nn.ModuleList(
+            nn.Sequential(
+                _conv3x3(w[i + 1], w[i]), nn.BatchNorm2d(w[i], eps=args.bn_eps), nn.LeakyReLU(slope)
+            )
+            for i in range(len(w) - 1)
+        )
+        # fuse[i]: after concatenation with the skip (2 w[i] channels) back to w[i].
+        self.fuse = nn.ModuleList(
+            nn.Sequential(_conv3x3(2 * w[i], w[i]), nn.LeakyReLU(slope)) for i in range(len(w) - 1)
+        )
+        self.out = nn.Conv2d(w[0], 1, kernel_size=1)
+        if args.scale > 1:
+            rw = int(args.refine_width)
+            self.refine = nn.Sequential(
+                _conv3x3(1 + args.in_channels + 1, rw), nn.LeakyReLU(slope), nn.Conv2d(rw, 1, kernel_size=1)
+            )
+
+    @property
+    def pad_multiple(self) -> int:
+        return self.args.pad_multiple
+
+    def _depth(self, x: torch.Tensor) -> torch.Tensor:
+        return F.conv2d(x, self.select)
+
+    def _with_radius(self, x: torch.Tensor, radius: torch.Tensor | None) -> torch.Tensor:
+        if not self.args.radius_input:
+            return x
+        if radius is None:
+            raise NeuralaoError("this U-Net takes the AO radius as an input; pass radius (N, 1, 1, 1)")
+        r = torch.clamp(radius / torch.clamp(self._depth(x), min=RADIUS_DEPTH_FLOOR), 0.0, RADIUS_CAP)
+        return torch.cat([x, r], dim=1)
+
+    def _unet(self, x: torch.Tensor) -> torch.Tensor:
+        gtao = F.conv2d(x, self.guide) if self.args.gtao_input else None
+        depth = self.args.depth
+        skips = []
+        for i, block in enumerate(self.down):
+            x = block(x)
+            if i < depth:
+                skips.append(x)
+                x = F.avg_pool2d(x, 2)
+        for i in reversed(range(depth)):
+            x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
+            x = self.up[i](x)
+            x = self.fuse[i](torch.cat([x, skips[i]], dim=1))
+        if gtao is not None:
+            return torch.clamp(gtao + self.out(x), 0.0, 1.0)
+        return torch.sigmoid(self.out(x))
+
+    def forward(self, x: torch.Tensor, radius: torch.Tensor | None = None) -> torch.Tensor:
+        s = int(self.args.scale)
+        if s == 1:
+            return self._unet(self._with_radius(x, radius))
+        low = F.interpolate(x, scale_factor=1.0 / s, mode="nearest")
+        ao = F.interpolate(self._unet(self._with_radius(low, radius)), scale_factor=float(s), mode="bilinear",
+                           align_corners=False)  # fmt: skip
+        d_up = F.interpolate(self._depth(low), scale_factor=float(s), mode="bilinear", align_corners=False)
+        return torch.clamp(ao + self.refine(torch.cat([ao, x, d_up], dim=1)), 0.0, 1.0)
+
+
+class PaddedUNet(nn.Module):
+    """Any resolution: reflect-pad bottom/right to ``pad_multiple``, run the U-Net, crop back.
+
+    x : (N, 4, H, W) float32, radius : (N, 1, 1, 1) float32 -> (N, 1, H, W) float32. Same padding
+    as :func:`pad_to_multiple`.
+    """
+
+    def __init__(self, unet: UNet):
+        super().__init__()
+        self.unet = unet
+
+    def forward(self, x: torch.Tensor, radius: torch.Tensor | None = None) -> torch.Tensor:
+        h, w = x.shape[-2:]
+        m = self.unet.pad_multiple
+        check_padable(h, w, m)
+        ph, pw = pad_amount(h, w, m)
+        if ph or pw:
+            x = F.pad(x, (0, pw, 0, ph), mode="reflect")
+        return self.unet(x, radius)[..., :h, :w]
+
+
+def build_model(model_args: dict | UNetArgs | None = None) -> UNet:
+    """UNet from a ``model_args`` dict (as stored in checkpoints) or a :class:`UNetArgs`."""
+    if isinstance(model_args, UNetArgs) or model_args is None:
+        return UNet(model_args)
+    from pipeline.foundation.settings import from_dict
+
+    model_args = dict(model_args)
+    model_args.setdefault("radius_input", False)  # checkpoints from before the radius input
+    return UNet(from_dict(UNetArgs, model_args))
+
+
+def model_args_dict(args: UNetArgs) -> dict:
+    return {
+        k: (list(v) if isinstance(v, Sequence) and not isinstance(v, str) else v)
+        for k, v in asdict(args).items()
+    }
+
+
+def count_parameters(model: nn.Module) -> int:
+    return int(sum(p.numel() for p in model.parameters()))
+
+
+def radius_tensor(rho: float | None) -> torch.Tensor | None:
+    """The radius parameter as the network's (1, 1, 1, 1) float32 input (None stays None)."""
+    return None if rho is None else torch.full((1, 1, 1, 1), float(rho), dtype=torch.float32)
+
+
+def predict(model: UNet, x: np.ndarray, rho: float | None = None) -> np.ndarray:
+    """Torch reference inference at any size. x : (4, H, W) float32, rho : the radius parameter
+    (:func:`radius_param`; required by radius-input models) -> (H, W) float32 (raw network output)."""
+    model.eval()
+    with torch.no_grad():
+        y = PaddedUNet(model)(
+            torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))[None], radius_tensor(rho)
+        )
+    return y[0, 0].numpy()

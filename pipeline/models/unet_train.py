@@ -1,0 +1,906 @@
+"""`neuralao train unet`: train the DeepAO U-Net with a masked 1 - SSIM loss; resumable, deterministic.
+
+Data: frames of the dataset's ``train`` scenes (held-back views excluded), preprocessed ONCE per
+whole frame with :func:`pipeline.models.unet.preprocess` (so the depth normalisation of a crop is that of
+its frame, exactly as at run time), then random square crops with horizontal / vertical flips
+(flips negate n_x / n_y). Frames may differ in size (a corpus of several resolutions): crops are
+the same size whatever the frame, so a batch mixes them. Validation: whole frames of the ``val``
+scenes every epoch (held-back views of the training scenes when the dataset has no val scene).
+
+Loss: 1 - SSIM (Gaussian window 11, sigma 1.5, C1 = 1e-4, C2 = 9e-4) averaged over the pixels
+whose label is valid; before SSIM the prediction is replaced by the label outside the mask, so
+background never enters the statistics of a window. A constant crop gives SSIM = 1 (C1, C2 keep
+the ratio finite); a batch without any valid pixel gives a zero loss.
+
+Checkpoints: written atomically after every epoch to ``OUT.partial`` (model, optimizer, RNG
+states, history); the final one is renamed onto ``OUT`` at the end, so an interrupted run leaves
+no ``OUT`` (make reruns the target) and a rerun continues from the partial file. Every random
+choice comes from one seeded generator whose state is checkpointed, so interrupted + resumed
+equals uninterrupted bit for bit (same machine and thread count).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
+from pipeline.models.checkpoint import restore_model, save_checkpoint
+from pipeline.models.unet import (
+    PREPROCESS_DESCRIPTION,
+    PaddedUNet,
+    UNet,
+    UNetArgs,
+    build_model,
+    frame_radius_param,
+    model_args_dict,
+    preprocess_frame,
+)
+
+log = logging.getLogger(__name__)
+
+KIND = "unet"
+FORMAT_VERSION = 1
+
+
+@dataclass
+class UNetTrainSettings:
+    """Settings of `neuralao train unet` (stored resolved in the checkpoint under "config")."""
+
+    epochs: int = 30  # passes over the training frames (crops_per_frame crops of each frame per pass)
+    batch_size: int = 16  # crops per Adam step (paper: 16)
+    # Adam learning rate. The paper uses 1e-4; on the demo budget (a few minutes on 2 CPU cores) 1e-4
+    # is still far from converged after 30 epochs, so the demo default is 1e-3 (see the report).
+    lr: float = 1e-3
+    weight_decay: float = 0.0  # Adam L2 weight decay
+    crop: int = 64  # square crop side in pixels (a multiple of 2**depth; 0 = whole frames, all the same size)
+    crops_per_frame: int = 2  # random crops drawn from each training frame per epoch
+    min_foreground: float = 0.1  # a crop should have at least this fraction of valid pixels (best of 8 tries)
+    hflip: bool = True  # random horizontal flips (negates camera-space n_x)
+    vflip: bool = True  # random vertical flips (negates camera-space n_y)
+    widths: list[int] = field(
+        default_factory=lambda: [4, 8, 16, 32]
+    )  # channels per U-Net level (paper 4/8/16/32)
+    negative_slope: float = 0.01  # LeakyReLU slope (paper 0.01)
+    ssim_window: int = 11  # SSIM Gaussian window side in pixels (paper 11)
+    ssim_sigma: float = 1.5  # SSIM Gaussian window sigma (Wang et al. 2004)
+    ssim_c1: float = 1e-4  # SSIM C1 = (0.01 L)^2 with L = 1
+    ssim_c2: float = 9e-4  # SSIM C2 = (0.03 L)^2 with L = 1
+    seed: int = 0  # seeds weight init (torch.manual_seed) and the crop / flip / order / radius generator
+    threads: int = 0  # torch intra-op threads (0 = torch's default); fixed for bitwise-reproducible runs
+    # Architecture beyond the widths: the G-buffer resolution divisor of the variant (1, 2 or 4) and the
+    # width of its full-resolution refinement (see pipeline.models.unet.UNet).
+    scale: int = 1
+    refine_width: int = 4
+    # Learning-rate schedule over all steps: "constant", or "cosine" (linear warm-up over warmup_steps,
+    # then cosine decay to lr * min_lr_ratio at the last step).
+    lr_schedule: str = "constant"
+    warmup_steps: int = 0
+    min_lr_ratio: float = 0.05
+    # Wall-clock budget in minutes (0 = none: train `epochs` epochs). With a budget, a short calibration on
+    # a copy of the model (10 steps, one validation pass) measures the cost of an epoch and fixes the epoch
+    # count so the run ends within the budget; the plan is stored in the checkpoint, so a resumed run
+    # follows the same plan and ends with the same weights as an uninterrupted one. `epochs` is then an upper
+    # bound. A budget run's schedule should be "cosine" (the end is known in advance).
+    budget_minutes: float = 0.0
+    train_fraction: float = 1.0  # train on this fraction of the training scenes (the corpus-size study)
+    val_frames: int = 0  # validate on at most this many frames, evenly spaced (0 = all)
+    device: str = "auto"  # "auto" (CUDA when torch sees a device), "cpu" or "cuda"
+    init: str = ""  # checkpoint to start from (weights whose shapes match are copied; e.g. the full-res
+    # network for a reduced-resolution variant, whose refinement then starts from scratch)
+    # Rows the network runs at: every frame is point-sampled to it (labels too; shorter frames up), as
+    # inference does (runtime.internal_resolution), so the radius input always means the same number of
+    # pixels. 0 = every frame at its own size. Exported models declare it (metadata internal_height).
+    internal_height: int = 256
+    # Hybrid: GTAO's AO at each label radius (runtime.baselines, computed on the frame before any
+    # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
+    gtao_input: bool = False
+
+
+# ----------------------------------------------------------------------------------------------- loss
+
+
+def gaussian_window(size: int, sigma: float) -> torch.Tensor:
+    """(size,) float32 normalised 1-D Gaussian."""
+    r = torch.arange(size, dtype=torch.float64) - (size - 1) / 2.0
+    g = torch.exp(-(r**2) / (2.0 * sigma**2))
+    return (g / g.sum()).to(torch.float32)
+
+
+def ssim_map(
+    x: torch.Tensor, y: torch.Tensor, window: int = 11, sigma: float = 1.5, c1: float = 1e-4, c2: float = 9e-4
+) -> torch.Tensor:
+    """Per-pixel SSIM of (N, 1, H, W) float32 images (Gaussian window, replicate padding) -> (N, 1, H, W)."""
+    g = gaussian_window(window, sigma).to(x.device)
+    stats = torch.cat([x, y, x * x, y * y, x * y], dim=1)
+    p = window // 2
+    stats = F.pad(stats, (p, p, p, p), mode="replicate")
+    stats = F.conv2d(stats, g.view(1, 1, 1, -1).expand(5, 1, 1, window).contiguous(), groups=5)
+    stats = F.conv2d(stats, g.view(1, 1, -1, 1).expand(5, 1, window, 1).contiguous(), groups=5)
+    mx, my, exx, eyy, exy = stats.split(1, dim=1)
+    vx, vy, cxy = exx - mx * mx, eyy - my * my, exy - mx * my
+    return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
+
+
+def masked_ssim_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, **ssim_kw) -> torch.Tensor:
+    """1 - mean SSIM over mask pixels. pred, target, mask : (N, 1, H, W) float32 (mask 0/1). Scalar.
+
+    Outside the mask the prediction is replaced by the target (background is identical in both,
+    so it never affects a window's statistics); no mask pixel at all -> 0 (still differentiable).
+    """
+    m = mask > 0.5
+    total = m.sum()
+    if int(total) == 0:
+        return (pred * 0.0).sum()
+    s = ssim_map(torch.where(m, pred, target), target, **ssim_kw)
+    return 1.0 - s[m].sum() / total
+
+
+def _ssim_kw(settings: UNetTrainSettings) -> dict:
+    return {
+        "window": settings.ssim_window,
+        "sigma": settings.ssim_sigma,
+        "c1": settings.ssim_c1,
+        "c2": settings.ssim_c2,
+    }
+
+
+# ----------------------------------------------------------------------------------------------- data
+
+
+@dataclass
+class FrameSet:
+    """Preprocessed frames in memory, with labels at K radii.
+
+    x : (N, 4, H, W) float32 network input; y : (N, K, H, W) float16 AO labels (exact: binary-kernel
+    labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
+    radius parameters (:func:`pipeline.models.unet.radius_param`); radii : (N, K) float32 radii in scene
+    units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
+    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that
+    indexes them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the
+    network's input for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
+    """
+
+    x: torch.Tensor | list[torch.Tensor]
+    y: torch.Tensor | list[torch.Tensor]
+    m: torch.Tensor | list[torch.Tensor]
+    rho: torch.Tensor
+    radii: torch.Tensor
+    names: list[str]
+    scenes: list[str]
+    g: torch.Tensor | list[torch.Tensor] | None = None  # hybrid: GTAO (N, K, H, W) float16 at each radius
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def sizes(self) -> list[tuple[int, int]]:
+        """(H, W) of every frame."""
+        if isinstance(self.x, torch.Tensor):
+            return [tuple(self.x.shape[-2:])] * len(self)
+        return [tuple(x.shape[-2:]) for x in self.x]
+
+    def subset(self, index: list[int]) -> FrameSet:
+        i = torch.as_tensor(index, dtype=torch.int64)
+        pick = lambda a: None if a is None else a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index]  # noqa: E731
+        return FrameSet(pick(self.x), pick(self.y), pick(self.m), self.rho[i], self.radii[i],
+                        [self.names[k] for k in index], [self.scenes[k] for k in index], pick(self.g))  # fmt: skip
+
+
+def network_input(data: FrameSet, f: int, j: int) -> torch.Tensor:
+    """(C, H, W) float32 input of frame ``f`` at radius index ``j``: the G-buffer channels, and for a
+    hybrid set GTAO at that radius as the fifth."""
+    if data.g is None:
+        return data.x[f]
+    return torch.cat([data.x[f], data.g[f][j : j + 1].float()], dim=0)
+
+
+def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ao (K, H, W) float32, valid (K, H, W) bool, radii (K,) float32) of a frame's labels at every radius.
+
+    Frames from a dataset with ``labels.radii_rel`` carry ``ao_radii``/``valid_radii``/``radii``; others
+    are refused (the network takes the radius as an input, so it needs to know each label's radius).
+    """
+    name = f"{frame.get('scene', '?')}/{frame.get('view', '?')}"
+    if not all(k in frame for k in ("ao_radii", "valid_radii", "radii")):
+        raise NeuralaoError(
+            f"frame {name} has no labels at known radii (ao_radii, valid_radii, radii): "
+            "build the dataset with labels.radii_rel set"
+        )
+    ao = np.moveaxis(np.asarray(frame["ao_radii"], dtype=np.float32), -1, 0)
+    valid = np.moveaxis(np.asarray(frame["valid_radii"], dtype=bool), -1, 0)
+    return ao, valid, np.asarray(frame["radii"], dtype=np.float32).reshape(-1)
+
+
+def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> FrameSet:
+    """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
+    every frame has one size, else per-frame lists).
+
+    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels included
+    (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not change, it is
+    relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame as rendered
+    (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
+    ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
+    only the compact arrays are kept.
+    """
+    from runtime.internal_resolution import downsample_frame, internal_size
+
+    xs, ys, ms, gs, rhos, radii, names, scenes = [], [], [], [], [], [], [], []
+    count = None
+    for i, f in enumerate(frames):
+        _, _, r = frame_labels(f)
+        if count is None:
+            count = len(r)
+        elif len(r) != count:
+            raise NeuralaoError(
+                f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset"
+            )
+        if gtao:
+            from runtime.baselines import run_gtao
+
+            f = f | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
+        h, w = np.shape(f["depth"])
+        lw, lh = internal_size(w, h, internal_height or None)
+        if (lw, lh) != (w, h):
+            f = downsample_frame(f, lw, lh)
+        ao, valid, r = frame_labels(f)
+        xs.append(torch.from_numpy(preprocess_frame(f)))
+        ys.append(torch.from_numpy(ao.astype(np.float16)))
+        ms.append(torch.from_numpy(valid & np.asarray(f["mask"], dtype=bool)[None]))
+        if gtao:
+            gs.append(torch.from_numpy(np.moveaxis(f["gtao_radii"], -1, 0).astype(np.float16)))
+        rhos.append([frame_radius_param(f, float(v)) for v in r])
+        radii.append(r)
+        scene = str(f.get("scene", "frames"))
+        names.append(f"{scene}/{f.get('view', i)}")
+        scenes.append(scene)
+    if not names:
+        raise NeuralaoError("no frames to train or validate on")
+    g = gs if gtao else None
+    if len({x.shape for x in xs}) == 1:
+        xs, ys, ms = torch.stack(xs), torch.stack(ys), torch.stack(ms)
+        g = torch.stack(gs) if gtao else None
+    return FrameSet(xs, ys, ms, torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)),
+                    names, scenes, g)  # fmt: skip
+
+
+def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
+    """The training scenes a ``train_fraction`` keeps: every k-th of the sorted scenes (all at 1)."""
+    if not 0.0 < train_fraction <= 1.0:
+        raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
+    scenes = sorted(train_scenes)
+    n = max(1, round(len(scenes) * train_fraction))  # n = all of them at 1
+    return [scenes[int(i * len(scenes) / n)] for i in range(n)]
+
+
+def load_dataset_frames(
+    data: Path,
+    train_fraction: float = 1.0,
+    loaded: tuple | None = None,
+    internal_height: int = 0,
+    gtao: bool = False,
+) -> tuple[FrameSet, FrameSet | None, dict]:
+    """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
+
+    ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
+    the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
+    dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
+    instead of read from disk again. ``internal_height`` and ``gtao``: see :func:`frames_to_set`.
+    """
+    from pipeline.datasets.dataset import open_dataset
+
+    ds = open_dataset(data)
+    train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
+    if not train_scenes:
+        raise NeuralaoError(f"dataset {data} has no training frames (no scene with split 'train')")
+    keep_set = set(kept_training_scenes(train_scenes, train_fraction))
+    val_source = "val scenes"
+    has_val = any(e["split"] == "val" for e in ds.manifest["shards"])
+    if not has_val:
+        val_source = "held-back views of the training scenes (the dataset has no val scene)"
+    if loaded is not None:
+        full, val, full_info = loaded
+        if (full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
+                or full_info.get("internal_height") != internal_height or full_info.get("gtao") != gtao):  # fmt: skip
+            raise NeuralaoError(
+                "load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1"
+            )
+        train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
+    else:
+        train = frames_to_set((f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
+                              internal_height, gtao)  # fmt: skip
+        val = frames_to_set(ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
+                            internal_height, gtao)  # fmt: skip
+    info = {
+        "path": str(data),
+        "name": ds.manifest.get("name"),
+        "dataset_hash": ds.manifest.get("dataset_hash"),
+        "labels": ds.manifest.get("config", {}).get("labels"),
+        "training_scenes": sorted(set(train.scenes)),
+        "val_scenes": sorted(set(val.scenes)),
+        "val_source": val_source,
+        "train_frames": len(train),
+        "val_frames": len(val),
+        "train_fraction": train_fraction,
+        "internal_height": internal_height,
+        "gtao": gtao,
+    }
+    return train, val, info
+
+
+def _integral(m: torch.Tensor) -> torch.Tensor:
+    """(N, H, W) bool mask -> (N, H+1, W+1) int32 summed-area table."""
+    s = torch.zeros(m.shape[0], m.shape[1] + 1, m.shape[2] + 1, dtype=torch.int32)
+    s[:, 1:, 1:] = m.to(torch.int32).cumsum(1).cumsum(2)
+    return s
+
+
+@dataclass
+class Foreground:
+    """Summed-area tables of every frame's foreground, end to end: entry (i, j) of frame f (0 <= i <= H_f,
+    0 <= j <= W_f) is ``table[offset[f] + i * stride[f] + j]`` with stride W_f + 1. table : (T,) int32;
+    offset, stride : (N,) int64. One flat table holds frames of any sizes with one gather per lookup."""
+
+    table: torch.Tensor
+    offset: torch.Tensor
+    stride: torch.Tensor
+
+    @classmethod
+    def of(cls, data: FrameSet) -> Foreground:
+        if isinstance(data.x, torch.Tensor):
+            tables = [_integral(data.x[:, 0] > 0)]
+        else:
+            tables = [_integral(x[None, 0] > 0) for x in data.x]
+        sizes = torch.tensor([(h + 1) * (w + 1) for h, w in data.sizes], dtype=torch.int64)
+        offset = torch.cumsum(sizes, 0) - sizes
+        stride = torch.tensor([w + 1 for _, w in data.sizes], dtype=torch.int64)
+        return cls(torch.cat([t.reshape(-1) for t in tables]), offset, stride)
+
+    def count(self, frame: torch.Tensor, top: torch.Tensor, left: torch.Tensor, c: int) -> torch.Tensor:
+        """Foreground pixels in the c x c squares at (top, left) of ``frame`` (broadcast int64 tensors)."""
+        base, row = self.offset[frame], self.stride[frame]
+
+        def at(i, j):
+            return self.table[base + i * row + j]
+
+        return at(top + c, left + c) - at(top, left + c) - at(top + c, left) + at(top, left)
+
+
+@dataclass
+class EpochPlan:
+    """Which crop of which frame, at which radius, each sample of an epoch uses. (S,) int64 / bool tensors."""
+
+    frame: torch.Tensor
+    top: torch.Tensor
+    left: torch.Tensor
+    hflip: torch.Tensor
+    vflip: torch.Tensor
+    radius: torch.Tensor
+
+
+def plan_epoch(
+    data: FrameSet, fg_table: Foreground, settings: UNetTrainSettings, gen: torch.Generator
+) -> EpochPlan:
+    """Draw the order, crops, flips and radii of one epoch from ``gen`` (the only randomness in training)."""
+    n = len(data)
+    sizes = sorted(set(data.sizes))
+    h, w = sizes[0]
+    if not settings.crop and len(sizes) > 1:
+        raise NeuralaoError(f"crop 0 (whole frames) needs frames of one size, not {len(sizes)}: set a crop")
+    c = settings.crop or min(h, w)
+    small_h, small_w = min(sizes, key=min)  # the frame with the shortest side
+    if settings.crop and settings.crop > min(small_h, small_w):
+        raise NeuralaoError(f"crop {settings.crop} is larger than the frames ({small_w}x{small_h}); "
+                            f"set crop<= {min(small_h, small_w)} or 0")  # fmt: skip
+    frames = torch.cat([torch.randperm(n, generator=gen) for _ in range(settings.crops_per_frame)])
+    s = len(frames)
+    tries = 8
+    if len(sizes) == 1:
+        tops = torch.randint(0, h - c + 1, (s, tries), generator=gen)
+        lefts = torch.randint(0, w - c + 1, (s, tries), generator=gen)
+    else:  # each frame's own range: uniform draws scaled to it (float64: never reaches the range's end)
+        hw = torch.tensor(data.sizes, dtype=torch.float64)[frames] - c + 1
+        tops = (torch.rand((s, tries), generator=gen, dtype=torch.float64) * hw[:, :1]).long()
+        lefts = (torch.rand((s, tries), generator=gen, dtype=torch.float64) * hw[:, 1:]).long()
+    hflip = (torch.rand(s, generator=gen) < 0.5) & settings.hflip
+    vflip = (torch.rand(s, generator=gen) < 0.5) & settings.vflip
+    radius = torch.randint(0, data.rho.shape[1], (s,), generator=gen)
+    if settings.crop:
+        fi = frames[:, None].expand(s, tries)
+        fg = fg_table.count(fi, tops, lefts, c).double() / float(c * c)
+        ok = fg >= settings.min_foreground
+        pick = torch.where(ok.any(1), ok.to(torch.int64).argmax(1), fg.argmax(1))
+        top, left = tops[torch.arange(s), pick], lefts[torch.arange(s), pick]
+    else:
+        top = left = torch.zeros(s, dtype=torch.int64)
+    return EpochPlan(frames, top, left, hflip, vflip, radius)
+
+
+def make_batch(
+    data: FrameSet, plan: EpochPlan, idx: range, crop: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[str]]:
+    """Crops + flips for samples ``idx`` of ``plan``: x (B, 4, c, c), rho (B, 1, 1, 1), y (B, 1, c, c)
+    float32, m (B, 1, c, c) float32 0/1, names."""
+    from pipeline.models.unet import flip_input
+
+    xs, rs, ys, ms, names = [], [], [], [], []
+    for k in idx:
+        f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
+        ch, cw = (crop, crop) if crop else data.x[f].shape[-2:]
+        x = network_input(data, f, j)[None, :, t : t + ch, l0 : l0 + cw]
+        y = data.y[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
+        m = data.m[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
+        if plan.hflip[k]:
+            x, y, m = flip_input(x, horizontal=True), y.flip(-1), m.flip(-1)
+        if plan.vflip[k]:
+            x, y, m = flip_input(x, horizontal=False), y.flip(-2), m.flip(-2)
+        xs.append(x)
+        rs.append(data.rho[f, j].view(1, 1, 1, 1))
+        ys.append(y)
+        ms.append(m)
+        names.append(data.names[f])
+    return torch.cat(xs), torch.cat(rs), torch.cat(ys), torch.cat(ms), names
+
+
+def lr_at(settings: UNetTrainSettings, step: int, total: int) -> float:
+    """Learning rate of 0-based ``step`` of ``total`` under ``settings.lr_schedule``."""
+    if settings.lr_schedule == "constant":
+        return settings.lr
+    if settings.lr_schedule != "cosine":
+        raise NeuralaoError(f"lr_schedule must be 'constant' or 'cosine', got {settings.lr_schedule!r}")
+    if step < settings.warmup_steps:
+        return settings.lr * (step + 1) / settings.warmup_steps
+    span = max(1, total - settings.warmup_steps - 1)
+    t = min(1.0, (step - settings.warmup_steps) / span)
+    low = settings.lr * settings.min_lr_ratio
+    return low + 0.5 * (settings.lr - low) * (1.0 + math.cos(math.pi * t))
+
+
+# ----------------------------------------------------------------------------------------------- metrics
+
+
+def _metric_fns():
+    """masked_ssim / masked_rmse from pipeline.foundation.metrics (shared with the MLP and the report)."""
+    try:
+        from pipeline.foundation.metrics import masked_rmse, masked_ssim
+    except ImportError:  # TEMPORARY until pipeline/foundation/metrics.py lands
+
+        def masked_ssim(pred, ref, mask):
+            t = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))[None, None]  # noqa: E731
+            return float(ssim_map(t(pred), t(ref))[t(mask) > 0.5].mean())
+
+        def masked_rmse(pred, ref, mask):
+            return float(np.sqrt(np.mean((pred[mask] - ref[mask]) ** 2)))
+
+    return masked_ssim, masked_rmse
+
+
+def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") -> dict:
+    """Whole-frame validation at every radius: mean masked SSIM and RMSE over (frame, radius) pairs,
+    per scene and per radius index.
+
+    The prediction is composited like every consumer does (background -> 1) before scoring.
+    """
+    masked_ssim, masked_rmse = _metric_fns()
+    model.eval()
+    wrapper = PaddedUNet(model)
+    per = []  # (scene, radius index, ssim, rmse)
+    with torch.no_grad():
+        for i in range(len(data)):
+            fg = data.x[i][0].numpy() > 0
+            for j in range(data.rho.shape[1]):
+                mask = data.m[i][j].numpy()
+                if not mask.any():
+                    continue
+                x = network_input(data, i, j)[None]
+                pred = wrapper(x.to(device), data.rho[i, j].view(1, 1, 1, 1).to(device))[0, 0].cpu().numpy()
+                pred = np.where(fg, pred, 1.0).astype(np.float32)  # background -> 1
+                ref = data.y[i][j].float().numpy()
+                per.append(
+                    (
+                        data.scenes[i],
+                        j,
+                        float(masked_ssim(pred, ref, mask)),
+                        float(masked_rmse(pred, ref, mask)),
+                    )
+                )
+    if not per:
+        return {}
+
+    def mean(rows, k):
+        return float(np.mean([r[k] for r in rows]))
+
+    scenes = sorted({r[0] for r in per})
+    radii = sorted({r[1] for r in per})
+    return {
+        "val_ssim": mean(per, 2),
+        "val_rmse": mean(per, 3),
+        "val_frames": len(data),
+        "val_pairs": len(per),
+        "per_scene": {s: {"ssim": mean([r for r in per if r[0] == s], 2), "rmse": mean([r for r in per if r[0] == s], 3)}
+                      for s in scenes},
+        "per_radius": [{"index": j, "ssim": mean([r for r in per if r[1] == j], 2), "rmse": mean([r for r in per if r[1] == j], 3)}
+                       for j in radii],
+    }  # fmt: skip
+
+
+def validation_subset(data: FrameSet | None, count: int) -> FrameSet | None:
+    """At most ``count`` frames of ``data``, evenly spaced (all when count is 0 or larger than the set)."""
+    if data is None or count <= 0 or count >= len(data):
+        return data
+    return data.subset([int(i * len(data) / count) for i in range(count)])
+
+
+# ----------------------------------------------------------------------------------------------- checkpoints
+
+
+def partial_path(out: Path) -> Path:
+    return out.with_name(out.name + ".partial")
+
+
+def load_checkpoint(path: str | Path) -> dict:
+    """Load a U-Net checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line error."""
+    return _load_checkpoint(path, KIND, "a U-Net")
+
+
+def model_from_checkpoint(ckpt: dict) -> UNet:
+    return restore_model(build_model, ckpt)
+
+
+def _resume_key(config: dict, dataset_hash: str | None) -> dict:
+    """What must match for a checkpoint to be continued: everything but the device, and but the epoch
+    count under a constant learning rate without a budget (a continued run may then add epochs)."""
+    free = {"device"} | ({"epochs"} if config.get("lr_schedule", "constant") == "constant"
+                         and not config.get("budget_minutes") else set())  # fmt: skip
+    return {"config": {k: v for k, v in config.items() if k not in free}, "dataset_hash": dataset_hash}
+
+
+def _find_resumable(out: Path, key: dict, epochs: int) -> dict | None:
+    for path in (partial_path(out), out):
+        if not path.exists():
+            continue
+        ckpt = load_checkpoint(path)
+        if _resume_key(ckpt["config"], ckpt.get("dataset", {}).get("dataset_hash")) != key:
+            log.warning("%s was trained with another config or dataset; starting over", path)
+            continue
+        if "optimizer" not in ckpt or "rng" not in ckpt:
+            continue
+        if ckpt["epoch"] > epochs:
+            log.warning(
+                "%s has %d epochs, more than the %d asked; starting over", path, ckpt["epoch"], epochs
+            )
+            continue
+        log.info("resuming from %s (epoch %d of %d)", path, ckpt["epoch"], epochs)
+        return ckpt
+    return None
+
+
+# ----------------------------------------------------------------------------------------------- training
+
+
+def pick_device(name: str) -> torch.device:
+    """ "auto" -> CUDA when torch sees a device, else the CPU; "cuda" without one is an error."""
+    if name not in ("auto", "cpu", "cuda"):
+        raise NeuralaoError(f"device must be auto, cpu or cuda, got {name!r}")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise NeuralaoError("device cuda asked but torch sees no CUDA device")
+    return torch.device("cuda" if name != "cpu" and torch.cuda.is_available() else "cpu")
+
+
+def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
+    return UNetArgs(in_channels=5 if settings.gtao_input else 4, widths=list(settings.widths),
+                    negative_slope=settings.negative_slope, radius_input=True, scale=int(settings.scale),
+                    refine_width=int(settings.refine_width), gtao_input=bool(settings.gtao_input))  # fmt: skip
+
+
+def _init_weights(model: UNet, path: str) -> dict:
+    """Copy every tensor of checkpoint ``path`` whose name and shape match; returns what was copied."""
+    src = load_checkpoint(path)["state_dict"]
+    own = model.state_dict()
+    copied = {k: v for k, v in src.items() if k in own and own[k].shape == v.shape}
+    own.update(copied)
+    model.load_state_dict(own)
+    return {"path": str(path), "tensors": len(copied), "of": len(own)}
+
+
+def _step(model, opt, xb, rb, yb, mb, kw, where: str, lr: float) -> float:
+    if not (torch.isfinite(xb).all() and torch.isfinite(yb).all()):
+        raise NeuralaoError(f"non-finite (NaN/inf) input or label in {where}; fix the dataset")
+    loss = masked_ssim_loss(PaddedUNet(model)(xb, rb), yb, mb, **kw)
+    if not torch.isfinite(loss):
+        raise NeuralaoError(
+            f"loss is {float(loss.detach())} in {where}; lower lr (now {lr:g}) or check the data"
+        )
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    return float(loss.detach())
+
+
+def calibrate(
+    model: UNet,
+    settings: UNetTrainSettings,
+    train_set: FrameSet,
+    val_set: FrameSet | None,
+    sat: Foreground,
+    device: torch.device,
+    steps: int = 10,
+) -> dict:
+    """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
+    with batches from a separate generator (the run's own state and randomness are untouched)."""
+    import copy
+
+    probe = copy.deepcopy(model)
+    opt = torch.optim.Adam(probe.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
+    plan = plan_epoch(train_set, sat, settings, torch.Generator().manual_seed(settings.seed + 7919))
+    kw = _ssim_kw(settings)
+    times = []
+    for k in range(steps + 2):
+        idx = range(k * settings.batch_size, min((k + 1) * settings.batch_size, len(plan.frame)))
+        if not len(idx):
+            break
+        xb, rb, yb, mb, _ = make_batch(train_set, plan, idx, settings.crop)
+        t0 = time.perf_counter()
+        probe.train()
+        _step(
+            probe,
+            opt,
+            xb.to(device),
+            rb.to(device),
+            yb.to(device),
+            mb.to(device),
+            kw,
+            "calibration",
+            settings.lr,
+        )
+        times.append(time.perf_counter() - t0)
+    per_step = float(np.median(times[2:] or times))  # the first steps warm up allocators
+    t0 = time.perf_counter()
+    if val_set is not None:
+        evaluate(probe, val_set, device)
+    return {"seconds_per_step": per_step, "val_seconds": time.perf_counter() - t0}
+
+
+def plan_budget(settings: UNetTrainSettings, steps_per_epoch: int, cal: dict) -> int:
+    """Epochs that fit ``budget_minutes`` at the calibrated cost (at least 1, at most ``epochs``)."""
+    per_epoch = steps_per_epoch * cal["seconds_per_step"] + cal["val_seconds"]
+    return int(max(1, min(settings.epochs, math.floor(settings.budget_minutes * 60.0 / per_epoch))))
+
+
+def train(
+    settings: UNetTrainSettings,
+    train_set: FrameSet,
+    val_set: FrameSet | None,
+    out: Path,
+    dataset_info: dict | None = None,
+    restart: bool = False,
+    progress: bool = False,
+    on_epoch_end: Callable[[int, dict], None] | None = None,
+) -> dict:
+    """Train (or continue training) and write the final checkpoint to ``out``. Returns the checkpoint dict.
+
+    ``on_epoch_end(epoch, ckpt)`` runs after each epoch's checkpoint is on disk (tests use it to
+    simulate an interruption).
+    """
+    from tqdm import tqdm
+
+    out = Path(out)
+    if settings.epochs < 1 or settings.batch_size < 1 or settings.crops_per_frame < 1:
+        raise NeuralaoError("epochs, batch_size and crops_per_frame must be >= 1")
+    if settings.budget_minutes < 0 or not math.isfinite(settings.budget_minutes):
+        raise NeuralaoError(f"budget_minutes must be >= 0, got {settings.budget_minutes}")
+    lr_at(settings, 0, 1)  # validates the schedule name
+    args = model_args_of(settings)
+    model = UNet(args)  # validates widths / scale
+    if settings.crop and settings.crop % args.pad_multiple:
+        raise NeuralaoError(
+            f"crop {settings.crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)"
+        )
+    if out.exists() and not restart:
+        load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
+    device = pick_device(settings.device)
+    info = dict(dataset_info or {})
+    info.setdefault("training_scenes", sorted(set(train_set.scenes)))
+    info.setdefault("val_scenes", sorted(set(val_set.scenes)) if val_set is not None else [])
+    config = settings_to_dict(settings)
+    key = _resume_key(config, info.get("dataset_hash"))
+    val_set = validation_subset(val_set, settings.val_frames)
+
+    prev_det = torch.are_deterministic_algorithms_enabled()
+    prev_threads = torch.get_num_threads()
+    if device.type == "cuda":
+        import os
+
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS
+    torch.use_deterministic_algorithms(True)
+    if settings.threads:
+        torch.set_num_threads(settings.threads)
+    try:
+        torch.manual_seed(settings.seed)
+        model = UNet(args)
+        init_info = _init_weights(model, settings.init) if settings.init else None
+        model.to(device)
+        opt = torch.optim.Adam(model.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
+        gen = torch.Generator().manual_seed(settings.seed)
+        history: list[dict] = []
+        start, wall = 0, 0.0
+        plan_info: dict = {}
+        resumed = None if restart else _find_resumable(out, key, settings.epochs)
+        sat = Foreground.of(train_set)
+        steps_per_epoch = -(-len(train_set) * settings.crops_per_frame // settings.batch_size)
+        if resumed is not None:
+            model.load_state_dict(resumed["state_dict"])
+            opt.load_state_dict(resumed["optimizer"])
+            gen.set_state(resumed["rng"]["data"])
+            torch.set_rng_state(resumed["rng"]["torch"])
+            history = list(resumed["history"])
+            start = int(resumed["epoch"])
+            wall = float(resumed.get("wall_seconds", 0.0))
+            if settings.budget_minutes > 0:  # a budget run follows the plan it made when it started
+                plan_info = dict(resumed.get("plan", {}))
+        if not plan_info:
+            epochs = settings.epochs
+            plan_info = {"epochs": epochs, "steps_per_epoch": steps_per_epoch}
+            if settings.budget_minutes > 0:
+                cal = calibrate(model, settings, train_set, val_set, sat, device)
+                epochs = plan_budget(settings, steps_per_epoch, cal)
+                plan_info = {
+                    "epochs": epochs,
+                    "steps_per_epoch": steps_per_epoch,
+                    "budget_minutes": settings.budget_minutes,
+                    **cal,
+                }
+                log.info("budget %.1f min: %.3f s/step, %.1f s/validation -> %d epochs of %d steps",
+                         settings.budget_minutes, cal["seconds_per_step"], cal["val_seconds"], epochs, steps_per_epoch)  # fmt: skip
+        epochs = int(plan_info["epochs"])
+        total_steps = epochs * steps_per_epoch
+        kw = _ssim_kw(settings)
+        ckpt = resumed
+        bar = tqdm(range(start, epochs), desc="unet", unit="epoch", disable=not progress)
+        for epoch in bar:
+            t0 = time.perf_counter()
+            model.train()
+            plan = plan_epoch(train_set, sat, settings, gen)
+            n = len(plan.frame)
+            batches = [range(i, min(i + settings.batch_size, n)) for i in range(0, n, settings.batch_size)]
+            losses = []
+            for b, idx in enumerate(batches):
+                step = epoch * steps_per_epoch + b
+                lr = lr_at(settings, step, total_steps)
+                for g in opt.param_groups:
+                    g["lr"] = lr
+                xb, rb, yb, mb, names = make_batch(train_set, plan, idx, settings.crop)
+                where = (
+                    f"epoch {epoch + 1} batch {b + 1}/{len(batches)} (frames {', '.join(sorted(set(names)))})"
+                )
+                losses.append(
+                    _step(
+                        model, opt, xb.to(device), rb.to(device), yb.to(device), mb.to(device), kw, where, lr
+                    )
+                )
+            train_seconds = time.perf_counter() - t0
+            metrics = evaluate(model, val_set, device) if val_set is not None else {}
+            seconds = time.perf_counter() - t0
+            wall += seconds
+            record = {
+                "epoch": epoch + 1,
+                "train_loss": float(np.mean(losses)),
+                "lr": lr,
+                "train_seconds": train_seconds,
+                "seconds": seconds,
+                "wall_seconds": wall,
+                **{k: v for k, v in metrics.items() if k not in ("per_scene", "per_radius")},
+            }
+            history.append(record)
+            log.info(
+                "epoch %d/%d  loss %.4f  lr %.2g  val ssim %s  rmse %s  (%.1f s, %.1f min in all)",
+                epoch + 1,
+                epochs,
+                record["train_loss"],
+                lr,
+                f"{metrics['val_ssim']:.4f}" if metrics else "-",
+                f"{metrics['val_rmse']:.4f}" if metrics else "-",
+                seconds,
+                wall / 60.0,
+            )
+            bar.set_postfix(
+                loss=f"{record['train_loss']:.4f}", val_ssim=f"{metrics.get('val_ssim', float('nan')):.4f}"
+            )
+            ckpt = {
+                "kind": KIND,
+                "format_version": FORMAT_VERSION,
+                "model_args": model_args_dict(args),
+                "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+                "config": config,
+                "preprocess": dict(PREPROCESS_DESCRIPTION),
+                "dataset": info,
+                "metrics": metrics,
+                "history": history,
+                "epoch": epoch + 1,
+                "plan": plan_info,
+                "init": init_info,
+                "wall_seconds": wall,
+                "device": device.type,
+                "complete": epoch + 1 == epochs,
+                "optimizer": opt.state_dict(),
+                "rng": {"data": gen.get_state(), "torch": torch.get_rng_state()},
+                "torch_version": str(torch.__version__),
+            }
+            save_checkpoint(partial_path(out), ckpt)
+            if on_epoch_end is not None:
+                on_epoch_end(epoch + 1, ckpt)
+        bar.close()
+    finally:
+        torch.use_deterministic_algorithms(prev_det)
+        torch.set_num_threads(prev_threads)
+    assert ckpt is not None
+    ckpt["complete"] = True
+    save_checkpoint(out, ckpt)
+    partial_path(out).unlink(missing_ok=True)
+    return ckpt
+
+
+# ----------------------------------------------------------------------------------------------- CLI
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--data",
+        required=True,
+        help="dataset folder (neuralao dataset): trains on 'train' scenes, validates on 'val'",
+    )
+    p.add_argument(
+        "--out", required=True, help="checkpoint MODEL.pt (progress in MODEL.pt.partial; a rerun resumes)"
+    )
+    p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
+    add_set_option(p, "--set epochs=3")
+    p.add_argument("--budget", type=float, metavar="MINUTES",
+                   help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)")  # fmt: skip
+    p.add_argument(
+        "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
+    settings = load_settings(UNetTrainSettings, args.config, overrides)
+    train_set, val_set, info = load_dataset_frames(Path(args.data), settings.train_fraction,
+                                                   internal_height=settings.internal_height, gtao=settings.gtao_input)  # fmt: skip
+    log.info(
+        "U-Net: %d training frames (%s), %d validation frames (%s)",
+        len(train_set),
+        ", ".join(info["training_scenes"]),
+        len(val_set) if val_set is not None else 0,
+        info["val_source"],
+    )
+    ckpt = train(
+        settings,
+        train_set,
+        val_set,
+        Path(args.out),
+        info,
+        restart=args.restart,
+        progress=not args.no_progress,
+    )
+    hist = ckpt["history"]
+    per_epoch = float(np.mean([h["seconds"] for h in hist])) if hist else math.nan
+    log.info(
+        "wrote %s: %d epochs, %.1f s/epoch, val SSIM %s",
+        args.out,
+        ckpt["epoch"],
+        per_epoch,
+        ckpt["metrics"].get("val_ssim"),
+    )
+    return 0

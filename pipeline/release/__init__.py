@@ -1,0 +1,1 @@
+"""Release: train, export, check and install the shipped models."""

@@ -1,0 +1,302 @@
+"""`neuralao ship CONFIG.json`: train, export, check and install the release models under ``runtime/models/``.
+
+One committed config (``configs/models.json``) names the corpus and every shipped model with its
+training settings (budget, widths, resolution, which model initialises it). For each model, in order:
+
+1. train (resumable; checkpoints under ``checkpoints``, never in the repository);
+2. export (ONNX + GLSL + manifest, with the torch / onnxruntime / OpenCV checks of ``export.unet``);
+3. parity of the generated GLSL against onnxruntime on real test frames (<= TOL.parity_unet_fp32);
+4. error on the test split (meshes no training scene uses) at every label radius, next to SSAO
+   and GTAO at the same radius (``pipeline.evaluation.test_split``), and GL time at ``time_sizes`` next to
+   SSAO's and GTAO's on the same G-buffer;
+5. provenance (dataset hash, commit, epochs, budget, wall time, validation and test metrics) into
+   the manifest AND the ONNX metadata; the folder must stay under ``max_bytes``;
+6. installed atomically: written to a temporary folder beside the target, then renamed onto it.
+
+``runtime/models/index.json`` lists the models, the defaults per kind (``neuralao infer`` and
+``neuralao report`` use them when given no export) and the baselines' figures of the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import sha256_file, write_json
+from pipeline.foundation.settings import from_dict, load_settings, settings_to_dict
+from pipeline.foundation.tolerances import TOL
+
+log = logging.getLogger(__name__)
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class ShippedModel:
+    """One release model: its name (folder), what initialises it, its training settings."""
+
+    name: str = ""
+    kind: str = "unet"
+    init: str = ""  # name of an earlier model of this config whose checkpoint initialises this one
+    train: dict = field(default_factory=dict)  # UNetTrainSettings fields
+
+
+@dataclass
+class ShipSettings:
+    """Settings of `neuralao ship` (configs/models.json)."""
+
+    dataset: str = "build/full/dataset"  # the corpus (neuralao dataset), relative to the repository
+    checkpoints: str = "build/ship"  # where training checkpoints go (never committed)
+    out: str = "runtime/models"  # where the release exports are installed
+    default: dict = field(default_factory=dict)  # kind -> model name used when no export is given
+    models: list[dict] = field(default_factory=list)  # ShippedModel fields
+    test_split: str = "test"
+    test_frames: int = 0  # evaluate on about this many test frames (0 = all)
+    parity_frames: int = 2  # real test frames for the GLSL parity (plus a crop of each)
+    time_sizes: list[list[int]] = field(default_factory=lambda: [[512, 512], [1920, 1080]])
+    time_repeats: int = 3
+    max_bytes: int = 1 << 20  # each installed folder must be smaller
+
+
+def git_commit() -> str:
+    """The repository's HEAD commit, with "+dirty" when tracked files differ from it ("unknown" outside git)."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
+                               text=True, check=True).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+dirty" if dirty else "")
+
+
+def _path(p: str) -> Path:
+    q = Path(p)
+    return q if q.is_absolute() else REPO / q
+
+
+def folder_bytes(folder: Path) -> int:
+    return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())
+
+
+def install(tmp: Path, target: Path) -> None:
+    """Replace ``target`` by ``tmp`` with renames only (an interrupted install leaves one of the two)."""
+    old = target.with_name(f".{target.name}.old")
+    if old.exists():
+        shutil.rmtree(old)
+    if target.exists():
+        target.rename(old)
+    tmp.rename(target)
+    if old.exists():
+        shutil.rmtree(old)
+
+
+def timing_frame(data: Path, split: str, size: tuple[int, int]) -> tuple[dict, float]:
+    """A G-buffer at ``size`` (W, H) from the pose of the split's first frame, and its label radius."""
+    from pipeline.datasets.dataset import open_dataset, scene_of
+    from pipeline.gbuffers.rasterizer import GBufferRenderer
+    from pipeline.geometry.camera import Camera
+
+    ds = open_dataset(data)
+    frame = next(iter(ds.frames(split=split)))
+    scene = scene_of(ds.manifest, frame["scene"])
+    w, h = size
+    cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]), float(frame["znear"]),
+                 float(frame["zfar"]))  # fmt: skip
+    with GBufferRenderer(scene) as r:
+        return r.render(cam), float(np.max(frame["radii"]))
+
+
+def baseline_figures(settings: ShipSettings, data: Path) -> dict:
+    """SSAO and GTAO on the test split (every radius) and their GL time at ``time_sizes``."""
+    from pipeline.evaluation.report import ReportSettings
+    from pipeline.evaluation.test_split import evaluate_split, screen_space_predictor
+    from runtime.baselines import time_screen_space
+
+    rs = ReportSettings()
+    methods = {"ssao": screen_space_predictor("ssao", rs.ssao), "gtao": screen_space_predictor("gtao", rs.gtao)}
+    test = evaluate_split(data, settings.test_split, methods, settings.test_frames)
+    times: dict[str, dict[str, float]] = {"ssao": {}, "gtao": {}}
+    for w, h in settings.time_sizes:
+        frame, radius = timing_frame(data, settings.test_split, (w, h))
+        for name in times:
+            times[name][f"{w}x{h}"] = time_screen_space(frame, name, radius, getattr(rs, name), repeats=settings.time_repeats * 4)
+    return {name: {"test": {k: v for k, v in test["methods"][name].items() if k != "per_scene"},
+                   "gl_seconds": times[name]} for name in methods}  # fmt: skip
+
+
+_LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
+
+
+def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str) -> dict:
+    """Train, export, check and install one model; returns its index entry."""
+    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+
+    if spec.kind != "unet":
+        raise NeuralaoError(f"model {spec.name}: only kind 'unet' can be shipped, got {spec.kind!r}")
+    train_cfg = dict(spec.train)
+    if spec.init:
+        if spec.init not in checkpoints:
+            raise NeuralaoError(f"model {spec.name}: init {spec.init!r} is not an earlier model of this config")
+        train_cfg["init"] = str(checkpoints[spec.init])
+    ts = from_dict(UNetTrainSettings, train_cfg, prefix=f"models.{spec.name}.train.")
+    ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
+    ckpt_path.parent.mkdir(parents=True, exist_ok=True)
+    # the corpus is ~13 GB on disk: read it once per way of reading it (internal height, GTAO input)
+    key = (str(data), int(ts.internal_height), bool(ts.gtao_input))
+    if _LOADED.get("key") != key:
+        _LOADED.clear()
+        _LOADED.update(key=key, sets=load_dataset_frames(data, internal_height=key[1], gtao=key[2]))
+    train_set, val_set, info = _LOADED["sets"]
+    if ts.train_fraction != 1.0:  # the corpus-size models: a subset cut from the frames in memory
+        train_set, val_set, info = load_dataset_frames(data, ts.train_fraction, loaded=_LOADED["sets"],
+                                                       internal_height=key[1], gtao=key[2])  # fmt: skip
+    log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
+    ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
+    checkpoints[spec.name] = ckpt_path
+
+    out = _path(settings.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".{spec.name}.tmp"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    try:
+        entry = _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, out, commit)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return entry
+
+
+def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, out, commit) -> dict:
+    from export.onnx_io import get_metadata, load_onnx, save_onnx
+    from export.unet import export_checkpoint, parity
+    from pipeline.datasets.dataset import open_dataset
+    from pipeline.evaluation.test_split import evaluate_split, unet_predictor
+    from runtime.glsl_runner import time_compute
+    from runtime.internal_resolution import internal_size
+
+    manifest = export_checkpoint(ckpt_path, tmp)
+    ds = open_dataset(data)
+    frames = []
+    for f in ds.frames(split=settings.test_split):
+        if len(frames) >= settings.parity_frames:
+            break
+        frames.append(f)
+    h0, w0 = frames[0]["depth"].shape
+    par = parity(tmp, frames=frames, sizes=[(w0 - w0 // 4 - 1, h0 - h0 // 4 - 1)])  # plus an odd-sized crop
+    if not par["passed"]:
+        raise NeuralaoError(f"model {spec.name}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > {par['tolerance']:g}")
+    # the model as a user runs it: at the internal height it declares (frames of any size resampled to it)
+    test = evaluate_split(data, settings.test_split, {"unet": unet_predictor(tmp / "model.onnx", "model")}, settings.test_frames)
+    unet_test = test["methods"]["unet"]
+    # the network's compute passes at the size it runs at for each frame size (its internal size when it
+    # declares one; the scaling passes and a hybrid's GTAO pass are timed beside it by bench/bench_shipped.py)
+    height = manifest.get("internal_height")
+    gl_seconds = {f"{w}x{h}": time_compute(tmp / "glsl", *internal_size(w, h, height)[::-1], repeats=settings.time_repeats)
+                  for w, h in settings.time_sizes}  # fmt: skip
+    provenance = {
+        "dataset_hash": info.get("dataset_hash"),
+        "dataset": str(settings.dataset),
+        "train_frames": info.get("train_frames"),
+        "train_fraction": info.get("train_fraction"),
+        "training_scenes": len(info.get("training_scenes", [])),
+        "commit": commit,
+        "config": str(spec.name),
+        "epochs": ckpt.get("epoch"),
+        "budget_minutes": ts.budget_minutes,
+        "wall_seconds": ckpt.get("wall_seconds"),
+        "device": ckpt.get("device"),
+        "plan": ckpt.get("plan", {}),
+        "init": spec.init or None,
+        "validation": {k: v for k, v in ckpt.get("metrics", {}).items() if k != "per_scene"},
+        "test": {k: v for k, v in unet_test.items() if k != "per_scene"},
+        "test_per_scene": unet_test["per_scene"],
+        "test_scenes": test["scenes"],
+        "test_frames": test["frames"],
+        "parity": {"glsl_vs_onnxruntime": par["max_abs_err"], "onnxruntime_vs_torch": manifest["checks"]["onnxruntime_vs_torch"],
+                   "tolerance_glsl": TOL.parity_unet_fp32, "tolerance_onnx": manifest["checks"]["tolerance"]["onnxruntime_vs_torch"]},
+        "gl_seconds": gl_seconds,
+        "history": [{k: h.get(k) for k in ("epoch", "wall_seconds", "val_ssim", "val_rmse", "train_loss", "lr")}
+                    for h in ckpt.get("history", [])],
+    }  # fmt: skip
+    onnx_path = tmp / "model.onnx"
+    proto = load_onnx(onnx_path)
+    meta = get_metadata(proto)
+    # (GL times are this machine's, not the model's: they stay in the manifest, so a rerun writes the same ONNX bytes)
+    meta["provenance"] = {k: v for k, v in provenance.items() if k not in ("history", "test_per_scene", "gl_seconds")}
+    save_onnx(proto, onnx_path, meta)
+    manifest.update(name=spec.name, onnx_sha256=sha256_file(onnx_path), metadata=meta, provenance=provenance)
+    manifest["checkpoint"] = {"file": ckpt_path.name, "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")}
+    write_json(tmp / "manifest.json", manifest)
+    size = folder_bytes(tmp)
+    if size > settings.max_bytes:
+        raise NeuralaoError(f"model {spec.name}: export is {size} bytes, over the {settings.max_bytes} limit")
+    install(tmp, out / spec.name)
+    log.info("%s: test SSIM %.4f RMSE %.4f, GL %s, %d bytes", spec.name, unet_test["ssim"], unet_test["rmse"],
+             ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in gl_seconds.items()), size)  # fmt: skip
+    return {"kind": spec.kind, "bytes": size, "test": provenance["test"], "gl_seconds": gl_seconds,
+            "epochs": ckpt.get("epoch"), "wall_seconds": ckpt.get("wall_seconds"), "scale": ckpt["model_args"].get("scale", 1),
+            "widths": ckpt["model_args"].get("widths"), "init": spec.init or None}  # fmt: skip
+
+
+def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
+    """Ship every model of ``settings`` (or those named in ``only``, which must keep their ``init`` order)."""
+    data = _path(settings.dataset)
+    if not (data / "manifest.json").is_file():
+        raise NeuralaoError(f"no corpus at {data} (run `make corpus` first)")
+    specs = [from_dict(ShippedModel, m, prefix="models.") for m in settings.models]
+    if not specs:
+        raise NeuralaoError("the config lists no models")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names) or not all(names):
+        raise NeuralaoError(f"model names must be unique and non-empty, got {names}")
+    for kind, name in settings.default.items():
+        if name not in names:
+            raise NeuralaoError(f"default {kind} model {name!r} is not one of {names}")
+    commit = git_commit()
+    out = _path(settings.out)
+    index_path = out / "index.json"
+    index = json.loads(index_path.read_text()) if index_path.is_file() else {}
+    index.setdefault("models", {})
+    checkpoints: dict[str, Path] = {}
+    t0 = time.perf_counter()
+    for spec in specs:
+        if only and spec.name not in only:
+            ckpt = _path(settings.checkpoints) / f"{spec.name}.pt"
+            if ckpt.is_file():
+                checkpoints[spec.name] = ckpt
+            continue
+        index["models"][spec.name] = ship_model(settings, spec, data, checkpoints, commit)
+        index.update(default=dict(settings.default), commit=commit, settings=settings_to_dict(settings))
+        write_json(index_path, index)  # after every model: a later failure keeps what was installed
+    _LOADED.clear()
+    index["baselines"] = baseline_figures(settings, data)
+    index["seconds"] = time.perf_counter() - t0
+    write_json(index_path, index)
+    return index
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", help="ship config JSON (configs/models.json)")
+    p.add_argument("--only", nargs="+", metavar="NAME", help="ship only these models (their init checkpoints must exist)")
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = load_settings(ShipSettings, args.config, [])
+    index = ship(settings, args.only)
+    for name, entry in index["models"].items():
+        log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
+    for name, entry in index.get("baselines", {}).items():
+        log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
+    log.info("installed %s under %s (index: %s)", ", ".join(index["models"]) or "nothing", settings.out,
+             Path(settings.out) / "index.json")  # fmt: skip
+    return 0
