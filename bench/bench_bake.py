@@ -10,7 +10,7 @@
    budget (same rays traced), and least squares at ``rays`` rays per surface sample. Ratios: LSQ
    RMSE over vertex RMSE.
 2. Regulariser: held-out RMSE of the least-squares fit against ``alpha`` (same traced samples),
-   the evidence for the default alpha = 1 (REG_SCALE in pipeline/bakes/vertex.py).
+   the evidence for the default alpha = 1 (REG_SCALE in pipeline/geometry/least_squares.py).
 3. Bake time of the largest test mesh (default ReciprocatingSaw, 198k faces) with the default
    ``neuralao bake`` settings (256 rays, 8 samples per vertex), both methods, split into sampling,
    tracing and solving.
@@ -29,17 +29,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bakes.vertex import (  # noqa: E402
-    BakeSettings,
-    bake,
-    fit_least_squares,
-    reference_at_samples,
-    surface_error,
-    surface_samples,
-)
+from pipeline.bakes.vertex import BakeSettings, bake, reference_at_samples  # noqa: E402
 from pipeline.evaluation.report import cpu_name
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
 from pipeline.geometry.scene import load_scene  # noqa: E402
+from pipeline.geometry.surface import surface_error, surface_samples  # noqa: E402
 from pipeline.tracing.labeller import Labeller  # noqa: E402
 
 ALPHAS = (0.0, 0.1, 1.0, 10.0, 100.0)

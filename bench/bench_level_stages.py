@@ -41,10 +41,11 @@ from pipeline.bakes.level import (  # noqa: E402
     receiver_samples,
     simplify,
 )
-from pipeline.bakes.vertex import fit_least_squares, surface_samples  # noqa: E402
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
 from pipeline.geometry.level_files import read_level  # noqa: E402
 from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from pipeline.geometry.surface import surface_samples  # noqa: E402
 from pipeline.tracing.level_tracer import (  # noqa: E402
     _RESAMPLE_RAYS,
     LevelLabeller,

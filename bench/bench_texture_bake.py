@@ -33,9 +33,10 @@ from pipeline.bakes.texture import (  # noqa: E402
     quantise,
     sample_bilinear,
 )
-from pipeline.bakes.vertex import BakeSettings, bake, interpolate, reference_at_samples, surface_samples  # noqa: E402
+from pipeline.bakes.vertex import BakeSettings, bake, reference_at_samples  # noqa: E402
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
 from pipeline.geometry.scene import load_scene  # noqa: E402
+from pipeline.geometry.surface import interpolate, surface_samples  # noqa: E402
 
 
 def png_bytes(image_u8: np.ndarray) -> int:

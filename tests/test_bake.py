@@ -14,21 +14,12 @@ import trimesh
 from helpers import box, merge
 
 from pipeline import cli
-from pipeline.bakes.vertex import (
-    BakeSettings,
-    bake,
-    fit_least_squares,
-    interpolate,
-    interpolation_matrix,
-    read_baked_mesh,
-    reference_at_samples,
-    surface_error,
-    surface_samples,
-    write_baked_mesh,
-)
+from pipeline.bakes.vertex import BakeSettings, bake, read_baked_mesh, reference_at_samples, write_baked_mesh
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.tolerances import TOL
+from pipeline.geometry.least_squares import fit_least_squares
 from pipeline.geometry.scene import scene_from_arrays
+from pipeline.geometry.surface import interpolate, interpolation_matrix, surface_error, surface_samples
 
 
 def grid_plane(half: float = 1.0, n: int = 2):

@@ -12,9 +12,9 @@ import trimesh
 
 from pipeline import cli
 from pipeline.bakes.level import bake_level, load_level_settings
-from pipeline.bakes.vertex import interpolate, vertex_colours
 from pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
 from pipeline.geometry.level_gen import settings_for, write_level
+from pipeline.geometry.surface import interpolate, vertex_colours
 
 
 @pytest.fixture(scope="module")

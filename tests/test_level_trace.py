@@ -11,10 +11,11 @@ from helpers import floor_quad, mc_bound, merge
 from scipy.special import expn
 
 from pipeline.bakes.level import TraceSettings, build_geometry, fit_global, linear_basis, receiver_samples
-from pipeline.bakes.vertex import fit_least_squares, surface_samples
+from pipeline.geometry.least_squares import fit_least_squares
 from pipeline.geometry.level_files import read_level
 from pipeline.geometry.level_gen import settings_for, write_level
 from pipeline.geometry.scene import scene_from_arrays
+from pipeline.geometry.surface import surface_samples
 from pipeline.tracing.foliage import Foliage, overlap_reduced
 from pipeline.tracing.labeller import Labeller, LabelSettings
 from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
@@ -227,7 +228,7 @@ def test_least_squares_columns_cg_and_amg_match_separate_direct_fits(tiny_geomet
 
 def test_edge_weights_match_unique_rows(tiny_geometry):
     """The 1-D keyed edge list (the fast path) is the lexicographic unique-rows one, weights bit for bit."""
-    from pipeline.bakes.vertex import edge_weights, face_areas
+    from pipeline.geometry.surface import edge_weights, face_areas
 
     sc = tiny_geometry.receivers
     e = np.concatenate([sc.faces[:, [0, 1]], sc.faces[:, [1, 2]], sc.faces[:, [2, 0]]])
@@ -247,7 +248,7 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
     from scipy.sparse.csgraph import connected_components
 
     from pipeline.bakes.level import TraceSettings, component_blocks, fit_level
-    from pipeline.bakes.vertex import normal_equations
+    from pipeline.geometry.least_squares import normal_equations
 
     g = tiny_geometry
     samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)

@@ -450,7 +450,8 @@ def write_vertex_scene(
     path: str | Path, gs: GltfScene, world_ao: np.ndarray, info: dict | None = None
 ) -> Path:
     """Write the scene with per-vertex AO on every primitive (module doc, step 3, ``--to vertex``)."""
-    from pipeline.bakes.vertex import GLB_AO_ATTRIBUTE, vertex_colours
+    from pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
+    from pipeline.geometry.surface import vertex_colours
 
     per_piece = vertex_ao(gs, np.asarray(world_ao, np.float32))
     by_key = {

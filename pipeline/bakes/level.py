@@ -43,7 +43,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from pipeline.bakes.vertex import SurfaceSamples, face_areas, fit_least_squares, interpolate, surface_samples
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import (
     read_npz,
@@ -55,8 +54,10 @@ from pipeline.foundation.io import (
     write_text,
 )
 from pipeline.foundation.settings import load_settings, settings_to_dict
+from pipeline.geometry.least_squares import fit_least_squares, normal_equations, solve_amg
 from pipeline.geometry.level_files import Level, LevelNode, flatten, read_level
 from pipeline.geometry.scene import Scene, scene_from_arrays
+from pipeline.geometry.surface import SurfaceSamples, face_areas, interpolate, surface_samples
 from pipeline.tracing.foliage import Foliage, overlap_reduced
 from pipeline.tracing.labeller import LabelSettings
 from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
@@ -79,7 +80,7 @@ class TraceSettings:
     samples_per_face_cap: int = 16
     # ... and at least this many (0: the smallest faces may get none; the edge regulariser fills them).
     min_samples_per_face: int = 1
-    # Least-squares edge regulariser weight (units of bake.REG_SCALE; the paper: alpha = 1).
+    # Least-squares edge regulariser weight (units of least_squares.REG_SCALE; the paper: alpha = 1).
     alpha: float = 1.0
     # Back-face rule threshold (the paper: 25%); None disables it.
     backface_threshold: float | None = 0.25
@@ -883,7 +884,7 @@ def _solve(
 
 def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, t: TraceSettings,
               engine=None, store=None, tag: str = "", timing: dict | None = None) -> np.ndarray:  # fmt: skip
-    """:func:`pipeline.bakes.vertex.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
+    """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
 
     "components": the normal equations are assembled here, split into their connected components (the
     matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
@@ -891,7 +892,6 @@ def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: 
     kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
     ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
     block (what a cluster cannot split further; each task times itself, a stored one as it took then)."""
-    from pipeline.bakes.vertex import normal_equations
     from pipeline.engines.engine import Context, LocalEngine, Task, content_key
 
     if t.solver != "components":
@@ -955,11 +955,9 @@ def _solve_block(state, args) -> dict[str, np.ndarray]:
     """Engine task: one block of the normal equations (csc matrix, rhs, "direct" | "amg") -> {"v": solution}."""
     from scipy.sparse.linalg import splu
 
-    from pipeline.bakes.vertex import _solve_amg
-
     a, rhs, method = args
     t0 = time.perf_counter()
-    v = splu(a).solve(rhs) if method == "direct" else _solve_amg(a, rhs)
+    v = splu(a).solve(rhs) if method == "direct" else solve_amg(a, rhs)
     return {"v": v, "seconds": np.array(time.perf_counter() - t0)}
 
 

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.bakes.vertex import vertex_colours
 from pipeline.foundation.io import write_json, write_text
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.level_files import GltfWriter, decompose
+from pipeline.geometry.surface import vertex_colours
 
 
 def write_outputs(

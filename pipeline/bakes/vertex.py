@@ -10,40 +10,15 @@ Vertices whose sample is invalid (back-face rule) are filled harmonically from t
 neighbours (Dirichlet problem on the mesh graph).
 
 ``least-squares`` (Kavan, Bargteil, Sloan 2011, "Least Squares Vertex Baking", as used for AO by
-Sloan, Tranchida, Chen, Kavan 2013): stratified surface samples ``s`` spread by area, each with the
-AO ``f_s`` traced along its face's geometric normal; the per-vertex values ``v`` minimise
-
-    E(v) = sum_s w_s (B_s v - f_s)^2  +  alpha * REG_SCALE * sum_(i,j) m_ij (v_i - v_j)^2
-
-* ``B`` (k, n): barycentric interpolation matrix, row s holds the barycentric coordinates of sample s
-  at its face's three vertices, so ``B v`` is exactly what the rasteriser shows at the samples;
-* ``w_s = area(face_s) / n_samples(face_s) / total_area``: area weights, so the data term is the
-  area-weighted mean squared error over the surface: independent of the sample count and of the
-  scene's scale (the integral of Kavan et al. divided by the total area);
-* ``m_ij = sum over the faces sharing edge ij of area / (3 total_area)`` (the weights sum to 1 over
-  all edges): the edge regulariser of Kavan et al. with each edge weighted by the surface it spans,
-  so data and regulariser stiffness both scale with the local area and ``alpha`` means the same on
-  coarse and fine meshes and at any scene scale (a plain unweighted edge sum would dominate on fine
-  meshes and vanish on coarse ones);
-* ``REG_SCALE`` = 0.01 (see the constant): with it ``alpha = 1`` is a mild regulariser, measured
-  near the error minimum on held-out samples (bench/bench_bake.py sweeps alpha); it fixes vertices
-  that no valid sample constrains and damps Monte-Carlo noise without blurring creases;
-* samples invalidated by the back-face rule (Sloan et al. 2013: more than 25% of a sample's rays hit
-  back faces, i.e. it lies inside geometry) are left out of the data term;
-* a ridge ``1e-9 * max(diag) * (v - prior)^2`` (prior: mean of the valid samples) makes the system
-  positive definite when a connected component has no valid sample at all (e.g. a part sealed
-  inside another): such vertices take the prior, everything else is unaffected.
-
-The normal equations ``(B^T W B + alpha REG_SCALE L_m + ridge) v = B^T W f`` are sparse, symmetric
-positive definite and solved directly (SuperLU via ``scipy.sparse.linalg.splu``); the result is
-clamped to [0, 1].
+Sloan, Tranchida, Chen, Kavan 2013): stratified surface samples spread by area
+(:func:`pipeline.geometry.surface.surface_samples`), each with the AO traced along its face's
+geometric normal; the per-vertex values are the area-weighted least-squares fit with an edge
+regulariser (:mod:`pipeline.geometry.least_squares`, where the energy and the solver are described).
+Samples invalidated by the back-face rule (Sloan et al. 2013: more than 25% of a sample's rays hit
+back faces, i.e. it lies inside geometry) are left out of the data term.
 
 Samples: every face gets ``round(density * area)`` samples, at least 1 and at most
-``samples_per_face_cap`` (Sloan et al. cap samples per face so a single huge face, a floor or a
-wall, cannot eat the budget), with ``density = samples_per_vertex * n_vertices / total_area``.
-Inside a face the k samples are a Hammersley set ``((i + s1) / k, frac(radinv(i) + s2))`` with a
-per-face random shift ``(s1, s2)``, mapped area-preservingly to the triangle (square-root warp):
-stratified, deterministic for a seed.
+``samples_per_face_cap``, with ``density = samples_per_vertex * n_vertices / total_area``.
 
 Output (PLY or GLB): the scene's vertices and faces as loaded (glTF nodes flattened), per-vertex
 colour = grey ``round(255 * ao)`` (RGBA8, alpha 255) AND the exact float32 value:
@@ -53,8 +28,9 @@ colour = grey ``round(255 * ao)`` (RGBA8, alpha 255) AND the exact float32 value
 * GLB: glTF 2.0 allows application-specific vertex attributes only with a leading underscore, so
   the float is the attribute ``_AO`` (FLOAT SCALAR accessor), beside ``COLOR_0``.
 
-Error against a reference is measured over surface samples (:func:`surface_error`), never at the
-vertices (where vertex sampling is exact by construction).
+Error against a reference is measured over surface samples
+(:func:`pipeline.geometry.surface.surface_error`), never at the vertices (where vertex sampling is
+exact by construction).
 """
 
 from __future__ import annotations
@@ -73,20 +49,13 @@ from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
 from pipeline.foundation.limits import MAX_CAP, SAMPLE_BYTES, check_count, check_int_range, check_seed
 from pipeline.foundation.settings import settings_to_dict
+from pipeline.geometry.least_squares import fill_invalid, fit_least_squares
 from pipeline.geometry.scene import Scene, load_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, hammersley, sample_shifts
+from pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
+from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args
 
 log = logging.getLogger(__name__)
 
-# Base scale of the edge regulariser (module doc). With area-weighted edges a vertex's regulariser
-# stiffness is ~4x its data stiffness at alpha * REG_SCALE = 1 on a regular mesh; 0.01 makes
-# alpha = 1 a light touch (~4% of the data stiffness). Chosen from the alpha sweep of
-# bench/bench_bake.py (5 meshes, 128 rays): alpha = 1 has the lowest held-out RMSE or is within 0.1%
-# of it on every mesh; alpha = 10 costs up to 12% (cornell_box), alpha = 100 20-100%.
-REG_SCALE = 0.01
-# Ridge towards the prior, relative to the largest diagonal entry: far below any data or
-# regulariser stiffness (float64 solve), only there to remove the null space of empty components.
-RIDGE_REL = 1e-9
 OUTPUT_SUFFIXES = (".ply", ".glb")
 GLB_AO_ATTRIBUTE = "_AO"
 
@@ -107,7 +76,7 @@ class BakeSettings:
     half_distance_rel: float = 0.05
     # "vertex": sample at vertices; "least-squares": fit vertex values to surface samples.
     method: Literal["vertex", "least-squares"] = "least-squares"
-    # Weight of the edge regulariser (least-squares), in units of REG_SCALE.
+    # Weight of the edge regulariser (least-squares), in units of least_squares.REG_SCALE.
     alpha: float = 1.0
     # Surface sample budget (least-squares) in samples per vertex, spread over faces by area.
     samples_per_vertex: float = 8.0
@@ -135,249 +104,11 @@ class BakeSettings:
 
 
 @dataclass
-class SurfaceSamples:
-    """Points on the surface.
-
-    face    : (k,) int64 face index
-    bary    : (k, 3) float64 barycentric coordinates at the face's corners (sum 1)
-    points  : (k, 3) float64 world positions
-    normals : (k, 3) float64 unit geometric face normals
-    weights : (k,) float64 area share (sums to 1 over all samples)
-    """
-
-    face: np.ndarray
-    bary: np.ndarray
-    points: np.ndarray
-    normals: np.ndarray
-    weights: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.face)
-
-
-@dataclass
 class BakeResult:
     """ao (n_vertices,) float32 in [0, 1]; info: counts, timings, settings."""
 
     ao: np.ndarray
     info: dict = field(default_factory=dict)
-
-
-# --------------------------------------------------------------------------- geometry helpers
-
-
-def face_areas(scene: Scene) -> np.ndarray:
-    """(m,) float64 triangle areas."""
-    t = scene.triangles
-    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-
-
-def samples_per_face(areas: np.ndarray, total: float, cap: int) -> np.ndarray:
-    """(m,) int64 sample counts: round(total * area share), clipped to [1, cap]."""
-    if cap < 1:
-        raise NeuralaoError(f"samples_per_face_cap must be >= 1, got {cap}")
-    share = areas / areas.sum()
-    return np.clip(np.rint(total * share), 1, cap).astype(np.int64)
-
-
-def surface_samples(
-    scene: Scene, total: float, cap: int = 32, seed: int = 0, counts: np.ndarray | None = None
-) -> SurfaceSamples:
-    """Stratified area-proportional samples: ``total`` overall (about), 1..``cap`` per face.
-
-    ``counts`` (m,) int overrides the per-face numbers (0 allowed). Deterministic for ``seed``.
-    """
-    areas = face_areas(scene)
-    if counts is None:
-        counts = samples_per_face(areas, total, cap)
-    counts = np.asarray(counts, dtype=np.int64)
-    face = np.repeat(np.arange(len(scene.faces), dtype=np.int64), counts)
-    start = np.cumsum(counts) - counts
-    index = np.arange(len(face), dtype=np.int64) - np.repeat(start, counts)  # index within the face
-    s1, s2 = sample_shifts(seed, face)  # one shift pair per face (same id for all its samples)
-    k = counts[face].astype(np.float64)
-    # radical inverse of the in-face index (Hammersley's second coordinate)
-    _, radinv = hammersley(int(index.max()) + 1 if len(index) else 1)
-    u1 = (index + s1) / k
-    u2 = np.mod(radinv[index] + s2, 1.0)
-    r = np.sqrt(u1)  # square-root warp: uniform by area over the triangle
-    bary = np.stack([1.0 - r, r * (1.0 - u2), r * u2], axis=1)
-    tri = scene.triangles[face]
-    points = np.einsum("kc,kcd->kd", bary, tri)
-    weights = (areas / np.maximum(counts, 1))[face] / areas[counts > 0].sum()
-    return SurfaceSamples(face, bary, points, scene.face_normals[face], weights)
-
-
-def interpolation_matrix(scene: Scene, samples: SurfaceSamples):
-    """B (k, n_vertices) scipy.sparse.csr_matrix: row s = barycentric weights of sample s."""
-    import scipy.sparse as sp
-
-    k = len(samples)
-    rows = np.repeat(np.arange(k), 3)
-    cols = scene.faces[samples.face].reshape(-1)
-    return sp.csr_matrix((samples.bary.reshape(-1), (rows, cols)), shape=(k, len(scene.vertices)))
-
-
-def interpolate(scene: Scene, vertex_values: np.ndarray, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """Values at surface points as the rasteriser shows them: (k,) float64 = sum_c bary[:, c] v[face corner c]."""
-    corners = np.asarray(vertex_values, dtype=np.float64)[scene.faces[face]]
-    return np.einsum("kc,kc->k", bary, corners)
-
-
-def edge_weights(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (e, 2) int64 and their area weights (e,) float64 summing to 1."""
-    areas = face_areas(scene)
-    f = scene.faces
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    w = np.tile(areas / 3.0, 3)
-    e.sort(axis=1)
-    keep = e[:, 0] != e[:, 1]
-    e, w = e[keep], w[keep]
-    # One int64 key per edge (i * n + j, i < j): the same order as unique rows, at 1-D sort speed
-    # (unique(axis=0) sorts a structured view, 10x slower on a level's millions of edges).
-    n = np.int64(max(len(scene.vertices), 1))
-    keys, inverse = np.unique(e[:, 0] * n + e[:, 1], return_inverse=True)
-    edges = np.stack([keys // n, keys % n], axis=1)
-    weights = np.bincount(inverse.reshape(-1), weights=w, minlength=len(edges))
-    total = weights.sum()
-    return edges, (weights / total if total > 0 else weights)
-
-
-def edge_laplacian(n: int, edges: np.ndarray, weights: np.ndarray):
-    """L (n, n) csc: v^T L v = sum_e w_e (v_i - v_j)^2."""
-    import scipy.sparse as sp
-
-    i, j = edges[:, 0], edges[:, 1]
-    off = sp.coo_matrix(
-        (np.concatenate([-weights, -weights]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(n, n)
-    )
-    deg = np.bincount(i, weights=weights, minlength=n) + np.bincount(j, weights=weights, minlength=n)
-    return (off + sp.diags(deg)).tocsc()
-
-
-# --------------------------------------------------------------------------- fitting
-
-
-def normal_equations(
-    scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, alpha: float = 1.0
-):
-    """The normal equations of the module-doc energy, what :func:`fit_least_squares` solves:
-    A (n, n) scipy.sparse csc, symmetric positive definite, and rhs (n,) or (n, c) float64.
-
-    A couples only vertices that share a face, so it is block diagonal over the mesh's connected
-    components (the level baker solves each block on its own)."""
-    import scipy.sparse as sp
-
-    if not (math.isfinite(alpha) and alpha >= 0):
-        raise NeuralaoError(f"alpha must be a finite number >= 0, got {alpha}")
-    values = np.asarray(values, dtype=np.float64)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(values).reshape(len(values), -1).all(axis=1)
-    n = len(scene.vertices)
-    b = interpolation_matrix(scene, samples)[valid]
-    w = samples.weights[valid]
-    w = w / w.sum() if w.sum() > 0 else w
-    f = values[valid]
-    bw = b.T.multiply(w).tocsr()  # (n, k) B^T W
-    a = (bw @ b).tocsc()
-    rhs = bw @ f
-    if alpha > 0:
-        edges, ew = edge_weights(scene)
-        a = a + (alpha * REG_SCALE) * edge_laplacian(n, edges, ew)
-    prior = np.average(f, weights=w, axis=0) if len(f) else np.ones(f.shape[1:])
-    diag = a.diagonal()
-    ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
-    a = (a + ridge * sp.identity(n, format="csc")).tocsc()
-    rhs = rhs + ridge * prior
-    return a, rhs
-
-
-def fit_least_squares(
-    scene: Scene,
-    samples: SurfaceSamples,
-    values: np.ndarray,
-    valid: np.ndarray,
-    alpha: float = 1.0,
-    solver: Literal["direct", "cg", "amg"] = "direct",
-) -> np.ndarray:
-    """Per-vertex values (n,) float32 in [0, 1] minimising the module-doc energy.
-
-    values : (k,) sample AO, or (k, c) for c signals fitted with one factorisation (the level
-    baker's two obscurance distances; result (n, c)); valid : (k,) bool, invalid samples are left
-    out entirely. ``solver="cg"``: Jacobi-preconditioned conjugate gradients (relative residual
-    1e-10) instead of SuperLU, for million-vertex levels where the direct factor's fill-in costs
-    more memory and time than the well-conditioned system needs. ``solver="amg"``: conjugate gradients
-    preconditioned by a smoothed-aggregation multigrid V-cycle (pyamg; relative residual 1e-10): linear
-    in the vertex count, where Jacobi CG needs thousands of iterations on a level's regulariser.
-    """
-    from scipy.sparse.linalg import splu
-
-    a, rhs = normal_equations(scene, samples, values, valid, alpha)
-    if solver == "direct":
-        v = splu(a).solve(rhs)
-    elif solver == "cg":
-        v = _solve_cg(a, rhs)
-    elif solver == "amg":
-        v = _solve_amg(a, rhs)
-    else:
-        raise NeuralaoError(f"solver must be 'direct', 'cg' or 'amg', got {solver!r}")
-    return np.clip(v, 0.0, 1.0).astype(np.float32)
-
-
-def _solve_cg(a, rhs: np.ndarray) -> np.ndarray:
-    """Jacobi-preconditioned CG on the SPD normal equations, one column of ``rhs`` at a time."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import cg
-
-    precond = sp.diags(1.0 / a.diagonal())
-    cols = rhs.reshape(len(rhs), -1)
-    out = np.empty_like(cols)
-    for j in range(cols.shape[1]):
-        out[:, j], info = cg(a, cols[:, j], rtol=1e-10, atol=0.0, maxiter=10000, M=precond)
-        if info != 0:
-            raise NeuralaoError(f"least-squares CG did not converge ({info} iterations)")
-    return out.reshape(rhs.shape)
-
-
-def _solve_amg(a, rhs: np.ndarray) -> np.ndarray:
-    """CG on the SPD normal equations with a smoothed-aggregation AMG preconditioner (one hierarchy for
-    every column of ``rhs``)."""
-    import pyamg
-    from scipy.sparse.linalg import cg
-
-    precond = pyamg.smoothed_aggregation_solver(a.tocsr(), symmetry="symmetric").aspreconditioner(cycle="V")
-    cols = rhs.reshape(len(rhs), -1)
-    out = np.empty_like(cols)
-    for j in range(cols.shape[1]):
-        out[:, j], info = cg(a, cols[:, j], rtol=1e-10, atol=0.0, maxiter=1000, M=precond)
-        if info != 0:
-            raise NeuralaoError(f"least-squares AMG-preconditioned CG did not converge ({info} iterations)")
-    return out.reshape(rhs.shape)
-
-
-def fill_invalid(scene: Scene, values: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Harmonic fill: invalid vertices solve the area-weighted graph Laplace equation with the valid
-    vertices fixed (a component without any valid vertex takes the mean of the valid ones).
-
-    values : (n,) float, valid : (n,) bool -> (n,) float32.
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import splu
-
-    values = np.asarray(values, dtype=np.float64).copy()
-    valid = np.asarray(valid, dtype=bool)
-    unknown = np.flatnonzero(~valid)
-    if len(unknown) == 0:
-        return values.astype(np.float32)
-    prior = float(values[valid].mean()) if valid.any() else 1.0
-    edges, ew = edge_weights(scene)
-    lap = edge_laplacian(len(values), edges, ew).tocsr()
-    known = np.flatnonzero(valid)
-    l_uu = lap[unknown][:, unknown].tocsc()
-    rhs = -(lap[unknown][:, known] @ values[known])
-    ridge = RIDGE_REL * (float(l_uu.diagonal().max()) if l_uu.nnz else 1.0)
-    l_uu = l_uu + ridge * sp.identity(len(unknown), format="csc")
-    values[unknown] = splu(l_uu.tocsc()).solve(rhs + ridge * prior)
-    return np.clip(values, 0.0, 1.0).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- baking
@@ -483,35 +214,7 @@ def reference_at_samples(
     return labeller.ao_at_points(samples.points, samples.normals)
 
 
-def surface_error(
-    scene: Scene, vertex_ao: np.ndarray, samples: SurfaceSamples, reference: np.ndarray, valid: np.ndarray
-) -> dict:
-    """Area-weighted error of interpolated vertex AO against ``reference`` at valid surface samples.
-
-    Returns {"rmse", "mae", "max", "samples"} (floats / int).
-    """
-    pred = interpolate(scene, vertex_ao, samples.face, samples.bary)
-    ref = np.asarray(reference, np.float64)
-    m = np.asarray(valid, bool)
-    if not m.any():
-        raise NeuralaoError("no valid reference sample to measure the error on")
-    w = samples.weights[m] / samples.weights[m].sum()
-    d = pred[m] - ref[m]
-    return {
-        "rmse": float(np.sqrt(np.sum(w * d * d))),
-        "mae": float(np.sum(w * np.abs(d))),
-        "max": float(np.abs(d).max()),
-        "samples": int(m.sum()),
-    }
-
-
 # --------------------------------------------------------------------------- files
-
-
-def vertex_colours(ao: np.ndarray) -> np.ndarray:
-    """(n, 4) uint8 grey RGBA: round(255 ao), alpha 255."""
-    g = np.rint(np.clip(np.asarray(ao, np.float64), 0.0, 1.0) * 255.0).astype(np.uint8)
-    return np.stack([g, g, g, np.full_like(g, 255)], axis=1)
 
 
 def write_baked_mesh(path: str | Path, scene: Scene, ao: np.ndarray) -> Path:

@@ -24,7 +24,7 @@ Model (``FieldNet``; ONNX ops Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh)
 Samples
 -------
 ``samples`` points drawn area-proportionally over the surface (stratified per face,
-:func:`pipeline.bakes.vertex.surface_samples`, seeded), each on *both sides*: the front with the smooth
+:func:`pipeline.geometry.surface.surface_samples`, seeded), each on *both sides*: the front with the smooth
 normal the G-buffer interpolates (corner normals turned to the face's side, barycentric blend,
 renormalised) and the label of the geometric normal, the back with both negated. The labeller's
 back-face rule marks the back side of a closed surface invalid (its rays start inside) and those
@@ -236,7 +236,7 @@ def smooth_normals_at(scene, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
 def two_sided_samples(scene, settings: FieldSettings, progress: bool = False) -> tuple[np.ndarray, ...]:
     """Surface samples on both sides, labelled. Returns position (m, 3), normal (m, 3) float32 and ao (m,)
     float32 of the valid ones, and counts (front valid, back valid, total per side)."""
-    from pipeline.bakes.vertex import surface_samples
+    from pipeline.geometry.surface import surface_samples
     from pipeline.tracing.labeller import Labeller
 
     s = surface_samples(scene, settings.samples, settings.samples_per_face_cap, seed=settings.seed)

@@ -20,6 +20,7 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.geometry.scene import Scene
+from pipeline.geometry.surface import interpolate
 from pipeline.tracing.labeller import Labeller, _run_chunks
 
 # Rays per chunk of caller-chosen rays (as the labeller's own chunks).
@@ -247,7 +248,6 @@ def _resample_block_geometric(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The reference :func:`_resample_block` is checked against: world hit points, their distance to
     the centre, barycentrics by projection onto the hit triangle, sums by bincount (4x slower)."""
-    from pipeline.bakes.vertex import interpolate
 
     k = len(u)
     origins = (centers[:, None, :] + rad[:, None, None] * u[None]).reshape(-1, 3)
