@@ -1,7 +1,8 @@
-"""Shared ONNX plumbing: atomic save with metadata, checker, onnxruntime and OpenCV dnn runners.
+"""Export-side ONNX plumbing: atomic save with metadata, checker, backend gate, OpenCV dnn runner.
 
 Metadata values are stored as strings in ``metadata_props`` (JSON for anything structured), so
-any ONNX consumer can read what the model expects without neuralao.
+any ONNX consumer can read what the model expects without neuralao. Loading, metadata reading and
+onnxruntime sessions are the consumer's (:mod:`runtime.onnx_io`), re-exported here for the exporters.
 """
 
 from __future__ import annotations
@@ -16,6 +17,10 @@ import onnx
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
+from runtime.onnx_io import get_metadata as get_metadata  # re-exported (the exporters' one import)
+from runtime.onnx_io import load_onnx as load_onnx
+from runtime.onnx_io import ort_session as ort_session
+from runtime.onnx_io import run_onnxruntime as run_onnxruntime
 
 
 def set_metadata(model: onnx.ModelProto, metadata: dict[str, Any]) -> None:
@@ -25,16 +30,6 @@ def set_metadata(model: onnx.ModelProto, metadata: dict[str, Any]) -> None:
         p = model.metadata_props.add()
         p.key = k
         p.value = v if isinstance(v, str) else json.dumps(v, sort_keys=True)
-
-
-def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for p in model.metadata_props:
-        try:
-            out[p.key] = json.loads(p.value)
-        except json.JSONDecodeError:
-            out[p.key] = p.value
-    return out
 
 
 def save_onnx(
@@ -86,42 +81,6 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
             f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"
         )
     return result
-
-
-def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
-    """Load and check an ONNX file; a missing or corrupt file is a one-line error."""
-    p = Path(path)
-    if not p.is_file():
-        raise NeuralaoError(f"ONNX file not found: {p}")
-    try:
-        model = onnx.load(str(p))
-        onnx.checker.check_model(model)
-    except Exception as e:
-        raise NeuralaoError(
-            f"cannot load ONNX file {p}: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
-        ) from None
-    return model
-
-
-def ort_session(path_or_bytes: str | os.PathLike | bytes):
-    import onnxruntime as ort
-
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 2
-    opts.log_severity_level = 3
-    src = path_or_bytes if isinstance(path_or_bytes, bytes) else str(path_or_bytes)
-    try:
-        return ort.InferenceSession(src, sess_options=opts, providers=["CPUExecutionProvider"])
-    except Exception as e:
-        raise NeuralaoError(f"onnxruntime cannot load the model: {str(e).splitlines()[0]}") from None
-
-
-def run_onnxruntime(
-    path_or_bytes: str | os.PathLike | bytes, inputs: dict[str, np.ndarray]
-) -> list[np.ndarray]:
-    """Run every output of the model on ``inputs`` (float32 arrays by input name)."""
-    sess = ort_session(path_or_bytes)
-    return sess.run(None, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in inputs.items()})
 
 
 def run_opencv(path: str | os.PathLike, inputs: dict[str, np.ndarray]) -> np.ndarray:

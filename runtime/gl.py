@@ -1,12 +1,15 @@
-"""Headless OpenGL 4.5 core context (pyrender's OSMesa or EGL platform) and small GL helpers.
+"""Headless OpenGL 4.5 core context (OSMesa or EGL, created with PyOpenGL) and small GL helpers.
 
 The platform follows ``PYOPENGL_PLATFORM`` (``osmesa`` default, ``egl`` for surfaceless llvmpipe on
-Mesa >= 25.1 where OSMesa is gone). One context per process, created lazily and kept current; all
-renderers and shader runners in neuralao share it.
+Mesa >= 25.1 where OSMesa is gone; ``EGL_DEVICE_ID`` picks the EGL device, 0 by default). One context
+per process, created lazily and kept current; all renderers and shader runners in neuralao share it.
+The context is requested with the attributes pyrender's platforms use (so the driver hands out the
+same context), without pyrender itself: a consumer runs this module with PyOpenGL alone.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import time
 from collections.abc import Callable
@@ -30,21 +33,136 @@ class GLInfo:
     renderer: str
 
 
+# OSMesa renders into a caller-owned buffer: a tiny RGBA one, since every pass draws into its own FBO.
+_OSMESA_SIZE = 8
+
+
+class _OSMesa:
+    """An OSMesa core-profile context (3.3 requested; Mesa gives its highest core version)."""
+
+    def __init__(self) -> None:
+        from OpenGL import arrays, osmesa  # the platform module exists only for PYOPENGL_PLATFORM=osmesa
+
+        attrs = arrays.GLintArray.asArray([
+            osmesa.OSMESA_FORMAT, osmesa.OSMESA_RGBA,
+            osmesa.OSMESA_DEPTH_BITS, 24,
+            osmesa.OSMESA_PROFILE, osmesa.OSMESA_CORE_PROFILE,
+            osmesa.OSMESA_CONTEXT_MAJOR_VERSION, 3,
+            osmesa.OSMESA_CONTEXT_MINOR_VERSION, 3,
+            0,
+        ])  # fmt: skip
+        self._make = osmesa.OSMesaMakeCurrent
+        self._context = osmesa.OSMesaCreateContextAttribs(attrs, None)
+        if not self._context:
+            raise RuntimeError("OSMesaCreateContextAttribs returned no context")
+        self._buffer = arrays.GLubyteArray.zeros((_OSMESA_SIZE, _OSMESA_SIZE, 4))
+
+    def make_current(self) -> None:
+        if not self._make(self._context, self._buffer, GL.GL_UNSIGNED_BYTE, _OSMESA_SIZE, _OSMESA_SIZE):
+            raise RuntimeError("OSMesaMakeCurrent failed")
+
+
+# EGL_EXT_platform_device / EGL_EXT_device_query constants PyOpenGL does not define.
+_EGL_PLATFORM_DEVICE_EXT = 0x313F
+
+
+class _EGL:
+    """A surfaceless EGL OpenGL 4.1 core context on device ``EGL_DEVICE_ID`` (default 0)."""
+
+    def __init__(self) -> None:
+        from OpenGL import EGL, arrays  # EGL bindings load libEGL: only for PYOPENGL_PLATFORM=egl
+
+        self._egl = EGL
+        self._display = self._display_of(int(os.environ.get("EGL_DEVICE_ID", "0")))
+        major, minor, count = ctypes.c_long(), ctypes.c_long(), ctypes.c_long()
+        configs = (EGL.EGLConfig * 1)()
+        config_attrs = arrays.GLintArray.asArray([
+            EGL.EGL_SURFACE_TYPE, EGL.EGL_PBUFFER_BIT,
+            EGL.EGL_BLUE_SIZE, 8, EGL.EGL_RED_SIZE, 8, EGL.EGL_GREEN_SIZE, 8,
+            EGL.EGL_DEPTH_SIZE, 24,
+            EGL.EGL_COLOR_BUFFER_TYPE, EGL.EGL_RGB_BUFFER,
+            EGL.EGL_RENDERABLE_TYPE, EGL.EGL_OPENGL_BIT,
+            EGL.EGL_CONFORMANT, EGL.EGL_OPENGL_BIT,
+            EGL.EGL_NONE,
+        ])  # fmt: skip
+        context_attrs = arrays.GLintArray.asArray([
+            EGL.EGL_CONTEXT_MAJOR_VERSION, 4,
+            EGL.EGL_CONTEXT_MINOR_VERSION, 1,
+            EGL.EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL.EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+            EGL.EGL_NONE,
+        ])  # fmt: skip
+        if not EGL.eglInitialize(self._display, major, minor):
+            raise RuntimeError("eglInitialize failed")
+        if not EGL.eglChooseConfig(self._display, config_attrs, configs, 1, count) or count.value < 1:
+            raise RuntimeError("eglChooseConfig found no OpenGL config")
+        if not EGL.eglBindAPI(EGL.EGL_OPENGL_API):
+            raise RuntimeError("eglBindAPI(EGL_OPENGL_API) failed")
+        self._context = EGL.eglCreateContext(self._display, configs[0], EGL.EGL_NO_CONTEXT, context_attrs)
+        if not self._context:
+            raise RuntimeError("eglCreateContext returned no context")
+
+    def _display_of(self, device_id: int):
+        """The display of EGL device ``device_id`` (EGL_EXT_device_enumeration), else the default one;
+        ``DISPLAY`` is hidden meanwhile so Mesa does not pick an X11 display."""
+        EGL = self._egl
+        query = _egl_function("eglQueryDevicesEXT", EGL.EGLBoolean)
+        platform_display = _egl_function("eglGetPlatformDisplayEXT", EGL.EGLDisplay)
+        x_display = os.environ.pop("DISPLAY", None)
+        try:
+            if query is None or platform_display is None:
+                if device_id != 0:
+                    raise RuntimeError(f"EGL device {device_id} requested but devices cannot be queried")
+                return EGL.eglGetDisplay(EGL.EGL_DEFAULT_DISPLAY)
+            from OpenGL._opaque import opaque_pointer_cls
+
+            device_type = opaque_pointer_cls("EGLDeviceEXT")
+            n = EGL.EGLint()
+            if not query(0, None, ctypes.pointer(n)) or n.value < 1:
+                raise RuntimeError("no EGL device found")
+            devices = (device_type * n.value)()
+            query(n.value, devices, ctypes.pointer(n))
+            if not 0 <= device_id < n.value:
+                raise RuntimeError(f"EGL_DEVICE_ID {device_id} is outside 0..{n.value - 1}")
+            return platform_display(_EGL_PLATFORM_DEVICE_EXT, devices[device_id], None)
+        finally:
+            if x_display is not None:
+                os.environ["DISPLAY"] = x_display
+
+    def make_current(self) -> None:
+        EGL = self._egl
+        if not EGL.eglMakeCurrent(self._display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, self._context):
+            raise RuntimeError("eglMakeCurrent failed")
+
+
+def _egl_function(name: str, restype, *argtypes):
+    """An EGL extension function by name (ctypes), or None where the driver lacks it."""
+    from OpenGL import EGL
+
+    address = EGL.eglGetProcAddress(name)
+    if address is None:
+        return None
+    proto = ctypes.CFUNCTYPE(restype)
+    proto.argtypes = argtypes
+    return proto(address)
+
+
+_PLATFORMS = {"osmesa": _OSMesa, "egl": _EGL}
+
+
 class _Context:
     def __init__(self) -> None:
-        import pyrender
-
         platform = os.environ.get("PYOPENGL_PLATFORM", "osmesa")
         try:
-            # pyrender owns context creation (OSMesaCreateContextAttribs / EGL surfaceless);
-            # we only use the context, rendering into our own float framebuffers.
-            self.renderer = pyrender.OffscreenRenderer(8, 8)
+            if platform not in _PLATFORMS:
+                raise ValueError(f"Unsupported PyOpenGL platform: {platform}")
+            # We only use the context, rendering into our own float framebuffers.
+            self._platform = _PLATFORMS[platform]()
+            self.make_current()
         except Exception as e:
             raise NeuralaoError(
                 f"cannot create a headless GL context with PYOPENGL_PLATFORM={platform}: {e}"
             ) from None
         self.platform = platform
-        self.make_current()
         self.info = GLInfo(
             platform,
             GL.glGetString(GL.GL_VERSION).decode(),
@@ -54,7 +172,7 @@ class _Context:
         self.empty_vao = GL.glGenVertexArrays(1)
 
     def make_current(self) -> None:
-        self.renderer._platform.make_current()
+        self._platform.make_current()
 
 
 def context() -> _Context:
@@ -94,8 +212,6 @@ def compile_program(feedback: tuple[str, ...] = (), **sources: str) -> int:
         GL.glAttachShader(prog, sh)
         shaders.append(sh)
     if feedback:
-        import ctypes
-
         names = [ctypes.create_string_buffer(n.encode()) for n in feedback]
         ptrs = (ctypes.c_char_p * len(names))(*[ctypes.addressof(b) for b in names])
         ptrs = ctypes.cast(ptrs, ctypes.POINTER(ctypes.POINTER(ctypes.c_char)))
