@@ -44,9 +44,10 @@ import numpy as np  # noqa: E402
 
 from pipeline.bakes.vertex import BakeSettings, bake  # noqa: E402
 from pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
-from pipeline.engines.engine import Context, LocalEngine, RayEngine, Task, content_key, labeller_context  # noqa: E402
+from pipeline.engines.engine import Context, LocalEngine, RayEngine, Task, content_key  # noqa: E402
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
 from pipeline.geometry.scene import load_scene  # noqa: E402
+from pipeline.tracing.engine_labeller import labeller_context  # noqa: E402
 
 # Table 1 of Sloan et al. 2013: the trace row's workload (6.7 M samples, 256 rays a sample, 1.8 M faces).
 TABLE1_SAMPLES = 6_700_000

@@ -360,13 +360,14 @@ def test_bad_engine_flags_are_one_line_errors(flags, message, config_file, tmp_p
 def test_worker_error_is_a_neuralao_error(ray_engine):
     """A NeuralaoError raised on a worker (here: building the Embree scene of a flat point) fails the
     run with its own one-line message, as it would locally."""
-    from pipeline.engines.engine import Task, _trace_chunk, labeller_context
+    from pipeline.engines.engine import Task
     from pipeline.geometry.scene import Scene
+    from pipeline.tracing.engine_labeller import labeller_context, trace_chunk
     from pipeline.tracing.labeller import LabelSettings
 
     point = Scene(np.zeros((3, 3)), np.array([[0, 1, 2]]), "point")
     args = (np.zeros((1, 3)), np.ones((1, 3)), np.zeros(1, np.int64))
-    tasks = [Task(labeller_context(point, LabelSettings()), _trace_chunk, args)]
+    tasks = [Task(labeller_context(point, LabelSettings()), trace_chunk, args)]
     for engine in (ray_engine, LocalEngine()):
         with pytest.raises(NeuralaoError, match="scene point has no extent"):
             dict(engine.map(tasks))

@@ -56,7 +56,7 @@ from pipeline.foundation.io import (
 from pipeline.foundation.settings import load_settings, settings_to_dict
 from pipeline.geometry.least_squares import fit_least_squares, normal_equations, solve_amg
 from pipeline.geometry.level_files import Level, LevelNode, flatten, read_level
-from pipeline.geometry.scene import Scene, scene_from_arrays
+from pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
 from pipeline.geometry.surface import SurfaceSamples, face_areas, interpolate, surface_samples
 from pipeline.tracing.foliage import Foliage, overlap_reduced
 from pipeline.tracing.labeller import LabelSettings
@@ -482,7 +482,7 @@ class LabellerFrame:
 def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, engine=None):
     """The engine context of the opaque labeller and the foliage (trace, resampling): workers rebuild
     both from the object store; with ``engine`` None, a context the driver's own state stands for."""
-    from pipeline.engines.engine import Context, slim_scene
+    from pipeline.engines.engine import Context
 
     if engine is None:
         return Context(f"level-trace/{key}/here", _level_tracer, None)
@@ -592,8 +592,6 @@ def _tree_model(g: LevelGeometry, mi: int, s: LevelBakeSettings) -> _TreeModel:
     local = blend(local_two[:, 0], local_two[:, 1], s.blend)
     train = surface_samples(model, d.samples_per_instance, 64, s.seed + 1)
     hold = surface_samples(model, d.holdout_samples, 64, s.seed + 2)
-    from pipeline.engines.engine import slim_scene
-
     return _TreeModel(
         slim_scene(model), train, hold, local, interpolate(model, local, train.face, train.bary)
     )
@@ -641,7 +639,7 @@ def bake_decorators(
     ``engine`` (None: this process, with the gold labeller built here), results kept in ``store``
     (:class:`pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered (and traced with
     ray ids) in a fixed order, so the result is the same bytes wherever the tasks run."""
-    from pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key, slim_scene
+    from pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key
 
     if not g.trees:
         return {"models": np.zeros(0, np.int64)}
@@ -1057,7 +1055,7 @@ def _blend_check(
         kern = _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=pick)
         ref_two, ref_valid = LevelLabeller(g.opaque, ref_settings).obscurance(pts, nrm, halves(s), foliage)
     else:
-        from pipeline.engines.engine import Context, Task, slim_scene
+        from pipeline.engines.engine import Context, Task
 
         if engine.threads is not None:
             ref_settings = replace(ref_settings, workers=engine.threads)

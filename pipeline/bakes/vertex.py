@@ -52,6 +52,7 @@ from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.least_squares import fill_invalid, fit_least_squares
 from pipeline.geometry.scene import Scene, load_scene
 from pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
+from pipeline.tracing.engine_labeller import EngineLabeller
 from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args
 
 log = logging.getLogger(__name__)
@@ -186,8 +187,6 @@ def bake(
     if engine is None:
         labeller = Labeller(scene, settings.label_settings())
     else:
-        from pipeline.engines.engine import EngineLabeller
-
         labeller = EngineLabeller(scene, settings.label_settings(), engine, store)
     if settings.method == "vertex":
         result = bake_vertex(scene, labeller, progress)

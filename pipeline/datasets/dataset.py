@@ -49,7 +49,7 @@ from pipeline.foundation.io import read_npz, remove_stale_temporaries, sha256_fi
 from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
 from pipeline.geometry.camera import Camera, closeup, interior, load_poses, orbit
 from pipeline.geometry.compose import ComposeSettings, compose
-from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path
+from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, slim_scene
 from pipeline.geometry.splits import object_meshes
 from pipeline.tracing.labeller import Labeller, LabelSettings
 
@@ -504,7 +504,7 @@ class _ShardWorker:
 
 def _shard_context(scene: Scene, labels: LabelSettings, threads: int | None):
     """Scene + label settings (``threads`` labelling threads per task; None: the settings' own)."""
-    from pipeline.engines.engine import Context, content_key, slim_scene
+    from pipeline.engines.engine import Context, content_key
 
     labels = labels if threads is None else replace(labels, workers=threads)
     slim = slim_scene(scene)

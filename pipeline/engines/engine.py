@@ -40,6 +40,7 @@ import collections
 import hashlib
 import logging
 import os
+import shutil
 import socket
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -60,7 +61,7 @@ STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
 # (ray.init itself retries for minutes).
 CONNECT_TIMEOUT_S = 5.0
-# Rays per bake task: ~0.1-0.2 s of tracing on one core, so Ray's ~3 ms per task is noise, and
+# Rays per point-tracing task (pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one core, so Ray's ~3 ms per task is noise, and
 # enough tasks that the last ones balance across workers.
 CHUNK_RAYS = 1 << 20
 # Environment a worker process needs to render and trace like the driver (GL platform, threads).
@@ -158,6 +159,11 @@ class Engine:
     def __init__(self) -> None:
         self.completed = 0  # tasks finished (or loaded from a store) by the latest map
 
+    @property
+    def task_rays(self) -> int:
+        """Rays per point-tracing task: ``chunk_rays``, or the module default ``CHUNK_RAYS``."""
+        return self.chunk_rays or CHUNK_RAYS
+
     def map(self, tasks: Iterable[Task], store: ResultStore | None = None) -> Iterator[tuple[int, Any]]:
         """Yield ``(index, result)`` for every task, in completion order. ``tasks`` is consumed lazily
         (a few ahead of the workers), so a generator may load one scene at a time."""
@@ -238,7 +244,7 @@ class _Worker:
         self._shared = _StateCache(STATES_PER_WORKER)  # Shared values by key
 
     def run(self, key: str, boxed_payload: list, build, fn, args):
-        import ray
+        import ray  # optional dependency: only --engine ray imports it
 
         # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
         # task of a context on this actor pulls it from the object store. Shared args likewise.
@@ -252,7 +258,7 @@ class _Worker:
             return _Failure(str(e))
 
     def where(self) -> tuple[int, str]:
-        import ray
+        import ray  # optional dependency: only --engine ray imports it
 
         return os.getpid(), ray.get_runtime_context().get_node_id()
 
@@ -376,7 +382,7 @@ def _ref_keys(task: Task) -> list[str]:
 
 
 def _get(ray, ref):
-    from ray.exceptions import RayActorError, RayError, RayTaskError
+    from ray.exceptions import RayActorError, RayError, RayTaskError  # optional dependency (ray)
 
     try:
         return ray.get(ref)
@@ -392,7 +398,7 @@ def _get(ray, ref):
 def _connect(address: str | None):
     """``ray`` after ray.init (an existing connection is reused); unreachable -> NeuralaoError."""
     try:
-        import ray
+        import ray  # optional dependency: only --engine ray imports it
     except ImportError:
         raise NeuralaoError("--engine ray needs the 'ray' package (pip install -e .)") from None
     if ray.is_initialized():
@@ -442,91 +448,7 @@ class ResultStore:
         write_npz(self._path(key), **result)
 
     def clear(self) -> None:
-        import shutil
-
         shutil.rmtree(self.folder, ignore_errors=True)
-
-
-# --------------------------------------------------------------------------- AO at points, as tasks
-
-
-def slim_scene(scene):
-    """The scene's vertices, faces and name only (no cached triangles / normals): what a worker needs."""
-    from pipeline.geometry.scene import Scene
-
-    return Scene(np.asarray(scene.vertices, np.float64), np.asarray(scene.faces, np.int64), scene.name)
-
-
-def _build_labeller(payload):
-    from pipeline.tracing.labeller import Labeller
-
-    scene, settings = payload
-    return Labeller(scene, settings)
-
-
-def _trace_chunk(labeller, args) -> dict[str, np.ndarray]:
-    points, normals, ids = args
-    ao, valid = labeller.ao_at_points(points, normals, ids=ids)
-    return {"ao": ao, "valid": valid}
-
-
-def labeller_context(scene, settings, threads: int | None = None) -> Context:
-    """A worker-side :class:`~pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene`` with ``threads``
-    threads (None: ``settings.workers``; labels never depend on it)."""
-    from dataclasses import replace
-
-    if threads is not None:
-        settings = replace(settings, workers=threads)
-    slim = slim_scene(scene)
-    key = content_key("labeller", slim.vertices, slim.faces, settings)
-    return Context(key, _build_labeller, (slim, settings))
-
-
-class EngineLabeller:
-    """What the bakers use of a :class:`~pipeline.tracing.labeller.Labeller` (``ao_at_points``, ``settings``,
-    ``max_distance``), with the tracing split into chunks of points mapped over an engine.
-
-    A point's rays depend only on (seed, id, normal), never on its chunk, so the result is bit-identical
-    to ``Labeller(scene, settings).ao_at_points(points, normals)``. With ``store``, finished chunks
-    are kept on disk (keyed by scene, settings and the chunk's points) and a rerun skips them.
-    """
-
-    def __init__(self, scene, settings, engine: Engine, store: ResultStore | None = None,
-                 chunk_rays: int | None = None):  # fmt: skip
-        from pipeline.tracing.labeller import _positive
-
-        self.scene, self.settings, self.engine, self.store = scene, settings, engine, store
-        self.chunk_rays = chunk_rays or engine.chunk_rays or CHUNK_RAYS  # rays per task
-        self.max_distance = _positive(
-            "max_distance", settings.max_distance, settings.max_distance_rel, scene.diagonal
-        )
-        self._context = labeller_context(scene, settings, engine.threads)
-
-    def ao_at_points(self, points: np.ndarray, normals: np.ndarray, progress: bool = False):
-        """points, normals (n, 3) float64 -> ao (n,) float32, valid (n,) bool (ids = arange(n))."""
-        from tqdm import tqdm
-
-        points = np.asarray(points, np.float64)
-        normals = np.asarray(normals, np.float64)
-        n = len(points)
-        step = max(1, self.chunk_rays // self.settings.rays)
-        bounds = [(lo, min(lo + step, n)) for lo in range(0, n, step)]
-        ctx = self._context
-
-        def tasks():
-            for lo, hi in bounds:
-                p, q = points[lo:hi], normals[lo:hi]
-                key = content_key(ctx.key, p, q, lo) if self.store is not None else None
-                yield Task(ctx, _trace_chunk, (p, q, np.arange(lo, hi, dtype=np.int64)), key)
-
-        ao = np.ones(n, np.float32)
-        valid = np.zeros(n, bool)
-        with tqdm(total=n, unit="pt", desc="AO labels", disable=not progress, leave=False) as bar:
-            for i, result in self.engine.map(tasks(), self.store):
-                lo, hi = bounds[i]
-                ao[lo:hi], valid[lo:hi] = result["ao"], result["valid"]
-                bar.update(hi - lo)
-        return ao, valid
 
 
 # --------------------------------------------------------------------------- command line

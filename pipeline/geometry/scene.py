@@ -89,6 +89,11 @@ class Scene:
         return Scene(self.vertices * factor + offset, self.faces.copy(), self.name, self.source)
 
 
+def slim_scene(scene: Scene) -> Scene:
+    """The scene's vertices, faces and name only (no cached triangles / normals): what a worker needs."""
+    return Scene(np.asarray(scene.vertices, np.float64), np.asarray(scene.faces, np.int64), scene.name)
+
+
 def _read_geometries(path: Path) -> list:
     """Every geometry of the file with its node transforms applied (``dump(concatenate=False)`` keeps
     instanced geometry). Reading *and* flattening are guarded: a truncated OBJ whose last vertex

@@ -198,8 +198,8 @@ class Labeller:
         check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
         check_rays("rays", s.rays, s.workers)
         diag = self._scale
-        self.max_distance = _positive("max_distance", s.max_distance, s.max_distance_rel, diag)
-        self.half_distance = _positive("half_distance", s.half_distance, s.half_distance_rel, diag)
+        self.max_distance = positive_distance("max_distance", s.max_distance, s.max_distance_rel, diag)
+        self.half_distance = positive_distance("half_distance", s.half_distance, s.half_distance_rel, diag)
         if not (math.isfinite(s.offset_rel) and 0 <= s.offset_rel < 0.01):
             raise NeuralaoError(f"offset_rel must be in [0, 0.01), got {s.offset_rel!r}")
         thr = s.backface_threshold
@@ -642,7 +642,8 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
-def _positive(name: str, value: float | None, rel: float, diag: float) -> float:
+def positive_distance(name: str, value: float | None, rel: float, diag: float) -> float:
+    """``value``, or ``rel * diag`` when it is None; refused unless a positive finite number."""
     v = rel * diag if value is None else value
     if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
         raise NeuralaoError(f"{name} must be a positive finite distance, got {v!r}")
@@ -653,7 +654,7 @@ def _radii(values: list[float], diag: float) -> tuple[float, ...]:
     """Resolve relative radii (``values * diag``), each positive and finite; at least one."""
     if not isinstance(values, list | tuple) or not values:
         raise NeuralaoError(f"radii must be a non-empty list of positive distances, got {values!r}")
-    return tuple(_positive("radius", None, float(v), diag) for v in values)
+    return tuple(positive_distance("radius", None, float(v), diag) for v in values)
 
 
 def _run_chunks(
