@@ -575,7 +575,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from export.unet import ort_runner
-    from pipeline.models.unet import count_parameters
+    from pipeline.models.checkpoint import count_parameters
     from runtime import gl
 
     t_start = time.perf_counter()

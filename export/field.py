@@ -31,7 +31,7 @@ import numpy as np
 import onnx
 import torch
 
-from export.manifest import per_mesh_manifest
+from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
 from export.onnx_io import get_metadata, load_onnx, ort_session, save_onnx, weighted_layers
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
@@ -48,10 +48,8 @@ from pipeline.models.field import (
 
 log = logging.getLogger(__name__)
 
-OPSET = 17
 POSITION, NORMAL, OUTPUT = "position", "normal", "ao"
 GLSL_DIR = "glsl"
-DIALECTS = ("glsl330", "es300")
 CHECK_BATCHES = (1, 7, 4096)
 TEXTURES = {"position": "xyz object-space position, w mask (>= 0.5 foreground)", "normal": "xyz object-space normal"}
 
@@ -240,12 +238,6 @@ def infer_frame(onnx_path, frame: dict) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------- parity
 
 
-def read_manifest(export_dir: Path) -> dict:
-    from export.parity import read_manifest as read_export_manifest
-
-    return read_export_manifest(export_dir, "field", "a field")
-
-
 def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ...] = DIALECTS) -> dict:
     """Generated GLSL (from the export folder) vs onnxruntime on real G-buffer frames of the mesh.
 
@@ -257,7 +249,7 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
     from runtime.glsl_runner import run_vector_fragment
 
     export_dir = Path(export_dir)
-    manifest = read_manifest(export_dir)
+    manifest = read_manifest(export_dir, "field", "a field")
     onnx_path = export_dir / manifest.get("onnx", "model.onnx")
     proto = load_onnx(onnx_path)
     check_field_onnx(proto, onnx_path)

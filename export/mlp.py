@@ -32,7 +32,7 @@ import numpy as np
 import onnx
 import torch
 
-from export.manifest import per_mesh_manifest
+from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
 from export.onnx_io import (
     backend_checks,
     get_metadata,
@@ -59,11 +59,8 @@ from pipeline.models.mlp import (
 
 log = logging.getLogger(__name__)
 
-OPSET = 17
 INPUT, OUTPUT = "normals", "ao"
 GLSL_DIR = "glsl"
-# Parity runs both (the runner executes the ES 3.0 sources on the desktop context).
-DIALECTS = ("glsl330", "es300")
 # Batch sizes of the export-time backend checks: one row, an odd count, a large batch (dynamic N).
 CHECK_BATCHES = (1, 7, 4096)
 INPUT_DESCRIPTION = (
@@ -314,12 +311,6 @@ def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------- parity
 
 
-def read_manifest(export_dir: Path) -> dict:
-    from export.parity import read_manifest as read_export_manifest
-
-    return read_export_manifest(export_dir, "mlp", "an MLP")
-
-
 def render_parity_frames(mesh: str, views: int = 2, size: tuple[int, int] = (128, 128)) -> list[dict]:
     """Real G-buffer frames of the training mesh: ``views`` orbit cameras (seed 2, not training cameras)."""
     from pipeline.gbuffers.rasterizer import GBufferRenderer
@@ -354,7 +345,7 @@ def parity(
     from runtime.glsl_runner import run_mlp_fragment
 
     export_dir = Path(export_dir)
-    manifest = read_manifest(export_dir)
+    manifest = read_manifest(export_dir, "mlp", "an MLP")
     onnx_path = export_dir / manifest.get("onnx", "model.onnx")
     proto = load_onnx(onnx_path)
     check_mlp_onnx(proto, onnx_path)

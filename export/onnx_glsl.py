@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 import onnx
 
+from export.manifest import read_manifest as read_export_manifest
 from export.onnx_io import load_onnx, ort_session
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import read_npz, sha256_file, write_bytes, write_json
@@ -199,8 +200,6 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
 
 
 def read_manifest(export_dir: Path) -> dict:
-    from export.parity import read_manifest as read_export_manifest
-
     manifest = read_export_manifest(export_dir, KIND, "a `neuralao glsl`")
     missing = [k for k in ("onnx", "glsl", "target", "inputs", "outputs", "precision") if k not in manifest]
     if missing or manifest["target"] not in TARGETS:

@@ -24,6 +24,7 @@ import numpy as np
 import onnx
 import torch
 
+from export.manifest import OPSET, read_manifest
 from export.onnx_io import (
     backend_checks,
     get_metadata,
@@ -35,6 +36,7 @@ from export.onnx_io import (
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import sha256_file, write_json
 from pipeline.foundation.tolerances import TOL
+from pipeline.models.checkpoint import count_parameters
 from pipeline.models.unet import (
     HYBRID_DESCRIPTION,
     PAD_MODE,
@@ -42,7 +44,6 @@ from pipeline.models.unet import (
     PREPROCESS_VERSION,
     RADIUS_INPUT,
     UNet,
-    count_parameters,
     frame_radius_param,
     pad_to_multiple,
     predict,
@@ -51,7 +52,6 @@ from pipeline.models.unet import (
 
 log = logging.getLogger(__name__)
 
-OPSET = 17
 INPUT, RADIUS, OUTPUT = "gbuffer", RADIUS_INPUT, "ao"
 # Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
 CHECK_RHOS: tuple[float, ...] = (0.05, 0.4)
@@ -540,12 +540,7 @@ def parity(
     compared over all pixels. Returns figures with ``passed`` = max error <= TOL.parity_unet_fp32.
     """
     export_dir = Path(export_dir)
-    manifest_path = export_dir / "manifest.json"
-    if not manifest_path.is_file():
-        raise NeuralaoError(f"no export manifest at {manifest_path}")
-    import json
-
-    manifest = json.loads(manifest_path.read_text())
+    manifest = read_manifest(export_dir)
     onnx_path = export_dir / manifest.get("onnx", "model.onnx")
     proto = load_onnx(onnx_path)
     meta = check_unet_onnx(proto, onnx_path)

@@ -3,22 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 from pathlib import Path
 
+from pipeline import kinds
 from pipeline.foundation.errors import NeuralaoError
-
-EXPORTERS = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field"}
+from pipeline.models.checkpoint import read_checkpoint
 
 
 def checkpoint_kind(path: str | Path) -> str:
     """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
-    from pipeline.models.checkpoint import read_checkpoint
-
     kind = read_checkpoint(path).get("kind")
-    if kind not in EXPORTERS:
+    if kind not in kinds.TRAINED:
         raise NeuralaoError(
-            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(EXPORTERS)})"
+            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(kinds.TRAINED)})"
         )
     return kind
 
@@ -30,5 +27,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kind = checkpoint_kind(args.model)
-    importlib.import_module(EXPORTERS[kind]).export_checkpoint(Path(args.model), Path(args.out))
+    kinds.module(kind).export_checkpoint(Path(args.model), Path(args.out))
     return 0

@@ -1,28 +1,212 @@
-"""`neuralao train mlp|unet|field`: dispatch to the model's own training module."""
+"""`neuralao train mlp|unet|field`: the flags of each trainable kind (pipeline.kinds) and its training."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import logging
+import math
+from collections.abc import Callable
+from pathlib import Path
 
-TRAINERS = {
-    "mlp": (
-        "pipeline.models.mlp",
-        "the baked MLP of Erra et al. (16 object-space normals -> AO), one network per mesh",
-    ),
-    "unet": ("pipeline.models.unet_train", "the DeepAO screen-space U-Net (depth + camera normal -> AO)"),
-    "field": (
-        "pipeline.models.field",
-        "a per-mesh neural AO field (object-space position + normal -> AO), one network per mesh",
-    ),
+import numpy as np
+
+from pipeline import kinds
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import add_set_option, load_settings
+from pipeline.models import field, mlp, unet_train
+
+# The lines a training writes keep the training module's logger name.
+_log = {name: logging.getLogger(k.trainer) for name, k in kinds.TRAINED.items()}
+
+
+# ----------------------------------------------------------------------------------------------- mlp
+
+
+def add_mlp_arguments(p: argparse.ArgumentParser) -> None:
+    src = p.add_argument_group("samples from a dataset, or directly from a mesh")
+    src.add_argument("--data", help="dataset folder (with --scene): samples from its non-held-back views")
+    src.add_argument("--scene", help="scene name in the dataset")
+    src.add_argument(
+        "--mesh", help="mesh file or name under the shared mesh folder: render and label only the samples"
+    )
+    d = mlp.MLPSettings()  # the help states the real defaults
+    src.add_argument("--views", type=int, help=f"mesh source: orbit views to sample (default {d.views})")
+    src.add_argument(
+        "--resolution",
+        type=int,
+        nargs=2,
+        metavar=("W", "H"),
+        help=f"mesh source: view size in pixels (default {d.size[0]} {d.size[1]})",
+    )
+    src.add_argument("--rays", type=int, help=f"mesh source: AO rays per sample (default {d.labels.rays})")
+    p.add_argument(
+        "--size",
+        default=None,
+        help=f"hidden layer widths XxY, e.g. 16x8, 32x16, 64x32 (default {mlp.size_name(d.hidden)})",
+    )
+    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
+    p.add_argument("--config", help="JSON preset of MLPSettings")
+    add_set_option(p, "--set optimizer=adam")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def mlp_settings_from_args(args: argparse.Namespace) -> mlp.MLPSettings:
+    overrides: list[str] = []
+    if args.size is not None:
+        overrides.append(f"hidden={mlp.parse_size(args.size)}")
+    if getattr(args, "views", None) is not None:
+        overrides.append(f"views={args.views}")
+    if getattr(args, "resolution", None) is not None:
+        overrides.append(f"size={list(args.resolution)}")
+    if getattr(args, "rays", None) is not None:
+        overrides.append(f"labels.rays={args.rays}")
+    return load_settings(mlp.MLPSettings, args.config, overrides + list(args.set))
+
+
+def run_mlp(args: argparse.Namespace) -> int:
+    if args.mesh and (args.data or args.scene):
+        raise NeuralaoError("give either --mesh or --data/--scene, not both")
+    if not args.mesh and not (args.data and args.scene):
+        raise NeuralaoError("give --data DIR --scene NAME, or --mesh PATH_OR_NAME")
+    if args.data and (args.views is not None or args.resolution is not None or args.rays is not None):
+        raise NeuralaoError("--views/--resolution/--rays apply to --mesh only (a dataset fixes them)")
+    settings = mlp_settings_from_args(args)
+    ckpt = mlp.train(
+        settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
+    )
+    m = ckpt["metrics"]
+    _log["mlp"].info(
+        "wrote %s: %s, %d parameters, %.1f s, test RMSE %.4f (constant %.4f), held-back SSIM %s RMSE %s",
+        args.out,
+        mlp.size_name(ckpt["model_args"]["hidden"]),
+        ckpt["parameters"],
+        ckpt["training_time_s"],
+        m["test_rmse"],
+        m["constant_test_rmse"],
+        f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
+        f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-",
+    )
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------- field
+
+
+def add_field_arguments(p: argparse.ArgumentParser) -> None:
+    src = p.add_argument_group("the mesh: a file, or a dataset's scene (its label settings are used)")
+    src.add_argument("--mesh", help="mesh file or name under the shared mesh folder")
+    src.add_argument("--data", help="dataset folder (with --scene)")
+    src.add_argument("--scene", help="scene name in the dataset")
+    d = field.FieldSettings()  # the help states the real defaults
+    p.add_argument("--size", default=None,
+                   help=f"hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default {mlp.size_name(d.hidden)})")  # fmt: skip
+    p.add_argument("--octaves", type=int, help=f"position-encoding frequency bands (default {d.octaves})")
+    p.add_argument("--rays", type=int, help=f"AO rays per surface sample (default {d.labels.rays})")
+    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
+    p.add_argument("--config", help="JSON preset of FieldSettings")
+    add_set_option(p, "--set steps=3000")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def field_settings_from_args(args: argparse.Namespace) -> field.FieldSettings:
+    overrides: list[str] = []
+    if args.size is not None:
+        overrides.append(f"hidden={mlp.parse_size(args.size)}")
+    if args.octaves is not None:
+        overrides.append(f"octaves={args.octaves}")
+    if args.rays is not None:
+        overrides.append(f"labels.rays={args.rays}")
+    return load_settings(field.FieldSettings, args.config, overrides + list(args.set))
+
+
+def run_field(args: argparse.Namespace) -> int:
+    if args.mesh and (args.data or args.scene):
+        raise NeuralaoError("give either --mesh or --data/--scene, not both")
+    if not args.mesh and not (args.data and args.scene):
+        raise NeuralaoError("give --mesh PATH_OR_NAME, or --data DIR --scene NAME")
+    settings = field_settings_from_args(args)
+    ckpt = field.train(settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh,
+                       progress=not args.no_progress)  # fmt: skip
+    m = ckpt["metrics"]
+    _log["field"].info("wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), "
+                       "held-back SSIM %s RMSE %s",
+                       args.out, mlp.size_name(ckpt["model_args"]["hidden"]), ckpt["model_args"]["octaves"],
+                       ckpt["parameter_bytes"], ckpt["training_time_s"], m["val_rmse"], m["constant_val_rmse"],
+                       f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
+                       f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-")  # fmt: skip
+    return 0
+
+
+# ----------------------------------------------------------------------------------------------- unet
+
+
+def add_unet_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--data",
+        required=True,
+        help="dataset folder (neuralao dataset): trains on 'train' scenes, validates on 'val'",
+    )
+    p.add_argument(
+        "--out", required=True, help="checkpoint MODEL.pt (progress in MODEL.pt.partial; a rerun resumes)"
+    )
+    p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
+    add_set_option(p, "--set epochs=3")
+    p.add_argument("--budget", type=float, metavar="MINUTES",
+                   help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)")  # fmt: skip
+    p.add_argument(
+        "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run_unet(args: argparse.Namespace) -> int:
+    overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
+    settings = load_settings(unet_train.UNetTrainSettings, args.config, overrides)
+    train_set, val_set, info = unet_train.load_dataset_frames(
+        Path(args.data), settings.train_fraction, internal_height=settings.internal_height,
+        gtao=settings.gtao_input)  # fmt: skip
+    log = _log["unet"]
+    log.info(
+        "U-Net: %d training frames (%s), %d validation frames (%s)",
+        len(train_set),
+        ", ".join(info["training_scenes"]),
+        len(val_set) if val_set is not None else 0,
+        info["val_source"],
+    )
+    ckpt = unet_train.train(
+        settings,
+        train_set,
+        val_set,
+        Path(args.out),
+        info,
+        restart=args.restart,
+        progress=not args.no_progress,
+    )
+    hist = ckpt["history"]
+    per_epoch = float(np.mean([h["seconds"] for h in hist])) if hist else math.nan
+    log.info(
+        "wrote %s: %d epochs, %.1f s/epoch, val SSIM %s",
+        args.out,
+        ckpt["epoch"],
+        per_epoch,
+        ckpt["metrics"].get("val_ssim"),
+    )
+    return 0
+
+
+# kind -> (its flags, its run); the kinds and their help come from pipeline.kinds
+COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
+    "mlp": (add_mlp_arguments, run_mlp),
+    "unet": (add_unet_arguments, run_unet),
+    "field": (add_field_arguments, run_field),
 }
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="model", metavar="MODEL", required=True)
-    for name, (module, help_) in TRAINERS.items():
-        importlib.import_module(module).add_arguments(sub.add_parser(name, help=help_, description=help_))
+    for name, kind in kinds.TRAINED.items():
+        COMMANDS[name][0](sub.add_parser(name, help=kind.train_help, description=kind.train_help))
 
 
 def run(args: argparse.Namespace) -> int:
-    return int(importlib.import_module(TRAINERS[args.model][0]).run(args) or 0)
+    return int(COMMANDS[args.model][1](args) or 0)

@@ -70,6 +70,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline import kinds
 from pipeline.evaluation.plots import shipped_markdown, shipped_note, write_shipped_plots
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
@@ -81,17 +82,21 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
 BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
-FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, "mlp": 3, "field": 4, "unet": 5}
-MODEL_FAMILIES = ("mlp", "field", "unet")  # methods loaded from exports
+# The report's own families (baselines); the model families (rows loaded from exports) come from pipeline.kinds.
+FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, **{n: k.report_order for n, k in kinds.REPORTED.items()}}
+MODEL_FAMILIES = tuple(kinds.REPORTED)  # methods loaded from exports
 # Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
-RADIUS_FAMILIES = ("screen-space", "unet")
+RADIUS_FAMILIES = ("screen-space", *(n for n, k in kinds.REPORTED.items() if k.radius_input))
+# Scatter-plot colours of the families (pipeline.kinds gives the models').
+COLOURS = {"screen-space": "tab:blue", "baked": "tab:green", "traced": "tab:gray",
+           **{n: k.colour for n, k in kinds.REPORTED.items()}}  # fmt: skip
 SHIPPED_PREFIX = "shipped:"  # row-name prefix of the release models of runtime/models
 # Shipped rows a report shows unless told otherwise: the default model and the fast one (pick_shipped).
 SHIPPED_PICKS = ("default", "fast")
 # Which methods can show a single-sided surface differently from its two sides (the G-buffer turns
 # the normal towards the viewer): per-vertex bakes store one value per vertex, so both sides of an
 # open sheet show the same AO; networks fed the viewer-facing normal and screen-space methods can differ.
-TWO_SIDED = {"screen-space": True, "baked": False, "traced": True, "mlp": True, "field": True, "unet": True}
+TWO_SIDED = {"screen-space": True, "baked": False, "traced": True, **{n: k.two_sided for n, k in kinds.REPORTED.items()}}
 
 
 @dataclass
@@ -1217,13 +1222,6 @@ def scatter_plot(result: dict, path: Path) -> Path | None:
            if ms[n].get("available") and ms[n].get("seconds") and ms[n].get("rmse_ratio_vs_ssao") is not None]  # fmt: skip
     if not pts:
         return None
-    colours = {
-        "screen-space": "tab:blue",
-        "baked": "tab:green",
-        "traced": "tab:gray",
-        "mlp": "tab:orange",
-        "unet": "tab:red",
-    }
     fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=110)
     for n, t, r, fam in pts:
         on = n in result.get("pareto", [])
@@ -1231,7 +1229,7 @@ def scatter_plot(result: dict, path: Path) -> Path | None:
             [t],
             [r],
             s=60 if on else 36,
-            color=colours.get(fam, "k"),
+            color=COLOURS.get(fam, "k"),
             edgecolors="k" if on else "none",
             zorder=3,
         )

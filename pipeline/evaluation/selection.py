@@ -10,15 +10,16 @@ order tried, the choice, whether the target was met (if nothing meets it the bes
 recorded with ``met_target: false``), and what the choice saves against the largest candidate.
 
 :mod:`pipeline.evaluation.report` (which measures) and :mod:`pipeline.cli.select` (the command) both import this
-module; it imports neither.
+module; it imports neither (the model families come from :mod:`pipeline.kinds`).
 """
 
 from __future__ import annotations
 
+from pipeline import kinds
 from pipeline.foundation.errors import NeuralaoError
 
 DEFAULT_TARGET = 0.95
-CANDIDATE_FAMILIES = ("screen-space", "baked", "mlp", "field", "unet")
+CANDIDATE_FAMILIES = ("screen-space", "baked", *kinds.REPORTED)
 
 
 def scene_candidates(result: dict) -> dict[str, list[dict]]:
@@ -142,13 +143,14 @@ def render_markdown(selection: dict, heading: str = "# Model selection") -> str:
     if selection.get("unavailable_models"):
         lines += [
             "",
-            "Not available: "
-            + "; ".join(f"{n} ({r})" for n, r in selection["unavailable_models"].items()),
+            "Not available: " + "; ".join(f"{n} ({r})" for n, r in selection["unavailable_models"].items()),
         ]
     return "\n".join(lines) + "\n"
 
 
-def render_targets_markdown(selections: dict[float, dict], heading: str = "## Selection at several targets") -> str:
+def render_targets_markdown(
+    selections: dict[float, dict], heading: str = "## Selection at several targets"
+) -> str:
     """One row per scene, one column group per target: the choice, its bytes and time, and the savings."""
     targets = sorted(selections)
     scenes = sorted({sc for sel in selections.values() for sc in sel["scenes"]})

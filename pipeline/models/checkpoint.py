@@ -19,6 +19,10 @@ from pipeline.foundation.io import atomic_path
 REQUIRED_KEYS = ("model_args", "state_dict", "config")
 
 
+def count_parameters(model: nn.Module) -> int:
+    return int(sum(p.numel() for p in model.parameters()))
+
+
 def per_mesh_checkpoint(kind: str, format_version: int, model: nn.Module, model_args: dict, config: dict,
                         samples_info: dict, metrics: dict, train_info: dict, parameter_bytes: int) -> dict:
     """The checkpoint of a per-mesh network (baked MLP, AO field): model, settings, samples, metrics."""
@@ -34,7 +38,7 @@ def per_mesh_checkpoint(kind: str, format_version: int, model: nn.Module, model_
         "samples": samples_info,
         "training": {k: v for k, v in train_info.items() if k != "seconds"},
         "training_time_s": float(train_info["seconds"]),
-        "parameters": int(sum(p.numel() for p in model.parameters())),
+        "parameters": count_parameters(model),
         "parameter_bytes": int(parameter_bytes),
         "torch_version": str(torch.__version__),
     }

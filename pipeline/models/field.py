@@ -39,7 +39,6 @@ rate decay, MSE loss, the weights of the best validation RMSE kept.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import time
@@ -61,12 +60,11 @@ from pipeline.foundation.limits import (
     check_pixels,
     check_seed,
 )
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.foundation.settings import settings_to_dict
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from pipeline.models.mlp import (  # count_parameters: trainable weights only
     count_parameters,
-    parse_size,
     size_name,
 )
 from pipeline.tracing.labeller import LabelSettings
@@ -490,46 +488,3 @@ def train(settings: FieldSettings, out, data=None, scene=None, mesh=None, progre
     if out is not None:
         save_checkpoint(out, ckpt)
     return ckpt
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    src = p.add_argument_group("the mesh: a file, or a dataset's scene (its label settings are used)")
-    src.add_argument("--mesh", help="mesh file or name under the shared mesh folder")
-    src.add_argument("--data", help="dataset folder (with --scene)")
-    src.add_argument("--scene", help="scene name in the dataset")
-    d = FieldSettings()  # the help states the real defaults
-    p.add_argument("--size", default=None,
-                   help=f"hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default {size_name(d.hidden)})")  # fmt: skip
-    p.add_argument("--octaves", type=int, help=f"position-encoding frequency bands (default {d.octaves})")
-    p.add_argument("--rays", type=int, help=f"AO rays per surface sample (default {d.labels.rays})")
-    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
-    p.add_argument("--config", help="JSON preset of FieldSettings")
-    add_set_option(p, "--set steps=3000")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-
-
-def settings_from_args(args: argparse.Namespace) -> FieldSettings:
-    overrides: list[str] = []
-    if args.size is not None:
-        overrides.append(f"hidden={parse_size(args.size)}")
-    if args.octaves is not None:
-        overrides.append(f"octaves={args.octaves}")
-    if args.rays is not None:
-        overrides.append(f"labels.rays={args.rays}")
-    return load_settings(FieldSettings, args.config, overrides + list(args.set))
-
-
-def run(args: argparse.Namespace) -> int:
-    if args.mesh and (args.data or args.scene):
-        raise NeuralaoError("give either --mesh or --data/--scene, not both")
-    if not args.mesh and not (args.data and args.scene):
-        raise NeuralaoError("give --mesh PATH_OR_NAME, or --data DIR --scene NAME")
-    settings = settings_from_args(args)
-    ckpt = train(settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress)
-    m = ckpt["metrics"]
-    log.info("wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), held-back SSIM %s RMSE %s",
-             args.out, size_name(ckpt["model_args"]["hidden"]), ckpt["model_args"]["octaves"], ckpt["parameter_bytes"],
-             ckpt["training_time_s"], m["val_rmse"], m["constant_val_rmse"],
-             f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
-             f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-")  # fmt: skip
-    return 0

@@ -62,7 +62,6 @@ The same network applied with the radius-10 circle it was trained on is reported
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import time
@@ -75,9 +74,9 @@ import torch
 from torch import nn
 
 from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.foundation.settings import settings_to_dict
+from pipeline.models.checkpoint import count_parameters, per_mesh_checkpoint, restore_model, save_checkpoint
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from pipeline.tracing.labeller import LabelSettings
 
 log = logging.getLogger(__name__)
@@ -179,10 +178,6 @@ def build_model(model_args: dict) -> BakedMLP:
 
 def model_args_dict(model: BakedMLP) -> dict:
     return {"inputs": model.inputs, "hidden": list(model.hidden)}
-
-
-def count_parameters(model: nn.Module) -> int:
-    return int(sum(p.numel() for p in model.parameters()))
 
 
 def parameter_bytes(model: nn.Module) -> int:
@@ -782,70 +777,3 @@ def train(
     if out is not None:
         save_checkpoint(out, ckpt)
     return ckpt
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    src = p.add_argument_group("samples from a dataset, or directly from a mesh")
-    src.add_argument("--data", help="dataset folder (with --scene): samples from its non-held-back views")
-    src.add_argument("--scene", help="scene name in the dataset")
-    src.add_argument(
-        "--mesh", help="mesh file or name under the shared mesh folder: render and label only the samples"
-    )
-    d = MLPSettings()  # the help states the real defaults
-    src.add_argument("--views", type=int, help=f"mesh source: orbit views to sample (default {d.views})")
-    src.add_argument(
-        "--resolution",
-        type=int,
-        nargs=2,
-        metavar=("W", "H"),
-        help=f"mesh source: view size in pixels (default {d.size[0]} {d.size[1]})",
-    )
-    src.add_argument("--rays", type=int, help=f"mesh source: AO rays per sample (default {d.labels.rays})")
-    p.add_argument(
-        "--size",
-        default=None,
-        help=f"hidden layer widths XxY, e.g. 16x8, 32x16, 64x32 (default {size_name(d.hidden)})",
-    )
-    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
-    p.add_argument("--config", help="JSON preset of MLPSettings")
-    add_set_option(p, "--set optimizer=adam")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-
-
-def settings_from_args(args: argparse.Namespace) -> MLPSettings:
-    overrides: list[str] = []
-    if args.size is not None:
-        overrides.append(f"hidden={parse_size(args.size)}")
-    if getattr(args, "views", None) is not None:
-        overrides.append(f"views={args.views}")
-    if getattr(args, "resolution", None) is not None:
-        overrides.append(f"size={list(args.resolution)}")
-    if getattr(args, "rays", None) is not None:
-        overrides.append(f"labels.rays={args.rays}")
-    return load_settings(MLPSettings, args.config, overrides + list(args.set))
-
-
-def run(args: argparse.Namespace) -> int:
-    if args.mesh and (args.data or args.scene):
-        raise NeuralaoError("give either --mesh or --data/--scene, not both")
-    if not args.mesh and not (args.data and args.scene):
-        raise NeuralaoError("give --data DIR --scene NAME, or --mesh PATH_OR_NAME")
-    if args.data and (args.views is not None or args.resolution is not None or args.rays is not None):
-        raise NeuralaoError("--views/--resolution/--rays apply to --mesh only (a dataset fixes them)")
-    settings = settings_from_args(args)
-    ckpt = train(
-        settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
-    )
-    m = ckpt["metrics"]
-    log.info(
-        "wrote %s: %s, %d parameters, %.1f s, test RMSE %.4f (constant %.4f), held-back SSIM %s RMSE %s",
-        args.out,
-        size_name(ckpt["model_args"]["hidden"]),
-        ckpt["parameters"],
-        ckpt["training_time_s"],
-        m["test_rmse"],
-        m["constant_test_rmse"],
-        f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
-        f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-",
-    )
-    return 0

@@ -262,10 +262,6 @@ def model_args_dict(args: UNetArgs) -> dict:
     }
 
 
-def count_parameters(model: nn.Module) -> int:
-    return int(sum(p.numel() for p in model.parameters()))
-
-
 def radius_tensor(rho: float | None) -> torch.Tensor | None:
     """The radius parameter as the network's (1, 1, 1, 1) float32 input (None stays None)."""
     return None if rho is None else torch.full((1, 1, 1, 1), float(rho), dtype=torch.float32)

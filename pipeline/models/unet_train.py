@@ -21,7 +21,6 @@ equals uninterrupted bit for bit (same machine and thread count).
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import time
@@ -34,7 +33,7 @@ import torch
 import torch.nn.functional as F
 
 from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.foundation.settings import settings_to_dict
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from pipeline.models.checkpoint import restore_model, save_checkpoint
 from pipeline.models.unet import (
@@ -849,58 +848,3 @@ def train(
     save_checkpoint(out, ckpt)
     partial_path(out).unlink(missing_ok=True)
     return ckpt
-
-
-# ----------------------------------------------------------------------------------------------- CLI
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--data",
-        required=True,
-        help="dataset folder (neuralao dataset): trains on 'train' scenes, validates on 'val'",
-    )
-    p.add_argument(
-        "--out", required=True, help="checkpoint MODEL.pt (progress in MODEL.pt.partial; a rerun resumes)"
-    )
-    p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
-    add_set_option(p, "--set epochs=3")
-    p.add_argument("--budget", type=float, metavar="MINUTES",
-                   help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)")  # fmt: skip
-    p.add_argument(
-        "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def run(args: argparse.Namespace) -> int:
-    overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
-    settings = load_settings(UNetTrainSettings, args.config, overrides)
-    train_set, val_set, info = load_dataset_frames(Path(args.data), settings.train_fraction,
-                                                   internal_height=settings.internal_height, gtao=settings.gtao_input)  # fmt: skip
-    log.info(
-        "U-Net: %d training frames (%s), %d validation frames (%s)",
-        len(train_set),
-        ", ".join(info["training_scenes"]),
-        len(val_set) if val_set is not None else 0,
-        info["val_source"],
-    )
-    ckpt = train(
-        settings,
-        train_set,
-        val_set,
-        Path(args.out),
-        info,
-        restart=args.restart,
-        progress=not args.no_progress,
-    )
-    hist = ckpt["history"]
-    per_epoch = float(np.mean([h["seconds"] for h in hist])) if hist else math.nan
-    log.info(
-        "wrote %s: %d epochs, %.1f s/epoch, val SSIM %s",
-        args.out,
-        ckpt["epoch"],
-        per_epoch,
-        ckpt["metrics"].get("val_ssim"),
-    )
-    return 0

@@ -8,14 +8,20 @@ U-Net), otherwise each model's parity function renders its own.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 
+from export.manifest import read_manifest
+from pipeline import kinds
+from pipeline.datasets.dataset import open_dataset
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
+from pipeline.foundation.limits import check_seed
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("export.parity")  # the name its lines have always carried
+
+# The kind of a `neuralao glsl` export: checked on seeded or given inputs, not on frames.
+ONNX_GLSL = "onnx-glsl"
 
 
 def export_dirs(root: Path) -> list[Path]:
@@ -27,28 +33,12 @@ def export_dirs(root: Path) -> list[Path]:
     return dirs
 
 
-def read_manifest(d: str | Path, kind: str | None = None, label: str = "") -> dict:
-    """An export folder's manifest.json; with ``kind``, one of that kind (``label`` names it in errors)."""
-    path = Path(d) / "manifest.json"
-    try:
-        manifest = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"no export manifest at {path}") from None
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{path} is corrupt") from None
-    if kind is not None and manifest.get("kind") != kind:
-        raise NeuralaoError(f"{d} is not {label or kind} export (kind {manifest.get('kind')!r})")
-    return manifest
-
-
 def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dict] | None:
-    """Dataset frames for one export: held-back views of the MLP's scene, or validation-split frames."""
+    """Dataset frames for one export: held-back views of a per-mesh model's scene, or validation-split frames."""
     if data is None:
         return None
-    from pipeline.datasets.dataset import open_dataset
-
     ds = open_dataset(data)
-    if manifest["kind"] in ("mlp", "field") and manifest.get("scene") in ds.scenes:
+    if kinds.KINDS[manifest["kind"]].per_mesh and manifest.get("scene") in ds.scenes:
         it = ds.frames(scene=manifest["scene"], holdout=True)
     else:
         it = ds.frames(split="val")
@@ -60,31 +50,25 @@ def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dic
     return frames or None
 
 
-# export kind -> module with parity(export_dir, frames, ...)
-PARITY_MODULES = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field", "onnx-glsl": "export.onnx_glsl"}
-
-
 def check_exports(root: Path, data: Path | None = None, inputs: Path | None = None, seed: int = 0,
                   size: tuple[int, int] | None = None) -> dict:  # fmt: skip
     """Parity of every export under ``root``. ``inputs``, ``seed`` and ``size`` (W, H; None: the
     export's own) apply to `neuralao glsl` exports, and are refused for the others, which run on frames."""
-    import importlib
-
     dirs = export_dirs(root)
     manifests = {d: read_manifest(d) for d in dirs}
     for d, manifest in manifests.items():
         kind = manifest.get("kind")
-        if kind not in PARITY_MODULES:
+        if kind not in kinds.KINDS:
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
-        if kind != "onnx-glsl" and (size is not None or inputs is not None):
+        if kind != ONNX_GLSL and (size is not None or inputs is not None):
             raise NeuralaoError(f"{d} is a {kind} export, checked on rendered or --data frames: "
                                 "--size and --inputs apply to `neuralao glsl` exports only")  # fmt: skip
     results = {}
     for d, manifest in manifests.items():
         kind = manifest["kind"]
-        module = importlib.import_module(PARITY_MODULES[kind])
+        module = kinds.module(kind)
         log.info("parity: %s (%s)", d.name, kind)
-        if kind == "onnx-glsl":
+        if kind == ONNX_GLSL:
             results[d.name] = module.parity(d, inputs=inputs, seed=seed, size=size)
         else:
             results[d.name] = module.parity(d, parity_frames(data, manifest))
@@ -105,9 +89,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pipeline.foundation.limits import check_seed
-
-    check_seed("--seed", args.seed)  # before any export is read: numpy refuses a negative seed with a traceback
+    # before any export is read: numpy refuses a negative seed with a traceback
+    check_seed("--seed", args.seed)
     results = check_exports(Path(args.exports), Path(args.data) if args.data else None,
                             Path(args.inputs) if args.inputs else None, args.seed,
                             tuple(args.size) if args.size else None)  # fmt: skip
