@@ -63,19 +63,54 @@ import json
 import logging
 import math
 import platform
-import time
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from export.field import NORMAL, POSITION, check_field_onnx, gbuffer_textures
+from export.glsl import load_compute_export, load_mlp_export
+from export.mlp import INPUT, check_mlp_onnx
+from export.onnx_io import load_onnx, ort_session
+from export.unet import check_unet_onnx, composite, ort_runner, run_padded
 from pipeline import kinds
-from pipeline.evaluation.plots import shipped_markdown, shipped_note, write_shipped_plots
+from pipeline.bakes.vertex import BakeSettings, bake
+from pipeline.datasets.dataset import open_dataset, scene_of
+from pipeline.evaluation.figures import contact_sheet as readable_sheet
+from pipeline.evaluation.figures import write_html, write_viewer_pages
+from pipeline.evaluation.plots import shipped_markdown, shipped_note, shipped_summary, write_shipped_plots
+from pipeline.evaluation.selection import render_markdown as select_markdown
+from pipeline.evaluation.selection import render_targets_markdown as targets_markdown
+from pipeline.evaluation.selection import select_from_results
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
-from runtime.baselines import GTAOSettings, SSAOSettings
+from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
+from pipeline.foundation.settings import add_set_option, from_dict, load_settings, settings_to_dict
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import Camera
+from pipeline.models.mlp import radius_zero_inputs
+from pipeline.models.unet import frame_radius_param, preprocess_frame
+from pipeline.tracing.labeller import Labeller, LabelSettings
+from runtime import gl
+from runtime.baselines import (
+    GTAOSettings,
+    SSAOSettings,
+    run_screen_space,
+    time_screen_space,
+    time_vertex_ao,
+    traced_ao,
+    vertex_ao_image,
+)
+from runtime.glsl_runner import (
+    run_mlp_fragment,
+    run_vector_fragment,
+    time_compute,
+    time_mlp_fragment,
+    time_vector_fragment,
+)
+from runtime.shipped import MODELS_DIR
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +118,12 @@ FORMAT_VERSION = 1
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
 BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
 # The report's own families (baselines); the model families (rows loaded from exports) come from pipeline.kinds.
-FAMILY_ORDER = {"screen-space": 0, "baked": 1, "traced": 2, **{n: k.report_order for n, k in kinds.REPORTED.items()}}
+FAMILY_ORDER = {
+    "screen-space": 0,
+    "baked": 1,
+    "traced": 2,
+    **{n: k.report_order for n, k in kinds.REPORTED.items()},
+}
 MODEL_FAMILIES = tuple(kinds.REPORTED)  # methods loaded from exports
 # Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
 RADIUS_FAMILIES = ("screen-space", *(n for n, k in kinds.REPORTED.items() if k.radius_input))
@@ -96,7 +136,12 @@ SHIPPED_PICKS = ("default", "fast")
 # Which methods can show a single-sided surface differently from its two sides (the G-buffer turns
 # the normal towards the viewer): per-vertex bakes store one value per vertex, so both sides of an
 # open sheet show the same AO; networks fed the viewer-facing normal and screen-space methods can differ.
-TWO_SIDED = {"screen-space": True, "baked": False, "traced": True, **{n: k.two_sided for n, k in kinds.REPORTED.items()}}
+TWO_SIDED = {
+    "screen-space": True,
+    "baked": False,
+    "traced": True,
+    **{n: k.two_sided for n, k in kinds.REPORTED.items()},
+}
 
 
 @dataclass
@@ -209,9 +254,6 @@ def evaluation_frames(ds, per_scene: int) -> dict[str, list[dict]]:
 
 
 def label_settings_of(ds, workers: int):
-    from pipeline.foundation.settings import from_dict
-    from pipeline.tracing.labeller import LabelSettings
-
     return replace(from_dict(LabelSettings, dict(ds.label_settings)), workers=workers)
 
 
@@ -431,8 +473,6 @@ def discover_shipped(
     every one) as rows ``shipped:<name>``, and the summary of the index
     (:func:`pipeline.evaluation.plots.shipped_summary`, its models cut to the picked ones and their
     ``roles``; its ``note`` says why none)."""
-    from pipeline.evaluation.plots import shipped_summary
-
     summary = shipped_summary(models_dir)
     names = pick_shipped(summary, picks)
     others = [n for n in summary["models"] if n not in names]
@@ -459,10 +499,6 @@ def discover_shipped(
 
 def _field_method(m: Method) -> None:
     """Every scene's shader; onnxruntime (timing only) of the first."""
-    from export.field import check_field_onnx
-    from export.glsl import load_mlp_export
-    from export.onnx_io import load_onnx, ort_session
-
     for scene, d in sorted(m.scene_exports.items()):
         manifest = json.loads((d / "manifest.json").read_text())
         m.runners[scene] = load_mlp_export(d / manifest.get("glsl", "glsl"))
@@ -498,10 +534,6 @@ def prepare_model(m: Method) -> None:
     """Load what a model method needs once (shader objects, onnxruntime sessions); failure -> unavailable."""
     try:
         if m.family == "mlp":
-            from export.glsl import load_mlp_export
-            from export.mlp import check_mlp_onnx
-            from export.onnx_io import load_onnx, ort_session
-
             manifest = json.loads((m.export / "manifest.json").read_text())
             m.runner = load_mlp_export(m.export / manifest.get("glsl", "glsl"))
             proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
@@ -510,10 +542,6 @@ def prepare_model(m: Method) -> None:
         elif m.family == "field":
             _field_method(m)
         elif m.family == "unet":
-            from export.glsl import load_compute_export
-            from export.onnx_io import load_onnx
-            from export.unet import check_unet_onnx, ort_runner
-
             manifest = json.loads((m.export / "manifest.json").read_text())
             proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
             meta = check_unet_onnx(proto, m.export)
@@ -531,19 +559,11 @@ def predict_model(m: Method, frame: dict, radius: float | None = None) -> np.nda
     scene units, for the U-Nets that take it as an input)."""
     mask = np.asarray(frame["mask"], bool)
     if m.family == "mlp":
-        from runtime.glsl_runner import run_mlp_fragment
-
         raw = run_mlp_fragment(m.runner, np.asarray(frame["normal_obj"], np.float32), mask)
         return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
     if m.family == "field":
-        from export.field import gbuffer_textures
-        from runtime.glsl_runner import run_vector_fragment
-
         raw = run_vector_fragment(m.runners[frame["scene"]], gbuffer_textures(frame))
         return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
-    from export.unet import composite, run_padded
-    from pipeline.models.unet import frame_radius_param, preprocess_frame
-
     fn, multiple = m.ort_runner
     rho = frame_radius_param(frame, radius)
     return composite(np.clip(run_padded(fn, preprocess_frame(frame), multiple, rho), 0.0, 1.0), frame)
@@ -554,49 +574,29 @@ def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
     w, h = size
     out: dict = {}
     if m.family == "mlp":
-        from export.mlp import INPUT
-        from pipeline.models.mlp import radius_zero_inputs
-        from runtime.glsl_runner import time_mlp_fragment
-
         out["seconds"] = time_mlp_fragment(m.runner, h, w, repeats=repeats)
         n = np.random.default_rng(0).normal(size=(h * w, 3)).astype(np.float32)
         x = radius_zero_inputs(n / np.linalg.norm(n, axis=1, keepdims=True))
-        out["seconds_onnxruntime"] = _median_seconds(
-            lambda: m.ort_runner.run(None, {INPUT: x}), max(1, repeats // 3)
+        out["seconds_onnxruntime"] = gl.median_frame_seconds(
+            lambda: m.ort_runner.run(None, {INPUT: x}), max(1, repeats // 3), warmup=1
         )
     elif m.family == "field":
-        from export.field import NORMAL, POSITION
-        from runtime.glsl_runner import time_vector_fragment
-
         out["seconds"] = time_vector_fragment(m.runner, h, w, repeats=repeats)
         rng = np.random.default_rng(0)
         p = rng.uniform(-1, 1, size=(h * w, 3)).astype(np.float32)
         n = rng.normal(size=(h * w, 3)).astype(np.float32)
         n /= np.linalg.norm(n, axis=1, keepdims=True)
-        out["seconds_onnxruntime"] = _median_seconds(
-            lambda: m.ort_runner.run(None, {POSITION: p, NORMAL: n}), max(1, repeats // 3)
+        out["seconds_onnxruntime"] = gl.median_frame_seconds(
+            lambda: m.ort_runner.run(None, {POSITION: p, NORMAL: n}), max(1, repeats // 3), warmup=1
         )
     else:
-        from export.unet import run_padded
-        from runtime.glsl_runner import time_compute
-
         out["seconds"] = time_compute(m.runner, h, w, repeats=max(1, min(repeats, 5)))
         fn, multiple = m.ort_runner
         x = np.random.default_rng(0).normal(size=(4, h, w)).astype(np.float32)
-        out["seconds_onnxruntime"] = _median_seconds(
-            lambda: run_padded(fn, x, multiple, 0.1), max(1, min(repeats, 5))
+        out["seconds_onnxruntime"] = gl.median_frame_seconds(
+            lambda: run_padded(fn, x, multiple, 0.1), max(1, min(repeats, 5)), warmup=1
         )
     return out
-
-
-def _median_seconds(fn, repeats: int) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 # --------------------------------------------------------------------------- per-scene context
@@ -621,8 +621,6 @@ class SceneContext:
         progress: bool,
         radii_rel: list[float] | None = None,
     ):
-        from pipeline.tracing.labeller import Labeller
-
         self.name = name
         self.scene = scene
         self.labeller = Labeller(self.scene, label_settings)
@@ -651,8 +649,6 @@ class SceneContext:
             lsq = self.baked("vertex-lsq")
             self.bakes[method] = (np.rint(np.clip(lsq, 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
             return self.bakes[method]
-        from pipeline.bakes.vertex import BakeSettings, bake
-
         ls = self.labeller.settings
         bs = BakeSettings(rays=self.settings.bake_rays, max_distance=self.labeller.max_distance, kernel=ls.kernel,
                           half_distance=self.labeller.half_distance, method="vertex" if method == "vertex-sampled" else "least-squares",
@@ -678,23 +674,23 @@ class SceneContext:
                 write_npz(path, ao=r.ao, info=np.array(json.dumps(r.info, default=str)))
         return self.bakes[method]
 
-    def timing_frame(self, frame: dict) -> tuple[dict, object]:
+    def timing_frame(self, frame: dict) -> tuple[dict, Camera]:
         """A ``time_size`` G-buffer from the pose of ``frame`` and its camera."""
-        from pipeline.gbuffers.rasterizer import GBufferRenderer
-        from pipeline.geometry.camera import Camera
+        return timing_frame(self.scene, frame, self.settings.time_size)
 
-        w, h = self.settings.time_size
-        cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]),
-                     float(frame["znear"]), float(frame["zfar"]))  # fmt: skip
-        with GBufferRenderer(self.scene) as r:
-            return r.render(cam), cam
+
+def timing_frame(scene, frame: dict, size: tuple[int, int]) -> tuple[dict, Camera]:
+    """A G-buffer of ``scene`` at ``size`` (W, H) from the pose of ``frame``, and its camera."""
+    w, h = size
+    cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]),
+                 float(frame["znear"]), float(frame["zfar"]))  # fmt: skip
+    with GBufferRenderer(scene) as r:
+        return r.render(cam), cam
 
 
 def predict(m: Method, ctx: SceneContext, frame: dict, radius: float | None = None) -> np.ndarray:
     """AO (H, W) float32 of method ``m`` on ``frame``; ``radius`` (scene units, default the labels'
     max distance) for the methods that take one (RADIUS_FAMILIES)."""
-    from runtime.baselines import run_screen_space, traced_ao, vertex_ao_image
-
     s = ctx.settings
     radius = ctx.radius if radius is None else radius
     if m.family == "screen-space":
@@ -711,8 +707,6 @@ def predict(m: Method, ctx: SceneContext, frame: dict, radius: float | None = No
 
 
 def time_method(m: Method, ctx: SceneContext, frame512: dict, camera) -> float:
-    from runtime.baselines import time_screen_space, time_vertex_ao, traced_ao
-
     s = ctx.settings
     if m.family == "screen-space":
         return time_screen_space(
@@ -744,12 +738,6 @@ def evaluate(
     ``exports``: a folder of export folders (None: none); ``shipped``: a shipped-models folder
     (runtime/models) whose U-Nets are added as ``shipped:<name>`` rows (None: not looked at), those of
     ``shipped_picks`` (roles or names, :func:`pick_shipped`; None: every one)."""
-    from tqdm import tqdm
-
-    from pipeline.datasets.dataset import open_dataset, scene_of
-    from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
-    from runtime import gl
-
     check_settings(settings)
     ds = open_dataset(data)
     frames_by_scene = evaluation_frames(ds, settings.frames_per_scene)
@@ -905,8 +893,6 @@ def evaluate(
 def score_radii(m: Method, ctx: SceneContext, frame: dict, truth: GroundTruth, pred: np.ndarray) -> dict:
     """radius key -> {ssim, rmse} of ``m`` given each radius of ``ctx.radii`` against the ground truth
     at that radius (``pred``: its output at the max distance, reused where a radius equals it)."""
-    from pipeline.foundation.metrics import masked_rmse, masked_ssim
-
     fg = np.asarray(frame["mask"], bool)
     out = {}
     for j, (rel, r) in enumerate(zip(ctx.radii_rel, ctx.radii, strict=True)):
@@ -1078,9 +1064,6 @@ def _bytes(v) -> str:
 
 
 def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
-    from pipeline.evaluation.selection import render_markdown as select_markdown
-    from pipeline.evaluation.selection import render_targets_markdown as targets_markdown
-
     ms = result["methods"]
     d = result["dataset"]
     w, h = result["settings"]["time_size"]
@@ -1211,7 +1194,7 @@ def radius_markdown(result: dict) -> list[str]:
 
 def scatter_plot(result: dict, path: Path) -> Path | None:
     """Speed (ms, log) against RMSE relative to SSAO, with the Pareto front."""
-    import matplotlib
+    import matplotlib  # imported here: a measured import-time cost (~0.5 s), for this plot only
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -1288,15 +1271,11 @@ def contact_order(result: dict, wanted: list[str]) -> list[str]:
 
 def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
     """The scene's contact sheet (:func:`pipeline.evaluation.figures.contact_sheet`)."""
-    from pipeline.evaluation.figures import contact_sheet as readable_sheet
-
     return readable_sheet(scene, sheet, order, path)
 
 
 def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     """Figures, the selection section, report.json and report.md (written last) under ``out``."""
-    from pipeline.evaluation.selection import select_from_results
-
     sheets = result.pop("_sheets", {})
     figures: dict = {"contact_sheets": {}}
     scatter = scatter_plot(result, out / "speed_vs_error.png")
@@ -1314,8 +1293,6 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     result["select_at"] = {
         str(t): select_from_results(result, t) for t in sorted(set(settings.select_targets))
     }
-    from pipeline.evaluation.figures import write_html, write_viewer_pages
-
     viewer_links = write_viewer_pages(sheets, out) if settings.viewer_pages else {}
     figures["viewer"] = viewer_links
     result["figures"] = figures
@@ -1371,8 +1348,6 @@ def settings_from_args(args: argparse.Namespace) -> ReportSettings:
 
 def shipped_folder(args: argparse.Namespace) -> Path | None:
     """The shipped-models folder to report on: by default only when no --exports is given."""
-    from runtime.shipped import MODELS_DIR
-
     include = getattr(args, "shipped", None)
     if include is None:
         include = not getattr(args, "exports", None)

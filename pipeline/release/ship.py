@@ -30,10 +30,20 @@ from pathlib import Path
 
 import numpy as np
 
+from export.onnx_io import get_metadata, load_onnx, save_onnx
+from export.unet import export_checkpoint, parity
+from pipeline.datasets.dataset import open_dataset, scene_of
+from pipeline.evaluation.report import ReportSettings
+from pipeline.evaluation.report import timing_frame as report_timing_frame
+from pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import sha256_file, write_json
 from pipeline.foundation.settings import from_dict, load_settings, settings_to_dict
 from pipeline.foundation.tolerances import TOL
+from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+from runtime.baselines import time_screen_space
+from runtime.glsl_runner import time_compute
+from runtime.internal_resolution import internal_size
 
 log = logging.getLogger(__name__)
 
@@ -101,26 +111,14 @@ def install(tmp: Path, target: Path) -> None:
 
 def timing_frame(data: Path, split: str, size: tuple[int, int]) -> tuple[dict, float]:
     """A G-buffer at ``size`` (W, H) from the pose of the split's first frame, and its label radius."""
-    from pipeline.datasets.dataset import open_dataset, scene_of
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import Camera
-
     ds = open_dataset(data)
     frame = next(iter(ds.frames(split=split)))
-    scene = scene_of(ds.manifest, frame["scene"])
-    w, h = size
-    cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]), float(frame["znear"]),
-                 float(frame["zfar"]))  # fmt: skip
-    with GBufferRenderer(scene) as r:
-        return r.render(cam), float(np.max(frame["radii"]))
+    gbuffer, _ = report_timing_frame(scene_of(ds.manifest, frame["scene"]), frame, size)
+    return gbuffer, float(np.max(frame["radii"]))
 
 
 def baseline_figures(settings: ShipSettings, data: Path) -> dict:
     """SSAO and GTAO on the test split (every radius) and their GL time at ``time_sizes``."""
-    from pipeline.evaluation.report import ReportSettings
-    from pipeline.evaluation.test_split import evaluate_split, screen_space_predictor
-    from runtime.baselines import time_screen_space
-
     rs = ReportSettings()
     methods = {"ssao": screen_space_predictor("ssao", rs.ssao), "gtao": screen_space_predictor("gtao", rs.gtao)}
     test = evaluate_split(data, settings.test_split, methods, settings.test_frames)
@@ -138,8 +136,6 @@ _LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the
 
 def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str) -> dict:
     """Train, export, check and install one model; returns its index entry."""
-    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
-
     if spec.kind != "unet":
         raise NeuralaoError(f"model {spec.name}: only kind 'unet' can be shipped, got {spec.kind!r}")
     train_cfg = dict(spec.train)
@@ -177,13 +173,6 @@ def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoin
 
 
 def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, out, commit) -> dict:
-    from export.onnx_io import get_metadata, load_onnx, save_onnx
-    from export.unet import export_checkpoint, parity
-    from pipeline.datasets.dataset import open_dataset
-    from pipeline.evaluation.test_split import evaluate_split, unet_predictor
-    from runtime.glsl_runner import time_compute
-    from runtime.internal_resolution import internal_size
-
     manifest = export_checkpoint(ckpt_path, tmp)
     ds = open_dataset(data)
     frames = []
