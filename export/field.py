@@ -32,7 +32,7 @@ import onnx
 import torch
 
 from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
-from export.onnx_io import get_metadata, load_onnx, ort_session, save_onnx, weighted_layers
+from export.onnx_io import load_onnx, ort_session, save_onnx, weighted_layers
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
 from pipeline.foundation.tolerances import TOL
@@ -46,12 +46,20 @@ from pipeline.models.field import (
     size_name,
 )
 
+# onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
+from runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs  # noqa: F401
+from runtime.predict import field_infer_frame as infer_frame  # noqa: F401
+from runtime.predict import run_field as run_network
+
 log = logging.getLogger(__name__)
 
-POSITION, NORMAL, OUTPUT = "position", "normal", "ao"
+POSITION, NORMAL, OUTPUT = FIELD_POSITION, FIELD_NORMAL, "ao"
 GLSL_DIR = "glsl"
 CHECK_BATCHES = (1, 7, 4096)
-TEXTURES = {"position": "xyz object-space position, w mask (>= 0.5 foreground)", "normal": "xyz object-space normal"}
+TEXTURES = {
+    "position": "xyz object-space position, w mask (>= 0.5 foreground)",
+    "normal": "xyz object-space normal",
+}
 
 
 def bindings():
@@ -89,8 +97,10 @@ def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
         "training_mesh": str(ckpt.get("mesh") or ""),
         "scene": str(ckpt.get("scene") or ""),
         "ao_labels": ckpt.get("samples", {}).get("labels", {}),
-        "measured_error": {k: metrics.get(k) for k in ("val_rmse", "constant_val_rmse", "holdout_ssim",
-                                                        "holdout_rmse", "holdout_frames")},  # fmt: skip
+        "measured_error": {
+            k: metrics.get(k)
+            for k in ("val_rmse", "constant_val_rmse", "holdout_ssim", "holdout_rmse", "holdout_frames")
+        },  # fmt: skip
         "measured_error_note": "val: surface samples held out; holdout_*: held-back orbit views, clamped, "
         "masked SSIM (Gaussian 11, sigma 1.5) and RMSE over valid foreground pixels",
     }
@@ -185,54 +195,11 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 # ----------------------------------------------------------------------------------------------- inference
 
 
-def check_field_onnx(proto: onnx.ModelProto, where) -> dict:
-    meta = get_metadata(proto)
-    if meta.get("neuralao_kind") != "field":
-        raise NeuralaoError(f"{where} is not a neuralao field ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})")
-    names = sorted(i.name for i in proto.graph.input if i.name not in {t.name for t in proto.graph.initializer})
-    if names != sorted([POSITION, NORMAL]):
-        raise NeuralaoError(f"{where}: expected inputs {POSITION!r} and {NORMAL!r}, found {names}")
-    return meta
-
-
-def frame_inputs(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """position (H, W, 3), normal_obj (H, W, 3) float32 and mask (H, W) bool; one-line errors."""
-    for key in ("position", "normal_obj"):
-        if key not in frame:
-            raise NeuralaoError(f"frame has no {key!r} channel, which the field reads")
-    p = np.asarray(frame["position"], np.float32)
-    n = np.asarray(frame["normal_obj"], np.float32)
-    if p.ndim != 3 or p.shape[2] != 3 or n.shape != p.shape:
-        raise NeuralaoError(f"frame position / normal_obj must both be (H, W, 3), got {p.shape}, {n.shape}")
-    mask = np.asarray(frame["mask"], bool) if "mask" in frame else np.abs(n).sum(axis=-1) > 0
-    if mask.shape != p.shape[:2]:
-        raise NeuralaoError(f"frame mask {mask.shape} does not match position {p.shape}")
-    return p, n, mask
-
-
 def gbuffer_textures(frame: dict) -> dict[str, np.ndarray]:
     """The shader's two RGBA32F inputs from a frame: position + mask, normal + 0."""
     p, n, mask = frame_inputs(frame)
     return {"position": np.concatenate([p, mask[..., None].astype(np.float32)], axis=-1),
             "normal": np.concatenate([n, np.zeros_like(n[..., :1])], axis=-1)}  # fmt: skip
-
-
-def run_network(sess, frame: dict) -> np.ndarray:
-    """Raw network output (H, W) float32 through onnxruntime, NaN on background."""
-    p, n, mask = frame_inputs(frame)
-    out = np.full(mask.shape, np.nan, np.float32)
-    if mask.any():
-        out[mask] = sess.run(None, {POSITION: p[mask], NORMAL: n[mask]})[0][:, 0]
-    return out
-
-
-def infer_frame(onnx_path, frame: dict) -> np.ndarray:
-    """AO (H, W) float32 of one G-buffer frame with onnxruntime, clamped, background 1."""
-    proto = load_onnx(onnx_path)
-    check_field_onnx(proto, onnx_path)
-    raw = run_network(ort_session(proto.SerializeToString()), frame)
-    mask = ~np.isnan(raw)
-    return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------------------------- parity

@@ -35,7 +35,6 @@ import torch
 from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
 from export.onnx_io import (
     backend_checks,
-    get_metadata,
     load_onnx,
     ort_session,
     run_opencv,
@@ -57,9 +56,14 @@ from pipeline.models.mlp import (
     size_name,
 )
 
+# onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
+from runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals  # noqa: F401
+from runtime.predict import mlp_infer_frame as infer_frame  # noqa: F401
+from runtime.predict import run_mlp as run_network
+
 log = logging.getLogger(__name__)
 
-INPUT, OUTPUT = "normals", "ao"
+INPUT, OUTPUT = MLP_INPUT, "ao"
 GLSL_DIR = "glsl"
 # Batch sizes of the export-time backend checks: one row, an odd count, a large batch (dynamic N).
 CHECK_BATCHES = (1, 7, 4096)
@@ -250,62 +254,6 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------- inference
-
-
-def check_mlp_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
-    """Metadata of an MLP ONNX file; another kind or another input layout is a one-line error."""
-    meta = get_metadata(proto)
-    if meta.get("neuralao_kind") != "mlp":
-        raise NeuralaoError(
-            f"{where} is not a neuralao MLP ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})"
-        )
-    inputs = [i for i in proto.graph.input if i.name not in {t.name for t in proto.graph.initializer}]
-    dims = (
-        [d.dim_value or d.dim_param for d in inputs[0].type.tensor_type.shape.dim] if len(inputs) == 1 else []
-    )
-    if len(inputs) != 1 or inputs[0].name != INPUT or len(dims) != 2 or dims[1] != INPUTS:
-        raise NeuralaoError(
-            f"{where}: expected one input {INPUT!r} of shape (N, {INPUTS}), found {[i.name for i in inputs]} {dims}"
-        )
-    return meta
-
-
-def frame_normals(frame: dict) -> tuple[np.ndarray, np.ndarray]:
-    """normal_obj (H, W, 3) float32 and mask (H, W) bool of a frame; one-line errors for wrong shapes."""
-    if "normal_obj" not in frame:
-        raise NeuralaoError("frame has no 'normal_obj' channel (object-space normals), which the MLP reads")
-    n = np.asarray(frame["normal_obj"], dtype=np.float32)
-    if n.ndim != 3 or n.shape[2] != 3:
-        raise NeuralaoError(f"frame normal_obj must be (H, W, 3), got {n.shape}")
-    if "mask" in frame:
-        mask = np.asarray(frame["mask"], dtype=bool)
-    elif "tri_id" in frame:
-        mask = np.asarray(frame["tri_id"]) >= 0
-    else:
-        mask = np.abs(n).sum(axis=-1) > 0  # background normals are 0 by the frame convention
-    if mask.shape != n.shape[:2]:
-        raise NeuralaoError(f"frame mask {mask.shape} does not match normal_obj {n.shape}")
-    return n, mask
-
-
-def run_network(sess, normal_obj: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Raw (unclamped) network output at radius zero: (H, W) float32, NaN on background."""
-    out = np.full(mask.shape, np.nan, dtype=np.float32)
-    if mask.any():
-        out[mask] = sess.run(None, {INPUT: radius_zero_inputs(normal_obj[mask])})[0][:, 0]
-    return out
-
-
-def infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
-    """AO of one G-buffer frame with onnxruntime (radius-zero input, as deployed).
-
-    frame : normal_obj (H, W, 3) and mask (H, W) (or tri_id). Returns ao (H, W) float32 in [0, 1], 1 on background.
-    """
-    proto = load_onnx(onnx_path)
-    check_mlp_onnx(proto, onnx_path)
-    normal_obj, mask = frame_normals(frame)
-    raw = run_network(ort_session(proto.SerializeToString()), normal_obj, mask)
-    return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
 
 
 # ----------------------------------------------------------------------------------------------- parity

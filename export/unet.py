@@ -14,10 +14,9 @@ generator knows.
 
 from __future__ import annotations
 
-import json
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +26,7 @@ import torch
 from export.manifest import OPSET, read_manifest
 from export.onnx_io import (
     backend_checks,
-    get_metadata,
     load_onnx,
-    ort_session,
     run_opencv,
     save_onnx,
 )
@@ -42,17 +39,30 @@ from pipeline.models.unet import (
     PAD_MODE,
     PREPROCESS_DESCRIPTION,
     PREPROCESS_VERSION,
-    RADIUS_INPUT,
     UNet,
-    frame_radius_param,
-    pad_to_multiple,
     predict,
     preprocess_frame,
 )
 
+# onnxruntime inference is the consumer runtime's (one copy); re-exported for the export checks and callers.
+from runtime.predict import (  # noqa: F401
+    UNET_INPUT,
+    UNET_RADIUS,
+    Runner,
+    check_unet_onnx,
+    composite,
+    declared_internal_height,
+    is_hybrid,
+    ort_runner,
+    radius_array,
+    run_padded,
+)
+from runtime.predict import unet_infer_frame as infer_frame  # noqa: F401
+from runtime.predict import unet_predictor as frame_predictor  # noqa: F401
+
 log = logging.getLogger(__name__)
 
-INPUT, RADIUS, OUTPUT = "gbuffer", RADIUS_INPUT, "ao"
+INPUT, RADIUS, OUTPUT = UNET_INPUT, UNET_RADIUS, "ao"
 # Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
 CHECK_RHOS: tuple[float, ...] = (0.05, 0.4)
 # Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
@@ -214,28 +224,6 @@ def export_onnx_dynamo(
 # ----------------------------------------------------------------------------------------------- runners
 
 
-Runner = Callable[[np.ndarray, float], np.ndarray]
-
-
-def radius_array(rho: float) -> np.ndarray:
-    """The radius input (1, 1, 1, 1) float32 of the exported graph."""
-    return np.full((1, 1, 1, 1), rho, dtype=np.float32)
-
-
-def run_padded(fn: Runner, x: np.ndarray, pad_multiple: int, rho: float) -> np.ndarray:
-    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn(x (1, 4, H', W'), rho)``, crop -> (H, W) float32."""
-    h, w = x.shape[-2:]
-    y = np.asarray(fn(pad_to_multiple(x, pad_multiple)[None], float(rho)), dtype=np.float32)
-    return y.reshape(y.shape[-2:])[:h, :w]
-
-
-def ort_runner(path_or_bytes) -> Runner:
-    sess = ort_session(path_or_bytes)
-    return lambda xp, rho: sess.run(
-        None, {INPUT: np.ascontiguousarray(xp, dtype=np.float32), RADIUS: radius_array(rho)}
-    )[0]
-
-
 def opencv_runner(path: str | Path) -> Runner:
     return lambda xp, rho: run_opencv(path, {INPUT: xp, RADIUS: radius_array(rho)})
 
@@ -390,100 +378,6 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------- inference
-
-
-def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
-    """Metadata of a U-Net ONNX file; another kind or another preprocessing version is a one-line error."""
-    meta = get_metadata(proto)
-    if meta.get("neuralao_kind") != "unet":
-        raise NeuralaoError(
-            f"{where} is not a neuralao U-Net ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})"
-        )
-    if str(meta.get("preprocess_version")) != str(PREPROCESS_VERSION):
-        raise NeuralaoError(
-            f"{where} expects preprocessing version {meta.get('preprocess_version')}, this neuralao has {PREPROCESS_VERSION}"
-        )
-    return meta
-
-
-def composite(y: np.ndarray, frame: dict) -> np.ndarray:
-    """Network output (H, W) -> AO (H, W) float32 with background 1 (DESIGN: ao = 1 where nothing is hit)."""
-    return np.where(np.asarray(frame["mask"], dtype=bool), y, np.float32(1.0)).astype(np.float32)
-
-
-def declared_internal_height(onnx_path: str | Path, proto: onnx.ModelProto | None = None) -> int | None:
-    """The internal height a U-Net export declares: ONNX metadata ``internal_height``, else the
-    ``internal_height`` of the manifest.json beside it; None (run at the frame's size) when neither."""
-    meta = get_metadata(proto if proto is not None else load_onnx(onnx_path))
-    value = meta.get("internal_height")
-    if value in (None, "", "None"):
-        manifest = Path(onnx_path).parent / "manifest.json"
-        if manifest.is_file():
-            try:
-                value = json.loads(manifest.read_text()).get("internal_height")
-            except json.JSONDecodeError:
-                raise NeuralaoError(f"{manifest} is not valid JSON") from None
-    if value in (None, "", "None"):
-        return None
-    try:
-        height = int(value)
-    except (TypeError, ValueError):
-        raise NeuralaoError(f"{onnx_path}: internal_height must be an integer, got {value!r}") from None
-    if height < 16:
-        raise NeuralaoError(f"{onnx_path}: internal_height must be >= 16, got {height}")
-    return height
-
-
-def is_hybrid(meta: dict) -> bool:
-    """True for a U-Net that refines GTAO (its input channels end with ``gtao``)."""
-    return str(meta.get("input_channels", "")).split(",")[-1] == "gtao"
-
-
-def frame_predictor(onnx_path: str | Path, internal_height: int | str | None = "model"):
-    """``predict(frame, radius) -> ao (H, W) float32`` of a U-Net export with onnxruntime.
-
-    frame: depth (H,W), normal_cam (H,W,3), mask (H,W), yfov; radius in scene units (None: the largest
-    radius the frame's labels have). ``internal_height``: "model" (the height the export declares, see
-    :func:`declared_internal_height`), None (the frame's own size) or a number of rows; frames taller
-    than it are point-sampled down and the AO upsampled (:mod:`runtime.internal_resolution`). A hybrid
-    gets GTAO at the same radius (runtime.baselines, at the frame's resolution) as its fifth channel,
-    and at an internal resolution its correction to GTAO is what is upsampled.
-    """
-    from runtime.baselines import run_gtao
-    from runtime.internal_resolution import at_internal_resolution
-
-    proto = load_onnx(onnx_path)
-    meta = check_unet_onnx(proto, onnx_path)
-    if internal_height == "model":
-        internal_height = declared_internal_height(onnx_path, proto)
-    run = ort_runner(proto.SerializeToString())
-    multiple = int(meta["pad_multiple"])
-    hybrid = is_hybrid(meta)
-
-    def predict(f: dict, r: float | None) -> np.ndarray:
-        x = preprocess_frame(f, f["gtao"] if hybrid else None)
-        return composite(run_padded(run, x, multiple, frame_radius_param(f, r)), f)
-
-    scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
-    if not hybrid:
-        return scaled
-
-    def predict_hybrid(frame: dict, radius: float | None) -> np.ndarray:
-        from pipeline.models.unet import frame_radius
-
-        return scaled(frame | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
-
-    return predict_hybrid
-
-
-def infer_frame(
-    onnx_path: str | Path,
-    frame: dict,
-    radius: float | None = None,
-    internal_height: int | str | None = "model",
-) -> np.ndarray:
-    """AO (H, W) float32 in [0, 1] (1 on background) of one G-buffer frame: :func:`frame_predictor`."""
-    return frame_predictor(onnx_path, internal_height)(frame, radius)
 
 
 # ----------------------------------------------------------------------------------------------- parity

@@ -1,13 +1,15 @@
-"""`neuralao infer [MODEL.onnx] FRAME.npz --out AO.png [--radius R] [--composite OUT.png]`: apply an exported
-model to a G-buffer. Without MODEL.onnx the shipped U-Net (``runtime/models``, see ``runtime.models``) is used.
+"""Apply an exported model to a G-buffer frame (the library side of ``neuralao infer``, whose command
+line is :mod:`pipeline.cli.infer`). Without a model the shipped U-Net (``runtime/models``, see
+``runtime.models``) is used.
 
-The model's kind comes from its ONNX metadata (``neuralao_kind``); each kind's module provides
-``infer_frame(onnx_path, frame) -> ao (H, W) float32`` (AO in [0, 1], 1 on background):
+The model's kind comes from its ONNX metadata (``neuralao_kind``); :data:`runtime.predict.PREDICTORS`
+holds each kind's onnxruntime predictor, ``predict(frame, radius) -> ao (H, W) float32`` (AO in [0, 1],
+1 on background):
 
-* ``mlp``:  :func:`export.mlp.infer_frame` (object-space normals, radius-zero input);
-* ``unet``: :func:`export.unet.infer_frame` (depth + camera-space normals; the AO radius ``--radius``
-  in scene units, by default the largest radius the frame's labels were traced at);
-* ``field``: :func:`export.field.infer_frame` (object-space position + normal).
+* ``mlp``:  object-space normals, radius-zero input;
+* ``unet``: depth + camera-space normals; the AO radius ``--radius`` in scene units, by default the
+  largest radius the frame's labels were traced at;
+* ``field``: object-space position + normal.
 
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
 ``mask``, ``yfov`` in radians, ...) or as a user's exporter writes it from the keys docs/formats.md
@@ -21,8 +23,6 @@ frame's camera-space normals) plus ambient, multiplied by the AO, over a light g
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import logging
 import math
 from pathlib import Path
@@ -31,12 +31,12 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path, read_npz, write_exr, write_png
-from pipeline.foundation.limits import check_finite_arrays, check_finite_number
+from pipeline.foundation.limits import check_finite_arrays
+from runtime.onnx_io import get_metadata, load_onnx
+from runtime.predict import PREDICTORS
 
 log = logging.getLogger(__name__)
 
-# neuralao_kind -> module with infer_frame(onnx_path, frame)
-INFERERS = {"mlp": "export.mlp", "unet": "export.unet", "field": "export.field"}
 ALBEDO = np.array([0.82, 0.78, 0.72], dtype=np.float32)  # a light clay colour
 BACKGROUND = np.array([0.93, 0.94, 0.96], dtype=np.float32)
 LIGHT_CAM = np.array([-0.3, 0.4, 1.0]) / np.linalg.norm(
@@ -46,12 +46,10 @@ LIGHT_CAM = np.array([-0.3, 0.4, 1.0]) / np.linalg.norm(
 
 def model_kind(onnx_path: str | Path) -> str:
     """``neuralao_kind`` from the ONNX metadata; missing or unknown -> one-line error."""
-    from export.onnx_io import get_metadata, load_onnx
-
     kind = get_metadata(load_onnx(onnx_path)).get("neuralao_kind")
-    if kind not in INFERERS:
+    if kind not in PREDICTORS:
         raise NeuralaoError(
-            f"{onnx_path}: unknown model kind {kind!r} (ONNX metadata neuralao_kind must be one of {sorted(INFERERS)})"
+            f"{onnx_path}: unknown model kind {kind!r} (ONNX metadata neuralao_kind must be one of {sorted(PREDICTORS)})"
         )
     return kind
 
@@ -95,23 +93,10 @@ def complete_frame(frame: dict, kind: str, yfov: float | None, path: str | Path)
     if "mask" not in frame and "depth" in frame and "tri_id" not in frame:
         frame["mask"] = np.asarray(frame["depth"]) > 0
     if kind == "unet" and "yfov" not in frame:
-        raise NeuralaoError(f"{path} has no yfov: give the vertical field of view with --yfov DEG (or --yfov-rad RAD)")
+        raise NeuralaoError(
+            f"{path} has no yfov: give the vertical field of view with --yfov DEG (or --yfov-rad RAD)"
+        )
     return frame
-
-
-def field_of_view(args: argparse.Namespace) -> float | None:
-    """``--yfov`` (degrees) or ``--yfov-rad`` as radians in (0, pi); None when neither is given."""
-    if args.yfov is not None and args.yfov_rad is not None:
-        raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
-    if args.yfov is not None:
-        if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
-            raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
-        return math.radians(args.yfov)
-    if args.yfov_rad is not None:
-        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
-            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
-        return float(args.yfov_rad)
-    return None
 
 
 def check_frame(frame: dict, path: str | Path) -> None:
@@ -132,13 +117,11 @@ def infer(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np
     """AO (H, W) float32 of ``frame`` with the model's own inference function (by ONNX metadata kind);
     ``radius`` (scene units) goes to the models that take the AO radius as an input."""
     kind = model_kind(onnx_path)
-    module = importlib.import_module(INFERERS[kind])
-    if kind == "unet":
-        ao = module.infer_frame(Path(onnx_path), frame, radius)
-    elif radius is not None:
-        raise NeuralaoError(f"--radius applies to U-Net models; {onnx_path} is a {kind} model (its radius is baked in)")
-    else:
-        ao = module.infer_frame(Path(onnx_path), frame)
+    if kind != "unet" and radius is not None:
+        raise NeuralaoError(
+            f"--radius applies to U-Net models; {onnx_path} is a {kind} model (its radius is baked in)"
+        )
+    ao = PREDICTORS[kind](Path(onnx_path))(frame, radius)
     ao = np.asarray(ao, dtype=np.float32)
     if ao.ndim != 2:
         raise NeuralaoError(f"model returned AO of shape {ao.shape}, expected (H, W)")
@@ -178,7 +161,7 @@ def shaded(frame: dict) -> tuple[np.ndarray, np.ndarray]:
 
     Uses normal_cam (camera space; OpenGL: the viewer is along +z) when present, else flat grey.
     """
-    mask = _mask(frame)
+    mask = foreground(frame)
     if "normal_cam" in frame and np.shape(frame["normal_cam"]) == (*mask.shape, 3):
         n = np.asarray(frame["normal_cam"], dtype=np.float64)
         lambert = np.clip(n @ LIGHT_CAM, 0.0, 1.0)
@@ -195,7 +178,8 @@ def composite(frame: dict, ao: np.ndarray) -> np.ndarray:
     return np.where(mask[..., None], base * ao[..., None], base).astype(np.float32)
 
 
-def _mask(frame: dict) -> np.ndarray:
+def foreground(frame: dict) -> np.ndarray:
+    """(H, W) bool foreground of a frame: its mask, else tri_id >= 0, else depth > 0."""
     if "mask" in frame:
         return np.asarray(frame["mask"], dtype=bool)
     if "tri_id" in frame:
@@ -203,45 +187,3 @@ def _mask(frame: dict) -> np.ndarray:
     if "depth" in frame:
         return np.asarray(frame["depth"]) > 0
     raise NeuralaoError("frame has no mask, tri_id or depth to tell foreground from background")
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("inputs", nargs="+", metavar="[MODEL.onnx] FRAME.npz",
-                   help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
-                   "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
-    p.add_argument("--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)")
-    p.add_argument("--yfov", type=float, metavar="DEG", help="vertical field of view in degrees, for frames that "
-                   "lack yfov (U-Net; replaces the frame's)")  # fmt: skip
-    p.add_argument("--yfov-rad", type=float, metavar="RAD", help="the same in radians")
-    p.add_argument("--out", required=True, help="AO image to write: .png (8-bit grey, 1 = white = open), "
-                   ".npy or .exr (float32 as computed)")  # fmt: skip
-    p.add_argument("--composite", help="also write AO over a simple shaded render (.png, .npy or .exr)")
-    p.add_argument("--index", type=int, help="frame index inside a .npz of stacked frames (dataset shard)")
-
-
-def run(args: argparse.Namespace) -> int:
-    if len(args.inputs) > 2:
-        raise NeuralaoError(f"expected [MODEL.onnx] FRAME.npz, got {len(args.inputs)} paths")
-    if len(args.inputs) == 2:
-        model, frame_path = args.inputs
-    else:
-        from runtime.shipped import default_model
-
-        model, frame_path = default_model("unet"), args.inputs[0]
-        log.info("model: %s (shipped default)", model)
-    check_output("--out", args.out)
-    if args.composite:
-        check_output("--composite", args.composite)
-    if args.radius is not None:
-        check_finite_number("--radius", args.radius, low=0.0)
-    yfov = field_of_view(args)
-    frame = complete_frame(load_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
-    check_frame(frame, frame_path)
-    ao = infer(model, frame, args.radius)
-    write_image(args.out, ao)
-    if args.composite:
-        write_image(args.composite, composite(frame, ao))
-    fg = _mask(frame) if ao.shape == _mask(frame).shape else np.ones(ao.shape, bool)
-    log.info("wrote %s (%dx%d, mean foreground AO %.3f)%s", args.out, ao.shape[1], ao.shape[0],
-             float(ao[fg].mean()) if fg.any() else 1.0, f" and {args.composite}" if args.composite else "")  # fmt: skip
-    return 0

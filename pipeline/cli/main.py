@@ -25,7 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("pipeline.cli.export", "export a checkpoint to ONNX + generated GLSL"),
     "glsl": ("export.onnx_glsl", "generate GLSL (compute or fragment) from any ONNX model within the op set"),
     "parity": ("pipeline.cli.parity", "run generated GLSL against onnxruntime on real frames or seeded inputs"),
-    "infer": ("runtime.infer", "apply an exported ONNX model to a G-buffer frame"),
+    "infer": ("pipeline.cli.infer", "apply an exported ONNX model to a G-buffer frame"),
     "report": ("pipeline.evaluation.report", "speed-vs-error report of every method on held-back frames"),
     "evaluate": ("pipeline.evaluation.categories", "score screen-space AO (U-Nets, SSAO, GTAO) by category and resolution on test meshes"),
     "ship": ("pipeline.release.ship", "train, export, check and install the release models (runtime/models) from a config"),

@@ -79,12 +79,14 @@ from pipeline.models.checkpoint import count_parameters, per_mesh_checkpoint, re
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from pipeline.tracing.labeller import LabelSettings
 
+# The deployed input layout is the consumer runtime's (CIRCLE_SAMPLES normals, radius-zero input).
+from runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
+from runtime.predict import MLP_INPUTS as INPUTS
+
 log = logging.getLogger(__name__)
 
 KIND = "mlp"
 FORMAT_VERSION = 1
-CIRCLE_SAMPLES = 16  # normals per input (paper: 16)
-INPUTS = 3 * CIRCLE_SAMPLES  # 48 floats, xyz interleaved
 SPLIT_NAMES = ("train", "val", "test")
 
 
@@ -226,11 +228,6 @@ def circle_inputs(
     centre = normal_obj[rows, cols]  # (n, 3)
     normals = np.where(ok[..., None], normal_obj[rr_c, cc_c], centre[:, None, :])
     return np.ascontiguousarray(normals.reshape(len(rows), 3 * count), dtype=np.float32), ~ok
-
-
-def radius_zero_inputs(normals: np.ndarray, count: int = CIRCLE_SAMPLES) -> np.ndarray:
-    """Deployed input: each (n, 3) normal repeated ``count`` times -> (n, 3 * count) float32."""
-    return np.ascontiguousarray(np.tile(np.asarray(normals, dtype=np.float32), (1, count)))
 
 
 # ----------------------------------------------------------------------------------------------- samples

@@ -1,0 +1,90 @@
+"""`neuralao infer [MODEL.onnx] FRAME.npz --out AO.png [--radius R] [--composite OUT.png]`: apply an exported
+model to a G-buffer. Without MODEL.onnx the shipped U-Net (``runtime/models``) is used.
+
+FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
+``mask``, ``yfov`` in radians, ...) or as a user's exporter writes it from the keys docs/formats.md
+lists; a dataset shard (frames stacked on a first axis) works with ``--index K``. The work is
+:mod:`runtime.infer`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+
+import numpy as np
+
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.limits import check_finite_number
+from runtime.infer import (
+    check_frame,
+    check_output,
+    complete_frame,
+    composite,
+    foreground,
+    infer,
+    load_frame,
+    model_kind,
+    write_image,
+)
+from runtime.shipped import default_model
+
+log = logging.getLogger("runtime.infer")  # the logger name users see in messages (unchanged by the move)
+
+
+def field_of_view(args: argparse.Namespace) -> float | None:
+    """``--yfov`` (degrees) or ``--yfov-rad`` as radians in (0, pi); None when neither is given."""
+    if args.yfov is not None and args.yfov_rad is not None:
+        raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
+    if args.yfov is not None:
+        if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
+            raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
+        return math.radians(args.yfov)
+    if args.yfov_rad is not None:
+        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
+            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
+        return float(args.yfov_rad)
+    return None
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("inputs", nargs="+", metavar="[MODEL.onnx] FRAME.npz",
+                   help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
+                   "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
+    p.add_argument(
+        "--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)"
+    )
+    p.add_argument("--yfov", type=float, metavar="DEG", help="vertical field of view in degrees, for frames that "
+                   "lack yfov (U-Net; replaces the frame's)")  # fmt: skip
+    p.add_argument("--yfov-rad", type=float, metavar="RAD", help="the same in radians")
+    p.add_argument("--out", required=True, help="AO image to write: .png (8-bit grey, 1 = white = open), "
+                   ".npy or .exr (float32 as computed)")  # fmt: skip
+    p.add_argument("--composite", help="also write AO over a simple shaded render (.png, .npy or .exr)")
+    p.add_argument("--index", type=int, help="frame index inside a .npz of stacked frames (dataset shard)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if len(args.inputs) > 2:
+        raise NeuralaoError(f"expected [MODEL.onnx] FRAME.npz, got {len(args.inputs)} paths")
+    if len(args.inputs) == 2:
+        model, frame_path = args.inputs
+    else:
+        model, frame_path = default_model("unet"), args.inputs[0]
+        log.info("model: %s (shipped default)", model)
+    check_output("--out", args.out)
+    if args.composite:
+        check_output("--composite", args.composite)
+    if args.radius is not None:
+        check_finite_number("--radius", args.radius, low=0.0)
+    yfov = field_of_view(args)
+    frame = complete_frame(load_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
+    check_frame(frame, frame_path)
+    ao = infer(model, frame, args.radius)
+    write_image(args.out, ao)
+    if args.composite:
+        write_image(args.composite, composite(frame, ao))
+    fg = foreground(frame) if ao.shape == foreground(frame).shape else np.ones(ao.shape, bool)
+    log.info("wrote %s (%dx%d, mean foreground AO %.3f)%s", args.out, ao.shape[1], ao.shape[0],
+             float(ao[fg].mean()) if fg.any() else 1.0, f" and {args.composite}" if args.composite else "")  # fmt: skip
+    return 0
