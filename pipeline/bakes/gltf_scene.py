@@ -577,21 +577,3 @@ def _glb(path: str | Path) -> Path:
     if path.suffix.lower() != ".glb":
         raise NeuralaoError(f"a scene bake writes a .glb, got {path.name!r}")
     return path
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def run_texture_scene(mesh: str, out: Path, settings) -> int:
-    """``neuralao bake SCENE.gltf --to texture --out OUT.glb`` (settings: TextureBakeSettings)."""
-    gs = read_gltf_scene(mesh)
-    images, layouts, info = bake_texture_scene(gs, settings, progress=True)
-    write_texture_scene(
-        out, gs, images, layouts, {"settings": info["settings"], "uv_sources": info["uv_sources"]}
-    )
-    log.info(
-        "baked %s (%d primitives in %d nodes, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
-        gs.path.name, sum(p.written for p in gs.pieces), len({p.node for p in gs.pieces if p.written}), info["maps"], info["resolution"], info["resolution"],
-        info["texels_covered"], info["invalid_texels"], info["seconds"], out,
-    )  # fmt: skip
-    return 0

@@ -30,11 +30,12 @@ pure functions of their inputs and only cost seconds.
 
 from __future__ import annotations
 
-import argparse
+import json
 import logging
 import math
 import os
 import resource
+import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -42,7 +43,10 @@ from types import SimpleNamespace
 from typing import Any, Literal
 
 import numpy as np
+from tqdm import tqdm
 
+from pipeline.bakes.level_output import write_outputs
+from pipeline.engines.engine import Context, LocalEngine, ResultStore, Shared, Task, content_key
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import (
     read_npz,
@@ -60,7 +64,7 @@ from pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
 from pipeline.geometry.surface import SurfaceSamples, face_areas, interpolate, surface_samples
 from pipeline.tracing.foliage import Foliage, overlap_reduced
 from pipeline.tracing.labeller import LabelSettings
-from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
+from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
 
 log = logging.getLogger(__name__)
 
@@ -241,7 +245,6 @@ class BakeLog:
         data = fn()
         write_npz(path, _key=np.array(self.key), **data)
         self._record(name, description, t0, c0, False, counts)
-        import shutil
 
         shutil.rmtree(self.dir / f"{name}.parts", ignore_errors=True)  # its task results (parts)
         return data
@@ -249,7 +252,6 @@ class BakeLog:
     def parts(self, name: str):
         """The :class:`pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each is written as
         it arrives, so a killed bake's rerun skips them; removed once the stage's own file is written."""
-        from pipeline.engines.engine import ResultStore
 
         return ResultStore(self.dir / f"{name}.parts")
 
@@ -296,7 +298,6 @@ def _cpu_seconds() -> float:
 
 def level_key(path: Path, settings: LevelBakeSettings) -> str:
     """Hash of the level's bytes (the .gltf / .glb and every external buffer) and the settings."""
-    import json
 
     files = [sha256_file(path)]
     if path.suffix.lower() == ".gltf":
@@ -419,39 +420,40 @@ def halves(s: LevelBakeSettings) -> list[float]:
 # --------------------------------------------------------------------------- trace (resumable blocks)
 
 
-def trace_samples(log_: BakeLog, labeller: LevelLabeller, foliage, samples: SurfaceSamples, s: LevelBakeSettings,
-                  progress: bool, engine=None) -> dict[str, np.ndarray]:  # fmt: skip
+def trace_samples(log_: BakeLog, labeller: LevelLabeller | LabellerFrame, foliage, samples: SurfaceSamples,
+                  s: LevelBakeSettings, progress: bool, engine=None) -> dict[str, np.ndarray]:  # fmt: skip
     """Two-distance obscurance at every sample, in blocks stored under stages/trace/.
 
-    ``engine`` (:mod:`pipeline.engines.engine`, e.g. a RayEngine): the blocks not stored yet become its tasks
-    (workers rebuild the labeller and the foliage from the object store; this process writes every
-    block file as it arrives, so resume and bytes are as with the local loop)."""
-    if engine is not None:
-        return _trace_samples_on(engine, log_, labeller, foliage, samples, s, progress)
-    block = s.trace.block_samples
+    The blocks not stored yet are tasks of ``engine`` (:mod:`pipeline.engines.engine`; None: this process
+    with ``labeller``, a RayEngine: workers rebuild the labeller and the foliage from the object store);
+    this process writes every block file as it arrives, so resume and bytes never depend on the engine."""
+    block, n = s.trace.block_samples, len(samples)
     folder = log_.dir / "trace"
     folder.mkdir(exist_ok=True)
     remove_stale_temporaries(folder)
-    n = len(samples)
     ao = np.empty((n, 2), np.float32)
     valid = np.empty(n, bool)
-    reused = 0
-    from tqdm import tqdm
-
-    starts = list(range(0, n, block))
-    for lo in tqdm(starts, desc="trace blocks", disable=not progress, leave=False):
+    starts, pending = list(range(0, n, block)), []
+    for lo in starts:
         hi = min(lo + block, n)
         path = folder / f"block_{lo // block:05d}.npz"
-        if path.is_file():
-            data = read_npz(path)
-            if str(data.get("_key", "")) == log_.key and len(data["valid"]) == hi - lo:
-                ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
-                reused += 1
-                continue
-        a, v = labeller.obscurance(samples.points[lo:hi], samples.normals[lo:hi], halves(s), foliage,
-                                   ids=np.arange(lo, hi, dtype=np.int64))  # fmt: skip
-        write_npz(path, _key=np.array(log_.key), ao=a, valid=v)
-        ao[lo:hi], valid[lo:hi] = a, v
+        data = read_npz(path) if path.is_file() else {}
+        if str(data.get("_key", "")) == log_.key and len(data["valid"]) == hi - lo:
+            ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
+        else:
+            pending.append((lo, hi, path))
+    ctx = opaque_context(log_.key, labeller, foliage, engine)
+    if engine is None:  # the driver's own labeller and foliage are the context's state
+        engine = LocalEngine(states={ctx.key: (labeller, foliage)})
+    tasks = (Task(ctx, _trace_block, (samples.points[lo:hi], samples.normals[lo:hi],
+                                      np.arange(lo, hi, dtype=np.int64), halves(s))) for lo, hi, _ in pending)  # fmt: skip
+    with tqdm(total=len(pending), desc="trace blocks", disable=not progress, leave=False) as bar:
+        for i, r in engine.map(tasks):
+            lo, hi, path = pending[i]
+            write_npz(path, _key=np.array(log_.key), ao=r["ao"], valid=r["valid"])
+            ao[lo:hi], valid[lo:hi] = r["ao"], r["valid"]
+            bar.update(1)
+    reused = len(starts) - len(pending)
     return {"ao": ao, "valid": valid, "reused_blocks": np.array(reused), "blocks": np.array(len(starts))}
 
 
@@ -482,7 +484,6 @@ class LabellerFrame:
 def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, engine=None):
     """The engine context of the opaque labeller and the foliage (trace, resampling): workers rebuild
     both from the object store; with ``engine`` None, a context the driver's own state stands for."""
-    from pipeline.engines.engine import Context
 
     if engine is None:
         return Context(f"level-trace/{key}/here", _level_tracer, None)
@@ -491,41 +492,6 @@ def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, e
     )
     return Context(f"level-trace/{key}/{settings.workers}", _level_tracer,
                    (slim_scene(labeller.scene), settings, foliage))  # fmt: skip
-
-
-def _trace_samples_on(engine, log_: BakeLog, labeller: LevelLabeller, foliage, samples: SurfaceSamples,
-                      s: LevelBakeSettings, progress: bool) -> dict[str, np.ndarray]:  # fmt: skip
-    """:func:`trace_samples` with the missing blocks as engine tasks (same block files, same bytes)."""
-    from tqdm import tqdm
-
-    from pipeline.engines.engine import Task
-
-    block, n = s.trace.block_samples, len(samples)
-    folder = log_.dir / "trace"
-    folder.mkdir(exist_ok=True)
-    remove_stale_temporaries(folder)
-    ao = np.empty((n, 2), np.float32)
-    valid = np.empty(n, bool)
-    starts, pending = list(range(0, n, block)), []
-    for lo in starts:
-        hi = min(lo + block, n)
-        path = folder / f"block_{lo // block:05d}.npz"
-        data = read_npz(path) if path.is_file() else {}
-        if str(data.get("_key", "")) == log_.key and len(data["valid"]) == hi - lo:
-            ao[lo:hi], valid[lo:hi] = data["ao"], data["valid"]
-        else:
-            pending.append((lo, hi, path))
-    ctx = opaque_context(log_.key, labeller, foliage, engine)
-    tasks = (Task(ctx, _trace_block, (samples.points[lo:hi], samples.normals[lo:hi],
-                                      np.arange(lo, hi, dtype=np.int64), halves(s))) for lo, hi, _ in pending)  # fmt: skip
-    with tqdm(total=len(pending), desc="trace blocks", disable=not progress, leave=False) as bar:
-        for i, r in engine.map(tasks):
-            lo, hi, path = pending[i]
-            write_npz(path, _key=np.array(log_.key), ao=r["ao"], valid=r["valid"])
-            ao[lo:hi], valid[lo:hi] = r["ao"], r["valid"]
-            bar.update(1)
-    reused = len(starts) - len(pending)
-    return {"ao": ao, "valid": valid, "reused_blocks": np.array(reused), "blocks": np.array(len(starts))}
 
 
 # --------------------------------------------------------------------------- decorators (section 2.2)
@@ -639,7 +605,6 @@ def bake_decorators(
     ``engine`` (None: this process, with the gold labeller built here), results kept in ``store``
     (:class:`pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered (and traced with
     ray ids) in a fixed order, so the result is the same bytes wherever the tasks run."""
-    from pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key
 
     if not g.trees:
         return {"models": np.zeros(0, np.int64)}
@@ -787,7 +752,6 @@ def bake_level(
 
     ``engine`` (:mod:`pipeline.engines.engine`): runs the trace stage's blocks, the trees' in-place traces and
     fits, and the resampling of grass, shrubs and the LOD as tasks (None: here, with threads)."""
-    from pipeline.bakes.level_output import write_outputs
 
     check_settings(settings)
     path, out = Path(path), Path(out)
@@ -890,7 +854,6 @@ def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: 
     kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
     ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
     block (what a cluster cannot split further; each task times itself, a stored one as it took then)."""
-    from pipeline.engines.engine import Context, LocalEngine, Task, content_key
 
     if t.solver != "components":
         return fit_least_squares(scene, samples, values, valid, t.alpha, t.solver)
@@ -994,7 +957,6 @@ class Resampler:
     def here(cls, labeller: LevelLabeller, foliage=None, key: str = "here", store=None,
              task_rays: int = 1 << 20) -> Resampler:  # fmt: skip
         """Blocks run in this process on ``labeller`` (its threads)."""
-        from pipeline.engines.engine import Context, LocalEngine
 
         ctx = Context(key, _level_tracer, None)
         return cls(LocalEngine(states={key: (labeller, foliage)}), ctx, store, task_rays)
@@ -1002,14 +964,11 @@ class Resampler:
     @staticmethod
     def share(values: np.ndarray):
         """Per-vertex values of the opaque scene as a :class:`pipeline.engines.engine.Shared` (sent once)."""
-        from pipeline.engines.engine import Shared, content_key
 
         return Shared(content_key("opaque-values", values), np.asarray(values, np.float64))
 
     def __call__(self, values, centers: np.ndarray, radius: float, rays: int, tag: str) -> np.ndarray:
         """values: :meth:`share` of (n,) vertex values; centers (p, 3) -> (p,) float64 (NaN: no hit)."""
-        from pipeline.engines.engine import Task, content_key
-        from pipeline.tracing.level_tracer import sphere_directions
 
         centers = np.asarray(centers, np.float64).reshape(-1, 3)
         step = max(1, self.task_rays // len(sphere_directions(rays)))
@@ -1055,8 +1014,6 @@ def _blend_check(
         kern = _blended_kernel_trace(labeller, foliage, pts, nrm, s, ids=pick)
         ref_two, ref_valid = LevelLabeller(g.opaque, ref_settings).obscurance(pts, nrm, halves(s), foliage)
     else:
-        from pipeline.engines.engine import Context, Task
-
         if engine.threads is not None:
             ref_settings = replace(ref_settings, workers=engine.threads)
         ref_ctx = Context(f"level-reference/{key}/{ref_settings.workers}", _level_tracer,
@@ -1177,26 +1134,10 @@ def bake_log_markdown(info: dict) -> str:
     return "\n".join(lines)
 
 
-# --------------------------------------------------------------------------- command line
+# --------------------------------------------------------------------------- settings file
 
 
 def load_level_settings(config: str | Path, overrides: list[str] | None = None) -> LevelBakeSettings:
     s = load_settings(LevelBakeSettings, config, overrides)
     check_settings(s)
     return s
-
-
-def run_level(args: argparse.Namespace) -> int:
-    """The level branch of `neuralao bake` (pipeline.bakes.vertex.run hands over when --config is given)."""
-    from pipeline.engines.engine import engine_from_args
-
-    settings = load_level_settings(args.config, getattr(args, "set", None))
-    if getattr(args, "chunk_rays", None) is not None:
-        raise NeuralaoError("--chunk-rays does not apply to a level; use --set trace.block_samples=N")
-    with engine_from_args(args) as engine:
-        info = bake_level(args.mesh, settings, args.out, progress=True,
-                          engine=None if engine.name == "local" else engine)  # fmt: skip
-    c = info["counts"]
-    log.info("baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
-             args.mesh, c["receiver_vertices"], c["receiver_faces"], c["samples"], info["seconds_total"], args.out)  # fmt: skip
-    return 0

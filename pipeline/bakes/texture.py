@@ -30,7 +30,6 @@ glTF's top-left origin), so the PNG is the image a glTF viewer samples.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
 from dataclasses import dataclass, field
@@ -40,11 +39,11 @@ from typing import Literal
 import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path, write_bytes, write_png
+from pipeline.foundation.io import atomic_path
 from pipeline.foundation.limits import SAMPLE_BYTES, check_count
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
-from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args
+from pipeline.tracing.labeller import Labeller, LabelSettings
 
 log = logging.getLogger(__name__)
 
@@ -545,64 +544,6 @@ def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
         np.asarray(uv, np.float64), material, "file", path.stem,
     )  # fmt: skip
     return mesh, red
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """Texture-only flags of ``neuralao bake`` (the tracing flags are the vertex bake's)."""
-    d = TextureBakeSettings()
-    p.add_argument("--resolution", type=int, default=None,
-                   help=f"--to texture: texture size in texels (default {d.resolution})")  # fmt: skip
-    p.add_argument("--margin", type=int, default=None,
-                   help=f"--to texture: gutter dilated around the UV charts, texels (default {d.margin})")  # fmt: skip
-    p.add_argument("--uv", choices=("auto", "mesh", "xatlas"), default=None,
-                   help="--to texture: the mesh's UVs, an xatlas atlas, or the mesh's when usable (default auto)")  # fmt: skip
-
-
-def settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
-    d = TextureBakeSettings()
-    check_label_args(args)
-    s = TextureBakeSettings(
-        resolution=d.resolution if args.resolution is None else args.resolution,
-        # The default gutter shrinks with a small texture (it may be at most a quarter of it).
-        margin=min(d.margin, (args.resolution or d.resolution) // 4) if args.margin is None else args.margin,
-        uv=args.uv or d.uv,
-        rays=args.rays,
-        max_distance=args.max_distance,
-        kernel=args.kernel,
-        half_distance=args.half_distance,
-        seed=args.seed,
-        workers=args.workers,
-    )
-    check_settings(s)
-    return s
-
-
-def run_texture(args: argparse.Namespace) -> int:
-    settings = settings_from_args(args)
-    out = Path(args.out)
-    if out.suffix.lower() != ".glb":
-        raise NeuralaoError(f"--to texture writes a .glb, got --out {out.name!r}")
-    if out.exists() and out.is_dir():
-        raise NeuralaoError(f"--out {out} is a folder")
-    from pipeline.bakes.gltf_scene import bakes_as_scene, run_texture_scene
-
-    if bakes_as_scene(args.mesh, out):  # nodes, materials and textures kept (pipeline.bakes.gltf_scene)
-        return run_texture_scene(args.mesh, out, settings)
-    mesh = load_uv_mesh(args.mesh, settings)
-    result = bake_texture(mesh, settings, progress=True)
-    data = texture_glb_bytes(mesh, result.ao)  # built before anything is written: both files or neither
-    write_png(png_path_for(out), quantise(result.ao))
-    write_bytes(out, data)
-    i = result.info
-    log.info(
-        "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",
-        mesh.name, i["faces"], i["uv_source"], i["resolution"], i["resolution"], i["texels_covered"],
-        i["invalid_texels"], i["seconds"], out, png_path_for(out).name,
-    )  # fmt: skip
-    return 0
 
 
 def scene_with_uvs(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, name: str = "mesh") -> UVMesh:

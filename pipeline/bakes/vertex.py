@@ -35,8 +35,6 @@ exact by construction).
 
 from __future__ import annotations
 
-import argparse
-import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -45,17 +43,16 @@ from typing import Literal
 
 import numpy as np
 
+from pipeline.engines.engine import LocalEngine
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
 from pipeline.foundation.limits import MAX_CAP, SAMPLE_BYTES, check_count, check_int_range, check_seed
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.least_squares import fill_invalid, fit_least_squares
-from pipeline.geometry.scene import Scene, load_scene
+from pipeline.geometry.scene import Scene
 from pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
 from pipeline.tracing.engine_labeller import EngineLabeller
-from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args
-
-log = logging.getLogger(__name__)
+from pipeline.tracing.labeller import Labeller, LabelSettings
 
 OUTPUT_SUFFIXES = (".ply", ".glb")
 GLB_AO_ATTRIBUTE = "_AO"
@@ -115,7 +112,7 @@ class BakeResult:
 # --------------------------------------------------------------------------- baking
 
 
-def bake_vertex(scene: Scene, labeller: Labeller, progress: bool = False) -> BakeResult:
+def bake_vertex(scene: Scene, labeller: Labeller | EngineLabeller, progress: bool = False) -> BakeResult:
     """AO sampled at every vertex along its vertex normal; invalid vertices filled from neighbours."""
     t0 = time.perf_counter()
     ao, valid = labeller.ao_at_points(scene.vertices, scene.vertex_normals, progress=progress)
@@ -136,7 +133,7 @@ def bake_vertex(scene: Scene, labeller: Labeller, progress: bool = False) -> Bak
 
 
 def bake_least_squares(
-    scene: Scene, labeller: Labeller, settings: BakeSettings, progress: bool = False
+    scene: Scene, labeller: Labeller | EngineLabeller, settings: BakeSettings, progress: bool = False
 ) -> BakeResult:
     """Least-squares vertex baking of stratified surface samples (module doc)."""
     t0 = time.perf_counter()
@@ -178,16 +175,14 @@ def bake(
 ) -> BakeResult:
     """Per-vertex AO of ``scene``: BakeResult.ao (n_vertices,) float32 in [0, 1].
 
-    ``engine`` (:mod:`pipeline.engines.engine`, e.g. a RayEngine): trace the samples as chunk tasks on it
-    (bit-identical result; ``store`` keeps finished chunks for a rerun); None: threads here.
+    The samples are traced as chunk tasks on ``engine`` (:mod:`pipeline.engines.engine`; None: a
+    LocalEngine, ``settings.workers`` threads in this process; a RayEngine: its cluster), with the same
+    bits wherever they run; ``store`` keeps finished chunks for a rerun.
     """
     settings = settings or BakeSettings()
     check_settings(settings)
     t0 = time.perf_counter()
-    if engine is None:
-        labeller = Labeller(scene, settings.label_settings())
-    else:
-        labeller = EngineLabeller(scene, settings.label_settings(), engine, store)
+    labeller = EngineLabeller(scene, settings.label_settings(), engine or LocalEngine(), store)
     if settings.method == "vertex":
         result = bake_vertex(scene, labeller, progress)
     else:
@@ -276,148 +271,3 @@ def read_baked_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarra
         np.asarray(attrs[key], np.float32).reshape(-1),
         colours,
     )
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    d = BakeSettings()
-    p.add_argument(
-        "mesh", help="mesh file (.obj .ply .gltf .glb .stl .off), glTF folder, or a bare test-mesh name"
-    )
-    p.add_argument("--rays", type=int, default=d.rays, help=f"AO rays per sample (default {d.rays})")
-    p.add_argument(
-        "--max-distance",
-        type=float,
-        default=None,
-        help="longest AO ray, scene units (default 0.25 x diagonal)",
-    )
-    p.add_argument(
-        "--kernel", choices=("binary", "obscurance"), default=d.kernel, help="AO kernel (default binary)"
-    )
-    p.add_argument("--half-distance", type=float, default=None,
-                   help="obscurance: distance at which a hit counts half, scene units (default 0.05 x diagonal)")  # fmt: skip
-    p.add_argument("--method", choices=("vertex", "least-squares"), default=d.method,
-                   help="sample at vertices, or fit vertex values to surface samples (default least-squares)")  # fmt: skip
-    p.add_argument(
-        "--alpha", type=float, default=d.alpha, help="least-squares edge regulariser weight (default 1)"
-    )
-    p.add_argument("--samples-per-vertex", type=float, default=d.samples_per_vertex,
-                   help=f"least-squares surface sample budget per vertex (default {d.samples_per_vertex:g})")  # fmt: skip
-    p.add_argument("--samples-per-face-cap", type=int, default=d.samples_per_face_cap,
-                   help=f"least-squares: at most this many samples on one face (default {d.samples_per_face_cap})")  # fmt: skip
-    p.add_argument(
-        "--seed", type=int, default=0, help="seed of sample positions and ray directions (default 0)"
-    )
-    p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
-    p.add_argument("--config", default=None, metavar="CONFIG.json",
-                   help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
-                        "(pipeline.bakes.level.LevelBakeSettings); --out is then a folder")  # fmt: skip
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)")  # fmt: skip
-    p.add_argument("--to", choices=("vertex", "texture"), default="vertex",
-                   help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
-                        "pipeline.bakes.texture) (default vertex)")  # fmt: skip
-    from pipeline.bakes.texture import add_arguments as add_texture_arguments
-
-    add_texture_arguments(p)
-    p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb|DIR",
-                   help="output mesh with per-vertex AO (a folder with --config)")  # fmt: skip
-    from pipeline.engines.engine import add_engine_arguments
-
-    add_engine_arguments(p, chunks=True)
-
-
-def settings_from_args(args: argparse.Namespace) -> BakeSettings:
-    check_label_args(args)
-    settings = BakeSettings(
-        rays=args.rays,
-        max_distance=args.max_distance,
-        kernel=args.kernel,
-        half_distance=args.half_distance,
-        method=args.method,
-        alpha=args.alpha,
-        samples_per_vertex=args.samples_per_vertex,
-        samples_per_face_cap=args.samples_per_face_cap,
-        seed=args.seed,
-        workers=args.workers,
-    )
-    check_settings(settings)
-    return settings
-
-
-# Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
-_MESH_ONLY_FLAGS = ("rays", "max_distance", "kernel", "half_distance", "method", "alpha",
-                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers",
-                    "to", "resolution", "margin", "uv")  # fmt: skip
-# Flags of the vertex bake only, and of the texture bake only (refused with the other --to).
-_VERTEX_ONLY_FLAGS = ("method", "alpha", "samples_per_vertex", "samples_per_face_cap")
-_TEXTURE_ONLY_FLAGS = ("resolution", "margin", "uv")
-
-
-def _refused_flag(args: argparse.Namespace) -> str | None:
-    """The first flag given that the chosen ``--to`` has no use for, or None."""
-    defaults = argparse.ArgumentParser()
-    add_arguments(defaults)
-    base = defaults.parse_args([args.mesh, "--out", args.out])
-    other = _VERTEX_ONLY_FLAGS if args.to == "texture" else _TEXTURE_ONLY_FLAGS
-    return next((f for f in other if getattr(args, f) != getattr(base, f)), None)
-
-
-def run(args: argparse.Namespace) -> int:
-    if getattr(args, "config", None) is not None:
-        from pipeline.bakes.level import run_level
-
-        if Path(args.mesh).suffix.lower() not in (".gltf", ".glb"):
-            raise NeuralaoError(f"--config bakes a level: expected a .gltf or .glb file, got {args.mesh!r}")
-        defaults = argparse.ArgumentParser()
-        add_arguments(defaults)
-        base = defaults.parse_args([args.mesh, "--out", args.out])
-        given = [f for f in _MESH_ONLY_FLAGS if getattr(args, f) != getattr(base, f)]
-        if given:
-            raise NeuralaoError(
-                f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
-            )
-        return run_level(args)  # --engine ray: the trace blocks become tasks (pipeline.bakes.level)
-    if args.set:
-        raise NeuralaoError("--set needs --config (level bakes only)")
-    if _refused_flag(args) is not None:
-        raise NeuralaoError(f"--{_refused_flag(args).replace('_', '-')} does not apply to --to {args.to}")
-    if args.to == "texture":
-        if getattr(args, "engine", "local") != "local":
-            raise NeuralaoError("texture bakes run locally (--engine ray is for vertex bakes and datasets)")
-        from pipeline.bakes.texture import run_texture
-
-        return run_texture(args)
-    settings = settings_from_args(args)
-    out = Path(args.out)
-    if out.suffix.lower() not in OUTPUT_SUFFIXES:
-        raise NeuralaoError(f"--out must end in .ply or .glb, got {out.name!r}")
-    if out.exists() and out.is_dir():
-        raise NeuralaoError(f"--out {out} is a folder")
-    from pipeline.bakes.gltf_scene import bakes_as_scene, read_gltf_scene, write_vertex_scene
-    from pipeline.engines.engine import ResultStore, engine_from_args
-
-    engine = engine_from_args(args)
-    # a glTF to a .glb is baked as a scene (pipeline.bakes.gltf_scene): nodes, materials and textures kept
-    gltf = read_gltf_scene(args.mesh) if bakes_as_scene(args.mesh, out) else None
-    scene = load_scene(args.mesh) if gltf is None else gltf.world
-    if engine.name == "local":  # threads in this process, exactly as before engines existed
-        result = bake(scene, settings, progress=True)
-    else:  # chunks on the cluster; finished ones kept beside OUT until it is written (resume)
-        store = ResultStore(out.parent / f".{out.name}.chunks")
-        with engine:
-            result = bake(scene, settings, progress=True, engine=engine, store=store)
-    if gltf is None:
-        write_baked_mesh(out, scene, result.ao)
-    else:
-        write_vertex_scene(out, gltf, result.ao, {"settings": result.info["settings"]})
-    if engine.name != "local":
-        store.clear()
-    i = result.info
-    log.info(
-        "baked %s (%d vertices, %s, %d samples, %d invalid) in %.1f s -> %s",
-        scene.name, i["vertices"], i["method"], i["samples"], i["invalid_samples"], i["seconds"], out,
-    )  # fmt: skip
-    return 0

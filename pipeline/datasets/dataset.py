@@ -32,7 +32,6 @@ shard entry of the manifest records its ``size`` [w, h].
 
 from __future__ import annotations
 
-import argparse
 import functools
 import hashlib
 import logging
@@ -46,7 +45,7 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import read_npz, remove_stale_temporaries, sha256_file, write_json, write_npz
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.camera import Camera, closeup, interior, load_poses, orbit
 from pipeline.geometry.compose import ComposeSettings, compose
 from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, slim_scene
@@ -98,7 +97,8 @@ class SceneSpec:
     split: Literal["train", "val", "test"] = (
         "train"  # scene-level split: the U-Net never trains on val/test scenes
     )
-    compose: ComposeSettings | None = None  # a composed scene (instead of ``mesh``); see pipeline.geometry.compose
+    # A composed scene (instead of ``mesh``); see pipeline.geometry.compose.
+    compose: ComposeSettings | None = None
     sizes: list[Size] | None = None  # frame sizes drawn per shard; None: the dataset's (sizes, else size)
     # Vertical fields of view (degrees) drawn per view; None: yfov_deg if set, else the dataset's range,
     # else the camera kind's default. Not for cameras="file" (poses carry their own).
@@ -629,16 +629,6 @@ def open_dataset(root: str | Path, verify: bool = True) -> Dataset:
     return Dataset(root, verify)
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("config", help="dataset config (JSON); see configs/demo.json")
-    p.add_argument("--out", required=True, help="output folder (resumes if an interrupted run is there)")
-    add_set_option(p, "--set labels.rays=64")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    from pipeline.engines.engine import add_engine_arguments
-
-    add_engine_arguments(p)
-
-
 def check_counts(settings: DatasetSettings, out: Path) -> None:
     """Every count of the config within what the machine can hold, before anything is expanded or
     allocated (pipeline.foundation.limits): scenes and views (a camera each), frame sizes (a shard's frames are
@@ -670,22 +660,3 @@ def check_counts(settings: DatasetSettings, out: Path) -> None:
         check_pixels("size", w, h, frames=settings.frames_per_shard)
     w, h = max(w for w, _ in sizes), max(h for _, h in sizes)
     check_disk("views", views * w * h * PIXEL_DISK_BYTES, out, f"{views} at up to {w} {h}")
-
-
-def run(args: argparse.Namespace) -> int:
-    from pipeline.engines.engine import engine_from_args
-
-    settings = load_settings(DatasetSettings, args.config, args.set)
-    check_counts(settings, Path(args.out))
-    with engine_from_args(args) as engine:
-        manifest = build_dataset(
-            settings, Path(args.out), Path(args.config).resolve().parent, not args.no_progress, engine
-        )
-    log.info(
-        "dataset %s: %d frames, %d shards, hash %s",
-        args.out,
-        manifest["frames"],
-        len(manifest["shards"]),
-        manifest["dataset_hash"][:16],
-    )
-    return 0

@@ -13,9 +13,7 @@ Table 1 of Sloan et al. 2013: >= 1.5M vertices and >= 1.8M faces of baked geomet
 
 from __future__ import annotations
 
-import argparse
 import json
-import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,10 +22,8 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
-from pipeline.foundation.settings import add_set_option, apply_overrides, from_dict, settings_to_dict
+from pipeline.foundation.settings import apply_overrides, from_dict, settings_to_dict
 from pipeline.geometry.level_files import GltfWriter, quat_to_matrix
-
-log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -304,23 +300,9 @@ def write_level(out: str | Path, s: LevelGenSettings, preset: str = "tiny") -> t
     return path, cfg
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", choices=sorted(PRESETS), default="tiny", help="level size (default tiny)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
-    add_set_option(p, "houses=10")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for level.gltf, level.bin, bake.json")
-
-
 def settings_for(preset: str, seed: int = 0, overrides: list[str] | None = None) -> LevelGenSettings:
     """A preset's settings with ``seed`` and ``key=value`` overrides (unknown keys rejected)."""
     if preset not in PRESETS:
         raise NeuralaoError(f"unknown preset {preset!r} (one of {', '.join(sorted(PRESETS))})")
     data = json.loads(json.dumps({**PRESETS[preset], "seed": seed}))
     return from_dict(LevelGenSettings, apply_overrides(data, overrides))
-
-
-def run(args: argparse.Namespace) -> int:
-    s = settings_for(args.preset, args.seed, args.set)
-    path, cfg = write_level(args.out, s, args.preset)
-    log.info("wrote %s and %s", path, cfg)
-    return 0

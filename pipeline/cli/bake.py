@@ -1,0 +1,260 @@
+"""`neuralao bake`: per-vertex AO of a mesh (:mod:`pipeline.bakes.vertex`), an AO texture map
+(``--to texture``, :mod:`pipeline.bakes.texture`), a glTF scene with its nodes and materials kept
+(:mod:`pipeline.bakes.gltf_scene`), or a game level (``--config``, :mod:`pipeline.bakes.level`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from pipeline.bakes.gltf_scene import (
+    bake_texture_scene,
+    bakes_as_scene,
+    read_gltf_scene,
+    write_texture_scene,
+    write_vertex_scene,
+)
+from pipeline.bakes.level import bake_level, load_level_settings
+from pipeline.bakes.texture import (
+    TextureBakeSettings,
+    bake_texture,
+    load_uv_mesh,
+    png_path_for,
+    quantise,
+    texture_glb_bytes,
+)
+from pipeline.bakes.texture import check_settings as check_texture_settings
+from pipeline.bakes.vertex import OUTPUT_SUFFIXES, BakeSettings, bake, check_settings, write_baked_mesh
+from pipeline.cli.engine_options import add_engine_arguments, engine_from_args
+from pipeline.engines.engine import ResultStore
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import write_bytes, write_png
+from pipeline.geometry.scene import load_scene
+from pipeline.tracing.labeller import check_label_args
+
+# Each bake's summary line carries the name of the module that bakes it, as it always has.
+_log_vertex = logging.getLogger("pipeline.bakes.vertex")
+_log_texture = logging.getLogger("pipeline.bakes.texture")
+_log_scene = logging.getLogger("pipeline.bakes.gltf_scene")
+_log_level = logging.getLogger("pipeline.bakes.level")
+
+# Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
+_MESH_ONLY_FLAGS = ("rays", "max_distance", "kernel", "half_distance", "method", "alpha",
+                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers",
+                    "to", "resolution", "margin", "uv")  # fmt: skip
+# Flags of the vertex bake only, and of the texture bake only (refused with the other --to).
+_VERTEX_ONLY_FLAGS = ("method", "alpha", "samples_per_vertex", "samples_per_face_cap")
+_TEXTURE_ONLY_FLAGS = ("resolution", "margin", "uv")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = BakeSettings()
+    p.add_argument(
+        "mesh", help="mesh file (.obj .ply .gltf .glb .stl .off), glTF folder, or a bare test-mesh name"
+    )
+    p.add_argument("--rays", type=int, default=d.rays, help=f"AO rays per sample (default {d.rays})")
+    p.add_argument(
+        "--max-distance",
+        type=float,
+        default=None,
+        help="longest AO ray, scene units (default 0.25 x diagonal)",
+    )
+    p.add_argument(
+        "--kernel", choices=("binary", "obscurance"), default=d.kernel, help="AO kernel (default binary)"
+    )
+    p.add_argument("--half-distance", type=float, default=None,
+                   help="obscurance: distance at which a hit counts half, scene units (default 0.05 x diagonal)")  # fmt: skip
+    p.add_argument("--method", choices=("vertex", "least-squares"), default=d.method,
+                   help="sample at vertices, or fit vertex values to surface samples (default least-squares)")  # fmt: skip
+    p.add_argument(
+        "--alpha", type=float, default=d.alpha, help="least-squares edge regulariser weight (default 1)"
+    )
+    p.add_argument("--samples-per-vertex", type=float, default=d.samples_per_vertex,
+                   help=f"least-squares surface sample budget per vertex (default {d.samples_per_vertex:g})")  # fmt: skip
+    p.add_argument("--samples-per-face-cap", type=int, default=d.samples_per_face_cap,
+                   help=f"least-squares: at most this many samples on one face (default {d.samples_per_face_cap})")  # fmt: skip
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of sample positions and ray directions (default 0)"
+    )
+    p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
+    p.add_argument("--config", default=None, metavar="CONFIG.json",
+                   help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
+                        "(pipeline.bakes.level.LevelBakeSettings); --out is then a folder")  # fmt: skip
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)")  # fmt: skip
+    p.add_argument("--to", choices=("vertex", "texture"), default="vertex",
+                   help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
+                        "pipeline.bakes.texture) (default vertex)")  # fmt: skip
+    _add_texture_arguments(p)
+    p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb|DIR",
+                   help="output mesh with per-vertex AO (a folder with --config)")  # fmt: skip
+    add_engine_arguments(p, chunks=True)
+
+
+def _add_texture_arguments(p: argparse.ArgumentParser) -> None:
+    """Texture-only flags (the tracing flags are the vertex bake's)."""
+    d = TextureBakeSettings()
+    p.add_argument("--resolution", type=int, default=None,
+                   help=f"--to texture: texture size in texels (default {d.resolution})")  # fmt: skip
+    p.add_argument("--margin", type=int, default=None,
+                   help=f"--to texture: gutter dilated around the UV charts, texels (default {d.margin})")  # fmt: skip
+    p.add_argument("--uv", choices=("auto", "mesh", "xatlas"), default=None,
+                   help="--to texture: the mesh's UVs, an xatlas atlas, or the mesh's when usable (default auto)")  # fmt: skip
+
+
+def settings_from_args(args: argparse.Namespace) -> BakeSettings:
+    check_label_args(args)
+    settings = BakeSettings(
+        rays=args.rays,
+        max_distance=args.max_distance,
+        kernel=args.kernel,
+        half_distance=args.half_distance,
+        method=args.method,
+        alpha=args.alpha,
+        samples_per_vertex=args.samples_per_vertex,
+        samples_per_face_cap=args.samples_per_face_cap,
+        seed=args.seed,
+        workers=args.workers,
+    )
+    check_settings(settings)
+    return settings
+
+
+def texture_settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
+    d = TextureBakeSettings()
+    check_label_args(args)
+    s = TextureBakeSettings(
+        resolution=d.resolution if args.resolution is None else args.resolution,
+        # The default gutter shrinks with a small texture (it may be at most a quarter of it).
+        margin=min(d.margin, (args.resolution or d.resolution) // 4) if args.margin is None else args.margin,
+        uv=args.uv or d.uv,
+        rays=args.rays,
+        max_distance=args.max_distance,
+        kernel=args.kernel,
+        half_distance=args.half_distance,
+        seed=args.seed,
+        workers=args.workers,
+    )
+    check_texture_settings(s)
+    return s
+
+
+def _defaults(args: argparse.Namespace) -> argparse.Namespace:
+    """What the command line would hold with only the mesh and --out given."""
+    defaults = argparse.ArgumentParser()
+    add_arguments(defaults)
+    return defaults.parse_args([args.mesh, "--out", args.out])
+
+
+def _refused_flag(args: argparse.Namespace) -> str | None:
+    """The first flag given that the chosen ``--to`` has no use for, or None."""
+    base = _defaults(args)
+    other = _VERTEX_ONLY_FLAGS if args.to == "texture" else _TEXTURE_ONLY_FLAGS
+    return next((f for f in other if getattr(args, f) != getattr(base, f)), None)
+
+
+def run(args: argparse.Namespace) -> int:
+    if getattr(args, "config", None) is not None:
+        if Path(args.mesh).suffix.lower() not in (".gltf", ".glb"):
+            raise NeuralaoError(f"--config bakes a level: expected a .gltf or .glb file, got {args.mesh!r}")
+        base = _defaults(args)
+        given = [f for f in _MESH_ONLY_FLAGS if getattr(args, f) != getattr(base, f)]
+        if given:
+            raise NeuralaoError(
+                f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
+            )
+        return run_level(args)  # --engine ray: the trace blocks become tasks (pipeline.bakes.level)
+    if args.set:
+        raise NeuralaoError("--set needs --config (level bakes only)")
+    if _refused_flag(args) is not None:
+        raise NeuralaoError(f"--{_refused_flag(args).replace('_', '-')} does not apply to --to {args.to}")
+    if args.to == "texture":
+        if getattr(args, "engine", "local") != "local":
+            raise NeuralaoError("texture bakes run locally (--engine ray is for vertex bakes and datasets)")
+        return run_texture(args)
+    return run_vertex(args)
+
+
+def run_vertex(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args)
+    out = Path(args.out)
+    if out.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise NeuralaoError(f"--out must end in .ply or .glb, got {out.name!r}")
+    if out.exists() and out.is_dir():
+        raise NeuralaoError(f"--out {out} is a folder")
+    engine = engine_from_args(args)
+    # a glTF to a .glb is baked as a scene (pipeline.bakes.gltf_scene): nodes, materials and textures kept
+    gltf = read_gltf_scene(args.mesh) if bakes_as_scene(args.mesh, out) else None
+    scene = load_scene(args.mesh) if gltf is None else gltf.world
+    # On a cluster, finished chunks are kept beside OUT until it is written (a rerun resumes).
+    store = None if engine.name == "local" else ResultStore(out.parent / f".{out.name}.chunks")
+    with engine:
+        result = bake(scene, settings, progress=True, engine=engine, store=store)
+    if gltf is None:
+        write_baked_mesh(out, scene, result.ao)
+    else:
+        write_vertex_scene(out, gltf, result.ao, {"settings": result.info["settings"]})
+    if store is not None:
+        store.clear()
+    i = result.info
+    _log_vertex.info(
+        "baked %s (%d vertices, %s, %d samples, %d invalid) in %.1f s -> %s",
+        scene.name, i["vertices"], i["method"], i["samples"], i["invalid_samples"], i["seconds"], out,
+    )  # fmt: skip
+    return 0
+
+
+def run_texture(args: argparse.Namespace) -> int:
+    settings = texture_settings_from_args(args)
+    out = Path(args.out)
+    if out.suffix.lower() != ".glb":
+        raise NeuralaoError(f"--to texture writes a .glb, got --out {out.name!r}")
+    if out.exists() and out.is_dir():
+        raise NeuralaoError(f"--out {out} is a folder")
+    if bakes_as_scene(args.mesh, out):  # nodes, materials and textures kept (pipeline.bakes.gltf_scene)
+        return run_texture_scene(args.mesh, out, settings)
+    mesh = load_uv_mesh(args.mesh, settings)
+    result = bake_texture(mesh, settings, progress=True)
+    data = texture_glb_bytes(mesh, result.ao)  # built before anything is written: both files or neither
+    write_png(png_path_for(out), quantise(result.ao))
+    write_bytes(out, data)
+    i = result.info
+    _log_texture.info(
+        "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",
+        mesh.name, i["faces"], i["uv_source"], i["resolution"], i["resolution"], i["texels_covered"],
+        i["invalid_texels"], i["seconds"], out, png_path_for(out).name,
+    )  # fmt: skip
+    return 0
+
+
+def run_texture_scene(mesh: str, out: Path, settings: TextureBakeSettings) -> int:
+    """``neuralao bake SCENE.gltf --to texture --out OUT.glb``."""
+    gs = read_gltf_scene(mesh)
+    images, layouts, info = bake_texture_scene(gs, settings, progress=True)
+    write_texture_scene(
+        out, gs, images, layouts, {"settings": info["settings"], "uv_sources": info["uv_sources"]}
+    )
+    _log_scene.info(
+        "baked %s (%d primitives in %d nodes, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
+        gs.path.name, sum(p.written for p in gs.pieces), len({p.node for p in gs.pieces if p.written}),
+        info["maps"], info["resolution"], info["resolution"],
+        info["texels_covered"], info["invalid_texels"], info["seconds"], out,
+    )  # fmt: skip
+    return 0
+
+
+def run_level(args: argparse.Namespace) -> int:
+    """The level branch (``--config``)."""
+    settings = load_level_settings(args.config, getattr(args, "set", None))
+    if getattr(args, "chunk_rays", None) is not None:
+        raise NeuralaoError("--chunk-rays does not apply to a level; use --set trace.block_samples=N")
+    with engine_from_args(args) as engine:
+        info = bake_level(args.mesh, settings, args.out, progress=True,
+                          engine=None if engine.name == "local" else engine)  # fmt: skip
+    c = info["counts"]
+    _log_level.info("baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
+                    args.mesh, c["receiver_vertices"], c["receiver_faces"], c["samples"],
+                    info["seconds_total"], args.out)  # fmt: skip
+    return 0
