@@ -1,5 +1,5 @@
 """Evaluate per-region volume AO models (``neuralao volumes``) at points and normals, with temporal
-blending for objects that move between regions; the ``neuralao probe`` command.
+blending for objects that move between regions (the library side of ``neuralao probe``).
 
     probe = VolumeProbe(read_volumes("VOLUMES.json"))
     ao = probe.ao(points, normals)                      # (n,) float32 in [0, 1], blended distances
@@ -20,31 +20,23 @@ exactly. The shader and the layout stay the same.
 
 from __future__ import annotations
 
-import argparse
-import logging
 import math
-from pathlib import Path
 
 import numpy as np
 
 from export.glsl.volume import evaluate_packed, pack_volumes
-from pipeline.bakes.volumes import Volumes, design, read_volumes
 from pipeline.foundation import sh
 from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.foundation.limits import check_count
-from pipeline.tracing.labeller import normalize_normals
-
-log = logging.getLogger(__name__)
+from runtime.volumes import Volumes, design
 
 ORDERS = {"linear": sh.LINEAR, "quadratic": sh.QUADRATIC}
 # Bytes per point and region of the lookup (nearest points of every box, their differences), the
 # design rows and the SH evaluation: what `probe` allocates for each row of --points.
-_POINT_BYTES = 256
+POINT_BYTES = 256
 
 
 class VolumeProbe:
-    """numpy evaluator of a :class:`pipeline.bakes.volumes.Volumes` (the reference for the GLSL function)."""
+    """numpy evaluator of a :class:`runtime.volumes.Volumes` (the reference for the GLSL function)."""
 
     def __init__(self, volumes: Volumes):
         self.volumes = volumes
@@ -187,59 +179,3 @@ def blended_path(
     blend = TemporalBlend(tau, mode)
     states = np.stack([blend.step(packed[r], dt, p) for r, p in zip(regions, positions, strict=True)])
     return evaluate_packed(states, positions, normals)
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("volumes", metavar="VOLUMES.json", help="models written by neuralao volumes")
-    p.add_argument("--points", required=True, metavar="P.npy", help="(n, 3) world positions")
-    p.add_argument("--normals", required=True, metavar="N.npy", help="(n, 3) normals (normalised here)")
-    p.add_argument("--out", required=True, metavar="AO.npy", help="(n,) float32 AO in [0, 1]")
-    p.add_argument("--distance", choices=("blend", "short", "long"), default="blend",
-                   help="which AO: the file's blend of the two distances (default), or one of them")  # fmt: skip
-    p.add_argument("--order", choices=tuple(ORDERS), default="quadratic", help="SH order (default quadratic)")
-
-
-def _load_rows(path: str, what: str) -> np.ndarray:
-    try:
-        a = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise NeuralaoError(f"{what} file not found: {path}") from None
-    except Exception as e:
-        raise NeuralaoError(f"cannot read {what} {path}: {type(e).__name__}") from None
-    if (
-        not isinstance(a, np.ndarray)
-        or a.ndim != 2
-        or a.shape[1] != 3
-        or not np.issubdtype(a.dtype, np.number)
-    ):
-        raise NeuralaoError(f"{what} {path} must be an (n, 3) numeric array, got {getattr(a, 'shape', '?')}")
-    return a.astype(np.float64)
-
-
-def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    if out.suffix.lower() != ".npy":
-        raise NeuralaoError(f"--out must end in .npy, got {out.name!r}")
-    vol = read_volumes(args.volumes)
-    points = _load_rows(args.points, "points")
-    normals = _load_rows(args.normals, "normals")
-    if len(points) != len(normals):
-        raise NeuralaoError(
-            f"--points {args.points} has {len(points)} rows and --normals {args.normals} has {len(normals)}"
-        )
-    check_count("--points", len(points), low=0, bytes_each=_POINT_BYTES * len(vol.regions),
-                each=f"per point and region, {len(vol.regions)} regions")  # fmt: skip
-    bad = int((~np.isfinite(points).all(axis=1)).sum())
-    if bad:
-        raise NeuralaoError(f"points {args.points} has {bad} rows with NaN or inf")
-    unit, ok = normalize_normals(normals)
-    if not ok.all():
-        log.warning("%d zero or non-finite normals evaluated as +z", int((~ok).sum()))
-    ao = VolumeProbe(vol).ao(points, unit, args.distance, args.order)
-    with atomic_path(out) as tmp:
-        np.save(tmp, ao)
-    log.info("probed %d points in %d regions -> %s", len(ao), len(vol.regions), out)
-    return 0

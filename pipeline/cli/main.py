@@ -30,8 +30,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("pipeline.evaluation.categories", "score screen-space AO (U-Nets, SSAO, GTAO) by category and resolution on test meshes"),
     "ship": ("pipeline.release.ship", "train, export, check and install the release models (runtime/models) from a config"),
     "select": ("pipeline.cli.select", "pick the cheapest AO representation that meets an error target per scene"),
-    "volumes": ("pipeline.bakes.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),
-    "probe": ("runtime.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
+    "volumes": ("pipeline.cli.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),
+    "probe": ("pipeline.cli.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
     "view": ("runtime.viewer", "write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders"),
 }
 

@@ -80,6 +80,7 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.limits import RAY_BYTES, RAY_TABLE_BYTES, THREAD_BYTES, check_count, check_seed
+from pipeline.foundation.normals import normalize_normals
 from pipeline.geometry.camera import Camera
 from pipeline.geometry.scene import Scene
 from pipeline.geometry.sequences import hammersley, sample_shifts
@@ -133,21 +134,6 @@ def onb(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t, bt
 
 
-def normalize_normals(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 3) any finite/non-finite normals -> (unit (n, 3) float64, ok (n,) bool).
-
-    Scale-safe (divides by the largest component first, so 1e-300 or 1e300 lengths work);
-    zero or non-finite normals become +z with ok = False.
-    """
-    normals = np.asarray(normals, dtype=np.float64)
-    big = np.abs(normals).max(axis=1) if len(normals) else np.zeros(0)
-    ok = np.isfinite(normals).all(axis=1) & (big > 0)
-    safe = np.where(ok[:, None], normals / np.where(ok, big, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
-    # Explicit sum (not np.linalg.norm): elementwise, so bits never depend on the batch shape.
-    length = np.sqrt(safe[:, 0] * safe[:, 0] + safe[:, 1] * safe[:, 1] + safe[:, 2] * safe[:, 2])
-    return safe / length[:, None], ok
-
-
 class Labeller:
     """AO labels for points and G-buffer frames of one scene.
 
@@ -163,15 +149,15 @@ class Labeller:
             raise NeuralaoError(f"scene {scene.name} has no extent (diagonal {diag})")
         self.scene = scene
         # Local frame: float64 centring and scaling before the float32 cast (see module doc).
-        self._center = np.asarray(scene.center, dtype=np.float64)
-        self._scale = diag
-        self._verts_local = (np.asarray(scene.vertices, np.float64) - self._center) / diag
+        self.center = np.asarray(scene.center, dtype=np.float64)
+        self.scale = diag
+        self._verts_local = (np.asarray(scene.vertices, np.float64) - self.center) / diag
         self._face_normals = np.asarray(scene.face_normals, dtype=np.float64)
         self._face_normals32 = np.nan_to_num(self._face_normals).astype(np.float32)
-        self._embree = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
+        self.embree = rtcore_scene.EmbreeScene()
+        TriangleMesh(self.embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
         # EmbreeScene.run commits lazily on the first call; do it now, before threads share it.
-        self._embree.run(
+        self.embree.run(
             np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED", dists=1.0
         )
         self._tls = threading.local()  # per-worker scratch buffers
@@ -197,7 +183,7 @@ class Labeller:
         # Before the ray tables and buffers are allocated: what they take must fit (pipeline.foundation.limits).
         check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
         check_rays("rays", s.rays, s.workers)
-        diag = self._scale
+        diag = self.scale
         self.max_distance = positive_distance("max_distance", s.max_distance, s.max_distance_rel, diag)
         self.half_distance = positive_distance("half_distance", s.half_distance, s.half_distance_rel, diag)
         if not (math.isfinite(s.offset_rel) and 0 <= s.offset_rel < 0.01):
@@ -208,7 +194,7 @@ class Labeller:
         self.offset = s.offset_rel * diag
         self.radii = None if s.radii_rel is None else _radii(s.radii_rel, diag)
         self.backface_rule = thr is not None and thr >= 0
-        self._r_local = np.float32(self.max_distance / diag)
+        self.r_local = np.float32(self.max_distance / diag)
         self._h_local = self.half_distance / diag
         self._offset_local = float(s.offset_rel)
         i, radinv = hammersley(s.rays)
@@ -262,24 +248,24 @@ class Labeller:
                 f"points must be (n, 3) and directions (n, k, 3); got {points.shape} and {directions.shape}"
             )
         k = directions.shape[1]
-        local = ((points - self._center) / self._scale).astype(np.float32)
+        local = ((points - self.center) / self.scale).astype(np.float32)
         dist = np.full((n, k), np.inf, dtype=np.float32)
         back = np.zeros((n, k), dtype=bool)
 
         def trace(lo: int, hi: int) -> None:
             orig = np.ascontiguousarray(np.repeat(local[lo:hi], k, axis=0))
             dirs = np.ascontiguousarray(directions[lo:hi].reshape(-1, 3))
-            dists = np.full(len(dirs), self._r_local, dtype=np.float32)
-            out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
+            dists = np.full(len(dirs), self.r_local, dtype=np.float32)
+            out = self.embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
             prim, tfar = out["primID"], out["tfar"]
             hit = prim >= 0
             fn = self._face_normals32[np.where(hit, prim, 0)]
             facing = dirs[:, 0] * fn[:, 0] + dirs[:, 1] * fn[:, 1] + dirs[:, 2] * fn[:, 2]
-            dist[lo:hi] = np.where(hit, tfar * np.float32(self._scale), np.inf).reshape(hi - lo, k)
+            dist[lo:hi] = np.where(hit, tfar * np.float32(self.scale), np.inf).reshape(hi - lo, k)
             back[lo:hi] = (hit & (facing > 0)).reshape(hi - lo, k)
 
         if n and k:
-            _run_chunks(trace, n, max(1, _CHUNK_RAYS // k), self.settings.workers, progress)
+            run_chunks(trace, n, max(1, _CHUNK_RAYS // k), self.settings.workers, progress)
         return dist, back
 
     def _local_points(self, points, normals, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -293,7 +279,7 @@ class Labeller:
         ids = np.arange(len(points), dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
         if ids.shape != (len(points),):
             raise NeuralaoError(f"ids must be ({len(points)},), got {ids.shape}")
-        return (points - self._center) / self._scale, normals, ids
+        return (points - self.center) / self.scale, normals, ids
 
     def label_frame(self, frame: dict, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """AO labels of a G-buffer frame.
@@ -354,14 +340,14 @@ class Labeller:
         return ao.reshape(h, w, k), valid.reshape(h, w, k)
 
     def _radii_local(self, radii: list[float] | np.ndarray | None) -> np.ndarray:
-        """(k,) float32 radii in local units (as ``_r_local``: scene units / diagonal, cast once)."""
+        """(k,) float32 radii in local units (as ``r_local``: scene units / diagonal, cast once)."""
         if radii is None:
             if self.radii is None:
                 raise NeuralaoError("no radii given and settings.radii_rel is None")
             radii = self.radii
         else:
             radii = _radii(list(np.asarray(radii, dtype=np.float64).reshape(-1)), 1.0)
-        return np.array([np.float32(r / self._scale) for r in radii], dtype=np.float32)
+        return np.array([np.float32(r / self.scale) for r in radii], dtype=np.float32)
 
     def visible_points(self, frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The float64 surface points :meth:`label_frame` labels.
@@ -377,7 +363,7 @@ class Labeller:
         indices of the foreground, exact (k,) bool.
         """
         local, normal, pix, exact = self._frame_points_local(frame)
-        return local * self._scale + self._center, normal, pix, exact
+        return local * self.scale + self.center, normal, pix, exact
 
     def _frame_points_local(self, frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`visible_points` in local units ``(x - center) / diagonal``."""
@@ -399,7 +385,7 @@ class Labeller:
         pix = np.flatnonzero(flat >= 0)
         d = pixel_directions(Camera(pose, w, h, float(frame["yfov"])), pix)
         tri = flat[pix]
-        origin = (pose[:3, 3] - self._center) / self._scale
+        origin = (pose[:3, 3] - self.center) / self.scale
         v0 = self._verts_local[self.scene.faces[tri, 0]]
         n = self._face_normals[tri]
         denom = _dot(n, d)
@@ -413,7 +399,7 @@ class Labeller:
                 fwd = -pose[:3, 2] / np.linalg.norm(pose[:3, 2])
                 depth = np.asarray(frame["depth"], np.float64).reshape(-1)[pix]
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    t = np.where(exact, t, depth / self._scale / (d @ fwd))
+                    t = np.where(exact, t, depth / self.scale / (d @ fwd))
         normal = np.where((denom > 0)[:, None], -n, n)
         return origin + t[:, None] * d, normal, pix, exact
 
@@ -456,8 +442,8 @@ class Labeller:
                 )
 
         workers = self.settings.workers
-        _run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
-        _run_chunks(trace, count, self._chunk_points, workers, progress)
+        run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
+        run_chunks(trace, count, self._chunk_points, workers, progress)
         ao[~np.isfinite(local).all(axis=1)] = 1.0
         valid &= ok if radii is None else ok[:, None]
         return ao, valid
@@ -491,7 +477,7 @@ class Labeller:
         """
         points = np.asarray(points, dtype=np.float64)
         ids = np.arange(len(points), dtype=np.int64) if ids is None else np.asarray(ids, dtype=np.int64)
-        origins, frames, jitter, _ = self._prepare((points - self._center) / self._scale, normals, ids)
+        origins, frames, jitter, _ = self._prepare((points - self.center) / self.scale, normals, ids)
         m, n_rays = len(points), self._rays
         dirs = np.empty((3, m, n_rays), np.float32)
         self._directions(frames, jitter, dirs, np.empty((m, n_rays), np.float32))
@@ -523,23 +509,23 @@ class Labeller:
         for k in range(3):
             orig_p[k].reshape(m, n_rays)[:] = origins[:, k, None]
         dirs, orig = dirs_p.T, orig_p.T  # (m * N, 3) views, no copy
-        kernel, r = self._kernel, self._r_local
+        kernel, r = self._kernel, self.r_local
         back_ok = np.ones(m, dtype=bool)
         if kernel == "binary" and not self.backface_rule:
             # embreex OCCLUDED returns the hit geometry's id, 0 (our only mesh), or -1 for a miss.
-            hit_geom = self._embree.run(orig, dirs, query="OCCLUDED", dists=r)
+            hit_geom = self.embree.run(orig, dirs, query="OCCLUDED", dists=r)
             escaped = np.count_nonzero(hit_geom.reshape(m, n_rays), axis=1)
             return (escaped / n_rays).astype(np.float32), back_ok
         prim = tfar = None
         if kernel == "binary":
-            prim = self._embree.run(orig, dirs, query="INTERSECT", dists=r)
+            prim = self.embree.run(orig, dirs, query="INTERSECT", dists=r)
         elif self.backface_rule:
             dists.fill(r)  # run() writes hit distances into this array
-            out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
+            out = self.embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
             prim, tfar = out["primID"], out["tfar"]
         else:
             dists.fill(r)
-            tfar = self._embree.run(orig, dirs, query="DISTANCE", dists=dists)
+            tfar = self.embree.run(orig, dirs, query="DISTANCE", dists=dists)
         if prim is not None:
             # Work on the hits only (usually a minority): their indices, and each one's point.
             hit_idx = np.flatnonzero(prim >= 0)
@@ -572,7 +558,7 @@ class Labeller:
             orig_p[k].reshape(m, n_rays)[:] = origins[:, k, None]
         dirs, orig = dirs_p.T, orig_p.T
         dists.fill(radii.max())
-        out = self._embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
+        out = self.embree.run(orig, dirs, query="INTERSECT", dists=dists, output=1)
         prim, tfar = out["primID"], out["tfar"]
         hit_idx = np.flatnonzero(prim >= 0)
         hit_point, hit_t = hit_idx // n_rays, tfar[hit_idx]
@@ -657,7 +643,7 @@ def _radii(values: list[float], diag: float) -> tuple[float, ...]:
     return tuple(positive_distance("radius", None, float(v), diag) for v in values)
 
 
-def _run_chunks(
+def run_chunks(
     work: Callable[[int, int], None], count: int, chunk: int, workers: int, progress: bool
 ) -> None:
     """Call ``work(lo, hi)`` over [0, count) in chunks on ``workers`` threads (tqdm if ``progress``)."""
