@@ -91,7 +91,7 @@ def throughput(scene, frame: dict, rays: int, repeats: int) -> dict:
     points, normals, pix, _ = any_lab.visible_points(frame)
     origins, dirs = any_lab.rays(points, normals, ids=pix)
     n_rays = len(dirs)
-    es, tfar = any_lab._embree, any_lab._r_local  # the same committed Embree scene and ray length
+    es, tfar = any_lab.embree, any_lab.r_local  # the same committed Embree scene and ray length
     best: dict[str, float] = {}
 
     cpu: dict[str, float] = {}

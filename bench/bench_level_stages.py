@@ -177,11 +177,11 @@ def _try_fit(g, samples, ao, valid, s, solver):
 def _bare_trace_seconds(lab: LevelLabeller, centers, radius, rays) -> float:
     """The same rays through closest_hits_local alone (no weighting)."""
     u = sphere_directions(rays)
-    scale = lab._scale
+    scale = lab.scale
     block = max(1, _RESAMPLE_RAYS // len(u))
     t0 = time.perf_counter()
     for lo in range(0, len(centers), block):
-        c = (centers[lo : lo + block] - lab._center) / scale
+        c = (centers[lo : lo + block] - lab.center) / scale
         o = (c[:, None] + (radius / scale) * u[None]).reshape(-1, 3).astype(np.float32)
         d = np.ascontiguousarray(np.broadcast_to(-u.astype(np.float32), (len(c), len(u), 3)).reshape(-1, 3))
         lab.closest_hits_local(o, d, np.full(len(o), 2 * radius / scale, np.float32))

@@ -91,7 +91,7 @@ def test_point_inside_a_wide_slab_of_media_closed_form(sigma_h):
     lab = LevelLabeller(scene, LabelSettings(rays=256, kernel="obscurance", max_distance=2 * scene.diagonal))
     h, half = 1.0, 200.0
     fol = Foliage([[-half, -half, -0.01]], [[half, half, h]], [sigma_h / h], np.zeros((0, 3)), np.zeros((0, 3), int),
-                  np.zeros(0), lab._center, lab._scale, max_hits=8)  # fmt: skip
+                  np.zeros(0), lab.center, lab.scale, max_hits=8)  # fmt: skip
     rng = np.random.default_rng(0)
     pts = np.c_[rng.uniform(-5, 5, (16, 2)), np.zeros(16)]
     ao, _ = lab.obscurance(pts, np.tile([0.0, 0.0, 1.0], (16, 1)), [1.0], fol)
@@ -158,8 +158,8 @@ def test_trees_attenuate_by_their_transmission_per_hit(layers, expected):
         tv,
         tf,
         np.full(len(tf), 0.5),
-        lab._center,
-        lab._scale,
+        lab.center,
+        lab.scale,
     )
     ao, _ = lab.obscurance(np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]), [3.0], fol)
     # Rays escaping below the sheets' rim (at most atan(1 / 150) from the horizon) see fewer layers.

@@ -404,7 +404,7 @@ def build_foliage(
             for k, _, _, _ in spans
         ]
         trans = np.concatenate(per_face)
-    return Foliage(lo, hi, dens, tv, tf, trans, labeller._center, labeller._scale, s.max_hits)
+    return Foliage(lo, hi, dens, tv, tf, trans, labeller.center, labeller.scale, s.max_hits)
 
 
 def label_settings(s: LevelBakeSettings, diagonal: float, rays: int | None = None) -> LabelSettings:
@@ -471,14 +471,14 @@ def _trace_block(state, args) -> dict[str, np.ndarray]:
 
 class LabellerFrame:
     """The driver's stand-in for the opaque :class:`LevelLabeller` when an engine traces: the scene, its
-    label settings and the local frame (``_center``, ``_scale``) the foliage is built in, no Embree scene."""
+    label settings and the local frame (``center``, ``scale``) the foliage is built in, no Embree scene."""
 
     def __init__(self, scene: Scene, settings: LabelSettings):
         self.scene, self.settings = scene, settings
-        self._center = np.asarray(scene.center, dtype=np.float64)
-        self._scale = float(scene.diagonal)
-        if not (math.isfinite(self._scale) and self._scale > 0):
-            raise NeuralaoError(f"scene {scene.name} has no extent (diagonal {self._scale})")
+        self.center = np.asarray(scene.center, dtype=np.float64)
+        self.scale = float(scene.diagonal)
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise NeuralaoError(f"scene {scene.name} has no extent (diagonal {self.scale})")
 
 
 def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, engine=None):
@@ -624,7 +624,7 @@ def bake_decorators(
         runner = engine
         # Foliage lives in a labeller's local frame: the gold labeller's (its scene's centre and
         # diagonal), without building its BVH here.
-        frame = SimpleNamespace(_center=np.asarray(gold.center, np.float64), _scale=float(gold.diagonal))
+        frame = SimpleNamespace(center=np.asarray(gold.center, np.float64), scale=float(gold.diagonal))
         gold_foliage = (build_foliage(g, frame, foliage_settings, include_trees=False)
                         if foliage_settings.enabled else None)  # fmt: skip
         payload = (slim_scene(gold), settings, gold_foliage)
@@ -1062,12 +1062,12 @@ def _blended_kernel_trace(
     per ray (escaped rays: 1), averaged per sample: a separate path from :meth:`LevelLabeller.obscurance`
     that shares only the rays (:meth:`Labeller.rays`)."""
     orig, dirs = labeller.rays(points, normals, ids=ids)
-    r = labeller._r_local
-    out = labeller._embree.run(
+    r = labeller.r_local
+    out = labeller.embree.run(
         orig, dirs, query="INTERSECT", dists=np.full(len(orig), r, np.float32), output=1
     )
     t = out["tfar"].astype(np.float64)
-    hs, hl = (h / labeller._scale for h in halves(s))
+    hs, hl = (h / labeller.scale for h in halves(s))
     w = s.blend.long_weight
     rho = np.where(t < r, w * (1 - 2.0 ** (-t / hl)) + (1 - w) * (1 - 2.0 ** (-t / hs)), 1.0)
     if foliage is not None and not foliage.empty:

@@ -148,12 +148,14 @@ class Labeller:
         if not (math.isfinite(diag) and diag > 0):
             raise NeuralaoError(f"scene {scene.name} has no extent (diagonal {diag})")
         self.scene = scene
-        # Local frame: float64 centring and scaling before the float32 cast (see module doc).
+        # Local frame: float64 centring and scaling before the float32 cast (see module doc):
+        # local = (world - center) / scale; center (3,) float64, scale the diagonal (scene units).
         self.center = np.asarray(scene.center, dtype=np.float64)
         self.scale = diag
         self._verts_local = (np.asarray(scene.vertices, np.float64) - self.center) / diag
         self._face_normals = np.asarray(scene.face_normals, dtype=np.float64)
         self._face_normals32 = np.nan_to_num(self._face_normals).astype(np.float32)
+        # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self.embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
         # EmbreeScene.run commits lazily on the first call; do it now, before threads share it.
@@ -194,7 +196,7 @@ class Labeller:
         self.offset = s.offset_rel * diag
         self.radii = None if s.radii_rel is None else _radii(s.radii_rel, diag)
         self.backface_rule = thr is not None and thr >= 0
-        self.r_local = np.float32(self.max_distance / diag)
+        self.r_local = np.float32(self.max_distance / diag)  # max_distance in local units, cast once
         self._h_local = self.half_distance / diag
         self._offset_local = float(s.offset_rel)
         i, radinv = hammersley(s.rays)

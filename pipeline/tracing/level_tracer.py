@@ -21,7 +21,7 @@ import numpy as np
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.geometry.scene import Scene
 from pipeline.geometry.surface import interpolate
-from pipeline.tracing.labeller import Labeller, _run_chunks
+from pipeline.tracing.labeller import Labeller, run_chunks
 
 # Rays per chunk of caller-chosen rays (as the labeller's own chunks).
 _CHUNK = 1 << 16
@@ -46,7 +46,7 @@ class LevelLabeller(Labeller):
         """
         if self._kernel != "obscurance":
             raise NeuralaoError("LevelLabeller.obscurance needs settings with kernel='obscurance'")
-        h_local = [float(h) / self._scale for h in half_distances]
+        h_local = [float(h) / self.scale for h in half_distances]
         if not h_local or not all(np.isfinite(h) and h > 0 for h in h_local):
             raise NeuralaoError(f"half distances must be positive and finite, got {half_distances!r}")
         local, normals, ids = self._local_points(points, normals, ids)
@@ -70,8 +70,8 @@ class LevelLabeller(Labeller):
             )
 
         workers = self.settings.workers
-        _run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
-        _run_chunks(trace, count, self._chunk_points, workers, progress)
+        run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
+        run_chunks(trace, count, self._chunk_points, workers, progress)
         ao[~np.isfinite(local).all(axis=1)] = 1.0
         return ao, valid & ok
 
@@ -99,7 +99,7 @@ class LevelLabeller(Labeller):
         for c in range(3):
             orig_p[c].reshape(m, n_rays)[:] = origins[:, c, None]
         dirs, orig = dirs_p.T, orig_p.T
-        r = self._r_local
+        r = self.r_local
         tfar = np.full(m * n_rays, r, np.float32)  # untraced rays read as misses
         back = np.zeros(m, np.int64)
         done = np.full(m, n_rays)  # rays traced per sample
@@ -114,7 +114,7 @@ class LevelLabeller(Labeller):
             else:
                 ids = (active[:, None] * n_rays + np.arange(lo, hi)).ravel()
                 o, d, t_in = orig[ids], dirs[ids], np.full(len(ids), r, np.float32)
-            out = self._embree.run(o, d, query="INTERSECT", dists=t_in, output=1)
+            out = self.embree.run(o, d, query="INTERSECT", dists=t_in, output=1)
             prim = out["primID"]
             if ids is None:
                 tfar[:] = out["tfar"]
@@ -169,22 +169,22 @@ class LevelLabeller(Labeller):
 
         Returns prim (r,) int64 (-1 = miss) and t (r,) float64 scene units (inf on a miss).
         """
-        local = ((np.asarray(origins, np.float64) - self._center) / self._scale).astype(np.float32)
+        local = ((np.asarray(origins, np.float64) - self.center) / self.scale).astype(np.float32)
         d = np.ascontiguousarray(dirs, dtype=np.float32)
-        tl = (np.asarray(tmax, np.float64) / self._scale).astype(np.float32)
+        tl = (np.asarray(tmax, np.float64) / self.scale).astype(np.float32)
         prim = np.full(len(local), -1, np.int64)
         t = np.full(len(local), np.inf)
 
         def work(lo: int, hi: int) -> None:
-            out = self._embree.run(np.ascontiguousarray(local[lo:hi]), d[lo:hi], query="INTERSECT",
+            out = self.embree.run(np.ascontiguousarray(local[lo:hi]), d[lo:hi], query="INTERSECT",
                                    dists=tl[lo:hi].copy(), output=1)  # fmt: skip
             p = out["primID"]
             hit = p >= 0
             prim[lo:hi] = np.where(hit, p, -1)
-            t[lo:hi] = np.where(hit, out["tfar"].astype(np.float64) * self._scale, np.inf)
+            t[lo:hi] = np.where(hit, out["tfar"].astype(np.float64) * self.scale, np.inf)
 
         if len(local):
-            _run_chunks(work, len(local), _CHUNK, self.settings.workers, False)
+            run_chunks(work, len(local), _CHUNK, self.settings.workers, False)
         return prim, t
 
     def closest_hits_local(
@@ -201,12 +201,12 @@ class LevelLabeller(Labeller):
         bu, bv, t = np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)
 
         def work(lo: int, hi: int) -> None:
-            out = self._embree.run(origins[lo:hi], dirs[lo:hi], query="INTERSECT",
+            out = self.embree.run(origins[lo:hi], dirs[lo:hi], query="INTERSECT",
                                    dists=np.array(tmax[lo:hi], np.float32), output=1)  # fmt: skip
             prim[lo:hi], bu[lo:hi], bv[lo:hi], t[lo:hi] = out["primID"], out["u"], out["v"], out["tfar"]
 
         if n:
-            _run_chunks(work, n, _CHUNK, self.settings.workers, False)
+            run_chunks(work, n, _CHUNK, self.settings.workers, False)
         return prim, bu, bv, t
 
 
@@ -221,9 +221,9 @@ def _resample_block(
     sums of a (p, k) layout (a centre's k rays are consecutive). :func:`_resample_block_geometric` is
     the reference it is tested against (projected hit points, bincount)."""
     p, k, nc = len(centers), len(u), cols.shape[1]
-    scale = labeller._scale
+    scale = labeller.scale
     rl = rad / scale  # local units
-    local_c = (centers - labeller._center) / scale
+    local_c = (centers - labeller.center) / scale
     origins = (local_c[:, None, :] + rl[:, None, None] * u[None]).reshape(-1, 3).astype(np.float32)
     dirs = np.ascontiguousarray(np.broadcast_to(-u.astype(np.float32), (p, k, 3)).reshape(-1, 3))
     prim, bu, bv, t = labeller.closest_hits_local(origins, dirs, np.repeat((2 * rl).astype(np.float32), k))
