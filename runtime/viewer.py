@@ -36,9 +36,10 @@ base64 float32. All data (geometry, textures, shader sources, weights) is inline
 
 from __future__ import annotations
 
-import argparse
 import base64
+import functools
 import hashlib
+import http.server
 import json
 import logging
 from dataclasses import dataclass, field
@@ -106,172 +107,11 @@ def corner_arrays(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     return t.reshape(-1, 3).astype(np.float32), corner_n.reshape(-1, 3).astype(np.float32)
 
 
-# --------------------------------------------------------------------------- inputs
-
-
-def method_from_bake(path: Path) -> ViewerMethod:
-    """A vertex bake (.ply/.glb with float AO) or a texture bake (.glb with an occlusionTexture)."""
-    from pipeline.bakes.texture import read_texture_glb
-    from pipeline.bakes.vertex import read_baked_mesh
-
-    if path.suffix.lower() == ".glb":
-        if _is_scene_bake(path):
-            return method_from_scene_bake(path)
-        try:
-            mesh, red = read_texture_glb(path)
-        except NeuralaoError:
-            mesh = None
-        if mesh is not None:
-            import io
-
-            from PIL import Image
-
-            pos, nrm = corner_arrays(mesh.vertices, mesh.faces)
-            uv = mesh.uv[mesh.faces].reshape(-1, 2)
-            uv_gltf = np.c_[uv[:, 0], 1.0 - uv[:, 1]].astype(np.float32)
-            buf = io.BytesIO()
-            Image.fromarray(np.rint(red * 255).astype(np.uint8), mode="L").save(buf, format="PNG")
-            return ViewerMethod(f"texture bake {red.shape[1]}x{red.shape[0]} ({path.name})", "texture", pos, nrm,
-                                uv=uv_gltf, texture=buf.getvalue())  # fmt: skip
-    vertices, faces, ao, _ = read_baked_mesh(path)
-    pos, nrm = corner_arrays(vertices, faces)
-    return ViewerMethod(
-        f"vertex bake ({path.name})", "vertex", pos, nrm, ao=ao[faces].reshape(-1).astype(np.float32)
-    )
-
-
-def _is_scene_bake(path: Path) -> bool:
-    """Whether a .glb's JSON says it is a scene bake (``asset.extras.neuralao.bake == "scene"``)."""
-    import struct
-
-    with open(path, "rb") as f:
-        head = f.read(20)
-        if len(head) < 20 or head[:4] != b"glTF":
-            return False
-        try:
-            doc = json.loads(f.read(struct.unpack_from("<I", head, 12)[0]))
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            return False
-    extras = doc.get("asset", {}).get("extras", {}) if isinstance(doc, dict) else {}
-    return (
-        isinstance(extras, dict)
-        and isinstance(extras.get("neuralao"), dict)
-        and extras["neuralao"].get("bake") == "scene"
-    )
-
-
-def method_from_scene_bake(path: Path) -> ViewerMethod:
-    """A scene bake: one part per primitive of every written node, in world space (module doc)."""
-    from pipeline.bakes.gltf_scene import read_gltf_scene
-
-    gs = read_gltf_scene(path)
-    doc, to = gs.doc, gs.doc["asset"]["extras"]["neuralao"].get("to", "vertex")
-    pos, nrm, ao, uv, uv_base, parts = [], [], [], [], [], []
-    for p in (p for p in gs.pieces if p.written):
-        prim = doc["meshes"][p.mesh]["primitives"][p.primitive]
-        attrs = prim["attributes"]
-        faces = p.faces[:, ::-1] if p.mirrored else p.faces  # front faces as glTF defines them
-        a, n = corner_arrays(p.world_vertices(), faces)
-        material = doc.get("materials", [])[prim["material"]] if "material" in prim else {}
-        pbr = material.get("pbrMetallicRoughness", {})
-        part = {
-            "first": sum(len(x) for x in pos),
-            "count": len(a),
-            "factor": pbr.get("baseColorFactor", [1.0] * 4),
-        }
-        ao.append(_corners(gs, attrs, "_AO", faces, 1, 1.0)[:, 0])
-        uv.append(np.zeros((len(a), 2), np.float32))
-        uv_base.append(np.zeros((len(a), 2), np.float32))
-        for key, slot, out in (("occlusion", material.get("occlusionTexture"), uv),
-                               ("base", pbr.get("baseColorTexture"), uv_base)):  # fmt: skip
-            if slot is not None:
-                part[key] = _texture_uri(gs, slot["index"])
-                out[-1] = _corners(gs, attrs, f"TEXCOORD_{slot.get('texCoord', 0)}", faces, 2, 0.0)
-        pos.append(a)
-        nrm.append(n)
-        parts.append(part)
-    return ViewerMethod(
-        f"scene {to} bake, {len(parts)} primitives ({path.name})", "scene", np.concatenate(pos), np.concatenate(nrm),
-        ao=np.concatenate(ao), uv=np.concatenate(uv), uv_base=np.concatenate(uv_base), parts=parts,
-        info={"bake": str(path), "to": to},
-    )  # fmt: skip
-
-
-def _corners(gs, attrs: dict, name: str, faces: np.ndarray, width: int, default: float) -> np.ndarray:
-    """(3m, width) float32 attribute ``name`` at the corners of ``faces`` (m, 3), or ``default``."""
-    if name not in attrs:
-        return np.full((3 * len(faces), width), default, np.float32)
-    values = np.asarray(gs.gltf.accessor(attrs[name], f"{gs.path.name} {name}"), np.float32)
-    return values[faces].reshape(-1, width)
-
-
-def _texture_uri(gs, texture: int) -> str:
-    """A data URI of texture ``texture``'s image (embedded in a bufferView or a data URI)."""
-    image = gs.doc["images"][gs.doc["textures"][texture]["source"]]
-    if "uri" in image:
-        if not image["uri"].startswith("data:"):
-            raise NeuralaoError(f"{gs.path.name}: image {image['uri']!r} is not embedded")
-        return image["uri"]
-    view = gs.doc["bufferViews"][image["bufferView"]]
-    start = int(view.get("byteOffset", 0))
-    data = gs.gltf.buffers[view.get("buffer", 0)][start : start + int(view["byteLength"])]
-    return f"data:{image.get('mimeType', 'image/png')};base64," + _b64(data)
-
-
-def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
-    """An MLP or field export: its ES 3.00 fragment pass, on ``mesh`` (default: the export's own mesh)."""
-    from export.glsl.files import load_mlp_export
-    from pipeline.geometry.scene import load_scene
-
-    try:
-        top = json.loads((folder / "manifest.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
-        raise NeuralaoError(f"{folder} is not an export folder (no readable manifest.json)") from None
-    glsl_dir = folder / "glsl"
-    if not (glsl_dir / "manifest.json").exists():
-        raise NeuralaoError(
-            f"{folder} has no glsl/ fragment export (only MLP and field exports can be viewed)"
-        )
-    shader = load_mlp_export(glsl_dir, dialect="es300")
-    manifest = shader.manifest
-    mesh_path = mesh or top.get("mesh") or manifest.get("source_model_metadata", {}).get("training_mesh")
-    if not mesh_path:
-        raise NeuralaoError(f"{folder}: no mesh recorded in the export; pass --mesh")
-    scene = load_scene(mesh_path)
-    pos, nrm = corner_arrays(scene.vertices, scene.faces)
-    inputs = [
-        {"sampler": i["sampler"], "unit": int(i["unit"]), "source": "position" if i["texture"] == "position" else "normal"}
-        for i in manifest["passes"][0]["inputs"]
-    ]  # fmt: skip
-    blocks = [
-        {"name": name, "binding": int(binding), "data": _b64(np.ascontiguousarray(arr, "<f4").tobytes())}
-        for name, binding, arr in shader.uniform_blocks
-    ]
-    kind = manifest.get("kind") or top.get("kind") or "mlp"
-    size = top.get("model_size") or top.get("size") or ""
-    return ViewerMethod(
-        f"{kind} {size} ES 3.00 shader ({folder.name})".replace("  ", " "), "shader", pos, nrm,
-        shader={"vertex": shader.vertex_source, "fragment": shader.fragment_source, "inputs": inputs,
-                "blocks": blocks},
-        info={"export": str(folder), "mesh": str(mesh_path), "onnx": str(folder / "model.onnx")},
-    )  # fmt: skip
-
-
-def load_method(path: str, mesh: str | None) -> ViewerMethod:
-    p = Path(path)
-    if p.is_dir():
-        return method_from_export(p, mesh)
-    if not p.exists():
-        raise NeuralaoError(f"no such file or folder: {path}")
-    if p.suffix.lower() not in (".ply", ".glb"):
-        raise NeuralaoError(f"{p.name}: expected a bake (.ply/.glb) or an export folder")
-    return method_from_bake(p)
-
-
 # --------------------------------------------------------------------------- page
 
 
-def _b64(data: bytes) -> str:
+def b64(data: bytes) -> str:
+    """Base64 text of ``data`` (how the page embeds binary arrays and images)."""
     return base64.b64encode(data).decode("ascii")
 
 
@@ -286,17 +126,17 @@ def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
         key = hashlib.sha256(pos + nrm).hexdigest()
         if key not in index:  # methods on the same mesh share one copy of it
             index[key] = len(geometries)
-            geometries.append({"count": len(m.positions), "positions": _b64(pos), "normals": _b64(nrm)})
+            geometries.append({"count": len(m.positions), "positions": b64(pos), "normals": b64(nrm)})
         e = {"name": m.name, "kind": m.kind, "geometry": index[key]}
         if m.ao is not None:
-            e["ao"] = _b64(m.ao.astype("<f4").tobytes())
+            e["ao"] = b64(m.ao.astype("<f4").tobytes())
         if m.uv is not None:
-            e["uv"] = _b64(m.uv.astype("<f4").tobytes())
+            e["uv"] = b64(m.uv.astype("<f4").tobytes())
         if m.texture is not None:
-            e["texture"] = "data:image/png;base64," + _b64(m.texture)
+            e["texture"] = "data:image/png;base64," + b64(m.texture)
         if m.parts is not None:
             e["parts"] = m.parts
-            e["uv_base"] = _b64(m.uv_base.astype("<f4").tobytes())
+            e["uv_base"] = b64(m.uv_base.astype("<f4").tobytes())
         if m.shader is not None:
             e["shader"] = m.shader
         e["info"] = m.info
@@ -322,45 +162,9 @@ def write_page(methods: list[ViewerMethod], out: Path, size: tuple[int, int] = (
 
 def serve(folder: Path, port: int) -> None:
     """Serve ``folder`` on http://127.0.0.1:PORT until interrupted."""
-    import functools
-    import http.server
-
     handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(folder))
     with http.server.ThreadingHTTPServer(("127.0.0.1", port), handler) as httpd:
         log.info(
             "serving %s on http://127.0.0.1:%d/index.html (Ctrl-C stops)", folder, httpd.server_address[1]
         )
         httpd.serve_forever()
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("inputs", nargs="+", metavar="EXPORT_OR_BAKE",
-                   help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
-    p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
-    p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
-    p.add_argument("--size", type=int, nargs=2, default=[640, 480], metavar=("W", "H"),
-                   help="canvas size in pixels (default 640 480)")  # fmt: skip
-    p.add_argument("--serve", action="store_true", help="serve the page on http://127.0.0.1:PORT afterwards")
-    p.add_argument(
-        "--port", type=int, default=8000, help="port for --serve (default 8000; 0 = any free port)"
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    w, h = args.size
-    if not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise NeuralaoError(f"--size must be in 1..8192, got {w} {h}")
-    if not 0 <= args.port <= 65535:
-        raise NeuralaoError(f"--port must be in 0..65535, got {args.port}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise NeuralaoError(f"--out {out} is a file")
-    methods = [load_method(i, args.mesh) for i in args.inputs]
-    page = write_page(methods, out, (w, h))
-    log.info("viewer: %d method(s) -> %s", len(methods), page)
-    if args.serve:
-        serve(out, args.port)
-    return 0

@@ -32,7 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "select": ("pipeline.cli.select", "pick the cheapest AO representation that meets an error target per scene"),
     "volumes": ("pipeline.cli.volumes", "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)"),
     "probe": ("pipeline.cli.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
-    "view": ("runtime.viewer", "write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders"),
+    "view": ("pipeline.cli.view", "write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders"),
 }
 
 

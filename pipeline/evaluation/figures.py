@@ -111,8 +111,9 @@ def write_viewer_pages(sheets: dict, out: Path) -> dict[str, str]:
     A page that cannot be built is left out with a warning (it must not sink the report)."""
     import logging
 
+    from pipeline.bakes.viewer_inputs import method_from_export
     from pipeline.foundation.errors import NeuralaoError
-    from runtime.viewer import ViewerMethod, corner_arrays, method_from_export, write_page
+    from runtime.viewer import ViewerMethod, corner_arrays, write_page
 
     log = logging.getLogger(__name__)
     links = {}

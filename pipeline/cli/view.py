@@ -1,0 +1,44 @@
+"""`neuralao view EXPORT_OR_BAKE... --out DIR [--mesh MESH] [--size W H] [--serve]`: write a
+self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders (:mod:`runtime.viewer`)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from pipeline.bakes.viewer_inputs import load_method
+from pipeline.foundation.errors import NeuralaoError
+from runtime.viewer import serve, write_page
+
+log = logging.getLogger("runtime.viewer")  # the logger name users see in messages (unchanged by the move)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("inputs", nargs="+", metavar="EXPORT_OR_BAKE",
+                   help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
+    p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
+    p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
+    p.add_argument("--size", type=int, nargs=2, default=[640, 480], metavar=("W", "H"),
+                   help="canvas size in pixels (default 640 480)")  # fmt: skip
+    p.add_argument("--serve", action="store_true", help="serve the page on http://127.0.0.1:PORT afterwards")
+    p.add_argument(
+        "--port", type=int, default=8000, help="port for --serve (default 8000; 0 = any free port)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    w, h = args.size
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise NeuralaoError(f"--size must be in 1..8192, got {w} {h}")
+    if not 0 <= args.port <= 65535:
+        raise NeuralaoError(f"--port must be in 0..65535, got {args.port}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} is a file")
+    methods = [load_method(i, args.mesh) for i in args.inputs]
+    page = write_page(methods, out, (w, h))
+    log.info("viewer: %d method(s) -> %s", len(methods), page)
+    if args.serve:
+        serve(out, args.port)
+    return 0
