@@ -1,4 +1,4 @@
-"""`neuralao glsl MODEL.onnx`: GLSL for a user's own ONNX model, and its parity check.
+"""GLSL for a user's own ONNX model (`neuralao glsl`, :mod:`pipeline.cli.glsl`), and its parity check.
 
     neuralao glsl MODEL.onnx --target image|vector|wgsl [--precision fp32|fp16] [--dialect ...] [--hlsl-msl]
                   [--bind INPUT=TEXTURE.CHANNELS[xREPEATS] ...] --out DIR
@@ -37,7 +37,6 @@ Image target inputs: one image (1, C, H, W) and any number of single-element sca
 
 from __future__ import annotations
 
-import argparse
 import logging
 import re
 from pathlib import Path
@@ -415,21 +414,3 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {shown})",
             "max_abs_err": err, "tolerance": tol, "passed": bool(err <= tol and bg_ok), "checks": rows}  # fmt: skip
 
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", help="an ONNX file within the op set (see README: GLSL from ONNX)")
-    p.add_argument("--target", required=True, choices=TARGETS, help="image: NCHW GLSL compute passes; wgsl: the same in WGSL (WebGPU); vector: per-pixel fragment pass")
-    p.add_argument("--precision", default="fp32", choices=("fp32", "fp16"), help="texture storage (default fp32)")
-    p.add_argument("--dialect", action="append", default=[], help="vector: keep only these of glsl330, es300, glsl430 (repeatable)")
-    p.add_argument("--bind", action="append", default=[], metavar="INPUT=TEXTURE.CHANNELS[xREPEATS]",
-                   help="vector: where an input comes from, e.g. normal=gbuffer.xyz or normals=gbuffer.xyzx16")  # fmt: skip
-    p.add_argument("--hlsl-msl", action="store_true",
-                   help="image: also write HLSL and MSL of every pass beside its GLSL (SPIR-V + SPIRV-Cross)")
-    p.add_argument("--out", required=True, help="export folder")
-
-
-def run(args: argparse.Namespace) -> int:
-    m = export_model(args.model, args.target, args.out, args.precision, args.bind, args.dialect or None,
-                     args.hlsl_msl)
-    log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
-    return 0

@@ -23,7 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "dataset": ("pipeline.cli.dataset", "render and label a dataset from a config (resumable shards + manifest)"),
     "train": ("pipeline.cli.train", "train the baked MLP, the DeepAO U-Net or a per-mesh AO field"),
     "export": ("pipeline.cli.export", "export a checkpoint to ONNX + generated GLSL"),
-    "glsl": ("export.onnx_glsl", "generate GLSL (compute or fragment) from any ONNX model within the op set"),
+    "glsl": ("pipeline.cli.glsl", "generate GLSL (compute or fragment) from any ONNX model within the op set"),
     "parity": ("pipeline.cli.parity", "run generated GLSL against onnxruntime on real frames or seeded inputs"),
     "infer": ("pipeline.cli.infer", "apply an exported ONNX model to a G-buffer frame"),
     "report": ("pipeline.evaluation.report", "speed-vs-error report of every method on held-back frames"),

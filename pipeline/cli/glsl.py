@@ -1,0 +1,56 @@
+"""`neuralao glsl MODEL.onnx`: GLSL (compute or fragment) for a user's own ONNX model.
+
+The export and its targets are :mod:`export.onnx_glsl`; `neuralao parity DIR` checks the folder it writes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from export.onnx_glsl import TARGETS, export_model
+
+log = logging.getLogger("export.onnx_glsl")  # the name its lines have always carried
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", help="an ONNX file within the op set (see README: GLSL from ONNX)")
+    p.add_argument(
+        "--target",
+        required=True,
+        choices=TARGETS,
+        help=(
+            "image: NCHW GLSL compute passes; wgsl: the same in WGSL (WebGPU); "
+            "vector: per-pixel fragment pass"
+        ),
+    )
+    p.add_argument(
+        "--precision", default="fp32", choices=("fp32", "fp16"), help="texture storage (default fp32)"
+    )
+    p.add_argument(
+        "--dialect",
+        action="append",
+        default=[],
+        help="vector: keep only these of glsl330, es300, glsl430 (repeatable)",
+    )
+    p.add_argument(
+        "--bind",
+        action="append",
+        default=[],
+        metavar="INPUT=TEXTURE.CHANNELS[xREPEATS]",
+        help="vector: where an input comes from, e.g. normal=gbuffer.xyz or normals=gbuffer.xyzx16",
+    )
+    p.add_argument(
+        "--hlsl-msl",
+        action="store_true",
+        help="image: also write HLSL and MSL of every pass beside its GLSL (SPIR-V + SPIRV-Cross)",
+    )
+    p.add_argument("--out", required=True, help="export folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    m = export_model(
+        args.model, args.target, args.out, args.precision, args.bind, args.dialect or None, args.hlsl_msl
+    )
+    log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
+    return 0
