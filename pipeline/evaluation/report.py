@@ -1133,8 +1133,11 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         for s, p in figures.get("contact_sheets", {}).items():
             lines += [f"![{s}]({p})", ""]
         if figures.get("viewer"):
-            lines += ["WebGL2 viewer pages (`neuralao view`; also linked from report.html): "
-                      + ", ".join(f"[{s}]({p})" for s, p in figures["viewer"].items()), ""]
+            lines += [
+                "WebGL2 viewer pages (`neuralao view`; also linked from report.html): "
+                + ", ".join(f"[{s}]({p})" for s, p in figures["viewer"].items()),
+                "",
+            ]
     if selection is not None:
         lines += ["", select_markdown(selection, heading="## Model selection")]
     if result.get("select_at"):

@@ -80,7 +80,9 @@ class ShipSettings:
 def git_commit() -> str:
     """The repository's HEAD commit, with "+dirty" when tracked files differ from it ("unknown" outside git)."""
     try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
+        ).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
                                text=True, check=True).stdout.strip()  # fmt: skip
     except (OSError, subprocess.CalledProcessError):
@@ -120,13 +122,18 @@ def timing_frame(data: Path, split: str, size: tuple[int, int]) -> tuple[dict, f
 def baseline_figures(settings: ShipSettings, data: Path) -> dict:
     """SSAO and GTAO on the test split (every radius) and their GL time at ``time_sizes``."""
     rs = ReportSettings()
-    methods = {"ssao": screen_space_predictor("ssao", rs.ssao), "gtao": screen_space_predictor("gtao", rs.gtao)}
+    methods = {
+        "ssao": screen_space_predictor("ssao", rs.ssao),
+        "gtao": screen_space_predictor("gtao", rs.gtao),
+    }
     test = evaluate_split(data, settings.test_split, methods, settings.test_frames)
     times: dict[str, dict[str, float]] = {"ssao": {}, "gtao": {}}
     for w, h in settings.time_sizes:
         frame, radius = timing_frame(data, settings.test_split, (w, h))
         for name in times:
-            times[name][f"{w}x{h}"] = time_screen_space(frame, name, radius, getattr(rs, name), repeats=settings.time_repeats * 4)
+            times[name][f"{w}x{h}"] = time_screen_space(
+                frame, name, radius, getattr(rs, name), repeats=settings.time_repeats * 4
+            )
     return {name: {"test": {k: v for k, v in test["methods"][name].items() if k != "per_scene"},
                    "gl_seconds": times[name]} for name in methods}  # fmt: skip
 
@@ -134,14 +141,18 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
 _LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
 
 
-def ship_model(settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str) -> dict:
+def ship_model(
+    settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str
+) -> dict:
     """Train, export, check and install one model; returns its index entry."""
     if spec.kind != "unet":
         raise NeuralaoError(f"model {spec.name}: only kind 'unet' can be shipped, got {spec.kind!r}")
     train_cfg = dict(spec.train)
     if spec.init:
         if spec.init not in checkpoints:
-            raise NeuralaoError(f"model {spec.name}: init {spec.init!r} is not an earlier model of this config")
+            raise NeuralaoError(
+                f"model {spec.name}: init {spec.init!r} is not an earlier model of this config"
+            )
         train_cfg["init"] = str(checkpoints[spec.init])
     ts = from_dict(UNetTrainSettings, train_cfg, prefix=f"models.{spec.name}.train.")
     ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
@@ -183,9 +194,13 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     h0, w0 = frames[0]["depth"].shape
     par = parity(tmp, frames=frames, sizes=[(w0 - w0 // 4 - 1, h0 - h0 // 4 - 1)])  # plus an odd-sized crop
     if not par["passed"]:
-        raise NeuralaoError(f"model {spec.name}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > {par['tolerance']:g}")
+        raise NeuralaoError(
+            f"model {spec.name}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > {par['tolerance']:g}"
+        )
     # the model as a user runs it: at the internal height it declares (frames of any size resampled to it)
-    test = evaluate_split(data, settings.test_split, {"unet": unet_predictor(tmp / "model.onnx", "model")}, settings.test_frames)
+    test = evaluate_split(
+        data, settings.test_split, {"unet": unet_predictor(tmp / "model.onnx", "model")}, settings.test_frames
+    )
     unet_test = test["methods"]["unet"]
     # the network's compute passes at the size it runs at for each frame size (its internal size when it
     # declares one; the scaling passes and a hybrid's GTAO pass are timed beside it by bench/bench_shipped.py)
@@ -221,10 +236,16 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     proto = load_onnx(onnx_path)
     meta = get_metadata(proto)
     # (GL times are this machine's, not the model's: they stay in the manifest, so a rerun writes the same ONNX bytes)
-    meta["provenance"] = {k: v for k, v in provenance.items() if k not in ("history", "test_per_scene", "gl_seconds")}
+    meta["provenance"] = {
+        k: v for k, v in provenance.items() if k not in ("history", "test_per_scene", "gl_seconds")
+    }
     save_onnx(proto, onnx_path, meta)
     manifest.update(name=spec.name, onnx_sha256=sha256_file(onnx_path), metadata=meta, provenance=provenance)
-    manifest["checkpoint"] = {"file": ckpt_path.name, "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")}
+    manifest["checkpoint"] = {
+        "file": ckpt_path.name,
+        "sha256": sha256_file(ckpt_path),
+        "epoch": ckpt.get("epoch"),
+    }
     write_json(tmp / "manifest.json", manifest)
     size = folder_bytes(tmp)
     if size > settings.max_bytes:
@@ -276,7 +297,9 @@ def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("config", help="ship config JSON (configs/models.json)")
-    p.add_argument("--only", nargs="+", metavar="NAME", help="ship only these models (their init checkpoints must exist)")
+    p.add_argument(
+        "--only", nargs="+", metavar="NAME", help="ship only these models (their init checkpoints must exist)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
