@@ -67,7 +67,7 @@ class Act:
         return x
 
 
-def _clip_bounds(min_: np.ndarray | None, max_: np.ndarray | None) -> dict[str, float]:
+def clip_bounds(min_: np.ndarray | None, max_: np.ndarray | None) -> dict[str, float]:
     out: dict[str, float] = {}
     for key, v in (("lo", min_), ("hi", max_)):
         if v is not None:

@@ -16,7 +16,7 @@ from export.glsl.cross import (
     validate_hlsl,
 )
 from export.glsl.dialects import FRAGMENT_FILES
-from export.glsl.graph import _sha256
+from export.glsl.graph import sha256_hex
 from export.glsl.image import ComputeProgram
 from export.glsl.validate import _can_validate, validate_glsl
 from export.glsl.vector import MLPShader
@@ -27,7 +27,7 @@ from pipeline.foundation.io import write_bytes, write_json
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest = dict(manifest)
-    manifest["files"] = {name: _sha256(data) for name, data in sorted(files.items())}
+    manifest["files"] = {name: sha256_hex(data) for name, data in sorted(files.items())}
     for name, data in files.items():
         write_bytes(out_dir / name, data)
     write_json(out_dir / "manifest.json", manifest)  # last: its presence marks a complete export
@@ -71,7 +71,7 @@ def _read_checked(d: Path, manifest: dict, name: str) -> bytes:
     except FileNotFoundError:
         raise NeuralaoError(f"export {d} lacks {name}") from None
     want = manifest.get("files", {}).get(name)
-    if want is not None and _sha256(data) != want:
+    if want is not None and sha256_hex(data) != want:
         raise NeuralaoError(f"{d / name} does not match its manifest hash (modified or truncated)")
     return data
 

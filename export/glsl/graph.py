@@ -37,7 +37,7 @@ def glsl_float(value: float) -> str:
     return f"({s})" if s.startswith("-") else s
 
 
-def _ceil4(n: int) -> int:
+def ceil4(n: int) -> int:
     return (int(n) + 3) // 4
 
 
@@ -59,7 +59,7 @@ def _attributes(node: onnx.NodeProto) -> dict[str, Any]:
     return out
 
 
-def _dims(vi: onnx.ValueInfoProto) -> list[int | str | None]:
+def shape_dims(vi: onnx.ValueInfoProto) -> list[int | str | None]:
     """Declared dims of a graph input: int (static), str (symbolic) or None (unknown)."""
     t = vi.type.tensor_type
     if not t.HasField("shape"):
@@ -76,7 +76,8 @@ def _dims(vi: onnx.ValueInfoProto) -> list[int | str | None]:
 
 
 # Here, not in files.py: both targets' manifests hash their parameters too.
-def _sha256(data: bytes) -> str:
+def sha256_hex(data: bytes) -> str:
+    """Hex SHA-256 of ``data`` (the manifests' file and weight hashes)."""
     return hashlib.sha256(data).hexdigest()
 
 

@@ -14,18 +14,18 @@ from typing import Any
 import numpy as np
 import onnx
 
-from export.glsl.activations import Act, _clip_bounds
+from export.glsl.activations import Act, clip_bounds
 from export.glsl.dialects import COMPUTE_DIALECTS, Dialect
 from export.glsl.graph import (
     FORMAT_VERSION,
     OnnxGraph,
     OpTable,
-    _ceil4,
-    _dims,
     _node_label,
-    _sha256,
+    ceil4,
     glsl_float,
     read_graph,
+    sha256_hex,
+    shape_dims,
 )
 from export.glsl.views import (
     Atom,
@@ -98,7 +98,7 @@ class Texture:
 
     @property
     def layers(self) -> int:
-        return _ceil4(self.channels)
+        return ceil4(self.channels)
 
 
 @dataclass
@@ -182,7 +182,7 @@ MAX_SCALAR_INPUTS = 64
 
 def _is_scalar_input(vi: onnx.ValueInfoProto) -> bool:
     """A static shape of one element, rank 0 to 4: (), (1,), ..., (1, 1, 1, 1)."""
-    dims = _dims(vi)
+    dims = shape_dims(vi)
     return vi.type.tensor_type.HasField("shape") and len(dims) <= 4 and all(d == 1 for d in dims)
 
 
@@ -211,7 +211,7 @@ def _split_inputs(graph: OnnxGraph) -> tuple[onnx.ValueInfoProto, list[onnx.Valu
     if len(images) > 1:
         vi = images[1]
         raise NeuralaoError(
-            f"graph input {vi.name!r} of shape {_dims(vi) or 'unknown'}: the image target takes one image "
+            f"graph input {vi.name!r} of shape {shape_dims(vi) or 'unknown'}: the image target takes one image "
             f"input ({image.name!r}) and single-element scalars ((1, 1, 1, 1), (1,) or ()) as uniforms"
         )
     return image, [vi for vi in inputs if vi is not image]
@@ -299,7 +299,7 @@ class ImageOps(OpTable):
         self.global_reads: list[str] = []  # global pools over a dynamic size (padding would enter them)
         self.param_count = 0
         self.image_input, scalars = _split_inputs(graph)
-        dims = _dims(self.image_input)
+        dims = shape_dims(self.image_input)
         name = self.image_input.name
         if len(dims) != 4:
             raise NeuralaoError(
@@ -310,7 +310,7 @@ class ImageOps(OpTable):
             raise NeuralaoError(f"image input {name!r} has batch {n}; the compute target runs batch 1")
         if not isinstance(c, int) or c <= 0:
             raise NeuralaoError(f"image input {name!r} needs a static channel count, got {c!r}")
-        if _ceil4(c) > MAX_ARRAY_LAYERS:
+        if ceil4(c) > MAX_ARRAY_LAYERS:
             raise NeuralaoError(f"image input {name!r}: {c} channels exceed {4 * MAX_ARRAY_LAYERS}")
         self.static = isinstance(h, int) and isinstance(w, int)
         if not self.static and (isinstance(h, int) or isinstance(w, int)):
@@ -346,14 +346,14 @@ class ImageOps(OpTable):
             p.fields = {"uniform": _uniform_name(vi.name, k, used), "location": 0}
             used.add(p.fields["uniform"])
             self.uniforms.append((vi, p))
-            self.scalar_ranks[t.ident] = len(_dims(vi))
+            self.scalar_ranks[t.ident] = len(shape_dims(vi))
             self.env[vi.name] = t
 
     # -- IR helpers
     def new_texture(
         self, channels: int, h: Dim, w: Dim, base: str = "padded", onnx_name: str = ""
     ) -> Texture:
-        if _ceil4(channels) > MAX_ARRAY_LAYERS:
+        if ceil4(channels) > MAX_ARRAY_LAYERS:
             raise self.fail(f"{channels} channels exceed the texture-array limit {4 * MAX_ARRAY_LAYERS}")
         for d in (h, w):
             if d.scale == 0 and not 1 <= d.offset <= MAX_TEXTURE_SIZE:
@@ -708,7 +708,7 @@ class ImageOps(OpTable):
     def Clip(self, input, min=None, max=None) -> Texture:  # noqa: A002
         lo = None if min is None else self.const(min, "min")
         hi = None if max is None else self.const(max, "max")
-        return self._activation(input, Act("Clip", _clip_bounds(lo, hi)))
+        return self._activation(input, Act("Clip", clip_bounds(lo, hi)))
 
     def Identity(self, input) -> Any:  # noqa: A002
         return input
@@ -1109,8 +1109,8 @@ class ImageOps(OpTable):
 
     def _member_params(self, base: np.ndarray, offsets: np.ndarray) -> dict[str, np.ndarray]:
         names = (self.param_name("base"), self.param_name("offsets"))
-        return {names[0]: _vec4_rows(base.astype(np.float64), _ceil4(len(base))),
-                names[1]: _vec4_rows(offsets.astype(np.float64), _ceil4(len(offsets)))}  # fmt: skip
+        return {names[0]: _vec4_rows(base.astype(np.float64), ceil4(len(base))),
+                names[1]: _vec4_rows(offsets.astype(np.float64), ceil4(len(offsets)))}  # fmt: skip
 
     def _reduce(self, op: str, data: Any, axes_input: Any, axes: Any, keepdims: int, noop: int) -> Any:
         if isinstance(data, np.ndarray):
@@ -2153,7 +2153,7 @@ def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:
 
 def _uniform_entry(vi: onnx.ValueInfoProto, p: Pass, metadata: dict[str, str]) -> dict:
     """Manifest entry of a scalar graph input: the uniform an engine sets before the pass runs."""
-    return {"onnx_input": vi.name, "declared_shape": [int(d) for d in _dims(vi)], "meaning": _input_meaning(vi, metadata),
+    return {"onnx_input": vi.name, "declared_shape": [int(d) for d in shape_dims(vi)], "meaning": _input_meaning(vi, metadata),
             "glsl_name": p.fields["uniform"], "type": "float", "location": p.fields["location"], "pass": p.name,
             "shader": f"{p.name}.comp", "texture": p.output.ident,
             "set_with": "glUseProgram(the pass's program); glUniform1f(location, value) before its dispatch"}  # fmt: skip
@@ -2245,7 +2245,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
         },
         "input": {"onnx_name": table.image_input.name, "texture": table.input_texture.ident,
                   "channels": table.input_texture.channels,
-                  "declared_shape": [str(v) for v in _dims(table.image_input)]},
+                  "declared_shape": [str(v) for v in shape_dims(table.image_input)]},
         "uniforms": [_uniform_entry(vi, p, graph.metadata) for vi, p in table.uniforms],
         "outputs": [{"onnx_name": n, "texture": crop.ident, "channels": crop.channels} for n, _, crop in outputs],
         "pad": {"multiple": multiple, "mode": "reflect", "side": "bottom,right", "pass": table.passes[0].name,
@@ -2253,7 +2253,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
                 "crop_passes": [p.name for p in table.passes if p.kind == "crop"]},
         "static_input_size": list(table.input_dims) if table.static else None,
         "textures": textures,
-        "weights": {"file": "weights.bin", "bytes": len(blob), "sha256": _sha256(blob),
+        "weights": {"file": "weights.bin", "bytes": len(blob), "sha256": sha256_hex(blob),
                     "dtype": "float32 little-endian", "range_alignment": PARAM_ALIGN},
         "passes": passes,
         "barrier": "glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT) after each pass",

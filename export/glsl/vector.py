@@ -10,17 +10,17 @@ from typing import Any
 import numpy as np
 import onnx
 
-from export.glsl.activations import Act, _clip_bounds
+from export.glsl.activations import Act, clip_bounds
 from export.glsl.dialects import DIALECTS, FRAGMENT_FILES, Dialect, get_dialect
 from export.glsl.graph import (
     FORMAT_VERSION,
     OnnxGraph,
     OpTable,
-    _ceil4,
-    _dims,
-    _sha256,
+    ceil4,
     glsl_float,
     read_graph,
+    sha256_hex,
+    shape_dims,
 )
 from export.glsl.templates import fill
 from pipeline.foundation.errors import NeuralaoError
@@ -42,7 +42,7 @@ class VecValue:
 
     @property
     def n4(self) -> int:
-        return _ceil4(self.width)
+        return ceil4(self.width)
 
 
 @dataclass
@@ -182,7 +182,7 @@ class VectorOps(OpTable):
 
     @staticmethod
     def _input_width(vi: onnx.ValueInfoProto, what: str, layout: str) -> int:
-        dims = _dims(vi)
+        dims = shape_dims(vi)
         if len(dims) != 2:
             raise NeuralaoError(f"{what} {vi.name!r} must have rank 2 {layout}, got shape {dims or 'unknown'}")
         width = dims[1]
@@ -346,7 +346,7 @@ class VectorOps(OpTable):
     def Clip(self, input, min=None, max=None) -> VecValue:  # noqa: A002  (ONNX input names)
         lo = None if min is None else self.const(min, "min")
         hi = None if max is None else self.const(max, "max")
-        return self._activation(input, Act("Clip", _clip_bounds(lo, hi)))
+        return self._activation(input, Act("Clip", clip_bounds(lo, hi)))
 
     def Identity(self, input) -> Any:  # noqa: A002
         return input
@@ -401,7 +401,7 @@ def _dense_tiles(op: DenseOp) -> tuple[np.ndarray, np.ndarray, int, int]:
     """W (out, in) as mat4 tiles and the bias as vec4s: tiles (out4 * in4 * 4, 4) float32, tile j * in4 + i
     holding W[4j .. 4j+3, 4i .. 4i+3] column-major (column c = the weights of input lane 4i + c), so
     ``tile * src[i]`` is that block's contribution to outputs 4j .. 4j+3; bias (out4, 4)."""
-    out4, in4 = _ceil4(op.weight.shape[0]), _ceil4(op.weight.shape[1])
+    out4, in4 = ceil4(op.weight.shape[0]), ceil4(op.weight.shape[1])
     w = np.zeros((out4 * 4, in4 * 4), np.float32)
     w[: op.weight.shape[0], : op.weight.shape[1]] = op.weight
     b = np.zeros(out4 * 4, np.float32)
@@ -702,7 +702,7 @@ def _mlp_manifest(
                             "offset": offset, "vec4s": int(arr.shape[0]), "layout": layout})  # fmt: skip
             offset += int(arr.nbytes)
         ubo.append({"name": b.name, "binding": b.binding, "bytes": b.nbytes, "file": f"mlp_block{b.binding}.bin",
-                    "sha256": _sha256(b.data.tobytes()), "members": members})  # fmt: skip
+                    "sha256": sha256_hex(b.data.tobytes()), "members": members})  # fmt: skip
     param_bytes = int(sum(op.weight.size + op.bias.size for op in table.ops if isinstance(op, DenseOp)) * 4)
     return {
         "kind": "mlp",
