@@ -54,7 +54,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
+from pipeline.bakes.texture import (
+    OVERLAP_LIMIT,
+    UV_RANGE_SLACK,
+    check_settings,
+    quantise,
+    rasterise,
+    texel_image,
+    xatlas_layout,
+)
+from pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.level_files import (
@@ -66,6 +77,8 @@ from pipeline.geometry.level_files import (
     node_matrix,
 )
 from pipeline.geometry.scene import Scene, resolve_mesh_path, scene_from_arrays
+from pipeline.geometry.surface import vertex_colours
+from pipeline.tracing.labeller import Labeller
 
 log = logging.getLogger(__name__)
 
@@ -279,8 +292,6 @@ class Layout:
 
 def primitive_layout(gs: GltfScene, piece: Piece, settings) -> Layout:
     """Own UVs when usable (``settings.uv``: auto / mesh / xatlas; pipeline.bakes.texture), else xatlas."""
-    from pipeline.bakes.texture import _OVERLAP_LIMIT, _UV_RANGE_SLACK, rasterise, xatlas_layout
-
     prim = gs.doc["meshes"][piece.mesh]["primitives"][piece.primitive]
     attrs = prim.get("attributes", {})
     where = f"{gltf_label('mesh', piece.mesh, gs.doc['meshes'][piece.mesh])} primitive {piece.primitive}"
@@ -290,12 +301,12 @@ def primitive_layout(gs: GltfScene, piece: Piece, settings) -> Layout:
         uv = np.c_[st[:, 0], 1.0 - st[:, 1]] if st.ndim == 2 and st.shape[1] == 2 else None
         if uv is None or len(uv) != len(piece.vertices) or not np.isfinite(uv).all():
             why = "its TEXCOORD_0 is not one finite VEC2 per vertex"
-        elif uv.min() < -_UV_RANGE_SLACK or uv.max() > 1 + _UV_RANGE_SLACK:
+        elif uv.min() < -UV_RANGE_SLACK or uv.max() > 1 + UV_RANGE_SLACK:
             why = "its UVs leave [0, 1] (tiling)"
         else:
             uv = np.clip(uv, 0.0, 1.0)
             overlap = rasterise(uv, piece.faces, settings.resolution).overlap
-            if overlap <= _OVERLAP_LIMIT:
+            if overlap <= OVERLAP_LIMIT:
                 return Layout(uv, piece.faces, None, 0)
             why = f"its UVs overlap ({100 * overlap:.1f}% of texels)"
     if settings.uv == "mesh":
@@ -314,9 +325,6 @@ def bake_texture_scene(
 ) -> tuple[list[np.ndarray | None], dict, dict]:
     """AO maps of every written piece (module doc, step 2): images (N, N) float32 per piece (None for
     occluder-only pieces), the layouts per (mesh, primitive), and info (counts, timings)."""
-    from pipeline.bakes.texture import check_settings, rasterise, texel_image
-    from pipeline.tracing.labeller import Labeller
-
     check_settings(settings)
     n = settings.resolution
     t0 = time.perf_counter()
@@ -450,9 +458,6 @@ def write_vertex_scene(
     path: str | Path, gs: GltfScene, world_ao: np.ndarray, info: dict | None = None
 ) -> Path:
     """Write the scene with per-vertex AO on every primitive (module doc, step 3, ``--to vertex``)."""
-    from pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
-    from pipeline.geometry.surface import vertex_colours
-
     per_piece = vertex_ao(gs, np.asarray(world_ao, np.float32))
     by_key = {
         (p.node, p.instance, p.primitive): ao for p, ao in zip(gs.pieces, per_piece, strict=True) if p.written
@@ -483,10 +488,6 @@ def write_texture_scene(
 ) -> Path:
     """Write the scene with an AO map per primitive as its material's occlusionTexture (module doc,
     step 3, ``--to texture``)."""
-    from PIL import Image
-
-    from pipeline.bakes.texture import quantise
-
     by_key = {
         (p.node, p.instance, p.primitive): quantise(im)
         for p, im in zip(gs.pieces, images, strict=True)

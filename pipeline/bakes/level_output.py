@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from export.glsl.decorator import decorator_shaders, manifest
 from pipeline.foundation.io import write_json, write_text
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.level_files import GltfWriter, decompose
@@ -30,8 +31,6 @@ from pipeline.geometry.surface import vertex_colours
 def write_outputs(
     path: Path, out: Path, g, s, solved: dict, final: np.ndarray, deco: dict, small: dict, lod: dict | None
 ) -> None:
-    from export.glsl.decorator import decorator_shaders, manifest
-
     w = GltfWriter("neuralao level bake")
     w.doc["extras"] = {"bake": {"blend": settings_to_dict(s.blend), "half_distances": [s.trace.half_distance_short,
                        s.trace.half_distance_long], "rays": s.trace.rays}}  # fmt: skip

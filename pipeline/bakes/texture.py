@@ -37,6 +37,8 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import xatlas
+from PIL import Image
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
@@ -55,9 +57,9 @@ _RASTER_BLOCK = 1 << 21
 _INSIDE_STRICT = 1e-6
 # Fraction of covered texels that may be held strictly by two triangles before ``--uv auto``
 # decides the mesh's UVs overlap (mirrored or reused UV islands) and generates an atlas instead.
-_OVERLAP_LIMIT = 0.005
+OVERLAP_LIMIT = 0.005
 # Slack on the [0, 1] UV range (float noise in exported files) before UVs count as tiling.
-_UV_RANGE_SLACK = 1e-6
+UV_RANGE_SLACK = 1e-6
 
 
 @dataclass
@@ -165,7 +167,7 @@ class TextureBakeResult:
 
 def _single_geometry(path: Path):
     """The one trimesh.Trimesh of a file, with its transform applied, or None when there are several."""
-    import trimesh
+    import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     try:
         loaded = trimesh.load(str(path), process=False)
@@ -190,7 +192,7 @@ def _mesh_uvs(mesh) -> tuple[np.ndarray | None, str]:
     uv = np.asarray(uv, np.float64)
     if not np.isfinite(uv).all():
         return None, "the mesh's UVs are not finite"
-    if uv.min() < -_UV_RANGE_SLACK or uv.max() > 1 + _UV_RANGE_SLACK:
+    if uv.min() < -UV_RANGE_SLACK or uv.max() > 1 + UV_RANGE_SLACK:
         return None, "the mesh's UVs leave [0, 1] (tiling)"
     return np.clip(uv, 0.0, 1.0), ""
 
@@ -202,8 +204,6 @@ def xatlas_layout(
 
     Charts are packed for a ``resolution``-texel square with ``margin`` texels between them.
     """
-    import xatlas
-
     atlas = xatlas.Atlas()
     # xatlas works in float32: centred and scaled to a unit box, so a mesh at 1e38 (whose float32 face
     # normals overflow, and on which xatlas never returns) or at 1e-30 charts like one at 1. The atlas
@@ -236,7 +236,7 @@ def load_uv_mesh(path: str | Path, settings: TextureBakeSettings) -> UVMesh:
         if uv is not None:
             candidate = UVMesh(scene.vertices, scene.faces, uv, material, "mesh", scene.name)
             texels = rasterise(uv, scene.faces, settings.resolution)
-            if texels.overlap <= _OVERLAP_LIMIT:
+            if texels.overlap <= OVERLAP_LIMIT:
                 return candidate
             why = f"the mesh's UVs overlap ({100 * texels.overlap:.1f}% of texels)"
     elif mesh is not None:
@@ -497,8 +497,7 @@ def write_texture_glb(path: str | Path, mesh: UVMesh, image: np.ndarray) -> Path
 
 def texture_glb_bytes(mesh: UVMesh, image: np.ndarray) -> bytes:
     """The .glb of :func:`write_texture_glb` in memory."""
-    import trimesh
-    from PIL import Image
+    import trimesh  # measured: ~1 s to import; only the file readers and writers need it
     from trimesh.visual.material import PBRMaterial
 
     grey = Image.fromarray(quantise(image), mode="L")
@@ -521,7 +520,7 @@ def texture_glb_bytes(mesh: UVMesh, image: np.ndarray) -> bytes:
 
 def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
     """Read a texture bake: the mesh with its UVs and the occlusion map's red channel (N, N) float32 in [0, 1]."""
-    import trimesh
+    import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     path = Path(path)
     try:

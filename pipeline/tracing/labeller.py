@@ -77,6 +77,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from tqdm import tqdm
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.limits import RAY_BYTES, RAY_TABLE_BYTES, THREAD_BYTES, check_count, check_seed
@@ -141,7 +142,7 @@ class Labeller:
     """
 
     def __init__(self, scene: Scene, settings: LabelSettings | None = None):
-        from embreex import rtcore_scene
+        from embreex import rtcore_scene  # measured: ~0.2 s to import; only the ray queries need it
         from embreex.mesh_construction import TriangleMesh
 
         diag = float(scene.diagonal)
@@ -649,8 +650,6 @@ def run_chunks(
     work: Callable[[int, int], None], count: int, chunk: int, workers: int, progress: bool
 ) -> None:
     """Call ``work(lo, hi)`` over [0, count) in chunks on ``workers`` threads (tqdm if ``progress``)."""
-    from tqdm import tqdm
-
     bounds = [(lo, min(lo + chunk, count)) for lo in range(0, count, chunk)]
     bar = tqdm(total=count, unit="pt", desc="AO labels", disable=not progress, leave=False)
     try:
