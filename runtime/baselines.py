@@ -376,6 +376,8 @@ def vertex_ao_image(scene, vertex_ao: np.ndarray, frame: dict) -> np.ndarray:
 
 def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: int = 20) -> float:
     """Median seconds per frame of the GL vertex-colour draw of the mesh (the engine's baked AO)."""
+    # Import cost: runtime.glsl_runner loads the GLSL generator and onnx (~1.7 s measured), which the
+    # screen-space baselines never need.
     from runtime.glsl_runner import time_vertex_colour
 
     return time_vertex_colour(scene, camera, repeats=repeats, ao=vertex_ao)

@@ -28,6 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
+from runtime import gl
+from runtime.baseline_templates import fill
+from runtime.baselines import _program, camera_space_position, gbuffer_textures
+from runtime.gl import GL  # runtime.gl sets PYOPENGL_PLATFORM before PyOpenGL loads
 
 
 @dataclass(frozen=True)
@@ -77,8 +81,6 @@ def downsample_frame(frame: dict, width: int, height: int) -> dict:
 
 def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera-space positions (H, W, 3), unit normals (H, W, 3) and mask (H, W) of a frame, float64."""
-    from runtime.baselines import camera_space_position
-
     mask = np.asarray(frame["mask"], bool)
     pos = np.where(mask[..., None], camera_space_position(frame), 0.0).astype(np.float64)
     n = np.nan_to_num(np.asarray(frame["normal_cam"], np.float64))
@@ -165,8 +167,6 @@ def at_internal_resolution(
 
 def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
     """The GLSL fragment shader of the upsampling pass with ``settings`` baked in."""
-    from runtime.baseline_templates import fill
-
     lit = lambda x: repr(float(x))  # noqa: E731  (a float literal GLSL accepts: 0.6, 1e-3, 8.0)
     for name in ("spatial_sigma", "plane_sigma"):
         if not (math.isfinite(getattr(settings, name)) and getattr(settings, name) > 0):
@@ -191,11 +191,6 @@ class UpsamplePass:
         size: tuple[int, int],
         settings: UpsampleSettings = UpsampleSettings(),
     ):
-        from OpenGL import GL
-
-        from runtime import gl
-        from runtime.baselines import _program
-
         gl.context()
         self.GL, self.gl = GL, gl
         (self.lw, self.lh), (self.w, self.h) = (int(v) for v in low_size), (int(v) for v in size)
@@ -252,16 +247,12 @@ class UpsamplePass:
 
 def vertex_source() -> str:
     """The full-screen-triangle vertex shader both passes draw with (3 vertices, empty VAO)."""
-    from runtime.baseline_templates import fill
-
     return fill("fullscreen_vertex")
 
 
 def downsample_source() -> str:
     """The GLSL fragment shader that point-samples the G-buffer to the internal resolution (two
     targets; ``uniform ivec2 u_low_size`` = that resolution)."""
-    from runtime.baseline_templates import fill
-
     return fill("downsample_fragment")
 
 
@@ -277,11 +268,6 @@ class ScalingPasses:
         size: tuple[int, int],
         settings: UpsampleSettings = UpsampleSettings(),
     ):
-        from OpenGL import GL
-
-        from runtime import gl
-        from runtime.baselines import _program
-
         self.up = UpsamplePass(low_size, size, settings)
         self.GL, self.gl = GL, gl
         self.prog = _program(downsample_source())
@@ -290,8 +276,6 @@ class ScalingPasses:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
     def upload(self, frame: dict, ao_low: np.ndarray | None = None) -> None:
-        from runtime.baselines import gbuffer_textures
-
         pos, nrm = gbuffer_textures(frame)
         up, GL = self.up, self.GL
         if pos.shape[:2] != (up.h, up.w):
