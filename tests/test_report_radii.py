@@ -260,7 +260,7 @@ def test_no_shipped_model_is_one_line(tmp_path, workspace):
 
 
 def test_shipped_models_are_the_default_without_exports(tmp_path):
-    from pipeline.evaluation.report import add_arguments, shipped_folder
+    from pipeline.cli.report import add_arguments, shipped_folder
     from runtime.shipped import MODELS_DIR
 
     parser = argparse.ArgumentParser()

@@ -1,4 +1,4 @@
-"""`neuralao evaluate CONFIG --models DIR... --out DIR`: screen-space AO judged where users run it.
+"""Screen-space AO judged where users run it (`neuralao evaluate`, :mod:`pipeline.cli.evaluate`).
 
 Test frames in categories (isolated scans, glTF game assets, low-poly interiors, composed rooms: all
 from test-split meshes, :mod:`pipeline.geometry.splits`) at several resolutions (128, 256, 512, 1920x1080 in
@@ -18,7 +18,6 @@ and ``OUT/evaluation.md``; with ``--write-manifest`` each U-Net's manifest gets 
 
 from __future__ import annotations
 
-import argparse
 import logging
 import time
 from collections.abc import Callable
@@ -31,7 +30,7 @@ from pipeline.datasets.dataset import ComposedScenes, DatasetSettings, SceneSpec
 from pipeline.evaluation.test_split import score_frame
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json, write_text
-from pipeline.foundation.settings import add_set_option, load_settings, settings_to_dict
+from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.splits import split_of
 from pipeline.tracing.labeller import LabelSettings
 
@@ -316,37 +315,3 @@ def write_to_manifests(result: dict, models: list[Path]) -> None:
         }
         manifest["evaluation"] = {"config": result["config"], "methods": mine}
         write_json(path, manifest)
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("config", help="evaluation config (JSON): categories x resolutions; see configs/eval.json")
-    p.add_argument("--models", nargs="*", default=None,
-                   help="U-Net export folders (default: the shipped default model)")  # fmt: skip
-    p.add_argument("--internal", default="model",
-                   help="comma-separated internal-resolution policies per U-Net: model (its manifest's), native, h<HEIGHT>")  # fmt: skip
-    p.add_argument("--out", required=True, help="output folder (frames are resumed from it)")
-    p.add_argument("--no-flip", action="store_true", help="skip the FLIP metric")
-    p.add_argument(
-        "--write-manifest", action="store_true", help="store each U-Net's table in its manifest.json"
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_set_option(p, "--set max_distance_rel=0.25")
-
-
-def run(args: argparse.Namespace) -> int:
-    settings = load_settings(EvalSettings, args.config, args.set)
-    if args.models is None:
-        from runtime.shipped import default_export
-
-        models = [default_export("unet")]
-    else:
-        models = [Path(m) for m in args.models]
-    policies = [p.strip() for p in args.internal.split(",") if p.strip()]
-    if not policies:
-        raise NeuralaoError("--internal lists no policy")
-    result = evaluate(settings, Path(args.out), models, policies, Path(args.config).resolve().parent,
-                      flip=not args.no_flip, progress=not args.no_progress)  # fmt: skip
-    if args.write_manifest:
-        write_to_manifests(result, models)
-    log.info("wrote %s and %s", Path(args.out) / "evaluation.json", Path(args.out) / "evaluation.md")
-    return 0

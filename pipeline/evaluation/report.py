@@ -58,7 +58,6 @@ as not available; the report never fails because a model is absent.
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
@@ -80,14 +79,14 @@ from pipeline.bakes.vertex import BakeSettings, bake
 from pipeline.datasets.dataset import open_dataset, scene_of
 from pipeline.evaluation.figures import contact_sheet as readable_sheet
 from pipeline.evaluation.figures import write_html, write_viewer_pages
-from pipeline.evaluation.plots import shipped_markdown, shipped_note, shipped_summary, write_shipped_plots
+from pipeline.evaluation.plots import shipped_markdown, shipped_summary, write_shipped_plots
 from pipeline.evaluation.selection import render_markdown as select_markdown
 from pipeline.evaluation.selection import render_targets_markdown as targets_markdown
 from pipeline.evaluation.selection import select_from_results
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
 from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
-from pipeline.foundation.settings import add_set_option, from_dict, load_settings, settings_to_dict
+from pipeline.foundation.settings import from_dict, settings_to_dict
 from pipeline.gbuffers.rasterizer import GBufferRenderer
 from pipeline.geometry.camera import Camera
 from pipeline.models.mlp import radius_zero_inputs
@@ -110,7 +109,6 @@ from runtime.glsl_runner import (
     time_mlp_fragment,
     time_vector_fragment,
 )
-from runtime.shipped import MODELS_DIR
 
 log = logging.getLogger(__name__)
 
@@ -1303,96 +1301,3 @@ def write_report(result: dict, out: Path, settings: ReportSettings) -> dict:
     write_html(result, out, figures, viewer_links)
     write_text(out / "report.md", render_markdown(result, selection, figures))
     return result
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="dataset folder (neuralao dataset)")
-    p.add_argument(
-        "--exports",
-        help="folder of export folders (mlp-16x8, mlp-32x16, mlp-64x32, unet); missing ones are listed as not available",
-    )
-    shipped = p.add_mutually_exclusive_group()
-    shipped.add_argument("--shipped", nargs="?", const=",".join(SHIPPED_PICKS), default=None, metavar="WHICH",
-                         help="also report shipped U-Nets (runtime/models) when --exports is given (without "
-                              "--exports they are included by default): a comma list of roles (default, fast) "
-                              "and model names, or all (default: default,fast)")  # fmt: skip
-    shipped.add_argument(
-        "--no-shipped", dest="shipped", action="store_false", help="leave the shipped U-Nets out"
-    )
-    p.add_argument("--models", help="folder of shipped models with index.json (default runtime/models)")
-    p.add_argument("--out", required=True, help="output folder: report.md, report.json, PNG figures, caches")
-    p.add_argument("--config", help="JSON preset of report settings")
-    p.add_argument("--gt-rays", type=int, help="ground-truth rays per pixel (default 1024)")
-    p.add_argument("--frames-per-scene", type=int, help="evaluation frames per scene (default 4)")
-    p.add_argument(
-        "--time-size", type=int, nargs=2, metavar=("W", "H"), help="timing resolution (default 512 512)"
-    )
-    p.add_argument("--repeats", type=int, help="timed repetitions per GL measurement (default 10)")
-    p.add_argument("--target", type=float, help="model-selection SSIM target (default 0.95)")
-    add_set_option(p, "--set trace_rays=[4,16] --set ssao.samples=32 (any report setting)")
-
-
-def settings_from_args(args: argparse.Namespace) -> ReportSettings:
-    overrides = list(args.set)
-    for flag, key in (("gt_rays", "gt_rays"), ("frames_per_scene", "frames_per_scene"), ("repeats", "repeats"),
-                      ("target", "target_ssim")):  # fmt: skip
-        v = getattr(args, flag, None)
-        if v is not None:
-            overrides.append(f"{key}={json.dumps(v)}")
-    if getattr(args, "time_size", None):
-        overrides.append(f"time_size={json.dumps(list(args.time_size))}")
-    settings = load_settings(ReportSettings, args.config, overrides)
-    check_settings(settings)
-    return settings
-
-
-def shipped_folder(args: argparse.Namespace) -> Path | None:
-    """The shipped-models folder to report on: by default only when no --exports is given."""
-    include = getattr(args, "shipped", None)
-    if include is None:
-        include = not getattr(args, "exports", None)
-    if not include:
-        return None
-    return Path(args.models) if getattr(args, "models", None) else MODELS_DIR
-
-
-def shipped_picks(args: argparse.Namespace) -> list[str]:
-    """The shipped rows asked for (``--shipped WHICH``): roles and names; default and fast by default."""
-    which = getattr(args, "shipped", None)
-    picks = [p.strip() for p in (which if isinstance(which, str) else ",".join(SHIPPED_PICKS)).split(",")]
-    if not all(picks):
-        raise NeuralaoError(
-            f"--shipped {which!r}: expected a comma list of default, fast, all or model names"
-        )
-    return picks
-
-
-def run(args: argparse.Namespace) -> int:
-    settings = settings_from_args(args)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise NeuralaoError(f"--out {out} exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    result = evaluate(args.data, args.exports, settings, out, progress=True, shipped=shipped_folder(args),
-                      shipped_picks=shipped_picks(args))  # fmt: skip
-    write_report(result, out, settings)
-    ms = result["methods"]
-    for n in method_order(ms):
-        e = ms[n]
-        if e.get("available"):
-            log.info(
-                "%-15s ssim %.3f rmse %.4f  %8.2f ms",
-                n,
-                e["ssim"],
-                e["rmse"],
-                (e.get("seconds") or float("nan")) * 1e3,
-            )
-        else:
-            log.info("%-15s not available: %s", n, e.get("reason"))
-    if result.get("shipped") is not None and not result["shipped"]["models"]:
-        log.info("%s", shipped_note(result["shipped"]))
-    log.info("report: %s", out / "report.md")
-    return 0

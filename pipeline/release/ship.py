@@ -1,4 +1,4 @@
-"""`neuralao ship CONFIG.json`: train, export, check and install the release models under ``runtime/models/``.
+"""Train, export, check and install the release models under ``runtime/models/`` (`neuralao ship`).
 
 One committed config (``configs/models.json``) names the corpus and every shipped model with its
 training settings (budget, widths, resolution, which model initialises it). For each model, in order:
@@ -19,7 +19,6 @@ training settings (budget, widths, resolution, which model initialises it). For 
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import shutil
@@ -38,7 +37,7 @@ from pipeline.evaluation.report import timing_frame as report_timing_frame
 from pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import sha256_file, write_json
-from pipeline.foundation.settings import from_dict, load_settings, settings_to_dict
+from pipeline.foundation.settings import from_dict, settings_to_dict
 from pipeline.foundation.tolerances import TOL
 from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 from runtime.baselines import time_screen_space
@@ -293,22 +292,3 @@ def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
     index["seconds"] = time.perf_counter() - t0
     write_json(index_path, index)
     return index
-
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("config", help="ship config JSON (configs/models.json)")
-    p.add_argument(
-        "--only", nargs="+", metavar="NAME", help="ship only these models (their init checkpoints must exist)"
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    settings = load_settings(ShipSettings, args.config, [])
-    index = ship(settings, args.only)
-    for name, entry in index["models"].items():
-        log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
-    for name, entry in index.get("baselines", {}).items():
-        log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])
-    log.info("installed %s under %s (index: %s)", ", ".join(index["models"]) or "nothing", settings.out,
-             Path(settings.out) / "index.json")  # fmt: skip
-    return 0

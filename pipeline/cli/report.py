@@ -1,0 +1,134 @@
+"""`neuralao report`: every AO method on the same held-back frames, speed against error.
+
+What is measured and written is :mod:`pipeline.evaluation.report`; this module is its command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from pipeline.evaluation.plots import shipped_note
+from pipeline.evaluation.report import (
+    SHIPPED_PICKS,
+    ReportSettings,
+    check_settings,
+    evaluate,
+    method_order,
+    write_report,
+)
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import add_set_option, load_settings
+from runtime.shipped import MODELS_DIR
+
+log = logging.getLogger("pipeline.evaluation.report")  # the name its lines have always carried
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="dataset folder (neuralao dataset)")
+    p.add_argument(
+        "--exports",
+        help="folder of export folders (mlp-16x8, mlp-32x16, mlp-64x32, unet); "
+        "missing ones are listed as not available",
+    )
+    shipped = p.add_mutually_exclusive_group()
+    shipped.add_argument(
+        "--shipped",
+        nargs="?",
+        const=",".join(SHIPPED_PICKS),
+        default=None,
+        metavar="WHICH",
+        help="also report shipped U-Nets (runtime/models) when --exports is given (without "
+        "--exports they are included by default): a comma list of roles (default, fast) "
+        "and model names, or all (default: default,fast)",
+    )
+    shipped.add_argument(
+        "--no-shipped", dest="shipped", action="store_false", help="leave the shipped U-Nets out"
+    )
+    p.add_argument("--models", help="folder of shipped models with index.json (default runtime/models)")
+    p.add_argument("--out", required=True, help="output folder: report.md, report.json, PNG figures, caches")
+    p.add_argument("--config", help="JSON preset of report settings")
+    p.add_argument("--gt-rays", type=int, help="ground-truth rays per pixel (default 1024)")
+    p.add_argument("--frames-per-scene", type=int, help="evaluation frames per scene (default 4)")
+    p.add_argument(
+        "--time-size", type=int, nargs=2, metavar=("W", "H"), help="timing resolution (default 512 512)"
+    )
+    p.add_argument("--repeats", type=int, help="timed repetitions per GL measurement (default 10)")
+    p.add_argument("--target", type=float, help="model-selection SSIM target (default 0.95)")
+    add_set_option(p, "--set trace_rays=[4,16] --set ssao.samples=32 (any report setting)")
+
+
+def settings_from_args(args: argparse.Namespace) -> ReportSettings:
+    overrides = list(args.set)
+    for flag, key in (
+        ("gt_rays", "gt_rays"),
+        ("frames_per_scene", "frames_per_scene"),
+        ("repeats", "repeats"),
+        ("target", "target_ssim"),
+    ):
+        v = getattr(args, flag, None)
+        if v is not None:
+            overrides.append(f"{key}={json.dumps(v)}")
+    if getattr(args, "time_size", None):
+        overrides.append(f"time_size={json.dumps(list(args.time_size))}")
+    settings = load_settings(ReportSettings, args.config, overrides)
+    check_settings(settings)
+    return settings
+
+
+def shipped_folder(args: argparse.Namespace) -> Path | None:
+    """The shipped-models folder to report on: by default only when no --exports is given."""
+    include = getattr(args, "shipped", None)
+    if include is None:
+        include = not getattr(args, "exports", None)
+    if not include:
+        return None
+    return Path(args.models) if getattr(args, "models", None) else MODELS_DIR
+
+
+def shipped_picks(args: argparse.Namespace) -> list[str]:
+    """The shipped rows asked for (``--shipped WHICH``): roles and names; default and fast by default."""
+    which = getattr(args, "shipped", None)
+    picks = [p.strip() for p in (which if isinstance(which, str) else ",".join(SHIPPED_PICKS)).split(",")]
+    if not all(picks):
+        raise NeuralaoError(
+            f"--shipped {which!r}: expected a comma list of default, fast, all or model names"
+        )
+    return picks
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = settings_from_args(args)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NeuralaoError(f"--out {out} exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    result = evaluate(
+        args.data,
+        args.exports,
+        settings,
+        out,
+        progress=True,
+        shipped=shipped_folder(args),
+        shipped_picks=shipped_picks(args),
+    )
+    write_report(result, out, settings)
+    ms = result["methods"]
+    for n in method_order(ms):
+        e = ms[n]
+        if e.get("available"):
+            log.info(
+                "%-15s ssim %.3f rmse %.4f  %8.2f ms",
+                n,
+                e["ssim"],
+                e["rmse"],
+                (e.get("seconds") or float("nan")) * 1e3,
+            )
+        else:
+            log.info("%-15s not available: %s", n, e.get("reason"))
+    if result.get("shipped") is not None and not result["shipped"]["models"]:
+        log.info("%s", shipped_note(result["shipped"]))
+    log.info("report: %s", out / "report.md")
+    return 0
