@@ -188,7 +188,8 @@ $(HOST): runtime/host/neuralao_host.c
 	mkdir -p $(@D)
 	$${CC:-cc} $(HOST_CFLAGS) -o $@ $< -lEGL -lOpenGL -lm
 
-test: $(STAMP) ## Set up if needed, then run the test suite
+test: $(STAMP) ## Set up if needed, check the import layers, then run the test suite
+	$(VENV)/bin/lint-imports --no-cache
 	$(PY) -m pytest -n 2 --dist loadfile
 
 # tests/test_cli_fuzz.py runs 500 seeded cases in `make test`; this runs more, from a fresh seed each time
@@ -202,9 +203,10 @@ bench: $(STAMP) ## Run benchmarks under bench/ (JSON + markdown tables in build/
 	mkdir -p build/bench
 	for b in bench/bench_*.py; do $(PY) $$b --out build/bench; done
 
-lint: $(STAMP) ## ruff check + format check
+lint: $(STAMP) ## ruff check + format check + import layers
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports --no-cache
 
 clean: ## Remove build outputs (keeps .venv)
 	rm -rf build
