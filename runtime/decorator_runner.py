@@ -28,8 +28,12 @@ def _program(vertex: str, varyings: list[str]) -> int:
         raise NeuralaoError(f"vertex shader failed to compile: {log.splitlines()[0] if log else '?'}")
     GL.glAttachShader(prog, sh)
     names = (ctypes.c_char_p * len(varyings))(*[v.encode() for v in varyings])
-    GL.glTransformFeedbackVaryings(prog, len(varyings), ctypes.cast(names, ctypes.POINTER(ctypes.POINTER(GL.GLchar))),
-                                   GL.GL_INTERLEAVED_ATTRIBS)  # fmt: skip
+    GL.glTransformFeedbackVaryings(
+        prog,
+        len(varyings),
+        ctypes.cast(names, ctypes.POINTER(ctypes.POINTER(GL.GLchar))),
+        GL.GL_INTERLEAVED_ATTRIBS,
+    )
     GL.glLinkProgram(prog)
     GL.glDeleteShader(sh)
     if not GL.glGetProgramiv(prog, GL.GL_LINK_STATUS):
@@ -69,8 +73,14 @@ def run_decorator_vertex_shader(
     vao = GL.glGenVertexArrays(1)
     GL.glBindVertexArray(vao)
     bufs = []
-    for loc, arr, comps, divisor in ((0, positions, 3, 0), (1, local_ao, 1, 0), (2, translation, 3, 1),
-                                     (3, rotation, 4, 1), (4, scale, 3, 1), (5, ao_global, 4, 1)):  # fmt: skip
+    for loc, arr, comps, divisor in (
+        (0, positions, 3, 0),
+        (1, local_ao, 1, 0),
+        (2, translation, 3, 1),
+        (3, rotation, 4, 1),
+        (4, scale, 3, 1),
+        (5, ao_global, 4, 1),
+    ):
         buf = gl.create_buffer(np.ascontiguousarray(arr, np.float32), target=GL.GL_ARRAY_BUFFER)
         GL.glVertexAttribPointer(loc, comps, GL.GL_FLOAT, GL.GL_FALSE, 0, None)
         GL.glEnableVertexAttribArray(loc)

@@ -43,14 +43,21 @@ class _OSMesa:
     def __init__(self) -> None:
         from OpenGL import arrays, osmesa  # the platform module exists only for PYOPENGL_PLATFORM=osmesa
 
-        attrs = arrays.GLintArray.asArray([
-            osmesa.OSMESA_FORMAT, osmesa.OSMESA_RGBA,
-            osmesa.OSMESA_DEPTH_BITS, 24,
-            osmesa.OSMESA_PROFILE, osmesa.OSMESA_CORE_PROFILE,
-            osmesa.OSMESA_CONTEXT_MAJOR_VERSION, 3,
-            osmesa.OSMESA_CONTEXT_MINOR_VERSION, 3,
-            0,
-        ])  # fmt: skip
+        attrs = arrays.GLintArray.asArray(
+            [
+                osmesa.OSMESA_FORMAT,
+                osmesa.OSMESA_RGBA,
+                osmesa.OSMESA_DEPTH_BITS,
+                24,
+                osmesa.OSMESA_PROFILE,
+                osmesa.OSMESA_CORE_PROFILE,
+                osmesa.OSMESA_CONTEXT_MAJOR_VERSION,
+                3,
+                osmesa.OSMESA_CONTEXT_MINOR_VERSION,
+                3,
+                0,
+            ]
+        )
         self._make = osmesa.OSMesaMakeCurrent
         self._context = osmesa.OSMesaCreateContextAttribs(attrs, None)
         if not self._context:
@@ -76,21 +83,38 @@ class _EGL:
         self._display = self._display_of(int(os.environ.get("EGL_DEVICE_ID", "0")))
         major, minor, count = ctypes.c_long(), ctypes.c_long(), ctypes.c_long()
         configs = (EGL.EGLConfig * 1)()
-        config_attrs = arrays.GLintArray.asArray([
-            EGL.EGL_SURFACE_TYPE, EGL.EGL_PBUFFER_BIT,
-            EGL.EGL_BLUE_SIZE, 8, EGL.EGL_RED_SIZE, 8, EGL.EGL_GREEN_SIZE, 8,
-            EGL.EGL_DEPTH_SIZE, 24,
-            EGL.EGL_COLOR_BUFFER_TYPE, EGL.EGL_RGB_BUFFER,
-            EGL.EGL_RENDERABLE_TYPE, EGL.EGL_OPENGL_BIT,
-            EGL.EGL_CONFORMANT, EGL.EGL_OPENGL_BIT,
-            EGL.EGL_NONE,
-        ])  # fmt: skip
-        context_attrs = arrays.GLintArray.asArray([
-            EGL.EGL_CONTEXT_MAJOR_VERSION, 4,
-            EGL.EGL_CONTEXT_MINOR_VERSION, 1,
-            EGL.EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL.EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-            EGL.EGL_NONE,
-        ])  # fmt: skip
+        config_attrs = arrays.GLintArray.asArray(
+            [
+                EGL.EGL_SURFACE_TYPE,
+                EGL.EGL_PBUFFER_BIT,
+                EGL.EGL_BLUE_SIZE,
+                8,
+                EGL.EGL_RED_SIZE,
+                8,
+                EGL.EGL_GREEN_SIZE,
+                8,
+                EGL.EGL_DEPTH_SIZE,
+                24,
+                EGL.EGL_COLOR_BUFFER_TYPE,
+                EGL.EGL_RGB_BUFFER,
+                EGL.EGL_RENDERABLE_TYPE,
+                EGL.EGL_OPENGL_BIT,
+                EGL.EGL_CONFORMANT,
+                EGL.EGL_OPENGL_BIT,
+                EGL.EGL_NONE,
+            ]
+        )
+        context_attrs = arrays.GLintArray.asArray(
+            [
+                EGL.EGL_CONTEXT_MAJOR_VERSION,
+                4,
+                EGL.EGL_CONTEXT_MINOR_VERSION,
+                1,
+                EGL.EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                EGL.EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                EGL.EGL_NONE,
+            ]
+        )
         if not EGL.eglInitialize(self._display, major, minor):
             raise RuntimeError("eglInitialize failed")
         if not EGL.eglChooseConfig(self._display, config_attrs, configs, 1, count) or count.value < 1:

@@ -246,8 +246,10 @@ def time_vertex_colour(
     """
     ctx = gl.context()
     d = DIALECTS["glsl330"]
-    prog = _program(vertex=fill("vertex_colour_vert", header=d.header()),
-                    fragment=fill("vertex_colour_frag", header=d.header()))  # fmt: skip
+    prog = _program(
+        vertex=fill("vertex_colour_vert", header=d.header()),
+        fragment=fill("vertex_colour_frag", header=d.header()),
+    )
     v = np.ascontiguousarray(scene.vertices, dtype=np.float32)
     f = np.ascontiguousarray(scene.faces, dtype=np.uint32)
     a = np.linspace(0.2, 1.0, len(v), dtype=np.float32) if ao is None else np.asarray(ao, np.float32)
@@ -319,8 +321,9 @@ def size_multiples(manifest: dict) -> tuple[int, int]:
     return out["H"], out["W"]
 
 
-def texture_sizes(manifest: dict, height: int, width: int, max_size: int = MAX_TEXTURE_SIZE,
-                  max_bytes: int | None = None) -> dict:  # fmt: skip
+def texture_sizes(
+    manifest: dict, height: int, width: int, max_size: int = MAX_TEXTURE_SIZE, max_bytes: int | None = None
+) -> dict:
     """{texture id: (width, height, layers, bytes)} of a compute program at an input of width x height,
     checked before anything is allocated: the program's fixed size if it has one, at least the pad
     multiple, whole texture sizes (:func:`size_multiples`), all textures together within ``max_bytes``
@@ -335,8 +338,10 @@ def texture_sizes(manifest: dict, height: int, width: int, max_size: int = MAX_T
         raise NeuralaoError(f"image {width}x{height} is smaller than the pad multiple {multiple}")
     mh, mw = size_multiples(manifest)
     if height % mh or width % mw:
-        raise NeuralaoError(f"image {width}x{height}: the width must be a multiple of {mw} and the height of {mh} "
-                            "(output textures are sized from them by the program's strides)")  # fmt: skip
+        raise NeuralaoError(
+            f"image {width}x{height}: the width must be a multiple of {mw} and the height of {mh} "
+            "(output textures are sized from them by the program's strides)"
+        )
     hp, wp = math.ceil(height / multiple) * multiple, math.ceil(width / multiple) * multiple
     sizes = {"H": height, "W": width, "Hp": hp, "Wp": wp}
     out = {}
@@ -346,12 +351,15 @@ def texture_sizes(manifest: dict, height: int, width: int, max_size: int = MAX_T
         out[ident] = (tw, th, int(t["layers"]), tw * th * int(t["layers"]) * texel)
     total = sum(t[3] for t in out.values())
     if max_bytes is not None and total > max_bytes:
-        raise NeuralaoError(f"a {width}x{height} image needs {total / (1 << 30):.3g} GiB of textures, over the "
-                            f"bound of {max_bytes / (1 << 30):.3g} GiB: choose a smaller size")  # fmt: skip
+        raise NeuralaoError(
+            f"a {width}x{height} image needs {total / (1 << 30):.3g} GiB of textures, over the "
+            f"bound of {max_bytes / (1 << 30):.3g} GiB: choose a smaller size"
+        )
     for ident, (tw, th, _, _) in out.items():
         if not (1 <= tw <= max_size and 1 <= th <= max_size):
-            raise NeuralaoError(f"texture {ident} would be {tw}x{th} for a {width}x{height} image, "
-                                f"outside 1..{max_size}")  # fmt: skip
+            raise NeuralaoError(
+                f"texture {ident} would be {tw}x{th} for a {width}x{height} image, outside 1..{max_size}"
+            )
     return out
 
 
@@ -482,8 +490,12 @@ def scalar_inputs(program_or_dir: ComputeProgram | str | Path) -> list[str]:
     return [u["onnx_input"] for u in _compute_program(program_or_dir).manifest.get("uniforms", [])]
 
 
-def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
-                    scalars: dict[str, float] | None = None) -> dict:  # fmt: skip
+def run_compute_all(
+    program_or_dir: ComputeProgram | str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+) -> dict:
     """Run every pass on x : (1, C, H, W) float32; returns {onnx output name: (1, C_out, H, W) float32}.
 
     flip_y : the input/output textures are bottom-up GL images (here: x is given bottom row first).
@@ -501,25 +513,33 @@ def run_compute_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, 
         run.dispatch(flip_y)
         out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
         # outputs that are not images ((1, 1000) logits after a Gemm): the manifest gives their shape
-        return {o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
-                for o in prog.manifest["outputs"]}  # fmt: skip
+        return {
+            o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
+            for o in prog.manifest["outputs"]
+        }
     finally:
         run.release()
 
 
 def run_compute(
-    program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
+    program_or_dir: ComputeProgram | str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
     scalars: dict[str, float] | None = None,
-) -> np.ndarray:  # fmt: skip
+) -> np.ndarray:
     """The first graph output of :func:`run_compute_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
     prog = _compute_program(program_or_dir)
     return run_compute_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
 
 
 def time_compute(
-    program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5, warmup: int = 1,
+    program_or_dir: ComputeProgram | str | Path,
+    height: int,
+    width: int,
+    repeats: int = 5,
+    warmup: int = 1,
     scalars: dict[str, float] | None = None,
-) -> float:  # fmt: skip
+) -> float:
     """Median seconds for all passes (pad, network, crop) at width x height, random input; scalar
     inputs from ``scalars``, 1.0 where not given (the cost does not depend on them)."""
     prog = _compute_program(program_or_dir)

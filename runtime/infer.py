@@ -76,8 +76,16 @@ def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarr
 
 
 # G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/cli/render.py).
-IMAGE_CHANNELS = {"depth": (), "mask": (), "tri_id": (), "ao": (), "valid": (), "normal_cam": (3,),
-                  "normal_obj": (3,), "position": (3,)}  # fmt: skip
+IMAGE_CHANNELS = {
+    "depth": (),
+    "mask": (),
+    "tri_id": (),
+    "ao": (),
+    "valid": (),
+    "normal_cam": (3,),
+    "normal_obj": (3,),
+    "position": (3,),
+}
 
 
 def complete_frame(frame: dict, kind: str, yfov: float | None, path: str | Path) -> dict:
@@ -87,8 +95,12 @@ def complete_frame(frame: dict, kind: str, yfov: float | None, path: str | Path)
     frame = dict(frame)
     if yfov is not None:
         if "yfov" in frame and not math.isclose(float(frame["yfov"]), yfov, rel_tol=1e-6):
-            log.warning("%s: using the given field of view %.4g deg, not the frame's %.4g deg", path,
-                        math.degrees(yfov), math.degrees(float(frame["yfov"])))  # fmt: skip
+            log.warning(
+                "%s: using the given field of view %.4g deg, not the frame's %.4g deg",
+                path,
+                math.degrees(yfov),
+                math.degrees(float(frame["yfov"])),
+            )
         frame["yfov"] = yfov
     if "mask" not in frame and "depth" in frame and "tri_id" not in frame:
         frame["mask"] = np.asarray(frame["depth"]) > 0
@@ -108,8 +120,10 @@ def check_frame(frame: dict, path: str | Path) -> None:
     for k, shape in shapes.items():
         if ref is None or shape != (*ref, *IMAGE_CHANNELS[k]):
             want = "(H, W" + "".join(f", {n}" for n in IMAGE_CHANNELS[k]) + ")"
-            raise NeuralaoError(f"{path}: G-buffer channel {k!r} has shape {shape}, expected {want}"
-                                + (f" with (H, W) = {ref}" if ref else ""))  # fmt: skip
+            raise NeuralaoError(
+                f"{path}: G-buffer channel {k!r} has shape {shape}, expected {want}"
+                + (f" with (H, W) = {ref}" if ref else "")
+            )
     check_finite_arrays(frame, str(path), "G-buffer channel")
 
 

@@ -311,8 +311,10 @@ class ScalingPasses:
     def read_low(self) -> tuple[np.ndarray, np.ndarray]:
         """(h, w, 4) position and normal targets of the point-sampling pass, top-down rows."""
         up, GL = self.up, self.GL
-        return (self.gl.read_texture(up.low_position, up.lw, up.lh, GL.GL_RGBA32F),
-                self.gl.read_texture(up.low_normal, up.lw, up.lh, GL.GL_RGBA32F))  # fmt: skip
+        return (
+            self.gl.read_texture(up.low_position, up.lw, up.lh, GL.GL_RGBA32F),
+            self.gl.read_texture(up.low_normal, up.lw, up.lh, GL.GL_RGBA32F),
+        )
 
     def release(self) -> None:
         self.GL.glDeleteFramebuffers(1, [self.fbo])

@@ -141,8 +141,14 @@ def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
             e["shader"] = m.shader
         e["info"] = m.info
         out.append(e)
-    return {"format": FORMAT, "format_version": FORMAT_VERSION, "methods": out, "geometries": geometries,
-            "bounds": [lo.tolist(), hi.tolist()], "size": [int(size[0]), int(size[1])]}  # fmt: skip
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "methods": out,
+        "geometries": geometries,
+        "bounds": [lo.tolist(), hi.tolist()],
+        "size": [int(size[0]), int(size[1])],
+    }
 
 
 def write_page(methods: list[ViewerMethod], out: Path, size: tuple[int, int] = (640, 480)) -> Path:
@@ -154,9 +160,15 @@ def write_page(methods: list[ViewerMethod], out: Path, size: tuple[int, int] = (
     write_text(out / "scene.js", "window.NEURALAO_SCENE = " + json.dumps(payload) + ";\n")
     for name in STATIC_FILES:
         write_text(out / name, (ASSETS / name).read_text())
-    write_text(out / "scene.json", json.dumps({k: v for k, v in payload.items() if k not in ("methods", "geometries")} |
-                                              {"methods": [{"name": m.name, "kind": m.kind, **m.info} for m in methods]},
-                                              indent=2) + "\n")  # fmt: skip
+    write_text(
+        out / "scene.json",
+        json.dumps(
+            {k: v for k, v in payload.items() if k not in ("methods", "geometries")}
+            | {"methods": [{"name": m.name, "kind": m.kind, **m.info} for m in methods]},
+            indent=2,
+        )
+        + "\n",
+    )
     return out / "index.html"
 
 

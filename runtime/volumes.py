@@ -207,10 +207,20 @@ def from_json(data: dict, what: str = "volumes") -> Volumes:
                 )
             if not (np.isfinite(coeffs).all() and np.isfinite(centre).all()):
                 raise NeuralaoError(f"{what}: region {k} has non-finite coefficients")
-            models.append(RegionModel(centre, coeffs, r.get("centre_choice", ""), int(r.get("valid_samples", 0)),
-                                      float(r.get("fit_rmse", 0.0)), r.get("fallback")))  # fmt: skip
-        edges = [Edge(int(e["regions"][0]), int(e["regions"][1]), float(e["area"]), tuple(map(float, e["centre"])))
-                 for e in data.get("edges", [])]  # fmt: skip
+            models.append(
+                RegionModel(
+                    centre,
+                    coeffs,
+                    r.get("centre_choice", ""),
+                    int(r.get("valid_samples", 0)),
+                    float(r.get("fit_rmse", 0.0)),
+                    r.get("fallback"),
+                )
+            )
+        edges = [
+            Edge(int(e["regions"][0]), int(e["regions"][1]), float(e["area"]), tuple(map(float, e["centre"])))
+            for e in data.get("edges", [])
+        ]
         halves = tuple(float(v) for v in data["half_distances"])
         blend = float(data["blend"])
     except NeuralaoError:

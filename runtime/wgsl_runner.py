@@ -91,8 +91,12 @@ class _WgslRun:
         self.textures = {}
         for ident, (tw, th, layers, _) in texture_sizes(self.m, height, width).items():
             fmt, texel = _FORMATS[self.m["textures"][ident]["format"]]
-            tex = dev.create_texture(size=(tw, th, layers), format=fmt, dimension="2d",
-                                     usage=tu.TEXTURE_BINDING | tu.STORAGE_BINDING | tu.COPY_DST | tu.COPY_SRC)  # fmt: skip
+            tex = dev.create_texture(
+                size=(tw, th, layers),
+                format=fmt,
+                dimension="2d",
+                usage=tu.TEXTURE_BINDING | tu.STORAGE_BINDING | tu.COPY_DST | tu.COPY_SRC,
+            )
             self.textures[ident] = (tex, tex.create_view(dimension="2d-array"), tw, th, layers, texel)
         bu = wgpu.BufferUsage
         weights = prog.weights or b"\0" * 16
@@ -111,24 +115,44 @@ class _WgslRun:
         stage = wgpu.ShaderStage.COMPUTE
         layout, group = [], []
         for inp in p["inputs"]:
-            layout.append({"binding": inp["binding"], "visibility": stage,
-                           "texture": {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}})  # fmt: skip
+            layout.append(
+                {
+                    "binding": inp["binding"],
+                    "visibility": stage,
+                    "texture": {"sample_type": "unfilterable-float", "view_dimension": "2d-array"},
+                }
+            )
             group.append({"binding": inp["binding"], "resource": self.textures[inp["texture"]][1]})
         out = p["output"]
-        layout.append({"binding": out["binding"], "visibility": stage,
-                       "storage_texture": {"access": "write-only", "format": out["format"],
-                                           "view_dimension": "2d-array"}})  # fmt: skip
+        layout.append(
+            {
+                "binding": out["binding"],
+                "visibility": stage,
+                "storage_texture": {
+                    "access": "write-only",
+                    "format": out["format"],
+                    "view_dimension": "2d-array",
+                },
+            }
+        )
         group.append({"binding": out["binding"], "resource": self.textures[out["texture"]][1]})
         if "params" in p:
             prm = p["params"]
             layout.append(
                 {"binding": prm["binding"], "visibility": stage, "buffer": {"type": "read-only-storage"}}
             )
-            group.append({"binding": prm["binding"], "resource": {"buffer": self.weights, "offset": prm["offset"],
-                                                                  "size": prm["bytes"]}})  # fmt: skip
+            group.append(
+                {
+                    "binding": prm["binding"],
+                    "resource": {"buffer": self.weights, "offset": prm["offset"], "size": prm["bytes"]},
+                }
+            )
         for name, u in p.get("uniforms", {}).items():
-            buf = (self._uniform(int(flip_y), "<i4") if name == "u_flip_y"
-                   else self._uniform(scalars[u["onnx_input"]], "<f4"))  # fmt: skip
+            buf = (
+                self._uniform(int(flip_y), "<i4")
+                if name == "u_flip_y"
+                else self._uniform(scalars[u["onnx_input"]], "<f4")
+            )
             layout.append({"binding": u["binding"], "visibility": stage, "buffer": {"type": "uniform"}})
             group.append({"binding": u["binding"], "resource": {"buffer": buf, "offset": 0, "size": 16}})
         bgl, pipeline = _pipeline(source, json.dumps(layout))
@@ -143,8 +167,9 @@ class _WgslRun:
         data = np.zeros((layers * 4, h, w), np.float32)
         data[: x.shape[1]] = x[0]
         data = np.ascontiguousarray(data.reshape(layers, 4, h, w).transpose(0, 2, 3, 1))
-        self.dev.queue.write_texture({"texture": tex}, data.tobytes(), {"bytes_per_row": w * 16, "rows_per_image": h},
-                                     (w, h, layers))  # fmt: skip
+        self.dev.queue.write_texture(
+            {"texture": tex}, data.tobytes(), {"bytes_per_row": w * 16, "rows_per_image": h}, (w, h, layers)
+        )
 
     def dispatch(self) -> None:
         enc = self.dev.create_command_encoder()
@@ -159,14 +184,19 @@ class _WgslRun:
     def read(self, ident: str, channels: int, size: tuple[int, int] | None = None) -> np.ndarray:
         tex, _, w, h, layers, _ = self.textures[ident]
         w, h = size or (w, h)
-        raw = self.dev.queue.read_texture({"texture": tex}, {"bytes_per_row": w * 16, "rows_per_image": h},
-                                          (w, h, layers))  # fmt: skip
+        raw = self.dev.queue.read_texture(
+            {"texture": tex}, {"bytes_per_row": w * 16, "rows_per_image": h}, (w, h, layers)
+        )
         buf = np.frombuffer(raw, np.float32).reshape(layers, h, w, 4)
         return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
 
 
-def run_wgsl_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
-                 scalars: dict[str, float] | None = None) -> dict:  # fmt: skip
+def run_wgsl_all(
+    program_or_dir: ComputeProgram | str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+) -> dict:
     """Run every WGSL pass on x : (1, C, H, W) float32; {onnx output name: (1, C_out, H, W) float32}."""
     prog = _program(program_or_dir)
     x = np.asarray(x, dtype=np.float32)
@@ -177,19 +207,31 @@ def run_wgsl_all(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, fli
     run.upload(x)
     run.dispatch()
     out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
-    return {o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
-            for o in prog.manifest["outputs"]}  # fmt: skip
+    return {
+        o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
+        for o in prog.manifest["outputs"]
+    }
 
 
-def run_wgsl(program_or_dir: ComputeProgram | str | Path, x: np.ndarray, flip_y: bool = False,
-             scalars: dict[str, float] | None = None) -> np.ndarray:  # fmt: skip
+def run_wgsl(
+    program_or_dir: ComputeProgram | str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+) -> np.ndarray:
     """The first graph output of :func:`run_wgsl_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
     prog = _program(program_or_dir)
     return run_wgsl_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
 
 
-def time_wgsl(program_or_dir: ComputeProgram | str | Path, height: int, width: int, repeats: int = 5,
-              warmup: int = 1, scalars: dict[str, float] | None = None) -> float:  # fmt: skip
+def time_wgsl(
+    program_or_dir: ComputeProgram | str | Path,
+    height: int,
+    width: int,
+    repeats: int = 5,
+    warmup: int = 1,
+    scalars: dict[str, float] | None = None,
+) -> float:
     """Median seconds for all passes at width x height (random input; scalar inputs 1.0 unless given)."""
     prog = _program(program_or_dir)
     values = {u["onnx_input"]: 1.0 for u in prog.manifest.get("uniforms", [])} | dict(scalars or {})

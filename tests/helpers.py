@@ -55,15 +55,21 @@ def box(half: float, inward: bool) -> tuple[np.ndarray, np.ndarray]:
     # Outward, counter-clockwise seen from outside (index = 4x + 2y + z over {0,1}).
     f = np.array(
         [
-            [0, 1, 3], [0, 3, 2],  # x = -half
-            [4, 6, 7], [4, 7, 5],  # x = +half
-            [0, 4, 5], [0, 5, 1],  # y = -half
-            [2, 3, 7], [2, 7, 6],  # y = +half
-            [0, 2, 6], [0, 6, 4],  # z = -half
-            [1, 5, 7], [1, 7, 3],  # z = +half
+            [0, 1, 3],
+            [0, 3, 2],  # x = -half
+            [4, 6, 7],
+            [4, 7, 5],  # x = +half
+            [0, 4, 5],
+            [0, 5, 1],  # y = -half
+            [2, 3, 7],
+            [2, 7, 6],  # y = +half
+            [0, 2, 6],
+            [0, 6, 4],  # z = -half
+            [1, 5, 7],
+            [1, 7, 3],  # z = +half
         ],
         dtype=np.int64,
-    )  # fmt: skip
+    )
     return v, (f[:, ::-1].copy() if inward else f)
 
 

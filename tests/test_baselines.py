@@ -55,8 +55,14 @@ def plane_frame():
 def corner():
     """Floor (z = 0, [-1, 1]^2) and a wall at x = 0.5 facing -x, seen from the open side, above."""
     scene = merge(floor_quad(1.0), wall_quad(0.5, 1.0, 1.0, facing_minus_x=True), name="corner")
-    cam = Camera(look_at(np.array([-1.2, 0.0, 1.6]), np.array([0.1, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])),
-                 80, 64, np.radians(50.0), 0.05, 10.0)  # fmt: skip
+    cam = Camera(
+        look_at(np.array([-1.2, 0.0, 1.6]), np.array([0.1, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])),
+        80,
+        64,
+        np.radians(50.0),
+        0.05,
+        10.0,
+    )
     frame = GBufferRenderer(scene).render(cam)
     radius = 0.25 * scene.diagonal
     labeller = Labeller(scene, LabelSettings(rays=256, max_distance=radius))

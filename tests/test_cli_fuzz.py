@@ -46,8 +46,22 @@ STATS: Counter = Counter()
 
 # ----------------------------------------------------------------------------- value pools
 
-INT_ABSURD = ["0", "-1", "-7", "2147483648", "9223372036854775808", "1000000000000", "10" * 20,
-              "1e3", "nan", "inf", "", "x", "3.5", "0x10"]  # fmt: skip
+INT_ABSURD = [
+    "0",
+    "-1",
+    "-7",
+    "2147483648",
+    "9223372036854775808",
+    "1000000000000",
+    "10" * 20,
+    "1e3",
+    "nan",
+    "inf",
+    "",
+    "x",
+    "3.5",
+    "0x10",
+]
 FLOAT_ABSURD = ["nan", "inf", "-inf", "1e999", "-1", "0", "x", "", "1e-320"]
 FLOAT_NONFINITE = {"nan", "inf", "-inf", "1e999", "-1e999"}
 SEED_ABSURD = ["-1", "9223372036854775808", "1" + "0" * 30, "x", "1.5"]
@@ -92,41 +106,117 @@ def _pick(draw, files: dict[str, bool], culprits: list[str], flags: dict) -> str
 # ----------------------------------------------------------------------------- fixture files (tokens)
 
 MESHES = {
-    "tet.obj": True, "tet.ply": True, "tet.glb": True, "tet.stl": True,
-    "nan.obj": False, "inf.obj": False, "overflow.obj": False, "huge.obj": False, "subnormal.obj": False,
-    "truncated.obj": False, "badindex.obj": False, "empty.obj": False, "junk.obj": False,
-    "collinear.obj": False, "words.obj": False, "hostile.ply": False, "truncated.ply": False,
-    "escape.gltf": False, "junk.gltf": False, "empty.glb": False, "badmagic.glb": False,
-    "lying.glb": False, "nomesh.glb": False, "bigaccessor.gltf": False, "junk.stl": False,
-    "missing.obj": False, "folder": False, "tet.txt": False,
-}  # fmt: skip
+    "tet.obj": True,
+    "tet.ply": True,
+    "tet.glb": True,
+    "tet.stl": True,
+    "nan.obj": False,
+    "inf.obj": False,
+    "overflow.obj": False,
+    "huge.obj": False,
+    "subnormal.obj": False,
+    "truncated.obj": False,
+    "badindex.obj": False,
+    "empty.obj": False,
+    "junk.obj": False,
+    "collinear.obj": False,
+    "words.obj": False,
+    "hostile.ply": False,
+    "truncated.ply": False,
+    "escape.gltf": False,
+    "junk.gltf": False,
+    "empty.glb": False,
+    "badmagic.glb": False,
+    "lying.glb": False,
+    "nomesh.glb": False,
+    "bigaccessor.gltf": False,
+    "junk.stl": False,
+    "missing.obj": False,
+    "folder": False,
+    "tet.txt": False,
+}
 FRAMES = {
-    "frame.npz": True, "stack.npz": True, "nan_depth.npz": False, "inf_normal.npz": False,
-    "nan_position.npz": False, "nan_pose.npz": False, "bad_shape.npz": False, "truncated.npz": False,
-    "pickle.npz": False, "empty.npz": False, "junk.npz": False, "missing.npz": False, "huge_depth.npz": False,
-}  # fmt: skip
+    "frame.npz": True,
+    "stack.npz": True,
+    "nan_depth.npz": False,
+    "inf_normal.npz": False,
+    "nan_position.npz": False,
+    "nan_pose.npz": False,
+    "bad_shape.npz": False,
+    "truncated.npz": False,
+    "pickle.npz": False,
+    "empty.npz": False,
+    "junk.npz": False,
+    "missing.npz": False,
+    "huge_depth.npz": False,
+}
 MODELS = {
-    "unet.onnx": True, "truncated.onnx": False, "junk.onnx": False, "empty.onnx": False,
-    "relu.onnx": False, "missing.onnx": False, "liar.onnx": False,
-}  # fmt: skip
+    "unet.onnx": True,
+    "truncated.onnx": False,
+    "junk.onnx": False,
+    "empty.onnx": False,
+    "relu.onnx": False,
+    "missing.onnx": False,
+    "liar.onnx": False,
+}
 POINTS = {
-    "p.npy": True, "nan_p.npy": False, "inf_p.npy": False, "far_p.npy": True, "p2.npy": False,
-    "p1d.npy": False, "pobj.npy": False, "ptrunc.npy": False, "phuge.npy": False, "pempty.npy": True,
-    "pint.npy": True, "missing_p.npy": False,
-}  # fmt: skip
+    "p.npy": True,
+    "nan_p.npy": False,
+    "inf_p.npy": False,
+    "far_p.npy": True,
+    "p2.npy": False,
+    "p1d.npy": False,
+    "pobj.npy": False,
+    "ptrunc.npy": False,
+    "phuge.npy": False,
+    "pempty.npy": True,
+    "pint.npy": True,
+    "missing_p.npy": False,
+}
 NORMALS = {"n.npy": True, "zero_n.npy": True, "nan_n.npy": True, "n2.npy": False}
 VOLUMES = {
-    "vol.json": True, "truncated_vol.json": False, "empty.json": False, "nan_vol.json": False,
-    "list.json": False, "missing_vol.json": False,
-}  # fmt: skip
-BAKES = {"baked.ply": True, "tex.glb": True, "empty.glb": False, "nomesh.glb": False, "tet.obj": False,
-         "junk.ply": False, "truncated_baked.ply": False, "missing.ply": False}  # fmt: skip
-POSES = {"poses.json": True, "nan_poses.json": False, "junk.json": False, "empty_poses.json": False,
-         "bad_poses.json": False, "huge_poses.json": False}  # fmt: skip
-REGIONS = {"regions.json": True, "nan_regions.json": False, "junk.json": False, "flat_regions.json": False,
-           "bad_edges.json": False, "far_regions.json": True}  # fmt: skip
-DATASETS = {"dataset.json": True, "junk.json": False, "nan_dataset.json": False, "big_dataset.json": False,
-            "noscene_dataset.json": False, "typo_dataset.json": False, "empty.json": False}  # fmt: skip
+    "vol.json": True,
+    "truncated_vol.json": False,
+    "empty.json": False,
+    "nan_vol.json": False,
+    "list.json": False,
+    "missing_vol.json": False,
+}
+BAKES = {
+    "baked.ply": True,
+    "tex.glb": True,
+    "empty.glb": False,
+    "nomesh.glb": False,
+    "tet.obj": False,
+    "junk.ply": False,
+    "truncated_baked.ply": False,
+    "missing.ply": False,
+}
+POSES = {
+    "poses.json": True,
+    "nan_poses.json": False,
+    "junk.json": False,
+    "empty_poses.json": False,
+    "bad_poses.json": False,
+    "huge_poses.json": False,
+}
+REGIONS = {
+    "regions.json": True,
+    "nan_regions.json": False,
+    "junk.json": False,
+    "flat_regions.json": False,
+    "bad_edges.json": False,
+    "far_regions.json": True,
+}
+DATASETS = {
+    "dataset.json": True,
+    "junk.json": False,
+    "nan_dataset.json": False,
+    "big_dataset.json": False,
+    "noscene_dataset.json": False,
+    "typo_dataset.json": False,
+    "empty.json": False,
+}
 EXPORTS = {"export": True, "empty_dir": False, "missing_dir": False, "bad_manifest": False}
 
 
@@ -257,11 +347,24 @@ def probe_case(draw) -> Case:
     return _finish("probe", [*argv, "--out", "@OUT"], "ao" + out, False, c, f)
 
 
-VOLUME_SETS = {"samples": ["1", "2"], "directions": ["4", "16"], "grid": ["1", "2", "3"], "iterations": ["0", "1"],
-               "boundary_grid": ["1", "2"], "cell_rays": ["4", "8"], "max_region_cells": ["1", "4"],
-               "min_cells": ["1", "2"], "workers": ["1", "2"], "seed": ["0", "7"]}  # fmt: skip
-VOLUME_FLOATS = {"beta": ["0", "1"], "blend": ["0", "0.5", "1"], "max_distance_rel": ["0.5", "4"],
-                 "backface_threshold": ["0", "0.25"]}  # fmt: skip
+VOLUME_SETS = {
+    "samples": ["1", "2"],
+    "directions": ["4", "16"],
+    "grid": ["1", "2", "3"],
+    "iterations": ["0", "1"],
+    "boundary_grid": ["1", "2"],
+    "cell_rays": ["4", "8"],
+    "max_region_cells": ["1", "4"],
+    "min_cells": ["1", "2"],
+    "workers": ["1", "2"],
+    "seed": ["0", "7"],
+}
+VOLUME_FLOATS = {
+    "beta": ["0", "1"],
+    "blend": ["0", "0.5", "1"],
+    "max_distance_rel": ["0.5", "4"],
+    "backface_threshold": ["0", "0.25"],
+}
 
 
 @st.composite
@@ -305,24 +408,49 @@ def view_case(draw) -> Case:
     return _finish("view", [*argv, "--out", "@OUT"], "page", True, c, f)
 
 
-FIELD_SETS = {"steps": ["1", "2"], "batch": ["8", "16"], "samples": ["32", "64"], "check_every": ["1"],
-              "holdout_views": ["0", "1"], "threads": ["1"], "seed": ["0", "3"]}  # fmt: skip
+FIELD_SETS = {
+    "steps": ["1", "2"],
+    "batch": ["8", "16"],
+    "samples": ["32", "64"],
+    "check_every": ["1"],
+    "holdout_views": ["0", "1"],
+    "threads": ["1"],
+    "seed": ["0", "3"],
+}
 
 
 @st.composite
 def train_field_case(draw) -> Case:
     c, f = [], _flags(draw)
     argv = ["train", "field", "--mesh", _pick(draw, MESHES, c, f), "--no-progress"]
-    argv += ["--size", _choice(draw, f, c, "--size", ["4x4", "4", "8x2"],
-                               ["0x4", "4x-1", "x", "99999999999x4", "4x4x4x4x4x4x4x4"], 0.2)]  # fmt: skip
+    argv += [
+        "--size",
+        _choice(
+            draw,
+            f,
+            c,
+            "--size",
+            ["4x4", "4", "8x2"],
+            ["0x4", "4x-1", "x", "99999999999x4", "4x4x4x4x4x4x4x4"],
+            0.2,
+        ),
+    ]
     argv += _int(draw, "--octaves", ["0", "1", "2"], c, f)
     argv += _int(draw, "--rays", ["1", "2"], c, f, p_bad=0.2)
-    sets = {"steps": "1", "batch": "8", "samples": "32", "check_every": "1", "holdout_views": "1",
-            "holdout_size": "[8,8]", "threads": "1"}  # fmt: skip
+    sets = {
+        "steps": "1",
+        "batch": "8",
+        "samples": "32",
+        "check_every": "1",
+        "holdout_views": "1",
+        "holdout_size": "[8,8]",
+        "threads": "1",
+    }
     for key in draw(st.lists(st.sampled_from(sorted(FIELD_SETS)), max_size=2, unique=True)):
         sets[key] = _int(draw, key, FIELD_SETS[key], c, f, p_bad=0.7)[1]
-    sets["holdout_size"] = _choice(draw, f, c, "holdout_size", ["[8,8]", "[4,6]"],
-                                   ["[0,8]", "[100000000,100000000]", "[8]", "x"], 0.15)  # fmt: skip
+    sets["holdout_size"] = _choice(
+        draw, f, c, "holdout_size", ["[8,8]", "[4,6]"], ["[0,8]", "[100000000,100000000]", "[8]", "x"], 0.15
+    )
     sets["lr"] = _choice(draw, f, c, "lr", ["0.01"], ["nan", "inf", "-1", "1e308"], 0.15)
     f["nonfinite"] |= sets["lr"] in ("nan", "inf")
     for k, v in sets.items():
@@ -331,10 +459,19 @@ def train_field_case(draw) -> Case:
 
 
 # What a refusal of each hostile dataset config names: the file, or the setting that is bad in it.
-DATASET_CULPRITS = {"nan_dataset.json": "max_distance", "big_dataset.json": "views", "noscene_dataset.json": "scenes",
-                    "typo_dataset.json": "sizee"}  # fmt: skip
-DATASET_SETS = {"labels.rays": ["1", "2"], "frames_per_shard": ["1", "2"], "holdout_every": ["0", "2"],
-                "seed": ["0", "1"], "scenes.0.views": ["1", "2"]}  # fmt: skip
+DATASET_CULPRITS = {
+    "nan_dataset.json": "max_distance",
+    "big_dataset.json": "views",
+    "noscene_dataset.json": "scenes",
+    "typo_dataset.json": "sizee",
+}
+DATASET_SETS = {
+    "labels.rays": ["1", "2"],
+    "frames_per_shard": ["1", "2"],
+    "holdout_every": ["0", "2"],
+    "seed": ["0", "1"],
+    "scenes.0.views": ["1", "2"],
+}
 
 
 @st.composite
@@ -361,8 +498,14 @@ def glsl_case(draw) -> Case:
     if _maybe(draw, 0.3):
         argv += ["--precision", draw(st.sampled_from(["fp32", "fp16"]))]
     if _bad(draw, f, 0.3):
-        argv += ["--bind", draw(st.sampled_from(["x=gbuffer.xyzw", "x=gbuffer.xyzwx99999999999", "x=", "=",
-                                                 "x=t.q", "nosuch=t.x"]))]  # fmt: skip
+        argv += [
+            "--bind",
+            draw(
+                st.sampled_from(
+                    ["x=gbuffer.xyzw", "x=gbuffer.xyzwx99999999999", "x=", "=", "x=t.q", "nosuch=t.x"]
+                )
+            ),
+        ]
         c.append("--bind")
     return _finish("glsl", [*argv, "--out", "@OUT"], "glsl", True, c, f)
 
@@ -386,15 +529,46 @@ def parity_case(draw) -> Case:
 
 @st.composite
 def garbage_case(draw) -> Case:
-    argv = draw(st.lists(st.sampled_from(["bake", "--rays", "-v", "--out", "nosuch", "render", "", "-", "--",
-                                          "train", "mlp", "--help-me", "x" * 300]), max_size=4))  # fmt: skip
+    argv = draw(
+        st.lists(
+            st.sampled_from(
+                [
+                    "bake",
+                    "--rays",
+                    "-v",
+                    "--out",
+                    "nosuch",
+                    "render",
+                    "",
+                    "-",
+                    "--",
+                    "train",
+                    "mlp",
+                    "--help-me",
+                    "x" * 300,
+                ]
+            ),
+            max_size=4,
+        )
+    )
     if "-v" in argv:
         argv.remove("-v")  # verbose re-raises internal errors on purpose
     return Case("", argv, "", False, [], False)
 
 
-CASES = st.one_of(bake_case(), render_case(), infer_case(), probe_case(), volumes_case(), view_case(),
-                  train_field_case(), dataset_case(), glsl_case(), parity_case(), garbage_case())  # fmt: skip
+CASES = st.one_of(
+    bake_case(),
+    render_case(),
+    infer_case(),
+    probe_case(),
+    volumes_case(),
+    view_case(),
+    train_field_case(),
+    dataset_case(),
+    glsl_case(),
+    parity_case(),
+    garbage_case(),
+)
 
 
 # ----------------------------------------------------------------------------- hostile files
@@ -420,12 +594,25 @@ def _glb(doc: dict, blob: bytes = b"") -> bytes:
 
 
 def _tet_gltf(uri: str, count: int = 4) -> dict:
-    return {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-            "accessors": [{"bufferView": 0, "componentType": 5126, "count": count, "type": "VEC3",
-                           "min": [0, 0, 0], "max": [1, 1, 1]}],
-            "bufferViews": [{"buffer": 0, "byteLength": 48}],
-            "buffers": [{"uri": uri, "byteLength": 48}]}  # fmt: skip
+    return {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [
+            {
+                "bufferView": 0,
+                "componentType": 5126,
+                "count": count,
+                "type": "VEC3",
+                "min": [0, 0, 0],
+                "max": [1, 1, 1],
+            }
+        ],
+        "bufferViews": [{"buffer": 0, "byteLength": 48}],
+        "buffers": [{"uri": uri, "byteLength": 48}],
+    }
 
 
 def _write_files(d: Path, work: Path) -> None:
@@ -453,14 +640,17 @@ def _write_files(d: Path, work: Path) -> None:
     (d / "junk.obj").write_bytes(junk)
     (d / "words.obj").write_text("v a b c\nv 1 2\nf x y z\n")
     (d / "collinear.obj").write_text(_obj([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)]))
-    (d / "hostile.ply").write_text("ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\n"
-                                   "property float y\nproperty float z\nelement face 1\n"
-                                   "property list uchar int vertex_indices\nend_header\n0 0 0\n")  # fmt: skip
+    (d / "hostile.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\n"
+        "property float y\nproperty float z\nelement face 1\n"
+        "property list uchar int vertex_indices\nend_header\n0 0 0\n"
+    )
     ply = (d / "tet.ply").read_bytes()
     (d / "truncated.ply").write_bytes(ply[: len(ply) // 2])
     (d / "escape.gltf").write_text(json.dumps(_tet_gltf("../../../../../../etc/hostname")))
-    (d / "bigaccessor.gltf").write_text(json.dumps(_tet_gltf("data:application/octet-stream;base64,"
-                                                             + "A" * 64, count=10**12)))  # fmt: skip
+    (d / "bigaccessor.gltf").write_text(
+        json.dumps(_tet_gltf("data:application/octet-stream;base64," + "A" * 64, count=10**12))
+    )
     (d / "junk.gltf").write_text('{"asset": {"version": "2.0"}, "nodes": [{"mesh": 7}]')
     (d / "empty.glb").write_bytes(b"")
     (d / "badmagic.glb").write_bytes(b"glTX" + junk)
@@ -473,16 +663,36 @@ def _write_files(d: Path, work: Path) -> None:
     (d / "junk.stl").write_bytes(junk)
     (d / "folder").mkdir()
     # G-buffer frames: a real render, then broken copies
-    assert main(["render", str(d / "tet.obj"), "--views", "2", "--size", "16", "16", "--rays", "2",
-                 "--out", str(work / "render")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "render",
+                str(d / "tet.obj"),
+                "--views",
+                "2",
+                "--size",
+                "16",
+                "16",
+                "--rays",
+                "2",
+                "--out",
+                str(work / "render"),
+            ]
+        )
+        == 0
+    )
     from pipeline.foundation.io import read_npz
 
     frame = read_npz(work / "render" / "view_0000.npz")
     np.savez(d / "frame.npz", **frame)
     np.savez(d / "stack.npz", **{k: np.stack([v, v]) for k, v in frame.items()})
-    for name, key, value in (("nan_depth", "depth", np.nan), ("inf_normal", "normal_cam", np.inf),
-                             ("nan_position", "position", np.nan), ("nan_pose", "pose", np.nan),
-                             ("huge_depth", "depth", 3e38)):  # fmt: skip
+    for name, key, value in (
+        ("nan_depth", "depth", np.nan),
+        ("inf_normal", "normal_cam", np.inf),
+        ("nan_position", "position", np.nan),
+        ("nan_pose", "pose", np.nan),
+        ("huge_depth", "depth", 3e38),
+    ):
         broken = dict(frame)
         broken[key] = np.full_like(frame[key], value)
         np.savez(d / f"{name}.npz", **broken)
@@ -503,8 +713,10 @@ def _write_files(d: Path, work: Path) -> None:
     (d / "empty.onnx").write_bytes(b"")
     x = oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4, "h", "w"])
     y = oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, "h", "w"])
-    relu = oh.make_model(oh.make_graph([oh.make_node("Relu", ["x"], ["y"], name="")], "g", [x], [y]),
-                         opset_imports=[oh.make_opsetid("", 19)])  # fmt: skip
+    relu = oh.make_model(
+        oh.make_graph([oh.make_node("Relu", ["x"], ["y"], name="")], "g", [x], [y]),
+        opset_imports=[oh.make_opsetid("", 19)],
+    )
     (d / "relu.onnx").write_bytes(relu.SerializeToString())
     liar = onnx.ModelProto()
     liar.CopyFrom(relu)
@@ -533,8 +745,23 @@ def _write_files(d: Path, work: Path) -> None:
     np.save(d / "nan_n.npy", np.full((6, 3), np.nan))
     np.save(d / "n2.npy", n[:5])
     # volumes, bakes, export
-    assert main(["volumes", str(d / "tet.obj"), "--out", str(d / "vol.json"), "--set", "samples=2",
-                 "--set", "directions=16", "--set", "grid=2"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "volumes",
+                str(d / "tet.obj"),
+                "--out",
+                str(d / "vol.json"),
+                "--set",
+                "samples=2",
+                "--set",
+                "directions=16",
+                "--set",
+                "grid=2",
+            ]
+        )
+        == 0
+    )
     vol = (d / "vol.json").read_text()
     (d / "truncated_vol.json").write_text(vol[: len(vol) // 2])
     data = json.loads(vol)
@@ -547,8 +774,23 @@ def _write_files(d: Path, work: Path) -> None:
     baked = (d / "baked.ply").read_bytes()
     (d / "truncated_baked.ply").write_bytes(baked[: len(baked) - 20])
     (d / "junk.ply").write_bytes(junk)
-    assert main(["bake", str(d / "tet.obj"), "--rays", "2", "--to", "texture", "--resolution", "8",
-                 "--out", str(d / "tex.glb")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "bake",
+                str(d / "tet.obj"),
+                "--rays",
+                "2",
+                "--to",
+                "texture",
+                "--resolution",
+                "8",
+                "--out",
+                str(d / "tex.glb"),
+            ]
+        )
+        == 0
+    )
     assert main(["glsl", str(d / "relu.onnx"), "--target", "image", "--out", str(d / "export")]) == 0
     (d / "empty_dir").mkdir()
     (d / "bad_manifest").mkdir()
@@ -617,8 +859,11 @@ def _materialise(case: Case, files: Path, work: Path) -> tuple[list[str], Path, 
 
 def _run(argv: list[str]) -> tuple[int, str, list[warnings.WarningMessage]]:
     err = io.StringIO()
-    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stderr(err), \
-            contextlib.redirect_stdout(io.StringIO()):  # fmt: skip
+    with (
+        warnings.catch_warnings(record=True) as caught,
+        contextlib.redirect_stderr(err),
+        contextlib.redirect_stdout(io.StringIO()),
+    ):
         warnings.simplefilter("always")
         try:
             rc = main(argv)
@@ -738,8 +983,14 @@ def check_case(root: Path, files: Path, case: Case) -> None:
         shutil.rmtree(work)
 
 
-@settings(max_examples=FUZZ_EXAMPLES, derandomize=FUZZ_SEED is None, database=None, deadline=None, print_blob=True,
-          suppress_health_check=list(HealthCheck))  # fmt: skip
+@settings(
+    max_examples=FUZZ_EXAMPLES,
+    derandomize=FUZZ_SEED is None,
+    database=None,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=list(HealthCheck),
+)
 @seed(FUZZ_SEED or 0)
 @given(case=CASES)
 def test_cli_invocation_keeps_the_contract(fuzz_env, case):

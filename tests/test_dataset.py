@@ -131,12 +131,26 @@ MIXED = {
     "scenes": [
         {"name": "suzanne", "mesh": "suzanne", "cameras": "orbit", "views": 6, "split": "train"},
         {"name": "spot", "mesh": "spot", "cameras": "orbit", "views": 2, "yfov_deg": 50, "split": "train"},
-        {"name": "box", "mesh": "cornell_box", "cameras": "interior", "views": 2, "split": "val",
-         "sizes": [[24, 16]]},
+        {
+            "name": "box",
+            "mesh": "cornell_box",
+            "cameras": "interior",
+            "views": 2,
+            "split": "val",
+            "sizes": [[24, 16]],
+        },
     ],
-    "composed": [{"count": 1, "seed": 1, "views": 2, "cameras": ["closeup"], "yfov_range_deg": [40, 45],
-                  "compose": {"meshes": ["Fox", "beetle"], "objects": [2, 3]}}],
-}  # fmt: skip
+    "composed": [
+        {
+            "count": 1,
+            "seed": 1,
+            "views": 2,
+            "cameras": ["closeup"],
+            "yfov_range_deg": [40, 45],
+            "compose": {"meshes": ["Fox", "beetle"], "objects": [2, 3]},
+        }
+    ],
+}
 
 
 class _Stop(Exception):
@@ -282,7 +296,10 @@ def test_corpus_config_isolates_every_mesh_and_splits_by_mesh():
     assert rooms == {m: split for split, names in INTERIORS.items() for m in names}
     composed = [s for s in specs if s.compose is not None]
     assert {s.split for s in composed} == {"train", "val", "test"} and {s.cameras for s in composed} == {
-        "orbit", "interior", "closeup"}  # fmt: skip
+        "orbit",
+        "interior",
+        "closeup",
+    }
     assert all(object_meshes(s.split, s.compose.pool) == OBJECTS[s.split] for s in composed)  # latest pool
     assert len(set(map(tuple, settings.sizes))) >= 4 and any(w != h for w, h in settings.sizes)
     assert settings.labels.rays == 256 and settings.labels.radii_rel == [0.03125, 0.0625, 0.125, 0.25]
@@ -293,8 +310,10 @@ def test_corpus_config_isolates_every_mesh_and_splits_by_mesh():
     bad = from_dict(DatasetSettings, data)
     with pytest.raises(NeuralaoError, match="fandisk.*split by mesh"):
         _validate(bad, expand_scenes(bad), root)
-    data = {"scenes": [{"name": "Avocado", "mesh": "Avocado", "split": "val"}],
-            "composed": [{"count": 1, "views": 1, "compose": {"pool": 2}}]}  # fmt: skip
+    data = {
+        "scenes": [{"name": "Avocado", "mesh": "Avocado", "split": "val"}],
+        "composed": [{"count": 1, "views": 1, "compose": {"pool": 2}}],
+    }
     bad = from_dict(DatasetSettings, data)
     with pytest.raises(NeuralaoError, match="Avocado"):  # pool 2 holds the added props
         _validate(bad, expand_scenes(bad), root)

@@ -35,8 +35,26 @@ def _user_frame(path, **extra) -> dict:
 
 def test_a_frame_written_by_render_is_read_by_infer_unchanged(tmp_path):
     out = tmp_path / "r"
-    assert cli.main(["render", "spot", "--views", "1", "--size", str(W), str(H), "--rays", "8", "--yfov", "50",
-                     "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "render",
+                "spot",
+                "--views",
+                "1",
+                "--size",
+                str(W),
+                str(H),
+                "--rays",
+                "8",
+                "--yfov",
+                "50",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     frame = np.load(out / "view_0000.npz")
     assert math.isclose(float(frame["yfov"]), math.radians(50))  # the frame stores radians
     assert json.loads((out / "render.json").read_text())["settings"]["yfov_deg"] == 50
@@ -55,8 +73,12 @@ def test_a_frame_from_the_documented_keys_alone_is_read_by_infer(tmp_path):
     assert a.shape == (H, W) and np.isfinite(a).all() and a.min() >= 0 and a.max() <= 1
     assert np.ptp(a) > 0  # the box's edges change the AO: the depth really went in
     # the same field of view in radians, on the command line or stored in the frame as render stores it
-    assert _infer([str(tmp_path / "mine.npz"), "--yfov-rad", repr(math.radians(60)), *args,
-                   str(tmp_path / "b.npy")]) == 0  # fmt: skip
+    assert (
+        _infer(
+            [str(tmp_path / "mine.npz"), "--yfov-rad", repr(math.radians(60)), *args, str(tmp_path / "b.npy")]
+        )
+        == 0
+    )
     _user_frame(tmp_path / "with_fov.npz", yfov=np.float64(math.radians(60)), mask=np.ones((H, W), bool))
     assert _infer([str(tmp_path / "with_fov.npz"), *args, str(tmp_path / "c.npy")]) == 0
     np.testing.assert_allclose(np.load(tmp_path / "b.npy"), a, atol=1e-6)
@@ -74,10 +96,14 @@ def test_a_missing_field_of_view_or_radius_names_the_flag(tmp_path, capsys):
     assert not (tmp_path / "a.png").exists()
 
 
-@pytest.mark.parametrize("flags", [["--yfov", "180"], ["--yfov", "0"], ["--yfov-rad", "3.2"], ["--yfov", "60", "--yfov-rad", "1"]])  # fmt: skip
+@pytest.mark.parametrize(
+    "flags", [["--yfov", "180"], ["--yfov", "0"], ["--yfov-rad", "3.2"], ["--yfov", "60", "--yfov-rad", "1"]]
+)
 def test_bad_fields_of_view_are_one_line_errors(tmp_path, capsys, flags):
     _user_frame(tmp_path / "mine.npz")
-    assert _infer([str(tmp_path / "mine.npz"), *flags, "--radius", "0.5", "--out", str(tmp_path / "a.png")]) == 2
+    assert (
+        _infer([str(tmp_path / "mine.npz"), *flags, "--radius", "0.5", "--out", str(tmp_path / "a.png")]) == 2
+    )
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert not (tmp_path / "a.png").exists()
 

@@ -223,8 +223,13 @@ def _op_batchnorm(g: _ImageGraph, x: _T) -> _T:
     shape = (1, c, 1, 1)
     src = g.add_scaled_abs(x, 2 * _gamma(64))
     k = 2 * _gamma(64) * (s * np.abs(mean) + np.abs(beta) + np.abs(beta - s * mean))
-    e = g.b("Add", [g.b("Mul", [src, g.const(s.reshape(shape).astype(np.float32))]),
-                    g.const(k.reshape(shape).astype(np.float32))])  # fmt: skip
+    e = g.b(
+        "Add",
+        [
+            g.b("Mul", [src, g.const(s.reshape(shape).astype(np.float32))]),
+            g.const(k.reshape(shape).astype(np.float32)),
+        ],
+    )
     return _T(out, e, c, x.h, x.w)
 
 
@@ -329,8 +334,13 @@ def _nearest_ties(g: _ImageGraph, x: _T, resize_inputs: list[str], attrs: dict) 
 
 def _op_resize(g: _ImageGraph, x: _T) -> _T | None:
     rng = g.rng
-    mode = str(rng.choice(["linear", "linear", "nearest", "nearest", "cubic"] if rng.random() < 0.1 else
-                          ["linear", "nearest"]))  # fmt: skip
+    mode = str(
+        rng.choice(
+            ["linear", "linear", "nearest", "nearest", "cubic"]
+            if rng.random() < 0.1
+            else ["linear", "nearest"]
+        )
+    )
     attrs = {"mode": mode, "coordinate_transformation_mode": str(rng.choice(COORDS))}
     if mode == "nearest":
         attrs["nearest_mode"] = str(rng.choice(NEAREST))
@@ -357,9 +367,22 @@ def _op_resize(g: _ImageGraph, x: _T) -> _T | None:
         # ulps of L each): a weight error delta moves the result by <= delta * 2 max |x| (per channel).
         big = max(x.h, x.w, h, w) + 1
         gmax = g.b("GlobalMaxPool", [g.abs_of(x)])
-        e = g.b("Add", [g.b("Add", [propagated, g.b("Mul", [g.b("Resize", [g.abs_of(x), *inputs[1:]], **attrs),
-                                                              g.scalar(2 * _gamma(8))])]),
-                        g.b("Mul", [gmax, g.scalar(2 * 2 * 16 * U * big)])])  # fmt: skip
+        e = g.b(
+            "Add",
+            [
+                g.b(
+                    "Add",
+                    [
+                        propagated,
+                        g.b(
+                            "Mul",
+                            [g.b("Resize", [g.abs_of(x), *inputs[1:]], **attrs), g.scalar(2 * _gamma(8))],
+                        ),
+                    ],
+                ),
+                g.b("Mul", [gmax, g.scalar(2 * 2 * 16 * U * big)]),
+            ],
+        )
     return _T(out, e, x.c, h, w)
 
 
@@ -379,7 +402,9 @@ def _op_concat(g: _ImageGraph, x: _T, pool: list[_T]) -> _T:
 
 def _op_unsupported(g: _ImageGraph, x: _T) -> _T:
     """Ops outside the compute table: a clean error."""
-    op = str(g.rng.choice(["Round", "Hardmax", "Tan", "Atan"]))  # outside the table (Log, Erf, Softmax, Exp joined it)
+    op = str(
+        g.rng.choice(["Round", "Hardmax", "Tan", "Atan"])
+    )  # outside the table (Log, Erf, Softmax, Exp joined it)
     out = g.fresh("v")
     g.node(op, [x.name], out, reject=True)
     return _T(out, x.bound, x.c, x.h, x.w)
@@ -548,8 +573,15 @@ def _random_mlp(seed: int, n: np.ndarray):
                 b64 = np.full(out_w, float(b[0]))
             reject = rng.random() < 0.05
             extra = {"transA": 1} if reject else {}
-            name = add("Gemm", [name, const(bmat, "B"), const(b.reshape(c_shape), "C")], reject, alpha=alpha,
-                       beta=beta, transB=trans_b, **extra)  # fmt: skip
+            name = add(
+                "Gemm",
+                [name, const(bmat, "B"), const(b.reshape(c_shape), "C")],
+                reject,
+                alpha=alpha,
+                beta=beta,
+                transB=trans_b,
+                **extra,
+            )
             w64, b64 = w64 * alpha, b64 * beta
         else:
             name = add("MatMul", [name, const(w.T.copy(), "B")])

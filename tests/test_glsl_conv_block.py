@@ -30,10 +30,12 @@ def _w(shape, seed):
 def _model(nodes, inits, cin, static=False):
     hw = [H, W] if static else ["h", "w"]  # a strided output of an odd dynamic size would be fractional
     graph = oh.make_graph(
-        nodes, "g", [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, cin, *hw])],
+        nodes,
+        "g",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, cin, *hw])],
         [oh.make_tensor_value_info("y", TensorProto.FLOAT, ["n", "c", "h2", "w2"])],
         [nh.from_array(v, k) for k, v in inits],
-    )  # fmt: skip
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", 19)])
     onnx.checker.check_model(model)
     return model
@@ -54,9 +56,17 @@ def _strided(cin=5, cout=12):
 
 def _concat(cin=4):
     """Two branches concatenated into a 5x5 conv (read in place: two input loops) + BatchNorm + PRelu."""
-    inits = [("w1", _w((8, cin, 3, 3), 5)), ("w2", _w((3, cin, 1, 1), 6)), ("w3", _w((8, 11, 5, 3), 7)),
-             ("b3", _w((8,), 8)), ("s", _w((8,), 9) + 1.0), ("m", _w((8,), 10)), ("v", np.abs(_w((8,), 11)) + 0.5),
-             ("bb", _w((8,), 12)), ("slope", _w((8, 1, 1), 13))]  # fmt: skip
+    inits = [
+        ("w1", _w((8, cin, 3, 3), 5)),
+        ("w2", _w((3, cin, 1, 1), 6)),
+        ("w3", _w((8, 11, 5, 3), 7)),
+        ("b3", _w((8,), 8)),
+        ("s", _w((8,), 9) + 1.0),
+        ("m", _w((8,), 10)),
+        ("v", np.abs(_w((8,), 11)) + 0.5),
+        ("bb", _w((8,), 12)),
+        ("slope", _w((8, 1, 1), 13)),
+    ]
     nodes = [
         oh.make_node("Conv", ["x", "w1"], ["a"], pads=[1, 1, 1, 1]),
         oh.make_node("Relu", ["a"], ["ar"]),
@@ -86,7 +96,9 @@ def test_blocks_match_onnxruntime(graph):
             layers = program.manifest["textures"][p["output"]["texture"]]["layers"]
             bx, by, bl = p["block"]
             assert (bx, by) == block[:2] and bl <= block[2] and layers % bl == 0, (p["block"], layers)
-            assert f"/ {8 * bx})" in p["dispatch"]["groups"][0] and f"/ {8 * by})" in p["dispatch"]["groups"][1]
+            assert (
+                f"/ {8 * bx})" in p["dispatch"]["groups"][0] and f"/ {8 * by})" in p["dispatch"]["groups"][1]
+            )
         got = run_compute(program, x)
         assert got.shape == ref.shape
         err = float(np.abs(got - ref).max())

@@ -120,9 +120,15 @@ def test_conv_transpose(case):
 def test_conv_batchnorm_and_arithmetic_fold():
     """Conv -> BatchNormalization -> Mul -> Add fold into the conv weights; the activation is an epilogue."""
     rng = np.random.default_rng(4)
-    inits = [("w", _w((C, 1, 3, 3))), ("s", rng.uniform(0.5, 2, C).astype(np.float32)), ("bb", _w((C,), 5)),
-             ("m", _w((C,), 6)), ("v", rng.uniform(0.1, 3, C).astype(np.float32)),
-             ("k", _w((C, 1, 1), 7)), ("c", np.float32(0.25))]  # fmt: skip
+    inits = [
+        ("w", _w((C, 1, 3, 3))),
+        ("s", rng.uniform(0.5, 2, C).astype(np.float32)),
+        ("bb", _w((C,), 5)),
+        ("m", _w((C,), 6)),
+        ("v", rng.uniform(0.1, 3, C).astype(np.float32)),
+        ("k", _w((C, 1, 1), 7)),
+        ("c", np.float32(0.25)),
+    ]
     nodes = [
         oh.make_node("Conv", ["x", "w"], ["a"], name="dw", group=C, pads=[1, 1, 1, 1]),
         oh.make_node("BatchNormalization", ["a", "s", "bb", "m", "v"], ["b"], name="bn"),
@@ -174,11 +180,13 @@ def _same_pads(n, k, s, d, upper):
 
 @pytest.mark.parametrize(
     "op,attrs",
-    [("Conv", dict(auto_pad="SAME_UPPER", strides=[3, 2], dilations=[2, 1], kernel_shape=[3, 2])),
-     ("Conv", dict(auto_pad="SAME_LOWER", strides=[2, 2], dilations=[2, 3], kernel_shape=[2, 3])),
-     ("MaxPool", dict(auto_pad="SAME_UPPER", strides=[2, 3], dilations=[2, 1], kernel_shape=[3, 3])),
-     ("AveragePool", dict(auto_pad="SAME_LOWER", strides=[2, 2], dilations=[2, 2], kernel_shape=[2, 3]))],
-)  # fmt: skip
+    [
+        ("Conv", dict(auto_pad="SAME_UPPER", strides=[3, 2], dilations=[2, 1], kernel_shape=[3, 2])),
+        ("Conv", dict(auto_pad="SAME_LOWER", strides=[2, 2], dilations=[2, 3], kernel_shape=[2, 3])),
+        ("MaxPool", dict(auto_pad="SAME_UPPER", strides=[2, 3], dilations=[2, 1], kernel_shape=[3, 3])),
+        ("AveragePool", dict(auto_pad="SAME_LOWER", strides=[2, 2], dilations=[2, 2], kernel_shape=[2, 3])),
+    ],
+)
 def test_same_with_dilations(op, attrs):
     """onnxruntime refuses (Conv) or mis-sizes (pools) SAME with dilations, so the reference is the same
     op with the spec's SAME padding given explicitly."""
@@ -205,7 +213,7 @@ def test_symbolic_sizes_same_ceil_and_transpose():
             pads=[1, 1, 1, 1],
             ceil_mode=1,
             count_include_pad=1,
-        ),  # fmt: skip
+        ),
         oh.make_node(
             "ConvTranspose",
             ["b", "t"],
@@ -214,7 +222,7 @@ def test_symbolic_sizes_same_ceil_and_transpose():
             strides=[2, 2],
             output_padding=[1, 1],
             pads=[1, 1, 1, 1],
-        ),  # fmt: skip
+        ),
     ]
     model = _model(nodes, [("w", _w((4, C, 3, 3))), ("t", _w((4, 2, 3, 3), 3))], (1, C, "H", "W"))
     program = _check(model, _x((1, C, 8, 12)))
@@ -248,8 +256,11 @@ def test_prelu(shape):
     _check(_model([_node("PRelu", ("x", "s"))], [("s", _w(shape, scale=1.0))]), _x())
 
 
-ARITH_CONSTANTS = {"scalar": np.float32(0.7), "per_channel": _w((C, 1, 1), 9, 1.0) + 2.0,
-                   "per_channel_4d": _w((1, C, 1, 1), 10, 1.0) - 2.0}  # fmt: skip
+ARITH_CONSTANTS = {
+    "scalar": np.float32(0.7),
+    "per_channel": _w((C, 1, 1), 9, 1.0) + 2.0,
+    "per_channel_4d": _w((1, C, 1, 1), 10, 1.0) - 2.0,
+}
 
 
 @pytest.mark.parametrize("op", ["Add", "Sub", "Mul", "Div"])
@@ -277,8 +288,10 @@ def test_arithmetic_two_images(op):
 
 
 def test_residual_add_of_input():
-    nodes = [oh.make_node("Conv", ["x", "w"], ["a"], name="conv", pads=[1, 1, 1, 1]),
-             oh.make_node("Add", ["x", "a"], ["y"], name="residual")]  # fmt: skip
+    nodes = [
+        oh.make_node("Conv", ["x", "w"], ["a"], name="conv", pads=[1, 1, 1, 1]),
+        oh.make_node("Add", ["x", "a"], ["y"], name="residual"),
+    ]
     _check(_model(nodes, [("w", _w((C, C, 3, 3)))]), _x())
 
 
@@ -372,17 +385,26 @@ def test_resize(attrs, scales, sizes):
     ],
 )
 def test_resize_tf_crop_and_resize(mode, roi, sizes, extrapolation):
-    attrs = dict(mode=mode, coordinate_transformation_mode="tf_crop_and_resize", extrapolation_value=extrapolation,
-                 axes=[2, 3])  # fmt: skip
+    attrs = dict(
+        mode=mode,
+        coordinate_transformation_mode="tf_crop_and_resize",
+        extrapolation_value=extrapolation,
+        axes=[2, 3],
+    )
     inits = [("r", np.array(roi, np.float32)), ("s", np.array(sizes, np.int64))]
     _check(_model([_node("Resize", ("x", "r", "", "s"), **attrs)], inits), _x())
 
 
 @pytest.mark.parametrize(
     "mode,scales,opset",
-    [("nearest", [1.0, 1.0, 2.0, 3.0], 9), ("linear", [1.0, 1.0, 2.0, 1.5], 9), ("nearest", [1.0, 1.0, 3.0, 2.0], 8),
-     ("linear", [1.0, 1.0, 1.5, 2.0], 7), ("nearest", [1.0, 1.0, 1.0, 1.5], 7)],
-)  # fmt: skip
+    [
+        ("nearest", [1.0, 1.0, 2.0, 3.0], 9),
+        ("linear", [1.0, 1.0, 2.0, 1.5], 9),
+        ("nearest", [1.0, 1.0, 3.0, 2.0], 8),
+        ("linear", [1.0, 1.0, 1.5, 2.0], 7),
+        ("nearest", [1.0, 1.0, 1.0, 1.5], 7),
+    ],
+)
 def test_upsample(mode, scales, opset):
     if opset == 9:
         model = _model(
@@ -411,8 +433,16 @@ def test_refused_attribute_values():
     _error(_model([_node("Clip", min=-1.0, max=1.0)], opset=6), "Clip", "my clip", "attribute value max=1.0")
     model = _model([_node("Upsample", mode="linear", scales=[1.0, 1.0, 2.0, 0.5])], opset=8)
     _error(model, "Upsample", "my upsample", "scales")
-    _error(_model([_node("Resize", ("x", "", "", "s"), mode="linear", antialias=1)], [("s", np.array([1, C, 4, 4]))],
-                  (1, C, "H", "W")), "Resize", "my resize", "antialias")  # fmt: skip
+    _error(
+        _model(
+            [_node("Resize", ("x", "", "", "s"), mode="linear", antialias=1)],
+            [("s", np.array([1, C, 4, 4]))],
+            (1, C, "H", "W"),
+        ),
+        "Resize",
+        "my resize",
+        "antialias",
+    )
     _error(
         _model([_node("Pad", ("x", "p"))], [("p", np.array([0, 1, 0, 0, 0, 0, 0, 0]))]),
         "Pad",
@@ -423,8 +453,10 @@ def test_refused_attribute_values():
 
 
 def test_refused_global_pool_on_padded_dynamic_input():
-    nodes = [oh.make_node("AveragePool", ["x"], ["a"], name="half", kernel_shape=[2, 2], strides=[2, 2]),
-             oh.make_node("GlobalAveragePool", ["a"], ["y"], name="gap")]  # fmt: skip
+    nodes = [
+        oh.make_node("AveragePool", ["x"], ["a"], name="half", kernel_shape=[2, 2], strides=[2, 2]),
+        oh.make_node("GlobalAveragePool", ["a"], ["y"], name="gap"),
+    ]
     _error(_model(nodes, in_shape=(1, C, "H", "W")), "GlobalAveragePool", "gap", "pad_multiple")
 
 
@@ -439,18 +471,25 @@ def test_pad_with_pads_computed_as_torch_writes_them():
     """torch.onnx.export of F.pad(x, (1, 2, 3, 0), mode="reflect") (and Conv2d(padding_mode="reflect")):
     the pads come from ConstantOfShape, Concat, Reshape, Slice, Transpose, Reshape and Cast."""
     nodes = [
-        _const("lrtb", np.array([1, 2, 3, 0], np.int64)), _const("n4", np.array([4], np.int64)),
-        oh.make_node("ConstantOfShape", ["n4"], ["zeros"], name="zeros", value=nh.from_array(np.zeros(1, np.int64))),
+        _const("lrtb", np.array([1, 2, 3, 0], np.int64)),
+        _const("n4", np.array([4], np.int64)),
+        oh.make_node(
+            "ConstantOfShape", ["n4"], ["zeros"], name="zeros", value=nh.from_array(np.zeros(1, np.int64))
+        ),
         oh.make_node("Concat", ["lrtb", "zeros"], ["p8"], name="cat", axis=0),
-        _const("s2", np.array([-1, 2], np.int64)), oh.make_node("Reshape", ["p8", "s2"], ["p42"], name="pairs"),
-        _const("st", np.array([-1], np.int64)), _const("en", np.array([-(2**63) + 1], np.int64)),
-        _const("ax", np.array([0], np.int64)), _const("sp", np.array([-1], np.int64)),
+        _const("s2", np.array([-1, 2], np.int64)),
+        oh.make_node("Reshape", ["p8", "s2"], ["p42"], name="pairs"),
+        _const("st", np.array([-1], np.int64)),
+        _const("en", np.array([-(2**63) + 1], np.int64)),
+        _const("ax", np.array([0], np.int64)),
+        _const("sp", np.array([-1], np.int64)),
         oh.make_node("Slice", ["p42", "st", "en", "ax", "sp"], ["rev"], name="reverse"),
         oh.make_node("Transpose", ["rev"], ["t"], name="transpose", perm=[1, 0]),
-        _const("flat", np.array([-1], np.int64)), oh.make_node("Reshape", ["t", "flat"], ["pf"], name="flatten"),
+        _const("flat", np.array([-1], np.int64)),
+        oh.make_node("Reshape", ["t", "flat"], ["pf"], name="flatten"),
         oh.make_node("Cast", ["pf"], ["pads"], name="cast", to=TensorProto.INT64),
         oh.make_node("Pad", ["x", "pads"], ["y"], name="pad", mode="reflect"),
-    ]  # fmt: skip
+    ]
     program = _check(_model(nodes), _x())
     assert _kinds(program) == [("spatial_pad", ["Pad"])]
 
@@ -460,7 +499,9 @@ def test_resize_to_a_static_shape_read_with_shape_gather_unsqueeze():
     nodes = [
         oh.make_node("AveragePool", ["x"], ["a"], name="pool", kernel_shape=[2, 2], strides=[2, 2]),
         oh.make_node("Shape", ["x"], ["shp"], name="shape"),
-        _const("i2", np.array(2, np.int64)), _const("i3", np.array([3], np.int64)), _const("z", np.array([0], np.int64)),
+        _const("i2", np.array(2, np.int64)),
+        _const("i3", np.array([3], np.int64)),
+        _const("z", np.array([0], np.int64)),
         oh.make_node("Gather", ["shp", "i2"], ["h"], name="gather h"),
         oh.make_node("Gather", ["shp", "i3"], ["w1"], name="gather w"),
         oh.make_node("Squeeze", ["w1", "z"], ["w"], name="squeeze"),
@@ -469,7 +510,7 @@ def test_resize_to_a_static_shape_read_with_shape_gather_unsqueeze():
         oh.make_node("Shape", ["a"], ["nc"], name="shape nc", end=2),
         oh.make_node("Concat", ["nc", "h1", "w2"], ["sizes"], name="sizes", axis=0),
         oh.make_node("Resize", ["a", "", "", "sizes"], ["y"], name="resize", mode="linear"),
-    ]  # fmt: skip
+    ]
     program = _check(_model(nodes), _x())
     assert [k for k, _ in _kinds(program)] == ["pool_avg", "resize_linear"]
 
@@ -477,13 +518,31 @@ def test_resize_to_a_static_shape_read_with_shape_gather_unsqueeze():
 def test_folded_ops_refuse_dynamic_shapes():
     """Reshape / Transpose of an image need its size (static views); Shape of a dynamic size cannot fold."""
     dynamic = (1, C, "H", "W")
-    _error(_model([_node("Reshape", ("x", "s"))], [("s", np.array([1, -1], np.int64))], dynamic), "Reshape",
-           "my reshape", "static image size")  # fmt: skip
-    _error(_model([_node("Transpose", perm=[0, 1, 3, 2])], in_shape=dynamic), "Transpose", "my transpose", "static")
-    _error(_model([_node("Slice", ("x", "s", "e"))], [("s", np.array([0])), ("e", np.array([1]))]), "Slice",
-           "my slice", "constants only")  # fmt: skip
-    nodes = [oh.make_node("Shape", ["x"], ["s"], name="shape"),
-             oh.make_node("Resize", ["x", "", "", "s"], ["y"], name="resize")]  # fmt: skip
+    _error(
+        _model([_node("Reshape", ("x", "s"))], [("s", np.array([1, -1], np.int64))], dynamic),
+        "Reshape",
+        "my reshape",
+        "static image size",
+    )
+    _error(
+        _model([_node("Transpose", perm=[0, 1, 3, 2])], in_shape=dynamic),
+        "Transpose",
+        "my transpose",
+        "static",
+    )
+    _error(
+        _model([_node("Slice", ("x", "s", "e"))], [("s", np.array([0])), ("e", np.array([1]))]),
+        "Slice",
+        "my slice",
+        "constants only",
+    )
+    nodes = [
+        oh.make_node("Shape", ["x"], ["s"], name="shape"),
+        oh.make_node("Resize", ["x", "", "", "s"], ["y"], name="resize"),
+    ]
     _error(_model(nodes, in_shape=(1, C, "H", "W")), "Shape", "shape", "dynamic size")
-    big = [oh.make_node("ConstantOfShape", ["n"], ["z"], name="big"), oh.make_node("Add", ["x", "z"], ["y"], name="add")]
+    big = [
+        oh.make_node("ConstantOfShape", ["n"], ["z"], name="big"),
+        oh.make_node("Add", ["x", "z"], ["y"], name="add"),
+    ]
     _error(_model(big, [("n", np.array([1 << 40], np.int64))]), "ConstantOfShape", "big", "exceeds")

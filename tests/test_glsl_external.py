@@ -59,7 +59,10 @@ def _seed_batchnorm(module: nn.Module, gen: torch.Generator) -> None:
 
 
 def _conv_bn(cin: int, cout: int, k: int, stride: int = 1, padding_mode: str = "zeros") -> list[nn.Module]:
-    return [nn.Conv2d(cin, cout, k, stride, k // 2, bias=False, padding_mode=padding_mode), nn.BatchNorm2d(cout)]
+    return [
+        nn.Conv2d(cin, cout, k, stride, k // 2, bias=False, padding_mode=padding_mode),
+        nn.BatchNorm2d(cout),
+    ]
 
 
 class BasicBlock(nn.Module):
@@ -67,8 +70,12 @@ class BasicBlock(nn.Module):
 
     def __init__(self, cin: int, cout: int, stride: int = 1):
         super().__init__()
-        self.body = nn.Sequential(*_conv_bn(cin, cout, 3, stride), nn.ReLU(inplace=True), *_conv_bn(cout, cout, 3))
-        self.downsample = nn.Sequential(*_conv_bn(cin, cout, 1, stride)) if stride != 1 or cin != cout else None
+        self.body = nn.Sequential(
+            *_conv_bn(cin, cout, 3, stride), nn.ReLU(inplace=True), *_conv_bn(cout, cout, 3)
+        )
+        self.downsample = (
+            nn.Sequential(*_conv_bn(cin, cout, 1, stride)) if stride != 1 or cin != cout else None
+        )
         self.relu = nn.ReLU(inplace=True)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -102,7 +109,12 @@ class Residual(nn.Module):
 
 
 def _block(cin: int, cout: int, padding_mode: str = "zeros") -> nn.Sequential:
-    return nn.Sequential(*_conv_bn(cin, cout, 3, padding_mode=padding_mode), nn.ReLU(), nn.Conv2d(cout, cout, 3, padding=1), nn.LeakyReLU(0.1))
+    return nn.Sequential(
+        *_conv_bn(cin, cout, 3, padding_mode=padding_mode),
+        nn.ReLU(),
+        nn.Conv2d(cout, cout, 3, padding=1),
+        nn.LeakyReLU(0.1),
+    )
 
 
 class ResUNet(nn.Module):
@@ -135,7 +147,10 @@ def _seeded(module: nn.Module, seed: int) -> nn.Module:
     gen = torch.Generator().manual_seed(seed)
     with torch.no_grad():
         for p in module.parameters():
-            p.copy_(torch.randn(p.shape, generator=gen) * (1.5 / max(1, p[0].numel()) ** 0.5 if p.ndim > 1 else 0.1))
+            p.copy_(
+                torch.randn(p.shape, generator=gen)
+                * (1.5 / max(1, p[0].numel()) ** 0.5 if p.ndim > 1 else 0.1)
+            )
     _seed_batchnorm(module, gen)
     return module.eval()
 
@@ -144,8 +159,16 @@ def _torch_onnx(module: nn.Module, path, size: tuple[int, int]) -> None:
     """Export as torchvision users do: legacy exporter, named input and output, dynamic H and W."""
     dyn = {"x": {2: "H", 3: "W"}, "y": {2: "h", 3: "w"}}
     buf = io.BytesIO()
-    torch.onnx.export(module, (torch.zeros(1, 3, size[1], size[0]),), buf, dynamo=False, opset_version=OPSET,
-                      input_names=["x"], output_names=["y"], dynamic_axes=dyn)  # fmt: skip
+    torch.onnx.export(
+        module,
+        (torch.zeros(1, 3, size[1], size[0]),),
+        buf,
+        dynamo=False,
+        opset_version=OPSET,
+        input_names=["x"],
+        output_names=["y"],
+        dynamic_axes=dyn,
+    )
     path.write_bytes(buf.getvalue())
 
 
@@ -159,35 +182,95 @@ def _tf_same_model(path) -> None:
     def b(n):
         return (rng.normal(size=n) * 0.1).astype(np.float32)
 
-    inits = {"pads": np.array([0, 0, 0, 0, 0, 0, 1, 1], np.int64), "pad_value": np.array(0.0, np.float32),
-             "zero": np.array(0.0, np.float32), "six": np.array(6.0, np.float32),
-             "w0": w(8, 3, 3, 3), "b0": b(8), "wd": w(8, 1, 3, 3), "bd": b(8), "wp": w(12, 8, 1, 1), "bp": b(12),
-             "w2": w(12, 12, 3, 3), "b2": b(12), "w3": w(4, 12, 1, 1), "b3": b(4)}  # fmt: skip
+    inits = {
+        "pads": np.array([0, 0, 0, 0, 0, 0, 1, 1], np.int64),
+        "pad_value": np.array(0.0, np.float32),
+        "zero": np.array(0.0, np.float32),
+        "six": np.array(6.0, np.float32),
+        "w0": w(8, 3, 3, 3),
+        "b0": b(8),
+        "wd": w(8, 1, 3, 3),
+        "bd": b(8),
+        "wp": w(12, 8, 1, 1),
+        "bp": b(12),
+        "w2": w(12, 12, 3, 3),
+        "b2": b(12),
+        "w3": w(4, 12, 1, 1),
+        "b3": b(4),
+    }
     same = dict(auto_pad="SAME_UPPER")
     nodes = [
         # ZeroPadding2D(((0, 1), (0, 1))) + Conv2D(strides=2, padding="valid"): tf2onnx keeps the Pad
-        oh.make_node("Pad", ["x", "pads", "pad_value"], ["xp"], name="model/zero_padding2d/Pad", mode="constant"),
-        oh.make_node("Conv", ["xp", "w0", "b0"], ["c0"], name="model/Conv1/Conv2D", kernel_shape=[3, 3],
-                     strides=[2, 2], dilations=[1, 1], auto_pad="VALID", group=1),
+        oh.make_node(
+            "Pad", ["x", "pads", "pad_value"], ["xp"], name="model/zero_padding2d/Pad", mode="constant"
+        ),
+        oh.make_node(
+            "Conv",
+            ["xp", "w0", "b0"],
+            ["c0"],
+            name="model/Conv1/Conv2D",
+            kernel_shape=[3, 3],
+            strides=[2, 2],
+            dilations=[1, 1],
+            auto_pad="VALID",
+            group=1,
+        ),
         oh.make_node("Clip", ["c0", "zero", "six"], ["r0"], name="model/Conv1_relu/Relu6"),
         # DepthwiseConv2D(padding="same")
-        oh.make_node("Conv", ["r0", "wd", "bd"], ["cd"], name="model/expanded_conv_depthwise/depthwise",
-                     kernel_shape=[3, 3], strides=[1, 1], dilations=[1, 1], group=8, **same),
+        oh.make_node(
+            "Conv",
+            ["r0", "wd", "bd"],
+            ["cd"],
+            name="model/expanded_conv_depthwise/depthwise",
+            kernel_shape=[3, 3],
+            strides=[1, 1],
+            dilations=[1, 1],
+            group=8,
+            **same,
+        ),
         oh.make_node("Clip", ["cd", "zero", "six"], ["rd"], name="model/expanded_conv_depthwise_relu/Relu6"),
-        oh.make_node("Conv", ["rd", "wp", "bp"], ["cp"], name="model/expanded_conv_project/Conv2D",
-                     kernel_shape=[1, 1], strides=[1, 1], **same),
+        oh.make_node(
+            "Conv",
+            ["rd", "wp", "bp"],
+            ["cp"],
+            name="model/expanded_conv_project/Conv2D",
+            kernel_shape=[1, 1],
+            strides=[1, 1],
+            **same,
+        ),
         # Conv2D(strides=2, padding="same") on an odd size: the odd pad sample goes to the end
-        oh.make_node("Conv", ["cp", "w2", "b2"], ["c2"], name="model/block_1/Conv2D", kernel_shape=[3, 3],
-                     strides=[2, 2], dilations=[1, 1], **same),
+        oh.make_node(
+            "Conv",
+            ["cp", "w2", "b2"],
+            ["c2"],
+            name="model/block_1/Conv2D",
+            kernel_shape=[3, 3],
+            strides=[2, 2],
+            dilations=[1, 1],
+            **same,
+        ),
         oh.make_node("Relu", ["c2"], ["r2"], name="model/block_1/Relu"),
-        oh.make_node("MaxPool", ["r2"], ["m2"], name="model/max_pooling2d/MaxPool", kernel_shape=[3, 3],
-                     strides=[2, 2], **same),
-        oh.make_node("Conv", ["m2", "w3", "b3"], ["c3"], name="model/head/Conv2D", kernel_shape=[1, 1], **same),
+        oh.make_node(
+            "MaxPool",
+            ["r2"],
+            ["m2"],
+            name="model/max_pooling2d/MaxPool",
+            kernel_shape=[3, 3],
+            strides=[2, 2],
+            **same,
+        ),
+        oh.make_node(
+            "Conv", ["m2", "w3", "b3"], ["c3"], name="model/head/Conv2D", kernel_shape=[1, 1], **same
+        ),
         oh.make_node("Clip", ["c3", "zero", "six"], ["y"], name="model/head_relu/Relu6"),
-    ]  # fmt: skip
-    graph = oh.make_graph(nodes, "tf2onnx", [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 37, 29])],
-                          [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, 5, 4])],
-                          [nh.from_array(v, k) for k, v in inits.items()])  # fmt: skip
+    ]
+    graph = oh.make_graph(
+        nodes,
+        "tf2onnx",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 37, 29])],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, 5, 4])],
+        [nh.from_array(v, k) for k, v in inits.items()],
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", 13)], producer_name="tf2onnx")
     onnx.checker.check_model(model, full_check=True)
     onnx.save(model, path)
@@ -196,7 +279,9 @@ def _tf_same_model(path) -> None:
 # ----------------------------------------------------------------------------- the checks
 
 
-def _glsl_and_parity(tmp_path, path, size: tuple[int, int], x: np.ndarray, torch_ref: np.ndarray | None) -> float:
+def _glsl_and_parity(
+    tmp_path, path, size: tuple[int, int], x: np.ndarray, torch_ref: np.ndarray | None
+) -> float:
     """glsl + parity on the command line, then the same comparison recomputed; returns parity's error."""
     out, report = tmp_path / "export", tmp_path / "parity.json"
     assert cli.main(["glsl", str(path), "--target", "image", "--out", str(out)]) == 0
@@ -208,7 +293,9 @@ def _glsl_and_parity(tmp_path, path, size: tuple[int, int], x: np.ndarray, torch
         assert ref.shape == torch_ref.shape
         diff, tol = float(np.abs(ref - torch_ref).max()), onnx_vs_torch_tol(torch_ref, path)
         peak, depth = float(np.abs(torch_ref).max()), weighted_layers(path)
-        assert diff <= tol, f"onnxruntime vs torch {diff:.3g} > {tol:.3g} (max|ref| {peak:.3g}, depth {depth})"  # fmt: skip
+        assert diff <= tol, (
+            f"onnxruntime vs torch {diff:.3g} > {tol:.3g} (max|ref| {peak:.3g}, depth {depth})"
+        )
     got = run_compute_all(out / "glsl", x)["y"]
     assert got.shape == ref.shape and got.dtype == np.float32
     err = float(np.abs(got - ref).max())
@@ -217,7 +304,9 @@ def _glsl_and_parity(tmp_path, path, size: tuple[int, int], x: np.ndarray, torch
     return float(r["max_abs_err"])
 
 
-def _torch_case(tmp_path, module: nn.Module, size: tuple[int, int], seed: int) -> tuple[float, onnx.ModelProto]:
+def _torch_case(
+    tmp_path, module: nn.Module, size: tuple[int, int], seed: int
+) -> tuple[float, onnx.ModelProto]:
     path = tmp_path / "model.onnx"
     _torch_onnx(module, path, (16, 16))  # traced at 16 x 16, checked at ``size``: H and W are dynamic
     x = np.random.default_rng(seed).normal(size=(1, 3, size[1], size[0])).astype(np.float32)

@@ -44,8 +44,16 @@ def _torch_mlp(sizes=(48, 16, 8, 1), seed=0) -> nn.Sequential:
 
 def _export_mlp(net: nn.Module) -> onnx.ModelProto:
     buf = io.BytesIO()
-    torch.onnx.export(net, (torch.zeros(2, 48),), buf, dynamo=False, input_names=["normals"], output_names=["ao"],
-                      dynamic_axes={"normals": {0: "N"}, "ao": {0: "N"}}, opset_version=17)  # fmt: skip
+    torch.onnx.export(
+        net,
+        (torch.zeros(2, 48),),
+        buf,
+        dynamo=False,
+        input_names=["normals"],
+        output_names=["ao"],
+        dynamic_axes={"normals": {0: "N"}, "ao": {0: "N"}},
+        opset_version=17,
+    )
     return onnx.load_from_string(buf.getvalue())
 
 
@@ -54,8 +62,10 @@ def _helper_mlp(net: nn.Sequential) -> onnx.ModelProto:
     nodes, inits, x = [], [], "normals"
     linears = [m for m in net if isinstance(m, nn.Linear)]
     for i, lin in enumerate(linears):
-        inits += [nh.from_array(lin.weight.detach().numpy().T.copy(), f"W{i}"),
-                  nh.from_array(lin.bias.detach().numpy().copy(), f"b{i}")]  # fmt: skip
+        inits += [
+            nh.from_array(lin.weight.detach().numpy().T.copy(), f"W{i}"),
+            nh.from_array(lin.bias.detach().numpy().copy(), f"b{i}"),
+        ]
         nodes += [
             oh.make_node("MatMul", [x, f"W{i}"], [f"m{i}"]),
             oh.make_node("Add", [f"m{i}", f"b{i}"], [f"a{i}"]),
@@ -64,8 +74,13 @@ def _helper_mlp(net: nn.Sequential) -> onnx.ModelProto:
         if i < len(linears) - 1:
             nodes.append(oh.make_node("Tanh", [x], [f"h{i}"]))
             x = f"h{i}"
-    graph = oh.make_graph(nodes, "mlp", [oh.make_tensor_value_info("normals", TensorProto.FLOAT, ["N", 48])],
-                          [oh.make_tensor_value_info(x, TensorProto.FLOAT, ["N", 1])], inits)  # fmt: skip
+    graph = oh.make_graph(
+        nodes,
+        "mlp",
+        [oh.make_tensor_value_info("normals", TensorProto.FLOAT, ["N", 48])],
+        [oh.make_tensor_value_info(x, TensorProto.FLOAT, ["N", 1])],
+        inits,
+    )
     return oh.make_model(graph, opset_imports=[oh.make_opsetid("", 17)])
 
 
@@ -194,9 +209,16 @@ def _set_pad_multiple(model: onnx.ModelProto, multiple: int) -> onnx.ModelProto:
 
 def _export_unet(net: TinyUNet) -> onnx.ModelProto:
     buf = io.BytesIO()
-    torch.onnx.export(net, (torch.zeros(1, 4, 16, 16),), buf, dynamo=False, input_names=["gbuffer"],
-                      output_names=["ao"], dynamic_axes={"gbuffer": {2: "H", 3: "W"}, "ao": {2: "H", 3: "W"}},
-                      opset_version=17)  # fmt: skip
+    torch.onnx.export(
+        net,
+        (torch.zeros(1, 4, 16, 16),),
+        buf,
+        dynamo=False,
+        input_names=["gbuffer"],
+        output_names=["ao"],
+        dynamic_axes={"gbuffer": {2: "H", 3: "W"}, "ao": {2: "H", 3: "W"}},
+        opset_version=17,
+    )
     return _set_pad_multiple(onnx.load_from_string(buf.getvalue()), 8)
 
 
@@ -233,13 +255,27 @@ def _helper_unet(net: TinyUNet) -> onnx.ModelProto:
     for i in reversed(range(len(net.up))):
         x = node("Resize", [x, "", "scale2"], mode="linear", coordinate_transformation_mode="half_pixel")
         bn = net.bn[i]
-        x = node("BatchNormalization", [conv(net.up[i], x), const(bn.weight), const(bn.bias), const(bn.running_mean),
-                                        const(bn.running_var)], epsilon=bn.eps)  # fmt: skip
+        x = node(
+            "BatchNormalization",
+            [
+                conv(net.up[i], x),
+                const(bn.weight),
+                const(bn.bias),
+                const(bn.running_mean),
+                const(bn.running_var),
+            ],
+            epsilon=bn.eps,
+        )
         x = node("Concat", [lrelu(x), skips[i]], axis=1)
         x = lrelu(conv(net.fuse[i], x))
     y = node("Sigmoid", [conv(net.out, x)])
-    graph = oh.make_graph(nodes, "unet", [oh.make_tensor_value_info("gbuffer", TensorProto.FLOAT, [1, 4, "H", "W"])],
-                          [oh.make_tensor_value_info(y, TensorProto.FLOAT, [1, 1, "H", "W"])], inits)  # fmt: skip
+    graph = oh.make_graph(
+        nodes,
+        "unet",
+        [oh.make_tensor_value_info("gbuffer", TensorProto.FLOAT, [1, 4, "H", "W"])],
+        [oh.make_tensor_value_info(y, TensorProto.FLOAT, [1, 1, "H", "W"])],
+        inits,
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", 17)])
     onnx.checker.check_model(model)
     return _set_pad_multiple(model, 8)

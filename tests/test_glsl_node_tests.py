@@ -6,9 +6,30 @@ from __future__ import annotations
 
 from export.node_tests import counts_by_op, run_node_tests
 
-OPS = ("DepthToSpace", "SpaceToDepth", "InstanceNormalization", "GroupNormalization", "LayerNormalization",
-       "ReduceMean", "ReduceMax", "ReduceSum", "ReduceL2", "Softmax", "LogSoftmax", "Erf", "Gelu", "Mish", "Sum",
-       "Mean", "Min", "Max", "LRN", "LpPool", "GlobalLpPool", "Dropout")  # fmt: skip
+OPS = (
+    "DepthToSpace",
+    "SpaceToDepth",
+    "InstanceNormalization",
+    "GroupNormalization",
+    "LayerNormalization",
+    "ReduceMean",
+    "ReduceMax",
+    "ReduceSum",
+    "ReduceL2",
+    "Softmax",
+    "LogSoftmax",
+    "Erf",
+    "Gelu",
+    "Mish",
+    "Sum",
+    "Mean",
+    "Min",
+    "Max",
+    "LRN",
+    "LpPool",
+    "GlobalLpPool",
+    "Dropout",
+)
 
 
 def test_node_tests_none_wrong():
@@ -19,6 +40,12 @@ def test_node_tests_none_wrong():
     # the cases with a (1, C, H, W) input pass: DepthToSpace 2, SpaceToDepth 3, InstanceNormalization 1,
     # Erf 1, LpPool 6; the others' node tests use rank-3 or batched inputs, refused at the input
     passed = {op: c["passed"] for op, c in counts.items() if c["passed"]}
-    assert passed == {"DepthToSpace": 2, "SpaceToDepth": 3, "InstanceNormalization": 1, "Erf": 1, "LpPool": 6}, passed
+    assert passed == {
+        "DepthToSpace": 2,
+        "SpaceToDepth": 3,
+        "InstanceNormalization": 1,
+        "Erf": 1,
+        "LpPool": 6,
+    }, passed
     refused = [r for r in results if r.outcome == "refused"]
     assert all(r.op in r.reason or "input" in r.reason for r in refused)

@@ -92,8 +92,12 @@ def test_conv(case):
 
 def test_batch_normalization_standalone():
     rng = np.random.default_rng(3)
-    inits = [("s", rng.uniform(0.5, 2, C)), ("b", rng.normal(size=C)), ("m", rng.normal(size=C)),
-             ("v", rng.uniform(0.1, 3, C))]  # fmt: skip
+    inits = [
+        ("s", rng.uniform(0.5, 2, C)),
+        ("b", rng.normal(size=C)),
+        ("m", rng.normal(size=C)),
+        ("v", rng.uniform(0.1, 3, C)),
+    ]
     inits = [(k, v.astype(np.float32)) for k, v in inits]
     node = oh.make_node("BatchNormalization", ["x", "s", "b", "m", "v"], ["y"], name="bn", epsilon=1e-3)
     program = _check_image(_image_model(node, inits), _x())
@@ -187,9 +191,14 @@ def test_concat_materialised():
 def test_concat_fused_into_conv_and_bn_folded():
     """Conv(Concat(relu(x), x)) + BatchNormalization + LeakyRelu: two fused passes, BN folded."""
     rng = np.random.default_rng(4)
-    inits = [("w", _w((6, 2 * C, 3, 3))), ("b", _w((6,), seed=5)), ("s", rng.uniform(0.5, 2, 6).astype(np.float32)),
-             ("bb", rng.normal(size=6).astype(np.float32)), ("m", rng.normal(size=6).astype(np.float32)),
-             ("v", rng.uniform(0.1, 3, 6).astype(np.float32))]  # fmt: skip
+    inits = [
+        ("w", _w((6, 2 * C, 3, 3))),
+        ("b", _w((6,), seed=5)),
+        ("s", rng.uniform(0.5, 2, 6).astype(np.float32)),
+        ("bb", rng.normal(size=6).astype(np.float32)),
+        ("m", rng.normal(size=6).astype(np.float32)),
+        ("v", rng.uniform(0.1, 3, 6).astype(np.float32)),
+    ]
     nodes = [
         oh.make_node("Relu", ["x"], ["r"], name="relu"),
         oh.make_node("Concat", ["r", "x"], ["c"], name="cat", axis=1),
@@ -313,11 +322,16 @@ def test_unsupported_op_names_op_and_node():
 @pytest.mark.parametrize(
     "node,inits,needle",
     [
-        (oh.make_node("BatchNormalization", ["x", "s", "s", "s", "s"], ["y"], name="train", training_mode=1),
-         [("s", np.ones(C, np.float32))], "training_mode=1"),
+        (
+            oh.make_node(
+                "BatchNormalization", ["x", "s", "s", "s", "s"], ["y"], name="train", training_mode=1
+            ),
+            [("s", np.ones(C, np.float32))],
+            "training_mode=1",
+        ),
         (oh.make_node("Concat", ["x", "x"], ["y"], name="hcat", axis=2), [], "axis=2"),
     ],
-)  # fmt: skip
+)
 def test_unsupported_attribute_value(node, inits, needle):
     _error(lambda: generate_compute(_image_model(node, inits)), node.op_type, node.name, needle)
 

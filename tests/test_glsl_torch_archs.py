@@ -38,8 +38,14 @@ from runtime.glsl_runner import run_compute_all
 class ESPCN(nn.Module):
     def __init__(self, scale: int = 2):
         super().__init__()
-        self.body = nn.Sequential(nn.Conv2d(3, 16, 5, padding=2), nn.Tanh(), nn.Conv2d(16, 8, 3, padding=1), nn.Tanh(),
-                                  nn.Conv2d(8, 3 * scale * scale, 3, padding=1), nn.PixelShuffle(scale))  # fmt: skip
+        self.body = nn.Sequential(
+            nn.Conv2d(3, 16, 5, padding=2),
+            nn.Tanh(),
+            nn.Conv2d(16, 8, 3, padding=1),
+            nn.Tanh(),
+            nn.Conv2d(8, 3 * scale * scale, 3, padding=1),
+            nn.PixelShuffle(scale),
+        )
 
     def forward(self, x):
         return self.body(x)
@@ -56,8 +62,13 @@ class StyleNet(nn.Module):
         super().__init__()
         self.down = nn.Sequential(*_conv_in(3, 8), nn.ReLU(), *_conv_in(8, 8, 2), nn.ReLU())
         self.res = nn.Sequential(*_conv_in(8, 8), nn.ReLU(), *_conv_in(8, 8))
-        self.up = nn.Sequential(nn.Upsample(scale_factor=2, mode="nearest"), *_conv_in(8, 8), nn.ReLU(),
-                                nn.ReflectionPad2d(1), nn.Conv2d(8, 3, 3))  # fmt: skip
+        self.up = nn.Sequential(
+            nn.Upsample(scale_factor=2, mode="nearest"),
+            *_conv_in(8, 8),
+            nn.ReLU(),
+            nn.ReflectionPad2d(1),
+            nn.Conv2d(8, 3, 3),
+        )
 
     def forward(self, x):
         y = self.down(x)
@@ -91,10 +102,18 @@ class ChannelsFirstLN(nn.Module):
 class NormNet(nn.Module):
     def __init__(self):
         super().__init__()
-        self.body = nn.Sequential(nn.Conv2d(3, 8, 3, padding=1), nn.GroupNorm(2, 8), nn.GELU(),
-                                  nn.Conv2d(8, 8, 3, padding=1), LayerNorm2d(8), nn.Mish(),
-                                  nn.Conv2d(8, 8, 3, padding=1), ChannelsFirstLN(8), nn.GELU("tanh"),
-                                  nn.Conv2d(8, 3, 1))  # fmt: skip
+        self.body = nn.Sequential(
+            nn.Conv2d(3, 8, 3, padding=1),
+            nn.GroupNorm(2, 8),
+            nn.GELU(),
+            nn.Conv2d(8, 8, 3, padding=1),
+            LayerNorm2d(8),
+            nn.Mish(),
+            nn.Conv2d(8, 8, 3, padding=1),
+            ChannelsFirstLN(8),
+            nn.GELU("tanh"),
+            nn.Conv2d(8, 3, 1),
+        )
 
     def forward(self, x):
         return self.body(x)
@@ -135,7 +154,9 @@ def _export(net: nn.Module, x: torch.Tensor, dynamo: bool) -> onnx.ModelProto:
         logging.disable(logging.WARNING)
         try:
             if dynamo:
-                return torch.onnx.export(net, (x,), dynamo=True, opset_version=18, input_names=["x"]).model_proto
+                return torch.onnx.export(
+                    net, (x,), dynamo=True, opset_version=18, input_names=["x"]
+                ).model_proto
             buf = io.BytesIO()
             torch.onnx.export(net, (x,), buf, dynamo=False, opset_version=17, input_names=["x"])
             return onnx.load_from_string(buf.getvalue())
@@ -162,5 +183,7 @@ def test_arch_both_exporters(arch, dynamo):
     got = run_compute_all(generate_compute(model), x.numpy())[model.graph.output[0].name]
     assert got.shape == ref.shape and got.dtype == np.float32
     err = float(np.abs(got - ref).max())
-    logging.getLogger(__name__).info("%s %s: max |GLSL - onnxruntime| %.3g", arch, "dynamo" if dynamo else "legacy", err)
+    logging.getLogger(__name__).info(
+        "%s %s: max |GLSL - onnxruntime| %.3g", arch, "dynamo" if dynamo else "legacy", err
+    )
     assert err <= TOL.parity_unet_fp32, f"max abs err {err:.3g}"

@@ -87,15 +87,21 @@ def test_binary_by_constant(op, const_first):
 @pytest.mark.parametrize("op", ["Add", "Sub", "Mul", "Div"])
 def test_binary_between_inputs(op):
     bindings = {"a": InputBinding("position", "xyz"), "b": InputBinding("normal", "zyx")}
-    nodes = [oh.make_node("Add", ["b", "three"], ["b3"], name="away_from_zero"),
-             oh.make_node(op, ["a", "b3"], ["y"], name="binop")]  # fmt: skip
+    nodes = [
+        oh.make_node("Add", ["b", "three"], ["b3"], name="away_from_zero"),
+        oh.make_node(op, ["a", "b3"], ["y"], name="binop"),
+    ]
     _check(_model(nodes, {"a": 3, "b": 3}, 3, [("three", np.float32(3.0))]), bindings)
 
 
 def test_concat_unaligned_and_aligned_parts():
     # widths 3 + 5 + 4: lane copies across vec4 boundaries, then one whole-vec4 copy is impossible
     # (offset 8, width 4 -> aligned: a vec4 copy); a Gemm reads the result so every lane matters.
-    bindings = {"a": InputBinding("t0", "xyz"), "b": InputBinding("t1", "xyzw", 1), "c": InputBinding("t0", "xyzw")}
+    bindings = {
+        "a": InputBinding("t0", "xyz"),
+        "b": InputBinding("t1", "xyzw", 1),
+        "c": InputBinding("t0", "xyzw"),
+    }
     rng = np.random.default_rng(3)
     nodes = [
         oh.make_node("MatMul", ["b", "m"], ["b5"], name="widen"),
@@ -139,13 +145,23 @@ def test_fourier_features_graph_runs_from_two_textures():
         oh.make_node("Gemm", ["a1", "w2", "b2"], ["y"], name="l2"),
     ]
     width = 6 + 6 * octaves
-    inits = [("centre", [0.1, -0.2, 0.3]), ("inv", [1.1, 0.9, 1.3]), ("freqs", freqs),
-             ("w1", rng.normal(size=(width, 16)) * 0.3), ("b1", rng.normal(size=16)),
-             ("w2", rng.normal(size=(16, 1))), ("b2", [0.5])]  # fmt: skip
+    inits = [
+        ("centre", [0.1, -0.2, 0.3]),
+        ("inv", [1.1, 0.9, 1.3]),
+        ("freqs", freqs),
+        ("w1", rng.normal(size=(width, 16)) * 0.3),
+        ("b1", rng.normal(size=16)),
+        ("w2", rng.normal(size=(16, 1))),
+        ("b2", [0.5]),
+    ]
     bindings = {"p": InputBinding("position", "xyz"), "n": InputBinding("normal", "xyz")}
     shader = _check(_model(nodes, {"p": 3, "n": 3}, 1, inits), bindings)
     assert shader.manifest["kind"] == "test"
-    assert shader.manifest["network"]["bindings"]["n"] == {"texture": "normal", "channels": "xyz", "repeats": 1}
+    assert shader.manifest["network"]["bindings"]["n"] == {
+        "texture": "normal",
+        "channels": "xyz",
+        "repeats": 1,
+    }
 
 
 def _error(fn, *needles):
@@ -169,10 +185,12 @@ def test_activation_not_fused_into_a_value_already_read():
     """Sin reads MatMul's output first; Cos, the last reader, must not fuse into the MatMul (that would
     turn what Sin already read into cos(z))."""
     rng = np.random.default_rng(5)
-    nodes = [oh.make_node("MatMul", ["x", "m"], ["z"], name="mm"),
-             oh.make_node("Sin", ["z"], ["s"], name="sin"),
-             oh.make_node("Cos", ["z"], ["c"], name="cos"),
-             oh.make_node("Add", ["s", "c"], ["y"], name="sum")]  # fmt: skip
+    nodes = [
+        oh.make_node("MatMul", ["x", "m"], ["z"], name="mm"),
+        oh.make_node("Sin", ["z"], ["s"], name="sin"),
+        oh.make_node("Cos", ["z"], ["c"], name="cos"),
+        oh.make_node("Add", ["s", "c"], ["y"], name="sum"),
+    ]
     _check(_model(nodes, {"x": 3}, 4, [("m", rng.normal(size=(3, 4)) * 3)]), ONE)
 
 
@@ -183,13 +201,19 @@ def test_image_target_does_not_fuse_into_a_value_already_read():
     from runtime.glsl_runner import run_compute
 
     rng = np.random.default_rng(6)
-    nodes = [oh.make_node("Conv", ["x", "w"], ["y"], name="conv", pads=[1, 1, 1, 1]),
-             oh.make_node("AveragePool", ["y"], ["a"], name="pool", kernel_shape=[1, 1]),
-             oh.make_node("Relu", ["y"], ["r"], name="relu"),
-             oh.make_node("Concat", ["a", "r"], ["out"], name="cat", axis=1)]  # fmt: skip
-    graph = oh.make_graph(nodes, "g", [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 2, 5, 6])],
-                          [oh.make_tensor_value_info("out", TensorProto.FLOAT, [1, 6, 5, 6])],
-                          [nh.from_array(rng.normal(size=(3, 2, 3, 3)).astype(np.float32), "w")])  # fmt: skip
+    nodes = [
+        oh.make_node("Conv", ["x", "w"], ["y"], name="conv", pads=[1, 1, 1, 1]),
+        oh.make_node("AveragePool", ["y"], ["a"], name="pool", kernel_shape=[1, 1]),
+        oh.make_node("Relu", ["y"], ["r"], name="relu"),
+        oh.make_node("Concat", ["a", "r"], ["out"], name="cat", axis=1),
+    ]
+    graph = oh.make_graph(
+        nodes,
+        "g",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 2, 5, 6])],
+        [oh.make_tensor_value_info("out", TensorProto.FLOAT, [1, 6, 5, 6])],
+        [nh.from_array(rng.normal(size=(3, 2, 3, 3)).astype(np.float32), "w")],
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", OPSET)])
     x = rng.normal(size=(1, 2, 5, 6)).astype(np.float32)
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
@@ -204,11 +228,17 @@ def test_weights_as_uniform_blocks_or_constants_run_from_disk(weights, tmp_path)
     from export.glsl import write_mlp_export
 
     rng = np.random.default_rng(7)
-    nodes = [oh.make_node("Gemm", ["x", "w1", "b1"], ["h"], name="l1"),
-             oh.make_node("Tanh", ["h"], ["t"], name="t"),
-             oh.make_node("Gemm", ["t", "w2", "b2"], ["y"], name="l2")]  # fmt: skip
-    inits = [("w1", rng.normal(size=(3, 12))), ("b1", rng.normal(size=12)), ("w2", rng.normal(size=(12, 2))),
-             ("b2", rng.normal(size=2))]  # fmt: skip
+    nodes = [
+        oh.make_node("Gemm", ["x", "w1", "b1"], ["h"], name="l1"),
+        oh.make_node("Tanh", ["h"], ["t"], name="t"),
+        oh.make_node("Gemm", ["t", "w2", "b2"], ["y"], name="l2"),
+    ]
+    inits = [
+        ("w1", rng.normal(size=(3, 12))),
+        ("b1", rng.normal(size=12)),
+        ("w2", rng.normal(size=(12, 2))),
+        ("b2", rng.normal(size=2)),
+    ]
     model = _model(nodes, {"x": 3}, 2, inits)
     shader = generate_vector_fragment(model, ONE, kind="test", weights=weights)
     assert (shader.manifest["uniform_blocks"] == []) == (weights == "constant")

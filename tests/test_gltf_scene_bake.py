@@ -82,8 +82,11 @@ def write_gltf(path, meshes: list[dict], nodes: list[dict], roots: list[int], ma
                 attrs["TEXCOORD_0"] = w.accessor(np.asarray(p["uv"], np.float32), target=ARRAY)
             if "colour" in p:
                 attrs["COLOR_0"] = w.accessor(np.asarray(p["colour"], np.float32), target=ARRAY)
-            prim = {"attributes": attrs, "mode": 4,
-                    "indices": w.accessor(np.asarray(p["f"], np.uint32).reshape(-1), target=ELEMENTS)}  # fmt: skip
+            prim = {
+                "attributes": attrs,
+                "mode": 4,
+                "indices": w.accessor(np.asarray(p["f"], np.uint32).reshape(-1), target=ELEMENTS),
+            }
             if "material" in p:
                 prim["material"] = p["material"]
             prims.append(prim)
@@ -141,8 +144,10 @@ def planes_gltf(path, ceiling: str = "rotated", colour: np.ndarray | None = None
         {"name": "ceiling", "mesh": 1, "translation": [0.0, 0.0, 2 * H], **turn},
     ]
     floor = {"v": v, "f": f, "uv": uv} | ({} if colour is None else {"colour": np.tile(colour, (len(v), 1))})
-    meshes = [{"name": "floor", "primitives": [floor]},
-              {"name": "ceiling", "primitives": [{"v": v, "f": f, "uv": uv}]}]  # fmt: skip
+    meshes = [
+        {"name": "floor", "primitives": [floor]},
+        {"name": "ceiling", "primitives": [{"v": v, "f": f, "uv": uv}]},
+    ]
     return write_gltf(path, meshes, nodes, [0])
 
 
@@ -199,8 +204,22 @@ def test_texture_bake_matches_the_parallel_planes_closed_form(tmp_path, uv):
     src = planes_gltf(tmp_path / "planes.glb")
     out = tmp_path / "baked.glb"
     rays, n = 256, 64
-    args = ["bake", str(src), "--to", "texture", "--resolution", str(n), "--rays", str(rays),
-            "--max-distance", str(R), "--uv", uv, "--out", str(out)]  # fmt: skip
+    args = [
+        "bake",
+        str(src),
+        "--to",
+        "texture",
+        "--resolution",
+        str(n),
+        "--rays",
+        str(rays),
+        "--max-distance",
+        str(R),
+        "--uv",
+        uv,
+        "--out",
+        str(out),
+    ]
     assert cli.main(args) == 0
     doc, binary = glb_parts(out)
     _, get = read_gltf_json(out)
@@ -229,11 +248,30 @@ def test_texture_bake_matches_the_parallel_planes_closed_form(tmp_path, uv):
 def test_each_plane_alone_is_open(tmp_path):
     """The control: without the other node the closed form would be 1 (what a per-object bake gives)."""
     v, f, uv = grid(8.0, 8)
-    src = write_gltf(tmp_path / "floor.glb", [{"name": "floor", "primitives": [{"v": v, "f": f}]}],
-                     [{"name": "floor", "mesh": 0, "scale": [0.5, 0.5, 0.5]}], [0])  # fmt: skip
+    src = write_gltf(
+        tmp_path / "floor.glb",
+        [{"name": "floor", "primitives": [{"v": v, "f": f}]}],
+        [{"name": "floor", "mesh": 0, "scale": [0.5, 0.5, 0.5]}],
+        [0],
+    )
     out = tmp_path / "baked.glb"
-    assert cli.main(["bake", str(src), "--method", "vertex", "--rays", "64", "--max-distance", str(R),
-                     "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "bake",
+                str(src),
+                "--method",
+                "vertex",
+                "--rays",
+                "64",
+                "--max-distance",
+                str(R),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc, get = read_gltf_json(out)
     assert np.all(get(doc["meshes"][0]["primitives"][0]["attributes"]["_AO"]) == 1.0)
 
@@ -248,8 +286,22 @@ def test_obscurance_matches_its_closed_form_through_the_transforms(tmp_path):
     src = planes_gltf(tmp_path / "planes.glb")
     out = tmp_path / "baked.glb"
     rays = 512
-    args = ["bake", str(src), "--method", "vertex", "--rays", str(rays), "--max-distance", str(R),
-            "--kernel", "obscurance", "--half-distance", str(half), "--out", str(out)]  # fmt: skip
+    args = [
+        "bake",
+        str(src),
+        "--method",
+        "vertex",
+        "--rays",
+        str(rays),
+        "--max-distance",
+        str(R),
+        "--kernel",
+        "obscurance",
+        "--half-distance",
+        str(half),
+        "--out",
+        str(out),
+    ]
     assert cli.main(args) == 0
     c2 = (H / R) ** 2
     expected = c2 + quad(lambda t: 1.0 - 0.5 ** (H / (half * np.sqrt(t))), c2, 1.0)[0]
@@ -258,8 +310,10 @@ def test_obscurance_matches_its_closed_form_through_the_transforms(tmp_path):
     for node in doc["nodes"][1:]:
         ao = get(doc["meshes"][node["mesh"]]["primitives"][0]["attributes"]["_AO"])[inside]
         assert np.all(np.abs(ao - expected) <= mc_bound(expected, rays)), (node["name"], ao, expected)
-        print(f"\nobscurance {node['name']}: mean {ao.mean():.4f} max |err| {np.abs(ao - expected).max():.4f}, "
-              f"closed form {expected:.4f}")  # fmt: skip
+        print(
+            f"\nobscurance {node['name']}: mean {ao.mean():.4f} max |err| {np.abs(ao - expected).max():.4f}, "
+            f"closed form {expected:.4f}"
+        )
 
 
 def test_authored_vertex_colours_are_kept_and_darkened(tmp_path):
@@ -268,8 +322,23 @@ def test_authored_vertex_colours_are_kept_and_darkened(tmp_path):
     colour = np.array([1.0, 0.5, 0.25, 0.75])
     src = planes_gltf(tmp_path / "planes.glb", colour=colour)
     out = tmp_path / "baked.glb"
-    assert cli.main(["bake", str(src), "--method", "vertex", "--rays", "64", "--max-distance", str(R),
-                     "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "bake",
+                str(src),
+                "--method",
+                "vertex",
+                "--rays",
+                "64",
+                "--max-distance",
+                str(R),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc, get = read_gltf_json(out)
     attrs = doc["meshes"][doc["nodes"][1]["mesh"]]["primitives"][0]["attributes"]
     ao, got = get(attrs["_AO"]), get(attrs["COLOR_0"])
@@ -297,20 +366,31 @@ def room_gltf(path):
     fv, ff, fuv = grid(2.0, 8)
     cv, cf, cuv = cube(0.5)
     materials = [
-        {"name": "red_paint", "pbrMetallicRoughness": {"baseColorFactor": RED, "metallicFactor": 0.0,
-                                                       "roughnessFactor": 0.7}},
-        {"name": "blue_checker", "pbrMetallicRoughness": {"baseColorFactor": BLUE, "baseColorTexture": {"index": 0},
-                                                          "metallicFactor": 0.0, "roughnessFactor": 0.5},
-         "normalTexture": {"index": 1, "scale": 0.8}},
-    ]  # fmt: skip
+        {
+            "name": "red_paint",
+            "pbrMetallicRoughness": {"baseColorFactor": RED, "metallicFactor": 0.0, "roughnessFactor": 0.7},
+        },
+        {
+            "name": "blue_checker",
+            "pbrMetallicRoughness": {
+                "baseColorFactor": BLUE,
+                "baseColorTexture": {"index": 0},
+                "metallicFactor": 0.0,
+                "roughnessFactor": 0.5,
+            },
+            "normalTexture": {"index": 1, "scale": 0.8},
+        },
+    ]
     nodes = [
         {"name": "room", "children": [1, 2]},
         {"name": "floor", "mesh": 0, "rotation": ROOT_TO_Y_UP},
         {"name": "crate_a", "mesh": 1, "translation": [0.0, 0.5, 0.0], "children": [3]},
         {"name": "crate_b", "mesh": 1, "translation": [0.3, 1.25, 0.1]},
     ]
-    meshes = [{"name": "floor_mesh", "primitives": [{"v": fv, "f": ff, "uv": fuv, "material": 0}]},
-              {"name": "crate_mesh", "primitives": [{"v": cv, "f": cf, "uv": cuv, "material": 1}]}]  # fmt: skip
+    meshes = [
+        {"name": "floor_mesh", "primitives": [{"v": fv, "f": ff, "uv": fuv, "material": 0}]},
+        {"name": "crate_mesh", "primitives": [{"v": cv, "f": cf, "uv": cuv, "material": 1}]},
+    ]
     flat_normal = np.full((4, 4, 3), (128, 128, 255), np.uint8)
     return write_gltf(path, meshes, nodes, [0], materials, [png(checker()), png(flat_normal)])
 
@@ -416,8 +496,14 @@ def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
     assert cli.main(["view", *map(str, bakes), "--out", str(page), "--size", "320", "240"]) == 0
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
-              "--enable-unsafe-swiftshader", "--window-size=700,600"):  # fmt: skip
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--window-size=700,600",
+    ):
         opts.add_argument(a)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     shots = []
@@ -440,8 +526,10 @@ def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
             driver.execute_script(f"window.neuralao.setMethod({i}); window.neuralao.setPose(35, 15, 1.0);")
             c = driver.execute_script("return window.neuralao.capture()")
             h, w = c["height"], c["width"]
-            img = {k: np.frombuffer(__import__("base64").b64decode(c[k]), np.float32).reshape(h, w, 4)[::-1]
-                   for k in ("position", "ao", "albedo")}  # fmt: skip
+            img = {
+                k: np.frombuffer(__import__("base64").b64decode(c[k]), np.float32).reshape(h, w, 4)[::-1]
+                for k in ("position", "ao", "albedo")
+            }
             mask = img["position"][..., 3] > 0.5
             albedo = img["albedo"][..., :3][mask]
             red = np.abs(albedo - np.asarray(RED[:3])).max(axis=1) < 1e-3

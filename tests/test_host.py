@@ -46,8 +46,21 @@ def test_c_host_matches_python_runner(tmp_path):
     gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
     gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
     radius, yfov = 0.1, float(frame["yfov"])
-    r = subprocess.run([str(host), str(export), str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius),
-                        repr(math.degrees(yfov)), str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=300)  # fmt: skip
+    r = subprocess.run(
+        [
+            str(host),
+            str(export),
+            str(tmp_path / "gbuffer.f32"),
+            str(w),
+            str(h),
+            repr(radius),
+            repr(math.degrees(yfov)),
+            str(tmp_path / "ao.f32"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     ao = np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
 
@@ -55,8 +68,10 @@ def test_c_host_matches_python_runner(tmp_path):
     x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
     python = composite(run_padded(glsl_runner(export / "glsl"), x, 8, rho), frame)
     assert float(np.abs(ao - python).max()) <= TOL.glsl_op_fp32  # same shaders, same driver
-    ort = run_onnxruntime((export / "model.onnx").read_bytes(),
-                          {"gbuffer": pad_to_multiple(x, 8)[None], "radius": radius_array(rho)})[0]  # fmt: skip
+    ort = run_onnxruntime(
+        (export / "model.onnx").read_bytes(),
+        {"gbuffer": pad_to_multiple(x, 8)[None], "radius": radius_array(rho)},
+    )[0]
     assert float(np.abs(ao - composite(ort[0, 0, :h, :w], frame)).max()) <= TOL.parity_unet_fp32
     assert np.all(ao[~frame["mask"]] == 1.0) and frame["mask"].any()
 
@@ -65,6 +80,10 @@ def test_c_host_refuses_a_wrong_gbuffer(tmp_path):
     host = _build_host()
     export = MODELS_DIR / json.loads(INDEX.read_text())["default"]["unet"]
     np.zeros(10, "<f4").tofile(tmp_path / "g.f32")
-    r = subprocess.run([str(host), str(export), str(tmp_path / "g.f32"), "16", "16", "0.1", "0.7",
-                        str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=60)  # fmt: skip
+    r = subprocess.run(
+        [str(host), str(export), str(tmp_path / "g.f32"), "16", "16", "0.1", "0.7", str(tmp_path / "ao.f32")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 1 and "5 floats a pixel" in r.stderr and not (tmp_path / "ao.f32").exists()

@@ -105,8 +105,12 @@ def test_upsampling_keeps_an_edge_between_surfaces():
     depth = np.where(np.arange(w)[None, :] < 37, 1.0, 3.0) * np.ones((h, 1))
     normal = np.zeros((h, w, 3))
     normal[..., 2] = 1.0
-    frame = {"depth": depth.astype(np.float32), "normal_cam": normal.astype(np.float32), "mask": np.ones((h, w), bool),
-             "yfov": 0.8}  # fmt: skip
+    frame = {
+        "depth": depth.astype(np.float32),
+        "normal_cam": normal.astype(np.float32),
+        "mask": np.ones((h, w), bool),
+        "yfov": 0.8,
+    }
     lw, lh = internal_size(w, h, 15)
     low = downsample_frame(frame, lw, lh)
     ao_low = np.where(low["depth"] < 2.0, 0.2, 0.9).astype(np.float32)
@@ -175,5 +179,6 @@ def test_infer_frame_follows_the_declared_internal_height(default_unet, tmp_path
     radius = 0.125 * scene.diagonal
     want = at_internal_resolution(default_unet, 64)(frame, radius)
     np.testing.assert_array_equal(infer_frame(tmp_path / "model.onnx", frame, radius), want)
-    np.testing.assert_array_equal(infer_frame(tmp_path / "model.onnx", frame, radius, internal_height=None),
-                                  default_unet(frame, radius))  # fmt: skip
+    np.testing.assert_array_equal(
+        infer_frame(tmp_path / "model.onnx", frame, radius, internal_height=None), default_unet(frame, radius)
+    )

@@ -118,8 +118,11 @@ def test_decorator_shader_on_mesa_matches_the_model(baked):
         np.testing.assert_allclose(world[j], w, atol=1e-4)
         expected = np.clip(local * (y[j, 0] + (w - t[j]) @ y[j, 1:]), 0, 1)
         np.testing.assert_allclose(ao[j], expected, atol=1e-5)
-    np.testing.assert_allclose(quat_to_matrix(q[:1])[0], trimesh.transformations.quaternion_matrix(
-        [q[0, 3], q[0, 0], q[0, 1], q[0, 2]])[:3, :3], atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        quat_to_matrix(q[:1])[0],
+        trimesh.transformations.quaternion_matrix([q[0, 3], q[0, 0], q[0, 1], q[0, 2]])[:3, :3],
+        atol=1e-6,
+    )
 
 
 def test_error_tables_point_the_right_way(baked):
@@ -182,13 +185,16 @@ def test_remap_curve_is_applied_after_the_blend(baked, tmp_path):
     np.testing.assert_allclose(get(a["_AO"]), np.interp(b, [0, 0.5, 1], [0, 0.8, 1]), atol=1e-6)
 
 
-@pytest.mark.parametrize("override, message", [
-    ("trace.rays=0", "trace.rays must be >= 1"),
-    ("blend.long_weight=1.5", "blend.long_weight must be in [0, 1]"),
-    ("blend.remap=[[0.2, 0], [1, 1]]", "cover [0, 1]"),
-    ("output=../x.glb", "output must be a file name"),
-    ("trace.solver=lu", "is not one of"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("trace.rays=0", "trace.rays must be >= 1"),
+        ("blend.long_weight=1.5", "blend.long_weight must be in [0, 1]"),
+        ("blend.remap=[[0.2, 0], [1, 1]]", "cover [0, 1]"),
+        ("output=../x.glb", "output must be a file name"),
+        ("trace.solver=lu", "is not one of"),
+    ],
+)
 def test_bad_settings_are_one_line_errors(baked, override, message, capsys):
     root, level, cfg, _ = baked
     code = cli.main(["bake", str(level), "--config", str(cfg), "--set", override, "--out", str(root / "bad")])

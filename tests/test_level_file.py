@@ -183,8 +183,21 @@ def test_cli_bad_level_exits_2_with_one_line(tiny, tmp_path):
     _edit(path, _bad_role)
     cfg = tmp_path / "bake.json"
     cfg.write_text("{}")
-    r = subprocess.run([sys.executable, "-m", "pipeline.cli", "bake", str(path), "--config", str(cfg), "--out",
-                        str(tmp_path / "out")], capture_output=True, text=True)  # fmt: skip
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pipeline.cli",
+            "bake",
+            str(path),
+            "--config",
+            str(cfg),
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("neuralao bake: error:") and "unknown role" in lines[0]
@@ -198,8 +211,22 @@ def test_cli_rejects_single_mesh_flags_and_bad_config_keys(tiny, tmp_path):
         (["--rays", "8"], "--rays does not apply to a level"),
         ([], "unknown setting(s) trace.rayz"),
     ):
-        r = subprocess.run([sys.executable, "-m", "pipeline.cli", "bake", str(tiny), "--config", str(cfg), "--out",
-                            str(tmp_path / "o"), *extra], capture_output=True, text=True)  # fmt: skip
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "pipeline.cli",
+                "bake",
+                str(tiny),
+                "--config",
+                str(cfg),
+                "--out",
+                str(tmp_path / "o"),
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert r.returncode == 2 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 

@@ -50,8 +50,14 @@ def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, thresh
 
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=3)
-    st = LabelSettings(rays=rays, kernel="obscurance", max_distance=g.opaque.diagonal, seed=2,
-                       backface_threshold=threshold, workers=2)  # fmt: skip
+    st = LabelSettings(
+        rays=rays,
+        kernel="obscurance",
+        max_distance=g.opaque.diagonal,
+        seed=2,
+        backface_threshold=threshold,
+        workers=2,
+    )
     fast, full = LevelLabeller(g.opaque, st), LevelLabeller(g.opaque, st)
     full.early_out = False
     assert len(fast._checkpoints(rays)) > 1 and full._checkpoints(rays) == [rays]
@@ -90,8 +96,17 @@ def test_point_inside_a_wide_slab_of_media_closed_form(sigma_h):
     scene = _slab_scene()
     lab = LevelLabeller(scene, LabelSettings(rays=256, kernel="obscurance", max_distance=2 * scene.diagonal))
     h, half = 1.0, 200.0
-    fol = Foliage([[-half, -half, -0.01]], [[half, half, h]], [sigma_h / h], np.zeros((0, 3)), np.zeros((0, 3), int),
-                  np.zeros(0), lab.center, lab.scale, max_hits=8)  # fmt: skip
+    fol = Foliage(
+        [[-half, -half, -0.01]],
+        [[half, half, h]],
+        [sigma_h / h],
+        np.zeros((0, 3)),
+        np.zeros((0, 3), int),
+        np.zeros(0),
+        lab.center,
+        lab.scale,
+        max_hits=8,
+    )
     rng = np.random.default_rng(0)
     pts = np.c_[rng.uniform(-5, 5, (16, 2)), np.zeros(16)]
     ao, _ = lab.obscurance(pts, np.tile([0.0, 0.0, 1.0], (16, 1)), [1.0], fol)
@@ -104,13 +119,29 @@ def test_point_inside_a_wide_slab_of_media_closed_form(sigma_h):
 
 
 def _box_foliage(lo, hi, density, max_hits=8):
-    return Foliage(np.atleast_2d(lo), np.atleast_2d(hi), np.atleast_1d(density), np.zeros((0, 3)), np.zeros((0, 3), int),
-                   np.zeros(0), np.zeros(3), 1.0, max_hits)  # fmt: skip
+    return Foliage(
+        np.atleast_2d(lo),
+        np.atleast_2d(hi),
+        np.atleast_1d(density),
+        np.zeros((0, 3)),
+        np.zeros((0, 3), int),
+        np.zeros(0),
+        np.zeros(3),
+        1.0,
+        max_hits,
+    )
 
 
-@pytest.mark.parametrize("origin, end, length", [((-5, 0.1, 0.2), 10.0, 2.0), ((-5, 0.1, 0.2), 5.0, 1.0),
-                                                 ((-5, 0.1, 0.2), 3.0, 0.0), ((0, 0.1, 0.2), 10.0, 1.0),
-                                                 ((0, 0.1, 0.2), 0.5, 0.5)])  # fmt: skip
+@pytest.mark.parametrize(
+    "origin, end, length",
+    [
+        ((-5, 0.1, 0.2), 10.0, 2.0),
+        ((-5, 0.1, 0.2), 5.0, 1.0),
+        ((-5, 0.1, 0.2), 3.0, 0.0),
+        ((0, 0.1, 0.2), 10.0, 1.0),
+        ((0, 0.1, 0.2), 0.5, 0.5),
+    ],
+)
 def test_one_box_of_known_density_and_length(origin, end, length):
     """exp(-density x length inside the box) for a ray in +x through [-1, 1]^3 (scaled down into local
     units), starting outside or inside, ending before, inside or after the box."""
@@ -276,8 +307,10 @@ def test_fast_resampling_matches_the_geometric_reference(tiny_geometry):
     g = tiny_geometry
     lab = LevelLabeller(g.opaque, LabelSettings(rays=8))
     rng = np.random.default_rng(3)
-    vals = np.r_[rng.uniform(0, 1, (len(g.receivers.vertices), 2)),
-                 np.full((len(g.opaque.vertices) - len(g.receivers.vertices), 2), np.nan)]  # fmt: skip
+    vals = np.r_[
+        rng.uniform(0, 1, (len(g.receivers.vertices), 2)),
+        np.full((len(g.opaque.vertices) - len(g.receivers.vertices), 2), np.nan),
+    ]
     centres = g.receivers.vertices[rng.choice(len(g.receivers.vertices), 300, replace=False)]
     rad, u = np.full(300, 0.9), sphere_directions(32)
     got, w = _resample_block(lab, vals, centres, rad, u)

@@ -28,8 +28,15 @@ def _ao_pair(h, w, seed):
 
 
 def _skimage(pred, ref):
-    return structural_similarity(pred, ref, data_range=1.0, gaussian_weights=True, sigma=SSIM_SIGMA,
-                                 use_sample_covariance=False, full=True)  # fmt: skip
+    return structural_similarity(
+        pred,
+        ref,
+        data_range=1.0,
+        gaussian_weights=True,
+        sigma=SSIM_SIGMA,
+        use_sample_covariance=False,
+        full=True,
+    )
 
 
 @pytest.mark.parametrize("shape,seed", [((64, 80), 0), ((121, 97), 1), ((1080 // 8, 1920 // 8), 2)])

@@ -111,8 +111,13 @@ def _shard_bytes(root: Path, manifest: dict) -> list[bytes]:
 
 
 def _cli(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "pipeline.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kw)  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "pipeline.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def test_two_node_dataset_is_byte_identical(ray_engine, local_dataset, config_file, tmp_path):
@@ -230,8 +235,11 @@ def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, 
     out = tmp_path / "ray"
     pid = ray_engine.worker_info()[1][0]
     result: dict = {}
-    run = threading.Thread(target=lambda: result.update(
-        info=bake_level(level, load_level_settings(cfg, LEVEL_TASKS), out, engine=ray_engine)))  # fmt: skip
+    run = threading.Thread(
+        target=lambda: result.update(
+            info=bake_level(level, load_level_settings(cfg, LEVEL_TASKS), out, engine=ray_engine)
+        )
+    )
     run.start()
     deadline = time.time() + 90
     while not list((out / "stages" / "decorators.parts").glob("[!.]*.npz")) and run.is_alive():

@@ -98,13 +98,32 @@ def test_readme_journeys_run_as_written(tmp_path):
     blocks = [(h, small(b)) for h, b in journey_blocks(README.read_text()) if not b.startswith(LONG_MARKER)]
     assert len(blocks) >= 8
     script = "".join(f"echo '::block {k}::' >&2\n{b}" for k, (_, b) in enumerate(blocks))
-    proc = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=BLOCK_TIMEOUT)  # fmt: skip
+    proc = subprocess.run(
+        ["bash", "-euo", "pipefail", "-c", script],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=BLOCK_TIMEOUT,
+    )
     if proc.returncode != 0:
         k = int(re.findall(r"::block (\d+)::", proc.stderr)[-1])
         pytest.fail(f"README block in {blocks[k][0]!r} failed:\n{blocks[k][1]}\n{proc.stderr[-3000:]}")
-    for out in ("spot-vertex.glb", "spot-texture.glb", "truck-texture.glb", "truck-view/index.html", "ao.png",
-                "shaded.png", "my_ao.png", "my-shaders/manifest.json", "exports/my-unet/model.onnx",
-                "my-unet-ao.png", "spot-view/index.html", "level-baked/level_baked.glb", "volumes.json",
-                "ao.npy", "spot-ray.ply"):  # fmt: skip
+    for out in (
+        "spot-vertex.glb",
+        "spot-texture.glb",
+        "truck-texture.glb",
+        "truck-view/index.html",
+        "ao.png",
+        "shaded.png",
+        "my_ao.png",
+        "my-shaders/manifest.json",
+        "exports/my-unet/model.onnx",
+        "my-unet-ao.png",
+        "spot-view/index.html",
+        "level-baked/level_baked.glb",
+        "volumes.json",
+        "ao.npy",
+        "spot-ray.ply",
+    ):
         assert (tmp_path / out).is_file(), out

@@ -71,8 +71,9 @@ def _run(code: str) -> subprocess.CompletedProcess:
     env = dict(
         os.environ, PYOPENGL_PLATFORM=os.environ.get("PYOPENGL_PLATFORM", "osmesa"), PYTHONPATH=str(ROOT)
     )
-    return subprocess.run([sys.executable, "-c", BLOCKER + code], cwd=ROOT, env=env, capture_output=True,
-                          text=True, timeout=600)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-c", BLOCKER + code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600
+    )
 
 
 def test_the_blocker_refuses_the_training_stack():

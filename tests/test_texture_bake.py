@@ -52,9 +52,11 @@ def corner_mesh() -> UVMesh:
     quad = np.array([[0, 1, 2], [0, 2, 3]])
     # wall winding: (0,-2,0) -> (0,-2,2) -> (0,2,2) has normal -x
     return scene_with_uvs(
-        np.concatenate([floor, wall]), np.concatenate([quad, quad + 4]), np.concatenate([uv_floor, uv_wall]),
+        np.concatenate([floor, wall]),
+        np.concatenate([quad, quad + 4]),
+        np.concatenate([uv_floor, uv_wall]),
         "corner",
-    )  # fmt: skip
+    )
 
 
 def closed_form(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -158,8 +160,13 @@ def test_glb_holds_the_map_as_occlusion_texture_and_keeps_the_material(tmp_path,
     mesh, result = corner_bake
     from trimesh.visual.material import PBRMaterial
 
-    mesh = UVMesh(mesh.vertices, mesh.faces, mesh.uv, PBRMaterial(baseColorFactor=[200, 10, 10, 255],
-                                                                  roughnessFactor=0.3), "mesh")  # fmt: skip
+    mesh = UVMesh(
+        mesh.vertices,
+        mesh.faces,
+        mesh.uv,
+        PBRMaterial(baseColorFactor=[200, 10, 10, 255], roughnessFactor=0.3),
+        "mesh",
+    )
     path = write_texture_glb(tmp_path / "m.glb", mesh, result.ao)
     data = path.read_bytes()
     magic, version, _ = struct.unpack_from("<4sII", data, 0)
@@ -181,8 +188,9 @@ def test_glb_holds_the_map_as_occlusion_texture_and_keeps_the_material(tmp_path,
 
 def test_mesh_uvs_are_used_when_usable_else_xatlas(tmp_path):
     mesh = corner_mesh()
-    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, visual=trimesh.visual.TextureVisuals(uv=mesh.uv),
-                         process=False)  # fmt: skip
+    tm = trimesh.Trimesh(
+        mesh.vertices, mesh.faces, visual=trimesh.visual.TextureVisuals(uv=mesh.uv), process=False
+    )
     good = tmp_path / "good.glb"
     good.write_bytes(tm.export(file_type="glb"))
     loaded = load_uv_mesh(good, TextureBakeSettings(resolution=64))
@@ -259,8 +267,12 @@ def test_cli_keeps_the_source_base_colour_texture_with_mesh_uvs(tmp_path):
     colour = np.zeros((8, 8, 3), np.uint8)
     colour[:, :4] = (200, 30, 30)
     material = PBRMaterial(baseColorTexture=Image.fromarray(colour), roughnessFactor=0.4)
-    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False,
-                         visual=trimesh.visual.TextureVisuals(uv=mesh.uv, material=material))  # fmt: skip
+    tm = trimesh.Trimesh(
+        mesh.vertices,
+        mesh.faces,
+        process=False,
+        visual=trimesh.visual.TextureVisuals(uv=mesh.uv, material=material),
+    )
     src = tmp_path / "textured.glb"
     src.write_bytes(tm.export(file_type="glb"))
     out = tmp_path / "baked.glb"

@@ -114,8 +114,14 @@ def browser(page):
 
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
-              "--enable-unsafe-swiftshader", "--window-size=700,600"):  # fmt: skip
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--window-size=700,600",
+    ):
         opts.add_argument(a)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     try:
@@ -151,8 +157,10 @@ def _capture(driver, method: int, pose) -> dict:
 
 
 def _methods(driver) -> dict[str, int]:
-    return {m["kind"] + ("-" + m["name"].split()[0] if m["kind"] == "shader" else ""): i
-            for i, m in enumerate(driver.execute_script("return window.neuralao.methods"))}  # fmt: skip
+    return {
+        m["kind"] + ("-" + m["name"].split()[0] if m["kind"] == "shader" else ""): i
+        for i, m in enumerate(driver.execute_script("return window.neuralao.methods"))
+    }
 
 
 def test_generated_shaders_match_onnxruntime_on_the_same_gbuffer(browser, page):
@@ -227,7 +235,9 @@ def test_vertex_and_texture_bakes_match_their_files(browser, page):
         ref = sample_bilinear(red, point_uvs(tex_mesh, face, bary))
         err = np.abs(img["ao"][..., 0][m] - ref)
         assert np.quantile(err, 0.99) <= TOL_TEXTURE_P99 and err.mean() <= TOL_TEXTURE_MEAN, (
-            np.quantile(err, 0.99), err.mean())  # fmt: skip
+            np.quantile(err, 0.99),
+            err.mean(),
+        )
         assert np.ptp(ref) > 0.2  # the map really varies over the view
 
 
@@ -255,8 +265,11 @@ def test_screenshots_of_every_method(browser, page, tmp_path):
             path.write_bytes(browser.find_element(By.ID, "view").screenshot_as_png)
             shot = Image.open(path).convert("RGB")
             assert shot.size == (320, 240) and np.asarray(shot.convert("L")).std() > 10  # drawn, not blank
-            ImageDraw.Draw(shot).text((6, 4), browser.execute_script("return window.neuralao.methods")[i]["name"],
-                                      fill=(230, 230, 230))  # fmt: skip
+            ImageDraw.Draw(shot).text(
+                (6, 4),
+                browser.execute_script("return window.neuralao.methods")[i]["name"],
+                fill=(230, 230, 230),
+            )
             shots.append(shot)
         assert len(shots) == 4
         sheet = Image.new("RGB", (640, 480))
@@ -269,10 +282,21 @@ def test_screenshots_of_every_method(browser, page, tmp_path):
 
 def test_serve_answers_on_localhost(page):
     proc = subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", "view", str(page / "vertex.glb"), "--out", str(page / "served"),
-         "--serve", "--port", "0"],
-        stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "pipeline.cli",
+            "view",
+            str(page / "vertex.glb"),
+            "--out",
+            str(page / "served"),
+            "--serve",
+            "--port",
+            "0",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = ""
         deadline = time.monotonic() + 60

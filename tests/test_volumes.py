@@ -212,8 +212,9 @@ def test_model_tracks_traced_ao_and_regularisation_trades_fit_for_continuity():
     assert face[1] < 0.7 * face[0], face  # measured 0.029 -> 0.014
     # accuracy against traced AO at random valid probes (traced with the blend of both distances)
     probe = VolumeProbe(vol)
-    unreg = VolumeProbe(Volumes(regions, vol.edges, extra["models_unregularised"], vol.half_distances,
-                                vol.blend, s))  # fmt: skip
+    unreg = VolumeProbe(
+        Volumes(regions, vol.edges, extra["models_unregularised"], vol.half_distances, vol.blend, s)
+    )
     pts = np.concatenate([points_in(r, 40, 10 + k, margin=0.05) for k, r in enumerate(regions)])
     lab = make_labeller(scene, s)
     _, valid = spherical_ao(lab, pts, np.arange(len(pts)), vol.half_distances, s)
@@ -261,8 +262,16 @@ def test_free_space_regions_cover_free_cells_and_never_cross_a_wall():
 
 def test_regions_json_and_bad_boxes_are_one_line_errors(tmp_path):
     f = tmp_path / "r.json"
-    f.write_text(json.dumps({"regions": [{"name": "a", "min": [0, 0, 0], "max": [1, 1, 1]},
-                                         {"name": "b", "min": [1, 0, 0], "max": [2, 1, 1]}]}))  # fmt: skip
+    f.write_text(
+        json.dumps(
+            {
+                "regions": [
+                    {"name": "a", "min": [0, 0, 0], "max": [1, 1, 1]},
+                    {"name": "b", "min": [1, 0, 0], "max": [2, 1, 1]},
+                ]
+            }
+        )
+    )
     regions, edges = read_regions(f)
     assert [r.name for r in regions] == ["a", "b"] and edges is None
     cases = {
@@ -274,7 +283,7 @@ def test_regions_json_and_bad_boxes_are_one_line_errors(tmp_path):
         "do not touch": {
             "regions": [{"min": [0, 0, 0], "max": [1, 1, 1]}, {"min": [3, 0, 0], "max": [4, 1, 1]}],
             "edges": [[0, 1]],
-        },  # fmt: skip
+        },
         "two different regions": {"regions": [{"min": [0, 0, 0], "max": [1, 1, 1]}], "edges": [[0, 5]]},
     }
     for message, data in cases.items():
@@ -389,8 +398,20 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
     obj = tmp_path / "level.obj"
     trimesh.Trimesh(scene.vertices, scene.faces, process=False).export(obj)
     out, glsl = tmp_path / "v.json", tmp_path / "glsl"
-    args = ["volumes", str(obj), "--out", str(out), "--set", "samples=4", "--set", "directions=128",
-            "--set", "grid=6", "--glsl", str(glsl)]  # fmt: skip
+    args = [
+        "volumes",
+        str(obj),
+        "--out",
+        str(out),
+        "--set",
+        "samples=4",
+        "--set",
+        "directions=128",
+        "--set",
+        "grid=6",
+        "--glsl",
+        str(glsl),
+    ]
     assert cli.main(args) == 0
     vol = read_volumes(out)
     assert len(vol.regions) >= 2
@@ -410,27 +431,70 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
     np.save(tmp_path / "p.npy", p)
     np.save(tmp_path / "n.npy", n)
     ao_path = tmp_path / "ao.npy"
-    assert cli.main(["probe", str(out), "--points", str(tmp_path / "p.npy"), "--normals", str(tmp_path / "n.npy"),
-                     "--out", str(ao_path)]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "probe",
+                str(out),
+                "--points",
+                str(tmp_path / "p.npy"),
+                "--normals",
+                str(tmp_path / "n.npy"),
+                "--out",
+                str(ao_path),
+            ]
+        )
+        == 0
+    )
     ao = np.load(ao_path)
     n[0] = (0, 0, 1)
     assert ao.shape == (100,) and np.isfinite(ao).all()
     assert np.allclose(ao, VolumeProbe(vol).ao(p, n), atol=1e-7)
     # same seed, other worker count: the same models
-    cli.main([*args[:3], str(tmp_path / "w.json"), "--set", "samples=4", "--set", "directions=128",
-              "--set", "grid=6", "--set", "workers=1"])  # fmt: skip
+    cli.main(
+        [
+            *args[:3],
+            str(tmp_path / "w.json"),
+            "--set",
+            "samples=4",
+            "--set",
+            "directions=128",
+            "--set",
+            "grid=6",
+            "--set",
+            "workers=1",
+        ]
+    )
     again = read_volumes(tmp_path / "w.json")
     assert all(
         np.array_equal(a.coefficients, b.coefficients) for a, b in zip(vol.models, again.models, strict=True)
     )
     # given regions and edges, settings from a preset file
-    (tmp_path / "regions.json").write_text(json.dumps({
-        "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in four_regions()],
-        "edges": [[0, 1], [0, 2]]}))  # fmt: skip
+    (tmp_path / "regions.json").write_text(
+        json.dumps(
+            {
+                "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in four_regions()],
+                "edges": [[0, 1], [0, 2]],
+            }
+        )
+    )
     (tmp_path / "preset.json").write_text(json.dumps({"samples": 4, "directions": 64}))
     given = tmp_path / "given.json"
-    assert cli.main(["volumes", str(obj), "--out", str(given), "--regions", str(tmp_path / "regions.json"),
-                     "--config", str(tmp_path / "preset.json")]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "volumes",
+                str(obj),
+                "--out",
+                str(given),
+                "--regions",
+                str(tmp_path / "regions.json"),
+                "--config",
+                str(tmp_path / "preset.json"),
+            ]
+        )
+        == 0
+    )
     g = read_volumes(given)
     assert [r.name for r in g.regions] == [r.name for r in four_regions()]
     assert [(e.i, e.j) for e in g.edges] == [(0, 1), (0, 2)] and g.settings.directions == 64
@@ -446,8 +510,21 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
     np.save(tmp_path / "nan.npy", p)
     assert cli.main([*probe_args, str(tmp_path / "nan.npy")]) == 2
     (tmp_path / "junk.json").write_text("{}")
-    assert cli.main(["probe", str(tmp_path / "junk.json"), "--points", str(tmp_path / "p.npy"), "--normals",
-                     str(tmp_path / "n.npy"), "--out", str(bad)]) == 2  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "probe",
+                str(tmp_path / "junk.json"),
+                "--points",
+                str(tmp_path / "p.npy"),
+                "--normals",
+                str(tmp_path / "n.npy"),
+                "--out",
+                str(bad),
+            ]
+        )
+        == 2
+    )
     assert not bad.exists()
 
 

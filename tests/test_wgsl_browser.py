@@ -81,8 +81,16 @@ def _run(driver, program: ComputeProgram, x: np.ndarray, scalars: dict) -> np.nd
     """program's first output on x (1, C, H, W) in the browser: (C_out, H, W) float32."""
     _, _, h, w = x.shape
     weights = base64.b64encode(program.weights).decode()
-    driver.execute_script(_START, program.manifest, program.sources, weights,
-                          base64.b64encode(np.ascontiguousarray(x[0]).tobytes()).decode(), w, h, scalars)  # fmt: skip
+    driver.execute_script(
+        _START,
+        program.manifest,
+        program.sources,
+        weights,
+        base64.b64encode(np.ascontiguousarray(x[0]).tobytes()).decode(),
+        w,
+        h,
+        scalars,
+    )
     deadline = time.monotonic() + 600
     while (r := driver.execute_script("return window.__nao")) is None:
         assert time.monotonic() < deadline, "the browser did not finish within 600 s"
@@ -108,15 +116,24 @@ def test_shipped_default_in_chromium_webgpu(browser):
 
 def test_blocked_conv_in_chromium_webgpu(browser):
     rng = np.random.default_rng(1)
-    inits = [nh.from_array(rng.normal(size=(8, 6, 3, 3)).astype(np.float32), "w"),
-             nh.from_array(rng.normal(size=(8,)).astype(np.float32), "b"),
-             nh.from_array(np.array([1, 1, 2, 2], np.float32), "s")]  # fmt: skip
-    nodes = [oh.make_node("Conv", ["x", "w", "b"], ["c"], pads=[1, 1, 1, 1]),
-             oh.make_node("LeakyRelu", ["c"], ["l"], alpha=0.1),
-             oh.make_node("AveragePool", ["l"], ["p"], kernel_shape=[2, 2], strides=[2, 2]),
-             oh.make_node("Resize", ["p", "", "s"], ["y"], mode="linear")]  # fmt: skip
-    graph = oh.make_graph(nodes, "g", [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 6, 10, 14])],
-                          [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)], inits)  # fmt: skip
+    inits = [
+        nh.from_array(rng.normal(size=(8, 6, 3, 3)).astype(np.float32), "w"),
+        nh.from_array(rng.normal(size=(8,)).astype(np.float32), "b"),
+        nh.from_array(np.array([1, 1, 2, 2], np.float32), "s"),
+    ]
+    nodes = [
+        oh.make_node("Conv", ["x", "w", "b"], ["c"], pads=[1, 1, 1, 1]),
+        oh.make_node("LeakyRelu", ["c"], ["l"], alpha=0.1),
+        oh.make_node("AveragePool", ["l"], ["p"], kernel_shape=[2, 2], strides=[2, 2]),
+        oh.make_node("Resize", ["p", "", "s"], ["y"], mode="linear"),
+    ]
+    graph = oh.make_graph(
+        nodes,
+        "g",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 6, 10, 14])],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
+        inits,
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", 19)])
     program = generate_compute(model, dialect="wgsl", conv_block=(2, 1, 2))
     assert [p["block"] for p in program.manifest["passes"] if p["kind"] == "conv"] == [[2, 1, 2]]

@@ -38,9 +38,13 @@ def _adapter_or_skip() -> None:
 
 
 def _model(nodes, inits=(), in_shape=(1, 6, 5, 7), opset=20) -> onnx.ModelProto:
-    graph = oh.make_graph(nodes, "g", [oh.make_tensor_value_info("x", TensorProto.FLOAT, list(in_shape))],
-                          [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
-                          [nh.from_array(np.asarray(v), k) for k, v in inits])  # fmt: skip
+    graph = oh.make_graph(
+        nodes,
+        "g",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, list(in_shape))],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
+        [nh.from_array(np.asarray(v), k) for k, v in inits],
+    )
     return oh.make_model(graph, opset_imports=[oh.make_opsetid("", opset)])
 
 
@@ -56,29 +60,59 @@ def _n(op, inputs=("x",), out="y", **attrs):
 # modes, pads, concat, binary, gather, reduce, moments + normalize, softmax, LRN) and the activations
 # whose WGSL text differs from the GLSL.
 CASES = {
-    "conv_blocked_leaky": ([_n("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]), _n("LeakyRelu", ("c",), alpha=0.1)],
-                           [("w", _w((9, 6, 3, 3))), ("b", _w((9,), 2))]),
-    "conv_transpose": ([_n("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])], [("w", _w((6, 5, 3, 3)))]),
-    "depthwise_hardswish": ([_n("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), _n("HardSwish", ("c",))],
-                            [("w", _w((6, 1, 3, 3)))]),
+    "conv_blocked_leaky": (
+        [_n("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]), _n("LeakyRelu", ("c",), alpha=0.1)],
+        [("w", _w((9, 6, 3, 3))), ("b", _w((9,), 2))],
+    ),
+    "conv_transpose": (
+        [_n("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])],
+        [("w", _w((6, 5, 3, 3)))],
+    ),
+    "depthwise_hardswish": (
+        [_n("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), _n("HardSwish", ("c",))],
+        [("w", _w((6, 1, 3, 3)))],
+    ),
     "maxpool_ceil": ([_n("MaxPool", kernel_shape=[2, 2], strides=[2, 2], ceil_mode=1)], []),
     "avgpool_pads": ([_n("AveragePool", kernel_shape=[3, 3], pads=[1, 1, 1, 1], count_include_pad=1)], []),
-    "resize_nearest": ([_n("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
-                       [("s", np.array([1, 1, 1.5, 2], np.float32))]),
-    "resize_linear_align": ([_n("Resize", ("x", "", "s"), mode="linear", coordinate_transformation_mode="align_corners")],
-                            [("s", np.array([1, 1, 2, 2], np.float32))]),
-    "resize_cubic": ([_n("Resize", ("x", "", "s"), mode="cubic")], [("s", np.array([1, 1, 2, 2], np.float32))]),
+    "resize_nearest": (
+        [_n("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
+        [("s", np.array([1, 1, 1.5, 2], np.float32))],
+    ),
+    "resize_linear_align": (
+        [_n("Resize", ("x", "", "s"), mode="linear", coordinate_transformation_mode="align_corners")],
+        [("s", np.array([1, 1, 2, 2], np.float32))],
+    ),
+    "resize_cubic": (
+        [_n("Resize", ("x", "", "s"), mode="cubic")],
+        [("s", np.array([1, 1, 2, 2], np.float32))],
+    ),
     "pad_wrap": ([_n("Pad", ("x", "p"), mode="wrap")], [("p", np.array([0, 0, 2, 1, 0, 0, 1, 3], np.int64))]),
-    "concat_mul_elu": ([_n("Concat", ("x", "x"), "c", axis=1), _n("Mul", ("c", "c"), "m"), _n("Elu", ("m",))], []),
-    "div_prelu": ([_n("Div", ("x", "k"), "d"), _n("PRelu", ("d", "s"))],
-                  [("k", np.full((1, 6, 1, 1), 3.0, np.float32)), ("s", _w((6, 1, 1), 3))]),
-    "depth_to_space": ([_n("DepthToSpace", blocksize=2, mode="CRD")], []),  # C = 6 is not divisible: see shape
-    "instance_norm_gelu": ([_n("InstanceNormalization", ("x", "s", "b"), "n"), _n("Gelu", ("n",))],
-                           [("s", _w((6,), 4)), ("b", _w((6,), 5))]),
-    "reduce_mean_softmax": ([_n("ReduceMean", ("x", "a"), "r", keepdims=1), _n("Softmax", ("x",), "s", axis=1),
-                             _n("Add", ("s", "r"))], [("a", np.array([2, 3], np.int64))]),
+    "concat_mul_elu": (
+        [_n("Concat", ("x", "x"), "c", axis=1), _n("Mul", ("c", "c"), "m"), _n("Elu", ("m",))],
+        [],
+    ),
+    "div_prelu": (
+        [_n("Div", ("x", "k"), "d"), _n("PRelu", ("d", "s"))],
+        [("k", np.full((1, 6, 1, 1), 3.0, np.float32)), ("s", _w((6, 1, 1), 3))],
+    ),
+    "depth_to_space": (
+        [_n("DepthToSpace", blocksize=2, mode="CRD")],
+        [],
+    ),  # C = 6 is not divisible: see shape
+    "instance_norm_gelu": (
+        [_n("InstanceNormalization", ("x", "s", "b"), "n"), _n("Gelu", ("n",))],
+        [("s", _w((6,), 4)), ("b", _w((6,), 5))],
+    ),
+    "reduce_mean_softmax": (
+        [
+            _n("ReduceMean", ("x", "a"), "r", keepdims=1),
+            _n("Softmax", ("x",), "s", axis=1),
+            _n("Add", ("s", "r")),
+        ],
+        [("a", np.array([2, 3], np.int64))],
+    ),
     "lrn_mish": ([_n("LRN", ("x",), "l", size=3), _n("Mish", ("l",))], []),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -130,9 +164,15 @@ def test_hlsl_and_msl_beside_the_glsl(tmp_path):
     """--hlsl-msl writes <pass>.hlsl and <pass>.metal for every pass; each HLSL compiles back with glslang's
     HLSL front end (write_compute_export validates it), each MSL declares the kernel."""
     nodes, inits = CASES["conv_blocked_leaky"]
-    model = _model(nodes + [_n("AveragePool", ("y",), "p", kernel_shape=[2, 2], strides=[2, 2]),
-                            _n("Resize", ("p", "", "s"), "r", mode="linear")],
-                   inits + [("s", np.array([1, 1, 2, 2], np.float32))], in_shape=(1, 6, "H", "W"))  # fmt: skip
+    model = _model(
+        nodes
+        + [
+            _n("AveragePool", ("y",), "p", kernel_shape=[2, 2], strides=[2, 2]),
+            _n("Resize", ("p", "", "s"), "r", mode="linear"),
+        ],
+        inits + [("s", np.array([1, 1, 2, 2], np.float32))],
+        in_shape=(1, 6, "H", "W"),
+    )
     model.graph.output[0].name = "r"
     manifest = json.loads(write_compute_export(generate_compute(model), tmp_path, cross=True).read_text())
     assert "HLSL front end" in manifest["cross_compiled"]["validated"]

@@ -36,8 +36,12 @@ class Act:
         if self.op == "Elu":
             return fill("act_Elu", x=x, alpha=glsl_float(self.params["alpha"]))
         if self.op == "HardSigmoid":
-            return fill("act_HardSigmoid", x=x, alpha=glsl_float(self.params["alpha"]),
-                        beta=glsl_float(self.params["beta"]))  # fmt: skip
+            return fill(
+                "act_HardSigmoid",
+                x=x,
+                alpha=glsl_float(self.params["alpha"]),
+                beta=glsl_float(self.params["beta"]),
+            )
         if self.op == "Pow":
             return _pow_expr(x, self.params["e"], fill)
         return fill(f"act_{self.op}", x=x)

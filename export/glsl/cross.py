@@ -49,12 +49,43 @@ def cross_compile(source: str) -> dict[str, str]:
     with tempfile.TemporaryDirectory(prefix="nao_cross_") as tmp:
         d = Path(tmp)
         (d / "pass.comp").write_text(source)
-        _run(["glslangValidator", "-G", "--shift-ssbo-binding", "comp", str(PARAMS_REGISTER_SHIFT), "-o",
-              str(d / "pass.spv"), str(d / "pass.comp")], "glslangValidator (GLSL -> SPIR-V)")  # fmt: skip
-        _run(["spirv-cross", str(d / "pass.spv"), "--hlsl", "--shader-model", HLSL_SHADER_MODEL, "--output",
-              str(d / "pass.hlsl")], "spirv-cross --hlsl")  # fmt: skip
-        _run(["spirv-cross", str(d / "pass.spv"), "--msl", "--msl-version", MSL_VERSION, "--output",
-              str(d / "pass.metal")], "spirv-cross --msl")  # fmt: skip
+        _run(
+            [
+                "glslangValidator",
+                "-G",
+                "--shift-ssbo-binding",
+                "comp",
+                str(PARAMS_REGISTER_SHIFT),
+                "-o",
+                str(d / "pass.spv"),
+                str(d / "pass.comp"),
+            ],
+            "glslangValidator (GLSL -> SPIR-V)",
+        )
+        _run(
+            [
+                "spirv-cross",
+                str(d / "pass.spv"),
+                "--hlsl",
+                "--shader-model",
+                HLSL_SHADER_MODEL,
+                "--output",
+                str(d / "pass.hlsl"),
+            ],
+            "spirv-cross --hlsl",
+        )
+        _run(
+            [
+                "spirv-cross",
+                str(d / "pass.spv"),
+                "--msl",
+                "--msl-version",
+                MSL_VERSION,
+                "--output",
+                str(d / "pass.metal"),
+            ],
+            "spirv-cross --msl",
+        )
         return {"hlsl": (d / "pass.hlsl").read_text(), "msl": (d / "pass.metal").read_text()}
 
 
@@ -65,5 +96,18 @@ def validate_hlsl(source: str) -> None:
     with tempfile.TemporaryDirectory(prefix="nao_hlsl_") as tmp:
         path = Path(tmp) / "pass.hlsl"
         path.write_text(source)
-        _run(["glslangValidator", "-D", "-V", "-e", "main", "-S", "comp", "-o", str(Path(tmp) / "pass.spv"),
-              str(path)], "glslangValidator -D (HLSL)")  # fmt: skip
+        _run(
+            [
+                "glslangValidator",
+                "-D",
+                "-V",
+                "-e",
+                "main",
+                "-S",
+                "comp",
+                "-o",
+                str(Path(tmp) / "pass.spv"),
+                str(path),
+            ],
+            "glslangValidator -D (HLSL)",
+        )

@@ -75,8 +75,11 @@ class WGSL(Dialect):
 
 DIALECTS: dict[str, Dialect] = {d.name: d() for d in (Dialect, GLSL330, ES300)}
 COMPUTE_DIALECTS: dict[str, Dialect] = {"glsl430": DIALECTS["glsl430"], "wgsl": WGSL()}
-FRAGMENT_FILES = {"glsl330": ("mlp.vert", "mlp.frag"), "es300": ("mlp_es300.vert", "mlp_es300.frag"),
-                  "glsl430": ("mlp_430.vert", "mlp_430.frag")}  # fmt: skip
+FRAGMENT_FILES = {
+    "glsl330": ("mlp.vert", "mlp.frag"),
+    "es300": ("mlp_es300.vert", "mlp_es300.frag"),
+    "glsl430": ("mlp_430.vert", "mlp_430.frag"),
+}
 
 
 def get_dialect(name: str) -> Dialect:

@@ -83,17 +83,26 @@ def load_mlp_export(export_dir: str | Path, dialect: str = "glsl330") -> MLPShad
         raise NeuralaoError(f"{d} is not a fragment-shader export")
     sources = {}
     for name, files in manifest["dialects"].items():
-        sources[name] = (_read_checked(d, manifest, files["vertex"]).decode(),
-                         _read_checked(d, manifest, files["fragment"]).decode())  # fmt: skip
+        sources[name] = (
+            _read_checked(d, manifest, files["vertex"]).decode(),
+            _read_checked(d, manifest, files["fragment"]).decode(),
+        )
     if dialect not in sources:
         raise NeuralaoError(f"export {d} has no {dialect!r} shaders")
-    ubos = [(b["name"], int(b["binding"]), np.frombuffer(_read_checked(d, manifest, b["file"]), dtype="<f4").copy())
-            for b in manifest["uniform_blocks"]]  # fmt: skip
+    ubos = [
+        (
+            b["name"],
+            int(b["binding"]),
+            np.frombuffer(_read_checked(d, manifest, b["file"]), dtype="<f4").copy(),
+        )
+        for b in manifest["uniform_blocks"]
+    ]
     return MLPShader(sources[dialect][1], sources[dialect][0], ubos, manifest, dialect, sources)
 
 
-def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate: bool = True,
-                         cross: bool = False) -> Path:  # fmt: skip
+def write_compute_export(
+    program: ComputeProgram, out_dir: str | Path, validate: bool = True, cross: bool = False
+) -> Path:
     """Write every pass as <name>.comp (GLSL) or <name>.wgsl, weights.bin and manifest.json (atomically);
     returns the manifest path. ``cross``: also <name>.hlsl and <name>.metal beside each GLSL pass
     (SPIR-V + SPIRV-Cross, :mod:`.cross`); the HLSL is compiled back with glslang's HLSL front end when
@@ -120,15 +129,15 @@ def write_compute_export(program: ComputeProgram, out_dir: str | Path, validate:
             files[entry["hlsl"]], files[entry["msl"]] = out["hlsl"].encode(), out["msl"].encode()
         manifest["cross_compiled"] = {
             "how": "GLSL -> SPIR-V (glslangValidator -G, SSBO bindings shifted by "
-                   f"{PARAMS_REGISTER_SHIFT}) -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / "
-                   f"--msl --msl-version {MSL_VERSION}",
+            f"{PARAMS_REGISTER_SHIFT}) -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / "
+            f"--msl --msl-version {MSL_VERSION}",
             "hlsl": "entry main, [numthreads] as local_size; input i: Texture2DArray t<i> (+ SamplerState s<i>, "
-                    f"unused: Load only); output: RWTexture2DArray u0; params: ByteAddressBuffer t{PARAMS_REGISTER_SHIFT}"
-                    " at the pass's weights.bin range; u_flip_y / scalar uniforms: $Globals cbuffer",
+            f"unused: Load only); output: RWTexture2DArray u0; params: ByteAddressBuffer t{PARAMS_REGISTER_SHIFT}"
+            " at the pass's weights.bin range; u_flip_y / scalar uniforms: $Globals cbuffer",
             "msl": "kernel main0; output texture(0), input i texture(i + 1); the params (device) and uniform "
-                   "(constant) buffers take [[buffer(k)]] in declaration order: see main0's signature",
+            "(constant) buffers take [[buffer(k)]] in declaration order: see main0's signature",
             "validated": "HLSL compiled back by glslang's HLSL front end" if validate else "not validated",
-        }  # fmt: skip
+        }
     files["weights.bin"] = program.weights
     return _write_export_files(Path(out_dir), files, manifest)
 

@@ -238,8 +238,13 @@ class OpTable:
         value_int: int | None = None,
         value_ints: list[int] | None = None,
     ) -> np.ndarray:
-        for v, dt in ((value, None), (value_float, np.float32), (value_floats, np.float32),
-                      (value_int, np.int64), (value_ints, np.int64)):  # fmt: skip
+        for v, dt in (
+            (value, None),
+            (value_float, np.float32),
+            (value_floats, np.float32),
+            (value_int, np.int64),
+            (value_ints, np.int64),
+        ):
             if v is not None:
                 return np.asarray(v, dtype=dt)
         raise self.fail("Constant without a value")

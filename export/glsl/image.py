@@ -78,8 +78,13 @@ class Dim:
         return s if self.offset == 0 else f"{s}{self.offset:+d}"
 
     def to_json(self, symbol: str) -> dict:
-        return {"of": symbol, "num": self.scale.numerator, "den": self.scale.denominator, "offset": self.offset,
-                "formula": self.describe(symbol)}  # fmt: skip
+        return {
+            "of": symbol,
+            "num": self.scale.numerator,
+            "den": self.scale.denominator,
+            "offset": self.offset,
+            "formula": self.describe(symbol),
+        }
 
 
 @dataclass
@@ -260,8 +265,20 @@ CONV_KINDS = ("conv", "conv_depthwise", "conv_transpose")
 # Transpose and Cast; F.interpolate(size=x.shape[2:]) emits Shape, Gather, Unsqueeze on a static size).
 # Reshape, Transpose, Squeeze, Unsqueeze and Shape also take image tensors (a View); Expand, Tile and Range
 # build weights from small constants (onnx's light models make every weight with ConstantOfShape).
-FOLDED_OPS = ("ConstantOfShape", "Reshape", "Slice", "Transpose", "Cast", "Shape", "Gather", "Unsqueeze", "Squeeze",
-              "Expand", "Tile", "Range")  # fmt: skip
+FOLDED_OPS = (
+    "ConstantOfShape",
+    "Reshape",
+    "Slice",
+    "Transpose",
+    "Cast",
+    "Shape",
+    "Gather",
+    "Unsqueeze",
+    "Squeeze",
+    "Expand",
+    "Tile",
+    "Range",
+)
 # Largest constant a folded op may create (elements): as many float32 as weights.bin can hold, so a weight
 # built inside the graph is as welcome as an initializer; a hostile shape (2^40 elements) is still refused.
 MAX_FOLDED_ELEMENTS = MAX_PARAM_BYTES // 4
@@ -279,15 +296,79 @@ def _split_transpose(total: int, auto_pad: str) -> tuple[int, int]:
 class ImageOps(OpTable):
     """ONNX -> compute passes over (1, C, H, W) images (GLSL 4.3 compute, texture storage)."""
 
-    OPS = ("Conv", "ConvTranspose", "BatchNormalization", "Relu", "LeakyRelu", "PRelu", "Sigmoid", "Tanh", "Clip",
-           "Elu", "Softplus", "HardSigmoid", "HardSwish", "Sin", "Cos", "Add", "Sub", "Mul", "Div", "AveragePool",
-           "MaxPool", "GlobalAveragePool", "GlobalMaxPool", "Resize", "Upsample", "Pad", "Concat", "Identity",
-           "Constant", *FOLDED_OPS, "Erf", "Gelu", "Mish", "Sqrt", "Exp", "Log", "Abs", "Neg", "Reciprocal", "Sign",
-           "Softsign", "Floor", "Ceil", "Pow", "Sum", "Mean", "Min", "Max", "Dropout", "DepthToSpace",
-           "SpaceToDepth", "Flatten", "InstanceNormalization", "GroupNormalization", "LayerNormalization",
-           "ReduceMean", "ReduceMax", "ReduceMin", "ReduceSum", "ReduceL1", "ReduceL2", "ReduceSumSquare",
-           "ReduceProd", "ReduceLogSum", "Softmax", "LogSoftmax", "LRN", "LpPool", "GlobalLpPool", "Gemm",
-           "MatMul")  # fmt: skip
+    OPS = (
+        "Conv",
+        "ConvTranspose",
+        "BatchNormalization",
+        "Relu",
+        "LeakyRelu",
+        "PRelu",
+        "Sigmoid",
+        "Tanh",
+        "Clip",
+        "Elu",
+        "Softplus",
+        "HardSigmoid",
+        "HardSwish",
+        "Sin",
+        "Cos",
+        "Add",
+        "Sub",
+        "Mul",
+        "Div",
+        "AveragePool",
+        "MaxPool",
+        "GlobalAveragePool",
+        "GlobalMaxPool",
+        "Resize",
+        "Upsample",
+        "Pad",
+        "Concat",
+        "Identity",
+        "Constant",
+        *FOLDED_OPS,
+        "Erf",
+        "Gelu",
+        "Mish",
+        "Sqrt",
+        "Exp",
+        "Log",
+        "Abs",
+        "Neg",
+        "Reciprocal",
+        "Sign",
+        "Softsign",
+        "Floor",
+        "Ceil",
+        "Pow",
+        "Sum",
+        "Mean",
+        "Min",
+        "Max",
+        "Dropout",
+        "DepthToSpace",
+        "SpaceToDepth",
+        "Flatten",
+        "InstanceNormalization",
+        "GroupNormalization",
+        "LayerNormalization",
+        "ReduceMean",
+        "ReduceMax",
+        "ReduceMin",
+        "ReduceSum",
+        "ReduceL1",
+        "ReduceL2",
+        "ReduceSumSquare",
+        "ReduceProd",
+        "ReduceLogSum",
+        "Softmax",
+        "LogSoftmax",
+        "LRN",
+        "LpPool",
+        "GlobalLpPool",
+        "Gemm",
+        "MatMul",
+    )
     target = "compute (image)"
 
     def __init__(self, graph: OnnxGraph, metadata_multiple: int | None):
@@ -403,8 +484,16 @@ class ImageOps(OpTable):
             return None
         return p
 
-    def output_dim(self, d: Dim, kernel: int, stride: int, dilation: int, pad_begin: int, pad_end: int,
-                   ceil_mode: int = 0) -> Dim:  # fmt: skip
+    def output_dim(
+        self,
+        d: Dim,
+        kernel: int,
+        stride: int,
+        dilation: int,
+        pad_begin: int,
+        pad_end: int,
+        ceil_mode: int = 0,
+    ) -> Dim:
         """floor (or ceil) of (n + pads - dilation (k - 1) - 1) / stride, + 1, kept symbolic (exact when
         stride divides Hp * scale, which the pad multiple guarantees). ceil_mode drops a last window
         that would start in the trailing padding (as onnxruntime and PyTorch do)."""
@@ -459,8 +548,9 @@ class ImageOps(OpTable):
             raise self.fail(f"constant {what} has non-finite values")
         return out
 
-    def _elementwise(self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str,
-                     index: int | None = 0) -> Texture:  # fmt: skip
+    def _elementwise(
+        self, X: Any, epi: Epilogue, params: dict[str, np.ndarray], op: str, index: int | None = 0
+    ) -> Texture:
         """Append ``epi`` to the pass producing X (input ``index`` of the node) or to a new elementwise pass
         (always when ``index`` is None: X is not one of the node's inputs as they stand)."""
         x = self.image(X, "X")
@@ -477,8 +567,17 @@ class ImageOps(OpTable):
     def _activation(self, X: Any, act: Act) -> Texture:
         return self._elementwise(X, Epilogue(act=act), {}, act.op)
 
-    def _conv_pass(self, kind: str, X: Any, parts: list[Texture], w: np.ndarray, bias: np.ndarray, window: tuple,
-                   h: Dim, wd: Dim) -> Texture:  # fmt: skip
+    def _conv_pass(
+        self,
+        kind: str,
+        X: Any,
+        parts: list[Texture],
+        w: np.ndarray,
+        bias: np.ndarray,
+        window: tuple,
+        h: Dim,
+        wd: Dim,
+    ) -> Texture:
         """A conv-like pass; w is the (M, C, kH, kW) dense equivalent ((C, 1, kH, kW) for depthwise)."""
         (kh, kw), (sy, sx), (dy, dx), p = window
         cout = w.shape[0]
@@ -494,8 +593,14 @@ class ImageOps(OpTable):
             layer_offsets.append(off)
             off += t.layers
         conv = Pass(0, kind, [self.node.op_type], parts, out, nodes=[self.label])
-        conv.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p,
-                       "layer_offsets": layer_offsets, "in_layers": off}  # fmt: skip
+        conv.fields = {
+            "kernel": (kh, kw),
+            "strides": (sy, sx),
+            "dilations": (dy, dx),
+            "pads": p,
+            "layer_offsets": layer_offsets,
+            "in_layers": off,
+        }
         conv.fields["weight64"], conv.fields["bias64"] = w, bias  # packed by _pack_conv (after BN folding)
         if isinstance(X, ConcatValue) and parts == X.parts:
             conv.ops.insert(0, "Concat")
@@ -510,14 +615,27 @@ class ImageOps(OpTable):
         return parts, w, bias
 
     # -- handlers
-    def Conv(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None, pads=None,
-             strides=None) -> Texture:  # fmt: skip
+    def Conv(
+        self,
+        X,
+        W,
+        B=None,
+        *,
+        auto_pad="NOTSET",
+        dilations=None,
+        group=1,
+        kernel_shape=None,
+        pads=None,
+        strides=None,
+    ) -> Texture:
         parts, w, bias = self._conv_inputs(X, W, B)
         if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
             raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
         cin, cout = sum(t.channels for t in parts), w.shape[0]
         if group < 1 or cout % group or w.shape[1] * group != cin:
-            raise self.fail(f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels")
+            raise self.fail(
+                f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels"
+            )
         dims = (parts[0].height, parts[0].width)
         window = self._window(list(w.shape[2:]), strides, dilations, pads, auto_pad, dims)
         (kh, kw), (sy, sx), (dy, dx), p = window
@@ -529,12 +647,27 @@ class ImageOps(OpTable):
         w = _group_dense(w, group) if group > 1 else w
         return self._conv_pass("conv", X, parts, w, bias, window, h, wd)
 
-    def ConvTranspose(self, X, W, B=None, *, auto_pad="NOTSET", dilations=None, group=1, kernel_shape=None,
-                      output_padding=None, output_shape=None, pads=None, strides=None) -> Texture:  # fmt: skip
+    def ConvTranspose(
+        self,
+        X,
+        W,
+        B=None,
+        *,
+        auto_pad="NOTSET",
+        dilations=None,
+        group=1,
+        kernel_shape=None,
+        output_padding=None,
+        output_shape=None,
+        pads=None,
+        strides=None,
+    ) -> Texture:
         parts, w, bias = self._conv_inputs(X, W, B)
         cin = sum(t.channels for t in parts)
         if group < 1 or w.shape[0] != cin or cin % group:
-            raise self.fail(f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels")
+            raise self.fail(
+                f"W of shape {list(w.shape)} with group={group} does not take {cin} input channels"
+            )
         if kernel_shape is not None and list(kernel_shape) != list(w.shape[2:]):
             raise self.fail(f"kernel_shape {list(kernel_shape)} does not match W {list(w.shape)}")
         kh, kw = (int(v) for v in w.shape[2:])
@@ -542,7 +675,9 @@ class ImageOps(OpTable):
         dy, dx = _spatial_pairs(dilations, 1, "dilations")
         adj = _spatial_pairs(output_padding, 0, "output_padding")
         if min(sy, sx, dy, dx) < 1 or max(kh, kw) > MAX_KERNEL:
-            raise self.fail(f"strides and dilations must be positive, the kernel {kh}x{kw} at most {MAX_KERNEL}")
+            raise self.fail(
+                f"strides and dilations must be positive, the kernel {kh}x{kw} at most {MAX_KERNEL}"
+            )
         if auto_pad not in ("NOTSET", "", "VALID", "SAME_UPPER", "SAME_LOWER"):
             raise self.unsupported("auto_pad", auto_pad)
         shape = None if output_shape is None else [int(v) for v in output_shape][-2:]
@@ -571,20 +706,25 @@ class ImageOps(OpTable):
         mg, cg = w.shape[1], cin // group
         dense = np.zeros((mg * group, cin, kh, kw))  # the gather form: out[m] += W[c, m] * in[c]
         for g in range(group):
-            dense[g * mg : (g + 1) * mg, g * cg : (g + 1) * cg] = w[g * cg : (g + 1) * cg].transpose(1, 0, 2, 3)
+            dense[g * mg : (g + 1) * mg, g * cg : (g + 1) * cg] = w[g * cg : (g + 1) * cg].transpose(
+                1, 0, 2, 3
+            )
         bias = np.zeros(mg * group) if bias is None else bias
         window = ((kh, kw), (sy, sx), (dy, dx), p)
         return self._conv_pass("conv_transpose", X, parts, dense, bias, window, dims[0], dims[1])
 
-    def BatchNormalization(self, X, scale, B, input_mean, input_var, *, epsilon=1e-5, momentum=0.9,
-                           training_mode=0, spatial=1) -> Texture:  # fmt: skip
+    def BatchNormalization(
+        self, X, scale, B, input_mean, input_var, *, epsilon=1e-5, momentum=0.9, training_mode=0, spatial=1
+    ) -> Texture:
         if training_mode:
             raise self.unsupported("training_mode", training_mode)
         if spatial != 1:
             raise self.unsupported("spatial", spatial)
         x = self.image(X, "X")
-        arrs = [self.const(v, n).astype(np.float64).reshape(-1) for v, n in
-                ((scale, "scale"), (B, "B"), (input_mean, "input_mean"), (input_var, "input_var"))]  # fmt: skip
+        arrs = [
+            self.const(v, n).astype(np.float64).reshape(-1)
+            for v, n in ((scale, "scale"), (B, "B"), (input_mean, "input_mean"), (input_var, "input_var"))
+        ]
         if any(a.shape != (x.channels,) for a in arrs):
             raise self.fail(f"batch-norm parameters must have {x.channels} entries")
         gamma, beta, mean, var = arrs
@@ -727,8 +867,18 @@ class ImageOps(OpTable):
         ps.fields = {"kernel": (kh, kw), "strides": (sy, sx), "dilations": (dy, dx), "pads": p}
         return self.add_pass(ps)
 
-    def AveragePool(self, X, *, auto_pad="NOTSET", ceil_mode=0, count_include_pad=0, dilations=None, kernel_shape,
-                    pads=None, strides=None) -> Texture:  # fmt: skip
+    def AveragePool(
+        self,
+        X,
+        *,
+        auto_pad="NOTSET",
+        ceil_mode=0,
+        count_include_pad=0,
+        dilations=None,
+        kernel_shape,
+        pads=None,
+        strides=None,
+    ) -> Texture:
         if count_include_pad not in (0, 1):
             raise self.unsupported("count_include_pad", count_include_pad)
         ps = self._pool("pool_avg", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode)
@@ -737,8 +887,18 @@ class ImageOps(OpTable):
         ps.fields["include_pad"] = bool(count_include_pad)
         return ps.output
 
-    def MaxPool(self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, pads=None,
-                storage_order=0, strides=None) -> Texture:  # fmt: skip
+    def MaxPool(
+        self,
+        X,
+        *,
+        auto_pad="NOTSET",
+        ceil_mode=0,
+        dilations=None,
+        kernel_shape,
+        pads=None,
+        storage_order=0,
+        strides=None,
+    ) -> Texture:
         if storage_order not in (0, 1):  # it orders only the Indices output, which is refused
             raise self.unsupported("storage_order", storage_order)
         return self._pool("pool_max", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode).output
@@ -759,8 +919,9 @@ class ImageOps(OpTable):
 
     PAD_MODES = ("constant", "reflect", "edge", "wrap")
 
-    def Pad(self, data, pads_input=None, constant_value=None, axes=None, *, mode="constant", pads=None,
-            value=0.0) -> Texture:  # fmt: skip
+    def Pad(
+        self, data, pads_input=None, constant_value=None, axes=None, *, mode="constant", pads=None, value=0.0
+    ) -> Texture:
         """Opset 11+: pads (here ``pads_input``: Python needs it apart from the opset-2 attribute of the
         same ONNX name), constant_value and axes are inputs; opset 2: pads and value are attributes."""
         x = self.image(data, "data")
@@ -808,10 +969,23 @@ class ImageOps(OpTable):
     NEAREST_MODES = ("round_prefer_floor", "round_prefer_ceil", "floor", "ceil")
     KEEP_ASPECT = ("stretch", "not_larger", "not_smaller")
 
-    def Resize(self, X, roi=None, scales=None, sizes=None, *, antialias=0, axes=None,
-               coordinate_transformation_mode="half_pixel", cubic_coeff_a=-0.75, exclude_outside=0,
-               extrapolation_value=0.0, keep_aspect_ratio_policy="stretch", mode="nearest",
-               nearest_mode="round_prefer_floor") -> Texture:  # fmt: skip
+    def Resize(
+        self,
+        X,
+        roi=None,
+        scales=None,
+        sizes=None,
+        *,
+        antialias=0,
+        axes=None,
+        coordinate_transformation_mode="half_pixel",
+        cubic_coeff_a=-0.75,
+        exclude_outside=0,
+        extrapolation_value=0.0,
+        keep_aspect_ratio_policy="stretch",
+        mode="nearest",
+        nearest_mode="round_prefer_floor",
+    ) -> Texture:
         x = self.image(X, "X")
         coord = coordinate_transformation_mode
         if mode not in ("nearest", "linear", "cubic"):
@@ -856,7 +1030,9 @@ class ImageOps(OpTable):
         in_sizes = [1, x.channels, x.height.offset, x.width.offset]
         if sz is not None and keep_aspect_ratio_policy != "stretch":
             if x.height.scale != 0 or x.width.scale != 0:
-                raise self.fail(f"keep_aspect_ratio_policy={keep_aspect_ratio_policy!r} needs a static input size")
+                raise self.fail(
+                    f"keep_aspect_ratio_policy={keep_aspect_ratio_policy!r} needs a static input size"
+                )
             ratios = [np.float32(full_sizes[a]) / np.float32(in_sizes[a]) for a in ax]
             s = min(ratios) if keep_aspect_ratio_policy == "not_larger" else max(ratios)
             for a in ax:
@@ -877,14 +1053,20 @@ class ImageOps(OpTable):
                     raise self.fail(f"scale {full_scales[a]} must be positive")
         dims, scale_exprs, support = [], [], []
         for a, d in ((2, x.height), (3, x.width)):
-            crop = np.float32(roi_box[a + 4]) - np.float32(roi_box[a]) if coord == "tf_crop_and_resize" else 1.0
+            crop = (
+                np.float32(roi_box[a + 4]) - np.float32(roi_box[a]) if coord == "tf_crop_and_resize" else 1.0
+            )
             n = full_sizes[a]
             if n is not None:
                 if n < 1:
                     raise self.fail(f"size {n} must be positive")
                 dims.append(Dim(Fraction(0), int(n)))
             elif d.scale == 0:
-                dims.append(Dim(Fraction(0), int(np.float32(d.offset) * np.float32(crop) * np.float32(full_scales[a]))))
+                dims.append(
+                    Dim(
+                        Fraction(0), int(np.float32(d.offset) * np.float32(crop) * np.float32(full_scales[a]))
+                    )
+                )
             else:
                 f = Fraction(float(np.float32(full_scales[a])))
                 if crop != 1.0 or f.denominator > 64 or (d.offset * f).denominator != 1:
@@ -902,12 +1084,36 @@ class ImageOps(OpTable):
                 else:
                     s = float(np.float32(n) / np.float32(d.offset)) if d.scale == 0 else None
             support.append(s)
-        return self._resize_pass(x, dims, scale_exprs, support, mode, coord, nearest_mode, antialias,
-                                 cubic_coeff_a, exclude_outside, extrapolation_value, roi_box)  # fmt: skip
+        return self._resize_pass(
+            x,
+            dims,
+            scale_exprs,
+            support,
+            mode,
+            coord,
+            nearest_mode,
+            antialias,
+            cubic_coeff_a,
+            exclude_outside,
+            extrapolation_value,
+            roi_box,
+        )
 
-    def _resize_pass(self, x: Texture, dims: list[Dim], scale_exprs: list, scales: list[float | None], mode: str,
-                     coord: str, nearest_mode: str, antialias: int, cubic_a: float, exclude_outside: int,
-                     extrapolation: float, roi_box: list[float]) -> Texture:  # fmt: skip
+    def _resize_pass(
+        self,
+        x: Texture,
+        dims: list[Dim],
+        scale_exprs: list,
+        scales: list[float | None],
+        mode: str,
+        coord: str,
+        nearest_mode: str,
+        antialias: int,
+        cubic_a: float,
+        exclude_outside: int,
+        extrapolation: float,
+        roi_box: list[float],
+    ) -> Texture:
         """scales: the per-axis scale when known at generation time (None: a ratio of dynamic sizes)."""
         if mode == "nearest":
             kind = "resize_nearest"
@@ -915,19 +1121,31 @@ class ImageOps(OpTable):
             kind = "resize_filter"
         else:
             kind = "resize_linear"  # antialias does not change upscaling (the kernel is not widened)
-        fields = {"mode": mode, "coord": coord, "nearest_mode": nearest_mode, "scales": scale_exprs,
-                  "extrapolation": float(extrapolation) if coord == "tf_crop_and_resize" else None,
-                  "roi": [roi_box[2], roi_box[3], roi_box[6], roi_box[7]]}  # fmt: skip
+        fields = {
+            "mode": mode,
+            "coord": coord,
+            "nearest_mode": nearest_mode,
+            "scales": scale_exprs,
+            "extrapolation": float(extrapolation) if coord == "tf_crop_and_resize" else None,
+            "roi": [roi_box[2], roi_box[3], roi_box[6], roi_box[7]],
+        }
         if kind == "resize_filter":
             if antialias and any(s is None for s in scales):
-                raise self.fail("antialias with sizes needs a static input size (the filter width depends on the scale)")
+                raise self.fail(
+                    "antialias with sizes needs a static input size (the filter width depends on the scale)"
+                )
             widen = [min(s, 1.0) if antialias else 1.0 for s in scales]
             reach = 2 if mode == "cubic" else 1
             half = [math.ceil(reach / w) for w in widen]
             if 2 * max(half) > MAX_FILTER_TAPS:
                 raise self.fail(f"antialiased scale {min(scales)} needs over {MAX_FILTER_TAPS} taps per axis")
-            fields.update(kernel=mode, cubic_coeff_a=float(cubic_a), exclude_outside=bool(exclude_outside),
-                          widen=widen, half=half)  # fmt: skip
+            fields.update(
+                kernel=mode,
+                cubic_coeff_a=float(cubic_a),
+                exclude_outside=bool(exclude_outside),
+                widen=widen,
+                half=half,
+            )
         out = self.new_texture(x.channels, dims[0], dims[1])
         ps = Pass(0, kind, [self.node.op_type], [x], out, nodes=[self.label])
         ps.fields = fields
@@ -957,8 +1175,20 @@ class ImageOps(OpTable):
                     raise self.fail(f"scale {float(s)} is not exact on a dynamic size")
                 dims.append(Dim(d.scale * f, int(d.offset * f)))
             exprs.append(("literal", glsl_float(float(s))))
-        return self._resize_pass(x, dims, exprs, [float(sc[2]), float(sc[3])], mode, "asymmetric", "floor", 0,
-                                 -0.75, 0, 0.0, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0])  # fmt: skip
+        return self._resize_pass(
+            x,
+            dims,
+            exprs,
+            [float(sc[2]), float(sc[3])],
+            mode,
+            "asymmetric",
+            "floor",
+            0,
+            -0.75,
+            0,
+            0.0,
+            [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 1.0],
+        )
 
     def Concat(self, *inputs, axis) -> ConcatValue | np.ndarray:
         if inputs and all(isinstance(v, np.ndarray) for v in inputs):
@@ -980,7 +1210,9 @@ class ImageOps(OpTable):
     # -- views (Reshape / Transpose / Flatten of image tensors; see views.py)
     def static_size(self, t: Texture) -> tuple[int, int]:
         if t.height.scale != 0 or t.width.scale != 0:
-            raise self.fail("reshaping or transposing an image tensor needs a static image size; give the input one")
+            raise self.fail(
+                "reshaping or transposing an image tensor needs a static image size; give the input one"
+            )
         return t.height.offset, t.width.offset
 
     def view(self, value: Any, what: str) -> View:
@@ -1043,7 +1275,9 @@ class ImageOps(OpTable):
         else:
             axes = self._steps(axes, [1, c, b, b, h, w], [0, 1, 4, 2, 5, 3])
         axes = self._steps(axes, [1, c, h * b, w * b], [0, 1, 2, 3])
-        return self._gather(t, axes, Dim(t.height.scale * b, t.height.offset * b), Dim(t.width.scale * b, t.width.offset * b))
+        return self._gather(
+            t, axes, Dim(t.height.scale * b, t.height.offset * b), Dim(t.width.scale * b, t.width.offset * b)
+        )
 
     def SpaceToDepth(self, input, *, blocksize, mode="DCR") -> Texture:  # noqa: A002
         """mode (opset 25): DCR puts the block offset outermost in the channels (the older opsets'
@@ -1109,8 +1343,10 @@ class ImageOps(OpTable):
 
     def _member_params(self, base: np.ndarray, offsets: np.ndarray) -> dict[str, np.ndarray]:
         names = (self.param_name("base"), self.param_name("offsets"))
-        return {names[0]: _vec4_rows(base.astype(np.float64), ceil4(len(base))),
-                names[1]: _vec4_rows(offsets.astype(np.float64), ceil4(len(offsets)))}  # fmt: skip
+        return {
+            names[0]: _vec4_rows(base.astype(np.float64), ceil4(len(base))),
+            names[1]: _vec4_rows(offsets.astype(np.float64), ceil4(len(offsets))),
+        }
 
     def _reduce(self, op: str, data: Any, axes_input: Any, axes: Any, keepdims: int, noop: int) -> Any:
         if isinstance(data, np.ndarray):
@@ -1127,8 +1363,13 @@ class ImageOps(OpTable):
         out = self.new_texture(r.groups, h, w)
         ps = Pass(0, "reduce", [self.node.op_type], [v.texture], out, nodes=[self.label])
         ps.params = self._member_params(r.base, r.offsets)
-        ps.fields = {"op": op, "spatial": r.spatial, "groups": r.groups, "members": len(r.offsets),
-                     "tables": tuple(ps.params)}  # fmt: skip
+        ps.fields = {
+            "op": op,
+            "spatial": r.spatial,
+            "groups": r.groups,
+            "members": len(r.offsets),
+            "tables": tuple(ps.params),
+        }
         self.add_pass(ps)
         kept = r.kept if keepdims else tuple(run for i, run in enumerate(r.kept) if i not in ax)
         result = self.simplify(View(out, kept))
@@ -1172,8 +1413,16 @@ class ImageOps(OpTable):
     def ReduceLogSum(self, data, axes_input=None, *, axes=None, keepdims=1, noop_with_empty_axes=0) -> Any:
         return self._reduce("LogSum", data, axes_input, axes, keepdims, noop_with_empty_axes)
 
-    def _normalize(self, X: Any, reduced_from: int | list[int], epsilon: float, scale: Any, shift: Any,
-                   align: str, op: str) -> Any:  # fmt: skip
+    def _normalize(
+        self,
+        X: Any,
+        reduced_from: int | list[int],
+        epsilon: float,
+        scale: Any,
+        shift: Any,
+        align: str,
+        op: str,
+    ) -> Any:
         """(x - mean) / sqrt(var + epsilon) over the logical axes ``reduced_from`` (an int: that axis and
         all after it), then * scale + shift. align "trailing": scale / shift broadcast numpy-style over the
         trailing axes (LayerNormalization); "axis1": they are (shape[1],) (Instance-, GroupNormalization)."""
@@ -1186,8 +1435,13 @@ class ImageOps(OpTable):
         stats = self.new_texture(2 * r.groups, h, w)
         ps = Pass(0, "moments", [op], [t], stats, nodes=[self.label])
         ps.params = self._member_params(r.base, r.offsets)
-        ps.fields = {"spatial": r.spatial, "groups": r.groups, "members": len(r.offsets),
-                     "epsilon": float(np.float32(epsilon)), "tables": tuple(ps.params)}  # fmt: skip
+        ps.fields = {
+            "spatial": r.spatial,
+            "groups": r.groups,
+            "members": len(r.offsets),
+            "epsilon": float(np.float32(epsilon)),
+            "tables": tuple(ps.params),
+        }
         self.add_pass(ps)
         out = self.new_texture(t.channels, t.height, t.width)
         norm = Pass(0, "normalize", [op], [t, stats], out, nodes=[self.label])
@@ -1195,8 +1449,10 @@ class ImageOps(OpTable):
         norm.params = {group: _vec4_rows(r.group_of.astype(np.float64), t.layers)}
         norm.fields = {"groups": r.groups, "spatial": r.spatial, "group": group}
         self.add_pass(norm)
-        sc, sh = (self._broadcast_channel(v, val, align, what) if val is not None else None
-                  for val, what in ((scale, "scale"), (shift, "B")))  # fmt: skip
+        sc, sh = (
+            self._broadcast_channel(v, val, align, what) if val is not None else None
+            for val, what in ((scale, "scale"), (shift, "B"))
+        )
         if sc is not None or sh is not None:
             sc = np.ones(t.channels) if sc is None else sc
             sh = np.zeros(t.channels) if sh is None else sh
@@ -1226,7 +1482,9 @@ class ImageOps(OpTable):
         c, g = v.shape[1], int(num_groups)
         if g < 1 or c % g:
             raise self.fail(f"{c} channels do not split into {g} groups")
-        sc, sh = (self.const(a, n).astype(np.float64).reshape(-1) for a, n in ((scale, "scale"), (bias, "bias")))
+        sc, sh = (
+            self.const(a, n).astype(np.float64).reshape(-1) for a, n in ((scale, "scale"), (bias, "bias"))
+        )
         if sc.size == g and g != c:  # opset 18: one value per group
             sc, sh = np.repeat(sc, c // g), np.repeat(sh, c // g)
         grouped = self._steps(v.axes, [1, g, c // g, v.shape[2], v.shape[3]], [0, 1, 2, 3, 4])
@@ -1239,7 +1497,9 @@ class ImageOps(OpTable):
         b = self._broadcast_channel(v, shift, "trailing", "bias")
         p = self.producer[v.texture.ident]
         names = (self.param_name("scale"), self.param_name("shift"))
-        p.params.update({names[0]: _vec4_rows(s, v.texture.layers), names[1]: _vec4_rows(b, v.texture.layers)})
+        p.params.update(
+            {names[0]: _vec4_rows(s, v.texture.layers), names[1]: _vec4_rows(b, v.texture.layers)}
+        )
         p.epilogue.append(Epilogue(form="affine", arrays=names))
         return self.simplify(v) if isinstance(like, View) else v.texture
 
@@ -1255,8 +1515,10 @@ class ImageOps(OpTable):
         reduced = [a] if self.opset >= 13 else list(range(a, rank))  # before 13: the flattened tail
         r = self._reduction(v, reduced)
         if any(r.spatial):
-            raise self.fail(f"softmax over axes {reduced} of shape {v.shape} reaches the image's height or width; "
-                            "the image target takes it over channels only")
+            raise self.fail(
+                f"softmax over axes {reduced} of shape {v.shape} reaches the image's height or width; "
+                "the image target takes it over channels only"
+            )
         t = v.texture
         out = self.new_texture(t.channels, t.height, t.width)
         ps = Pass(0, "softmax", [self.node.op_type], [t], out, nodes=[self.label])
@@ -1278,12 +1540,18 @@ class ImageOps(OpTable):
             raise self.fail(f"size {n} must be positive")
         out = self.new_texture(x.channels, x.height, x.width)
         ps = Pass(0, "lrn", ["LRN"], [x], out, nodes=[self.label])
-        ps.fields = {"before": (n - 1) // 2, "after": n - 1 - (n - 1) // 2, "alpha": float(np.float32(alpha) / n),
-                     "beta": float(beta), "bias": float(bias)}  # fmt: skip
+        ps.fields = {
+            "before": (n - 1) // 2,
+            "after": n - 1 - (n - 1) // 2,
+            "alpha": float(np.float32(alpha) / n),
+            "beta": float(beta),
+            "bias": float(bias),
+        }
         return self.add_pass(ps).output
 
-    def LpPool(self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, p=2, pads=None,
-               strides=None) -> Texture:  # fmt: skip
+    def LpPool(
+        self, X, *, auto_pad="NOTSET", ceil_mode=0, dilations=None, kernel_shape, p=2, pads=None, strides=None
+    ) -> Texture:
         if float(p) <= 0:
             raise self.unsupported("p", p)
         ps = self._pool("pool_lp", X, kernel_shape, strides, pads, dilations, auto_pad, ceil_mode)
@@ -1317,12 +1585,16 @@ class ImageOps(OpTable):
         """(1, F) @ (F, K) on a flattened image: a conv whose kernel covers the whole image."""
         v = self.view(A, "A")
         if len(v.shape) != 2 or v.shape[0] != 1 or b.ndim != 2 or b.shape[0] != v.shape[1]:
-            raise self.fail(f"A of shape {v.shape} and B of shape {list(b.shape)}: the image target takes "
-                            "(1, F) @ (F, K) on a flattened image")
+            raise self.fail(
+                f"A of shape {v.shape} and B of shape {list(b.shape)}: the image target takes "
+                "(1, F) @ (F, K) on a flattened image"
+            )
         t = v.texture
         h, w = t.height.offset, t.width.offset
         if max(h, w) > MAX_KERNEL:
-            raise self.fail(f"a dense layer over a {h}x{w} image needs a kernel beyond {MAX_KERNEL}x{MAX_KERNEL}")
+            raise self.fail(
+                f"a dense layer over a {h}x{w} image needs a kernel beyond {MAX_KERNEL}x{MAX_KERNEL}"
+            )
         k = b.shape[1]
         xyz = coordinates(v.axes[1:])
         weight = np.zeros((k, t.channels, h, w))
@@ -1434,9 +1706,13 @@ class ImageOps(OpTable):
             c, x = (a, b) if isinstance(a, np.ndarray) else (b, a)
             if op == "Add":
                 t = self.image(x, "data_0")
-                return self._affine(t, np.ones(t.channels), self.channel_const(c, t.channels, "data_0"), "Sum", None)
+                return self._affine(
+                    t, np.ones(t.channels), self.channel_const(c, t.channels, "data_0"), "Sum", None
+                )
             if c.size != 1:
-                raise self.fail(f"{op} with a constant of shape {list(c.shape)}: the image target takes scalars only")
+                raise self.fail(
+                    f"{op} with a constant of shape {list(c.shape)}: the image target takes scalars only"
+                )
             bound = {"lo": float(c.reshape(()))} if op == "Max" else {"hi": float(c.reshape(()))}
             return self._activation_any(x, Act("Clip", bound), None)
         return self._binary(op, a, b)
@@ -1460,7 +1736,9 @@ class ImageOps(OpTable):
     # -- constant folding (FOLDED_OPS): numpy on constants; an image input is refused by _folded
     def _folded(self, value: Any, what: str) -> np.ndarray:
         if not isinstance(value, np.ndarray):
-            raise self.fail(f"input {what} is an image tensor; the image target evaluates this op on constants only")
+            raise self.fail(
+                f"input {what} is an image tensor; the image target evaluates this op on constants only"
+            )
         return value
 
     def _small(self, a: np.ndarray) -> np.ndarray:
@@ -1510,7 +1788,9 @@ class ImageOps(OpTable):
 
     def Slice(self, data, starts, ends, axes=None, steps=None) -> np.ndarray:
         d = self._folded(data, "data")
-        st, en = (self._folded(v, n).astype(np.int64).reshape(-1) for v, n in ((starts, "starts"), (ends, "ends")))
+        st, en = (
+            self._folded(v, n).astype(np.int64).reshape(-1) for v, n in ((starts, "starts"), (ends, "ends"))
+        )
         ax = range(st.size) if axes is None else [int(a) for a in self._folded(axes, "axes").reshape(-1)]
         sp = [1] * st.size if steps is None else [int(v) for v in self._folded(steps, "steps").reshape(-1)]
         index = [slice(None)] * d.ndim
@@ -1541,9 +1821,13 @@ class ImageOps(OpTable):
             return np.asarray(data.shape, np.int64)[start:end]
         t = data.parts[0] if isinstance(data, ConcatValue) else self.image(data, "data")  # no concat pass
         if self.scalar_ranks.get(t.ident, 4) != 4:
-            raise self.fail(f"Shape of the rank-{self.scalar_ranks[t.ident]} scalar input {t.onnx_name!r} cannot be folded")
+            raise self.fail(
+                f"Shape of the rank-{self.scalar_ranks[t.ident]} scalar input {t.onnx_name!r} cannot be folded"
+            )
         if t.height.scale != 0 or t.width.scale != 0:
-            raise self.fail("Shape of an image of dynamic size cannot be folded; give the input a static size")
+            raise self.fail(
+                "Shape of an image of dynamic size cannot be folded; give the input a static size"
+            )
         return np.asarray([1, data.channels, t.height.offset, t.width.offset], np.int64)[start:end]
 
     def Gather(self, data, indices, *, axis=0) -> np.ndarray:
@@ -1570,7 +1854,11 @@ class ImageOps(OpTable):
         ax = axes if axes_input is None else self._folded(axes_input, "axes").reshape(-1)
         if not isinstance(data, np.ndarray):
             v = self.view(data, "data")
-            gone = {i for i, n in enumerate(v.shape) if n == 1} if ax is None else {int(a) % len(v.shape) for a in ax}
+            gone = (
+                {i for i, n in enumerate(v.shape) if n == 1}
+                if ax is None
+                else {int(a) % len(v.shape) for a in ax}
+            )
             if any(v.shape[i] != 1 for i in gone):
                 raise self.fail(f"cannot squeeze axes {sorted(gone)} of shape {v.shape}")
             return self.reshape_view(v, [n for i, n in enumerate(v.shape) if i not in gone], 1)
@@ -1590,7 +1878,9 @@ class ImageOps(OpTable):
         return np.tile(d, r)
 
     def Range(self, start, limit, delta) -> np.ndarray:
-        a, b, k = (self._folded(v, n).reshape(()) for v, n in ((start, "start"), (limit, "limit"), (delta, "delta")))
+        a, b, k = (
+            self._folded(v, n).reshape(()) for v, n in ((start, "start"), (limit, "limit"), (delta, "delta"))
+        )
         if k == 0:
             raise self.fail("Range delta 0")
         n = max(int(np.ceil((b - a) / k)), 0)
@@ -1642,8 +1932,11 @@ def _resize_coords(p: Pass, d: Dialect) -> list[str]:
     for i, (axis, (kind, value)) in enumerate(zip("yx", f["scales"], strict=True)):
         len_in = d.fill("float_of", v=f"in_size.{axis}")
         len_out = d.fill("float_of", v=f"out_size.{axis}")
-        scale = d.fill("scale_literal", value=value) if kind == "literal" else d.fill("scale_ratio", len_out=len_out,
-                                                                                   len_in=len_in)  # fmt: skip
+        scale = (
+            d.fill("scale_literal", value=value)
+            if kind == "literal"
+            else d.fill("scale_ratio", len_out=len_out, len_in=len_in)
+        )
         fields = {
             "x": d.fill("float_of", v=f"gid.{axis}"),
             "scale": scale,
@@ -1653,11 +1946,14 @@ def _resize_coords(p: Pass, d: Dialect) -> list[str]:
             "end": glsl_float(f["roi"][i + 2]),
         }
         tpl = f"coord_{f['coord']}"
-        wanted = {"coord_half_pixel": ("x", "scale"), "coord_asymmetric": ("x", "scale"),
-                  "coord_pytorch_half_pixel": ("x", "scale", "len_out"),
-                  "coord_align_corners": ("x", "len_in", "len_out"),
-                  "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out"),
-                  "coord_tf_crop_and_resize": ("x", "len_in", "len_out", "start", "end")}[tpl]  # fmt: skip
+        wanted = {
+            "coord_half_pixel": ("x", "scale"),
+            "coord_asymmetric": ("x", "scale"),
+            "coord_pytorch_half_pixel": ("x", "scale", "len_out"),
+            "coord_align_corners": ("x", "len_in", "len_out"),
+            "coord_half_pixel_symmetric": ("x", "scale", "len_in", "len_out"),
+            "coord_tf_crop_and_resize": ("x", "len_in", "len_out", "start", "end"),
+        }[tpl]
         coords.append(d.fill(tpl, **{k: fields[k] for k in wanted}))
     return coords
 
@@ -1684,22 +1980,49 @@ def _resize_body(p: Pass, d: Dialect) -> str:
             weights.append(d.fill("kernel_cubic", t=t, a=glsl_float(f["cubic_coeff_a"])))
         else:
             weights.append(d.fill("kernel_linear", t=t))
-    exclude = [d.fill(f"filter_exclude_{a}") if f["exclude_outside"] else d.fill(f"filter_edge_{a}") for a in "yx"]
-    return d.fill("resize_filter_body", half_y=f["half"][0], half_x=f["half"][1], taps_y=2 * f["half"][0],
-                taps_x=2 * f["half"][1], weight_y=weights[0], weight_x=weights[1], exclude_y=exclude[0],
-                exclude_x=exclude[1], **common)  # fmt: skip
+    exclude = [
+        d.fill(f"filter_exclude_{a}") if f["exclude_outside"] else d.fill(f"filter_edge_{a}") for a in "yx"
+    ]
+    return d.fill(
+        "resize_filter_body",
+        half_y=f["half"][0],
+        half_x=f["half"][1],
+        taps_y=2 * f["half"][0],
+        taps_x=2 * f["half"][1],
+        weight_y=weights[0],
+        weight_x=weights[1],
+        exclude_y=exclude[0],
+        exclude_x=exclude[1],
+        **common,
+    )
 
 
 def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     (kh, kw), (sy, sx), (dy, dx), pads = f["kernel"], f["strides"], f["dilations"], f["pads"]
-    window = {"bias_offset": offs["bias"], "kh": kh, "kw": kw, "sy": sy, "sx": sx, "dy": dy, "dx": dx,
-              "pad_top": pads[0], "pad_left": pads[1], "weight_offset": offs["weight"]}  # fmt: skip
+    window = {
+        "bias_offset": offs["bias"],
+        "kh": kh,
+        "kw": kw,
+        "sy": sy,
+        "sx": sx,
+        "dy": dy,
+        "dx": dx,
+        "pad_top": pads[0],
+        "pad_left": pads[1],
+        "weight_offset": offs["weight"],
+    }
     if p.kind == "conv_depthwise":
         return d.fill("conv_depthwise_body", **window)
     sizes = "\n".join(d.fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
     loops = "\n".join(
-        d.fill("conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=f["layer_offsets"][i])
+        d.fill(
+            "conv_input_loop",
+            size=f"size{i}",
+            layers=t.layers,
+            src=f"src{i}",
+            layer_offset=f["layer_offsets"][i],
+        )
         for i, t in enumerate(p.inputs)
     )
     if _blocked(p):
@@ -1721,10 +2044,16 @@ def _conv_block_body(p: Pass, window: dict, d: Dialect) -> str:
     texels = bx * by
     acc = [d.fill("conv_block_bias", o=o, bias_offset=window["bias_offset"]) for o in range(bl)]
     sep = d.fill("conv_block_acc_sep")
-    acc += [d.fill("conv_block_acc", names=sep.join(d.fill("conv_block_acc_name", o=o, p=k) for k in range(texels)))
-            for o in range(bl)]  # fmt: skip
-    coords = "\n".join(d.fill("conv_block_coord", p=k, qx=(k % bx) * window["sx"], qy=(k // bx) * window["sy"])
-                        for k in range(texels))  # fmt: skip
+    acc += [
+        d.fill(
+            "conv_block_acc", names=sep.join(d.fill("conv_block_acc_name", o=o, p=k) for k in range(texels))
+        )
+        for o in range(bl)
+    ]
+    coords = "\n".join(
+        d.fill("conv_block_coord", p=k, qx=(k % bx) * window["sx"], qy=(k // bx) * window["sy"])
+        for k in range(texels)
+    )
     layer_stride = window["kh"] * window["kw"] * 4 * f["in_layers"]  # vec4s between output layers' taps
     loops = []
     for i, t in enumerate(p.inputs):
@@ -1735,12 +2064,31 @@ def _conv_block_body(p: Pass, window: dict, d: Dialect) -> str:
             for k0 in range(0, texels, 4):  # four accumulations a line
                 fmas = " ".join(d.fill("conv_block_fma", o=o, p=k) for k in range(k0, min(k0 + 4, texels)))
                 products.append(d.fill("conv_block_fmas", fmas=fmas))
-        loops.append(d.fill("conv_block_input_loop", layers=t.layers, layer_offset=f["layer_offsets"][i],
-                          fetches=fetches, products="\n".join(products)))  # fmt: skip
-    return d.fill("conv_block_body", acc_init="\n".join(acc), kh=window["kh"], kw=window["kw"],
-                weight_offset=window["weight_offset"], tap_stride=4 * f["in_layers"], sx=window["sx"],
-                sy=window["sy"], dx=window["dx"], dy=window["dy"], pad_left=window["pad_left"],
-                pad_top=window["pad_top"], coords=coords, input_loops="\n".join(loops))  # fmt: skip
+        loops.append(
+            d.fill(
+                "conv_block_input_loop",
+                layers=t.layers,
+                layer_offset=f["layer_offsets"][i],
+                fetches=fetches,
+                products="\n".join(products),
+            )
+        )
+    return d.fill(
+        "conv_block_body",
+        acc_init="\n".join(acc),
+        kh=window["kh"],
+        kw=window["kw"],
+        weight_offset=window["weight_offset"],
+        tap_stride=4 * f["in_layers"],
+        sx=window["sx"],
+        sy=window["sy"],
+        dx=window["dx"],
+        dy=window["dy"],
+        pad_left=window["pad_left"],
+        pad_top=window["pad_top"],
+        coords=coords,
+        input_loops="\n".join(loops),
+    )
 
 
 def _lp_steps(p: float, d: Dialect) -> tuple[str, str]:
@@ -1762,15 +2110,35 @@ def _pool_body(p: Pass, d: Dialect) -> str:
     else:
         init, acc = d.fill("pool_init_avg"), d.fill("pool_acc_avg")
         finish = d.fill("pool_finish_padded") if f["include_pad"] else d.fill("pool_finish_count")
-    return d.fill("pool_body", init=init, kh=kh, kw=kw, sy=sy, sx=sx, dy=dy, dx=dx, pad_top=pads[0],
-                pad_left=pads[1], pad_bottom=pads[2], pad_right=pads[3], accumulate=acc, finish=finish)  # fmt: skip
+    return d.fill(
+        "pool_body",
+        init=init,
+        kh=kh,
+        kw=kw,
+        sy=sy,
+        sx=sx,
+        dy=dy,
+        dx=dx,
+        pad_top=pads[0],
+        pad_left=pads[1],
+        pad_bottom=pads[2],
+        pad_right=pads[3],
+        accumulate=acc,
+        finish=finish,
+    )
 
 
 def _binary_body(p: Pass, d: Dialect) -> str:
     f = p.fields
     fetch = [d.fill(f"fetch_{how}", src=f"src{i}") for i, how in enumerate(f["fetch"])]
-    guard = d.fill("binary_guard_div", channels=p.output.channels) if f["op"] == "Div" else d.fill("binary_guard_none")
-    return d.fill("binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=d.fill(f"binop_{f['op']}"))
+    guard = (
+        d.fill("binary_guard_div", channels=p.output.channels)
+        if f["op"] == "Div"
+        else d.fill("binary_guard_none")
+    )
+    return d.fill(
+        "binary_body", fetch_a=fetch[0], fetch_b=fetch[1], guard=guard, expr=d.fill(f"binop_{f['op']}")
+    )
 
 
 def _gather_body(p: Pass, d: Dialect) -> str:
@@ -1780,11 +2148,15 @@ def _gather_body(p: Pass, d: Dialect) -> str:
         for i, (axis, size, stride) in enumerate(reversed(run)):  # innermost first
             coord = {"c": "z", "y": "y", "x": "x"}[axis]
             last = i == len(run) - 1
-            lines.append(d.fill("gather_digit_last", coord=coord, stride=stride) if last else
-                         d.fill("gather_digit", coord=coord, size=size, stride=stride))  # fmt: skip
+            lines.append(
+                d.fill("gather_digit_last", coord=coord, stride=stride)
+                if last
+                else d.fill("gather_digit", coord=coord, size=size, stride=stride)
+            )
         digits.append("\n".join(lines))
-    return d.fill("gather_body", channels=p.output.channels, digits_c=digits[0], digits_y=digits[1],
-                digits_x=digits[2])  # fmt: skip
+    return d.fill(
+        "gather_body", channels=p.output.channels, digits_c=digits[0], digits_y=digits[1], digits_x=digits[2]
+    )
 
 
 def _window_bounds(spatial: tuple[bool, bool]) -> dict[str, str]:
@@ -1796,10 +2168,17 @@ def _window_bounds(spatial: tuple[bool, bool]) -> dict[str, str]:
     return out
 
 
-_REDUCE_STEPS = {"Sum": ("zero", "sum", "none"), "Mean": ("zero", "sum", "mean"), "Max": ("max", "max", "none"),
-                 "Min": ("min", "min", "none"), "L1": ("zero", "abs", "none"), "L2": ("zero", "square", "sqrt"),
-                 "SumSquare": ("zero", "square", "none"), "Prod": ("one", "prod", "none"),
-                 "LogSum": ("zero", "sum", "log")}  # fmt: skip
+_REDUCE_STEPS = {
+    "Sum": ("zero", "sum", "none"),
+    "Mean": ("zero", "sum", "mean"),
+    "Max": ("max", "max", "none"),
+    "Min": ("min", "min", "none"),
+    "L1": ("zero", "abs", "none"),
+    "L2": ("zero", "square", "sqrt"),
+    "SumSquare": ("zero", "square", "none"),
+    "Prod": ("one", "prod", "none"),
+    "LogSum": ("zero", "sum", "log"),
+}
 
 
 def _reduce_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
@@ -1807,21 +2186,50 @@ def _reduce_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     init, acc, finish = _REDUCE_STEPS[f["op"]]
     bounds = _window_bounds(f["spatial"])
     base, offsets = f["tables"]
-    loops = d.fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=d.fill(f"reduce_acc_{acc}"),
-                 **bounds)  # fmt: skip
-    return d.fill("reduce_body", groups=f["groups"], base_offset=offs[base], members=f["members"],
-                init=d.fill(f"reduce_init_{init}"), loops=loops, finish=d.fill(f"reduce_finish_{finish}"), **bounds)  # fmt: skip
+    loops = d.fill(
+        "member_loops",
+        members=f["members"],
+        offsets_offset=offs[offsets],
+        statement=d.fill(f"reduce_acc_{acc}"),
+        **bounds,
+    )
+    return d.fill(
+        "reduce_body",
+        groups=f["groups"],
+        base_offset=offs[base],
+        members=f["members"],
+        init=d.fill(f"reduce_init_{init}"),
+        loops=loops,
+        finish=d.fill(f"reduce_finish_{finish}"),
+        **bounds,
+    )
 
 
 def _moments_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     bounds = _window_bounds(f["spatial"])
     base, offsets = f["tables"]
-    loops = [d.fill("member_loops", members=f["members"], offsets_offset=offs[offsets], statement=d.fill(acc), **bounds)
-             for acc in ("reduce_acc_sum", "moments_acc_square")]  # fmt: skip
-    return d.fill("moments_body", channels=p.output.channels, groups=f["groups"], base_offset=offs[base],
-                members=f["members"], sum_loops=loops[0], square_loops=loops[1],
-                epsilon=glsl_float(f["epsilon"]), **bounds)  # fmt: skip
+    loops = [
+        d.fill(
+            "member_loops",
+            members=f["members"],
+            offsets_offset=offs[offsets],
+            statement=d.fill(acc),
+            **bounds,
+        )
+        for acc in ("reduce_acc_sum", "moments_acc_square")
+    ]
+    return d.fill(
+        "moments_body",
+        channels=p.output.channels,
+        groups=f["groups"],
+        base_offset=offs[base],
+        members=f["members"],
+        sum_loops=loops[0],
+        square_loops=loops[1],
+        epsilon=glsl_float(f["epsilon"]),
+        **bounds,
+    )
 
 
 def _normalize_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
@@ -1833,19 +2241,36 @@ def _normalize_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
 def _softmax_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     f = p.fields
     base, offsets = f["tables"]
-    return d.fill("softmax_body", channels=p.output.channels, base_offset=offs[base], offsets_offset=offs[offsets],
-                members=f["members"], finish=d.fill("log_softmax_finish" if f["log"] else "softmax_finish"))  # fmt: skip
+    return d.fill(
+        "softmax_body",
+        channels=p.output.channels,
+        base_offset=offs[base],
+        offsets_offset=offs[offsets],
+        members=f["members"],
+        finish=d.fill("log_softmax_finish" if f["log"] else "softmax_finish"),
+    )
 
 
 def _lrn_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    return d.fill("lrn_body", channels=p.output.channels, before=f["before"], after=f["after"],
-                bias=glsl_float(f["bias"]), alpha=glsl_float(f["alpha"]), beta=glsl_float(f["beta"]))  # fmt: skip
+    return d.fill(
+        "lrn_body",
+        channels=p.output.channels,
+        before=f["before"],
+        after=f["after"],
+        bias=glsl_float(f["bias"]),
+        alpha=glsl_float(f["alpha"]),
+        beta=glsl_float(f["beta"]),
+    )
 
 
 def _spatial_pad_body(p: Pass, d: Dialect) -> str:
     f = p.fields
-    mode = d.fill("pad_constant", value=glsl_float(f["value"])) if f["mode"] == "constant" else d.fill(f"pad_{f['mode']}")
+    mode = (
+        d.fill("pad_constant", value=glsl_float(f["value"]))
+        if f["mode"] == "constant"
+        else d.fill(f"pad_{f['mode']}")
+    )
     return d.fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
 
 
@@ -1924,12 +2349,28 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
     epi = _epilogue(p, offs, "gid.z", d)
     if _blocked(p):
         bx, by, bl = p.fields["block"]
-        stores = [d.fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k) for o in range(bl) for k in range(bx * by)]
+        stores = [
+            d.fill("conv_block_store", px=k % bx, py=k // bx, o=o, p=k)
+            for o in range(bl)
+            for k in range(bx * by)
+        ]
         epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z", d).split("\n"))
-        return d.fill("compute_pass_block", header=d.header(), pass_index=p.index, summary=" + ".join(p.ops),
-                    block_x=bx, block_y=by, block_layers=bl, local_x=local_size[0], local_y=local_size[1],
-                    prelude="\n\n".join(prelude), declarations="\n".join(decls), epilogue=epi_z, body=body,
-                    stores="\n".join(stores))  # fmt: skip
+        return d.fill(
+            "compute_pass_block",
+            header=d.header(),
+            pass_index=p.index,
+            summary=" + ".join(p.ops),
+            block_x=bx,
+            block_y=by,
+            block_layers=bl,
+            local_x=local_size[0],
+            local_y=local_size[1],
+            prelude="\n\n".join(prelude),
+            declarations="\n".join(decls),
+            epilogue=epi_z,
+            body=body,
+            stores="\n".join(stores),
+        )
     return d.fill(
         "compute_pass",
         header=d.header(),
@@ -1952,7 +2393,9 @@ def _epilogue(p: Pass, offs: dict[str, int], z: str, d: Dialect) -> str:
         if e.form == "act":
             epi.append(d.fill("epilogue_act", expr=e.act.expr("r", d.fill)))
         elif e.form == "affine":
-            epi.append(d.fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z))
+            epi.append(
+                d.fill("epilogue_affine", scale_offset=offs[e.arrays[0]], shift_offset=offs[e.arrays[1]], z=z)
+            )
         elif e.form == "prelu":
             epi.append(d.fill("epilogue_prelu", slope_offset=offs[e.arrays[0]], z=z))
         elif e.form == "guard":
@@ -2012,14 +2455,20 @@ def _conv_block(block: tuple[int, int, int], layers: int) -> tuple[int, int, int
     largest divisor of ``layers`` not above the requested one (every invocation fills whole layers)."""
     bx, by, bl = (int(v) for v in block)
     if bx < 1 or by < 1 or bl < 1 or bx * by * bl > MAX_BLOCK_ACCUMULATORS:
-        raise NeuralaoError(f"conv block {list(block)} must be positive with at most {MAX_BLOCK_ACCUMULATORS} accumulators")
+        raise NeuralaoError(
+            f"conv block {list(block)} must be positive with at most {MAX_BLOCK_ACCUMULATORS} accumulators"
+        )
     return bx, by, max(d for d in range(1, min(bl, layers) + 1) if layers % d == 0)
 
 
 def generate_compute(
-    model: onnx.ModelProto, precision: str = "fp32", kind: str = "unet", local_size: tuple[int, int] = (8, 8),
-    conv_block: tuple[int, int, int] = CONV_BLOCK, dialect: str = "glsl430",
-) -> ComputeProgram:  # fmt: skip
+    model: onnx.ModelProto,
+    precision: str = "fp32",
+    kind: str = "unet",
+    local_size: tuple[int, int] = (8, 8),
+    conv_block: tuple[int, int, int] = CONV_BLOCK,
+    dialect: str = "glsl430",
+) -> ComputeProgram:
     """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
     ``dialect="wgsl"`` writes the same passes in WGSL (WebGPU; see :func:`_wgsl_manifest`).
 
@@ -2097,8 +2546,10 @@ def generate_compute(
         try:
             sources[f"{p.name}{d.extension}"] = _write_compute_pass(p, precision, local_size, d)
         except KeyError as e:  # a template the dialect lacks: that pass kind is not written in it yet
-            raise NeuralaoError(f"{d.name}: pass {p.name} ({' + '.join(p.ops)}, nodes {', '.join(p.nodes) or '-'}) "
-                                f"cannot be written: {e.args[0]}") from None  # fmt: skip
+            raise NeuralaoError(
+                f"{d.name}: pass {p.name} ({' + '.join(p.ops)}, nodes {', '.join(p.nodes) or '-'}) "
+                f"cannot be written: {e.args[0]}"
+            ) from None
     manifest = _compute_manifest(
         table, graph, outputs, ranges, bytes(blob), precision, kind, multiple, local_size
     )
@@ -2126,21 +2577,27 @@ def _wgsl_manifest(manifest: dict, d: Dialect) -> None:
         for inp in entry["inputs"]:
             inp["as"] = "texture_2d_array<f32> (textureLoad), sampleType unfilterable-float"
         fmt = {"rgba32f": "rgba32float", "rgba16f": "rgba16float"}[entry["output"]["format"]]
-        entry["output"].update(binding=slots["output"], format=fmt,
-                               **{"as": f"texture_storage_2d_array<{fmt}, write>"})  # fmt: skip
+        entry["output"].update(
+            binding=slots["output"], format=fmt, **{"as": f"texture_storage_2d_array<{fmt}, write>"}
+        )
         if "params" in entry:
             entry["params"]["binding"] = slots["params"]
-            entry["params"]["as"] = ("var<storage, read> prm: array<vec4<f32>>, bound at the range's offset and "
-                                     "size")  # fmt: skip
+            entry["params"]["as"] = (
+                "var<storage, read> prm: array<vec4<f32>>, bound at the range's offset and size"
+            )
         for name, u in entry.get("uniforms", {}).items():
             u.pop("location", None)
             u["binding"] = slots["uniform"]
-            u["as"] = f"var<uniform> {name}: {'i32' if name == 'u_flip_y' else 'f32'} (a 16-byte uniform buffer)"
+            u["as"] = (
+                f"var<uniform> {name}: {'i32' if name == 'u_flip_y' else 'f32'} (a 16-byte uniform buffer)"
+            )
     for u in manifest["uniforms"]:
         u["shader"] = u["pass"] + d.extension
         u.pop("location", None)
         u["wgsl_name"] = u.pop("glsl_name")
-        u["binding"] = next(p["uniforms"][u["wgsl_name"]]["binding"] for p in manifest["passes"] if p["name"] == u["pass"])
+        u["binding"] = next(
+            p["uniforms"][u["wgsl_name"]]["binding"] for p in manifest["passes"] if p["name"] == u["pass"]
+        )
         u["set_with"] = "queue.writeBuffer of one f32 into the pass's uniform buffer before its dispatch"
 
 
@@ -2153,10 +2610,18 @@ def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:
 
 def _uniform_entry(vi: onnx.ValueInfoProto, p: Pass, metadata: dict[str, str]) -> dict:
     """Manifest entry of a scalar graph input: the uniform an engine sets before the pass runs."""
-    return {"onnx_input": vi.name, "declared_shape": [int(d) for d in shape_dims(vi)], "meaning": _input_meaning(vi, metadata),
-            "glsl_name": p.fields["uniform"], "type": "float", "location": p.fields["location"], "pass": p.name,
-            "shader": f"{p.name}.comp", "texture": p.output.ident,
-            "set_with": "glUseProgram(the pass's program); glUniform1f(location, value) before its dispatch"}  # fmt: skip
+    return {
+        "onnx_input": vi.name,
+        "declared_shape": [int(d) for d in shape_dims(vi)],
+        "meaning": _input_meaning(vi, metadata),
+        "glsl_name": p.fields["uniform"],
+        "type": "float",
+        "location": p.fields["location"],
+        "pass": p.name,
+        "shader": f"{p.name}.comp",
+        "texture": p.output.ident,
+        "set_with": "glUseProgram(the pass's program); glUniform1f(location, value) before its dispatch",
+    }
 
 
 def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, multiple, local_size) -> dict:
@@ -2166,10 +2631,14 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
     for t in table.textures:
         raw = t.base == "raw"
         fmt = "RGBA32F" if raw or t.ident in fp32 else internal
-        textures[t.ident] = {"channels": t.channels, "layers": t.layers, "format": fmt,
-                             "height": t.height.to_json("H" if raw else "Hp"),
-                             "width": t.width.to_json("W" if raw else "Wp"),
-                             "onnx_tensor": t.onnx_name}  # fmt: skip
+        textures[t.ident] = {
+            "channels": t.channels,
+            "layers": t.layers,
+            "format": fmt,
+            "height": t.height.to_json("H" if raw else "Hp"),
+            "width": t.width.to_json("W" if raw else "Wp"),
+            "onnx_tensor": t.onnx_name,
+        }
         log2 = math.log2(t.height.scale) if t.height.scale > 0 else None
         if log2 is not None and log2 == int(log2) and t.height.scale == t.width.scale:
             textures[t.ident]["scale_log2"] = int(log2)
@@ -2183,23 +2652,39 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "kind": p.kind,
             "ops": p.ops,
             "onnx_nodes": p.nodes,
-            "inputs": [{"texture": t.ident, "binding": i, "as": "sampler2DArray (texelFetch)"} for i, t in
-                       enumerate(p.inputs)],
-            "output": {"texture": p.output.ident, "binding": 0, "as": "image2DArray writeonly, layered",
-                       "format": textures[p.output.ident]["format"].lower()},
+            "inputs": [
+                {"texture": t.ident, "binding": i, "as": "sampler2DArray (texelFetch)"}
+                for i, t in enumerate(p.inputs)
+            ],
+            "output": {
+                "texture": p.output.ident,
+                "binding": 0,
+                "as": "image2DArray writeonly, layered",
+                "format": textures[p.output.ident]["format"].lower(),
+            },
             "local_size": [local_size[0], local_size[1], 1],
             "block": list(block),
-            "dispatch": {"size_of": p.output.ident,
-                         "groups": [f"ceil(width({p.output.ident}) / {local_size[0] * block[0]})",
-                                    f"ceil(height({p.output.ident}) / {local_size[1] * block[1]})",
-                                    f"layers({p.output.ident}) / {block[2]} = {p.output.layers // block[2]}"]},
-        }  # fmt: skip
+            "dispatch": {
+                "size_of": p.output.ident,
+                "groups": [
+                    f"ceil(width({p.output.ident}) / {local_size[0] * block[0]})",
+                    f"ceil(height({p.output.ident}) / {local_size[1] * block[1]})",
+                    f"layers({p.output.ident}) / {block[2]} = {p.output.layers // block[2]}",
+                ],
+            },
+        }
         if p.index in ranges:
             off, size = ranges[p.index]
-            entry["params"] = {"buffer": "weights.bin", "binding": 0, "offset": off, "bytes": size,
-                               "as": "std430 readonly buffer { vec4 prm[]; } via glBindBufferRange",
-                               "arrays": {n: {"offset_vec4": offs[n], "vec4s": int(a.shape[0])} for n, a in
-                                          p.params.items()}}  # fmt: skip
+            entry["params"] = {
+                "buffer": "weights.bin",
+                "binding": 0,
+                "offset": off,
+                "bytes": size,
+                "as": "std430 readonly buffer { vec4 prm[]; } via glBindBufferRange",
+                "arrays": {
+                    n: {"offset_vec4": offs[n], "vec4s": int(a.shape[0])} for n, a in p.params.items()
+                },
+            }
             if p.kind == "conv_depthwise":
                 entry["params"]["layout"] = (
                     "weight: vec4 per (layer, ky, kx), lane r = W[4*layer + r, 0, ky, kx]; bias: vec4 per layer"
@@ -2208,23 +2693,39 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
                 entry["params"]["layout"] = (
                     "weight: mat4 per (out_layer, ky, kx, in_layer) = 4 vec4 columns; column c = input lane, "
                     "row r = output lane: W[4*out_layer + r, channel(in_layer, c), ky, kx]; bias: vec4 per out_layer"
-                    + ("; ConvTranspose as a gather: W[m, c] = ONNX W[c, m] per group" if p.kind == "conv_transpose"
-                       else "")
-                )  # fmt: skip
+                    + (
+                        "; ConvTranspose as a gather: W[m, c] = ONNX W[c, m] per group"
+                        if p.kind == "conv_transpose"
+                        else ""
+                    )
+                )
             if p.kind in CONV_KINDS:
                 entry["conv"] = {k: list(v) if isinstance(v, tuple) else v for k, v in p.fields.items()}
                 entry["folded_batch_norm"] = p.folded_bn
         if p.kind == "uniform":
             vi = next(v for v, q in table.uniforms if q is p)
-            entry["uniforms"] = {p.fields["uniform"]: {"location": p.fields["location"], "type": "float",
-                                                       "onnx_input": vi.name,
-                                                       "value": f"graph input {vi.name!r} (glUniform1f)"}}  # fmt: skip
+            entry["uniforms"] = {
+                p.fields["uniform"]: {
+                    "location": p.fields["location"],
+                    "type": "float",
+                    "onnx_input": vi.name,
+                    "value": f"graph input {vi.name!r} (glUniform1f)",
+                }
+            }
         if p.kind in ("pad", "crop"):
-            entry["uniforms"] = {"u_flip_y": {"location": 0, "value": "0: texture row 0 = tensor row 0 (top); "
-                                              "1: the texture is a bottom-up GL image (row 0 = bottom)"}}  # fmt: skip
+            entry["uniforms"] = {
+                "u_flip_y": {
+                    "location": 0,
+                    "value": "0: texture row 0 = tensor row 0 (top); "
+                    "1: the texture is a bottom-up GL image (row 0 = bottom)",
+                }
+            }
         if p.kind.startswith("resize"):
-            entry["resize"] = {"mode": p.fields["mode"], "coordinate_transformation_mode": p.fields["coord"],
-                               "nearest_mode": p.fields["nearest_mode"]}  # fmt: skip
+            entry["resize"] = {
+                "mode": p.fields["mode"],
+                "coordinate_transformation_mode": p.fields["coord"],
+                "nearest_mode": p.fields["nearest_mode"],
+            }
             for key in ("cubic_coeff_a", "exclude_outside", "extrapolation", "widen"):
                 if p.fields.get(key) is not None:
                     entry["resize"][key] = p.fields[key]
@@ -2243,19 +2744,34 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "rows": "texel (x, y) = tensor[..., y, x]: row 0 is the tensor's first (top) row",
             "arithmetic": "fp32",
         },
-        "input": {"onnx_name": table.image_input.name, "texture": table.input_texture.ident,
-                  "channels": table.input_texture.channels,
-                  "declared_shape": [str(v) for v in shape_dims(table.image_input)]},
+        "input": {
+            "onnx_name": table.image_input.name,
+            "texture": table.input_texture.ident,
+            "channels": table.input_texture.channels,
+            "declared_shape": [str(v) for v in shape_dims(table.image_input)],
+        },
         "uniforms": [_uniform_entry(vi, p, graph.metadata) for vi, p in table.uniforms],
-        "outputs": [{"onnx_name": n, "texture": crop.ident, "channels": crop.channels} for n, _, crop in outputs],
-        "pad": {"multiple": multiple, "mode": "reflect", "side": "bottom,right", "pass": table.passes[0].name,
-                "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",
-                "crop_passes": [p.name for p in table.passes if p.kind == "crop"]},
+        "outputs": [
+            {"onnx_name": n, "texture": crop.ident, "channels": crop.channels} for n, _, crop in outputs
+        ],
+        "pad": {
+            "multiple": multiple,
+            "mode": "reflect",
+            "side": "bottom,right",
+            "pass": table.passes[0].name,
+            "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",
+            "crop_passes": [p.name for p in table.passes if p.kind == "crop"],
+        },
         "static_input_size": list(table.input_dims) if table.static else None,
         "textures": textures,
-        "weights": {"file": "weights.bin", "bytes": len(blob), "sha256": sha256_hex(blob),
-                    "dtype": "float32 little-endian", "range_alignment": PARAM_ALIGN},
+        "weights": {
+            "file": "weights.bin",
+            "bytes": len(blob),
+            "sha256": sha256_hex(blob),
+            "dtype": "float32 little-endian",
+            "range_alignment": PARAM_ALIGN,
+        },
         "passes": passes,
         "barrier": "glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT) after each pass",
         "source_model_metadata": dict(graph.metadata),
-    }  # fmt: skip
+    }

@@ -91,7 +91,9 @@ _T["prelude_erf"] = """vec4 nao_erf(vec4 x) {
 }"""
 _T["act_Erf"] = "nao_erf(${x})"
 _T["act_Gelu"] = "(0.5 * ${x} * (1.0 + nao_erf(${x} * 0.70710678118654752)))"
-_T["act_GeluTanh"] = "(0.5 * ${x} * (1.0 + nao_tanh(0.79788456080286536 * (${x} + 0.044715 * ${x} * ${x} * ${x}))))"
+_T["act_GeluTanh"] = (
+    "(0.5 * ${x} * (1.0 + nao_tanh(0.79788456080286536 * (${x} + 0.044715 * ${x} * ${x} * ${x}))))"
+)
 _T["act_Mish"] = "(${x} * nao_tanh(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x})))))"
 _T["act_Sqrt"] = "sqrt(${x})"
 _T["act_Exp"] = "exp(${x})"
@@ -300,7 +302,9 @@ _T["conv_block_bias"] = "    vec4 b${o} = prm[${bias_offset} + z0 + ${o}];"
 _T["conv_block_acc"] = "    vec4 ${names};"
 _T["conv_block_acc_name"] = "a${o}_${p} = b${o}"
 _T["conv_block_acc_sep"] = ", "
-_T["conv_block_coord"] = "            ivec2 q${p} = qb + ivec2(${qx}, ${qy}); float k${p} = nao_clip(q${p}, in_size);"
+_T["conv_block_coord"] = (
+    "            ivec2 q${p} = qb + ivec2(${qx}, ${qy}); float k${p} = nao_clip(q${p}, in_size);"
+)
 _T["conv_block_input_loop"] = """            for (int l = 0; l < ${layers}; ++l) {
                 int o = tap + (${layer_offset} + l) * 4;
 ${fetches}
@@ -932,7 +936,9 @@ ${input_loops}
     }"""
 _W["conv_block_bias"] = "    let b${o} = prm[${bias_offset} + z0 + ${o}];"
 _W["conv_block_acc"] = "    var ${names};"
-_W["conv_block_coord"] = "            var q${p} = qb + vec2<i32>(${qx}, ${qy}); let k${p} = nao_clip(&q${p}, in_size);"
+_W["conv_block_coord"] = (
+    "            var q${p} = qb + vec2<i32>(${qx}, ${qy}); let k${p} = nao_clip(&q${p}, in_size);"
+)
 _W["conv_block_input_loop"] = """            for (var l: i32 = 0; l < ${layers}; l++) {
                 let o = tap + (${layer_offset} + l) * 4;
 ${fetches}
@@ -1026,7 +1032,9 @@ _W["prelude_div"] = """fn nao_div(a: f32, b: f32) -> f32 {
     return q + r / b;
 }"""
 _W["coord_pytorch_half_pixel"] = "select(0.0, nao_div(${x} + 0.5, ${scale}) - 0.5, ${len_out} > 1.0)"
-_W["coord_align_corners"] = "select(0.0, nao_div(${x} * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
+_W["coord_align_corners"] = (
+    "select(0.0, nao_div(${x} * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
+)
 _W["coord_tf_crop_and_resize"] = (
     "select(0.5 * (${start} + ${end}) * (${len_in} - 1.0), ${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - "
     "${start}) * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
@@ -1065,7 +1073,9 @@ ${outside}
     if (outside) {
         r = vec4<f32>(${extrapolation});
     }"""
-_W["resize_outside"] = "    let outside = fy < 0.0 || fy > f32(in_size.y - 1) || fx < 0.0 || fx > f32(in_size.x - 1);"
+_W["resize_outside"] = (
+    "    let outside = fy < 0.0 || fy > f32(in_size.y - 1) || fx < 0.0 || fx > f32(in_size.x - 1);"
+)
 _W["resize_inside"] = "    let outside = false;"
 _W["resize_filter_body"] = """    let in_size = nao_size(src0);
     let fy: f32 = ${coord_y};
@@ -1270,19 +1280,80 @@ _W["lrn_body"] = """    let x = nao_fetch(src0, gid);
 # GLSL templates whose text is valid WGSL as it stands (expressions and statements on identifiers
 # the WGSL bodies declare the same way).
 _WGSL_SHARED = (
-    "act_LeakyRelu", "act_Sigmoid", "act_Tanh", "act_Identity", "act_Sin", "act_Cos", "act_Erf", "act_Gelu",
-    "act_GeluTanh", "act_Sqrt", "act_Exp", "act_Log", "act_Abs", "act_Neg", "act_Reciprocal", "act_Sign",
-    "act_Softsign", "act_Floor", "act_Ceil", "act_Pow_reciprocal", "pow_product", "conv_block_acc_name",
-    "conv_block_fma", "conv_block_fmas", "pool_acc_avg", "pool_acc_max", "pool_finish_none", "pool_acc_l1",
-    "pool_acc_l2", "pool_finish_l1", "pool_finish_l2", "coord_half_pixel", "coord_asymmetric",
-    "coord_half_pixel_symmetric", "scale_literal", "scale_ratio", "round_floor", "round_ceil", "kernel_linear",
-    "kernel_cubic", "filter_exclude_y", "filter_exclude_x", "filter_edge_y", "filter_edge_x", "binary_guard_none",
-    "binop_Add", "binop_Sub", "binop_Mul", "binop_Div", "binop_Max", "binop_Min", "epilogue_act", "epilogue_affine",
-    "epilogue_none", "gather_digit", "gather_digit_last", "reduce_init_zero", "reduce_init_one", "reduce_init_max",
-    "reduce_init_min", "reduce_acc_sum", "reduce_acc_square", "reduce_acc_abs", "reduce_acc_max", "reduce_acc_min",
-    "reduce_acc_prod", "reduce_finish_none", "reduce_finish_mean", "reduce_finish_sqrt", "reduce_finish_log",
-    "moments_acc_square", "softmax_finish", "log_softmax_finish",
-)  # fmt: skip
+    "act_LeakyRelu",
+    "act_Sigmoid",
+    "act_Tanh",
+    "act_Identity",
+    "act_Sin",
+    "act_Cos",
+    "act_Erf",
+    "act_Gelu",
+    "act_GeluTanh",
+    "act_Sqrt",
+    "act_Exp",
+    "act_Log",
+    "act_Abs",
+    "act_Neg",
+    "act_Reciprocal",
+    "act_Sign",
+    "act_Softsign",
+    "act_Floor",
+    "act_Ceil",
+    "act_Pow_reciprocal",
+    "pow_product",
+    "conv_block_acc_name",
+    "conv_block_fma",
+    "conv_block_fmas",
+    "pool_acc_avg",
+    "pool_acc_max",
+    "pool_finish_none",
+    "pool_acc_l1",
+    "pool_acc_l2",
+    "pool_finish_l1",
+    "pool_finish_l2",
+    "coord_half_pixel",
+    "coord_asymmetric",
+    "coord_half_pixel_symmetric",
+    "scale_literal",
+    "scale_ratio",
+    "round_floor",
+    "round_ceil",
+    "kernel_linear",
+    "kernel_cubic",
+    "filter_exclude_y",
+    "filter_exclude_x",
+    "filter_edge_y",
+    "filter_edge_x",
+    "binary_guard_none",
+    "binop_Add",
+    "binop_Sub",
+    "binop_Mul",
+    "binop_Div",
+    "binop_Max",
+    "binop_Min",
+    "epilogue_act",
+    "epilogue_affine",
+    "epilogue_none",
+    "gather_digit",
+    "gather_digit_last",
+    "reduce_init_zero",
+    "reduce_init_one",
+    "reduce_init_max",
+    "reduce_init_min",
+    "reduce_acc_sum",
+    "reduce_acc_square",
+    "reduce_acc_abs",
+    "reduce_acc_max",
+    "reduce_acc_min",
+    "reduce_acc_prod",
+    "reduce_finish_none",
+    "reduce_finish_mean",
+    "reduce_finish_sqrt",
+    "reduce_finish_log",
+    "moments_acc_square",
+    "softmax_finish",
+    "log_softmax_finish",
+)
 
 TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.items()}
 WGSL_TEMPLATES: dict[str, Template] = {

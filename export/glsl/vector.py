@@ -142,8 +142,24 @@ class UniformBlock:
 class VectorOps(OpTable):
     """ONNX -> per-pixel dense network (N, K) -> (N, M) for the fragment target."""
 
-    OPS = ("Gemm", "MatMul", "Add", "Sub", "Mul", "Div", "Concat", "Relu", "LeakyRelu", "Sigmoid", "Tanh",
-           "Sin", "Cos", "Clip", "Identity", "Constant")  # fmt: skip
+    OPS = (
+        "Gemm",
+        "MatMul",
+        "Add",
+        "Sub",
+        "Mul",
+        "Div",
+        "Concat",
+        "Relu",
+        "LeakyRelu",
+        "Sigmoid",
+        "Tanh",
+        "Sin",
+        "Cos",
+        "Clip",
+        "Identity",
+        "Constant",
+    )
     target = "fragment (per-pixel MLP)"
 
     def __init__(self, graph: OnnxGraph, bindings: dict[str, InputBinding] | None = None):
@@ -184,12 +200,16 @@ class VectorOps(OpTable):
     def _input_width(vi: onnx.ValueInfoProto, what: str, layout: str) -> int:
         dims = shape_dims(vi)
         if len(dims) != 2:
-            raise NeuralaoError(f"{what} {vi.name!r} must have rank 2 {layout}, got shape {dims or 'unknown'}")
+            raise NeuralaoError(
+                f"{what} {vi.name!r} must have rank 2 {layout}, got shape {dims or 'unknown'}"
+            )
         width = dims[1]
         if not isinstance(width, int) or width <= 0:
             raise NeuralaoError(f"{what} {vi.name!r} needs a static positive width, got {width!r}")
         if width > MAX_VECTOR_WIDTH:
-            raise NeuralaoError(f"{what} {vi.name!r}: width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}")
+            raise NeuralaoError(
+                f"{what} {vi.name!r}: width {width} exceeds the fragment limit {MAX_VECTOR_WIDTH}"
+            )
         return int(width)
 
     def new_value(self, width: int) -> VecValue:
@@ -383,7 +403,11 @@ def _fold_repeated_input(table: VectorOps) -> bool:
     """Fold W1 (out, 3k) to (out, 3): the shader feeds the same normal k times, so the k column
     blocks of the first layer multiply the same three numbers. Sums in float64 (the summation order
     differs from onnxruntime's by rounding only; the parity tests hold both paths to the same TOL)."""
-    if len(table.inputs) != 1 or table.repeats < 2 or table.bindings[table.graph.input.name].channels != "xyz":
+    if (
+        len(table.inputs) != 1
+        or table.repeats < 2
+        or table.bindings[table.graph.input.name].channels != "xyz"
+    ):
         return False
     readers = [op for op in table.ops if _reads(op, table.input)]
     if len(readers) != 1 or not isinstance(readers[0], DenseOp):
@@ -427,9 +451,15 @@ def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
             for ci, j0 in enumerate(range(0, out4, rows4)):
                 j1 = min(out4, j0 + rows4)
                 wname = f"w{li}_{ci}"
-                members.append((wname, tiles[j0 * in4 * 4 : j1 * in4 * 4],
-                                f"mat4 tiles of W (out, in) rows {4 * j0}..{4 * j1 - 1}: tile (j - {j0}) * {in4} + i = "
-                                f"W[4j..4j+3, 4i..4i+3] column-major (column c = input lane 4i + c)", "mat4"))  # fmt: skip
+                members.append(
+                    (
+                        wname,
+                        tiles[j0 * in4 * 4 : j1 * in4 * 4],
+                        f"mat4 tiles of W (out, in) rows {4 * j0}..{4 * j1 - 1}: tile (j - {j0}) * {in4} + i = "
+                        f"W[4j..4j+3, 4i..4i+3] column-major (column c = input lane 4i + c)",
+                        "mat4",
+                    )
+                )
                 op.chunks.append((j0, j1, wname, f"b{li}", -1))
             members.append((f"b{li}", b, f"bias[0..{4 * out4 - 1}]", "vec4"))
         elif isinstance(op, MapOp) and op.const is not None:
@@ -466,8 +496,17 @@ def _concat_copies(op: ConcatOp) -> list[str]:
                 out.append(fill("vec_copy", dst=op.dst.ident, di=k // 4, src=part.ident, si=i // 4))
                 i, k = i + 4, k + 4
                 continue
-            out.append(fill("lane_copy", dst=op.dst.ident, di=k // 4, dl=lanes[k % 4], src=part.ident,
-                            si=i // 4, sl=lanes[i % 4]))  # fmt: skip
+            out.append(
+                fill(
+                    "lane_copy",
+                    dst=op.dst.ident,
+                    di=k // 4,
+                    dl=lanes[k % 4],
+                    src=part.ident,
+                    si=i // 4,
+                    sl=lanes[i % 4],
+                )
+            )
             i, k = i + 1, k + 1
     for k in range(op.dst.width, op.dst.n4 * 4):  # padding lanes are read by dot(): keep them 0
         out.append(fill("lane_zero", dst=op.dst.ident, di=k // 4, dl=lanes[k % 4]))
@@ -494,17 +533,30 @@ def _dense_rows(op: DenseOp) -> list[str]:
     for j0, j1, wname, bname, _ in op.chunks:
         if straight:
             for j in range(j0, j1):
-                terms = [fill("mat_term", weight=wname, index=(j - j0) * in4 + i, src=op.src.ident, i=i) for i in range(in4)]
+                terms = [
+                    fill("mat_term", weight=wname, index=(j - j0) * in4 + i, src=op.src.ident, i=i)
+                    for i in range(in4)
+                ]
                 value = fill("dense_acc", bias=bname, j=j, terms=" + ".join(terms))
                 for act in op.epilogue:
                     value = act.expr(value)
                 rows.append(fill("dense_row", dst=op.dst.ident, j=j, value=value))
             continue
-        terms = [fill("mat_term", weight=wname, index=f"(j - {j0}) * {in4} + {i}", src=op.src.ident, i=i) for i in range(in4)]
+        terms = [
+            fill("mat_term", weight=wname, index=f"(j - {j0}) * {in4} + {i}", src=op.src.ident, i=i)
+            for i in range(in4)
+        ]
         value = fill("dense_acc", bias=bname, j="j", terms=" + ".join(terms))
         for act in op.epilogue:
             value = act.expr(value)
-        rows.append(fill("dense_loop", j_begin=j0, j_end=j1, row=fill("dense_row", dst=op.dst.ident, j="j", value=value)))
+        rows.append(
+            fill(
+                "dense_loop",
+                j_begin=j0,
+                j_end=j1,
+                row=fill("dense_row", dst=op.dst.ident, j="j", value=value),
+            )
+        )
     return rows
 
 
@@ -530,21 +582,31 @@ def _const_arrays(blocks: list[UniformBlock]) -> list[str]:
         for name, data, _, glsl_type in blk.members:
             per = 16 if glsl_type == "mat4" else 4
             flat = np.asarray(data, np.float32).reshape(-1)
-            items = [fill("const_item", type=glsl_type, values=", ".join(glsl_float(v) for v in flat[k : k + per]))
-                     for k in range(0, flat.size, per)]  # fmt: skip
-            out.append(fill("const_array", type=glsl_type, name=name, count=len(items), items=", ".join(items)))
+            items = [
+                fill("const_item", type=glsl_type, values=", ".join(glsl_float(v) for v in flat[k : k + per]))
+                for k in range(0, flat.size, per)
+            ]
+            out.append(
+                fill("const_array", type=glsl_type, name=name, count=len(items), items=", ".join(items))
+            )
     return out
 
 
 def _write_vector_fragment(
-    table: VectorOps, blocks: list[UniformBlock], result: VecValue, d: Dialect, description: str,
+    table: VectorOps,
+    blocks: list[UniformBlock],
+    result: VecValue,
+    d: Dialect,
+    description: str,
     constant_weights: bool = False,
-) -> str:  # fmt: skip
+) -> str:
     """The writer for the fragment target: IR -> template fills."""
     block_text = []
     for blk in [] if constant_weights else blocks:
-        members = "\n".join(fill("ubo_member", type=m[3], name=m[0], count=m[1].shape[0] // (4 if m[3] == "mat4" else 1))
-                            for m in blk.members)  # fmt: skip
+        members = "\n".join(
+            fill("ubo_member", type=m[3], name=m[0], count=m[1].shape[0] // (4 if m[3] == "mat4" else 1))
+            for m in blk.members
+        )
         block_text.append(
             fill("ubo_block", layout=d.ubo_layout(blk.binding), block=blk.name, members=members)
         )
@@ -558,21 +620,27 @@ def _write_vector_fragment(
         lanes = [f"{g}.{c}" for c in b.channels]
         for i in range(value.n4):
             comps = [lanes[(4 * i + c) % len(lanes)] if 4 * i + c < value.width else "0.0" for c in range(4)]
-            body.append(fill("input_tile", dst=value.ident, index=i, c0=comps[0], c1=comps[1], c2=comps[2],
-                             c3=comps[3]))  # fmt: skip
+            body.append(
+                fill(
+                    "input_tile", dst=value.ident, index=i, c0=comps[0], c1=comps[1], c2=comps[2], c3=comps[3]
+                )
+            )
     for op in table.ops:
         if isinstance(op, DenseOp):
             body.extend(_dense_rows(op))
         elif isinstance(op, ConcatOp):
             body.extend(_concat_copies(op))
         else:
-            body.extend(fill("vec_map", dst=op.dst.ident, j=j, expr=_map_expr(op, j)) for j in range(op.dst.n4))
+            body.extend(
+                fill("vec_map", dst=op.dst.ident, j=j, expr=_map_expr(op, j)) for j in range(op.dst.n4)
+            )
     return fill(
         "vector_fragment",
         header=d.header(),
         description=_comment_text(description),
-        weights=fill("weights_constant") if constant_weights else fill("weights_uniform", n_blocks=len(blocks),
-                                                                         max_block_bytes=MAX_UNIFORM_BLOCK_BYTES),
+        weights=fill("weights_constant")
+        if constant_weights
+        else fill("weights_uniform", n_blocks=len(blocks), max_block_bytes=MAX_UNIFORM_BLOCK_BYTES),
         prelude=fill("prelude"),
         samplers=samplers,
         mask_sampler=sampler_name(0),
@@ -643,7 +711,10 @@ def generate_vector_fragment(
     if not description and bindings is None:
         description = f"neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed {table.repeats} times."
     elif not description:  # inputs by position: their names stay in the manifest
-        units = [f"#{i} = unit {table.textures.index(b.texture)}.{b.channels}" for i, b in enumerate(table.bindings.values())]  # fmt: skip
+        units = [
+            f"#{i} = unit {table.textures.index(b.texture)}.{b.channels}"
+            for i, b in enumerate(table.bindings.values())
+        ]
         description = f"neuralao per-pixel network ({kind}): inputs {', '.join(units)} (names: manifest network.bindings)"
     blocks = _assign_blocks(table)
     if weights not in ("auto", "uniform", "constant"):
@@ -652,7 +723,10 @@ def generate_vector_fragment(
     straight = all(op.dst.n4 * op.src.n4 <= MAX_STRAIGHT_TILES for op in table.ops if isinstance(op, DenseOp))
     constant = weights == "constant" or (weights == "auto" and straight and n_weights <= MAX_CONSTANT_WEIGHTS)
     sources = {
-        name: (_write_fullscreen_vertex(dl), _write_vector_fragment(table, blocks, result, dl, description, constant))
+        name: (
+            _write_fullscreen_vertex(dl),
+            _write_vector_fragment(table, blocks, result, dl, description, constant),
+        )
         for name, dl in DIALECTS.items()
     }
     manifest = _mlp_manifest(table, blocks, graph, result, input_width, folded)
@@ -684,25 +758,55 @@ def _mlp_manifest(
     layers = []
     for op in table.ops:
         if isinstance(op, DenseOp):
-            layers.append({"type": "dense", "in": int(op.weight.shape[1]), "out": int(op.weight.shape[0]),
-                           "epilogue": [a.op for a in op.epilogue], "onnx_nodes": op.nodes,
-                           "blocks": [c[4] for c in op.chunks]})  # fmt: skip
+            layers.append(
+                {
+                    "type": "dense",
+                    "in": int(op.weight.shape[1]),
+                    "out": int(op.weight.shape[0]),
+                    "epilogue": [a.op for a in op.epilogue],
+                    "onnx_nodes": op.nodes,
+                    "blocks": [c[4] for c in op.chunks],
+                }
+            )
         elif isinstance(op, ConcatOp):
             layers.append({"type": "concat", "widths": [p.width for p in op.parts], "onnx_nodes": op.nodes})
         else:
             operand = "vector" if op.other else ("constant" if op.const is not None else None)
-            layers.append({"type": "map", "width": op.dst.width, "binop": op.binop if operand else None,
-                           "operand": operand, "operand_first": op.swapped,
-                           "epilogue": [a.op for a in op.epilogue], "onnx_nodes": op.nodes})  # fmt: skip
+            layers.append(
+                {
+                    "type": "map",
+                    "width": op.dst.width,
+                    "binop": op.binop if operand else None,
+                    "operand": operand,
+                    "operand_first": op.swapped,
+                    "epilogue": [a.op for a in op.epilogue],
+                    "onnx_nodes": op.nodes,
+                }
+            )
     ubo = []
     for b in blocks:
         offset, members = 0, []
         for name, arr, layout, glsl_type in b.members:
-            members.append({"name": name, "type": f"{glsl_type}[{arr.shape[0] // (4 if glsl_type == 'mat4' else 1)}]",
-                            "offset": offset, "vec4s": int(arr.shape[0]), "layout": layout})  # fmt: skip
+            members.append(
+                {
+                    "name": name,
+                    "type": f"{glsl_type}[{arr.shape[0] // (4 if glsl_type == 'mat4' else 1)}]",
+                    "offset": offset,
+                    "vec4s": int(arr.shape[0]),
+                    "layout": layout,
+                }
+            )
             offset += int(arr.nbytes)
-        ubo.append({"name": b.name, "binding": b.binding, "bytes": b.nbytes, "file": f"mlp_block{b.binding}.bin",
-                    "sha256": sha256_hex(b.data.tobytes()), "members": members})  # fmt: skip
+        ubo.append(
+            {
+                "name": b.name,
+                "binding": b.binding,
+                "bytes": b.nbytes,
+                "file": f"mlp_block{b.binding}.bin",
+                "sha256": sha256_hex(b.data.tobytes()),
+                "members": members,
+            }
+        )
     param_bytes = int(sum(op.weight.size + op.bias.size for op in table.ops if isinstance(op, DenseOp)) * 4)
     return {
         "kind": "mlp",
@@ -714,8 +818,10 @@ def _mlp_manifest(
                 "name": "mlp",
                 "type": "fullscreen_triangle",
                 "draw": "glDrawArrays(GL_TRIANGLES, 0, 3) with an empty VAO, viewport = G-buffer size",
-                "inputs": [{"texture": t, "sampler": sampler_name(unit), "unit": unit, "fetch": "texelFetch"}
-                           for unit, t in enumerate(table.textures)],
+                "inputs": [
+                    {"texture": t, "sampler": sampler_name(unit), "unit": unit, "fetch": "texelFetch"}
+                    for unit, t in enumerate(table.textures)
+                ],
                 "outputs": [{"texture": "ao", "location": 0}],
                 "uniform_blocks": [b["name"] for b in ubo],
                 "uniforms": {
@@ -730,7 +836,7 @@ def _mlp_manifest(
                 "size": "screen",
                 "channels": "network output (raw, not clamped); background 1.0",
             },
-        },  # fmt: skip
+        },
         "uniform_blocks": ubo,
         "uniform_block_rule": f"std140, vec4 / mat4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes (the portable "
         "GL_MAX_UNIFORM_BLOCK_SIZE); glsl330/es300 bind with glUniformBlockBinding(name -> binding)",
@@ -754,12 +860,20 @@ def _mlp_manifest(
 
 def _input_textures(table: VectorOps) -> dict:
     if list(table.bindings.values()) == [InputBinding("gbuffer", "xyz", table.repeats)]:
-        return {"gbuffer": {"format": "RGBA32F", "size": "screen",
-                            "channels": "xyz object-space normal as stored (not renormalised), w mask: >= 0.5 foreground"}}  # fmt: skip
+        return {
+            "gbuffer": {
+                "format": "RGBA32F",
+                "size": "screen",
+                "channels": "xyz object-space normal as stored (not renormalised), w mask: >= 0.5 foreground",
+            }
+        }
     out = {}
     for unit, t in enumerate(table.textures):
-        uses = [f"{b.channels} -> ONNX input {n!r}" + (f" (x{b.repeats})" if b.repeats > 1 else "")
-                for n, b in table.bindings.items() if b.texture == t]  # fmt: skip
+        uses = [
+            f"{b.channels} -> ONNX input {n!r}" + (f" (x{b.repeats})" if b.repeats > 1 else "")
+            for n, b in table.bindings.items()
+            if b.texture == t
+        ]
         if unit == 0:
             uses.append("w: mask, >= 0.5 foreground")
         out[t] = {"format": "RGBA32F", "size": "screen", "channels": "; ".join(uses)}

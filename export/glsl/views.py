@@ -149,13 +149,19 @@ def reduction(axes: Axes, reduced: list[int], channels: int) -> Reduction | str:
         g = sum(d * new_stride[a] for d, a in zip(digits, kept_c, strict=True))
         base[g] = sum(d * a.stride for d, a in zip(digits, kept_c, strict=True))
     offsets = np.asarray(
-        [sum(d * a.stride for d, a in zip(digits, gone_c, strict=True))
-         for digits in itertools.product(*(range(a.size) for a in gone_c))], np.int64)  # fmt: skip
+        [
+            sum(d * a.stride for d, a in zip(digits, gone_c, strict=True))
+            for digits in itertools.product(*(range(a.size) for a in gone_c))
+        ],
+        np.int64,
+    )
     group_of = np.zeros(channels, np.int64)
     for c in range(channels):
         group_of[c] = sum(((c // a.stride) % a.size) * new_stride[a] for a in kept_c)
     kept = tuple(
-        () if i in reduced else tuple(Atom(a.axis, a.size, new_stride[a] if a.axis == "c" else a.stride) for a in run)
+        ()
+        if i in reduced
+        else tuple(Atom(a.axis, a.size, new_stride[a] if a.axis == "c" else a.stride) for a in run)
         for i, run in enumerate(axes)
     )
     spatial = (any(a.axis == "y" for a in gone), any(a.axis == "x" for a in gone))

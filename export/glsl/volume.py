@@ -113,8 +113,15 @@ def volume_function(order: str = "linear", blend: float = 0.97) -> str:
         fill("chunk", u=UNIFORM, k=c, **{f"i{t}": 1 + 7 * c + t for t in range(7)}) for c in range(k)
     )
     basis = "\n".join(fill(f"basis_{c}") for c in range(k))
-    return fill("function", order=order, blend=f"{blend:g}", size=packed_size(order), uniform=UNIFORM,
-                basis=basis, chunks=chunks)  # fmt: skip
+    return fill(
+        "function",
+        order=order,
+        blend=f"{blend:g}",
+        size=packed_size(order),
+        uniform=UNIFORM,
+        basis=basis,
+        chunks=chunks,
+    )
 
 
 def probe_shaders(order: str = "linear", blend: float = 0.97, dialect: str = "glsl330") -> tuple[str, str]:

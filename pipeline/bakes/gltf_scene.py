@@ -156,14 +156,17 @@ def triangles(index: np.ndarray, mode: int, where: str) -> np.ndarray | None:
         i = np.arange(len(index) - 2)
         if mode == 5:  # strip: every other triangle swaps its first two corners to keep the winding
             odd = i % 2 == 1
-            return np.stack([np.where(odd, index[i + 1], index[i]), np.where(odd, index[i], index[i + 1]),
-                             index[i + 2]], axis=1)  # fmt: skip
+            return np.stack(
+                [np.where(odd, index[i + 1], index[i]), np.where(odd, index[i], index[i + 1]), index[i + 2]],
+                axis=1,
+            )
         return np.stack([np.full_like(i, index[0]), index[i + 1], index[i + 2]], axis=1)
     return None if mode not in (4, 5, 6) else np.zeros((0, 3), np.int64)
 
 
-def _primitive_pieces(g: _Gltf, node: int, mi: int, transforms: np.ndarray, written: bool,
-                      skipped: dict[str, int]) -> list[Piece]:  # fmt: skip
+def _primitive_pieces(
+    g: _Gltf, node: int, mi: int, transforms: np.ndarray, written: bool, skipped: dict[str, int]
+) -> list[Piece]:
     mesh = g.doc["meshes"][mi]
     out = []
     for k, prim in enumerate(mesh.get("primitives", [])):
@@ -350,8 +353,9 @@ def bake_texture_scene(
         spans.append(tx.pixel)
     t1 = time.perf_counter()
     labeller = Labeller(gs.world, settings.label_settings())
-    ao, valid = labeller.ao_at_points(np.concatenate(points), np.concatenate(normals), progress=progress,
-                                      ids=np.concatenate(ids))  # fmt: skip
+    ao, valid = labeller.ao_at_points(
+        np.concatenate(points), np.concatenate(normals), progress=progress, ids=np.concatenate(ids)
+    )
     t2 = time.perf_counter()
     images: list[np.ndarray | None] = []
     start, covered = 0, 0
@@ -368,11 +372,21 @@ def bake_texture_scene(
         raise NeuralaoError(
             f"no texel centre falls inside a UV triangle at resolution {n}; raise --resolution"
         )
-    info = {"resolution": n, "maps": sum(im is not None for im in images), "texels_covered": covered,
-            "invalid_texels": int((~valid).sum()), "rays_traced": int(len(ao)) * settings.rays,
-            "uv_sources": {f"{m}/{k}": ("mesh" if lay.vmap is None else "xatlas") for (m, k), lay in layouts.items()},
-            "max_distance": labeller.max_distance, "seconds_raster": t1 - t0, "seconds_trace": t2 - t1,
-            "seconds": time.perf_counter() - t0, "settings": settings_to_dict(settings)}  # fmt: skip
+    info = {
+        "resolution": n,
+        "maps": sum(im is not None for im in images),
+        "texels_covered": covered,
+        "invalid_texels": int((~valid).sum()),
+        "rays_traced": int(len(ao)) * settings.rays,
+        "uv_sources": {
+            f"{m}/{k}": ("mesh" if lay.vmap is None else "xatlas") for (m, k), lay in layouts.items()
+        },
+        "max_distance": labeller.max_distance,
+        "seconds_raster": t1 - t0,
+        "seconds_trace": t2 - t1,
+        "seconds": time.perf_counter() - t0,
+        "settings": settings_to_dict(settings),
+    }
     return images, layouts, info
 
 
@@ -498,8 +512,12 @@ def write_texture_scene(
     slots = _mesh_slots(gs, w, {k: v.tobytes() for k, v in by_key.items()})
     first = {target: members[0] for groups in slots.values() for target, members in groups}
     # materials that some primitive keeps as they are (no map for it): never edited in place
-    reserved = {prim["material"] for mi, mesh in enumerate(doc["meshes"]) for k, prim in enumerate(mesh.get("primitives", []))
-                if "material" in prim and (mi not in first or (*first[mi], k) not in by_key)}  # fmt: skip
+    reserved = {
+        prim["material"]
+        for mi, mesh in enumerate(doc["meshes"])
+        for k, prim in enumerate(mesh.get("primitives", []))
+        if "material" in prim and (mi not in first or (*first[mi], k) not in by_key)
+    }
     doc.setdefault("samplers", []).append(
         {"magFilter": _LINEAR, "minFilter": _LINEAR, "wrapS": _CLAMP, "wrapT": _CLAMP}
     )
@@ -520,16 +538,27 @@ def write_texture_scene(
                     prim.update(copy.deepcopy(remapped[(mi, k)]))
                 buf = io.BytesIO()
                 Image.fromarray(grey, mode="L").save(buf, format="PNG")
-                doc.setdefault("images", []).append({"bufferView": w.buffer_view(buf.getvalue()), "mimeType": "image/png",
-                                                     "name": f"ao_{doc['nodes'][node].get('name', node)}_{k}"})  # fmt: skip
+                doc.setdefault("images", []).append(
+                    {
+                        "bufferView": w.buffer_view(buf.getvalue()),
+                        "mimeType": "image/png",
+                        "name": f"ao_{doc['nodes'][node].get('name', node)}_{k}",
+                    }
+                )
                 doc.setdefault("textures", []).append({"sampler": sampler, "source": len(doc["images"]) - 1})
                 occlusion = {"index": len(doc["textures"]) - 1}
                 if lay.texcoord:
                     occlusion["texCoord"] = lay.texcoord
                 src = prim.get("material")
                 if src is None:
-                    material = {"name": "neuralao_ao", "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1],
-                                "metallicFactor": 0.0, "roughnessFactor": 1.0}}  # fmt: skip
+                    material = {
+                        "name": "neuralao_ao",
+                        "pbrMetallicRoughness": {
+                            "baseColorFactor": [1, 1, 1, 1],
+                            "metallicFactor": 0.0,
+                            "roughnessFactor": 1.0,
+                        },
+                    }
                 else:
                     material = copy.deepcopy(gs.doc["materials"][src])
                 material["occlusionTexture"] = occlusion
@@ -559,8 +588,11 @@ def _remapped_primitive(gs: GltfScene, w: GltfWriter, mi: int, k: int, lay: Layo
     attrs = {name: gather(a) for name, a in src.get("attributes", {}).items()}
     st = np.c_[lay.uv[:, 0], 1.0 - lay.uv[:, 1]].astype(np.float32)  # glTF: v down
     attrs[f"TEXCOORD_{lay.texcoord}"] = w.accessor(st, target=_ARRAY_BUFFER)
-    out = {"attributes": attrs, "mode": 4,
-           "indices": w.accessor(lay.faces.astype(np.uint32).reshape(-1), target=_ELEMENT_ARRAY_BUFFER)}  # fmt: skip
+    out = {
+        "attributes": attrs,
+        "mode": 4,
+        "indices": w.accessor(lay.faces.astype(np.uint32).reshape(-1), target=_ELEMENT_ARRAY_BUFFER),
+    }
     if "targets" in src:
         out["targets"] = [{name: gather(a) for name, a in t.items()} for t in src["targets"]]
     return out

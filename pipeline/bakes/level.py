@@ -174,16 +174,28 @@ class LevelBakeSettings:
 
 def check_settings(s: LevelBakeSettings) -> None:
     t = s.trace
-    for name, v in (("trace.rays", t.rays), ("trace.block_samples", t.block_samples), ("workers", s.workers), ("task_rays", s.task_rays),
-                    ("trace.component_vertices", t.component_vertices),
-                    ("grass.rays", s.grass.rays), ("lod.rays", s.lod.rays), ("decorators.local_rays", s.decorators.local_rays),
-                    ("decorators.samples_per_instance", s.decorators.samples_per_instance),
-                    ("decorators.holdout_samples", s.decorators.holdout_samples), ("foliage.max_hits", s.foliage.max_hits)):  # fmt: skip
+    for name, v in (
+        ("trace.rays", t.rays),
+        ("trace.block_samples", t.block_samples),
+        ("workers", s.workers),
+        ("task_rays", s.task_rays),
+        ("trace.component_vertices", t.component_vertices),
+        ("grass.rays", s.grass.rays),
+        ("lod.rays", s.lod.rays),
+        ("decorators.local_rays", s.decorators.local_rays),
+        ("decorators.samples_per_instance", s.decorators.samples_per_instance),
+        ("decorators.holdout_samples", s.decorators.holdout_samples),
+        ("foliage.max_hits", s.foliage.max_hits),
+    ):
         if v < 1:
             raise NeuralaoError(f"{name} must be >= 1, got {v}")
-    for name, v in (("trace.half_distance_short", t.half_distance_short), ("trace.half_distance_long", t.half_distance_long),
-                    ("trace.samples_per_vertex", t.samples_per_vertex), ("grass.radius", s.grass.radius),
-                    ("lod.samples_per_vertex", s.lod.samples_per_vertex)):  # fmt: skip
+    for name, v in (
+        ("trace.half_distance_short", t.half_distance_short),
+        ("trace.half_distance_long", t.half_distance_long),
+        ("trace.samples_per_vertex", t.samples_per_vertex),
+        ("grass.radius", s.grass.radius),
+        ("lod.samples_per_vertex", s.lod.samples_per_vertex),
+    ):
         if not (math.isfinite(v) and v > 0):
             raise NeuralaoError(f"{name} must be a positive number, got {v}")
     if t.max_distance is not None and not (math.isfinite(t.max_distance) and t.max_distance > 0):
@@ -258,8 +270,16 @@ class BakeLog:
         return ResultStore(self.dir / f"{name}.parts")
 
     def _record(self, name, description, t0, c0, reused, counts) -> None:
-        self.stages.append({"stage": name, "description": description, "seconds": time.perf_counter() - t0,
-                            "cpu_seconds": _cpu_seconds() - c0, "reused": reused, **counts})  # fmt: skip
+        self.stages.append(
+            {
+                "stage": name,
+                "description": description,
+                "seconds": time.perf_counter() - t0,
+                "cpu_seconds": _cpu_seconds() - c0,
+                "reused": reused,
+                **counts,
+            }
+        )
         if (peak := _peak_rss()) is not None:
             self.stages[-1]["peak_rss_bytes"] = peak
 
@@ -334,10 +354,23 @@ def build_geometry(level: Level) -> LevelGeometry:
     rv, rf, spans = flatten(level, static)
     bv, bf, _ = flatten(level, level.nodes_with("blocker"))
     receivers = scene_from_arrays(rv, rf, "receivers", level.source, drop_degenerate=False)
-    opaque = scene_from_arrays(np.concatenate([rv, bv]), np.concatenate([rf, bf + len(rv)]), "opaque", level.source,
-                               drop_degenerate=False)  # fmt: skip
-    return LevelGeometry(level, receivers, opaque, spans, static, level.nodes_with("tree"), level.nodes_with("shrub"),
-                         level.nodes_with("grass"))  # fmt: skip
+    opaque = scene_from_arrays(
+        np.concatenate([rv, bv]),
+        np.concatenate([rf, bf + len(rv)]),
+        "opaque",
+        level.source,
+        drop_degenerate=False,
+    )
+    return LevelGeometry(
+        level,
+        receivers,
+        opaque,
+        spans,
+        static,
+        level.nodes_with("tree"),
+        level.nodes_with("shrub"),
+        level.nodes_with("grass"),
+    )
 
 
 def receiver_samples(scene: Scene, t: TraceSettings, seed: int) -> SurfaceSamples:
@@ -410,9 +443,15 @@ def build_foliage(
 
 
 def label_settings(s: LevelBakeSettings, diagonal: float, rays: int | None = None) -> LabelSettings:
-    return LabelSettings(rays=rays or s.trace.rays, max_distance=s.trace.max_distance or diagonal, kernel="obscurance",
-                         half_distance=s.trace.half_distance_long, backface_threshold=s.trace.backface_threshold,
-                         seed=s.seed, workers=s.workers)  # fmt: skip
+    return LabelSettings(
+        rays=rays or s.trace.rays,
+        max_distance=s.trace.max_distance or diagonal,
+        kernel="obscurance",
+        half_distance=s.trace.half_distance_long,
+        backface_threshold=s.trace.backface_threshold,
+        seed=s.seed,
+        workers=s.workers,
+    )
 
 
 def halves(s: LevelBakeSettings) -> list[float]:
@@ -422,8 +461,15 @@ def halves(s: LevelBakeSettings) -> list[float]:
 # --------------------------------------------------------------------------- trace (resumable blocks)
 
 
-def trace_samples(log_: BakeLog, labeller: LevelLabeller | LabellerFrame, foliage, samples: SurfaceSamples,
-                  s: LevelBakeSettings, progress: bool, engine=None) -> dict[str, np.ndarray]:  # fmt: skip
+def trace_samples(
+    log_: BakeLog,
+    labeller: LevelLabeller | LabellerFrame,
+    foliage,
+    samples: SurfaceSamples,
+    s: LevelBakeSettings,
+    progress: bool,
+    engine=None,
+) -> dict[str, np.ndarray]:
     """Two-distance obscurance at every sample, in blocks stored under stages/trace/.
 
     The blocks not stored yet are tasks of ``engine`` (:mod:`pipeline.engines.engine`; None: this process
@@ -447,8 +493,14 @@ def trace_samples(log_: BakeLog, labeller: LevelLabeller | LabellerFrame, foliag
     ctx = opaque_context(log_.key, labeller, foliage, engine)
     if engine is None:  # the driver's own labeller and foliage are the context's state
         engine = LocalEngine(states={ctx.key: (labeller, foliage)})
-    tasks = (Task(ctx, _trace_block, (samples.points[lo:hi], samples.normals[lo:hi],
-                                      np.arange(lo, hi, dtype=np.int64), halves(s))) for lo, hi, _ in pending)  # fmt: skip
+    tasks = (
+        Task(
+            ctx,
+            _trace_block,
+            (samples.points[lo:hi], samples.normals[lo:hi], np.arange(lo, hi, dtype=np.int64), halves(s)),
+        )
+        for lo, hi, _ in pending
+    )
     with tqdm(total=len(pending), desc="trace blocks", disable=not progress, leave=False) as bar:
         for i, r in engine.map(tasks):
             lo, hi, path = pending[i]
@@ -492,8 +544,11 @@ def opaque_context(key: str, labeller: LevelLabeller | LabellerFrame, foliage, e
     settings = (
         labeller.settings if engine.threads is None else replace(labeller.settings, workers=engine.threads)
     )
-    return Context(f"level-trace/{key}/{settings.workers}", _level_tracer,
-                   (slim_scene(labeller.scene), settings, foliage))  # fmt: skip
+    return Context(
+        f"level-trace/{key}/{settings.workers}",
+        _level_tracer,
+        (slim_scene(labeller.scene), settings, foliage),
+    )
 
 
 # --------------------------------------------------------------------------- decorators (section 2.2)
@@ -527,8 +582,12 @@ _DECORATOR_ERRORS = ("local_x_global", "global_only", "in_place", "local_only", 
 def gold_scene(g: LevelGeometry) -> Scene:
     """The decorators' gold standard scene: the opaque level plus every tree instance, opaque."""
     tv, tf, _ = flatten(g.level, g.trees)
-    return scene_from_arrays(np.concatenate([g.opaque.vertices, tv]), np.concatenate([g.opaque.faces, tf + len(g.opaque.vertices)]),
-                             "gold", drop_degenerate=False)  # fmt: skip
+    return scene_from_arrays(
+        np.concatenate([g.opaque.vertices, tv]),
+        np.concatenate([g.opaque.faces, tf + len(g.opaque.vertices)]),
+        "gold",
+        drop_degenerate=False,
+    )
 
 
 @dataclass
@@ -586,10 +645,12 @@ def _tree_instance(state, args) -> dict[str, np.ndarray]:
     # What the shader shows: the per-vertex product, interpolated by the rasteriser.
     prod = np.clip(local * (linear_basis(world_v, origin) @ y), 0, 1)
     w = hold.weights[vh] / hold.weights[vh].sum()
-    preds = {"local_x_global": interpolate(model, prod, hold.face, hold.bary),
-             "global_only": np.clip(linear_basis(ph, origin) @ y1, 0, 1),
-             "in_place": interpolate(model, inplace, hold.face, hold.bary),
-             "local_only": interpolate(model, local, hold.face, hold.bary)}  # fmt: skip
+    preds = {
+        "local_x_global": interpolate(model, prod, hold.face, hold.bary),
+        "global_only": np.clip(linear_basis(ph, origin) @ y1, 0, 1),
+        "in_place": interpolate(model, inplace, hold.face, hold.bary),
+        "local_only": interpolate(model, local, hold.face, hold.bary),
+    }
     err = {k: float(np.sqrt(np.sum(w * (p[vh] - fh[vh]) ** 2))) for k, p in preds.items()}
     err["local_x_global_vs_in_place"] = float(
         np.sqrt(np.sum(w * (preds["local_x_global"][vh] - preds["in_place"][vh]) ** 2))
@@ -598,9 +659,13 @@ def _tree_instance(state, args) -> dict[str, np.ndarray]:
 
 
 def bake_decorators(
-    g: LevelGeometry, s: LevelBakeSettings, foliage_settings: FoliageSettings, engine=None,
-    store=None, key: str = "",
-) -> dict[str, np.ndarray]:  # fmt: skip
+    g: LevelGeometry,
+    s: LevelBakeSettings,
+    foliage_settings: FoliageSettings,
+    engine=None,
+    store=None,
+    key: str = "",
+) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
 
     The local AO of each model is baked here; every instance's in-place trace and fits is a task of
@@ -618,8 +683,11 @@ def bake_decorators(
     if engine is None:
         # The gold standard sees the trees as opaque geometry (every instance baked in place).
         gold_labeller = LevelLabeller(gold, settings)
-        gold_foliage = (build_foliage(g, gold_labeller, foliage_settings, include_trees=False)
-                        if foliage_settings.enabled else None)  # fmt: skip
+        gold_foliage = (
+            build_foliage(g, gold_labeller, foliage_settings, include_trees=False)
+            if foliage_settings.enabled
+            else None
+        )
         runner = LocalEngine(states={ctx_key: (gold_labeller, gold_foliage)})
         payload = None
     else:
@@ -627,8 +695,11 @@ def bake_decorators(
         # Foliage lives in a labeller's local frame: the gold labeller's (its scene's centre and
         # diagonal), without building its BVH here.
         frame = SimpleNamespace(center=np.asarray(gold.center, np.float64), scale=float(gold.diagonal))
-        gold_foliage = (build_foliage(g, frame, foliage_settings, include_trees=False)
-                        if foliage_settings.enabled else None)  # fmt: skip
+        gold_foliage = (
+            build_foliage(g, frame, foliage_settings, include_trees=False)
+            if foliage_settings.enabled
+            else None
+        )
         payload = (slim_scene(gold), settings, gold_foliage)
     ctx = Context(ctx_key, _level_tracer, payload)
     models = sorted({n.mesh for n in g.trees})
@@ -675,8 +746,15 @@ def median_edge(scene: Scene) -> float:
     return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
 
 
-def bake_lod(g: LevelGeometry, resample: Resampler | LevelLabeller, high_ao: np.ndarray, samples: SurfaceSamples,
-             traced: np.ndarray, traced_valid: np.ndarray, s: LevelBakeSettings) -> dict[str, np.ndarray]:  # fmt: skip
+def bake_lod(
+    g: LevelGeometry,
+    resample: Resampler | LevelLabeller,
+    high_ao: np.ndarray,
+    samples: SurfaceSamples,
+    traced: np.ndarray,
+    traced_valid: np.ndarray,
+    s: LevelBakeSettings,
+) -> dict[str, np.ndarray]:
     """LOD1 of the receivers and its AO by (a) resampling at its vertices, (b) least squares over
     resampled surface samples; both against the gold standard at held-out LOD samples.
 
@@ -723,15 +801,28 @@ def bake_lod(g: LevelGeometry, resample: Resampler | LevelLabeller, high_ao: np.
                 ref[i] = np.sum(w * fw[nb]) / w.sum()
     m = np.isfinite(ref)
     w = hold.weights[m] / hold.weights[m].sum()
-    errs = {k: float(np.sqrt(np.sum(w * (interpolate(lod, v, hold.face, hold.bary)[m] - ref[m]) ** 2)))
-            for k, v in (("vertex", vert), ("least_squares", lsq))}  # fmt: skip
+    errs = {
+        k: float(np.sqrt(np.sum(w * (interpolate(lod, v, hold.face, hold.bary)[m] - ref[m]) ** 2)))
+        for k, v in (("vertex", vert), ("least_squares", lsq))
+    }
     # Baseline: one constant (the reference's mean) for the whole LOD.
     errs["constant"] = float(np.sqrt(np.sum(w * (ref[m] - np.sum(w * ref[m])) ** 2)))
-    return {"vertices": lod.vertices, "faces": lod.faces, "ao_vertex": vert, "ao_least_squares": lsq,
-            "radius": np.array(radius), "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
-            "rmse_vertex": np.array(errs["vertex"]), "rmse_constant": np.array(errs["constant"]), "rmse_least_squares": np.array(errs["least_squares"]),
-            "holdout": np.array(int(m.sum())), "seconds_simplify": np.array(t1 - t0), "seconds_resample": np.array(t2 - t1),
-            "seconds_solve": np.array(t3 - t2), "seconds_reference": np.array(time.perf_counter() - t3)}  # fmt: skip
+    return {
+        "vertices": lod.vertices,
+        "faces": lod.faces,
+        "ao_vertex": vert,
+        "ao_least_squares": lsq,
+        "radius": np.array(radius),
+        "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
+        "rmse_vertex": np.array(errs["vertex"]),
+        "rmse_constant": np.array(errs["constant"]),
+        "rmse_least_squares": np.array(errs["least_squares"]),
+        "holdout": np.array(int(m.sum())),
+        "seconds_simplify": np.array(t1 - t0),
+        "seconds_resample": np.array(t2 - t1),
+        "seconds_solve": np.array(t3 - t2),
+        "seconds_reference": np.array(time.perf_counter() - t3),
+    }
 
 
 def _holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
@@ -766,8 +857,12 @@ def bake_level(
     blog = BakeLog(out, key)
     s = settings
     g = blog.timed("geometry", "Process geometry", lambda: build_geometry(level))
-    blog.note("geometry", vertices=len(g.receivers.vertices), faces=len(g.receivers.faces),
-              occluder_faces=len(g.opaque.faces))  # fmt: skip
+    blog.note(
+        "geometry",
+        vertices=len(g.receivers.vertices),
+        faces=len(g.receivers.faces),
+        occluder_faces=len(g.opaque.faces),
+    )
     samples = blog.timed("samples", "Sample mesh", lambda: receiver_samples(g.receivers, s.trace, s.seed))
     blog.note("samples", samples=len(samples))
     # With an engine every trace runs on the workers, so the driver keeps no Embree scene (a few GiB for a
@@ -781,18 +876,31 @@ def bake_level(
     )
     foliage = None
     if s.foliage.enabled:
-        foliage = blog.timed("foliage", "Flatten trees, shrub 'fog' boxes + foliage BVH",
-                             lambda: build_foliage(g, labeller, s.foliage))  # fmt: skip
+        foliage = blog.timed(
+            "foliage",
+            "Flatten trees, shrub 'fog' boxes + foliage BVH",
+            lambda: build_foliage(g, labeller, s.foliage),
+        )
         blog.note("foliage", trees=sum(len(n.transforms) for n in g.trees), shrub_boxes=foliage.n_boxes)
-    traced = blog.stored("trace", "Ray trace samples (2 distances, foliage)",
-                         lambda: trace_samples(blog, labeller, foliage, samples, s, progress, engine),
-                         samples=len(samples), rays=len(samples) * s.trace.rays)  # fmt: skip
-    deco = blog.stored("decorators", "Trees: local AO, in-place gold standard, eq. 3 fits",
-                       lambda: bake_decorators(g, s, s.foliage, engine, blog.parts("decorators"), key),
-                       instances=sum(len(n.transforms) for n in g.trees))  # fmt: skip
-    solved = blog.stored("solve", "Least squares solve (both distances)",
-                         lambda: _solve(g, samples, traced, s, engine, blog.parts("solve")),
-                         vertices=len(g.receivers.vertices))  # fmt: skip
+    traced = blog.stored(
+        "trace",
+        "Ray trace samples (2 distances, foliage)",
+        lambda: trace_samples(blog, labeller, foliage, samples, s, progress, engine),
+        samples=len(samples),
+        rays=len(samples) * s.trace.rays,
+    )
+    deco = blog.stored(
+        "decorators",
+        "Trees: local AO, in-place gold standard, eq. 3 fits",
+        lambda: bake_decorators(g, s, s.foliage, engine, blog.parts("decorators"), key),
+        instances=sum(len(n.transforms) for n in g.trees),
+    )
+    solved = blog.stored(
+        "solve",
+        "Least squares solve (both distances)",
+        lambda: _solve(g, samples, traced, s, engine, blog.parts("solve")),
+        vertices=len(g.receivers.vertices),
+    )
     blog.note("solve", **{k: float(v) for k, v in solved.items() if k.startswith("seconds_")})
     final = blend(solved["short"], solved["long"], s.blend)
     ctx = opaque_context(key, labeller, foliage, engine)
@@ -802,17 +910,33 @@ def bake_level(
             return Resampler.here(labeller, foliage, ctx.key, blog.parts(stage), s.task_rays)
         return Resampler(engine, ctx, blog.parts(stage), s.task_rays)
 
-    small = blog.stored("small_decorators", "Resample grass clumps and shrubs",
-                        lambda: _small_decorators(g, resampler("small_decorators"), final, s))  # fmt: skip
+    small = blog.stored(
+        "small_decorators",
+        "Resample grass clumps and shrubs",
+        lambda: _small_decorators(g, resampler("small_decorators"), final, s),
+    )
     lod = None
     if s.lod.enabled:
-        lod = blog.stored("lod", "LOD: simplify, resample, least squares solve",
-                          lambda: bake_lod(g, resampler("lod"), final, samples, traced["ao"], traced["valid"], s))  # fmt: skip
-        blog.note("lod", lod_vertices=len(lod["vertices"]), lod_faces=len(lod["faces"]),
-                  resample_points=int(lod["resample_points"]),
-                  **{k: float(lod[k]) for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")})  # fmt: skip
-    blend_err = blog.stored("blend_check", "Two-distance blend vs blended-kernel traces (error table)",
-                            lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s, engine=engine, key=key))  # fmt: skip
+        lod = blog.stored(
+            "lod",
+            "LOD: simplify, resample, least squares solve",
+            lambda: bake_lod(g, resampler("lod"), final, samples, traced["ao"], traced["valid"], s),
+        )
+        blog.note(
+            "lod",
+            lod_vertices=len(lod["vertices"]),
+            lod_faces=len(lod["faces"]),
+            resample_points=int(lod["resample_points"]),
+            **{
+                k: float(lod[k])
+                for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")
+            },
+        )
+    blend_err = blog.stored(
+        "blend_check",
+        "Two-distance blend vs blended-kernel traces (error table)",
+        lambda: _blend_check(g, labeller, foliage, samples, traced, solved, s, engine=engine, key=key),
+    )
     blog.timed(
         "output",
         "Write glTF, shader, log",
@@ -824,13 +948,24 @@ def bake_level(
         + [st.get("peak_rss_bytes", 0) for st in blog.stages]
     )
     info = {
-        "level": str(path), "key": key, "settings": settings_to_dict(s), "stages": blog.stages,
-        "seconds_total": time.perf_counter() - t_start, "cpu_seconds_total": _cpu_seconds() - c_start, "peak_rss_bytes": int(peak),
-        "counts": {**level.counts(), "receiver_vertices": len(g.receivers.vertices), "receiver_faces": len(g.receivers.faces),
-                   "samples": len(samples), "invalid_samples": int((~traced["valid"]).sum())},
+        "level": str(path),
+        "key": key,
+        "settings": settings_to_dict(s),
+        "stages": blog.stages,
+        "seconds_total": time.perf_counter() - t_start,
+        "cpu_seconds_total": _cpu_seconds() - c_start,
+        "peak_rss_bytes": int(peak),
+        "counts": {
+            **level.counts(),
+            "receiver_vertices": len(g.receivers.vertices),
+            "receiver_faces": len(g.receivers.faces),
+            "samples": len(samples),
+            "invalid_samples": int((~traced["valid"]).sum()),
+        },
         "errors": _error_tables(deco, lod, blend_err),
-        "load_average": list(os.getloadavg()), "cpu_count": os.cpu_count(),
-    }  # fmt: skip
+        "load_average": list(os.getloadavg()),
+        "cpu_count": os.cpu_count(),
+    }
     write_json(out / "bake_log.json", info)
     write_text(out / "bake_log.md", bake_log_markdown(info))
     return info
@@ -846,8 +981,17 @@ def _solve(
     return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
 
 
-def fit_level(scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, t: TraceSettings,
-              engine=None, store=None, tag: str = "", timing: dict | None = None) -> np.ndarray:  # fmt: skip
+def fit_level(
+    scene: Scene,
+    samples: SurfaceSamples,
+    values: np.ndarray,
+    valid: np.ndarray,
+    t: TraceSettings,
+    engine=None,
+    store=None,
+    tag: str = "",
+    timing: dict | None = None,
+) -> np.ndarray:
     """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
 
     "components": the normal equations are assembled here, split into their connected components (the
@@ -920,8 +1064,9 @@ def _solve_block(state, args) -> dict[str, np.ndarray]:
     return {"v": v, "seconds": np.array(time.perf_counter() - t0)}
 
 
-def _small_decorators(g: LevelGeometry, resample: Resampler, final: np.ndarray, s: LevelBakeSettings
-                      ) -> dict[str, np.ndarray]:  # fmt: skip
+def _small_decorators(
+    g: LevelGeometry, resample: Resampler, final: np.ndarray, s: LevelBakeSettings
+) -> dict[str, np.ndarray]:
     values = resample.share(np.r_[final, np.full(len(g.opaque.vertices) - len(final), np.nan)])
     out: dict[str, np.ndarray] = {}
     for role, nodes in (("grass", g.grass), ("shrub", g.shrubs)):
@@ -952,8 +1097,9 @@ class Resampler:
         self.engine, self.context, self.store, self.task_rays = engine, context, store, task_rays
 
     @classmethod
-    def here(cls, labeller: LevelLabeller, foliage=None, key: str = "here", store=None,
-             task_rays: int = 1 << 20) -> Resampler:  # fmt: skip
+    def here(
+        cls, labeller: LevelLabeller, foliage=None, key: str = "here", store=None, task_rays: int = 1 << 20
+    ) -> Resampler:
         """Blocks run in this process on ``labeller`` (its threads)."""
 
         ctx = Context(key, _level_tracer, None)
@@ -971,8 +1117,15 @@ class Resampler:
         centers = np.asarray(centers, np.float64).reshape(-1, 3)
         step = max(1, self.task_rays // len(sphere_directions(rays)))
         bounds = [(lo, min(lo + step, len(centers))) for lo in range(0, len(centers), step)]
-        tasks = (Task(self.context, _resample_task, (values, centers[lo:hi], radius, rays),
-                      content_key(self.context.key, values.key, tag, lo, hi, radius, rays)) for lo, hi in bounds)  # fmt: skip
+        tasks = (
+            Task(
+                self.context,
+                _resample_task,
+                (values, centers[lo:hi], radius, rays),
+                content_key(self.context.key, values.key, tag, lo, hi, radius, rays),
+            )
+            for lo, hi in bounds
+        )
         out = np.full(len(centers), np.nan)
         for i, r in self.engine.map(tasks, self.store):
             lo, hi = bounds[i]
@@ -1014,10 +1167,15 @@ def _blend_check(
     else:
         if engine.threads is not None:
             ref_settings = replace(ref_settings, workers=engine.threads)
-        ref_ctx = Context(f"level-reference/{key}/{ref_settings.workers}", _level_tracer,
-                          (slim_scene(g.opaque), ref_settings, foliage))  # fmt: skip
-        tasks = [Task(opaque_context(key, labeller, foliage, engine), _blend_kernel_task, (pts, nrm, pick, s)),
-                 Task(ref_ctx, _obscurance_task, (pts, nrm, halves(s)))]  # fmt: skip
+        ref_ctx = Context(
+            f"level-reference/{key}/{ref_settings.workers}",
+            _level_tracer,
+            (slim_scene(g.opaque), ref_settings, foliage),
+        )
+        tasks = [
+            Task(opaque_context(key, labeller, foliage, engine), _blend_kernel_task, (pts, nrm, pick, s)),
+            Task(ref_ctx, _obscurance_task, (pts, nrm, halves(s))),
+        ]
         done = dict(engine.map(tasks))
         kern, ref_two, ref_valid = done[0]["kern"], done[1]["ao"], done[1]["valid"]
     ref = w * ref_two[:, 1].astype(np.float64) + (1 - w) * ref_two[:, 0]
@@ -1084,18 +1242,26 @@ def _error_tables(deco: dict, lod: dict | None, blend_err: dict) -> dict:
         }
         out["decorators"]["instances"] = int(len(deco["coefficients"]))
     if lod is not None:
-        out["lod"] = {"rmse_vertex": float(lod["rmse_vertex"]), "rmse_least_squares": float(lod["rmse_least_squares"]),
-                      "rmse_constant": float(lod["rmse_constant"]),
-                      "holdout": int(lod["holdout"]), "radius": float(lod["radius"])}  # fmt: skip
+        out["lod"] = {
+            "rmse_vertex": float(lod["rmse_vertex"]),
+            "rmse_least_squares": float(lod["rmse_least_squares"]),
+            "rmse_constant": float(lod["rmse_constant"]),
+            "holdout": int(lod["holdout"]),
+            "radius": float(lod["radius"]),
+        }
     return out
 
 
 def bake_log_markdown(info: dict) -> str:
     """A table like Table 1 of Sloan et al. 2013 (stage, counts, seconds) plus totals and errors."""
     c = info["counts"]
-    lines = [f"Bake of {Path(info['level']).name}: {c['receiver_vertices']:,} V {c['receiver_faces']:,} F, "
-             f"{c['samples']:,} samples, {info['settings']['trace']['rays']} rays", "",
-             "| Description | Time (s) | CPU (s) | peak RSS (MiB) | reused |", "|---|---:|---:|---:|:---:|"]  # fmt: skip
+    lines = [
+        f"Bake of {Path(info['level']).name}: {c['receiver_vertices']:,} V {c['receiver_faces']:,} F, "
+        f"{c['samples']:,} samples, {info['settings']['trace']['rays']} rays",
+        "",
+        "| Description | Time (s) | CPU (s) | peak RSS (MiB) | reused |",
+        "|---|---:|---:|---:|:---:|",
+    ]
     skip = ("stage", "description", "seconds", "cpu_seconds", "reused", "peak_rss_bytes")
     for st in info["stages"]:
         extra = {k: v for k, v in st.items() if k not in skip}
@@ -1108,9 +1274,13 @@ def bake_log_markdown(info: dict) -> str:
             f"| {st['description']}{' (' + detail + ')' if detail else ''} | {st['seconds']:.2f} | "
             f"{st['cpu_seconds']:.1f} | {rss} | {'yes' if st['reused'] else ''} |"
         )
-    lines += [f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | **{info['peak_rss_bytes'] / 2**20:,.0f}** | |", "",
-              f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
-              f"on {info['cpu_count']} cores (CPU s: all threads of this process).", ""]  # fmt: skip
+    lines += [
+        f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | **{info['peak_rss_bytes'] / 2**20:,.0f}** | |",
+        "",
+        f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
+        f"on {info['cpu_count']} cores (CPU s: all threads of this process).",
+        "",
+    ]
     e = info["errors"]
     if "decorators" in e:
         d = e["decorators"]
@@ -1119,16 +1289,24 @@ def bake_log_markdown(info: dict) -> str:
             lines.append(f"| {k.replace('_', ' ')} | {d[k]['mean']:.4f} | {d[k]['max']:.4f} |")
         lines.append("")
     if "lod" in e:
-        lines += ["| LOD transfer (RMSE vs gold standard) | RMSE |", "|---|---:|",
-                  f"| resampled at LOD vertices | {e['lod']['rmse_vertex']:.4f} |",
-                  f"| least squares over resampled samples | {e['lod']['rmse_least_squares']:.4f} |",
-                  f"| (baseline: one constant) | {e['lod']['rmse_constant']:.4f} |", ""]  # fmt: skip
+        lines += [
+            "| LOD transfer (RMSE vs gold standard) | RMSE |",
+            "|---|---:|",
+            f"| resampled at LOD vertices | {e['lod']['rmse_vertex']:.4f} |",
+            f"| least squares over resampled samples | {e['lod']['rmse_least_squares']:.4f} |",
+            f"| (baseline: one constant) | {e['lod']['rmse_constant']:.4f} |",
+            "",
+        ]
     b = e["blend"]
-    lines += ["| two-distance blend | value |", "|---|---:|",
-              f"| same rays: blend of two columns vs blended-kernel trace, max abs | {b['same_rays_max_abs']:.2e} |",
-              f"| per-vertex blend vs least squares of blended samples, max abs | {b['per_vertex_blend_vs_lsq_of_blend_max_abs']:.2e} |",
-              f"| samples (blend) vs 4x-ray blended reference, RMSE | {b['samples_rmse_vs_reference']:.4f} |",
-              f"| baked vertices (blend) vs 4x-ray blended reference, RMSE | {b['bake_rmse_vs_reference']:.4f} |", ""]  # fmt: skip
+    lines += [
+        "| two-distance blend | value |",
+        "|---|---:|",
+        f"| same rays: blend of two columns vs blended-kernel trace, max abs | {b['same_rays_max_abs']:.2e} |",
+        f"| per-vertex blend vs least squares of blended samples, max abs | {b['per_vertex_blend_vs_lsq_of_blend_max_abs']:.2e} |",
+        f"| samples (blend) vs 4x-ray blended reference, RMSE | {b['samples_rmse_vs_reference']:.4f} |",
+        f"| baked vertices (blend) vs 4x-ray blended reference, RMSE | {b['bake_rmse_vs_reference']:.4f} |",
+        "",
+    ]
     return "\n".join(lines)
 
 

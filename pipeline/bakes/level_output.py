@@ -32,19 +32,31 @@ def write_outputs(
     path: Path, out: Path, g, s, solved: dict, final: np.ndarray, deco: dict, small: dict, lod: dict | None
 ) -> None:
     w = GltfWriter("neuralao level bake")
-    w.doc["extras"] = {"bake": {"blend": settings_to_dict(s.blend), "half_distances": [s.trace.half_distance_short,
-                       s.trace.half_distance_long], "rays": s.trace.rays}}  # fmt: skip
+    w.doc["extras"] = {
+        "bake": {
+            "blend": settings_to_dict(s.blend),
+            "half_distances": [s.trace.half_distance_short, s.trace.half_distance_long],
+            "rays": s.trace.rays,
+        }
+    }
     level = g.level
     rv = g.receivers.vertices
     for k, j, v0, f0 in g.static_spans:
         node = g.static_nodes[k]
         mesh = level.meshes[node.mesh]
         sl = slice(v0, v0 + len(mesh.vertices))
-        attrs = {"COLOR_0": vertex_colours(final[sl]), "_AO": final[sl], "_AO_SHORT": solved["short"][sl],
-                 "_AO_LONG": solved["long"][sl]}  # fmt: skip
+        attrs = {
+            "COLOR_0": vertex_colours(final[sl]),
+            "_AO": final[sl],
+            "_AO_SHORT": solved["short"][sl],
+            "_AO_LONG": solved["long"][sl],
+        }
         mi = w.mesh(f"{node.name}_{j}", rv[sl], g.receivers.faces[f0 : f0 + len(mesh.faces)] - v0, attrs)
-        w.node(f"{node.name}_{j}" if len(node.transforms) > 1 else node.name, mi,
-               extras={"role": "static", "source_node": node.index, "instance": j})  # fmt: skip
+        w.node(
+            f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
+            mi,
+            extras={"role": "static", "source_node": node.index, "instance": j},
+        )
     rows = _coefficient_rows(g, deco)
     written: dict[int, int] = {}
     for node in g.trees:
@@ -54,19 +66,35 @@ def write_outputs(
                 mesh.name, mesh.vertices, mesh.faces, {"_AO_LOCAL": deco[f"local_{node.mesh}"]}
             )
         t, q, sc = decompose(node.transforms)
-        w.node(node.name, written[node.mesh], extras={"role": "tree", **node.params},
-               instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO_GLOBAL": rows[node.index]})  # fmt: skip
+        w.node(
+            node.name,
+            written[node.mesh],
+            extras={"role": "tree", **node.params},
+            instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO_GLOBAL": rows[node.index]},
+        )
     for role, nodes in (("grass", g.grass), ("shrub", g.shrubs)):
         for kk, node in enumerate(nodes):
             mesh = level.meshes[node.mesh]
             t, q, sc = decompose(node.transforms)
             mi = w.mesh(mesh.name, mesh.vertices, mesh.faces)
-            w.node(node.name, mi, extras={"role": role, **node.params},
-                   instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]})  # fmt: skip
+            w.node(
+                node.name,
+                mi,
+                extras={"role": role, **node.params},
+                instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]},
+            )
     if lod is not None:
         ao = np.asarray(lod["ao_least_squares"], np.float32)
-        mi = w.mesh("lod1", lod["vertices"], lod["faces"], {"COLOR_0": vertex_colours(ao), "_AO": ao,
-                                                            "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32)})  # fmt: skip
+        mi = w.mesh(
+            "lod1",
+            lod["vertices"],
+            lod["faces"],
+            {
+                "COLOR_0": vertex_colours(ao),
+                "_AO": ao,
+                "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32),
+            },
+        )
         w.node("lod1", mi, extras={"role": "static", "lod": 1})
     w.write(path)
     shaders = decorator_shaders()

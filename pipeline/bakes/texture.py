@@ -256,8 +256,13 @@ def _factors_only(material):
     pbr = material.to_pbr() if hasattr(material, "to_pbr") else material
     pbr = pbr.copy()
     dropped = []
-    for key in ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "emissiveTexture",
-                "occlusionTexture"):  # fmt: skip
+    for key in (
+        "baseColorTexture",
+        "metallicRoughnessTexture",
+        "normalTexture",
+        "emissiveTexture",
+        "occlusionTexture",
+    ):
         if getattr(pbr, key, None) is not None:
             setattr(pbr, key, None)
             dropped.append(key)
@@ -505,8 +510,9 @@ def texture_glb_bytes(mesh: UVMesh, image: np.ndarray) -> bytes:
         material = mesh.material.to_pbr() if hasattr(mesh.material, "to_pbr") else mesh.material
         material = material.copy()
     else:
-        material = PBRMaterial(name="neuralao_ao", baseColorFactor=[255, 255, 255, 255], metallicFactor=0.0,
-                               roughnessFactor=1.0)  # fmt: skip
+        material = PBRMaterial(
+            name="neuralao_ao", baseColorFactor=[255, 255, 255, 255], metallicFactor=0.0, roughnessFactor=1.0
+        )
     material.occlusionTexture = grey
     tm = trimesh.Trimesh(
         vertices=np.asarray(mesh.vertices, np.float64),
@@ -539,9 +545,13 @@ def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
         raise NeuralaoError(f"{path} has no occlusionTexture with UVs (not a texture bake)")
     red = np.asarray(tex.convert("RGB"), np.float32)[:, :, 0] / 255.0
     mesh = UVMesh(
-        np.asarray(loaded.vertices, np.float64), np.asarray(loaded.faces, np.int64),
-        np.asarray(uv, np.float64), material, "file", path.stem,
-    )  # fmt: skip
+        np.asarray(loaded.vertices, np.float64),
+        np.asarray(loaded.faces, np.int64),
+        np.asarray(uv, np.float64),
+        material,
+        "file",
+        path.stem,
+    )
     return mesh, red
 
 

@@ -139,8 +139,13 @@ def bake_least_squares(
     t0 = time.perf_counter()
     total = settings.samples_per_vertex * len(scene.vertices)
     # The samples' arrays are allocated before anything else: their number must fit (pipeline.foundation.limits).
-    check_count("--samples-per-vertex", math.ceil(min(total, 2.0**62)) + len(scene.faces), bytes_each=SAMPLE_BYTES,
-                each="per surface sample", shown=f"{settings.samples_per_vertex:g} on {len(scene.vertices)} vertices")  # fmt: skip
+    check_count(
+        "--samples-per-vertex",
+        math.ceil(min(total, 2.0**62)) + len(scene.faces),
+        bytes_each=SAMPLE_BYTES,
+        each="per surface sample",
+        shown=f"{settings.samples_per_vertex:g} on {len(scene.vertices)} vertices",
+    )
     samples = surface_samples(scene, total, settings.samples_per_face_cap, settings.seed)
     t1 = time.perf_counter()
     ao, valid = labeller.ao_at_points(samples.points, samples.normals, progress=progress)

@@ -40,8 +40,14 @@ def method_from_bake(path: Path) -> ViewerMethod:
             uv_gltf = np.c_[uv[:, 0], 1.0 - uv[:, 1]].astype(np.float32)
             buf = io.BytesIO()
             Image.fromarray(np.rint(red * 255).astype(np.uint8), mode="L").save(buf, format="PNG")
-            return ViewerMethod(f"texture bake {red.shape[1]}x{red.shape[0]} ({path.name})", "texture", pos, nrm,
-                                uv=uv_gltf, texture=buf.getvalue())  # fmt: skip
+            return ViewerMethod(
+                f"texture bake {red.shape[1]}x{red.shape[0]} ({path.name})",
+                "texture",
+                pos,
+                nrm,
+                uv=uv_gltf,
+                texture=buf.getvalue(),
+            )
     vertices, faces, ao, _ = read_baked_mesh(path)
     pos, nrm = corner_arrays(vertices, faces)
     return ViewerMethod(
@@ -87,8 +93,10 @@ def method_from_scene_bake(path: Path) -> ViewerMethod:
         ao.append(_corners(gs, attrs, "_AO", faces, 1, 1.0)[:, 0])
         uv.append(np.zeros((len(a), 2), np.float32))
         uv_base.append(np.zeros((len(a), 2), np.float32))
-        for key, slot, out in (("occlusion", material.get("occlusionTexture"), uv),
-                               ("base", pbr.get("baseColorTexture"), uv_base)):  # fmt: skip
+        for key, slot, out in (
+            ("occlusion", material.get("occlusionTexture"), uv),
+            ("base", pbr.get("baseColorTexture"), uv_base),
+        ):
             if slot is not None:
                 part[key] = _texture_uri(gs, slot["index"])
                 out[-1] = _corners(gs, attrs, f"TEXCOORD_{slot.get('texCoord', 0)}", faces, 2, 0.0)
@@ -96,10 +104,16 @@ def method_from_scene_bake(path: Path) -> ViewerMethod:
         nrm.append(n)
         parts.append(part)
     return ViewerMethod(
-        f"scene {to} bake, {len(parts)} primitives ({path.name})", "scene", np.concatenate(pos), np.concatenate(nrm),
-        ao=np.concatenate(ao), uv=np.concatenate(uv), uv_base=np.concatenate(uv_base), parts=parts,
+        f"scene {to} bake, {len(parts)} primitives ({path.name})",
+        "scene",
+        np.concatenate(pos),
+        np.concatenate(nrm),
+        ao=np.concatenate(ao),
+        uv=np.concatenate(uv),
+        uv_base=np.concatenate(uv_base),
+        parts=parts,
         info={"bake": str(path), "to": to},
-    )  # fmt: skip
+    )
 
 
 def _corners(gs, attrs: dict, name: str, faces: np.ndarray, width: int, default: float) -> np.ndarray:
@@ -142,9 +156,13 @@ def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
     scene = load_scene(mesh_path)
     pos, nrm = corner_arrays(scene.vertices, scene.faces)
     inputs = [
-        {"sampler": i["sampler"], "unit": int(i["unit"]), "source": "position" if i["texture"] == "position" else "normal"}
+        {
+            "sampler": i["sampler"],
+            "unit": int(i["unit"]),
+            "source": "position" if i["texture"] == "position" else "normal",
+        }
         for i in manifest["passes"][0]["inputs"]
-    ]  # fmt: skip
+    ]
     blocks = [
         {"name": name, "binding": int(binding), "data": b64(np.ascontiguousarray(arr, "<f4").tobytes())}
         for name, binding, arr in shader.uniform_blocks
@@ -152,11 +170,18 @@ def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
     kind = manifest.get("kind") or top.get("kind") or "mlp"
     size = top.get("model_size") or top.get("size") or ""
     return ViewerMethod(
-        f"{kind} {size} ES 3.00 shader ({folder.name})".replace("  ", " "), "shader", pos, nrm,
-        shader={"vertex": shader.vertex_source, "fragment": shader.fragment_source, "inputs": inputs,
-                "blocks": blocks},
+        f"{kind} {size} ES 3.00 shader ({folder.name})".replace("  ", " "),
+        "shader",
+        pos,
+        nrm,
+        shader={
+            "vertex": shader.vertex_source,
+            "fragment": shader.fragment_source,
+            "inputs": inputs,
+            "blocks": blocks,
+        },
         info={"export": str(folder), "mesh": str(mesh_path), "onnx": str(folder / "model.onnx")},
-    )  # fmt: skip
+    )
 
 
 def load_method(path: str, mesh: str | None) -> ViewerMethod:

@@ -168,9 +168,11 @@ def connect(
     ``pairs``, each of which must). Sorted by (i, j)."""
     tol = _TOUCH_REL * max(diagonal, 1e-300)
     edges = []
-    candidates = pairs if pairs is not None else [
-        (i, j) for i in range(len(regions)) for j in range(i + 1, len(regions))
-    ]  # fmt: skip
+    candidates = (
+        pairs
+        if pairs is not None
+        else [(i, j) for i in range(len(regions)) for j in range(i + 1, len(regions))]
+    )
     for i, j in candidates:
         shared = _shared_boundary(regions[i], regions[j], tol)
         if shared is None:
@@ -554,11 +556,21 @@ def check_settings(s: VolumeSettings) -> None:
     check_count("iterations", s.iterations, low=0, bytes_each=64, each="an energy record of the history")
     check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
     check_count("directions", s.directions, bytes_each=256, each="per ray of one sample")
-    check_count("samples", s.samples**3, bytes_each=256 * s.directions, shown=f"{s.samples} ({s.samples**3} per region)",
-                each=f"per sample of {s.directions} directions")  # fmt: skip
+    check_count(
+        "samples",
+        s.samples**3,
+        bytes_each=256 * s.directions,
+        shown=f"{s.samples} ({s.samples**3} per region)",
+        each=f"per sample of {s.directions} directions",
+    )
     check_count("cell_rays", s.cell_rays, bytes_each=32, each="per ray of one cell")
-    check_count("grid", s.grid**3, bytes_each=64 + 32 * s.cell_rays, shown=f"{s.grid} (up to {s.grid**3} cells)",
-                each=f"per cell of {s.cell_rays} rays")  # fmt: skip
+    check_count(
+        "grid",
+        s.grid**3,
+        bytes_each=64 + 32 * s.cell_rays,
+        shown=f"{s.grid} (up to {s.grid**3} cells)",
+        each=f"per cell of {s.cell_rays} rays",
+    )
     check_count(
         "boundary_grid",
         s.boundary_grid**2,
@@ -681,13 +693,29 @@ def bake_volumes(
         },
     }
     vol = Volumes(
-        regions, edges, final, halves, s.blend, s,
-        scene={"name": scene.name, "source": scene.source, "diagonal": scene.diagonal,
-               "bounds": scene.bounds.tolist(), "faces": int(len(scene.faces))},
+        regions,
+        edges,
+        final,
+        halves,
+        s.blend,
+        s,
+        scene={
+            "name": scene.name,
+            "source": scene.source,
+            "diagonal": scene.diagonal,
+            "bounds": scene.bounds.tolist(),
+            "faces": int(len(scene.faces)),
+        },
         stats=stats,
-    )  # fmt: skip
-    return vol, {"samples": samples, "fits": fits, "grams": grams, "models_unregularised": unreg,
-                 "jumps_before": jumps_before, "jumps_after": jumps_after}  # fmt: skip
+    )
+    return vol, {
+        "samples": samples,
+        "fits": fits,
+        "grams": grams,
+        "models_unregularised": unreg,
+        "jumps_before": jumps_before,
+        "jumps_after": jumps_after,
+    }
 
 
 def _summary(jumps: np.ndarray, edges: list[Edge]) -> dict:

@@ -41,9 +41,22 @@ _log_scene = logging.getLogger("pipeline.bakes.gltf_scene")
 _log_level = logging.getLogger("pipeline.bakes.level")
 
 # Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
-_MESH_ONLY_FLAGS = ("rays", "max_distance", "kernel", "half_distance", "method", "alpha",
-                    "samples_per_vertex", "samples_per_face_cap", "seed", "workers",
-                    "to", "resolution", "margin", "uv")  # fmt: skip
+_MESH_ONLY_FLAGS = (
+    "rays",
+    "max_distance",
+    "kernel",
+    "half_distance",
+    "method",
+    "alpha",
+    "samples_per_vertex",
+    "samples_per_face_cap",
+    "seed",
+    "workers",
+    "to",
+    "resolution",
+    "margin",
+    "uv",
+)
 # Flags of the vertex bake only, and of the texture bake only (refused with the other --to).
 _VERTEX_ONLY_FLAGS = ("method", "alpha", "samples_per_vertex", "samples_per_face_cap")
 _TEXTURE_ONLY_FLAGS = ("resolution", "margin", "uv")
@@ -64,44 +77,89 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--kernel", choices=("binary", "obscurance"), default=d.kernel, help="AO kernel (default binary)"
     )
-    p.add_argument("--half-distance", type=float, default=None,
-                   help="obscurance: distance at which a hit counts half, scene units (default 0.05 x diagonal)")  # fmt: skip
-    p.add_argument("--method", choices=("vertex", "least-squares"), default=d.method,
-                   help="sample at vertices, or fit vertex values to surface samples (default least-squares)")  # fmt: skip
+    p.add_argument(
+        "--half-distance",
+        type=float,
+        default=None,
+        help="obscurance: distance at which a hit counts half, scene units (default 0.05 x diagonal)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("vertex", "least-squares"),
+        default=d.method,
+        help="sample at vertices, or fit vertex values to surface samples (default least-squares)",
+    )
     p.add_argument(
         "--alpha", type=float, default=d.alpha, help="least-squares edge regulariser weight (default 1)"
     )
-    p.add_argument("--samples-per-vertex", type=float, default=d.samples_per_vertex,
-                   help=f"least-squares surface sample budget per vertex (default {d.samples_per_vertex:g})")  # fmt: skip
-    p.add_argument("--samples-per-face-cap", type=int, default=d.samples_per_face_cap,
-                   help=f"least-squares: at most this many samples on one face (default {d.samples_per_face_cap})")  # fmt: skip
+    p.add_argument(
+        "--samples-per-vertex",
+        type=float,
+        default=d.samples_per_vertex,
+        help=f"least-squares surface sample budget per vertex (default {d.samples_per_vertex:g})",
+    )
+    p.add_argument(
+        "--samples-per-face-cap",
+        type=int,
+        default=d.samples_per_face_cap,
+        help=f"least-squares: at most this many samples on one face (default {d.samples_per_face_cap})",
+    )
     p.add_argument(
         "--seed", type=int, default=0, help="seed of sample positions and ray directions (default 0)"
     )
     p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
-    p.add_argument("--config", default=None, metavar="CONFIG.json",
-                   help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
-                        "(pipeline.bakes.level.LevelBakeSettings); --out is then a folder")  # fmt: skip
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)")  # fmt: skip
-    p.add_argument("--to", choices=("vertex", "texture"), default="vertex",
-                   help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
-                        "pipeline.bakes.texture) (default vertex)")  # fmt: skip
+    p.add_argument(
+        "--config",
+        default=None,
+        metavar="CONFIG.json",
+        help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
+        "(pipeline.bakes.level.LevelBakeSettings); --out is then a folder",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="with --config: override a level setting, e.g. trace.rays=64 (repeatable)",
+    )
+    p.add_argument(
+        "--to",
+        choices=("vertex", "texture"),
+        default="vertex",
+        help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
+        "pipeline.bakes.texture) (default vertex)",
+    )
     _add_texture_arguments(p)
-    p.add_argument("--out", required=True, metavar="OUT.ply|OUT.glb|DIR",
-                   help="output mesh with per-vertex AO (a folder with --config)")  # fmt: skip
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="OUT.ply|OUT.glb|DIR",
+        help="output mesh with per-vertex AO (a folder with --config)",
+    )
     add_engine_arguments(p, chunks=True)
 
 
 def _add_texture_arguments(p: argparse.ArgumentParser) -> None:
     """Texture-only flags (the tracing flags are the vertex bake's)."""
     d = TextureBakeSettings()
-    p.add_argument("--resolution", type=int, default=None,
-                   help=f"--to texture: texture size in texels (default {d.resolution})")  # fmt: skip
-    p.add_argument("--margin", type=int, default=None,
-                   help=f"--to texture: gutter dilated around the UV charts, texels (default {d.margin})")  # fmt: skip
-    p.add_argument("--uv", choices=("auto", "mesh", "xatlas"), default=None,
-                   help="--to texture: the mesh's UVs, an xatlas atlas, or the mesh's when usable (default auto)")  # fmt: skip
+    p.add_argument(
+        "--resolution",
+        type=int,
+        default=None,
+        help=f"--to texture: texture size in texels (default {d.resolution})",
+    )
+    p.add_argument(
+        "--margin",
+        type=int,
+        default=None,
+        help=f"--to texture: gutter dilated around the UV charts, texels (default {d.margin})",
+    )
+    p.add_argument(
+        "--uv",
+        choices=("auto", "mesh", "xatlas"),
+        default=None,
+        help="--to texture: the mesh's UVs, an xatlas atlas, or the mesh's when usable (default auto)",
+    )
 
 
 def settings_from_args(args: argparse.Namespace) -> BakeSettings:
@@ -201,8 +259,14 @@ def run_vertex(args: argparse.Namespace) -> int:
     i = result.info
     _log_vertex.info(
         "baked %s (%d vertices, %s, %d samples, %d invalid) in %.1f s -> %s",
-        scene.name, i["vertices"], i["method"], i["samples"], i["invalid_samples"], i["seconds"], out,
-    )  # fmt: skip
+        scene.name,
+        i["vertices"],
+        i["method"],
+        i["samples"],
+        i["invalid_samples"],
+        i["seconds"],
+        out,
+    )
     return 0
 
 
@@ -223,9 +287,17 @@ def run_texture(args: argparse.Namespace) -> int:
     i = result.info
     _log_texture.info(
         "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",
-        mesh.name, i["faces"], i["uv_source"], i["resolution"], i["resolution"], i["texels_covered"],
-        i["invalid_texels"], i["seconds"], out, png_path_for(out).name,
-    )  # fmt: skip
+        mesh.name,
+        i["faces"],
+        i["uv_source"],
+        i["resolution"],
+        i["resolution"],
+        i["texels_covered"],
+        i["invalid_texels"],
+        i["seconds"],
+        out,
+        png_path_for(out).name,
+    )
     return 0
 
 
@@ -238,10 +310,17 @@ def run_texture_scene(mesh: str, out: Path, settings: TextureBakeSettings) -> in
     )
     _log_scene.info(
         "baked %s (%d primitives in %d nodes, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
-        gs.path.name, sum(p.written for p in gs.pieces), len({p.node for p in gs.pieces if p.written}),
-        info["maps"], info["resolution"], info["resolution"],
-        info["texels_covered"], info["invalid_texels"], info["seconds"], out,
-    )  # fmt: skip
+        gs.path.name,
+        sum(p.written for p in gs.pieces),
+        len({p.node for p in gs.pieces if p.written}),
+        info["maps"],
+        info["resolution"],
+        info["resolution"],
+        info["texels_covered"],
+        info["invalid_texels"],
+        info["seconds"],
+        out,
+    )
     return 0
 
 
@@ -251,10 +330,17 @@ def run_level(args: argparse.Namespace) -> int:
     if getattr(args, "chunk_rays", None) is not None:
         raise NeuralaoError("--chunk-rays does not apply to a level; use --set trace.block_samples=N")
     with engine_from_args(args) as engine:
-        info = bake_level(args.mesh, settings, args.out, progress=True,
-                          engine=None if engine.name == "local" else engine)  # fmt: skip
+        info = bake_level(
+            args.mesh, settings, args.out, progress=True, engine=None if engine.name == "local" else engine
+        )
     c = info["counts"]
-    _log_level.info("baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
-                    args.mesh, c["receiver_vertices"], c["receiver_faces"], c["samples"],
-                    info["seconds_total"], args.out)  # fmt: skip
+    _log_level.info(
+        "baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
+        args.mesh,
+        c["receiver_vertices"],
+        c["receiver_faces"],
+        c["samples"],
+        info["seconds_total"],
+        args.out,
+    )
     return 0

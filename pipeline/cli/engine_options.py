@@ -11,16 +11,34 @@ from pipeline.foundation.errors import NeuralaoError
 
 def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> None:
     """--engine, --address, --ray-workers (and --chunk-rays for commands that trace point chunks)."""
-    p.add_argument("--engine", choices=("local", "ray"), default="local",
-                   help="where the work runs: this process (default) or a Ray cluster")  # fmt: skip
-    p.add_argument("--address", default=None, metavar="HOST:PORT",
-                   help="Ray cluster address (`ray start --head` prints it); 'auto': the cluster on this "
-                   "machine; default: a private local Ray instance")  # fmt: skip
-    p.add_argument("--ray-workers", type=int, default=None, metavar="N",
-                   help="Ray actors to start (default: one per CPU of the cluster)")  # fmt: skip
+    p.add_argument(
+        "--engine",
+        choices=("local", "ray"),
+        default="local",
+        help="where the work runs: this process (default) or a Ray cluster",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="HOST:PORT",
+        help="Ray cluster address (`ray start --head` prints it); 'auto': the cluster on this "
+        "machine; default: a private local Ray instance",
+    )
+    p.add_argument(
+        "--ray-workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Ray actors to start (default: one per CPU of the cluster)",
+    )
     if chunks:
-        p.add_argument("--chunk-rays", type=int, default=None, metavar="N",
-                       help=f"rays per task (default {CHUNK_RAYS}); changes scheduling, never results")  # fmt: skip
+        p.add_argument(
+            "--chunk-rays",
+            type=int,
+            default=None,
+            metavar="N",
+            help=f"rays per task (default {CHUNK_RAYS}); changes scheduling, never results",
+        )
 
 
 def engine_from_args(args: argparse.Namespace) -> Engine:

@@ -49,17 +49,28 @@ def field_of_view(args: argparse.Namespace) -> float | None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("inputs", nargs="+", metavar="[MODEL.onnx] FRAME.npz",
-                   help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
-                   "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index")  # fmt: skip
+    p.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="[MODEL.onnx] FRAME.npz",
+        help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
+        "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index",
+    )
     p.add_argument(
         "--radius", type=float, help="AO radius in scene units (U-Net; default: the frame's label radius)"
     )
-    p.add_argument("--yfov", type=float, metavar="DEG", help="vertical field of view in degrees, for frames that "
-                   "lack yfov (U-Net; replaces the frame's)")  # fmt: skip
+    p.add_argument(
+        "--yfov",
+        type=float,
+        metavar="DEG",
+        help="vertical field of view in degrees, for frames that lack yfov (U-Net; replaces the frame's)",
+    )
     p.add_argument("--yfov-rad", type=float, metavar="RAD", help="the same in radians")
-    p.add_argument("--out", required=True, help="AO image to write: .png (8-bit grey, 1 = white = open), "
-                   ".npy or .exr (float32 as computed)")  # fmt: skip
+    p.add_argument(
+        "--out",
+        required=True,
+        help="AO image to write: .png (8-bit grey, 1 = white = open), .npy or .exr (float32 as computed)",
+    )
     p.add_argument("--composite", help="also write AO over a simple shaded render (.png, .npy or .exr)")
     p.add_argument("--index", type=int, help="frame index inside a .npz of stacked frames (dataset shard)")
 
@@ -85,6 +96,12 @@ def run(args: argparse.Namespace) -> int:
     if args.composite:
         write_image(args.composite, composite(frame, ao))
     fg = foreground(frame) if ao.shape == foreground(frame).shape else np.ones(ao.shape, bool)
-    log.info("wrote %s (%dx%d, mean foreground AO %.3f)%s", args.out, ao.shape[1], ao.shape[0],
-             float(ao[fg].mean()) if fg.any() else 1.0, f" and {args.composite}" if args.composite else "")  # fmt: skip
+    log.info(
+        "wrote %s (%dx%d, mean foreground AO %.3f)%s",
+        args.out,
+        ao.shape[1],
+        ao.shape[0],
+        float(ao[fg].mean()) if fg.any() else 1.0,
+        f" and {args.composite}" if args.composite else "",
+    )
     return 0

@@ -24,8 +24,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--points", required=True, metavar="P.npy", help="(n, 3) world positions")
     p.add_argument("--normals", required=True, metavar="N.npy", help="(n, 3) normals (normalised here)")
     p.add_argument("--out", required=True, metavar="AO.npy", help="(n,) float32 AO in [0, 1]")
-    p.add_argument("--distance", choices=("blend", "short", "long"), default="blend",
-                   help="which AO: the file's blend of the two distances (default), or one of them")  # fmt: skip
+    p.add_argument(
+        "--distance",
+        choices=("blend", "short", "long"),
+        default="blend",
+        help="which AO: the file's blend of the two distances (default), or one of them",
+    )
     p.add_argument("--order", choices=tuple(ORDERS), default="quadratic", help="SH order (default quadratic)")
 
 
@@ -57,8 +61,13 @@ def run(args: argparse.Namespace) -> int:
         raise NeuralaoError(
             f"--points {args.points} has {len(points)} rows and --normals {args.normals} has {len(normals)}"
         )
-    check_count("--points", len(points), low=0, bytes_each=POINT_BYTES * len(vol.regions),
-                each=f"per point and region, {len(vol.regions)} regions")  # fmt: skip
+    check_count(
+        "--points",
+        len(points),
+        low=0,
+        bytes_each=POINT_BYTES * len(vol.regions),
+        each=f"per point and region, {len(vol.regions)} regions",
+    )
     bad = int((~np.isfinite(points).all(axis=1)).sum())
     if bad:
         raise NeuralaoError(f"points {args.points} has {bad} rows with NaN or inf")

@@ -88,9 +88,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--cameras", metavar="POSES.json", default=None, help="explicit camera poses instead of an orbit"
     )
     p.add_argument(
-        "--yfov", type=float, default=None, metavar="DEG",
+        "--yfov",
+        type=float,
+        default=None,
+        metavar="DEG",
         help="orbit vertical field of view in degrees (default 40)",
-    )  # fmt: skip
+    )
     p.add_argument("--yfov-rad", type=float, default=None, metavar="RAD", help="the same in radians")
     p.add_argument(
         "--normals", choices=("smooth", "flat"), default="smooth", help="G-buffer normals (default smooth)"

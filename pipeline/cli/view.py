@@ -15,12 +15,22 @@ log = logging.getLogger("runtime.viewer")  # the logger name users see in messag
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("inputs", nargs="+", metavar="EXPORT_OR_BAKE",
-                   help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each")  # fmt: skip
+    p.add_argument(
+        "inputs",
+        nargs="+",
+        metavar="EXPORT_OR_BAKE",
+        help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each",
+    )
     p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
     p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
-    p.add_argument("--size", type=int, nargs=2, default=[640, 480], metavar=("W", "H"),
-                   help="canvas size in pixels (default 640 480)")  # fmt: skip
+    p.add_argument(
+        "--size",
+        type=int,
+        nargs=2,
+        default=[640, 480],
+        metavar=("W", "H"),
+        help="canvas size in pixels (default 640 480)",
+    )
     p.add_argument("--serve", action="store_true", help="serve the page on http://127.0.0.1:PORT afterwards")
     p.add_argument(
         "--port", type=int, default=8000, help="port for --serve (default 8000; 0 = any free port)"

@@ -32,14 +32,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "(.obj .ply .gltf .glb .stl .off), glTF folder or test-mesh name",
     )
     p.add_argument("--out", required=True, metavar="VOLUMES.json", help="output models (JSON)")
-    p.add_argument("--regions", metavar="REGIONS.json",
-                   help="regions {'regions': [{'name', 'min', 'max'}], 'edges': [[i, j]]} (default: from free space)")  # fmt: skip
+    p.add_argument(
+        "--regions",
+        metavar="REGIONS.json",
+        help="regions {'regions': [{'name', 'min', 'max'}], 'edges': [[i, j]]} (default: from free space)",
+    )
     p.add_argument("--config", metavar="JSON", help="VolumeSettings preset (JSON object)")
     p.add_argument(
         "--glsl", metavar="DIR", help="also write the vertex-shader GLSL function and packed models here"
     )
-    p.add_argument("--order", choices=("linear", "quadratic"), default="linear",
-                   help="SH order of the GLSL function (default linear, as the paper's engine)")  # fmt: skip
+    p.add_argument(
+        "--order",
+        choices=("linear", "quadratic"),
+        default="linear",
+        help="SH order of the GLSL function (default linear, as the paper's engine)",
+    )
     add_set_option(p, "grid=12 or beta=2")
 
 
@@ -60,7 +67,13 @@ def run(args: argparse.Namespace) -> int:
     st = vol.stats
     log.info(
         "%d regions (%d edges, %d fallback), %d rays in %.1f s; boundary jump %.4f -> %.4f -> %s",
-        st["regions"], st["edges"], st["fallback_regions"], st["rays"], st["seconds"]["total"],
-        st["jump_before"]["area_weighted"], st["jump_after"]["area_weighted"], out,
-    )  # fmt: skip
+        st["regions"],
+        st["edges"],
+        st["fallback_regions"],
+        st["rays"],
+        st["seconds"]["total"],
+        st["jump_before"]["area_weighted"],
+        st["jump_after"]["area_weighted"],
+        out,
+    )
     return 0

@@ -251,10 +251,15 @@ def expand_scenes(settings: DatasetSettings) -> list[SceneSpec]:
             elif kind == "interior":
                 c = replace(c, walls=(max(c.walls[0], 3), max(c.walls[1], 3)))
             spec = SceneSpec(
-                f"{gen.prefix}-{gen.seed + i:04d}", cameras=kind, views=gen.views, yfov_deg=gen.yfov_deg,
-                split=gen.split, compose=replace(c, seed=gen.seed + i), sizes=gen.sizes,
+                f"{gen.prefix}-{gen.seed + i:04d}",
+                cameras=kind,
+                views=gen.views,
+                yfov_deg=gen.yfov_deg,
+                split=gen.split,
+                compose=replace(c, seed=gen.seed + i),
+                sizes=gen.sizes,
                 yfov_range_deg=gen.yfov_range_deg,
-            )  # fmt: skip
+            )
             specs.append(spec)
     return specs
 
@@ -636,8 +641,12 @@ def check_counts(settings: DatasetSettings, out: Path) -> None:
     check_seed("seed", settings.seed)
     check_count("frames_per_shard", settings.frames_per_shard)
     check_int_range("holdout_every", settings.holdout_every, 0, MAX_CAP)
-    check_count("composed count", sum(max(g.count, 0) for g in settings.composed) + 1, bytes_each=scene_bytes,
-                each="a scene entry")  # fmt: skip
+    check_count(
+        "composed count",
+        sum(max(g.count, 0) for g in settings.composed) + 1,
+        bytes_each=scene_bytes,
+        each="a scene entry",
+    )
     sizes = [tuple(settings.size), *(settings.sizes or [])]
     views = 0
     for item in [*settings.scenes, *settings.composed]:

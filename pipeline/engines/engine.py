@@ -250,8 +250,12 @@ class _Worker:
         try:
             state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
             if isinstance(args, tuple):
-                args = tuple(self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
-                             if isinstance(a, _SharedRef) else a for a in args)  # fmt: skip
+                args = tuple(
+                    self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
+                    if isinstance(a, _SharedRef)
+                    else a
+                    for a in args
+                )
             return fn(state, args)
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
@@ -316,8 +320,10 @@ class RayEngine(Engine):
     def _remote_args(self, args: Any, live: set[str]) -> Any:
         if not isinstance(args, tuple):
             return args
-        return tuple(_SharedRef(a.key, [self._put("shared/" + a.key, a.value, live)])
-                     if isinstance(a, Shared) else a for a in args)  # fmt: skip
+        return tuple(
+            _SharedRef(a.key, [self._put("shared/" + a.key, a.value, live)]) if isinstance(a, Shared) else a
+            for a in args
+        )
 
     def _run(self, pending):
         ray = self._ray

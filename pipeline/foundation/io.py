@@ -150,18 +150,20 @@ def write_exr(path: str | os.PathLike, image: np.ndarray) -> None:
         b"".join(names[k].encode() + b"\0" + struct.pack("<iB3xii", FLOAT, 0, 1, 1) for k in order) + b"\0"
     )
     window = struct.pack("<iiii", 0, 0, w - 1, h - 1)
-    header = b"".join([
-        struct.pack("<ii", 20000630, 2),
-        attr("channels", "chlist", chlist),
-        attr("compression", "compression", b"\0"),  # NO_COMPRESSION
-        attr("dataWindow", "box2i", window),
-        attr("displayWindow", "box2i", window),
-        attr("lineOrder", "lineOrder", b"\0"),  # INCREASING_Y
-        attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
-        attr("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
-        attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
-        b"\0",
-    ])  # fmt: skip
+    header = b"".join(
+        [
+            struct.pack("<ii", 20000630, 2),
+            attr("channels", "chlist", chlist),
+            attr("compression", "compression", b"\0"),  # NO_COMPRESSION
+            attr("dataWindow", "box2i", window),
+            attr("displayWindow", "box2i", window),
+            attr("lineOrder", "lineOrder", b"\0"),  # INCREASING_Y
+            attr("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+            attr("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
+            attr("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+            b"\0",
+        ]
+    )
     line_bytes = w * c * 4
     first = len(header) + 8 * h
     offsets = np.arange(h, dtype="<u8") * (8 + line_bytes) + first

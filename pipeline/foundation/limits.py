@@ -138,8 +138,13 @@ def check_pixels(name: str, width: object, height: object, frames: int = 1, max_
     w, h = _integer(name, width), _integer(name, height)
     if not (1 <= w <= max_side and 1 <= h <= max_side):
         raise NeuralaoError(f"{name} must be between 1 and {max_side} in each dimension, got {w} {h}")
-    check_count(name, w * h * max(frames, 1), bytes_each=PIXEL_BYTES, each="per pixel of a frame",
-                shown=f"{w} {h} ({w * h} pixels)")  # fmt: skip
+    check_count(
+        name,
+        w * h * max(frames, 1),
+        bytes_each=PIXEL_BYTES,
+        each="per pixel of a frame",
+        shown=f"{w} {h} ({w * h} pixels)",
+    )
 
 
 def check_disk(name: str, nbytes: float, folder: str | os.PathLike, shown: str) -> None:

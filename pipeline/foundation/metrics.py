@@ -110,7 +110,11 @@ def masked_flip(pred: np.ndarray, ref: np.ndarray, mask: np.ndarray, ppd: float 
     pred, ref, mask = _check(pred, ref, mask)
     as_rgb = lambda a: np.repeat(np.clip(np.where(mask, a, 1.0), 0.0, 1.0)[..., None], 3, axis=2)  # noqa: E731
     error, _, _ = flip_evaluator.evaluate(
-        as_rgb(ref).astype(np.float32), as_rgb(pred).astype(np.float32), "LDR",
-        applyMagma=False, computeMeanError=False, parameters={} if ppd is None else {"ppd": float(ppd)},
-    )  # fmt: skip
+        as_rgb(ref).astype(np.float32),
+        as_rgb(pred).astype(np.float32),
+        "LDR",
+        applyMagma=False,
+        computeMeanError=False,
+        parameters={} if ppd is None else {"ppd": float(ppd)},
+    )
     return float(np.asarray(error, np.float64).reshape(mask.shape)[mask].mean())

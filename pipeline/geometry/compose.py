@@ -407,10 +407,14 @@ def compose_parts(settings: ComposeSettings, split: str = "train", name: str | N
         parts.append((index, kind, part))
         records.append(
             Placed(
-                kind, source, (counts[0], counts[0] + len(part.vertices)), (counts[1], counts[1] + len(part.faces)),
-                placement, support,
+                kind,
+                source,
+                (counts[0], counts[0] + len(part.vertices)),
+                (counts[1], counts[1] + len(part.faces)),
+                placement,
+                support,
             )
-        )  # fmt: skip
+        )
         verts.append(part.vertices)
         faces.append(part.faces + counts[0])
         counts[0] += len(part.vertices)
@@ -440,9 +444,12 @@ def compose_parts(settings: ComposeSettings, split: str = "train", name: str | N
         offset, support, used = result
         add(item.kind, item.source, obj.moved(offset), used, support)
     scene = scene_from_arrays(
-        np.concatenate(verts), np.concatenate(faces), name or f"compose-{settings.seed}",
-        f"compose:seed={settings.seed}", drop_degenerate=False,  # parts are clean; ranges must stay valid
-    )  # fmt: skip
+        np.concatenate(verts),
+        np.concatenate(faces),
+        name or f"compose-{settings.seed}",
+        f"compose:seed={settings.seed}",
+        drop_degenerate=False,  # parts are clean; ranges must stay valid
+    )
     return Composition(scene, records, p.room, p.walls, p.ceiling)
 
 

@@ -138,12 +138,36 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     cand = np.stack(
         [
             np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1], 1 + tr], -1),
-            np.stack([1 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2], r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0], r[:, 2, 1] - r[:, 1, 2]], -1),
-            np.stack([r[:, 0, 1] + r[:, 1, 0], 1 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2], r[:, 1, 2] + r[:, 2, 1], r[:, 0, 2] - r[:, 2, 0]], -1),
-            np.stack([r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1], 1 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1], r[:, 1, 0] - r[:, 0, 1]], -1),
+            np.stack(
+                [
+                    1 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2],
+                    r[:, 0, 1] + r[:, 1, 0],
+                    r[:, 0, 2] + r[:, 2, 0],
+                    r[:, 2, 1] - r[:, 1, 2],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    r[:, 0, 1] + r[:, 1, 0],
+                    1 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2],
+                    r[:, 1, 2] + r[:, 2, 1],
+                    r[:, 0, 2] - r[:, 2, 0],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    r[:, 0, 2] + r[:, 2, 0],
+                    r[:, 1, 2] + r[:, 2, 1],
+                    1 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1],
+                    r[:, 1, 0] - r[:, 0, 1],
+                ],
+                -1,
+            ),
         ],
         axis=1,
-    )  # fmt: skip
+    )
     diag = np.stack([tr, r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]], -1)
     q = cand[np.arange(len(r)), np.argmax(diag, axis=1)]
     q /= np.linalg.norm(q, axis=1, keepdims=True)
@@ -560,8 +584,12 @@ class GltfWriter:
             view["target"] = target
         self._blob.extend(arr.astype(arr.dtype.newbyteorder("<"), copy=False).tobytes())
         self.doc["bufferViews"].append(view)
-        acc: dict[str, Any] = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": code,
-                               "count": int(arr.shape[0]), "type": kind}  # fmt: skip
+        acc: dict[str, Any] = {
+            "bufferView": len(self.doc["bufferViews"]) - 1,
+            "componentType": code,
+            "count": int(arr.shape[0]),
+            "type": kind,
+        }
         if normalized:
             acc["normalized"] = True
         if kind == "VEC3" and code == 5126 and len(arr):  # POSITION needs min / max
@@ -589,8 +617,14 @@ class GltfWriter:
         )
         return len(self.doc["meshes"]) - 1
 
-    def node(self, name: str, mesh: int | None = None, matrix: np.ndarray | None = None, extras: dict | None = None,
-             instances: dict[str, np.ndarray] | None = None) -> int:  # fmt: skip
+    def node(
+        self,
+        name: str,
+        mesh: int | None = None,
+        matrix: np.ndarray | None = None,
+        extras: dict | None = None,
+        instances: dict[str, np.ndarray] | None = None,
+    ) -> int:
         """A root node; ``instances``: EXT_mesh_gpu_instancing attributes (TRANSLATION, ROTATION,
         SCALE and custom ``_NAME`` per-instance attributes)."""
         node: dict[str, Any] = {"name": name}

@@ -66,30 +66,80 @@ class LevelGenSettings:
 
 PRESETS: dict[str, dict] = {
     "tiny": {},
-    "small": {"terrain_size": 120.0, "terrain_cells": 120, "houses": 40, "trees": 12, "shrubs": 200, "grass": 400,
-              "buildings": [{"mesh": "cornell_box", "count": 4, "scale": 3.0}, {"mesh": "sponza_partial", "count": 1, "scale": 0.01}]},
+    "small": {
+        "terrain_size": 120.0,
+        "terrain_cells": 120,
+        "houses": 40,
+        "trees": 12,
+        "shrubs": 200,
+        "grass": 400,
+        "buildings": [
+            {"mesh": "cornell_box", "count": 4, "scale": 3.0},
+            {"mesh": "sponza_partial", "count": 1, "scale": 0.01},
+        ],
+    },
     # Table 1 of Sloan et al.: 1.5M V / 1.8M F of geometry, 46 trees, 7856 shrub proxies.
-    "table1": {"terrain_size": 600.0, "terrain_cells": 660, "terrain_height": 12.0, "houses": 6000, "house_boxes": 5,
-               "trees": 46, "shrubs": 7856, "grass": 20000, "crown_subdivisions": 2,
-               "buildings": [{"mesh": "Sponza", "count": 2, "scale": 1.0}, {"mesh": "sponza_partial", "count": 2, "scale": 0.02}]},
+    "table1": {
+        "terrain_size": 600.0,
+        "terrain_cells": 660,
+        "terrain_height": 12.0,
+        "houses": 6000,
+        "house_boxes": 5,
+        "trees": 46,
+        "shrubs": 7856,
+        "grass": 20000,
+        "crown_subdivisions": 2,
+        "buildings": [
+            {"mesh": "Sponza", "count": 2, "scale": 1.0},
+            {"mesh": "sponza_partial", "count": 2, "scale": 0.02},
+        ],
+    },
     # Ten times table1: ten times the area (600 m x sqrt(10)) and of every count. Faces: terrain 2 x 2087^2 = 8.71M,
     # 60,000 houses x 5 boxes x 12 = 3.6M, 20 + 20 Sponzas 5.92M: 18.2M (table1: 0.87M + 0.36M + 0.59M = 1.82M).
-    "world10x": {"terrain_size": 1897.0, "terrain_cells": 2087, "terrain_height": 12.0, "houses": 60000, "house_boxes": 5,
-                 "trees": 460, "shrubs": 78560, "grass": 200000, "crown_subdivisions": 2,
-                 "buildings": [{"mesh": "Sponza", "count": 20, "scale": 1.0}, {"mesh": "sponza_partial", "count": 20, "scale": 0.02}]},
-}  # fmt: skip
+    "world10x": {
+        "terrain_size": 1897.0,
+        "terrain_cells": 2087,
+        "terrain_height": 12.0,
+        "houses": 60000,
+        "house_boxes": 5,
+        "trees": 460,
+        "shrubs": 78560,
+        "grass": 200000,
+        "crown_subdivisions": 2,
+        "buildings": [
+            {"mesh": "Sponza", "count": 20, "scale": 1.0},
+            {"mesh": "sponza_partial", "count": 20, "scale": 0.02},
+        ],
+    },
+}
 
 # The bake config each preset is written with (pipeline.bakes.level.LevelBakeSettings keys).
 BAKE_CONFIGS: dict[str, dict] = {
-    "tiny": {"trace": {"rays": 64, "samples_per_vertex": 2.0, "samples_per_face_cap": 4},
-             "decorators": {"samples_per_instance": 256, "holdout_samples": 256, "local_rays": 64},
-             "lod": {"target_reduction": 0.5, "holdout_samples": 400}},
+    "tiny": {
+        "trace": {"rays": 64, "samples_per_vertex": 2.0, "samples_per_face_cap": 4},
+        "decorators": {"samples_per_instance": 256, "holdout_samples": 256, "local_rays": 64},
+        "lod": {"target_reduction": 0.5, "holdout_samples": 400},
+    },
     "small": {"trace": {"rays": 128}},
-    "table1": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0}},
+    "table1": {
+        "trace": {
+            "rays": 256,
+            "samples_per_vertex": 1.25,
+            "samples_per_face_cap": 2,
+            "min_samples_per_face": 0,
+        }
+    },
     # SuperLU's fill-in at 16M vertices is out of reach: the multigrid-preconditioned solve (linear in vertices).
-    "world10x": {"trace": {"rays": 256, "samples_per_vertex": 1.25, "samples_per_face_cap": 2, "min_samples_per_face": 0,
-                           "solver": "amg"}},
-}  # fmt: skip
+    "world10x": {
+        "trace": {
+            "rays": 256,
+            "samples_per_vertex": 1.25,
+            "samples_per_face_cap": 2,
+            "min_samples_per_face": 0,
+            "solver": "amg",
+        }
+    },
+}
 
 
 # --------------------------------------------------------------------------- geometry
@@ -184,9 +234,16 @@ def house(rng: np.random.Generator, boxes: int) -> tuple[np.ndarray, np.ndarray]
 def tree_model(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     """Trunk + a crown of five overlapping leaf clusters (interpenetrating closed parts: the crown
     shades itself, which is what the per-model local AO captures)."""
-    clusters = [ellipsoid(c, r, subdivisions) for c, r in (
-        ([0, 6.2, 0], [1.6, 1.5, 1.6]), ([1.3, 5.0, 0.2], [1.3, 1.1, 1.2]), ([-1.2, 5.1, -0.4], [1.2, 1.1, 1.3]),
-        ([0.2, 4.9, 1.3], [1.2, 1.0, 1.1]), ([-0.1, 5.0, -1.4], [1.1, 1.0, 1.2]))]  # fmt: skip
+    clusters = [
+        ellipsoid(c, r, subdivisions)
+        for c, r in (
+            ([0, 6.2, 0], [1.6, 1.5, 1.6]),
+            ([1.3, 5.0, 0.2], [1.3, 1.1, 1.2]),
+            ([-1.2, 5.1, -0.4], [1.2, 1.1, 1.3]),
+            ([0.2, 4.9, 1.3], [1.2, 1.0, 1.1]),
+            ([-0.1, 5.0, -1.4], [1.1, 1.0, 1.2]),
+        )
+    ]
     return merge_parts(prism(0.3, 5.0), *clusters)
 
 
@@ -255,10 +312,12 @@ def generate(s: LevelGenSettings) -> GltfWriter:
             g.node(f"house_{i}", models[i % len(models)], matrix=m, extras={"role": "static"})
     if s.blocker_height > 0:
         h, t = s.terrain_size / 2, 2.0
-        walls = [box_soup([-h - t, -s.terrain_height * 2, -h - t], [h + t, s.blocker_height, -h]),
-                 box_soup([-h - t, -s.terrain_height * 2, h], [h + t, s.blocker_height, h + t]),
-                 box_soup([-h - t, -s.terrain_height * 2, -h], [-h, s.blocker_height, h]),
-                 box_soup([h, -s.terrain_height * 2, -h], [h + t, s.blocker_height, h])]  # fmt: skip
+        walls = [
+            box_soup([-h - t, -s.terrain_height * 2, -h - t], [h + t, s.blocker_height, -h]),
+            box_soup([-h - t, -s.terrain_height * 2, h], [h + t, s.blocker_height, h + t]),
+            box_soup([-h - t, -s.terrain_height * 2, -h], [-h, s.blocker_height, h]),
+            box_soup([h, -s.terrain_height * 2, -h], [h + t, s.blocker_height, h]),
+        ]
         g.node("blocker_walls", g.mesh("walls", *merge_parts(*walls)), extras={"role": "blocker"})
     for role, count, model, extras, margin, sink in (
         ("tree", s.trees, tree_model(s.crown_subdivisions), {"transmission": s.tree_transmission}, 6.0, 0.1),
@@ -268,8 +327,11 @@ def generate(s: LevelGenSettings) -> GltfWriter:
         if count == 0:
             continue
         pos = _scatter(rng, count, s, phases, margin, sink)
-        inst = {"TRANSLATION": pos, "ROTATION": _yaw_quats(rng, count),
-                "SCALE": np.repeat(rng.uniform(0.8, 1.25, (count, 1)), 3, axis=1)}  # fmt: skip
+        inst = {
+            "TRANSLATION": pos,
+            "ROTATION": _yaw_quats(rng, count),
+            "SCALE": np.repeat(rng.uniform(0.8, 1.25, (count, 1)), 3, axis=1),
+        }
         g.node(f"{role}s", g.mesh(role, *model), extras={"role": role, **extras}, instances=inst)
     return g
 

@@ -31,23 +31,51 @@ Split = Literal["train", "val", "test"]
 # (revision 1: every other object mesh). See object_meshes.
 ADDED: dict[int, tuple[str, ...]] = {
     # glTF props with thin parts, open shells and small objects in contact (all train)
-    2: ("Avocado", "ClearcoatWicker", "GlassBrokenWindow", "GlassHurricaneCandleHolder", "IridescenceLamp",
-        "IridescentDishWithOlives", "LightsPunctualLamp", "MosquitoInAmber", "WaterBottle"),
-}  # fmt: skip
+    2: (
+        "Avocado",
+        "ClearcoatWicker",
+        "GlassBrokenWindow",
+        "GlassHurricaneCandleHolder",
+        "IridescenceLamp",
+        "IridescentDishWithOlives",
+        "LightsPunctualLamp",
+        "MosquitoInAmber",
+        "WaterBottle",
+    ),
+}
 LATEST_POOL = max(ADDED)
 
 # Object meshes, by split (bare names under pipeline.geometry.scene.mesh_root()).
 OBJECTS: dict[str, tuple[str, ...]] = {
     "train": (
-        "bunny", "dragon", "spot", "teapot", "rocker-arm", "suzanne", "cow", "beetle",
-        "2CylinderEngine", "ReciprocatingSaw", "FlightHelmet", "BrainStem", "Spaceship",
-        "SheenChair", "GlamVelvetSofa", "StainedGlassLamp", "ToyCar", "BoomBox", "Corset",
-        "MaterialsVariantsShoe", "CesiumMan", "Fox", "BarramundiFish",
+        "bunny",
+        "dragon",
+        "spot",
+        "teapot",
+        "rocker-arm",
+        "suzanne",
+        "cow",
+        "beetle",
+        "2CylinderEngine",
+        "ReciprocatingSaw",
+        "FlightHelmet",
+        "BrainStem",
+        "Spaceship",
+        "SheenChair",
+        "GlamVelvetSofa",
+        "StainedGlassLamp",
+        "ToyCar",
+        "BoomBox",
+        "Corset",
+        "MaterialsVariantsShoe",
+        "CesiumMan",
+        "Fox",
+        "BarramundiFish",
         *ADDED[2],
     ),
     "val": ("happy_buddha", "fandisk", "AnisotropyBarnLamp", "GlassVaseFlowers", "RiggedFigure"),
     "test": ("lucy", "horse", "KnightArmor", "RetroUFO", "CesiumMilkTruck"),
-}  # fmt: skip
+}
 
 # Interiors (camera inside), by split.
 INTERIORS: dict[str, tuple[str, ...]] = {

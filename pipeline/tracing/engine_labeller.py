@@ -49,8 +49,14 @@ class EngineLabeller:
     are kept on disk (keyed by scene, settings and the chunk's points) and a rerun skips them.
     """
 
-    def __init__(self, scene: Scene, settings: LabelSettings, engine: Engine, store: ResultStore | None = None,
-                 chunk_rays: int | None = None):  # fmt: skip
+    def __init__(
+        self,
+        scene: Scene,
+        settings: LabelSettings,
+        engine: Engine,
+        store: ResultStore | None = None,
+        chunk_rays: int | None = None,
+    ):
         self.scene, self.settings, self.engine, self.store = scene, settings, engine, store
         self.chunk_rays = chunk_rays or engine.task_rays  # rays per task
         self.max_distance = positive_distance(

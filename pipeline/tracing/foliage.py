@@ -43,8 +43,23 @@ def box_triangles(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarra
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
     v = lo[:, None, :] + corners[None] * (hi - lo)[:, None, :]
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.int64)  # fmt: skip
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ],
+        np.int64,
+    )
     faces = f[None] + 8 * np.arange(len(lo))[:, None, None]
     return v.reshape(-1, 3), faces.reshape(-1, 3)
 
@@ -78,14 +93,33 @@ class Foliage:
     center (3,), scale: the opaque labeller's local frame ``(x - center) / scale``.
     """
 
-    def __init__(self, boxes_lo, boxes_hi, density, tree_vertices, tree_faces, tree_transmission, center, scale,
-                 max_hits: int = 32):  # fmt: skip
+    def __init__(
+        self,
+        boxes_lo,
+        boxes_hi,
+        density,
+        tree_vertices,
+        tree_faces,
+        tree_transmission,
+        center,
+        scale,
+        max_hits: int = 32,
+    ):
         from embreex import rtcore_scene  # measured: ~0.2 s to import; only the ray queries need it
         from embreex.mesh_construction import TriangleMesh
 
         # Kept for pickling (see __reduce__): the Embree scene is rebuilt where a copy is unpickled.
-        self._args = (boxes_lo, boxes_hi, density, tree_vertices, tree_faces, tree_transmission, center, scale,
-                      max_hits)  # fmt: skip
+        self._args = (
+            boxes_lo,
+            boxes_hi,
+            density,
+            tree_vertices,
+            tree_faces,
+            tree_transmission,
+            center,
+            scale,
+            max_hits,
+        )
         self.center, self.scale = np.asarray(center, np.float64), float(scale)
         bv, bf = box_triangles(np.reshape(boxes_lo, (-1, 3)), np.reshape(boxes_hi, (-1, 3)))
         tv = np.reshape(np.asarray(tree_vertices, np.float64), (-1, 3))

@@ -670,8 +670,12 @@ def run_chunks(
 def check_rays(name: str, rays: int, workers: int) -> int:
     """Rays per sample within what the labeller's buffers can hold: ``max(rays, chunk)`` rays per
     tracing thread plus the ray tables (pipeline.foundation.limits)."""
-    return check_count(name, rays, bytes_each=RAY_BYTES * max(int(workers), 1) + RAY_TABLE_BYTES,
-                       each=f"per ray on {workers} tracing thread(s)")  # fmt: skip
+    return check_count(
+        name,
+        rays,
+        bytes_each=RAY_BYTES * max(int(workers), 1) + RAY_TABLE_BYTES,
+        each=f"per ray on {workers} tracing thread(s)",
+    )
 
 
 def check_label_args(args) -> None:

@@ -176,8 +176,13 @@ class LevelLabeller(Labeller):
         t = np.full(len(local), np.inf)
 
         def work(lo: int, hi: int) -> None:
-            out = self.embree.run(np.ascontiguousarray(local[lo:hi]), d[lo:hi], query="INTERSECT",
-                                   dists=tl[lo:hi].copy(), output=1)  # fmt: skip
+            out = self.embree.run(
+                np.ascontiguousarray(local[lo:hi]),
+                d[lo:hi],
+                query="INTERSECT",
+                dists=tl[lo:hi].copy(),
+                output=1,
+            )
             p = out["primID"]
             hit = p >= 0
             prim[lo:hi] = np.where(hit, p, -1)
@@ -201,8 +206,13 @@ class LevelLabeller(Labeller):
         bu, bv, t = np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)
 
         def work(lo: int, hi: int) -> None:
-            out = self.embree.run(origins[lo:hi], dirs[lo:hi], query="INTERSECT",
-                                   dists=np.array(tmax[lo:hi], np.float32), output=1)  # fmt: skip
+            out = self.embree.run(
+                origins[lo:hi],
+                dirs[lo:hi],
+                query="INTERSECT",
+                dists=np.array(tmax[lo:hi], np.float32),
+                output=1,
+            )
             prim[lo:hi], bu[lo:hi], bv[lo:hi], t[lo:hi] = out["primID"], out["u"], out["v"], out["tfar"]
 
         if n:
@@ -261,8 +271,13 @@ def _resample_block_geometric(
     bary = barycentric(labeller.scene, face, points)
     vals = np.stack([interpolate(labeller.scene, cols[:, j], face, bary) for j in range(cols.shape[1])], 1)
     keep = np.isfinite(vals).all(axis=1)
-    out = np.stack([np.bincount(owner[keep], weights=(w * vals[:, j])[keep], minlength=len(centers))
-                    for j in range(cols.shape[1])], 1)  # fmt: skip
+    out = np.stack(
+        [
+            np.bincount(owner[keep], weights=(w * vals[:, j])[keep], minlength=len(centers))
+            for j in range(cols.shape[1])
+        ],
+        1,
+    )
     total = np.bincount(owner[keep], weights=w[keep], minlength=len(centers))
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(total[:, None] > 0, out / total[:, None], np.nan)
