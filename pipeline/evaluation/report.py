@@ -31,7 +31,7 @@ Methods (each one run on every frame it applies to):
   generated GLSL fragment shader on the frame's object-space normals, output clamped to [0, 1]);
 * ``field-<size>``: every exported AO field (:mod:`pipeline.models.field`), on the frames of the scene it was
   trained for: its generated GLSL fragment shader on the frame's object-space position + normal;
-* ``unet``: the exported U-Net through onnxruntime (:func:`export.unet` padding contract), every frame;
+* ``unet``: the exported U-Net through onnxruntime (:func:`runtime.predict.unet_predictor`), every frame;
   half / quarter-resolution variants (manifest metadata ``scale`` 2 / 4) are rows like any U-Net;
 * ``shipped:<name>``: the release U-Nets of ``runtime/models/`` (:mod:`runtime.shipped`), included when
   no ``--exports`` is given, or in addition with ``--shipped``: by default the ``default`` and ``fast``
@@ -44,7 +44,8 @@ ground truth is valid, averaged over frames. Time: seconds per frame at ``time_s
 all in this run: GL passes (SSAO, GTAO, the MLP fragment shader, the U-Net's generated compute
 shaders, the vertex-colour draw) on the same headless GL context, timed with ``glFinish`` around
 each frame with the G-buffer resident; traced AO as the wall time of the Embree trace on the CPU
-(``workers`` threads); onnxruntime (CPU) times of the models are reported beside the GL ones. Each
+(``workers`` threads); onnxruntime (CPU) times of the models (a whole frame through
+:mod:`runtime.predict`, input packing and clamping included) are reported beside the GL ones. Each
 scene gets a ``time_size`` G-buffer rendered from the pose of its first evaluation frame; a
 method's time is the median over scenes. Ratios: time over SSAO's time, and RMSE (and 1 - SSIM)
 over SSAO's on the same frames.
@@ -63,17 +64,16 @@ import logging
 import math
 import platform
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
-from export.field import NORMAL, POSITION, check_field_onnx, gbuffer_textures
+from export.field import gbuffer_textures
 from export.glsl import load_compute_export, load_mlp_export
-from export.mlp import INPUT, check_mlp_onnx
-from export.onnx_io import load_onnx, ort_session
-from export.unet import check_unet_onnx, composite, ort_runner, run_padded
 from pipeline import kinds
 from pipeline.bakes.vertex import BakeSettings, bake
 from pipeline.datasets.dataset import open_dataset, scene_of
@@ -89,8 +89,6 @@ from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
 from pipeline.foundation.settings import from_dict, settings_to_dict
 from pipeline.gbuffers.rasterizer import GBufferRenderer
 from pipeline.geometry.camera import Camera
-from pipeline.models.mlp import radius_zero_inputs
-from pipeline.models.unet import frame_radius_param, preprocess_frame
 from pipeline.tracing.labeller import Labeller, LabelSettings
 from runtime import gl
 from runtime.baselines import (
@@ -109,6 +107,7 @@ from runtime.glsl_runner import (
     time_mlp_fragment,
     time_vector_fragment,
 )
+from runtime.predict import PREDICTORS, Predictor
 
 log = logging.getLogger(__name__)
 
@@ -213,11 +212,13 @@ class Method:
     export: Path | None = None
     available: bool = True
     reason: str = ""
-    runner: object = None  # prepared per-frame predictor (model methods)
-    ort_runner: object = None
-    # Fields: one export per mesh, one row per size: scene -> export folder (and prepared runners).
+    # Model methods, prepared by prepare_model: the AO its error is measured on, its onnxruntime
+    # inference (runtime.predict) and the generated GLSL program that is timed.
+    predictor: Predictor | None = None
+    ort: Predictor | None = None
+    program: Any = None
+    # Fields: one export per mesh, one row per size: scene -> export folder.
     scene_exports: dict[str, Path] | None = None
-    runners: dict = field(default_factory=dict)
     scale: int = 1  # U-Nets: 1 = full resolution, 2 / 4 = run at 1/2 / 1/4 resolution
     shipped: str | None = None  # name under runtime/models when a shipped release model
 
@@ -495,17 +496,6 @@ def discover_shipped(
     return methods, summary
 
 
-def _field_method(m: Method) -> None:
-    """Every scene's shader; onnxruntime (timing only) of the first."""
-    for scene, d in sorted(m.scene_exports.items()):
-        manifest = json.loads((d / "manifest.json").read_text())
-        m.runners[scene] = load_mlp_export(d / manifest.get("glsl", "glsl"))
-        proto = load_onnx(d / manifest.get("onnx", "model.onnx"))
-        check_field_onnx(proto, d)
-        if m.ort_runner is None:
-            m.runner, m.ort_runner = m.runners[scene], ort_session(proto.SerializeToString())
-
-
 def baseline_methods(settings: ReportSettings) -> list[Method]:
     s = settings.ssao
     ssao_bytes = s.samples * 12 + s.noise_size**2 * 16
@@ -528,23 +518,81 @@ def baseline_methods(settings: ReportSettings) -> list[Method]:
     return out
 
 
+def _clamped(raw: np.ndarray, frame: dict) -> np.ndarray:
+    """Raw AO (H, W) clamped to [0, 1] on the frame's mask (NaN counts as 1), 1 on background."""
+    mask = np.asarray(frame["mask"], bool)
+    return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class GLPath:
+    """How the report runs the generated GLSL of one model kind."""
+
+    # The export's GLSL folder -> its program.
+    load: Callable[[Path], Any]
+    # (program, frame) -> raw AO (H, W) of the frame; None: the kind's error is measured with
+    # onnxruntime (its GLSL is parity-checked against onnxruntime at export).
+    run: Callable[[Any, dict], np.ndarray] | None
+    # (program, W, H, repeats) -> median seconds per frame, random content.
+    seconds: Callable[[Any, int, int, int], float]
+    # Timed repetitions of the onnxruntime inference, from ReportSettings.repeats.
+    ort_repeats: Callable[[int], int]
+    # Keyword arguments of the kind's onnxruntime predictor (runtime.predict.PREDICTORS).
+    ort_options: dict = field(default_factory=dict)
+
+
+# A U-Net frame costs ~100x an MLP's: at most 5 repetitions of each; the report's U-Nets run at the
+# frame's own size (the network's ``scale`` does any downsampling).
+GL_PATHS: dict[str, GLPath] = {
+    "mlp": GLPath(
+        load_mlp_export,
+        lambda shader, f: run_mlp_fragment(
+            shader, np.asarray(f["normal_obj"], np.float32), np.asarray(f["mask"], bool)
+        ),
+        lambda shader, w, h, n: time_mlp_fragment(shader, h, w, repeats=n),
+        lambda n: max(1, n // 3),
+    ),
+    "field": GLPath(
+        load_mlp_export,
+        lambda shader, f: run_vector_fragment(shader, gbuffer_textures(f)),
+        lambda shader, w, h, n: time_vector_fragment(shader, h, w, repeats=n),
+        lambda n: max(1, n // 3),
+    ),
+    "unet": GLPath(
+        load_compute_export,
+        None,
+        lambda program, w, h, n: time_compute(program, h, w, repeats=max(1, min(n, 5))),
+        lambda n: max(1, min(n, 5)),
+        {"internal_height": None},
+    ),
+}
+
+
+def gl_predictor(run: Callable[[Any, dict], np.ndarray], programs: dict[str, Any]) -> Predictor:
+    """``predict(frame) -> ao`` through the generated GLSL: the program of the frame's scene."""
+
+    def predict(frame: dict, radius: float | None = None) -> np.ndarray:
+        return _clamped(run(programs[frame["scene"]], frame), frame)
+
+    return predict
+
+
 def prepare_model(m: Method) -> None:
-    """Load what a model method needs once (shader objects, onnxruntime sessions); failure -> unavailable."""
+    """Load what a model method needs once (GL programs, onnxruntime predictors); failure -> unavailable.
+
+    A per-mesh row of fields holds every scene's export: every one is loaded and checked, the first
+    one's program and onnxruntime inference are timed."""
     try:
-        if m.family == "mlp":
-            manifest = json.loads((m.export / "manifest.json").read_text())
-            m.runner = load_mlp_export(m.export / manifest.get("glsl", "glsl"))
-            proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
-            check_mlp_onnx(proto, m.export)
-            m.ort_runner = ort_session(proto.SerializeToString())
-        elif m.family == "field":
-            _field_method(m)
-        elif m.family == "unet":
-            manifest = json.loads((m.export / "manifest.json").read_text())
-            proto = load_onnx(m.export / manifest.get("onnx", "model.onnx"))
-            meta = check_unet_onnx(proto, m.export)
-            m.ort_runner = (ort_runner(proto.SerializeToString()), int(meta["pad_multiple"]))
-            m.runner = load_compute_export(m.export / manifest.get("glsl", "glsl"))
+        path = GL_PATHS[m.family]
+        exports = m.scene_exports if m.scene_exports is not None else {m.scene: m.export}
+        programs: dict = {}
+        for scene, d in sorted(exports.items()):
+            manifest = json.loads((d / "manifest.json").read_text())
+            programs[scene] = path.load(d / manifest.get("glsl", "glsl"))
+            ort = PREDICTORS[m.family](d / manifest.get("onnx", "model.onnx"), **path.ort_options)
+            if m.ort is None:
+                m.program, m.ort = programs[scene], ort
+        m.predictor = m.ort if path.run is None else gl_predictor(path.run, programs)
     except Exception as e:  # a broken export must not stop the report: list it with the reason
         m.available, m.reason = (
             False,
@@ -553,48 +601,34 @@ def prepare_model(m: Method) -> None:
 
 
 def predict_model(m: Method, frame: dict, radius: float | None = None) -> np.ndarray:
-    """AO (H, W) float32 of a model method on one frame, background 1 (``radius``: the AO radius in
-    scene units, for the U-Nets that take it as an input)."""
-    mask = np.asarray(frame["mask"], bool)
-    if m.family == "mlp":
-        raw = run_mlp_fragment(m.runner, np.asarray(frame["normal_obj"], np.float32), mask)
-        return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
-    if m.family == "field":
-        raw = run_vector_fragment(m.runners[frame["scene"]], gbuffer_textures(frame))
-        return np.where(mask, np.clip(np.nan_to_num(raw, nan=1.0), 0.0, 1.0), 1.0).astype(np.float32)
-    fn, multiple = m.ort_runner
-    rho = frame_radius_param(frame, radius)
-    return composite(np.clip(run_padded(fn, preprocess_frame(frame), multiple, rho), 0.0, 1.0), frame)
+    """AO (H, W) float32 in [0, 1] of a model method on one frame, background 1 (``radius``: the AO
+    radius in scene units, given to the kinds that take it as an input)."""
+    return np.clip(m.predictor(frame, radius if kinds.KINDS[m.family].radius_input else None), 0.0, 1.0)
+
+
+def timing_inputs(size: tuple[int, int]) -> dict:
+    """A G-buffer frame of ``size`` (W, H), every pixel foreground, seeded random content: what the
+    onnxruntime timings run on (the networks' cost does not depend on content)."""
+    w, h = size
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(h, w, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return {"depth": rng.uniform(1.0, 2.0, (h, w)).astype(np.float32), "normal_cam": n, "normal_obj": n,
+            "position": rng.uniform(-1.0, 1.0, (h, w, 3)).astype(np.float32), "mask": np.ones((h, w), bool),
+            "yfov": 0.8}  # fmt: skip
 
 
 def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
     """GL and onnxruntime seconds per frame at ``size`` (W, H) (content-independent networks)."""
-    w, h = size
-    out: dict = {}
-    if m.family == "mlp":
-        out["seconds"] = time_mlp_fragment(m.runner, h, w, repeats=repeats)
-        n = np.random.default_rng(0).normal(size=(h * w, 3)).astype(np.float32)
-        x = radius_zero_inputs(n / np.linalg.norm(n, axis=1, keepdims=True))
-        out["seconds_onnxruntime"] = gl.median_frame_seconds(
-            lambda: m.ort_runner.run(None, {INPUT: x}), max(1, repeats // 3), warmup=1
-        )
-    elif m.family == "field":
-        out["seconds"] = time_vector_fragment(m.runner, h, w, repeats=repeats)
-        rng = np.random.default_rng(0)
-        p = rng.uniform(-1, 1, size=(h * w, 3)).astype(np.float32)
-        n = rng.normal(size=(h * w, 3)).astype(np.float32)
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
-        out["seconds_onnxruntime"] = gl.median_frame_seconds(
-            lambda: m.ort_runner.run(None, {POSITION: p, NORMAL: n}), max(1, repeats // 3), warmup=1
-        )
-    else:
-        out["seconds"] = time_compute(m.runner, h, w, repeats=max(1, min(repeats, 5)))
-        fn, multiple = m.ort_runner
-        x = np.random.default_rng(0).normal(size=(4, h, w)).astype(np.float32)
-        out["seconds_onnxruntime"] = gl.median_frame_seconds(
-            lambda: run_padded(fn, x, multiple, 0.1), max(1, min(repeats, 5)), warmup=1
-        )
-    return out
+    path = GL_PATHS[m.family]
+    frame = timing_inputs(size)
+    radius = 1.0 if kinds.KINDS[m.family].radius_input else None
+    return {
+        "seconds": path.seconds(m.program, *size, repeats),
+        "seconds_onnxruntime": gl.median_frame_seconds(
+            lambda: m.ort(frame, radius), path.ort_repeats(repeats), warmup=1
+        ),
+    }
 
 
 # --------------------------------------------------------------------------- per-scene context
@@ -1244,10 +1278,11 @@ def _scene_exports(methods: list[Method], scene: str) -> dict[str, str]:
     """Method name -> export folder of the per-mesh networks (MLP, field) that apply to ``scene``."""
     out = {}
     for m in methods:
-        if m.family == "field" and m.scene_exports and scene in m.scene_exports:
-            out[m.name] = str(m.scene_exports[scene])
-        elif m.family == "mlp" and m.export is not None and m.scene == scene:
-            out[m.name] = str(m.export)
+        if m.family not in kinds.KINDS or not kinds.KINDS[m.family].per_mesh:
+            continue
+        exports = m.scene_exports if m.scene_exports is not None else {m.scene: m.export}
+        if exports.get(scene) is not None:
+            out[m.name] = str(exports[scene])
     return out
 
 
