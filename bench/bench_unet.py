@@ -18,7 +18,7 @@ texel of one layer to the default block) timed in the same rounds, with their co
    background band (``export.unet.random_input``) only if rendering fails (the table says which).
 3. Per size, ``--repeats`` interleaved rounds (the order rotates each round) of
    (a) torch: ``PaddedUNet`` forward in eval mode under no_grad (pad, network, crop, as deployed);
-   (b) onnxruntime CPU session (``export.unet.ort_runner`` + ``run_padded``, as ``neuralao infer``);
+   (b) onnxruntime CPU session (``runtime.predict.ort_runner`` + ``run_padded``, as ``neuralao infer``);
    (c) the generated GLSL passes (pad, network, crop) through ``runtime.glsl_runner``'s compute runner:
        input upload, dispatch of every pass, readback, each closed by ``glFinish`` and timed apart.
    The main GLSL figure is the dispatch alone (upload and readback excluded: an engine already has
@@ -175,10 +175,10 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
     same rounds (``glsl_variants``)."""
     import torch
 
-    from export.unet import run_padded
     from pipeline.models.unet import PaddedUNet
     from runtime import gl
     from runtime.glsl_runner import _ComputeRun
+    from runtime.predict import run_padded
 
     h, w = x.shape[-2:]
     m = model.pad_multiple
@@ -574,9 +574,9 @@ def main(argv: list[str] | None = None) -> int:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from export.unet import ort_runner
     from pipeline.models.checkpoint import count_parameters
     from runtime import gl
+    from runtime.predict import ort_runner
 
     t_start = time.perf_counter()
     out = args.out

@@ -18,6 +18,7 @@ and ``OUT/evaluation.md``; with ``--write-manifest`` each U-Net's manifest gets 
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from collections.abc import Callable
@@ -26,8 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.datasets.dataset import ComposedScenes, DatasetSettings, SceneSpec, build_dataset, open_dataset
-from pipeline.evaluation.test_split import score_frame
+from pipeline.datasets.dataset import (
+    ComposedScenes,
+    DatasetSettings,
+    SceneSpec,
+    _config_dict,
+    build_dataset,
+    open_dataset,
+)
+from pipeline.evaluation.test_split import score_frame, screen_space_predictor, unet_predictor
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json, write_text
 from pipeline.foundation.settings import settings_to_dict
@@ -105,10 +113,6 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
 def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress: bool) -> None:
     """The labelled frames of one resolution: kept when ``folder`` holds a finished dataset of exactly
     this config (its manifest's config), else built or resumed by the dataset stage."""
-    import json
-
-    from pipeline.datasets.dataset import _config_dict
-
     manifest = folder / "manifest.json"
     if manifest.is_file():
         try:
@@ -150,10 +154,6 @@ def check_settings(settings: EvalSettings) -> None:
 
 def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
     """A predictor per internal-resolution policy of one U-Net export folder (onnxruntime)."""
-    import json
-
-    from pipeline.evaluation.test_split import unet_predictor
-
     manifest_path = folder / "manifest.json"
     if not manifest_path.is_file():
         raise NeuralaoError(f"{folder} is not an export folder (no manifest.json)")
@@ -182,8 +182,6 @@ def internal_height_of(policy: str, manifest: dict) -> int | None:
 
 
 def baseline_predictors() -> dict[str, Predictor]:
-    from pipeline.evaluation.test_split import screen_space_predictor
-
     return {"ssao": screen_space_predictor("ssao"), "gtao": screen_space_predictor("gtao")}
 
 
@@ -303,8 +301,6 @@ def _write_tables(
 
 def write_to_manifests(result: dict, models: list[Path]) -> None:
     """Each U-Net export's manifest gets its rows of the table (and SSAO's and GTAO's beside them)."""
-    import json
-
     for folder in models:
         path = Path(folder) / "manifest.json"
         manifest = json.loads(path.read_text())

@@ -14,25 +14,25 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.datasets.dataset import open_dataset
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
+from runtime.baselines import run_screen_space
+from runtime.predict import unet_predictor as runtime_unet_predictor
 
 # predictor(frame, radius in scene units) -> AO (H, W) float32, 1 on background
 Predictor = Callable[[dict, float], np.ndarray]
 
 
 def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = None) -> Predictor:
-    """onnxruntime inference of a U-Net export at a given radius (:func:`export.unet.frame_predictor`);
-    ``internal_height`` None runs it at the frame's own size, "model" at the height it declares."""
-    from export.unet import frame_predictor
-
-    return frame_predictor(onnx_path, internal_height)
+    """onnxruntime inference of a U-Net export at a given radius (:func:`runtime.predict.unet_predictor`);
+    ``internal_height`` None (the default here) runs it at the frame's own size, "model" at the height
+    it declares."""
+    return runtime_unet_predictor(onnx_path, internal_height)
 
 
 def screen_space_predictor(method: str, settings=None) -> Predictor:
     """SSAO / GTAO (runtime.baselines) with the label radius as their kernel radius."""
-    from runtime.baselines import run_screen_space
-
     return lambda frame, radius: run_screen_space(frame, method, radius, settings)
 
 
@@ -98,8 +98,6 @@ def evaluate_frames(
 
 def evaluate_split(data: str | Path, split: str, methods: dict[str, Predictor], max_frames: int = 0) -> dict:
     """:func:`evaluate_frames` on a dataset split (``max_frames`` > 0: every k-th frame, about that many)."""
-    from pipeline.datasets.dataset import open_dataset
-
     ds = open_dataset(data)
     if not any(e["split"] == split for e in ds.manifest["shards"]):
         raise NeuralaoError(f"dataset {data} has no {split!r} split")
