@@ -179,7 +179,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     summary = {"format": glsl_manifest.get("format"), "dialects": sorted(glsl_manifest.get("dialects", {})),
                "uniform_bytes": glsl_manifest.get("uniform_bytes")}  # fmt: skip
     manifest = per_mesh_manifest(
-        "field", out_dir, ckpt_path, ckpt, proto, OPSET, GLSL_DIR, summary, ckpt.get("metrics", {}), t0,
+        "field", out_dir, ckpt_path, ckpt, proto, GLSL_DIR, summary, ckpt.get("metrics", {}), t0,
         inputs=[{"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
                 {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"}],
         output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": metadata["output"]},

@@ -39,10 +39,21 @@ def read_manifest(d: str | Path, kind: str | None = None, label: str = "") -> di
     return manifest
 
 
-def per_mesh_manifest(kind: str, out_dir: Path, ckpt_path: Path, ckpt: dict, proto: onnx.ModelProto, opset: int,
-                      glsl_dir: str, glsl_summary: dict, metrics: dict, t0: float, **fields) -> dict:  # fmt: skip
-    """The manifest of ``out_dir`` (model.onnx and ``glsl_dir`` already written); ``fields`` go in as
-    given, after the common keys and before the provenance ones. ``t0``: perf_counter at the start."""
+def per_mesh_manifest(
+    kind: str,
+    out_dir: Path,
+    ckpt_path: Path,
+    ckpt: dict,
+    proto: onnx.ModelProto,
+    glsl_dir: str,
+    glsl_summary: dict,
+    metrics: dict,
+    t0: float,
+    **fields,
+) -> dict:
+    """The manifest of ``out_dir`` (model.onnx, exported at :data:`OPSET`, and ``glsl_dir`` already
+    written); ``fields`` go in as given, after the common keys and before the provenance ones.
+    ``t0``: perf_counter at the start."""
     return {
         "kind": kind,
         "format_version": 1,
@@ -51,7 +62,7 @@ def per_mesh_manifest(kind: str, out_dir: Path, ckpt_path: Path, ckpt: dict, pro
         "glsl": glsl_dir,
         "glsl_manifest_sha256": sha256_file(out_dir / glsl_dir / "manifest.json"),
         "glsl_summary": glsl_summary,
-        "exporter": f"torch.onnx.export(dynamo=False, opset={opset}) torch {torch.__version__}",
+        "exporter": f"torch.onnx.export(dynamo=False, opset={OPSET}) torch {torch.__version__}",
         "ops": sorted({n.op_type for n in proto.graph.node}),
         **fields,
         "model_args": ckpt["model_args"],

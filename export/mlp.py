@@ -235,7 +235,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     }
     metrics = {k: v for k, v in ckpt.get("metrics", {}).items() if k != "holdout_per_view"}
     manifest = per_mesh_manifest(
-        "mlp", out_dir, ckpt_path, ckpt, proto, OPSET, GLSL_DIR, summary, metrics, t0,
+        "mlp", out_dir, ckpt_path, ckpt, proto, GLSL_DIR, summary, metrics, t0,
         input={"name": INPUT, "shape": ["N", INPUTS], "dtype": "float32", "semantics": INPUT_DESCRIPTION},
         output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": OUTPUT_DESCRIPTION},
         metadata=metadata, model_size=size_name(model.hidden), parameters=count_parameters(model),
