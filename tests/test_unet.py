@@ -20,13 +20,13 @@ from helpers import onnx_vs_torch_tol
 from pipeline.foundation import metrics
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.tolerances import TOL
+from pipeline.models.checkpoint import count_parameters
 from pipeline.models.unet import (
     PREPROCESS_VERSION,
     PaddedUNet,
     UNet,
     UNetArgs,
     build_model,
-    count_parameters,
     model_args_dict,
     predict,
     preprocess,
