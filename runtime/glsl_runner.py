@@ -241,8 +241,8 @@ def time_vertex_colour(
     """Median seconds per frame of the plain baked-AO draw: the mesh with one float per vertex as its
     colour, depth-tested, into an RGBA8 target of the camera's size (the engine's cheapest AO).
 
-    scene : pipeline.geometry.scene.Scene; camera : pipeline.geometry.camera.Camera; ao : (n_vertices,) float32 or None
-    (then a deterministic pattern; the cost does not depend on the values).
+    scene : pipeline.geometry.scene.Scene; camera : pipeline.geometry.camera.Camera; ao : (n_vertices,)
+    float32 or None (then a deterministic pattern; the cost does not depend on the values).
     """
     ctx = gl.context()
     d = DIALECTS["glsl330"]

@@ -49,7 +49,8 @@ def model_kind(onnx_path: str | Path) -> str:
     kind = get_metadata(load_onnx(onnx_path)).get("neuralao_kind")
     if kind not in PREDICTORS:
         raise NeuralaoError(
-            f"{onnx_path}: unknown model kind {kind!r} (ONNX metadata neuralao_kind must be one of {sorted(PREDICTORS)})"
+            f"{onnx_path}: unknown model kind {kind!r} "
+            f"(ONNX metadata neuralao_kind must be one of {sorted(PREDICTORS)})"
         )
     return kind
 

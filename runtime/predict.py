@@ -68,7 +68,8 @@ def radius_array(rho: float) -> np.ndarray:
 
 
 def run_padded(fn: Runner, x: np.ndarray, pad_multiple: int, rho: float) -> np.ndarray:
-    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn(x (1, 4, H', W'), rho)``, crop -> (H, W) float32."""
+    """Pad x (4, H, W) float32 (reflect, bottom/right), run ``fn(x (1, 4, H', W'), rho)``,
+    crop -> (H, W) float32."""
     h, w = x.shape[-2:]
     y = np.asarray(fn(pad_to_multiple(x, pad_multiple)[None], float(rho)), dtype=np.float32)
     return y.reshape(y.shape[-2:])[:h, :w]
@@ -96,7 +97,8 @@ def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
         )
     if str(meta.get("preprocess_version")) != str(PREPROCESS_VERSION):
         raise NeuralaoError(
-            f"{where} expects preprocessing version {meta.get('preprocess_version')}, this neuralao has {PREPROCESS_VERSION}"
+            f"{where} expects preprocessing version {meta.get('preprocess_version')}, "
+            f"this neuralao has {PREPROCESS_VERSION}"
         )
     return meta
 
@@ -196,7 +198,8 @@ def check_mlp_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
     )
     if len(inputs) != 1 or inputs[0].name != MLP_INPUT or len(dims) != 2 or dims[1] != MLP_INPUTS:
         raise NeuralaoError(
-            f"{where}: expected one input {MLP_INPUT!r} of shape (N, {MLP_INPUTS}), found {[i.name for i in inputs]} {dims}"
+            f"{where}: expected one input {MLP_INPUT!r} of shape (N, {MLP_INPUTS}), "
+            f"found {[i.name for i in inputs]} {dims}"
         )
     return meta
 

@@ -75,8 +75,9 @@ class VolumeProbe:
         if bad.any():
             i = int(np.argmax(bad))
             raise NeuralaoError(
-                f"point {i} {p[i].tolist()} is too far from region {self.volumes.regions[r[i]].name!r} for its "
-                f"model to be evaluated ({int(bad.sum())} such point(s)): the model overflows float64 there"
+                f"point {i} {p[i].tolist()} is too far from region {self.volumes.regions[r[i]].name!r} "
+                f"for its model to be evaluated ({int(bad.sum())} such point(s)): "
+                "the model overflows float64 there"
             )
         return out
 

@@ -42,10 +42,10 @@ PREPROCESS_DESCRIPTION = {
     "depth_normalisation": "depth / mean(depth[mask]); background 0",
     "normal_space": "camera space, OpenGL convention (x right, y up, z towards the viewer), unit length, "
     "flipped to face the viewer",
-    "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and normal "
-    "(0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
-    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), R = AO "
-    "radius in scene units (the distance beyond which nothing occludes); the graph feeds the network "
+    "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and "
+    "normal (0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
+    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), "
+    "R = AO radius in scene units (the distance beyond which nothing occludes); the graph feeds the network "
     f"clip(rho / max(depth, {RADIUS_DEPTH_FLOOR:g}), 0, {RADIUS_CAP:g}) as a fifth channel",
     "radius_glsl": "uniform float u_radius (the same rho), set per frame",
     "output_name": "ao",
@@ -87,7 +87,8 @@ def preprocess(depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray) -> n
     mask = np.asarray(mask, dtype=bool)
     if depth.ndim != 2 or normal_cam.shape != depth.shape + (3,) or mask.shape != depth.shape:
         raise NeuralaoError(
-            f"G-buffer shapes do not match: depth {depth.shape}, normal_cam {normal_cam.shape}, mask {mask.shape}"
+            f"G-buffer shapes do not match: depth {depth.shape}, normal_cam {normal_cam.shape}, "
+            f"mask {mask.shape}"
         )
     scale = depth_scale(depth, mask)
     x = np.empty((4,) + depth.shape, dtype=np.float32)
@@ -146,7 +147,8 @@ def pad_amount(height: int, width: int, multiple: int) -> tuple[int, int]:
 def check_padable(height: int, width: int, multiple: int) -> None:
     if height < multiple or width < multiple:
         raise NeuralaoError(
-            f"image {width}x{height} is smaller than the U-Net's pad multiple {multiple} (reflect padding needs at least that)"
+            f"image {width}x{height} is smaller than the U-Net's pad multiple {multiple} "
+            "(reflect padding needs at least that)"
         )
 
 

@@ -7,8 +7,8 @@ Each INPUT becomes one entry of the page's method switch:
 * a **vertex bake** (``neuralao bake ... --out X.ply|X.glb``): per-vertex float AO, interpolated;
 * a **texture bake** (``neuralao bake ... --to texture --out X.glb``): the occlusionTexture sampled
   bilinearly (LINEAR, CLAMP_TO_EDGE) at the mesh's TEXCOORD_0, red channel;
-* a **scene bake** (``neuralao bake SCENE.gltf|SCENE.glb ... --out X.glb``, pipeline/bakes/gltf_scene.py): every
-  node's primitives in world space, each drawn with its material's base colour (factor x texture)
+* a **scene bake** (``neuralao bake SCENE.gltf|SCENE.glb ... --out X.glb``, pipeline/bakes/gltf_scene.py):
+  every node's primitives in world space, each drawn with its material's base colour (factor x texture)
   times its AO (``_AO`` per vertex, or the occlusionTexture on its TEXCOORD set), so the page shows the
   materials the bake kept;
 * an **MLP or field export folder** (``neuralao export``): its generated GLSL ES 3.00 fragment shader
@@ -24,13 +24,20 @@ no third-party code) draws every frame in three passes:
    triangle's side, interpolated, renormalised, negated on back faces: the project's G-buffer
    convention, pipeline/gbuffers/rasterizer.py), plus the AO of the baked methods;
 2. AO: for a shader method the generated pass; its input texture named ``position`` in the manifest
-   reads the position target, any other (``normal``, the MLP's ``gbuffer``) the normal target (xyz normal, w mask);
+   reads the position target, any other (``normal``, the MLP's ``gbuffer``) the normal target
+   (xyz normal, w mask); for a **screen-space U-Net** (``neuralao view --screen-space``) a camera-space
+   G-buffer (position, -z = linear depth, w mask; camera-space normal, as pipeline/gbuffers/rasterizer.py)
+   is read back and the model's WGSL compute passes (``wgsl.js``) run on it in WebGPU, as
+   runtime/predict.py ``unet_predictor`` does (internal height, preprocessing, joint bilateral
+   upsampling); asynchronous: a frame shows the latest finished AO. Without WebGPU the page says so and
+   the other methods still work;
 3. display: AO as grey on a dark background, to the canvas (a scene bake: base colour x AO, sRGB).
 
 An orbit camera (drag to rotate, wheel to zoom, keys 1-9 pick a method) and, for tests, a small API on
 ``window.neuralao``: ``setPose(azimuth_deg, elevation_deg, distance_in_diagonals)``, ``setMethod(i)`` and
 ``capture()``, which renders and returns the float targets (position, normal, AO; bottom row first) as
-base64 float32. All data (geometry, textures, shader sources, weights) is inlined as base64 in
+base64 float32, and ``captureNetwork()``, a promise of the U-Net's camera-space G-buffer and AO. All
+data (geometry, textures, shader sources, weights) is inlined as base64 in
 ``scene.js``, so the page works from ``file://`` as well as over ``--serve``.
 """
 
@@ -53,7 +60,7 @@ from pipeline.foundation.io import write_text
 log = logging.getLogger(__name__)
 
 ASSETS = Path(__file__).resolve().parent / "viewer"
-STATIC_FILES = ("index.html", "viewer.js")
+STATIC_FILES = ("index.html", "viewer.js", "wgsl.js")
 FORMAT = "neuralao-viewer"
 FORMAT_VERSION = 1
 
@@ -70,6 +77,9 @@ class ViewerMethod:
     uv_base   : (3m, 2) float32 glTF UVs of the base colour textures (scene bakes) or None
     parts     : scene bakes: one draw per primitive, {"first", "count", "factor" (RGBA base colour
                 factor), "base" / "occlusion" (PNG or JPEG data URIs, or absent)}; None otherwise
+    network   : screen-space U-Nets: {"manifest", "sources" (a WGSL compute export), "weights" (base64),
+                "internal_height" (rows or None), "radius" (scene units), "upsample" (UpsampleSettings
+                fields), "model"}; None otherwise
     """
 
     name: str
@@ -83,6 +93,7 @@ class ViewerMethod:
     info: dict = field(default_factory=dict)
     uv_base: np.ndarray | None = None
     parts: list[dict] | None = None
+    network: dict | None = None
 
 
 # --------------------------------------------------------------------------- geometry
@@ -139,6 +150,8 @@ def scene_payload(methods: list[ViewerMethod], size: tuple[int, int]) -> dict:
             e["uv_base"] = b64(m.uv_base.astype("<f4").tobytes())
         if m.shader is not None:
             e["shader"] = m.shader
+        if m.network is not None:
+            e["network"] = m.network
         e["info"] = m.info
         out.append(e)
     return {

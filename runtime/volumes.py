@@ -163,7 +163,8 @@ def to_json(vol: Volumes) -> dict:
         "blend": vol.blend,
         "sh": {
             "count": sh.QUADRATIC,
-            "basis": "real SH, order Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22 (pipeline/foundation/sh.py)",
+            "basis": "real SH, order Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22 "
+            "(pipeline/foundation/sh.py)",
             "space": "AO: clamped cosine applied, AO_d(n) = sum_j f_dj Y_j(n) for a unit normal n",
         },
         "terms": list(TERMS),

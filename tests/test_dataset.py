@@ -1,4 +1,5 @@
-"""Dataset stage: same config -> same hash; an interrupted run resumes to the same bytes; corrupt shards are caught."""
+"""Dataset stage: same config -> same hash; an interrupted run resumes to the same bytes; corrupt shards are
+caught."""
 
 from __future__ import annotations
 

@@ -415,7 +415,7 @@ def test_upsample(mode, scales, opset):
     _check(model, _x())
 
 
-# ----------------------------------------------------------------------------- refusals name op, node, attribute
+# -------------------------------------------------------------------------- refusals name op, node, attribute
 
 
 def _error(model, *needles):
@@ -460,7 +460,7 @@ def test_refused_global_pool_on_padded_dynamic_input():
     _error(_model(nodes, in_shape=(1, C, "H", "W")), "GlobalAveragePool", "gap", "pad_multiple")
 
 
-# ----------------------------------------------------------------------------- constant folding (shape arithmetic)
+# ------------------------------------------------------------------------ constant folding (shape arithmetic)
 
 
 def _const(name, value):
@@ -495,7 +495,8 @@ def test_pad_with_pads_computed_as_torch_writes_them():
 
 
 def test_resize_to_a_static_shape_read_with_shape_gather_unsqueeze():
-    """F.interpolate(pooled, size=x.shape[2:]) on a static input: Shape, Gather, Unsqueeze, Squeeze, Concat."""
+    """F.interpolate(pooled, size=x.shape[2:]) on a static input: Shape, Gather, Unsqueeze, Squeeze,
+    Concat."""
     nodes = [
         oh.make_node("AveragePool", ["x"], ["a"], name="pool", kernel_shape=[2, 2], strides=[2, 2]),
         oh.make_node("Shape", ["x"], ["shp"], name="shape"),

@@ -324,7 +324,8 @@ def test_torchvision_style_cnn(tmp_path):
 
 def test_onnx_vs_torch_rule_scales_with_the_values(tmp_path):
     """The tolerance admits the 1.14e-5 measured on an AMD EPYC for the CNN above because its outputs reach
-    18.1, not by slack (at magnitude 1 the same depth allows less), and still rejects a 1e-3 relative error."""
+    18.1, not by slack (at magnitude 1 the same depth allows less), and still rejects a 1e-3 relative
+    error."""
     module, path = _seeded(SmallResNet(), 0), tmp_path / "model.onnx"
     _torch_onnx(module, path, (16, 16))
     x = np.random.default_rng(1).normal(size=(1, 3, 32, 40)).astype(np.float32)  # the input of that test

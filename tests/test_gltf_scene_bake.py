@@ -7,7 +7,8 @@ binary AO is P(cos(theta) <= h / R) = (h / R)^2 wherever the disk of radius sqrt
 point lies inside the other plane. Each plane alone is open (AO 1): a bake that traced the nodes
 one by one, or ignored a node's transform, is off by O(1).
 
-The scenes are written here as glTF (pipeline.geometry.level_files.GltfWriter), nothing is copied from shared/.
+The scenes are written here as glTF (pipeline.geometry.level_files.GltfWriter), nothing is copied from
+shared/.
 """
 
 from __future__ import annotations
@@ -70,8 +71,8 @@ def cube(half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def write_gltf(path, meshes: list[dict], nodes: list[dict], roots: list[int], materials=(), images=()):
-    """A glTF from parts. meshes: [{"name", "primitives": [{"v", "f", "uv"?, "colour"?, "material"?}]}]; nodes:
-    glTF node dicts as they are; images: PNG bytes, one texture each (embedded in .glb, files beside a
+    """A glTF from parts. meshes: [{"name", "primitives": [{"v", "f", "uv"?, "colour"?, "material"?}]}];
+    nodes: glTF node dicts as they are; images: PNG bytes, one texture each (embedded in .glb, files beside a
     .gltf). Returns the path."""
     w = GltfWriter("neuralao tests")
     for m in meshes:

@@ -2,8 +2,8 @@
 
 Same Gaussian window (sigma 1.5, truncate 3.5 -> 11 taps), K1 = 0.01, K2 = 0.03, data range 1,
 population covariance. The two differ only in the border: scikit-image pads by reflection and drops
-the outer (11 - 1) / 2 = 5 pixels from its mean, pipeline.foundation.metrics replicates the edge and keeps them.
-So the per-pixel maps must agree to rounding in the interior, and the whole-image means by no more
+the outer (11 - 1) / 2 = 5 pixels from its mean, pipeline.foundation.metrics replicates the edge and keeps
+them. So the per-pixel maps must agree to rounding in the interior, and the whole-image means by no more
 than what the border band can move.
 """
 

@@ -338,7 +338,8 @@ def test_bake_driver_killed_resumes_to_same_bytes(cluster, local_bake, tmp_path)
 def test_local_engine_never_imports_ray(tmp_path, config_file):
     code = (
         "import sys; from pipeline.cli.main import main; "
-        f"assert main(['dataset', {str(config_file)!r}, '--out', {str(tmp_path / 'ds')!r}, '--no-progress']) == 0; "
+        f"assert main(['dataset', {str(config_file)!r}, '--out', {str(tmp_path / 'ds')!r}, "
+        "'--no-progress']) == 0; "
         f"assert main(['bake', 'spot', '--rays', '8', '--out', {str(tmp_path / 'a.ply')!r}]) == 0; "
         "assert 'ray' not in sys.modules, 'ray was imported'"
     )

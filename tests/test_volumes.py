@@ -178,7 +178,8 @@ def test_box_room_is_brightest_at_the_centre_and_darkens_towards_every_wall():
                 )
                 ref += (vol.blend if k else 1 - vol.blend) * lab.ao_at_points(pts, facing)[0]
             assert (np.diff(ref) < 0).all()
-            # piecewise-linear in position: AO curves near a wall (measured max 0.080 at 0.25 from it, mean 0.039)
+            # piecewise-linear in position: AO curves near a wall
+            # (measured max 0.080 at 0.25 from it, mean 0.039)
             assert np.abs(ao - ref).max() < 0.1 and np.abs(ao - ref).mean() < 0.05
 
 

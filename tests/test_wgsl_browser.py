@@ -49,7 +49,8 @@ window.__nao = null;
                                      new Float32Array(dec(xB64)), w, h, scalars, false);
   const u8 = new Uint8Array(out.buffer);
   let s = "";
-  for (let i = 0; i < u8.length; i += 0x8000) s += String.fromCharCode.apply(null, u8.subarray(i, i + 0x8000));
+  for (let i = 0; i < u8.length; i += 0x8000) \
+s += String.fromCharCode.apply(null, u8.subarray(i, i + 0x8000));
   return errors.length ? { error: errors[0] } : { out: btoa(s) };
 })().then(r => { window.__nao = r; }, e => { window.__nao = { error: String(e) }; });
 """

@@ -90,7 +90,8 @@ def cross_compile(source: str) -> dict[str, str]:
 
 
 def validate_hlsl(source: str) -> None:
-    """Compile HLSL compute ``source`` (entry ``main``) with glslang's HLSL front end; NeuralaoError on failure."""
+    """Compile HLSL compute ``source`` (entry ``main``) with glslang's HLSL front end; NeuralaoError on
+    failure."""
     if shutil.which("glslangValidator") is None:
         raise NeuralaoError("glslangValidator is not installed (apt-get install glslang-tools)")
     with tempfile.TemporaryDirectory(prefix="nao_hlsl_") as tmp:

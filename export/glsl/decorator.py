@@ -86,6 +86,8 @@ def manifest() -> dict:
             "i_scale": "SCALE",
             "i_ao_global": "_AO_GLOBAL",
         },
-        "model": "v_ao = clamp(a_local_ao * (g.x + dot(g.yzw, p_world - i_translation)), 0, 1), g = i_ao_global",
+        "model": (
+            "v_ao = clamp(a_local_ao * (g.x + dot(g.yzw, p_world - i_translation)), 0, 1), g = i_ao_global"
+        ),
         "outputs": ["v_ao", "v_world"],
     }

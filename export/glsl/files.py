@@ -131,9 +131,10 @@ def write_compute_export(
             "how": "GLSL -> SPIR-V (glslangValidator -G, SSBO bindings shifted by "
             f"{PARAMS_REGISTER_SHIFT}) -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / "
             f"--msl --msl-version {MSL_VERSION}",
-            "hlsl": "entry main, [numthreads] as local_size; input i: Texture2DArray t<i> (+ SamplerState s<i>, "
-            f"unused: Load only); output: RWTexture2DArray u0; params: ByteAddressBuffer t{PARAMS_REGISTER_SHIFT}"
-            " at the pass's weights.bin range; u_flip_y / scalar uniforms: $Globals cbuffer",
+            "hlsl": "entry main, [numthreads] as local_size; input i: Texture2DArray t<i> "
+            "(+ SamplerState s<i>, unused: Load only); output: RWTexture2DArray u0; params: "
+            f"ByteAddressBuffer t{PARAMS_REGISTER_SHIFT} at the pass's weights.bin range; "
+            "u_flip_y / scalar uniforms: $Globals cbuffer",
             "msl": "kernel main0; output texture(0), input i texture(i + 1); the params (device) and uniform "
             "(constant) buffers take [[buffer(k)]] in declaration order: see main0's signature",
             "validated": "HLSL compiled back by glslang's HLSL front end" if validate else "not validated",

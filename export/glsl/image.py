@@ -41,7 +41,8 @@ from export.glsl.views import (
 )
 from pipeline.foundation.errors import NeuralaoError
 
-# Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS, GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
+# Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS,
+# GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
 MAX_TEXTURE_SIZE = 16384
 MAX_ARRAY_LAYERS = 2048
 MAX_PARAM_BYTES = 1 << 27
@@ -155,10 +156,10 @@ class Pass:
 
     index: int
     # pad | crop | conv | conv_depthwise | conv_transpose | pool_avg | pool_max | global_pool_avg |
-    # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary | spatial_pad |
-    # uniform (a scalar graph input: writes uniform float fields["uniform"] to a 1x1 texture) | gather (a view
-    # materialised: DepthToSpace, channel shuffles) | reduce | moments (mean and 1/std per group) | normalize |
-    # softmax | lrn | pool_lp | global_pool_lp
+    # global_pool_max | resize_linear | resize_nearest | resize_filter | concat | elementwise | binary |
+    # spatial_pad | uniform (a scalar graph input: writes uniform float fields["uniform"] to a 1x1
+    # texture) | gather (a view materialised: DepthToSpace, channel shuffles) | reduce | moments (mean
+    # and 1/std per group) | normalize | softmax | lrn | pool_lp | global_pool_lp
     kind: str
     ops: list[str]
     inputs: list[Texture]
@@ -216,8 +217,8 @@ def _split_inputs(graph: OnnxGraph) -> tuple[onnx.ValueInfoProto, list[onnx.Valu
     if len(images) > 1:
         vi = images[1]
         raise NeuralaoError(
-            f"graph input {vi.name!r} of shape {shape_dims(vi) or 'unknown'}: the image target takes one image "
-            f"input ({image.name!r}) and single-element scalars ((1, 1, 1, 1), (1,) or ()) as uniforms"
+            f"graph input {vi.name!r} of shape {shape_dims(vi) or 'unknown'}: the image target takes one "
+            f"image input ({image.name!r}) and single-element scalars ((1, 1, 1, 1), (1,) or ()) as uniforms"
         )
     return image, [vi for vi in inputs if vi is not image]
 
@@ -253,7 +254,8 @@ def _group_dense(w: np.ndarray, group: int) -> np.ndarray:
 
 
 def _constant_binary(op: str, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Arithmetic on two constants (exporters emit shape arithmetic): numpy; ONNX integer division truncates."""
+    """Arithmetic on two constants (exporters emit shape arithmetic): numpy; ONNX integer division
+    truncates."""
     if op == "Div" and np.issubdtype(a.dtype, np.integer) and np.issubdtype(b.dtype, np.integer):
         return np.fix(a / b).astype(np.result_type(a, b))
     return {"Add": np.add, "Sub": np.subtract, "Mul": np.multiply, "Div": np.divide}[op](a, b)
@@ -1822,7 +1824,8 @@ class ImageOps(OpTable):
         t = data.parts[0] if isinstance(data, ConcatValue) else self.image(data, "data")  # no concat pass
         if self.scalar_ranks.get(t.ident, 4) != 4:
             raise self.fail(
-                f"Shape of the rank-{self.scalar_ranks[t.ident]} scalar input {t.onnx_name!r} cannot be folded"
+                f"Shape of the rank-{self.scalar_ranks[t.ident]} scalar input {t.onnx_name!r} "
+                "cannot be folded"
             )
         if t.height.scale != 0 or t.width.scale != 0:
             raise self.fail(
@@ -2687,12 +2690,14 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             }
             if p.kind == "conv_depthwise":
                 entry["params"]["layout"] = (
-                    "weight: vec4 per (layer, ky, kx), lane r = W[4*layer + r, 0, ky, kx]; bias: vec4 per layer"
+                    "weight: vec4 per (layer, ky, kx), lane r = W[4*layer + r, 0, ky, kx]; "
+                    "bias: vec4 per layer"
                 )
             elif p.kind in CONV_KINDS:
                 entry["params"]["layout"] = (
                     "weight: mat4 per (out_layer, ky, kx, in_layer) = 4 vec4 columns; column c = input lane, "
-                    "row r = output lane: W[4*out_layer + r, channel(in_layer, c), ky, kx]; bias: vec4 per out_layer"
+                    "row r = output lane: W[4*out_layer + r, channel(in_layer, c), ky, kx]; "
+                    "bias: vec4 per out_layer"
                     + (
                         "; ConvTranspose as a gather: W[m, c] = ONNX W[c, m] per group"
                         if p.kind == "conv_transpose"
@@ -2772,6 +2777,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "range_alignment": PARAM_ALIGN,
         },
         "passes": passes,
-        "barrier": "glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT) after each pass",
+        "barrier": "glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT) "
+        "after each pass",
         "source_model_metadata": dict(graph.metadata),
     }

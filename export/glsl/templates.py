@@ -249,7 +249,8 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
 # source short (the compiler inlines them).
 _T["compute_pass_block"] = """${header}
 // neuralao compute pass ${pass_index}: ${summary}
-// One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) from layer ${block_layers} * gid.z.
+// One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) \
+from layer ${block_layers} * gid.z.
 layout(local_size_x = ${local_x}, local_size_y = ${local_y}, local_size_z = 1) in;
 
 ${prelude}
@@ -349,7 +350,8 @@ _T["conv_depthwise_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
             if (ix < 0 || ix >= in_size.x) {
                 continue;
             }
-            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * \
+texelFetch(src0, ivec3(ix, iy, gid.z), 0);
         }
     }"""
 
@@ -425,11 +427,13 @@ _T["coord_pytorch_half_pixel"] = "(${len_out} > 1.0 ? nao_div(${x} + 0.5, ${scal
 _T["coord_align_corners"] = "(${len_out} > 1.0 ? nao_div(${x} * (${len_in} - 1.0), ${len_out} - 1.0) : 0.0)"
 _T["coord_asymmetric"] = "nao_div(${x}, ${scale})"
 _T["coord_half_pixel_symmetric"] = (
-    "(${len_in} * 0.5 * (1.0 - nao_div(${len_out}, ${scale} * ${len_in})) + nao_div(${x} + 0.5, ${scale}) - 0.5)"
+    "(${len_in} * 0.5 * (1.0 - nao_div(${len_out}, ${scale} * ${len_in})) + "
+    "nao_div(${x} + 0.5, ${scale}) - 0.5)"
 )
 # tf_crop_and_resize: roi start / end literals of this axis, in onnxruntime's operation order.
 _T["coord_tf_crop_and_resize"] = (
-    "(${len_out} > 1.0 ? ${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - ${start}) * (${len_in} - 1.0), "
+    "(${len_out} > 1.0 ? ${start} * (${len_in} - 1.0) + "
+    "nao_div(${x} * (${end} - ${start}) * (${len_in} - 1.0), "
     "${len_out} - 1.0) : 0.5 * (${start} + ${end}) * (${len_in} - 1.0))"
 )
 _T["scale_literal"] = "${value}"
@@ -886,7 +890,8 @@ _W["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
 
 _W["compute_pass_block"] = """${header}
 // neuralao compute pass ${pass_index}: ${summary}
-// One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) from layer ${block_layers} * gid.z.
+// One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) \
+from layer ${block_layers} * gid.z.
 
 ${prelude}
 
@@ -929,7 +934,8 @@ ${acc_init}
     for (var ky: i32 = 0; ky < ${kh}; ky++) {
         for (var kx: i32 = 0; kx < ${kw}; kx++) {
             let tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
-            let qb = base * vec2<i32>(${sx}, ${sy}) + vec2<i32>(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
+            let qb = base * vec2<i32>(${sx}, ${sy}) + \
+vec2<i32>(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
 ${coords}
 ${input_loops}
         }
@@ -979,7 +985,8 @@ _W["conv_depthwise_body"] = """    let in_size = nao_size(src0);
             if (ix < 0 || ix >= in_size.x) {
                 continue;
             }
-            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
+            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * \
+nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
         }
     }"""
 
@@ -1036,7 +1043,8 @@ _W["coord_align_corners"] = (
     "select(0.0, nao_div(${x} * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
 )
 _W["coord_tf_crop_and_resize"] = (
-    "select(0.5 * (${start} + ${end}) * (${len_in} - 1.0), ${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - "
+    "select(0.5 * (${start} + ${end}) * (${len_in} - 1.0), "
+    "${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - "
     "${start}) * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
 )
 _W["float_of"] = "f32(${v})"
@@ -1134,7 +1142,8 @@ _W["fetch_pixel"] = "nao_fetch(${src}, vec3<i32>(0, 0, gid.z))"
 _W["fetch_channel"] = "nao_fetch(${src}, vec3<i32>(gid.xy, 0)).xxxx"
 _W["fetch_scalar"] = "nao_fetch(${src}, vec3<i32>(0)).xxxx"
 _W["binary_guard_div"] = (
-    "    b = select(vec4<f32>(1.0), b, vec4<i32>(4 * gid.z) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
+    "    b = select(vec4<f32>(1.0), b, "
+    "vec4<i32>(4 * gid.z) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
 )
 
 _W["spatial_pad_body"] = """    let in_size = nao_size(src0);
@@ -1385,5 +1394,6 @@ def fill(template: str, /, **fields: object) -> str:
 
 
 def fill_wgsl(template: str, /, **fields: object) -> str:
-    """Fill the WGSL template named ``template`` (a WGSL override, or a GLSL template listed as valid WGSL)."""
+    """Fill the WGSL template named ``template`` (a WGSL override, or a GLSL template listed as valid
+    WGSL)."""
     return fill_from(WGSL_TEMPLATES, template, "WGSL", **fields)

@@ -455,7 +455,8 @@ def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
                     (
                         wname,
                         tiles[j0 * in4 * 4 : j1 * in4 * 4],
-                        f"mat4 tiles of W (out, in) rows {4 * j0}..{4 * j1 - 1}: tile (j - {j0}) * {in4} + i = "
+                        f"mat4 tiles of W (out, in) rows {4 * j0}..{4 * j1 - 1}: "
+                        f"tile (j - {j0}) * {in4} + i = "
                         f"W[4j..4j+3, 4i..4i+3] column-major (column c = input lane 4i + c)",
                         "mat4",
                     )
@@ -480,7 +481,8 @@ def _assign_blocks(table: VectorOps) -> list[UniformBlock]:
             op.chunks = [(j0, j1, w, b, where[w]) for j0, j1, w, b, _ in op.chunks]
     if len(blocks) > MAX_FRAGMENT_UNIFORM_BLOCKS:
         raise NeuralaoError(
-            f"the network needs {len(blocks)} uniform blocks; the portable limit is {MAX_FRAGMENT_UNIFORM_BLOCKS}"
+            f"the network needs {len(blocks)} uniform blocks; "
+            f"the portable limit is {MAX_FRAGMENT_UNIFORM_BLOCKS}"
         )
     return blocks
 
@@ -661,8 +663,8 @@ def generate_mlp_fragment(
     """Baked-MLP fragment shader from an ONNX graph (N, 3k) -> (N, m<=4), k normals repeated.
 
     The shader reads the object-space normal (xyz) and a mask (w >= 0.5: foreground) from an
-    RGBA32F G-buffer texture "gbuffer" (unit 0, sampler ``u_tex0``), feeds the normal k times (radius zero, as in
-    Erra et al.), evaluates the network and writes its m outputs to ``o_result`` (location 0);
+    RGBA32F G-buffer texture "gbuffer" (unit 0, sampler ``u_tex0``), feeds the normal k times (radius zero, as
+    in Erra et al.), evaluates the network and writes its m outputs to ``o_result`` (location 0);
     background pixels get 1. ``fold_repeated_input`` folds the k column blocks of the first layer
     into one (out, 3) matrix (same function, k times fewer multiply-adds); False keeps the literal
     network. ``weights``: see :func:`generate_vector_fragment` (uniform blocks are <= 16384 bytes each).
@@ -691,8 +693,9 @@ def generate_vector_fragment(
 
     ``bindings`` maps each graph input to channels of a named RGBA32F texture (unit = the texture's
     order of first appearance, sampler ``u_tex<unit>``: texture and ONNX names stay in the manifest,
-    never in shader source); the first texture's w is the foreground mask (>= 0.5). None: the baked-MLP layout (see :func:`generate_mlp_fragment`).
-    Background pixels get 1; the m outputs go to ``o_result`` (location 0).
+    never in shader source); the first texture's w is the foreground mask (>= 0.5). None: the baked-MLP
+    layout (see :func:`generate_mlp_fragment`). Background pixels get 1; the m outputs go to ``o_result``
+    (location 0).
     """
     d = get_dialect(dialect)
     graph = read_graph(model, max_inputs=1 if bindings is None else 8)
@@ -709,13 +712,19 @@ def generate_vector_fragment(
     input_width = table.input.width
     folded = _fold_repeated_input(table) if fold_repeated_input else False
     if not description and bindings is None:
-        description = f"neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed {table.repeats} times."
+        description = (
+            "neuralao baked-MLP AO (Erra et al.): per pixel, the object-space normal fed "
+            f"{table.repeats} times."
+        )
     elif not description:  # inputs by position: their names stay in the manifest
         units = [
             f"#{i} = unit {table.textures.index(b.texture)}.{b.channels}"
             for i, b in enumerate(table.bindings.values())
         ]
-        description = f"neuralao per-pixel network ({kind}): inputs {', '.join(units)} (names: manifest network.bindings)"
+        description = (
+            f"neuralao per-pixel network ({kind}): inputs {', '.join(units)} "
+            "(names: manifest network.bindings)"
+        )
     blocks = _assign_blocks(table)
     if weights not in ("auto", "uniform", "constant"):
         raise NeuralaoError(f"weights must be auto, uniform or constant, got {weights!r}")
@@ -825,7 +834,8 @@ def _mlp_manifest(
                 "outputs": [{"texture": "ao", "location": 0}],
                 "uniform_blocks": [b["name"] for b in ubo],
                 "uniforms": {
-                    "u_loop_guard": "int, leave at its default 0 (keeps the large layers' loops rolled; see the shader)"
+                    "u_loop_guard": "int, leave at its default 0 "
+                    "(keeps the large layers' loops rolled; see the shader)"
                 },
             }
         ],
@@ -838,8 +848,9 @@ def _mlp_manifest(
             },
         },
         "uniform_blocks": ubo,
-        "uniform_block_rule": f"std140, vec4 / mat4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes (the portable "
-        "GL_MAX_UNIFORM_BLOCK_SIZE); glsl330/es300 bind with glUniformBlockBinding(name -> binding)",
+        "uniform_block_rule": f"std140, vec4 / mat4 arrays, every block <= {MAX_UNIFORM_BLOCK_BYTES} bytes "
+        "(the portable GL_MAX_UNIFORM_BLOCK_SIZE); glsl330/es300 bind with "
+        "glUniformBlockBinding(name -> binding)",
         "uniform_bytes": int(sum(b.nbytes for b in blocks)),
         "parameter_bytes_fp32": param_bytes,
         "network": {

@@ -200,10 +200,12 @@ def write_volume_glsl(vol, out_dir: str | Path, order: str = "linear") -> dict:
         "half_distances": list(vol.half_distances),
         "models": {"file": "models.bin", "dtype": "float32-le", "shape": list(packed.shape)},
         "bytes_per_region": int(packed[0].nbytes),
-        "layout": "[0].xyz centre; [1 + 7k + t] chunk k of term t (mean,+x,-x,+y,-y,+z,-z), SH constants folded in",
+        "layout": "[0].xyz centre; [1 + 7k + t] chunk k of term t (mean,+x,-x,+y,-y,+z,-z), "
+        "SH constants folded in",
         "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in vol.regions],
-        "temporal_blend": "engine side, per object and frame: linearise target and previous state at the object's "
-        "position (runtime.probe.anchored), then state = target + (previous - target) * exp(-dt / tau)",
+        "temporal_blend": "engine side, per object and frame: linearise target and previous state at the "
+        "object's position (runtime.probe.anchored), then state = target + (previous - target) * "
+        "exp(-dt / tau)",
     }
     write_text(out / "nao_volume.glsl", volume_function(order, vol.blend))
     write_bytes(out / "models.bin", packed.astype("<f4").tobytes())

@@ -264,8 +264,8 @@ class BakeLog:
         return data
 
     def parts(self, name: str):
-        """The :class:`pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each is written as
-        it arrives, so a killed bake's rerun skips them; removed once the stage's own file is written."""
+        """The :class:`pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each is written
+        as it arrives, so a killed bake's rerun skips them; removed once the stage's own file is written."""
 
         return ResultStore(self.dir / f"{name}.parts")
 
@@ -992,7 +992,8 @@ def fit_level(
     tag: str = "",
     timing: dict | None = None,
 ) -> np.ndarray:
-    """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver (``t.solver``, ``t.alpha``).
+    """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver
+    (``t.solver``, ``t.alpha``).
 
     "components": the normal equations are assembled here, split into their connected components (the
     matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
@@ -1057,7 +1058,8 @@ def _no_state(payload) -> None:
 
 
 def _solve_block(state, args) -> dict[str, np.ndarray]:
-    """Engine task: one block of the normal equations (csc matrix, rhs, "direct" | "amg") -> {"v": solution}."""
+    """Engine task: one block of the normal equations (csc matrix, rhs, "direct" | "amg")
+    -> {"v": solution}."""
     a, rhs, method = args
     t0 = time.perf_counter()
     v = splu(a).solve(rhs) if method == "direct" else solve_amg(a, rhs)
@@ -1149,8 +1151,8 @@ def _blend_check(
     engine=None,
     key: str = "",
 ) -> dict:
-    """The error table of the two-distance blend: (a) same rays (valid samples): blend of the two columns vs one trace
-    whose kernel is the blend (rho_b = w rho_long + (1 - w) rho_short: the mean is linear, so any
+    """The error table of the two-distance blend: (a) same rays (valid samples): blend of the two columns vs
+    one trace whose kernel is the blend (rho_b = w rho_long + (1 - w) rho_short: the mean is linear, so any
     difference is float rounding); (b) the stored per-vertex blend vs a 4x-ray blended-kernel reference
     at held-out samples (the bake's error); (c) per-vertex blend vs least squares of blended samples.
     With ``engine`` the two traces are its tasks (the reference labeller is built on a worker)."""
@@ -1275,9 +1277,11 @@ def bake_log_markdown(info: dict) -> str:
             f"{st['cpu_seconds']:.1f} | {rss} | {'yes' if st['reused'] else ''} |"
         )
     lines += [
-        f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | **{info['peak_rss_bytes'] / 2**20:,.0f}** | |",
+        f"| **Total** | **{info['seconds_total']:.1f}** | **{info['cpu_seconds_total']:.1f}** | "
+        f"**{info['peak_rss_bytes'] / 2**20:,.0f}** | |",
         "",
-        f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; load average {info['load_average'][0]:.2f} "
+        f"Peak memory (RSS): {info['peak_rss_bytes'] / 2**30:.2f} GiB; "
+        f"load average {info['load_average'][0]:.2f} "
         f"on {info['cpu_count']} cores (CPU s: all threads of this process).",
         "",
     ]
@@ -1301,8 +1305,10 @@ def bake_log_markdown(info: dict) -> str:
     lines += [
         "| two-distance blend | value |",
         "|---|---:|",
-        f"| same rays: blend of two columns vs blended-kernel trace, max abs | {b['same_rays_max_abs']:.2e} |",
-        f"| per-vertex blend vs least squares of blended samples, max abs | {b['per_vertex_blend_vs_lsq_of_blend_max_abs']:.2e} |",
+        "| same rays: blend of two columns vs blended-kernel trace, max abs | "
+        f"{b['same_rays_max_abs']:.2e} |",
+        "| per-vertex blend vs least squares of blended samples, max abs | "
+        f"{b['per_vertex_blend_vs_lsq_of_blend_max_abs']:.2e} |",
         f"| samples (blend) vs 4x-ray blended reference, RMSE | {b['samples_rmse_vs_reference']:.4f} |",
         f"| baked vertices (blend) vs 4x-ray blended reference, RMSE | {b['bake_rmse_vs_reference']:.4f} |",
         "",

@@ -10,9 +10,10 @@ Steps
    *centre* lies inside a triangle (barycentric coordinates >= 0) maps to the surface point with the
    same barycentric coordinates on the 3-D triangle, with the triangle's geometric normal. A texel
    covered by several triangles (shared edges) takes the one it lies deepest inside.
-3. **Labels.** Those points go through the project's Embree labeller (:class:`pipeline.tracing.labeller.Labeller`:
-   cosine-weighted rays, the back-face rule, the origin offset relative to the diagonal), seeded by
-   texel index, so a texel's value never depends on the batch it is traced in.
+3. **Labels.** Those points go through the project's Embree labeller
+   (:class:`pipeline.tracing.labeller.Labeller`: cosine-weighted rays, the back-face rule, the origin offset
+   relative to the diagonal), seeded by texel index, so a texel's value never depends on the batch it is
+   traced in.
 4. **Holes and gutters.** Texels that are covered but invalid (back-face rule: inside geometry) and
    the uncovered texels within ``margin`` of a covered one are filled by repeated 8-neighbour
    averaging from the valid texels (dilation). Without the gutter, bilinear filtering and mip-maps
@@ -460,7 +461,8 @@ def point_uvs(mesh: UVMesh, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
 
 
 def sample_bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear lookup as a GL sampler does it (LINEAR, CLAMP_TO_EDGE): image (N, N), uv (k, 2) -> (k,) float64."""
+    """Bilinear lookup as a GL sampler does it (LINEAR, CLAMP_TO_EDGE): image (N, N), uv (k, 2)
+    -> (k,) float64."""
     img = np.asarray(image, np.float64)
     h, w = img.shape
     uv = np.asarray(uv, np.float64)
@@ -525,7 +527,8 @@ def texture_glb_bytes(mesh: UVMesh, image: np.ndarray) -> bytes:
 
 
 def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
-    """Read a texture bake: the mesh with its UVs and the occlusion map's red channel (N, N) float32 in [0, 1]."""
+    """Read a texture bake: the mesh with its UVs and the occlusion map's red channel (N, N) float32
+    in [0, 1]."""
     import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     path = Path(path)

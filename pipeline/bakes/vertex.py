@@ -138,7 +138,8 @@ def bake_least_squares(
     """Least-squares vertex baking of stratified surface samples (module doc)."""
     t0 = time.perf_counter()
     total = settings.samples_per_vertex * len(scene.vertices)
-    # The samples' arrays are allocated before anything else: their number must fit (pipeline.foundation.limits).
+    # The samples' arrays are allocated before anything else: their number must fit
+    # (pipeline.foundation.limits).
     check_count(
         "--samples-per-vertex",
         math.ceil(min(total, 2.0**62)) + len(scene.faces),
@@ -217,7 +218,8 @@ def reference_at_samples(
 
 
 def write_baked_mesh(path: str | Path, scene: Scene, ao: np.ndarray) -> Path:
-    """Write ``scene`` with per-vertex AO (colours + float32 property, module doc) to .ply or .glb, atomically."""
+    """Write ``scene`` with per-vertex AO (colours + float32 property, module doc) to .ply or .glb,
+    atomically."""
     import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     path = Path(path)
@@ -243,7 +245,8 @@ def write_baked_mesh(path: str | Path, scene: Scene, ao: np.ndarray) -> Path:
 
 
 def read_baked_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Read a baked .ply/.glb: vertices (n, 3) f64, faces (m, 3) i64, ao (n,) float32, colours (n, 4) uint8."""
+    """Read a baked .ply/.glb: vertices (n, 3) f64, faces (m, 3) i64, ao (n,) float32,
+    colours (n, 4) uint8."""
     import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     path = Path(path)

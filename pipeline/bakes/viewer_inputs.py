@@ -8,6 +8,7 @@ consumer that only writes the page from arrays does not need.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import struct
@@ -16,12 +17,17 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from export.glsl import generate_compute, load_compute_export
 from export.glsl.files import load_mlp_export
 from pipeline.bakes.gltf_scene import read_gltf_scene
 from pipeline.bakes.texture import read_texture_glb
 from pipeline.bakes.vertex import read_baked_mesh
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.geometry.scene import load_scene
+from runtime.internal_resolution import UpsampleSettings
+from runtime.onnx_io import get_metadata, load_onnx
+from runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
+from runtime.shipped import read_index, shipped_models
 from runtime.viewer import ViewerMethod, b64, corner_arrays
 
 
@@ -193,3 +199,111 @@ def load_method(path: str, mesh: str | None) -> ViewerMethod:
     if p.suffix.lower() not in (".ply", ".glb"):
         raise NeuralaoError(f"{p.name}: expected a bake (.ply/.glb) or an export folder")
     return method_from_bake(p)
+
+
+# ----------------------------------------------------------------------------- screen-space U-Net
+
+# Default AO radius of the screen-space U-Net, as a fraction of the mesh's bounding-box diagonal (the
+# unit of the training labels' radii_rel, 1/32 to 1/4: pipeline/datasets/dataset.py).
+SCREEN_SPACE_RADIUS_REL = 0.125
+
+
+def _unet_meta(folder: Path) -> dict:
+    """ONNX metadata of the U-Net export in ``folder`` (checked: a U-Net, this preprocessing)."""
+    manifest = json.loads((folder / "manifest.json").read_text())
+    path = folder / manifest.get("onnx", "model.onnx")
+    return check_unet_onnx(load_onnx(path), path)
+
+
+def default_screen_space_model(models_dir: Path | None = None) -> Path:
+    """The shipped pure (non-hybrid) U-Net the viewer runs by default: the index's default U-Net if it
+    is pure, else the first pure one by name (read from each model's ONNX metadata)."""
+    index = read_index(models_dir)
+    default = index.get("default", {}).get("unet")
+    models = shipped_models(models_dir)
+    for name in [default, *sorted(n for n in models if n != default)]:
+        folder = models.get(name)
+        if folder is None or index["models"][name].get("kind", "unet") != "unet":
+            continue
+        if not is_hybrid(get_metadata(load_onnx(folder / "model.onnx"))):
+            return folder
+    raise NeuralaoError("no shipped pure (non-hybrid) U-Net to run in the viewer; give an export folder")
+
+
+def _screen_space_folder(model: str | None) -> Path:
+    if model is None:
+        return default_screen_space_model()
+    if Path(model).is_dir():
+        return Path(model)
+    models = shipped_models()
+    if model not in models:
+        raise NeuralaoError(
+            f"--screen-space {model}: not an export folder nor a shipped model ({', '.join(sorted(models))})"
+        )
+    return models[model]
+
+
+def method_from_unet(
+    model: str | None,
+    positions: np.ndarray,
+    normals: np.ndarray,
+    radius_rel: float = SCREEN_SPACE_RADIUS_REL,
+    conv_block: tuple[int, int, int] | None = None,
+) -> ViewerMethod:
+    """A screen-space U-Net (an export folder or a shipped model's name; None: the default pure one) run
+    by the page in WebGPU on the mesh ``positions`` / ``normals`` (3m, 3) float32 (corner_arrays).
+
+    Its WGSL: the export's ``wgsl/`` folder if it has one and ``conv_block`` is None, else generated
+    from model.onnx (``conv_block`` None: the generator's default). A hybrid (GTAO-input) model is a
+    one-line error naming a pure one: the page has no GTAO pass.
+    """
+    folder = _screen_space_folder(model)
+    try:
+        meta = _unet_meta(folder)
+    except (FileNotFoundError, json.JSONDecodeError):
+        raise NeuralaoError(f"{folder} is not a U-Net export folder (no readable manifest.json)") from None
+    if is_hybrid(meta):
+        try:
+            pure = f"; use a pure one, e.g. --screen-space {default_screen_space_model().name}"
+        except NeuralaoError:
+            pure = ""
+        raise NeuralaoError(
+            f"{folder.name} is a hybrid U-Net (it refines GTAO, which the viewer does not compute){pure}"
+        )
+    if not (np.isfinite(radius_rel) and radius_rel > 0):
+        raise NeuralaoError(f"--screen-space-radius must be a positive fraction, got {radius_rel}")
+    onnx_path = folder / json.loads((folder / "manifest.json").read_text()).get("onnx", "model.onnx")
+    if conv_block is None and (folder / "wgsl" / "manifest.json").is_file():
+        program = load_compute_export(folder / "wgsl")
+    else:
+        block = {} if conv_block is None else {"conv_block": tuple(conv_block)}
+        program = generate_compute(load_onnx(onnx_path), dialect="wgsl", **block)
+    diagonal = float(np.linalg.norm(np.ptp(np.asarray(positions, np.float64), axis=0)))
+    radius = radius_rel * diagonal
+    network = {
+        "manifest": program.manifest,
+        "sources": program.sources,
+        "weights": b64(program.weights),
+        "internal_height": declared_internal_height(onnx_path),
+        "radius": radius,
+        "upsample": dataclasses.asdict(UpsampleSettings()),
+        "model": folder.name,
+    }
+    return ViewerMethod(
+        f"screen-space U-Net {folder.name} (WebGPU)",
+        "screen-space",
+        positions,
+        normals,
+        network=network,
+        info={"export": str(folder), "onnx": str(onnx_path), "radius": radius, "radius_rel": radius_rel},
+    )
+
+
+def screen_space_mesh(methods: list[ViewerMethod], mesh: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh the U-Net's page draws: ``mesh`` if given, else the first method's."""
+    if mesh is not None:
+        scene = load_scene(mesh)
+        return corner_arrays(scene.vertices, scene.faces)
+    if not methods:
+        raise NeuralaoError("--screen-space needs a mesh: give a bake, an export or --mesh")
+    return methods[0].positions, methods[0].normals

@@ -46,8 +46,9 @@ Bad input and fallbacks (never NaN)
   not touch, a region index out of range: one-line :class:`NeuralaoError`.
 * A region with no valid sample (fully inside geometry, or behind walls): ``fallback = "neighbours"``,
   a constant model equal to the area-weighted mean of its resolved neighbours' models at the shared
-  boundary centres (propagated from neighbour to neighbour); with no resolved neighbour at all ``fallback = "open"``
-  (AO = 1 for every normal), with a warning. Fallback regions take no part in the regularisation.
+  boundary centres (propagated from neighbour to neighbour); with no resolved neighbour at all
+  ``fallback = "open"`` (AO = 1 for every normal), with a warning. Fallback regions take no part in the
+  regularisation.
 * A region with fewer valid samples than the 7 unknowns, or all on one side of the centre on an axis:
   the minimum-norm least-squares solution (undetermined derivatives are 0: flat extrapolation).
 * Every region invalid: one-line error (the level has no free space the model could describe).
@@ -232,9 +233,9 @@ def _triangles_cross_cells(scene: Scene, lo: np.ndarray, cell: np.ndarray, count
 
 def free_space_regions(scene: Scene, labeller: Labeller, settings: VolumeSettings) -> list[Region]:
     """Regions covering the level's free space: grid cells (``grid`` along the longest axis of the
-    bounds, axes thinner than ``min_cells`` cells padded to it on both sides) that no triangle crosses and whose centre is
-    not inside geometry (back-face rule over ``cell_rays`` directions), merged greedily (x, then y,
-    then z runs, at most ``max_region_cells`` cells per axis) into boxes. Deterministic."""
+    bounds, axes thinner than ``min_cells`` cells padded to it on both sides) that no triangle crosses and
+    whose centre is not inside geometry (back-face rule over ``cell_rays`` directions), merged greedily
+    (x, then y, then z runs, at most ``max_region_cells`` cells per axis) into boxes. Deterministic."""
     if settings.grid < 1 or settings.max_region_cells < 1:
         raise NeuralaoError("grid and max_region_cells must be >= 1")
     lo, hi = scene.bounds
@@ -279,7 +280,8 @@ def free_space_regions(scene: Scene, labeller: Labeller, settings: VolumeSetting
                 regions.append(Region(f"r{len(regions)}", tuple(a.tolist()), tuple(b.tolist())))
     if not regions:
         raise NeuralaoError(
-            f"level {scene.name} has no free grid cell at grid {settings.grid} (try another grid or --regions)"
+            f"level {scene.name} has no free grid cell at grid {settings.grid} "
+            "(try another grid or --regions)"
         )
     return regions
 
@@ -550,9 +552,9 @@ def check_settings(s: VolumeSettings) -> None:
         v = getattr(s, name)
         if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "iterations" else 1):
             raise NeuralaoError(f"{name} must be a positive integer, got {v!r}")
-    # What each count allocates (pipeline.foundation.limits), checked before any of it is: a region's samples^3
-    # points trace `directions` rays each (directions, distances, the obscurance and its SH projection,
-    # ~256 B a ray); the free-space grid is up to grid^3 cells, each tracing cell_rays rays.
+    # What each count allocates (pipeline.foundation.limits), checked before any of it is: a region's
+    # samples^3 points trace `directions` rays each (directions, distances, the obscurance and its SH
+    # projection, ~256 B a ray); the free-space grid is up to grid^3 cells, each tracing cell_rays rays.
     check_count("iterations", s.iterations, low=0, bytes_each=64, each="an energy record of the history")
     check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
     check_count("directions", s.directions, bytes_each=256, each="per ray of one sample")
@@ -736,8 +738,8 @@ def _summary(jumps: np.ndarray, edges: list[Edge]) -> dict:
 
 
 def is_level(path: Path) -> bool:
-    """A glTF level of the level bake (pipeline/geometry/level_files.py): some node sets a ``role`` in its extras, or
-    the file uses EXT_mesh_gpu_instancing (which plain mesh loading does not expand)."""
+    """A glTF level of the level bake (pipeline/geometry/level_files.py): some node sets a ``role`` in its
+    extras, or the file uses EXT_mesh_gpu_instancing (which plain mesh loading does not expand)."""
     if path.suffix.lower() not in (".gltf", ".glb"):
         return False
     from pipeline.geometry.level_files import INSTANCING, read_gltf_json

@@ -203,8 +203,9 @@ def view_seed(seed: int, view: int) -> int:
 def render_and_label(renderer, labeller, camera: Camera) -> dict[str, np.ndarray]:
     """One view: the G-buffer frame of ``camera`` plus ``ao`` (H, W) f32 and ``valid`` (H, W) bool.
 
-    renderer : :class:`pipeline.gbuffers.rasterizer.GBufferRenderer`; labeller : :class:`pipeline.tracing.labeller.Labeller`
-    (its current settings, seed included, are used as they are).
+    renderer : :class:`pipeline.gbuffers.rasterizer.GBufferRenderer`;
+    labeller : :class:`pipeline.tracing.labeller.Labeller` (its current settings, seed included, are used
+    as they are).
     """
     frame = renderer.render(camera)
     frame["ao"], frame["valid"] = labeller.label_frame(frame)
@@ -309,7 +310,8 @@ def normal_preview(frame: dict) -> np.ndarray:
 
 
 def depth_preview(frame: dict) -> np.ndarray:
-    """(H, W, 3) float32: depth normalised to the foreground's range (near = bright, magma), background grey."""
+    """(H, W, 3) float32: depth normalised to the foreground's range (near = bright, magma), background
+    grey."""
     from matplotlib import colormaps  # measured: ~0.5 s to import; only the depth preview needs it
 
     depth, mask = np.asarray(frame["depth"], np.float64), frame["mask"]

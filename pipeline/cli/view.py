@@ -1,5 +1,6 @@
-"""`neuralao view EXPORT_OR_BAKE... --out DIR [--mesh MESH] [--size W H] [--serve]`: write a
-self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders (:mod:`runtime.viewer`)."""
+"""`neuralao view EXPORT_OR_BAKE... --out DIR [--mesh MESH] [--screen-space [MODEL]] [--size W H] [--serve]`:
+write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders, and optionally a
+screen-space U-Net run in WebGPU on the page's own G-buffer (:mod:`runtime.viewer`)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,12 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.bakes.viewer_inputs import load_method
+from pipeline.bakes.viewer_inputs import (
+    SCREEN_SPACE_RADIUS_REL,
+    load_method,
+    method_from_unet,
+    screen_space_mesh,
+)
 from pipeline.foundation.errors import NeuralaoError
 from runtime.viewer import serve, write_page
 
@@ -17,11 +23,33 @@ log = logging.getLogger("runtime.viewer")  # the logger name users see in messag
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "inputs",
-        nargs="+",
+        nargs="*",
         metavar="EXPORT_OR_BAKE",
-        help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export folders: one method each",
+        help="vertex bakes (.ply/.glb), texture bakes (.glb), scene bakes (.glb) and MLP / field export "
+        "folders: one method each",
     )
-    p.add_argument("--mesh", help="mesh of the export folders (default: the mesh each export records)")
+    p.add_argument(
+        "--mesh",
+        help="mesh of the export folders and of --screen-space (default: the mesh each export records; "
+        "for --screen-space, the first input's)",
+    )
+    p.add_argument(
+        "--screen-space",
+        nargs="?",
+        const="",
+        metavar="MODEL",
+        help="add a screen-space U-Net run live in WebGPU on the page's G-buffer: an export folder or a "
+        "shipped model's name (no value: the default shipped pure U-Net; hybrids, which need GTAO, are "
+        "refused)",
+    )
+    p.add_argument(
+        "--screen-space-radius",
+        type=float,
+        default=SCREEN_SPACE_RADIUS_REL,
+        metavar="FRACTION",
+        help=f"the U-Net's AO radius as a fraction of the mesh's bounding-box diagonal "
+        f"(default {SCREEN_SPACE_RADIUS_REL})",
+    )
     p.add_argument("--out", required=True, help="output folder: index.html, viewer.js, scene.js, scene.json")
     p.add_argument(
         "--size",
@@ -46,7 +74,12 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} is a file")
+    if not args.inputs and args.screen_space is None:
+        raise NeuralaoError("nothing to view: give bakes or exports, or --screen-space with --mesh")
     methods = [load_method(i, args.mesh) for i in args.inputs]
+    if args.screen_space is not None:
+        pos, nrm = screen_space_mesh(methods, args.mesh)
+        methods.append(method_from_unet(args.screen_space or None, pos, nrm, args.screen_space_radius))
     page = write_page(methods, out, (w, h))
     log.info("viewer: %d method(s) -> %s", len(methods), page)
     if args.serve:

@@ -595,7 +595,8 @@ class Dataset:
         if self.verify and entry["file"] not in self._verified:
             if sha256_file(path) != entry["sha256"]:
                 raise NeuralaoError(
-                    f"dataset shard {path} is corrupt (sha256 differs from the manifest); rerun `neuralao dataset`"
+                    f"dataset shard {path} is corrupt (sha256 differs from the manifest); "
+                    "rerun `neuralao dataset`"
                 )
             self._verified.add(entry["file"])
         return read_npz(path)
@@ -635,8 +636,8 @@ def open_dataset(root: str | Path, verify: bool = True) -> Dataset:
 
 def check_counts(settings: DatasetSettings, out: Path) -> None:
     """Every count of the config within what the machine can hold, before anything is expanded or
-    allocated (pipeline.foundation.limits): scenes and views (a camera each), frame sizes (a shard's frames are
-    in memory together), the frames on disk, seeds."""
+    allocated (pipeline.foundation.limits): scenes and views (a camera each), frame sizes (a shard's frames
+    are in memory together), the frames on disk, seeds."""
     scene_bytes = 4096  # a scene entry or a camera, before anything is rendered
     check_seed("seed", settings.seed)
     check_count("frames_per_shard", settings.frames_per_shard)

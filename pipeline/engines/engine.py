@@ -60,8 +60,8 @@ STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
 # (ray.init itself retries for minutes).
 CONNECT_TIMEOUT_S = 5.0
-# Rays per point-tracing task (pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one core, so Ray's ~3 ms per task is noise, and
-# enough tasks that the last ones balance across workers.
+# Rays per point-tracing task (pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one core, so Ray's
+# ~3 ms per task is noise, and enough tasks that the last ones balance across workers.
 CHUNK_RAYS = 1 << 20
 # Environment a worker process needs to render and trace like the driver (GL platform, threads).
 FORWARDED_ENV = ("PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "OMP_WAIT_POLICY", "NEURALAO_MESHES")

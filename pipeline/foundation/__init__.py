@@ -1,1 +1,2 @@
-"""Foundation: errors, atomic file io, settings dataclasses with --set, the tolerance table, limits, metrics, spherical harmonics. Imports nothing above it."""
+"""Foundation: errors, atomic file io, settings dataclasses with --set, the tolerance table, limits, metrics,
+spherical harmonics. Imports nothing above it."""

@@ -52,11 +52,12 @@ class Tolerances:
     onnx_vs_torch_base: float = 2.0**-18
     # OpenCV dnn vs onnxruntime (same fp32 math, different kernels).
     opencv_vs_onnx: float = 1e-4
-    # float32 SSIM (torch training loss, pipeline/models/unet_train.py) vs float64 SSIM (pipeline/foundation/metrics.py),
-    # per pixel or averaged. The variance terms E[x^2] - E[x]^2 cancel catastrophically in float32
-    # (rounding ~6e-8 for values in [0, 1]) and are then divided by (var_x + var_y + C2) >= C2 = 9e-4,
-    # so a flat window can be off by ~1e-4; measured 4.2e-5 on constant 0.3 / 0.7 crops and 2e-6 on
-    # random images. A wrong window, sigma, padding or mask handling moves SSIM by > 1e-2.
+    # float32 SSIM (torch training loss, pipeline/models/unet_train.py) vs float64 SSIM
+    # (pipeline/foundation/metrics.py), per pixel or averaged. The variance terms E[x^2] - E[x]^2 cancel
+    # catastrophically in float32 (rounding ~6e-8 for values in [0, 1]) and are then divided by
+    # (var_x + var_y + C2) >= C2 = 9e-4, so a flat window can be off by ~1e-4; measured 4.2e-5 on
+    # constant 0.3 / 0.7 crops and 2e-6 on random images. A wrong window, sigma, padding or mask handling
+    # moves SSIM by > 1e-2.
     ssim_fp32_vs_fp64: float = 1e-4
     # Fuzzed GLSL (tests/test_fuzz.py: random image graphs and MLPs, weights up to ~100, inputs up to
     # ~1e3, so sums reach 1e4+ and cancel) vs onnxruntime, both fp32. A fixed absolute or relative

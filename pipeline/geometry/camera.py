@@ -208,7 +208,8 @@ def interior(
             break
     if len(eyes) < views:
         raise NeuralaoError(
-            f"scene {scene.name}: found only {len(eyes)} of {views} interior camera positions clear of geometry"
+            f"scene {scene.name}: found only {len(eyes)} of {views} interior camera positions "
+            "clear of geometry"
         )
     cams = []
     for eye in eyes[:views]:

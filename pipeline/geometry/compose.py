@@ -67,8 +67,9 @@ class ComposeSettings:
     size: tuple[float, float] = (0.25, 0.9)  # range of an object's largest bounding-box extent
     tumble: float = 0.25  # probability that a mesh gets a uniformly random rotation (else upright + yaw)
     meshes: list[str] | None = None  # mesh pool; None -> the object meshes of the scene's split
-    # Revision of that split's pool (pipeline.geometry.splits.ADDED): 1 = the meshes of the first corpus, 2 adds the
-    # thin-part / shell props. Fixed per config, so adding meshes to a split never changes a config's scenes.
+    # Revision of that split's pool (pipeline.geometry.splits.ADDED): 1 = the meshes of the first corpus,
+    # 2 adds the thin-part / shell props. Fixed per config, so adding meshes to a split never changes a
+    # config's scenes.
     pool: int = 1
 
 
@@ -133,7 +134,8 @@ class _Part:
         return _Part(self.vertices + offset, self.faces, self.probes + offset)
 
     def distances(self, origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        """(n,) float64 distance along unit ``direction`` from each origin (n, 3) to this part; inf on a miss."""
+        """(n,) float64 distance along unit ``direction`` from each origin (n, 3) to this part; inf on a
+        miss."""
         if len(origins) == 0:
             return np.full(0, np.inf)
         if self._embree is None:
@@ -241,7 +243,8 @@ def _axis_rotation(axis: int, angle: float) -> np.ndarray:
 
 def plan(settings: ComposeSettings, split: str = "train") -> Plan:
     """The seeded :class:`Plan` of a composed scene, before any mesh is loaded. Meshes come from
-    ``settings.meshes`` or else :func:`pipeline.geometry.splits.object_meshes` of ``split`` at ``settings.pool``."""
+    ``settings.meshes`` or else :func:`pipeline.geometry.splits.object_meshes` of ``split`` at
+    ``settings.pool``."""
     _check(settings)
     pool = tuple(settings.meshes) if settings.meshes is not None else object_meshes(split, settings.pool)
     rng = np.random.default_rng([int(settings.seed) & 0xFFFFFFFF, 0])

@@ -315,7 +315,8 @@ class _Gltf:
             data = p.read_bytes()
         if len(data) < int(spec.get("byteLength", 0)):
             raise NeuralaoError(
-                f"level {self.path}: buffer {index} has {len(data)} bytes, byteLength says {spec.get('byteLength')}"
+                f"level {self.path}: buffer {index} has {len(data)} bytes, "
+                f"byteLength says {spec.get('byteLength')}"
             )
         return data
 
@@ -361,7 +362,8 @@ def _role_and_params(node: dict, inherited: tuple[str, dict] | None, where: str)
     unknown = sorted(set(extras) - _EXTRAS_KEYS)
     if unknown:
         raise NeuralaoError(
-            f"{where}: unknown key(s) in extras: {', '.join(unknown)} (known: {', '.join(sorted(_EXTRAS_KEYS))})"
+            f"{where}: unknown key(s) in extras: {', '.join(unknown)} "
+            f"(known: {', '.join(sorted(_EXTRAS_KEYS))})"
         )
     if "role" not in extras:
         role, params = inherited if inherited else ("static", {})

@@ -94,8 +94,9 @@ PRESETS: dict[str, dict] = {
             {"mesh": "sponza_partial", "count": 2, "scale": 0.02},
         ],
     },
-    # Ten times table1: ten times the area (600 m x sqrt(10)) and of every count. Faces: terrain 2 x 2087^2 = 8.71M,
-    # 60,000 houses x 5 boxes x 12 = 3.6M, 20 + 20 Sponzas 5.92M: 18.2M (table1: 0.87M + 0.36M + 0.59M = 1.82M).
+    # Ten times table1: ten times the area (600 m x sqrt(10)) and of every count. Faces: terrain
+    # 2 x 2087^2 = 8.71M, 60,000 houses x 5 boxes x 12 = 3.6M, 20 + 20 Sponzas 5.92M: 18.2M
+    # (table1: 0.87M + 0.36M + 0.59M = 1.82M).
     "world10x": {
         "terrain_size": 1897.0,
         "terrain_cells": 2087,
@@ -129,7 +130,8 @@ BAKE_CONFIGS: dict[str, dict] = {
             "min_samples_per_face": 0,
         }
     },
-    # SuperLU's fill-in at 16M vertices is out of reach: the multigrid-preconditioned solve (linear in vertices).
+    # SuperLU's fill-in at 16M vertices is out of reach: the multigrid-preconditioned solve
+    # (linear in vertices).
     "world10x": {
         "trace": {
             "rays": 256,

@@ -127,7 +127,8 @@ def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
 
 
 def gltf_resource(gltf: str | os.PathLike, uri: str) -> Path:
-    """The file a glTF's relative ``uri`` names (percent-decoded), refused when it leaves the glTF's folder."""
+    """The file a glTF's relative ``uri`` names (percent-decoded), refused when it leaves the glTF's
+    folder."""
     folder = Path(gltf).resolve().parent
     target = (folder / unquote(uri)).resolve()
     if not target.is_relative_to(folder):

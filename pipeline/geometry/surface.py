@@ -99,7 +99,8 @@ def interpolation_matrix(scene: Scene, samples: SurfaceSamples):
 
 
 def interpolate(scene: Scene, vertex_values: np.ndarray, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """Values at surface points as the rasteriser shows them: (k,) float64 = sum_c bary[:, c] v[face corner c]."""
+    """Values at surface points as the rasteriser shows them: (k,) float64
+    = sum_c bary[:, c] v[face corner c]."""
     corners = np.asarray(vertex_values, dtype=np.float64)[scene.faces[face]]
     return np.einsum("kc,kc->k", bary, corners)
 

@@ -31,8 +31,8 @@ def trace_chunk(labeller, args) -> dict[str, np.ndarray]:
 
 
 def labeller_context(scene: Scene, settings: LabelSettings, threads: int | None = None) -> Context:
-    """A worker-side :class:`~pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene`` with ``threads``
-    threads (None: ``settings.workers``; labels never depend on it)."""
+    """A worker-side :class:`~pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene`` with
+    ``threads`` threads (None: ``settings.workers``; labels never depend on it)."""
     if threads is not None:
         settings = replace(settings, workers=threads)
     slim = slim_scene(scene)

@@ -39,7 +39,8 @@ _STEP = 3e-6
 
 
 def box_triangles(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Boxes (b, 3) lo / hi -> vertices (8b, 3) and outward faces (12b, 3) int64 (box i: faces 12i..12i+11)."""
+    """Boxes (b, 3) lo / hi -> vertices (8b, 3) and outward faces (12b, 3) int64
+    (box i: faces 12i..12i+11)."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], np.float64)
     v = lo[:, None, :] + corners[None] * (hi - lo)[:, None, :]

@@ -183,7 +183,8 @@ class Labeller:
                 raise NeuralaoError(
                     f"{name} must be a{' positive' if name != 'seed' else 'n'} integer, got {value!r}"
                 )
-        # Before the ray tables and buffers are allocated: what they take must fit (pipeline.foundation.limits).
+        # Before the ray tables and buffers are allocated: what they take must fit
+        # (pipeline.foundation.limits).
         check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
         check_rays("rays", s.rays, s.workers)
         diag = self.scale
@@ -416,8 +417,9 @@ class Labeller:
         progress: bool,
         radii: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Core: points (n, 3) float64 in local units, normals (n, 3), ids (n,) -> ao (n,) f32, valid (n,) bool;
-        with ``radii`` (k,) float32 local: ao (n, k) f32 and valid (n, k) bool (:meth:`_trace_radii`)."""
+        """Core: points (n, 3) float64 in local units, normals (n, 3), ids (n,) -> ao (n,) f32, valid (n,)
+        bool; with ``radii`` (k,) float32 local: ao (n, k) f32 and valid (n, k) bool
+        (:meth:`_trace_radii`)."""
         count = len(local)
         shape = (count,) if radii is None else (count, len(radii))
         ao = np.ones(shape, dtype=np.float32)
