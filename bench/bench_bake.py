@@ -63,8 +63,11 @@ def compare(name: str, rays: int, ref_rays: int, held_out: int) -> dict:
         "vertex_budget_rays": budget,
     }
     for key, r in (("vertex", vertex), ("vertex_same_budget", vertex_budget), ("lsq", lsq)):
-        out[key] = {**surface_error(scene, r.ao, held, ref, ref_valid), "seconds": r.info["seconds"],
-                    "rays_traced": r.info["rays_traced"]}  # fmt: skip
+        out[key] = {
+            **surface_error(scene, r.ao, held, ref, ref_valid),
+            "seconds": r.info["seconds"],
+            "rays_traced": r.info["rays_traced"],
+        }
     out["rmse_ratio_lsq_vs_vertex"] = out["lsq"]["rmse"] / out["vertex"]["rmse"]
     out["rmse_ratio_lsq_vs_vertex_same_budget"] = out["lsq"]["rmse"] / out["vertex_same_budget"]["rmse"]
     # regulariser sweep on the same traced samples
@@ -110,8 +113,13 @@ def markdown(result: dict) -> str:
             f"({m['vertex_budget_rays']} rays) | {m['lsq']['rmse']:.4f} | {m['rmse_ratio_lsq_vs_vertex']:.2f} | "
             f"{m['rmse_ratio_lsq_vs_vertex_same_budget']:.2f} | {m['vertex']['max']:.3f} | {m['lsq']['max']:.3f} |"
         )
-    lines += ["", "Held-out RMSE of the least-squares fit against the regulariser weight alpha (same traced samples):", "",
-              "| mesh | " + " | ".join(f"alpha {a:g}" for a in ALPHAS) + " |", "|---|" + "---:|" * len(ALPHAS)]  # fmt: skip
+    lines += [
+        "",
+        "Held-out RMSE of the least-squares fit against the regulariser weight alpha (same traced samples):",
+        "",
+        "| mesh | " + " | ".join(f"alpha {a:g}" for a in ALPHAS) + " |",
+        "|---|" + "---:|" * len(ALPHAS),
+    ]
     for m in result["meshes"]:
         lines.append(
             f"| {m['mesh']} | " + " | ".join(f"{m['alpha_sweep'][str(a)]:.4f}" for a in ALPHAS) + " |"

@@ -48,8 +48,10 @@ def node_table(results) -> tuple[str, dict]:
 
     counts = counts_by_op(results)
     total = Counter()
-    lines = ["| op | passed | matches onnxruntime | refused | wrong | crashed | refused because |",
-             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines = [
+        "| op | passed | matches onnxruntime | refused | wrong | crashed | refused because |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for op, c in counts.items():
         total.update(c)
         why = Counter(_reason_kind(r.reason) for r in results if r.op == op and r.outcome == "refused")
@@ -81,25 +83,42 @@ def light_models(dialect: str = "glsl430") -> list[dict]:
             continue
         inits = {i.name for i in model.graph.initializer}
         vi = next(i for i in model.graph.input if i.name not in inits)
-        x = np.random.default_rng(0).normal(size=[d.dim_value for d in vi.type.tensor_type.shape.dim]).astype(np.float32)
+        x = (
+            np.random.default_rng(0)
+            .normal(size=[d.dim_value for d in vi.type.tensor_type.shape.dim])
+            .astype(np.float32)
+        )
         ref = run_onnxruntime(model.SerializeToString(), {vi.name: x})[0]
         t1 = time.perf_counter()
         got = next(iter(run_program(program, x).values()))
         err = float(np.abs(got - ref).max()) if got.shape == ref.shape else float("inf")
-        rows.append({"model": name, "outcome": "passed" if err <= 1e-4 * max(1.0, float(np.abs(ref).max())) else "wrong",
-                     "max_abs_err": err, "max_abs_ref": float(np.abs(ref).max()), "passes": len(program.manifest["passes"]),
-                     "generate_s": round(t1 - t0, 2), "run_s": round(time.perf_counter() - t1, 2)})  # fmt: skip
+        rows.append(
+            {
+                "model": name,
+                "outcome": "passed" if err <= 1e-4 * max(1.0, float(np.abs(ref).max())) else "wrong",
+                "max_abs_err": err,
+                "max_abs_ref": float(np.abs(ref).max()),
+                "passes": len(program.manifest["passes"]),
+                "generate_s": round(t1 - t0, 2),
+                "run_s": round(time.perf_counter() - t1, 2),
+            }
+        )
     return rows
 
 
 def light_table(rows: list[dict]) -> str:
-    lines = ["| model | outcome | max abs err | max abs value | passes | why refused |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| model | outcome | max abs err | max abs value | passes | why refused |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
         if r["outcome"] == "refused":
             lines.append(f"| {r['model']} | refused | | | | {r['reason']} |")
         else:
-            lines.append(f"| {r['model']} | {r['outcome']} | {r['max_abs_err']:.2g} | {r['max_abs_ref']:.3g} | "
-                         f"{r['passes']} | |")  # fmt: skip
+            lines.append(
+                f"| {r['model']} | {r['outcome']} | {r['max_abs_err']:.2g} | {r['max_abs_ref']:.3g} | "
+                f"{r['passes']} | |"
+            )
     return "\n".join(lines)
 
 
@@ -107,8 +126,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--no-light", action="store_true", help="skip the light models (minutes on llvmpipe)")
-    ap.add_argument("--dialect", default="glsl430", choices=("glsl430", "wgsl"),
-                    help="glsl430: GLSL on GL (llvmpipe); wgsl: WGSL on WebGPU (wgpu, lavapipe)")
+    ap.add_argument(
+        "--dialect",
+        default="glsl430",
+        choices=("glsl430", "wgsl"),
+        help="glsl430: GLSL on GL (llvmpipe); wgsl: WGSL on WebGPU (wgpu, lavapipe)",
+    )
     args = ap.parse_args()
     from export.glsl import ImageOps
     from export.node_tests import run_node_tests
@@ -119,8 +142,14 @@ def main() -> None:
     seconds = time.perf_counter() - t0
     light = [] if args.no_light else light_models(args.dialect)
     stem = "conformance-wgsl" if args.dialect == "wgsl" else "conformance"
-    report = {"cpu": cpu_name(), "dialect": args.dialect, "node_tests": counts, "node_seconds": round(seconds, 1), "light": light,
-              "cases": [r.__dict__ for r in results]}  # fmt: skip
+    report = {
+        "cpu": cpu_name(),
+        "dialect": args.dialect,
+        "node_tests": counts,
+        "node_seconds": round(seconds, 1),
+        "light": light,
+        "cases": [r.__dict__ for r in results],
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     write_json(args.out / f"{stem}.json", report)
     md = [f"Node tests ({len(results)} cases, {seconds:.0f} s on {cpu_name()}):", "", table]

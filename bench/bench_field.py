@@ -37,7 +37,15 @@ from pipeline.evaluation.report import cpu_name  # noqa: E402
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
 
 LADDER = ("16x8", "32x16", "64x32")
-DEFAULT_MESHES = ("cornell_box:interior", "GlamVelvetSofa", "CesiumMilkTruck", "KnightArmor", "bunny", "dragon", "horse")
+DEFAULT_MESHES = (
+    "cornell_box:interior",
+    "GlamVelvetSofa",
+    "CesiumMilkTruck",
+    "KnightArmor",
+    "bunny",
+    "dragon",
+    "horse",
+)
 LOW_POLY_VERTICES = 10_000  # below: the low-poly goal applies; above: the dense goal
 
 
@@ -72,8 +80,15 @@ def bench_mesh(spec: str, sizes, bake_rays: int, timing: int, out: Path, repeats
     base = FieldSettings(cameras=cams or "orbit")
     t0 = time.perf_counter()
     samples = collect_samples(scene, base)
-    row = {"mesh": name, "cameras": base.cameras, "vertices": len(scene.vertices), "faces": len(scene.faces),
-           "samples": samples.info, "sampling_seconds": time.perf_counter() - t0, "fields": {}}  # fmt: skip
+    row = {
+        "mesh": name,
+        "cameras": base.cameras,
+        "vertices": len(scene.vertices),
+        "faces": len(scene.faces),
+        "samples": samples.info,
+        "sampling_seconds": time.perf_counter() - t0,
+        "fields": {},
+    }
     for size in sizes:
         s = replace(base, hidden=parse_size(size))
         model, info = train_model(samples, scene, s)
@@ -85,7 +100,10 @@ def bench_mesh(spec: str, sizes, bake_rays: int, timing: int, out: Path, repeats
     for method in ("vertex", "least-squares"):
         b = bake(scene, BakeSettings(rays=bake_rays, method=method, seed=1))
         ev = evaluate(lambda f, ao=b.ao: vertex_ao_image(scene, ao, f), samples.holdout)
-        row["vertex-lsq" if method == "least-squares" else "vertex-sampled"] = {"bytes": 4 * len(scene.vertices), **ev}
+        row["vertex-lsq" if method == "least-squares" else "vertex-sampled"] = {
+            "bytes": 4 * len(scene.vertices),
+            **ev,
+        }
     lsq = row["vertex-lsq"]
     for f in row["fields"].values():
         f["rmse_vs_lsq"] = f["rmse"] / lsq["rmse"]
@@ -108,18 +126,30 @@ def time_gl(scene, samples, models: dict, size: int, repeats: int, out: Path) ->
     res: dict = {"size": size}
     out.mkdir(parents=True, exist_ok=True)
     for name, model in models.items():
-        ckpt = make_checkpoint(model, FieldSettings(hidden=model.hidden, octaves=model.octaves), samples,
-                               {}, {"seconds": 0.0})  # fmt: skip
+        ckpt = make_checkpoint(
+            model, FieldSettings(hidden=model.hidden, octaves=model.octaves), samples, {}, {"seconds": 0.0}
+        )
         save_checkpoint(out / f"field-{name}.pt", ckpt)
         export_checkpoint(out / f"field-{name}.pt", out / f"field-{name}")
         p = parity(out / f"field-{name}", samples.holdout[:2])
-        res[f"field-{name}_ms"] = 1e3 * time_vector_fragment(out / f"field-{name}" / "glsl", size, size, repeats=repeats)
+        res[f"field-{name}_ms"] = 1e3 * time_vector_fragment(
+            out / f"field-{name}" / "glsl", size, size, repeats=repeats
+        )
         res[f"field-{name}_parity"] = p["max_abs_err"]
     # the first held-back pose at the timing size, for the vertex draw and SSAO
-    cam = Camera(np.asarray(f0["pose"], np.float64), size, size, float(f0["yfov"]), float(f0["znear"]), float(f0["zfar"]))
+    cam = Camera(
+        np.asarray(f0["pose"], np.float64),
+        size,
+        size,
+        float(f0["yfov"]),
+        float(f0["znear"]),
+        float(f0["zfar"]),
+    )
     with GBufferRenderer(scene) as r:
         frame = r.render(cam)
-    res["vertex_colour_ms"] = 1e3 * time_vertex_ao(scene, cam, np.ones(len(scene.vertices), np.float32), repeats)
+    res["vertex_colour_ms"] = 1e3 * time_vertex_ao(
+        scene, cam, np.ones(len(scene.vertices), np.float32), repeats
+    )
     res["ssao_ms"] = 1e3 * time_screen_space(frame, "ssao", 0.25 * scene.diagonal, repeats=repeats)
     for k in [k for k in res if k.endswith("_ms") and k.startswith("field")]:
         res[k.replace("_ms", "_vs_vertex")] = res[k] / res["vertex_colour_ms"]
@@ -144,29 +174,51 @@ def octave_sweep(mesh: str, octaves=(0, 2, 4, 6, 8)) -> dict:
 
 
 def markdown(result: dict) -> str:
-    lines = [f"# AO field vs vertex baking ({result['cpu']})", "",
-             "Held-back views, masked SSIM / RMSE against 256-ray labels; bytes: float32 field weights + encoding "
-             "constants, 4 B per vertex for vertex AO.", "",
-             "| mesh | vertices | method | bytes | SSIM | RMSE | RMSE / vertex-lsq | bytes / vertex-lsq | train s |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    lines = [
+        f"# AO field vs vertex baking ({result['cpu']})",
+        "",
+        "Held-back views, masked SSIM / RMSE against 256-ray labels; bytes: float32 field weights + encoding "
+        "constants, 4 B per vertex for vertex AO.",
+        "",
+        "| mesh | vertices | method | bytes | SSIM | RMSE | RMSE / vertex-lsq | bytes / vertex-lsq | train s |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for row in result["meshes"]:
         for m in ("vertex-sampled", "vertex-lsq"):
             e = row[m]
-            lines.append(f"| {row['mesh']} | {row['vertices']} | {m} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
-                         f"{e['rmse'] / row['vertex-lsq']['rmse']:.2f} | {e['bytes'] / row['vertex-lsq']['bytes']:.2f} | - |")  # fmt: skip
+            lines.append(
+                f"| {row['mesh']} | {row['vertices']} | {m} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
+                f"{e['rmse'] / row['vertex-lsq']['rmse']:.2f} | {e['bytes'] / row['vertex-lsq']['bytes']:.2f} | - |"
+            )
         for size, e in row["fields"].items():
-            lines.append(f"| {row['mesh']} | {row['vertices']} | field-{size} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
-                         f"{e['rmse_vs_lsq']:.2f} | {e['bytes_vs_lsq']:.2f} | {e['train_seconds']:.1f} |")  # fmt: skip
-    lines += ["", "GL ms per frame at the timing size (llvmpipe), same run:", "",
-              "| mesh | vertex colours | SSAO | fields (ms, x vertex, x SSAO, parity) |", "|---|---:|---:|---|"]  # fmt: skip
+            lines.append(
+                f"| {row['mesh']} | {row['vertices']} | field-{size} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
+                f"{e['rmse_vs_lsq']:.2f} | {e['bytes_vs_lsq']:.2f} | {e['train_seconds']:.1f} |"
+            )
+    lines += [
+        "",
+        "GL ms per frame at the timing size (llvmpipe), same run:",
+        "",
+        "| mesh | vertex colours | SSAO | fields (ms, x vertex, x SSAO, parity) |",
+        "|---|---:|---:|---|",
+    ]
     for row in result["meshes"]:
         t = row["timing"]
-        parts = [f"{k[:-3]} {t[k]:.2f} ms ({t[k[:-3] + '_vs_vertex']:.1f}x, {t[k[:-3] + '_vs_ssao']:.2f}x, "
-                 f"{t[k[:-3] + '_parity']:.1e})" for k in t if k.startswith("field") and k.endswith("_ms")]  # fmt: skip
-        lines.append(f"| {row['mesh']} | {t['vertex_colour_ms']:.2f} | {t['ssao_ms']:.2f} | {'; '.join(parts)} |")
+        parts = [
+            f"{k[:-3]} {t[k]:.2f} ms ({t[k[:-3] + '_vs_vertex']:.1f}x, {t[k[:-3] + '_vs_ssao']:.2f}x, "
+            f"{t[k[:-3] + '_parity']:.1e})"
+            for k in t
+            if k.startswith("field") and k.endswith("_ms")
+        ]
+        lines.append(
+            f"| {row['mesh']} | {t['vertex_colour_ms']:.2f} | {t['ssao_ms']:.2f} | {'; '.join(parts)} |"
+        )
     for mesh, sweep in result.get("octave_sweep", {}).items():
-        lines += ["", f"Octave sweep (field-64x32) on {mesh}: " +
-                  ", ".join(f"{k}: RMSE {v['rmse']:.4f} / SSIM {v['ssim']:.3f}" for k, v in sweep.items())]  # fmt: skip
+        lines += [
+            "",
+            f"Octave sweep (field-64x32) on {mesh}: "
+            + ", ".join(f"{k}: RMSE {v['rmse']:.4f} / SSIM {v['ssim']:.3f}" for k, v in sweep.items()),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -186,7 +238,9 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     result: dict = {"cpu": cpu_name(), "meshes": [], "octave_sweep": {}}
     for spec in args.meshes:
-        result["meshes"].append(bench_mesh(spec, args.sizes, args.bake_rays, args.timing_size, out / "field", args.repeats))
+        result["meshes"].append(
+            bench_mesh(spec, args.sizes, args.bake_rays, args.timing_size, out / "field", args.repeats)
+        )
         write_json(out / "field.json", result)
         write_text(out / "field.md", markdown(result))
     for mesh in args.octave_sweep:

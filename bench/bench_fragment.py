@@ -94,15 +94,21 @@ def main() -> None:
             rows[name]["uniform_vs_ssao"] = rows[name]["uniform_ms"] / ssao
             rows[name]["constant_vs_ssao"] = rows[name]["constant_ms"] / ssao
     result = {"cpu": cpu_name(), "size": args.size, "ssao_ms": ssao, "networks": rows}
-    lines = [f"# Fragment target: weights in uniform blocks vs shader constants ({result['cpu']}, llvmpipe)", "",
-             f"{args.size}x{args.size}, every pixel foreground, median of {args.repeats} frames, one run; SSAO "
-             f"{ssao:.2f} ms on a real bunny G-buffer in the same run.", "",
-             "| network | uniform ms (x SSAO) | constant ms (x SSAO) | speed-up | compile s uniform / constant | max abs diff |",
-             "|---|---:|---:|---:|---:|---:|"]  # fmt: skip
+    lines = [
+        f"# Fragment target: weights in uniform blocks vs shader constants ({result['cpu']}, llvmpipe)",
+        "",
+        f"{args.size}x{args.size}, every pixel foreground, median of {args.repeats} frames, one run; SSAO "
+        f"{ssao:.2f} ms on a real bunny G-buffer in the same run.",
+        "",
+        "| network | uniform ms (x SSAO) | constant ms (x SSAO) | speed-up | compile s uniform / constant | max abs diff |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
     for n, r in rows.items():
-        lines.append(f"| {n} | {r['uniform_ms']:.2f} ({r['uniform_vs_ssao']:.2f}) | {r['constant_ms']:.2f} "
-                     f"({r['constant_vs_ssao']:.2f}) | {r['speedup']:.2f} | {r['uniform_compile_s']:.2f} / "
-                     f"{r['constant_compile_s']:.2f} | {r['max_abs_diff']:.1e} |")  # fmt: skip
+        lines.append(
+            f"| {n} | {r['uniform_ms']:.2f} ({r['uniform_vs_ssao']:.2f}) | {r['constant_ms']:.2f} "
+            f"({r['constant_vs_ssao']:.2f}) | {r['speedup']:.2f} | {r['uniform_compile_s']:.2f} / "
+            f"{r['constant_compile_s']:.2f} | {r['max_abs_diff']:.1e} |"
+        )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "fragment.json", result)

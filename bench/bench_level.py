@@ -114,13 +114,22 @@ def main() -> int:
     trace = next(s for s in info["stages"] if s["stage"] == "trace")
     method = sum(s["seconds"] for s in info["stages"] if s["stage"] not in CHECK_STAGES)
     result = {
-        "preset": args.preset, "seed": args.seed, "overrides": args.set, "seconds_generate": t_gen,
-        "seconds_total": info["seconds_total"], "seconds_method": method, "paper_total_s": PAPER_TOTAL,
-        "ratio_total_vs_paper": info["seconds_total"] / PAPER_TOTAL, "stage_seconds": secs,
+        "preset": args.preset,
+        "seed": args.seed,
+        "overrides": args.set,
+        "seconds_generate": t_gen,
+        "seconds_total": info["seconds_total"],
+        "seconds_method": method,
+        "paper_total_s": PAPER_TOTAL,
+        "ratio_total_vs_paper": info["seconds_total"] / PAPER_TOTAL,
+        "stage_seconds": secs,
         "trace_mrays_per_s": trace["rays"] / trace["seconds"] / 1e6 if not trace["reused"] else None,
-        "load_before": load_before, "load_after": list(os.getloadavg()), "cpu_count": os.cpu_count(),
-        "paper_rows": [{"description": d, "seconds": s, "stages": k} for d, s, k in PAPER], "bake": info,
-    }  # fmt: skip
+        "load_before": load_before,
+        "load_after": list(os.getloadavg()),
+        "cpu_count": os.cpu_count(),
+        "paper_rows": [{"description": d, "seconds": s, "stages": k} for d, s, k in PAPER],
+        "bake": info,
+    }
     if result["trace_mrays_per_s"] is None:
         result["trace_mrays_per_s"] = float("nan")
     write_json(out / "bench_level.json", result)

@@ -102,10 +102,17 @@ def main(argv=None) -> int:
     lab = LevelLabeller(g.opaque, label_settings(s, g.opaque.diagonal))
     load_before = os.getloadavg()[0]
     t_trace, (ao, valid) = timed(lambda: lab.obscurance(samples.points, samples.normals, halves(s)), "trace")
-    result = {"level": {"preset": args.preset, "overrides": overrides, "vertices": len(g.receivers.vertices),
-                        "faces": len(g.receivers.faces), "samples": len(samples)},
-              "trace": {"seconds": t_trace, "rays_per_second": len(samples) * args.rays / t_trace},
-              "workers": s.workers}  # fmt: skip
+    result = {
+        "level": {
+            "preset": args.preset,
+            "overrides": overrides,
+            "vertices": len(g.receivers.vertices),
+            "faces": len(g.receivers.faces),
+            "samples": len(samples),
+        },
+        "trace": {"seconds": t_trace, "rays_per_second": len(samples) * args.rays / t_trace},
+        "workers": s.workers,
+    }
 
     # ---- solve
     solve = {}
@@ -118,10 +125,21 @@ def main(argv=None) -> int:
     for solver in ("amg", "components"):
         t, v = timed(lambda solver=solver: _try_fit(g, samples, ao, valid, s, solver), solver)
         e = np.abs(v.astype(np.float64) - ref) if v is not None else None
-        solve[solver] = {"seconds": t, "speedup": t_direct / t, "cpu_seconds": CPU[solver],
-                         "cpu_speedup": CPU["direct"] / CPU[solver],
-                         **({"max_abs": float(e.max()), "rmse": float(np.sqrt((e**2).mean())),
-                             "share_over_half_8bit": float((e > 0.5 / 255).mean())} if e is not None else {"failed": True})}  # fmt: skip
+        solve[solver] = {
+            "seconds": t,
+            "speedup": t_direct / t,
+            "cpu_seconds": CPU[solver],
+            "cpu_speedup": CPU["direct"] / CPU[solver],
+            **(
+                {
+                    "max_abs": float(e.max()),
+                    "rmse": float(np.sqrt((e**2).mean())),
+                    "share_over_half_8bit": float((e > 0.5 / 255).mean()),
+                }
+                if e is not None
+                else {"failed": True}
+            ),
+        }
     result["solve"] = solve
 
     # ---- LOD resampling (bake_lod's two resamplings)
@@ -143,16 +161,23 @@ def main(argv=None) -> int:
     bare, _ = timed(lambda: _bare_trace_seconds(lab, centers, radius, s.lod.rays), "bare")
     both = np.isfinite(got["fast"]) & np.isfinite(got["geometric"])
     result["resample"] = {
-        "points": len(centers), "rays": rays, "radius": radius,
-        "geometric_seconds": min(times["geometric"]), "fast_seconds": min(times["fast"]), "bare_trace_seconds": bare,
+        "points": len(centers),
+        "rays": rays,
+        "radius": radius,
+        "geometric_seconds": min(times["geometric"]),
+        "fast_seconds": min(times["fast"]),
+        "bare_trace_seconds": bare,
         "speedup": min(times["geometric"]) / min(times["fast"]),
-        "geometric_cpu_seconds": min(cpu["geometric"]), "fast_cpu_seconds": min(cpu["fast"]), "bare_trace_cpu_seconds": CPU["bare"],
+        "geometric_cpu_seconds": min(cpu["geometric"]),
+        "fast_cpu_seconds": min(cpu["fast"]),
+        "bare_trace_cpu_seconds": CPU["bare"],
         "cpu_speedup": min(cpu["geometric"]) / min(cpu["fast"]),
-        "geometric_rays_per_second": rays / min(times["geometric"]), "fast_rays_per_second": rays / min(times["fast"]),
+        "geometric_rays_per_second": rays / min(times["geometric"]),
+        "fast_rays_per_second": rays / min(times["fast"]),
         "bare_trace_rays_per_second": rays / bare,
         "same_misses": bool((np.isfinite(got["fast"]) == np.isfinite(got["geometric"])).all()),
         "max_abs_difference": float(np.abs(got["fast"][both] - got["geometric"][both]).max(initial=0.0)),
-    }  # fmt: skip
+    }
     result["load_average"] = [load_before, os.getloadavg()[0]]
     result["cpu_count"] = os.cpu_count()
     result["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
@@ -190,26 +215,35 @@ def _bare_trace_seconds(lab: LevelLabeller, centers, radius, rays) -> float:
 
 def markdown(r: dict) -> str:
     lv, rs, sv = r["level"], r["resample"], r["solve"]
-    lines = [f"Level: {lv['vertices']:,} V / {lv['faces']:,} F, {lv['samples']:,} samples; {r['workers']} tracing "
-             f"threads; load average {r['load_average'][0]:.1f} -> {r['load_average'][1]:.1f} on {r['cpu_count']} cores.", "",
-             f"| LOD resampling ({rs['points']:,} points x {rs['rays'] // rs['points']} rays) | wall s | CPU s | M rays per CPU s |",
-             "|---|---:|---:|---:|",
-             f"| geometric weighting (before) | {rs['geometric_seconds']:.2f} | {rs['geometric_cpu_seconds']:.2f} | {rs['rays'] / rs['geometric_cpu_seconds'] / 1e6:.2f} |",
-             f"| trace-speed weighting (now) | {rs['fast_seconds']:.2f} | {rs['fast_cpu_seconds']:.2f} | {rs['rays'] / rs['fast_cpu_seconds'] / 1e6:.2f} |",
-             f"| bare trace of the same rays | {rs['bare_trace_seconds']:.2f} | {rs['bare_trace_cpu_seconds']:.2f} | {rs['rays'] / rs['bare_trace_cpu_seconds'] / 1e6:.2f} |",
-             f"| **speedup (now / before)** | **{rs['speedup']:.2f}x** | **{rs['cpu_speedup']:.2f}x** | max abs difference {rs['max_abs_difference']:.1e} |", "",
-             "| least squares (receivers, 2 columns, incl. building the system) | wall s | CPU s | CPU speedup | max abs vs SuperLU | RMSE | share > half an 8-bit step |",
-             "|---|---:|---:|---:|---:|---:|---:|", f"| SuperLU (direct) | {sv['direct']['seconds']:.2f} | {sv['direct']['cpu_seconds']:.2f} | 1.00 | 0 | 0 | 0 |"]  # fmt: skip
-    for k, label in (("amg", "multigrid-preconditioned CG (pyamg, rtol 1e-10)"),
-                     ("components", "per connected component (SuperLU; multigrid CG from 100k vertices), in series")):  # fmt: skip
+    lines = [
+        f"Level: {lv['vertices']:,} V / {lv['faces']:,} F, {lv['samples']:,} samples; {r['workers']} tracing "
+        f"threads; load average {r['load_average'][0]:.1f} -> {r['load_average'][1]:.1f} on {r['cpu_count']} cores.",
+        "",
+        f"| LOD resampling ({rs['points']:,} points x {rs['rays'] // rs['points']} rays) | wall s | CPU s | M rays per CPU s |",
+        "|---|---:|---:|---:|",
+        f"| geometric weighting (before) | {rs['geometric_seconds']:.2f} | {rs['geometric_cpu_seconds']:.2f} | {rs['rays'] / rs['geometric_cpu_seconds'] / 1e6:.2f} |",
+        f"| trace-speed weighting (now) | {rs['fast_seconds']:.2f} | {rs['fast_cpu_seconds']:.2f} | {rs['rays'] / rs['fast_cpu_seconds'] / 1e6:.2f} |",
+        f"| bare trace of the same rays | {rs['bare_trace_seconds']:.2f} | {rs['bare_trace_cpu_seconds']:.2f} | {rs['rays'] / rs['bare_trace_cpu_seconds'] / 1e6:.2f} |",
+        f"| **speedup (now / before)** | **{rs['speedup']:.2f}x** | **{rs['cpu_speedup']:.2f}x** | max abs difference {rs['max_abs_difference']:.1e} |",
+        "",
+        "| least squares (receivers, 2 columns, incl. building the system) | wall s | CPU s | CPU speedup | max abs vs SuperLU | RMSE | share > half an 8-bit step |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+        f"| SuperLU (direct) | {sv['direct']['seconds']:.2f} | {sv['direct']['cpu_seconds']:.2f} | 1.00 | 0 | 0 | 0 |",
+    ]
+    for k, label in (
+        ("amg", "multigrid-preconditioned CG (pyamg, rtol 1e-10)"),
+        ("components", "per connected component (SuperLU; multigrid CG from 100k vertices), in series"),
+    ):
         v = sv[k]
         if v.get("failed"):
             lines.append(
                 f"| {label} | {v['seconds']:.2f} | {v['cpu_seconds']:.2f} | did not converge | | | |"
             )
         else:
-            lines.append(f"| {label} | {v['seconds']:.2f} | {v['cpu_seconds']:.2f} | {v['cpu_speedup']:.2f} | {v['max_abs']:.1e} | "
-                         f"{v['rmse']:.1e} | {v['share_over_half_8bit']:.1e} |")  # fmt: skip
+            lines.append(
+                f"| {label} | {v['seconds']:.2f} | {v['cpu_seconds']:.2f} | {v['cpu_speedup']:.2f} | {v['max_abs']:.1e} | "
+                f"{v['rmse']:.1e} | {v['share_over_half_8bit']:.1e} |"
+            )
     return "\n".join(lines) + "\n"
 
 

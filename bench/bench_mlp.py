@@ -75,8 +75,14 @@ def bench_mesh(mesh: str, base: MLPSettings, sizes: list[str], out: Path, ablati
     log = logging.getLogger("bench_mlp")
     t0 = time.perf_counter()
     samples = samples_from_mesh(mesh, base, progress=True)
-    log.info("%s: %d samples in %.1f s (+ %d held-back views in %.1f s)", mesh, samples.info["samples"],
-             samples.info["sampling_seconds"], len(samples.holdout), samples.info["holdout_seconds"])  # fmt: skip
+    log.info(
+        "%s: %d samples in %.1f s (+ %d held-back views in %.1f s)",
+        mesh,
+        samples.info["samples"],
+        samples.info["sampling_seconds"],
+        len(samples.holdout),
+        samples.info["holdout_seconds"],
+    )
     ceiling = noise_ceiling(mesh, samples.holdout, base.labels)
     row: dict = {
         "mesh": mesh,
@@ -95,8 +101,11 @@ def bench_mesh(mesh: str, base: MLPSettings, sizes: list[str], out: Path, ablati
         ckpt = train(settings, ckpt_path, samples=samples, progress=True)
         m = ckpt["metrics"]
         if k == 0:
-            row["constant"] = {"test_rmse": m["constant_test_rmse"], "holdout_ssim": m["holdout_constant_ssim"],
-                               "holdout_rmse": m["holdout_constant_rmse"]}  # fmt: skip
+            row["constant"] = {
+                "test_rmse": m["constant_test_rmse"],
+                "holdout_ssim": m["holdout_constant_ssim"],
+                "holdout_rmse": m["holdout_constant_rmse"],
+            }
         export_dir = out / "exports" / f"{mesh}-{size}"
         manifest = export_checkpoint(ckpt_path, export_dir)
         par = parity(export_dir, parity_frames, fp16=True, dialects=("glsl330",))
@@ -121,8 +130,16 @@ def bench_mesh(mesh: str, base: MLPSettings, sizes: list[str], out: Path, ablati
             "parity_passed": par["passed"],
             "glsl_dir": str(export_dir / "glsl"),
         }
-        log.info("%s %s: %.1f s, held-back SSIM %.4f (paper %s) RMSE %.4f, parity %.2g", mesh, size,
-                 ckpt["training_time_s"], m["holdout_ssim"], paper, m["holdout_rmse"], par["max_abs_err"])  # fmt: skip
+        log.info(
+            "%s %s: %.1f s, held-back SSIM %.4f (paper %s) RMSE %.4f, parity %.2g",
+            mesh,
+            size,
+            ckpt["training_time_s"],
+            m["holdout_ssim"],
+            paper,
+            m["holdout_rmse"],
+            par["max_abs_err"],
+        )
     if ablation:
         ckpt = train(
             replace(base, hidden=parse_size(sizes[0]), train_inputs="both"),
@@ -131,9 +148,14 @@ def bench_mesh(mesh: str, base: MLPSettings, sizes: list[str], out: Path, ablati
             progress=True,
         )
         m = ckpt["metrics"]
-        row["ablation_both"] = {"size": sizes[0], "training_seconds": ckpt["training_time_s"], "test_rmse": m["test_rmse"],
-                                "holdout_ssim": m["holdout_ssim"], "holdout_rmse": m["holdout_rmse"],
-                                "holdout_ssim_full": m["holdout_ssim_full"]}  # fmt: skip
+        row["ablation_both"] = {
+            "size": sizes[0],
+            "training_seconds": ckpt["training_time_s"],
+            "test_rmse": m["test_rmse"],
+            "holdout_ssim": m["holdout_ssim"],
+            "holdout_rmse": m["holdout_rmse"],
+            "holdout_ssim_full": m["holdout_ssim_full"],
+        }
     row["seconds"] = time.perf_counter() - t0
     return row
 
@@ -155,8 +177,9 @@ def shader_costs(rows: list[dict], sizes: list[str], side: int, repeats: int) ->
     return {"size": side, "repeats": repeats, "mlp_ms": mlp, "vertex_colour_ms": vc}
 
 
-def paper_protocol(rows: list[dict], sizes: list[str], views: int, size: tuple[int, int], labels: LabelSettings,
-                   repeats: int) -> dict:
+def paper_protocol(
+    rows: list[dict], sizes: list[str], views: int, size: tuple[int, int], labels: LabelSettings, repeats: int
+) -> dict:
     """Table 2 as the paper measures it: whole-image SSIM at ``size`` on orbit views, plus GL times vs SSAO."""
     from skimage.metrics import structural_similarity
 
@@ -177,13 +200,24 @@ def paper_protocol(rows: list[dict], sizes: list[str], views: int, size: tuple[i
         for f in frames:
             f["ao"], f["valid"] = labeller.label_frame(f)
             valid = f["valid"] & f["mask"]
-            preds = {sz: run_mlp_fragment(r["sizes"][sz]["glsl_dir"], f["normal_obj"], f["mask"]) for sz in sizes}
+            preds = {
+                sz: run_mlp_fragment(r["sizes"][sz]["glsl_dir"], f["normal_obj"], f["mask"]) for sz in sizes
+            }
             preds["ssao"] = run_screen_space(f, "ssao", labeller.max_distance)
             for key, raw in preds.items():
                 pred = np.where(f["mask"], np.clip(np.nan_to_num(raw, nan=1.0), 0, 1), 1.0)
-                per[key]["skimage"].append(float(structural_similarity(
-                    pred, f["ao"].astype(np.float64), data_range=1.0, gaussian_weights=True, sigma=SSIM_SIGMA,
-                    use_sample_covariance=False)))  # fmt: skip
+                per[key]["skimage"].append(
+                    float(
+                        structural_similarity(
+                            pred,
+                            f["ao"].astype(np.float64),
+                            data_range=1.0,
+                            gaussian_weights=True,
+                            sigma=SSIM_SIGMA,
+                            use_sample_covariance=False,
+                        )
+                    )
+                )
                 per[key]["ours"].append(image_ssim(pred, f["ao"]))
                 per[key]["masked"].append(masked_ssim(pred, f["ao"], valid))
         out["meshes"][r["mesh"]] = {k: {m: float(np.mean(v)) for m, v in d.items()} for k, d in per.items()}
@@ -193,10 +227,14 @@ def paper_protocol(rows: list[dict], sizes: list[str], views: int, size: tuple[i
     out["ssao_ms"] = 1e3 * time_screen_space(f, "ssao", radius, repeats=repeats)
     # the same real frame (background pixels exit early in both shaders), and every pixel foreground
     g = np.concatenate([f["normal_obj"], f["mask"][..., None].astype(np.float32)], axis=-1)
-    out["mlp_ms"] = {sz: 1e3 * time_vector_fragment(r0["sizes"][sz]["glsl_dir"], h, w, repeats=repeats,
-                                                     textures={"gbuffer": g}) for sz in sizes}  # fmt: skip
-    out["mlp_full_ms"] = {sz: 1e3 * time_mlp_fragment(r0["sizes"][sz]["glsl_dir"], h, w, repeats=repeats)
-                          for sz in sizes}  # fmt: skip
+    out["mlp_ms"] = {
+        sz: 1e3
+        * time_vector_fragment(r0["sizes"][sz]["glsl_dir"], h, w, repeats=repeats, textures={"gbuffer": g})
+        for sz in sizes
+    }
+    out["mlp_full_ms"] = {
+        sz: 1e3 * time_mlp_fragment(r0["sizes"][sz]["glsl_dir"], h, w, repeats=repeats) for sz in sizes
+    }
     out["timing_mesh"] = r0["mesh"]
     out["timing_foreground"] = float(f["mask"].mean())
     out["mlp_vs_ssao"] = {sz: v / out["ssao_ms"] for sz, v in out["mlp_ms"].items()}
@@ -205,22 +243,33 @@ def paper_protocol(rows: list[dict], sizes: list[str], views: int, size: tuple[i
 
 def paper_markdown(p: dict, sizes: list[str]) -> list[str]:
     w, h = p["size"]
-    lines = ["", f"## The paper's protocol: whole-image SSIM at {w}x{h}, {p['views']} orbit views per mesh", "",
-             "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, data "
-             "range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same images (edge "
-             "replicated, border kept); masked: foreground pixels only. SSAO on the same frames for scale.", "",
-             "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | masked SSIM |",
-             "|---|---:|---|---:|---:|---:|---:|"]  # fmt: skip
+    lines = [
+        "",
+        f"## The paper's protocol: whole-image SSIM at {w}x{h}, {p['views']} orbit views per mesh",
+        "",
+        "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, data "
+        "range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same images (edge "
+        "replicated, border kept); masked: foreground pixels only. SSAO on the same frames for scale.",
+        "",
+        "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | masked SSIM |",
+        "|---|---:|---|---:|---:|---:|---:|",
+    ]
     for mesh, d in p["meshes"].items():
         for key in [*sizes, "ssao"]:
             paper = PAPER_SSIM.get(mesh, (None,) * 3)[SIZES.index(key)] if key in SIZES else None
-            lines.append(f"| {mesh} | {d['foreground_fraction']:.2f} | {'mlp-' + key if key != 'ssao' else 'ssao'} | "
-                         f"{fmt(paper)} | {d[key]['skimage']:.4f} | {d[key]['ours']:.4f} | {d[key]['masked']:.4f} |")  # fmt: skip
-    lines += ["", f"GL time at {w}x{h} (llvmpipe, same run, both on the first view of {p.get('timing_mesh')}, "
-              f"{100 * p.get('timing_foreground', 0):.0f}% foreground): SSAO {p['ssao_ms']:.1f} ms; "
-              + ", ".join(f"mlp-{k} {v:.1f} ms = {p['mlp_vs_ssao'][k]:.2f}x SSAO" for k, v in p["mlp_ms"].items())
-              + " (the paper: NN-16x8 about 0.12x its SSAO on a GTX 1070). Every pixel foreground (worst case): "
-              + ", ".join(f"mlp-{k} {v:.1f} ms" for k, v in p.get("mlp_full_ms", {}).items()) + "."]  # fmt: skip
+            lines.append(
+                f"| {mesh} | {d['foreground_fraction']:.2f} | {'mlp-' + key if key != 'ssao' else 'ssao'} | "
+                f"{fmt(paper)} | {d[key]['skimage']:.4f} | {d[key]['ours']:.4f} | {d[key]['masked']:.4f} |"
+            )
+    lines += [
+        "",
+        f"GL time at {w}x{h} (llvmpipe, same run, both on the first view of {p.get('timing_mesh')}, "
+        f"{100 * p.get('timing_foreground', 0):.0f}% foreground): SSAO {p['ssao_ms']:.1f} ms; "
+        + ", ".join(f"mlp-{k} {v:.1f} ms = {p['mlp_vs_ssao'][k]:.2f}x SSAO" for k, v in p["mlp_ms"].items())
+        + " (the paper: NN-16x8 about 0.12x its SSAO on a GTX 1070). Every pixel foreground (worst case): "
+        + ", ".join(f"mlp-{k} {v:.1f} ms" for k, v in p.get("mlp_full_ms", {}).items())
+        + ".",
+    ]
     return lines
 
 
@@ -344,10 +393,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--timing-size", type=int, default=512, help="shader timing resolution (square)")
     p.add_argument("--repeats", type=int, default=20, help="timed frames per measurement")
     p.add_argument("--no-ablation", action="store_true", help="skip the train_inputs=both ablation")
-    p.add_argument("--paper-views", type=int, default=2, help="views per mesh of the paper's protocol (0: skip)")
+    p.add_argument(
+        "--paper-views", type=int, default=2, help="views per mesh of the paper's protocol (0: skip)"
+    )
     p.add_argument("--paper-size", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"))
-    p.add_argument("--paper-only", action="store_true",
-                   help="reuse OUT/mlp.json and its exports; rerun only the paper's protocol")  # fmt: skip
+    p.add_argument(
+        "--paper-only",
+        action="store_true",
+        help="reuse OUT/mlp.json and its exports; rerun only the paper's protocol",
+    )
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     out = Path(args.out)
@@ -364,8 +418,14 @@ def main(argv: list[str] | None = None) -> int:
         import json
 
         result = json.loads((out / "mlp.json").read_text())
-        result["paper_protocol"] = paper_protocol(result["meshes"], result["sizes"], args.paper_views,
-                                                  tuple(args.paper_size), base.labels, max(3, args.repeats // 4))  # fmt: skip
+        result["paper_protocol"] = paper_protocol(
+            result["meshes"],
+            result["sizes"],
+            args.paper_views,
+            tuple(args.paper_size),
+            base.labels,
+            max(3, args.repeats // 4),
+        )
         write_json(out / "mlp.json", result)
         write_text(out / "mlp.md", markdown(result))
         print(markdown(result))
@@ -383,8 +443,9 @@ def main(argv: list[str] | None = None) -> int:
         "paper_ssim": PAPER_SSIM,
     }
     if args.paper_views > 0:
-        result["paper_protocol"] = paper_protocol(rows, args.sizes, args.paper_views, tuple(args.paper_size),
-                                                  base.labels, max(3, args.repeats // 4))  # fmt: skip
+        result["paper_protocol"] = paper_protocol(
+            rows, args.sizes, args.paper_views, tuple(args.paper_size), base.labels, max(3, args.repeats // 4)
+        )
     result["seconds"] = time.perf_counter() - t0
     write_json(out / "mlp.json", result)
     write_text(out / "mlp.md", markdown(result))

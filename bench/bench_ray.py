@@ -74,10 +74,20 @@ def timed(fn) -> float:
 def dataset_settings(rays: int, views: int) -> DatasetSettings:
     from pipeline.foundation.settings import from_dict
 
-    return from_dict(DatasetSettings, {
-        "name": "bench-ray", "seed": 1, "size": [128, 128], "frames_per_shard": 1, "labels": {"rays": rays},
-        "scenes": [{"name": "spot", "mesh": "spot", "views": views}, {"name": "bunny", "mesh": "bunny", "views": views}],
-    })  # fmt: skip
+    return from_dict(
+        DatasetSettings,
+        {
+            "name": "bench-ray",
+            "seed": 1,
+            "size": [128, 128],
+            "frames_per_shard": 1,
+            "labels": {"rays": rays},
+            "scenes": [
+                {"name": "spot", "mesh": "spot", "views": views},
+                {"name": "bunny", "mesh": "bunny", "views": views},
+            ],
+        },
+    )
 
 
 def measure(args) -> dict:
@@ -91,8 +101,15 @@ def measure(args) -> dict:
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_ray_"))
     level, cfg = write_level(tmp / "level", settings_for("tiny", seed=2), "tiny")
-    level_s = load_level_settings(cfg, [f"trace.rays={args.rays}", f"trace.block_samples={args.level_block}",
-                                        "trace.samples_per_vertex=16", "trace.samples_per_face_cap=64"])  # fmt: skip
+    level_s = load_level_settings(
+        cfg,
+        [
+            f"trace.rays={args.rays}",
+            f"trace.block_samples={args.level_block}",
+            "trace.samples_per_vertex=16",
+            "trace.samples_per_face_cap=64",
+        ],
+    )
     reference: dict = {}
     runs: dict[str, list[float]] = {}
     samples = frames = level_samples = 0
@@ -107,8 +124,12 @@ def measure(args) -> dict:
     def run_dataset(engine, k):
         nonlocal frames
         out = Path(tempfile.mkdtemp(dir=tmp))
-        m = build_dataset(replace(ds, labels=replace(ds.labels, workers=k)), out, progress=False,
-                          engine=engine or LocalEngine())  # fmt: skip
+        m = build_dataset(
+            replace(ds, labels=replace(ds.labels, workers=k)),
+            out,
+            progress=False,
+            engine=engine or LocalEngine(),
+        )
         frames = m["frames"]
         reference.setdefault("dataset", m["dataset_hash"])
         assert m["dataset_hash"] == reference["dataset"], "dataset differs between engines"
@@ -161,21 +182,42 @@ def measure(args) -> dict:
         for k in (1, 2):
             local, remote = best[f"{name}/local/{k}"], best[f"{name}/ray/{k}"]
             warm = best.get(f"{name}/warm/{k}")
-            rows.append({"workload": name, "workers": k, "local_s": local, "ray_s": remote,
-                         "local_per_s": work[name] / local, "ray_per_s": work[name] / remote,
-                         "ray_over_local": local / remote, "warm_s": warm,
-                         "warm_over_local": local / warm if warm else None})  # fmt: skip
+            rows.append(
+                {
+                    "workload": name,
+                    "workers": k,
+                    "local_s": local,
+                    "ray_s": remote,
+                    "local_per_s": work[name] / local,
+                    "ray_per_s": work[name] / remote,
+                    "ray_over_local": local / remote,
+                    "warm_s": warm,
+                    "warm_over_local": local / warm if warm else None,
+                }
+            )
     # Cost of one ray on one core, from the local 1-worker bake (sampling and solve included: upper bound).
     c_ray = best["bake/local/1"] / (samples * args.rays)
     c_ray_level = best["level/local/1"] / (level_samples * args.rays)
     return {
-        "mesh": args.mesh, "rays": args.rays, "samples_per_vertex": args.samples_per_vertex,
+        "mesh": args.mesh,
+        "rays": args.rays,
+        "samples_per_vertex": args.samples_per_vertex,
         "dataset": {"scenes": 2, "views": args.views, "size": [128, 128], "rays": args.dataset_rays},
-        "repeats": args.repeats, "runs": runs, "rows": rows, "work": work,
-        "seconds_start_ray": t_start_ray, "t_task_s": t_task, "t_context_s": t_ctx, "payload_bytes": payload_bytes, "faces": faces,
-        "c_ray_bake_s": c_ray, "c_ray_level_s": c_ray_level,
-        "load_average_before": load_before, "load_average_after": load_after, "cpu_count": os.cpu_count(),
-    }  # fmt: skip
+        "repeats": args.repeats,
+        "runs": runs,
+        "rows": rows,
+        "work": work,
+        "seconds_start_ray": t_start_ray,
+        "t_task_s": t_task,
+        "t_context_s": t_ctx,
+        "payload_bytes": payload_bytes,
+        "faces": faces,
+        "c_ray_bake_s": c_ray,
+        "c_ray_level_s": c_ray_level,
+        "load_average_before": load_before,
+        "load_average_after": load_after,
+        "cpu_count": os.cpu_count(),
+    }
 
 
 # Stages (bench_level.json stage rows, or "stage:part" notes) whose work runs as engine tasks: their measured
@@ -230,11 +272,29 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
         # Task stages spread over every core, but never below their largest single task (the solve's
         # biggest connected component).
         spread = max(parallel / (n * cores) / efficiency, largest)
-        rows.append({"machines": n, "cores": n * cores, "tasks": tasks, "block_samples": block, "trace_s": trace_s,
-                     "overhead_s": overhead, "serial_s": serial, "task_stages_s": spread,
-                     "total_s": serial + spread + trace_s + overhead})  # fmt: skip
-    return {"rays": rays, "c_ray_s": c_ray, "efficiency": efficiency, "t_context_table1_s": t_ctx,
-            "cores_per_machine": cores, "serial_source": source, "rows": rows, "paper_trace_s": 35.1}  # fmt: skip
+        rows.append(
+            {
+                "machines": n,
+                "cores": n * cores,
+                "tasks": tasks,
+                "block_samples": block,
+                "trace_s": trace_s,
+                "overhead_s": overhead,
+                "serial_s": serial,
+                "task_stages_s": spread,
+                "total_s": serial + spread + trace_s + overhead,
+            }
+        )
+    return {
+        "rays": rays,
+        "c_ray_s": c_ray,
+        "efficiency": efficiency,
+        "t_context_table1_s": t_ctx,
+        "cores_per_machine": cores,
+        "serial_source": source,
+        "rows": rows,
+        "paper_trace_s": 35.1,
+    }
 
 
 def markdown(result: dict, proj: dict) -> str:
@@ -257,9 +317,11 @@ def markdown(result: dict, proj: dict) -> str:
     ]
     unit = {"bake": "samples", "dataset": "frames", "level": "samples (trace stage)"}
     for r in result["rows"]:
-        lines.append(f"| {r['workload']} ({unit[r['workload']]}) | {r['workers']} | {r['local_s']:.2f} | {r['ray_s']:.2f} | "
-                     f"{r['local_per_s']:,.0f} | {r['ray_per_s']:,.0f} | **{r['ray_over_local']:.2f}** | "
-                     + (f"{r['warm_s']:.2f} | **{r['warm_over_local']:.2f}** |" if r.get("warm_s") else "- | - |"))  # fmt: skip
+        lines.append(
+            f"| {r['workload']} ({unit[r['workload']]}) | {r['workers']} | {r['local_s']:.2f} | {r['ray_s']:.2f} | "
+            f"{r['local_per_s']:,.0f} | {r['ray_per_s']:,.0f} | **{r['ray_over_local']:.2f}** | "
+            + (f"{r['warm_s']:.2f} | **{r['warm_over_local']:.2f}** |" if r.get("warm_s") else "- | - |")
+        )
     lines += [
         "",
         f"Per task: empty round trip {result['t_task_s'] * 1e3:.2f} ms; first task of a new context "
@@ -281,8 +343,10 @@ def markdown(result: dict, proj: dict) -> str:
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in proj["rows"]:
-        lines.append(f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | {r['trace_s']:.1f} | {r['overhead_s']:.2f} | "
-                     f"{r['serial_s']:.1f} | {r['task_stages_s']:.1f} | {r['total_s']:.1f} |")  # fmt: skip
+        lines.append(
+            f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | {r['trace_s']:.1f} | {r['overhead_s']:.2f} | "
+            f"{r['serial_s']:.1f} | {r['task_stages_s']:.1f} | {r['total_s']:.1f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -304,8 +368,12 @@ def main() -> None:
     args = p.parse_args()
     out = Path(args.out)
     result = json.loads((out / "bench_ray.json").read_text()) if args.project_only else measure(args)
-    proj = projection(result, Path(args.level_json) if args.level_json else None, args.cores_per_machine,
-                      [1, 2, 4, 8, 16, 32])  # fmt: skip
+    proj = projection(
+        result,
+        Path(args.level_json) if args.level_json else None,
+        args.cores_per_machine,
+        [1, 2, 4, 8, 16, 32],
+    )
     result["projection"] = proj
     write_json(out / "bench_ray.json", result)
     text = markdown(result, proj)

@@ -128,16 +128,31 @@ def measure(args) -> dict:
         info = index["models"].get(internal.get(m, (m,))[0]) or index.get("baselines", {}).get(m, {})
         test = info.get("test", {})
         med = {s: float(np.median(v)) for s, v in times[m].items()}
-        rows[m] = {"ms": {s: 1e3 * v for s, v in med.items()}, "rounds": times[m],
-                   "test_ssim": test.get("ssim"), "test_rmse": test.get("rmse"),
-                   "scale": info.get("scale"), "widths": info.get("widths"), "init": info.get("init")}  # fmt: skip
+        rows[m] = {
+            "ms": {s: 1e3 * v for s, v in med.items()},
+            "rounds": times[m],
+            "test_ssim": test.get("ssim"),
+            "test_rmse": test.get("rmse"),
+            "scale": info.get("scale"),
+            "widths": info.get("widths"),
+            "init": info.get("init"),
+        }
     for row in rows.values():
         for ref in (default, "gtao"):
             if ref in rows:
                 row[f"over_{ref}"] = {s: row["ms"][s] / rows[ref]["ms"][s] for s in row["ms"]}
     foreground = {f"{w}x{h}": float(np.mean(frames[(w, h)]["mask"])) for w, h in args.sizes}
-    return {"foreground": foreground, "cpu": cpu_name(), "gl_renderer": gl.context().info.renderer, "models": str(models_dir), "default": default, "mesh": args.mesh,
-            "sizes": [f"{w}x{h}" for w, h in args.sizes], "rounds": args.rounds, "rows": rows}  # fmt: skip
+    return {
+        "foreground": foreground,
+        "cpu": cpu_name(),
+        "gl_renderer": gl.context().info.renderer,
+        "models": str(models_dir),
+        "default": default,
+        "mesh": args.mesh,
+        "sizes": [f"{w}x{h}" for w, h in args.sizes],
+        "rounds": args.rounds,
+        "rows": rows,
+    }
 
 
 def markdown(result: dict) -> str:
@@ -168,8 +183,10 @@ def markdown(result: dict) -> str:
             for s in sizes
         )
         widths = "/".join(str(w) for w in r["widths"]) if r.get("widths") else "-"
-        lines.append(f"| {m} | {f(r.get('scale'), 'd')} | {widths} | {f(r['test_ssim'], '.4f')} | "
-                     f"{f(r['test_rmse'], '.4f')} | {cells} |")  # fmt: skip
+        lines.append(
+            f"| {m} | {f(r.get('scale'), 'd')} | {widths} | {f(r['test_ssim'], '.4f')} | "
+            f"{f(r['test_rmse'], '.4f')} | {cells} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -184,8 +201,12 @@ def main() -> None:
     p.add_argument("--mesh", default="sponza_partial")
     p.add_argument("--seed", type=int, default=0, help="seed of the interior camera")
     p.add_argument("--only", nargs="+", help="time only these shipped models (default: all)")
-    p.add_argument("--internal-height", type=int, default=None,
-                   help="also time each model at this internal height (default: the height its manifest declares)")  # fmt: skip
+    p.add_argument(
+        "--internal-height",
+        type=int,
+        default=None,
+        help="also time each model at this internal height (default: the height its manifest declares)",
+    )
     args = p.parse_args()
     if min(args.rounds, args.repeats, args.large_repeats) < 1:
         p.error("--rounds, --repeats and --large-repeats must be at least 1")

@@ -60,10 +60,16 @@ def bench_mesh(name: str, resolutions: list[int], rays: int) -> list[dict]:
     for method in ("vertex", "least-squares"):
         r = bake(scene, replace(settings, method=method))
         pred8 = interpolate(scene, np.rint(r.ao * 255) / 255, held.face, held.bary)
-        rows.append({
-            "mesh": name, "method": f"{method} (8-bit)", "rmse": weighted_rmse(pred8, ref, ref_valid, held.weights),
-            "bytes": len(scene.vertices), "bytes_uv": 0, "seconds": r.info["seconds"],
-        })  # fmt: skip
+        rows.append(
+            {
+                "mesh": name,
+                "method": f"{method} (8-bit)",
+                "rmse": weighted_rmse(pred8, ref, ref_valid, held.weights),
+                "bytes": len(scene.vertices),
+                "bytes_uv": 0,
+                "seconds": r.info["seconds"],
+            }
+        )
     for n in resolutions:
         tset = TextureBakeSettings(resolution=n, rays=rays)
         mesh = load_uv_mesh(name, tset)
@@ -72,12 +78,18 @@ def bench_mesh(name: str, resolutions: list[int], rays: int) -> list[dict]:
         result = bake_texture(mesh, tset)
         img8 = quantise(result.ao)
         pred = sample_bilinear(img8 / 255.0, point_uvs(mesh, held.face, held.bary))
-        rows.append({
-            "mesh": name, "method": f"texture {n}x{n} ({mesh.uv_source} UVs)",
-            "rmse": weighted_rmse(pred, ref, ref_valid, held.weights), "bytes": png_bytes(img8),
-            "bytes_raw": n * n, "bytes_uv": 8 * len(mesh.vertices), "seconds": result.info["seconds"],
-            "coverage": result.info["coverage"],
-        })  # fmt: skip
+        rows.append(
+            {
+                "mesh": name,
+                "method": f"texture {n}x{n} ({mesh.uv_source} UVs)",
+                "rmse": weighted_rmse(pred, ref, ref_valid, held.weights),
+                "bytes": png_bytes(img8),
+                "bytes_raw": n * n,
+                "bytes_uv": 8 * len(mesh.vertices),
+                "seconds": result.info["seconds"],
+                "coverage": result.info["coverage"],
+            }
+        )
     return rows
 
 
@@ -90,18 +102,34 @@ def bench_corner(resolutions: list[int], rays: int) -> list[dict]:
     rows = []
     scene = mesh.scene()
     for method in ("vertex", "least-squares"):
-        r = bake(scene, BakeSettings(rays=rays, max_distance=R, method=method, samples_per_vertex=512,
-                                     samples_per_face_cap=2048))  # fmt: skip
+        r = bake(
+            scene,
+            BakeSettings(
+                rays=rays, max_distance=R, method=method, samples_per_vertex=512, samples_per_face_cap=2048
+            ),
+        )
         pred = np.einsum("kc,kc->k", bary, r.ao[mesh.faces[face]].astype(np.float64))
-        rows.append({"mesh": "floor+wall (closed form)", "method": method,
-                     "rmse": float(np.sqrt(np.mean((pred - expected)[ok] ** 2))), "bytes": len(scene.vertices)})  # fmt: skip
+        rows.append(
+            {
+                "mesh": "floor+wall (closed form)",
+                "method": method,
+                "rmse": float(np.sqrt(np.mean((pred - expected)[ok] ** 2))),
+                "bytes": len(scene.vertices),
+            }
+        )
     for n in resolutions:
         result = bake_texture(mesh, TextureBakeSettings(resolution=n, margin=2, rays=rays, max_distance=R))
         img8 = quantise(result.ao)
         pred = sample_bilinear(img8 / 255.0, point_uvs(mesh, face, bary))
-        rows.append({"mesh": "floor+wall (closed form)", "method": f"texture {n}x{n}",
-                     "rmse": float(np.sqrt(np.mean((pred - expected)[ok] ** 2))), "bytes": png_bytes(img8),
-                     "bytes_raw": n * n})  # fmt: skip
+        rows.append(
+            {
+                "mesh": "floor+wall (closed form)",
+                "method": f"texture {n}x{n}",
+                "rmse": float(np.sqrt(np.mean((pred - expected)[ok] ** 2))),
+                "bytes": png_bytes(img8),
+                "bytes_raw": n * n,
+            }
+        )
     return rows
 
 

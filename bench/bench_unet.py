@@ -168,7 +168,9 @@ def glsl_rounds(repeats: int, n: int) -> set[int]:
     return {int(round(v)) for v in np.linspace(0, repeats - 1, n)}
 
 
-def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, others: dict | None = None) -> dict:
+def time_size(
+    model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, others: dict | None = None
+) -> dict:
     """Interleaved rounds of torch / onnxruntime / GLSL on one input; medians, ratios, differences.
 
     others : {label: ComputeProgram} of the same graph generated with other conv blocks, timed in the
@@ -202,7 +204,10 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
 
     out_spec = program.manifest["outputs"][0]
     run = _ComputeRun(program, h, w, scalars={"radius": BENCH_RHO})
-    variants = {label: _ComputeRun(prog, h, w, scalars={"radius": BENCH_RHO}) for label, prog in (others or {}).items()}
+    variants = {
+        label: _ComputeRun(prog, h, w, scalars={"radius": BENCH_RHO})
+        for label, prog in (others or {}).items()
+    }
     x_gl = np.ascontiguousarray(x[None])
     glsl_out: dict[str, np.ndarray] = {}
 
@@ -250,10 +255,15 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
                 fns[name]()
                 times[name].append(time.perf_counter() - t0)
             log.info(
-                "%dx%d round %d/%d: torch %.0f ms, ort %.0f ms%s", w, h, r + 1, repeats,
-                1e3 * times["torch"][-1], 1e3 * times["onnxruntime"][-1],
+                "%dx%d round %d/%d: torch %.0f ms, ort %.0f ms%s",
+                w,
+                h,
+                r + 1,
+                repeats,
+                1e3 * times["torch"][-1],
+                1e3 * times["onnxruntime"][-1],
                 f", glsl {1e3 * times['glsl'][-1]['dispatch']:.0f} ms" if r in with_glsl else "",
-            )  # fmt: skip
+            )
     finally:
         run.release()
         for v in variants.values():
@@ -289,10 +299,15 @@ def time_size(model, ort, program, x: np.ndarray, repeats: int, glsl_n: int, oth
             "onnxruntime": [1e3 * t for t in times["onnxruntime"]],
             "glsl": [{k: 1e3 * v for k, v in t.items()} for t in times["glsl"]],
         },
-        "glsl_variants": {label: {"ms": 1e3 * med(times[label]), "ratio_ort": med(times[label]) / t_ort,
-                                  "speedup_of_default": med(times[label]) / g["dispatch"],
-                                  "max_abs_vs_ort": float(np.abs(glsl_out[label][:h, :w] - y_ort).max())}
-                          for label in variants},  # fmt: skip
+        "glsl_variants": {
+            label: {
+                "ms": 1e3 * med(times[label]),
+                "ratio_ort": med(times[label]) / t_ort,
+                "speedup_of_default": med(times[label]) / g["dispatch"],
+                "max_abs_vs_ort": float(np.abs(glsl_out[label][:h, :w] - y_ort).max()),
+            }
+            for label in variants
+        },
         "max_abs_glsl_vs_ort": float(np.abs(y_gl - y_ort).max()),
         "max_abs_ort_vs_torch": float(np.abs(y_ort - y_torch).max()),
     }
@@ -475,17 +490,21 @@ def markdown(result: dict) -> str:
             "Speed-up = that block's time / the default's. Compile = untimed first run(s) at the warm-up "
             "size(s), shader cache off.",
             "",
-            "| conv block | " + " | ".join(f"{r['size'][0]}x{r['size'][1]} ms (/ ORT)" for r in result["sizes"])
+            "| conv block | "
+            + " | ".join(f"{r['size'][0]}x{r['size'][1]} ms (/ ORT)" for r in result["sizes"])
             + " | speed-up of the default | compile s | max abs vs ORT |",
             "|---|" + "---|" * (len(result["sizes"]) + 3),
-            f"| **{default}** (default) | " + " | ".join(f"{r['glsl_ms']:.0f} ({r['ratio_glsl_ort']:.1f})" for r in result["sizes"])
+            f"| **{default}** (default) | "
+            + " | ".join(f"{r['glsl_ms']:.0f} ({r['ratio_glsl_ort']:.1f})" for r in result["sizes"])
             + f" | 1 | {result['glsl_warmup_s']:.1f} | {max(r['max_abs_glsl_vs_ort'] for r in result['sizes']):.1e} |",
         ]
         for label in labels:
             v = [r["glsl_variants"][label] for r in result["sizes"]]
             lines.append(
-                f"| {label} | " + " | ".join(f"{x['ms']:.0f} ({x['ratio_ort']:.1f})" for x in v)
-                + " | " + ", ".join(f"{x['speedup_of_default']:.1f}x" for x in v)
+                f"| {label} | "
+                + " | ".join(f"{x['ms']:.0f} ({x['ratio_ort']:.1f})" for x in v)
+                + " | "
+                + ", ".join(f"{x['speedup_of_default']:.1f}x" for x in v)
                 + f" | {result['glsl_variant_warmup_s'][label]:.1f} | {max(x['max_abs_vs_ort'] for x in v):.1e} |"
             )
     lines += [
@@ -555,11 +574,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train-views", type=int, default=32, help="orbit views per mesh of the tiny dataset")
     p.add_argument("--train-rays", type=int, default=64, help="AO rays per pixel of the tiny dataset")
     p.add_argument("--no-train", action="store_true", help="skip the training timing")
-    p.add_argument("--compare-blocks", nargs="*", type=parse_block, default=[(1, 1, 1), (4, 4, 1), (8, 4, 1)],
-                   metavar="X,Y,L",
-                   help="conv blocks (texels x, y, output layers per invocation) timed beside the default "
-                        f"{CONV_BLOCK} in the same rounds; the default list is the steps to it: one texel of "
-                        "one layer (before), 4x4 texels, 8x4 texels")  # fmt: skip
+    p.add_argument(
+        "--compare-blocks",
+        nargs="*",
+        type=parse_block,
+        default=[(1, 1, 1), (4, 4, 1), (8, 4, 1)],
+        metavar="X,Y,L",
+        help="conv blocks (texels x, y, output layers per invocation) timed beside the default "
+        f"{CONV_BLOCK} in the same rounds; the default list is the steps to it: one texel of "
+        "one layer (before), 4x4 texels, 8x4 texels",
+    )
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     if args.repeats < 1 or args.glsl_repeats_large < 1 or args.epochs < 1:
@@ -612,8 +636,13 @@ def run(args: argparse.Namespace) -> int:
         row["input"], row["foreground"] = input_source, fg
         rows.append(row)
         log.info(
-            "%dx%d: torch %.1f ms, ort %.1f ms, glsl %.0f ms", w, h, row["torch_ms"], row["onnxruntime_ms"], row["glsl_ms"]
-        )  # fmt: skip
+            "%dx%d: torch %.1f ms, ort %.1f ms, glsl %.0f ms",
+            w,
+            h,
+            row["torch_ms"],
+            row["onnxruntime_ms"],
+            row["glsl_ms"],
+        )
     t0 = time.perf_counter()
     training = training_cost(args, work)
     log.info("training timing: %.0f s", time.perf_counter() - t0)

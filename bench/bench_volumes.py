@@ -128,8 +128,17 @@ def _box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
 def synthetic_level(seed: int) -> Scene:
     """A composed room (floor y = 0, 4 walls, ceiling) with objects, split at x = 0 by a wall 0.1 thick
     with a 1.0 x 1.6 doorway at z in [-0.5, 0.5]."""
-    room = compose(ComposeSettings(seed=seed, objects=(8, 10), walls=(4, 4), ceiling=1.0, room=(5.0, 5.5),
-                                   height=(2.2, 2.4), size=(0.3, 1.0)))  # fmt: skip
+    room = compose(
+        ComposeSettings(
+            seed=seed,
+            objects=(8, 10),
+            walls=(4, 4),
+            ceiling=1.0,
+            room=(5.0, 5.5),
+            height=(2.2, 2.4),
+            size=(0.3, 1.0),
+        )
+    )
     (x0, y0, z0), (x1, y1, z1) = room.bounds
     parts = [(room.vertices, room.faces)]
     t = 0.05
@@ -172,8 +181,14 @@ def traced_ao(lab, vol: Volumes, points: np.ndarray, normals: np.ndarray, rays: 
     """Cosine-weighted obscurance at both half distances (labeller), blended like the models."""
     out = np.zeros(len(points))
     for k, half in enumerate(vol.half_distances):
-        lab.settings = LabelSettings(rays=rays, kernel="obscurance", max_distance_rel=vol.settings.max_distance_rel,
-                                     half_distance=half, backface_threshold=None, seed=11)  # fmt: skip
+        lab.settings = LabelSettings(
+            rays=rays,
+            kernel="obscurance",
+            max_distance_rel=vol.settings.max_distance_rel,
+            half_distance=half,
+            backface_threshold=None,
+            seed=11,
+        )
         out += (vol.blend if k else 1.0 - vol.blend) * lab.ao_at_points(points, normals)[0]
     return out
 
@@ -206,9 +221,8 @@ def level_accuracy(
         g = np.einsum("d,ndj->nj", w, own)[:, :count]
         floor[order] = float(np.sqrt(np.mean((np.clip(sh.evaluate(g, n), 0, 1) - ref) ** 2)))
     placeholder = [
-        m if m is not None else replace(extra["models_unregularised"][i])
-        for i, m in enumerate(extra["fits"])
-    ]  # fmt: skip
+        m if m is not None else replace(extra["models_unregularised"][i]) for i, m in enumerate(extra["fits"])
+    ]
     rows = []
     for grid, beta in [(1, b) for b in BETAS] + [(3, b) for b in BETAS[1:]]:
         reg, _ = regularise_models(
@@ -302,7 +316,7 @@ def path_study(vol: Volumes, lab, ref_rays: int, tau: float, unregularised: Volu
             "blend_parameters": steps(params),
             "unregularised_no_blend": steps(hard_raw),
             "unregularised_blend": steps(soft_raw),
-        },  # fmt: skip
+        },
         "unregularised_no_blend": hard_raw.tolist(),
         "rmse_no_blend_quadratic": float(np.sqrt(np.mean((quadratic - ref) ** 2))),
         "ref_rays": ref_rays,
@@ -372,39 +386,63 @@ def markdown(r: dict) -> str:
         "|---|---:|---:|---:|---:|",
     ]
     for row in r["ground_plane"]:
-        lines.append(f"| {row['z_over_h']} | {row['linear_max']:.4f} | {row['linear_rms']:.4f} | "
-                     f"{row['quadratic_max']:.4f} | {row['quadratic_rms']:.4f} |")  # fmt: skip
+        lines.append(
+            f"| {row['z_over_h']} | {row['linear_max']:.4f} | {row['linear_rms']:.4f} | "
+            f"{row['quadratic_max']:.4f} | {row['quadratic_rms']:.4f} |"
+        )
     lv = r["level"]
-    lines += ["", f"## Synthetic level {lv['scene']['name']}: {lv['regions']} regions, {lv['edges']} edges, "
-              f"{lv['probes']} probes vs {lv['ref_rays']}-ray traced AO (mean {lv['ao_mean']:.3f}, sd {lv['ao_std']:.3f})", ""]  # fmt: skip
-    lines += ["| agreement points | beta | RMSE quadratic | RMSE linear | jump centre (quad) | jump face (quad) | jump face (linear) |",
-              "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    lines += [
+        "",
+        f"## Synthetic level {lv['scene']['name']}: {lv['regions']} regions, {lv['edges']} edges, "
+        f"{lv['probes']} probes vs {lv['ref_rays']}-ray traced AO (mean {lv['ao_mean']:.3f}, sd {lv['ao_std']:.3f})",
+        "",
+    ]
+    lines += [
+        "| agreement points | beta | RMSE quadratic | RMSE linear | jump centre (quad) | jump face (quad) | jump face (linear) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for row in lv["betas"]:
         where = (
             "face centre"
             if row["boundary_grid"] == 1
             else f"{row['boundary_grid']}x{row['boundary_grid']} on the face"
         )
-        lines.append(f"| {where} | {row['beta']:g} | {row['rmse_quadratic']:.4f} | {row['rmse_linear']:.4f} | "
-                     f"{row['jump_centre_quadratic']:.4f} | {row['jump_face_quadratic']:.4f} | {row['jump_face_linear']:.4f} |")  # fmt: skip
+        lines.append(
+            f"| {where} | {row['beta']:g} | {row['rmse_quadratic']:.4f} | {row['rmse_linear']:.4f} | "
+            f"{row['jump_centre_quadratic']:.4f} | {row['jump_face_quadratic']:.4f} | {row['jump_face_linear']:.4f} |"
+        )
     f = lv["sh_at_probe_rmse"]
-    lines += ["", f"SH of each probe point itself (no spatial model): RMSE quadratic {f['quadratic']:.4f}, "
-              f"linear {f['linear']:.4f}.", ""]  # fmt: skip
+    lines += [
+        "",
+        f"SH of each probe point itself (no spatial model): RMSE quadratic {f['quadratic']:.4f}, "
+        f"linear {f['linear']:.4f}.",
+        "",
+    ]
     sec = lv["seconds"]
-    lines += [f"Bake: {lv['bake_seconds']:.1f} s total for {lv['regions']} regions ({lv['rays'] / 1e6:.1f} M rays): "
-              + ", ".join(f"{k} {v:.2f} s" for k, v in sec.items()) + "; per region "
-              + ", ".join(f"{k} {v:.0f} ms" for k, v in lv["per_region_ms"].items()) + ".",
-              "Bytes per region: " + ", ".join(f"{k} {v} B" for k, v in lv["bytes_per_region"].items()) + "."]  # fmt: skip
+    lines += [
+        f"Bake: {lv['bake_seconds']:.1f} s total for {lv['regions']} regions ({lv['rays'] / 1e6:.1f} M rays): "
+        + ", ".join(f"{k} {v:.2f} s" for k, v in sec.items())
+        + "; per region "
+        + ", ".join(f"{k} {v:.0f} ms" for k, v in lv["per_region_ms"].items())
+        + ".",
+        "Bytes per region: " + ", ".join(f"{k} {v} B" for k, v in lv["bytes_per_region"].items()) + ".",
+    ]
     p = r["path"]
     st = p["steps"]
-    lines += ["", "Largest frame-to-frame AO change along the path, at region switches / elsewhere: "
-              + "; ".join(f"{k} {v['at_switches']:.4f} / {v['elsewhere']:.4f}" for k, v in st.items())
-              + f". RMSE vs traced, quadratic SH without blending: {p['rmse_no_blend_quadratic']:.4f}."]  # fmt: skip
-    lines += ["", f"Path: {len(p['x'])} frames, {p['switches']} region switches; largest frame-to-frame AO step "
-              f"{p['max_step_no_blend']:.4f} without blending, {p['max_step_blend']:.4f} with tau = {p['tau']} s; "
-              f"RMSE vs traced {p['rmse_no_blend']:.4f} / {p['rmse_blend']:.4f}; blending the packed numbers "
-              f"(centre included) instead: step {p['max_step_blend_parameters']:.4f}, dips up to "
-              f"{p['overshoot_parameters']:.4f} below both models."]  # fmt: skip
+    lines += [
+        "",
+        "Largest frame-to-frame AO change along the path, at region switches / elsewhere: "
+        + "; ".join(f"{k} {v['at_switches']:.4f} / {v['elsewhere']:.4f}" for k, v in st.items())
+        + f". RMSE vs traced, quadratic SH without blending: {p['rmse_no_blend_quadratic']:.4f}.",
+    ]
+    lines += [
+        "",
+        f"Path: {len(p['x'])} frames, {p['switches']} region switches; largest frame-to-frame AO step "
+        f"{p['max_step_no_blend']:.4f} without blending, {p['max_step_blend']:.4f} with tau = {p['tau']} s; "
+        f"RMSE vs traced {p['rmse_no_blend']:.4f} / {p['rmse_blend']:.4f}; blending the packed numbers "
+        f"(centre included) instead: step {p['max_step_blend_parameters']:.4f}, dips up to "
+        f"{p['overshoot_parameters']:.4f} below both models.",
+    ]
     return "\n".join(lines) + "\n"
 
 

@@ -65,9 +65,16 @@ def main(argv: list[str] | None = None) -> int:
         got_w = run_wgsl(wgsl, x, scalars=scalars)
         seconds = time.perf_counter() - t0
         got_g = run_compute(generate_compute(model), x, scalars=scalars)
-        rows.append({"model": name, "default": name == default, "passes": len(wgsl.manifest["passes"]),
-                     "wgsl_max_abs_err": float(np.abs(got_w - ref).max()),
-                     "glsl_max_abs_err": float(np.abs(got_g - ref).max()), "wgsl_compile_and_run_s": seconds})  # fmt: skip
+        rows.append(
+            {
+                "model": name,
+                "default": name == default,
+                "passes": len(wgsl.manifest["passes"]),
+                "wgsl_max_abs_err": float(np.abs(got_w - ref).max()),
+                "glsl_max_abs_err": float(np.abs(got_g - ref).max()),
+                "wgsl_compile_and_run_s": seconds,
+            }
+        )
         log.info("%s: WGSL %.2g, GLSL %.2g", name, rows[-1]["wgsl_max_abs_err"], rows[-1]["glsl_max_abs_err"])
     model = onnx.load(MODELS_DIR / default / "model.onnx")
     n = args.time_size
@@ -80,8 +87,14 @@ def main(argv: list[str] | None = None) -> int:
         "glsl_llvmpipe_s": gl_s,
         "wgsl_lavapipe_s": wgsl_s,
     }
-    result = {"date": time.strftime("%Y-%m-%d"), "cpu": cpu_name(), "adapter": adapter_info(), "parity_size": args.size,
-              "parity": rows, "timing": timing}  # fmt: skip
+    result = {
+        "date": time.strftime("%Y-%m-%d"),
+        "cpu": cpu_name(),
+        "adapter": adapter_info(),
+        "parity_size": args.size,
+        "parity": rows,
+        "timing": timing,
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     write_json(args.out / "wgsl.json", result)
     lines = ["| model | passes | WGSL vs onnxruntime | GLSL vs onnxruntime |", "|---|---|---|---|"]
@@ -90,8 +103,11 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(
             f"| {name} | {r['passes']} | {r['wgsl_max_abs_err']:.1e} | {r['glsl_max_abs_err']:.1e} |"
         )
-    lines += ["", f"{default} at {n}x{n}: GLSL on llvmpipe {gl_s * 1e3:.0f} ms, WGSL on lavapipe {wgsl_s * 1e3:.0f} ms "
-              f"(median of {args.repeats}; {result['cpu']}; {result['adapter']['description']})"]  # fmt: skip
+    lines += [
+        "",
+        f"{default} at {n}x{n}: GLSL on llvmpipe {gl_s * 1e3:.0f} ms, WGSL on lavapipe {wgsl_s * 1e3:.0f} ms "
+        f"(median of {args.repeats}; {result['cpu']}; {result['adapter']['description']})",
+    ]
     write_text(args.out / "wgsl.md", "\n".join(lines) + "\n")
     log.info("\n".join(lines))
     return 0

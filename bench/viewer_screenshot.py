@@ -34,8 +34,14 @@ def screenshot(page: Path, out: Path, pose: tuple[float, float, float]) -> Path:
         raise SystemExit("viewer_screenshot: needs chromium and chromium-driver (make system-deps)")
     opts = webdriver.ChromeOptions()
     opts.binary_location = chromium
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
-              "--enable-unsafe-swiftshader", "--window-size=700,600"):  # fmt: skip
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--window-size=700,600",
+    ):
         opts.add_argument(a)
     driver = webdriver.Chrome(service=Service(driver_bin), options=opts)
     try:

@@ -71,9 +71,11 @@ def bindings():
 def encoding_description(model: FieldNet) -> str:
     if model.octaves == 0:
         return "none: features = [q, normal], q = (position - centre) * inv_half"
-    return (f"axis-aligned positional encoding, {model.octaves} octaves: q = (position - centre) * inv_half, "
-            f"z[3k+a] = q[a] * pi * 2^k (k < {model.octaves}), features = [q, normal, sin(z), cos(z)] "
-            f"({model.features} floats)")  # fmt: skip
+    return (
+        f"axis-aligned positional encoding, {model.octaves} octaves: q = (position - centre) * inv_half, "
+        f"z[3k+a] = q[a] * pi * 2^k (k < {model.octaves}), features = [q, normal, sin(z), cos(z)] "
+        f"({model.features} floats)"
+    )
 
 
 def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
@@ -100,7 +102,7 @@ def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
         "measured_error": {
             k: metrics.get(k)
             for k in ("val_rmse", "constant_val_rmse", "holdout_ssim", "holdout_rmse", "holdout_frames")
-        },  # fmt: skip
+        },
         "measured_error_note": "val: surface samples held out; holdout_*: held-back orbit views, clamped, "
         "masked SSIM (Gaussian 11, sigma 1.5) and RMSE over valid foreground pixels",
     }
@@ -111,10 +113,17 @@ def onnx_bytes(model: FieldNet) -> bytes:
     buf = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, (torch.zeros(2, 3), torch.zeros(2, 3)), buf, dynamo=False, opset_version=OPSET,
-                          input_names=[POSITION, NORMAL], output_names=[OUTPUT],
-                          dynamic_axes={POSITION: {0: "N"}, NORMAL: {0: "N"}, OUTPUT: {0: "N"}},
-                          do_constant_folding=True)  # fmt: skip
+        torch.onnx.export(
+            model,
+            (torch.zeros(2, 3), torch.zeros(2, 3)),
+            buf,
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=[POSITION, NORMAL],
+            output_names=[OUTPUT],
+            dynamic_axes={POSITION: {0: "N"}, NORMAL: {0: "N"}, OUTPUT: {0: "N"}},
+            do_constant_folding=True,
+        )
     return buf.getvalue()
 
 
@@ -145,10 +154,14 @@ def check_backends(model: FieldNet, onnx_path: Path, seed: int = 0) -> dict:
     tol = TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path))
     if worst > tol:
         raise NeuralaoError(f"onnxruntime differs from torch by {worst:.3g} > {tol:.3g}")
-    return {"inputs": "positions in the bounding box grown by 10%, random unit normals", "checks": rows,
-            "onnxruntime_vs_torch": worst, "tolerance": {"onnxruntime_vs_torch": tol},
-            "opencv": "not checked: OpenCV dnn is the MLP's second consumer; the field's Sin/Cos graph is "
-                      "checked against torch and the generated GLSL"}  # fmt: skip
+    return {
+        "inputs": "positions in the bounding box grown by 10%, random unit normals",
+        "checks": rows,
+        "onnxruntime_vs_torch": worst,
+        "tolerance": {"onnxruntime_vs_torch": tol},
+        "opencv": "not checked: OpenCV dnn is the MLP's second consumer; the field's Sin/Cos graph is "
+        "checked against torch and the generated GLSL",
+    }
 
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, description: str) -> dict:
@@ -173,22 +186,48 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     proto = onnx.load_from_string(onnx_bytes(model))
     save_onnx(proto, onnx_path, metadata)
     checks = check_backends(model, onnx_path)
-    glsl_manifest = write_glsl(proto, out_dir / GLSL_DIR,
-                               f"neuralao AO field {size_name(model.hidden)} of {Path(str(ckpt.get('mesh') or '')).name}: "
-                               f"{encoding_description(model)}")  # fmt: skip
-    summary = {"format": glsl_manifest.get("format"), "dialects": sorted(glsl_manifest.get("dialects", {})),
-               "uniform_bytes": glsl_manifest.get("uniform_bytes")}  # fmt: skip
+    glsl_manifest = write_glsl(
+        proto,
+        out_dir / GLSL_DIR,
+        f"neuralao AO field {size_name(model.hidden)} of {Path(str(ckpt.get('mesh') or '')).name}: "
+        f"{encoding_description(model)}",
+    )
+    summary = {
+        "format": glsl_manifest.get("format"),
+        "dialects": sorted(glsl_manifest.get("dialects", {})),
+        "uniform_bytes": glsl_manifest.get("uniform_bytes"),
+    }
     manifest = per_mesh_manifest(
-        "field", out_dir, ckpt_path, ckpt, proto, GLSL_DIR, summary, ckpt.get("metrics", {}), t0,
-        inputs=[{"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
-                {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"}],
+        "field",
+        out_dir,
+        ckpt_path,
+        ckpt,
+        proto,
+        GLSL_DIR,
+        summary,
+        ckpt.get("metrics", {}),
+        t0,
+        inputs=[
+            {"name": POSITION, "shape": ["N", 3], "dtype": "float32", "texture": "position"},
+            {"name": NORMAL, "shape": ["N", 3], "dtype": "float32", "texture": "normal"},
+        ],
         output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": metadata["output"]},
-        metadata=metadata, encoding=metadata["encoding"], octaves=model.octaves, model_size=size_name(model.hidden),
-        parameters=count_parameters(model), parameter_bytes=parameter_bytes(model), checks=checks,
-    )  # fmt: skip
+        metadata=metadata,
+        encoding=metadata["encoding"],
+        octaves=model.octaves,
+        model_size=size_name(model.hidden),
+        parameters=count_parameters(model),
+        parameter_bytes=parameter_bytes(model),
+        checks=checks,
+    )
     write_json(out_dir / "manifest.json", manifest)
-    log.info("exported %s: field %s, %d bytes, ort-vs-torch %.2g", out_dir, manifest["model_size"],
-             manifest["parameter_bytes"], checks["onnxruntime_vs_torch"])  # fmt: skip
+    log.info(
+        "exported %s: field %s, %d bytes, ort-vs-torch %.2g",
+        out_dir,
+        manifest["model_size"],
+        manifest["parameter_bytes"],
+        checks["onnxruntime_vs_torch"],
+    )
     return manifest
 
 
@@ -198,8 +237,10 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 def gbuffer_textures(frame: dict) -> dict[str, np.ndarray]:
     """The shader's two RGBA32F inputs from a frame: position + mask, normal + 0."""
     p, n, mask = frame_inputs(frame)
-    return {"position": np.concatenate([p, mask[..., None].astype(np.float32)], axis=-1),
-            "normal": np.concatenate([n, np.zeros_like(n[..., :1])], axis=-1)}  # fmt: skip
+    return {
+        "position": np.concatenate([p, mask[..., None].astype(np.float32)], axis=-1),
+        "normal": np.concatenate([n, np.zeros_like(n[..., :1])], axis=-1),
+    }
 
 
 # ----------------------------------------------------------------------------------------------- parity
@@ -238,15 +279,29 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
         tex = gbuffer_textures(frame)
         for d in dialects:
             out = run_vector_fragment(shaders[d], tex, dialect=d)
-            rows.append({"frame": i, "dialect": d, "size": [int(mask.shape[1]), int(mask.shape[0])],
-                         "foreground_pixels": int(mask.sum()),
-                         "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
-                         "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0})  # fmt: skip
+            rows.append(
+                {
+                    "frame": i,
+                    "dialect": d,
+                    "size": [int(mask.shape[1]), int(mask.shape[0])],
+                    "foreground_pixels": int(mask.sum()),
+                    "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
+                    "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0,
+                }
+            )
     if not rows:
         raise NeuralaoError("parity: no frame with foreground pixels to check")
     err = max(r["max_abs_err"] for r in rows)
     bg = max(r["background_max_abs_err"] for r in rows)
-    return {"kind": "field", "model_size": manifest.get("model_size"), "frames": len(frames), "frame_source": source,
-            "max_abs_err": err, **{f"max_abs_err_{d}": max(r["max_abs_err"] for r in rows if r["dialect"] == d) for d in dialects},
-            "background_max_abs_err": bg, "tolerance": TOL.parity_mlp_fp32,
-            "passed": bool(err <= TOL.parity_mlp_fp32 and bg == 0.0), "checks": rows}  # fmt: skip
+    return {
+        "kind": "field",
+        "model_size": manifest.get("model_size"),
+        "frames": len(frames),
+        "frame_source": source,
+        "max_abs_err": err,
+        **{f"max_abs_err_{d}": max(r["max_abs_err"] for r in rows if r["dialect"] == d) for d in dialects},
+        "background_max_abs_err": bg,
+        "tolerance": TOL.parity_mlp_fp32,
+        "passed": bool(err <= TOL.parity_mlp_fp32 and bg == 0.0),
+        "checks": rows,
+    }

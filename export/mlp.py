@@ -196,8 +196,13 @@ def check_backends(model: BakedMLP, onnx_path: str | Path, seed: int = 0) -> dic
                     "opencv_vs_onnxruntime": float(np.abs(y_cv.reshape(-1) - y_ort[:, 0]).max()),
                 }
             )
-    return backend_checks(rows, ref_max, onnx_path, checks=rows,
-                          inputs="random unit normals (16 independent per row, and radius-zero rows)")  # fmt: skip
+    return backend_checks(
+        rows,
+        ref_max,
+        onnx_path,
+        checks=rows,
+        inputs="random unit normals (16 independent per row, and radius-zero rows)",
+    )
 
 
 # ----------------------------------------------------------------------------------------------- export
@@ -235,12 +240,23 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     }
     metrics = {k: v for k, v in ckpt.get("metrics", {}).items() if k != "holdout_per_view"}
     manifest = per_mesh_manifest(
-        "mlp", out_dir, ckpt_path, ckpt, proto, GLSL_DIR, summary, metrics, t0,
+        "mlp",
+        out_dir,
+        ckpt_path,
+        ckpt,
+        proto,
+        GLSL_DIR,
+        summary,
+        metrics,
+        t0,
         input={"name": INPUT, "shape": ["N", INPUTS], "dtype": "float32", "semantics": INPUT_DESCRIPTION},
         output={"name": OUTPUT, "shape": ["N", 1], "dtype": "float32", "semantics": OUTPUT_DESCRIPTION},
-        metadata=metadata, model_size=size_name(model.hidden), parameters=count_parameters(model),
-        parameter_bytes=parameter_bytes(model), checks=checks,
-    )  # fmt: skip
+        metadata=metadata,
+        model_size=size_name(model.hidden),
+        parameters=count_parameters(model),
+        parameter_bytes=parameter_bytes(model),
+        checks=checks,
+    )
     write_json(out_dir / "manifest.json", manifest)
     log.info(
         "exported %s: %s, %d parameters, ort-vs-torch %.2g, opencv-vs-ort %.2g",

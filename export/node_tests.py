@@ -50,8 +50,14 @@ def node_cases(ops: tuple[str, ...]) -> list[Any]:
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")
         cases = node.collect_testcases(None)
-    return [c for c in cases if not c.name.endswith("_expanded") and "_expanded_" not in c.name
-            and len(c.model.graph.node) == 1 and c.model.graph.node[0].op_type in ops]  # fmt: skip
+    return [
+        c
+        for c in cases
+        if not c.name.endswith("_expanded")
+        and "_expanded_" not in c.name
+        and len(c.model.graph.node) == 1
+        and c.model.graph.node[0].op_type in ops
+    ]
 
 
 def _with_initializers(model: onnx.ModelProto, inputs: list[np.ndarray]) -> onnx.ModelProto:
@@ -90,14 +96,29 @@ def run_case(case: Any, dialect: str = "glsl430") -> NodeResult:
     names = [vi.name for vi in case.model.graph.output]
     why = _compare(case, got, dict(zip(names, expected, strict=False)))
     if why is None:
-        return NodeResult(case.name, op, "passed", max_abs_err=_max_err(got, dict(zip(names, expected, strict=False))))
+        return NodeResult(
+            case.name, op, "passed", max_abs_err=_max_err(got, dict(zip(names, expected, strict=False)))
+        )
     from export.onnx_io import run_onnxruntime
 
-    ort = dict(zip(names, run_onnxruntime(model.SerializeToString(), {model.graph.input[0].name: inputs[0]}),
-                   strict=False))  # fmt: skip
-    if _compare(case, ort, dict(zip(names, expected, strict=False))) is not None and _compare(case, got, ort) is None:
-        return NodeResult(case.name, op, "matches_onnxruntime", f"onnxruntime misses the expected output too; {why}",
-                          _max_err(got, ort))  # fmt: skip
+    ort = dict(
+        zip(
+            names,
+            run_onnxruntime(model.SerializeToString(), {model.graph.input[0].name: inputs[0]}),
+            strict=False,
+        )
+    )
+    if (
+        _compare(case, ort, dict(zip(names, expected, strict=False))) is not None
+        and _compare(case, got, ort) is None
+    ):
+        return NodeResult(
+            case.name,
+            op,
+            "matches_onnxruntime",
+            f"onnxruntime misses the expected output too; {why}",
+            _max_err(got, ort),
+        )
     return NodeResult(case.name, op, "wrong", why)
 
 
@@ -114,8 +135,13 @@ def _compare(case: Any, got: dict, want: dict) -> str | None:
 
 
 def _max_err(got: dict, want: dict) -> float:
-    return max((float(np.nanmax(np.abs(np.asarray(got[n], np.float64) - np.asarray(w)), initial=0.0))
-                for n, w in want.items()), default=0.0)  # fmt: skip
+    return max(
+        (
+            float(np.nanmax(np.abs(np.asarray(got[n], np.float64) - np.asarray(w)), initial=0.0))
+            for n, w in want.items()
+        ),
+        default=0.0,
+    )
 
 
 def run_node_tests(ops: tuple[str, ...], dialect: str = "glsl430") -> list[NodeResult]:

@@ -56,7 +56,9 @@ KIND = "onnx-glsl"
 GLSL_DIR = "glsl"
 TARGETS = ("image", "vector", "wgsl")
 SHADER_DIRS = {"image": GLSL_DIR, "vector": GLSL_DIR, "wgsl": "wgsl"}
-_BIND = re.compile(r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<channels>[xyzw]{1,4})(x(?P<rep>\d+))?$")
+_BIND = re.compile(
+    r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<channels>[xyzw]{1,4})(x(?P<rep>\d+))?$"
+)
 
 
 def parse_bindings(texts: list[str]):
@@ -67,7 +69,9 @@ def parse_bindings(texts: list[str]):
     for t in texts:
         m = _BIND.match(t)
         if not m:
-            raise NeuralaoError(f"--bind {t!r}: expected INPUT=TEXTURE.CHANNELS[xREPEATS], e.g. normal=gbuffer.xyz")
+            raise NeuralaoError(
+                f"--bind {t!r}: expected INPUT=TEXTURE.CHANNELS[xREPEATS], e.g. normal=gbuffer.xyz"
+            )
         if m["input"] in out:
             raise NeuralaoError(f"--bind: input {m['input']!r} bound twice")
         out[m["input"]] = InputBinding(m["texture"], m["channels"], int(m["rep"] or 1))
@@ -76,9 +80,14 @@ def parse_bindings(texts: list[str]):
 
 def _input_dims(proto: onnx.ModelProto) -> dict[str, list]:
     init = {t.name for t in proto.graph.initializer}
-    return {vi.name: [d.dim_value if d.HasField("dim_value") else (d.dim_param or None)
-                      for d in vi.type.tensor_type.shape.dim]
-            for vi in proto.graph.input if vi.name not in init}  # fmt: skip
+    return {
+        vi.name: [
+            d.dim_value if d.HasField("dim_value") else (d.dim_param or None)
+            for d in vi.type.tensor_type.shape.dim
+        ]
+        for vi in proto.graph.input
+        if vi.name not in init
+    }
 
 
 def default_bindings(proto: onnx.ModelProto, given: dict):
@@ -100,10 +109,14 @@ def default_bindings(proto: onnx.ModelProto, given: dict):
             continue
         width = dims[-1] if dims else None
         if len(dims) != 2 or not isinstance(width, int) or not 1 <= width <= 4:
-            raise NeuralaoError(f"input {name!r} of shape {dims} needs --bind {name}=TEXTURE.CHANNELS[xREPEATS]")
+            raise NeuralaoError(
+                f"input {name!r} of shape {dims} needs --bind {name}=TEXTURE.CHANNELS[xREPEATS]"
+            )
         if name in bound:
-            raise NeuralaoError(f"input {name!r} would read the texture of its own name, which --bind gives to "
-                                f"{bound[name]!r}; bind {name!r} too (--bind {name}=TEXTURE.CHANNELS)")  # fmt: skip
+            raise NeuralaoError(
+                f"input {name!r} would read the texture of its own name, which --bind gives to "
+                f"{bound[name]!r}; bind {name!r} too (--bind {name}=TEXTURE.CHANNELS)"
+            )
         out[name] = InputBinding(name, "xyzw"[:width])
     return out
 
@@ -112,8 +125,10 @@ def _refuse_image_model(proto: onnx.ModelProto) -> None:
     """The vector target takes (N, k) inputs: an (N, C, H, W) input means an image model."""
     for name, dims in _input_dims(proto).items():
         if len(dims) == 4:
-            raise NeuralaoError(f"input {name!r} of shape {dims} is an image (N, C, H, W): this is an image "
-                                "model, use --target image (--target vector takes per-pixel (N, k) inputs)")  # fmt: skip
+            raise NeuralaoError(
+                f"input {name!r} of shape {dims} is an image (N, C, H, W): this is an image "
+                "model, use --target image (--target vector takes per-pixel (N, k) inputs)"
+            )
 
 
 def _check_out_dir(out_dir: Path) -> None:
@@ -126,8 +141,15 @@ def _check_out_dir(out_dir: Path) -> None:
             return
 
 
-def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind: list[str] | None = None,
-                 dialects: list[str] | None = None, hlsl_msl: bool = False) -> dict:  # fmt: skip
+def export_model(
+    onnx_path,
+    target: str,
+    out_dir,
+    precision: str = "fp32",
+    bind: list[str] | None = None,
+    dialects: list[str] | None = None,
+    hlsl_msl: bool = False,
+) -> dict:
     """Generate and write the export of a user's ONNX file; returns its manifest. ``hlsl_msl`` (image
     target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross)."""
     from export.glsl import (
@@ -169,11 +191,14 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         _refuse_image_model(proto)
         bindings = default_bindings(proto, given)
         # the file name stays out of the shader (it is the manifest's "source"), as the input names do
-        shader = generate_vector_fragment(proto, bindings, kind="onnx",
-                                          description="neuralao GLSL of a user's ONNX model (vector target)")  # fmt: skip
+        shader = generate_vector_fragment(
+            proto, bindings, kind="onnx", description="neuralao GLSL of a user's ONNX model (vector target)"
+        )
         if dialects:
             shader.sources = {k: v for k, v in shader.sources.items() if k in dialects}
-            shader.manifest["dialects"] = {k: v for k, v in shader.manifest["dialects"].items() if k in dialects}
+            shader.manifest["dialects"] = {
+                k: v for k, v in shader.manifest["dialects"].items() if k in dialects
+            }
         out_dir.mkdir(parents=True, exist_ok=True)
         write_mlp_export(shader, glsl_dir)
         extra["bindings"] = {n: b.to_json() for n, b in bindings.items()}
@@ -189,7 +214,9 @@ def export_model(onnx_path, target: str, out_dir, precision: str = "fp32", bind:
         "source": str(onnx_path),
         "glsl": SHADER_DIRS[target],  # the shader folder (WGSL too, under this key for older readers)
         "glsl_manifest_sha256": sha256_file(glsl_dir / "manifest.json"),
-        "inputs": {n: [str(d) if d is not None else None for d in dims] for n, dims in _input_dims(proto).items()},
+        "inputs": {
+            n: [str(d) if d is not None else None for d in dims] for n, dims in _input_dims(proto).items()
+        },
         "outputs": [o.name for o in proto.graph.output],
         "ops": sorted({n.op_type for n in proto.graph.node}),
         **extra,
@@ -261,8 +288,10 @@ def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tup
         w, h = _positive_size(size)
         if any(f is not None and f != v for f, v in zip(fixed, (w, h), strict=True)):
             want = " ".join(str(f) if f is not None else "?" for f in fixed)
-            raise NeuralaoError(f"--size {w} {h}: this export's input {dims} is static ({want}); "
-                                "--size is taken only when it equals the static size (or omit it)")  # fmt: skip
+            raise NeuralaoError(
+                f"--size {w} {h}: this export's input {dims} is static ({want}); "
+                "--size is taken only when it equals the static size (or omit it)"
+            )
     try:
         textures = texture_sizes(manifest, h, w, max_bytes=PARITY_MAX_BYTES)
     except NeuralaoError as e:  # name the flag when the size came from it
@@ -271,8 +300,9 @@ def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tup
     return w, h
 
 
-def _vector_size(glsl: dict, n_textures: int, size: tuple[int, int] | None,
-                 what: str = "--size") -> tuple[int, int]:  # fmt: skip
+def _vector_size(
+    glsl: dict, n_textures: int, size: tuple[int, int] | None, what: str = "--size"
+) -> tuple[int, int]:
     """(W, H) of the textures, checked against the texture limit and PARITY_MAX_BYTES (textures, the
     per-pixel inputs and the widest layer, twice: onnxruntime holds an operand and a result). ``what``
     names where the size came from in errors."""
@@ -285,8 +315,10 @@ def _vector_size(glsl: dict, n_textures: int, size: tuple[int, int] | None,
     widths = [layer.get("out", layer.get("width", 0)) for layer in net["layers"]] + [net["output_width"]]
     per_pixel = 16 * (n_textures + 1) + 4 * (net["input_width"] + 2 * max(widths))
     if w * h * per_pixel > PARITY_MAX_BYTES:
-        raise NeuralaoError(f"{what} {w} {h} needs about {_gib(w * h * per_pixel)} ({per_pixel} bytes a pixel), "
-                            f"over parity's bound of {_gib(PARITY_MAX_BYTES)}: choose a smaller size")  # fmt: skip
+        raise NeuralaoError(
+            f"{what} {w} {h} needs about {_gib(w * h * per_pixel)} ({per_pixel} bytes a pixel), "
+            f"over parity's bound of {_gib(PARITY_MAX_BYTES)}: choose a smaller size"
+        )
     return w, h
 
 
@@ -316,8 +348,13 @@ def _run_per_pixel(sess, feeds: dict[str, np.ndarray], batch: int | None, width:
     return np.concatenate(parts)
 
 
-def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int = 0,
-           size: tuple[int, int] | None = None) -> dict:  # fmt: skip
+def parity(
+    export_dir,
+    frames=None,
+    inputs: str | Path | None = None,
+    seed: int = 0,
+    size: tuple[int, int] | None = None,
+) -> dict:
     """The export's shaders (read from disk) vs onnxruntime on seeded random or given inputs.
 
     ``size`` (W, H): of symbolic image dimensions / vector textures, checked before anything is
@@ -357,7 +394,11 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
         feeds = {name: x}
         for n in scalar_names:  # a uniform each: one element, fed to onnxruntime in its declared shape
             shape = _shape(manifest["inputs"][n], (1, 1), n)
-            v = np.asarray(given[n], np.float32) if given is not None else rng.uniform(0.1, 2.0, shape).astype(np.float32)
+            v = (
+                np.asarray(given[n], np.float32)
+                if given is not None
+                else rng.uniform(0.1, 2.0, shape).astype(np.float32)
+            )
             if v.size != 1:
                 raise NeuralaoError(f"scalar input {n!r} of shape {list(v.shape)} must hold one value")
             feeds[n] = v.reshape(shape)
@@ -404,13 +445,25 @@ def parity(export_dir, frames=None, inputs: str | Path | None = None, seed: int 
             if manifest["precision"] == "fp16":
                 diff = diff / np.maximum(1.0, np.abs(ref))
             bg = float(np.abs(got[~masked] - 1.0).max()) if (~masked).any() else 0.0
-            rows.append({"dialect": d, "pixels": int(masked.sum()), "max_abs_err": float(diff.max()) if diff.size else 0.0,
-                         "background_max_abs_err": bg})  # fmt: skip
+            rows.append(
+                {
+                    "dialect": d,
+                    "pixels": int(masked.sum()),
+                    "max_abs_err": float(diff.max()) if diff.size else 0.0,
+                    "background_max_abs_err": bg,
+                }
+            )
         tol = TOL.parity_fp16 if manifest["precision"] == "fp16" else TOL.parity_mlp_fp32
         shown = f"{w}x{h}"
     err = max(r["max_abs_err"] for r in rows)
     bg_ok = all(r.get("background_max_abs_err", 0.0) == 0.0 for r in rows)
-    return {"kind": KIND, "target": manifest["target"], "precision": manifest["precision"],
-            "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {shown})",
-            "max_abs_err": err, "tolerance": tol, "passed": bool(err <= tol and bg_ok), "checks": rows}  # fmt: skip
-
+    return {
+        "kind": KIND,
+        "target": manifest["target"],
+        "precision": manifest["precision"],
+        "inputs": str(inputs) if inputs else f"seeded random (seed {seed}, size {shown})",
+        "max_abs_err": err,
+        "tolerance": tol,
+        "passed": bool(err <= tol and bg_ok),
+        "checks": rows,
+    }

@@ -70,12 +70,16 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
         **describe,
         "onnxruntime_vs_torch": max(r["onnxruntime_vs_torch"] for r in rows),
         "opencv_vs_onnxruntime": max(r["opencv_vs_onnxruntime"] for r in rows),
-        "tolerance": {"onnxruntime_vs_torch": TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path)),
-                      "opencv_vs_onnxruntime": TOL.opencv_vs_onnx},
-    }  # fmt: skip
+        "tolerance": {
+            "onnxruntime_vs_torch": TOL.onnx_vs_torch(ref_max, weighted_layers(onnx_path)),
+            "opencv_vs_onnxruntime": TOL.opencv_vs_onnx,
+        },
+    }
     if result["onnxruntime_vs_torch"] > result["tolerance"]["onnxruntime_vs_torch"]:
-        raise NeuralaoError(f"onnxruntime differs from torch by {result['onnxruntime_vs_torch']:.3g} > "
-                            f"{result['tolerance']['onnxruntime_vs_torch']:.3g}")  # fmt: skip
+        raise NeuralaoError(
+            f"onnxruntime differs from torch by {result['onnxruntime_vs_torch']:.3g} > "
+            f"{result['tolerance']['onnxruntime_vs_torch']:.3g}"
+        )
     if result["opencv_vs_onnxruntime"] > TOL.opencv_vs_onnx:
         raise NeuralaoError(
             f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"

@@ -38,8 +38,24 @@ def refusal(capsys, argv: list[str]) -> str:
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("contract")
     (d / "tet.obj").write_text(TET)
-    assert main(["render", str(d / "tet.obj"), "--views", "1", "--size", "16", "16", "--rays", "2",
-                 "--out", str(d / "render")]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "render",
+                str(d / "tet.obj"),
+                "--views",
+                "1",
+                "--size",
+                "16",
+                "16",
+                "--rays",
+                "2",
+                "--out",
+                str(d / "render"),
+            ]
+        )
+        == 0
+    )
     return d
 
 
@@ -73,11 +89,26 @@ def test_render_checks_every_frame_it_writes_is_finite(files):
 
 def test_meshes_beyond_the_float32_range_are_refused_not_rendered_empty(tmp_path, capsys):
     # At 1e38 the float32 transforms overflowed and render wrote frames with no foreground at all.
-    (tmp_path / "huge.obj").write_text(re.sub(r"v (\d) (\d) (\d)", lambda m: "v " + " ".join(
-        f"{int(g) * 1e38:g}" for g in m.groups()), TET))  # fmt: skip
+    (tmp_path / "huge.obj").write_text(
+        re.sub(r"v (\d) (\d) (\d)", lambda m: "v " + " ".join(f"{int(g) * 1e38:g}" for g in m.groups()), TET)
+    )
     out = tmp_path / "out"
-    msg = refusal(capsys, ["render", str(tmp_path / "huge.obj"), "--views", "1", "--size", "8", "8", "--rays", "1",
-                           "--out", str(out)])  # fmt: skip
+    msg = refusal(
+        capsys,
+        [
+            "render",
+            str(tmp_path / "huge.obj"),
+            "--views",
+            "1",
+            "--size",
+            "8",
+            "8",
+            "--rays",
+            "1",
+            "--out",
+            str(out),
+        ],
+    )
     assert "huge.obj" in msg and "1e+30" in msg
     assert not (out / "render.json").exists()
 
@@ -194,7 +225,7 @@ def test_infer_refuses_unknown_output_formats_with_the_supported_ones(files, tmp
                 "@f.pt",
             ],
             "steps",
-        ),  # fmt: skip
+        ),
         (["volumes", "@tet.obj", "--set", "iterations=1000000000000", "--out", "@v.json"], "iterations"),
         (["train", "mlp", "--mesh", "@tet.obj", "--views", "1000000000000", "--out", "@m.pt"], "views"),
         (["train", "mlp", "--mesh", "@tet.obj", "--resolution", "8", "100000", "--out", "@m.pt"], "size"),
@@ -292,8 +323,19 @@ def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
     np.save(tmp_path / "p.npy", np.array([[1.0, 0, 0], [1.7e308, 0, 0]]))
     np.save(tmp_path / "n.npy", np.array([[0, 0, 1.0]] * 2))
     out = tmp_path / "ao.npy"
-    msg = refusal(capsys, ["probe", str(tmp_path / "v.json"), "--points", str(tmp_path / "p.npy"),
-                           "--normals", str(tmp_path / "n.npy"), "--out", str(out)])  # fmt: skip
+    msg = refusal(
+        capsys,
+        [
+            "probe",
+            str(tmp_path / "v.json"),
+            "--points",
+            str(tmp_path / "p.npy"),
+            "--normals",
+            str(tmp_path / "n.npy"),
+            "--out",
+            str(out),
+        ],
+    )
     assert "point 1" in msg and "'right'" in msg and not out.exists()
 
 
@@ -325,12 +367,26 @@ def _gltf(uri: str, nodes: list[dict]) -> dict:
     buf = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32).tobytes()
     buf += np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], np.uint16).tobytes()
     uri = uri or "data:application/octet-stream;base64," + base64.b64encode(buf).decode()
-    return {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(len(nodes)))}], "nodes": nodes,
-            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
-            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0],
-                           "max": [1, 1, 1]}, {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}],
-            "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
-            "buffers": [{"uri": uri, "byteLength": 72}]}  # fmt: skip
+    return {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": list(range(len(nodes)))}],
+        "nodes": nodes,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "accessors": [
+            {
+                "bufferView": 0,
+                "componentType": 5126,
+                "count": 4,
+                "type": "VEC3",
+                "min": [0, 0, 0],
+                "max": [1, 1, 1],
+            },
+            {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"},
+        ],
+        "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+        "buffers": [{"uri": uri, "byteLength": 72}],
+    }
 
 
 def test_a_gltf_reaching_outside_its_folder_gets_advice_a_cli_user_can_follow(tmp_path, capsys):
@@ -338,17 +394,22 @@ def test_a_gltf_reaching_outside_its_folder_gets_advice_a_cli_user_can_follow(tm
     (tmp_path / "level").mkdir()
     gltf = tmp_path / "level" / "scene.gltf"
     gltf.write_text(json.dumps(_gltf("../secret.bin", [{"mesh": 0}])))
-    for argv in (["render", str(gltf), "--views", "1", "--size", "8", "8", "--out", str(tmp_path / "r")],
-                 ["bake", str(gltf), "--rays", "1", "--out", str(tmp_path / "b.glb")],  # the glTF scene reader
-                 ["volumes", str(gltf), "--out", str(tmp_path / "v.json")]):  # fmt: skip
+    for argv in (
+        ["render", str(gltf), "--views", "1", "--size", "8", "8", "--out", str(tmp_path / "r")],
+        ["bake", str(gltf), "--rays", "1", "--out", str(tmp_path / "b.glb")],  # the glTF scene reader
+        ["volumes", str(gltf), "--out", str(tmp_path / "v.json")],
+    ):
         msg = refusal(capsys, argv)
         assert "'../secret.bin'" in msg and "outside its folder" in msg and "FilePathResolver" not in msg, msg
     assert sorted(p.name for p in tmp_path.iterdir()) == ["level", "secret.bin"]
 
 
 def test_unnamed_gltf_nodes_are_named_one_way_in_every_message(tmp_path, capsys):
-    nodes = [{"mesh": 0, "extras": {"role": "static"}}, {"mesh": 0, "extras": {"role": "bogus"}},
-             {"mesh": 0, "name": "Chair", "scale": [0, 0, 0]}]  # fmt: skip
+    nodes = [
+        {"mesh": 0, "extras": {"role": "static"}},
+        {"mesh": 0, "extras": {"role": "bogus"}},
+        {"mesh": 0, "name": "Chair", "scale": [0, 0, 0]},
+    ]
     (tmp_path / "level.gltf").write_text(json.dumps(_gltf("", nodes)))
     level = refusal(capsys, ["volumes", str(tmp_path / "level.gltf"), "--out", str(tmp_path / "v.json")])
     assert "node 1 (unnamed)" in level, level  # was "node 1 ('node1')"
@@ -388,8 +449,23 @@ def test_texture_bake_of_a_mesh_at_float32_limits_finishes(tmp_path):
         r"v (\d) (\d) (\d)", lambda m: "v " + " ".join(f"{int(g) * 1e25:g}" for g in m.groups()), TET
     )
     (tmp_path / "big.obj").write_text(big)
-    cmd = [sys.executable, "-m", "pipeline.cli", "bake", str(tmp_path / "big.obj"), "--to", "texture", "--uv", "xatlas",
-           "--resolution", "16", "--rays", "1", "--out", str(tmp_path / "t.glb")]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "pipeline.cli",
+        "bake",
+        str(tmp_path / "big.obj"),
+        "--to",
+        "texture",
+        "--uv",
+        "xatlas",
+        "--resolution",
+        "16",
+        "--rays",
+        "1",
+        "--out",
+        str(tmp_path / "t.glb"),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-500:]
     assert (tmp_path / "t.glb").stat().st_size > 0
@@ -413,6 +489,17 @@ def test_fuzz_findings_are_one_line_refusals(tmp_path, capsys):
     )
     assert "--seed" in refusal(capsys, ["parity", str(tmp_path / "export"), "--seed", "-1"])
     (tmp_path / "tet.obj").write_text(TET)
-    msg = refusal(capsys, ["train", "field", "--mesh", str(tmp_path / "tet.obj"), "--octaves", "1000000000000",
-                           "--out", str(tmp_path / "f.pt")])  # fmt: skip
+    msg = refusal(
+        capsys,
+        [
+            "train",
+            "field",
+            "--mesh",
+            str(tmp_path / "tet.obj"),
+            "--octaves",
+            "1000000000000",
+            "--out",
+            str(tmp_path / "f.pt"),
+        ],
+    )
     assert "octaves" in msg and "batch" not in msg

@@ -37,8 +37,18 @@ def evaluated(tmp_path_factory):
     (root / "eval.json").write_text(json.dumps(CONFIG))
     model = root / "model"
     shutil.copytree(default_export("unet"), model)
-    argv = ["evaluate", str(root / "eval.json"), "--models", str(model), "--internal", "model,native",
-            "--out", str(root / "out"), "--write-manifest", "--no-progress"]  # fmt: skip
+    argv = [
+        "evaluate",
+        str(root / "eval.json"),
+        "--models",
+        str(model),
+        "--internal",
+        "model,native",
+        "--out",
+        str(root / "out"),
+        "--write-manifest",
+        "--no-progress",
+    ]
     assert main(argv) == 0
     return root, model, json.loads((root / "out" / "evaluation.json").read_text())
 
@@ -94,8 +104,18 @@ def test_a_rerun_resumes_the_frames(evaluated):
     root, model, result = evaluated
     shards = sorted((root / "out" / "frames").rglob("*.npz"))
     before = {p: p.stat().st_mtime_ns for p in shards}
-    argv = ["evaluate", str(root / "eval.json"), "--models", str(model), "--internal", "native", "--out",
-            str(root / "out"), "--no-flip", "--no-progress"]  # fmt: skip
+    argv = [
+        "evaluate",
+        str(root / "eval.json"),
+        "--models",
+        str(model),
+        "--internal",
+        "native",
+        "--out",
+        str(root / "out"),
+        "--no-flip",
+        "--no-progress",
+    ]
     assert main(argv) == 0
     again = json.loads((root / "out" / "evaluation.json").read_text())
     assert again["methods"]["gtao"]["all"]["ssim"] == result["methods"]["gtao"]["all"]["ssim"]

@@ -60,8 +60,11 @@ def _shader_text(glsl_dir: Path) -> str:
 
 def _difference(a: str, b: str) -> onnx.ModelProto:
     """y = a - b on two (N, 3) inputs: not symmetric, so swapped or merged inputs show."""
-    return _model([oh.make_node("Sub", [a, b], ["y"], name="diff")], [_vec(a, "N", 3), _vec(b, "N", 3)],
-                  [_vec("y", "N", 3)])  # fmt: skip
+    return _model(
+        [oh.make_node("Sub", [a, b], ["y"], name="diff")],
+        [_vec(a, "N", 3), _vec(b, "N", 3)],
+        [_vec("y", "N", 3)],
+    )
 
 
 def test_inputs_whose_names_sanitise_alike_stay_distinct(tmp_path):
@@ -105,17 +108,23 @@ def test_hostile_names_never_reach_shader_source(tmp_path):
 def test_default_texture_taken_by_a_bind_is_refused(tmp_path, capsys):
     path = tmp_path / "m.onnx"
     onnx.save(_difference("a", "b"), path)
-    _one_line_error(capsys, ["glsl", str(path), "--target", "vector", "--bind", "a=b.xyz", "--out", str(tmp_path / "o")],
-                    "'b'", "--bind")  # fmt: skip
+    _one_line_error(
+        capsys,
+        ["glsl", str(path), "--target", "vector", "--bind", "a=b.xyz", "--out", str(tmp_path / "o")],
+        "'b'",
+        "--bind",
+    )
     assert not (tmp_path / "o" / "manifest.json").exists()
 
 
 def _mlp(batch) -> onnx.ModelProto:
     rng = np.random.default_rng(3)
-    nodes = [oh.make_node("Gemm", ["normal", "w1", "b1"], ["h"], name="l1", transB=1),
-             oh.make_node("Relu", ["h"], ["r"], name="relu"),
-             oh.make_node("Gemm", ["r", "w2", "b2"], ["z"], name="l2", transB=1),
-             oh.make_node("Sigmoid", ["z"], ["ao"], name="ao")]  # fmt: skip
+    nodes = [
+        oh.make_node("Gemm", ["normal", "w1", "b1"], ["h"], name="l1", transB=1),
+        oh.make_node("Relu", ["h"], ["r"], name="relu"),
+        oh.make_node("Gemm", ["r", "w2", "b2"], ["z"], name="l2", transB=1),
+        oh.make_node("Sigmoid", ["z"], ["ao"], name="ao"),
+    ]
     inits = [
         ("w1", rng.normal(size=(8, 3))),
         ("b1", rng.normal(size=8)),
@@ -145,10 +154,15 @@ def _strided(path: Path, dims: list) -> None:
     """(1, 3, H, W) -> Conv 3x3 stride 2 -> Relu -> (1, 4, H/2, W/2)."""
     w = np.random.default_rng(4).normal(size=(4, 3, 3, 3)) * 0.3
     out_dims = [1, 4, *(d // 2 if isinstance(d, int) else f"{d}2" for d in dims[2:])]
-    model = _model([oh.make_node("Conv", ["x", "w"], ["c"], name="down", pads=[1, 1, 1, 1], strides=[2, 2]),
-                    oh.make_node("Relu", ["c"], ["y"], name="relu")],
-                   [oh.make_tensor_value_info("x", TensorProto.FLOAT, dims)],
-                   [oh.make_tensor_value_info("y", TensorProto.FLOAT, out_dims)], [("w", w)])  # fmt: skip
+    model = _model(
+        [
+            oh.make_node("Conv", ["x", "w"], ["c"], name="down", pads=[1, 1, 1, 1], strides=[2, 2]),
+            oh.make_node("Relu", ["c"], ["y"], name="relu"),
+        ],
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, dims)],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, out_dims)],
+        [("w", w)],
+    )
     onnx.save(model, path)
 
 
@@ -189,8 +203,11 @@ def test_glsl_out_that_is_a_file(tmp_path, capsys):
     _one_line_error(
         capsys, ["glsl", str(path), "--target", "vector", "--out", str(tmp_path / "taken")], "is a file"
     )
-    _one_line_error(capsys, ["glsl", str(path), "--target", "vector", "--out", str(tmp_path / "taken" / "sub")],
-                    "is a file")  # fmt: skip
+    _one_line_error(
+        capsys,
+        ["glsl", str(path), "--target", "vector", "--out", str(tmp_path / "taken" / "sub")],
+        "is a file",
+    )
     assert (tmp_path / "taken").read_text() == "not a folder"
 
 
@@ -201,13 +218,15 @@ def test_large_folded_constant_names_the_conv_that_uses_it(tmp_path, capsys):
 
     def conv_model(shape):
         return _model(
-            [oh.make_node("ConstantOfShape", ["w_shape"], ["w_big"], name="make_w"),
-             oh.make_node("Identity", ["w_big"], ["w_view"], name="view"),
-             oh.make_node("Conv", ["x", "w_view"], ["y"], name="conv_big", pads=[1, 1, 1, 1])],
+            [
+                oh.make_node("ConstantOfShape", ["w_shape"], ["w_big"], name="make_w"),
+                oh.make_node("Identity", ["w_big"], ["w_view"], name="view"),
+                oh.make_node("Conv", ["x", "w_view"], ["y"], name="conv_big", pads=[1, 1, 1, 1]),
+            ],
             [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, int(shape[1]), 8, 8])],
             [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, int(shape[0]), 8, 8])],
             [("w_shape", np.array(shape, np.int64))],
-        )  # fmt: skip
+        )
 
     generate_compute(conv_model([128, 64, 3, 3]))  # 73,728 elements: fine
     with pytest.raises(NeuralaoError) as err:
@@ -217,5 +236,10 @@ def test_large_folded_constant_names_the_conv_that_uses_it(tmp_path, capsys):
     # onnx's own light test models store their weights this way; alexnet's fc6 is past the limit
     light = Path(onnx.__file__).parent / "backend" / "test" / "data" / "light" / "light_bvlc_alexnet.onnx"
     assert light.is_file(), light
-    _one_line_error(capsys, ["glsl", str(light), "--target", "image", "--out", str(tmp_path / "alexnet")],
-                    "Gemm node", "'fc6_w_0'", "[4096, 9216]")  # fmt: skip
+    _one_line_error(
+        capsys,
+        ["glsl", str(light), "--target", "image", "--out", str(tmp_path / "alexnet")],
+        "Gemm node",
+        "'fc6_w_0'",
+        "[4096, 9216]",
+    )

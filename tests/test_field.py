@@ -36,8 +36,16 @@ from pipeline.models.field import (
 )
 from pipeline.tracing.labeller import LabelSettings
 
-FAST = FieldSettings(hidden=[16, 8], octaves=3, samples=4096, steps=300, check_every=100, holdout_views=1,
-                     holdout_size=(48, 48), labels=LabelSettings(rays=32))  # fmt: skip
+FAST = FieldSettings(
+    hidden=[16, 8],
+    octaves=3,
+    samples=4096,
+    steps=300,
+    check_every=100,
+    holdout_views=1,
+    holdout_size=(48, 48),
+    labels=LabelSettings(rays=32),
+)
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +106,11 @@ def test_same_seed_same_weights_and_samples(spot_run):
     scene = load_scene("spot")
     s = FieldSettings(**{**FAST.__dict__, "steps": 60, "holdout_views": 0})
     a, b = collect_samples(scene, s), collect_samples(scene, s)
-    assert np.array_equal(a.position, b.position) and np.array_equal(a.ao, b.ao) and np.array_equal(a.split, b.split)
+    assert (
+        np.array_equal(a.position, b.position)
+        and np.array_equal(a.ao, b.ao)
+        and np.array_equal(a.split, b.split)
+    )
     m1, _ = train_model(a, scene, s)
     m2, _ = train_model(b, scene, s)
     for (k, v1), v2 in zip(m1.state_dict().items(), m2.state_dict().values(), strict=True):
@@ -125,9 +137,22 @@ def test_export_bytes_metadata_and_parity(spot_run):
     assert manifest["parameter_bytes"] == parameter_bytes(model) == 4 * (params + 6 + 9)
     proto = load_onnx(root / "export" / "model.onnx")
     meta = {p.key: p.value for p in proto.metadata_props}
-    assert meta["neuralao_kind"] == "field" and meta["octaves"] == "3" and meta["parameter_bytes"] == str(4 * (params + 15))
+    assert (
+        meta["neuralao_kind"] == "field"
+        and meta["octaves"] == "3"
+        and meta["parameter_bytes"] == str(4 * (params + 15))
+    )
     assert json.loads(meta["bounding_box_centre"]) == pytest.approx(model.centre.reshape(-1).tolist())
-    assert {n.op_type for n in proto.graph.node} <= {"Sub", "Mul", "MatMul", "Sin", "Cos", "Concat", "Gemm", "Tanh"}
+    assert {n.op_type for n in proto.graph.node} <= {
+        "Sub",
+        "Mul",
+        "MatMul",
+        "Sin",
+        "Cos",
+        "Concat",
+        "Gemm",
+        "Tanh",
+    }
     # onnxruntime vs torch on random inputs
     p, n = random_inputs(model, 257, seed=4)
     y = run_onnxruntime(proto.SerializeToString(), {"position": p, "normal": n})[0]
@@ -139,7 +164,10 @@ def test_export_bytes_metadata_and_parity(spot_run):
     assert r["passed"] and r["max_abs_err"] <= TOL.parity_mlp_fp32 and r["background_max_abs_err"] == 0.0
     assert {c["dialect"] for c in r["checks"]} == {"glsl330", "es300"}
     glsl = json.loads((root / "export" / "glsl" / "manifest.json").read_text())
-    assert glsl["kind"] == "field" and [t["texture"] for t in glsl["passes"][0]["inputs"]] == ["position", "normal"]
+    assert glsl["kind"] == "field" and [t["texture"] for t in glsl["passes"][0]["inputs"]] == [
+        "position",
+        "normal",
+    ]
 
 
 def test_single_sided_plane_with_a_box_on_one_side():
@@ -150,8 +178,15 @@ def test_single_sided_plane_with_a_box_on_one_side():
     floor = floor_quad(1.0)
     v, f = box(0.2, inward=False)
     scene = merge(floor, (v + [0.0, 0.0, 0.2], f), name="plane_box")
-    s = FieldSettings(hidden=[32, 16], octaves=4, samples=8192, steps=1500, check_every=250, holdout_views=0,
-                      labels=LabelSettings(rays=64))  # fmt: skip
+    s = FieldSettings(
+        hidden=[32, 16],
+        octaves=4,
+        samples=8192,
+        steps=1500,
+        check_every=250,
+        holdout_views=0,
+        labels=LabelSettings(rays=64),
+    )
     samples = collect_samples(scene, s)
     # both sides of the floor were labelled and kept; the box's inside (back faces) was dropped
     assert samples.info["valid_back"] > 0.3 * samples.info["surface_points"] * (4.0 / (4.0 + 20 * 0.04))
@@ -166,20 +201,52 @@ def test_single_sided_plane_with_a_box_on_one_side():
     # the field agrees with the labeller on both sides
     from pipeline.tracing.labeller import Labeller
 
-    ref_top, _ = Labeller(scene, LabelSettings(rays=256)).ao_at_points(p.astype(np.float64), up.astype(np.float64))
+    ref_top, _ = Labeller(scene, LabelSettings(rays=256)).ao_at_points(
+        p.astype(np.float64), up.astype(np.float64)
+    )
     assert float(np.sqrt(np.mean((np.clip(top, 0, 1) - ref_top) ** 2))) < 0.08
 
 
 def test_cli_train_export_parity_and_bad_input(tmp_path, capsys):
     out = tmp_path / "f.pt"
-    args = ["train", "field", "--mesh", "spot", "--size", "8x4", "--octaves", "2", "--rays", "16",
-            "--set", "samples=2048", "--set", "steps=50", "--set", "holdout_views=0", "--out", str(out), "--no-progress"]  # fmt: skip
+    args = [
+        "train",
+        "field",
+        "--mesh",
+        "spot",
+        "--size",
+        "8x4",
+        "--octaves",
+        "2",
+        "--rays",
+        "16",
+        "--set",
+        "samples=2048",
+        "--set",
+        "steps=50",
+        "--set",
+        "holdout_views=0",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     assert cli.main(args) == 0 and out.is_file()
     assert cli.main(["export", str(out), "--out", str(tmp_path / "e")]) == 0
     assert cli.main(["parity", str(tmp_path / "e")]) == 0
-    assert cli.main(["train", "field", "--mesh", str(tmp_path / "missing.obj"), "--out", str(tmp_path / "x.pt")]) == 2
-    assert cli.main(["train", "field", "--mesh", "spot", "--data", str(tmp_path), "--out", str(tmp_path / "x.pt")]) == 2
-    assert cli.main(["train", "field", "--mesh", "spot", "--set", "octaves=-1", "--out", str(tmp_path / "x.pt")]) == 2
+    assert (
+        cli.main(["train", "field", "--mesh", str(tmp_path / "missing.obj"), "--out", str(tmp_path / "x.pt")])
+        == 2
+    )
+    assert (
+        cli.main(
+            ["train", "field", "--mesh", "spot", "--data", str(tmp_path), "--out", str(tmp_path / "x.pt")]
+        )
+        == 2
+    )
+    assert (
+        cli.main(["train", "field", "--mesh", "spot", "--set", "octaves=-1", "--out", str(tmp_path / "x.pt")])
+        == 2
+    )
     assert not (tmp_path / "x.pt").exists()
     errors = [ln for ln in capsys.readouterr().err.splitlines() if "error:" in ln]
     assert len(errors) == 3 and all(ln.startswith("neuralao ") for ln in errors)
@@ -204,7 +271,17 @@ def test_infer_frame_matches_torch_and_cli(spot_run, tmp_path):
     tol = onnx_vs_torch_tol(want, root / "export" / "model.onnx")
     assert float(np.abs(ao - want).max()) <= tol and (ao[~frame["mask"]] == 1).all()
     write_npz(tmp_path / "f.npz", **{k: np.asarray(v) for k, v in frame.items()})
-    assert cli.main(["infer", str(root / "export" / "model.onnx"), str(tmp_path / "f.npz"), "--out",
-                     str(tmp_path / "ao.png")]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "infer",
+                str(root / "export" / "model.onnx"),
+                str(tmp_path / "f.npz"),
+                "--out",
+                str(tmp_path / "ao.png"),
+            ]
+        )
+        == 0
+    )
     png = np.asarray(Image.open(tmp_path / "ao.png")).astype(float)
     assert np.abs(png - (ao * 255 + 0.5).astype(np.uint8)).max() <= 1

@@ -46,7 +46,9 @@ def _model(nodes, inputs, inits=(), metadata=None) -> onnx.ModelProto:
     return model
 
 
-def _check(model, feeds: dict[str, np.ndarray], image: str, tol=TOL.glsl_op_fp32, precision="fp32", relative=False):
+def _check(
+    model, feeds: dict[str, np.ndarray], image: str, tol=TOL.glsl_op_fp32, precision="fp32", relative=False
+):
     """GLSL vs onnxruntime on ``feeds`` (the image and every scalar, by ONNX name)."""
     ref = run_onnxruntime(model.SerializeToString(), feeds)[0]
     program = generate_compute(model, precision=precision)
@@ -83,9 +85,11 @@ def test_scalar_input_with_an_image(op, scalar_first, shape):
 
 def test_scalar_first_input_static_image_and_fused_scalar_arithmetic():
     """The image need not be the first input; ops on the scalar alone fuse into its uniform pass."""
-    nodes = [oh.make_node("Mul", ["r", "two"], ["r2"], name="double"),
-             oh.make_node("Clip", ["r2", "lo", ""], ["rc"], name="floor"),
-             oh.make_node("Div", ["x", "rc"], ["y"], name="div")]  # fmt: skip
+    nodes = [
+        oh.make_node("Mul", ["r", "two"], ["r2"], name="double"),
+        oh.make_node("Clip", ["r2", "lo", ""], ["rc"], name="floor"),
+        oh.make_node("Div", ["x", "rc"], ["y"], name="div"),
+    ]
     model = _model(nodes, [("r", [1, 1, 1, 1]), ("x", [1, 5, 6, 7])], [("two", 2.0), ("lo", 0.5)])
     program = _check(model, {"r": np.full((1, 1, 1, 1), 0.2, np.float32), "x": _x((1, 5, 6, 7))}, "x")
     kinds = [p["kind"] for p in program.manifest["passes"]]
@@ -136,11 +140,20 @@ def _radius_net(half: str | None = None):
     ]
     if half:
         nodes.append(oh.make_node("Resize", ["ao", "", "up"], ["y"], name="back", mode=half))
-    inits = [("select", select), ("eps", EPS), ("zero", 0.0), ("cap", CAP),
-             ("w1", rng.normal(size=(6, 5, 3, 3)) * 0.3), ("b1", rng.normal(size=6) * 0.1),
-             ("w2", rng.normal(size=(6, 6, 3, 3)) * 0.3), ("b2", rng.normal(size=6) * 0.1),
-             ("w3", rng.normal(size=(1, 12, 1, 1)) * 0.3), ("b3", [0.1]),
-             ("up", [1, 1, 2, 2]), ("down", [1, 1, 0.5, 0.5])]  # fmt: skip
+    inits = [
+        ("select", select),
+        ("eps", EPS),
+        ("zero", 0.0),
+        ("cap", CAP),
+        ("w1", rng.normal(size=(6, 5, 3, 3)) * 0.3),
+        ("b1", rng.normal(size=6) * 0.1),
+        ("w2", rng.normal(size=(6, 6, 3, 3)) * 0.3),
+        ("b2", rng.normal(size=6) * 0.1),
+        ("w3", rng.normal(size=(1, 12, 1, 1)) * 0.3),
+        ("b3", [0.1]),
+        ("up", [1, 1, 2, 2]),
+        ("down", [1, 1, 0.5, 0.5]),
+    ]
     meta = {"radius_description": "AO radius in world units (labels' max distance)"}
     return _model(nodes, [("gbuffer", [1, 4, "height", "width"]), ("radius", [1, 1, 1, 1])], inits, meta)
 
@@ -180,8 +193,12 @@ def test_scalars_missing_unknown_or_not_scalar_are_one_line_errors(tmp_path):
     write_compute_export(program, tmp_path / "glsl")
     assert scalar_inputs(tmp_path / "glsl") == ["radius"]
     g = _gbuffer()
-    cases = [({}, "'radius' not given"), ({"r": 2.0}, "'radius' not given"),
-             ({"radius": np.ones(2)}, "one finite value"), ({"radius": float("nan")}, "one finite value")]  # fmt: skip
+    cases = [
+        ({}, "'radius' not given"),
+        ({"r": 2.0}, "'radius' not given"),
+        ({"radius": np.ones(2)}, "one finite value"),
+        ({"radius": float("nan")}, "one finite value"),
+    ]
     for scalars, needle in cases:
         for fn in (run_compute, run_compute_all):
             with pytest.raises(NeuralaoError) as e:
@@ -197,11 +214,13 @@ def test_scalars_missing_unknown_or_not_scalar_are_one_line_errors(tmp_path):
 
 @pytest.mark.parametrize(
     "inputs,needle",
-    [([("x", [1, 3, "H", "W"]), ("y2", [1, 3, "H", "W"])], "'y2'"),
-     ([("x", [1, 3, "H", "W"]), ("v", [1, 2, 1, 1])], "'v'"),
-     ([("x", [1, 3, "H", "W"]), ("n", ["N"])], "'n'")],
+    [
+        ([("x", [1, 3, "H", "W"]), ("y2", [1, 3, "H", "W"])], "'y2'"),
+        ([("x", [1, 3, "H", "W"]), ("v", [1, 2, 1, 1])], "'v'"),
+        ([("x", [1, 3, "H", "W"]), ("n", ["N"])], "'n'"),
+    ],
     ids=["second_image", "two_channels", "symbolic"],
-)  # fmt: skip
+)
 def test_refused_extra_inputs_name_the_input(inputs, needle):
     second = inputs[1][0]
     model = _model([oh.make_node("Add", ["x", second], ["y"], name="add")], inputs)

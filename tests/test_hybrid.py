@@ -188,8 +188,17 @@ def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     from export.unet import export_checkpoint, is_hybrid
     from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
-    ts = UNetTrainSettings(epochs=2, batch_size=2, crop=16, crops_per_frame=1, widths=[4, 8], gtao_input=True,
-                           internal_height=32, threads=1, seed=0)  # fmt: skip
+    ts = UNetTrainSettings(
+        epochs=2,
+        batch_size=2,
+        crop=16,
+        crops_per_frame=1,
+        widths=[4, 8],
+        gtao_input=True,
+        internal_height=32,
+        threads=1,
+        seed=0,
+    )
     train_set, val_set, info = load_dataset_frames(tiny_dataset, internal_height=32, gtao=True)
     ckpt = train(ts, train_set, val_set, tmp_path / "h.pt", info, progress=False)
     assert ckpt["model_args"]["gtao_input"] and ckpt["model_args"]["in_channels"] == 5
@@ -206,8 +215,16 @@ def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
     from runtime import gl
 
-    ts = UNetTrainSettings(epochs=1, batch_size=2, crop=16, crops_per_frame=1, widths=[2, 4], internal_height=32,
-                           threads=1, seed=0)  # fmt: skip
+    ts = UNetTrainSettings(
+        epochs=1,
+        batch_size=2,
+        crop=16,
+        crops_per_frame=1,
+        widths=[2, 4],
+        internal_height=32,
+        threads=1,
+        seed=0,
+    )
     train_set, val_set, info = load_dataset_frames(tiny_dataset, internal_height=32)
     train(ts, train_set, val_set, tmp_path / "u.pt", info, progress=False)
     manifest = export_checkpoint(tmp_path / "u.pt", tmp_path / "export")

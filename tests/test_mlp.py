@@ -223,8 +223,15 @@ def test_training_fits_a_known_function_far_better_than_a_constant():
     v = rng.standard_normal((n, 16, 3))
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
     y = (0.6 + 0.3 * v[:, :, 2].mean(axis=1)).astype(np.float32)
-    s = Samples(v.reshape(n, 48).astype(np.float32), v[:, 0].astype(np.float32), y, np.zeros(n, np.int32),
-                split_samples(n, [0.5, 0.25, 0.25], 0), [], {"scene": "synthetic"})  # fmt: skip
+    s = Samples(
+        v.reshape(n, 48).astype(np.float32),
+        v[:, 0].astype(np.float32),
+        y,
+        np.zeros(n, np.int32),
+        split_samples(n, [0.5, 0.25, 0.25], 0),
+        [],
+        {"scene": "synthetic"},
+    )
     model, info = train_model(s, replace(MLPSettings(), max_iterations=300))
     x_test, y_test = s.part("test")
     rmse = float(np.sqrt(np.mean((predict(model, x_test) - y_test) ** 2)))
@@ -301,9 +308,30 @@ def test_wrong_checkpoint_kind_and_corrupt_file(tmp_path):
 
 def test_train_cli_end_to_end_and_bad_input(tmp_path, capsys):
     out = tmp_path / "m.pt"
-    argv = ["train", "mlp", "--mesh", "suzanne", "--views", "3", "--resolution", "48", "48", "--rays", "16",
-            "--size", "8x4", "--out", str(out), "--no-progress", "--set", "holdout_views=1",
-            "--set", "holdout_size=[48,48]", "--set", "max_iterations=30"]  # fmt: skip
+    argv = [
+        "train",
+        "mlp",
+        "--mesh",
+        "suzanne",
+        "--views",
+        "3",
+        "--resolution",
+        "48",
+        "48",
+        "--rays",
+        "16",
+        "--size",
+        "8x4",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--set",
+        "holdout_views=1",
+        "--set",
+        "holdout_size=[48,48]",
+        "--set",
+        "max_iterations=30",
+    ]
     assert cli_main(argv) == 0
     ckpt = load_checkpoint(out)
     assert ckpt["model_args"]["hidden"] == [8, 4] and ckpt["config"]["views"] == 3
@@ -333,8 +361,23 @@ def test_train_cli_end_to_end_and_bad_input(tmp_path, capsys):
 
 def test_train_cli_from_a_dataset(tiny_dataset, tmp_path, capsys):
     out = tmp_path / "d.pt"
-    argv = ["train", "mlp", "--data", str(tiny_dataset), "--scene", "spot", "--size", "8x4", "--out", str(out),
-            "--no-progress", "--set", "max_iterations=20", "--set", "samples_per_view=64"]  # fmt: skip
+    argv = [
+        "train",
+        "mlp",
+        "--data",
+        str(tiny_dataset),
+        "--scene",
+        "spot",
+        "--size",
+        "8x4",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--set",
+        "max_iterations=20",
+        "--set",
+        "samples_per_view=64",
+    ]
     assert cli_main(argv) == 0
     ckpt = load_checkpoint(out)
     assert ckpt["samples"]["source"] == "dataset" and ckpt["scene"] == "spot" and ckpt["mesh"] == "spot"

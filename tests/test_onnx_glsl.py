@@ -27,7 +27,9 @@ OPSET = 19
 
 
 def _save(tmp_path, nodes, inputs, outputs, inits, name="m.onnx"):
-    graph = oh.make_graph(nodes, "user", inputs, outputs, [nh.from_array(np.asarray(v, np.float32), k) for k, v in inits])
+    graph = oh.make_graph(
+        nodes, "user", inputs, outputs, [nh.from_array(np.asarray(v, np.float32), k) for k, v in inits]
+    )
     model = oh.make_model(graph, opset_imports=[oh.make_opsetid("", OPSET)])
     onnx.checker.check_model(model)
     path = tmp_path / name
@@ -38,16 +40,27 @@ def _save(tmp_path, nodes, inputs, outputs, inits, name="m.onnx"):
 def _residual_net(tmp_path):
     """conv -> relu -> conv, + skip, average pool, linear upsample back: dynamic H and W."""
     rng = np.random.default_rng(0)
-    nodes = [oh.make_node("Conv", ["x", "w1", "b1"], ["c1"], name="c1", pads=[1, 1, 1, 1]),
-             oh.make_node("Relu", ["c1"], ["r1"], name="r1"),
-             oh.make_node("Conv", ["r1", "w2"], ["c2"], name="c2", pads=[1, 1, 1, 1]),
-             oh.make_node("Add", ["c2", "x"], ["res"], name="skip"),
-             oh.make_node("AveragePool", ["res"], ["p"], name="pool", kernel_shape=[2, 2], strides=[2, 2]),
-             oh.make_node("Resize", ["p", "", "scales"], ["y"], name="up", mode="linear")]  # fmt: skip
-    inits = [("w1", rng.normal(size=(6, 3, 3, 3)) * 0.3), ("b1", rng.normal(size=6)),
-             ("w2", rng.normal(size=(3, 6, 3, 3)) * 0.3), ("scales", [1.0, 1.0, 2.0, 2.0])]  # fmt: skip
-    return _save(tmp_path, nodes, [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, "H", "W"])],
-                 [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, "H", "W"])], inits)  # fmt: skip
+    nodes = [
+        oh.make_node("Conv", ["x", "w1", "b1"], ["c1"], name="c1", pads=[1, 1, 1, 1]),
+        oh.make_node("Relu", ["c1"], ["r1"], name="r1"),
+        oh.make_node("Conv", ["r1", "w2"], ["c2"], name="c2", pads=[1, 1, 1, 1]),
+        oh.make_node("Add", ["c2", "x"], ["res"], name="skip"),
+        oh.make_node("AveragePool", ["res"], ["p"], name="pool", kernel_shape=[2, 2], strides=[2, 2]),
+        oh.make_node("Resize", ["p", "", "scales"], ["y"], name="up", mode="linear"),
+    ]
+    inits = [
+        ("w1", rng.normal(size=(6, 3, 3, 3)) * 0.3),
+        ("b1", rng.normal(size=6)),
+        ("w2", rng.normal(size=(3, 6, 3, 3)) * 0.3),
+        ("scales", [1.0, 1.0, 2.0, 2.0]),
+    ]
+    return _save(
+        tmp_path,
+        nodes,
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, "H", "W"])],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, "H", "W"])],
+        inits,
+    )
 
 
 def test_image_target_from_a_users_onnx(tmp_path):
@@ -69,26 +82,61 @@ def test_image_target_from_a_users_onnx(tmp_path):
     assert got.shape == ref.shape == (1, 3, 10, 18)
     assert r["max_abs_err"] == pytest.approx(float(np.abs(got - ref).max()), abs=1e-9)
     # fp16 storage
-    assert cli.main(["glsl", str(path), "--target", "image", "--precision", "fp16", "--out", str(tmp_path / "h")]) == 0
+    assert (
+        cli.main(
+            ["glsl", str(path), "--target", "image", "--precision", "fp16", "--out", str(tmp_path / "h")]
+        )
+        == 0
+    )
     assert parity(tmp_path / "h", size=(16, 12))["passed"]
 
 
 def test_vector_target_with_bindings_and_defaults(tmp_path):
     rng = np.random.default_rng(1)
-    nodes = [oh.make_node("Gemm", ["normals", "w1", "b1"], ["h"], name="l1", transB=1),
-             oh.make_node("Tanh", ["h"], ["t"], name="t"),
-             oh.make_node("Gemm", ["t", "w2"], ["y0"], name="l2", transB=1),
-             oh.make_node("Mul", ["y0", "gain"], ["y1"], name="gain"),
-             oh.make_node("Add", ["y1", "bias"], ["y"], name="bias")]  # fmt: skip
-    inits = [("w1", rng.normal(size=(8, 48)) * 0.3), ("b1", rng.normal(size=8)), ("w2", rng.normal(size=(1, 8)))]
-    path, _ = _save(tmp_path, nodes, [oh.make_tensor_value_info("normals", TensorProto.FLOAT, ["N", 48]),
-                                      oh.make_tensor_value_info("gain", TensorProto.FLOAT, ["N", 1]),
-                                      oh.make_tensor_value_info("bias", TensorProto.FLOAT, ["N", 1])],
-                    [oh.make_tensor_value_info("y", TensorProto.FLOAT, ["N", 1])], inits)  # fmt: skip
+    nodes = [
+        oh.make_node("Gemm", ["normals", "w1", "b1"], ["h"], name="l1", transB=1),
+        oh.make_node("Tanh", ["h"], ["t"], name="t"),
+        oh.make_node("Gemm", ["t", "w2"], ["y0"], name="l2", transB=1),
+        oh.make_node("Mul", ["y0", "gain"], ["y1"], name="gain"),
+        oh.make_node("Add", ["y1", "bias"], ["y"], name="bias"),
+    ]
+    inits = [
+        ("w1", rng.normal(size=(8, 48)) * 0.3),
+        ("b1", rng.normal(size=8)),
+        ("w2", rng.normal(size=(1, 8))),
+    ]
+    path, _ = _save(
+        tmp_path,
+        nodes,
+        [
+            oh.make_tensor_value_info("normals", TensorProto.FLOAT, ["N", 48]),
+            oh.make_tensor_value_info("gain", TensorProto.FLOAT, ["N", 1]),
+            oh.make_tensor_value_info("bias", TensorProto.FLOAT, ["N", 1]),
+        ],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, ["N", 1])],
+        inits,
+    )
     out = tmp_path / "vec"
     # normals: the G-buffer normal repeated 16 times; gain and bias (width 1) default to textures of their names
-    assert cli.main(["glsl", str(path), "--target", "vector", "--bind", "normals=gbuffer.xyzx16",
-                     "--dialect", "glsl330", "--dialect", "es300", "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "glsl",
+                str(path),
+                "--target",
+                "vector",
+                "--bind",
+                "normals=gbuffer.xyzx16",
+                "--dialect",
+                "glsl330",
+                "--dialect",
+                "es300",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["bindings"]["gain"] == {"texture": "gain", "channels": "x", "repeats": 1}
     assert manifest["dialects"] == ["es300", "glsl330"]
@@ -100,9 +148,14 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys):
     path, _ = _residual_net(tmp_path)
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"not an onnx file")
-    soft = _save(tmp_path, [oh.make_node("Softmax", ["x"], ["y"], name="sm")],
-                 [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 4, 4])],
-                 [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, 4, 4])], [], name="soft.onnx")[0]  # fmt: skip
+    soft = _save(
+        tmp_path,
+        [oh.make_node("Softmax", ["x"], ["y"], name="sm")],
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 4, 4])],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, 4, 4])],
+        [],
+        name="soft.onnx",
+    )[0]
     cases = [
         (["glsl", str(bad), "--target", "image"], "cannot"),
         (["glsl", str(tmp_path / "missing.onnx"), "--target", "image"], "missing.onnx"),

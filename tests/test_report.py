@@ -26,8 +26,23 @@ from pipeline.tracing.labeller import LabelSettings
 
 # (name, hidden sizes, constant output)
 MLPS = (("mlp-16x8", (16, 8), 0.9), ("mlp-32x16", (32, 16), 0.97))
-FAST = ["--gt-rays", "32", "--frames-per-scene", "2", "--time-size", "40", "32", "--repeats", "1",
-        "--set", "trace_rays=[2,4]", "--set", "bake_rays=8", "--set", "bake_samples_per_vertex=2"]  # fmt: skip
+FAST = [
+    "--gt-rays",
+    "32",
+    "--frames-per-scene",
+    "2",
+    "--time-size",
+    "40",
+    "32",
+    "--repeats",
+    "1",
+    "--set",
+    "trace_rays=[2,4]",
+    "--set",
+    "bake_rays=8",
+    "--set",
+    "bake_samples_per_vertex=2",
+]
 
 
 def constant_mlp_checkpoint(path: Path, hidden, value: float, scene: str) -> None:
@@ -38,8 +53,19 @@ def constant_mlp_checkpoint(path: Path, hidden, value: float, scene: str) -> Non
     with torch.no_grad():
         last.weight.zero_()
         last.bias.fill_(value)
-    torch.save({"kind": KIND, "format_version": 1, "model_args": model_args_dict(model), "config": {},
-                "state_dict": model.state_dict(), "scene": scene, "mesh": scene, "metrics": {}}, path)  # fmt: skip
+    torch.save(
+        {
+            "kind": KIND,
+            "format_version": 1,
+            "model_args": model_args_dict(model),
+            "config": {},
+            "state_dict": model.state_dict(),
+            "scene": scene,
+            "mesh": scene,
+            "metrics": {},
+        },
+        path,
+    )
 
 
 def tiny_unet_checkpoint(path: Path) -> None:
@@ -49,8 +75,17 @@ def tiny_unet_checkpoint(path: Path) -> None:
     torch.manual_seed(0)
     args = UNetArgs(widths=[2, 4])
     model = build_model(args).eval()
-    torch.save({"kind": KIND, "format_version": 1, "model_args": model_args_dict(args), "config": {},
-                "state_dict": model.state_dict(), "metrics": {}}, path)  # fmt: skip
+    torch.save(
+        {
+            "kind": KIND,
+            "format_version": 1,
+            "model_args": model_args_dict(args),
+            "config": {},
+            "state_dict": model.state_dict(),
+            "metrics": {},
+        },
+        path,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +99,7 @@ def workspace(tmp_path_factory):
         scenes=[
             SceneSpec("spot", "spot", views=4, split="train"),
             SceneSpec("box", "cornell_box", cameras="interior", views=2, split="val"),
-        ],  # fmt: skip
+        ],
         size=(32, 32),
         labels=LabelSettings(rays=8),
         holdout_every=2,
@@ -85,8 +120,16 @@ def workspace(tmp_path_factory):
     from pipeline.models.field import FieldSettings
     from pipeline.models.field import train as train_field
 
-    fs = FieldSettings(hidden=[8, 4], octaves=4, samples=2048, steps=40, check_every=20, holdout_views=1,
-                       holdout_size=(32, 32), labels=LabelSettings(rays=8))  # fmt: skip
+    fs = FieldSettings(
+        hidden=[8, 4],
+        octaves=4,
+        samples=2048,
+        steps=40,
+        check_every=20,
+        holdout_views=1,
+        holdout_size=(32, 32),
+        labels=LabelSettings(rays=8),
+    )
     for scene in ("spot", "box"):  # one field per mesh; the report shows them as one row per size
         train_field(fs, root / f"field-{scene}.pt", data=data, scene=scene)
         export_field(root / f"field-{scene}.pt", exports / f"field-{scene}-8x4")
@@ -134,7 +177,11 @@ def test_report_lists_every_method(report):
     assert "Single-sided surfaces: vertex-sampled, vertex-lsq, vertex-lsq-8bit" in md
     # 8-bit storage: a quarter of the bytes, and the error moves by at most half a step of 1/255
     for scene, ps in ms["vertex-lsq"]["per_scene"].items():
-        assert ms["vertex-lsq-8bit"]["per_scene"][scene]["bytes"] * 4 == ps["bytes"] == 4 * r["scenes"][scene]["vertices"]
+        assert (
+            ms["vertex-lsq-8bit"]["per_scene"][scene]["bytes"] * 4
+            == ps["bytes"]
+            == 4 * r["scenes"][scene]["vertices"]
+        )
     assert abs(ms["vertex-lsq-8bit"]["rmse"] - ms["vertex-lsq"]["rmse"]) <= 0.5 / 255 + 1e-7
 
 
@@ -220,8 +267,11 @@ def test_select_picks_the_cheapest_representation_meeting_the_target(report, wor
     out, r = report
     root, data, exports = workspace
     for scene in ("spot", "box"):
-        ssims = sorted(e["per_scene"][scene]["ssim"] for e in r["methods"].values()
-                       if e.get("available") and scene in e.get("per_scene", {}) and e["family"] != "traced")  # fmt: skip
+        ssims = sorted(
+            e["per_scene"][scene]["ssim"]
+            for e in r["methods"].values()
+            if e.get("available") and scene in e.get("per_scene", {}) and e["family"] != "traced"
+        )
         for target in [0.0, *ssims, 1.0]:
             sel = select_from_results(r, target)["scenes"][scene]
             chosen, met, order = _expected_choice(r, scene, target)
@@ -232,18 +282,62 @@ def test_select_picks_the_cheapest_representation_meeting_the_target(report, wor
         assert sel["scenes"] == select_from_results(r, float(t))["scenes"]
     assert "## Selection at several targets" in (out / "report.md").read_text()
     spot = select_from_results(r, 0.0)["scenes"]["spot"]
-    assert {"ssao", "gtao", "vertex-lsq-8bit", "mlp-16x8", "field-8x4", "unet"} <= set(_expected_choice(r, "spot", 0)[2])
+    assert {"ssao", "gtao", "vertex-lsq-8bit", "mlp-16x8", "field-8x4", "unet"} <= set(
+        _expected_choice(r, "spot", 0)[2]
+    )
     assert spot["bytes_saved"] == spot["largest_bytes"] - spot["bytes"]
     # the CLI: from the report's numbers, and measuring by itself (same ground truth settings)
     sel_path = tmp_path / "select.json"
-    assert cli.main(["select", "--data", str(data), "--exports", str(exports), "--out", str(sel_path),
-                     "--report", str(out / "report.json"), "--target", "0.5"]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "select",
+                "--data",
+                str(data),
+                "--exports",
+                str(exports),
+                "--out",
+                str(sel_path),
+                "--report",
+                str(out / "report.json"),
+                "--target",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     from_report = json.loads(sel_path.read_text())
     measured = tmp_path / "measured.json"
-    assert cli.main(["select", "--data", str(data), "--exports", str(exports), "--out", str(measured),
-                     "--target", "0.5", "--set", "gt_rays=32", "--set", "frames_per_scene=2",
-                     "--set", "time_size=[40,32]", "--set", "repeats=1", "--set", "bake_rays=8",
-                     "--set", "bake_samples_per_vertex=2", "--set", "trace_rays=[2,4]"]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "select",
+                "--data",
+                str(data),
+                "--exports",
+                str(exports),
+                "--out",
+                str(measured),
+                "--target",
+                "0.5",
+                "--set",
+                "gt_rays=32",
+                "--set",
+                "frames_per_scene=2",
+                "--set",
+                "time_size=[40,32]",
+                "--set",
+                "repeats=1",
+                "--set",
+                "bake_rays=8",
+                "--set",
+                "bake_samples_per_vertex=2",
+                "--set",
+                "trace_rays=[2,4]",
+            ]
+        )
+        == 0
+    )
     again = json.loads(measured.read_text())
     for scene in ("spot", "box"):
         a, b = from_report["scenes"][scene], again["scenes"][scene]
@@ -253,9 +347,16 @@ def test_select_picks_the_cheapest_representation_meeting_the_target(report, wor
 def test_report_and_select_do_not_import_each_other():
     import ast
 
-    files = {"report": "evaluation/report.py", "selection": "evaluation/selection.py", "select": "cli/select.py"}
-    modules = {"report": "pipeline.evaluation.report", "selection": "pipeline.evaluation.selection",
-               "select": "pipeline.cli.select"}  # fmt: skip
+    files = {
+        "report": "evaluation/report.py",
+        "selection": "evaluation/selection.py",
+        "select": "cli/select.py",
+    }
+    modules = {
+        "report": "pipeline.evaluation.report",
+        "selection": "pipeline.evaluation.selection",
+        "select": "pipeline.cli.select",
+    }
     for module, other in (("report", "select"), ("selection", "report"), ("selection", "select")):
         tree = ast.parse((Path(__file__).parents[1] / "pipeline" / files[module]).read_text())
         names = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
@@ -263,8 +364,10 @@ def test_report_and_select_do_not_import_each_other():
 
 
 def test_choose_handles_no_candidate_meeting_the_target():
-    cands = [{"name": "a", "family": "mlp", "bytes": 10, "ssim": 0.5, "rmse": 0.1, "seconds": 1.0, "frames": 1},
-             {"name": "b", "family": "unet", "bytes": 100, "ssim": 0.7, "rmse": 0.1, "seconds": 4.0, "frames": 1}]  # fmt: skip
+    cands = [
+        {"name": "a", "family": "mlp", "bytes": 10, "ssim": 0.5, "rmse": 0.1, "seconds": 1.0, "frames": 1},
+        {"name": "b", "family": "unet", "bytes": 100, "ssim": 0.7, "rmse": 0.1, "seconds": 4.0, "frames": 1},
+    ]
     e = choose(cands, 0.9)
     assert e["chosen"] == "b" and not e["met_target"] and e["bytes_saved"] == 0
     e = choose(cands, 0.6)
@@ -276,12 +379,30 @@ def test_choose_handles_no_candidate_meeting_the_target():
 def test_report_without_exports_and_bad_input(tmp_path, workspace, capsys):
     _, data, _ = workspace
     out = tmp_path / "r"
-    assert cli.main(["report", "--data", str(data), "--exports", str(tmp_path / "none"), "--out", str(out), *FAST,
-                     "--set", "contact_sheets=false"]) == 0  # fmt: skip
+    assert (
+        cli.main(
+            [
+                "report",
+                "--data",
+                str(data),
+                "--exports",
+                str(tmp_path / "none"),
+                "--out",
+                str(out),
+                *FAST,
+                "--set",
+                "contact_sheets=false",
+            ]
+        )
+        == 0
+    )
     r = json.loads((out / "report.json").read_text())
     assert all(not r["methods"][n]["available"] for n in ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet"))
-    assert all(c["family"] in ("screen-space", "baked") for e in r["select"]["scenes"].values() for c in
-               [r["methods"][t["name"]] for t in e["tried"]])  # fmt: skip
+    assert all(
+        c["family"] in ("screen-space", "baked")
+        for e in r["select"]["scenes"].values()
+        for c in [r["methods"][t["name"]] for t in e["tried"]]
+    )
     assert cli.main(["report", "--data", str(tmp_path / "nothing"), "--out", str(out)]) == 2
     assert cli.main(["report", "--data", str(data), "--out", str(out), "--set", "bogus=1"]) == 2
     assert cli.main(["select", "--data", str(data), "--out", str(tmp_path / "s.txt")]) == 2

@@ -51,16 +51,30 @@ def test_contact_sheet_has_one_column_per_method(tmp_path):
 def test_shipped_picks_default_and_fast_by_role_or_by_gl_time():
     from pipeline.evaluation.report import contact_order, pick_shipped
 
-    models = {n: {"kind": "unet", "gl_seconds": {"512x512": t}} for n, t in (("big", 0.8), ("mid", 0.3), ("tiny", 0.1))}
+    models = {
+        n: {"kind": "unet", "gl_seconds": {"512x512": t}}
+        for n, t in (("big", 0.8), ("mid", 0.3), ("tiny", 0.1))
+    }
     summary = {"folder": "m", "models": models, "default": {"unet": "big"}, "fast": {}}
     assert pick_shipped(summary, ["default", "fast"]) == ["big", "tiny"]  # fast: least GL time
     assert pick_shipped({**summary, "fast": {"unet": "mid"}}, ["default", "fast"]) == ["big", "mid"]
     assert pick_shipped(summary, ["all"]) == ["big", "mid", "tiny"] == pick_shipped(summary, None)
     assert pick_shipped(summary, ["mid", "nonesuch"]) == ["mid"]
     result = {
-        "methods": {n: {"family": f, "bytes": b} for n, f, b in (("gtao", "screen-space", 256), ("field-32x16", "field", 6000),
-                    ("field-16x8", "field", 2600), ("shipped:tiny", "unet", 1), ("mlp-16x8", "mlp", 10))},  # fmt: skip
+        "methods": {
+            n: {"family": f, "bytes": b}
+            for n, f, b in (
+                ("gtao", "screen-space", 256),
+                ("field-32x16", "field", 6000),
+                ("field-16x8", "field", 2600),
+                ("shipped:tiny", "unet", 1),
+                ("mlp-16x8", "mlp", 10),
+            )
+        },
         "shipped": {"roles": {"default": "big", "fast": "tiny"}},
     }
     assert contact_order(result, ["gtao", "field", "shipped:default", "shipped:fast"]) == [
-        "gtao", "field-16x8", "shipped:tiny"]  # fmt: skip
+        "gtao",
+        "field-16x8",
+        "shipped:tiny",
+    ]

@@ -29,15 +29,25 @@ RADII = [0.0625, 0.25]  # the dataset's labels.radii_rel; max_distance_rel is 0.
 def _fast_settings(**kw):
     from pipeline.evaluation.report import ReportSettings
 
-    base = dict(gt_rays=16, frames_per_scene=2, time_size=(32, 32), repeats=1, trace_rays=[2], bake_rays=8,
-                bake_samples_per_vertex=2.0, contact_sheets=False)  # fmt: skip
+    base = dict(
+        gt_rays=16,
+        frames_per_scene=2,
+        time_size=(32, 32),
+        repeats=1,
+        trace_rays=[2],
+        bake_rays=8,
+        bake_samples_per_vertex=2.0,
+        contact_sheets=False,
+    )
     base.update(kw)
     return ReportSettings(**base)
 
 
 def _history(minutes: float, epochs: int, top: float) -> list[dict]:
-    return [{"epoch": e, "wall_seconds": 60.0 * minutes * e / epochs, "val_ssim": top * (1 - 0.5 / e), "lr": 1e-3}
-            for e in range(1, epochs + 1)]  # fmt: skip
+    return [
+        {"epoch": e, "wall_seconds": 60.0 * minutes * e / epochs, "val_ssim": top * (1 - 0.5 / e), "lr": 1e-3}
+        for e in range(1, epochs + 1)
+    ]
 
 
 def _tiny_unet(path: Path, scale: int) -> None:
@@ -47,8 +57,17 @@ def _tiny_unet(path: Path, scale: int) -> None:
     torch.manual_seed(0)
     args = UNetArgs(widths=[2, 4], scale=scale)
     model = build_model(args).eval()
-    torch.save({"kind": KIND, "format_version": 1, "model_args": model_args_dict(args), "config": {},
-                "state_dict": model.state_dict(), "metrics": {}}, path)  # fmt: skip
+    torch.save(
+        {
+            "kind": KIND,
+            "format_version": 1,
+            "model_args": model_args_dict(args),
+            "config": {},
+            "state_dict": model.state_dict(),
+            "metrics": {},
+        },
+        path,
+    )
 
 
 def _install(models: Path, name: str, export: Path, provenance: dict, config: dict) -> None:
@@ -65,11 +84,21 @@ def workspace(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("report-radii")
     data = root / "dataset"
-    build_dataset(DatasetSettings(name="tiny-radii", size=(32, 32), holdout_every=2, frames_per_shard=4,
-                                  labels=LabelSettings(rays=8, radii_rel=list(RADII)),
-                                  scenes=[SceneSpec("spot", "spot", views=4, split="train"),
-                                          SceneSpec("box", "cornell_box", cameras="interior", views=2, split="val")]),
-                  data, progress=False)  # fmt: skip
+    build_dataset(
+        DatasetSettings(
+            name="tiny-radii",
+            size=(32, 32),
+            holdout_every=2,
+            frames_per_shard=4,
+            labels=LabelSettings(rays=8, radii_rel=list(RADII)),
+            scenes=[
+                SceneSpec("spot", "spot", views=4, split="train"),
+                SceneSpec("box", "cornell_box", cameras="interior", views=2, split="val"),
+            ],
+        ),
+        data,
+        progress=False,
+    )
     models = root / "models"
     models.mkdir()
     for name, scale, minutes in (("u-30", 1, 30), ("u-90-half", 2, 90)):
@@ -81,13 +110,29 @@ def workspace(tmp_path_factory):
             "test": {"ssim": 0.7, "rmse": 0.1},
         }
         _install(models, name, root / "export" / name, prov, {"train_fraction": 1.0})
-    index = {"models": {"u-30": {"kind": "unet", "scale": 1, "bytes": 1000, "test": {"ssim": 0.71, "rmse": 0.11},
-                                 "gl_seconds": {"512x512": 0.05}},
-                        "u-90-half": {"kind": "unet", "scale": 2, "bytes": 1200, "test": {"ssim": 0.72, "rmse": 0.1},
-                                      "gl_seconds": {"512x512": 0.02}}},
-             "default": {"unet": "u-30"},
-             "baselines": {"ssao": {"test": {"ssim": 0.6, "rmse": 0.2}, "gl_seconds": {"512x512": 0.01}},
-                           "gtao": {"test": {"ssim": 0.75, "rmse": 0.12}, "gl_seconds": {"512x512": 0.03}}}}  # fmt: skip
+    index = {
+        "models": {
+            "u-30": {
+                "kind": "unet",
+                "scale": 1,
+                "bytes": 1000,
+                "test": {"ssim": 0.71, "rmse": 0.11},
+                "gl_seconds": {"512x512": 0.05},
+            },
+            "u-90-half": {
+                "kind": "unet",
+                "scale": 2,
+                "bytes": 1200,
+                "test": {"ssim": 0.72, "rmse": 0.1},
+                "gl_seconds": {"512x512": 0.02},
+            },
+        },
+        "default": {"unet": "u-30"},
+        "baselines": {
+            "ssao": {"test": {"ssim": 0.6, "rmse": 0.2}, "gl_seconds": {"512x512": 0.01}},
+            "gtao": {"test": {"ssim": 0.75, "rmse": 0.12}, "gl_seconds": {"512x512": 0.03}},
+        },
+    }
     (models / "index.json").write_text(json.dumps(index))
     return root, data, models
 
@@ -225,9 +270,12 @@ def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
         ("full", 1.0, 8, 0.7),
     ):
         (models / name).mkdir(parents=True)
-        manifest = {"kind": "unet", "config": {"train_fraction": frac, "budget_minutes": 15},
-                    "metadata": {"scale": "1", "training_scenes": [f"s{i}" for i in range(scenes)]},
-                    "provenance": {"budget_minutes": 15, "test": {"ssim": ssim, "rmse": 0.1}}}  # fmt: skip
+        manifest = {
+            "kind": "unet",
+            "config": {"train_fraction": frac, "budget_minutes": 15},
+            "metadata": {"scale": "1", "training_scenes": [f"s{i}" for i in range(scenes)]},
+            "provenance": {"budget_minutes": 15, "test": {"ssim": ssim, "rmse": 0.1}},
+        }
         (models / name / "manifest.json").write_text(json.dumps(manifest))
         index["models"][name] = {
             "kind": "unet",
@@ -251,8 +299,16 @@ def test_no_shipped_model_is_one_line(tmp_path, workspace):
     from pipeline.evaluation.report import evaluate, render_markdown
 
     _, data, _ = workspace
-    r = evaluate(data, None, _fast_settings(frames_per_scene=1), None, families={"screen-space"}, progress=False,
-                 keep_images=False, shipped=tmp_path / "empty")  # fmt: skip
+    r = evaluate(
+        data,
+        None,
+        _fast_settings(frames_per_scene=1),
+        None,
+        families={"screen-space"},
+        progress=False,
+        keep_images=False,
+        shipped=tmp_path / "empty",
+    )
     r.pop("_sheets")
     assert r["shipped"]["models"] == {} and "index.json is missing" in r["shipped"]["note"]
     md = render_markdown(r, None, {})

@@ -13,8 +13,18 @@ import pytest
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.tolerances import TOL
 
-TINY_TRAIN = {"widths": [2, 4], "epochs": 3, "internal_height": 40, "batch_size": 4, "lr": 0.01, "crop": 16, "crops_per_frame": 2,
-              "threads": 1, "lr_schedule": "cosine", "budget_minutes": 30.0}  # fmt: skip
+TINY_TRAIN = {
+    "widths": [2, 4],
+    "epochs": 3,
+    "internal_height": 40,
+    "batch_size": 4,
+    "lr": 0.01,
+    "crop": 16,
+    "crops_per_frame": 2,
+    "threads": 1,
+    "lr_schedule": "cosine",
+    "budget_minutes": 30.0,
+}
 
 
 @pytest.fixture(scope="module")
@@ -42,10 +52,18 @@ def corpus(tmp_path_factory):
 def _settings(corpus: Path, tmp: Path, **kw):
     from pipeline.release.ship import ShipSettings
 
-    base = dict(dataset=str(corpus), checkpoints=str(tmp / "ckpt"), out=str(tmp / "models"),
-                default={"unet": "u-full"}, time_sizes=[[32, 32]], time_repeats=1,
-                models=[{"name": "u-full", "train": dict(TINY_TRAIN)},
-                        {"name": "u-half", "init": "u-full", "train": {**TINY_TRAIN, "scale": 2, "epochs": 2}}])  # fmt: skip
+    base = dict(
+        dataset=str(corpus),
+        checkpoints=str(tmp / "ckpt"),
+        out=str(tmp / "models"),
+        default={"unet": "u-full"},
+        time_sizes=[[32, 32]],
+        time_repeats=1,
+        models=[
+            {"name": "u-full", "train": dict(TINY_TRAIN)},
+            {"name": "u-half", "init": "u-full", "train": {**TINY_TRAIN, "scale": 2, "epochs": 2}},
+        ],
+    )
     base.update(kw)
     return ShipSettings(**base)
 
@@ -74,7 +92,11 @@ def test_ship_installs_self_describing_exports(shipped, corpus):
     for name in ("u-full", "u-half"):
         manifest = json.loads((models / name / "manifest.json").read_text())
         prov = manifest["provenance"]
-        assert prov["dataset_hash"] == ds_hash and prov["commit"] and prov["epochs"] == (3 if name == "u-full" else 2)
+        assert (
+            prov["dataset_hash"] == ds_hash
+            and prov["commit"]
+            and prov["epochs"] == (3 if name == "u-full" else 2)
+        )
         assert prov["budget_minutes"] == 30.0 and prov["plan"]["epochs"] == prov["epochs"]
         assert prov["test_scenes"] == ["cow"] and "spot" not in prov["test_per_scene"]  # split by mesh
         assert 0 < prov["test"]["ssim"] <= 1 and set(prov["test"]["per_radius"]) == {"0.0625", "0.25"}
@@ -83,7 +105,10 @@ def test_ship_installs_self_describing_exports(shipped, corpus):
         assert len(prov["history"]) == prov["epochs"] and prov["gl_seconds"]["32x32"] > 0
         meta = get_metadata(load_onnx(models / name / "model.onnx"))
         assert meta["provenance"]["dataset_hash"] == ds_hash and meta["provenance"]["test"] == prov["test"]
-        assert sum(f.stat().st_size for f in (models / name).rglob("*") if f.is_file()) == index["models"][name]["bytes"]
+        assert (
+            sum(f.stat().st_size for f in (models / name).rglob("*") if f.is_file())
+            == index["models"][name]["bytes"]
+        )
         assert index["models"][name]["bytes"] < settings.max_bytes
     assert json.loads((models / "u-half" / "manifest.json").read_text())["metadata"]["scale"] == 2
     assert set(index["baselines"]) == {"ssao", "gtao"} and index["baselines"]["gtao"]["test"]["pairs"] > 0
@@ -123,10 +148,18 @@ def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
     with pytest.raises(NeuralaoError, match="is not one of"):
         ship(_settings(corpus, tmp_path, default={"unet": "nope"}))
     with pytest.raises(NeuralaoError, match="not an earlier model"):
-        ship(_settings(corpus, tmp_path, default={}, models=[{"name": "a", "init": "b", "train": TINY_TRAIN}]))
+        ship(
+            _settings(corpus, tmp_path, default={}, models=[{"name": "a", "init": "b", "train": TINY_TRAIN}])
+        )
     with pytest.raises(NeuralaoError, match="no corpus"):
         ship(_settings(tmp_path / "none", tmp_path))
-    small = _settings(corpus, tmp_path, max_bytes=1000, default={}, models=[{"name": "u", "train": {**TINY_TRAIN, "epochs": 1}}])
+    small = _settings(
+        corpus,
+        tmp_path,
+        max_bytes=1000,
+        default={},
+        models=[{"name": "u", "train": {**TINY_TRAIN, "epochs": 1}}],
+    )
     with pytest.raises(NeuralaoError, match="over the 1000 limit"):
         ship(small)
     assert not (tmp_path / "models" / "u").exists() and not list((tmp_path / "models").glob(".*"))
@@ -173,7 +206,9 @@ def test_infer_uses_the_shipped_default_when_given_only_a_frame(shipped, corpus,
     path = tmp_path / "frame.npz"
     write_npz(path, **{k: np.asarray(v) for k, v in frame.items() if k not in ("scene", "split", "holdout")})
     monkeypatch.setattr(sh, "MODELS_DIR", tmp_path / "nothing")
-    assert main(["infer", str(path), "--out", str(tmp_path / "none.png")]) == 2  # one-line error: none shipped
+    assert (
+        main(["infer", str(path), "--out", str(tmp_path / "none.png")]) == 2
+    )  # one-line error: none shipped
     monkeypatch.setattr(sh, "MODELS_DIR", Path(settings.out))
     radius = float(frame["radii"][0])
     assert main(["infer", str(path), "--radius", str(radius), "--out", str(tmp_path / "ao.png")]) == 0
@@ -191,7 +226,9 @@ def test_ship_installs_a_hybrid_at_its_internal_height(corpus, tmp_path):
     from pipeline.release.ship import ship
 
     hybrid = {**TINY_TRAIN, "gtao_input": True, "internal_height": 32, "epochs": 2}
-    settings = _settings(corpus, tmp_path, default={"unet": "u-gtao"}, models=[{"name": "u-gtao", "train": hybrid}])
+    settings = _settings(
+        corpus, tmp_path, default={"unet": "u-gtao"}, models=[{"name": "u-gtao", "train": hybrid}]
+    )
     index = ship(settings)
     entry = index["models"]["u-gtao"]
     manifest = json.loads((tmp_path / "models" / "u-gtao" / "manifest.json").read_text())

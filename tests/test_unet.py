@@ -371,8 +371,10 @@ def test_interrupted_training_resumes_to_the_same_weights(frames, tmp_path):
     restarted = train(other, train_set, val_set, longer, info)
     fresh = train(other, train_set, val_set, tmp_path / "fresh.pt", info)
     assert _state_equal(restarted["state_dict"], fresh["state_dict"])
-    assert not _state_equal(fresh["state_dict"], train(replace(settings, epochs=1), train_set, val_set,
-                                                       tmp_path / "seed0.pt", info)["state_dict"])  # fmt: skip
+    assert not _state_equal(
+        fresh["state_dict"],
+        train(replace(settings, epochs=1), train_set, val_set, tmp_path / "seed0.pt", info)["state_dict"],
+    )
 
 
 # ----------------------------------------------------------------------------------------------- checkpoints
@@ -384,8 +386,17 @@ def _mlp_checkpoint(path):
     from pipeline.models.mlp import model_args_dict as mlp_args
 
     model = BakedMLP(hidden=[8, 4])
-    torch.save({"kind": MLP_KIND, "format_version": 1, "model_args": mlp_args(model), "config": {},
-                "state_dict": model.state_dict(), "metrics": {}}, path)  # fmt: skip
+    torch.save(
+        {
+            "kind": MLP_KIND,
+            "format_version": 1,
+            "model_args": mlp_args(model),
+            "config": {},
+            "state_dict": model.state_dict(),
+            "metrics": {},
+        },
+        path,
+    )
 
 
 def test_checkpoint_is_plain_data_and_round_trips(trained, frames):
@@ -398,7 +409,8 @@ def test_checkpoint_is_plain_data_and_round_trips(trained, frames):
         assert key in raw
     x = frames[1].x[0].numpy()
     np.testing.assert_array_equal(
-        predict(model_from_checkpoint(load_checkpoint(path)), x, RHO), predict(model_from_checkpoint(ckpt), x, RHO)
+        predict(model_from_checkpoint(load_checkpoint(path)), x, RHO),
+        predict(model_from_checkpoint(ckpt), x, RHO),
     )
 
 
@@ -502,9 +514,7 @@ def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
         assert raw.shape == (1, 1, h, w)
         assert np.abs(raw - want).max() <= onnx_vs_torch_tol(want, out / "model.onnx")
         if min(h, w) > 4:
-            assert (
-                np.abs(run_opencv(out / "model.onnx", feed) - raw).max() <= TOL.opencv_vs_onnx
-            )
+            assert np.abs(run_opencv(out / "model.onnx", feed) - raw).max() <= TOL.opencv_vs_onnx
 
 
 def test_infer_frame_composites_background(exported, trained, frames):
@@ -514,8 +524,12 @@ def test_infer_frame_composites_background(exported, trained, frames):
     model = model_from_checkpoint(load_checkpoint(trained[0]))
     val = frames[1]
     depth = val.x[0, 0].numpy() * 3.0  # any positive scale: preprocessing divides it out
-    frame = {"depth": depth, "normal_cam": np.moveaxis(val.x[0, 1:].numpy(), 0, -1), "mask": depth > 0,
-             "yfov": 0.8}  # fmt: skip
+    frame = {
+        "depth": depth,
+        "normal_cam": np.moveaxis(val.x[0, 1:].numpy(), 0, -1),
+        "mask": depth > 0,
+        "yfov": 0.8,
+    }
     fg = frame["mask"]
     with pytest.raises(NeuralaoError, match="--radius"):  # no label radii in the frame, none given
         infer_frame(out / "model.onnx", frame)
@@ -605,7 +619,9 @@ def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeyp
     import pipeline.models.unet_train as ut
 
     train_set, val_set, info = frames
-    settings = replace(TINY, epochs=3, widths=[2, 4], budget_minutes=60.0, lr_schedule="cosine", warmup_steps=2)
+    settings = replace(
+        TINY, epochs=3, widths=[2, 4], budget_minutes=60.0, lr_schedule="cosine", warmup_steps=2
+    )
     reference = train(settings, train_set, val_set, tmp_path / "ref.pt", info)
     assert reference["plan"]["epochs"] == 3 and reference["plan"]["seconds_per_step"] > 0
     assert [h["epoch"] for h in reference["history"]] == [1, 2, 3]
@@ -668,7 +684,10 @@ def test_corpus_fraction_cut_from_the_loaded_corpus_equals_a_fresh_load(tmp_path
     full = load_dataset_frames(tmp_path)
     assert full[2]["training_scenes"] == ["bunny", "cow", "spot"]
     for fraction in (0.34, 0.5, 1.0):
-        fresh, cut = load_dataset_frames(tmp_path, fraction), load_dataset_frames(tmp_path, fraction, loaded=full)
+        fresh, cut = (
+            load_dataset_frames(tmp_path, fraction),
+            load_dataset_frames(tmp_path, fraction, loaded=full),
+        )
         assert cut[2] == fresh[2]
         for a, b in ((fresh[0], cut[0]), (fresh[1], cut[1])):
             assert a.names == b.names and a.scenes == b.scenes

@@ -50,8 +50,13 @@ def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dic
     return frames or None
 
 
-def check_exports(root: Path, data: Path | None = None, inputs: Path | None = None, seed: int = 0,
-                  size: tuple[int, int] | None = None) -> dict:  # fmt: skip
+def check_exports(
+    root: Path,
+    data: Path | None = None,
+    inputs: Path | None = None,
+    seed: int = 0,
+    size: tuple[int, int] | None = None,
+) -> dict:
     """Parity of every export under ``root``. ``inputs``, ``seed`` and ``size`` (W, H; None: the
     export's own) apply to `neuralao glsl` exports, and are refused for the others, which run on frames."""
     dirs = export_dirs(root)
@@ -61,8 +66,10 @@ def check_exports(root: Path, data: Path | None = None, inputs: Path | None = No
         if kind not in kinds.KINDS:
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
         if kind != ONNX_GLSL and (size is not None or inputs is not None):
-            raise NeuralaoError(f"{d} is a {kind} export, checked on rendered or --data frames: "
-                                "--size and --inputs apply to `neuralao glsl` exports only")  # fmt: skip
+            raise NeuralaoError(
+                f"{d} is a {kind} export, checked on rendered or --data frames: "
+                "--size and --inputs apply to `neuralao glsl` exports only"
+            )
     results = {}
     for d, manifest in manifests.items():
         kind = manifest["kind"]
@@ -79,21 +86,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("exports", help="an export folder, or a folder of export folders")
     p.add_argument("--data", help="dataset folder whose frames to use (default: render frames)")
     p.add_argument("--out", help="write the figures as JSON here")
-    p.add_argument("--inputs", help="`neuralao glsl` exports: .npz of inputs (image: per graph input, scalar "
-                   "inputs included, by ONNX name; vector: per texture, (H, W, 4)); default: seeded random inputs "
-                   "of the declared shapes, scalars uniform in [0.1, 2]")  # fmt: skip
+    p.add_argument(
+        "--inputs",
+        help="`neuralao glsl` exports: .npz of inputs (image: per graph input, scalar "
+        "inputs included, by ONNX name; vector: per texture, (H, W, 4)); default: seeded random inputs "
+        "of the declared shapes, scalars uniform in [0.1, 2]",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the random inputs (default 0)")
-    p.add_argument("--size", type=int, nargs=2, default=None, metavar=("W", "H"),
-                   help="size of symbolic image dimensions / vector textures (default 64 48, rounded up to the "
-                   "multiples an image program takes); must equal a static input size")  # fmt: skip
+    p.add_argument(
+        "--size",
+        type=int,
+        nargs=2,
+        default=None,
+        metavar=("W", "H"),
+        help="size of symbolic image dimensions / vector textures (default 64 48, rounded up to the "
+        "multiples an image program takes); must equal a static input size",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     # before any export is read: numpy refuses a negative seed with a traceback
     check_seed("--seed", args.seed)
-    results = check_exports(Path(args.exports), Path(args.data) if args.data else None,
-                            Path(args.inputs) if args.inputs else None, args.seed,
-                            tuple(args.size) if args.size else None)  # fmt: skip
+    results = check_exports(
+        Path(args.exports),
+        Path(args.data) if args.data else None,
+        Path(args.inputs) if args.inputs else None,
+        args.seed,
+        tuple(args.size) if args.size else None,
+    )
     failed = [name for name, r in results.items() if not r.get("passed", False)]
     summary = {"exports": results, "passed": not failed}
     for name, r in results.items():

@@ -98,8 +98,11 @@ def add_field_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--data", help="dataset folder (with --scene)")
     src.add_argument("--scene", help="scene name in the dataset")
     d = field.FieldSettings()  # the help states the real defaults
-    p.add_argument("--size", default=None,
-                   help=f"hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default {mlp.size_name(d.hidden)})")  # fmt: skip
+    p.add_argument(
+        "--size",
+        default=None,
+        help=f"hidden tanh widths XxY, e.g. 16x8, 32x16, 64x32 (default {mlp.size_name(d.hidden)})",
+    )
     p.add_argument("--octaves", type=int, help=f"position-encoding frequency bands (default {d.octaves})")
     p.add_argument("--rays", type=int, help=f"AO rays per surface sample (default {d.labels.rays})")
     p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
@@ -125,15 +128,23 @@ def run_field(args: argparse.Namespace) -> int:
     if not args.mesh and not (args.data and args.scene):
         raise NeuralaoError("give --mesh PATH_OR_NAME, or --data DIR --scene NAME")
     settings = field_settings_from_args(args)
-    ckpt = field.train(settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh,
-                       progress=not args.no_progress)  # fmt: skip
+    ckpt = field.train(
+        settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
+    )
     m = ckpt["metrics"]
-    _log["field"].info("wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), "
-                       "held-back SSIM %s RMSE %s",
-                       args.out, mlp.size_name(ckpt["model_args"]["hidden"]), ckpt["model_args"]["octaves"],
-                       ckpt["parameter_bytes"], ckpt["training_time_s"], m["val_rmse"], m["constant_val_rmse"],
-                       f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
-                       f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-")  # fmt: skip
+    _log["field"].info(
+        "wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), "
+        "held-back SSIM %s RMSE %s",
+        args.out,
+        mlp.size_name(ckpt["model_args"]["hidden"]),
+        ckpt["model_args"]["octaves"],
+        ckpt["parameter_bytes"],
+        ckpt["training_time_s"],
+        m["val_rmse"],
+        m["constant_val_rmse"],
+        f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
+        f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-",
+    )
     return 0
 
 
@@ -151,8 +162,12 @@ def add_unet_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--config", help="preset JSON of UNetTrainSettings fields")
     add_set_option(p, "--set epochs=3")
-    p.add_argument("--budget", type=float, metavar="MINUTES",
-                   help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)")  # fmt: skip
+    p.add_argument(
+        "--budget",
+        type=float,
+        metavar="MINUTES",
+        help="wall-clock budget (sets budget_minutes; use with lr_schedule=cosine)",
+    )
     p.add_argument(
         "--restart", action="store_true", help="ignore an existing checkpoint and train from scratch"
     )
@@ -163,8 +178,11 @@ def run_unet(args: argparse.Namespace) -> int:
     overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
     settings = load_settings(unet_train.UNetTrainSettings, args.config, overrides)
     train_set, val_set, info = unet_train.load_dataset_frames(
-        Path(args.data), settings.train_fraction, internal_height=settings.internal_height,
-        gtao=settings.gtao_input)  # fmt: skip
+        Path(args.data),
+        settings.train_fraction,
+        internal_height=settings.internal_height,
+        gtao=settings.gtao_input,
+    )
     log = _log["unet"]
     log.info(
         "U-Net: %d training frames (%s), %d validation frames (%s)",

@@ -101,13 +101,29 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
         count = min(cat.composed, res.scenes_per_category) if res.scenes_per_category > 0 else cat.composed
         if count > 0:
             cameras = [cat.cameras] if cat.cameras in ("orbit", "interior", "closeup") else ["interior"]
-            composed.append(ComposedScenes(count=count, seed=cat.composed_seed, prefix=cat.name, views=res.views,
-                                           split="test", cameras=cameras))  # fmt: skip
+            composed.append(
+                ComposedScenes(
+                    count=count,
+                    seed=cat.composed_seed,
+                    prefix=cat.name,
+                    views=res.views,
+                    split="test",
+                    cameras=cameras,
+                )
+            )
     labels = LabelSettings(
         rays=res.rays, max_distance_rel=settings.max_distance_rel, radii_rel=list(settings.radii_rel)
     )
-    return DatasetSettings(name=f"{settings.name}-{w}x{h}", scenes=scenes, composed=composed, size=(w, h),
-                           labels=labels, seed=settings.seed, holdout_every=0, frames_per_shard=1 if w * h > 1 << 20 else 4)  # fmt: skip
+    return DatasetSettings(
+        name=f"{settings.name}-{w}x{h}",
+        scenes=scenes,
+        composed=composed,
+        size=(w, h),
+        labels=labels,
+        seed=settings.seed,
+        holdout_every=0,
+        frames_per_shard=1 if w * h > 1 << 20 else 4,
+    )
 
 
 def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress: bool) -> None:
@@ -207,8 +223,10 @@ def summarise(rows: list[dict], methods: list[str], radii_rel: list[float]) -> d
             for res in sorted({r["resolution"] for r in mine if r["category"] == cat}, key=_pixels):
                 sel = [r for r in mine if r["category"] == cat and r["resolution"] == res]
                 cells[cat][res] = {k: mean(sel, k) for k in METRICS} | {"pairs": len(sel)}
-        per_radius = {f"{radii_rel[j]:g}": {k: mean([r for r in mine if r["radius"] == j], k) for k in METRICS}
-                      for j in sorted({r["radius"] for r in mine})}  # fmt: skip
+        per_radius = {
+            f"{radii_rel[j]:g}": {k: mean([r for r in mine if r["radius"] == j], k) for k in METRICS}
+            for j in sorted({r["radius"] for r in mine})
+        }
         out[m] = {
             "cells": cells,
             "per_radius": per_radius,
@@ -228,8 +246,12 @@ def markdown(summary: dict, reference: str = "gtao", level: int = 3) -> str:
     cats = sorted({c for m in methods for c in summary[m]["cells"]})
     lines = []
     for metric, better in (("ssim", "higher"), ("rmse", "lower"), ("flip", "lower")):
-        lines += [f"{'#' * level} {metric.upper()} ({better} is better)", "", "| category | resolution | " + " | ".join(methods) + " |",
-                  "|---|---|" + "---:|" * len(methods)]  # fmt: skip
+        lines += [
+            f"{'#' * level} {metric.upper()} ({better} is better)",
+            "",
+            "| category | resolution | " + " | ".join(methods) + " |",
+            "|---|---|" + "---:|" * len(methods),
+        ]
         for cat in cats:
             ress = sorted({r for m in methods for r in summary[m]["cells"].get(cat, {})}, key=_pixels)
             for res in ress:
@@ -257,8 +279,15 @@ def markdown(summary: dict, reference: str = "gtao", level: int = 3) -> str:
     return "\n".join(lines)
 
 
-def evaluate(settings: EvalSettings, out: Path, models: list[Path], policies: list[str], config_dir: Path,
-             flip: bool = True, progress: bool = True) -> dict:  # fmt: skip
+def evaluate(
+    settings: EvalSettings,
+    out: Path,
+    models: list[Path],
+    policies: list[str],
+    config_dir: Path,
+    flip: bool = True,
+    progress: bool = True,
+) -> dict:
     """Build (or resume) the frames of every resolution, score every method, write the tables."""
     check_settings(settings)
     methods: dict[str, Predictor] = {}
@@ -276,8 +305,15 @@ def evaluate(settings: EvalSettings, out: Path, models: list[Path], policies: li
         t0 = time.perf_counter()
         for frame in open_dataset(out / "frames" / key).frames(split="test"):
             for row in score_frame(frame, methods, flip):
-                rows.append(row | {"category": category_of(frame["scene"], settings), "resolution": key,
-                                   "scene": frame["scene"], "view": frame["view"]})  # fmt: skip
+                rows.append(
+                    row
+                    | {
+                        "category": category_of(frame["scene"], settings),
+                        "resolution": key,
+                        "scene": frame["scene"],
+                        "view": frame["view"],
+                    }
+                )
         log.info(
             "%s: labels ready in %.0f s, scored in %.0f s", key, build_times[key], time.perf_counter() - t0
         )
@@ -292,8 +328,14 @@ def _write_tables(
 ) -> dict:
     """evaluation.json and evaluation.md of the rows scored so far (rewritten after each resolution)."""
     summary = summarise(rows, methods, list(settings.radii_rel))
-    result = {"config": settings_to_dict(settings), "policies": policies, "methods": summary, "rows": rows,
-              "models": [str(m) for m in models], "build_seconds": dict(build_times)}  # fmt: skip
+    result = {
+        "config": settings_to_dict(settings),
+        "policies": policies,
+        "methods": summary,
+        "rows": rows,
+        "models": [str(m) for m in models],
+        "build_seconds": dict(build_times),
+    }
     write_json(out / "evaluation.json", result)
     write_text(out / "evaluation.md", markdown(summary))
     return result

@@ -67,11 +67,20 @@ def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path
     bg = 0.5
     axes[0, 0].imshow(np.where(fg, gt, bg), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     axes[0, 0].set_title("ground truth", fontsize=9)
-    axes[1, 0].imshow(np.where(fg & ~mask, 1.0, np.where(fg, 0.6, 0.2)), cmap="gray", vmin=0, vmax=1,
-                      interpolation="nearest")  # fmt: skip
+    axes[1, 0].imshow(
+        np.where(fg & ~mask, 1.0, np.where(fg, 0.6, 0.2)),
+        cmap="gray",
+        vmin=0,
+        vmax=1,
+        interpolation="nearest",
+    )
     axes[1, 0].set_xlabel("invalid GT (white)", fontsize=8)
-    axes[2, 0].imshow(np.linspace(0, ERROR_VMAX, 256)[:, None][::-1], cmap="magma", aspect="auto",
-                      extent=(0, 1, 0, ERROR_VMAX))  # fmt: skip
+    axes[2, 0].imshow(
+        np.linspace(0, ERROR_VMAX, 256)[:, None][::-1],
+        cmap="magma",
+        aspect="auto",
+        extent=(0, 1, 0, ERROR_VMAX),
+    )
     axes[2, 0].set_xlabel(f"|error| scale, 0-{ERROR_VMAX:g}", fontsize=8)
     axes[2, 0].tick_params(labelsize=7)
     for k, n in enumerate(names, start=1):
@@ -80,15 +89,25 @@ def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path
         rmse = float(np.sqrt(np.mean(err[mask] ** 2))) if mask.any() else float("nan")
         axes[0, k].imshow(np.where(fg, pred, bg), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
         axes[0, k].set_title(f"{n}\nRMSE {rmse:.3f}", fontsize=9)
-        axes[1, k].imshow(np.ma.masked_array(err, mask=~mask), cmap="magma", vmin=0, vmax=ERROR_VMAX,
-                          interpolation="nearest")  # fmt: skip
+        axes[1, k].imshow(
+            np.ma.masked_array(err, mask=~mask),
+            cmap="magma",
+            vmin=0,
+            vmax=ERROR_VMAX,
+            interpolation="nearest",
+        )
         r, c = worst_window(err, mask, win)
         axes[1, k].add_patch(Rectangle((c - 0.5, r - 0.5), win, win, fill=False, edgecolor="#39d0ff", lw=1.0))
         zoom_gt = np.where(fg, gt, bg)[r : r + win, c : c + win]
         zoom_pred = np.where(fg, pred, bg)[r : r + win, c : c + win]
         gap = np.full((zoom_gt.shape[0], 1), 1.0)
-        axes[2, k].imshow(np.concatenate([zoom_gt, gap, zoom_pred], axis=1), cmap="gray", vmin=0, vmax=1,
-                          interpolation="nearest")  # fmt: skip
+        axes[2, k].imshow(
+            np.concatenate([zoom_gt, gap, zoom_pred], axis=1),
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            interpolation="nearest",
+        )
         axes[2, k].set_xlabel("worst window: GT | method", fontsize=8)
     for ax in axes.ravel():
         ax.set_xticks([])

@@ -107,7 +107,9 @@ def shipped_summary(models_dir: str | Path) -> dict:
             "test": entry.get("test") or prov.get("test") or {},
             "gl_seconds": entry.get("gl_seconds") or prov.get("gl_seconds") or {},
             "history": entry.get("history") or prov.get("history") or [],
-            "evaluation": manifest.get("evaluation"),  # `neuralao evaluate --write-manifest`: by category x resolution
+            "evaluation": manifest.get(
+                "evaluation"
+            ),  # `neuralao evaluate --write-manifest`: by category x resolution
         }
     if not out["models"]:
         out["note"] = f"{folder / 'index.json'} lists no models"
@@ -142,8 +144,11 @@ def learning_curves_plot(shipped: dict, path: Path) -> Path | None:
     """Validation SSIM against wall-clock minutes, one curve per shipped model with a history."""
     curves = []
     for name, m in shipped.get("models", {}).items():
-        pts = [(h["wall_seconds"] / 60.0, h["val_ssim"]) for h in m.get("history") or []
-               if _finite(h.get("wall_seconds")) and _finite(h.get("val_ssim"))]  # fmt: skip
+        pts = [
+            (h["wall_seconds"] / 60.0, h["val_ssim"])
+            for h in m.get("history") or []
+            if _finite(h.get("wall_seconds")) and _finite(h.get("val_ssim"))
+        ]
         if pts:
             curves.append((name, m, sorted(pts)))
     if not curves:
@@ -249,8 +254,11 @@ def shipped_front_plot(shipped: dict, path: Path) -> Path | None:
     for name, t, e, base in pts:
         ax.scatter([t], [e], color="tab:blue" if base else "tab:red", marker="s" if base else "o", zorder=3)
         ax.annotate(name, (t, e), textcoords="offset points", xytext=(5, 4), fontsize=7)
-    front = sorted((t, e) for _, t, e, _ in pts if not any(
-        t2 <= t and e2 <= e and (t2, e2) != (t, e) for _, t2, e2, _ in pts))  # fmt: skip
+    front = sorted(
+        (t, e)
+        for _, t, e, _ in pts
+        if not any(t2 <= t and e2 <= e and (t2, e2) != (t, e) for _, t2, e2, _ in pts)
+    )
     if len(front) > 1:
         xs, ys = zip(*front, strict=True)
         ax.step(xs, ys, where="post", color="k", lw=1, ls="--", label="Pareto front")
@@ -269,9 +277,11 @@ def write_shipped_plots(shipped: dict | None, out: Path) -> dict[str, str]:
     if not shipped or not shipped.get("models"):
         return {}
     figures = {}
-    for key, fn, name in (("learning_curves", learning_curves_plot, "learning_curves.png"),
-                          ("corpus_size", corpus_size_plot, "corpus_size.png"),
-                          ("shipped_front", shipped_front_plot, "shipped_front.png")):  # fmt: skip
+    for key, fn, name in (
+        ("learning_curves", learning_curves_plot, "learning_curves.png"),
+        ("corpus_size", corpus_size_plot, "corpus_size.png"),
+        ("shipped_front", shipped_front_plot, "shipped_front.png"),
+    ):
         path = fn(shipped, Path(out) / name)
         if path is not None:
             figures[key] = path.name
@@ -328,14 +338,20 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
     for name, b in (shipped.get("baselines") or {}).items():
         test = b.get("test") or {}
         t = (b.get("gl_seconds") or {}).get("512x512")
-        lines.append(f"| {name} (baseline) | - | - | - | - | - | {_f(test.get('ssim'), '.4f')} | "
-                     f"{_f(test.get('rmse'), '.4f')} | {_f(t * 1e3 if _finite(t) else None, '.1f')} | - |")  # fmt: skip
+        lines.append(
+            f"| {name} (baseline) | - | - | - | - | - | {_f(test.get('ssim'), '.4f')} | "
+            f"{_f(test.get('rmse'), '.4f')} | {_f(t * 1e3 if _finite(t) else None, '.1f')} | - |"
+        )
     for name, m in shipped["models"].items():
         evaluation = m.get("evaluation")
         if evaluation and evaluation.get("methods"):
             from pipeline.evaluation.categories import markdown as evaluation_markdown
 
-            lines += ["", f"### {name} where users run it (`neuralao evaluate`: test meshes by category and resolution)", ""]
+            lines += [
+                "",
+                f"### {name} where users run it (`neuralao evaluate`: test meshes by category and resolution)",
+                "",
+            ]
             lines += evaluation_markdown(evaluation["methods"], level=4).splitlines()
     captions = {
         "learning_curves": "learning curves (validation SSIM against wall-clock minutes)",

@@ -125,8 +125,12 @@ MODEL_FAMILIES = tuple(kinds.REPORTED)  # methods loaded from exports
 # Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
 RADIUS_FAMILIES = ("screen-space", *(n for n, k in kinds.REPORTED.items() if k.radius_input))
 # Scatter-plot colours of the families (pipeline.kinds gives the models').
-COLOURS = {"screen-space": "tab:blue", "baked": "tab:green", "traced": "tab:gray",
-           **{n: k.colour for n, k in kinds.REPORTED.items()}}  # fmt: skip
+COLOURS = {
+    "screen-space": "tab:blue",
+    "baked": "tab:green",
+    "traced": "tab:gray",
+    **{n: k.colour for n, k in kinds.REPORTED.items()},
+}
 SHIPPED_PREFIX = "shipped:"  # row-name prefix of the release models of runtime/models
 # Shipped rows a report shows unless told otherwise: the default model and the fast one (pick_shipped).
 SHIPPED_PICKS = ("default", "fast")
@@ -340,8 +344,13 @@ def ground_truth(
         try:
             z = read_npz(path)
             if z["ao_radii"].shape[-1] == len(radii):
-                return GroundTruth(z["ao_radii"], z["valid_radii"].astype(bool), radii, main,
-                                   f"relabelled, {settings.gt_rays} rays (cached)")  # fmt: skip
+                return GroundTruth(
+                    z["ao_radii"],
+                    z["valid_radii"].astype(bool),
+                    radii,
+                    main,
+                    f"relabelled, {settings.gt_rays} rays (cached)",
+                )
             log.warning("ground-truth cache %s has other radii; relabelling", path)
         except (NeuralaoError, KeyError):
             log.warning("ground-truth cache %s unreadable; relabelling", path)
@@ -354,8 +363,14 @@ def ground_truth(
     finally:
         labeller.settings = saved
     if path is not None:
-        write_npz(path, ao=ao[..., main], valid=valid[..., main], ao_radii=ao, valid_radii=valid,
-                  radii=np.asarray(radii, np.float64))  # fmt: skip
+        write_npz(
+            path,
+            ao=ao[..., main],
+            valid=valid[..., main],
+            ao_radii=ao,
+            valid_radii=valid,
+            radii=np.asarray(radii, np.float64),
+        )
     return GroundTruth(ao, valid, radii, main, f"relabelled, {settings.gt_rays} rays")
 
 
@@ -397,14 +412,29 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
     try:
         manifest = json.loads((d / "manifest.json").read_text())
     except (OSError, json.JSONDecodeError) as e:
-        return Method(name, "mlp" if name.startswith("mlp") else "unet", "", "", "", available=False,
-                      reason=f"unreadable manifest ({type(e).__name__})")  # fmt: skip
+        return Method(
+            name,
+            "mlp" if name.startswith("mlp") else "unet",
+            "",
+            "",
+            "",
+            available=False,
+            reason=f"unreadable manifest ({type(e).__name__})",
+        )
     kind = manifest.get("kind")
     if kind == "mlp":
         scene = manifest.get("scene")
-        m = Method(name, "mlp", f"baked MLP {manifest.get('model_size', '')} (Erra et al.), one network per mesh",
-                   "GL fragment shader (generated GLSL)", "GL fragment shader, clamped to [0, 1]", scene=scene,
-                   bytes=manifest.get("parameter_bytes"), bytes_note="float32 weights", export=d)  # fmt: skip
+        m = Method(
+            name,
+            "mlp",
+            f"baked MLP {manifest.get('model_size', '')} (Erra et al.), one network per mesh",
+            "GL fragment shader (generated GLSL)",
+            "GL fragment shader, clamped to [0, 1]",
+            scene=scene,
+            bytes=manifest.get("parameter_bytes"),
+            bytes_note="float32 weights",
+            export=d,
+        )
         if scene not in scenes:
             m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
         return m
@@ -412,10 +442,18 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
         scene = manifest.get("scene")
         octaves = manifest.get("octaves")
         row = f"field-{manifest.get('model_size', '')}" + ("" if octaves == 4 else f"-o{octaves}")
-        m = Method(row, "field", f"AO field {manifest.get('model_size', '')}, {manifest.get('octaves')} octaves "
-                   "(object-space position + normal), one network per mesh", "GL fragment shader (generated GLSL)",
-                   "GL fragment shader, clamped to [0, 1]", scene=scene, bytes=manifest.get("parameter_bytes"),
-                   bytes_note="float32 weights + encoding constants", export=d)  # fmt: skip
+        m = Method(
+            row,
+            "field",
+            f"AO field {manifest.get('model_size', '')}, {manifest.get('octaves')} octaves "
+            "(object-space position + normal), one network per mesh",
+            "GL fragment shader (generated GLSL)",
+            "GL fragment shader, clamped to [0, 1]",
+            scene=scene,
+            bytes=manifest.get("parameter_bytes"),
+            bytes_note="float32 weights + encoding constants",
+            export=d,
+        )
         if scene not in scenes:
             m.name = name
             m.available, m.reason = False, f"trained for scene {scene!r}, which the dataset does not hold"
@@ -423,9 +461,17 @@ def _export_method(name: str, d: Path, scenes: list[str]) -> Method:
     if kind == "unet":
         scale = _unet_scale(manifest)
         at = "" if scale == 1 else f", run at 1/{scale} resolution (depth- and normal-aware upsampling)"
-        return Method(name, "unet", f"DeepAO screen-space U-Net (Zhang et al.){at}", "GL compute shaders (generated GLSL)",
-                      "onnxruntime (GLSL parity-checked)", bytes=manifest.get("bytes_fp32"),
-                      bytes_note="float32 weights", export=d, scale=scale)  # fmt: skip
+        return Method(
+            name,
+            "unet",
+            f"DeepAO screen-space U-Net (Zhang et al.){at}",
+            "GL compute shaders (generated GLSL)",
+            "onnxruntime (GLSL parity-checked)",
+            bytes=manifest.get("bytes_fp32"),
+            bytes_note="float32 weights",
+            export=d,
+            scale=scale,
+        )
     return Method(name, "unknown", "", "", "", available=False, reason=f"unknown export kind {kind!r}")
 
 
@@ -453,8 +499,11 @@ def pick_shipped(summary: dict, picks: list[str] | tuple[str, ...] | None) -> li
         elif pick == "fast":
             name = (summary.get("fast") or {}).get("unet")
             if name is None:
-                timed = [(float((m.get("gl_seconds") or {}).get("512x512") or math.inf), n)
-                         for n, m in models.items() if n != default]  # fmt: skip
+                timed = [
+                    (float((m.get("gl_seconds") or {}).get("512x512") or math.inf), n)
+                    for n, m in models.items()
+                    if n != default
+                ]
                 name = min(timed)[1] if timed else None
         else:
             name = pick
@@ -501,20 +550,60 @@ def baseline_methods(settings: ReportSettings) -> list[Method]:
     ssao_bytes = s.samples * 12 + s.noise_size**2 * 16
     gtao_bytes = settings.gtao.noise_size**2 * 16
     out = [
-        Method("ssao", "screen-space", f"Crytek-style normal-oriented hemisphere SSAO, {s.samples} samples + {s.noise_size}x{s.noise_size} blur",
-               "GL fragment shader", "GL fragment shader", bytes=ssao_bytes, bytes_note="kernel + noise tile"),
-        Method("gtao", "screen-space", f"GTAO, {settings.gtao.slices} slices x {settings.gtao.steps} steps + blur",
-               "GL fragment shader", "GL fragment shader", bytes=gtao_bytes, bytes_note="noise tile"),
-        Method("vertex-sampled", "baked", f"per-vertex AO sampled at vertices ({settings.bake_rays} rays), vertex colours",
-               "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
-        Method("vertex-lsq", "baked", f"least-squares vertex bake ({settings.bake_rays} rays/sample), vertex colours",
-               "GL vertex-colour draw", "barycentric interpolation (= the draw)", bytes_note="4 B per vertex"),
-        Method("vertex-lsq-8bit", "baked", "the least-squares bake stored as 8-bit UNORM vertex colours",
-               "GL vertex-colour draw", "barycentric interpolation of the 8-bit values", bytes_note="1 B per vertex"),
-    ]  # fmt: skip
+        Method(
+            "ssao",
+            "screen-space",
+            f"Crytek-style normal-oriented hemisphere SSAO, {s.samples} samples + {s.noise_size}x{s.noise_size} blur",
+            "GL fragment shader",
+            "GL fragment shader",
+            bytes=ssao_bytes,
+            bytes_note="kernel + noise tile",
+        ),
+        Method(
+            "gtao",
+            "screen-space",
+            f"GTAO, {settings.gtao.slices} slices x {settings.gtao.steps} steps + blur",
+            "GL fragment shader",
+            "GL fragment shader",
+            bytes=gtao_bytes,
+            bytes_note="noise tile",
+        ),
+        Method(
+            "vertex-sampled",
+            "baked",
+            f"per-vertex AO sampled at vertices ({settings.bake_rays} rays), vertex colours",
+            "GL vertex-colour draw",
+            "barycentric interpolation (= the draw)",
+            bytes_note="4 B per vertex",
+        ),
+        Method(
+            "vertex-lsq",
+            "baked",
+            f"least-squares vertex bake ({settings.bake_rays} rays/sample), vertex colours",
+            "GL vertex-colour draw",
+            "barycentric interpolation (= the draw)",
+            bytes_note="4 B per vertex",
+        ),
+        Method(
+            "vertex-lsq-8bit",
+            "baked",
+            "the least-squares bake stored as 8-bit UNORM vertex colours",
+            "GL vertex-colour draw",
+            "barycentric interpolation of the 8-bit values",
+            bytes_note="1 B per vertex",
+        ),
+    ]
     for r in settings.trace_rays:
-        out.append(Method(f"trace-{r}", "traced", f"Embree ray-traced AO, {r} rays per pixel",
-                          f"CPU Embree ({settings.workers} threads)", "CPU Embree", bytes_note="scene + BVH"))  # fmt: skip
+        out.append(
+            Method(
+                f"trace-{r}",
+                "traced",
+                f"Embree ray-traced AO, {r} rays per pixel",
+                f"CPU Embree ({settings.workers} threads)",
+                "CPU Embree",
+                bytes_note="scene + BVH",
+            )
+        )
     return out
 
 
@@ -613,9 +702,14 @@ def timing_inputs(size: tuple[int, int]) -> dict:
     rng = np.random.default_rng(0)
     n = rng.normal(size=(h, w, 3)).astype(np.float32)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    return {"depth": rng.uniform(1.0, 2.0, (h, w)).astype(np.float32), "normal_cam": n, "normal_obj": n,
-            "position": rng.uniform(-1.0, 1.0, (h, w, 3)).astype(np.float32), "mask": np.ones((h, w), bool),
-            "yfov": 0.8}  # fmt: skip
+    return {
+        "depth": rng.uniform(1.0, 2.0, (h, w)).astype(np.float32),
+        "normal_cam": n,
+        "normal_obj": n,
+        "position": rng.uniform(-1.0, 1.0, (h, w, 3)).astype(np.float32),
+        "mask": np.ones((h, w), bool),
+        "yfov": 0.8,
+    }
 
 
 def time_model(m: Method, size: tuple[int, int], repeats: int) -> dict:
@@ -682,12 +776,24 @@ class SceneContext:
             self.bakes[method] = (np.rint(np.clip(lsq, 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
             return self.bakes[method]
         ls = self.labeller.settings
-        bs = BakeSettings(rays=self.settings.bake_rays, max_distance=self.labeller.max_distance, kernel=ls.kernel,
-                          half_distance=self.labeller.half_distance, method="vertex" if method == "vertex-sampled" else "least-squares",
-                          samples_per_vertex=self.settings.bake_samples_per_vertex, backface_threshold=ls.backface_threshold,
-                          seed=frame_key_seed(self.settings.seed, "bake", self.name), workers=ls.workers)  # fmt: skip
-        key = {"scene": self.name, "vertices": len(self.scene.vertices), "faces": len(self.scene.faces),
-               "source": self.scene.source, "bake": settings_to_dict(bs)}  # fmt: skip
+        bs = BakeSettings(
+            rays=self.settings.bake_rays,
+            max_distance=self.labeller.max_distance,
+            kernel=ls.kernel,
+            half_distance=self.labeller.half_distance,
+            method="vertex" if method == "vertex-sampled" else "least-squares",
+            samples_per_vertex=self.settings.bake_samples_per_vertex,
+            backface_threshold=ls.backface_threshold,
+            seed=frame_key_seed(self.settings.seed, "bake", self.name),
+            workers=ls.workers,
+        )
+        key = {
+            "scene": self.name,
+            "vertices": len(self.scene.vertices),
+            "faces": len(self.scene.faces),
+            "source": self.scene.source,
+            "bake": settings_to_dict(bs),
+        }
         path = self.cache / f"{self.name}-{method}-{sha256_json(key)[:16]}.npz" if self.cache else None
         if path is not None and path.is_file():
             z = read_npz(path)
@@ -714,8 +820,14 @@ class SceneContext:
 def timing_frame(scene, frame: dict, size: tuple[int, int]) -> tuple[dict, Camera]:
     """A G-buffer of ``scene`` at ``size`` (W, H) from the pose of ``frame``, and its camera."""
     w, h = size
-    cam = Camera(np.asarray(frame["pose"], np.float64), int(w), int(h), float(frame["yfov"]),
-                 float(frame["znear"]), float(frame["zfar"]))  # fmt: skip
+    cam = Camera(
+        np.asarray(frame["pose"], np.float64),
+        int(w),
+        int(h),
+        float(frame["yfov"]),
+        float(frame["znear"]),
+        float(frame["zfar"]),
+    )
     with GBufferRenderer(scene) as r:
         return r.render(cam), cam
 
@@ -802,31 +914,56 @@ def evaluate(
     for scene_name, frames in frames_by_scene.items():
         try:
             scene = scene_of(ds.manifest, scene_name)  # a mesh, or a composed scene rebuilt from its seed
-            ctx = SceneContext(scene_name, scene, label_settings, settings, bake_cache, progress=False,
-                               radii_rel=radii_rel)  # fmt: skip
+            ctx = SceneContext(
+                scene_name, scene, label_settings, settings, bake_cache, progress=False, radii_rel=radii_rel
+            )
         except NeuralaoError as e:
             log.warning("scene %s skipped: %s", scene_name, e)
             scene_info[scene_name] = {"skipped": str(e)}
             bar.update(len(frames))
             continue
-        scene_info[scene_name] = {"split": ds.split_of(scene_name), "vertices": len(ctx.scene.vertices),
-                                  "faces": len(ctx.scene.faces), "radius": ctx.radius, "radii": list(ctx.radii),
-                                  "frames": len(frames)}  # fmt: skip
+        scene_info[scene_name] = {
+            "split": ds.split_of(scene_name),
+            "vertices": len(ctx.scene.vertices),
+            "faces": len(ctx.scene.faces),
+            "radius": ctx.radius,
+            "radii": list(ctx.radii),
+            "frames": len(frames),
+        }
         applicable = [m for m in methods if m.available and m.applies_to(scene_name)]
         for fi, frame in enumerate(frames):
-            key = {"dataset": ds.manifest.get("dataset_hash"), "scene": scene_name, "view": frame["view"],
-                   "labels": settings_to_dict(label_settings), "gt_rays": settings.gt_rays, "seed": settings.seed}  # fmt: skip
+            key = {
+                "dataset": ds.manifest.get("dataset_hash"),
+                "scene": scene_name,
+                "view": frame["view"],
+                "labels": settings_to_dict(label_settings),
+                "gt_rays": settings.gt_rays,
+                "seed": settings.seed,
+            }
             truth = ground_truth(
                 ctx.labeller, frame, ds_rays, settings, gt_cache, key, ctx.trace_radii, ctx.main
             )
             gt, gt_valid = truth.at(truth.main)
             fg = np.asarray(frame["mask"], bool)
             mask = fg & gt_valid
-            row = {"scene": scene_name, "view": int(frame["view"]), "split": frame["split"], "holdout": bool(frame["holdout"]),
-                   "pixels": int(mask.sum()), "gt": truth.source, "methods": {}}  # fmt: skip
+            row = {
+                "scene": scene_name,
+                "view": int(frame["view"]),
+                "split": frame["split"],
+                "holdout": bool(frame["holdout"]),
+                "pixels": int(mask.sum()),
+                "gt": truth.source,
+                "methods": {},
+            }
             if ctx.radii:  # the same frame at every radius of radii_rel: RADIUS_FAMILIES only
-                row["radii"] = {radius_key(rel): {"radius": r, "pixels": int((fg & truth.valid[..., j]).sum()), "methods": {}}
-                                for j, (rel, r) in enumerate(zip(ctx.radii_rel, ctx.radii, strict=True))}  # fmt: skip
+                row["radii"] = {
+                    radius_key(rel): {
+                        "radius": r,
+                        "pixels": int((fg & truth.valid[..., j]).sum()),
+                        "methods": {},
+                    }
+                    for j, (rel, r) in enumerate(zip(ctx.radii_rel, ctx.radii, strict=True))
+                }
             if not mask.any():
                 row["skipped"] = "no valid foreground pixel"
                 per_frame.append(row)
@@ -856,10 +993,16 @@ def evaluate(
                 if fi == 0 and keep_images:
                     images[m.name] = pred
             if fi == 0 and keep_images:
-                sheets[scene_name] = {"gt": gt, "mask": mask, "fg": np.asarray(frame["mask"], bool),
-                                      "view": int(frame["view"]), "images": images, "scene": ctx.scene,
-                                      "bakes": {k: v for k, v in ctx.bakes.items() if k == "vertex-lsq"},
-                                      "exports": _scene_exports(applicable, scene_name)}  # fmt: skip
+                sheets[scene_name] = {
+                    "gt": gt,
+                    "mask": mask,
+                    "fg": np.asarray(frame["mask"], bool),
+                    "view": int(frame["view"]),
+                    "images": images,
+                    "scene": ctx.scene,
+                    "bakes": {k: v for k, v in ctx.bakes.items() if k == "vertex-lsq"},
+                    "exports": _scene_exports(applicable, scene_name),
+                }
             per_frame.append(row)
             bar.update(1)
         # timing at time_size, from the first frame's pose
@@ -882,8 +1025,10 @@ def evaluate(
                 times[m.name] = time_method(m, ctx, frame512, cam512)
         for name in ("vertex-sampled", "vertex-lsq"):
             if name in ctx.bake_info:
-                scene_info[scene_name][f"bake_{name}"] = {k: ctx.bake_info[name].get(k) for k in
-                                                          ("samples", "invalid_samples", "seconds", "vertices")}  # fmt: skip
+                scene_info[scene_name][f"bake_{name}"] = {
+                    k: ctx.bake_info[name].get(k)
+                    for k in ("samples", "invalid_samples", "seconds", "vertices")
+                }
         for m in methods:
             if m.family == "baked" and m.available:
                 scene_info[scene_name].setdefault("vertex_ao_bytes", 4 * len(ctx.scene.vertices))
@@ -901,14 +1046,14 @@ def evaluate(
             "labels": settings_to_dict(label_settings),
             "label_rays": ds_rays,
             "size": ds.manifest.get("size"),
-        },  # fmt: skip
+        },
         "device": {
             "gl_renderer": ctx_gl.info.renderer,
             "gl_version": ctx_gl.info.version,
             "gl_platform": ctx_gl.info.platform,
             "cpu": cpu_name(),
             "python": platform.python_version(),
-        },  # fmt: skip
+        },
         "scenes": scene_info,
         "frames": per_frame,
         "model_times": model_times,
@@ -951,18 +1096,28 @@ def summarise_radii(name: str, per_frame: list[dict]) -> dict:
         if not rows:
             continue
         scenes = [r["scene"] for r in per_frame if name in r.get("radii", {}).get(k, {}).get("methods", {})]
-        e = {"radius_rel": float(k), "frames": len(rows), "ssim": float(np.mean([r[name]["ssim"] for r in rows])),
-             "rmse": float(np.mean([r[name]["rmse"] for r in rows]))}  # fmt: skip
+        e = {
+            "radius_rel": float(k),
+            "frames": len(rows),
+            "ssim": float(np.mean([r[name]["ssim"] for r in rows])),
+            "rmse": float(np.mean([r[name]["rmse"] for r in rows])),
+        }
         if all("ssao" in r for r in rows):
             s_rmse = float(np.mean([r["ssao"]["rmse"] for r in rows]))
             s_dssim = float(np.mean([1.0 - r["ssao"]["ssim"] for r in rows]))
             e["rmse_ratio_vs_ssao"] = e["rmse"] / s_rmse if s_rmse > 0 else None
             e["dssim_ratio_vs_ssao"] = (1.0 - e["ssim"]) / s_dssim if s_dssim > 0 else None
         e["per_scene"] = {
-            s: {"ssim": float(np.mean([r[name]["ssim"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s])),
-                "rmse": float(np.mean([r[name]["rmse"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s]))}
+            s: {
+                "ssim": float(
+                    np.mean([r[name]["ssim"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s])
+                ),
+                "rmse": float(
+                    np.mean([r[name]["rmse"] for r, s2 in zip(rows, scenes, strict=True) if s2 == s])
+                ),
+            }
             for s in dict.fromkeys(scenes)
-        }  # fmt: skip
+        }
         out[k] = e
     return out
 
@@ -971,10 +1126,18 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
     """Per-method means, per-scene breakdown and ratios to SSAO on the same frames."""
     out: dict = {}
     for m in methods:
-        entry = {"family": m.family, "description": m.description, "available": m.available, "reason": m.reason,
-                 "time_on": m.time_on, "error_on": m.error_on, "scope": m.scope,
-                 "bytes": m.bytes, "bytes_note": m.bytes_note,
-                 "two_sided": TWO_SIDED.get(m.family, True)}  # fmt: skip
+        entry = {
+            "family": m.family,
+            "description": m.description,
+            "available": m.available,
+            "reason": m.reason,
+            "time_on": m.time_on,
+            "error_on": m.error_on,
+            "scope": m.scope,
+            "bytes": m.bytes,
+            "bytes_note": m.bytes_note,
+            "two_sided": TWO_SIDED.get(m.family, True),
+        }
         if m.family == "unet":
             entry["scale"] = m.scale
         if m.shipped is not None:
@@ -998,8 +1161,13 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
             t = per_scene_time.get(scene, {}).get(m.name)
             ps["seconds"] = t
         times = [per_scene_time[s][m.name] for s in per_scene if m.name in per_scene_time.get(s, {})]
-        entry.update(frames=len(rows), ssim=float(np.mean(ssim)), rmse=float(np.mean(rmse)),
-                     seconds=float(np.median(times)) if times else None, per_scene=per_scene)  # fmt: skip
+        entry.update(
+            frames=len(rows),
+            ssim=float(np.mean(ssim)),
+            rmse=float(np.mean(rmse)),
+            seconds=float(np.median(times)) if times else None,
+            per_scene=per_scene,
+        )
         flip = [r["methods"][m.name].get("flip") for r in rows]
         entry["flip"] = float(np.mean(flip)) if all(f is not None for f in flip) else None
         if m.family == "baked":
@@ -1034,8 +1202,11 @@ def summarise(methods, per_frame, per_scene_time, scene_info, model_times) -> di
 
 def pareto_front(methods: dict) -> list[str]:
     """Methods not dominated in (seconds, RMSE ratio vs SSAO): nothing else is both faster and better."""
-    pts = {n: (e["seconds"], e["rmse_ratio_vs_ssao"]) for n, e in methods.items()
-           if e.get("available") and e.get("seconds") is not None and e.get("rmse_ratio_vs_ssao") is not None}  # fmt: skip
+    pts = {
+        n: (e["seconds"], e["rmse_ratio_vs_ssao"])
+        for n, e in methods.items()
+        if e.get("available") and e.get("seconds") is not None and e.get("rmse_ratio_vs_ssao") is not None
+    }
     front = []
     for n, (t, r) in pts.items():
         dominated = any(
@@ -1123,15 +1294,21 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
             f"{_fmt(e.get('time_ratio_vs_ssao'), '.2f')} | {_fmt(e.get('rmse_ratio_vs_ssao'), '.2f')} | "
             f"{_fmt(e.get('dssim_ratio_vs_ssao'), '.2f')} | {_bytes(e.get('bytes'))} | {e['time_on']} |"
         )
-    lines += ["", "`*` on the Pareto front of (time, RMSE / SSAO). Ratios are over SSAO on the same frames "
-              "(an MLP or a field is measured on its own scene only). FLIP: NVIDIA's perceptual error "
-              "(flip-evaluator, LDR, 67 pixels per degree; 0 = identical), AO shown as grey with the "
-              "background set to 1 in both images, averaged over the foreground."]  # fmt: skip
+    lines += [
+        "",
+        "`*` on the Pareto front of (time, RMSE / SSAO). Ratios are over SSAO on the same frames "
+        "(an MLP or a field is measured on its own scene only). FLIP: NVIDIA's perceptual error "
+        "(flip-evaluator, LDR, 67 pixels per degree; 0 = identical), AO shown as grey with the "
+        "background set to 1 in both images, averaged over the foreground.",
+    ]
     one_sided = [n for n in method_order(ms) if ms[n].get("available") and ms[n].get("two_sided") is False]
     if one_sided:
-        lines += ["", "Single-sided surfaces: " + ", ".join(one_sided) + " store one value per vertex and so show "
-                  "the same AO on both sides of an open sheet (the G-buffer turns the normal towards the viewer); "
-                  "the fields, MLPs, U-Nets, screen-space and traced methods can tell the sides apart."]  # fmt: skip
+        lines += [
+            "",
+            "Single-sided surfaces: " + ", ".join(one_sided) + " store one value per vertex and so show "
+            "the same AO on both sides of an open sheet (the G-buffer turns the normal towards the viewer); "
+            "the fields, MLPs, U-Nets, screen-space and traced methods can tell the sides apart.",
+        ]
     ort = [(n, ms[n]["seconds_onnxruntime"]) for n in method_order(ms) if ms[n].get("seconds_onnxruntime")]
     if ort:
         lines += [
@@ -1236,8 +1413,11 @@ def scatter_plot(result: dict, path: Path) -> Path | None:
     from matplotlib.ticker import FuncFormatter
 
     ms = result["methods"]
-    pts = [(n, ms[n]["seconds"] * 1e3, ms[n]["rmse_ratio_vs_ssao"], ms[n]["family"]) for n in method_order(ms)
-           if ms[n].get("available") and ms[n].get("seconds") and ms[n].get("rmse_ratio_vs_ssao") is not None]  # fmt: skip
+    pts = [
+        (n, ms[n]["seconds"] * 1e3, ms[n]["rmse_ratio_vs_ssao"], ms[n]["family"])
+        for n in method_order(ms)
+        if ms[n].get("available") and ms[n].get("seconds") and ms[n].get("rmse_ratio_vs_ssao") is not None
+    ]
     if not pts:
         return None
     fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=110)

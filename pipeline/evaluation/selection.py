@@ -38,7 +38,7 @@ def scene_candidates(result: dict) -> dict[str, list[dict]]:
                     "rmse": ps["rmse"],
                     "seconds": ps.get("seconds", e.get("seconds")),
                     "frames": ps["frames"],
-                }  # fmt: skip
+                }
             )
     return out
 
@@ -48,8 +48,14 @@ def choose(candidates: list[dict], target: float) -> dict:
     if not candidates:
         raise NeuralaoError("no candidate model to choose from")
     inf = float("inf")
-    ordered = sorted(candidates, key=lambda c: (inf if c["bytes"] is None else c["bytes"],
-                                                inf if c["seconds"] is None else c["seconds"], c["name"]))  # fmt: skip
+    ordered = sorted(
+        candidates,
+        key=lambda c: (
+            inf if c["bytes"] is None else c["bytes"],
+            inf if c["seconds"] is None else c["seconds"],
+            c["name"],
+        ),
+    )
     tried, chosen = [], None
     for c in ordered:
         tried.append(
@@ -91,8 +97,11 @@ def select_from_results(result: dict, target: float = DEFAULT_TARGET) -> dict:
     per_scene = {}
     for scene, cands in sorted(scene_candidates(result).items()):
         per_scene[scene] = choose(cands, target)
-    unavailable = {n: e.get("reason", "") for n, e in result["methods"].items()
-                   if e.get("family") in CANDIDATE_FAMILIES and not e.get("available")}  # fmt: skip
+    unavailable = {
+        n: e.get("reason", "")
+        for n, e in result["methods"].items()
+        if e.get("family") in CANDIDATE_FAMILIES and not e.get("available")
+    }
     return {
         "format": "neuralao-select",
         "version": 1,
@@ -154,10 +163,17 @@ def render_targets_markdown(
     """One row per scene, one column group per target: the choice, its bytes and time, and the savings."""
     targets = sorted(selections)
     scenes = sorted({sc for sel in selections.values() for sc in sel["scenes"]})
-    lines = [heading, "", "Per scene, the cheapest representation (bytes, then time) whose masked SSIM meets the target; "
-             "`(not met)`: nothing does, the best is shown. Saved: against the largest candidate of the scene.", "",
-             "| scene | " + " | ".join(f"target {t}: choice (SSIM) | bytes / time | saved vs largest" for t in targets) + " |",
-             "|---|" + "---|---:|---:|" * len(targets)]  # fmt: skip
+    lines = [
+        heading,
+        "",
+        "Per scene, the cheapest representation (bytes, then time) whose masked SSIM meets the target; "
+        "`(not met)`: nothing does, the best is shown. Saved: against the largest candidate of the scene.",
+        "",
+        "| scene | "
+        + " | ".join(f"target {t}: choice (SSIM) | bytes / time | saved vs largest" for t in targets)
+        + " |",
+        "|---|" + "---|---:|---:|" * len(targets),
+    ]
     for scene in scenes:
         cells = []
         for t in targets:

@@ -53,8 +53,15 @@ def score_frame(frame: dict, methods: dict[str, Predictor], flip: bool = True) -
                 raise NeuralaoError(
                     f"{name} returned non-finite AO on {frame.get('scene')}/{frame.get('view')}"
                 )
-            rows.append({"method": name, "radius": j, "ssim": masked_ssim(pred, gt, mask), "rmse": masked_rmse(pred, gt, mask),
-                         "flip": masked_flip(pred, gt, mask) if flip else float("nan")})  # fmt: skip
+            rows.append(
+                {
+                    "method": name,
+                    "radius": j,
+                    "ssim": masked_ssim(pred, gt, mask),
+                    "rmse": masked_rmse(pred, gt, mask),
+                    "flip": masked_flip(pred, gt, mask) if flip else float("nan"),
+                }
+            )
     return rows
 
 
@@ -87,12 +94,19 @@ def evaluate_frames(
             "pairs": len(rs),
             "per_radius": {
                 (f"{radii_rel[j]:g}" if radii_rel and j < len(radii_rel) else str(j)): {
-                    "ssim": mean([r for r in rs if r[1] == j], 2), "rmse": mean([r for r in rs if r[1] == j], 3)}
+                    "ssim": mean([r for r in rs if r[1] == j], 2),
+                    "rmse": mean([r for r in rs if r[1] == j], 3),
+                }
                 for j in radii
             },
-            "per_scene": {s: {"ssim": mean([r for r in rs if r[0] == s], 2), "rmse": mean([r for r in rs if r[0] == s], 3)}
-                          for s in sorted({r[0] for r in rs})},
-        }  # fmt: skip
+            "per_scene": {
+                s: {
+                    "ssim": mean([r for r in rs if r[0] == s], 2),
+                    "rmse": mean([r for r in rs if r[0] == s], 3),
+                }
+                for s in sorted({r[0] for r in rs})
+            },
+        }
     return out
 
 
@@ -106,6 +120,10 @@ def evaluate_split(data: str | Path, split: str, methods: dict[str, Predictor], 
     frames = (f for i, f in enumerate(ds.frames(split=split)) if i % step == 0)
     radii_rel = (ds.manifest.get("config", {}).get("labels") or {}).get("radii_rel")
     result = evaluate_frames(frames, methods, radii_rel)
-    result.update(split=split, dataset_hash=ds.manifest.get("dataset_hash"), frame_step=step,
-                  scenes=sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == split}))  # fmt: skip
+    result.update(
+        split=split,
+        dataset_hash=ds.manifest.get("dataset_hash"),
+        frame_step=step,
+        scenes=sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == split}),
+    )
     return result

@@ -23,8 +23,17 @@ def count_parameters(model: nn.Module) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-def per_mesh_checkpoint(kind: str, format_version: int, model: nn.Module, model_args: dict, config: dict,
-                        samples_info: dict, metrics: dict, train_info: dict, parameter_bytes: int) -> dict:
+def per_mesh_checkpoint(
+    kind: str,
+    format_version: int,
+    model: nn.Module,
+    model_args: dict,
+    config: dict,
+    samples_info: dict,
+    metrics: dict,
+    train_info: dict,
+    parameter_bytes: int,
+) -> dict:
     """The checkpoint of a per-mesh network (baked MLP, AO field): model, settings, samples, metrics."""
     return {
         "kind": kind,

@@ -76,7 +76,19 @@ FORMAT_VERSION = 1
 INPUTS = ("position", "normal")  # ONNX input names, each (N, 3) float32
 # What a held-back frame keeps: the network's inputs, the labels, and what relabelling and the vertex
 # draw need (pose, camera, triangle ids).
-HOLDOUT_KEYS = ("position", "normal_obj", "mask", "valid", "ao", "view", "pose", "tri_id", "yfov", "znear", "zfar")
+HOLDOUT_KEYS = (
+    "position",
+    "normal_obj",
+    "mask",
+    "valid",
+    "ao",
+    "view",
+    "pose",
+    "tri_id",
+    "yfov",
+    "znear",
+    "zfar",
+)
 
 
 @dataclass
@@ -180,7 +192,13 @@ def build_model(model_args: dict) -> FieldNet:
         inv_half = np.asarray(model_args["inv_half"], np.float32)
     except (KeyError, TypeError, ValueError):
         raise NeuralaoError(f"bad field model_args {model_args!r}") from None
-    if not hidden or min(hidden) < 1 or not 0 <= octaves <= 16 or centre.shape != (3,) or inv_half.shape != (3,):
+    if (
+        not hidden
+        or min(hidden) < 1
+        or not 0 <= octaves <= 16
+        or centre.shape != (3,)
+        or inv_half.shape != (3,)
+    ):
         raise NeuralaoError(f"bad field model_args {model_args!r}")
     return FieldNet(hidden, octaves, centre, inv_half)
 
@@ -278,27 +296,49 @@ def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
 
 def check_settings(s: FieldSettings) -> None:
     if not 0 <= s.octaves <= 16:
-        raise NeuralaoError(f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}")
+        raise NeuralaoError(
+            f"octaves must be in 0..16 (pi 2^15 is the largest float32-safe band), got {s.octaves}"
+        )
     if not s.hidden or min(s.hidden) < 1:
         raise NeuralaoError(f"hidden widths must be positive, got {s.hidden}")
     for name in ("steps", "batch", "check_every", "samples", "samples_per_face_cap", "holdout_views"):
         check_int_range(name, getattr(s, name), 0 if name == "holdout_views" else 1, MAX_CAP)
     check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
     # Every check_every-th step keeps a validation record in the history (and the checkpoint).
-    check_count("steps", s.steps // s.check_every + 1, bytes_each=512, each="a validation record of the history",
-                shown=f"{s.steps} (checked every {s.check_every})")  # fmt: skip
+    check_count(
+        "steps",
+        s.steps // s.check_every + 1,
+        bytes_each=512,
+        each="a validation record of the history",
+        shown=f"{s.steps} (checked every {s.check_every})",
+    )
     # What the counts allocate, before any of it is (pipeline.foundation.limits): every surface sample twice (both
     # sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
-    check_count("samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples))  # fmt: skip
-    check_count("batch", s.batch, bytes_each=64 * (sum(s.hidden) + 6 + 6 * max(s.octaves, 0)) + 64,
-                each="per batch row")  # fmt: skip
+    check_count(
+        "samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples)
+    )
+    check_count(
+        "batch",
+        s.batch,
+        bytes_each=64 * (sum(s.hidden) + 6 + 6 * max(s.octaves, 0)) + 64,
+        each="per batch row",
+    )
     if s.holdout_views:
         check_pixels("holdout_size", *s.holdout_size, frames=s.holdout_views)
-    check_count("hidden", max(s.hidden or [1]) ** 2 * len(s.hidden or [1]), bytes_each=64, each="per weight",
-                shown=str(list(s.hidden)))  # fmt: skip
+    check_count(
+        "hidden",
+        max(s.hidden or [1]) ** 2 * len(s.hidden or [1]),
+        bytes_each=64,
+        each="per weight",
+        shown=str(list(s.hidden)),
+    )
     check_seed("seed", s.seed)
-    if not (math.isfinite(s.lr) and s.lr > 0 and math.isfinite(s.lr_final_fraction) and s.lr_final_fraction >= 0):  # fmt: skip
-        raise NeuralaoError(f"lr must be a finite number > 0 and lr_final_fraction >= 0, got {s.lr}, {s.lr_final_fraction}")  # fmt: skip
+    if not (
+        math.isfinite(s.lr) and s.lr > 0 and math.isfinite(s.lr_final_fraction) and s.lr_final_fraction >= 0
+    ):
+        raise NeuralaoError(
+            f"lr must be a finite number > 0 and lr_final_fraction >= 0, got {s.lr}, {s.lr_final_fraction}"
+        )
     if s.samples < 16 or s.samples_per_face_cap < 1 or not 0.0 <= s.val_fraction < 1.0:
         raise NeuralaoError("samples must be >= 16, samples_per_face_cap >= 1 and val_fraction in [0, 1)")
 
@@ -370,10 +410,17 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
     history = []
     t0 = time.perf_counter()
     perm, cursor = torch.randperm(len(ty), generator=gen), 0
-    for step in tqdm(range(1, settings.steps + 1), desc=f"field {size_name(settings.hidden)}", disable=not progress,
-                     leave=False, unit="step"):  # fmt: skip
+    for step in tqdm(
+        range(1, settings.steps + 1),
+        desc=f"field {size_name(settings.hidden)}",
+        disable=not progress,
+        leave=False,
+        unit="step",
+    ):
         frac = (step - 1) / max(1, settings.steps - 1)
-        scale = settings.lr_final_fraction + (1 - settings.lr_final_fraction) * 0.5 * (1 + math.cos(math.pi * frac))
+        scale = settings.lr_final_fraction + (1 - settings.lr_final_fraction) * 0.5 * (
+            1 + math.cos(math.pi * frac)
+        )
         for g in opt.param_groups:
             g["lr"] = settings.lr * scale
         if cursor + settings.batch > len(ty):
@@ -383,21 +430,34 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
         pred = model(tp[idx], tn[idx]).reshape(-1)
         loss = torch.mean((pred - ty[idx]) ** 2)
         if not torch.isfinite(loss):
-            raise NeuralaoError(f"training diverged at step {step} (loss {float(loss)}); try a smaller lr than {settings.lr:g}")  # fmt: skip
+            raise NeuralaoError(
+                f"training diverged at step {step} (loss {float(loss)}); try a smaller lr than {settings.lr:g}"
+            )
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         if step % settings.check_every == 0 or step == settings.steps:
             with torch.no_grad():
-                val = float(torch.sqrt(torch.mean((model(vp, vn).reshape(-1) - vy) ** 2))) if len(vy) else float(loss)
+                val = (
+                    float(torch.sqrt(torch.mean((model(vp, vn).reshape(-1) - vy) ** 2)))
+                    if len(vy)
+                    else float(loss)
+                )
             history.append({"step": step, "val_rmse": val, "seconds": time.perf_counter() - t0})
             if not math.isfinite(val):  # the weights are gone (NaN or inf): no best model to keep
-                raise NeuralaoError(f"training diverged at step {step} (validation RMSE {val}); try a smaller lr than {settings.lr:g}")  # fmt: skip
+                raise NeuralaoError(
+                    f"training diverged at step {step} (validation RMSE {val}); try a smaller lr than {settings.lr:g}"
+                )
             if val < best[0]:
                 best = (val, {k: v.detach().clone() for k, v in model.state_dict().items()}, step)
     model.load_state_dict(best[1])
-    info = {"best_step": best[2], "best_val_rmse": best[0], "history": history,
-            "seconds": time.perf_counter() - t0, "optimizer": "adam, cosine decay"}  # fmt: skip
+    info = {
+        "best_step": best[2],
+        "best_val_rmse": best[0],
+        "history": history,
+        "seconds": time.perf_counter() - t0,
+        "optimizer": "adam, cosine decay",
+    }
     return model.eval(), info
 
 
@@ -415,11 +475,20 @@ def evaluate_frames(model: FieldNet | float, frames: list[dict]) -> dict:
         else:
             pred = np.where(f["mask"], np.float32(model), np.float32(1.0))
         ref = np.asarray(f["ao"], np.float32)
-        rows.append({"view": int(f["view"]), "ssim": masked_ssim(pred, ref, valid), "rmse": masked_rmse(pred, ref, valid)})
+        rows.append(
+            {
+                "view": int(f["view"]),
+                "ssim": masked_ssim(pred, ref, valid),
+                "rmse": masked_rmse(pred, ref, valid),
+            }
+        )
     if not rows:
         return {"frames": 0, "ssim": None, "rmse": None}
-    return {"frames": len(rows), "ssim": float(np.mean([r["ssim"] for r in rows])),
-            "rmse": float(np.mean([r["rmse"] for r in rows]))}  # fmt: skip
+    return {
+        "frames": len(rows),
+        "ssim": float(np.mean([r["ssim"] for r in rows])),
+        "rmse": float(np.mean([r["rmse"] for r in rows])),
+    }
 
 
 def compute_metrics(model: FieldNet, samples: FieldSamples) -> dict:
@@ -432,17 +501,33 @@ def compute_metrics(model: FieldNet, samples: FieldSamples) -> dict:
     vy = samples.part(1)[2]
     out["constant_val_rmse"] = float(np.sqrt(np.mean((vy - mean_train) ** 2))) if len(vy) else None
     held, constant = evaluate_frames(model, samples.holdout), evaluate_frames(mean_train, samples.holdout)
-    out.update(holdout_frames=held["frames"], holdout_ssim=held["ssim"], holdout_rmse=held["rmse"],
-               holdout_constant_ssim=constant["ssim"], holdout_constant_rmse=constant["rmse"])  # fmt: skip
+    out.update(
+        holdout_frames=held["frames"],
+        holdout_ssim=held["ssim"],
+        holdout_rmse=held["rmse"],
+        holdout_constant_ssim=constant["ssim"],
+        holdout_constant_rmse=constant["rmse"],
+    )
     return out
 
 
 # ----------------------------------------------------------------------------------------------- checkpoints
 
 
-def make_checkpoint(model: FieldNet, settings: FieldSettings, samples: FieldSamples, metrics: dict, info: dict) -> dict:
-    return per_mesh_checkpoint(KIND, FORMAT_VERSION, model, model_args_dict(model), settings_to_dict(settings),
-                               samples.info, metrics, info, parameter_bytes(model))  # fmt: skip
+def make_checkpoint(
+    model: FieldNet, settings: FieldSettings, samples: FieldSamples, metrics: dict, info: dict
+) -> dict:
+    return per_mesh_checkpoint(
+        KIND,
+        FORMAT_VERSION,
+        model,
+        model_args_dict(model),
+        settings_to_dict(settings),
+        samples.info,
+        metrics,
+        info,
+        parameter_bytes(model),
+    )
 
 
 def load_checkpoint(path: str | Path) -> dict:
@@ -475,7 +560,9 @@ def resolve_source(data, scene_name, mesh, settings: FieldSettings):
     return scene_of(ds.manifest, scene_name), replace(settings, labels=labels, holdout_views=0), frames
 
 
-def train(settings: FieldSettings, out, data=None, scene=None, mesh=None, progress=False, samples=None) -> dict:
+def train(
+    settings: FieldSettings, out, data=None, scene=None, mesh=None, progress=False, samples=None
+) -> dict:
     """Mesh (or dataset scene) -> two-sided surface samples -> field -> metrics -> checkpoint at ``out``."""
     scene_obj, settings, frames = resolve_source(data, scene, mesh, settings)
     if samples is None:

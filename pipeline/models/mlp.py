@@ -705,8 +705,17 @@ def compute_metrics(model: BakedMLP, samples: Samples) -> dict:
 def make_checkpoint(
     model: BakedMLP, settings: MLPSettings, samples: Samples, metrics: dict, train_info: dict
 ) -> dict:
-    return per_mesh_checkpoint(KIND, FORMAT_VERSION, model, model_args_dict(model), settings_to_dict(settings),
-                               samples.info, metrics, train_info, parameter_bytes(model))  # fmt: skip
+    return per_mesh_checkpoint(
+        KIND,
+        FORMAT_VERSION,
+        model,
+        model_args_dict(model),
+        settings_to_dict(settings),
+        samples.info,
+        metrics,
+        train_info,
+        parameter_bytes(model),
+    )
 
 
 def load_checkpoint(path: str | Path) -> dict:
@@ -730,18 +739,33 @@ def check_counts(s: MLPSettings) -> None:
     check_count(
         "views", s.views, bytes_each=4096 + SAMPLE_BYTES * max(s.samples_per_view, 1), each="a view's samples"
     )
-    check_count("samples_per_view", s.views * s.samples_per_view, bytes_each=SAMPLE_BYTES, each="per sample",
-                shown=f"{s.samples_per_view} on {s.views} views")  # fmt: skip
+    check_count(
+        "samples_per_view",
+        s.views * s.samples_per_view,
+        bytes_each=SAMPLE_BYTES,
+        each="per sample",
+        shown=f"{s.samples_per_view} on {s.views} views",
+    )
     check_pixels("size", *s.size)
     if s.holdout_views:
         check_pixels("holdout_size", *s.holdout_size, frames=s.holdout_views)
     check_count(
         "adam_batch", s.adam_batch, bytes_each=64 * (INPUTS + sum(s.hidden or [1])), each="per batch row"
     )
-    check_count("hidden", max(s.hidden or [1]) ** 2 * len(s.hidden or [1]) * max(s.lbfgs_history, 1), bytes_each=64,
-                each="per weight and L-BFGS pair", shown=str(list(s.hidden)))  # fmt: skip
-    check_count("max_iterations", s.max_iterations // max(s.check_every, 1) + 1, bytes_each=512,
-                each="a validation record of the history", shown=str(s.max_iterations))  # fmt: skip
+    check_count(
+        "hidden",
+        max(s.hidden or [1]) ** 2 * len(s.hidden or [1]) * max(s.lbfgs_history, 1),
+        bytes_each=64,
+        each="per weight and L-BFGS pair",
+        shown=str(list(s.hidden)),
+    )
+    check_count(
+        "max_iterations",
+        s.max_iterations // max(s.check_every, 1) + 1,
+        bytes_each=512,
+        each="a validation record of the history",
+        shown=str(s.max_iterations),
+    )
     check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
     check_seed("seed", s.seed)
 

@@ -217,8 +217,12 @@ class UNet(nn.Module):
         if s == 1:
             return self._unet(self._with_radius(x, radius))
         low = F.interpolate(x, scale_factor=1.0 / s, mode="nearest")
-        ao = F.interpolate(self._unet(self._with_radius(low, radius)), scale_factor=float(s), mode="bilinear",
-                           align_corners=False)  # fmt: skip
+        ao = F.interpolate(
+            self._unet(self._with_radius(low, radius)),
+            scale_factor=float(s),
+            mode="bilinear",
+            align_corners=False,
+        )
         d_up = F.interpolate(self._depth(low), scale_factor=float(s), mode="bilinear", align_corners=False)
         return torch.clamp(ao + self.refine(torch.cat([ao, x, d_up], dim=1)), 0.0, 1.0)
 

@@ -193,8 +193,16 @@ class FrameSet:
     def subset(self, index: list[int]) -> FrameSet:
         i = torch.as_tensor(index, dtype=torch.int64)
         pick = lambda a: None if a is None else a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index]  # noqa: E731
-        return FrameSet(pick(self.x), pick(self.y), pick(self.m), self.rho[i], self.radii[i],
-                        [self.names[k] for k in index], [self.scenes[k] for k in index], pick(self.g))  # fmt: skip
+        return FrameSet(
+            pick(self.x),
+            pick(self.y),
+            pick(self.m),
+            self.rho[i],
+            self.radii[i],
+            [self.names[k] for k in index],
+            [self.scenes[k] for k in index],
+            pick(self.g),
+        )
 
 
 def network_input(data: FrameSet, f: int, j: int) -> torch.Tensor:
@@ -270,8 +278,16 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     if len({x.shape for x in xs}) == 1:
         xs, ys, ms = torch.stack(xs), torch.stack(ys), torch.stack(ms)
         g = torch.stack(gs) if gtao else None
-    return FrameSet(xs, ys, ms, torch.tensor(rhos, dtype=torch.float32), torch.from_numpy(np.stack(radii)),
-                    names, scenes, g)  # fmt: skip
+    return FrameSet(
+        xs,
+        ys,
+        ms,
+        torch.tensor(rhos, dtype=torch.float32),
+        torch.from_numpy(np.stack(radii)),
+        names,
+        scenes,
+        g,
+    )
 
 
 def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
@@ -310,17 +326,27 @@ def load_dataset_frames(
         val_source = "held-back views of the training scenes (the dataset has no val scene)"
     if loaded is not None:
         full, val, full_info = loaded
-        if (full_info.get("train_fraction") != 1.0 or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
-                or full_info.get("internal_height") != internal_height or full_info.get("gtao") != gtao):  # fmt: skip
+        if (
+            full_info.get("train_fraction") != 1.0
+            or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
+            or full_info.get("internal_height") != internal_height
+            or full_info.get("gtao") != gtao
+        ):
             raise NeuralaoError(
                 "load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1"
             )
         train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
     else:
-        train = frames_to_set((f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
-                              internal_height, gtao)  # fmt: skip
-        val = frames_to_set(ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
-                            internal_height, gtao)  # fmt: skip
+        train = frames_to_set(
+            (f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
+            internal_height,
+            gtao,
+        )
+        val = frames_to_set(
+            ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
+            internal_height,
+            gtao,
+        )
     info = {
         "path": str(data),
         "name": ds.manifest.get("name"),
@@ -400,8 +426,10 @@ def plan_epoch(
     c = settings.crop or min(h, w)
     small_h, small_w = min(sizes, key=min)  # the frame with the shortest side
     if settings.crop and settings.crop > min(small_h, small_w):
-        raise NeuralaoError(f"crop {settings.crop} is larger than the frames ({small_w}x{small_h}); "
-                            f"set crop<= {min(small_h, small_w)} or 0")  # fmt: skip
+        raise NeuralaoError(
+            f"crop {settings.crop} is larger than the frames ({small_w}x{small_h}); "
+            f"set crop<= {min(small_h, small_w)} or 0"
+        )
     frames = torch.cat([torch.randperm(n, generator=gen) for _ in range(settings.crops_per_frame)])
     s = len(frames)
     tries = 8
@@ -527,11 +555,22 @@ def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") ->
         "val_rmse": mean(per, 3),
         "val_frames": len(data),
         "val_pairs": len(per),
-        "per_scene": {s: {"ssim": mean([r for r in per if r[0] == s], 2), "rmse": mean([r for r in per if r[0] == s], 3)}
-                      for s in scenes},
-        "per_radius": [{"index": j, "ssim": mean([r for r in per if r[1] == j], 2), "rmse": mean([r for r in per if r[1] == j], 3)}
-                       for j in radii],
-    }  # fmt: skip
+        "per_scene": {
+            s: {
+                "ssim": mean([r for r in per if r[0] == s], 2),
+                "rmse": mean([r for r in per if r[0] == s], 3),
+            }
+            for s in scenes
+        },
+        "per_radius": [
+            {
+                "index": j,
+                "ssim": mean([r for r in per if r[1] == j], 2),
+                "rmse": mean([r for r in per if r[1] == j], 3),
+            }
+            for j in radii
+        ],
+    }
 
 
 def validation_subset(data: FrameSet | None, count: int) -> FrameSet | None:
@@ -560,8 +599,11 @@ def model_from_checkpoint(ckpt: dict) -> UNet:
 def _resume_key(config: dict, dataset_hash: str | None) -> dict:
     """What must match for a checkpoint to be continued: everything but the device, and but the epoch
     count under a constant learning rate without a budget (a continued run may then add epochs)."""
-    free = {"device"} | ({"epochs"} if config.get("lr_schedule", "constant") == "constant"
-                         and not config.get("budget_minutes") else set())  # fmt: skip
+    free = {"device"} | (
+        {"epochs"}
+        if config.get("lr_schedule", "constant") == "constant" and not config.get("budget_minutes")
+        else set()
+    )
     return {"config": {k: v for k, v in config.items() if k not in free}, "dataset_hash": dataset_hash}
 
 
@@ -598,9 +640,15 @@ def pick_device(name: str) -> torch.device:
 
 
 def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
-    return UNetArgs(in_channels=5 if settings.gtao_input else 4, widths=list(settings.widths),
-                    negative_slope=settings.negative_slope, radius_input=True, scale=int(settings.scale),
-                    refine_width=int(settings.refine_width), gtao_input=bool(settings.gtao_input))  # fmt: skip
+    return UNetArgs(
+        in_channels=5 if settings.gtao_input else 4,
+        widths=list(settings.widths),
+        negative_slope=settings.negative_slope,
+        radius_input=True,
+        scale=int(settings.scale),
+        refine_width=int(settings.refine_width),
+        gtao_input=bool(settings.gtao_input),
+    )
 
 
 def _init_weights(model: UNet, path: str) -> dict:
@@ -760,8 +808,14 @@ def train(
                     "budget_minutes": settings.budget_minutes,
                     **cal,
                 }
-                log.info("budget %.1f min: %.3f s/step, %.1f s/validation -> %d epochs of %d steps",
-                         settings.budget_minutes, cal["seconds_per_step"], cal["val_seconds"], epochs, steps_per_epoch)  # fmt: skip
+                log.info(
+                    "budget %.1f min: %.3f s/step, %.1f s/validation -> %d epochs of %d steps",
+                    settings.budget_minutes,
+                    cal["seconds_per_step"],
+                    cal["val_seconds"],
+                    epochs,
+                    steps_per_epoch,
+                )
         epochs = int(plan_info["epochs"])
         total_steps = epochs * steps_per_epoch
         kw = _ssim_kw(settings)

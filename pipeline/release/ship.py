@@ -82,8 +82,13 @@ def git_commit() -> str:
         head = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
         ).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO, capture_output=True,
-                               text=True, check=True).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("+dirty" if dirty else "")
@@ -133,8 +138,13 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
             times[name][f"{w}x{h}"] = time_screen_space(
                 frame, name, radius, getattr(rs, name), repeats=settings.time_repeats * 4
             )
-    return {name: {"test": {k: v for k, v in test["methods"][name].items() if k != "per_scene"},
-                   "gl_seconds": times[name]} for name in methods}  # fmt: skip
+    return {
+        name: {
+            "test": {k: v for k, v in test["methods"][name].items() if k != "per_scene"},
+            "gl_seconds": times[name],
+        }
+        for name in methods
+    }
 
 
 _LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
@@ -163,8 +173,9 @@ def ship_model(
         _LOADED.update(key=key, sets=load_dataset_frames(data, internal_height=key[1], gtao=key[2]))
     train_set, val_set, info = _LOADED["sets"]
     if ts.train_fraction != 1.0:  # the corpus-size models: a subset cut from the frames in memory
-        train_set, val_set, info = load_dataset_frames(data, ts.train_fraction, loaded=_LOADED["sets"],
-                                                       internal_height=key[1], gtao=key[2])  # fmt: skip
+        train_set, val_set, info = load_dataset_frames(
+            data, ts.train_fraction, loaded=_LOADED["sets"], internal_height=key[1], gtao=key[2]
+        )
     log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
     checkpoints[spec.name] = ckpt_path
@@ -204,8 +215,12 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     # the network's compute passes at the size it runs at for each frame size (its internal size when it
     # declares one; the scaling passes and a hybrid's GTAO pass are timed beside it by bench/bench_shipped.py)
     height = manifest.get("internal_height")
-    gl_seconds = {f"{w}x{h}": time_compute(tmp / "glsl", *internal_size(w, h, height)[::-1], repeats=settings.time_repeats)
-                  for w, h in settings.time_sizes}  # fmt: skip
+    gl_seconds = {
+        f"{w}x{h}": time_compute(
+            tmp / "glsl", *internal_size(w, h, height)[::-1], repeats=settings.time_repeats
+        )
+        for w, h in settings.time_sizes
+    }
     provenance = {
         "dataset_hash": info.get("dataset_hash"),
         "dataset": str(settings.dataset),
@@ -225,12 +240,18 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
         "test_per_scene": unet_test["per_scene"],
         "test_scenes": test["scenes"],
         "test_frames": test["frames"],
-        "parity": {"glsl_vs_onnxruntime": par["max_abs_err"], "onnxruntime_vs_torch": manifest["checks"]["onnxruntime_vs_torch"],
-                   "tolerance_glsl": TOL.parity_unet_fp32, "tolerance_onnx": manifest["checks"]["tolerance"]["onnxruntime_vs_torch"]},
+        "parity": {
+            "glsl_vs_onnxruntime": par["max_abs_err"],
+            "onnxruntime_vs_torch": manifest["checks"]["onnxruntime_vs_torch"],
+            "tolerance_glsl": TOL.parity_unet_fp32,
+            "tolerance_onnx": manifest["checks"]["tolerance"]["onnxruntime_vs_torch"],
+        },
         "gl_seconds": gl_seconds,
-        "history": [{k: h.get(k) for k in ("epoch", "wall_seconds", "val_ssim", "val_rmse", "train_loss", "lr")}
-                    for h in ckpt.get("history", [])],
-    }  # fmt: skip
+        "history": [
+            {k: h.get(k) for k in ("epoch", "wall_seconds", "val_ssim", "val_rmse", "train_loss", "lr")}
+            for h in ckpt.get("history", [])
+        ],
+    }
     onnx_path = tmp / "model.onnx"
     proto = load_onnx(onnx_path)
     meta = get_metadata(proto)
@@ -250,11 +271,25 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     if size > settings.max_bytes:
         raise NeuralaoError(f"model {spec.name}: export is {size} bytes, over the {settings.max_bytes} limit")
     install(tmp, out / spec.name)
-    log.info("%s: test SSIM %.4f RMSE %.4f, GL %s, %d bytes", spec.name, unet_test["ssim"], unet_test["rmse"],
-             ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in gl_seconds.items()), size)  # fmt: skip
-    return {"kind": spec.kind, "bytes": size, "test": provenance["test"], "gl_seconds": gl_seconds,
-            "epochs": ckpt.get("epoch"), "wall_seconds": ckpt.get("wall_seconds"), "scale": ckpt["model_args"].get("scale", 1),
-            "widths": ckpt["model_args"].get("widths"), "init": spec.init or None}  # fmt: skip
+    log.info(
+        "%s: test SSIM %.4f RMSE %.4f, GL %s, %d bytes",
+        spec.name,
+        unet_test["ssim"],
+        unet_test["rmse"],
+        ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in gl_seconds.items()),
+        size,
+    )
+    return {
+        "kind": spec.kind,
+        "bytes": size,
+        "test": provenance["test"],
+        "gl_seconds": gl_seconds,
+        "epochs": ckpt.get("epoch"),
+        "wall_seconds": ckpt.get("wall_seconds"),
+        "scale": ckpt["model_args"].get("scale", 1),
+        "widths": ckpt["model_args"].get("widths"),
+        "init": spec.init or None,
+    }
 
 
 def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
