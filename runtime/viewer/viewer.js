@@ -1,4 +1,5 @@
-// neuralao viewer: plain WebGL2, no dependencies. See runtime/viewer.py for the passes and the data.
+// neuralao viewer: plain WebGL2 (and WebGPU for a screen-space U-Net, through wgsl.js), no dependencies.
+// See runtime/viewer.py for the passes and the data.
 "use strict";
 
 (function () {
@@ -116,6 +117,32 @@ void main() {
   o_ao = vec4(ao, 0.0, 0.0, 1.0);
   o_albedo = u_factor * texture(u_base, v_uv_base);
 }`;
+  // The screen-space U-Net's G-buffer, as pipeline/gbuffers/rasterizer.py writes it: camera-space
+  // position (-z = linear depth; w = 1 on the foreground, 0 on background) and the camera-space normal
+  // (the viewer-facing object-space normal rotated by the view matrix, renormalised).
+  const CAMERA_VS = `#version 300 es
+precision highp float;
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_normal;
+uniform mat4 u_mvp;
+uniform mat4 u_view;
+out vec3 v_cam; out vec3 v_normal;
+void main() {
+  v_cam = (u_view * vec4(a_position, 1.0)).xyz; v_normal = a_normal;
+  gl_Position = u_mvp * vec4(a_position, 1.0);
+}`;
+  const CAMERA_FS = `#version 300 es
+precision highp float;
+in vec3 v_cam; in vec3 v_normal;
+uniform mat3 u_rotation;       // world -> camera rotation (the view matrix's)
+layout(location = 0) out vec4 o_position;
+layout(location = 1) out vec4 o_normal;
+void main() {
+  vec3 n = normalize(v_normal);
+  if (!gl_FrontFacing) n = -n;
+  o_position = vec4(v_cam, 1.0);
+  o_normal = vec4(normalize(u_rotation * n), 1.0);
+}`;
   const FULLSCREEN_VS = `#version 300 es
 void main() {
   vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
@@ -140,6 +167,7 @@ void main() {
 }`;
   const gbufferProg = program(GBUFFER_VS, GBUFFER_FS, "G-buffer");
   const displayProg = program(FULLSCREEN_VS, DISPLAY_FS, "display");
+  const cameraProg = program(CAMERA_VS, CAMERA_FS, "camera-space G-buffer");
   const emptyVAO = gl.createVertexArray();
 
   // ------------------------------------------------------------------ targets
@@ -158,6 +186,192 @@ void main() {
   gl.bindFramebuffer(gl.FRAMEBUFFER, fbShader);
   gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tShader, 0);
   if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) fail("AO framebuffer incomplete");
+  const tCamPosition = floatTarget(W, H), tCamNormal = floatTarget(W, H);
+  const fbCamera = gl.createFramebuffer();
+  gl.bindFramebuffer(gl.FRAMEBUFFER, fbCamera);
+  [tCamPosition, tCamNormal].forEach((t, i) =>
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t, 0));
+  gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, depth);
+  gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1]);
+  if (gl.checkFramebufferStatus(gl.FRAMEBUFFER) !== gl.FRAMEBUFFER_COMPLETE) {
+    fail("camera G-buffer framebuffer incomplete");
+  }
+  // the screen-space U-Net's latest AO (one float per pixel, GL row order), shown by the display pass
+  const tNetwork = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, tNetwork);
+  gl.texStorage2D(gl.TEXTURE_2D, 1, gl.R32F, W, H);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, W, H, gl.RED, gl.FLOAT, new Float32Array(W * H).fill(1));
+
+  // ------------------------------------------------------------------ screen-space U-Net (WebGPU)
+  // A method with a `network` runs a U-Net's WGSL compute export (wgsl.js) on the page's camera-space
+  // G-buffer, as runtime/predict.py unet_predictor does with onnxruntime: point-sampled to the model's
+  // internal height (runtime/internal_resolution.py), preprocessed (runtime/unet_input.py: depth over
+  // the mean foreground depth, camera-space normals, rho = R / (mean depth * tan(yfov / 2))), run,
+  // background set to 1, upsampled by the joint bilateral filter. WebGPU is asynchronous: a frame
+  // shows the latest finished AO; while one run is in flight, newer frames coalesce into one more run.
+  const net = { device: null, state: "none", error: null, busy: null, dirty: false, last: null };
+  net.note = () => net.error ? " (error: " + net.error + ")" : net.state === "ready" ? ""
+    : net.state === "pending" ? " (starting WebGPU...)" : " (" + net.state + ")";
+  function networkOf(n) {
+    return { program: { manifest: n.manifest, sources: n.sources, weights: b64floats(n.weights).buffer },
+      internalHeight: n.internal_height, radius: n.radius, upsample: n.upsample, model: n.model };
+  }
+  async function startWebGPU() {
+    net.state = "pending";
+    const unavailable = (why) => {
+      net.state = "WebGPU is not available here (" + why + "): the U-Net is not shown; "
+        + "the other methods run on WebGL2";
+      document.getElementById("note").textContent = net.state;
+      return null;
+    };
+    if (!navigator.gpu) {
+      return unavailable("no navigator.gpu: it needs a WebGPU browser and file:// or http://127.0.0.1");
+    }
+    const adapter = await navigator.gpu.requestAdapter();
+    if (!adapter) return unavailable("no adapter");
+    const device = await adapter.requestDevice();
+    device.addEventListener("uncapturederror", (e) => { net.error = e.error.message; });
+    const info = adapter.info || {};
+    net.adapter = [info.vendor, info.architecture, info.description].filter(Boolean).join(" ");
+    net.device = device;
+    net.state = "ready";
+    return device;
+  }
+  function drawCameraGbuffer(m) {
+    const v = view();
+    gl.bindFramebuffer(gl.FRAMEBUFFER, fbCamera);
+    gl.clearBufferfv(gl.COLOR, 0, new Float32Array([0, 0, 0, 0]));
+    gl.clearBufferfv(gl.COLOR, 1, new Float32Array([0, 0, 0, 0]));
+    gl.clearBufferfi(gl.DEPTH_STENCIL, 0, 1.0, 0);
+    gl.enable(gl.DEPTH_TEST);
+    gl.useProgram(cameraProg);
+    gl.uniformMatrix4fv(gl.getUniformLocation(cameraProg, "u_mvp"), false, mvp());
+    gl.uniformMatrix4fv(gl.getUniformLocation(cameraProg, "u_view"), false, v.matrix);
+    const r = v.matrix;  // column-major: the upper 3x3 is the rotation
+    gl.uniformMatrix3fv(gl.getUniformLocation(cameraProg, "u_rotation"), false,
+      new Float32Array([r[0], r[1], r[2], r[4], r[5], r[6], r[8], r[9], r[10]]));
+    gl.bindVertexArray(m.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, m.count);
+  }
+  // one run at a time; the G-buffer is read when the run starts (that frame's), the AO shown when it ends
+  function requestNetwork(m) {
+    if (!net.device) return;
+    if (net.busy) { net.dirty = true; return; }
+    const gb = { position: readTexture(tCamPosition), normal: readTexture(tCamNormal) };
+    net.busy = runNetwork(m.network, gb).then((r) => {
+      net.last = r;
+      gl.bindTexture(gl.TEXTURE_2D, tNetwork);
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, W, H, gl.RED, gl.FLOAT, r.ao);
+    }, (e) => { net.error = String(e && e.message || e); }).then(() => {
+      net.busy = null;
+      if (methods[current] !== m) return;
+      if (net.dirty) { net.dirty = false; render(); } else display(m, tNetwork);
+    });
+  }
+  // Python's round(): halves to even (runtime/internal_resolution.py internal_size)
+  function roundHalfEven(v) {
+    const f = Math.floor(v), d = v - f;
+    return d > 0.5 ? f + 1 : d < 0.5 ? f : (f % 2 === 0 ? f : f + 1);
+  }
+  function internalSize(h) {
+    return h === null || h === undefined ? [W, H] : [Math.max(1, roundHalfEven(W * h / H)), h];
+  }
+  // low texel t of n samples pixel floor((t + 0.5) N / n) of N, per axis, GL row order
+  function pointSample(img, lw, lh) {
+    const out = new Float32Array(lw * lh * 4);
+    for (let ty = 0; ty < lh; ty++) {
+      const sy = Math.min(Math.floor((2 * ty + 1) * H / (2 * lh)), H - 1);
+      for (let tx = 0; tx < lw; tx++) {
+        const sx = Math.min(Math.floor((2 * tx + 1) * W / (2 * lw)), W - 1);
+        for (let c = 0; c < 4; c++) out[(ty * lw + tx) * 4 + c] = img[(sy * W + sx) * 4 + c];
+      }
+    }
+    return out;
+  }
+  // camera-space points of the pixel-centre rays at the depth, as runtime/baselines.py camera_space_position
+  // (GL row order; float32 like its result)
+  function rayPositions(pos, w, h) {
+    const t = Math.tan(YFOV / 2), out = new Float32Array(w * h * 3);
+    for (let r = 0; r < h; r++) {
+      const yc = (1.0 - ((h - 1 - r) + 0.5) / h * 2.0) * t;
+      for (let c = 0; c < w; c++) {
+        const i = r * w + c, fg = pos[4 * i + 3] >= 0.5, d = fg ? -pos[4 * i + 2] : 0;
+        const xc = ((c + 0.5) / w * 2.0 - 1.0) * t * (w / h);
+        out[3 * i] = fg ? xc * d : 0; out[3 * i + 1] = fg ? yc * d : 0; out[3 * i + 2] = fg ? -d : 0;
+      }
+    }
+    return out;
+  }
+  // joint bilateral upsampling of ao (lh x lw, GL rows), runtime/internal_resolution.py upsample_ao
+  function upsample(aoLow, lw, lh, gb, lowGb, s) {
+    const hp = rayPositions(gb.position, W, H), lp = rayPositions(lowGb.position, lw, lh);
+    const out = new Float32Array(W * H);
+    const div = (a, b) => Math.floor(a / b);  // floor division of integers
+    for (let py = 0; py < H; py++) {
+      const v = (py + 0.5) * lh / H - 0.5, by = div((2 * py + 1) * lh - H, 2 * H) - 1;
+      for (let px = 0; px < W; px++) {
+        const i = py * W + px;
+        if (!(gb.position[4 * i + 3] >= 0.5)) { out[i] = 1; continue; }
+        const u = (px + 0.5) * lw / W - 0.5, bx = div((2 * px + 1) * lw - W, 2 * W) - 1;
+        const hx = hp[3 * i], hy = hp[3 * i + 1], hz = hp[3 * i + 2];
+        const nx = gb.normal[4 * i], ny = gb.normal[4 * i + 1], nz = gb.normal[4 * i + 2];
+        const depth = Math.max(-hz, 1e-30);
+        let acc = 0, total = 0;
+        for (let ty = 0; ty < 4; ty++) {
+          const qyr = by + ty, qy = Math.min(Math.max(qyr, 0), lh - 1), dy = qyr - v;
+          for (let tx = 0; tx < 4; tx++) {
+            const qxr = bx + tx, qx = Math.min(Math.max(qxr, 0), lw - 1), dx = qxr - u;
+            const q = qy * lw + qx;
+            if (!(lowGb.position[4 * q + 3] >= 0.5)) continue;
+            const spatial = Math.exp(-(dx * dx + dy * dy) / (2.0 * s.spatial_sigma * s.spatial_sigma));
+            const qnx = lowGb.normal[4 * q], qny = lowGb.normal[4 * q + 1], qnz = lowGb.normal[4 * q + 2];
+            const off = qnx * (hx - lp[3 * q]) + qny * (hy - lp[3 * q + 1]) + qnz * (hz - lp[3 * q + 2]);
+            const plane = Math.abs(off) / (s.plane_sigma * depth);
+            const agree = Math.pow(Math.max(qnx * nx + qny * ny + qnz * nz, 0.0), s.normal_power);
+            const weight = spatial * (s.floor + Math.exp(-plane * plane) * agree);
+            acc += weight * aoLow[q];
+            total += weight;
+          }
+        }
+        out[i] = total > 0 ? acc / total : 1.0;
+      }
+    }
+    return out;
+  }
+  // gb: {position, normal} RGBA float32 W x H, GL rows. Returns {ao (W x H, GL rows), rho, size, ms}.
+  async function runNetwork(n, gb) {
+    const t0 = performance.now();
+    const [lw, lh] = internalSize(n.internalHeight);
+    const same = lw === W && lh === H;
+    const low = same ? gb
+      : { position: pointSample(gb.position, lw, lh), normal: pointSample(gb.normal, lw, lh) };
+    const P = low.position, N = low.normal, count = lw * lh;
+    let sum = 0, fg = 0;
+    for (let i = 0; i < count; i++) if (P[4 * i + 3] >= 0.5) { sum += -P[4 * i + 2]; fg++; }
+    const scale = fg ? sum / fg : 1.0;  // mean foreground depth (float64, as depth_scale)
+    const scale32 = Math.fround(scale);
+    const x = new Float32Array(4 * count);  // (4, lh, lw), row 0 at the top
+    for (let r = 0; r < lh; r++) {
+      for (let c = 0; c < lw; c++) {
+        const src = (lh - 1 - r) * lw + c, dst = r * lw + c;
+        if (!(P[4 * src + 3] >= 0.5)) continue;
+        x[dst] = -P[4 * src + 2] / scale32;
+        for (let k = 0; k < 3; k++) x[(k + 1) * count + dst] = N[4 * src + k];
+      }
+    }
+    const rho = n.radius / (scale * Math.tan(0.5 * YFOV));
+    const y = await neuralaoWgsl.run(net.device, n.program, x, lw, lh, { radius: rho }, false);
+    const aoLow = new Float32Array(count);  // GL rows, background 1 (runtime/predict.py composite)
+    for (let r = 0; r < lh; r++)
+      for (let c = 0; c < lw; c++) {
+        const i = r * lw + c;
+        aoLow[i] = P[4 * i + 3] >= 0.5 ? y[(lh - 1 - r) * lw + c] : 1.0;
+      }
+    const ao = same ? aoLow : upsample(aoLow, lw, lh, gb, low, n.upsample);
+    return { ao: ao, rho: rho, size: [lw, lh], ms: performance.now() - t0, gbuffer: gb };
+  }
 
   // ------------------------------------------------------------------ methods
   function attribute(loc, data, size) {
@@ -197,6 +411,7 @@ void main() {
     if (m.uv_base) attribute(4, b64floats(m.uv_base), 2); else gl.vertexAttrib2f(4, 0.0, 0.0);
     gl.bindVertexArray(null);
     const out = { name: m.name, kind: m.kind, count: m.count, vao: vao };
+    if (m.network) out.network = networkOf(m.network);
     if (m.texture) out.texture = occlusionTexture(m.texture, m.name);
     if (m.parts) {  // scene bakes: one draw per primitive with its own material
       out.parts = m.parts.map((p) => ({ first: p.first, count: p.count, factor: new Float32Array(p.factor),
@@ -273,11 +488,16 @@ void main() {
   const diag = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
   const pose = { azimuth: 30, elevation: 20, distance: 1.6 };  // degrees, degrees, diagonals
   let current = 0;
-  function mvp() {
+  const YFOV = 45 * (Math.PI / 180);  // vertical field of view (radians), as Python's math.radians(45)
+  function view() {
     const az = pose.azimuth * Math.PI / 180, el = pose.elevation * Math.PI / 180, r = pose.distance * diag;
     const eye = [centre[0] + r * Math.cos(el) * Math.sin(az), centre[1] + r * Math.sin(el), centre[2] + r * Math.cos(el) * Math.cos(az)];
     const near = Math.max(r - diag, r * 0.01), far = r + diag;
-    return mul(perspective(45 * Math.PI / 180, W / H, near, far), lookAt(eye, centre, [0, 1, 0]));
+    return { eye: eye, matrix: lookAt(eye, centre, [0, 1, 0]), near: near, far: far };
+  }
+  function mvp() {
+    const v = view();
+    return mul(perspective(YFOV, W / H, v.near, v.far), v.matrix);
   }
 
   // ------------------------------------------------------------------ frame
@@ -308,8 +528,13 @@ void main() {
       gl.bindTexture(gl.TEXTURE_2D, p.base);
       gl.drawArrays(gl.TRIANGLES, p.first, p.count);
     }
-    gl.disable(gl.DEPTH_TEST);
     let aoTex = tBaked;
+    if (m.network) {  // the camera-space G-buffer, then the network on it (asynchronous, WebGPU)
+      drawCameraGbuffer(m);
+      requestNetwork(m);
+      aoTex = tNetwork;
+    }
+    gl.disable(gl.DEPTH_TEST);
     if (m.prog) {  // the generated pass, unchanged, over the G-buffer
       gl.bindFramebuffer(gl.FRAMEBUFFER, fbShader);
       gl.useProgram(m.prog);
@@ -323,6 +548,12 @@ void main() {
       gl.drawArrays(gl.TRIANGLES, 0, 3);
       aoTex = tShader;
     }
+    display(m, aoTex);
+    return aoTex;
+  }
+  function display(m, aoTex) {
+    gl.viewport(0, 0, W, H);
+    gl.disable(gl.DEPTH_TEST);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.useProgram(displayProg);
     gl.activeTexture(gl.TEXTURE0);
@@ -338,8 +569,7 @@ void main() {
     gl.bindVertexArray(emptyVAO);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
     gl.bindVertexArray(null);
-    status.textContent = m.name;
-    return aoTex;
+    status.textContent = m.name + (m.network ? net.note() : "");
   }
   function readTexture(tex) {
     const fb = gl.createFramebuffer();
@@ -386,6 +616,25 @@ void main() {
       position: b64bytes(readTexture(tPosition)), normal: b64bytes(readTexture(tNormal)), ao: b64bytes(readTexture(aoTex)),
       albedo: b64bytes(readTexture(tAlbedo)) };
   };
+  // The U-Net on the current pose: resolves to the camera-space G-buffer the run read and its AO (bottom
+  // row first, base64 float32), once WebGPU has started; rejects where WebGPU is absent.
+  api.captureNetwork = async () => {
+    await api.webgpu;
+    if (!net.device) throw new Error(net.state);
+    const m = methods[current];
+    if (!m.network) throw new Error(m.name + " is not a screen-space method");
+    while (net.busy) await net.busy;
+    render();
+    await net.busy;
+    if (net.error) throw new Error(net.error);
+    const r = net.last;
+    return { width: W, height: H, method: m.name, model: m.network.model, radius: m.network.radius,
+      yfov: YFOV, rho: r.rho, internal: r.size, ms: r.ms, adapter: net.adapter,
+      position: b64bytes(r.gbuffer.position), normal: b64bytes(r.gbuffer.normal), ao: b64bytes(r.ao) };
+  };
+  api.webgpu = !methods.some((m) => m.network) ? Promise.resolve()
+    : startWebGPU().catch((e) => { net.state = "WebGPU failed: " + e; });
+  api.webgpu.then(() => { if (api.ready && methods[current].network) render(); });
   function start() { render(); api.ready = true; }
   if (pending === 0) start();
 })();
