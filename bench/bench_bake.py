@@ -91,7 +91,8 @@ def largest(name: str) -> dict:
         r = bake(scene, BakeSettings(method=method))
         out[method] = {k: v for k, v in r.info.items() if k != "settings"}
     out["settings"] = (
-        "defaults of `neuralao bake`: 256 rays, binary kernel, max distance 0.25 x diagonal, 8 samples/vertex, cap 32/face"
+        "defaults of `neuralao bake`: 256 rays, binary kernel, max distance 0.25 x diagonal, "
+        "8 samples/vertex, cap 32/face"
     )
     return out
 
@@ -100,18 +101,21 @@ def markdown(result: dict) -> str:
     lines = [
         "# Vertex AO baking: least squares vs per-vertex sampling",
         "",
-        f"CPU: {result['cpu']} ({result['cores']} cores). Error = area-weighted RMSE of the interpolated vertex AO "
-        f"against a {result['ref_rays']}-ray reference at held-out surface samples; bakes at {result['rays']} rays "
-        f"per sample (binary kernel, max distance 0.25 x diagonal).",
+        f"CPU: {result['cpu']} ({result['cores']} cores). Error = area-weighted RMSE of the interpolated "
+        f"vertex AO against a {result['ref_rays']}-ray reference at held-out surface samples; "
+        f"bakes at {result['rays']} rays per sample (binary kernel, max distance 0.25 x diagonal).",
         "",
-        "| mesh | vertices | faces | RMSE vertex | RMSE vertex (same rays as LSQ) | RMSE LSQ | LSQ / vertex | LSQ / vertex same rays | max err vertex | max err LSQ |",
+        "| mesh | vertices | faces | RMSE vertex | RMSE vertex (same rays as LSQ) | RMSE LSQ | "
+        "LSQ / vertex | LSQ / vertex same rays | max err vertex | max err LSQ |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for m in result["meshes"]:
         lines.append(
-            f"| {m['mesh']} | {m['vertices']} | {m['faces']} | {m['vertex']['rmse']:.4f} | {m['vertex_same_budget']['rmse']:.4f} "
-            f"({m['vertex_budget_rays']} rays) | {m['lsq']['rmse']:.4f} | {m['rmse_ratio_lsq_vs_vertex']:.2f} | "
-            f"{m['rmse_ratio_lsq_vs_vertex_same_budget']:.2f} | {m['vertex']['max']:.3f} | {m['lsq']['max']:.3f} |"
+            f"| {m['mesh']} | {m['vertices']} | {m['faces']} | {m['vertex']['rmse']:.4f} | "
+            f"{m['vertex_same_budget']['rmse']:.4f} ({m['vertex_budget_rays']} rays) "
+            f"| {m['lsq']['rmse']:.4f} | {m['rmse_ratio_lsq_vs_vertex']:.2f} | "
+            f"{m['rmse_ratio_lsq_vs_vertex_same_budget']:.2f} | {m['vertex']['max']:.3f} | "
+            f"{m['lsq']['max']:.3f} |"
         )
     lines += [
         "",
@@ -129,12 +133,15 @@ def markdown(result: dict) -> str:
         lv, ll = big["vertex"], big["least-squares"]
         lines += [
             "",
-            f"Bake time, largest test mesh {big['mesh']} ({big['vertices']} vertices, {big['faces']} faces), {big['settings']}:",
+            f"Bake time, largest test mesh {big['mesh']} ({big['vertices']} vertices, "
+            f"{big['faces']} faces), {big['settings']}:",
             "",
             "| method | samples | rays traced | sampling s | trace s | solve s | total s |",
             "|---|---:|---:|---:|---:|---:|---:|",
-            f"| vertex | {lv['samples']} | {lv['rays_traced']:.3g} | - | {lv['seconds_trace']:.1f} | {lv['seconds_solve']:.2f} | {lv['seconds']:.1f} |",
-            f"| least-squares | {ll['samples']} | {ll['rays_traced']:.3g} | {ll['seconds_sampling']:.2f} | {ll['seconds_trace']:.1f} | "
+            f"| vertex | {lv['samples']} | {lv['rays_traced']:.3g} | - | "
+            f"{lv['seconds_trace']:.1f} | {lv['seconds_solve']:.2f} | {lv['seconds']:.1f} |",
+            f"| least-squares | {ll['samples']} | {ll['rays_traced']:.3g} | "
+            f"{ll['seconds_sampling']:.2f} | {ll['seconds_trace']:.1f} | "
             f"{ll['seconds_solve']:.2f} | {ll['seconds']:.1f} |",
         ]
     return "\n".join(lines) + "\n"
@@ -164,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         result["meshes"].append(compare(name, args.rays, args.ref_rays, args.held_out))
         m = result["meshes"][-1]
         print(
-            f"{name}: vertex {m['vertex']['rmse']:.4f}  lsq {m['lsq']['rmse']:.4f}  ratio {m['rmse_ratio_lsq_vs_vertex']:.2f}",
+            f"{name}: vertex {m['vertex']['rmse']:.4f}  lsq {m['lsq']['rmse']:.4f}  ratio "
+            f"{m['rmse_ratio_lsq_vs_vertex']:.2f}",
             flush=True,
         )
     if not args.skip_largest:

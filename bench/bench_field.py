@@ -180,20 +180,23 @@ def markdown(result: dict) -> str:
         "Held-back views, masked SSIM / RMSE against 256-ray labels; bytes: float32 field weights + encoding "
         "constants, 4 B per vertex for vertex AO.",
         "",
-        "| mesh | vertices | method | bytes | SSIM | RMSE | RMSE / vertex-lsq | bytes / vertex-lsq | train s |",
+        "| mesh | vertices | method | bytes | SSIM | RMSE | RMSE / vertex-lsq | bytes / vertex-lsq | "
+        "train s |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for row in result["meshes"]:
         for m in ("vertex-sampled", "vertex-lsq"):
             e = row[m]
             lines.append(
-                f"| {row['mesh']} | {row['vertices']} | {m} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
-                f"{e['rmse'] / row['vertex-lsq']['rmse']:.2f} | {e['bytes'] / row['vertex-lsq']['bytes']:.2f} | - |"
+                f"| {row['mesh']} | {row['vertices']} | {m} | {e['bytes']} | "
+                f"{e['ssim']:.3f} | {e['rmse']:.4f} | {e['rmse'] / row['vertex-lsq']['rmse']:.2f} | "
+                f"{e['bytes'] / row['vertex-lsq']['bytes']:.2f} | - |"
             )
         for size, e in row["fields"].items():
             lines.append(
-                f"| {row['mesh']} | {row['vertices']} | field-{size} | {e['bytes']} | {e['ssim']:.3f} | {e['rmse']:.4f} | "
-                f"{e['rmse_vs_lsq']:.2f} | {e['bytes_vs_lsq']:.2f} | {e['train_seconds']:.1f} |"
+                f"| {row['mesh']} | {row['vertices']} | field-{size} | {e['bytes']} | "
+                f"{e['ssim']:.3f} | {e['rmse']:.4f} | {e['rmse_vs_lsq']:.2f} | "
+                f"{e['bytes_vs_lsq']:.2f} | {e['train_seconds']:.1f} |"
             )
     lines += [
         "",

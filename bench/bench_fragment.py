@@ -100,7 +100,8 @@ def main() -> None:
         f"{args.size}x{args.size}, every pixel foreground, median of {args.repeats} frames, one run; SSAO "
         f"{ssao:.2f} ms on a real bunny G-buffer in the same run.",
         "",
-        "| network | uniform ms (x SSAO) | constant ms (x SSAO) | speed-up | compile s uniform / constant | max abs diff |",
+        "| network | uniform ms (x SSAO) | constant ms (x SSAO) | speed-up | "
+        "compile s uniform / constant | max abs diff |",
         "|---|---:|---:|---:|---:|---:|",
     ]
     for n, r in rows.items():

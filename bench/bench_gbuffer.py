@@ -1,6 +1,7 @@
 """Benchmark the float G-buffer renderer against pyrender's own OffscreenRenderer on the same views.
 
-    .venv/bin/python bench/bench_gbuffer.py --out build/bench [--size 512] [--views 8] [--meshes spot bunny ...]
+    .venv/bin/python bench/bench_gbuffer.py --out build/bench [--size 512] [--views 8]
+        [--meshes spot bunny ...]
 
 For each mesh and the same ``views`` orbit cameras at ``size`` x ``size``:
 
@@ -11,9 +12,10 @@ For each mesh and the same ``views`` orbit cameras at ``size`` x ``size``:
   without our own program.
 
 Both run in the same process on the same GL platform, interleaved round by round (``--repeats``
-rounds, the best round kept, since other processes share the two cores). Also reported: the time
-to upload each scene and render its first frame, the G-buffer's draw vs readback split, and the
-fraction of pixels on which both agree about foreground vs background (a sanity check). Writes DIR/gbuffer.json and DIR/gbuffer.md.
+rounds, the best round kept, since other processes share the two cores). Also reported: the time to
+upload each scene and render its first frame, the G-buffer's draw vs readback split, and the
+fraction of pixels on which both agree about foreground vs background (a sanity check). Writes
+DIR/gbuffer.json and DIR/gbuffer.md.
 """
 
 from __future__ import annotations
@@ -147,16 +149,17 @@ def markdown(result: dict) -> str:
         "G-buffer = our MRT pass + readback of every float channel and the triangle ids; "
         "pyrender = `OffscreenRenderer.render` (shaded 8-bit colour + float depth).",
         "",
-        "| mesh | faces | G-buffer ms (fps) | draw / readback ms | pyrender ms (fps) | G-buffer fps / pyrender fps "
-        "| upload s (ours / pyrender) |",
+        "| mesh | faces | G-buffer ms (fps) | draw / readback ms | pyrender ms (fps) | "
+        "G-buffer fps / pyrender fps | upload s (ours / pyrender) |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result["meshes"]:
         lines.append(
             f"| {r['mesh']} | {r['faces']:,} | {r['gbuffer_ms']:.1f} ({r['gbuffer_fps']:.1f}) "
-            f"| {r['gbuffer_draw_ms']:.1f} / {r['gbuffer_readback_ms']:.1f} "
-            f"| {r['pyrender_ms']:.1f} ({r['pyrender_fps']:.1f}) | {r['ratio_gbuffer_over_pyrender_fps']:.2f}x "
-            f"| {r['upload_s']['gbuffer']:.2f} / {r['upload_s']['pyrender']:.2f} |"
+            f"| {r['gbuffer_draw_ms']:.1f} / {r['gbuffer_readback_ms']:.1f} | "
+            f"{r['pyrender_ms']:.1f} ({r['pyrender_fps']:.1f}) | "
+            f"{r['ratio_gbuffer_over_pyrender_fps']:.2f}x | {r['upload_s']['gbuffer']:.2f} / "
+            f"{r['upload_s']['pyrender']:.2f} |"
         )
     lines.append("")
     return "\n".join(lines)

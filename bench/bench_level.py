@@ -58,9 +58,11 @@ def markdown(result: dict) -> str:
     info, secs = result["bake"], result["stage_seconds"]
     c = info["counts"]
     lines = [
-        f"Level: {c['receiver_vertices']:,} V, {c['receiver_faces']:,} F baked per vertex; {c['samples']:,} samples x "
-        f"{info['settings']['trace']['rays']} rays = {c['samples'] * info['settings']['trace']['rays'] / 1e6:,.0f} M rays; "
-        f"{c.get('tree_instances', 0)} trees, {c.get('shrub_instances', 0)} shrub boxes, {c.get('grass_instances', 0)} grass clumps.",
+        f"Level: {c['receiver_vertices']:,} V, {c['receiver_faces']:,} F baked per vertex; "
+        f"{c['samples']:,} samples x {info['settings']['trace']['rays']} rays = "
+        f"{c['samples'] * info['settings']['trace']['rays'] / 1e6:,.0f} M rays; "
+        f"{c.get('tree_instances', 0)} trees, {c.get('shrub_instances', 0)} shrub boxes, "
+        f"{c.get('grass_instances', 0)} grass clumps.",
         "",
         "| Table 1 row (K20) | paper (s) | here (s) | here / paper |",
         "|---|---:|---:|---:|",
@@ -81,12 +83,16 @@ def markdown(result: dict) -> str:
     for s in extra:
         lines.append(f"| (not in Table 1) {s['description']} | - | {s['seconds']:.1f} | - |")
     lines += [
-        f"| **Total** | **{PAPER_TOTAL:g}** | **{result['seconds_total']:.1f}** | **{result['seconds_total'] / PAPER_TOTAL:.1f}x** |",
-        f"| Total without the error-table checks | | {result['seconds_method']:.1f} | {result['seconds_method'] / PAPER_TOTAL:.1f}x |",
+        f"| **Total** | **{PAPER_TOTAL:g}** | **{result['seconds_total']:.1f}** | "
+        f"**{result['seconds_total'] / PAPER_TOTAL:.1f}x** |",
+        f"| Total without the error-table checks | | {result['seconds_method']:.1f} | "
+        f"{result['seconds_method'] / PAPER_TOTAL:.1f}x |",
         "",
-        f"Trace: {result['trace_mrays_per_s']:.2f} M rays/s. Peak memory (RSS) {info['peak_rss_bytes'] / 2**30:.1f} GiB. "
-        f"{result['cpu_count']} cores; load average {result['load_before'][0]:.2f} before, {result['load_after'][0]:.2f} after "
-        f"(1-min; the bake itself accounts for up to {result['cpu_count']}: above that, other jobs shared the cores).",
+        f"Trace: {result['trace_mrays_per_s']:.2f} M rays/s. Peak memory (RSS) "
+        f"{info['peak_rss_bytes'] / 2**30:.1f} GiB. {result['cpu_count']} cores; "
+        f"load average {result['load_before'][0]:.2f} before, {result['load_after'][0]:.2f} after (1-min; "
+        f"the bake itself accounts for up to {result['cpu_count']}: above that, "
+        "other jobs shared the cores).",
     ]
     return "\n".join(lines) + "\n"
 

@@ -216,19 +216,27 @@ def _bare_trace_seconds(lab: LevelLabeller, centers, radius, rays) -> float:
 def markdown(r: dict) -> str:
     lv, rs, sv = r["level"], r["resample"], r["solve"]
     lines = [
-        f"Level: {lv['vertices']:,} V / {lv['faces']:,} F, {lv['samples']:,} samples; {r['workers']} tracing "
-        f"threads; load average {r['load_average'][0]:.1f} -> {r['load_average'][1]:.1f} on {r['cpu_count']} cores.",
+        f"Level: {lv['vertices']:,} V / {lv['faces']:,} F, {lv['samples']:,} samples; "
+        f"{r['workers']} tracing threads; load average {r['load_average'][0]:.1f} -> "
+        f"{r['load_average'][1]:.1f} on {r['cpu_count']} cores.",
         "",
-        f"| LOD resampling ({rs['points']:,} points x {rs['rays'] // rs['points']} rays) | wall s | CPU s | M rays per CPU s |",
+        f"| LOD resampling ({rs['points']:,} points x {rs['rays'] // rs['points']} rays) | wall s | "
+        "CPU s | M rays per CPU s |",
         "|---|---:|---:|---:|",
-        f"| geometric weighting (before) | {rs['geometric_seconds']:.2f} | {rs['geometric_cpu_seconds']:.2f} | {rs['rays'] / rs['geometric_cpu_seconds'] / 1e6:.2f} |",
-        f"| trace-speed weighting (now) | {rs['fast_seconds']:.2f} | {rs['fast_cpu_seconds']:.2f} | {rs['rays'] / rs['fast_cpu_seconds'] / 1e6:.2f} |",
-        f"| bare trace of the same rays | {rs['bare_trace_seconds']:.2f} | {rs['bare_trace_cpu_seconds']:.2f} | {rs['rays'] / rs['bare_trace_cpu_seconds'] / 1e6:.2f} |",
-        f"| **speedup (now / before)** | **{rs['speedup']:.2f}x** | **{rs['cpu_speedup']:.2f}x** | max abs difference {rs['max_abs_difference']:.1e} |",
+        f"| geometric weighting (before) | {rs['geometric_seconds']:.2f} | "
+        f"{rs['geometric_cpu_seconds']:.2f} | {rs['rays'] / rs['geometric_cpu_seconds'] / 1e6:.2f} |",
+        f"| trace-speed weighting (now) | {rs['fast_seconds']:.2f} | "
+        f"{rs['fast_cpu_seconds']:.2f} | {rs['rays'] / rs['fast_cpu_seconds'] / 1e6:.2f} |",
+        f"| bare trace of the same rays | {rs['bare_trace_seconds']:.2f} | "
+        f"{rs['bare_trace_cpu_seconds']:.2f} | {rs['rays'] / rs['bare_trace_cpu_seconds'] / 1e6:.2f} |",
+        f"| **speedup (now / before)** | **{rs['speedup']:.2f}x** | **{rs['cpu_speedup']:.2f}x** | "
+        f"max abs difference {rs['max_abs_difference']:.1e} |",
         "",
-        "| least squares (receivers, 2 columns, incl. building the system) | wall s | CPU s | CPU speedup | max abs vs SuperLU | RMSE | share > half an 8-bit step |",
+        "| least squares (receivers, 2 columns, incl. building the system) | wall s | CPU s | "
+        "CPU speedup | max abs vs SuperLU | RMSE | share > half an 8-bit step |",
         "|---|---:|---:|---:|---:|---:|---:|",
-        f"| SuperLU (direct) | {sv['direct']['seconds']:.2f} | {sv['direct']['cpu_seconds']:.2f} | 1.00 | 0 | 0 | 0 |",
+        f"| SuperLU (direct) | {sv['direct']['seconds']:.2f} | {sv['direct']['cpu_seconds']:.2f} | 1.00 | "
+        "0 | 0 | 0 |",
     ]
     for k, label in (
         ("amg", "multigrid-preconditioned CG (pyamg, rtol 1e-10)"),
@@ -241,8 +249,9 @@ def markdown(r: dict) -> str:
             )
         else:
             lines.append(
-                f"| {label} | {v['seconds']:.2f} | {v['cpu_seconds']:.2f} | {v['cpu_speedup']:.2f} | {v['max_abs']:.1e} | "
-                f"{v['rmse']:.1e} | {v['share_over_half_8bit']:.1e} |"
+                f"| {label} | {v['seconds']:.2f} | {v['cpu_seconds']:.2f} | "
+                f"{v['cpu_speedup']:.2f} | {v['max_abs']:.1e} | {v['rmse']:.1e} | "
+                f"{v['share_over_half_8bit']:.1e} |"
             )
     return "\n".join(lines) + "\n"
 

@@ -17,11 +17,11 @@ Per mesh (samples are drawn once and shared by the three sizes):
 4. Shader cost on Mesa (llvmpipe) at ``--timing-size`` squared: the MLP fragment pass per size (all pixels
    foreground, the worst case) and, in the same run, the plain vertex-colour AO draw of the mesh; ratios.
 5. Ablation (16x8): trained on circle + radius-zero copies of every sample (``train_inputs=both``).
-6. The paper's Table 2 protocol (``--paper-views``, default 2): whole-image SSIM at 1920x1080 (camera on
-   an orbit around the bounding sphere, a third phase), the generated GLSL at radius zero against
-   ray-traced AO. scikit-image's ``structural_similarity`` (Gaussian sigma 1.5, population covariance,
-   data range 1) is the reference; ``pipeline.foundation.metrics.image_ssim`` and the masked SSIM beside it. In the
-   same run, at 1920x1080: each MLP's shader time against SSAO's (the paper: NN-16x8 about 0.12x).
+6. The paper's Table 2 protocol (``--paper-views``, default 2): whole-image SSIM at 1920x1080 (camera on an
+   orbit around the bounding sphere, a third phase), the generated GLSL at radius zero against ray-traced
+   AO. scikit-image's ``structural_similarity`` (Gaussian sigma 1.5, population covariance, data range 1) is
+   the reference; ``pipeline.foundation.metrics.image_ssim`` and the masked SSIM beside it. In the same run,
+   at 1920x1080: each MLP's shader time against SSAO's (the paper: NN-16x8 about 0.12x).
 
 Writes DIR/mlp.json and DIR/mlp.md (checkpoints and exports under DIR/mlp/).
 """
@@ -180,7 +180,8 @@ def shader_costs(rows: list[dict], sizes: list[str], side: int, repeats: int) ->
 def paper_protocol(
     rows: list[dict], sizes: list[str], views: int, size: tuple[int, int], labels: LabelSettings, repeats: int
 ) -> dict:
-    """Table 2 as the paper measures it: whole-image SSIM at ``size`` on orbit views, plus GL times vs SSAO."""
+    """Table 2 as the paper measures it: whole-image SSIM at ``size`` on orbit views, plus GL times vs
+    SSAO."""
     from skimage.metrics import structural_similarity
 
     from pipeline.foundation.metrics import SSIM_SIGMA, image_ssim
@@ -247,11 +248,13 @@ def paper_markdown(p: dict, sizes: list[str]) -> list[str]:
         "",
         f"## The paper's protocol: whole-image SSIM at {w}x{h}, {p['views']} orbit views per mesh",
         "",
-        "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, data "
-        "range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same images (edge "
-        "replicated, border kept); masked: foreground pixels only. SSAO on the same frames for scale.",
+        "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, "
+        "data range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same "
+        "images (edge replicated, border kept); masked: foreground pixels only. "
+        "SSAO on the same frames for scale.",
         "",
-        "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | masked SSIM |",
+        "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | "
+        "masked SSIM |",
         "|---|---:|---|---:|---:|---:|---:|",
     ]
     for mesh, d in p["meshes"].items():
@@ -283,19 +286,22 @@ def markdown(result: dict) -> str:
     lines = [
         "# Baked MLP (Erra et al. 2017) on the paper's models",
         "",
-        f"CPU: {result['cpu']} ({result['cores']} cores, torch threads 1, Embree 2 threads); GL: Mesa llvmpipe. "
-        f"Samples: {s['views']} orbit views at {s['size'][0]}x{s['size'][1]}, {s['samples_per_view']} pixels each, "
-        f"{s['labels']['rays']} rays ({s['labels']['kernel']}, max distance {s['labels']['max_distance_rel']} x diagonal); "
-        f"held back: {s['holdout_views']} views (another orbit) at {s['holdout_size'][0]}x{s['holdout_size'][1]}. "
+        f"CPU: {result['cpu']} ({result['cores']} cores, torch threads 1, Embree 2 threads); GL: "
+        f"Mesa llvmpipe. Samples: {s['views']} orbit views at {s['size'][0]}x{s['size'][1]}, "
+        f"{s['samples_per_view']} pixels each, {s['labels']['rays']} rays ({s['labels']['kernel']}, "
+        f"max distance {s['labels']['max_distance_rel']} x diagonal); held back: "
+        f"{s['holdout_views']} views (another orbit) at {s['holdout_size'][0]}x{s['holdout_size'][1]}. "
         f"L-BFGS, at most {s['max_iterations']} iterations, early stopping. Total {result['seconds']:.0f} s.",
         "",
         "## SSIM on held-back views (network at radius zero, as deployed) next to the paper's Table 2",
         "",
-        "Ours: masked SSIM over valid foreground pixels (Gaussian 11, sigma 1.5, C1 1e-4, C2 9e-4). "
-        "Whole-image: the same images with the background (1 in both) included, as the paper most likely measured. "
-        "Constant: the mean training AO everywhere. Ceiling: the reference against a second labelling (other seed).",
+        "Ours: masked SSIM over valid foreground pixels (Gaussian 11, sigma 1.5, C1 1e-4, "
+        "C2 9e-4). Whole-image: the same images with the background (1 in both) included, "
+        "as the paper most likely measured. Constant: the mean training AO everywhere. Ceiling: "
+        "the reference against a second labelling (other seed).",
         "",
-        "| mesh | size | ours (masked) | whole-image | paper | RMSE | radius 10: SSIM / RMSE | constant: SSIM / RMSE | ceiling: SSIM / RMSE |",
+        "| mesh | size | ours (masked) | whole-image | paper | RMSE | radius 10: SSIM / RMSE | "
+        "constant: SSIM / RMSE | ceiling: SSIM / RMSE |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in result["meshes"]:
@@ -303,45 +309,52 @@ def markdown(result: dict) -> str:
             z = r["sizes"][size]
             c, n = r["constant"], r["noise_ceiling"]
             lines.append(
-                f"| {r['mesh']} | {size} | {fmt(z['holdout_ssim'])} | {fmt(z['holdout_ssim_full'])} | {fmt(z['paper_ssim'])} | "
-                f"{fmt(z['holdout_rmse'])} | {fmt(z['holdout_ssim_r10'])} / {fmt(z['holdout_rmse_r10'])} | "
-                f"{fmt(c['holdout_ssim'])} / {fmt(c['holdout_rmse'])} | {fmt(n['ssim'])} / {fmt(n['rmse'])} |"
+                f"| {r['mesh']} | {size} | {fmt(z['holdout_ssim'])} | {fmt(z['holdout_ssim_full'])} | "
+                f"{fmt(z['paper_ssim'])} | {fmt(z['holdout_rmse'])} | {fmt(z['holdout_ssim_r10'])} / "
+                f"{fmt(z['holdout_rmse_r10'])} | {fmt(c['holdout_ssim'])} / {fmt(c['holdout_rmse'])} | "
+                f"{fmt(n['ssim'])} / {fmt(n['rmse'])} |"
             )
     lines += [
         "",
         "## Training (per size) and sample error",
         "",
-        "| mesh | samples | size | parameters (bytes) | iterations | training s | test RMSE | constant test RMSE |",
+        "| mesh | samples | size | parameters (bytes) | iterations | training s | test RMSE | "
+        "constant test RMSE |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in result["meshes"]:
         for size in sizes:
             z = r["sizes"][size]
             lines.append(
-                f"| {r['mesh']} | {r['samples']} | {size} | {z['parameters']} ({z['parameter_bytes']}) | {z['iterations']} | "
-                f"{z['training_seconds']:.1f} | {fmt(z['test_rmse'])} | {fmt(r['constant']['test_rmse'])} |"
+                f"| {r['mesh']} | {r['samples']} | {size} | {z['parameters']} ({z['parameter_bytes']}) "
+                f"| {z['iterations']} | {z['training_seconds']:.1f} | {fmt(z['test_rmse'])} | "
+                f"{fmt(r['constant']['test_rmse'])} |"
             )
     lines += [
         "",
         "## Export checks and GLSL parity (held-back frames, every foreground pixel, raw output)",
         "",
-        "| mesh | size | onnxruntime vs torch | OpenCV vs onnxruntime | GLSL fp32 vs onnxruntime | GLSL fp16 storage | passed |",
+        "| mesh | size | onnxruntime vs torch | OpenCV vs onnxruntime | GLSL fp32 vs onnxruntime | "
+        "GLSL fp16 storage | passed |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in result["meshes"]:
         for size in sizes:
             z = r["sizes"][size]
             lines.append(
-                f"| {r['mesh']} | {size} | {z['onnxruntime_vs_torch']:.2g} | {z['opencv_vs_onnxruntime']:.2g} | "
-                f"{z['parity_fp32']:.2g} | {fmt(z['parity_fp16'], '.2g')} | {z['parity_passed']} |"
+                f"| {r['mesh']} | {size} | {z['onnxruntime_vs_torch']:.2g} | "
+                f"{z['opencv_vs_onnxruntime']:.2g} | {z['parity_fp32']:.2g} | "
+                f"{fmt(z['parity_fp16'], '.2g')} | {z['parity_passed']} |"
             )
     sc = result["shader_cost"]
     lines += [
         "",
-        f"## Shader cost on Mesa llvmpipe at {sc['size']}x{sc['size']} (median of {sc['repeats']} frames, same run)",
+        f"## Shader cost on Mesa llvmpipe at {sc['size']}x{sc['size']} (median of {sc['repeats']} frames, "
+        "same run)",
         "",
-        "MLP: one full-screen fragment pass, every pixel foreground (worst case). Vertex colours: the mesh drawn "
-        "with one AO value per vertex (the paper's cheapest baseline). Ratio = MLP / vertex colours.",
+        "MLP: one full-screen fragment pass, every pixel foreground (worst case). Vertex colours: "
+        "the mesh drawn with one AO value per vertex (the paper's cheapest baseline). "
+        "Ratio = MLP / vertex colours.",
         "",
         "| size | MLP ms | " + " | ".join(f"ratio vs {m}" for m in sc["vertex_colour_ms"]) + " |",
         "|---|---|" + "---|" * len(sc["vertex_colour_ms"]),
@@ -359,9 +372,11 @@ def markdown(result: dict) -> str:
     if any("ablation_both" in r for r in result["meshes"]):
         lines += [
             "",
-            "## Ablation: trained on circle inputs plus a radius-zero copy of every sample (train_inputs=both)",
+            "## Ablation: trained on circle inputs plus a radius-zero copy of every sample "
+            "(train_inputs=both)",
             "",
-            "| mesh | size | held-back SSIM (masked) | RMSE | whole-image SSIM | vs paper-faithful SSIM / RMSE |",
+            "| mesh | size | held-back SSIM (masked) | RMSE | whole-image SSIM | "
+            "vs paper-faithful SSIM / RMSE |",
             "|---|---|---|---|---|---|",
         ]
         for r in result["meshes"]:

@@ -17,9 +17,9 @@ ray on one core. The projection for Table 1 of Sloan et al. 2013 (6.7 M samples 
 machines of C cores, with ``tasks = TASKS_PER_CORE * N * C`` blocks (trace.block_samples chosen to
 match; the default 262,144 would make 26 tasks and leave cores idle beyond 26):
 ``T(N) = serial + ceil(tasks / (N C)) * block * rays * c_ray / e + tasks * t_task / (N C) + t_ctx
-+ max(task stages / (N C e), largest task)`` (driver stages serial; the stages that run as tasks, decorators, grass and shrubs, LOD resampling and
-the solve's blocks, spread over the cores but not below the largest solve block; ``e`` the measured
-Ray / local ratio of the level trace; ``t_ctx``
++ max(task stages / (N C e), largest task)`` (driver stages serial; the stages that run as tasks,
+decorators, grass and shrubs, LOD resampling and the solve's blocks, spread over the cores but not
+below the largest solve block; ``e`` the measured Ray / local ratio of the level trace; ``t_ctx``
 the first-task cost scaled by faces, paid once per actor, in parallel on every machine), using a
 bench_level.json of bench/bench_level.py for the serial stages when one exists.
 
@@ -308,24 +308,27 @@ def markdown(result: dict, proj: dict) -> str:
             if result["load_average_before"][0] > 0.5 * result["cpu_count"]
             else "idle before the run). "
         )
-        + f"Best of {result['repeats']} interleaved rounds. Ray: fresh actors per round (process start excluded, "
-        "their imports, GL context and scene states included, as in one CLI run); Ray warm: the same work "
-        "again on those actors.",
+        + f"Best of {result['repeats']} interleaved rounds. Ray: fresh actors per round (process start "
+        "excluded, their imports, GL context and scene states included, as in one CLI run); Ray warm: "
+        "the same work again on those actors.",
         "",
-        "| workload | workers | local s | Ray s | local /s | Ray /s | Ray / local | Ray warm s | warm / local |",
+        "| workload | workers | local s | Ray s | local /s | Ray /s | Ray / local | Ray warm s | "
+        "warm / local |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     unit = {"bake": "samples", "dataset": "frames", "level": "samples (trace stage)"}
     for r in result["rows"]:
         lines.append(
-            f"| {r['workload']} ({unit[r['workload']]}) | {r['workers']} | {r['local_s']:.2f} | {r['ray_s']:.2f} | "
-            f"{r['local_per_s']:,.0f} | {r['ray_per_s']:,.0f} | **{r['ray_over_local']:.2f}** | "
+            f"| {r['workload']} ({unit[r['workload']]}) | {r['workers']} | "
+            f"{r['local_s']:.2f} | {r['ray_s']:.2f} | {r['local_per_s']:,.0f} | "
+            f"{r['ray_per_s']:,.0f} | **{r['ray_over_local']:.2f}** | "
             + (f"{r['warm_s']:.2f} | **{r['warm_over_local']:.2f}** |" if r.get("warm_s") else "- | - |")
         )
     lines += [
         "",
-        f"Per task: empty round trip {result['t_task_s'] * 1e3:.2f} ms; first task of a new context "
-        f"({result['payload_bytes'] / 1e6:.1f} MB mesh: object store + Embree build) {result['t_context_s'] * 1e3:.0f} ms; "
+        f"Per task: empty round trip {result['t_task_s'] * 1e3:.2f} ms; "
+        f"first task of a new context ({result['payload_bytes'] / 1e6:.1f} MB mesh: "
+        f"object store + Embree build) {result['t_context_s'] * 1e3:.0f} ms; "
         f"trace {result['c_ray_level_s'] * 1e9:.0f} ns per ray per core (level), "
         f"{result['c_ray_bake_s'] * 1e9:.0f} ns (bake, sampling and solve included). "
         f"Starting the private Ray instance: {result['seconds_start_ray']:.1f} s (not in the rows).",
@@ -334,18 +337,20 @@ def markdown(result: dict, proj: dict) -> str:
         f"{proj['rays'] / 1e9:.2f} G rays) on N machines x {proj['cores_per_machine']} cores, "
         f"{TASKS_PER_CORE} trace blocks per core",
         "",
-        f"Efficiency e = {proj['efficiency']:.2f} (level trace, Ray / local at 2 workers); serial stages: "
-        f"{proj['serial_source']}; per-ray cost {proj['c_ray_s'] * 1e9:.0f} ns per core as measured here; first-task "
-        f"cost scaled to 1.8 M faces {proj['t_context_table1_s']:.1f} s. The paper's trace row: "
-        f"{proj['paper_trace_s']} s on one K20.",
+        f"Efficiency e = {proj['efficiency']:.2f} (level trace, Ray / local at 2 workers); "
+        f"serial stages: {proj['serial_source']}; per-ray cost {proj['c_ray_s'] * 1e9:.0f} ns per core as "
+        f"measured here; first-task cost scaled to 1.8 M faces {proj['t_context_table1_s']:.1f} s. "
+        f"The paper's trace row: {proj['paper_trace_s']} s on one K20.",
         "",
-        "| machines | cores | tasks | samples / task | trace s | Ray overhead s | driver s | task stages s | total s |",
+        "| machines | cores | tasks | samples / task | trace s | Ray overhead s | driver s | "
+        "task stages s | total s |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in proj["rows"]:
         lines.append(
-            f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | {r['trace_s']:.1f} | {r['overhead_s']:.2f} | "
-            f"{r['serial_s']:.1f} | {r['task_stages_s']:.1f} | {r['total_s']:.1f} |"
+            f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | "
+            f"{r['trace_s']:.1f} | {r['overhead_s']:.2f} | {r['serial_s']:.1f} | "
+            f"{r['task_stages_s']:.1f} | {r['total_s']:.1f} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -17,7 +17,8 @@ medians and ratios from the same rounds:
   model's manifest (``internal_height``);
 * a hybrid (GTAO as its fifth input channel): the GTAO pass at the frame's size is added to its time;
 * SSAO and GTAO: ``runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (a seeded
-  interior camera: all foreground, as in a game frame; they skip background pixels) at each size, radius 1/4 of the scene diagonal (the largest label radius), blur included.
+  interior camera: all foreground, as in a game frame; they skip background pixels) at each size,
+  radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
 Ratios: to the index's default model (the issue-9 bound is a variant at <= 1/4 of the full network's
 time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship`` measured them).
@@ -161,11 +162,11 @@ def markdown(result: dict) -> str:
     lines = [
         "# Shipped U-Nets vs SSAO and GTAO: GL time in the same rounds",
         "",
-        f"GL on {result['gl_renderer']} ({result['cpu']}); median of "
-        f"{result['rounds']} interleaved rounds; SSAO / GTAO on a {result['mesh']} G-buffer from an interior "
-        f"camera (foreground {', '.join(f'{100 * v:.0f}%' for v in result['foreground'].values())} of the pixels: "
-        "their cost falls with the background they skip) at radius 1/4 of its diagonal. Test SSIM / RMSE: the "
-        "test split, from index.json.",
+        f"GL on {result['gl_renderer']} ({result['cpu']}); median of {result['rounds']} interleaved rounds; "
+        f"SSAO / GTAO on a {result['mesh']} G-buffer from an interior camera (foreground "
+        f"{', '.join(f'{100 * v:.0f}%' for v in result['foreground'].values())} of the pixels: "
+        "their cost falls with the background they skip) at radius 1/4 of its diagonal. "
+        "Test SSIM / RMSE: the test split, from index.json.",
         "",
         f"| method | scale | widths | test SSIM | test RMSE | {head} |",
         "|---|---:|---|---:|---:|" + "---:|" * (3 * len(sizes)),

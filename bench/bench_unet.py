@@ -457,16 +457,17 @@ def markdown(result: dict) -> str:
         "",
         "## Inference, median ms per frame (interleaved rounds, same run)",
         "",
-        f"torch: `PaddedUNet` forward, eval, no_grad (pad, network, crop), {result['threads']['torch']} threads "
-        f"(OMP_WAIT_POLICY={result['threads']['omp_wait_policy']}), and the same on 1 thread. onnxruntime: CPU session, "
-        "reflect pad + run + crop as `neuralao infer`. GLSL: all generated compute passes (pad, network, "
-        "crop) on llvmpipe, closed by glFinish; **upload and readback excluded** in the GLSL column, "
-        "included in the column after it. Ratios use the multi-thread torch and the GLSL column. Differences: max |.| over all "
-        "pixels of the raw network output on the timed input.",
+        "torch: `PaddedUNet` forward, eval, no_grad (pad, network, crop), "
+        f"{result['threads']['torch']} threads (OMP_WAIT_POLICY={result['threads']['omp_wait_policy']}), "
+        "and the same on 1 thread. onnxruntime: CPU session, reflect pad + run + crop as `neuralao infer`. "
+        "GLSL: all generated compute passes (pad, network, crop) on llvmpipe, closed by glFinish; "
+        "**upload and readback excluded** in the GLSL column, included in the column after it. "
+        "Ratios use the multi-thread torch and the GLSL column. Differences: max |.| "
+        "over all pixels of the raw network output on the timed input.",
         "",
-        "| size | input (foreground) | torch CPU | torch CPU 1 thread | onnxruntime CPU | GLSL llvmpipe (upload excl.) | "
-        "GLSL + upload + readback | ORT / torch | GLSL / torch | GLSL / ORT | rounds (GLSL) | "
-        "GLSL vs ORT | ORT vs torch |",
+        "| size | input (foreground) | torch CPU | torch CPU 1 thread | onnxruntime CPU | "
+        "GLSL llvmpipe (upload excl.) | GLSL + upload + readback | ORT / torch | GLSL / torch | "
+        "GLSL / ORT | rounds (GLSL) | GLSL vs ORT | ORT vs torch |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in result["sizes"]:
@@ -496,7 +497,10 @@ def markdown(result: dict) -> str:
             "|---|" + "---|" * (len(result["sizes"]) + 3),
             f"| **{default}** (default) | "
             + " | ".join(f"{r['glsl_ms']:.0f} ({r['ratio_glsl_ort']:.1f})" for r in result["sizes"])
-            + f" | 1 | {result['glsl_warmup_s']:.1f} | {max(r['max_abs_glsl_vs_ort'] for r in result['sizes']):.1e} |",
+            + (
+                f" | 1 | {result['glsl_warmup_s']:.1f} | "
+                f"{max(r['max_abs_glsl_vs_ort'] for r in result['sizes']):.1e} |"
+            ),
         ]
         for label in labels:
             v = [r["glsl_variants"][label] for r in result["sizes"]]
@@ -505,7 +509,10 @@ def markdown(result: dict) -> str:
                 + " | ".join(f"{x['ms']:.0f} ({x['ratio_ort']:.1f})" for x in v)
                 + " | "
                 + ", ".join(f"{x['speedup_of_default']:.1f}x" for x in v)
-                + f" | {result['glsl_variant_warmup_s'][label]:.1f} | {max(x['max_abs_vs_ort'] for x in v):.1e} |"
+                + (
+                    f" | {result['glsl_variant_warmup_s'][label]:.1f} | "
+                    f"{max(x['max_abs_vs_ort'] for x in v):.1e} |"
+                )
             )
     lines += [
         "",
@@ -515,7 +522,10 @@ def markdown(result: dict) -> str:
             for r in result["sizes"]
         )
         + ". Shader JIT warm-up (untimed, small sizes of the same texture class: "
-        + f"{', '.join(f'{a}x{b}' for a, b in result['glsl_warmup_sizes'])}): {result['glsl_warmup_s']:.1f} s.",
+        + (
+            f"{', '.join(f'{a}x{b}' for a, b in result['glsl_warmup_sizes'])}): "
+            f"{result['glsl_warmup_s']:.1f} s."
+        ),
         "",
         "## Training time per epoch (`pipeline.models.unet_train.train`, default settings)",
         "",
@@ -528,16 +538,18 @@ def markdown(result: dict) -> str:
         built = f"built in {d['seconds']:.0f} s" if d["built"] else "reused"
         lines += [
             f"Dataset: {d['source']} ({d['path']}, {built}); {t['train_frames']} training frames "
-            f"{t['frame_size'][0]}x{t['frame_size'][1]}, {t['val_frames']} validation frames ({t['val_source']}). "
-            f"Torch threads {t['torch_threads']}, deterministic algorithms (as `neuralao train unet`).",
+            f"{t['frame_size'][0]}x{t['frame_size'][1]}, {t['val_frames']} validation frames "
+            f"({t['val_source']}). Torch threads {t['torch_threads']}, "
+            "deterministic algorithms (as `neuralao train unet`).",
             "",
             "| epochs | crops / epoch (crop px, batch) | batches / epoch | train s / epoch (median) | "
             "per epoch incl. validation s | ms / crop |",
             "|---|---|---|---|---|---|",
-            f"| {t['epochs']} | {t['crops_per_epoch']} ({t['crop']}, {t['batch_size']}) | "
-            f"{t['batches_per_epoch']} | {t['median_train_seconds_per_epoch']:.2f} "
-            f"({', '.join(f'{v:.2f}' for v in t['train_seconds_per_epoch'])}) | "
-            f"{', '.join(f'{v:.2f}' for v in t['seconds_per_epoch_with_validation'])} | {t['ms_per_crop']:.1f} |",
+            f"| {t['epochs']} | {t['crops_per_epoch']} ({t['crop']}, {t['batch_size']}) "
+            f"| {t['batches_per_epoch']} | {t['median_train_seconds_per_epoch']:.2f} "
+            f"({', '.join(f'{v:.2f}' for v in t['train_seconds_per_epoch'])}) "
+            f"| {', '.join(f'{v:.2f}' for v in t['seconds_per_epoch_with_validation'])} | "
+            f"{t['ms_per_crop']:.1f} |",
             "",
             "An epoch is `crops_per_frame` (2) random 64-px crops of every training frame, so its time "
             "scales with the dataset: multiply ms / crop by 2 x the training frames of another dataset.",
@@ -676,7 +688,9 @@ def run(args: argparse.Namespace) -> int:
             "large_pixels": LARGE_PIXELS,
             "mesh": args.mesh,
             "seed": args.seed,
-            "timing": "median over interleaved rounds; GLSL dispatch timed to glFinish, upload/readback apart",
+            "timing": (
+                "median over interleaved rounds; GLSL dispatch timed to glFinish, upload/readback apart"
+            ),
         },
         "sizes": rows,
         "training": training,

@@ -393,12 +393,14 @@ def markdown(r: dict) -> str:
     lv = r["level"]
     lines += [
         "",
-        f"## Synthetic level {lv['scene']['name']}: {lv['regions']} regions, {lv['edges']} edges, "
-        f"{lv['probes']} probes vs {lv['ref_rays']}-ray traced AO (mean {lv['ao_mean']:.3f}, sd {lv['ao_std']:.3f})",
+        f"## Synthetic level {lv['scene']['name']}: {lv['regions']} regions, "
+        f"{lv['edges']} edges, {lv['probes']} probes vs {lv['ref_rays']}-ray traced AO (mean "
+        f"{lv['ao_mean']:.3f}, sd {lv['ao_std']:.3f})",
         "",
     ]
     lines += [
-        "| agreement points | beta | RMSE quadratic | RMSE linear | jump centre (quad) | jump face (quad) | jump face (linear) |",
+        "| agreement points | beta | RMSE quadratic | RMSE linear | jump centre (quad) | jump face (quad) "
+        "| jump face (linear) |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for row in lv["betas"]:
@@ -408,8 +410,9 @@ def markdown(r: dict) -> str:
             else f"{row['boundary_grid']}x{row['boundary_grid']} on the face"
         )
         lines.append(
-            f"| {where} | {row['beta']:g} | {row['rmse_quadratic']:.4f} | {row['rmse_linear']:.4f} | "
-            f"{row['jump_centre_quadratic']:.4f} | {row['jump_face_quadratic']:.4f} | {row['jump_face_linear']:.4f} |"
+            f"| {where} | {row['beta']:g} | {row['rmse_quadratic']:.4f} | "
+            f"{row['rmse_linear']:.4f} | {row['jump_centre_quadratic']:.4f} | "
+            f"{row['jump_face_quadratic']:.4f} | {row['jump_face_linear']:.4f} |"
         )
     f = lv["sh_at_probe_rmse"]
     lines += [
@@ -420,7 +423,8 @@ def markdown(r: dict) -> str:
     ]
     sec = lv["seconds"]
     lines += [
-        f"Bake: {lv['bake_seconds']:.1f} s total for {lv['regions']} regions ({lv['rays'] / 1e6:.1f} M rays): "
+        f"Bake: {lv['bake_seconds']:.1f} s total for {lv['regions']} regions "
+        f"({lv['rays'] / 1e6:.1f} M rays): "
         + ", ".join(f"{k} {v:.2f} s" for k, v in sec.items())
         + "; per region "
         + ", ".join(f"{k} {v:.0f} ms" for k, v in lv["per_region_ms"].items())

@@ -83,9 +83,12 @@ def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
     metrics = ckpt.get("metrics", {})
     return {
         "neuralao_kind": "field",
-        "input": f"{POSITION}: (N, 3) float32 object-space position in the mesh's units; {NORMAL}: (N, 3) float32 "
-        "viewer-facing object-space unit normal (the G-buffer's, flipped towards the camera on back faces)",
-        "output": "ao: (N, 1) float32 accessibility (1 open, 0 occluded), linear, NOT clamped: clamp to [0, 1]",
+        "input": f"{POSITION}: (N, 3) float32 object-space position in the mesh's units; "
+        f"{NORMAL}: (N, 3) float32 viewer-facing object-space unit normal (the G-buffer's, "
+        "flipped towards the camera on back faces)",
+        "output": (
+            "ao: (N, 1) float32 accessibility (1 open, 0 occluded), linear, NOT clamped: clamp to [0, 1]"
+        ),
         "output_clamped": "false",
         "encoding": encoding_description(model),
         "octaves": str(model.octaves),
@@ -95,7 +98,9 @@ def onnx_metadata(model: FieldNet, ckpt: dict | None = None) -> dict:
         "model_args": ckpt.get("model_args", {}),
         "parameters": str(count_parameters(model)),
         "parameter_bytes": str(parameter_bytes(model)),
-        "parameter_bytes_note": "float32: trainable weights + 6 normalisation constants + 3*octaves frequencies",
+        "parameter_bytes_note": (
+            "float32: trainable weights + 6 normalisation constants + 3*octaves frequencies"
+        ),
         "training_mesh": str(ckpt.get("mesh") or ""),
         "scene": str(ckpt.get("scene") or ""),
         "ao_labels": ckpt.get("samples", {}).get("labels", {}),

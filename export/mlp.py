@@ -1,4 +1,5 @@
-"""Baked-MLP export: ONNX (dynamic N) + generated GLSL fragment shader + manifest; backend checks, parity, inference.
+"""Baked-MLP export: ONNX (dynamic N) + generated GLSL fragment shader + manifest; backend checks,
+parity, inference.
 
 The ONNX graph is the raw :class:`pipeline.models.mlp.BakedMLP`: input ``normals`` (N, 48) float32 = 16
 object-space unit normals, xyz interleaved, output ``ao`` (N, 1) float32 = accessibility. The output
@@ -93,7 +94,9 @@ def onnx_metadata(model: BakedMLP, ckpt: dict | None = None) -> dict:
         "input": INPUT_DESCRIPTION,
         "output": OUTPUT_DESCRIPTION,
         "output_clamped": "false",
-        "units": "normals are unitless object-space (= world-space of the flattened training mesh) directions",
+        "units": (
+            "normals are unitless object-space (= world-space of the flattened training mesh) directions"
+        ),
         "radius_px": str(config.get("radius_px", "")),
         "train_inputs": str(config.get("train_inputs", "")),
         "training_mesh": str(ckpt.get("mesh") or ""),
@@ -115,7 +118,9 @@ def onnx_metadata(model: BakedMLP, ckpt: dict | None = None) -> dict:
                 "holdout_frames",
             )
         },
-        "measured_error_note": "holdout_*: held-back views, radius-zero input, clamped, masked SSIM (Gaussian 11, sigma 1.5)",
+        "measured_error_note": (
+            "holdout_*: held-back views, radius-zero input, clamped, masked SSIM (Gaussian 11, sigma 1.5)"
+        ),
     }
 
 
@@ -123,7 +128,8 @@ def onnx_bytes(model: BakedMLP) -> bytes:
     """TorchScript exporter (``dynamo=False``), opset 17, dynamic batch N: Gemm / Tanh graph as bytes."""
     model = model.eval().to(torch.float32)
     buf = io.BytesIO()
-    # dynamo=False is the exporter DESIGN.md names (Linear -> Gemm, Tanh); its deprecation warning is expected.
+    # dynamo=False is the exporter DESIGN.md names (Linear -> Gemm, Tanh); its deprecation warning is
+    # expected.
     with torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(

@@ -127,7 +127,10 @@ def _compare(case: Any, got: dict, want: dict) -> str | None:
     for name, w in want.items():
         have, w = got.get(name), np.asarray(w)
         if have is None or np.shape(have) != w.shape:
-            return f"output {name!r}: shape {None if have is None else list(np.shape(have))}, expected {list(w.shape)}"
+            return (
+                f"output {name!r}: shape {None if have is None else list(np.shape(have))}, "
+                f"expected {list(w.shape)}"
+            )
         if not np.allclose(have, w, rtol=case.rtol, atol=case.atol, equal_nan=True):
             err = float(np.nanmax(np.abs(np.asarray(have, np.float64) - w)))
             return f"output {name!r}: max abs err {err:.3g} (rtol {case.rtol}, atol {case.atol})"

@@ -15,9 +15,9 @@ Targets (the op tables of :mod:`export.glsl`):
   (``--bind position=position.xyz --bind normal=normal.xyz``; an input of width <= 4 without a
   ``--bind`` reads the texture of its own name, channels ``xyzw[:k]``). The first texture's w channel
   is the foreground mask. Texture and input names live in the manifest only: the shader's samplers are
-  ``u_tex<unit>``, so no name the user chose reaches shader source. One fragment pass in GLSL 3.30, ES 3.00 and 4.30 (``--dialect`` keeps a
-  subset), weights in std140 uniform blocks. ``fp16`` is a run-time choice here (RGBA16F textures),
-  recorded for parity.
+  ``u_tex<unit>``, so no name the user chose reaches shader source. One fragment pass in GLSL 3.30,
+  ES 3.00 and 4.30 (``--dialect`` keeps a subset), weights in std140 uniform blocks. ``fp16`` is a
+  run-time choice here (RGBA16F textures), recorded for parity.
 
 The export folder (self-describing, every file atomic, ``manifest.json`` last)::
 
@@ -235,7 +235,8 @@ def read_manifest(export_dir: Path) -> dict:
     return manifest
 
 
-# Seeded inputs are this size (W, H) unless --size says otherwise (image: rounded up to what the program takes).
+# Seeded inputs are this size (W, H) unless --size says otherwise (image: rounded up to what the program
+# takes).
 DEFAULT_SIZE = (64, 48)
 # Parity holds the inputs, every texture of the program and onnxruntime's tensors at once; a --size whose
 # textures (or, for the vector target, per-pixel tensors) would pass this many bytes is refused before

@@ -82,7 +82,8 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
         )
     if result["opencv_vs_onnxruntime"] > TOL.opencv_vs_onnx:
         raise NeuralaoError(
-            f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > {TOL.opencv_vs_onnx:g}"
+            f"OpenCV dnn differs from onnxruntime by {result['opencv_vs_onnxruntime']:.3g} > "
+            f"{TOL.opencv_vs_onnx:g}"
         )
     return result
 

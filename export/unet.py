@@ -308,10 +308,13 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
     ):
         write_text(folder / sources[key], text)
     steps = [
-        f"downsample.frag at (round(W * {height} / H), {height}): the G-buffer's position (xyz camera space, w mask) "
-        "and normal textures point-sampled into two RGBA32F targets (uniform u_low_size = that size)",
-        "the network's compute passes at that size, input built from the two targets (depth = -z / mean foreground "
-        "depth, camera-space normal" + (", GTAO point-sampled the same way" if hybrid else "") + ")",
+        f"downsample.frag at (round(W * {height} / H), {height}): the G-buffer's position (xyz camera "
+        "space, w mask) and normal textures point-sampled into two RGBA32F targets (uniform u_low_size = "
+        "that size)",
+        "the network's compute passes at that size, input built from the two targets (depth = -z / mean "
+        "foreground depth, camera-space normal"
+        + (", GTAO point-sampled the same way" if hybrid else "")
+        + ")",
         "upsample.frag at W x H: the network's AO (u_low_ao)"
         + (" minus the point-sampled GTAO, i.e. its correction," if hybrid else "")
         + " upsampled with the full-resolution G-buffer as guide",

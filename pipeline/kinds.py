@@ -64,7 +64,9 @@ KINDS: dict[str, ModelKind] = {
             "field",
             exporter="export.field",
             trainer="pipeline.models.field",
-            train_help="a per-mesh neural AO field (object-space position + normal -> AO), one network per mesh",
+            train_help=(
+                "a per-mesh neural AO field (object-space position + normal -> AO), one network per mesh"
+            ),
             per_mesh=True,
             report_order=4,
             colour="tab:purple",

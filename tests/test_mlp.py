@@ -1,4 +1,5 @@
-"""Baked MLP (pipeline/models/mlp.py): sizes, circle sampling, samples from meshes and datasets, training, checkpoints."""
+"""Baked MLP (pipeline/models/mlp.py): sizes, circle sampling, samples from meshes and datasets, training,
+checkpoints."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""MLP export (export/mlp.py): ONNX vs torch vs OpenCV, generated GLSL vs onnxruntime on real frames, `neuralao infer`."""
+"""MLP export (export/mlp.py): ONNX vs torch vs OpenCV, generated GLSL vs onnxruntime on real frames,
+`neuralao infer`."""
 
 from __future__ import annotations
 

@@ -117,7 +117,8 @@ def test_vector_target_with_bindings_and_defaults(tmp_path):
         inits,
     )
     out = tmp_path / "vec"
-    # normals: the G-buffer normal repeated 16 times; gain and bias (width 1) default to textures of their names
+    # normals: the G-buffer normal repeated 16 times; gain and bias (width 1) default to textures of their
+    # names
     assert (
         cli.main(
             [

@@ -1,6 +1,6 @@
-"""DeepAO U-Net (pipeline/models/unet.py, pipeline/models/unet_train.py, export/unet.py): model shapes and size,
-the masked SSIM loss, training on a tiny real dataset (NaN stop, resumption), checkpoints, and the
-export through onnxruntime, OpenCV dnn and the generated GLSL on Mesa.
+"""DeepAO U-Net (pipeline/models/unet.py, pipeline/models/unet_train.py, export/unet.py): model
+shapes and size, the masked SSIM loss, training on a tiny real dataset (NaN stop, resumption),
+checkpoints, and the export through onnxruntime, OpenCV dnn and the generated GLSL on Mesa.
 
 One tiny dataset (spot for training, a Cornell-box interior for validation, 40x36 px, 8 rays) and
 one tiny trained U-Net (widths 2/4/8, pad multiple 4) are shared by the module.
@@ -156,7 +156,8 @@ def test_images_smaller_than_the_pad_multiple_are_a_clear_error(h, w):
 
 
 def test_parameter_count_matches_a_hand_count():
-    # 4/8/16/32 by hand (5 input channels: G-buffer + radius): down 184+296+1168+4640, up (conv+BN) 300+1176+4656, fuse 292+1160+4624, out 5.
+    # 4/8/16/32 by hand (5 input channels: G-buffer + radius): down 184+296+1168+4640,
+    # up (conv+BN) 300+1176+4656, fuse 292+1160+4624, out 5.
     assert count_parameters(UNet()) == _expected_parameters([4, 8, 16, 32]) == 18501
     for widths in ([2, 4], [3, 5, 7], [2, 4, 8, 16, 32]):
         model = build_model(model_args_dict(UNetArgs(widths=widths)))  # via the checkpoint dict path
@@ -270,7 +271,8 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
         ckpt["dataset"]["training_scenes"] == ["spot"]
         and ckpt["dataset"]["dataset_hash"] == info["dataset_hash"]
     )
-    # The recorded validation metrics == pipeline.foundation.metrics on the composited prediction (background 1).
+    # The recorded validation metrics == pipeline.foundation.metrics on the composited prediction
+    # (background 1).
     model = model_from_checkpoint(load_checkpoint(path))
     ssim, rmse = [], []
     for i in range(len(val_set)):
@@ -584,7 +586,7 @@ def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_pari
         assert np.all(np.isfinite(y)) and y.min() >= 0.0 and y.max() <= 1.0, (name, y.min(), y.max())
 
 
-# ----------------------------------------------------------------------------------------------- budget, schedule
+# ------------------------------------------------------------------------------------------- budget, schedule
 
 
 def test_cosine_schedule_closed_form():

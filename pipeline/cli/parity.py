@@ -34,7 +34,8 @@ def export_dirs(root: Path) -> list[Path]:
 
 
 def parity_frames(data: Path | None, manifest: dict, limit: int = 4) -> list[dict] | None:
-    """Dataset frames for one export: held-back views of a per-mesh model's scene, or validation-split frames."""
+    """Dataset frames for one export: held-back views of a per-mesh model's scene, or validation-split
+    frames."""
     if data is None:
         return None
     ds = open_dataset(data)

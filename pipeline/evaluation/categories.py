@@ -145,7 +145,8 @@ def check_settings(settings: EvalSettings) -> None:
         raise NeuralaoError("the evaluation config needs at least one category and one resolution")
     if not settings.radii_rel or any(not (0 < r <= settings.max_distance_rel) for r in settings.radii_rel):
         raise NeuralaoError(
-            f"radii_rel must be in (0, max_distance_rel={settings.max_distance_rel}], got {settings.radii_rel}"
+            f"radii_rel must be in (0, max_distance_rel={settings.max_distance_rel}], "
+            f"got {settings.radii_rel}"
         )
     names = [c.name for c in settings.categories]
     if len(set(names)) != len(names):

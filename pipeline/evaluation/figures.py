@@ -160,7 +160,8 @@ def write_viewer_pages(sheets: dict, out: Path) -> dict[str, str]:
 
 
 def write_html(result: dict, out: Path, figures: dict, viewer_links: dict[str, str]) -> Path:
-    """report.html: the main table, the figures and links to the viewer pages (report.md has the full text)."""
+    """report.html: the main table, the figures and links to the viewer pages (report.md has the full
+    text)."""
     import html
 
     from pipeline.foundation.io import write_text
@@ -175,7 +176,8 @@ def write_html(result: dict, out: Path, figures: dict, viewer_links: dict[str, s
         ms_frame = None if e.get("seconds") is None else e["seconds"] * 1e3
         rows.append(
             f"<tr><td>{esc(n)}</td><td>{esc(str(e.get('scope', '')))}</td><td>{e.get('frames', '')}</td>"
-            f"<td>{fmt(e.get('ssim'), '.3f')}</td><td>{fmt(e.get('rmse'), '.4f')}</td><td>{fmt(e.get('flip'), '.4f')}</td>"
+            f"<td>{fmt(e.get('ssim'), '.3f')}</td><td>{fmt(e.get('rmse'), '.4f')}</td>"
+            f"<td>{fmt(e.get('flip'), '.4f')}</td>"
             f"<td>{fmt(ms_frame, '.2f')}</td><td>{fmt(e.get('bytes'), 'd')}</td></tr>"
         )
     w, h = result["settings"]["time_size"]
@@ -189,14 +191,17 @@ def write_html(result: dict, out: Path, figures: dict, viewer_links: dict[str, s
     pages = "".join(f'<li><a href="{esc(p)}">{esc(s)}</a></li>' for s, p in viewer_links.items())
     text = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>neuralao report</title>
-<style>body{{font:14px/1.45 system-ui,sans-serif;margin:2em;max-width:1200px}}table{{border-collapse:collapse}}
-td,th{{padding:3px 8px;border-bottom:1px solid #ddd;text-align:right}}td:first-child,th:first-child,td:nth-child(2){{text-align:left}}
+<style>body{{font:14px/1.45 system-ui,sans-serif;margin:2em;max-width:1200px}}\
+table{{border-collapse:collapse}}
+td,th{{padding:3px 8px;border-bottom:1px solid #ddd;text-align:right}}\
+td:first-child,th:first-child,td:nth-child(2){{text-align:left}}
 img{{max-width:100%}}</style></head><body>
 <h1>neuralao report: speed against error</h1>
 <p>Dataset <code>{esc(str(result["dataset"].get("name")))}</code>; the full text, selection and notes are in
 <a href="report.md">report.md</a>, the numbers in <a href="report.json">report.json</a>. Masked SSIM, RMSE and
 NVIDIA FLIP over foreground pixels with valid ground truth, mean over frames; time per {w}x{h} frame.</p>
-<table><tr><th>method</th><th>scope</th><th>frames</th><th>SSIM</th><th>RMSE</th><th>FLIP</th><th>ms / frame</th><th>bytes</th></tr>
+<table><tr><th>method</th><th>scope</th><th>frames</th><th>SSIM</th><th>RMSE</th><th>FLIP</th>\
+<th>ms / frame</th><th>bytes</th></tr>
 {"".join(rows)}</table>
 {"<h2>Viewer</h2><ul>" + pages + "</ul>" if pages else ""}
 {"".join(figs)}

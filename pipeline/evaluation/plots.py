@@ -322,7 +322,8 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
             else ""
         ),
         "",
-        "| model | scale | widths | budget (min) | epochs | train fraction | test SSIM | test RMSE | GL ms (512x512) | bytes |",
+        "| model | scale | widths | budget (min) | epochs | train fraction | test SSIM | test RMSE | "
+        "GL ms (512x512) | bytes |",
         "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for name, m in shipped["models"].items():
@@ -331,9 +332,10 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
         lines.append(
             f"| {name}{' (default)' if name == default else ''} | {m.get('scale', 1)} | "
             f"{'/'.join(map(str, m.get('widths') or [])) or '-'} | {_f(m.get('budget_minutes'), 'g')} | "
-            f"{m.get('epochs') if m.get('epochs') is not None else '-'} | {_f(m.get('train_fraction'), 'g')} | "
-            f"{_f(test.get('ssim'), '.4f')} | {_f(test.get('rmse'), '.4f')} | "
-            f"{_f(t * 1e3 if _finite(t) else None, '.1f')} | {m.get('bytes') if m.get('bytes') is not None else '-'} |"
+            f"{m.get('epochs') if m.get('epochs') is not None else '-'} | "
+            f"{_f(m.get('train_fraction'), 'g')} | {_f(test.get('ssim'), '.4f')} | "
+            f"{_f(test.get('rmse'), '.4f')} | {_f(t * 1e3 if _finite(t) else None, '.1f')} | "
+            f"{m.get('bytes') if m.get('bytes') is not None else '-'} |"
         )
     for name, b in (shipped.get("baselines") or {}).items():
         test = b.get("test") or {}
@@ -349,7 +351,8 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
 
             lines += [
                 "",
-                f"### {name} where users run it (`neuralao evaluate`: test meshes by category and resolution)",
+                f"### {name} where users run it (`neuralao evaluate`: test meshes by category and "
+                "resolution)",
                 "",
             ]
             lines += evaluation_markdown(evaluation["methods"], level=4).splitlines()

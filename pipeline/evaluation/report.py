@@ -51,10 +51,10 @@ method's time is the median over scenes. Ratios: time over SSAO's time, and RMSE
 over SSAO's on the same frames.
 
 Outputs (every file atomic): ``report.md`` (tables), ``report.json`` (everything, per scene and per
-frame), ``speed_vs_error.png`` (scatter with the Pareto front), ``contact_<scene>.png`` (ground
-truth | each method, and the error heat maps); with shipped models ``learning_curves.png``,
-``corpus_size.png`` and ``shipped_front.png`` (each skipped when its data is absent). Methods whose export is missing or broken are listed
-as not available; the report never fails because a model is absent.
+frame), ``speed_vs_error.png`` (scatter with the Pareto front), ``contact_<scene>.png`` (ground truth |
+each method, and the error heat maps); with shipped models ``learning_curves.png``, ``corpus_size.png``
+and ``shipped_front.png`` (each skipped when its data is absent). Methods whose export is missing or
+broken are listed as not available; the report never fails because a model is absent.
 """
 
 from __future__ import annotations
@@ -114,7 +114,8 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
 BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
-# The report's own families (baselines); the model families (rows loaded from exports) come from pipeline.kinds.
+# The report's own families (baselines); the model families (rows loaded from exports) come from
+# pipeline.kinds.
 FAMILY_ORDER = {
     "screen-space": 0,
     "baked": 1,
@@ -169,7 +170,8 @@ class ReportSettings:
     seed: int = 0
     # Tracing threads (ground truth, baselines).
     workers: int = 2
-    # Write a contact sheet per scene (pipeline.evaluation.figures: cropped, methods side by side, error inset).
+    # Write a contact sheet per scene (pipeline.evaluation.figures: cropped, methods side by side, error
+    # inset).
     contact_sheets: bool = True
     # The methods a contact sheet shows, in order (those present in the report); "shipped:default" and
     # "shipped:fast" stand for the shipped rows of those roles, "field" / "mlp" for the smallest of each.
@@ -187,8 +189,8 @@ class ReportSettings:
     # Write a viewer page per scene (`neuralao view`: its least-squares bake and its MLP / field shaders)
     # under OUT/viewer/, linked from report.html.
     viewer_pages: bool = True
-    # Also score every frame with NVIDIA FLIP (pipeline.foundation.metrics.masked_flip, flip-evaluator; background
-    # set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on one core.
+    # Also score every frame with NVIDIA FLIP (pipeline.foundation.metrics.masked_flip, flip-evaluator;
+    # background set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on one core.
     flip: bool = True
     # Screen-space baseline settings (radius: the labels' max distance, and each of radii_rel).
     ssao: SSAOSettings = field(default_factory=SSAOSettings)
@@ -553,7 +555,8 @@ def baseline_methods(settings: ReportSettings) -> list[Method]:
         Method(
             "ssao",
             "screen-space",
-            f"Crytek-style normal-oriented hemisphere SSAO, {s.samples} samples + {s.noise_size}x{s.noise_size} blur",
+            f"Crytek-style normal-oriented hemisphere SSAO, {s.samples} samples + "
+            f"{s.noise_size}x{s.noise_size} blur",
             "GL fragment shader",
             "GL fragment shader",
             bytes=ssao_bytes,
@@ -1274,13 +1277,14 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         "# neuralao report: speed against error",
         "",
         f"Dataset `{d['name']}` ({d['dataset_hash'][:12] if d.get('dataset_hash') else '?'}), "
-        f"{sum(1 for f in result['frames'] if 'skipped' not in f)} held-back frames at {d['size'][0]}x{d['size'][1]}; "
-        f"ground truth: {result['settings']['gt_rays']} rays, kernel {d['labels']['kernel']}, "
-        f"max distance {d['labels']['max_distance_rel']} x scene diagonal. "
-        f"Times: {w}x{h} frames, GL on {result['device']['gl_renderer']} ({result['device']['gl_platform']}); "
-        f"CPU: {result['device']['cpu']}.",
+        f"{sum(1 for f in result['frames'] if 'skipped' not in f)} held-back frames at "
+        f"{d['size'][0]}x{d['size'][1]}; ground truth: {result['settings']['gt_rays']} rays, "
+        f"kernel {d['labels']['kernel']}, max distance {d['labels']['max_distance_rel']} x scene diagonal. "
+        f"Times: {w}x{h} frames, GL on {result['device']['gl_renderer']} "
+        f"({result['device']['gl_platform']}); CPU: {result['device']['cpu']}.",
         "",
-        f"| method | scope | frames | SSIM | RMSE | FLIP | ms / frame ({w}x{h}) | time / SSAO | RMSE / SSAO | (1-SSIM) / SSAO | bytes | timed on |",
+        f"| method | scope | frames | SSIM | RMSE | FLIP | ms / frame ({w}x{h}) | time / SSAO | "
+        "RMSE / SSAO | (1-SSIM) / SSAO | bytes | timed on |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for n in method_order(ms):
@@ -1289,8 +1293,9 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
             continue
         pareto = " *" if n in result.get("pareto", []) else ""
         lines.append(
-            f"| {n}{pareto} | {e['scope']} | {e['frames']} | {_fmt(e['ssim'], '.3f')} | {_fmt(e['rmse'], '.4f')} | "
-            f"{_fmt(e.get('flip'), '.4f')} | {_fmt(e['seconds'] * 1e3 if e.get('seconds') is not None else None, '.2f')} | "
+            f"| {n}{pareto} | {e['scope']} | {e['frames']} | {_fmt(e['ssim'], '.3f')} | "
+            f"{_fmt(e['rmse'], '.4f')} | {_fmt(e.get('flip'), '.4f')} | "
+            f"{_fmt(e['seconds'] * 1e3 if e.get('seconds') is not None else None, '.2f')} | "
             f"{_fmt(e.get('time_ratio_vs_ssao'), '.2f')} | {_fmt(e.get('rmse_ratio_vs_ssao'), '.2f')} | "
             f"{_fmt(e.get('dssim_ratio_vs_ssao'), '.2f')} | {_bytes(e.get('bytes'))} | {e['time_on']} |"
         )
@@ -1355,14 +1360,17 @@ def render_markdown(result: dict, selection: dict | None, figures: dict) -> str:
         "",
         "## How this was measured",
         "",
-        "- Error: masked SSIM (Gaussian window 11, sigma 1.5) and RMSE over foreground pixels with valid ground truth, "
-        "mean over frames. SSAO, GTAO and the MLP: their GLSL on the frames' G-buffers; U-Net: onnxruntime "
-        "(its generated GLSL matches it within the parity tolerance); vertex AO: barycentric interpolation of the "
-        "baked values (what the vertex-colour draw shows); traced: Embree.",
-        "- Time: median seconds per frame at the stated size, G-buffer resident; GL methods with glFinish around "
-        "each frame in this process's headless context; traced AO: wall time of the CPU trace; the U-Net's GL "
-        "time covers all generated compute passes. A method's time is the median over scenes.",
-        "- Bytes: float32 weights for the networks, 4 bytes per vertex for baked AO, shader constants for SSAO/GTAO.",
+        "- Error: masked SSIM (Gaussian window 11, sigma 1.5) and RMSE over foreground pixels with valid "
+        "ground truth, mean over frames. SSAO, GTAO and the MLP: their GLSL on the frames' G-buffers; "
+        "U-Net: onnxruntime (its generated GLSL matches it within the parity tolerance); "
+        "vertex AO: barycentric interpolation of the baked values (what the vertex-colour draw shows); "
+        "traced: Embree.",
+        "- Time: median seconds per frame at the stated size, G-buffer resident; "
+        "GL methods with glFinish around each frame in this process's headless context; traced AO: "
+        "wall time of the CPU trace; the U-Net's GL time covers all generated compute passes. "
+        "A method's time is the median over scenes.",
+        "- Bytes: float32 weights for the networks, 4 bytes per vertex for baked AO, "
+        "shader constants for SSAO/GTAO.",
     ]
     return "\n".join(lines) + "\n"
 
@@ -1384,10 +1392,10 @@ def radius_markdown(result: dict) -> list[str]:
         "",
         "## Per radius (SSAO, GTAO and the U-Nets given the same radius)",
         "",
-        f"Radius r as a fraction of each scene's diagonal; ground truth at every radius from one "
-        f"{result['settings']['gt_rays']}-ray trace. The tables above are at the labels' max distance ({main}); "
-        "the vertex bakes, MLPs, fields and traced rows have that radius baked in. "
-        "Cells: SSIM / RMSE (RMSE / SSAO's RMSE at the same radius).",
+        "Radius r as a fraction of each scene's diagonal; ground truth at every radius from one "
+        f"{result['settings']['gt_rays']}-ray trace. The tables above are at the labels' max distance "
+        f"({main}); the vertex bakes, MLPs, fields and traced rows have that radius baked in. Cells: "
+        "SSIM / RMSE (RMSE / SSAO's RMSE at the same radius).",
         "",
         "| method | " + " | ".join(f"r = {k}" for k in keys) + " |",
         "|---|" + "---:|" * len(keys),

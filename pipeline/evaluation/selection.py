@@ -9,8 +9,8 @@ scene's held-back frames is at least ``target`` is chosen. The document records,
 order tried, the choice, whether the target was met (if nothing meets it the best-scoring one is
 recorded with ``met_target: false``), and what the choice saves against the largest candidate.
 
-:mod:`pipeline.evaluation.report` (which measures) and :mod:`pipeline.cli.select` (the command) both import this
-module; it imports neither (the model families come from :mod:`pipeline.kinds`).
+:mod:`pipeline.evaluation.report` (which measures) and :mod:`pipeline.cli.select` (the command)
+both import this module; it imports neither (the model families come from :mod:`pipeline.kinds`).
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ def scene_candidates(result: dict) -> dict[str, list[dict]]:
 
 
 def choose(candidates: list[dict], target: float) -> dict:
-    """Cheapest-first selection among ``candidates`` (dicts with name, bytes, ssim, seconds): bytes, then time."""
+    """Cheapest-first selection among ``candidates`` (dicts with name, bytes, ssim, seconds): bytes, then
+    time."""
     if not candidates:
         raise NeuralaoError("no candidate model to choose from")
     inf = float("inf")
@@ -106,8 +107,9 @@ def select_from_results(result: dict, target: float = DEFAULT_TARGET) -> dict:
         "format": "neuralao-select",
         "version": 1,
         "target_ssim": target,
-        "rule": "per scene, candidates (SSAO, GTAO, vertex bakes incl. 8-bit, MLPs and fields of that scene, U-Nets) "
-        "sorted by stored bytes, then GL time; the first with masked SSIM >= target on held-back frames is chosen; "
+        "rule": "per scene, candidates (SSAO, GTAO, vertex bakes incl. 8-bit, "
+        "MLPs and fields of that scene, U-Nets) sorted by stored bytes, then GL time; "
+        "the first with masked SSIM >= target on held-back frames is chosen; "
         "savings against the largest candidate",
         "time_size": result.get("settings", {}).get("time_size"),
         "time_on": "GL (headless context of the report run)",
@@ -130,7 +132,8 @@ def render_markdown(selection: dict, heading: str = "# Model selection") -> str:
     lines = [
         heading,
         "",
-        f"Cheapest representation per scene with masked SSIM >= {t} on held-back views (tried by bytes, then time).",
+        f"Cheapest representation per scene with masked SSIM >= {t} on held-back views (tried by bytes, "
+        "then time).",
         "",
     ]
     if not selection["scenes"]:
@@ -146,8 +149,8 @@ def render_markdown(selection: dict, heading: str = "# Model selection") -> str:
             saved_b = f"{_kib(e.get('bytes_saved'))} ({e['bytes_ratio']:.3g}x)" if "bytes_ratio" in e else "-"
             saved_t = f"{_ms(e.get('seconds_saved'))} ({e['time_ratio']:.3g}x)" if "time_ratio" in e else "-"
             lines.append(
-                f"| {scene} | {chosen} | {e['ssim']:.3f} | {_kib(e['bytes'])} | {_ms(e['seconds'])} | {tried} | "
-                f"{e['largest']} | {saved_b} | {saved_t} |"
+                f"| {scene} | {chosen} | {e['ssim']:.3f} | {_kib(e['bytes'])} | "
+                f"{_ms(e['seconds'])} | {tried} | {e['largest']} | {saved_b} | {saved_t} |"
             )
     if selection.get("unavailable_models"):
         lines += [

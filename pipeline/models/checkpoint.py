@@ -59,7 +59,8 @@ def save_checkpoint(path: str | Path, ckpt: dict) -> None:
 
 
 def read_checkpoint(path: str | Path) -> dict:
-    """The raw checkpoint dict (``weights_only=True``); a missing, corrupt or unsafe file is a one-line error."""
+    """The raw checkpoint dict (``weights_only=True``); a missing, corrupt or unsafe file is a one-line
+    error."""
     p = Path(path)
     if not p.is_file():
         raise NeuralaoError(f"checkpoint not found: {p}")

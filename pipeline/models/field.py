@@ -223,7 +223,8 @@ def parameter_bytes(model: FieldNet) -> int:
 
 @dataclass
 class FieldSamples:
-    """position (n, 3), normal (n, 3) float32 network inputs, ao (n,) float32, split (n,) int8 (0 train, 1 val)."""
+    """position (n, 3), normal (n, 3) float32 network inputs, ao (n,) float32,
+    split (n,) int8 (0 train, 1 val)."""
 
     position: np.ndarray
     normal: np.ndarray
@@ -238,8 +239,9 @@ class FieldSamples:
 
 
 def smooth_normals_at(scene, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """(k, 3) float64 unit normals as the G-buffer interpolates them (pipeline/gbuffers/rasterizer.py): each corner's
-    vertex normal turned to its face's side, barycentric blend, renormalised; zero -> the face normal."""
+    """(k, 3) float64 unit normals as the G-buffer interpolates them (pipeline/gbuffers/rasterizer.py):
+    each corner's vertex normal turned to its face's side, barycentric blend, renormalised; zero -> the
+    face normal."""
     fn = scene.face_normals[face]
     corners = scene.vertex_normals[scene.faces[face]]  # (k, 3, 3)
     flip = np.einsum("kcd,kd->kc", corners, fn) < 0
@@ -312,8 +314,8 @@ def check_settings(s: FieldSettings) -> None:
         each="a validation record of the history",
         shown=f"{s.steps} (checked every {s.check_every})",
     )
-    # What the counts allocate, before any of it is (pipeline.foundation.limits): every surface sample twice (both
-    # sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
+    # What the counts allocate, before any of it is (pipeline.foundation.limits): every surface sample twice
+    # (both sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
     check_count(
         "samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples)
     )
@@ -431,7 +433,8 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
         loss = torch.mean((pred - ty[idx]) ** 2)
         if not torch.isfinite(loss):
             raise NeuralaoError(
-                f"training diverged at step {step} (loss {float(loss)}); try a smaller lr than {settings.lr:g}"
+                f"training diverged at step {step} (loss {float(loss)}); "
+                f"try a smaller lr than {settings.lr:g}"
             )
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -446,7 +449,8 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
             history.append({"step": step, "val_rmse": val, "seconds": time.perf_counter() - t0})
             if not math.isfinite(val):  # the weights are gone (NaN or inf): no best model to keep
                 raise NeuralaoError(
-                    f"training diverged at step {step} (validation RMSE {val}); try a smaller lr than {settings.lr:g}"
+                    f"training diverged at step {step} (validation RMSE {val}); "
+                    f"try a smaller lr than {settings.lr:g}"
                 )
             if val < best[0]:
                 best = (val, {k: v.detach().clone() for k, v in model.state_dict().items()}, step)

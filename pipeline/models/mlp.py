@@ -395,7 +395,8 @@ def label_pixels(labeller, frame: dict, pix: np.ndarray, seed: int) -> tuple[np.
 
 
 def samples_from_mesh(mesh: str | Path, settings: MLPSettings, progress: bool = False) -> Samples:
-    """Render ``settings.views`` orbit views of a mesh, label only the drawn pixels; fully label held-back views."""
+    """Render ``settings.views`` orbit views of a mesh, label only the drawn pixels; fully label held-back
+    views."""
     from tqdm import tqdm
 
     from pipeline.datasets.dataset import frame_seed
@@ -694,7 +695,9 @@ def compute_metrics(model: BakedMLP, samples: Samples) -> dict:
         holdout_constant_rmse=constant["rmse"],
         ssim_window="gaussian 11, sigma 1.5, C1=1e-4, C2=9e-4, masked to valid foreground "
         "(holdout_ssim_full: whole image with background, for comparison with the paper only)",
-        deployed_input="radius zero: the pixel's object-space normal repeated 16 times, output clamped to [0, 1]",
+        deployed_input=(
+            "radius zero: the pixel's object-space normal repeated 16 times, output clamped to [0, 1]"
+        ),
     )
     return out
 
@@ -719,7 +722,8 @@ def make_checkpoint(
 
 
 def load_checkpoint(path: str | Path) -> dict:
-    """Load an MLP checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line error."""
+    """Load an MLP checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line
+    error."""
     return _load_checkpoint(path, KIND, "an MLP")
 
 

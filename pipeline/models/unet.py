@@ -146,7 +146,8 @@ class UNet(nn.Module):
             )
         if int(args.scale) not in (1, 2, 4) or int(args.refine_width) < 1:
             raise NeuralaoError(
-                f"U-Net scale must be 1, 2 or 4 and refine_width >= 1, got {args.scale} and {args.refine_width}"
+                f"U-Net scale must be 1, 2 or 4 and refine_width >= 1, got {args.scale} and "
+                f"{args.refine_width}"
             )
         w = [int(v) for v in args.widths]
         slope = args.negative_slope

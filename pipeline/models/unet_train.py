@@ -234,10 +234,10 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
     every frame has one size, else per-frame lists).
 
-    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels included
-    (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not change, it is
-    relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame as rendered
-    (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
+    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels
+    included (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not
+    change, it is relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame
+    as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept.
     """
@@ -588,7 +588,8 @@ def partial_path(out: Path) -> Path:
 
 
 def load_checkpoint(path: str | Path) -> dict:
-    """Load a U-Net checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line error."""
+    """Load a U-Net checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line
+    error."""
     return _load_checkpoint(path, KIND, "a U-Net")
 
 

@@ -77,7 +77,8 @@ class ShipSettings:
 
 
 def git_commit() -> str:
-    """The repository's HEAD commit, with "+dirty" when tracked files differ from it ("unknown" outside git)."""
+    """The repository's HEAD commit, with "+dirty" when tracked files differ from it ("unknown" outside
+    git)."""
     try:
         head = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
@@ -205,7 +206,8 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     par = parity(tmp, frames=frames, sizes=[(w0 - w0 // 4 - 1, h0 - h0 // 4 - 1)])  # plus an odd-sized crop
     if not par["passed"]:
         raise NeuralaoError(
-            f"model {spec.name}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > {par['tolerance']:g}"
+            f"model {spec.name}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > "
+            f"{par['tolerance']:g}"
         )
     # the model as a user runs it: at the internal height it declares (frames of any size resampled to it)
     test = evaluate_split(
@@ -255,7 +257,8 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     onnx_path = tmp / "model.onnx"
     proto = load_onnx(onnx_path)
     meta = get_metadata(proto)
-    # (GL times are this machine's, not the model's: they stay in the manifest, so a rerun writes the same ONNX bytes)
+    # (GL times are this machine's, not the model's: they stay in the manifest, so a rerun writes the same
+    # ONNX bytes)
     meta["provenance"] = {
         k: v for k, v in provenance.items() if k not in ("history", "test_per_scene", "gl_seconds")
     }
