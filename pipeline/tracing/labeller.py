@@ -692,3 +692,10 @@ def check_label_args(args) -> None:
             raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
     if args.half_distance is not None and args.kernel != "obscurance":
         raise NeuralaoError("--half-distance only applies to --kernel obscurance")
+
+
+def label_fields(args) -> dict:
+    """The :class:`LabelSettings` fields those flags (and --seed) give, by name, for any settings that
+    extend them (a bake's, a render's)."""
+    names = ("rays", "max_distance", "kernel", "half_distance", "seed", "workers")
+    return {k: getattr(args, k) for k in names}
