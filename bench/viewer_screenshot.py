@@ -12,9 +12,7 @@ the demo report's bunny page to write ``build/demo/viewer.png``.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
-import time
 from pathlib import Path
 
 PANEL = (320, 240)
@@ -25,36 +23,15 @@ def screenshot(page: Path, out: Path, pose: tuple[float, float, float]) -> Path:
     import io
 
     from PIL import Image, ImageDraw
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
 
-    chromium, driver_bin = shutil.which("chromium"), shutil.which("chromedriver")
-    if not (chromium and driver_bin):
+    from runtime.chromium import SWIFTSHADER_WEBGL, chromium_paths, headless_chromium, wait_for_page
+
+    if not all(chromium_paths()):
         raise SystemExit("viewer_screenshot: needs chromium and chromium-driver (make system-deps)")
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=700,600",
-    ):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(driver_bin), options=opts)
-    try:
+    with headless_chromium(*SWIFTSHADER_WEBGL, "--window-size=700,600") as driver:
         driver.get((page / "index.html").resolve().as_uri() + f"?w={PANEL[0]}&h={PANEL[1]}")
-        deadline = time.monotonic() + 120
-        state = None
-        while time.monotonic() < deadline:
-            state = driver.execute_script(
-                "return window.neuralao ? [window.neuralao.ready, window.neuralao.error] : null"
-            )
-            if state and (state[0] or state[1]):
-                break
-            time.sleep(0.1)
+        state = wait_for_page(driver, timeout_s=120)
         if not (state and state[0]) or state[1]:
             raise SystemExit(f"viewer_screenshot: the page did not load: {state}")
         shots = []
@@ -65,8 +42,6 @@ def screenshot(page: Path, out: Path, pose: tuple[float, float, float]) -> Path:
             shot = Image.open(io.BytesIO(driver.find_element(By.ID, "view").screenshot_as_png)).convert("RGB")
             ImageDraw.Draw(shot).text((6, 4), method["name"], fill=(230, 230, 230))
             shots.append(shot)
-    finally:
-        driver.quit()
     sheet = Image.new("RGB", (PANEL[0] * len(shots), PANEL[1]), (255, 255, 255))
     for k, shot in enumerate(shots):
         sheet.paste(shot.resize(PANEL), (k * PANEL[0], 0))

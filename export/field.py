@@ -31,8 +31,8 @@ import numpy as np
 import onnx
 import torch
 
-from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
-from export.onnx_io import load_onnx, ort_session, save_onnx, weighted_layers
+from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest
+from export.onnx_io import ort_session, save_onnx, weighted_layers
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
 from pipeline.foundation.tolerances import TOL
@@ -197,11 +197,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
         f"neuralao AO field {size_name(model.hidden)} of {Path(str(ckpt.get('mesh') or '')).name}: "
         f"{encoding_description(model)}",
     )
-    summary = {
-        "format": glsl_manifest.get("format"),
-        "dialects": sorted(glsl_manifest.get("dialects", {})),
-        "uniform_bytes": glsl_manifest.get("uniform_bytes"),
-    }
+    summary = glsl_summary_of(glsl_manifest)
     manifest = per_mesh_manifest(
         "field",
         out_dir,
@@ -258,21 +254,12 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
     exactly 1. No fp16 variant: half-float positions would move points by ~1e-3 of the box, which is
     a different input, not storage rounding. Returns figures with ``passed``."""
     from export.glsl import load_mlp_export
-    from export.mlp import render_parity_frames
+    from export.mlp import parity_export, parity_frames, pixel_errors
     from runtime.glsl_runner import run_vector_fragment
 
     export_dir = Path(export_dir)
-    manifest = read_manifest(export_dir, "field", "a field")
-    onnx_path = export_dir / manifest.get("onnx", "model.onnx")
-    proto = load_onnx(onnx_path)
-    check_field_onnx(proto, onnx_path)
-    glsl_dir = export_dir / manifest.get("glsl", GLSL_DIR)
-    source = "given frames"
-    if not frames:
-        if not manifest.get("mesh"):
-            raise NeuralaoError(f"export {export_dir} names no training mesh to render parity frames from")
-        frames = render_parity_frames(manifest["mesh"])
-        source = f"rendered: 2 orbit views of {manifest['mesh']} at 128x128"
+    manifest, proto, glsl_dir = parity_export(export_dir, "field", "a field", check_field_onnx)
+    frames, source = parity_frames(export_dir, manifest, frames)
     sess = ort_session(proto.SerializeToString())
     shaders = {d: load_mlp_export(glsl_dir, dialect=d) for d in dialects}
     rows = []
@@ -289,9 +276,7 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
                     "frame": i,
                     "dialect": d,
                     "size": [int(mask.shape[1]), int(mask.shape[0])],
-                    "foreground_pixels": int(mask.sum()),
-                    "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
-                    "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0,
+                    **pixel_errors(out, ref, mask),
                 }
             )
     if not rows:

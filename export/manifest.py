@@ -39,6 +39,17 @@ def read_manifest(d: str | Path, kind: str | None = None, label: str = "") -> di
     return manifest
 
 
+def glsl_summary_of(glsl_manifest: dict, **extra) -> dict:
+    """The ``glsl_summary`` of a per-mesh manifest from its GLSL export's manifest: format, dialects and
+    uniform bytes, then ``extra`` as given."""
+    return {
+        "format": glsl_manifest.get("format"),
+        "dialects": sorted(glsl_manifest.get("dialects", {})),
+        "uniform_bytes": glsl_manifest.get("uniform_bytes"),
+        **extra,
+    }
+
+
 def per_mesh_manifest(
     kind: str,
     out_dir: Path,

@@ -27,13 +27,14 @@ import json
 import logging
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import onnx
 import torch
 
-from export.manifest import DIALECTS, OPSET, per_mesh_manifest, read_manifest
+from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest, read_manifest
 from export.onnx_io import (
     backend_checks,
     load_onnx,
@@ -238,12 +239,9 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     proto = export_onnx(model, onnx_path, metadata)
     checks = check_backends(model, onnx_path)
     glsl_manifest = write_glsl(proto, out_dir / GLSL_DIR)
-    summary = {
-        "format": glsl_manifest.get("format"),
-        "dialects": sorted(glsl_manifest.get("dialects", {})),
-        "uniform_bytes": glsl_manifest.get("uniform_bytes"),
-        "fold_repeated_input": glsl_manifest.get("network", {}).get("fold_repeated_input"),
-    }
+    summary = glsl_summary_of(
+        glsl_manifest, fold_repeated_input=glsl_manifest.get("network", {}).get("fold_repeated_input")
+    )
     metrics = {k: v for k, v in ckpt.get("metrics", {}).items() if k != "holdout_per_view"}
     manifest = per_mesh_manifest(
         "mlp",
@@ -295,6 +293,38 @@ def render_parity_frames(mesh: str, views: int = 2, size: tuple[int, int] = (128
     return frames
 
 
+def parity_export(
+    export_dir: Path, kind: str, label: str, check_onnx: Callable[[onnx.ModelProto, Path], None]
+) -> tuple[dict, onnx.ModelProto, Path]:
+    """(manifest, checked ONNX graph, GLSL folder) of a per-mesh export folder of ``kind`` (``label``
+    names it in errors); ``check_onnx(proto, path)`` is the kind's graph check."""
+    manifest = read_manifest(export_dir, kind, label)
+    onnx_path = export_dir / manifest.get("onnx", "model.onnx")
+    proto = load_onnx(onnx_path)
+    check_onnx(proto, onnx_path)
+    return manifest, proto, export_dir / manifest.get("glsl", GLSL_DIR)
+
+
+def parity_frames(export_dir: Path, manifest: dict, frames: list[dict] | None) -> tuple[list[dict], str]:
+    """The frames parity runs on and where they came from: ``frames`` if given, else
+    :func:`render_parity_frames` of the export's training mesh."""
+    if frames:
+        return frames, "given frames"
+    if not manifest.get("mesh"):
+        raise NeuralaoError(f"export {export_dir} names no training mesh to render parity frames from")
+    return render_parity_frames(manifest["mesh"]), f"rendered: 2 orbit views of {manifest['mesh']} at 128x128"
+
+
+def pixel_errors(out: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict:
+    """A parity row's figures for shader output ``out`` vs ``ref`` (H, W) float32 under ``mask`` (H, W)
+    bool: foreground pixels, max |error| on them, max |out - 1| on the background (0 if none)."""
+    return {
+        "foreground_pixels": int(mask.sum()),
+        "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
+        "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0,
+    }
+
+
 def parity(
     export_dir: str | Path,
     frames: list[dict] | None = None,
@@ -315,19 +345,10 @@ def parity(
     from runtime.glsl_runner import run_mlp_fragment
 
     export_dir = Path(export_dir)
-    manifest = read_manifest(export_dir, "mlp", "an MLP")
-    onnx_path = export_dir / manifest.get("onnx", "model.onnx")
-    proto = load_onnx(onnx_path)
-    check_mlp_onnx(proto, onnx_path)
-    glsl_dir = export_dir / manifest.get("glsl", GLSL_DIR)
+    manifest, proto, glsl_dir = parity_export(export_dir, "mlp", "an MLP", check_mlp_onnx)
     if not (glsl_dir / "manifest.json").is_file():
         raise NeuralaoError(f"export {export_dir} has no GLSL export in {glsl_dir.name}/")
-    source = "given frames"
-    if not frames:
-        if not manifest.get("mesh"):
-            raise NeuralaoError(f"export {export_dir} names no training mesh to render parity frames from")
-        frames = render_parity_frames(manifest["mesh"])
-        source = f"rendered: 2 orbit views of {manifest['mesh']} at 128x128"
+    frames, source = parity_frames(export_dir, manifest, frames)
     sess = ort_session(proto.SerializeToString())
     unknown = sorted(set(dialects) - set(DIALECTS))
     if unknown or not dialects:
@@ -352,9 +373,7 @@ def parity(
                     "size": [int(mask.shape[1]), int(mask.shape[0])],
                     "dialect": dialect,
                     "storage": "fp16" if half else "fp32",
-                    "foreground_pixels": int(mask.sum()),
-                    "max_abs_err": float(np.abs(out[mask] - ref[mask]).max()),
-                    "background_max_abs_err": float(np.abs(out[~mask] - 1.0).max()) if (~mask).any() else 0.0,
+                    **pixel_errors(out, ref, mask),
                     "glsl_seconds": seconds,
                 }
             )

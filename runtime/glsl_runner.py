@@ -26,6 +26,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -490,6 +491,29 @@ def scalar_inputs(program_or_dir: ComputeProgram | str | Path) -> list[str]:
     return [u["onnx_input"] for u in _compute_program(program_or_dir).manifest.get("uniforms", [])]
 
 
+def compute_input(manifest: dict, x: np.ndarray) -> np.ndarray:
+    """x as float32 if it is (1, C, H, W) with the C of a compute manifest's input, else a NeuralaoError.
+
+    Shared by this GL runner and runtime/wgsl_runner.py: both take the same manifest."""
+    x = np.asarray(x, dtype=np.float32)
+    want_c = manifest["input"]["channels"]
+    if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
+        raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
+    return x
+
+
+def compute_outputs(manifest: dict, read: Callable[[str, int], np.ndarray]) -> dict[str, np.ndarray]:
+    """{ONNX output name: array} of a compute manifest's outputs, each from ``read(texture, channels)``.
+
+    An image output stays (1, C_out, H, W) float32; one that is not an image ((1, 1000) logits after a
+    Gemm) is reshaped to the shape the manifest gives it."""
+    out = {o["onnx_name"]: read(o["texture"], o["channels"]) for o in manifest["outputs"]}
+    return {
+        o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
+        for o in manifest["outputs"]
+    }
+
+
 def run_compute_all(
     program_or_dir: ComputeProgram | str | Path,
     x: np.ndarray,
@@ -502,21 +526,13 @@ def run_compute_all(
     scalars : {ONNX input name: float} for each scalar graph input (manifest ``uniforms``).
     """
     prog = _compute_program(program_or_dir)
-    x = np.asarray(x, dtype=np.float32)
-    want_c = prog.manifest["input"]["channels"]
-    if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
-        raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
+    x = compute_input(prog.manifest, x)
     values = scalar_values(prog.manifest, scalars)  # before any GL object exists
     run = _ComputeRun(prog, x.shape[2], x.shape[3], values)
     try:
         run.upload(x)
         run.dispatch(flip_y)
-        out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
-        # outputs that are not images ((1, 1000) logits after a Gemm): the manifest gives their shape
-        return {
-            o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
-            for o in prog.manifest["outputs"]
-        }
+        return compute_outputs(prog.manifest, run.read)
     finally:
         run.release()
 

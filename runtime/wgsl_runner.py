@@ -25,7 +25,7 @@ import numpy as np
 
 from export.glsl import ComputeProgram, load_compute_export
 from pipeline.foundation.errors import NeuralaoError
-from runtime.glsl_runner import scalar_values, texture_sizes
+from runtime.glsl_runner import compute_input, compute_outputs, scalar_values, texture_sizes
 
 log = logging.getLogger(__name__)
 
@@ -199,18 +199,11 @@ def run_wgsl_all(
 ) -> dict:
     """Run every WGSL pass on x : (1, C, H, W) float32; {onnx output name: (1, C_out, H, W) float32}."""
     prog = _program(program_or_dir)
-    x = np.asarray(x, dtype=np.float32)
-    want_c = prog.manifest["input"]["channels"]
-    if x.ndim != 4 or x.shape[0] != 1 or x.shape[1] != want_c:
-        raise NeuralaoError(f"expected input (1, {want_c}, H, W), got {x.shape}")
+    x = compute_input(prog.manifest, x)
     run = _WgslRun(prog, x.shape[2], x.shape[3], scalar_values(prog.manifest, scalars), flip_y)
     run.upload(x)
     run.dispatch()
-    out = {o["onnx_name"]: run.read(o["texture"], o["channels"]) for o in prog.manifest["outputs"]}
-    return {
-        o["onnx_name"]: out[o["onnx_name"]].reshape(o["shape"]) if "shape" in o else out[o["onnx_name"]]
-        for o in prog.manifest["outputs"]
-    }
+    return compute_outputs(prog.manifest, run.read)
 
 
 def run_wgsl(

@@ -8,9 +8,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from pipeline.foundation.tolerances import TOL
 from pipeline.geometry.scene import Scene, scene_from_arrays
+from runtime.chromium import chromium_paths
 
 
 def quad(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -116,3 +118,9 @@ def onnx_vs_torch_tol(ref: np.ndarray | float, model) -> float:
 
         depth = weighted_layers(model)
     return TOL.onnx_vs_torch(float(np.max(np.abs(ref))), depth)
+
+
+# Skips a test (or, as ``pytestmark``, a module) where headless Chromium cannot start (runtime/chromium.py).
+needs_chromium = pytest.mark.skipif(
+    not all(chromium_paths()), reason="needs Debian's chromium and chromium-driver (make system-deps)"
+)

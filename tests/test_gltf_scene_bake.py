@@ -16,20 +16,19 @@ from __future__ import annotations
 import io
 import json
 import os
-import shutil
 import struct
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
-from helpers import mc_bound
+from helpers import mc_bound, needs_chromium
 from PIL import Image
 
 from pipeline import cli
 from pipeline.bakes.gltf_scene import read_gltf_scene
 from pipeline.geometry.level_files import GltfWriter, read_gltf_json
+from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 
 ARRAY, ELEMENTS = 34962, 34963
 R, H = 2.0, 1.0  # max distance and world gap between the planes: binary AO (H / R)^2 = 0.25
@@ -475,50 +474,26 @@ def test_scene_bake_reads_the_same_world_as_the_flattened_loader(tmp_path):
 
 # --------------------------------------------------------------------------- in the viewer
 
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
-
 
 def srgb_to_linear(c: float) -> float:
     return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
 
 
-@pytest.mark.skipif(not (CHROMIUM and DRIVER), reason="needs Debian's chromium and chromium-driver")
+@needs_chromium
 def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
     """The three-node, two-material room baked both ways, drawn by `neuralao view` in headless Chromium:
     the read-back base colour has the red floor and the blue checker crates, the AO has the contact
     shadows, and a screenshot of each bake goes to gltf-scene-bake.png (NEURALAO_ARTIFACTS or tmp)."""
     from PIL import ImageDraw
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
     from selenium.webdriver.common.by import By
 
     bakes = [bake_room(tmp_path, to, rays=64, resolution=64)[1] for to in ("vertex", "texture")]
     page = tmp_path / "page"
     assert cli.main(["view", *map(str, bakes), "--out", str(page), "--size", "320", "240"]) == 0
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=700,600",
-    ):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     shots = []
-    try:
+    with headless_chromium(*SWIFTSHADER_WEBGL, "--window-size=700,600") as driver:
         driver.get((page / "index.html").as_uri())
-        deadline = time.monotonic() + 60
-        state = None
-        while time.monotonic() < deadline:
-            state = driver.execute_script(
-                "return window.neuralao ? [window.neuralao.ready, window.neuralao.error] : null"
-            )
-            if state and (state[0] or state[1]):
-                break
-            time.sleep(0.05)
+        state = wait_for_page(driver)
         assert state and state[0] and not state[1], state
         methods = driver.execute_script("return window.neuralao.methods")
         assert [m["kind"] for m in methods] == ["scene", "scene"]
@@ -550,8 +525,6 @@ def test_viewer_shows_both_bakes_with_their_materials(tmp_path):
             assert shot.size == (320, 240)
             ImageDraw.Draw(shot).text((6, 4), m["name"].split(",")[0], fill=(230, 230, 230))
             shots.append(shot)
-    finally:
-        driver.quit()
     out = Path(os.environ.get("NEURALAO_ARTIFACTS", tmp_path))
     out.mkdir(parents=True, exist_ok=True)
     sheet = Image.new("RGB", (640, 240))

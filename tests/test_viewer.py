@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import base64
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -26,13 +25,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import needs_chromium
 
 from pipeline import cli
+from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM and DRIVER), reason="needs Debian's chromium and chromium-driver (make system-deps)"
-)
+pytestmark = needs_chromium
 SIZE = 96
 POSES = [(30.0, 20.0, 1.6), (-120.0, -10.0, 1.3)]  # azimuth, elevation (degrees), distance (diagonals)
 # Generated shader vs onnxruntime, max abs error over foreground pixels. The path is float32 end to
@@ -109,35 +107,11 @@ def page(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser(page):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--window-size=700,600",
-    ):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    try:
+    with headless_chromium(*SWIFTSHADER_WEBGL, "--window-size=700,600") as driver:
         driver.get((page / "page" / "index.html").as_uri())
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            state = driver.execute_script(
-                "return window.neuralao ? [window.neuralao.ready, window.neuralao.error] : null"
-            )
-            if state and (state[0] or state[1]):
-                break
-            time.sleep(0.05)
+        state = wait_for_page(driver)
         assert state and state[0] and not state[1], state
         yield driver
-    finally:
-        driver.quit()
 
 
 def _capture(driver, method: int, pose) -> dict:

@@ -13,23 +13,21 @@ from __future__ import annotations
 import base64
 import json
 import math
-import shutil
 import time
 
 import numpy as np
 import onnx
 import pytest
+from helpers import needs_chromium
 
 from pipeline import cli
 from pipeline.bakes.viewer_inputs import default_screen_space_model, method_from_unet, screen_space_mesh
 from pipeline.foundation.tolerances import TOL
+from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 from runtime.predict import unet_predictor
 from runtime.viewer import write_page
 
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM and DRIVER), reason="needs Debian's chromium and chromium-driver (make system-deps)"
-)
+pytestmark = needs_chromium
 W, H = 48, 40
 POSE = (30.0, 20.0, 0.9)  # azimuth, elevation (degrees), distance (diagonals), as the page's setPose
 # Page G-buffer vs pipeline/gbuffers/rasterizer.py (llvmpipe): both snap vertices to their own sub-pixel
@@ -51,35 +49,14 @@ def page(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser(page):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        "--enable-unsafe-webgpu",
-        "--window-size=400,300",
-    ):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    try:
+    flags = ("--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--enable-unsafe-webgpu")
+    with headless_chromium(*flags, "--window-size=400,300") as driver:
         driver.get((page[0] / "page" / "index.html").as_uri())  # file:// is a secure context
         if not driver.execute_script("return !!navigator.gpu"):
             pytest.skip("this Chromium exposes no WebGPU")
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            state = driver.execute_script("return window.neuralao && [neuralao.ready, neuralao.error]")
-            if state and (state[0] or state[1]):
-                break
-            time.sleep(0.05)
+        state = wait_for_page(driver)
         assert state and state[0] and not state[1], state
         yield driver
-    finally:
-        driver.quit()
 
 
 def _capture_network(driver) -> dict:
@@ -190,21 +167,7 @@ def test_a_hybrid_is_a_one_line_error_naming_a_pure_model(tmp_path, capsys):
 
 def test_without_webgpu_the_page_says_so_and_still_draws(page):
     """Chromium without --enable-unsafe-webgpu (WebGL2 on SwiftShader only): a visible note, no error."""
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-    ):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    try:
+    with headless_chromium(*SWIFTSHADER_WEBGL) as driver:
         driver.get((page[0] / "page" / "index.html").as_uri())
         deadline = time.monotonic() + 60
         note = ""
@@ -219,5 +182,3 @@ def test_without_webgpu_the_page_says_so_and_still_draws(page):
         assert driver.execute_script("return [neuralao.ready, neuralao.error]") == [True, None]
         assert "WebGPU is not available" in note
         assert driver.execute_script("return neuralao.capture().position.length") > 0  # WebGL2 still draws
-    finally:
-        driver.quit()

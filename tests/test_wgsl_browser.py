@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import base64
 import json
-import shutil
 import time
 from pathlib import Path
 
 import numpy as np
 import onnx
 import pytest
+from helpers import needs_chromium
 from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
@@ -26,12 +26,10 @@ from onnx import numpy_helper as nh
 from export.glsl import ComputeProgram, generate_compute
 from export.onnx_io import run_onnxruntime
 from pipeline.foundation.tolerances import TOL
+from runtime.chromium import headless_chromium
 from runtime.shipped import INDEX, MODELS_DIR
 
-CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM and DRIVER), reason="needs Debian's chromium and chromium-driver (make system-deps)"
-)
+pytestmark = needs_chromium
 RUNNER = Path(__file__).resolve().parents[1] / "runtime" / "viewer" / "wgsl.js"
 
 # Started by the test, collected by polling (SwiftShader may compile for longer than one WebDriver call).
@@ -58,24 +56,14 @@ s += String.fromCharCode.apply(null, u8.subarray(i, i + 0x8000));
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory):
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
     page = tmp_path_factory.mktemp("wgsl_page")
     (page / "wgsl.js").write_text(RUNNER.read_text())
     (page / "index.html").write_text('<!doctype html><meta charset="utf-8"><script src="wgsl.js"></script>\n')
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for a in ("--headless=new", "--no-sandbox", "--enable-unsafe-webgpu", "--enable-unsafe-swiftshader"):
-        opts.add_argument(a)
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    try:
+    with headless_chromium("--enable-unsafe-webgpu", "--enable-unsafe-swiftshader") as driver:
         driver.get((page / "index.html").as_uri())  # file:// is a secure context: navigator.gpu exists
         if not driver.execute_script("return !!navigator.gpu"):
             pytest.skip("this Chromium exposes no WebGPU")
         yield driver
-    finally:
-        driver.quit()
 
 
 def _run(driver, program: ComputeProgram, x: np.ndarray, scalars: dict) -> np.ndarray:

@@ -32,7 +32,7 @@ from pipeline.engines.engine import ResultStore
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_bytes, write_png
 from pipeline.geometry.scene import load_scene
-from pipeline.tracing.labeller import check_label_args
+from pipeline.tracing.labeller import check_label_args, label_fields
 
 # Each bake's summary line carries the name of the module that bakes it, as it always has.
 _log_vertex = logging.getLogger("pipeline.bakes.vertex")
@@ -165,16 +165,11 @@ def _add_texture_arguments(p: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> BakeSettings:
     check_label_args(args)
     settings = BakeSettings(
-        rays=args.rays,
-        max_distance=args.max_distance,
-        kernel=args.kernel,
-        half_distance=args.half_distance,
+        **label_fields(args),
         method=args.method,
         alpha=args.alpha,
         samples_per_vertex=args.samples_per_vertex,
         samples_per_face_cap=args.samples_per_face_cap,
-        seed=args.seed,
-        workers=args.workers,
     )
     check_settings(settings)
     return settings
@@ -188,12 +183,7 @@ def texture_settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
         # The default gutter shrinks with a small texture (it may be at most a quarter of it).
         margin=min(d.margin, (args.resolution or d.resolution) // 4) if args.margin is None else args.margin,
         uv=args.uv or d.uv,
-        rays=args.rays,
-        max_distance=args.max_distance,
-        kernel=args.kernel,
-        half_distance=args.half_distance,
-        seed=args.seed,
-        workers=args.workers,
+        **label_fields(args),
     )
     check_texture_settings(s)
     return s

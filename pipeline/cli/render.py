@@ -39,7 +39,7 @@ from pipeline.foundation.limits import (
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.camera import Camera, load_poses, orbit
 from pipeline.geometry.scene import Scene, load_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args
+from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, label_fields
 
 log = logging.getLogger(__name__)
 # PyOpenGL logs "No OpenGL_accelerate module loaded" at INFO on import; it is expected and not news.
@@ -140,14 +140,7 @@ def run(args: argparse.Namespace) -> int:
         cameras = load_poses(args.cameras, scene, w, h)
     else:
         cameras = orbit(scene, args.views, w, h, yfov_deg=args.yfov, seed=args.seed)
-    settings = LabelSettings(
-        rays=args.rays,
-        max_distance=args.max_distance,
-        kernel=args.kernel,
-        half_distance=args.half_distance,
-        seed=args.seed,
-        workers=args.workers,
-    )
+    settings = LabelSettings(**label_fields(args))
     start = time.perf_counter()
     summary = render_views(scene, cameras, settings, args.out, progress=True, normals=args.normals)
     log.info(

@@ -19,6 +19,36 @@ from pipeline.models import field, mlp, unet_train
 _log = {name: logging.getLogger(k.trainer) for name, k in kinds.TRAINED.items()}
 
 
+# ------------------------------------------------------------------------------------- per-mesh kinds
+
+
+def add_checkpoint_arguments(p: argparse.ArgumentParser, preset: str, set_example: str) -> None:
+    """The last flags of a per-mesh kind (mlp, field): the checkpoint, the settings and the progress bars.
+
+    preset : the settings dataclass a --config file presets; set_example : the --set example in the help."""
+    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
+    p.add_argument("--config", help=f"JSON preset of {preset}")
+    add_set_option(p, set_example)
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def check_mesh_or_dataset(args: argparse.Namespace, neither: str) -> None:
+    """A per-mesh kind trains on --mesh or on --data with --scene, not both; ``neither`` is the error
+    when none is given."""
+    if args.mesh and (args.data or args.scene):
+        raise NeuralaoError("give either --mesh or --data/--scene, not both")
+    if not args.mesh and not (args.data and args.scene):
+        raise NeuralaoError(neither)
+
+
+def holdout_figures(metrics: dict) -> tuple[str, str]:
+    """(SSIM, RMSE) on the held-back views as the training line prints them: 4 decimals, or "-" where
+    there were none."""
+    return tuple(
+        f"{metrics[k]:.4f}" if metrics[k] is not None else "-" for k in ("holdout_ssim", "holdout_rmse")
+    )
+
+
 # ----------------------------------------------------------------------------------------------- mlp
 
 
@@ -44,10 +74,7 @@ def add_mlp_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help=f"hidden layer widths XxY, e.g. 16x8, 32x16, 64x32 (default {mlp.size_name(d.hidden)})",
     )
-    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
-    p.add_argument("--config", help="JSON preset of MLPSettings")
-    add_set_option(p, "--set optimizer=adam")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_checkpoint_arguments(p, "MLPSettings", "--set optimizer=adam")
 
 
 def mlp_settings_from_args(args: argparse.Namespace) -> mlp.MLPSettings:
@@ -64,10 +91,7 @@ def mlp_settings_from_args(args: argparse.Namespace) -> mlp.MLPSettings:
 
 
 def run_mlp(args: argparse.Namespace) -> int:
-    if args.mesh and (args.data or args.scene):
-        raise NeuralaoError("give either --mesh or --data/--scene, not both")
-    if not args.mesh and not (args.data and args.scene):
-        raise NeuralaoError("give --data DIR --scene NAME, or --mesh PATH_OR_NAME")
+    check_mesh_or_dataset(args, "give --data DIR --scene NAME, or --mesh PATH_OR_NAME")
     if args.data and (args.views is not None or args.resolution is not None or args.rays is not None):
         raise NeuralaoError("--views/--resolution/--rays apply to --mesh only (a dataset fixes them)")
     settings = mlp_settings_from_args(args)
@@ -83,8 +107,7 @@ def run_mlp(args: argparse.Namespace) -> int:
         ckpt["training_time_s"],
         m["test_rmse"],
         m["constant_test_rmse"],
-        f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
-        f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-",
+        *holdout_figures(m),
     )
     return 0
 
@@ -105,10 +128,7 @@ def add_field_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--octaves", type=int, help=f"position-encoding frequency bands (default {d.octaves})")
     p.add_argument("--rays", type=int, help=f"AO rays per surface sample (default {d.labels.rays})")
-    p.add_argument("--out", required=True, help="checkpoint to write (MODEL.pt)")
-    p.add_argument("--config", help="JSON preset of FieldSettings")
-    add_set_option(p, "--set steps=3000")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_checkpoint_arguments(p, "FieldSettings", "--set steps=3000")
 
 
 def field_settings_from_args(args: argparse.Namespace) -> field.FieldSettings:
@@ -123,10 +143,7 @@ def field_settings_from_args(args: argparse.Namespace) -> field.FieldSettings:
 
 
 def run_field(args: argparse.Namespace) -> int:
-    if args.mesh and (args.data or args.scene):
-        raise NeuralaoError("give either --mesh or --data/--scene, not both")
-    if not args.mesh and not (args.data and args.scene):
-        raise NeuralaoError("give --mesh PATH_OR_NAME, or --data DIR --scene NAME")
+    check_mesh_or_dataset(args, "give --mesh PATH_OR_NAME, or --data DIR --scene NAME")
     settings = field_settings_from_args(args)
     ckpt = field.train(
         settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
@@ -142,8 +159,7 @@ def run_field(args: argparse.Namespace) -> int:
         ckpt["training_time_s"],
         m["val_rmse"],
         m["constant_val_rmse"],
-        f"{m['holdout_ssim']:.4f}" if m["holdout_ssim"] is not None else "-",
-        f"{m['holdout_rmse']:.4f}" if m["holdout_rmse"] is not None else "-",
+        *holdout_figures(m),
     )
     return 0
 

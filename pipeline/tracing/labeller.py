@@ -426,17 +426,7 @@ class Labeller:
         valid = np.zeros(shape, dtype=bool)
         if count == 0:
             return ao, valid
-        # Per-point set-up in blocks on the workers (numpy call overhead, ~1-10 us a call, makes it
-        # too slow per trace chunk and too slow serially); elementwise, so a point's rays never
-        # depend on its block, batch or worker.
-        origins = np.empty((count, 3), np.float32)
-        frames = np.empty((3, 3, count, 1), np.float32)
-        jitter = np.empty(count, np.float32)
-        ok = np.empty(count, bool)
-
-        def prepare(lo: int, hi: int) -> None:
-            o, f, j, k = self._prepare(local[lo:hi], normals[lo:hi], ids[lo:hi])
-            origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], ok[lo:hi] = o, f, j, k
+        origins, frames, jitter, ok = self._prepare_all(local, normals, ids)
 
         def trace(lo: int, hi: int) -> None:
             if radii is None:
@@ -446,12 +436,31 @@ class Labeller:
                     origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], radii
                 )
 
-        workers = self.settings.workers
-        run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
-        run_chunks(trace, count, self._chunk_points, workers, progress)
+        run_chunks(trace, count, self._chunk_points, self.settings.workers, progress)
         ao[~np.isfinite(local).all(axis=1)] = 1.0
         valid &= ok if radii is None else ok[:, None]
         return ao, valid
+
+    def _prepare_all(
+        self, local: np.ndarray, normals: np.ndarray, ids: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_prepare` of every point (n of them), in blocks on the workers: numpy call overhead
+        (~1-10 us a call) makes it too slow per trace chunk and too slow serially. Elementwise, so a
+        point's rays never depend on its block, batch or worker. Returns origins (n, 3), frames
+        (3, 3, n, 1), jitter (n,) float32 and ok (n,) bool."""
+        count = len(local)
+        origins = np.empty((count, 3), np.float32)
+        frames = np.empty((3, 3, count, 1), np.float32)
+        jitter = np.empty(count, np.float32)
+        ok = np.empty(count, bool)
+
+        def prepare(lo: int, hi: int) -> None:
+            o, f, j, k = self._prepare(local[lo:hi], normals[lo:hi], ids[lo:hi])
+            origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], ok[lo:hi] = o, f, j, k
+
+        workers = self.settings.workers
+        run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
+        return origins, frames, jitter, ok
 
     def _prepare(
         self, local: np.ndarray, normals: np.ndarray, ids: np.ndarray
@@ -692,3 +701,10 @@ def check_label_args(args) -> None:
             raise NeuralaoError(f"{flag} must be a positive finite distance, got {value}")
     if args.half_distance is not None and args.kernel != "obscurance":
         raise NeuralaoError("--half-distance only applies to --kernel obscurance")
+
+
+def label_fields(args) -> dict:
+    """The :class:`LabelSettings` fields those flags (and --seed) give, by name, for any settings that
+    extend them (a bake's, a render's)."""
+    names = ("rays", "max_distance", "kernel", "half_distance", "seed", "workers")
+    return {k: getattr(args, k) for k in names}

@@ -55,23 +55,14 @@ class LevelLabeller(Labeller):
         valid = np.zeros(count, bool)
         if count == 0:
             return ao, valid
-        origins = np.empty((count, 3), np.float32)
-        frames = np.empty((3, 3, count, 1), np.float32)
-        jitter = np.empty(count, np.float32)
-        ok = np.empty(count, bool)
-
-        def prepare(lo: int, hi: int) -> None:
-            o, f, j, g = self._prepare(local[lo:hi], normals[lo:hi], ids[lo:hi])
-            origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], ok[lo:hi] = o, f, j, g
+        origins, frames, jitter, ok = self._prepare_all(local, normals, ids)
 
         def trace(lo: int, hi: int) -> None:
             ao[lo:hi], valid[lo:hi] = self._trace_halves(
                 origins[lo:hi], frames[:, :, lo:hi], jitter[lo:hi], h_local, foliage
             )
 
-        workers = self.settings.workers
-        run_chunks(prepare, count, max(1024, -(-count // workers)), workers, False)
-        run_chunks(trace, count, self._chunk_points, workers, progress)
+        run_chunks(trace, count, self._chunk_points, self.settings.workers, progress)
         ao[~np.isfinite(local).all(axis=1)] = 1.0
         return ao, valid & ok
 
