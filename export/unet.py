@@ -294,19 +294,28 @@ def check_backends(
 
 
 def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
-    """The two fragment passes around the network at its internal height (runtime.internal_resolution)
-    as files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them."""
+    """The fragment passes around the network at its internal height (runtime.internal_resolution) as
+    files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them. A
+    hybrid also gets the GTAO pass it refines (runtime.baselines' shaders, default settings: the
+    ones :func:`runtime.predict.unet_predictor` runs) and an upsampling pass that leaves GTAO alone
+    where no foreground texel is in reach."""
     from pipeline.foundation.io import write_text
+    from runtime.baselines import GTAOSettings, blur_source, fragment_source, gtao_pass_description
     from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
     folder = glsl_dir / "internal"
     sources = {"vertex": "fullscreen.vert", "downsample": "downsample.frag", "upsample": "upsample.frag"}
-    for key, text in (
-        ("vertex", vertex_source()),
-        ("downsample", downsample_source()),
-        ("upsample", upsample_source()),
-    ):
-        write_text(folder / sources[key], text)
+    texts = {
+        "vertex": vertex_source(),
+        "downsample": downsample_source(),
+        "upsample": upsample_source(empty=0.0 if hybrid else 1.0),
+    }
+    gtao = GTAOSettings()
+    if hybrid:
+        sources.update(gtao="gtao.frag", gtao_blur="gtao_blur.frag")
+        texts.update(gtao=fragment_source("gtao", gtao), gtao_blur=blur_source(gtao.noise_size))
+    for key, name in sources.items():
+        write_text(folder / name, texts[key])
     steps = [
         f"downsample.frag at (round(W * {height} / H), {height}): the G-buffer's position (xyz camera "
         "space, w mask) and normal textures point-sampled into two RGBA32F targets (uniform u_low_size = "
@@ -320,8 +329,22 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
         + " upsampled with the full-resolution G-buffer as guide",
     ]
     if hybrid:
-        steps.append("AO = clamp(GTAO + upsampled correction, 0, 1) at W x H")
-    return {"height": height, "folder": "internal", "sources": sources, "steps": steps}
+        steps = [
+            "gtao.frag at W x H (the frame's own resolution) with the full-resolution G-buffer textures, "
+            'the noise tile and the uniforms of "gtao" (u_radius = the AO radius R in scene units), '
+            "then gtao_blur.frag at W x H on its output (u_raw): the GTAO image, 1 on background",
+            *steps[:1],
+            "GTAO point-sampled to the same size with the same texels (low texel t of an axis of n reads "
+            "full-resolution pixel floor((t + 0.5) * N / n), GL order)",
+            *steps[1:],
+            "AO = clamp(GTAO + upsampled correction, 0, 1) at W x H, 1 on background",
+        ]
+    entry = {"height": height, "folder": "internal", "sources": sources, "steps": steps}
+    if hybrid:
+        entry["gtao"] = gtao_pass_description(gtao) | {
+            "resolution": "W x H, the frame's own; the network reads it point-sampled with the G-buffer"
+        }
+    return entry
 
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:

@@ -215,7 +215,8 @@ void main() {
 # by a Gaussian of its distance in low-resolution texels, by how close the pixel's point lies to the
 # texel's tangent plane (relative to depth) and by how well the normals agree; background texels get
 # no weight. A small floor keeps the spatially nearest foreground texels in charge where no texel
-# matches (thin parts the low resolution missed). No foreground texel in reach -> 1 (open).
+# matches (thin parts the low resolution missed). No foreground texel in reach -> ${empty} (1.0, open,
+# for AO; 0.0 for a hybrid's correction to GTAO, which then keeps GTAO).
 # Low-resolution texels are point samples of the high-resolution G-buffer: texel t of a low axis of
 # n texels is high pixel floor((t + 0.5) * N / n), so its position is that pixel's exact position.
 _T["upsample_fragment"] = """#version 430 core
@@ -263,7 +264,7 @@ void main() {
             total += w;
         }
     }
-    o_ao = total > 0.0 ? sum / total : 1.0;
+    o_ao = total > 0.0 ? sum / total : ${empty};
 }
 """
 

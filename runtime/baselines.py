@@ -294,6 +294,49 @@ class ScreenSpaceAO:
         self.release()
 
 
+def gtao_pass_description(settings: GTAOSettings | None = None) -> dict:
+    """How an engine runs :class:`ScreenSpaceAO`'s GTAO exactly as it runs here (an export's manifest
+    entry beside the shaders of :func:`fragment_source` and :func:`blur_source`): texture bindings,
+    the noise tile's texels, and each uniform as a number or the formula :meth:`ScreenSpaceAO._uniforms`
+    computes. JSON-ready; float32 values survive JSON exactly (a double holds every float32)."""
+    s = settings if settings is not None else GTAOSettings()
+    _check("gtao", s, 1.0)
+    # GL rows bottom up, the order glTexImage2D takes (gl.upload_texture flips the top-down tile)
+    tile = noise_tile(s.noise_size, s.seed, "gtao")[::-1]
+    return {
+        "settings": {
+            "slices": s.slices,
+            "steps": s.steps,
+            "falloff": s.falloff,
+            "noise_size": s.noise_size,
+            "blur": s.blur,
+            "seed": s.seed,
+        },
+        "textures": {"u_position": 0, "u_normal": 1, "u_noise": 2},
+        "noise": {
+            "binding": 2,
+            "width": s.noise_size,
+            "height": s.noise_size,
+            "format": "RGBA32F",
+            "texels": [float(v) for v in tile.reshape(-1)],
+            "order": "RGBA per texel, row 0 = GL row 0 (as glTexImage2D takes it); nearest, fetched "
+            "with texelFetch at pixel % noise_size",
+        },
+        "uniforms": {
+            "u_proj": {"type": "vec2", "formula": "(P00, P11) = (f * H / W, f), f = 1 / tan(yfov / 2)"},
+            "u_radius": {
+                "type": "float",
+                "formula": "R, the AO radius in scene units (the network's radius input rho is R / (m * "
+                "tan(yfov / 2)), m the mean foreground depth of the G-buffer the network reads)",
+            },
+            "u_falloff": {"type": "float", "value": float(s.falloff)},
+            "u_pixels_per_unit": {"type": "float", "formula": "0.5 * H * P11 (H: this pass's height)"},
+        },
+        "output": "R32F: accessibility in [0, 1], 1 on background",
+        "blur": {"textures": {"u_position": 0, "u_raw": 3}, "window": s.noise_size} if s.blur else None,
+    }
+
+
 def run_screen_space(frame: dict, method: Method, radius: float, settings=None) -> np.ndarray:
     """AO (H, W) float32 of ``method`` ("ssao" | "gtao") on a G-buffer frame; 1 on background.
 

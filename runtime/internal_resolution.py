@@ -165,8 +165,10 @@ def at_internal_resolution(
     return scaled
 
 
-def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
-    """The GLSL fragment shader of the upsampling pass with ``settings`` baked in."""
+def upsample_source(settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0) -> str:
+    """The GLSL fragment shader of the upsampling pass with ``settings`` baked in; ``empty`` is the value
+    of a foreground pixel with no foreground texel in reach (as in :func:`upsample_ao`: 1.0 for AO, 0.0
+    for a hybrid's correction)."""
     lit = lambda x: repr(float(x))  # noqa: E731  (a float literal GLSL accepts: 0.6, 1e-3, 8.0)
     for name in ("spatial_sigma", "plane_sigma"):
         if not (math.isfinite(getattr(settings, name)) and getattr(settings, name) > 0):
@@ -177,6 +179,7 @@ def upsample_source(settings: UpsampleSettings = UpsampleSettings()) -> str:
         plane_sigma=lit(settings.plane_sigma),
         normal_power=lit(settings.normal_power),
         floor=lit(settings.floor),
+        empty=lit(empty),
     )
 
 
@@ -190,11 +193,12 @@ class UpsamplePass:
         low_size: tuple[int, int],
         size: tuple[int, int],
         settings: UpsampleSettings = UpsampleSettings(),
+        empty: float = 1.0,
     ):
         gl.context()
         self.GL, self.gl = GL, gl
         (self.lw, self.lh), (self.w, self.h) = (int(v) for v in low_size), (int(v) for v in size)
-        self.prog = _program(upsample_source(settings))
+        self.prog = _program(upsample_source(settings, empty))
         self.vao = gl.context().empty_vao
         make = lambda w, h, fmt: gl.create_texture(w, h, fmt)  # noqa: E731
         self.position, self.normal = make(self.w, self.h, GL.GL_RGBA32F), make(self.w, self.h, GL.GL_RGBA32F)
@@ -267,8 +271,9 @@ class ScalingPasses:
         low_size: tuple[int, int],
         size: tuple[int, int],
         settings: UpsampleSettings = UpsampleSettings(),
+        empty: float = 1.0,
     ):
-        self.up = UpsamplePass(low_size, size, settings)
+        self.up = UpsamplePass(low_size, size, settings, empty)
         self.GL, self.gl = GL, gl
         self.prog = _program(downsample_source())
         up = self.up
@@ -337,13 +342,13 @@ def time_scaling_passes(frame: dict, low_size: tuple[int, int], repeats: int = 1
 
 
 def run_upsample_gl(
-    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings()
+    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
 ) -> np.ndarray:
     """:func:`upsample_ao` as the GL passes run it on Mesa (point sampling, then upsampling).
     Returns (H, W) float32, 1 on background."""
     h, w = np.shape(frame["depth"])
     lh, lw = np.shape(ao_low)
-    with ScalingPasses((lw, lh), (w, h), settings) as p:
+    with ScalingPasses((lw, lh), (w, h), settings, empty) as p:
         p.upload(frame, ao_low)
         p.draw()
         out = p.up.read()

@@ -234,3 +234,85 @@ def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     vertex = (folder / passes["sources"]["vertex"]).read_text()
     for key in ("downsample", "upsample"):
         assert gl.compile_program(vertex=vertex, fragment=(folder / passes["sources"][key]).read_text()) > 0
+
+
+# ------------------------------------------------------------------------------ the export's GTAO pass
+
+
+def write_internal_export(model: UNet, out, internal_height: int) -> dict:
+    """model.onnx + glsl/ + glsl/internal/ + manifest.json of ``model`` at ``internal_height``, as
+    :func:`export.unet.export_checkpoint` writes them (without a checkpoint). Returns the manifest."""
+    from export.unet import export_onnx, onnx_metadata, write_glsl, write_internal_passes
+    from pipeline.foundation.io import write_json
+
+    meta = onnx_metadata(model) | {"internal_height": str(internal_height)}
+    proto = export_onnx(model, out / "model.onnx", meta)
+    glsl = write_glsl(proto, out / "glsl")
+    internal = write_internal_passes(glsl, internal_height, model.args.gtao_input)
+    manifest = {"kind": "unet", "internal_height": internal_height, "internal_resolution": internal}
+    write_json(out / "manifest.json", manifest)
+    return manifest
+
+
+def run_export_gtao(export_dir, frame: dict, radius: float) -> np.ndarray:
+    """The GTAO pass of a hybrid export, run from its files and manifest entry alone (as an engine
+    would) on the headless GL context: (H, W) float32, 1 on background."""
+    from runtime import gl
+    from runtime.baselines import gbuffer_textures, projection_scale
+    from runtime.gl import GL
+
+    entry = json.loads((export_dir / "manifest.json").read_text())["internal_resolution"]
+    folder, g = export_dir / "glsl" / entry["folder"], entry["gtao"]
+    src = {k: (folder / v).read_text() for k, v in entry["sources"].items()}
+    h, w = frame["depth"].shape
+    pos, nrm = gbuffer_textures(frame)
+    noise = np.asarray(g["noise"]["texels"], np.float32).reshape(g["noise"]["height"], g["noise"]["width"], 4)
+    tex = {
+        "u_position": gl.create_texture(w, h, GL.GL_RGBA32F, pos),
+        "u_normal": gl.create_texture(w, h, GL.GL_RGBA32F, nrm),
+        "u_noise": gl.create_texture(noise.shape[1], noise.shape[0], GL.GL_RGBA32F, noise[::-1]),
+        "u_raw": gl.create_texture(w, h, GL.GL_R32F),
+    }
+    out = gl.create_texture(w, h, GL.GL_R32F)
+    p00, p11 = projection_scale(frame["yfov"], w, h)
+    formulas = {"u_proj": (p00, p11), "u_radius": (radius,), "u_pixels_per_unit": (0.5 * h * p11,)}
+    GL.glViewport(0, 0, w, h)
+    GL.glBindVertexArray(gl.context().empty_vao)
+    passes = [("gtao", g["textures"], tex["u_raw"]), ("gtao_blur", g["blur"]["textures"], out)]
+    for key, bindings, target in passes:
+        prog = gl.compile_program(vertex=src["vertex"], fragment=src[key])
+        fbo = gl.create_framebuffer([target], w, h, depth=False)
+        GL.glUseProgram(prog)
+        for name, unit in bindings.items():
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, tex[name])
+        for name, u in g["uniforms"].items() if key == "gtao" else ():
+            values = (u["value"],) if "value" in u else formulas[name]
+            (GL.glUniform1f if len(values) == 1 else GL.glUniform2f)(
+                GL.glGetUniformLocation(prog, name), *values
+            )
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, 3)
+        GL.glDeleteFramebuffers(1, [fbo])
+    GL.glUseProgram(0)
+    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+    ao = gl.read_texture(out, w, h, GL.GL_R32F)[..., 0].copy()
+    GL.glDeleteTextures(5, [*tex.values(), out])
+    return np.where(frame["mask"], ao, np.float32(1.0)).astype(np.float32)
+
+
+def test_hybrid_export_carries_the_gtao_pass_it_refines(tmp_path, frame):
+    """gtao.frag + gtao_blur.frag and the manifest's uniforms and noise tile, run from the export alone,
+    reproduce runtime.baselines' GTAO bit for bit; a pure export carries no GTAO pass."""
+    f, radius = frame
+    manifest = write_internal_export(_hybrid(), tmp_path / "hybrid", 32)
+    entry = manifest["internal_resolution"]
+    assert {"gtao", "gtao_blur"} <= set(entry["sources"]) and entry["steps"][0].startswith("gtao.frag")
+    got = run_export_gtao(tmp_path / "hybrid", f, radius)
+    np.testing.assert_array_equal(got, f["gtao"])
+    assert np.abs(run_export_gtao(tmp_path / "hybrid", f, 0.5 * radius) - f["gtao"]).max() > 1e-2
+
+    torch.manual_seed(0)
+    pure = UNet(UNetArgs(in_channels=4, widths=WIDTHS)).eval()
+    entry = write_internal_export(pure, tmp_path / "pure", 32)["internal_resolution"]
+    assert "gtao" not in entry and "gtao" not in entry["sources"]
+    assert not (tmp_path / "pure" / "glsl" / "internal" / "gtao.frag").exists()
