@@ -87,3 +87,47 @@ def test_c_host_refuses_a_wrong_gbuffer(tmp_path):
         timeout=60,
     )
     assert r.returncode == 1 and "5 floats a pixel" in r.stderr and not (tmp_path / "ao.f32").exists()
+
+
+def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Path) -> np.ndarray:
+    h, w = frame["depth"].shape
+    gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
+    gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
+    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius), repr(math.degrees(frame["yfov"]))]
+    r = subprocess.run(
+        [str(host), str(export), *args, str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=300
+    )
+    assert r.returncode == 0, r.stderr
+    return np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
+
+
+def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(tmp_path):
+    """GTAO pass, point sampling, the network at the internal size, upsampling of its correction and
+    clamp(GTAO + correction): the C host from the export's files alone against runtime.predict's
+    reference (onnxruntime network, float64 numpy upsampler). The two differ by the generated GLSL vs
+    onnxruntime (TOL.parity_unet_fp32; the correction passes through the upsampler's convex weights, so
+    it does not grow) plus the GLSL vs numpy upsampler (TOL.upsample_glsl_vs_numpy); GTAO is the same
+    shader on the same driver."""
+    from test_hybrid import _hybrid, write_internal_export
+
+    from runtime.baselines import run_gtao
+    from runtime.internal_resolution import downsample_frame, upsample_ao
+    from runtime.predict import unet_predictor
+
+    host = _build_host()
+    frame = render_parity_frames((96, 64))[0]
+    radius, internal = 0.3, 40  # the network runs at 60 x 40
+    write_internal_export(_hybrid(), tmp_path / "export", internal)
+    ao = _run_host(host, tmp_path / "export", frame, radius, tmp_path)
+    ref = unet_predictor(tmp_path / "export" / "model.onnx", "model")(frame, radius)
+    tol = TOL.parity_unet_fp32 + TOL.upsample_glsl_vs_numpy
+    err = float(np.abs(ao - ref).max())
+    assert err <= tol, err
+    assert np.all(ao[~frame["mask"]] == 1.0) and frame["mask"].any()
+
+    # the test can fail: the correction is visible, and a shortcut (GTAO run on the point-sampled frame,
+    # the AO upsampled as a pure export's is) lands far outside the tolerance
+    assert float(np.abs(ref - run_gtao(frame, radius)).max()) > 10 * tol
+    low = downsample_frame(frame, 60, internal)
+    shortcut = upsample_ao(unet_predictor(tmp_path / "export" / "model.onnx", None)(low, radius), frame)
+    assert float(np.abs(shortcut - ref).max()) > 10 * tol

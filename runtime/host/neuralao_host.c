@@ -17,8 +17,11 @@
  *   4. every texture of the manifest allocated at its size formula (W, Wp = ceil(W / p) * p, ...);
  *      the passes in order (the generated pad pass pads, the crop pass crops), one dispatch each,
  *      a memory barrier between them; the output texture read back, background set to 1.
- * The network runs at the frame's own size (an export's internal-resolution fragment passes are not
- * run here).
+ * An export whose manifest.json declares "internal_resolution" runs around them the fragment passes it
+ * names (docs/engine-integration.md, "Internal resolution"): for a hybrid first its GTAO pass (gtao.frag,
+ * its blur) at W x H, then the point-sampling pass to the internal size, the network there (steps 1-4 on
+ * the point-sampled G-buffer, GTAO point-sampled as the fifth channel), the upsampling pass back to
+ * W x H, and for a hybrid AO = clamp(GTAO + upsampled correction, 0, 1).
  *
  * Context: EGL on Mesa's surfaceless platform (no window, no display server), OpenGL 4.3 core.
  * The manifest is read by the small JSON reader below (objects, arrays, strings, numbers, literals).
@@ -224,6 +227,27 @@ static GLuint compile_compute(const char *src, const char *name) {
     return prog;
 }
 
+static GLuint compile_pipeline(const char *vertex, const char *fragment, const char *name) {
+    GLint ok;
+    char log[4096];
+    const char *srcs[2] = {vertex, fragment};
+    const GLenum kinds[2] = {GL_VERTEX_SHADER, GL_FRAGMENT_SHADER};
+    GLuint prog = glCreateProgram();
+    for (int i = 0; i < 2; i++) {
+        GLuint sh = glCreateShader(kinds[i]);
+        glShaderSource(sh, 1, &srcs[i], NULL);
+        glCompileShader(sh);
+        glGetShaderiv(sh, GL_COMPILE_STATUS, &ok);
+        if (!ok) glGetShaderInfoLog(sh, sizeof log, NULL, log), die("%s does not compile: %s", name, log);
+        glAttachShader(prog, sh);
+        glDeleteShader(sh);
+    }
+    glLinkProgram(prog);
+    glGetProgramiv(prog, GL_LINK_STATUS, &ok);
+    if (!ok) glGetProgramInfoLog(prog, sizeof log, NULL, log), die("%s does not link: %s", name, log);
+    return prog;
+}
+
 /* ------------------------------------------------------------------ textures */
 
 typedef struct {
@@ -250,50 +274,41 @@ static Texture *find_texture(Texture *t, int n, const char *id) {
     return NULL;
 }
 
-/* ------------------------------------------------------------------ main */
-
-int main(int argc, char **argv) {
-    if (argc != 8) {
-        fprintf(stderr, "usage: neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV_DEG OUT.f32\n"
-                        "  GBUFFER.f32: HEIGHT x WIDTH x (depth, nx, ny, nz, mask) float32, row 0 on top\n");
-        return 2;
+/* A 2-D texture as the fragment passes use them: nearest, clamped, row 0 = GL row 0 (the bottom). */
+static GLuint texture_2d(int w, int h, GLenum internal, GLenum format, const float *data) {
+    GLuint t;
+    glGenTextures(1, &t);
+    glBindTexture(GL_TEXTURE_2D, t);
+    glTexStorage2D(GL_TEXTURE_2D, 1, internal, w, h);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    if (data) {
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, w, h, format, GL_FLOAT, data);
     }
-    const int W = atoi(argv[3]), H = atoi(argv[4]);
-    const double radius = atof(argv[5]), yfov_deg = atof(argv[6]);
-    const double yfov = yfov_deg * 3.14159265358979323846 / 180.0; /* degrees, as on every neuralao command */
-    if (W < 1 || H < 1) die("WIDTH and HEIGHT must be positive");
-    if (!(radius > 0) || !(yfov_deg > 0 && yfov_deg < 180)) die("RADIUS must be > 0 and YFOV_DEG in (0, 180) degrees");
+    return t;
+}
 
-    /* the export: glsl/manifest.json under EXPORT_DIR, or EXPORT_DIR/manifest.json itself */
-    char dir[4096], path[4200];
-    snprintf(dir, sizeof dir, "%s/glsl", argv[1]);
-    snprintf(path, sizeof path, "%s/manifest.json", dir);
-    FILE *probe = fopen(path, "rb");
-    if (probe) fclose(probe); else snprintf(dir, sizeof dir, "%s", argv[1]);
-    snprintf(path, sizeof path, "%s/manifest.json", dir);
-    char *text = read_file(path, NULL);
-    Reader rd = {text};
-    Json *m = parse_value(&rd);
-    if (strcmp(jstr(m, "format"), "neuralao-glsl-compute")) die("%s is not a GLSL compute export", path);
+static float *read_2d(GLuint t, int w, int h, GLenum format, int channels) {
+    float *out = xmalloc(sizeof(float) * (size_t)channels * (size_t)w * (size_t)h);
+    glBindTexture(GL_TEXTURE_2D, t);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glGetTexImage(GL_TEXTURE_2D, 0, format, GL_FLOAT, out);
+    return out;
+}
+
+/* ------------------------------------------------------------------ the network (generated passes) */
+
+/* Runs the compute export m (in dir) at w x h on planes: `channels` planes of w x h floats, row 0 on top,
+ * in the network's input order. Returns lane 0 of the output, w x h, row 0 on top (not composited). */
+static float *run_network(const Json *m, const char *dir, int w, int h, const float *planes, int channels,
+                          float rho, int *n_passes) {
+    char path[4200];
     const int p = (int)jnum(jreq(m, "pad"), "multiple");
-    if (W < p || H < p) die("a %dx%d frame is smaller than the pad multiple %d", W, H, p);
-    const int Wp = (W + p - 1) / p * p, Hp = (H + p - 1) / p * p;
-
-    /* the G-buffer and step 1: mean foreground depth */
-    size_t gb_bytes;
-    float *gb = (float *)read_file(argv[2], &gb_bytes);
-    if (gb_bytes != (size_t)W * H * 5 * sizeof(float))
-        die("%s holds %zu bytes, a %dx%d G-buffer of 5 floats a pixel needs %zu", argv[2], gb_bytes, W, H,
-            (size_t)W * H * 5 * sizeof(float));
-    double sum = 0.0;
-    long count = 0;
-    for (long i = 0; i < (long)W * H; i++)
-        if (gb[i * 5 + 4] >= 0.5f) sum += gb[i * 5], count++;
-    const double mean_depth = count ? sum / (double)count : 1.0;
-    /* step 3: the radius in units of half the screen height at the mean depth */
-    const float rho = (float)(radius / (mean_depth * tan(0.5 * yfov)));
-
-    egl_context();
+    if (w < p || h < p) die("a %dx%d network input is smaller than the pad multiple %d", w, h, p);
+    const int Wp = (w + p - 1) / p * p, Hp = (h + p - 1) / p * p;
 
     /* step 4: every texture at its size formula */
     Json *tex_json = jreq(m, "textures");
@@ -302,8 +317,8 @@ int main(int argc, char **argv) {
     for (int i = 0; i < n_tex; i++) {
         Json *t = tex_json->items[i];
         tex[i].id = tex_json->keys[i];
-        tex[i].w = dim_size(jreq(t, "width"), W, H, Wp, Hp);
-        tex[i].h = dim_size(jreq(t, "height"), W, H, Wp, Hp);
+        tex[i].w = dim_size(jreq(t, "width"), w, h, Wp, Hp);
+        tex[i].h = dim_size(jreq(t, "height"), w, h, Wp, Hp);
         tex[i].layers = (int)jnum(t, "layers");
         tex[i].internal = !strcmp(jstr(t, "format"), "RGBA16F") ? GL_RGBA16F : GL_RGBA32F;
         glGenTextures(1, &tex[i].tex);
@@ -313,19 +328,19 @@ int main(int argc, char **argv) {
         glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
     }
 
-    /* step 2: the network input, (z / m, n) on foreground and 0 on background, 4 channels a layer */
+    /* step 2: the input texture, channel c in lane c % 4 of layer c / 4 */
     Texture *in = find_texture(tex, n_tex, jstr(jreq(m, "input"), "texture"));
-    if (in->w != W || in->h != H) die("input texture %s is %dx%d, expected the frame's %dx%d", in->id, in->w, in->h, W, H);
-    if ((int)jnum(jreq(m, "input"), "channels") != 4) die("this host feeds 4 channels (a hybrid needs GTAO first)");
-    float *x = xmalloc(sizeof(float) * 4 * (size_t)W * H * (size_t)in->layers);
-    const float m32 = (float)mean_depth;
-    for (long i = 0; i < (long)W * H; i++) {
-        const float *g = gb + i * 5;
-        if (g[4] >= 0.5f) x[i * 4] = g[0] / m32, x[i * 4 + 1] = g[1], x[i * 4 + 2] = g[2], x[i * 4 + 3] = g[3];
-    }
+    if (in->w != w || in->h != h) die("input texture %s is %dx%d, expected %dx%d", in->id, in->w, in->h, w, h);
+    if ((int)jnum(jreq(m, "input"), "channels") != channels || channels > 4 * in->layers)
+        die("the export takes %.0f input channels, this host built %d", jnum(jreq(m, "input"), "channels"), channels);
+    const size_t px = (size_t)w * (size_t)h;
+    float *x = xmalloc(sizeof(float) * 4 * px * (size_t)in->layers);
+    for (int c = 0; c < channels; c++)
+        for (size_t i = 0; i < px; i++) x[((size_t)(c / 4) * px + i) * 4 + (size_t)(c % 4)] = planes[(size_t)c * px + i];
     glBindTexture(GL_TEXTURE_2D_ARRAY, in->tex);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, W, H, in->layers, GL_RGBA, GL_FLOAT, x);
+    glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, w, h, in->layers, GL_RGBA, GL_FLOAT, x);
+    free(x);
 
     /* the weights: one SSBO, each pass binds its range */
     Json *wj = jreq(m, "weights");
@@ -337,8 +352,9 @@ int main(int argc, char **argv) {
     glGenBuffers(1, &ssbo);
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, ssbo);
     glBufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)(w_bytes ? w_bytes : 16), weights, GL_STATIC_DRAW);
+    free(weights);
 
-    /* the passes, in order */
+    /* step 3 (rho) and 4: the passes, in order */
     Json *passes = jreq(m, "passes");
     for (int i = 0; i < passes->n; i++) {
         Json *ps = passes->items[i];
@@ -379,22 +395,318 @@ int main(int argc, char **argv) {
         glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
         glDeleteProgram(prog);
     }
+    *n_passes = passes->n;
 
-    /* the output: lane 0 of layer 0 of the first output texture, background 1 */
+    /* the output: lane 0 of layer 0 of the first output texture */
     Texture *res = find_texture(tex, n_tex, jstr(jreq(m, "outputs")->items[0], "texture"));
+    if (res->w != w || res->h != h) die("output texture %s is %dx%d, expected %dx%d", res->id, res->w, res->h, w, h);
     float *rgba = xmalloc(sizeof(float) * 4 * (size_t)res->w * res->h * (size_t)res->layers);
     glBindTexture(GL_TEXTURE_2D_ARRAY, res->tex);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glGetTexImage(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA, GL_FLOAT, rgba);
+    float *y = xmalloc(sizeof(float) * px);
+    for (size_t i = 0; i < px; i++) y[i] = rgba[i * 4];
+    free(rgba);
+    for (int i = 0; i < n_tex; i++) glDeleteTextures(1, &tex[i].tex);
+    glDeleteBuffers(1, &ssbo);
+    free(tex);
+    return y;
+}
+
+/* Steps 1-2 on a G-buffer of w x h pixels, row 0 on top: mean foreground depth m (double, as the
+ * Python reference), the input planes (z / m, n on foreground, 0 on background; extra planes after). */
+static double mean_depth_of(const float *depth, const float *mask, size_t px) {
+    double sum = 0.0;
+    long count = 0;
+    for (size_t i = 0; i < px; i++)
+        if (mask[i] >= 0.5f) sum += depth[i], count++;
+    return count ? sum / (double)count : 1.0;
+}
+
+/* ------------------------------------------------------------------ the internal-resolution passes */
+
+typedef struct {
+    GLuint position, normal;  /* full-resolution G-buffer, RGBA32F, GL order */
+    GLuint vao;
+    const char *vertex;
+    int W, H;
+} Frame;
+
+static void draw_fullscreen(GLuint prog, GLuint *targets, int n_targets, int w, int h) {
+    GLuint fbo;
+    glGenFramebuffers(1, &fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    GLenum bufs[4];
+    for (int i = 0; i < n_targets; i++) {
+        glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0 + (GLenum)i, GL_TEXTURE_2D, targets[i], 0);
+        bufs[i] = GL_COLOR_ATTACHMENT0 + (GLenum)i;
+    }
+    glDrawBuffers(n_targets, bufs);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) die("incomplete framebuffer");
+    glViewport(0, 0, w, h);
+    glUseProgram(prog);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glUseProgram(0);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glDeleteFramebuffers(1, &fbo);
+}
+
+static char *pass_source(const char *folder, const Json *sources, const char *key) {
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", folder, jstr(sources, key));
+    return read_file(path, NULL);
+}
+
+/* The export's GTAO pass (manifest "gtao") at W x H: gtao.frag, then gtao_blur.frag when it has one.
+ * Returns the R32F GTAO texture. Uniforms with a "value" are set as given; the three with a formula
+ * are the ones runtime.baselines computes from the frame (u_proj, u_radius, u_pixels_per_unit). */
+static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, const Json *g, double radius,
+                       double yfov) {
+    Json *noise = jreq(g, "noise"), *texels = jreq(noise, "texels");
+    const int nw = (int)jnum(noise, "width"), nh = (int)jnum(noise, "height");
+    if (texels->n != nw * nh * 4) die("manifest: the GTAO noise tile has %d values, not %d", texels->n, nw * nh * 4);
+    float *tile = xmalloc(sizeof(float) * (size_t)texels->n);
+    for (int i = 0; i < texels->n; i++) tile[i] = (float)texels->items[i]->num;
+    GLuint noise_tex = texture_2d(nw, nh, GL_RGBA32F, GL_RGBA, tile);
+    free(tile);
+    GLuint raw = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
+    const double focal = 1.0 / tan(0.5 * yfov), p00 = focal / ((double)f->W / f->H), p11 = focal;
+
+    char *frag = pass_source(folder, sources, "gtao");
+    GLuint prog = compile_pipeline(f->vertex, frag, jstr(sources, "gtao"));
+    free(frag);
+    glUseProgram(prog);
+    Json *uniforms = jreq(g, "uniforms");
+    for (int k = 0; k < uniforms->n; k++) {
+        const char *name = uniforms->keys[k];
+        GLint loc = glGetUniformLocation(prog, name);
+        Json *value = jget(uniforms->items[k], "value");
+        if (value) glUniform1f(loc, (float)value->num);
+        else if (!strcmp(name, "u_proj")) glUniform2f(loc, (float)p00, (float)p11);
+        else if (!strcmp(name, "u_radius")) glUniform1f(loc, (float)radius);
+        else if (!strcmp(name, "u_pixels_per_unit")) glUniform1f(loc, (float)(0.5 * f->H * p11));
+        else die("manifest: GTAO uniform %s has a formula this host does not know", name);
+    }
+    const char *bound[] = {"u_position", "u_normal", "u_noise", "u_raw"};
+    GLuint by_name[] = {f->position, f->normal, noise_tex, raw};
+    Json *blur = jget(g, "blur");
+    const Json *stages[2] = {jreq(g, "textures"), blur && blur->type == J_OBJ ? jreq(blur, "textures") : NULL};
+    GLuint out = raw;
+    for (int s = 0; s < 2 && stages[s]; s++) {
+        if (s == 1) {
+            out = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
+            frag = pass_source(folder, sources, "gtao_blur");
+            glDeleteProgram(prog);
+            prog = compile_pipeline(f->vertex, frag, jstr(sources, "gtao_blur"));
+            free(frag);
+        }
+        for (int k = 0; k < stages[s]->n; k++) {
+            int which = -1;
+            for (int b = 0; b < 4; b++) if (!strcmp(stages[s]->keys[k], bound[b])) which = b;
+            if (which < 0) die("manifest: GTAO texture %s is not one this host has", stages[s]->keys[k]);
+            glActiveTexture(GL_TEXTURE0 + (GLenum)stages[s]->items[k]->num);
+            glBindTexture(GL_TEXTURE_2D, by_name[which]);
+        }
+        glActiveTexture(GL_TEXTURE0);
+        draw_fullscreen(prog, &out, 1, f->W, f->H);
+    }
+    glDeleteProgram(prog);
+    glDeleteTextures(1, &noise_tex);
+    if (out != raw) glDeleteTextures(1, &raw);
+    return out;
+}
+
+/* The whole frame at the manifest's internal resolution: (GTAO,) downsample, network, upsample (, clamp).
+ * gb: W x H x 5 floats, row 0 on top. Returns AO W x H, row 0 on top, 1 on background. */
+static float *run_internal(const Json *m, const char *dir, const Json *ir, const float *gb,
+                           int W, int H, double radius, double yfov, int *n_passes) {
+    char folder[4200];
+    snprintf(folder, sizeof folder, "%s/%s", dir, jstr(ir, "folder"));
+    Json *sources = jreq(ir, "sources");
+    const int hybrid = jget(sources, "gtao") != NULL;
+    if (hybrid && !jget(ir, "gtao")) die("manifest: a gtao source without its \"gtao\" entry");
+    const int ih = (int)jnum(ir, "height");
+    const int lh = ih, lw = (int)fmax(1.0, rint((double)W * ih / H));  /* round half to even, as Python */
+    const size_t px = (size_t)W * H, lpx = (size_t)lw * lh;
+
+    /* the full-resolution G-buffer as runtime.baselines.gbuffer_textures builds it, GL order */
+    float *pos = xmalloc(sizeof(float) * 4 * px), *nrm = xmalloc(sizeof(float) * 4 * px);
+    const double t = tan(0.5 * yfov);
+    for (int r = 0; r < H; r++) {
+        const double yc = (1.0 - (r + 0.5) / H * 2.0) * t;
+        for (int c = 0; c < W; c++) {
+            const float *g = gb + ((size_t)r * W + c) * 5;
+            float *p = pos + ((size_t)(H - 1 - r) * W + c) * 4, *n = nrm + ((size_t)(H - 1 - r) * W + c) * 4;
+            if (!(g[4] >= 0.5f)) continue;
+            const double xc = ((c + 0.5) / W * 2.0 - 1.0) * t * ((double)W / H), z = g[0];
+            p[0] = (float)(xc * z), p[1] = (float)(yc * z), p[2] = (float)(-z), p[3] = 1.0f;
+            for (int k = 0; k < 3; k++) n[k] = isfinite(g[1 + k]) ? g[1 + k] : 0.0f;
+        }
+    }
+    GLuint vao;
+    glGenVertexArrays(1, &vao);
+    glBindVertexArray(vao);
+    Frame f = {texture_2d(W, H, GL_RGBA32F, GL_RGBA, pos), texture_2d(W, H, GL_RGBA32F, GL_RGBA, nrm), vao,
+               pass_source(folder, sources, "vertex"), W, H};
+    glDisable(GL_DEPTH_TEST), glDisable(GL_BLEND), glDisable(GL_CULL_FACE), glDisable(GL_SCISSOR_TEST);
+
+    /* hybrid, first: GTAO at the frame's own resolution */
+    GLuint gtao_tex = 0;
+    float *gtao = NULL;
+    if (hybrid) {
+        gtao_tex = run_gtao(&f, folder, sources, jreq(ir, "gtao"), radius, yfov);
+        gtao = read_2d(gtao_tex, W, H, GL_RED, 1);
+    }
+
+    /* downsample.frag: point-sampled G-buffer at lw x lh */
+    GLuint low[2] = {texture_2d(lw, lh, GL_RGBA32F, GL_RGBA, NULL), texture_2d(lw, lh, GL_RGBA32F, GL_RGBA, NULL)};
+    char *frag = pass_source(folder, sources, "downsample");
+    GLuint prog = compile_pipeline(f.vertex, frag, jstr(sources, "downsample"));
+    free(frag);
+    glActiveTexture(GL_TEXTURE0), glBindTexture(GL_TEXTURE_2D, f.position);
+    glActiveTexture(GL_TEXTURE1), glBindTexture(GL_TEXTURE_2D, f.normal);
+    glUseProgram(prog);
+    glUniform2i(glGetUniformLocation(prog, "u_low_size"), lw, lh);
+    draw_fullscreen(prog, low, 2, lw, lh);
+    glDeleteProgram(prog);
+    float *lpos = read_2d(low[0], lw, lh, GL_RGBA, 4), *lnrm = read_2d(low[1], lw, lh, GL_RGBA, 4);
+
+    /* the network's input at lw x lh, row 0 on top: depth -z / m, normal, (GTAO at the same texels) */
+    const int channels = hybrid ? 5 : 4;
+    float *planes = xmalloc(sizeof(float) * (size_t)channels * lpx), *ldepth = xmalloc(sizeof(float) * lpx);
+    float *lmask = xmalloc(sizeof(float) * lpx), *lgtao = xmalloc(sizeof(float) * lpx);
+    for (int r = 0; r < lh; r++)
+        for (int c = 0; c < lw; c++) {
+            const size_t top = (size_t)r * lw + c, gl_i = (size_t)(lh - 1 - r) * lw + c;
+            lmask[top] = lpos[gl_i * 4 + 3], ldepth[top] = -lpos[gl_i * 4 + 2];
+            if (hybrid) {  /* the full-resolution pixel downsample.frag read for this texel, GL order */
+                const long qx = (2L * c + 1) * W / (2L * lw), qy = (2L * (lh - 1 - r) + 1) * H / (2L * lh);
+                lgtao[top] = gtao[(size_t)qy * W + (size_t)qx];
+            }
+        }
+    const double mean = mean_depth_of(ldepth, lmask, lpx);
+    const float m32 = (float)mean;
+    for (size_t i = 0; i < lpx; i++) {
+        const int fg = lmask[i] >= 0.5f;
+        const size_t r = i / (size_t)lw, c = i % (size_t)lw, gl_i = ((size_t)lh - 1 - r) * (size_t)lw + c;
+        planes[i] = fg ? ldepth[i] / m32 : 0.0f;
+        for (int k = 0; k < 3; k++) planes[(size_t)(1 + k) * lpx + i] = fg ? lnrm[gl_i * 4 + (size_t)k] : 0.0f;
+        if (hybrid) planes[4 * lpx + i] = fg ? lgtao[i] : 1.0f;
+    }
+    const float rho = (float)(radius / (mean * tan(0.5 * yfov)));
+    float *y = run_network(m, dir, lw, lh, planes, channels, rho, n_passes);
+
+    /* upsample.frag: the AO (hybrid: its correction to the point-sampled GTAO) to W x H, GL order */
+    float *low_ao = xmalloc(sizeof(float) * lpx);
+    for (size_t i = 0; i < lpx; i++) {
+        const size_t r = i / (size_t)lw, c = i % (size_t)lw, gl_i = ((size_t)lh - 1 - r) * (size_t)lw + c;
+        const float ao = lmask[i] >= 0.5f ? y[i] : 1.0f;
+        low_ao[gl_i] = hybrid ? ao - (lmask[i] >= 0.5f ? lgtao[i] : 1.0f) : ao;
+    }
+    GLuint low_ao_tex = texture_2d(lw, lh, GL_R32F, GL_RED, low_ao), up = texture_2d(W, H, GL_R32F, GL_RED, NULL);
+    frag = pass_source(folder, sources, "upsample");
+    prog = compile_pipeline(f.vertex, frag, jstr(sources, "upsample"));
+    free(frag);
+    const GLuint units[5] = {0, 1, 4, 5, 6}, texs[5] = {f.position, f.normal, low_ao_tex, low[0], low[1]};
+    for (int k = 0; k < 5; k++) glActiveTexture(GL_TEXTURE0 + units[k]), glBindTexture(GL_TEXTURE_2D, texs[k]);
+    glActiveTexture(GL_TEXTURE0);
+    draw_fullscreen(prog, &up, 1, W, H);
+    glDeleteProgram(prog);
+    float *upsampled = read_2d(up, W, H, GL_RED, 1);
+
+    /* the AO, row 0 on top: hybrid clamp(GTAO + correction, 0, 1); background 1 */
+    float *ao = xmalloc(sizeof(float) * px);
+    for (int r = 0; r < H; r++)
+        for (int c = 0; c < W; c++) {
+            const size_t top = (size_t)r * W + c, gl_i = (size_t)(H - 1 - r) * W + c;
+            float v = upsampled[gl_i];
+            if (hybrid) v = fminf(fmaxf(gtao[gl_i] + v, 0.0f), 1.0f);
+            ao[top] = gb[top * 5 + 4] >= 0.5f ? v : 1.0f;
+        }
+    *n_passes += 2 + (hybrid ? 1 + (jget(sources, "gtao_blur") ? 1 : 0) : 0);
+    free(pos), free(nrm), free(lpos), free(lnrm), free(planes), free(ldepth), free(lmask), free(lgtao);
+    free(y), free(low_ao), free(upsampled), free(gtao);
+    return ao;
+}
+
+/* ------------------------------------------------------------------ main */
+
+int main(int argc, char **argv) {
+    if (argc != 8) {
+        fprintf(stderr, "usage: neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV_DEG OUT.f32\n"
+                        "  GBUFFER.f32: HEIGHT x WIDTH x (depth, nx, ny, nz, mask) float32, row 0 on top\n");
+        return 2;
+    }
+    const int W = atoi(argv[3]), H = atoi(argv[4]);
+    const double radius = atof(argv[5]), yfov_deg = atof(argv[6]);
+    const double yfov = yfov_deg * 3.14159265358979323846 / 180.0; /* degrees, as on every neuralao command */
+    if (W < 1 || H < 1) die("WIDTH and HEIGHT must be positive");
+    if (!(radius > 0) || !(yfov_deg > 0 && yfov_deg < 180)) die("RADIUS must be > 0 and YFOV_DEG in (0, 180) degrees");
+
+    /* the export: glsl/manifest.json under EXPORT_DIR (and EXPORT_DIR/manifest.json, whose
+     * "internal_resolution" names the fragment passes around the network), or EXPORT_DIR/manifest.json */
+    char dir[4096], path[4200];
+    snprintf(dir, sizeof dir, "%s/glsl", argv[1]);
+    snprintf(path, sizeof path, "%s/manifest.json", dir);
+    FILE *probe = fopen(path, "rb");
+    Json *internal = NULL;
+    if (probe) {
+        fclose(probe);
+        char top_path[4200];
+        snprintf(top_path, sizeof top_path, "%s/manifest.json", argv[1]);
+        FILE *top = fopen(top_path, "rb");
+        if (top) {
+            fclose(top);
+            Reader tr = {read_file(top_path, NULL)};
+            internal = jget(parse_value(&tr), "internal_resolution");
+            if (internal && internal->type != J_OBJ) internal = NULL;  /* null: the frame's own size */
+        }
+    } else {
+        snprintf(dir, sizeof dir, "%s", argv[1]);
+    }
+    snprintf(path, sizeof path, "%s/manifest.json", dir);
+    char *text = read_file(path, NULL);
+    Reader rd = {text};
+    Json *m = parse_value(&rd);
+    if (strcmp(jstr(m, "format"), "neuralao-glsl-compute")) die("%s is not a GLSL compute export", path);
+
+    size_t gb_bytes;
+    float *gb = (float *)read_file(argv[2], &gb_bytes);
+    if (gb_bytes != (size_t)W * H * 5 * sizeof(float))
+        die("%s holds %zu bytes, a %dx%d G-buffer of 5 floats a pixel needs %zu", argv[2], gb_bytes, W, H,
+            (size_t)W * H * 5 * sizeof(float));
+
+    egl_context();
+    int n_passes = 0;
+    float *ao;
+    if (internal) {
+        ao = run_internal(m, dir, internal, gb, W, H, radius, yfov, &n_passes);
+    } else {
+        if ((int)jnum(jreq(m, "input"), "channels") != 4)
+            die("a hybrid export runs its GTAO pass at an internal resolution; this one declares none");
+        /* steps 1-3 at the frame's own size: mean depth, input planes, rho */
+        const size_t px = (size_t)W * H;
+        float *planes = xmalloc(sizeof(float) * 4 * px), *depth = xmalloc(sizeof(float) * px);
+        float *mask = xmalloc(sizeof(float) * px);
+        for (size_t i = 0; i < px; i++) depth[i] = gb[i * 5], mask[i] = gb[i * 5 + 4];
+        const double mean = mean_depth_of(depth, mask, px);
+        const float m32 = (float)mean;
+        for (size_t i = 0; i < px; i++)
+            if (mask[i] >= 0.5f)
+                for (int k = 0; k < 4; k++) planes[(size_t)k * px + i] = k ? gb[i * 5 + (size_t)k] : gb[i * 5] / m32;
+        const float rho = (float)(radius / (mean * tan(0.5 * yfov)));
+        ao = run_network(m, dir, W, H, planes, 4, rho, &n_passes);
+        for (size_t i = 0; i < px; i++) if (!(mask[i] >= 0.5f)) ao[i] = 1.0f;
+        free(planes), free(depth), free(mask);
+    }
     if (glGetError() != GL_NO_ERROR) die("OpenGL reported an error");
-    float *ao = xmalloc(sizeof(float) * (size_t)W * H);
-    for (long i = 0; i < (long)W * H; i++) ao[i] = gb[i * 5 + 4] >= 0.5f ? rgba[i * 4] : 1.0f;
+
     char tmp[4200];
     snprintf(tmp, sizeof tmp, "%s.tmp", argv[7]);
     FILE *f = fopen(tmp, "wb");
     if (!f || fwrite(ao, sizeof(float), (size_t)W * H, f) != (size_t)W * H || fclose(f)) die("cannot write %s", tmp);
     if (rename(tmp, argv[7])) die("cannot rename %s to %s", tmp, argv[7]);
-    fprintf(stderr, "neuralao_host: %dx%d, mean depth %.6g, rho %.6g, %d passes -> %s\n", W, H, mean_depth, rho,
-            passes->n, argv[7]);
+    fprintf(stderr, "neuralao_host: %dx%d%s, %d passes -> %s\n", W, H, internal ? " (internal resolution)" : "",
+            n_passes, argv[7]);
     return 0;
 }
