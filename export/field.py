@@ -31,7 +31,9 @@ import numpy as np
 import onnx
 import torch
 
+from export.glsl import InputBinding, generate_vector_fragment, load_mlp_export, write_mlp_export
 from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest
+from export.mlp import parity_export, parity_frames, pixel_errors
 from export.onnx_io import ort_session, save_onnx, weighted_layers
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
@@ -45,6 +47,7 @@ from pipeline.models.field import (
     predict,
     size_name,
 )
+from runtime.glsl_runner import run_vector_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
 from runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs  # noqa: F401
@@ -63,8 +66,6 @@ TEXTURES = {
 
 
 def bindings():
-    from export.glsl import InputBinding
-
     return {POSITION: InputBinding("position", "xyz"), NORMAL: InputBinding("normal", "xyz")}
 
 
@@ -170,8 +171,6 @@ def check_backends(model: FieldNet, onnx_path: Path, seed: int = 0) -> dict:
 
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, description: str) -> dict:
-    from export.glsl import generate_vector_fragment, write_mlp_export
-
     shader = generate_vector_fragment(proto, bindings(), kind="field", description=description)
     for name, text in TEXTURES.items():
         shader.manifest["textures"][name]["semantics"] = text
@@ -253,10 +252,6 @@ def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ..
     Raw outputs compared on every foreground pixel (gate TOL.parity_mlp_fp32); background must be
     exactly 1. No fp16 variant: half-float positions would move points by ~1e-3 of the box, which is
     a different input, not storage rounding. Returns figures with ``passed``."""
-    from export.glsl import load_mlp_export
-    from export.mlp import parity_export, parity_frames, pixel_errors
-    from runtime.glsl_runner import run_vector_fragment
-
     export_dir = Path(export_dir)
     manifest, proto, glsl_dir = parity_export(export_dir, "field", "a field", check_field_onnx)
     frames, source = parity_frames(export_dir, manifest, frames)

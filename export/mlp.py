@@ -30,10 +30,12 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
+import cv2
 import numpy as np
 import onnx
 import torch
 
+from export.glsl import generate_mlp_fragment, load_mlp_export, write_mlp_export
 from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest, read_manifest
 from export.onnx_io import (
     backend_checks,
@@ -45,6 +47,9 @@ from export.onnx_io import (
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import write_json
 from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import orbit
+from pipeline.geometry.scene import load_scene
 from pipeline.models.mlp import (
     CIRCLE_SAMPLES,
     INPUTS,
@@ -57,6 +62,7 @@ from pipeline.models.mlp import (
     radius_zero_inputs,
     size_name,
 )
+from runtime.glsl_runner import run_mlp_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
 from runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals  # noqa: F401
@@ -167,10 +173,8 @@ def random_normals(n: int, seed: int = 0, radius_zero: bool = False) -> np.ndarr
 def _quiet_opencv() -> None:
     """OpenCV dnn logs a warning per network about setPreferableTarget; errors still surface."""
     try:
-        import cv2
-
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-    except (ImportError, AttributeError):
+    except AttributeError:  # a build without the logging utilities
         pass
 
 
@@ -220,8 +224,6 @@ def write_glsl(proto: onnx.ModelProto, out_dir: Path) -> dict:
 
     Returns the GLSL export's manifest (as written).
     """
-    from export.glsl import generate_mlp_fragment, write_mlp_export
-
     shader = generate_mlp_fragment(proto, dialect="glsl330")
     path = write_mlp_export(shader, out_dir)
     return json.loads(Path(path).read_text())
@@ -281,10 +283,6 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 
 def render_parity_frames(mesh: str, views: int = 2, size: tuple[int, int] = (128, 128)) -> list[dict]:
     """Real G-buffer frames of the training mesh: ``views`` orbit cameras (seed 2, not training cameras)."""
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
-
     scene = load_scene(mesh)
     with GBufferRenderer(scene) as renderer:
         frames = [renderer.render(cam) for cam in orbit(scene, views, size[0], size[1], seed=2)]
@@ -341,9 +339,6 @@ def parity(
     (seconds for 16x8, minutes for 64x32 uncached; Mesa's disk cache keeps it afterwards).
     Returns figures with ``passed``.
     """
-    from export.glsl import load_mlp_export
-    from runtime.glsl_runner import run_mlp_fragment
-
     export_dir = Path(export_dir)
     manifest, proto, glsl_dir = parity_export(export_dir, "mlp", "an MLP", check_mlp_onnx)
     if not (glsl_dir / "manifest.json").is_file():

@@ -26,8 +26,13 @@ from typing import Any
 import numpy as np
 import onnx
 from onnx import numpy_helper
+from onnx.backend.test.case import node
 
+from export.glsl import generate_compute
+from export.onnx_io import run_onnxruntime
 from pipeline.foundation.errors import NeuralaoError
+from runtime.glsl_runner import run_compute_all
+from runtime.wgsl_runner import run_wgsl_all
 
 log = logging.getLogger(__name__)
 
@@ -45,8 +50,6 @@ class NodeResult:
 
 def node_cases(ops: tuple[str, ...]) -> list[Any]:
     """onnx's single-node test cases (``onnx.backend.test.case.test_case.TestCase``) of ``ops``."""
-    from onnx.backend.test.case import node
-
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")
         cases = node.collect_testcases(None)
@@ -72,10 +75,6 @@ def _with_initializers(model: onnx.ModelProto, inputs: list[np.ndarray]) -> onnx
 
 def run_case(case: Any, dialect: str = "glsl430") -> NodeResult:
     """Lower, run and compare one node test case; ``dialect`` glsl430 runs on GL, wgsl on WebGPU."""
-    from export.glsl import generate_compute
-    from runtime.glsl_runner import run_compute_all
-    from runtime.wgsl_runner import run_wgsl_all
-
     run_program = run_wgsl_all if dialect == "wgsl" else run_compute_all
 
     op = case.model.graph.node[0].op_type
@@ -99,7 +98,6 @@ def run_case(case: Any, dialect: str = "glsl430") -> NodeResult:
         return NodeResult(
             case.name, op, "passed", max_abs_err=_max_err(got, dict(zip(names, expected, strict=False)))
         )
-    from export.onnx_io import run_onnxruntime
 
     ort = dict(
         zip(

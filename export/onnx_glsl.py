@@ -44,6 +44,17 @@ from pathlib import Path
 import numpy as np
 import onnx
 
+from export.glsl import (
+    DIALECTS,
+    MAX_TEXTURE_SIZE,
+    InputBinding,
+    generate_compute,
+    generate_vector_fragment,
+    load_compute_export,
+    load_mlp_export,
+    write_compute_export,
+    write_mlp_export,
+)
 from export.manifest import read_manifest as read_export_manifest
 from export.onnx_io import load_onnx, ort_session
 from pipeline.foundation.errors import NeuralaoError
@@ -63,8 +74,6 @@ _BIND = re.compile(
 
 def parse_bindings(texts: list[str]):
     """``INPUT=TEXTURE.CHANNELS[xREPEATS]`` strings -> {input: InputBinding}."""
-    from export.glsl import InputBinding
-
     out = {}
     for t in texts:
         m = _BIND.match(t)
@@ -96,8 +105,6 @@ def default_bindings(proto: onnx.ModelProto, given: dict):
     The texture name is the ONNX name as it is (ONNX input names are unique, so two inputs never share
     a texture by accident); it names the texture for the host and in the manifest only, the shader's
     samplers are generated (``u_tex<unit>``)."""
-    from export.glsl import InputBinding
-
     dims_of = _input_dims(proto)
     unknown = sorted(set(given) - set(dims_of))
     if unknown:
@@ -152,14 +159,6 @@ def export_model(
 ) -> dict:
     """Generate and write the export of a user's ONNX file; returns its manifest. ``hlsl_msl`` (image
     target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross)."""
-    from export.glsl import (
-        DIALECTS,
-        generate_compute,
-        generate_vector_fragment,
-        write_compute_export,
-        write_mlp_export,
-    )
-
     if target not in TARGETS:
         raise NeuralaoError(f"--target must be one of {TARGETS}, got {target!r}")
     if precision not in ("fp32", "fp16"):
@@ -277,6 +276,8 @@ def _positive_size(size: tuple[int, int], what: str = "--size") -> tuple[int, in
 def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tuple[int, int]:
     """(W, H) of the seeded image input: the declared static size, else ``size``, else DEFAULT_SIZE
     rounded up to the multiples the program takes; checked against the program and PARITY_MAX_BYTES."""
+    # Lazy, here and in parity: the runners load PyOpenGL, which fails to import without a GL library
+    # (and costs 0.15 s measured); `neuralao glsl` only writes shaders, parity runs them.
     from runtime.glsl_runner import size_multiples, texture_sizes
 
     fixed = (_static(dims[3]), _static(dims[2])) if len(dims) == 4 else (None, None)
@@ -307,8 +308,6 @@ def _vector_size(
     """(W, H) of the textures, checked against the texture limit and PARITY_MAX_BYTES (textures, the
     per-pixel inputs and the widest layer, twice: onnxruntime holds an operand and a result). ``what``
     names where the size came from in errors."""
-    from export.glsl import MAX_TEXTURE_SIZE
-
     w, h = DEFAULT_SIZE if size is None else _positive_size(size, what)
     if w > MAX_TEXTURE_SIZE or h > MAX_TEXTURE_SIZE:
         raise NeuralaoError(f"{what} {w} {h}: textures are at most {MAX_TEXTURE_SIZE} wide and high")
@@ -361,7 +360,7 @@ def parity(
     ``size`` (W, H): of symbolic image dimensions / vector textures, checked before anything is
     allocated; None: the static size, else DEFAULT_SIZE (rounded up to the program's multiples).
     It must equal a static size, and is refused with ``inputs`` (whose arrays fix the size)."""
-    from export.glsl import load_compute_export, load_mlp_export
+    # Lazy: the runners need PyOpenGL and a GL library (see _image_size)
     from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names, texture_sizes
     from runtime.wgsl_runner import run_wgsl_all
 

@@ -12,11 +12,13 @@ import os
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import onnx
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
+from pipeline.foundation.tolerances import TOL
 from runtime.onnx_io import get_metadata as get_metadata  # re-exported (the exporters' one import)
 from runtime.onnx_io import load_onnx as load_onnx
 from runtime.onnx_io import ort_session as ort_session
@@ -64,8 +66,6 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
     (``onnxruntime_vs_torch``, ``opencv_vs_onnxruntime``) -> the result dict (``describe`` entries, worst of
     each, their tolerances: TOL.onnx_vs_torch for ``ref_max`` and the graph's depth, TOL.opencv_vs_onnx);
     either difference over its tolerance is a one-line error."""
-    from pipeline.foundation.tolerances import TOL
-
     result = {
         **describe,
         "onnxruntime_vs_torch": max(r["onnxruntime_vs_torch"] for r in rows),
@@ -90,8 +90,6 @@ def backend_checks(rows: list[dict], ref_max: float, onnx_path: str | os.PathLik
 
 def run_opencv(path: str | os.PathLike, inputs: dict[str, np.ndarray]) -> np.ndarray:
     """Second consumer: OpenCV's dnn module (its own importer and kernels). Returns the first output."""
-    import cv2
-
     try:
         net = cv2.dnn.readNetFromONNX(str(path))
     except cv2.error as e:

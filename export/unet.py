@@ -14,15 +14,19 @@ generator knows.
 
 from __future__ import annotations
 
+import io
 import logging
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import onnx
 import torch
+from onnx import numpy_helper
 
+from export.glsl import generate_compute, write_compute_export
 from export.manifest import OPSET, read_manifest
 from export.onnx_io import (
     backend_checks,
@@ -31,8 +35,11 @@ from export.onnx_io import (
     save_onnx,
 )
 from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import sha256_file, write_json
+from pipeline.foundation.io import sha256_file, write_json, write_text
 from pipeline.foundation.tolerances import TOL
+from pipeline.gbuffers.rasterizer import render_gbuffer
+from pipeline.geometry.camera import interior, orbit
+from pipeline.geometry.scene import load_scene
 from pipeline.models.checkpoint import count_parameters
 from pipeline.models.unet import (
     HYBRID_DESCRIPTION,
@@ -40,9 +47,14 @@ from pipeline.models.unet import (
     PREPROCESS_DESCRIPTION,
     PREPROCESS_VERSION,
     UNet,
+    depth_scale,
     predict,
     preprocess_frame,
 )
+from pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
+from runtime.baselines import GTAOSettings, blur_source, fragment_source, gtao_pass_description, run_gtao
+from runtime.glsl_runner import load_compute_export, run_compute
+from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for the export checks and callers.
 from runtime.predict import (  # noqa: F401
@@ -77,8 +89,6 @@ PARITY_SIZES: tuple[tuple[int, int], ...] = ((96, 72), (101, 67))
 
 def load_model(ckpt_path: str | Path) -> tuple[UNet, dict]:
     """(model in eval mode, checkpoint dict) from a U-Net checkpoint (weights_only load, kind checked)."""
-    from pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
-
     ckpt = load_checkpoint(ckpt_path)
     return model_from_checkpoint(ckpt), ckpt
 
@@ -135,8 +145,6 @@ def _input_names(model: UNet) -> list[str]:
 
 def export_onnx(model: UNet, path: str | Path, metadata: dict | None = None) -> onnx.ModelProto:
     """TorchScript exporter (``dynamo=False``), opset 17, dynamic H and W; checked and written atomically."""
-    import io
-
     model = model.eval()
     buf = io.BytesIO()
     with torch.no_grad():
@@ -158,8 +166,6 @@ def export_onnx(model: UNet, path: str | Path, metadata: dict | None = None) -> 
 
 def constants_to_initializers(proto: onnx.ModelProto) -> onnx.ModelProto:
     """Move ``Constant`` nodes (tensor values) into graph initializers, in place; returns ``proto``."""
-    from onnx import numpy_helper
-
     dtypes = {
         "value_float": np.float32,
         "value_floats": np.float32,
@@ -193,8 +199,6 @@ def export_onnx_dynamo(
     H and W are dynamic as ``pad_multiple * k``; the symbolic dim names are renamed to height/width.
     Written (checked, atomically) when ``path`` is given.
     """
-    import warnings
-
     model = model.eval()
     m = model.pad_multiple
     h = torch.export.Dim("h", min=1, max=4096)
@@ -229,8 +233,6 @@ def opencv_runner(path: str | Path) -> Runner:
 
 
 def glsl_runner(glsl_dir: str | Path) -> Runner:
-    from runtime.glsl_runner import load_compute_export, run_compute
-
     program = load_compute_export(glsl_dir)
     return lambda xp, rho: run_compute(
         program, np.ascontiguousarray(xp, dtype=np.float32), scalars={RADIUS: rho}
@@ -299,10 +301,6 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
     hybrid also gets the GTAO pass it refines (runtime.baselines' shaders, default settings: the
     ones :func:`runtime.predict.unet_predictor` runs) and an upsampling pass that leaves GTAO alone
     where no foreground texel is in reach."""
-    from pipeline.foundation.io import write_text
-    from runtime.baselines import GTAOSettings, blur_source, fragment_source, gtao_pass_description
-    from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
-
     folder = glsl_dir / "internal"
     sources = {"vertex": "fullscreen.vert", "downsample": "downsample.frag", "upsample": "upsample.frag"}
     texts = {
@@ -349,8 +347,6 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
 
 def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:
     """Generate the compute passes from the ONNX graph and write them (and their manifest) to ``out_dir``."""
-    from export.glsl import generate_compute, write_compute_export
-
     program = generate_compute(proto, precision=precision)
     write_compute_export(program, out_dir)
     return out_dir
@@ -426,10 +422,6 @@ def crop_frame(frame: dict, width: int, height: int) -> dict:
 
 def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
     """Two real G-buffer frames (an orbit of a closed mesh, an interior view) when no dataset is given."""
-    from pipeline.gbuffers.rasterizer import render_gbuffer
-    from pipeline.geometry.camera import interior, orbit
-    from pipeline.geometry.scene import load_scene
-
     w, h = size
     frames = []
     for name, cams in (("spot", orbit), ("cornell_box", interior)):
@@ -444,9 +436,6 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
 def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
     """GTAO (runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
     :func:`pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
-    from pipeline.models.unet import depth_scale
-    from runtime.baselines import run_gtao
-
     radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))
     return run_gtao(frame, radius)
 

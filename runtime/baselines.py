@@ -35,6 +35,7 @@ from pipeline.foundation.errors import NeuralaoError
 from runtime import gl
 from runtime.baseline_templates import fill
 from runtime.gl import GL
+from runtime.glsl_runner import time_vertex_colour
 
 Method = Literal["ssao", "gtao"]
 
@@ -421,7 +422,6 @@ def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: 
     """Median seconds per frame of the GL vertex-colour draw of the mesh (the engine's baked AO)."""
     # Import cost: runtime.glsl_runner loads the GLSL generator and onnx (~1.7 s measured), which the
     # screen-space baselines never need.
-    from runtime.glsl_runner import time_vertex_colour
 
     return time_vertex_colour(scene, camera, repeats=repeats, ao=vertex_ao)
 

@@ -37,9 +37,11 @@ from pipeline.foundation.limits import (
     check_seed,
 )
 from pipeline.foundation.settings import settings_to_dict
+from pipeline.gbuffers.rasterizer import GBufferRenderer
 from pipeline.geometry.camera import Camera, load_poses, orbit
 from pipeline.geometry.scene import Scene, load_scene
 from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, label_fields
+from runtime.gl import context
 
 log = logging.getLogger(__name__)
 # PyOpenGL logs "No OpenGL_accelerate module loaded" at INFO on import; it is expected and not news.
@@ -221,10 +223,6 @@ def render_views(
     scene units) and ``gl`` (platform, version, renderer). Bad settings raise :class:`NeuralaoError`
     before anything is written.
     """
-    # Measured: ~0.5 s to import (PyOpenGL); only rendering needs it
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from runtime.gl import context  # PyOpenGL as above
-
     if not cameras:
         raise NeuralaoError("no cameras to render")
     labeller = Labeller(scene, label_settings)

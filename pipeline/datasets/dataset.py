@@ -498,7 +498,8 @@ class _ShardWorker:
     """A worker's state for one scene: its G-buffer renderer and labeller (built where it runs)."""
 
     def __init__(self, payload: tuple[Scene, LabelSettings]):
-        # Measured: ~0.5 s to import (PyOpenGL); only rendering needs it
+        # Lazy: PyOpenGL (0.16 s measured, and a GL library) is needed only where a shard renders; a
+        # Ray driver and U-Net training read datasets without it.
         from pipeline.gbuffers.rasterizer import GBufferRenderer
 
         scene, labels = payload

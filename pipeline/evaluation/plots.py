@@ -23,7 +23,10 @@ import logging
 import math
 from pathlib import Path
 
+from pipeline.evaluation.categories import markdown as evaluation_markdown
+from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import atomic_path
+from runtime.shipped import read_index
 
 log = logging.getLogger(__name__)
 
@@ -63,9 +66,6 @@ def shipped_summary(models_dir: str | Path) -> dict:
     train_fraction, corpus_size + corpus_unit, test {ssim, rmse, per_radius, ...}, gl_seconds,
     history [{epoch, wall_seconds, val_ssim, ...}].
     """
-    from pipeline.foundation.errors import NeuralaoError
-    from runtime.shipped import read_index
-
     folder = Path(models_dir)
     out: dict = {
         "folder": str(folder),
@@ -120,7 +120,7 @@ def shipped_summary(models_dir: str | Path) -> dict:
 
 
 def _pyplot():
-    import matplotlib
+    import matplotlib  # lazy: matplotlib + pyplot cost 0.6 s measured; only the plots need them
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -215,7 +215,7 @@ def corpus_size_plot(shipped: dict, path: Path) -> Path | None:
 
 def _plain_log_ticks(ax, at: list[float] | None = None) -> None:
     """Log x axis labelled in plain numbers: at ``at`` (the data), else at 1, 2, 5 x 10^k."""
-    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter  # lazy, as _pyplot
 
     ax.xaxis.set_major_locator(FixedLocator(sorted(set(at))) if at else LogLocator(subs=(1.0, 2.0, 5.0)))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
@@ -347,8 +347,6 @@ def shipped_markdown(shipped: dict | None, figures: dict) -> list[str]:
     for name, m in shipped["models"].items():
         evaluation = m.get("evaluation")
         if evaluation and evaluation.get("methods"):
-            from pipeline.evaluation.categories import markdown as evaluation_markdown
-
             lines += [
                 "",
                 f"### {name} where users run it (`neuralao evaluate`: test meshes by category and "

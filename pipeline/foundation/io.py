@@ -8,14 +8,20 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io as _io
 import json
 import os
+import struct
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from PIL import Image
+
+from pipeline.foundation.errors import NeuralaoError
 
 
 @contextlib.contextmanager
@@ -83,9 +89,6 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
     ``np.savez`` stamps each member with the current time, so two identical datasets would hash
     differently; here every member gets a fixed timestamp and members are sorted by name.
     """
-    import io as _io
-    import zipfile
-
     with atomic_path(path) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
             for name in sorted(arrays):
@@ -100,8 +103,6 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
 
 def read_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Load every array of an npz (no pickles); a truncated or corrupt file is a one-line error."""
-    from pipeline.foundation.errors import NeuralaoError
-
     try:  # our own handle: np.load leaves its file open when the zip directory is unreadable
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
@@ -113,8 +114,6 @@ def read_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:
     """Write an (H, W) or (H, W, 3|4) image; float input in [0, 1] is quantised to 8 bits."""
-    from PIL import Image
-
     img = np.asarray(image)
     if img.dtype != np.uint8:
         img = (np.clip(np.nan_to_num(img), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
@@ -131,8 +130,6 @@ def write_exr(path: str | os.PathLike, image: np.ndarray) -> None:
     ending in a zero byte, one uint64 offset per scanline, then each scanline as int32 y, int32 byte
     count and the line's pixels channel by channel, channels in alphabetical order.
     """
-    import struct
-
     img = np.asarray(image, dtype=np.float32)
     if img.ndim == 2:
         img = img[..., None]

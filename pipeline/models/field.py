@@ -49,7 +49,9 @@ from typing import Literal
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
 
+from pipeline.datasets.dataset import frame_seed, open_dataset, scene_of
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.limits import (
     MAX_CAP,
@@ -60,14 +62,19 @@ from pipeline.foundation.limits import (
     check_pixels,
     check_seed,
 )
-from pipeline.foundation.settings import settings_to_dict
+from pipeline.foundation.metrics import masked_rmse, masked_ssim
+from pipeline.foundation.settings import from_dict, settings_to_dict
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import interior, orbit
+from pipeline.geometry.scene import load_scene
+from pipeline.geometry.surface import surface_samples
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from pipeline.models.mlp import (  # count_parameters: trainable weights only
     count_parameters,
     size_name,
 )
-from pipeline.tracing.labeller import LabelSettings
+from pipeline.tracing.labeller import Labeller, LabelSettings
 
 log = logging.getLogger(__name__)
 
@@ -254,9 +261,6 @@ def smooth_normals_at(scene, face: np.ndarray, bary: np.ndarray) -> np.ndarray:
 def two_sided_samples(scene, settings: FieldSettings, progress: bool = False) -> tuple[np.ndarray, ...]:
     """Surface samples on both sides, labelled. Returns position (m, 3), normal (m, 3) float32 and ao (m,)
     float32 of the valid ones, and counts (front valid, back valid, total per side)."""
-    from pipeline.geometry.surface import surface_samples
-    from pipeline.tracing.labeller import Labeller
-
     s = surface_samples(scene, settings.samples, settings.samples_per_face_cap, seed=settings.seed)
     smooth = smooth_normals_at(scene, s.face, s.bary)
     labeller = Labeller(scene, replace(settings.labels, seed=settings.seed))
@@ -272,11 +276,6 @@ def two_sided_samples(scene, settings: FieldSettings, progress: bool = False) ->
 
 def holdout_frames(scene, settings: FieldSettings) -> list[dict]:
     """Fully labelled orbit views of another phase than any sampling (evaluation only)."""
-    from pipeline.datasets.dataset import frame_seed
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import interior, orbit
-    from pipeline.tracing.labeller import Labeller
-
     if settings.holdout_views < 1:
         return []
     w, h = settings.holdout_size
@@ -396,8 +395,6 @@ def predict_frame(model: FieldNet, frame: dict) -> np.ndarray:
 
 def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress: bool = False):
     """Adam with cosine decay; returns (model with the best validation weights, info)."""
-    from tqdm import tqdm
-
     if settings.threads > 0:
         torch.set_num_threads(settings.threads)
     check_settings(settings)
@@ -467,8 +464,6 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
 
 def evaluate_frames(model: FieldNet | float, frames: list[dict]) -> dict:
     """Masked SSIM / RMSE over valid foreground pixels of held-back frames (``model`` a number: constant)."""
-    from pipeline.foundation.metrics import masked_rmse, masked_ssim
-
     rows = []
     for f in frames:
         valid = np.asarray(f["valid"], bool) & np.asarray(f["mask"], bool)
@@ -548,12 +543,8 @@ def model_from_checkpoint(ckpt: dict) -> FieldNet:
 def resolve_source(data, scene_name, mesh, settings: FieldSettings):
     """The Scene to train on, the settings and the held-back frames (None: render them): a dataset scene
     takes the dataset's label settings and its held-back views of that scene."""
-    from pipeline.geometry.scene import load_scene
-
     if mesh is not None:
         return load_scene(mesh), settings, None
-    from pipeline.datasets.dataset import open_dataset, scene_of
-    from pipeline.foundation.settings import from_dict
 
     ds = open_dataset(data)
     if scene_name not in ds.scenes:

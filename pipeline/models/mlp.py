@@ -72,12 +72,19 @@ from typing import Literal
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
 
+from pipeline.datasets.dataset import frame_seed, open_dataset
 from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.limits import SAMPLE_BYTES, THREAD_BYTES, check_count, check_pixels, check_seed
+from pipeline.foundation.metrics import image_ssim, masked_rmse, masked_ssim
 from pipeline.foundation.settings import settings_to_dict
+from pipeline.gbuffers.rasterizer import GBufferRenderer
+from pipeline.geometry.camera import orbit
+from pipeline.geometry.scene import load_scene
 from pipeline.models.checkpoint import count_parameters, per_mesh_checkpoint, restore_model, save_checkpoint
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from pipeline.tracing.labeller import LabelSettings
+from pipeline.tracing.labeller import Labeller, LabelSettings
 
 # The deployed input layout is the consumer runtime's (CIRCLE_SAMPLES normals, radius-zero input).
 from runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
@@ -341,10 +348,6 @@ def samples_from_dataset(
     data: str | Path, scene: str, settings: MLPSettings, progress: bool = False
 ) -> Samples:
     """Samples from the non-held-back views of ``scene`` in a dataset; its held-back views for evaluation."""
-    from tqdm import tqdm
-
-    from pipeline.datasets.dataset import open_dataset
-
     ds = open_dataset(data)
     if scene not in ds.scenes:
         raise NeuralaoError(f"scene {scene!r} is not in dataset {data} (it has: {', '.join(ds.scenes)})")
@@ -397,14 +400,6 @@ def label_pixels(labeller, frame: dict, pix: np.ndarray, seed: int) -> tuple[np.
 def samples_from_mesh(mesh: str | Path, settings: MLPSettings, progress: bool = False) -> Samples:
     """Render ``settings.views`` orbit views of a mesh, label only the drawn pixels; fully label held-back
     views."""
-    from tqdm import tqdm
-
-    from pipeline.datasets.dataset import frame_seed
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
-    from pipeline.tracing.labeller import Labeller
-
     scene = load_scene(mesh)
     w, h = settings.size
     hw, hh = settings.holdout_size
@@ -493,8 +488,6 @@ def train_model(samples: Samples, settings: MLPSettings, progress: bool = False)
 
 
 def _train_model(samples: Samples, settings: MLPSettings, progress: bool) -> tuple[BakedMLP, dict]:
-    from tqdm import tqdm
-
     if settings.max_iterations < 1 or settings.check_every < 1 or settings.patience < 1:
         raise NeuralaoError("max_iterations, check_every and patience must be >= 1")
     torch.manual_seed(settings.seed)
@@ -641,8 +634,6 @@ def predict_frame(
 def evaluate_frames(model: BakedMLP | float, frames: list[dict], radius: float = 0.0) -> dict:
     """Masked SSIM / RMSE (and whole-image SSIM) against ray-traced AO over valid foreground pixels,
     per frame and mean. ``model`` may be a number: the constant predictor (baseline)."""
-    from pipeline.foundation.metrics import image_ssim, masked_rmse, masked_ssim
-
     rows = []
     for f in frames:
         valid = np.asarray(f["valid"], dtype=bool) & np.asarray(f["mask"], dtype=bool)
@@ -738,8 +729,6 @@ def check_counts(s: MLPSettings) -> None:
     """Every count of the settings within what the machine can hold, before anything is rendered or
     allocated (pipeline.foundation.limits): the orbit's views and their samples, the view and held-back sizes,
     the batch, the network and the validation history; seed and threads."""
-    from pipeline.foundation.limits import SAMPLE_BYTES, THREAD_BYTES, check_count, check_pixels, check_seed
-
     check_count(
         "views", s.views, bytes_each=4096 + SAMPLE_BYTES * max(s.samples_per_view, 1), each="a view's samples"
     )

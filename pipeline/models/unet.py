@@ -50,6 +50,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.settings import from_dict
 
 # The input contract is the consumer runtime's (numpy only); re-exported for training and export.
 from runtime.unet_input import (  # noqa: F401
@@ -253,7 +254,6 @@ def build_model(model_args: dict | UNetArgs | None = None) -> UNet:
     """UNet from a ``model_args`` dict (as stored in checkpoints) or a :class:`UNetArgs`."""
     if isinstance(model_args, UNetArgs) or model_args is None:
         return UNet(model_args)
-    from pipeline.foundation.settings import from_dict
 
     model_args = dict(model_args)
     model_args.setdefault("radius_input", False)  # checkpoints from before the radius input

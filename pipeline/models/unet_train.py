@@ -21,8 +21,10 @@ equals uninterrupted bit for bit (same machine and thread count).
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,8 +33,11 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from tqdm import tqdm
 
+from pipeline.datasets.dataset import open_dataset
 from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.metrics import masked_rmse, masked_ssim
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from pipeline.models.checkpoint import restore_model, save_checkpoint
@@ -42,10 +47,13 @@ from pipeline.models.unet import (
     UNet,
     UNetArgs,
     build_model,
+    flip_input,
     frame_radius_param,
     model_args_dict,
     preprocess_frame,
 )
+from runtime.baselines import run_gtao
+from runtime.internal_resolution import downsample_frame, internal_size
 
 log = logging.getLogger(__name__)
 
@@ -241,8 +249,6 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept.
     """
-    from runtime.internal_resolution import downsample_frame, internal_size
-
     xs, ys, ms, gs, rhos, radii, names, scenes = [], [], [], [], [], [], [], []
     count = None
     for i, f in enumerate(frames):
@@ -254,8 +260,6 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
                 f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset"
             )
         if gtao:
-            from runtime.baselines import run_gtao
-
             f = f | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
         h, w = np.shape(f["depth"])
         lw, lh = internal_size(w, h, internal_height or None)
@@ -313,8 +317,6 @@ def load_dataset_frames(
     dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
     instead of read from disk again. ``internal_height`` and ``gtao``: see :func:`frames_to_set`.
     """
-    from pipeline.datasets.dataset import open_dataset
-
     ds = open_dataset(data)
     train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
     if not train_scenes:
@@ -459,8 +461,6 @@ def make_batch(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[str]]:
     """Crops + flips for samples ``idx`` of ``plan``: x (B, 4, c, c), rho (B, 1, 1, 1), y (B, 1, c, c)
     float32, m (B, 1, c, c) float32 0/1, names."""
-    from pipeline.models.unet import flip_input
-
     xs, rs, ys, ms, names = [], [], [], [], []
     for k in idx:
         f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
@@ -497,29 +497,12 @@ def lr_at(settings: UNetTrainSettings, step: int, total: int) -> float:
 # ----------------------------------------------------------------------------------------------- metrics
 
 
-def _metric_fns():
-    """masked_ssim / masked_rmse from pipeline.foundation.metrics (shared with the MLP and the report)."""
-    try:
-        from pipeline.foundation.metrics import masked_rmse, masked_ssim
-    except ImportError:  # TEMPORARY until pipeline/foundation/metrics.py lands
-
-        def masked_ssim(pred, ref, mask):
-            t = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float32))[None, None]  # noqa: E731
-            return float(ssim_map(t(pred), t(ref))[t(mask) > 0.5].mean())
-
-        def masked_rmse(pred, ref, mask):
-            return float(np.sqrt(np.mean((pred[mask] - ref[mask]) ** 2)))
-
-    return masked_ssim, masked_rmse
-
-
 def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") -> dict:
     """Whole-frame validation at every radius: mean masked SSIM and RMSE over (frame, radius) pairs,
     per scene and per radius index.
 
     The prediction is composited like every consumer does (background -> 1) before scoring.
     """
-    masked_ssim, masked_rmse = _metric_fns()
     model.eval()
     wrapper = PaddedUNet(model)
     per = []  # (scene, radius index, ssim, rmse)
@@ -687,8 +670,6 @@ def calibrate(
 ) -> dict:
     """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
     with batches from a separate generator (the run's own state and randomness are untouched)."""
-    import copy
-
     probe = copy.deepcopy(model)
     opt = torch.optim.Adam(probe.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
     plan = plan_epoch(train_set, sat, settings, torch.Generator().manual_seed(settings.seed + 7919))
@@ -741,8 +722,6 @@ def train(
     ``on_epoch_end(epoch, ckpt)`` runs after each epoch's checkpoint is on disk (tests use it to
     simulate an interruption).
     """
-    from tqdm import tqdm
-
     out = Path(out)
     if settings.epochs < 1 or settings.batch_size < 1 or settings.crops_per_frame < 1:
         raise NeuralaoError("epochs, batch_size and crops_per_frame must be >= 1")
@@ -768,8 +747,6 @@ def train(
     prev_det = torch.are_deterministic_algorithms_enabled()
     prev_threads = torch.get_num_threads()
     if device.type == "cuda":
-        import os
-
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")  # deterministic cuBLAS
     torch.use_deterministic_algorithms(True)
     if settings.threads:
