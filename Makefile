@@ -86,7 +86,7 @@ $(DATASET): $(DEMO_CONFIG) | $(STAMP)
 
 dataset: $(DATASET) ## Render and label the default scenes (G-buffers + Embree AO)
 
-# The composed-scene corpus of issue 9 (configs/full.json: 2,420 train frames from 180 composed scenes
+# The composed-scene corpus (configs/full.json: 2,420 train frames from 180 composed scenes
 # plus the Sponza interiors, val/test split by mesh, 256x256, AO at 4 radii). Resumable; ~1.6 h at the
 # rate measured on 2 cores shared with a training job.
 # The training corpus (configs/corpus.json): every object mesh alone on an orbit (train meshes in

@@ -69,7 +69,7 @@ def markdown(result: dict) -> str:
     ]
     for desc, paper, ours in PAPER:
         if not ours:
-            lines.append(f"| {desc} | {paper:g} | (volumes: issue 14) | - |")
+            lines.append(f"| {desc} | {paper:g} | (volumes: bench_volumes.py) | - |")
             continue
         t = sum(secs.get(k, 0.0) for k in ours)
         lines.append(f"| {desc} | {paper:g} | {t:.1f} | {t / paper:.1f}x |")

@@ -20,8 +20,8 @@ medians and ratios from the same rounds:
   interior camera: all foreground, as in a game frame; they skip background pixels) at each size,
   radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
-Ratios: to the index's default model (the issue-9 bound is a variant at <= 1/4 of the full network's
-time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship`` measured them).
+Ratios: to the index's default model (a reduced-resolution variant should cost at most 1/4 of the
+full network's time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship`` measured them).
 Writes DIR/shipped.json and DIR/shipped.md. No shipped models: one line, exit 0.
 """
 

@@ -3,9 +3,9 @@
     PYOPENGL_PLATFORM=osmesa .venv/bin/python bench/bench_unet.py --out build/bench \
         [--sizes 512x512 1920x1080] [--repeats 5] [--checkpoint MODEL.pt] [--data DATASET]
 
-GitHub issue 4: inference cost at 512x512 and 1920x1080 for torch CPU, onnxruntime CPU and the
+Inference cost at 512x512 and 1920x1080 for torch CPU, onnxruntime CPU and the
 generated GLSL compute passes on Mesa llvmpipe, in one run; parameters and bytes of the model;
-training time per epoch. Issue 11: the same graph generated with other conv blocks
+training time per epoch. Also the same graph generated with other conv blocks
 (``--compare-blocks``: texels x, y and output layers per invocation; by default the steps from one
 texel of one layer to the default block) timed in the same rounds, with their compile times.
 
@@ -438,7 +438,7 @@ def training_cost(args: argparse.Namespace, out: Path) -> dict:
 def markdown(result: dict) -> str:
     mdl, ex = result["model"], result["export"]
     lines = [
-        "# DeepAO U-Net inference cost (GitHub issue 4)",
+        "# DeepAO U-Net inference cost",
         "",
         f"Model: widths {mdl['widths']}, {mdl['source']}. CPU: {result['cpu']} ({result['cores']} cores; "
         f"load average {result['loadavg_before'][0]:.2f} before, {result['loadavg_after'][0]:.2f} after - "

@@ -19,7 +19,7 @@ from pipeline.foundation import sh
 from pipeline.foundation.io import read_npz
 
 TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
-UNET = "runtime/models/unet-15min/model.onnx"
+UNET = "runtime/models/unet-fast/model.onnx"
 
 
 def refusal(capsys, argv: list[str]) -> str:

@@ -706,7 +706,7 @@ def _write_files(d: Path, work: Path) -> None:
     np.savez(d / "empty.npz")
     (d / "junk.npz").write_bytes(junk)
     # models
-    unet = Path(__file__).resolve().parents[1] / "runtime" / "models" / "unet-15min" / "model.onnx"
+    unet = Path(__file__).resolve().parents[1] / "runtime" / "models" / "unet-fast" / "model.onnx"
     (d / "unet.onnx").write_bytes(unet.read_bytes())
     (d / "truncated.onnx").write_bytes(unet.read_bytes()[:2000])
     (d / "junk.onnx").write_bytes(junk)

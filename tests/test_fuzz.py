@@ -1,4 +1,4 @@
-"""Fuzz (issue 6): random image graphs, random MLPs and random meshes through the whole pipeline.
+"""Fuzz: random image graphs, random MLPs and random meshes through the whole pipeline.
 
 Every case is a seeded numpy draw whose seed is the test id (``-k 'image_graph and 7]'`` replays one),
 so CI is deterministic. What each case must end in:

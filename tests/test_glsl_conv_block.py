@@ -1,4 +1,4 @@
-"""Blocked conv passes of the GLSL image target (issue 11): one invocation computes a block of texels x
+"""Blocked conv passes of the GLSL image target: one invocation computes a block of texels x
 output layers. Every block against onnxruntime on graphs built with onnx.helper: strides, dilations,
 asymmetric pads, output layer counts the block does not divide, concatenated inputs, epilogues that
 index per-layer parameters, and sizes that leave partial blocks at the right and bottom edges."""

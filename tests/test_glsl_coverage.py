@@ -1,4 +1,4 @@
-"""Attribute coverage of the compute (image) target (issue 11, part 2): every ONNX attribute value of a
+"""Attribute coverage of the compute (image) target: every ONNX attribute value of a
 supported op is implemented, or refused naming the op, the node and the attribute.
 
 Single-node (or small) graphs built with onnx.helper, seeded inputs, generated GLSL run on Mesa against

@@ -1,4 +1,4 @@
-"""`neuralao glsl` on ONNX models written outside this project's export code (issue 11, "What it must show").
+"""`neuralao glsl` on ONNX models written outside this project's export code.
 
 Three models, each as its exporter writes it, none through ``export/``:
 

@@ -1,4 +1,4 @@
-"""Hard cases the other test files do not reach (issue 6): labels on the real triangle-soup assemblies,
+"""Hard cases the other test files do not reach: labels on the real triangle-soup assemblies,
 batch norm with (near-)zero variance and ONNX Clip with lo > hi through the GLSL generator, and truncated
 copies of the real mesh files."""
 
