@@ -21,7 +21,8 @@ medians and ratios from the same rounds:
   radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
 Ratios: to the index's default model (a reduced-resolution variant should cost at most 1/4 of the
-full network's time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship`` measured them).
+full network's time) and to GTAO; test-split SSIM / RMSE come from index.json (``neuralao ship``
+measured them).
 Writes DIR/shipped.json and DIR/shipped.md. No shipped models: one line, exit 0.
 """
 
