@@ -11,6 +11,8 @@ import json
 from pathlib import Path
 
 from pipeline.foundation.errors import NeuralaoError
+from runtime.onnx_io import get_metadata, load_onnx
+from runtime.predict import is_hybrid
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 INDEX = MODELS_DIR / "index.json"
@@ -55,3 +57,19 @@ def default_model(kind: str, models_dir: Path | None = None) -> Path:
     folder = default_export(kind, models_dir)
     manifest = json.loads((folder / "manifest.json").read_text())
     return folder / manifest.get("onnx", "model.onnx")
+
+
+def pure_unet_export(models_dir: Path | None = None) -> Path:
+    """The export folder of a shipped pure U-Net (one that needs no GTAO input): the index's default U-Net
+    if it is pure, else the first pure one by name (read from each model's ONNX metadata). For consumers
+    without a GTAO pass, such as the viewer's WebGPU path."""
+    index = read_index(models_dir)
+    default = index.get("default", {}).get("unet")
+    models = shipped_models(models_dir)
+    for name in [default, *sorted(n for n in models if n != default)]:
+        folder = models.get(name)
+        if folder is None or index["models"][name].get("kind", "unet") != "unet":
+            continue
+        if not is_hybrid(get_metadata(load_onnx(folder / "model.onnx"))):
+            return folder
+    raise NeuralaoError("no shipped pure (non-hybrid) U-Net; give an export folder")

@@ -21,7 +21,7 @@ from export.onnx_io import run_onnxruntime
 from export.unet import composite, glsl_runner, radius_array, render_parity_frames, run_padded
 from pipeline.foundation.tolerances import TOL
 from pipeline.models.unet import pad_to_multiple, preprocess, radius_param
-from runtime.shipped import INDEX, MODELS_DIR
+from runtime.shipped import pure_unet_export
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,14 @@ def _build_host() -> Path:
 
 def test_c_host_matches_python_runner(tmp_path):
     host = _build_host()
-    export = MODELS_DIR / json.loads(INDEX.read_text())["default"]["unet"]
+    # the network's own pass chain at the frame's size: a copy of the pure shipped export without its
+    # internal-resolution passes (those are checked by the hybrid test below)
+    export = tmp_path / "export"
+    shutil.copytree(pure_unet_export(), export)
+    manifest = json.loads((export / "manifest.json").read_text())
+    manifest.pop("internal_resolution", None)
+    manifest.pop("internal_height", None)
+    (export / "manifest.json").write_text(json.dumps(manifest))
     frame = render_parity_frames((61, 45))[0]  # odd size: the pad pass pads to 64 x 48, the crop pass crops
     h, w = frame["depth"].shape
     gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
@@ -78,7 +85,7 @@ def test_c_host_matches_python_runner(tmp_path):
 
 def test_c_host_refuses_a_wrong_gbuffer(tmp_path):
     host = _build_host()
-    export = MODELS_DIR / json.loads(INDEX.read_text())["default"]["unet"]
+    export = pure_unet_export()
     np.zeros(10, "<f4").tofile(tmp_path / "g.f32")
     r = subprocess.run(
         [str(host), str(export), str(tmp_path / "g.f32"), "16", "16", "0.1", "0.7", str(tmp_path / "ao.f32")],

@@ -11,6 +11,7 @@ when the network runs at the frame's own resolution (GTAO: 0.005 / 0.032 / 0.003
 from __future__ import annotations
 
 import numpy as np
+import onnx
 import pytest
 
 from pipeline.foundation.tolerances import TOL
@@ -27,7 +28,7 @@ from runtime.internal_resolution import (
     sample_index,
     upsample_ao,
 )
-from runtime.shipped import default_model
+from runtime.shipped import pure_unet_export
 
 CASES = [
     ("spot", orbit, (200, 150), 64),
@@ -131,7 +132,7 @@ def _block_mean(a: np.ndarray, mask: np.ndarray, k: int) -> tuple[np.ndarray, np
 def default_unet():
     from pipeline.evaluation.test_split import unet_predictor
 
-    return unet_predictor(default_model("unet"))
+    return unet_predictor(pure_unet_export() / "model.onnx")
 
 
 @pytest.mark.parametrize("name,cams", [("horse", orbit), ("cornell_box", interior)])
@@ -165,12 +166,15 @@ def test_shipped_unet_mean_ao_does_not_increase_with_radius(default_unet):
 def test_infer_frame_follows_the_declared_internal_height(default_unet, tmp_path):
     """`infer` runs a U-Net at the height its export declares (manifest ``internal_height``)."""
     import json
-    import shutil
 
     from export.unet import declared_internal_height, infer_frame
 
-    src = default_model("unet")
-    shutil.copy(src, tmp_path / "model.onnx")
+    src = pure_unet_export() / "model.onnx"
+    model = onnx.load(src)  # the export's own declaration (ONNX metadata, then manifest) says 64 rows
+    for prop in model.metadata_props:
+        if prop.key == "internal_height":
+            prop.value = "64"
+    onnx.save(model, tmp_path / "model.onnx")
     manifest = json.loads((src.parent / "manifest.json").read_text()) | {"internal_height": 64}
     (tmp_path / "manifest.json").write_text(json.dumps(manifest))
     assert declared_internal_height(tmp_path / "model.onnx") == 64

@@ -168,7 +168,7 @@ def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
 def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
     """The shipped default U-Net on real test-split frames: a larger radius input never brightens the
     frame on average (more geometry can occlude)."""
-    from runtime.shipped import MODELS_DIR, default_model
+    from runtime.shipped import MODELS_DIR, pure_unet_export
 
     if not (MODELS_DIR / "index.json").is_file():
         pytest.skip("no model shipped yet (make models)")
@@ -179,7 +179,7 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
     from pipeline.geometry.scene import load_scene
     from pipeline.models.unet import preprocess_frame, radius_param
 
-    onnx = default_model("unet")
+    onnx = pure_unet_export() / "model.onnx"
     proto = load_onnx(onnx)
     m = int(check_unet_onnx(proto, onnx)["pad_multiple"])
     run = ort_runner(proto.SerializeToString())

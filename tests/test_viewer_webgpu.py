@@ -21,10 +21,11 @@ import pytest
 from helpers import needs_chromium
 
 from pipeline import cli
-from pipeline.bakes.viewer_inputs import default_screen_space_model, method_from_unet, screen_space_mesh
+from pipeline.bakes.viewer_inputs import method_from_unet, screen_space_mesh
 from pipeline.foundation.tolerances import TOL
 from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 from runtime.predict import unet_predictor
+from runtime.shipped import pure_unet_export
 from runtime.viewer import write_page
 
 pytestmark = needs_chromium
@@ -141,15 +142,15 @@ def test_webgpu_unet_matches_onnxruntime_on_the_page_gbuffer(browser, page):
     assert float(err.max()) <= TOL.parity_unet_fp32
 
 
-def test_the_default_screen_space_model_is_pure():
+def test_the_viewer_runs_a_pure_shipped_unet():
     from runtime.predict import is_hybrid
 
-    folder = default_screen_space_model()
+    folder = pure_unet_export()
     assert not is_hybrid({p.key: p.value for p in onnx.load(folder / "model.onnx").metadata_props})
 
 
 def test_a_hybrid_is_a_one_line_error_naming_a_pure_model(tmp_path, capsys):
-    folder = default_screen_space_model()
+    folder = pure_unet_export()
     hybrid = tmp_path / "hybrid"
     hybrid.mkdir()
     model = onnx.load(folder / "model.onnx")

@@ -11,7 +11,6 @@ small network with a 2 x 1 x 2 block, so the blocked template meets Tint too.
 from __future__ import annotations
 
 import base64
-import json
 import time
 from pathlib import Path
 
@@ -27,7 +26,7 @@ from export.glsl import ComputeProgram, generate_compute
 from export.onnx_io import run_onnxruntime
 from pipeline.foundation.tolerances import TOL
 from runtime.chromium import headless_chromium
-from runtime.shipped import INDEX, MODELS_DIR
+from runtime.shipped import pure_unet_export
 
 pytestmark = needs_chromium
 RUNNER = Path(__file__).resolve().parents[1] / "runtime" / "viewer" / "wgsl.js"
@@ -89,7 +88,7 @@ def _run(driver, program: ComputeProgram, x: np.ndarray, scalars: dict) -> np.nd
 
 
 def test_shipped_default_in_chromium_webgpu(browser):
-    model_path = MODELS_DIR / json.loads(INDEX.read_text())["default"]["unet"] / "model.onnx"
+    model_path = pure_unet_export() / "model.onnx"
     program = generate_compute(onnx.load(model_path), dialect="wgsl", conv_block=(1, 1, 1))
     rng = np.random.default_rng(0)
     x = np.concatenate([rng.uniform(0.5, 1.5, (1, 1, 28, 36)), rng.normal(size=(1, 3, 28, 36))], 1).astype(

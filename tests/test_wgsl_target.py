@@ -21,7 +21,7 @@ from onnx import numpy_helper as nh
 from export.glsl import generate_compute, write_compute_export
 from export.onnx_io import run_onnxruntime
 from pipeline.foundation.tolerances import TOL
-from runtime.shipped import INDEX, MODELS_DIR
+from runtime.shipped import pure_unet_export
 
 wgpu = pytest.importorskip("wgpu")
 
@@ -140,7 +140,7 @@ def test_single_ops_wgsl_vs_onnxruntime(name):
 def test_shipped_default_wgsl_vs_onnxruntime(tmp_path):
     """The shipped default U-Net, exported to WGSL and read back from disk, on an odd size (pad + crop)."""
     _adapter_or_skip()
-    model_path = MODELS_DIR / json.loads(INDEX.read_text())["default"]["unet"] / "model.onnx"
+    model_path = pure_unet_export() / "model.onnx"
     program = generate_compute(onnx.load(model_path), dialect="wgsl")
     write_compute_export(program, tmp_path / "wgsl")
     rng = np.random.default_rng(0)

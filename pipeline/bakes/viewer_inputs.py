@@ -25,9 +25,9 @@ from pipeline.bakes.vertex import read_baked_mesh
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.geometry.scene import load_scene
 from runtime.internal_resolution import UpsampleSettings
-from runtime.onnx_io import get_metadata, load_onnx
+from runtime.onnx_io import load_onnx
 from runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
-from runtime.shipped import read_index, shipped_models
+from runtime.shipped import pure_unet_export, shipped_models
 from runtime.viewer import ViewerMethod, b64, corner_arrays
 
 
@@ -215,24 +215,9 @@ def _unet_meta(folder: Path) -> dict:
     return check_unet_onnx(load_onnx(path), path)
 
 
-def default_screen_space_model(models_dir: Path | None = None) -> Path:
-    """The shipped pure (non-hybrid) U-Net the viewer runs by default: the index's default U-Net if it
-    is pure, else the first pure one by name (read from each model's ONNX metadata)."""
-    index = read_index(models_dir)
-    default = index.get("default", {}).get("unet")
-    models = shipped_models(models_dir)
-    for name in [default, *sorted(n for n in models if n != default)]:
-        folder = models.get(name)
-        if folder is None or index["models"][name].get("kind", "unet") != "unet":
-            continue
-        if not is_hybrid(get_metadata(load_onnx(folder / "model.onnx"))):
-            return folder
-    raise NeuralaoError("no shipped pure (non-hybrid) U-Net to run in the viewer; give an export folder")
-
-
 def _screen_space_folder(model: str | None) -> Path:
     if model is None:
-        return default_screen_space_model()
+        return pure_unet_export()
     if Path(model).is_dir():
         return Path(model)
     models = shipped_models()
@@ -264,7 +249,7 @@ def method_from_unet(
         raise NeuralaoError(f"{folder} is not a U-Net export folder (no readable manifest.json)") from None
     if is_hybrid(meta):
         try:
-            pure = f"; use a pure one, e.g. --screen-space {default_screen_space_model().name}"
+            pure = f"; use a pure one, e.g. --screen-space {pure_unet_export().name}"
         except NeuralaoError:
             pure = ""
         raise NeuralaoError(
