@@ -28,7 +28,7 @@ from runtime.internal_resolution import (
     sample_index,
     upsample_ao,
 )
-from runtime.shipped import pure_unet_export
+from runtime.shipped import default_model, pure_unet_export
 
 CASES = [
     ("spot", orbit, (200, 150), 64),
@@ -128,8 +128,18 @@ def _block_mean(a: np.ndarray, mask: np.ndarray, k: int) -> tuple[np.ndarray, np
     return total / np.maximum(count, 1), count == k * k
 
 
+@pytest.fixture(scope="module", params=["default", "pure"])
+def default_unet(request):
+    """The shipped default U-Net (a hybrid: its predictor runs GTAO itself) and the shipped pure one, each
+    at the frame's own size."""
+    from pipeline.evaluation.test_split import unet_predictor
+
+    onnx = default_model("unet") if request.param == "default" else pure_unet_export() / "model.onnx"
+    return unet_predictor(onnx)
+
+
 @pytest.fixture(scope="module")
-def default_unet():
+def pure_unet():
     from pipeline.evaluation.test_split import unet_predictor
 
     return unet_predictor(pure_unet_export() / "model.onnx")
@@ -163,7 +173,7 @@ def test_shipped_unet_mean_ao_does_not_increase_with_radius(default_unet):
     assert all(b <= a for a, b in zip(means[:-1], means[1:], strict=True)), means
 
 
-def test_infer_frame_follows_the_declared_internal_height(default_unet, tmp_path):
+def test_infer_frame_follows_the_declared_internal_height(pure_unet, tmp_path):
     """`infer` runs a U-Net at the height its export declares (manifest ``internal_height``)."""
     import json
 
@@ -181,8 +191,8 @@ def test_infer_frame_follows_the_declared_internal_height(default_unet, tmp_path
     scene = load_scene("spot")
     frame = render_gbuffer(scene, orbit(scene, 3, 192, 128, seed=1)[1])
     radius = 0.125 * scene.diagonal
-    want = at_internal_resolution(default_unet, 64)(frame, radius)
+    want = at_internal_resolution(pure_unet, 64)(frame, radius)
     np.testing.assert_array_equal(infer_frame(tmp_path / "model.onnx", frame, radius), want)
     np.testing.assert_array_equal(
-        infer_frame(tmp_path / "model.onnx", frame, radius, internal_height=None), default_unet(frame, radius)
+        infer_frame(tmp_path / "model.onnx", frame, radius, internal_height=None), pure_unet(frame, radius)
     )
