@@ -59,6 +59,12 @@ def main(argv: list[str] | None = None) -> int:
     for name in sorted(index["models"]):
         path = MODELS_DIR / name / "model.onnx"
         model = onnx.load(path)
+        channels = model.graph.input[0].type.tensor_type.shape.dim[1].dim_value
+        if channels > x.shape[1]:  # a hybrid's extra input (GTAO): seeded values in [0, 1]
+            extra = np.random.default_rng(1).uniform(size=(1, channels - x.shape[1], *x.shape[2:]))
+            x = np.concatenate([x[:, :4], extra.astype(np.float32)], 1)
+        else:
+            x = x[:, :channels]
         ref = run_onnxruntime(path.read_bytes(), {model.graph.input[0].name: x, **scalars})[0]
         t0 = time.perf_counter()
         wgsl = generate_compute(model, dialect="wgsl")
