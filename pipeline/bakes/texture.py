@@ -91,17 +91,7 @@ class TextureBakeSettings:
     workers: int = 2
 
     def label_settings(self) -> LabelSettings:
-        return LabelSettings(
-            rays=self.rays,
-            max_distance=self.max_distance,
-            max_distance_rel=self.max_distance_rel,
-            kernel=self.kernel,
-            half_distance=self.half_distance,
-            half_distance_rel=self.half_distance_rel,
-            backface_threshold=self.backface_threshold,
-            seed=self.seed,
-            workers=self.workers,
-        )
+        return LabelSettings.shared_with(self)
 
 
 def check_settings(s: TextureBakeSettings) -> None:

@@ -73,7 +73,7 @@ import math
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Literal
 
 import numpy as np
@@ -118,6 +118,12 @@ class LabelSettings:
     # Extra AO radii (max distances) as fractions of the diagonal, all from one trace to the largest
     # (Labeller.radii, label_frame_radii; the dataset's ao_radii); None: none, only ``ao``.
     radii_rel: list[float] | None = None
+
+    @classmethod
+    def shared_with(cls, settings: object) -> LabelSettings:
+        """The labelling settings of a stage whose settings repeat some of these fields by name (a vertex
+        or texture bake's); the fields it does not have keep their defaults."""
+        return cls(**{f.name: getattr(settings, f.name) for f in fields(cls) if hasattr(settings, f.name)})
 
 
 def onb(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
