@@ -96,7 +96,8 @@ def measure(args) -> dict:
     scene = load_scene(args.mesh)
     bake_s = BakeSettings(rays=args.rays, samples_per_vertex=args.samples_per_vertex)
     ds = dataset_settings(args.dataset_rays, args.views)
-    from pipeline.bakes.level import bake_level, load_level_settings
+    from pipeline.bakes.level import bake_level
+    from pipeline.bakes.level_settings import load_level_settings
     from pipeline.geometry.level_gen import settings_for, write_level
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_ray_"))

@@ -11,7 +11,8 @@ import pytest
 import trimesh
 
 from pipeline import cli
-from pipeline.bakes.level import bake_level, load_level_settings
+from pipeline.bakes.level import bake_level
+from pipeline.bakes.level_settings import load_level_settings
 from pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
 from pipeline.geometry.level_gen import settings_for, write_level
 from pipeline.geometry.surface import interpolate, vertex_colours
@@ -247,7 +248,7 @@ def test_world10x_preset_is_ten_times_table1():
 
 
 def load_level_settings_dict(data):
-    from pipeline.bakes.level import LevelBakeSettings, check_settings
+    from pipeline.bakes.level_settings import LevelBakeSettings, check_settings
     from pipeline.foundation.settings import from_dict
 
     s = from_dict(LevelBakeSettings, data)

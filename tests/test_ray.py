@@ -155,7 +155,8 @@ LEVEL_TASKS = ["trace.block_samples=256", "task_rays=4096"]
 
 @pytest.fixture(scope="module")
 def local_level(tmp_path_factory):
-    from pipeline.bakes.level import bake_level, load_level_settings
+    from pipeline.bakes.level import bake_level
+    from pipeline.bakes.level_settings import load_level_settings
     from pipeline.geometry.level_gen import settings_for, write_level
 
     root = tmp_path_factory.mktemp("level")
@@ -229,7 +230,8 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
 def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, tmp_path):
     """An actor SIGKILLed while the trees' in-place tasks run is restarted (its state rebuilt) and the
     bake's bytes do not change."""
-    from pipeline.bakes.level import bake_level, load_level_settings
+    from pipeline.bakes.level import bake_level
+    from pipeline.bakes.level_settings import load_level_settings
 
     level, cfg, local, info = local_level
     out = tmp_path / "ray"

@@ -9,7 +9,8 @@ glTF layout (``OUT/level_baked.glb`` by default):
   EXT_mesh_gpu_instancing TRANSLATION / ROTATION / SCALE + ``_AO_GLOBAL`` (VEC4 per instance: the
   linear global function of equation 3, relative to the instance's translation);
 * grass and shrub nodes: their model and instancing attributes + ``_AO`` (one scalar per instance);
-* LOD 1 of the receivers: one mesh with ``COLOR_0`` / ``_AO``, extras ``{"lod": 1}``.
+* LOD 1 of the receivers: one mesh per piece (``lod1``, or ``lod1_<piece>`` with several) with
+  ``COLOR_0`` / ``_AO`` / ``_AO_RESAMPLED``, extras ``{"lod": 1, "piece": <piece>}``.
 
 Blockers are not written (they receive no AO). glTF allows application attributes only with a
 leading underscore, hence the names.
@@ -29,9 +30,22 @@ from pipeline.geometry.surface import vertex_colours
 
 
 def write_outputs(
-    path: Path, out: Path, g, s, solved: dict, final: np.ndarray, deco: dict, small: dict, lod: dict | None
+    path: Path,
+    out: Path,
+    level,
+    index,
+    s,
+    static_results,
+    deco: dict,
+    small: dict,
+    lod_files,
+    pieces,
 ) -> None:
-    w = GltfWriter("neuralao level bake")
+    """Write the baked glTF, streamed: ``static_results`` yields each piece's arrays (the output tasks'
+    results, in piece order, one at a time) and the LOD comes from ``lod_files`` piece by piece; the binary
+    data goes to a file beside ``path`` as it is made, so memory holds one piece."""
+    spill = path.with_name(f".{path.name}.bin.part")
+    w = GltfWriter("neuralao level bake", spill=spill)
     w.doc["extras"] = {
         "bake": {
             "blend": settings_to_dict(s.blend),
@@ -39,27 +53,27 @@ def write_outputs(
             "rays": s.trace.rays,
         }
     }
-    level = g.level
-    rv = g.receivers.vertices
-    for k, j, v0, f0 in g.static_spans:
-        node = g.static_nodes[k]
-        mesh = level.meshes[node.mesh]
-        sl = slice(v0, v0 + len(mesh.vertices))
-        attrs = {
-            "COLOR_0": vertex_colours(final[sl]),
-            "_AO": final[sl],
-            "_AO_SHORT": solved["short"][sl],
-            "_AO_LONG": solved["long"][sl],
-        }
-        mi = w.mesh(f"{node.name}_{j}", rv[sl], g.receivers.faces[f0 : f0 + len(mesh.faces)] - v0, attrs)
-        w.node(
-            f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
-            mi,
-            extras={"role": "static", "source_node": node.index, "instance": j},
-        )
-    rows = _coefficient_rows(g, deco)
+    for piece, (_, r, _) in zip(pieces, static_results, strict=True):
+        rows = index.table[piece.first : piece.stop]
+        for k, j, v0, f0, nv, nf in rows:
+            node = index.nodes[k]
+            sl, fl = slice(v0 - piece.v0, v0 - piece.v0 + nv), slice(f0 - piece.f0, f0 - piece.f0 + nf)
+            attrs = {
+                "COLOR_0": r["colour"][sl],
+                "_AO": r["ao"][sl],
+                "_AO_SHORT": r["short"][sl],
+                "_AO_LONG": r["long"][sl],
+            }
+            mi = w.mesh(f"{node.name}_{j}", r["positions"][sl], r["faces"][fl], attrs)
+            w.node(
+                f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
+                mi,
+                extras={"role": "static", "source_node": node.index, "instance": int(j)},
+            )
+    trees = level.nodes_with("tree")
+    rows = _coefficient_rows(trees, deco)
     written: dict[int, int] = {}
-    for node in g.trees:
+    for node in trees:
         mesh = level.meshes[node.mesh]
         if node.mesh not in written:
             written[node.mesh] = w.mesh(
@@ -72,7 +86,7 @@ def write_outputs(
             extras={"role": "tree", **node.params},
             instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO_GLOBAL": rows[node.index]},
         )
-    for role, nodes in (("grass", g.grass), ("shrub", g.shrubs)):
+    for role, nodes in (("grass", level.nodes_with("grass")), ("shrub", level.nodes_with("shrub"))):
         for kk, node in enumerate(nodes):
             mesh = level.meshes[node.mesh]
             t, q, sc = decompose(node.transforms)
@@ -83,19 +97,18 @@ def write_outputs(
                 extras={"role": role, **node.params},
                 instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]},
             )
-    if lod is not None:
-        ao = np.asarray(lod["ao_least_squares"], np.float32)
-        mi = w.mesh(
-            "lod1",
-            lod["vertices"],
-            lod["faces"],
-            {
+    if lod_files is not None:
+        for piece in pieces:
+            lod = lod_files.get(f"p{piece.index:05d}")
+            ao = np.asarray(lod["ao_least_squares"], np.float32)
+            attrs = {
                 "COLOR_0": vertex_colours(ao),
                 "_AO": ao,
                 "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32),
-            },
-        )
-        w.node("lod1", mi, extras={"role": "static", "lod": 1})
+            }
+            name = "lod1" if len(pieces) == 1 else f"lod1_{piece.index}"
+            mi = w.mesh(name, lod["vertices"], lod["faces"], attrs)
+            w.node(name, mi, extras={"role": "static", "lod": 1, "piece": piece.index})
     w.write(path)
     shaders = decorator_shaders()
     write_text(out / "shaders" / "decorator.vert", shaders["vertex"])
@@ -103,14 +116,14 @@ def write_outputs(
     write_json(out / "shaders" / "manifest.json", manifest())
 
 
-def _coefficient_rows(g, deco: dict) -> dict[int, np.ndarray]:
+def _coefficient_rows(trees, deco: dict) -> dict[int, np.ndarray]:
     """Per tree node index: (k, 4) float32 coefficients, in the order bake_decorators wrote them
     (models ascending, then the level's tree nodes of that model in order, instances in order)."""
     rows: dict[int, np.ndarray] = {}
     coeffs = np.asarray(deco.get("coefficients", np.zeros((0, 4))), np.float32)
     r = 0
     for mi in (int(m) for m in deco.get("models", [])):
-        for node in (n for n in g.trees if n.mesh == mi):
+        for node in (n for n in trees if n.mesh == mi):
             k = len(node.transforms)
             rows[node.index] = coeffs[r : r + k]
             r += k

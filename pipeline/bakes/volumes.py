@@ -750,13 +750,13 @@ def is_level(path: Path) -> bool:
 
 def load_level_scene(level: str | Path) -> Scene:
     """The occluders a dynamic object sees: for a level (:func:`is_level`) its opaque geometry, every
-    static and blocker instance (pipeline.bakes.level.build_geometry; trees, shrubs and grass are not
+    static and blocker instance (pipeline.bakes.level_stages.opaque_scene; trees, shrubs and grass are not
     opaque and are left out); for any other mesh file, glTF folder or test-mesh name the whole mesh
     (pipeline.geometry.scene.load_scene)."""
     path = resolve_mesh_path(level)
     if is_level(path):
         # Lazy: the level-bake stack costs 0.3 s measured on `neuralao volumes`; only a level needs it
-        from pipeline.bakes.level import build_geometry
+        from pipeline.bakes.level_stages import opaque_scene
 
-        return build_geometry(read_level(path)).opaque
+        return opaque_scene(read_level(path))
     return load_scene(path)

@@ -16,7 +16,8 @@ from pipeline.bakes.gltf_scene import (
     write_texture_scene,
     write_vertex_scene,
 )
-from pipeline.bakes.level import bake_level, load_level_settings
+from pipeline.bakes.level import bake_level
+from pipeline.bakes.level_settings import load_level_settings
 from pipeline.bakes.texture import (
     TextureBakeSettings,
     bake_texture,
@@ -113,7 +114,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="CONFIG.json",
         help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
-        "(pipeline.bakes.level.LevelBakeSettings); --out is then a folder",
+        "(pipeline.bakes.level_settings.LevelBakeSettings); --out is then a folder",
     )
     p.add_argument(
         "--set",
@@ -213,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
             raise NeuralaoError(
                 f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
             )
-        return run_level(args)  # --engine ray: the trace blocks become tasks (pipeline.bakes.level)
+        return run_level(args)  # --engine ray: every heavy stage runs as tasks (pipeline.bakes.level)
     if args.set:
         raise NeuralaoError("--set needs --config (level bakes only)")
     if _refused_flag(args) is not None:

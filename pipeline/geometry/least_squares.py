@@ -36,7 +36,8 @@ graph Laplace equation with the valid ones fixed.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,11 +58,30 @@ REG_SCALE = 0.01
 RIDGE_REL = 1e-9
 
 
+@dataclass(frozen=True)
+class Whole:
+    """What the normal equations of a piece of a surface take from the whole surface: its valid samples'
+    weight, its area and the weighted mean of its valid values (where a part without samples settles)."""
+
+    weight: float
+    area: float
+    prior: Any = None
+
+
 def normal_equations(
-    scene: Scene, samples: SurfaceSamples, values: np.ndarray, valid: np.ndarray, alpha: float = 1.0
+    scene: Scene,
+    samples: SurfaceSamples,
+    values: np.ndarray,
+    valid: np.ndarray,
+    alpha: float = 1.0,
+    whole: Whole | None = None,
 ):
     """The normal equations of the module-doc energy, what :func:`fit_least_squares` solves:
     A (n, n) scipy.sparse csc, symmetric positive definite, and rhs (n,) or (n, c) float64.
+
+    The valid samples' weights are divided by their sum, the edges' by the surface's area and the ridge
+    pulls toward the samples' weighted mean; with ``whole`` (``scene`` is a piece of a bigger surface that
+    shares no vertex with the rest) by the whole's: the piece's equations are then the whole's block.
 
     A couples only vertices that share a face, so it is block diagonal over the mesh's connected
     components (the level baker solves each block on its own)."""
@@ -72,15 +92,19 @@ def normal_equations(
     n = len(scene.vertices)
     b = interpolation_matrix(scene, samples)[valid]
     w = samples.weights[valid]
-    w = w / w.sum() if w.sum() > 0 else w
+    total = w.sum() if whole is None else whole.weight
+    w = w / total if total > 0 else w
     f = values[valid]
     bw = b.T.multiply(w).tocsr()  # (n, k) B^T W
     a = (bw @ b).tocsc()
     rhs = bw @ f
     if alpha > 0:
-        edges, ew = edge_weights(scene)
+        edges, ew = edge_weights(scene, None if whole is None else whole.area)
         a = a + (alpha * REG_SCALE) * edge_laplacian(n, edges, ew)
-    prior = np.average(f, weights=w, axis=0) if len(f) else np.ones(f.shape[1:])
+    if whole is not None and whole.prior is not None:
+        prior = np.asarray(whole.prior, np.float64)
+    else:
+        prior = np.average(f, weights=w, axis=0) if len(f) and w.sum() > 0 else np.ones(f.shape[1:])
     diag = a.diagonal()
     ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
     a = (a + ridge * sp.identity(n, format="csc")).tocsc()
@@ -95,6 +119,7 @@ def fit_least_squares(
     valid: np.ndarray,
     alpha: float = 1.0,
     solver: Literal["direct", "cg", "amg"] = "direct",
+    whole: Whole | None = None,
 ) -> np.ndarray:
     """Per-vertex values (n,) float32 in [0, 1] minimising the module-doc energy.
 
@@ -106,7 +131,7 @@ def fit_least_squares(
     preconditioned by a smoothed-aggregation multigrid V-cycle (pyamg; relative residual 1e-10): linear
     in the vertex count, where Jacobi CG needs thousands of iterations on a level's regulariser.
     """
-    a, rhs = normal_equations(scene, samples, values, valid, alpha)
+    a, rhs = normal_equations(scene, samples, values, valid, alpha, whole)
     if solver == "direct":
         v = splu(a).solve(rhs)
     elif solver == "cg":

@@ -27,6 +27,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import shutil
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -529,13 +530,44 @@ def flatten(
 # --------------------------------------------------------------------------- writing
 
 
+class _SpillBuffer:
+    """The binary buffer of a :class:`GltfWriter` kept in a file instead of memory (``append`` / ``extend``
+    and ``len`` like the bytearray it stands for)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._file = open(path, "wb")  # noqa: SIM115 (closed by GltfWriter.write)
+        self._size = 0
+
+    def __len__(self) -> int:
+        return self._size
+
+    def append(self, byte: int) -> None:
+        self.extend(bytes([byte]))
+
+    def extend(self, data) -> None:
+        self._file.write(data)
+        self._size += len(data)
+
+    def copy_to(self, out) -> None:
+        self._file.flush()
+        with open(self.path, "rb") as f:
+            shutil.copyfileobj(f, out, 1 << 22)
+
+    def close(self) -> None:
+        self._file.close()
+        self.path.unlink(missing_ok=True)
+
+
 class GltfWriter:
     """Accumulates meshes, nodes and binary data; writes .glb or .gltf + .bin atomically.
 
     Deterministic: the same calls give the same bytes (sorted JSON keys, 4-byte aligned views).
+    ``spill``: a file to keep the binary data in as it is added (a level's glTF of gigabytes), instead of
+    memory; :meth:`write` copies it into place and removes it. Same bytes either way.
     """
 
-    def __init__(self, generator: str = "neuralao"):
+    def __init__(self, generator: str = "neuralao", spill: str | Path | None = None):
         self.doc: dict[str, Any] = {
             "asset": {"version": "2.0", "generator": generator},
             "scene": 0,
@@ -545,7 +577,7 @@ class GltfWriter:
             "accessors": [],
             "bufferViews": [],
         }
-        self._blob = bytearray()
+        self._blob: bytearray | _SpillBuffer = bytearray() if spill is None else _SpillBuffer(Path(spill))
 
     @classmethod
     def from_document(cls, doc: dict[str, Any], blob: bytes) -> GltfWriter:
@@ -659,26 +691,35 @@ class GltfWriter:
         """Write ``path`` (.glb: one file; .gltf: the .bin next to it first, then the .gltf)."""
         path = Path(path)
         suffix = path.suffix.lower()
-        if suffix == ".glb":
-            text = self._json(None)
-            text += b" " * (-len(text) % 4)
-            blob = bytes(self._blob)
-            total = 12 + 8 + len(text) + 8 + len(blob)
-            data = (
-                struct.pack("<III", _GLB_MAGIC, 2, total) + struct.pack("<II", len(text), _JSON_CHUNK) + text
-            )
-            data += struct.pack("<II", len(blob), _BIN_CHUNK) + blob
-            with atomic_path(path) as tmp:
-                tmp.write_bytes(data)
-        elif suffix == ".gltf":
-            bin_path = path.with_suffix(".bin")
-            with atomic_path(bin_path) as tmp:
-                tmp.write_bytes(bytes(self._blob))
-            with atomic_path(path) as tmp:
-                tmp.write_bytes(self._json(bin_path.name))
-        else:
+        if suffix not in (".glb", ".gltf"):
             raise NeuralaoError(f"glTF output must end in .gltf or .glb, got {path.name!r}")
+        try:
+            if suffix == ".glb":
+                text = self._json(None)
+                text += b" " * (-len(text) % 4)
+                total = 12 + 8 + len(text) + 8 + len(self._blob)
+                with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                    f.write(struct.pack("<III", _GLB_MAGIC, 2, total))
+                    f.write(struct.pack("<II", len(text), _JSON_CHUNK) + text)
+                    f.write(struct.pack("<II", len(self._blob), _BIN_CHUNK))
+                    self._write_blob(f)
+            else:
+                bin_path = path.with_suffix(".bin")
+                text = self._json(bin_path.name)
+                with atomic_path(bin_path) as tmp, open(tmp, "wb") as f:
+                    self._write_blob(f)
+                with atomic_path(path) as tmp:
+                    tmp.write_bytes(text)
+        finally:
+            if isinstance(self._blob, _SpillBuffer):
+                self._blob.close()
         return path
+
+    def _write_blob(self, f) -> None:
+        if isinstance(self._blob, _SpillBuffer):
+            self._blob.copy_to(f)
+        else:
+            f.write(self._blob)
 
 
 def read_gltf_json(path: str | Path) -> tuple[dict, Any]:

@@ -114,7 +114,7 @@ PRESETS: dict[str, dict] = {
     },
 }
 
-# The bake config each preset is written with (pipeline.bakes.level.LevelBakeSettings keys).
+# The bake config each preset is written with (pipeline.bakes.level_settings.LevelBakeSettings keys).
 BAKE_CONFIGS: dict[str, dict] = {
     "tiny": {
         "trace": {"rays": 64, "samples_per_vertex": 2.0, "samples_per_face_cap": 4},

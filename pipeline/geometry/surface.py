@@ -63,11 +63,20 @@ def samples_per_face(areas: np.ndarray, total: float, cap: int) -> np.ndarray:
 
 
 def surface_samples(
-    scene: Scene, total: float, cap: int = 32, seed: int = 0, counts: np.ndarray | None = None
+    scene: Scene,
+    total: float,
+    cap: int = 32,
+    seed: int = 0,
+    counts: np.ndarray | None = None,
+    face_offset: int = 0,
+    area_total: float | None = None,
 ) -> SurfaceSamples:
     """Stratified area-proportional samples: ``total`` overall (about), 1..``cap`` per face.
 
     ``counts`` (m,) int overrides the per-face numbers (0 allowed). Deterministic for ``seed``.
+    ``scene`` may be a piece of a bigger one: its faces are numbered from ``face_offset`` there (each
+    face's random shifts follow its number) and ``area_total`` is the area of the bigger scene's faces
+    with samples (what the weights are shares of; default: this scene's).
     """
     areas = face_areas(scene)
     if counts is None:
@@ -76,7 +85,7 @@ def surface_samples(
     face = np.repeat(np.arange(len(scene.faces), dtype=np.int64), counts)
     start = np.cumsum(counts) - counts
     index = np.arange(len(face), dtype=np.int64) - np.repeat(start, counts)  # index within the face
-    s1, s2 = sample_shifts(seed, face)  # one shift pair per face (same id for all its samples)
+    s1, s2 = sample_shifts(seed, face + face_offset)  # one shift pair per face (for all its samples)
     k = counts[face].astype(np.float64)
     # radical inverse of the in-face index (Hammersley's second coordinate)
     _, radinv = hammersley(int(index.max()) + 1 if len(index) else 1)
@@ -86,7 +95,8 @@ def surface_samples(
     bary = np.stack([1.0 - r, r * (1.0 - u2), r * u2], axis=1)
     tri = scene.triangles[face]
     points = np.einsum("kc,kcd->kd", bary, tri)
-    weights = (areas / np.maximum(counts, 1))[face] / areas[counts > 0].sum()
+    norm = areas[counts > 0].sum() if area_total is None else area_total
+    weights = (areas / np.maximum(counts, 1))[face] / norm
     return SurfaceSamples(face, bary, points, scene.face_normals[face], weights)
 
 
@@ -105,8 +115,9 @@ def interpolate(scene: Scene, vertex_values: np.ndarray, face: np.ndarray, bary:
     return np.einsum("kc,kc->k", bary, corners)
 
 
-def edge_weights(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Unique undirected edges (e, 2) int64 and their area weights (e,) float64 summing to 1."""
+def edge_weights(scene: Scene, total: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges (e, 2) int64 and their area weights (e,) float64 summing to 1, or divided by
+    ``total`` when ``scene`` is a piece of a bigger one (the bigger one's face area: its edges' weight)."""
     areas = face_areas(scene)
     f = scene.faces
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
@@ -120,7 +131,7 @@ def edge_weights(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     keys, inverse = np.unique(e[:, 0] * n + e[:, 1], return_inverse=True)
     edges = np.stack([keys // n, keys % n], axis=1)
     weights = np.bincount(inverse.reshape(-1), weights=w, minlength=len(edges))
-    total = weights.sum()
+    total = weights.sum() if total is None else total
     return edges, (weights / total if total > 0 else weights)
 
 

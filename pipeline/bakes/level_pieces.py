@@ -1,0 +1,254 @@
+"""A level in pieces, so that a bake's driver never holds the flattened level.
+
+The static instances, in flatten order (node by node, instance by instance: the order of
+:func:`pipeline.geometry.level_files.flatten`), are cut into *pieces*: runs of whole instances of about
+``piece_faces`` faces (an instance bigger than that is a piece of its own). Instances share no vertices,
+so everything per vertex (the least-squares solve, the LOD) depends on one piece alone. Global face,
+vertex and sample numbers are a piece's offsets plus its own, so a piece's samples and their rays are
+exactly those of the whole level flattened at once (tested), whichever machine makes them.
+
+Sample counts follow :func:`water_fill` (a density under the per-face floor and cap, found on a
+histogram of face areas that every piece adds to) and stochastic rounding whose uniforms are one seeded
+stream indexed by global face number (each piece skips ahead to its first face).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from pipeline.geometry.level_files import Level, LevelNode
+from pipeline.geometry.scene import Scene, scene_from_arrays
+from pipeline.geometry.surface import SurfaceSamples, face_areas, surface_samples
+
+# Area histogram: bins per octave of face area and the octaves covered (areas outside are clamped in).
+_BINS_PER_OCTAVE = 64
+_OCTAVES = (-80, 80)
+
+
+@dataclass(frozen=True)
+class Piece:
+    """Static instance rows [first, stop) of the :class:`PieceIndex` table; their first global vertex,
+    face and sample and their counts."""
+
+    index: int
+    first: int
+    stop: int
+    v0: int
+    f0: int
+    nv: int
+    nf: int
+    s0: int = 0
+    ns: int = 0
+
+
+@dataclass
+class PieceIndex:
+    """The static instances (``table`` rows: node position in ``nodes``, instance, first vertex, first
+    face, vertices, faces) cut into pieces, and the opaque level's bounds (static and blocker instances)."""
+
+    nodes: list[LevelNode]
+    table: np.ndarray
+    pieces: list[Piece]
+    bounds: np.ndarray
+
+    @property
+    def vertices(self) -> int:
+        return int(self.table[:, 4].sum()) if len(self.table) else 0
+
+    @property
+    def faces(self) -> int:
+        return int(self.table[:, 5].sum()) if len(self.table) else 0
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.bounds.mean(0)
+
+    @property
+    def diagonal(self) -> float:
+        return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+
+
+def instance_table(level: Level, nodes: list[LevelNode]) -> np.ndarray:
+    """(i, 6) int64 rows (node position, instance, first vertex, first face, vertices, faces) of every
+    instance of ``nodes`` in flatten order."""
+    rows, nv, nf = [], 0, 0
+    for k, node in enumerate(nodes):
+        mesh = level.meshes[node.mesh]
+        for j in range(len(node.transforms)):
+            rows.append((k, j, nv, nf, len(mesh.vertices), len(mesh.faces)))
+            nv += len(mesh.vertices)
+            nf += len(mesh.faces)
+    return np.array(rows, np.int64).reshape(-1, 6)
+
+
+def cut_pieces(table: np.ndarray, piece_faces: int) -> list[Piece]:
+    """Runs of whole instances of at most ``piece_faces`` faces (a bigger instance alone)."""
+    pieces: list[Piece] = []
+    first = 0
+    for i in range(len(table) + 1):
+        if i > first and (i == len(table) or table[first:i, 5].sum() + table[i, 5] > piece_faces):
+            v0, f0 = int(table[first, 2]), int(table[first, 3])
+            nv, nf = int(table[first:i, 4].sum()), int(table[first:i, 5].sum())
+            pieces.append(Piece(len(pieces), first, i, v0, f0, nv, nf))
+            first = i
+    return pieces
+
+
+def instance_vertices(level: Level, node: LevelNode, j: int) -> np.ndarray:
+    """World-space vertices (n, 3) float64 of instance ``j`` of ``node`` (as :func:`flatten` makes them)."""
+    v = level.meshes[node.mesh].vertices
+    return np.c_[v, np.ones(len(v))] @ node.transforms[j][:3].T
+
+
+def level_bounds(level: Level, nodes: list[LevelNode]) -> np.ndarray:
+    """(2, 3) min and max corner of every instance of ``nodes``, one instance at a time."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for node in nodes:
+        for j in range(len(node.transforms)):
+            v = instance_vertices(level, node, j)
+            if len(v):
+                lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+    return np.stack([lo, hi])
+
+
+def index_level(level: Level, piece_faces: int) -> PieceIndex:
+    static = level.nodes_with("static")
+    table = instance_table(level, static)
+    bounds = level_bounds(level, level.nodes_with("static", "blocker"))
+    return PieceIndex(static, table, cut_pieces(table, piece_faces), bounds)
+
+
+def piece_scene(level: Level, index: PieceIndex, piece: Piece) -> Scene:
+    """The piece's instances flattened (vertex and face numbers local to the piece)."""
+    verts, faces = [], []
+    for k, j, v0, _, _, _ in index.table[piece.first : piece.stop]:
+        node = index.nodes[k]
+        verts.append(instance_vertices(level, node, int(j)))
+        faces.append(level.meshes[node.mesh].faces + (v0 - piece.v0))
+    return scene_from_arrays(
+        np.concatenate(verts),
+        np.concatenate(faces),
+        f"piece{piece.index}",
+        level.source,
+        drop_degenerate=False,
+    )
+
+
+# --------------------------------------------------------------------------- sample counts
+
+
+@dataclass(frozen=True)
+class SampleRule:
+    """What every piece's samples depend on: the water-filled density ``rho`` (samples per unit area),
+    the per-face floor and cap, the seed, and the area of every face that got a sample (the weights'
+    normaliser: each sample's weight is its share of that area); ``area_all``: every face's."""
+
+    rho: float
+    floor: int
+    cap: int
+    seed: int
+    area_total: float = 0.0
+    area_all: float = 0.0
+
+
+class AreaHistogram:
+    """Face counts and area sums on log2-spaced bins, added to piece by piece (O(bins) memory)."""
+
+    def __init__(self) -> None:
+        lo, hi = _OCTAVES
+        self.edges = 2.0 ** np.linspace(lo, hi, (hi - lo) * _BINS_PER_OCTAVE + 1)
+        self.count = np.zeros(len(self.edges) - 1)
+        self.area = np.zeros(len(self.edges) - 1)
+
+    def add(self, areas: np.ndarray) -> None:
+        b = np.clip(np.searchsorted(self.edges, areas, side="right") - 1, 0, len(self.count) - 1)
+        self.count += np.bincount(b, minlength=len(self.count))
+        self.area += np.bincount(b, weights=areas, minlength=len(self.count))
+
+    def expected(self, rho: float, floor: int, cap: int) -> float:
+        """About sum(clip(rho * area, floor, cap)) over every face added: exact for bins wholly below the
+        floor, above the cap or between, the bin's area sum clipped for the one or two bins across."""
+        lo, hi = rho * self.edges[:-1], rho * self.edges[1:]
+        linear = np.clip(rho * self.area, floor * self.count, cap * self.count)
+        out = np.where(hi <= floor, floor * self.count, np.where(lo >= cap, cap * self.count, linear))
+        return float(out.sum())
+
+
+def water_fill(hist: AreaHistogram, total: float, floor: int, cap: int) -> float:
+    """The density rho with sum clip(rho * area, floor, cap) = ``total`` (bisection; the histogram stands
+    for the faces). What the cap takes from large faces goes to the rest."""
+    area = float(hist.area.sum())
+    lo, hi = 0.0, total / max(area, 1e-300)
+    while hist.expected(hi, floor, cap) < total and hi < 1e300:
+        if hist.expected(hi, floor, cap) >= cap * hist.count.sum():
+            break
+        hi *= 2.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if hist.expected(mid, floor, cap) < total else (lo, mid)
+    return hi
+
+
+def face_counts(areas: np.ndarray, f0: int, rule: SampleRule) -> np.ndarray:
+    """(m,) int64 samples per face of faces f0 .. f0 + m: clip(rho * area, floor, cap) rounded
+    stochastically (floor(x + u), u from one seeded stream indexed by global face number)."""
+    expected = np.clip(rule.rho * areas, rule.floor, rule.cap)
+    rng = np.random.default_rng(rule.seed + 0x5A3)
+    rng.bit_generator.advance(int(f0))  # one 64-bit draw per uniform: u of face f0 onwards
+    u = rng.uniform(size=len(areas))
+    counts = np.clip(np.floor(expected + u), rule.floor, rule.cap).astype(np.int64)
+    counts[areas <= 0] = 0
+    return counts
+
+
+def piece_samples(scene: Scene, piece: Piece, rule: SampleRule) -> SurfaceSamples:
+    """The piece's samples (faces numbered within the piece), as the whole level's would be."""
+    counts = face_counts(face_areas(scene), piece.f0, rule)
+    return surface_samples(
+        scene, 0, rule.cap, rule.seed, counts=counts, face_offset=piece.f0, area_total=rule.area_total
+    )
+
+
+# A worker's latest pieces (geometry and samples), reused by the next task of the same piece.
+_CACHE: OrderedDict[tuple, tuple[Scene, SurfaceSamples | None]] = OrderedDict()
+_CACHE_SIZE = 2
+
+
+def cached_piece(
+    key: str, level: Level, index: PieceIndex, piece: Piece, rule: SampleRule | None
+) -> tuple[Scene, SurfaceSamples | None]:
+    """(scene, samples or None) of ``piece``, from this process's small cache when a task of the same
+    bake and piece ran here last (trace blocks of one big piece, then its solve)."""
+    k = (key, piece.index, rule)
+    if k in _CACHE:
+        _CACHE.move_to_end(k)
+        return _CACHE[k]
+    scene = piece_scene(level, index, piece)
+    value = (scene, None if rule is None else piece_samples(scene, piece, rule))
+    _CACHE[k] = value
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return value
+
+
+def sample_rule(level: Level, index: PieceIndex, samples_per_vertex: float, floor: int, cap: int, seed: int):
+    """The :class:`SampleRule` of the level and the pieces with their sample offsets and counts: two passes
+    over the pieces (areas into the histogram; then counts), one piece in memory at a time."""
+    hist = AreaHistogram()
+    for piece in index.pieces:
+        hist.add(face_areas(piece_scene(level, index, piece)))
+    rho = water_fill(hist, samples_per_vertex * index.vertices, floor, cap)
+    rule = SampleRule(rho, floor, cap, seed)
+    pieces, s0, area_total, area_all = [], 0, 0.0, 0.0
+    for piece in index.pieces:
+        areas = face_areas(piece_scene(level, index, piece))
+        counts = face_counts(areas, piece.f0, rule)
+        area_total += float(areas[counts > 0].sum())
+        area_all += float(areas.sum())
+        ns = int(counts.sum())
+        pieces.append(replace(piece, s0=s0, ns=ns))
+        s0 += ns
+    return SampleRule(rho, floor, cap, seed, area_total, area_all), pieces

@@ -1,0 +1,536 @@
+"""The heavy stages of a level bake as tasks of an engine, one piece (:mod:`pipeline.bakes.level_pieces`) or a
+block of one piece's samples at a time.
+
+Every task is a pure function of its arguments and of the worker's state (the opaque level's labeller,
+built from the level's meshes and instance transforms where the task runs), so a local and a Ray bake write
+the same bytes. The driver sends each task what only it holds (a piece's traced values, its vertex AO),
+writes each result to ``OUT/stages/<stage>/`` as it arrives, and keeps none of them: a killed bake's rerun
+skips the files it finds, and the driver's memory is one piece's, not the level's.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import splu
+from tqdm import tqdm
+
+from pipeline.bakes.level_pieces import Piece, PieceIndex, SampleRule, cached_piece
+from pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
+from pipeline.engines.engine import Context, LocalEngine, Task, content_key
+from pipeline.foundation.errors import NeuralaoError
+from pipeline.foundation.io import remove_stale_temporaries, write_npz
+from pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
+from pipeline.geometry.level_files import Level, flatten
+from pipeline.geometry.scene import Scene, scene_from_arrays
+from pipeline.geometry.surface import face_areas, interpolate, surface_samples, vertex_colours
+from pipeline.tracing.labeller import LabelSettings
+from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
+
+# --------------------------------------------------------------------------- scenes and worker state
+
+
+def opaque_scene(level: Level) -> Scene:
+    """Every static instance (first, in flatten order), then every blocker instance, as one scene."""
+    rv, rf, _ = flatten(level, level.nodes_with("static"))
+    bv, bf, _ = flatten(level, level.nodes_with("blocker"))
+    return scene_from_arrays(
+        np.concatenate([rv, bv]),
+        np.concatenate([rf, bf + len(rv)]),
+        "opaque",
+        level.source,
+        drop_degenerate=False,
+    )
+
+
+def gold_scene(level: Level) -> Scene:
+    """The decorators' gold standard scene: the opaque level plus every tree instance, opaque."""
+    opaque = opaque_scene(level)
+    tv, tf, _ = flatten(level, level.nodes_with("tree"))
+    return scene_from_arrays(
+        np.concatenate([opaque.vertices, tv]),
+        np.concatenate([opaque.faces, tf + len(opaque.vertices)]),
+        "gold",
+        drop_degenerate=False,
+    )
+
+
+@dataclass
+class PieceState:
+    """What a worker holds for a bake: the opaque labeller and foliage, and the level it cuts pieces from."""
+
+    labeller: LevelLabeller
+    foliage: Any
+    level: Level
+    index: PieceIndex
+    key: str
+
+
+def _opaque_state(payload) -> PieceState:
+    level, index, settings, foliage, key = payload
+    return PieceState(LevelLabeller(opaque_scene(level), settings), foliage, level, index, key)
+
+
+def _gold_state(payload) -> tuple[LevelLabeller, Any]:
+    level, settings, foliage = payload
+    return LevelLabeller(gold_scene(level), settings), foliage
+
+
+class LabellerFrame:
+    """The local frame (``center``, ``scale``) and label settings of the opaque labeller, without its scene:
+    what the driver needs to build the foliage in the frame the workers trace in."""
+
+    def __init__(self, center: np.ndarray, scale: float, settings: LabelSettings):
+        self.center, self.scale, self.settings = np.asarray(center, np.float64), float(scale), settings
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise NeuralaoError(f"the level has no extent (diagonal {self.scale})")
+
+
+def worker_settings(settings: LabelSettings, engine) -> LabelSettings:
+    """``settings`` with the engine's threads per task (where it sets them)."""
+    if engine is not None and engine.threads is not None:
+        return replace(settings, workers=engine.threads)
+    return settings
+
+
+def opaque_context(key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage) -> Context:
+    """The engine context of the opaque labeller: workers build it from the level's meshes and transforms."""
+    return Context(
+        f"level-trace/{key}/{settings.workers}", _opaque_state, (level, index, settings, foliage, key)
+    )
+
+
+def gold_context(key: str, level: Level, settings: LabelSettings, foliage) -> Context:
+    return Context(f"level-gold/{key}/{settings.workers}", _gold_state, (level, settings, foliage))
+
+
+# --------------------------------------------------------------------------- per-task files
+
+
+class TaskFiles:
+    """A stage's task results, one npz each under ``folder`` (``STEM.npz``) stamped with the bake's key:
+    written as each arrives and kept for the later stages; a missing, partial or stale one is redone."""
+
+    def __init__(self, folder: Path, key: str):
+        self.folder, self.key = Path(folder), key
+        self.folder.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(self.folder)
+
+    def path(self, stem: str) -> Path:
+        return self.folder / f"{stem}.npz"
+
+    def get(self, stem: str) -> dict[str, np.ndarray] | None:
+        try:
+            with np.load(self.path(stem), allow_pickle=False) as z:
+                if str(z["_key"]) != self.key:
+                    return None
+                return {k: z[k] for k in z.files if k != "_key"}
+        except (OSError, ValueError, KeyError, EOFError):
+            return None
+
+    def has(self, stem: str) -> bool:
+        try:
+            with np.load(self.path(stem), allow_pickle=False) as z:
+                return str(z["_key"]) == self.key
+        except (OSError, ValueError, KeyError, EOFError):
+            return False
+
+    def put(self, stem: str, data: dict[str, np.ndarray]) -> None:
+        write_npz(self.path(stem), _key=np.array(self.key), **data)
+
+    def keep_only(self, stems: set[str]) -> None:
+        """Remove the files of tasks this bake does not have (an earlier bake's pieces)."""
+        for p in self.folder.glob("*.npz"):
+            if p.stem not in stems:
+                p.unlink()
+
+
+def run_to_files(
+    files: TaskFiles, runner, jobs: list[tuple[str, Callable[[], Task]]], desc: str, progress: bool
+) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
+    """Run the jobs (file stem, task maker) a file does not hold yet on ``runner``, writing each result as it
+    arrives; then yield (stem, result, reused) for every job in order, one file read at a time."""
+    files.keep_only({stem for stem, _ in jobs})
+    pending = [(stem, make) for stem, make in jobs if not files.has(stem)]
+    with tqdm(total=len(pending), desc=desc, disable=not progress, leave=False) as bar:
+        for i, r in runner.map(make() for _, make in pending):
+            files.put(pending[i][0], r)
+            bar.update(1)
+    fresh = {stem for stem, _ in pending}
+    for stem, _ in jobs:
+        data = files.get(stem)
+        if data is None:
+            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+        yield stem, data, stem not in fresh
+
+
+def piece_stem(piece: Piece) -> str:
+    return f"p{piece.index:05d}"
+
+
+# --------------------------------------------------------------------------- trace
+
+
+def trace_jobs(ctx: Context, pieces: list[Piece], rule: SampleRule, s: LevelBakeSettings):
+    """(stem, task maker) per block of ``trace.block_samples`` samples of each piece."""
+    block, jobs = s.trace.block_samples, []
+    for p in pieces:
+        for lo in range(0, p.ns, block):
+            args = (p, rule, lo, min(lo + block, p.ns), halves(s))
+            jobs.append((f"{piece_stem(p)}_{lo // block:05d}", lambda a=args: Task(ctx, _trace_block, a)))
+    return jobs
+
+
+def _trace_block(state: PieceState, args) -> dict[str, np.ndarray]:
+    piece, rule, lo, hi, half = args
+    _, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    ids = np.arange(piece.s0 + lo, piece.s0 + hi, dtype=np.int64)
+    ao, valid = state.labeller.obscurance(
+        samples.points[lo:hi], samples.normals[lo:hi], half, state.foliage, ids=ids
+    )
+    # The valid samples' weight and weighted values: every piece's least squares takes the level's.
+    w = samples.weights[lo:hi][valid]
+    return {
+        "ao": ao,
+        "valid": valid,
+        "weight": np.array(w.sum()),
+        "weighted": w @ ao[valid].astype(np.float64),
+    }
+
+
+def piece_trace(files: TaskFiles, piece: Piece, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """The traced (ns, 2) float32 obscurance and (ns,) valid flags of a piece, from its block files."""
+    ao, valid = np.zeros((piece.ns, 2), np.float32), np.zeros(piece.ns, bool)
+    for lo in range(0, piece.ns, block):
+        data = files.get(f"{piece_stem(piece)}_{lo // block:05d}")
+        if data is None:
+            raise NeuralaoError(
+                f"trace block {lo // block} of piece {piece.index} is missing from {files.folder}"
+            )
+        ao[lo : lo + len(data["valid"])], valid[lo : lo + len(data["valid"])] = data["ao"], data["valid"]
+    return ao, valid
+
+
+# --------------------------------------------------------------------------- least squares
+
+
+def _solve_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: the least-squares vertex values of one piece (both distances)."""
+    piece, rule, ao, valid, t, whole = args
+    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    timing: dict[str, float] = {}
+    v = fit_level(scene, samples, ao, valid, t, timing=timing, whole=whole)
+    return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
+
+
+def solve_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole):
+    def make(p: Piece) -> Task:
+        ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
+        return Task(ctx, _solve_piece, (p, rule, ao, valid, s.trace, whole))
+
+    return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
+
+
+def fit_level(
+    scene: Scene,
+    samples,
+    values: np.ndarray,
+    valid: np.ndarray,
+    t: TraceSettings,
+    engine=None,
+    store=None,
+    tag: str = "",
+    timing: dict | None = None,
+    whole: Whole | None = None,
+) -> np.ndarray:
+    """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver
+    (``t.solver``, ``t.alpha``).
+
+    "components": the normal equations are assembled here, split into their connected components (the
+    matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
+    and each block, or a pack of small ones, is a task of ``engine`` (None: this process), its result
+    kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
+    ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
+    block (each task times itself, a stored one as it took then). ``whole``: see
+    :func:`pipeline.geometry.least_squares.normal_equations` (a piece of a level)."""
+
+    if t.solver != "components":
+        t0 = time.perf_counter()
+        v = fit_least_squares(scene, samples, values, valid, t.alpha, t.solver, whole)
+        if timing is not None:
+            took = time.perf_counter() - t0
+            timing.update(assembly=0.0, blocks=took, largest_block=took)
+        return v
+    t0 = time.perf_counter()
+    a, rhs = normal_equations(scene, samples, values, valid, t.alpha, whole)
+    blocks = component_blocks(a, t.component_vertices)
+    a = a.tocsr()
+    timing = {} if timing is None else timing
+    timing.update(assembly=time.perf_counter() - t0, blocks=0.0, largest_block=0.0)
+    ctx = Context("level-solve", _no_state, None)
+
+    def tasks():
+        for idx, method in blocks:
+            sub = a[idx][:, idx].tocsc()
+            yield Task(
+                ctx,
+                _solve_block,
+                (sub, rhs[idx], method),
+                content_key("solve", tag, idx, method, sub.data, rhs[idx]),
+            )
+
+    out = np.empty(rhs.shape)
+    for i, r in (engine or LocalEngine()).map(tasks(), store):
+        out[blocks[i][0]] = r["v"]
+        took = float(r.get("seconds", 0.0))
+        timing["blocks"] += took
+        timing["largest_block"] = max(timing["largest_block"], took)
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def component_blocks(a, big: int) -> list[tuple[np.ndarray, str]]:
+    """The connected components of the sparse symmetric ``a`` as solve tasks: (vertex indices (ascending)
+    int64, "amg" | "direct"). A component of at least ``big`` vertices is a task of its own solved by
+    multigrid CG; smaller ones (SuperLU) are packed, largest first, into tasks of about ``big`` vertices."""
+    _, label = connected_components(a, directed=False)
+    sizes = np.bincount(label)
+    members = np.split(np.argsort(label, kind="stable"), np.cumsum(sizes)[:-1])
+    blocks, pack, packed = [], [], 0
+    for c in np.argsort(-sizes, kind="stable"):
+        if sizes[c] >= big:
+            blocks.append((members[c], "amg"))
+            continue
+        pack.append(members[c])
+        packed += sizes[c]
+        if packed >= big:
+            blocks.append((np.sort(np.concatenate(pack)), "direct"))
+            pack, packed = [], 0
+    if pack:
+        blocks.append((np.sort(np.concatenate(pack)), "direct"))
+    return blocks
+
+
+def _no_state(payload) -> None:
+    return None
+
+
+def _solve_block(state, args) -> dict[str, np.ndarray]:
+    """Engine task: one block of the normal equations (csc matrix, rhs, "direct" | "amg")
+    -> {"v": solution}."""
+    a, rhs, method = args
+    t0 = time.perf_counter()
+    v = splu(a).solve(rhs) if method == "direct" else solve_amg(a, rhs)
+    return {"v": v, "seconds": np.array(time.perf_counter() - t0)}
+
+
+# --------------------------------------------------------------------------- LOD (section 2.2.1)
+
+
+def simplify(scene: Scene, reduction: float) -> Scene:
+    import fast_simplification  # measured: ~0.3 s to import; only the LOD stage needs it
+
+    v, f = fast_simplification.simplify(
+        scene.vertices.astype(np.float32), scene.faces.astype(np.int32), target_reduction=reduction
+    )
+    if len(f) == 0:  # nothing left of a tiny piece: it is its own LOD
+        return scene
+    return scene_from_arrays(np.asarray(v, np.float64), np.asarray(f, np.int64), "lod1", scene.source)
+
+
+def median_edge(scene: Scene) -> float:
+    t = scene.triangles
+    return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
+
+
+def holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
+    """Held-out sample counts: ``total`` faces drawn by area (seeded), one sample each."""
+    areas = face_areas(scene)
+    counts = np.zeros(len(areas), np.int64)
+    if total <= 0 or areas.sum() <= 0:
+        return counts
+    rng = np.random.default_rng(seed + 99)
+    pick = rng.choice(
+        len(areas), size=min(total, int((areas > 0).sum())), replace=False, p=areas / areas.sum()
+    )
+    counts[pick] = 1
+    return counts
+
+
+def lod_jobs(ctx, pieces, rule, values, trace_files: TaskFiles, s: LevelBakeSettings):
+    """One task per piece: its LOD, the LOD's AO by resampling and by least squares, and the error sums
+    against the gold standard at held-out LOD points (``lod.holdout_samples`` spread by area)."""
+
+    def make(p: Piece) -> Task:
+        ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
+        return Task(ctx, _lod_piece, (p, rule, values, ao, valid, s))
+
+    return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
+
+
+def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: LOD 1 of one piece and its AO by (a) resampling at its vertices, (b) least squares over
+    resampled surface samples; both against the gold standard at held-out LOD samples."""
+    from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
+
+    piece, rule, values, traced, traced_valid, s = args
+    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    t0 = time.perf_counter()
+    lod = simplify(scene, s.lod.target_reduction)
+    t1 = time.perf_counter()
+    radius = s.lod.radius or 1.5 * median_edge(lod)
+    at_vertices, _ = resample_in_spheres(state.labeller, values, lod.vertices, radius, s.lod.rays)
+    lod_samples = surface_samples(
+        lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3, face_offset=piece.f0
+    )
+    at_samples, _ = resample_in_spheres(state.labeller, values, lod_samples.points, radius, s.lod.rays)
+    ok = np.isfinite(at_samples)
+    t2 = time.perf_counter()
+    area = float(face_areas(scene).sum())
+    share = area / rule.area_all if rule.area_all > 0 else 0.0
+    # The piece's block of the whole LOD's least squares: its sample weights (shares of the piece's area)
+    # and edge weights scaled by the piece's share of the level's area.
+    lsq = fit_level(
+        lod,
+        lod_samples,
+        np.where(ok, at_samples, 0.0),
+        ok,
+        s.trace,
+        whole=Whole(1.0 / share, float(face_areas(lod).sum()) / share) if share else None,
+    )
+    fill = float(np.nanmean(at_vertices)) if np.isfinite(at_vertices).any() else 1.0
+    vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
+    t3 = time.perf_counter()
+    # Gold standard at held-out LOD points: the piece's traced samples within the sphere and facing the same
+    # way, weighted by area and by distance to the boundary (no vertex bake, no resampling rays).
+    count = int(round(s.lod.holdout_samples * share))
+    sums = np.zeros(6)  # sum w, w e_vertex^2, w e_lsq^2, w ref, w ref^2, held-out points
+    if count > 0:
+        hold = surface_samples(
+            lod,
+            count,
+            4,
+            s.seed + 4,
+            counts=holdout_counts(lod, count, s.seed + piece.f0),
+            face_offset=piece.f0,
+        )
+        f = blend(traced[:, 0], traced[:, 1], s.blend).astype(np.float64)
+        pts, nrm = samples.points[traced_valid], samples.normals[traced_valid]
+        fw, sw = f[traced_valid], samples.weights[traced_valid]
+        ref = np.full(len(hold), np.nan)
+        if len(pts):
+            tree = cKDTree(pts)
+            for i, nb in enumerate(tree.query_ball_point(hold.points, radius)):
+                if nb:
+                    nb = np.asarray(nb)
+                    # The same surface only: samples facing within 60 degrees of the LOD point's normal.
+                    w = sw[nb] * np.maximum(radius - np.linalg.norm(pts[nb] - hold.points[i], axis=1), 0)
+                    w = w * (nrm[nb] @ hold.normals[i] > 0.5)
+                    if w.sum() > 0:
+                        ref[i] = np.sum(w * fw[nb]) / w.sum()
+        m = np.isfinite(ref)
+        if m.any():
+            w = hold.weights[m] / hold.weights[m].sum() * share
+            ev = interpolate(lod, vert, hold.face, hold.bary)[m] - ref[m]
+            el = interpolate(lod, lsq, hold.face, hold.bary)[m] - ref[m]
+            sums = np.array(
+                [
+                    w.sum(),
+                    (w * ev**2).sum(),
+                    (w * el**2).sum(),
+                    (w * ref[m]).sum(),
+                    (w * ref[m] ** 2).sum(),
+                    m.sum(),
+                ]
+            )
+    return {
+        "vertices": lod.vertices,
+        "faces": lod.faces,
+        "ao_vertex": vert,
+        "ao_least_squares": lsq,
+        "radius": np.array(radius),
+        "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
+        "error_sums": sums,
+        "seconds_simplify": np.array(t1 - t0),
+        "seconds_resample": np.array(t2 - t1),
+        "seconds_solve": np.array(t3 - t2),
+        "seconds_reference": np.array(time.perf_counter() - t3),
+    }
+
+
+# --------------------------------------------------------------------------- blend check
+
+
+def _blend_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: at the picked samples of one piece, (a) the blended-kernel trace on the bake's rays,
+    (b) a 4x-ray blended reference (its own seed; the labeller's BVH is shared), the per-vertex blend
+    interpolated; with ``gap``, (c) the largest gap between the per-vertex blend and least squares of the
+    blended samples over the piece."""
+    piece, rule, picks, order, short, long_, ao, valid, s, ref_settings, gap, whole = args
+    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    pts, nrm = samples.points[picks], samples.normals[picks]
+    kern = blended_kernel_trace(state.labeller, state.foliage, pts, nrm, s, ids=piece.s0 + picks)
+    reference = copy.copy(state.labeller)
+    reference.settings = ref_settings
+    ref_two, ref_valid = reference.obscurance(pts, nrm, halves(s), state.foliage, ids=order)
+    plain = replace(s.blend, remap=None)
+    per_vertex = blend(short, long_, plain)
+    pred = interpolate(scene, per_vertex, samples.face[picks], samples.bary[picks])
+    worst = np.nan
+    if gap:
+        lsq = fit_level(scene, samples, blend(ao[:, 0], ao[:, 1], plain), valid, s.trace, whole=whole)
+        worst = float(np.abs(per_vertex - lsq).max(initial=0.0))
+    return {"kern": kern, "ref_two": ref_two, "ref_valid": ref_valid, "pred": pred, "gap": np.array(worst)}
+
+
+def blended_kernel_trace(
+    labeller: LevelLabeller, foliage, points, normals, s: LevelBakeSettings, ids
+) -> np.ndarray:
+    """One trace with the blended kernel rho_b(d) = w (1 - 2^(-d/h_long)) + (1 - w) (1 - 2^(-d/h_short))
+    per ray (escaped rays: 1), averaged per sample: a separate path from :meth:`LevelLabeller.obscurance`
+    that shares only the rays (:meth:`Labeller.rays`)."""
+    orig, dirs = labeller.rays(points, normals, ids=ids)
+    r = labeller.r_local
+    out = labeller.embree.run(
+        orig, dirs, query="INTERSECT", dists=np.full(len(orig), r, np.float32), output=1
+    )
+    t = out["tfar"].astype(np.float64)
+    hs, hl = (h / labeller.scale for h in halves(s))
+    w = s.blend.long_weight
+    rho = np.where(t < r, w * (1 - 2.0 ** (-t / hl)) + (1 - w) * (1 - 2.0 ** (-t / hs)), 1.0)
+    if foliage is not None and not foliage.empty:
+        start = np.repeat(foliage.origin_density(orig[:: labeller.settings.rays]), labeller.settings.rays)
+        rho = rho * foliage.transmittance(orig, dirs, np.minimum(out["tfar"], r), start)
+    return rho.reshape(len(points), -1).mean(axis=1)
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: the glTF arrays of one piece's static instances, concatenated in instance order: world
+    positions (float32), faces (local to each instance), COLOR_0 and the three AO attributes."""
+    piece, short, long_, blend_settings = args
+    final = blend(short, long_, blend_settings)
+    level, index = state.level, state.index
+    verts, faces = [], []
+    for k, j, _, _, _, _ in index.table[piece.first : piece.stop]:
+        node = index.nodes[k]
+        mesh = level.meshes[node.mesh]
+        v = mesh.vertices
+        verts.append((np.c_[v, np.ones(len(v))] @ node.transforms[j][:3].T).astype(np.float32))
+        faces.append(mesh.faces.astype(np.uint32))
+    return {
+        "positions": np.concatenate(verts),
+        "faces": np.concatenate(faces),
+        "colour": vertex_colours(final),
+        "ao": final,
+        "short": np.asarray(short, np.float32),
+        "long": np.asarray(long_, np.float32),
+    }
