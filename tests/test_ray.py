@@ -149,8 +149,9 @@ def test_two_node_bake_is_byte_identical(ray_engine, local_bake, tmp_path, monke
     assert (tmp_path / "spot.ply").read_bytes() == data
 
 
-# Small tasks on the tiny level (scheduling only): several resampling tasks per stage, one per tree.
-LEVEL_TASKS = ["trace.block_samples=256", "task_rays=4096"]
+# Small tasks on the tiny level (scheduling only): pieces of at most 100 faces (the terrain alone, then
+# the buildings), several trace blocks and resampling tasks, one task per tree.
+LEVEL_TASKS = ["trace.block_samples=256", "task_rays=4096", "piece_faces=100"]
 
 
 @pytest.fixture(scope="module")
@@ -170,10 +171,10 @@ def _stage_arrays(out: Path) -> dict[str, np.ndarray]:
     from pipeline.foundation.io import read_npz
 
     arrays = {}
-    for f in sorted((out / "stages").glob("*.npz")):
+    for f in sorted((out / "stages").rglob("*.npz")):
         for k, v in read_npz(f).items():
-            if not k.startswith("seconds_") and k != "reused_blocks":
-                arrays[f"{f.stem}/{k}"] = v
+            if not k.startswith("seconds_") and k != "reused_tasks":
+                arrays[f"{f.relative_to(out / 'stages').with_suffix('')}/{k}"] = v
     return arrays
 
 
@@ -183,21 +184,25 @@ def _assert_same_level_bake(out: Path, local: Path, info: dict) -> None:
     files = [
         f for f in files if f.parts[0] != "stages" and f.name[:8] != "bake_log" or f.parent.name == "trace"
     ]
-    assert sum(f.name.startswith("block_") for f in files) == info["counts"]["samples"] // 256 + 1 > 2
-    assert any(f.suffix == ".glb" for f in files)
+    assert sum(f.parent.name == "trace" for f in files) >= info["counts"]["samples"] // 256 + 1 > 2
+    assert info["counts"]["pieces"] == 3 and any(f.suffix == ".glb" for f in files)
     for f in files:
         assert (out / f).read_bytes() == (local / f).read_bytes(), f
     mine, theirs = _stage_arrays(out), _stage_arrays(local)
-    assert mine.keys() == theirs.keys() and {"lod/ao_least_squares", "decorators/coefficients"} <= mine.keys()
+    assert (
+        mine.keys() == theirs.keys()
+        and {"lod/p00000/ao_least_squares", "decorators/coefficients"} <= mine.keys()
+    )
     for k, v in theirs.items():
         np.testing.assert_array_equal(mine[k], v, err_msg=k)
     assert not list((out / "stages").glob("*.parts")), "task results are removed once their stage is stored"
 
 
 def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(cluster, local_level, tmp_path):
-    """`neuralao bake LEVEL --config ... --engine ray`: trace blocks, trees' in-place traces and fits, grass,
-    shrub and LOD resampling as tasks (states rebuilt on the workers); the driver is killed once the LOD
-    stage has kept task results, and the rerun ends with the local library run's bytes."""
+    """`neuralao bake LEVEL --config ... --engine ray`: trace blocks, trees' in-place traces and fits, the
+    pieces' solves, LODs and outputs, grass and shrub resampling as tasks (states rebuilt on the workers);
+    the driver is killed once the solve stage has written a piece's result, and the rerun ends with the
+    local library run's bytes."""
     level, cfg, local, info = local_level
     out = tmp_path / "ray"
     args = [
@@ -214,16 +219,18 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
     ]
     for kv in LEVEL_TASKS:
         args += ["--set", kv]
-    parts = out / "stages" / "lod.parts"
+    parts = out / "stages" / "solve"
     p = _cli(*args, start_new_session=True)
     _kill_when(p, lambda: any(parts.glob("[!.]*.npz")), timeout=120)
     assert p.returncode == -signal.SIGKILL and not (out / "level_baked.glb").exists()
     assert (out / "stages" / "decorators.npz").is_file()
+    kept = {f.name: f.stat().st_mtime_ns for f in (out / "stages" / "trace").glob("*.npz")}
     p = _cli(*args)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 0, err
     reused = {st["stage"] for st in json.loads((out / "bake_log.json").read_text())["stages"] if st["reused"]}
-    assert {"trace", "decorators", "solve", "small_decorators"} <= reused, reused
+    assert {"trace", "decorators"} <= reused, reused
+    assert {f.name: f.stat().st_mtime_ns for f in (out / "stages" / "trace").glob("*.npz")} == kept
     _assert_same_level_bake(out, local, info)
 
 
