@@ -4,15 +4,19 @@ per-instance linear global fit (equation 3 of Sloan et al. 2013)."""
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from helpers import floor_quad, mc_bound, merge
 from scipy.special import expn
 
-from pipeline.bakes.level import TraceSettings, build_geometry, fit_global, linear_basis, receiver_samples
+from pipeline.bakes.level_decorators import FoliageSettings, build_foliage, fit_global, linear_basis
+from pipeline.bakes.level_pieces import index_level, piece_samples, piece_scene, sample_rule, scene_samples
+from pipeline.bakes.level_settings import TraceSettings
+from pipeline.bakes.level_stages import component_blocks, fit_level, opaque_scene
 from pipeline.geometry.least_squares import fit_least_squares
-from pipeline.geometry.level_files import read_level
+from pipeline.geometry.level_files import flatten, read_level
 from pipeline.geometry.level_gen import settings_for, write_level
 from pipeline.geometry.scene import scene_from_arrays
 from pipeline.geometry.surface import surface_samples
@@ -23,9 +27,37 @@ from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sp
 
 @pytest.fixture(scope="module")
 def tiny_geometry(tmp_path_factory):
+    """The tiny level whole: its receivers (static instances), its opaque scene and the level."""
     out = tmp_path_factory.mktemp("lv")
     write_level(out, settings_for("tiny", seed=1), "tiny")
-    return build_geometry(read_level(out / "level.gltf"))
+    level = read_level(out / "level.gltf")
+    rv, rf, _ = flatten(level, level.nodes_with("static"))
+    return SimpleNamespace(
+        level=level, receivers=scene_from_arrays(rv, rf, drop_degenerate=False), opaque=opaque_scene(level)
+    )
+
+
+def receiver_samples(scene, t: TraceSettings, seed: int):
+    return scene_samples(scene, t.samples_per_vertex, t.min_samples_per_face, t.samples_per_face_cap, seed)
+
+
+@pytest.mark.parametrize("piece_faces", [100, 600, 10**9])
+def test_pieces_make_the_samples_of_the_whole_level(tiny_geometry, piece_faces):
+    """Samples made piece by piece (global face numbers, the shared rounding stream skipped ahead, the
+    level's area as the weights' normaliser) are the samples of the flattened level, bit for bit."""
+    g = tiny_geometry
+    index = index_level(g.level, piece_faces)
+    assert len(index.pieces) == {100: 3, 600: 2, 10**9: 1}[piece_faces]
+    np.testing.assert_array_equal(index.bounds, g.opaque.bounds)
+    rule, pieces = sample_rule(g.level, index, 2.0, 1, 4, seed=7)
+    whole = scene_samples(g.receivers, 2.0, 1, 4, seed=7)
+    parts = [piece_samples(piece_scene(g.level, index, p), p, rule) for p in pieces]
+    assert [len(s) for s in parts] == [p.ns for p in pieces] and sum(p.ns for p in pieces) == len(whole)
+    np.testing.assert_array_equal(np.concatenate([s.points for s in parts]), whole.points)
+    np.testing.assert_array_equal(
+        np.concatenate([s.face + p.f0 for s, p in zip(parts, pieces, strict=True)]), whole.face
+    )
+    np.testing.assert_allclose(np.concatenate([s.weights for s in parts]), whole.weights, rtol=1e-12)
 
 
 def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
@@ -46,8 +78,6 @@ def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
 def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, threshold):
     """The early out of the back-face rule (rounds of rays, rejected samples stop) gives the same valid
     flags and bit-identical AO of every valid sample as tracing every ray, with foliage on."""
-    from pipeline.bakes.level import FoliageSettings, build_foliage
-
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=3)
     st = LabelSettings(
@@ -61,7 +91,7 @@ def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, thresh
     fast, full = LevelLabeller(g.opaque, st), LevelLabeller(g.opaque, st)
     full.early_out = False
     assert len(fast._checkpoints(rays)) > 1 and full._checkpoints(rays) == [rays]
-    fol = build_foliage(g, fast, FoliageSettings())
+    fol = build_foliage(g.level, fast, FoliageSettings())
     a, v = fast.obscurance(samples.points, samples.normals, [2.0, 300.0], fol)
     b, w = full.obscurance(samples.points, samples.normals, [2.0, 300.0], fol)
     np.testing.assert_array_equal(v, w)
@@ -71,14 +101,12 @@ def test_back_face_early_out_changes_no_valid_sample(tiny_geometry, rays, thresh
 
 
 def test_foliage_attenuates_only_where_there_is_foliage(tiny_geometry):
-    from pipeline.bakes.level import FoliageSettings, build_foliage
-
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
     lab = LevelLabeller(g.opaque, LabelSettings(rays=32, kernel="obscurance", max_distance=g.opaque.diagonal))
     plain, _ = lab.obscurance(samples.points, samples.normals, [2.0, 300.0])
     fol, _ = lab.obscurance(
-        samples.points, samples.normals, [2.0, 300.0], build_foliage(g, lab, FoliageSettings())
+        samples.points, samples.normals, [2.0, 300.0], build_foliage(g.level, lab, FoliageSettings())
     )
     assert (fol <= plain + 1e-7).all()
     darker = (plain - fol).max(axis=1) > 1e-3
@@ -278,7 +306,6 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
     multigrid CG for blocks of at least component_vertices) gives the global SuperLU solution."""
     from scipy.sparse.csgraph import connected_components
 
-    from pipeline.bakes.level import TraceSettings, component_blocks, fit_level
     from pipeline.geometry.least_squares import normal_equations
 
     g = tiny_geometry

@@ -58,12 +58,14 @@ from pipeline.bakes.level_stages import (
     TaskFiles,
     _blend_piece,
     _output_piece,
+    _simplify_level,
     lod_jobs,
     opaque_context,
     piece_stem,
     piece_trace,
     run_to_files,
     solve_jobs,
+    split_lod,
     trace_jobs,
     worker_settings,
 )
@@ -97,6 +99,8 @@ class BakeLog:
     def __init__(self, out: Path, key: str):
         self.out, self.key = out, key
         self.stages: list[dict[str, Any]] = []
+        self.runner = None  # the engine whose task seconds each stage's row takes (Engine.task_seconds)
+        self.task_seconds: dict[str, list[float]] = {}
         self.dir = out / "stages"
         self.dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.dir)
@@ -145,6 +149,10 @@ class BakeLog:
         )
         if (peak := _peak_rss()) is not None:
             self.stages[-1]["peak_rss_bytes"] = peak
+        if self.runner is not None and self.runner.task_seconds:
+            done, self.runner.task_seconds = self.runner.task_seconds, []
+            self.task_seconds[name] = done
+            self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
 
     def note(self, name: str, **counts) -> None:
         for st in self.stages:
@@ -253,6 +261,7 @@ def bake_level(
         runner = LocalEngine(states={ctx.key: state})
     else:
         runner = engine
+    blog.runner = runner  # each stage's row counts its tasks' seconds
     trace_files = TaskFiles(blog.dir / "trace", key)
     traced = blog.stored(
         "trace",
@@ -269,7 +278,9 @@ def bake_level(
     deco = blog.stored(
         "decorators",
         "Trees: local AO, in-place gold standard, eq. 3 fits",
-        lambda: bake_decorators(level, index.diagonal, s, engine, blog.parts("decorators"), key),
+        lambda: bake_decorators(
+            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key
+        ),
         instances=level.counts().get("tree_instances", 0),
     )
     solve_files = TaskFiles(blog.dir / "solve", key)
@@ -311,14 +322,8 @@ def bake_level(
         lod = blog.stored(
             "lod",
             "LOD: simplify, resample, least squares solve",
-            lambda: _lod_summary(
-                run_to_files(
-                    lod_files,
-                    runner,
-                    lod_jobs(ctx, pieces, rule, values, trace_files, s),
-                    "lod",
-                    progress,
-                )
+            lambda: _lod_stage(
+                runner, ctx, level, index, pieces, rule, values, trace_files, lod_files, s, progress
             ),
         )
         blog.note(
@@ -389,6 +394,9 @@ def bake_level(
             "invalid_samples": int(traced["invalid"]),
         },
         "errors": _error_tables(deco, lod, blend_err),
+        # Every task's own seconds per stage (as it ran, on whichever worker): what bench/bench_level.py
+        # projects onto N machines.
+        "task_seconds": blog.task_seconds,
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),
@@ -433,12 +441,34 @@ def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSett
     return values
 
 
+def _lod_stage(runner, ctx, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
+    """LOD 1 of the level's static instances (one task: one simplification of them all), split by piece
+    as it arrives; then per piece its LOD resampled, solved and measured (a task each). The resampling
+    radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it."""
+    t0 = time.perf_counter()
+    mesh_files = TaskFiles(lod_files.folder.parent / "lod_meshes", lod_files.key)
+    stems = {piece_stem(p) for p in pieces} | {"radius"}
+    mesh_files.keep_only(stems)
+    if not all(mesh_files.has(stem) for stem in stems):
+        ((_, result),) = list(runner.map([Task(ctx, _simplify_level, (s.lod.target_reduction,))]))
+        for stem, part in split_lod(result, pieces):
+            mesh_files.put(stem, part)
+        mesh_files.put("radius", {"median_edge": result["median_edge"]})
+        del result
+    radius = s.lod.radius or 1.5 * float(mesh_files.get("radius")["median_edge"])
+    simplify_s = time.perf_counter() - t0
+    jobs = lod_jobs(ctx, pieces, rule, values, mesh_files, radius, trace_files, s)
+    out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress))
+    out["seconds_simplify"] = np.array(simplify_s)
+    out["radius"] = np.array(radius)
+    return out
+
+
 def _lod_summary(results) -> dict[str, np.ndarray]:
     """The LOD pieces' counts, times and error table (from their weighted error sums)."""
     sums = np.zeros(6)
-    times = ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")
+    times = ("seconds_resample", "seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
-    radii, weights = [], []
     for _, r, _ in results:
         out["lod_vertices"] += len(r["vertices"])
         out["lod_faces"] += len(r["faces"])
@@ -446,13 +476,10 @@ def _lod_summary(results) -> dict[str, np.ndarray]:
         for k in times:
             out[k] += float(r[k])
         sums += r["error_sums"]
-        radii.append(float(r["radius"]))
-        weights.append(len(r["faces"]))
     sw = max(sums[0], 1e-300)
     mean = sums[3] / sw
     return {
         **{k: np.array(v) for k, v in out.items()},
-        "radius": np.array(float(np.average(radii, weights=weights)) if radii else np.nan),
         "rmse_vertex": np.array(np.sqrt(sums[1] / sw)),
         "rmse_least_squares": np.array(np.sqrt(sums[2] / sw)),
         "rmse_constant": np.array(np.sqrt(max(sums[4] / sw - mean**2, 0.0))),

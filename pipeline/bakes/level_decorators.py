@@ -16,7 +16,7 @@ import numpy as np
 from pipeline.bakes.level_pieces import level_bounds
 from pipeline.bakes.level_settings import FoliageSettings, LevelBakeSettings, blend, halves, label_settings
 from pipeline.bakes.level_stages import LabellerFrame, PieceState, gold_context, worker_settings
-from pipeline.engines.engine import LocalEngine, Shared, Task, content_key
+from pipeline.engines.engine import Shared, Task, content_key
 from pipeline.geometry.least_squares import fit_least_squares
 from pipeline.geometry.level_files import Level, LevelNode, flatten
 from pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
@@ -155,33 +155,31 @@ def bake_decorators(
     level: Level,
     diagonal: float,
     s: LevelBakeSettings,
-    engine=None,
+    runner,
+    local: bool,
     store=None,
     key: str = "",
 ) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
 
     The local AO of each model is baked here; every instance's in-place trace and fits is a task of
-    ``engine`` (None: this process, with the gold labeller built here), results kept in ``store``
-    (:class:`pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered (and traced with
-    ray ids) in a fixed order, so the result is the same bytes wherever the tasks run. ``diagonal``: the
-    opaque level's (the rays' length)."""
+    ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
+    ``store`` (:class:`pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered (and
+    traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
+    ``diagonal``: the opaque level's (the rays' length)."""
 
     trees = level.nodes_with("tree")
     if not trees:
         return {"models": np.zeros(0, np.int64)}
-    settings = worker_settings(label_settings(s, diagonal), engine)
+    settings = worker_settings(label_settings(s, diagonal), None if local else runner)
     # Foliage lives in the gold labeller's local frame (its scene's centre and diagonal), found here
     # one instance at a time, without flattening the level.
     bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))
     frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
     gold_foliage = build_foliage(level, frame, s.foliage, include_trees=False) if s.foliage.enabled else None
     ctx = gold_context(key, level, settings, gold_foliage)
-    if engine is None:
-        # The gold standard sees the trees as opaque geometry (every instance baked in place).
-        runner = LocalEngine(states={ctx.key: ctx.build(ctx.payload)})
-    else:
-        runner = engine
+    if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
+        runner.hold(ctx.key, ctx.build(ctx.payload))
     ctx_key = ctx.key
     models = sorted({n.mesh for n in trees})
     out: dict[str, Any] = {}
@@ -201,6 +199,8 @@ def bake_decorators(
     rows: list[dict | None] = [None] * len(jobs)
     for i, r in runner.map(tasks(), store):
         rows[i] = r
+    if local:
+        runner.release(ctx.key)
     out["models"] = np.array(models, np.int64)
     out["coefficients"] = np.array([r["y"] for r in rows])
     out["coefficients_global_only"] = np.array([r["y1"] for r in rows])

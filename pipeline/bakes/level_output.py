@@ -100,6 +100,8 @@ def write_outputs(
     if lod_files is not None:
         for piece in pieces:
             lod = lod_files.get(f"p{piece.index:05d}")
+            if len(lod["faces"]) == 0:
+                continue
             ao = np.asarray(lod["ao_least_squares"], np.float32)
             attrs = {
                 "COLOR_0": vertex_colours(ao),

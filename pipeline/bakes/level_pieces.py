@@ -252,3 +252,15 @@ def sample_rule(level: Level, index: PieceIndex, samples_per_vertex: float, floo
         pieces.append(replace(piece, s0=s0, ns=ns))
         s0 += ns
     return SampleRule(rho, floor, cap, seed, area_total, area_all), pieces
+
+
+def scene_samples(scene: Scene, samples_per_vertex: float, floor: int, cap: int, seed: int) -> SurfaceSamples:
+    """The samples a level bake makes on ``scene`` taken whole (one piece): water-filled under the per-face
+    ``floor`` and ``cap``, stochastically rounded, seeded."""
+    areas = face_areas(scene)
+    hist = AreaHistogram()
+    hist.add(areas)
+    rule = SampleRule(
+        water_fill(hist, samples_per_vertex * len(scene.vertices), floor, cap), floor, cap, seed
+    )
+    return surface_samples(scene, 0, cap, seed, counts=face_counts(areas, 0, rule))

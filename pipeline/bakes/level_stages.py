@@ -168,6 +168,8 @@ def run_to_files(
         data = files.get(stem)
         if data is None:
             raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+        if stem not in fresh and "seconds_task" in data:  # as it took in the run that wrote it
+            runner.task_seconds.append(float(data["seconds_task"]))
         yield stem, data, stem not in fresh
 
 
@@ -333,20 +335,61 @@ def _solve_block(state, args) -> dict[str, np.ndarray]:
 # --------------------------------------------------------------------------- LOD (section 2.2.1)
 
 
-def simplify(scene: Scene, reduction: float) -> Scene:
+def simplify(scene: Scene, reduction: float | None = None, target_count: int | None = None) -> Scene:
+    """Quadric-error simplification (fast-simplification) to a fraction removed or a face count."""
     import fast_simplification  # measured: ~0.3 s to import; only the LOD stage needs it
 
     v, f = fast_simplification.simplify(
-        scene.vertices.astype(np.float32), scene.faces.astype(np.int32), target_reduction=reduction
+        scene.vertices.astype(np.float32),
+        scene.faces.astype(np.int32),
+        target_reduction=reduction,
+        target_count=target_count,
     )
-    if len(f) == 0:  # nothing left of a tiny piece: it is its own LOD
+    if len(f) == 0:  # nothing left: the mesh is its own LOD
         return scene
     return scene_from_arrays(np.asarray(v, np.float64), np.asarray(f, np.int64), "lod1", scene.source)
 
 
-def median_edge(scene: Scene) -> float:
-    t = scene.triangles
-    return float(np.median(np.linalg.norm(t[:, 1] - t[:, 0], axis=1)))
+def _simplify_level(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: LOD 1 of the level's static instances, one quadric simplification of them all flattened
+    (the simplifier's error threshold is the whole level's: flat house walls go before a curved terrain),
+    and the piece of every LOD face. Collapses never join two components, so each LOD component comes from
+    one instance: its piece is the one most of its vertices' nearest original vertices belong to.
+    Returns vertices, faces, face_piece and the LOD's median edge length."""
+    from scipy.sparse import coo_matrix
+    from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
+
+    (reduction,) = args
+    level, index = state.level, state.index
+    rv, rf, _ = flatten(level, index.nodes)
+    lod = simplify(scene_from_arrays(rv, rf, "receivers", level.source, drop_degenerate=False), reduction)
+    starts = np.array([p.v0 for p in index.pieces])
+    _, near = cKDTree(rv).query(lod.vertices)
+    del rv, rf
+    owner = np.searchsorted(starts, near, side="right") - 1
+    f = lod.faces
+    n = len(lod.vertices)
+    graph = coo_matrix(
+        (np.ones(2 * len(f)), (np.r_[f[:, 0], f[:, 1]], np.r_[f[:, 1], f[:, 2]])), shape=(n, n)
+    )
+    _, comp = connected_components(graph, directed=False)
+    votes = np.bincount(comp * len(starts) + owner, minlength=(comp.max() + 1) * len(starts))
+    comp_piece = votes.reshape(-1, len(starts)).argmax(axis=1)
+    v = lod.vertices
+    return {
+        "vertices": v,
+        "faces": f,
+        "face_piece": comp_piece[comp[f[:, 0]]],
+        "median_edge": np.array(float(np.median(np.linalg.norm(v[f[:, 1]] - v[f[:, 0]], axis=1)))),
+    }
+
+
+def split_lod(result: dict[str, np.ndarray], pieces: list[Piece]):
+    """(stem, {"vertices", "faces"}) of each piece's part of the level's LOD (vertices renumbered)."""
+    for p in pieces:
+        f = result["faces"][result["face_piece"] == p.index]
+        used, local = np.unique(f, return_inverse=True)
+        yield piece_stem(p), {"vertices": result["vertices"][used], "faces": local.reshape(-1, 3)}
 
 
 def holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
@@ -363,13 +406,16 @@ def holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
     return counts
 
 
-def lod_jobs(ctx, pieces, rule, values, trace_files: TaskFiles, s: LevelBakeSettings):
+def lod_jobs(
+    ctx, pieces, rule, values, lod_meshes: TaskFiles, radius: float, trace_files, s: LevelBakeSettings
+):
     """One task per piece: its LOD, the LOD's AO by resampling and by least squares, and the error sums
     against the gold standard at held-out LOD points (``lod.holdout_samples`` spread by area)."""
 
     def make(p: Piece) -> Task:
         ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
-        return Task(ctx, _lod_piece, (p, rule, values, ao, valid, s))
+        mesh = lod_meshes.get(piece_stem(p))
+        return Task(ctx, _lod_piece, (p, rule, values, mesh["vertices"], mesh["faces"], radius, ao, valid, s))
 
     return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
 
@@ -379,12 +425,15 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     resampled surface samples; both against the gold standard at held-out LOD samples."""
     from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
 
-    piece, rule, values, traced, traced_valid, s = args
+    piece, rule, values, lod_vertices, lod_faces, radius, traced, traced_valid, s = args
+    if len(lod_faces) == 0:  # the simplification left nothing of this piece
+        out = {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
+        out.update(ao_vertex=np.zeros(0, np.float32), ao_least_squares=np.zeros(0, np.float32))
+        out.update(resample_points=np.array(0), error_sums=np.zeros(6))
+        return out | {k: np.array(0.0) for k in ("seconds_resample", "seconds_solve", "seconds_reference")}
     scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
-    t0 = time.perf_counter()
-    lod = simplify(scene, s.lod.target_reduction)
     t1 = time.perf_counter()
-    radius = s.lod.radius or 1.5 * median_edge(lod)
+    lod = scene_from_arrays(lod_vertices, lod_faces, f"lod{piece.index}", drop_degenerate=False)
     at_vertices, _ = resample_in_spheres(state.labeller, values, lod.vertices, radius, s.lod.rays)
     lod_samples = surface_samples(
         lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3, face_offset=piece.f0
@@ -457,7 +506,6 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         "radius": np.array(radius),
         "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
         "error_sums": sums,
-        "seconds_simplify": np.array(t1 - t0),
         "seconds_resample": np.array(t2 - t1),
         "seconds_solve": np.array(t3 - t2),
         "seconds_reference": np.array(time.perf_counter() - t3),

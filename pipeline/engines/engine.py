@@ -41,6 +41,7 @@ import logging
 import os
 import shutil
 import socket
+import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,6 +158,9 @@ class Engine:
 
     def __init__(self) -> None:
         self.completed = 0  # tasks finished (or loaded from a store) by the latest map
+        # Seconds of every task result yielded (fresh or stored, as it took then), in order; a caller
+        # timing its stages reads and clears it.
+        self.task_seconds: list[float] = []
 
     @property
     def task_rays(self) -> int:
@@ -173,6 +177,8 @@ class Engine:
                 self.reused += 1
             elif store is not None and task.key is not None:
                 store.put(task.key, result)
+            if isinstance(result, dict) and "seconds_task" in result:
+                self.task_seconds.append(float(result["seconds_task"]))
             self.completed += 1
             yield index, result
         if self.reused:
@@ -218,19 +224,50 @@ class LocalEngine(Engine):
         self._cache = _StateCache(1)
         self._states = dict(states or {})
 
+    def hold(self, key: str, state: Any) -> None:
+        """Use ``state`` (held by the caller) for the tasks of context ``key`` from now on."""
+        self._states[key] = state
+
+    def release(self, key: str) -> None:
+        """Forget the state :meth:`hold` was given for ``key`` (the caller frees it)."""
+        self._states.pop(key, None)
+
     def _run(self, pending):
         for index, task in pending:
             yield from self._drain_stored()
             ctx = task.context
+            built = [0.0]
             if ctx.key in self._states:
                 state = self._states[ctx.key]
             else:
-                state = self._cache.get(ctx.key, lambda ctx=ctx: ctx.build(ctx.payload))
-            yield index, task, task.fn(state, _unshare(task.args))
+                state = self._cache.get(
+                    ctx.key, lambda ctx=ctx, built=built: _timed_build(ctx.build, lambda: ctx.payload, built)
+                )
+            yield index, task, _timed_call(task.fn, state, _unshare(task.args), built[0])
         yield from self._drain_stored()
 
     def close(self) -> None:
         self._cache.clear()  # e.g. a dataset's GL renderer
+
+
+def _timed_build(build, payload, seconds: list[float]):
+    """``build(payload())``, its seconds (fetch and build) in ``seconds[0]``."""
+    t0 = time.perf_counter()
+    state = build(payload())
+    seconds[0] = time.perf_counter() - t0
+    return state
+
+
+def _timed_call(fn, state, args, state_seconds: float = 0.0):
+    """``fn(state, args)``; a dict result gets the call's seconds (``seconds_task``) and, for the task that
+    built its context's state, the build's (``seconds_state``): what a projection of a run's stages reads."""
+    t0 = time.perf_counter()
+    result = fn(state, args)
+    if isinstance(result, dict):
+        result["seconds_task"] = np.array(time.perf_counter() - t0)
+        if state_seconds:
+            result["seconds_state"] = np.array(state_seconds)
+    return result
 
 
 class _Worker:
@@ -248,7 +285,10 @@ class _Worker:
         # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
         # task of a context on this actor pulls it from the object store. Shared args likewise.
         try:
-            state = self._cache.get(key, lambda: build(ray.get(boxed_payload[0])))
+            built = [0.0]
+            state = self._cache.get(
+                key, lambda: _timed_build(build, lambda: ray.get(boxed_payload[0]), built)
+            )
             if isinstance(args, tuple):
                 args = tuple(
                     self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
@@ -256,7 +296,7 @@ class _Worker:
                     else a
                     for a in args
                 )
-            return fn(state, args)
+            return _timed_call(fn, state, args, built[0])
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
 

@@ -64,18 +64,23 @@ class Scene:
         """(m, 3, 3) float64 corner positions."""
         return self.vertices[self.faces]
 
+    def face_cross(self) -> np.ndarray:
+        """(m, 3) float64 (v1 - v0) x (v2 - v0) per face: twice the area along the normal. Computed from the
+        vertices each time, never from :attr:`triangles`, so a big scene keeps no (m, 3, 3) copy."""
+        v, f = self.vertices, self.faces
+        e0 = v[f[:, 0]]
+        return np.cross(v[f[:, 1]] - e0, v[f[:, 2]] - e0)
+
     @cached_property
     def face_normals(self) -> np.ndarray:
         """(m, 3) float64 unit geometric normals (right-handed winding)."""
-        t = self.triangles
-        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        n = self.face_cross()
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
     @cached_property
     def vertex_normals(self) -> np.ndarray:
         """(n, 3) float64 area-weighted vertex normals; a vertex whose normals cancel gets +z."""
-        t = self.triangles
-        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])  # area weighted
+        n = self.face_cross()  # area weighted
         vn = np.zeros_like(self.vertices)
         for k in range(3):
             np.add.at(vn, self.faces[:, k], n)

@@ -50,8 +50,7 @@ class SurfaceSamples:
 
 def face_areas(scene: Scene) -> np.ndarray:
     """(m,) float64 triangle areas."""
-    t = scene.triangles
-    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    return 0.5 * np.linalg.norm(scene.face_cross(), axis=1)
 
 
 def samples_per_face(areas: np.ndarray, total: float, cap: int) -> np.ndarray:
@@ -93,7 +92,7 @@ def surface_samples(
     u2 = np.mod(radinv[index] + s2, 1.0)
     r = np.sqrt(u1)  # square-root warp: uniform by area over the triangle
     bary = np.stack([1.0 - r, r * (1.0 - u2), r * u2], axis=1)
-    tri = scene.triangles[face]
+    tri = scene.vertices[scene.faces[face]]
     points = np.einsum("kc,kcd->kd", bary, tri)
     norm = areas[counts > 0].sum() if area_total is None else area_total
     weights = (areas / np.maximum(counts, 1))[face] / norm

@@ -74,6 +74,7 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, fields
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -159,18 +160,23 @@ class Labeller:
         # local = (world - center) / scale; center (3,) float64, scale the diagonal (scene units).
         self.center = np.asarray(scene.center, dtype=np.float64)
         self.scale = diag
-        self._verts_local = (np.asarray(scene.vertices, np.float64) - self.center) / diag
         self._face_normals = np.asarray(scene.face_normals, dtype=np.float64)
         self._face_normals32 = np.nan_to_num(self._face_normals).astype(np.float32)
         # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self.embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
+        del self.__dict__["_verts_local"]  # only frames need it again: a level's labeller keeps no copy
         # EmbreeScene.run commits lazily on the first call; do it now, before threads share it.
         self.embree.run(
             np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED", dists=1.0
         )
         self._tls = threading.local()  # per-worker scratch buffers
         self.settings = settings or LabelSettings()
+
+    @cached_property
+    def _verts_local(self) -> np.ndarray:
+        """(n, 3) float64 vertices in the local frame (module doc)."""
+        return (np.asarray(self.scene.vertices, np.float64) - self.center) / self.scale
 
     @property
     def settings(self) -> LabelSettings:

@@ -292,7 +292,7 @@ def sphere_directions(k: int) -> np.ndarray:
 
 def barycentric(scene: Scene, face: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(h, 3) barycentric coordinates of ``points`` (h, 3) projected onto triangles ``face`` (h,)."""
-    t = scene.triangles[face]
+    t = scene.vertices[scene.faces[face]]
     v0, v1, v2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0], points - t[:, 0]
     d00, d01, d11 = (v0 * v0).sum(1), (v0 * v1).sum(1), (v1 * v1).sum(1)
     d20, d21 = (v2 * v0).sum(1), (v2 * v1).sum(1)
