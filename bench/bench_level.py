@@ -9,6 +9,10 @@ every stage's seconds beside the paper's row (NVIDIA K20, OptiX), the ratio, pea
 second and the machine's load average before and after (other jobs on a shared machine slow it).
 The bake folder keeps its stages, so a second run of the same command only reruns what is stale
 (use --fresh to time everything again).
+
+``--baseline DIR`` first bakes the same level with the checkout at DIR (another version of this project,
+e.g. a ``git worktree`` of an older commit; it runs its own bench/bench_level.py, fresh), then this one,
+in the same run on the same idle machine, and adds a before / after table per stage (OUT/bench_level.md).
 """
 
 from __future__ import annotations
@@ -98,6 +102,41 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def run_baseline(checkout: Path, args) -> dict:
+    """bench/bench_level.py of the checkout at ``checkout`` (fresh, same preset and seed), run as its own
+    process with that checkout first on the path; returns its bench_level.json."""
+    import subprocess
+
+    out = Path(args.out).resolve() / "baseline"
+    cmd = [sys.executable, "bench/bench_level.py", "--preset", args.preset, "--seed", str(args.seed)]
+    cmd += ["--out", str(out), "--fresh"] + [f"--set={kv}" for kv in args.set]
+    env = dict(os.environ, PYTHONPATH=str(checkout.resolve()))
+    subprocess.run(cmd, cwd=checkout, env=env, check=True)
+    return json.loads((out / "level" / args.preset / "bench_level.json").read_text())
+
+
+def before_after(before: dict, after: dict) -> str:
+    """Per-stage seconds of the baseline and of this checkout, side by side, with their ratio."""
+    b = {s["stage"]: s for s in before["bake"]["stages"]}
+    a = {s["stage"]: s for s in after["bake"]["stages"]}
+    lines = [
+        "| stage | before (s) | after (s) | before / after | driver peak RSS before / after (MiB) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for name in list(b) + [n for n in a if n not in b]:
+        sb, sa = b.get(name, {}).get("seconds"), a.get(name, {}).get("seconds")
+        rb, ra = (x.get(name, {}).get("peak_rss_bytes", 0) / 2**20 for x in (b, a))
+        ratio = f"{sb / sa:.2f}x" if sb and sa else "-"
+        fmt = lambda v: f"{v:.1f}" if v is not None else "-"  # noqa: E731
+        lines.append(f"| {name} | {fmt(sb)} | {fmt(sa)} | {ratio} | {rb:,.0f} / {ra:,.0f} |")
+    tb, ta = before["seconds_total"], after["seconds_total"]
+    pb, pa = before["bake"]["peak_rss_bytes"] / 2**30, after["bake"]["peak_rss_bytes"] / 2**30
+    lines.append(
+        f"| **total** | **{tb:.1f}** | **{ta:.1f}** | **{tb / ta:.2f}x** | {pb:.2f} / {pa:.2f} GiB |"
+    )
+    return "\n".join(lines) + "\n"
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--preset", default="table1")
@@ -107,8 +146,12 @@ def main() -> int:
     )
     p.add_argument("--set", action="append", default=[], help="bake setting override, e.g. trace.rays=64")
     p.add_argument("--fresh", action="store_true", help="delete the bake folder first (time every stage)")
+    p.add_argument("--baseline", default=None, help="a checkout of another version to bake first (before)")
     args = p.parse_args()
     out = Path(args.out) / "level" / args.preset
+    before = None
+    if args.baseline:
+        before = run_baseline(Path(args.baseline), args)
     load_before = list(os.getloadavg())
     t0 = time.perf_counter()
     level, cfg = write_level(out / "level", settings_for(args.preset, args.seed), args.preset)
@@ -139,9 +182,13 @@ def main() -> int:
     }
     if result["trace_mrays_per_s"] is None:
         result["trace_mrays_per_s"] = float("nan")
+    text = markdown(result)
+    if before is not None:
+        result["baseline"] = {"checkout": str(args.baseline), "result": before}
+        text += "\n" + before_after(before, result)
     write_json(out / "bench_level.json", result)
-    write_text(out / "bench_level.md", markdown(result))
-    print(markdown(result))
+    write_text(out / "bench_level.md", text)
+    print(text)
     print(json.dumps(info["errors"], indent=1))
     return 0
 

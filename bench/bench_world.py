@@ -106,11 +106,12 @@ def _folder_bytes(folder: Path) -> int:
 
 def markdown(r: dict) -> str:
     log = r.get("bake_log") or {}
+    c = log.get("counts", {})
     gib = 2**30
     lines = [
-        f"Level {r['preset']}: {log.get('counts', {}).get('receiver_faces', 0):,} faces baked, "
-        f"{log.get('counts', {}).get('samples', 0):,} samples x {r['rays']} rays, "
-        f"{log.get('counts', {}).get('pieces', 0)} pieces; Ray, {r['workers']} workers on {r['cpu_count']} cores.",
+        f"Level {r['preset']}: {c.get('receiver_faces', 0):,} faces baked, "
+        f"{c.get('samples', 0):,} samples x {r['rays']} rays, {c.get('pieces', 0)} pieces; "
+        f"Ray, {r['workers']} workers on {r['cpu_count']} cores.",
         "",
         "| stage | seconds | tasks | longest task (s) | driver peak RSS (MiB) | reused |",
         "|---|---:|---:|---:|---:|:---:|",
@@ -121,15 +122,17 @@ def markdown(r: dict) -> str:
             f"{st.get('task_seconds_max', float('nan')):.1f} | {st.get('peak_rss_bytes', 0) / 2**20:,.0f} | "
             f"{'yes' if st['reused'] else ''} |"
         )
-    p = r["peak_bytes"]
+    p = {k: v / gib for k, v in r["peak_bytes"].items()}
     lines += [
         f"| **this run, wall** | **{r['seconds_wall']:.0f}** | | | | |",
         "",
-        f"Peak RSS: driver {p['driver'] / gib:.2f} GiB (budget {r['budget_gib']:g} GiB: "
-        f"{'within' if r['driver_within_budget'] else 'OVER'}), largest worker {p['worker'] / gib:.2f} GiB, "
-        f"Ray's services {p['ray_services'] / gib:.2f} GiB, every process together {p['all'] / gib:.2f} GiB; "
-        f"object store (/dev/shm) {p['object_store_shm'] / gib:.2f} GiB.",
-        f"Bytes written: glTF {r['output_bytes'] / gib:.2f} GiB, stage files {r['stage_bytes'] / gib:.2f} GiB. "
+        f"Peak RSS: driver {p['driver']:.2f} GiB (budget {r['budget_gib']:g} GiB: "
+        f"{'within' if r['driver_within_budget'] else 'OVER'}), "
+        f"largest worker {p['worker']:.2f} GiB, Ray's services {p['ray_services']:.2f} GiB, "
+        f"all processes {p['all']:.2f} GiB; "
+        f"object store (/dev/shm) {p['object_store_shm']:.2f} GiB.",
+        f"Bytes written: glTF {r['output_bytes'] / gib:.2f} GiB, "
+        f"stage files {r['stage_bytes'] / gib:.2f} GiB. "
         f"Load average {r['load_before'][0]:.2f} before, {r['load_after'][0]:.2f} after.",
     ]
     return "\n".join(lines) + "\n"
@@ -147,12 +150,20 @@ def main() -> int:
     level = out / "level" / "level.gltf"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     if not level.is_file():
-        cmd = [sys.executable, "-m", "pipeline.cli", "level", "--preset", args.preset, "--out", str(out / "level")]
+        cmd = [
+            sys.executable,
+            "-m",
+            "pipeline.cli",
+            "level",
+            "--preset",
+            args.preset,
+            "--out",
+            str(out / "level"),
+        ]
         subprocess.run(cmd, check=True, env=env)
-    bake = [
-        sys.executable, "-m", "pipeline.cli", "bake", str(level), "--config", str(out / "level" / "bake.json"),
-        "--out", str(out / "bake"), "--engine", "ray", "--ray-workers", str(args.workers),
-    ]  # fmt: skip
+    cfg = out / "level" / "bake.json"
+    bake = [sys.executable, "-m", "pipeline.cli", "bake", str(level), "--config", str(cfg), "--out"]
+    bake += [str(out / "bake"), "--engine", "ray", "--ray-workers", str(args.workers)]
     for kv in args.set:
         bake += ["--set", kv]
     load_before = list(os.getloadavg())

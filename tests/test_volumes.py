@@ -530,7 +530,7 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
 
 
 def test_volumes_of_a_generated_glTF_level_use_its_opaque_instances(tmp_path):
-    from pipeline.bakes.level import build_geometry
+    from pipeline.bakes.level_stages import opaque_scene
     from pipeline.geometry.level_files import read_level
     from pipeline.geometry.level_gen import settings_for, write_level
 
@@ -550,7 +550,7 @@ def test_volumes_of_a_generated_glTF_level_use_its_opaque_instances(tmp_path):
     ]
     assert cli.main(args) == 0
     vol = read_volumes(out)
-    opaque = build_geometry(read_level(path)).opaque
+    opaque = opaque_scene(read_level(path))
     assert vol.scene["faces"] == len(opaque.faces)  # static + blocker instances, instancing expanded
     assert np.allclose(vol.scene["bounds"], opaque.bounds)
     assert all(np.isfinite(m.coefficients).all() for m in vol.models) and len(vol.regions) > 1

@@ -101,6 +101,7 @@ class BakeLog:
         self.stages: list[dict[str, Any]] = []
         self.runner = None  # the engine whose task seconds each stage's row takes (Engine.task_seconds)
         self.task_seconds: dict[str, list[float]] = {}
+        self.state_seconds: dict[str, list[float]] = {}
         self.dir = out / "stages"
         self.dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.dir)
@@ -153,6 +154,10 @@ class BakeLog:
             done, self.runner.task_seconds = self.runner.task_seconds, []
             self.task_seconds[name] = done
             self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
+        if self.runner is not None and self.runner.state_seconds:
+            built, self.runner.state_seconds = self.runner.state_seconds, []
+            self.state_seconds[name] = built
+            self.stages[-1].update(states_built=len(built))
 
     def note(self, name: str, **counts) -> None:
         for st in self.stages:
@@ -397,6 +402,7 @@ def bake_level(
         # Every task's own seconds per stage (as it ran, on whichever worker): what bench/bench_level.py
         # projects onto N machines.
         "task_seconds": blog.task_seconds,
+        "state_seconds": blog.state_seconds,
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),

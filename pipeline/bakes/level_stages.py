@@ -168,8 +168,6 @@ def run_to_files(
         data = files.get(stem)
         if data is None:
             raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
-        if stem not in fresh and "seconds_task" in data:  # as it took in the run that wrote it
-            runner.task_seconds.append(float(data["seconds_task"]))
         yield stem, data, stem not in fresh
 
 

@@ -158,9 +158,18 @@ class Engine:
 
     def __init__(self) -> None:
         self.completed = 0  # tasks finished (or loaded from a store) by the latest map
-        # Seconds of every task result yielded (fresh or stored, as it took then), in order; a caller
-        # timing its stages reads and clears it.
+        # Seconds of every task this engine ran (the call on its worker, without building the context's
+        # state) and of every state it built, in completion order; a caller timing its stages reads and
+        # clears them.
         self.task_seconds: list[float] = []
+        self.state_seconds: list[float] = []
+
+    def _timing(self, timed: _Timed) -> Any:
+        """The result inside ``timed``, its seconds noted."""
+        self.task_seconds.append(timed.seconds)
+        if timed.state_seconds:
+            self.state_seconds.append(timed.state_seconds)
+        return timed.result
 
     @property
     def task_rays(self) -> int:
@@ -177,8 +186,6 @@ class Engine:
                 self.reused += 1
             elif store is not None and task.key is not None:
                 store.put(task.key, result)
-            if isinstance(result, dict) and "seconds_task" in result:
-                self.task_seconds.append(float(result["seconds_task"]))
             self.completed += 1
             yield index, result
         if self.reused:
@@ -243,7 +250,7 @@ class LocalEngine(Engine):
                 state = self._cache.get(
                     ctx.key, lambda ctx=ctx, built=built: _timed_build(ctx.build, lambda: ctx.payload, built)
                 )
-            yield index, task, _timed_call(task.fn, state, _unshare(task.args), built[0])
+            yield index, task, self._timing(_timed_call(task.fn, state, _unshare(task.args), built[0]))
         yield from self._drain_stored()
 
     def close(self) -> None:
@@ -258,16 +265,20 @@ def _timed_build(build, payload, seconds: list[float]):
     return state
 
 
-def _timed_call(fn, state, args, state_seconds: float = 0.0):
-    """``fn(state, args)``; a dict result gets the call's seconds (``seconds_task``) and, for the task that
-    built its context's state, the build's (``seconds_state``): what a projection of a run's stages reads."""
+@dataclass(frozen=True)
+class _Timed:
+    """A task's result, the seconds of its call and of building its context's state (0: already built)."""
+
+    result: Any
+    seconds: float
+    state_seconds: float
+
+
+def _timed_call(fn, state, args, state_seconds: float = 0.0) -> _Timed:
+    """``fn(state, args)`` and its seconds: what a projection of a run's stages reads."""
     t0 = time.perf_counter()
     result = fn(state, args)
-    if isinstance(result, dict):
-        result["seconds_task"] = np.array(time.perf_counter() - t0)
-        if state_seconds:
-            result["seconds_state"] = np.array(state_seconds)
-    return result
+    return _Timed(result, time.perf_counter() - t0, state_seconds)
 
 
 class _Worker:
@@ -405,7 +416,7 @@ class RayEngine(Engine):
                 result = _get(ray, ready)
                 if isinstance(result, _Failure):
                     raise NeuralaoError(result.message)
-                yield index, task, result
+                yield index, task, self._timing(result)
         finally:
             for ref in inflight:  # an abandoned run (error, interrupt): drop its queued work
                 try:
