@@ -13,15 +13,13 @@ interleaved rounds, as ratios to the local engine at the same worker count (goal
 
 Per-task costs measured on the same instance: the round trip of an empty task, the first task of a
 new context (payload through the object store + Embree build on the worker) and the trace cost per
-ray on one core. The projection for Table 1 of Sloan et al. 2013 (6.7 M samples x 256 rays) on N
-machines of C cores, with ``tasks = TASKS_PER_CORE * N * C`` blocks (trace.block_samples chosen to
-match; the default 262,144 would make 26 tasks and leave cores idle beyond 26):
-``T(N) = serial + ceil(tasks / (N C)) * block * rays * c_ray / e + tasks * t_task / (N C) + t_ctx
-+ max(task stages / (N C e), largest task)`` (driver stages serial; the stages that run as tasks,
-decorators, grass and shrubs, LOD resampling and the solve's blocks, spread over the cores but not
-below the largest solve block; ``e`` the measured Ray / local ratio of the level trace; ``t_ctx``
-the first-task cost scaled by faces, paid once per actor, in parallel on every machine), using a
-bench_level.json of bench/bench_level.py for the serial stages when one exists.
+ray on one core. The projection of a level bake on N machines of C cores reads a level bake's log
+(``--level-json``: bench/bench_level.py's bench_level.json, or any bake_log.json), whose every stage
+records its wall time and each of its tasks' seconds: per stage, the driver's own seconds plus the
+makespan of its tasks scheduled longest first on N C cores (one task per core, at the measured Ray /
+local efficiency and per-task round trip); the trace's blocks divide (``trace.block_samples`` is
+sized to the cores), the other stages' tasks do not (the largest piece's solve and LOD, the one LOD
+simplification, bound them); every machine builds its BVHs once, in parallel.
 
 Writes OUT/bench_ray.json and OUT/bench_ray.md. The machine's load average is recorded before and
 after: on a shared machine absolute numbers move, ratios within one run still compare.
@@ -49,10 +47,6 @@ from pipeline.foundation.io import write_json, write_text  # noqa: E402
 from pipeline.geometry.scene import load_scene  # noqa: E402
 from pipeline.tracing.engine_labeller import labeller_context  # noqa: E402
 
-# Table 1 of Sloan et al. 2013: the trace row's workload (6.7 M samples, 256 rays a sample, 1.8 M faces).
-TABLE1_SAMPLES = 6_700_000
-TABLE1_RAYS = 256
-TABLE1_FACES = 1_800_000
 # Tasks per core in the projection: enough that the last round of tasks balances (block size follows).
 TASKS_PER_CORE = 4
 
@@ -221,80 +215,95 @@ def measure(args) -> dict:
     }
 
 
-# Stages (bench_level.json stage rows, or "stage:part" notes) whose work runs as engine tasks: their measured
-# seconds on this machine's 2 tracing threads spread over the cluster's cores.
-TASK_STAGES = ("decorators", "small_decorators", "lod:resample", "solve:blocks")
+# Stages whose tasks trace (their seconds were taken with the bake's tracing threads); the others' tasks
+# (the solve, the output, the LOD's one simplification) run on one thread.
+TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check")
+# Stages that only produce the error tables (not part of a production bake).
+CHECK_STAGES = ("blend_check",)
 
 
-def split_stages(stages: list[dict]) -> tuple[float, float, float, str]:
-    """(serial s, task-stage s (core-seconds at 2 threads), largest single task s, description) of a
-    level bake's stage rows; every production stage but the trace. A bake log from before the stages
-    became tasks (no solve:blocks note) counts all of them as serial."""
-    secs = {st["stage"]: st["seconds"] for st in stages}
-    for st in stages:
-        secs.update({f"{st['stage']}:{k[8:]}": v for k, v in st.items() if k.startswith("seconds_")})
-    production = sum(v for k, v in secs.items() if ":" not in k and k not in ("trace", "blend_check"))
-    if "solve:blocks" not in secs:
-        return production, 0.0, 0.0, "every production stage but the trace, on the driver"
-    # The tasks ran on the driver's 2 threads (local bake): core-seconds = 2 x wall for the traced ones.
-    parallel = sum(secs.get(k, 0.0) for k in TASK_STAGES if k != "solve:blocks") * 2 + secs["solve:blocks"]
-    serial = production - sum(secs.get(k, 0.0) for k in TASK_STAGES)
-    return (
-        serial,
-        parallel,
-        secs.get("solve:largest_block", 0.0),
-        ("driver stages serial; decorators, grass/shrubs, LOD resampling and solve blocks as tasks"),
-    )
+def stage_costs(info: dict) -> list[dict]:
+    """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
+    seconds (the stage's wall time less its tasks', for a bake whose tasks ran in the driver: a local
+    bake) and each task's core-seconds (its seconds x the threads it traced with; the LOD stage's first
+    task is its one simplification, single-threaded), the states workers build (the opaque BVH: the
+    ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
+    threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
+    tasks = info.get("task_seconds", {})
+    local = info.get("engine", "local") == "local"
+    rows = []
+    for st in info["stages"]:
+        name = st["stage"]
+        if name in CHECK_STAGES:
+            continue
+        t = list(tasks.get(name, []))
+        cores = [x * (threads if name in TRACING_STAGES else 1) for x in t]
+        if name == "lod" and cores:
+            cores[0] = t[0]
+        state = 0.0
+        if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
+            state, driver = st["seconds"], 0.0
+        else:
+            state = float(st.get("seconds_gold_state", 0.0))
+            driver = max(0.0, st["seconds"] - (sum(t) if local else 0.0) - state)
+        rows.append({"stage": name, "driver_s": driver, "task_core_s": cores, "state_s": state})
+    return rows
+
+
+def makespan(durations: list[float], cores: int) -> float:
+    """Longest-processing-time list scheduling of independent tasks on ``cores`` cores."""
+    import heapq
+
+    if not durations:
+        return 0.0
+    load = [0.0] * min(cores, len(durations))
+    heapq.heapify(load)
+    for d in sorted(durations, reverse=True):
+        heapq.heapreplace(load, load[0] + d)
+    return max(load)
 
 
 def projection(result: dict, level_json: Path | None, cores: int, machines: list[int]) -> dict:
-    """Table 1's trace (and serial stages when a bench_level.json exists) on N machines x C cores."""
-    import math
-
-    rays = TABLE1_SAMPLES * TABLE1_RAYS
+    """A level bake on N machines x C cores from its measured per-stage costs (:func:`stage_costs`): per
+    stage, the driver's own seconds plus the makespan of its tasks on N C cores (one task per core at the
+    measured Ray / local efficiency e and per-task round trip); the trace's blocks are resized to the
+    cores (its work divides: total core-seconds / (N C)); states are built once per machine, in parallel."""
     efficiency = next(
         r["ray_over_local"] for r in result["rows"] if r["workload"] == "level" and r["workers"] == 2
     )
-    c_ray = result["c_ray_level_s"]
-    t_ctx = result["t_context_s"] * TABLE1_FACES / result["faces"]  # BVH build ~ linear in faces: upper bound
-    serial, parallel, largest, source = 0.0, 0.0, 0.0, "not measured (no bench_level.json): trace stage only"
-    if level_json is not None and level_json.is_file():
-        data = json.loads(level_json.read_text())
-        serial, parallel, largest, source = split_stages(
-            data.get("bake", data.get("info", {})).get("stages", [])
-        )
-        source = f"{level_json} ({source}, on this machine)"
+    t_task = result["t_task_s"]
+    if level_json is None or not level_json.is_file():
+        return {"rows": [], "source": f"no level bake log at {level_json}"}
+    data = json.loads(level_json.read_text())
+    info = data.get("bake", data)
+    costs = stage_costs(info)
     rows = []
     for n in machines:
-        tasks = TASKS_PER_CORE * n * cores
-        block = math.ceil(TABLE1_SAMPLES / tasks)
-        trace_s = math.ceil(tasks / (n * cores)) * block * TABLE1_RAYS * c_ray / efficiency
-        overhead = tasks * result["t_task_s"] / (n * cores) + t_ctx
-        # Task stages spread over every core, but never below their largest single task (the solve's
-        # biggest connected component).
-        spread = max(parallel / (n * cores) / efficiency, largest)
-        rows.append(
-            {
-                "machines": n,
-                "cores": n * cores,
-                "tasks": tasks,
-                "block_samples": block,
-                "trace_s": trace_s,
-                "overhead_s": overhead,
-                "serial_s": serial,
-                "task_stages_s": spread,
-                "total_s": serial + spread + trace_s + overhead,
-            }
-        )
+        p = n * cores
+        per_stage = {}
+        for c in costs:
+            work = [x / efficiency for x in c["task_core_s"]]
+            if c["stage"] == "trace":
+                span = sum(work) / p + t_task * TASKS_PER_CORE if work else 0.0
+            else:
+                span = makespan(work, p) + (t_task * len(work) / p if work else 0.0)
+            per_stage[c["stage"]] = c["driver_s"] + c["state_s"] + span
+        rows.append({"machines": n, "cores": p, "stages": per_stage, "total_s": sum(per_stage.values())})
+    base = rows[0]["total_s"]
+    for r in rows:
+        r["speedup"] = base / r["total_s"]
+    largest = {c["stage"]: max(c["task_core_s"], default=0.0) / efficiency for c in costs}
     return {
-        "rays": rays,
-        "c_ray_s": c_ray,
+        "source": str(level_json),
+        "level_counts": info.get("counts", {}),
+        "engine": info.get("engine", "local"),
         "efficiency": efficiency,
-        "t_context_table1_s": t_ctx,
+        "t_task_s": t_task,
         "cores_per_machine": cores,
-        "serial_source": source,
+        "driver_s": sum(c["driver_s"] for c in costs),
+        "state_s": sum(c["state_s"] for c in costs),
+        "largest_task_s": largest,
         "rows": rows,
-        "paper_trace_s": 35.1,
     }
 
 
@@ -334,24 +343,30 @@ def markdown(result: dict, proj: dict) -> str:
         f"{result['c_ray_bake_s'] * 1e9:.0f} ns (bake, sampling and solve included). "
         f"Starting the private Ray instance: {result['seconds_start_ray']:.1f} s (not in the rows).",
         "",
-        f"## Projection: Table 1 trace ({TABLE1_SAMPLES / 1e6:.1f} M samples x {TABLE1_RAYS} rays = "
-        f"{proj['rays'] / 1e9:.2f} G rays) on N machines x {proj['cores_per_machine']} cores, "
-        f"{TASKS_PER_CORE} trace blocks per core",
+        "## Projection: the level bake on N machines",
         "",
-        f"Efficiency e = {proj['efficiency']:.2f} (level trace, Ray / local at 2 workers); "
-        f"serial stages: {proj['serial_source']}; per-ray cost {proj['c_ray_s'] * 1e9:.0f} ns per core as "
-        f"measured here; first-task cost scaled to 1.8 M faces {proj['t_context_table1_s']:.1f} s. "
-        f"The paper's trace row: {proj['paper_trace_s']} s on one K20.",
+    ]
+    if not proj["rows"]:
+        return "\n".join(lines + [proj["source"]]) + "\n"
+    c = proj["level_counts"]
+    stages = list(proj["rows"][0]["stages"])
+    lines += [
+        f"From the measured per-stage costs of {proj['source']} ({c.get('receiver_faces', 0):,} faces, "
+        f"{c.get('samples', 0):,} samples; a {proj['engine']} bake): each stage's driver seconds, plus "
+        f"its tasks scheduled longest first on N x {proj['cores_per_machine']} cores at Ray's measured efficiency "
+        f"e = {proj['efficiency']:.2f} and {proj['t_task_s'] * 1e3:.1f} ms a task; the trace's blocks "
+        "resized to the cores; every machine builds its BVHs once, in parallel. Driver seconds in all: "
+        f"{proj['driver_s']:.1f}; BVH builds: {proj['state_s']:.1f}. Longest single task per stage (s): "
+        + ", ".join(f"{k} {v:.1f}" for k, v in proj["largest_task_s"].items() if v > 0)
+        + ".",
         "",
-        "| machines | cores | tasks | samples / task | trace s | Ray overhead s | driver s | "
-        "task stages s | total s |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| machines | cores | " + " | ".join(stages) + " | total s | speed-up vs 1 |",
+        "|---:|---:|" + "---:|" * len(stages) + "---:|---:|",
     ]
     for r in proj["rows"]:
+        cells = " | ".join(f"{r['stages'][k]:.1f}" for k in stages)
         lines.append(
-            f"| {r['machines']} | {r['cores']} | {r['tasks']} | {r['block_samples']:,} | "
-            f"{r['trace_s']:.1f} | {r['overhead_s']:.2f} | {r['serial_s']:.1f} | "
-            f"{r['task_stages_s']:.1f} | {r['total_s']:.1f} |"
+            f"| {r['machines']} | {r['cores']} | {cells} | **{r['total_s']:.1f}** | {r['speedup']:.1f}x |"
         )
     return "\n".join(lines) + "\n"
 

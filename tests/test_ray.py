@@ -223,13 +223,13 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
     p = _cli(*args, start_new_session=True)
     _kill_when(p, lambda: any(parts.glob("[!.]*.npz")), timeout=120)
     assert p.returncode == -signal.SIGKILL and not (out / "level_baked.glb").exists()
-    assert (out / "stages" / "decorators.npz").is_file()
+    assert (out / "stages" / "trace.npz").is_file()
     kept = {f.name: f.stat().st_mtime_ns for f in (out / "stages" / "trace").glob("*.npz")}
     p = _cli(*args)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 0, err
     reused = {st["stage"] for st in json.loads((out / "bake_log.json").read_text())["stages"] if st["reused"]}
-    assert {"trace", "decorators"} <= reused, reused
+    assert "trace" in reused, reused
     assert {f.name: f.stat().st_mtime_ns for f in (out / "stages" / "trace").glob("*.npz")} == kept
     _assert_same_level_bake(out, local, info)
 

@@ -63,6 +63,7 @@ from pipeline.bakes.level_stages import (
     opaque_context,
     piece_stem,
     piece_trace,
+    pieces_context,
     run_to_files,
     solve_jobs,
     split_lod,
@@ -259,6 +260,7 @@ def bake_level(
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
     ctx = opaque_context(key, level, index, settings_here, foliage)
+    light = pieces_context(key, level, index)
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:
@@ -280,14 +282,6 @@ def bake_level(
         samples=total_samples,
         rays=total_samples * s.trace.rays,
     )
-    deco = blog.stored(
-        "decorators",
-        "Trees: local AO, in-place gold standard, eq. 3 fits",
-        lambda: bake_decorators(
-            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key
-        ),
-        instances=level.counts().get("tree_instances", 0),
-    )
     solve_files = TaskFiles(blog.dir / "solve", key)
     # What every piece's least squares takes from the whole level (it is one block of the level's).
     weight = float(traced["valid_weight"])
@@ -300,7 +294,7 @@ def bake_level(
             run_to_files(
                 solve_files,
                 runner,
-                solve_jobs(ctx, pieces, rule, trace_files, s, whole),
+                solve_jobs(light, pieces, rule, trace_files, s, whole),
                 "solve",
                 progress,
             ),
@@ -328,7 +322,7 @@ def bake_level(
             "lod",
             "LOD: simplify, resample, least squares solve",
             lambda: _lod_stage(
-                runner, ctx, level, index, pieces, rule, values, trace_files, lod_files, s, progress
+                runner, (ctx, light), level, index, pieces, rule, values, trace_files, lod_files, s, progress
             ),
         )
         blog.note(
@@ -358,6 +352,21 @@ def bake_level(
             whole,
         ),
     )
+    # The trees last: their gold BVH (the level with every tree opaque) replaces the opaque one on the
+    # workers (and here), which need it no more.
+    if engine is None:
+        runner.release(ctx.key)
+        state = None
+    deco = blog.stored(
+        "decorators",
+        "Trees: local AO, in-place gold standard, eq. 3 fits",
+        lambda: bake_decorators(
+            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key
+        ),
+        instances=level.counts().get("tree_instances", 0),
+    )
+    if "seconds_gold_state" in deco:
+        blog.note("decorators", seconds_gold_state=float(deco["seconds_gold_state"]))
     output_files = TaskFiles(blog.dir / "output", key)
     blog.timed(
         "output",
@@ -368,7 +377,9 @@ def bake_level(
             level,
             index,
             s,
-            run_to_files(output_files, runner, _output_jobs(ctx, pieces, solve_files, s), "output", progress),
+            run_to_files(
+                output_files, runner, _output_jobs(light, pieces, solve_files, s), "output", progress
+            ),
             deco,
             small,
             lod_files,
@@ -403,6 +414,9 @@ def bake_level(
         # projects onto N machines.
         "task_seconds": blog.task_seconds,
         "state_seconds": blog.state_seconds,
+        "engine": runner.name,
+        # Threads each task traced with (this process's for a local bake; an actor's on Ray).
+        "task_threads": s.workers if engine is None else (engine.threads or s.workers),
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),
@@ -447,16 +461,17 @@ def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSett
     return values
 
 
-def _lod_stage(runner, ctx, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
+def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
     """LOD 1 of the level's static instances (one task: one simplification of them all), split by piece
     as it arrives; then per piece its LOD resampled, solved and measured (a task each). The resampling
     radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it."""
+    ctx, light = contexts
     t0 = time.perf_counter()
     mesh_files = TaskFiles(lod_files.folder.parent / "lod_meshes", lod_files.key)
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
     if not all(mesh_files.has(stem) for stem in stems):
-        ((_, result),) = list(runner.map([Task(ctx, _simplify_level, (s.lod.target_reduction,))]))
+        ((_, result),) = list(runner.map([Task(light, _simplify_level, (s.lod.target_reduction,))]))
         for stem, part in split_lod(result, pieces):
             mesh_files.put(stem, part)
         mesh_files.put("radius", {"median_edge": result["median_edge"]})

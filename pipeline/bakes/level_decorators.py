@@ -8,6 +8,7 @@ the level's meshes and transforms, so the driver never flattens the level.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -178,8 +179,10 @@ def bake_decorators(
     frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
     gold_foliage = build_foliage(level, frame, s.foliage, include_trees=False) if s.foliage.enabled else None
     ctx = gold_context(key, level, settings, gold_foliage)
+    t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
         runner.hold(ctx.key, ctx.build(ctx.payload))
+    gold_s = time.perf_counter() - t0
     ctx_key = ctx.key
     models = sorted({n.mesh for n in trees})
     out: dict[str, Any] = {}
@@ -202,6 +205,7 @@ def bake_decorators(
     if local:
         runner.release(ctx.key)
     out["models"] = np.array(models, np.int64)
+    out["seconds_gold_state"] = np.array(gold_s)  # the gold BVH built here (a local bake), 0 on an engine
     out["coefficients"] = np.array([r["y"] for r in rows])
     out["coefficients_global_only"] = np.array([r["y1"] for r in rows])
     errors = np.array([r["errors"] for r in rows]).reshape(len(rows), len(_DECORATOR_ERRORS))

@@ -66,7 +66,7 @@ def gold_scene(level: Level) -> Scene:
 class PieceState:
     """What a worker holds for a bake: the opaque labeller and foliage, and the level it cuts pieces from."""
 
-    labeller: LevelLabeller
+    labeller: LevelLabeller | None  # None: a state for tasks that trace nothing
     foliage: Any
     level: Level
     index: PieceIndex
@@ -101,14 +101,27 @@ def worker_settings(settings: LabelSettings, engine) -> LabelSettings:
 
 
 def opaque_context(key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage) -> Context:
-    """The engine context of the opaque labeller: workers build it from the level's meshes and transforms."""
-    return Context(
-        f"level-trace/{key}/{settings.workers}", _opaque_state, (level, index, settings, foliage, key)
-    )
+    """The engine context of the opaque labeller: workers build it from the level's meshes and transforms
+    (heavy: a worker holds no other big state beside it)."""
+    payload = (level, index, settings, foliage, key)
+    return Context(f"level-trace/{key}/{settings.workers}", _opaque_state, payload, heavy=True)
 
 
 def gold_context(key: str, level: Level, settings: LabelSettings, foliage) -> Context:
-    return Context(f"level-gold/{key}/{settings.workers}", _gold_state, (level, settings, foliage))
+    return Context(
+        f"level-gold/{key}/{settings.workers}", _gold_state, (level, settings, foliage), heavy=True
+    )
+
+
+def _pieces_state(payload) -> PieceState:
+    level, index, key = payload
+    return PieceState(None, None, level, index, key)
+
+
+def pieces_context(key: str, level: Level, index: PieceIndex) -> Context:
+    """The level and its pieces without a BVH: the state of the tasks that trace nothing (solve, output, the
+    LOD's simplification)."""
+    return Context(f"level-pieces/{key}", _pieces_state, (level, index, key))
 
 
 # --------------------------------------------------------------------------- per-task files

@@ -75,6 +75,9 @@ class Context:
     key: str  # content hash of everything ``build`` reads: equal keys must build equal states
     build: Callable[[Any], Any]  # module-level function: payload -> state (may have a close())
     payload: Any  # picklable input of ``build`` (numpy arrays, dataclasses), not a path
+    # A state of gigabytes (a level's BVH): a worker drops every other state before building it, so
+    # two never share its memory.
+    heavy: bool = False
 
 
 @dataclass(frozen=True)
@@ -130,11 +133,11 @@ class _StateCache:
         self.size = size
         self._states: collections.OrderedDict[str, Any] = collections.OrderedDict()
 
-    def get(self, key: str, build: Callable[[], Any]) -> Any:
+    def get(self, key: str, build: Callable[[], Any], heavy: bool = False) -> Any:
         if key in self._states:
             self._states.move_to_end(key)
             return self._states[key]
-        while len(self._states) >= self.size:
+        while len(self._states) >= (1 if heavy else self.size):
             _, old = self._states.popitem(last=False)
             if (close := getattr(old, "close", None)) is not None:
                 close()
@@ -248,7 +251,9 @@ class LocalEngine(Engine):
                 state = self._states[ctx.key]
             else:
                 state = self._cache.get(
-                    ctx.key, lambda ctx=ctx, built=built: _timed_build(ctx.build, lambda: ctx.payload, built)
+                    ctx.key,
+                    lambda ctx=ctx, built=built: _timed_build(ctx.build, lambda: ctx.payload, built),
+                    ctx.heavy,
                 )
             yield index, task, self._timing(_timed_call(task.fn, state, _unshare(task.args), built[0]))
         yield from self._drain_stored()
@@ -290,7 +295,7 @@ class _Worker:
         self._cache = _StateCache(STATES_PER_WORKER)
         self._shared = _StateCache(STATES_PER_WORKER)  # Shared values by key
 
-    def run(self, key: str, boxed_payload: list, build, fn, args):
+    def run(self, key: str, boxed_payload: list, build, fn, args, heavy: bool = False):
         import ray  # optional dependency: only --engine ray imports it
 
         # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
@@ -298,7 +303,7 @@ class _Worker:
         try:
             built = [0.0]
             state = self._cache.get(
-                key, lambda: _timed_build(build, lambda: ray.get(boxed_payload[0]), built)
+                key, lambda: _timed_build(build, lambda: ray.get(boxed_payload[0]), built), heavy
             )
             if isinstance(args, tuple):
                 args = tuple(
@@ -402,7 +407,7 @@ class RayEngine(Engine):
                         key=lambda i: (load[i] >= TASKS_PER_WORKER, ctx.key not in holds[i], load[i]),
                     )
                     holds[a].add(ctx.key)
-                    out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, args)
+                    out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, args, ctx.heavy)
                     inflight[out] = (index, task, a)
                     load[a] += 1
                 yield from self._drain_stored()

@@ -160,8 +160,14 @@ class Labeller:
         # local = (world - center) / scale; center (3,) float64, scale the diagonal (scene units).
         self.center = np.asarray(scene.center, dtype=np.float64)
         self.scale = diag
-        self._face_normals = np.asarray(scene.face_normals, dtype=np.float64)
-        self._face_normals32 = np.nan_to_num(self._face_normals).astype(np.float32)
+        # float32 unit face normals for the hot path; the float64 ones (frames only) are made on demand,
+        # so a level's labeller holds no (m, 3) float64 copy.
+        cross = scene.face_cross()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self._face_normals32 = np.nan_to_num(cross / np.linalg.norm(cross, axis=1, keepdims=True)).astype(
+                np.float32
+            )
+        del cross
         # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self.embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
@@ -172,6 +178,11 @@ class Labeller:
         )
         self._tls = threading.local()  # per-worker scratch buffers
         self.settings = settings or LabelSettings()
+
+    @cached_property
+    def _face_normals(self) -> np.ndarray:
+        """(m, 3) float64 unit face normals (frames only)."""
+        return np.asarray(self.scene.face_normals, dtype=np.float64)
 
     @cached_property
     def _verts_local(self) -> np.ndarray:
