@@ -26,6 +26,37 @@ def baked(tmp_path_factory):
     return root, level, cfg, info
 
 
+def _static_ao(path) -> dict[str, np.ndarray]:
+    doc, get = read_gltf_json(path)
+    return {
+        n["name"]: get(doc["meshes"][n["mesh"]]["primitives"][0]["attributes"]["_AO"])
+        for n in doc["nodes"]
+        if n.get("extras", {}).get("role") == "static" and "lod" not in n["extras"]
+    }
+
+
+def test_a_bake_in_pieces_is_the_bake_of_the_whole_level(baked, tmp_path):
+    """Cut into three pieces (the terrain, then the buildings), every task runs per piece, yet each static
+    vertex gets the AO of the one-piece bake: the samples and rays are the same, and each piece's least
+    squares is the level's block (its weights and prior are the level's). The bake log lists every
+    task's seconds."""
+    root, level, cfg, info = baked
+    pieces = bake_level(level, load_level_settings(cfg, ["piece_faces=100"]), tmp_path / "pieces")
+    assert info["counts"]["pieces"] == 1 and pieces["counts"]["pieces"] == 3
+    assert pieces["counts"]["samples"] == info["counts"]["samples"]
+    whole, cut = (
+        _static_ao(root / "out" / "level_baked.glb"),
+        _static_ao(tmp_path / "pieces" / "level_baked.glb"),
+    )
+    assert whole.keys() == cut.keys()
+    for name, ao in whole.items():
+        np.testing.assert_allclose(cut[name], ao, atol=1e-5, err_msg=name)
+    blocks = {s["stage"]: s.get("tasks", 0) for s in pieces["stages"]}
+    assert blocks["solve"] == 3 and blocks["output"] == 3 and blocks["trace"] >= 3
+    assert len(pieces["task_seconds"]["trace"]) == blocks["trace"]
+    assert all(t >= 0 for ts in pieces["task_seconds"].values() for t in ts)
+
+
 def _glb(root):
     doc, get = read_gltf_json(root / "out" / "level_baked.glb")
     return doc, get

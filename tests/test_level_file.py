@@ -91,6 +91,23 @@ def test_glb_and_gltf_read_the_same(tmp_path):
     assert a.nodes[0].transforms[0, 0, 0] == 2.0
 
 
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_spilled_writer_writes_the_same_bytes(tmp_path, suffix):
+    """A writer whose binary data goes to a spill file as it is added (a level's glTF of gigabytes) writes
+    the bytes the in-memory writer writes, and removes its spill."""
+    rng = np.random.default_rng(0)
+    meshes = [rng.uniform(-1, 1, (7 + k, 3)) for k in range(3)]  # odd sizes: padding between views
+    for name, spill in (("memory", None), ("spill", tmp_path / "x.part")):
+        w = GltfWriter(spill=spill)
+        for k, v in enumerate(meshes):
+            ao = np.linspace(0, 1, len(v), dtype=np.float32)
+            w.node(f"n{k}", w.mesh(f"m{k}", v, np.array([[0, 1, 2], [2, 3, 4]]), {"_AO": ao}))
+        w.write(tmp_path / name / f"level{suffix}")
+        assert spill is None or not spill.exists()
+    for f in [f"level{suffix}"] + (["level.bin"] if suffix == ".gltf" else []):
+        assert (tmp_path / "memory" / f).read_bytes() == (tmp_path / "spill" / f).read_bytes()
+
+
 def _edit(path, fn):
     doc = json.loads(path.read_text())
     fn(doc)
