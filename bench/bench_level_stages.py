@@ -31,20 +31,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bakes.level import (  # noqa: E402
-    blend,
-    build_geometry,
-    halves,
-    label_settings,
-    load_level_settings,
-    median_edge,
-    receiver_samples,
-    simplify,
-)
+from pipeline.bakes.level_pieces import scene_samples  # noqa: E402
+from pipeline.bakes.level_settings import blend, halves, label_settings, load_level_settings  # noqa: E402
+from pipeline.bakes.level_stages import fit_level, opaque_scene, simplify  # noqa: E402
 from pipeline.foundation.io import write_json, write_text  # noqa: E402
 from pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
-from pipeline.geometry.level_files import read_level  # noqa: E402
+from pipeline.geometry.level_files import (
+    flatten,  # noqa: E402
+    read_level,  # noqa: E402
+)
 from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from pipeline.geometry.scene import scene_from_arrays  # noqa: E402
 from pipeline.geometry.surface import surface_samples  # noqa: E402
 from pipeline.tracing.level_tracer import (  # noqa: E402
     _RESAMPLE_RAYS,
@@ -82,6 +79,20 @@ def timed(fn, label: str = ""):
     return time.perf_counter() - t0, result
 
 
+def whole_level(level):
+    """The level flattened whole: its receivers (static instances) and its opaque scene."""
+    from types import SimpleNamespace
+
+    rv, rf, _ = flatten(level, level.nodes_with("static"))
+    receivers = scene_from_arrays(rv, rf, "receivers", drop_degenerate=False)
+    return SimpleNamespace(receivers=receivers, opaque=opaque_scene(level))
+
+
+def median_edge(scene) -> float:
+    v, f = scene.vertices, scene.faces
+    return float(np.median(np.linalg.norm(v[f[:, 1]] - v[f[:, 0]], axis=1)))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", default="small")
@@ -97,8 +108,11 @@ def main(argv=None) -> int:
     overrides = MEDIUM if args.set is None and args.preset == "small" else (args.set or [])
     level, cfg = write_level(out / "level", settings_for(args.preset, 0, overrides), args.preset)
     s = load_level_settings(cfg, [f"trace.rays={args.rays}"])
-    g = build_geometry(read_level(level))
-    samples = receiver_samples(g.receivers, s.trace, s.seed)
+    g = whole_level(read_level(level))
+    t = s.trace
+    samples = scene_samples(
+        g.receivers, t.samples_per_vertex, t.min_samples_per_face, t.samples_per_face_cap, s.seed
+    )
     lab = LevelLabeller(g.opaque, label_settings(s, g.opaque.diagonal))
     load_before = os.getloadavg()[0]
     t_trace, (ao, valid) = timed(lambda: lab.obscurance(samples.points, samples.normals, halves(s)), "trace")
@@ -190,7 +204,6 @@ def main(argv=None) -> int:
 def _try_fit(g, samples, ao, valid, s, solver):
     from dataclasses import replace
 
-    from pipeline.bakes.level import fit_level
     from pipeline.foundation.errors import NeuralaoError
 
     try:

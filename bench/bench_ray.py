@@ -351,12 +351,14 @@ def markdown(result: dict, proj: dict) -> str:
     c = proj["level_counts"]
     stages = list(proj["rows"][0]["stages"])
     lines += [
-        f"From the measured per-stage costs of {proj['source']} ({c.get('receiver_faces', 0):,} faces, "
-        f"{c.get('samples', 0):,} samples; a {proj['engine']} bake): each stage's driver seconds, plus "
-        f"its tasks scheduled longest first on N x {proj['cores_per_machine']} cores at Ray's measured efficiency "
-        f"e = {proj['efficiency']:.2f} and {proj['t_task_s'] * 1e3:.1f} ms a task; the trace's blocks "
-        "resized to the cores; every machine builds its BVHs once, in parallel. Driver seconds in all: "
-        f"{proj['driver_s']:.1f}; BVH builds: {proj['state_s']:.1f}. Longest single task per stage (s): "
+        f"From the measured per-stage costs of {proj['source']} "
+        f"({c.get('receiver_faces', 0):,} faces, {c.get('samples', 0):,} samples; "
+        f"a {proj['engine']} bake): each stage's driver seconds, plus its tasks scheduled longest "
+        f"first on N x {proj['cores_per_machine']} cores at Ray's measured efficiency "
+        f"e = {proj['efficiency']:.2f} and {proj['t_task_s'] * 1e3:.1f} ms a task; the trace's "
+        "blocks resized to the cores; every machine builds its BVHs once, in parallel. "
+        f"Driver seconds in all: {proj['driver_s']:.1f}; BVH builds: {proj['state_s']:.1f}. "
+        "Longest single task per stage (s): "
         + ", ".join(f"{k} {v:.1f}" for k, v in proj["largest_task_s"].items() if v > 0)
         + ".",
         "",
