@@ -224,8 +224,8 @@ CHECK_STAGES = ("blend_check",)
 
 def stage_costs(info: dict) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
-    seconds (the stage's wall time less its tasks', for a bake whose tasks ran in the driver: a local
-    bake) and each task's core-seconds (its seconds x the threads it traced with; the LOD stage's first
+    seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake: the
+    driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with; the LOD stage's first
     task is its one simplification, single-threaded), the states workers build (the opaque BVH: the
     ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
@@ -243,9 +243,12 @@ def stage_costs(info: dict) -> list[dict]:
         state = 0.0
         if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
             state, driver = st["seconds"], 0.0
-        else:
+        elif local:  # the tasks ran in the driver, one after the other
             state = float(st.get("seconds_gold_state", 0.0))
-            driver = max(0.0, st["seconds"] - (sum(t) if local else 0.0) - state)
+            driver = max(0.0, st["seconds"] - sum(t) - state)
+        else:  # on an engine the driver waits for the tasks: its own work is its CPU time
+            driver = st["cpu_seconds"]
+            state = max(info.get("state_seconds", {}).get(name, [0.0]))
         rows.append({"stage": name, "driver_s": driver, "task_core_s": cores, "state_s": state})
     return rows
 
