@@ -225,9 +225,9 @@ CHECK_STAGES = ("blend_check",)
 def stage_costs(info: dict) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
     seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake:
-    the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with; the LOD stage's first
-    task is its one simplification, single-threaded), the states workers build (the opaque BVH: the
-    ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
+    the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with;
+    the LOD stage's first task is its one simplification, single-threaded), the states workers build
+    (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
     tasks = info.get("task_seconds", {})
     local = info.get("engine", "local") == "local"
