@@ -234,6 +234,32 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
     _assert_same_level_bake(out, local, info)
 
 
+def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, tmp_path):
+    """`--ray-threads 2`: one actor holding both CPUs of a private Ray instance (one BVH per machine)
+    traces with two threads and writes the local bake's bytes."""
+    level, cfg, local, info = local_level
+    out = tmp_path / "threads"
+    args = [
+        "bake",
+        str(level),
+        "--config",
+        str(cfg),
+        "--out",
+        str(out),
+        "--engine",
+        "ray",
+        "--ray-threads",
+        "2",
+    ]
+    for kv in LEVEL_TASKS:
+        args += ["--set", kv]
+    p = _cli(*args)
+    _, err = p.communicate(timeout=180)
+    assert p.returncode == 0, err
+    assert json.loads((out / "bake_log.json").read_text())["task_threads"] == 2
+    _assert_same_level_bake(out, local, info)
+
+
 def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, tmp_path):
     """An actor SIGKILLed while the trees' in-place tasks run is restarted (its state rebuilt) and the
     bake's bytes do not change."""
@@ -361,6 +387,8 @@ def test_local_engine_never_imports_ray(tmp_path, config_file):
         (["--engine", "ray", "--address", "127.0.0.1:{port}"], "cannot reach a Ray cluster at 127.0.0.1:"),
         (["--engine", "ray", "--address", "nonsense"], "--address must be HOST:PORT"),
         (["--address", "127.0.0.1:6379"], "need --engine ray"),
+        (["--ray-threads", "2"], "need --engine ray"),
+        (["--engine", "ray", "--ray-threads", "0"], "--ray-threads must be >= 1"),
         (
             ["--engine", "ray", "--ray-workers", "0", "--address", "127.0.0.1:{port}"],
             "--ray-workers must be >= 1",

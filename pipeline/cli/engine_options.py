@@ -1,5 +1,5 @@
 """The flags that choose where a command's work runs (``--engine``, ``--address``, ``--ray-workers``,
-``--chunk-rays``) and the :class:`~pipeline.engines.engine.Engine` they describe."""
+``--ray-threads``, ``--chunk-rays``) and the :class:`~pipeline.engines.engine.Engine` they describe."""
 
 from __future__ import annotations
 
@@ -29,7 +29,15 @@ def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> No
         type=int,
         default=None,
         metavar="N",
-        help="Ray actors to start (default: one per CPU of the cluster)",
+        help="Ray actors to start (default: as many as the cluster's CPUs hold)",
+    )
+    p.add_argument(
+        "--ray-threads",
+        type=int,
+        default=None,
+        metavar="T",
+        help="CPUs and tracing threads per Ray actor (default 1; a machine's cores: one actor, one copy "
+        "of a level's BVH per machine)",
     )
     if chunks:
         p.add_argument(
@@ -46,9 +54,10 @@ def engine_from_args(args: argparse.Namespace) -> Engine:
     if chunk_rays is not None and chunk_rays < 1:
         raise NeuralaoError(f"--chunk-rays must be >= 1, got {chunk_rays}")
     if args.engine == "local":
-        if args.address is not None or args.ray_workers is not None or chunk_rays is not None:
-            raise NeuralaoError("--address, --ray-workers and --chunk-rays need --engine ray")
+        ray_flags = (args.address, args.ray_workers, getattr(args, "ray_threads", None), chunk_rays)
+        if any(f is not None for f in ray_flags):
+            raise NeuralaoError("--address, --ray-workers, --ray-threads and --chunk-rays need --engine ray")
         return LocalEngine()
-    engine = RayEngine(args.address, args.ray_workers)
+    engine = RayEngine(args.address, args.ray_workers, 1 if args.ray_threads is None else args.ray_threads)
     engine.chunk_rays = chunk_rays
     return engine

@@ -332,29 +332,38 @@ class RayEngine(Engine):
 
     address : "HOST:PORT" of a running cluster (``ray start --head``), "auto" for the one on this
               machine, or None to start a private local Ray instance for this run.
-    workers : actors to start (each num_cpus=1); None: one per CPU of the cluster.
+    workers : actors to start; None: as many as the cluster's CPUs hold.
+    threads : CPUs (and tracing threads) per actor. 1: one actor per CPU; a machine's cores: one actor per
+              machine, which builds a level's BVH once for all of them and holds one copy (a 10x world's
+              BVH is gigabytes), while single-threaded tasks (a solve, an output piece) leave cores idle.
     """
 
     name = "ray"
-    threads = 1  # each actor holds one CPU
 
-    def __init__(self, address: str | None = None, workers: int | None = None):
+    def __init__(self, address: str | None = None, workers: int | None = None, threads: int = 1):
         super().__init__()
         if workers is not None and workers < 1:
             raise NeuralaoError(f"--ray-workers must be >= 1, got {workers}")
+        if threads < 1:
+            raise NeuralaoError(f"--ray-threads must be >= 1, got {threads}")
+        self.threads = threads
         self.address = address
         self._ray = _connect(address)
         ray = self._ray
         cpus = int(ray.cluster_resources().get("CPU", 0))
         if cpus < 1 and workers is None:
             raise NeuralaoError(f"the Ray cluster at {address or 'local'} has no CPUs")
-        if workers is not None and workers > cpus:
-            # Each actor holds one CPU: more than the cluster has would wait for ever.
-            raise NeuralaoError(f"--ray-workers {workers} is more than the {cpus} CPUs of the Ray cluster")
-        self.workers = workers or cpus
+        if threads > max(cpus, 1):
+            raise NeuralaoError(f"--ray-threads {threads} is more than the {cpus} CPUs of the Ray cluster")
+        if workers is not None and workers * threads > cpus:
+            # Each actor holds its CPUs: more than the cluster has would wait for ever.
+            raise NeuralaoError(
+                f"--ray-workers {workers} x --ray-threads {threads} is more than the cluster's {cpus} CPUs"
+            )
+        self.workers = workers or max(1, cpus // threads)
         env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
-        env.setdefault("OMP_NUM_THREADS", "1")  # one CPU per actor
-        actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_Worker)
+        env.setdefault("OMP_NUM_THREADS", "1")  # tracing threads are Python threads, not OpenMP's
+        actor = ray.remote(num_cpus=threads, max_restarts=-1, max_task_retries=-1)(_Worker)
         self._actors = [actor.remote(env) for _ in range(self.workers)]
         self._payloads: dict[str, Any] = {}  # context key -> ObjectRef of its payload
 
