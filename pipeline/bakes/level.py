@@ -60,7 +60,9 @@ from pipeline.bakes.level_stages import (
     _output_piece,
     _simplify_level,
     lod_jobs,
+    lod_resample_jobs,
     opaque_context,
+    piece_resampled,
     piece_stem,
     piece_trace,
     pieces_context,
@@ -477,10 +479,21 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
         mesh_files.put("radius", {"median_edge": result["median_edge"]})
         del result
     radius = s.lod.radius or 1.5 * float(mesh_files.get("radius")["median_edge"])
-    simplify_s = time.perf_counter() - t0
-    jobs = lod_jobs(ctx, pieces, rule, values, mesh_files, radius, trace_files, s)
+    t1 = time.perf_counter()
+    resample_files = TaskFiles(lod_files.folder.parent / "lod_resample", lod_files.key)
+    jobs, counts = lod_resample_jobs(ctx, pieces, values, mesh_files, radius, s)
+    for _ in run_to_files(resample_files, runner, jobs, "lod resampling", progress):
+        pass
+    t2 = time.perf_counter()
+    per_block = max(1, s.task_rays // s.lod.rays)
+
+    def resampled(p):
+        return piece_resampled(resample_files, p, counts[p.index], per_block)
+
+    jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, trace_files, s)
     out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress))
-    out["seconds_simplify"] = np.array(simplify_s)
+    out["seconds_simplify"] = np.array(t1 - t0)
+    out["seconds_resample"] = np.array(t2 - t1)
     out["radius"] = np.array(radius)
     return out
 
@@ -488,7 +501,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
 def _lod_summary(results) -> dict[str, np.ndarray]:
     """The LOD pieces' counts, times and error table (from their weighted error sums)."""
     sums = np.zeros(6)
-    times = ("seconds_resample", "seconds_solve", "seconds_reference")
+    times = ("seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
     for _, r, _ in results:
         out["lod_vertices"] += len(r["vertices"])

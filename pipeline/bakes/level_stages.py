@@ -417,16 +417,74 @@ def holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
     return counts
 
 
+def lod_points(vertices: np.ndarray, faces: np.ndarray, piece: Piece, s: LevelBakeSettings):
+    """A piece's LOD scene and its least-squares surface samples (seeded, numbered from the piece's first
+    face); the resampling points are the LOD's vertices, then these samples."""
+    lod = scene_from_arrays(vertices, faces, f"lod{piece.index}", drop_degenerate=False)
+    samples = surface_samples(
+        lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3, face_offset=piece.f0
+    )
+    return lod, samples
+
+
+def lod_resample_jobs(ctx, pieces, values, lod_meshes: TaskFiles, radius: float, s: LevelBakeSettings):
+    """(stem, task maker) per block of ``task_rays`` rays of each piece's resampling points (its LOD's
+    vertices and samples), made here one piece at a time; and per piece its point count."""
+    per_block = max(1, s.task_rays // s.lod.rays)
+    jobs, counts, last = [], {}, {}
+
+    def points(p: Piece) -> np.ndarray:
+        if last.get("piece") != p.index:
+            mesh = lod_meshes.get(piece_stem(p))
+            lod, samples = lod_points(mesh["vertices"], mesh["faces"], p, s)
+            last.update(piece=p.index, points=np.r_[lod.vertices, samples.points])
+        return last["points"]
+
+    for p in pieces:
+        mesh = lod_meshes.get(piece_stem(p))
+        if len(mesh["faces"]) == 0:
+            counts[p.index] = 0
+            continue
+        lod, samples = lod_points(mesh["vertices"], mesh["faces"], p, s)
+        counts[p.index] = n = len(lod.vertices) + len(samples)
+        for b, lo in enumerate(range(0, n, per_block)):
+
+            def make(p=p, lo=lo) -> Task:
+                return Task(
+                    ctx, _resample_points, (values, points(p)[lo : lo + per_block], radius, s.lod.rays)
+                )
+
+            jobs.append((f"{piece_stem(p)}_{b:05d}", make))
+    return jobs, counts
+
+
+def _resample_points(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: :func:`resample_in_spheres` of one block of points on the opaque labeller."""
+    values, points, radius, rays = args
+    v, _ = resample_in_spheres(state.labeller, values, points, radius, rays)
+    return {"values": v}
+
+
+def piece_resampled(files: TaskFiles, piece: Piece, count: int, per_block: int) -> np.ndarray:
+    """The resampled values of a piece's LOD points, from its block files."""
+    out = np.full(count, np.nan)
+    for b, lo in enumerate(range(0, count, per_block)):
+        out[lo : lo + per_block] = files.get(f"{piece_stem(piece)}_{b:05d}")["values"]
+    return out
+
+
 def lod_jobs(
-    ctx, pieces, rule, values, lod_meshes: TaskFiles, radius: float, trace_files, s: LevelBakeSettings
+    ctx, pieces, rule, lod_meshes: TaskFiles, resampled, radius: float, trace_files, s: LevelBakeSettings
 ):
-    """One task per piece: its LOD, the LOD's AO by resampling and by least squares, and the error sums
-    against the gold standard at held-out LOD points (``lod.holdout_samples`` spread by area)."""
+    """One task per piece: the LOD's least squares over its resampled samples, its AO at the vertices, and
+    the error sums against the gold standard at held-out LOD points (``lod.holdout_samples`` spread by
+    area). ``resampled(piece)``: the piece's resampled values (vertices, then samples)."""
 
     def make(p: Piece) -> Task:
         ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
         mesh = lod_meshes.get(piece_stem(p))
-        return Task(ctx, _lod_piece, (p, rule, values, mesh["vertices"], mesh["faces"], radius, ao, valid, s))
+        args = (p, rule, mesh["vertices"], mesh["faces"], resampled(p), radius, ao, valid, s)
+        return Task(ctx, _lod_piece, args)
 
     return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
 
@@ -436,22 +494,17 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     resampled surface samples; both against the gold standard at held-out LOD samples."""
     from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
 
-    piece, rule, values, lod_vertices, lod_faces, radius, traced, traced_valid, s = args
+    piece, rule, lod_vertices, lod_faces, resampled, radius, traced, traced_valid, s = args
     if len(lod_faces) == 0:  # the simplification left nothing of this piece
         out = {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
         out.update(ao_vertex=np.zeros(0, np.float32), ao_least_squares=np.zeros(0, np.float32))
         out.update(resample_points=np.array(0), error_sums=np.zeros(6))
-        return out | {k: np.array(0.0) for k in ("seconds_resample", "seconds_solve", "seconds_reference")}
+        return out | {k: np.array(0.0) for k in ("seconds_solve", "seconds_reference")}
     scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
-    t1 = time.perf_counter()
-    lod = scene_from_arrays(lod_vertices, lod_faces, f"lod{piece.index}", drop_degenerate=False)
-    at_vertices, _ = resample_in_spheres(state.labeller, values, lod.vertices, radius, s.lod.rays)
-    lod_samples = surface_samples(
-        lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3, face_offset=piece.f0
-    )
-    at_samples, _ = resample_in_spheres(state.labeller, values, lod_samples.points, radius, s.lod.rays)
-    ok = np.isfinite(at_samples)
     t2 = time.perf_counter()
+    lod, lod_samples = lod_points(lod_vertices, lod_faces, piece, s)
+    at_vertices, at_samples = resampled[: len(lod.vertices)], resampled[len(lod.vertices) :]
+    ok = np.isfinite(at_samples)
     area = float(face_areas(scene).sum())
     share = area / rule.area_all if rule.area_all > 0 else 0.0
     # The piece's block of the whole LOD's least squares: its sample weights (shares of the piece's area)
@@ -517,7 +570,6 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         "radius": np.array(radius),
         "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
         "error_sums": sums,
-        "seconds_resample": np.array(t2 - t1),
         "seconds_solve": np.array(t3 - t2),
         "seconds_reference": np.array(time.perf_counter() - t3),
     }
