@@ -83,6 +83,7 @@ from pipeline.foundation.io import (
     write_npz,
     write_text,
 )
+from pipeline.foundation.limits import release_free_memory
 from pipeline.foundation.settings import settings_to_dict
 from pipeline.geometry.least_squares import Whole
 from pipeline.geometry.level_files import read_level
@@ -141,6 +142,7 @@ class BakeLog:
         return ResultStore(self.dir / f"{name}.parts")
 
     def _record(self, name, description, t0, c0, reused, counts) -> None:
+        release_free_memory()  # the stage's temporaries: the next stage's peak is its own
         self.stages.append(
             {
                 "stage": name,
@@ -473,7 +475,9 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
     if not all(mesh_files.has(stem) for stem in stems):
-        ((_, result),) = list(runner.map([Task(light, _simplify_level, (s.lod.target_reduction,))]))
+        # A heavy context: its worker drops the opaque BVH while it simplifies the flattened level.
+        simplify_ctx = pieces_context(lod_files.key, level, index, heavy=True)
+        ((_, result),) = list(runner.map([Task(simplify_ctx, _simplify_level, (s.lod.target_reduction,))]))
         for stem, part in split_lod(result, pieces):
             mesh_files.put(stem, part)
         mesh_files.put("radius", {"median_edge": result["median_edge"]})

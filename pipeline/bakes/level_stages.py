@@ -30,7 +30,13 @@ from pipeline.foundation.io import remove_stale_temporaries, write_npz
 from pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
 from pipeline.geometry.level_files import Level, flatten
 from pipeline.geometry.scene import Scene, scene_from_arrays
-from pipeline.geometry.surface import face_areas, interpolate, surface_samples, vertex_colours
+from pipeline.geometry.surface import (
+    face_areas,
+    interpolate,
+    samples_per_face,
+    surface_samples,
+    vertex_colours,
+)
 from pipeline.tracing.labeller import LabelSettings
 from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
 
@@ -118,10 +124,12 @@ def _pieces_state(payload) -> PieceState:
     return PieceState(None, None, level, index, key)
 
 
-def pieces_context(key: str, level: Level, index: PieceIndex) -> Context:
-    """The level and its pieces without a BVH: the state of the tasks that trace nothing (solve, output, the
-    LOD's simplification)."""
-    return Context(f"level-pieces/{key}", _pieces_state, (level, index, key))
+def pieces_context(key: str, level: Level, index: PieceIndex, heavy: bool = False) -> Context:
+    """The level and its pieces without a BVH: the state of the tasks that trace nothing (solve, output).
+    ``heavy``: for the LOD's one simplification of the flattened level (gigabytes on its worker for a big
+    world), which has its worker drop the opaque BVH first."""
+    name = "level-simplify" if heavy else "level-pieces"
+    return Context(f"{name}/{key}", _pieces_state, (level, index, key), heavy=heavy)
 
 
 # --------------------------------------------------------------------------- per-task files
@@ -374,9 +382,10 @@ def _simplify_level(state: PieceState, args) -> dict[str, np.ndarray]:
     level, index = state.level, state.index
     rv, rf, _ = flatten(level, index.nodes)
     lod = simplify(scene_from_arrays(rv, rf, "receivers", level.source, drop_degenerate=False), reduction)
+    del rf
     starts = np.array([p.v0 for p in index.pieces])
     _, near = cKDTree(rv).query(lod.vertices)
-    del rv, rf
+    del rv
     owner = np.searchsorted(starts, near, side="right") - 1
     f = lod.faces
     n = len(lod.vertices)
@@ -445,8 +454,12 @@ def lod_resample_jobs(ctx, pieces, values, lod_meshes: TaskFiles, radius: float,
         if len(mesh["faces"]) == 0:
             counts[p.index] = 0
             continue
-        lod, samples = lod_points(mesh["vertices"], mesh["faces"], p, s)
-        counts[p.index] = n = len(lod.vertices) + len(samples)
+        # The count only (the points are made when the piece's first block is sent): the LOD's vertices
+        # and its samples, as surface_samples spreads them.
+        lod = scene_from_arrays(mesh["vertices"], mesh["faces"], f"lod{p.index}", drop_degenerate=False)
+        n_samples = samples_per_face(face_areas(lod), s.lod.samples_per_vertex * len(lod.vertices), 16).sum()
+        counts[p.index] = n = len(lod.vertices) + int(n_samples)
+        del lod
         for b, lo in enumerate(range(0, n, per_block)):
 
             def make(p=p, lo=lo) -> Task:

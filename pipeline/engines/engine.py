@@ -51,6 +51,7 @@ import numpy as np
 
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import read_npz, remove_stale_temporaries, write_npz
+from pipeline.foundation.limits import release_free_memory
 
 log = logging.getLogger(__name__)
 
@@ -141,6 +142,8 @@ class _StateCache:
             _, old = self._states.popitem(last=False)
             if (close := getattr(old, "close", None)) is not None:
                 close()
+            del old
+            release_free_memory()
         state = self._states[key] = build()
         return state
 
@@ -312,7 +315,9 @@ class _Worker:
                     else a
                     for a in args
                 )
-            return _timed_call(fn, state, args, built[0])
+            result = _timed_call(fn, state, args, built[0])
+            release_free_memory()  # the task's temporaries, so the actor's memory is the states it holds
+            return result
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
 
