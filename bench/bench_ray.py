@@ -278,7 +278,9 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
     if level_json is None or not level_json.is_file():
         return {"rows": [], "source": f"no level bake log at {level_json}"}
     data = json.loads(level_json.read_text())
-    info = data.get("bake", data)
+    info = data.get("bake", data.get("bake_log", data))  # bench_level.json, bench_world.json or a bake log
+    if info.get("engine") == "ray":  # its tasks were timed on Ray actors already
+        efficiency = 1.0
     costs = stage_costs(info)
     rows = []
     for n in machines:
