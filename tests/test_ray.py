@@ -198,6 +198,14 @@ def _assert_same_level_bake(out: Path, local: Path, info: dict) -> None:
     assert not list((out / "stages").glob("*.parts")), "task results are removed once their stage is stored"
 
 
+def _level_bake_args(level: Path, cfg: Path, out: Path, *engine_flags: str) -> list[str]:
+    """`neuralao bake LEVEL --config CFG --out OUT --engine ray FLAGS` with the small tasks of LEVEL_TASKS."""
+    args = ["bake", str(level), "--config", str(cfg), "--out", str(out), "--engine", "ray", *engine_flags]
+    for kv in LEVEL_TASKS:
+        args += ["--set", kv]
+    return args
+
+
 def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(cluster, local_level, tmp_path):
     """`neuralao bake LEVEL --config ... --engine ray`: trace blocks, trees' in-place traces and fits, the
     pieces' solves, LODs and outputs, grass and shrub resampling as tasks (states rebuilt on the workers);
@@ -205,20 +213,7 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
     local library run's bytes."""
     level, cfg, local, info = local_level
     out = tmp_path / "ray"
-    args = [
-        "bake",
-        str(level),
-        "--config",
-        str(cfg),
-        "--out",
-        str(out),
-        "--engine",
-        "ray",
-        "--address",
-        cluster,
-    ]
-    for kv in LEVEL_TASKS:
-        args += ["--set", kv]
+    args = _level_bake_args(level, cfg, out, "--address", cluster)
     parts = out / "stages" / "solve"
     p = _cli(*args, start_new_session=True)
     _kill_when(p, lambda: any(parts.glob("[!.]*.npz")), timeout=120)
@@ -239,20 +234,7 @@ def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, t
     traces with two threads and writes the local bake's bytes."""
     level, cfg, local, info = local_level
     out = tmp_path / "threads"
-    args = [
-        "bake",
-        str(level),
-        "--config",
-        str(cfg),
-        "--out",
-        str(out),
-        "--engine",
-        "ray",
-        "--ray-threads",
-        "2",
-    ]
-    for kv in LEVEL_TASKS:
-        args += ["--set", kv]
+    args = _level_bake_args(level, cfg, out, "--ray-threads", "2")
     p = _cli(*args)
     _, err = p.communicate(timeout=180)
     assert p.returncode == 0, err

@@ -54,25 +54,24 @@ from pipeline.bakes.level_settings import (
 )
 from pipeline.bakes.level_stages import (
     LabellerFrame,
-    Task,
     TaskFiles,
-    _blend_piece,
-    _output_piece,
-    _simplify_level,
+    blend_piece,
     lod_jobs,
     lod_resample_jobs,
     opaque_context,
+    output_jobs,
     piece_resampled,
     piece_stem,
     piece_trace,
     pieces_context,
     run_to_files,
+    simplify_level,
     solve_jobs,
     split_lod,
     trace_jobs,
     worker_settings,
 )
-from pipeline.engines.engine import LocalEngine, ResultStore
+from pipeline.engines.engine import LocalEngine, ResultStore, Task
 from pipeline.foundation.errors import NeuralaoError
 from pipeline.foundation.io import (
     read_npz,
@@ -382,7 +381,7 @@ def bake_level(
             index,
             s,
             run_to_files(
-                output_files, runner, _output_jobs(light, pieces, solve_files, s), "output", progress
+                output_files, runner, output_jobs(light, pieces, solve_files, s), "output", progress
             ),
             deco,
             small,
@@ -477,7 +476,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     if not all(mesh_files.has(stem) for stem in stems):
         # A heavy context: its worker drops the opaque BVH while it simplifies the flattened level.
         simplify_ctx = pieces_context(lod_files.key, level, index, heavy=True)
-        ((_, result),) = list(runner.map([Task(simplify_ctx, _simplify_level, (s.lod.target_reduction,))]))
+        ((_, result),) = list(runner.map([Task(simplify_ctx, simplify_level, (s.lod.target_reduction,))]))
         for stem, part in split_lod(result, pieces):
             mesh_files.put(stem, part)
         mesh_files.put("radius", {"median_edge": result["median_edge"]})
@@ -523,14 +522,6 @@ def _lod_summary(results) -> dict[str, np.ndarray]:
         "rmse_constant": np.array(np.sqrt(max(sums[4] / sw - mean**2, 0.0))),
         "holdout": np.array(int(sums[5])),
     }
-
-
-def _output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings):
-    def make(p) -> Task:
-        r = solve_files.get(piece_stem(p))
-        return Task(ctx, _output_piece, (p, r["short"], r["long"], s.blend))
-
-    return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
 
 
 # Largest level on which the blend check also fits the blended samples by least squares.
@@ -582,15 +573,15 @@ def _blend_check(
                 args += (ao, valid, s, ref_settings, True, blended)
             else:
                 args += (None, None, s, ref_settings, False, blended)
-            return Task(ctx, _blend_piece, args)
+            return Task(ctx, blend_piece, args)
 
         jobs.append(make)
     n = len(pick)
     kern, ref_two, ref_valid, pred = np.zeros(n), np.zeros((n, 2)), np.zeros(n, bool), np.zeros(n)
     two_ao, two_valid = np.zeros((n, 2)), np.zeros(n, bool)
     worst = np.nan
-    tasks = [make() for make in jobs]
-    for i, r in runner.map(tasks):
+    # Made as the engine takes them (each ``make`` notes its picks, in order): one piece's arrays at a time.
+    for i, r in runner.map(make() for make in jobs):
         mine, a, v = parts[i]
         kern[mine], ref_two[mine], ref_valid[mine], pred[mine] = (
             r["kern"],

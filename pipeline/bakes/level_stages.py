@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 from tqdm import tqdm
 
-from pipeline.bakes.level_pieces import Piece, PieceIndex, SampleRule, cached_piece
+from pipeline.bakes.level_pieces import Piece, PieceIndex, SampleRule, cached_piece, instance_vertices
 from pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
 from pipeline.engines.engine import Context, LocalEngine, Task, content_key
 from pipeline.foundation.errors import NeuralaoError
@@ -369,7 +369,7 @@ def simplify(scene: Scene, reduction: float | None = None, target_count: int | N
     return scene_from_arrays(np.asarray(v, np.float64), np.asarray(f, np.int64), "lod1", scene.source)
 
 
-def _simplify_level(state: PieceState, args) -> dict[str, np.ndarray]:
+def simplify_level(state: PieceState, args) -> dict[str, np.ndarray]:
     """Engine task: LOD 1 of the level's static instances, one quadric simplification of them all flattened
     (the simplifier's error threshold is the whole level's: flat house walls go before a curved terrain),
     and the piece of every LOD face. Collapses never join two components, so each LOD component comes from
@@ -591,7 +591,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
 # --------------------------------------------------------------------------- blend check
 
 
-def _blend_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+def blend_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     """Engine task: at the picked samples of one piece, (a) the blended-kernel trace on the bake's rays,
     (b) a 4x-ray blended reference (its own seed; the labeller's BVH is shared), the per-vertex blend
     interpolated; with ``gap``, (c) the largest gap between the per-vertex blend and least squares of the
@@ -637,6 +637,16 @@ def blended_kernel_trace(
 # --------------------------------------------------------------------------- output
 
 
+def output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings):
+    """(stem, task maker) per piece: its instances' glTF arrays from its solved vertex AO."""
+
+    def make(p: Piece) -> Task:
+        r = solve_files.get(piece_stem(p))
+        return Task(ctx, _output_piece, (p, r["short"], r["long"], s.blend))
+
+    return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
+
+
 def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     """Engine task: the glTF arrays of one piece's static instances, concatenated in instance order: world
     positions (float32), faces (local to each instance), COLOR_0 and the three AO attributes."""
@@ -646,10 +656,8 @@ def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     verts, faces = [], []
     for k, j, _, _, _, _ in index.table[piece.first : piece.stop]:
         node = index.nodes[k]
-        mesh = level.meshes[node.mesh]
-        v = mesh.vertices
-        verts.append((np.c_[v, np.ones(len(v))] @ node.transforms[j][:3].T).astype(np.float32))
-        faces.append(mesh.faces.astype(np.uint32))
+        verts.append(instance_vertices(level, node, int(j)).astype(np.float32))
+        faces.append(level.meshes[node.mesh].faces.astype(np.uint32))
     return {
         "positions": np.concatenate(verts),
         "faces": np.concatenate(faces),
