@@ -71,11 +71,16 @@ class Scene:
         e0 = v[f[:, 0]]
         return np.cross(v[f[:, 1]] - e0, v[f[:, 2]] - e0)
 
+    def unit_face_normals(self) -> np.ndarray:
+        """(m, 3) float64 unit geometric normals (right-handed winding; NaN for a degenerate face), made
+        anew: :attr:`face_normals` is the cached copy, this one is for callers that keep only a cast."""
+        n = self.face_cross()
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
     @cached_property
     def face_normals(self) -> np.ndarray:
         """(m, 3) float64 unit geometric normals (right-handed winding)."""
-        n = self.face_cross()
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        return self.unit_face_normals()
 
     @cached_property
     def vertex_normals(self) -> np.ndarray:

@@ -162,12 +162,8 @@ class Labeller:
         self.scale = diag
         # float32 unit face normals for the hot path; the float64 ones (frames only) are made on demand,
         # so a level's labeller holds no (m, 3) float64 copy.
-        cross = scene.face_cross()
         with np.errstate(invalid="ignore", divide="ignore"):
-            self._face_normals32 = np.nan_to_num(cross / np.linalg.norm(cross, axis=1, keepdims=True)).astype(
-                np.float32
-            )
-        del cross
+            self._face_normals32 = np.nan_to_num(scene.unit_face_normals()).astype(np.float32)
         # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self.embree, self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32))
