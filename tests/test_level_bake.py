@@ -185,8 +185,10 @@ def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
     (out / "stages" / "trace" / "p00000_00000.npz").unlink()
     (out / "level_baked.glb").unlink()
     (out / "stages" / ".solve.npz.abc.tmp.npz").write_bytes(b"partial")
+    (out / ".level_baked.glb.spill.tmp").write_bytes(b"partial")  # a killed output stage's glTF spill
     third = bake_level(level, load_level_settings(cfg), out)
     assert not (out / "stages" / ".solve.npz.abc.tmp.npz").exists()
+    assert not (out / ".level_baked.glb.spill.tmp").exists()
     assert {s["stage"] for s in third["stages"] if s["reused"]} == reused - {"trace", "solve"}
     assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
 

@@ -44,7 +44,8 @@ def write_outputs(
     """Write the baked glTF, streamed: ``static_results`` yields each piece's arrays (the output tasks'
     results, in piece order, one at a time) and the LOD comes from ``lod_files`` piece by piece; the binary
     data goes to a file beside ``path`` as it is made, so memory holds one piece."""
-    spill = path.with_name(f".{path.name}.bin.part")
+    # Named as atomic_path names its temporaries, so a killed bake's rerun sweeps a stale one away.
+    spill = path.with_name(f".{path.name}.spill.tmp")
     w = GltfWriter("neuralao level bake", spill=spill)
     w.doc["extras"] = {
         "bake": {
