@@ -24,8 +24,8 @@ import onnx
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.evaluation.report import cpu_name  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 OUTCOMES = ("passed", "matches_onnxruntime", "refused", "wrong", "crashed")
 
@@ -44,7 +44,7 @@ def _reason_kind(reason: str) -> str:
 
 
 def node_table(results) -> tuple[str, dict]:
-    from export.node_tests import counts_by_op
+    from neuralao.export.node_tests import counts_by_op
 
     counts = counts_by_op(results)
     total = Counter()
@@ -64,11 +64,11 @@ def node_table(results) -> tuple[str, dict]:
 def light_models(dialect: str = "glsl430") -> list[dict]:
     from onnx.backend.test import __file__ as test_init
 
-    from export.glsl import generate_compute
-    from export.onnx_io import run_onnxruntime
-    from pipeline.foundation.errors import NeuralaoError
-    from runtime.glsl_runner import run_compute_all
-    from runtime.wgsl_runner import run_wgsl_all
+    from neuralao.export.glsl import generate_compute
+    from neuralao.export.onnx_io import run_onnxruntime
+    from neuralao.runtime.foundation.errors import NeuralaoError
+    from neuralao.runtime.glsl_runner import run_compute_all
+    from neuralao.runtime.wgsl_runner import run_wgsl_all
 
     run_program = run_wgsl_all if dialect == "wgsl" else run_compute_all
     rows = []
@@ -133,8 +133,8 @@ def main() -> None:
         help="glsl430: GLSL on GL (llvmpipe); wgsl: WGSL on WebGPU (wgpu, lavapipe)",
     )
     args = ap.parse_args()
-    from export.glsl import ImageOps
-    from export.node_tests import run_node_tests
+    from neuralao.export.glsl import ImageOps
+    from neuralao.export.node_tests import run_node_tests
 
     t0 = time.perf_counter()
     results = run_node_tests(ImageOps.OPS, args.dialect)

@@ -33,8 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.evaluation.report import cpu_name  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 LADDER = ("16x8", "32x16", "64x32")
 DEFAULT_MESHES = (
@@ -50,7 +50,7 @@ LOW_POLY_VERTICES = 10_000  # below: the low-poly goal applies; above: the dense
 
 
 def evaluate(pred_fn, frames) -> dict:
-    from pipeline.foundation.metrics import masked_rmse, masked_ssim
+    from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 
     ssim, rmse = [], []
     for f in frames:
@@ -63,17 +63,17 @@ def evaluate(pred_fn, frames) -> dict:
 
 
 def bench_mesh(spec: str, sizes, bake_rays: int, timing: int, out: Path, repeats: int) -> dict:
-    from pipeline.bakes.vertex import BakeSettings, bake
-    from pipeline.geometry.scene import load_scene
-    from pipeline.models.field import (
+    from neuralao.pipeline.bakes.vertex import BakeSettings, bake
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.models.field import (
         FieldSettings,
         collect_samples,
         parameter_bytes,
         predict_frame,
         train_model,
     )
-    from pipeline.models.mlp import parse_size
-    from runtime.baselines import vertex_ao_image
+    from neuralao.pipeline.models.mlp import parse_size
+    from neuralao.runtime.baselines import vertex_ao_image
 
     name, _, cams = spec.partition(":")
     scene = load_scene(name)
@@ -114,13 +114,13 @@ def bench_mesh(spec: str, sizes, bake_rays: int, timing: int, out: Path, repeats
 
 def time_gl(scene, samples, models: dict, size: int, repeats: int, out: Path) -> dict:
     """GL ms per frame of the field pass(es), the vertex-colour draw and SSAO on one held-back pose."""
-    from export.field import export_checkpoint, parity
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import Camera
-    from pipeline.models.checkpoint import save_checkpoint
-    from pipeline.models.field import FieldSettings, make_checkpoint
-    from runtime.baselines import time_screen_space, time_vertex_ao
-    from runtime.glsl_runner import time_vector_fragment
+    from neuralao.export.field import export_checkpoint, parity
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.pipeline.geometry.camera import Camera
+    from neuralao.pipeline.models.checkpoint import save_checkpoint
+    from neuralao.pipeline.models.field import FieldSettings, make_checkpoint
+    from neuralao.runtime.baselines import time_screen_space, time_vertex_ao
+    from neuralao.runtime.glsl_runner import time_vector_fragment
 
     f0 = samples.holdout[0]
     res: dict = {"size": size}
@@ -158,8 +158,8 @@ def time_gl(scene, samples, models: dict, size: int, repeats: int, out: Path) ->
 
 
 def octave_sweep(mesh: str, octaves=(0, 2, 4, 6, 8)) -> dict:
-    from pipeline.geometry.scene import load_scene
-    from pipeline.models.field import FieldSettings, collect_samples, predict_frame, train_model
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.models.field import FieldSettings, collect_samples, predict_frame, train_model
 
     name, _, cams = mesh.partition(":")
     scene = load_scene(name)

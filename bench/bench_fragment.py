@@ -26,30 +26,30 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.evaluation.report import cpu_name  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 
 def mlp_graph(hidden) -> onnx.ModelProto:
-    from export.mlp import onnx_bytes
-    from pipeline.models.mlp import BakedMLP
+    from neuralao.export.mlp import onnx_bytes
+    from neuralao.pipeline.models.mlp import BakedMLP
 
     torch.manual_seed(0)
     return onnx.load_from_string(onnx_bytes(BakedMLP(hidden)))
 
 
 def field_graph(hidden) -> onnx.ModelProto:
-    from export.field import onnx_bytes
-    from pipeline.models.field import FieldNet
+    from neuralao.export.field import onnx_bytes
+    from neuralao.pipeline.models.field import FieldNet
 
     torch.manual_seed(0)
     return onnx.load_from_string(onnx_bytes(FieldNet(hidden, 4, [0, 0, 0], [1, 1, 1])))
 
 
 def variants(name: str, proto: onnx.ModelProto, size: int, repeats: int) -> dict:
-    from export.field import bindings
-    from export.glsl import generate_vector_fragment
-    from runtime.glsl_runner import run_vector_fragment, texture_names, time_vector_fragment
+    from neuralao.export.field import bindings
+    from neuralao.export.glsl import generate_vector_fragment
+    from neuralao.runtime.glsl_runner import run_vector_fragment, texture_names, time_vector_fragment
 
     binds = None if name.startswith("mlp") else bindings()
     row: dict = {}
@@ -75,10 +75,10 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--repeats", type=int, default=10)
     args = ap.parse_args()
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
-    from runtime.baselines import time_screen_space
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.runtime.baselines import time_screen_space
 
     scene = load_scene("bunny")
     with GBufferRenderer(scene) as r:

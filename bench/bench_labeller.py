@@ -29,11 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.evaluation.report import cpu_name
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.geometry.camera import orbit  # noqa: E402
-from pipeline.geometry.scene import load_scene  # noqa: E402
-from pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name
+from neuralao.pipeline.geometry.camera import orbit  # noqa: E402
+from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 RAW_CHUNK = 1 << 16  # rays per raw call when split over threads (same granularity as the labeller)
 
@@ -42,9 +42,9 @@ def render_frame(scene, size: int) -> tuple[dict, str]:
     """A size x size frame of ``scene`` from its first orbit camera: pyrender G-buffer if available."""
     camera = orbit(scene, 4, size, size, seed=1)[0]
     try:
-        from pipeline.gbuffers.rasterizer import render_gbuffer
+        from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
 
-        return render_gbuffer(scene, camera), "pipeline.gbuffers.rasterizer (pyrender/OSMesa)"
+        return render_gbuffer(scene, camera), "neuralao.pipeline.gbuffers.rasterizer (pyrender/OSMesa)"
     except ImportError:
         return embree_frame(scene, camera), "Embree primary rays"
 

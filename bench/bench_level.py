@@ -27,10 +27,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bakes.level import bake_level  # noqa: E402
-from pipeline.bakes.level_settings import load_level_settings  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from neuralao.pipeline.bakes.level import bake_level  # noqa: E402
+from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: E402
+from neuralao.pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 # Table 1 of the paper: description, seconds (on a K20), our stage(s).
 PAPER = [

@@ -31,25 +31,25 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bakes.level_pieces import scene_samples  # noqa: E402
-from pipeline.bakes.level_settings import blend, halves, label_settings, load_level_settings  # noqa: E402
-from pipeline.bakes.level_stages import fit_level, opaque_scene, simplify  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
-from pipeline.geometry.level_files import (
+from neuralao.pipeline.bakes.level_pieces import scene_samples  # noqa: E402
+from neuralao.pipeline.bakes.level_settings import blend, halves, label_settings, load_level_settings  # noqa: E402
+from neuralao.pipeline.bakes.level_stages import fit_level, opaque_scene, simplify  # noqa: E402
+from neuralao.pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
+from neuralao.pipeline.geometry.level_files import (
     flatten,  # noqa: E402
     read_level,  # noqa: E402
 )
-from pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
-from pipeline.geometry.scene import scene_from_arrays  # noqa: E402
-from pipeline.geometry.surface import surface_samples  # noqa: E402
-from pipeline.tracing.level_tracer import (  # noqa: E402
+from neuralao.pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
+from neuralao.pipeline.geometry.scene import scene_from_arrays  # noqa: E402
+from neuralao.pipeline.geometry.surface import surface_samples  # noqa: E402
+from neuralao.pipeline.tracing.level_tracer import (  # noqa: E402
     _RESAMPLE_RAYS,
     LevelLabeller,
     _resample_block,
     _resample_block_geometric,
     sphere_directions,
 )
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 # The "medium" level: the small preset at 4x its area and 9x its terrain cells (~300k faces).
 MEDIUM = ["terrain_cells=360", "houses=400", "terrain_size=240"]
@@ -204,7 +204,7 @@ def main(argv=None) -> int:
 def _try_fit(g, samples, ao, valid, s, solver):
     from dataclasses import replace
 
-    from pipeline.foundation.errors import NeuralaoError
+    from neuralao.runtime.foundation.errors import NeuralaoError
 
     try:
         return fit_level(g.receivers, samples, ao, valid, replace(s.trace, solver=solver))

@@ -20,8 +20,8 @@ Per mesh (samples are drawn once and shared by the three sizes):
 6. The paper's Table 2 protocol (``--paper-views``, default 2): whole-image SSIM at 1920x1080 (camera on an
    orbit around the bounding sphere, a third phase), the generated GLSL at radius zero against ray-traced
    AO. scikit-image's ``structural_similarity`` (Gaussian sigma 1.5, population covariance, data range 1) is
-   the reference; ``pipeline.foundation.metrics.image_ssim`` and the masked SSIM beside it. In the same run,
-   at 1920x1080: each MLP's shader time against SSAO's (the paper: NN-16x8 about 0.12x).
+   the reference; ``neuralao.runtime.foundation.metrics.image_ssim`` and the masked SSIM beside it. In the
+   same run, at 1920x1080: each MLP's shader time against SSAO's (the paper: NN-16x8 about 0.12x).
 
 Writes DIR/mlp.json and DIR/mlp.md (checkpoints and exports under DIR/mlp/).
 """
@@ -40,14 +40,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from export.mlp import export_checkpoint, parity  # noqa: E402
-from pipeline.evaluation.report import cpu_name
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.foundation.metrics import masked_rmse, masked_ssim  # noqa: E402
-from pipeline.geometry.camera import orbit  # noqa: E402
-from pipeline.geometry.scene import load_scene  # noqa: E402
-from pipeline.models.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
-from pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
+from neuralao.export.mlp import export_checkpoint, parity  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name
+from neuralao.pipeline.geometry.camera import orbit  # noqa: E402
+from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.pipeline.models.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim  # noqa: E402
 
 # Erra et al. 2017, Table 2: SSIM against ray-traced AO for NN-16x8, NN-32x16, NN-64x32.
 PAPER_SSIM = {
@@ -163,7 +163,7 @@ def bench_mesh(mesh: str, base: MLPSettings, sizes: list[str], out: Path, ablati
 def shader_costs(rows: list[dict], sizes: list[str], side: int, repeats: int) -> dict:
     """Median ms per frame at side x side: MLP pass per size (first mesh's export: the cost does not depend
     on the weights) and vertex-colour AO per mesh."""
-    from runtime.glsl_runner import time_mlp_fragment, time_vertex_colour
+    from neuralao.runtime.glsl_runner import time_mlp_fragment, time_vertex_colour
 
     mlp = {}
     for size in sizes:
@@ -184,10 +184,10 @@ def paper_protocol(
     SSAO."""
     from skimage.metrics import structural_similarity
 
-    from pipeline.foundation.metrics import SSIM_SIGMA, image_ssim
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from runtime.baselines import run_screen_space, time_screen_space
-    from runtime.glsl_runner import run_mlp_fragment, time_mlp_fragment, time_vector_fragment
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.runtime.baselines import run_screen_space, time_screen_space
+    from neuralao.runtime.foundation.metrics import SSIM_SIGMA, image_ssim
+    from neuralao.runtime.glsl_runner import run_mlp_fragment, time_mlp_fragment, time_vector_fragment
 
     w, h = size
     out: dict = {"size": [w, h], "views": views, "meshes": {}}
@@ -249,8 +249,8 @@ def paper_markdown(p: dict, sizes: list[str]) -> list[str]:
         f"## The paper's protocol: whole-image SSIM at {w}x{h}, {p['views']} orbit views per mesh",
         "",
         "Reference: scikit-image `structural_similarity` (Gaussian sigma 1.5, population covariance, "
-        "data range 1, border of 5 px excluded); `ours`: pipeline.foundation.metrics.image_ssim on the same "
-        "images (edge replicated, border kept); masked: foreground pixels only. "
+        "data range 1, border of 5 px excluded); `ours`: neuralao.runtime.foundation.metrics.image_ssim "
+        "on the same images (edge replicated, border kept); masked: foreground pixels only. "
         "SSAO on the same frames for scale.",
         "",
         "| mesh | foreground | method | paper | whole-image SSIM (skimage) | whole-image (ours) | "
@@ -446,7 +446,7 @@ def main(argv: list[str] | None = None) -> int:
         print(markdown(result))
         return 0
     rows = [bench_mesh(m, base, args.sizes, out / "mlp", not args.no_ablation) for m in args.meshes]
-    from pipeline.foundation.settings import settings_to_dict
+    from neuralao.runtime.foundation.settings import settings_to_dict
 
     result = {
         "cpu": cpu_name(),

@@ -40,12 +40,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from pipeline.bakes.vertex import BakeSettings, bake  # noqa: E402
-from pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
-from pipeline.engines.engine import Context, LocalEngine, RayEngine, Task, content_key  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.geometry.scene import load_scene  # noqa: E402
-from pipeline.tracing.engine_labeller import labeller_context  # noqa: E402
+from neuralao.pipeline.bakes.vertex import BakeSettings, bake  # noqa: E402
+from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
+from neuralao.pipeline.engines.engine import Context, LocalEngine, RayEngine, Task, content_key  # noqa: E402
+from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.pipeline.tracing.engine_labeller import labeller_context  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 # Tasks per core in the projection: enough that the last round of tasks balances (block size follows).
 TASKS_PER_CORE = 4
@@ -66,7 +66,7 @@ def timed(fn) -> float:
 
 
 def dataset_settings(rays: int, views: int) -> DatasetSettings:
-    from pipeline.foundation.settings import from_dict
+    from neuralao.runtime.foundation.settings import from_dict
 
     return from_dict(
         DatasetSettings,
@@ -90,9 +90,9 @@ def measure(args) -> dict:
     scene = load_scene(args.mesh)
     bake_s = BakeSettings(rays=args.rays, samples_per_vertex=args.samples_per_vertex)
     ds = dataset_settings(args.dataset_rays, args.views)
-    from pipeline.bakes.level import bake_level
-    from pipeline.bakes.level_settings import load_level_settings
-    from pipeline.geometry.level_gen import settings_for, write_level
+    from neuralao.pipeline.bakes.level import bake_level
+    from neuralao.pipeline.bakes.level_settings import load_level_settings
+    from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_ray_"))
     level, cfg = write_level(tmp / "level", settings_for("tiny", seed=2), "tiny")

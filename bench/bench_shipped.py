@@ -9,14 +9,14 @@ the two screen-space baselines in interleaved rounds (the order rotates each rou
 medians and ratios from the same rounds:
 
 * each shipped model: its generated GLSL compute passes (pad, network, crop; dispatch only, the input
-  already resident, as in an engine) through ``runtime.glsl_runner.time_compute`` on random input (the
-  cost does not depend on the input or the radius uniform);
+  already resident, as in an engine) through ``neuralao.runtime.glsl_runner.time_compute`` on random input
+  (the cost does not depend on the input or the radius uniform);
 * ``<model>@h<N>``: the same network at an internal height of N rows (same aspect ratio) between the
-  point-sampling and upsampling passes of ``runtime.internal_resolution`` (both timed at the frame's
+  point-sampling and upsampling passes of ``neuralao.runtime.internal_resolution`` (both timed at the frame's
   size), as a frame at a resolution taller than N runs it; N from ``--internal-height`` or the
   model's manifest (``internal_height``);
 * a hybrid (GTAO as its fifth input channel): the GTAO pass at the frame's size is added to its time;
-* SSAO and GTAO: ``runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (a seeded
+* SSAO and GTAO: ``neuralao.runtime.baselines.time_screen_space`` on a real G-buffer of ``--mesh`` (a seeded
   interior camera: all foreground, as in a game frame; they skip background pixels) at each size,
   radius 1/4 of the scene diagonal (the largest label radius), blur included.
 
@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.evaluation.report import cpu_name  # noqa: E402
-from pipeline.foundation.errors import NeuralaoError  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
+from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 LARGE_PIXELS = 1_000_000  # sizes above this get --large-repeats timed dispatches a round
 
@@ -59,14 +59,14 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def measure(args) -> dict:
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import interior
-    from pipeline.geometry.scene import load_scene
-    from runtime import gl
-    from runtime.baselines import time_screen_space
-    from runtime.glsl_runner import time_compute
-    from runtime.internal_resolution import internal_size, time_scaling_passes
-    from runtime.shipped import read_index
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.pipeline.geometry.camera import interior
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.runtime import gl
+    from neuralao.runtime.baselines import time_screen_space
+    from neuralao.runtime.glsl_runner import time_compute
+    from neuralao.runtime.internal_resolution import internal_size, time_scaling_passes
+    from neuralao.runtime.shipped import read_index
 
     models_dir = Path(args.models)
     index = read_index(models_dir)

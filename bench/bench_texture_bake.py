@@ -25,7 +25,7 @@ from PIL import Image
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from pipeline.bakes.texture import (  # noqa: E402
+from neuralao.pipeline.bakes.texture import (  # noqa: E402
     TextureBakeSettings,
     bake_texture,
     load_uv_mesh,
@@ -33,10 +33,10 @@ from pipeline.bakes.texture import (  # noqa: E402
     quantise,
     sample_bilinear,
 )
-from pipeline.bakes.vertex import BakeSettings, bake, reference_at_samples  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
-from pipeline.geometry.scene import load_scene  # noqa: E402
-from pipeline.geometry.surface import interpolate, surface_samples  # noqa: E402
+from neuralao.pipeline.bakes.vertex import BakeSettings, bake, reference_at_samples  # noqa: E402
+from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.pipeline.geometry.surface import interpolate, surface_samples  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 
 def png_bytes(image_u8: np.ndarray) -> int:

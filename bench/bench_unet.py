@@ -9,18 +9,21 @@ training time per epoch. Also the same graph generated with other conv blocks
 (``--compare-blocks``: texels x, y and output layers per invocation; by default the steps from one
 texel of one layer to the default block) timed in the same rounds, with their compile times.
 
-1. Model: the paper architecture (``pipeline.models.unet`` defaults, widths 4/8/16/32) with a seeded random
-   init, or ``--checkpoint`` (loaded weights_only by the project's loader). Timing does not depend on
-   the weights. Exported with the project's own path: ``export.unet.export_onnx`` (TorchScript
-   exporter, batch norm folded) and ``export.unet.write_glsl`` (fp32 compute passes) into DIR/unet/.
-2. Input per size: a real G-buffer frame of ``--mesh`` (pipeline.gbuffers.rasterizer, first camera of a 4-view
-   orbit) preprocessed with ``pipeline.models.unet.preprocess_frame``; seeded random depth / normals with a
-   background band (``export.unet.random_input``) only if rendering fails (the table says which).
+1. Model: the paper architecture (``neuralao.pipeline.models.unet`` defaults, widths 4/8/16/32) with a
+   seeded random init, or ``--checkpoint`` (loaded weights_only by the project's loader). Timing does not
+   depend on the weights. Exported with the project's own path: ``neuralao.export.unet.export_onnx``
+   (TorchScript exporter, batch norm folded) and ``neuralao.export.unet.write_glsl`` (fp32 compute passes)
+   into DIR/unet/.
+2. Input per size: a real G-buffer frame of ``--mesh`` (neuralao.pipeline.gbuffers.rasterizer, first camera
+   of a 4-view orbit) preprocessed with ``neuralao.pipeline.models.unet.preprocess_frame``; seeded random
+   depth / normals with a background band (``neuralao.export.unet.random_input``) only if rendering fails
+   (the table says which).
 3. Per size, ``--repeats`` interleaved rounds (the order rotates each round) of
    (a) torch: ``PaddedUNet`` forward in eval mode under no_grad (pad, network, crop, as deployed);
-   (b) onnxruntime CPU session (``runtime.predict.ort_runner`` + ``run_padded``, as ``neuralao infer``);
-   (c) the generated GLSL passes (pad, network, crop) through ``runtime.glsl_runner``'s compute runner:
-       input upload, dispatch of every pass, readback, each closed by ``glFinish`` and timed apart.
+   (b) onnxruntime CPU session (``neuralao.runtime.predict.ort_runner`` + ``run_padded``, as ``neuralao
+       infer``);
+   (c) the generated GLSL passes (pad, network, crop) through ``neuralao.runtime.glsl_runner``'s compute
+       runner: input upload, dispatch of every pass, readback, each closed by ``glFinish`` and timed apart.
    The main GLSL figure is the dispatch alone (upload and readback excluded: an engine already has
    its G-buffer on the GPU and consumes the AO there); the sum with upload + readback is reported too.
    Medians over rounds; ratios ORT / torch, GLSL / torch and GLSL / ORT from the same rounds. GLSL on
@@ -29,10 +32,10 @@ texel of one layer to the default block) timed in the same rounds, with their co
    texture class (llvmpipe JIT-compiles a shader variant per power-of-two-ness of the textures), and
    one untimed torch and onnxruntime run. ``OMP_WAIT_POLICY=PASSIVE`` unless set (spinning OpenMP
    threads made 2-thread torch 20-50x slower while other processes held a core).
-4. Training time per epoch: ``pipeline.models.unet_train.train`` for ``--epochs`` epochs (default settings:
-   64-px crops, 2 crops per training frame, batch 16) on ``--data`` if given, otherwise on a tiny
-   dataset built here with ``pipeline.datasets.dataset`` (four small meshes at 128x128, 32 views, 64 rays),
-   reused on later runs when its config is unchanged.
+4. Training time per epoch: ``neuralao.pipeline.models.unet_train.train`` for ``--epochs`` epochs (default
+   settings: 64-px crops, 2 crops per training frame, batch 16) on ``--data`` if given, otherwise on a tiny
+   dataset built here with ``neuralao.pipeline.datasets.dataset`` (four small meshes at 128x128, 32 views,
+   64 rays), reused on later runs when its config is unchanged.
 
 Writes DIR/unet.json and DIR/unet.md (ONNX, GLSL, dataset and checkpoint under DIR/unet/).
 """
@@ -56,10 +59,10 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 os.environ.setdefault("MESA_SHADER_CACHE_DISABLE", "true")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from export.glsl.image import CONV_BLOCK  # noqa: E402
-from pipeline.evaluation.report import cpu_name  # noqa: E402
-from pipeline.foundation.errors import NeuralaoError  # noqa: E402
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.export.glsl.image import CONV_BLOCK  # noqa: E402
+from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
+from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 log = logging.getLogger("bench_unet")
 # The radius parameter rho of the timed runs (the cost does not depend on it).
@@ -96,10 +99,10 @@ def build(checkpoint: Path | None, seed: int):
     """(UNet in eval mode, description, checkpoint dict or None)."""
     import torch
 
-    from pipeline.models.unet import UNet, UNetArgs
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
 
     if checkpoint is not None:
-        from export.unet import load_model
+        from neuralao.export.unet import load_model
 
         model, ckpt = load_model(checkpoint)
         return model.eval(), f"checkpoint {checkpoint} (epoch {ckpt.get('epoch')})", ckpt
@@ -109,8 +112,8 @@ def build(checkpoint: Path | None, seed: int):
 
 def export(model, ckpt: dict | None, out: Path) -> dict:
     """model.onnx + glsl/ under ``out`` with the project's export functions; sizes and pass counts."""
-    from export.glsl import load_compute_export
-    from export.unet import export_onnx, onnx_metadata, write_glsl
+    from neuralao.export.glsl import load_compute_export
+    from neuralao.export.unet import export_onnx, onnx_metadata, write_glsl
 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -140,23 +143,27 @@ def export(model, ckpt: dict | None, out: Path) -> dict:
 
 def make_input(mesh: str, width: int, height: int, seed: int) -> tuple[np.ndarray, str, float]:
     """(x (4, H, W) float32 network input, its source in words, foreground fraction)."""
-    from pipeline.models.unet import preprocess_frame
+    from neuralao.pipeline.models.unet import preprocess_frame
 
     try:
-        from pipeline.gbuffers.rasterizer import render_gbuffer
-        from pipeline.geometry.camera import orbit
-        from pipeline.geometry.scene import load_scene
+        from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+        from neuralao.pipeline.geometry.camera import orbit
+        from neuralao.pipeline.geometry.scene import load_scene
 
         scene = load_scene(mesh)
         frame = render_gbuffer(scene, orbit(scene, 4, width, height, seed=1)[0])
         x = preprocess_frame(frame)
-        return x, f"G-buffer of `{scene.name}` (pipeline.gbuffers.rasterizer)", float(np.mean(frame["mask"]))
+        return (
+            x,
+            f"G-buffer of `{scene.name}` (neuralao.pipeline.gbuffers.rasterizer)",
+            float(np.mean(frame["mask"])),
+        )
     except (ImportError, NeuralaoError) as e:
         log.warning("cannot render %s (%s); using a random input", mesh, e)
-        from export.unet import random_input
+        from neuralao.export.unet import random_input
 
         x = random_input(width, height, seed)
-        return x, "seeded random depth/normals (export.unet.random_input)", float(np.mean(x[0] > 0))
+        return x, "seeded random depth/normals (neuralao.export.unet.random_input)", float(np.mean(x[0] > 0))
 
 
 # ----------------------------------------------------------------------------------------------- timing
@@ -177,10 +184,10 @@ def time_size(
     same rounds (``glsl_variants``)."""
     import torch
 
-    from pipeline.models.unet import PaddedUNet
-    from runtime import gl
-    from runtime.glsl_runner import _ComputeRun
-    from runtime.predict import run_padded
+    from neuralao.pipeline.models.unet import PaddedUNet
+    from neuralao.runtime import gl
+    from neuralao.runtime.glsl_runner import _ComputeRun
+    from neuralao.runtime.predict import run_padded
 
     h, w = x.shape[-2:]
     m = model.pad_multiple
@@ -336,7 +343,7 @@ def warmup_size(width: int, height: int, multiple: int) -> tuple[int, int]:
 
 def warm_glsl(program, width: int, height: int, done: set) -> float:
     """Run every pass once, untimed, at a small size of the same texture class (JIT compiles)."""
-    from runtime.glsl_runner import run_compute
+    from neuralao.runtime.glsl_runner import run_compute
 
     size = warmup_size(width, height, program.pad_multiple)
     if size in done:
@@ -352,8 +359,8 @@ def warm_glsl(program, width: int, height: int, done: set) -> float:
 
 
 def tiny_dataset_settings(meshes: list[str], views: int, rays: int):
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     scenes = [
         SceneSpec(
@@ -370,8 +377,8 @@ def tiny_dataset_settings(meshes: list[str], views: int, rays: int):
 
 def tiny_dataset(out: Path, meshes: list[str], views: int, rays: int) -> dict:
     """Build (or reuse, when its config is unchanged) a small dataset; returns where and how long."""
-    from pipeline.datasets.dataset import build_dataset
-    from pipeline.foundation.settings import settings_to_dict
+    from neuralao.pipeline.datasets.dataset import build_dataset
+    from neuralao.runtime.foundation.settings import settings_to_dict
 
     settings = tiny_dataset_settings(meshes, views, rays)
     config = json.loads(json.dumps(settings_to_dict(settings)))
@@ -388,10 +395,11 @@ def tiny_dataset(out: Path, meshes: list[str], views: int, rays: int) -> dict:
 
 
 def training_cost(args: argparse.Namespace, out: Path) -> dict:
-    """Seconds per epoch of pipeline.models.unet_train.train (default settings, ``--epochs`` epochs)."""
+    """Seconds per epoch of neuralao.pipeline.models.unet_train.train (default settings, ``--epochs``
+    epochs)."""
     import torch
 
-    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
     if args.no_train:
         return {"skipped": "--no-train"}
@@ -527,7 +535,7 @@ def markdown(result: dict) -> str:
             f"{result['glsl_warmup_s']:.1f} s."
         ),
         "",
-        "## Training time per epoch (`pipeline.models.unet_train.train`, default settings)",
+        "## Training time per epoch (`neuralao.pipeline.models.unet_train.train`, default settings)",
         "",
     ]
     t = result["training"]
@@ -610,9 +618,9 @@ def main(argv: list[str] | None = None) -> int:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from pipeline.models.checkpoint import count_parameters
-    from runtime import gl
-    from runtime.predict import ort_runner
+    from neuralao.pipeline.models.checkpoint import count_parameters
+    from neuralao.runtime import gl
+    from neuralao.runtime.predict import ort_runner
 
     t_start = time.perf_counter()
     out = args.out
@@ -627,8 +635,8 @@ def run(args: argparse.Namespace) -> int:
     info = gl.context().info
     default_block = tuple(CONV_BLOCK)
     others = {}
-    from export.glsl import generate_compute
-    from export.onnx_io import load_onnx
+    from neuralao.export.glsl import generate_compute
+    from neuralao.export.onnx_io import load_onnx
 
     proto = load_onnx(ex["onnx"])
     for blk in args.compare_blocks:
@@ -667,7 +675,7 @@ def run(args: argparse.Namespace) -> int:
         "threads": {
             "torch": torch.get_num_threads(),
             "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
-            "onnxruntime": 2,  # export.onnx_io.ort_session: intra_op_num_threads = 2
+            "onnxruntime": 2,  # neuralao.export.onnx_io.ort_session: intra_op_num_threads = 2
             "llvmpipe": os.environ.get("LP_NUM_THREADS", f"unset (Mesa default: {os.cpu_count()} cores)"),
         },
         "model": {

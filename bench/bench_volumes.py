@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.bakes.volumes import (  # noqa: E402
+from neuralao.pipeline.bakes.volumes import (  # noqa: E402
     Volumes,
     VolumeSettings,
     bake_volumes,
@@ -44,13 +44,13 @@ from pipeline.bakes.volumes import (  # noqa: E402
     make_labeller,
     spherical_ao,
 )
-from pipeline.bakes.volumes import regularise as regularise_models  # noqa: E402
-from pipeline.foundation import sh  # noqa: E402
-from pipeline.foundation.io import atomic_path, write_json, write_text  # noqa: E402
-from pipeline.geometry.compose import ComposeSettings, compose  # noqa: E402
-from pipeline.geometry.scene import Scene, scene_from_arrays  # noqa: E402
-from pipeline.tracing.labeller import LabelSettings  # noqa: E402
-from runtime.probe import VolumeProbe, blended_path  # noqa: E402
+from neuralao.pipeline.bakes.volumes import regularise as regularise_models  # noqa: E402
+from neuralao.pipeline.geometry.compose import ComposeSettings, compose  # noqa: E402
+from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays  # noqa: E402
+from neuralao.pipeline.tracing.labeller import LabelSettings  # noqa: E402
+from neuralao.runtime.foundation import sh  # noqa: E402
+from neuralao.runtime.foundation.io import atomic_path, write_json, write_text  # noqa: E402
+from neuralao.runtime.probe import VolumeProbe, blended_path  # noqa: E402
 
 BETAS = (0.0, 0.25, 1.0, 4.0, 16.0)
 Z_OVER_H = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0, math.inf)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from pipeline.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -153,7 +153,7 @@ def main() -> int:
         cmd = [
             sys.executable,
             "-m",
-            "pipeline.cli",
+            "neuralao.pipeline.cli",
             "level",
             "--preset",
             args.preset,
@@ -162,7 +162,7 @@ def main() -> int:
         ]
         subprocess.run(cmd, check=True, env=env)
     cfg = out / "level" / "bake.json"
-    bake = [sys.executable, "-m", "pipeline.cli", "bake", str(level), "--config", str(cfg), "--out"]
+    bake = [sys.executable, "-m", "neuralao.pipeline.cli", "bake", str(level), "--config", str(cfg), "--out"]
     bake += [str(out / "bake"), "--engine", "ray", "--ray-workers", str(args.workers)]
     for kv in args.set:
         bake += ["--set", kv]

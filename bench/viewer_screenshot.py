@@ -25,7 +25,7 @@ def screenshot(page: Path, out: Path, pose: tuple[float, float, float]) -> Path:
     from PIL import Image, ImageDraw
     from selenium.webdriver.common.by import By
 
-    from runtime.chromium import SWIFTSHADER_WEBGL, chromium_paths, headless_chromium, wait_for_page
+    from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, chromium_paths, headless_chromium, wait_for_page
 
     if not all(chromium_paths()):
         raise SystemExit("viewer_screenshot: needs chromium and chromium-driver (make system-deps)")

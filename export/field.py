@@ -1,7 +1,7 @@
 """Neural-field export: ONNX (two inputs, dynamic N) + generated GLSL fragment shader + manifest; parity.
 
-The ONNX graph is :class:`pipeline.models.field.FieldNet` as is: inputs ``position`` (N, 3) float32 = the
-object-space position in the mesh's own units (the graph normalises it by the bounding box itself) and
+The ONNX graph is :class:`neuralao.pipeline.models.field.FieldNet` as is: inputs ``position`` (N, 3) float32
+= the object-space position in the mesh's own units (the graph normalises it by the bounding box itself) and
 ``normal`` (N, 3) float32 = the viewer-facing object-space unit normal; output ``ao`` (N, 1) float32,
 linear and unclamped. Ops: Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh.
 
@@ -31,14 +31,11 @@ import numpy as np
 import onnx
 import torch
 
-from export.glsl import InputBinding, generate_vector_fragment, load_mlp_export, write_mlp_export
-from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest
-from export.mlp import parity_export, parity_frames, pixel_errors
-from export.onnx_io import ort_session, save_onnx, weighted_layers
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.tolerances import TOL
-from pipeline.models.field import (
+from neuralao.export.glsl import InputBinding, generate_vector_fragment, load_mlp_export, write_mlp_export
+from neuralao.export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest
+from neuralao.export.mlp import parity_export, parity_frames, pixel_errors
+from neuralao.export.onnx_io import ort_session, save_onnx, weighted_layers
+from neuralao.pipeline.models.field import (
     FieldNet,
     count_parameters,
     load_checkpoint,
@@ -47,12 +44,15 @@ from pipeline.models.field import (
     predict,
     size_name,
 )
-from runtime.glsl_runner import run_vector_fragment
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_vector_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
-from runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs  # noqa: F401
-from runtime.predict import field_infer_frame as infer_frame  # noqa: F401
-from runtime.predict import run_field as run_network
+from neuralao.runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs  # noqa: F401
+from neuralao.runtime.predict import field_infer_frame as infer_frame  # noqa: F401
+from neuralao.runtime.predict import run_field as run_network
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import onnx
 import torch
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import sha256_file
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import sha256_file
 
 OPSET = 17  # ONNX opset of every checkpoint export (torch.onnx.export(dynamo=False))
 # GLSL dialects of the per-mesh fragment shaders that parity runs (the runner executes the ES 3.0

@@ -1,11 +1,11 @@
 """Baked-MLP export: ONNX (dynamic N) + generated GLSL fragment shader + manifest; backend checks,
 parity, inference.
 
-The ONNX graph is the raw :class:`pipeline.models.mlp.BakedMLP`: input ``normals`` (N, 48) float32 = 16
-object-space unit normals, xyz interleaved, output ``ao`` (N, 1) float32 = accessibility. The output
-is the network's **linear, unclamped** value (no Clip node: the GLSL generator emits exactly the
-graph, and a UNORM / clamped render target or the consumer clamps); everything here that produces
-an image clamps to [0, 1] and sets background to 1.
+The ONNX graph is the raw :class:`neuralao.pipeline.models.mlp.BakedMLP`: input ``normals`` (N, 48) float32
+= 16 object-space unit normals, xyz interleaved, output ``ao`` (N, 1) float32 = accessibility. The output is
+the network's **linear, unclamped** value (no Clip node: the GLSL generator emits exactly the graph, and a
+UNORM / clamped render target or the consumer clamps); everything here that produces an image clamps to [0,
+1] and sets background to 1.
 
 At run time the network is evaluated at radius zero: each pixel's own normal repeated 16 times
 (Erra et al.); the generated shader does that itself (and folds the 16 column blocks of the first
@@ -14,7 +14,7 @@ layer into one, which changes only float32 rounding; parity holds it to TOL.pari
 Export layout (``export_checkpoint``)::
 
     OUT/model.onnx       checked, with metadata (input semantics, training mesh, measured error, size)
-    OUT/glsl/            export.glsl.write_mlp_export: mlp.vert/.frag (GLSL 3.30), ES 3.0, 4.30 variants,
+    OUT/glsl/ neuralao.export.glsl.write_mlp_export: mlp.vert/.frag (GLSL 3.30), ES 3.0, 4.30 variants,
                          uniform-block weight files and its own manifest.json
     OUT/manifest.json    everything: files + hashes, backend checks (torch / onnxruntime / OpenCV dnn),
                          checkpoint provenance, config and metrics (written last, atomically)
@@ -35,22 +35,19 @@ import numpy as np
 import onnx
 import torch
 
-from export.glsl import generate_mlp_fragment, load_mlp_export, write_mlp_export
-from export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest, read_manifest
-from export.onnx_io import (
+from neuralao.export.glsl import generate_mlp_fragment, load_mlp_export, write_mlp_export
+from neuralao.export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest, read_manifest
+from neuralao.export.onnx_io import (
     backend_checks,
     load_onnx,
     ort_session,
     run_opencv,
     save_onnx,
 )
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import orbit
-from pipeline.geometry.scene import load_scene
-from pipeline.models.mlp import (
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.models.mlp import (
     CIRCLE_SAMPLES,
     INPUTS,
     BakedMLP,
@@ -62,12 +59,15 @@ from pipeline.models.mlp import (
     radius_zero_inputs,
     size_name,
 )
-from runtime.glsl_runner import run_mlp_fragment
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_mlp_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
-from runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals  # noqa: F401
-from runtime.predict import mlp_infer_frame as infer_frame  # noqa: F401
-from runtime.predict import run_mlp as run_network
+from neuralao.runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals  # noqa: F401
+from neuralao.runtime.predict import mlp_infer_frame as infer_frame  # noqa: F401
+from neuralao.runtime.predict import run_mlp as run_network
 
 log = logging.getLogger(__name__)
 

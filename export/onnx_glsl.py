@@ -1,10 +1,11 @@
-"""GLSL for a user's own ONNX model (`neuralao glsl`, :mod:`pipeline.cli.glsl`), and its parity check.
+"""GLSL for a user's own ONNX model (`neuralao glsl`, :mod:`neuralao.pipeline.cli.glsl`), and its parity
+check.
 
     neuralao glsl MODEL.onnx --target image|vector|wgsl [--precision fp32|fp16] [--dialect ...] [--hlsl-msl]
                   [--bind INPUT=TEXTURE.CHANNELS[xREPEATS] ...] --out DIR
     neuralao parity DIR [--inputs X.npz] [--seed N] [--size W H]
 
-Targets (the op tables of :mod:`export.glsl`):
+Targets (the op tables of :mod:`neuralao.export.glsl`):
 
 * ``image``: an NCHW image network (1, C, H, W) -> images, H and W static or symbolic; GLSL 4.30
   compute passes + ``weights.bin`` + a manifest of passes, textures and formats. ``fp16`` stores the
@@ -44,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import onnx
 
-from export.glsl import (
+from neuralao.export.glsl import (
     DIALECTS,
     MAX_TEXTURE_SIZE,
     InputBinding,
@@ -55,11 +56,11 @@ from export.glsl import (
     write_compute_export,
     write_mlp_export,
 )
-from export.manifest import read_manifest as read_export_manifest
-from export.onnx_io import load_onnx, ort_session
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import read_npz, sha256_file, write_bytes, write_json
-from pipeline.foundation.tolerances import TOL
+from neuralao.export.manifest import read_manifest as read_export_manifest
+from neuralao.export.onnx_io import load_onnx, ort_session
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import read_npz, sha256_file, write_bytes, write_json
+from neuralao.runtime.foundation.tolerances import TOL
 
 log = logging.getLogger(__name__)
 
@@ -278,7 +279,7 @@ def _image_size(manifest: dict, dims: list, size: tuple[int, int] | None) -> tup
     rounded up to the multiples the program takes; checked against the program and PARITY_MAX_BYTES."""
     # Lazy, here and in parity: the runners load PyOpenGL, which fails to import without a GL library
     # (and costs 0.15 s measured); `neuralao glsl` only writes shaders, parity runs them.
-    from runtime.glsl_runner import size_multiples, texture_sizes
+    from neuralao.runtime.glsl_runner import size_multiples, texture_sizes
 
     fixed = (_static(dims[3]), _static(dims[2])) if len(dims) == 4 else (None, None)
     if size is None:
@@ -361,8 +362,13 @@ def parity(
     allocated; None: the static size, else DEFAULT_SIZE (rounded up to the program's multiples).
     It must equal a static size, and is refused with ``inputs`` (whose arrays fix the size)."""
     # Lazy: the runners need PyOpenGL and a GL library (see _image_size)
-    from runtime.glsl_runner import run_compute_all, run_vector_fragment, texture_names, texture_sizes
-    from runtime.wgsl_runner import run_wgsl_all
+    from neuralao.runtime.glsl_runner import (
+        run_compute_all,
+        run_vector_fragment,
+        texture_names,
+        texture_sizes,
+    )
+    from neuralao.runtime.wgsl_runner import run_wgsl_all
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)

@@ -2,7 +2,7 @@
 
 Metadata values are stored as strings in ``metadata_props`` (JSON for anything structured), so
 any ONNX consumer can read what the model expects without neuralao. Loading, metadata reading and
-onnxruntime sessions are the consumer's (:mod:`runtime.onnx_io`), re-exported here for the exporters.
+onnxruntime sessions are the consumer's (:mod:`neuralao.runtime.onnx_io`), re-exported here for the exporters.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ import cv2
 import numpy as np
 import onnx
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.foundation.tolerances import TOL
-from runtime.onnx_io import get_metadata as get_metadata  # re-exported (the exporters' one import)
-from runtime.onnx_io import load_onnx as load_onnx
-from runtime.onnx_io import ort_session as ort_session
-from runtime.onnx_io import run_onnxruntime as run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.onnx_io import get_metadata as get_metadata  # re-exported (the exporters' one import)
+from neuralao.runtime.onnx_io import load_onnx as load_onnx
+from neuralao.runtime.onnx_io import ort_session as ort_session
+from neuralao.runtime.onnx_io import run_onnxruntime as run_onnxruntime
 
 
 def set_metadata(model: onnx.ModelProto, metadata: dict[str, Any]) -> None:

@@ -1,9 +1,9 @@
 """U-Net export: ONNX (dynamic H, W) + generated GLSL + manifest; backend checks, GLSL parity, inference.
 
-The ONNX graph is the raw :class:`pipeline.models.unet.UNet` (H, W multiples of ``pad_multiple``); padding
-stays outside it. Every consumer here goes through :func:`run_padded`: preprocess the frame with
-:func:`pipeline.models.unet.preprocess_frame`, reflect-pad bottom/right to the multiple, run, crop back,
-and set background pixels to AO 1. The metadata of the ONNX file states all of it in words.
+The ONNX graph is the raw :class:`neuralao.pipeline.models.unet.UNet` (H, W multiples of ``pad_multiple``);
+padding stays outside it. Every consumer here goes through :func:`run_padded`: preprocess the frame with
+:func:`neuralao.pipeline.models.unet.preprocess_frame`, reflect-pad bottom/right to the multiple, run, crop
+back, and set background pixels to AO 1. The metadata of the ONNX file states all of it in words.
 
 Exporters: the TorchScript exporter (``dynamo=False``, the shipped model.onnx) folds batch norm into
 the preceding conv in eval mode. :func:`export_onnx_dynamo` is the second path: the dynamo exporter
@@ -26,22 +26,19 @@ import onnx
 import torch
 from onnx import numpy_helper
 
-from export.glsl import generate_compute, write_compute_export
-from export.manifest import OPSET, read_manifest
-from export.onnx_io import (
+from neuralao.export.glsl import generate_compute, write_compute_export
+from neuralao.export.manifest import OPSET, read_manifest
+from neuralao.export.onnx_io import (
     backend_checks,
     load_onnx,
     run_opencv,
     save_onnx,
 )
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import sha256_file, write_json, write_text
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import render_gbuffer
-from pipeline.geometry.camera import interior, orbit
-from pipeline.geometry.scene import load_scene
-from pipeline.models.checkpoint import count_parameters
-from pipeline.models.unet import (
+from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+from neuralao.pipeline.geometry.camera import interior, orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.models.checkpoint import count_parameters
+from neuralao.pipeline.models.unet import (
     HYBRID_DESCRIPTION,
     PAD_MODE,
     PREPROCESS_DESCRIPTION,
@@ -51,13 +48,22 @@ from pipeline.models.unet import (
     predict,
     preprocess_frame,
 )
-from pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
-from runtime.baselines import GTAOSettings, blur_source, fragment_source, gtao_pass_description, run_gtao
-from runtime.glsl_runner import load_compute_export, run_compute
-from runtime.internal_resolution import downsample_source, upsample_source, vertex_source
+from neuralao.pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
+from neuralao.runtime.baselines import (
+    GTAOSettings,
+    blur_source,
+    fragment_source,
+    gtao_pass_description,
+    run_gtao,
+)
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import load_compute_export, run_compute
+from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for the export checks and callers.
-from runtime.predict import (  # noqa: F401
+from neuralao.runtime.predict import (  # noqa: F401
     UNET_INPUT,
     UNET_RADIUS,
     Runner,
@@ -69,8 +75,8 @@ from runtime.predict import (  # noqa: F401
     radius_array,
     run_padded,
 )
-from runtime.predict import unet_infer_frame as infer_frame  # noqa: F401
-from runtime.predict import unet_predictor as frame_predictor  # noqa: F401
+from neuralao.runtime.predict import unet_infer_frame as infer_frame  # noqa: F401
+from neuralao.runtime.predict import unet_predictor as frame_predictor  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +123,8 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
         "dataset_hash": dataset.get("dataset_hash") or "",
         "epochs": str(ckpt.get("epoch", 0)),
         "scale": str(model.args.scale),
-        # rows the training frames were resampled to; inference resamples to it (runtime.internal_resolution)
+        # rows the training frames were resampled to; inference resamples to it
+        # (neuralao.runtime.internal_resolution)
         "internal_height": str(dataset.get("internal_height") or ""),
         "trained_radii_rel": (dataset.get("labels") or {}).get("radii_rel") or [],
         "training": {
@@ -296,10 +303,10 @@ def check_backends(
 
 
 def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
-    """The fragment passes around the network at its internal height (runtime.internal_resolution) as
+    """The fragment passes around the network at its internal height (neuralao.runtime.internal_resolution) as
     files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them. A
-    hybrid also gets the GTAO pass it refines (runtime.baselines' shaders, default settings: the
-    ones :func:`runtime.predict.unet_predictor` runs) and an upsampling pass that leaves GTAO alone
+    hybrid also gets the GTAO pass it refines (neuralao.runtime.baselines' shaders, default settings: the
+    ones :func:`neuralao.runtime.predict.unet_predictor` runs) and an upsampling pass that leaves GTAO alone
     where no foreground texel is in reach."""
     folder = glsl_dir / "internal"
     sources = {"vertex": "fullscreen.vert", "downsample": "downsample.frag", "upsample": "upsample.frag"}
@@ -434,8 +441,8 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
 
 
 def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
-    """GTAO (runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
-    :func:`pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
+    """GTAO (neuralao.runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
+    :func:`neuralao.pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
     radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))
     return run_gtao(frame, radius)
 

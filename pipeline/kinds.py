@@ -44,8 +44,8 @@ KINDS: dict[str, ModelKind] = {
     for k in (
         ModelKind(
             "mlp",
-            exporter="export.mlp",
-            trainer="pipeline.models.mlp",
+            exporter="neuralao.export.mlp",
+            trainer="neuralao.pipeline.models.mlp",
             train_help="the baked MLP of Erra et al. (16 object-space normals -> AO), one network per mesh",
             per_mesh=True,
             report_order=3,
@@ -53,8 +53,8 @@ KINDS: dict[str, ModelKind] = {
         ),
         ModelKind(
             "unet",
-            exporter="export.unet",
-            trainer="pipeline.models.unet_train",
+            exporter="neuralao.export.unet",
+            trainer="neuralao.pipeline.models.unet_train",
             train_help="the DeepAO screen-space U-Net (depth + camera normal -> AO)",
             report_order=5,
             colour="tab:red",
@@ -62,8 +62,8 @@ KINDS: dict[str, ModelKind] = {
         ),
         ModelKind(
             "field",
-            exporter="export.field",
-            trainer="pipeline.models.field",
+            exporter="neuralao.export.field",
+            trainer="neuralao.pipeline.models.field",
             train_help=(
                 "a per-mesh neural AO field (object-space position + normal -> AO), one network per mesh"
             ),
@@ -71,7 +71,7 @@ KINDS: dict[str, ModelKind] = {
             report_order=4,
             colour="tab:purple",
         ),
-        ModelKind("onnx-glsl", exporter="export.onnx_glsl"),
+        ModelKind("onnx-glsl", exporter="neuralao.export.onnx_glsl"),
     )
 }
 

@@ -1,8 +1,8 @@
 """GLSL text of the screen-space AO baselines (SSAO, GTAO, the shared blur), as named templates.
 
-Same habit as :mod:`export.glsl.templates`: every shader string lives here, :func:`fill` substitutes
+Same habit as :mod:`neuralao.export.glsl.templates`: every shader string lives here, :func:`fill` substitutes
 ``${name}`` fields strictly (a missing or unexpected field is an error), and
-:mod:`runtime.baselines` is the one writer. Values substituted are integers and float literals.
+:mod:`neuralao.runtime.baselines` is the one writer. Values substituted are integers and float literals.
 
 G-buffer textures every pass reads (RGBA32F, nearest, fetched with ``texelFetch``; GL row 0 at the
 bottom, so ``gl_FragCoord`` y and camera-space y both point up):
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from string import Template
 
-from export.glsl.templates import fill_from
+from neuralao.export.glsl.templates import fill_from
 
 _T: dict[str, str] = {}
 
@@ -270,7 +270,7 @@ void main() {
 
 # The G-buffer at the internal resolution: each low texel copies one high pixel (point sampling,
 # never a blend across an edge), the pixel floor((t + 0.5) * N / n) per axis, as the upsampling
-# pass and runtime.internal_resolution.downsample_frame assume.
+# pass and neuralao.runtime.internal_resolution.downsample_frame assume.
 _T["downsample_fragment"] = """#version 430 core
 // neuralao: point-sampled G-buffer at the internal resolution (two targets: position, normal).
 layout(binding = 0) uniform sampler2D u_position;  // high res: xyz camera-space position, w mask

@@ -9,12 +9,12 @@
 * **Baked vertex AO** shown per pixel: per-vertex values interpolated with the barycentric
   coordinates of each pixel's surface point in its triangle (``tri_id`` + world position), i.e.
   what a vertex-colour draw of the mesh shows; its cost is timed with a real GL vertex-colour draw
-  (:func:`runtime.glsl_runner.time_vertex_colour`).
+  (:func:`neuralao.runtime.glsl_runner.time_vertex_colour`).
 * **Just trace it**: Embree AO of every pixel at a low ray count (4, 16, 64) through
-  :class:`pipeline.tracing.labeller.Labeller` (CPU, ``workers`` threads): the quality a real-time ray tracer
-  at that budget would reach, timed on this machine's CPU.
+  :class:`neuralao.pipeline.tracing.labeller.Labeller` (CPU, ``workers`` threads): the quality a real-time
+  ray tracer at that budget would reach, timed on this machine's CPU.
 
-Both screen-space passes are GLSL fragment shaders (text in :mod:`runtime.baseline_templates`)
+Both screen-space passes are GLSL fragment shaders (text in :mod:`neuralao.runtime.baseline_templates`)
 run in the same headless GL context as the generated neural shaders, reading RGBA32F textures:
 camera-space position (xyz) + foreground mask (w), and the camera-space normal. Their radius is in
 scene units; the report passes the labels' ``max_distance`` (``max_distance_rel`` x the scene's
@@ -31,11 +31,11 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from runtime import gl
-from runtime.baseline_templates import fill
-from runtime.gl import GL
-from runtime.glsl_runner import time_vertex_colour
+from neuralao.runtime import gl
+from neuralao.runtime.baseline_templates import fill
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.gl import GL
+from neuralao.runtime.glsl_runner import time_vertex_colour
 
 Method = Literal["ssao", "gtao"]
 
@@ -420,7 +420,7 @@ def vertex_ao_image(scene, vertex_ao: np.ndarray, frame: dict) -> np.ndarray:
 
 def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: int = 20) -> float:
     """Median seconds per frame of the GL vertex-colour draw of the mesh (the engine's baked AO)."""
-    # Import cost: runtime.glsl_runner loads the GLSL generator and onnx (~1.7 s measured), which the
+    # Import cost: neuralao.runtime.glsl_runner loads the GLSL generator and onnx (~1.7 s measured), which the
     # screen-space baselines never need.
 
     return time_vertex_colour(scene, camera, repeats=repeats, ao=vertex_ao)
@@ -432,8 +432,9 @@ def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: 
 def traced_ao(labeller, frame: dict, rays: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """Embree AO of every foreground pixel at ``rays`` rays (the labeller's kernel and distances).
 
-    labeller : pipeline.tracing.labeller.Labeller of the frame's scene (its settings are restored afterwards).
-    Returns ao (H, W) float32 (1 on background), valid (H, W) bool and the wall seconds of the trace.
+    labeller : neuralao.pipeline.tracing.labeller.Labeller of the frame's scene (its settings are restored
+    afterwards). Returns ao (H, W) float32 (1 on background), valid (H, W) bool and the wall seconds of the
+    trace.
     """
     if rays < 1:
         raise NeuralaoError(f"rays must be >= 1, got {rays}")

@@ -13,8 +13,8 @@ import ctypes
 import numpy as np
 from OpenGL import GL
 
-from pipeline.foundation.errors import NeuralaoError
-from runtime import gl
+from neuralao.runtime import gl
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def _program(vertex: str, varyings: list[str]) -> int:

@@ -1,4 +1,5 @@
-"""Headless executor for the generated GLSL (Mesa llvmpipe through :mod:`runtime.gl`, or any GL 4.3+).
+"""Headless executor for the generated GLSL (Mesa llvmpipe through :mod:`neuralao.runtime.gl`, or any GL
+4.3+).
 
 Everything here is driven by what an engine would read: shader sources, uniform-block / weight
 files and the manifest. Passing an export folder instead of an in-memory object runs exactly the
@@ -31,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from export.glsl import (
+from neuralao.export.glsl import (
     DIALECTS,
     MAX_TEXTURE_SIZE,
     ComputeProgram,
@@ -39,10 +40,10 @@ from export.glsl import (
     load_compute_export,
     load_mlp_export,
 )
-from export.glsl.templates import fill
-from pipeline.foundation.errors import NeuralaoError
-from runtime import gl
-from runtime.gl import GL
+from neuralao.export.glsl.templates import fill
+from neuralao.runtime import gl
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.gl import GL
 
 log = logging.getLogger(__name__)
 
@@ -242,8 +243,8 @@ def time_vertex_colour(
     """Median seconds per frame of the plain baked-AO draw: the mesh with one float per vertex as its
     colour, depth-tested, into an RGBA8 target of the camera's size (the engine's cheapest AO).
 
-    scene : pipeline.geometry.scene.Scene; camera : pipeline.geometry.camera.Camera; ao : (n_vertices,)
-    float32 or None (then a deterministic pattern; the cost does not depend on the values).
+    scene : neuralao.pipeline.geometry.scene.Scene; camera : neuralao.pipeline.geometry.camera.Camera; ao :
+    (n_vertices,) float32 or None (then a deterministic pattern; the cost does not depend on the values).
     """
     ctx = gl.context()
     d = DIALECTS["glsl330"]

@@ -1,8 +1,8 @@
 """Apply an exported model to a G-buffer frame (the library side of ``neuralao infer``, whose command
-line is :mod:`pipeline.cli.infer`). Without a model the shipped U-Net (``runtime/models``, see
+line is :mod:`neuralao.pipeline.cli.infer`). Without a model the shipped U-Net (``runtime/models``, see
 ``runtime.models``) is used.
 
-The model's kind comes from its ONNX metadata (``neuralao_kind``); :data:`runtime.predict.PREDICTORS`
+The model's kind comes from its ONNX metadata (``neuralao_kind``); :data:`neuralao.runtime.predict.PREDICTORS`
 holds each kind's onnxruntime predictor, ``predict(frame, radius) -> ao (H, W) float32`` (AO in [0, 1],
 1 on background):
 
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path, read_npz, write_exr, write_png
-from pipeline.foundation.limits import check_finite_arrays
-from runtime.onnx_io import get_metadata, load_onnx
-from runtime.predict import PREDICTORS
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path, read_npz, write_exr, write_png
+from neuralao.runtime.foundation.limits import check_finite_arrays
+from neuralao.runtime.onnx_io import get_metadata, load_onnx
+from neuralao.runtime.predict import PREDICTORS
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ shipped default at 128x128 on the test categories: SSIM 0.728 / RMSE 0.119 run a
 point-sampled up to 256 rows.
 
 Conventions (the same in the numpy reference here and in the GLSL pass of
-:mod:`runtime.baseline_templates` ``upsample_fragment``, which the tests hold to each other):
+:mod:`neuralao.runtime.baseline_templates` ``upsample_fragment``, which the tests hold to each other):
 
 * low-resolution texel ``t`` of an axis of ``n`` texels is the high-resolution pixel
   ``floor((t + 0.5) * N / n)`` of that axis of ``N`` pixels, counted in GL order (row 0 at the
@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from runtime import gl
-from runtime.baseline_templates import fill
-from runtime.baselines import _program, camera_space_position, gbuffer_textures
-from runtime.gl import GL  # runtime.gl sets PYOPENGL_PLATFORM before PyOpenGL loads
+from neuralao.runtime import gl
+from neuralao.runtime.baseline_templates import fill
+from neuralao.runtime.baselines import _program, camera_space_position, gbuffer_textures
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.gl import GL  # neuralao.runtime.gl sets PYOPENGL_PLATFORM before PyOpenGL loads
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Consumer-side ONNX plumbing: load and check a model file, read its metadata, run it with onnxruntime.
 
 Metadata values are stored as strings in ``metadata_props`` (JSON for anything structured), so any
-ONNX consumer can read what the model expects without neuralao; :mod:`export.onnx_io` writes them.
+ONNX consumer can read what the model expects without neuralao; :mod:`neuralao.export.onnx_io` writes them.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 import onnx
 import onnxruntime as ort
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:

@@ -9,8 +9,8 @@
 * ``field``: object-space position + normal (radius baked in; ``radius`` must be None).
 
 This is the ONE copy of each family's onnxruntime inference: ``neuralao infer``, the exporters'
-checks and the evaluation all call it (through :mod:`export.unet`, :mod:`export.mlp`,
-:mod:`export.field`, which re-export these names).
+checks and the evaluation all call it (through :mod:`neuralao.export.unet`, :mod:`neuralao.export.mlp`,
+:mod:`neuralao.export.field`, which re-export these names).
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ from typing import Protocol
 import numpy as np
 import onnx
 
-from pipeline.foundation.errors import NeuralaoError
-from runtime.baselines import run_gtao
-from runtime.internal_resolution import at_internal_resolution
-from runtime.onnx_io import get_metadata, load_onnx, ort_session
-from runtime.unet_input import (
+from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.internal_resolution import at_internal_resolution
+from neuralao.runtime.onnx_io import get_metadata, load_onnx, ort_session
+from neuralao.runtime.unet_input import (
     PREPROCESS_VERSION,
     RADIUS_INPUT,
     frame_radius,
@@ -137,9 +137,9 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     frame: depth (H,W), normal_cam (H,W,3), mask (H,W), yfov; radius in scene units (None: the largest
     radius the frame's labels have). ``internal_height``: "model" (the height the export declares, see
     :func:`declared_internal_height`), None (the frame's own size) or a number of rows; frames taller
-    than it are point-sampled down and the AO upsampled (:mod:`runtime.internal_resolution`). A hybrid
-    gets GTAO at the same radius (runtime.baselines, at the frame's resolution) as its fifth channel,
-    and at an internal resolution its correction to GTAO is what is upsampled.
+    than it are point-sampled down and the AO upsampled (:mod:`neuralao.runtime.internal_resolution`). A
+    hybrid gets GTAO at the same radius (neuralao.runtime.baselines, at the frame's resolution) as its fifth
+    channel, and at an internal resolution its correction to GTAO is what is upsampled.
     """
     proto = load_onnx(onnx_path)
     meta = check_unet_onnx(proto, onnx_path)

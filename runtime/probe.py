@@ -24,10 +24,10 @@ import math
 
 import numpy as np
 
-from export.glsl.volume import evaluate_packed, pack_volumes
-from pipeline.foundation import sh
-from pipeline.foundation.errors import NeuralaoError
-from runtime.volumes import Volumes, design
+from neuralao.export.glsl.volume import evaluate_packed, pack_volumes
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.volumes import Volumes, design
 
 ORDERS = {"linear": sh.LINEAR, "quadratic": sh.QUADRATIC}
 # Bytes per point and region of the lookup (nearest points of every box, their differences), the
@@ -36,7 +36,8 @@ POINT_BYTES = 256
 
 
 class VolumeProbe:
-    """numpy evaluator of a :class:`runtime.volumes.Volumes` (the reference for the GLSL function)."""
+    """numpy evaluator of a :class:`neuralao.runtime.volumes.Volumes` (the reference for the GLSL
+    function)."""
 
     def __init__(self, volumes: Volumes):
         self.volumes = volumes

@@ -10,9 +10,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from pipeline.foundation.errors import NeuralaoError
-from runtime.onnx_io import get_metadata, load_onnx
-from runtime.predict import is_hybrid
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.onnx_io import get_metadata, load_onnx
+from neuralao.runtime.predict import is_hybrid
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 INDEX = MODELS_DIR / "index.json"

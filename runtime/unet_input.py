@@ -8,8 +8,8 @@
     radius   rho = R / (mean foreground depth * tan(yfov / 2)), (1, 1, 1, 1) float32.
 
 The ONE preprocessing that training, export checks, parity and inference use (see
-:mod:`pipeline.models.unet` for the reasons behind it and the model); a consumer runs it without torch.
-The ONNX graph needs H and W multiples of ``pad_multiple``: the consumer reflect-pads bottom/right
+:mod:`neuralao.pipeline.models.unet` for the reasons behind it and the model); a consumer runs it without
+torch. The ONNX graph needs H and W multiples of ``pad_multiple``: the consumer reflect-pads bottom/right
 (:func:`pad_to_multiple`) and crops the output back.
 """
 
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and ``infer`` checks it.
 PREPROCESS_VERSION = 2

@@ -54,8 +54,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_text
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_text
 
 log = logging.getLogger(__name__)
 

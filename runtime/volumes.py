@@ -3,7 +3,7 @@
 The VOLUMES.json document (format ``neuralao-volumes`` v1, :func:`to_json` / :func:`from_json`), its
 dataclasses (regions, edges, per-region models, the bake's settings) and the model of eq. 4
 (:func:`design`, :func:`model_at`): what a consumer needs to evaluate the models without the baker
-(:mod:`pipeline.bakes.volumes`, which traces and fits them).
+(:mod:`neuralao.pipeline.bakes.volumes`, which traces and fits them).
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation import sh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import from_dict, settings_to_dict
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 
 FORMAT = "neuralao-volumes"
 VERSION = 1
@@ -164,7 +164,7 @@ def to_json(vol: Volumes) -> dict:
         "sh": {
             "count": sh.QUADRATIC,
             "basis": "real SH, order Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22 "
-            "(pipeline/foundation/sh.py)",
+            "(runtime/foundation/sh.py)",
             "space": "AO: clamped cosine applied, AO_d(n) = sum_j f_dj Y_j(n) for a unit normal n",
         },
         "terms": list(TERMS),

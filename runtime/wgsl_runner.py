@@ -1,7 +1,7 @@
 """Headless executor for the generated WGSL compute passes: WebGPU through ``wgpu`` (wgpu-native),
 on Mesa's lavapipe Vulkan driver here (any WebGPU adapter elsewhere).
 
-The WGSL twin of :func:`runtime.glsl_runner.run_compute`, driven only by what an engine reads: the
+The WGSL twin of :func:`neuralao.runtime.glsl_runner.run_compute`, driven only by what an engine reads: the
 ``.wgsl`` sources, ``weights.bin`` and the manifest (format ``neuralao-wgsl-compute``).
 
     run_wgsl_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from export.glsl import ComputeProgram, load_compute_export
-from pipeline.foundation.errors import NeuralaoError
-from runtime.glsl_runner import compute_input, compute_outputs, scalar_values, texture_sizes
+from neuralao.export.glsl import ComputeProgram, load_compute_export
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.glsl_runner import compute_input, compute_outputs, scalar_values, texture_sizes
 
 log = logging.getLogger(__name__)
 

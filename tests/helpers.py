@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.foundation.tolerances import TOL
-from pipeline.geometry.scene import Scene, scene_from_arrays
-from runtime.chromium import chromium_paths
+from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
+from neuralao.runtime.chromium import chromium_paths
+from neuralao.runtime.foundation.tolerances import TOL
 
 
 def quad(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -114,7 +114,7 @@ def onnx_vs_torch_tol(ref: np.ndarray | float, model) -> float:
     elif hasattr(model, "modules"):  # a torch module, counted without importing torch here
         depth = sum(type(m).__name__ in ("Conv2d", "ConvTranspose2d", "Linear") for m in model.modules())
     else:
-        from export.onnx_io import weighted_layers
+        from neuralao.export.onnx_io import weighted_layers
 
         depth = weighted_layers(model)
     return TOL.onnx_vs_torch(float(np.max(np.abs(ref))), depth)

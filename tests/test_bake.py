@@ -13,13 +13,24 @@ import pytest
 import trimesh
 from helpers import box, merge
 
-from pipeline import cli
-from pipeline.bakes.vertex import BakeSettings, bake, read_baked_mesh, reference_at_samples, write_baked_mesh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.geometry.least_squares import fit_least_squares
-from pipeline.geometry.scene import scene_from_arrays
-from pipeline.geometry.surface import interpolate, interpolation_matrix, surface_error, surface_samples
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.vertex import (
+    BakeSettings,
+    bake,
+    read_baked_mesh,
+    reference_at_samples,
+    write_baked_mesh,
+)
+from neuralao.pipeline.geometry.least_squares import fit_least_squares
+from neuralao.pipeline.geometry.scene import scene_from_arrays
+from neuralao.pipeline.geometry.surface import (
+    interpolate,
+    interpolation_matrix,
+    surface_error,
+    surface_samples,
+)
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 
 def grid_plane(half: float = 1.0, n: int = 2):

@@ -10,12 +10,10 @@ import numpy as np
 import pytest
 from helpers import floor_quad, merge, wall_quad
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import Camera, look_at
-from pipeline.tracing.labeller import Labeller, LabelSettings
-from runtime.baselines import (
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import Camera, look_at
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.baselines import (
     GTAOSettings,
     SSAOSettings,
     camera_space_position,
@@ -26,6 +24,8 @@ from runtime.baselines import (
     traced_ao,
     vertex_ao_image,
 )
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 METHODS = ("ssao", "gtao")
 
@@ -186,9 +186,9 @@ def test_low_ray_tracing_error_falls_with_rays(corner):
 )
 def test_shaders_pass_glslang():
     """The baseline shaders are valid GLSL for a second compiler too (not only Mesa's)."""
-    from export.glsl import validate_glsl
-    from runtime.baseline_templates import fill
-    from runtime.baselines import blur_source, fragment_source
+    from neuralao.export.glsl import validate_glsl
+    from neuralao.runtime.baseline_templates import fill
+    from neuralao.runtime.baselines import blur_source, fragment_source
 
     validate_glsl(fill("fullscreen_vertex"), "vert")
     validate_glsl(fragment_source("ssao", SSAOSettings()), "frag")

@@ -1,7 +1,8 @@
 """The command-line contract on inputs that used to get through: non-finite G-buffers, output formats,
 counts past what the machine can hold, probe points far from the level, help text defaults, and
 messages a command-line user can act on. Each test runs the real command in-process
-(:func:`pipeline.cli.main.main`) and checks the exit status, the one stderr line and the files left behind.
+(:func:`neuralao.pipeline.cli.main.main`) and checks the exit status, the one stderr line and the files left
+behind.
 """
 
 from __future__ import annotations
@@ -14,9 +15,9 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline.cli.main import main
-from pipeline.foundation import sh
-from pipeline.foundation.io import read_npz
+from neuralao.pipeline.cli.main import main
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.io import read_npz
 
 TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 UNET = "runtime/models/unet-fast/model.onnx"
@@ -289,7 +290,7 @@ def test_usage_errors_and_a_missing_command_are_one_line(capsys):
 
 def _two_regions(slope: float = 0.0):
     """Boxes x in [-1, 0] and [0.5, 1.5] with constant AO 0.2 and 0.9 (``slope``: d AO / dx on the right)."""
-    from pipeline.bakes.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
+    from neuralao.pipeline.bakes.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
 
     regions = [Region("left", (-1, -1, -1), (0, 1, 1)), Region("right", (0.5, -1, -1), (1.5, 1, 1))]
     y0 = sh.basis(np.eye(3)[:1], 1)[0, 0]
@@ -304,7 +305,7 @@ def _two_regions(slope: float = 0.0):
 
 @pytest.mark.parametrize("distance", [1e3, 1e6, 1e15, 1e30, 1e150, 1e300])
 def test_probe_far_from_the_level_uses_the_nearest_region(distance):
-    from runtime.probe import VolumeProbe
+    from neuralao.runtime.probe import VolumeProbe
 
     probe = VolumeProbe(_two_regions())
     p = np.array([[distance, 0.3, 0.1], [-distance, 0.2, 0.0]])
@@ -316,8 +317,8 @@ def test_probe_far_from_the_level_uses_the_nearest_region(distance):
 
 
 def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
-    from pipeline.bakes.volumes import to_json
-    from pipeline.foundation.io import write_json
+    from neuralao.pipeline.bakes.volumes import to_json
+    from neuralao.runtime.foundation.io import write_json
 
     write_json(tmp_path / "v.json", to_json(_two_regions(slope=3.0)))
     np.save(tmp_path / "p.npy", np.array([[1.0, 0, 0], [1.7e308, 0, 0]]))
@@ -344,8 +345,8 @@ def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
 
 @pytest.mark.parametrize("model", ["field", "mlp"])
 def test_train_help_states_the_real_defaults(capsys, model):
-    from pipeline.models.field import FieldSettings
-    from pipeline.models.mlp import MLPSettings, size_name
+    from neuralao.pipeline.models.field import FieldSettings
+    from neuralao.pipeline.models.mlp import MLPSettings, size_name
 
     with pytest.raises(SystemExit):
         main(["train", model, "--help"])
@@ -429,7 +430,7 @@ def test_unnamed_gltf_nodes_are_named_one_way_in_every_message(tmp_path, capsys)
 
 @pytest.mark.parametrize("content", [b"", "no meshes"])
 def test_view_of_a_bake_without_geometry_says_so(tmp_path, capsys, content):
-    from pipeline.geometry.level_files import GltfWriter
+    from neuralao.pipeline.geometry.level_files import GltfWriter
 
     path = tmp_path / "empty.glb"
     if content:
@@ -452,7 +453,7 @@ def test_texture_bake_of_a_mesh_at_float32_limits_finishes(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "pipeline.cli",
+        "neuralao.pipeline.cli",
         "bake",
         str(tmp_path / "big.obj"),
         "--to",

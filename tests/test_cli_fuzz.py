@@ -1,6 +1,7 @@
 """CLI fuzz: hypothesis-generated ``neuralao`` invocations with bad and absurd numbers, shapes, paths and
 hostile files (truncated and lying glTF / OBJ / PLY / NPZ / NPY / ONNX / JSON), run in-process through
-:func:`pipeline.cli.main.main` (stderr and ``SystemExit`` captured), so hundreds of cases fit in a test run.
+:func:`neuralao.pipeline.cli.main.main` (stderr and ``SystemExit`` captured), so hundreds of cases fit in a
+test run.
 
 The contract every case is held to:
 
@@ -37,7 +38,7 @@ import pytest
 from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
-from pipeline.cli.main import main
+from neuralao.pipeline.cli.main import main
 
 FUZZ_EXAMPLES = int(os.environ.get("NEURALAO_FUZZ_EXAMPLES", "500"))
 # None: derandomised (the same cases every run, as CI needs); a number: that seed (`make fuzz`).
@@ -681,7 +682,7 @@ def _write_files(d: Path, work: Path) -> None:
         )
         == 0
     )
-    from pipeline.foundation.io import read_npz
+    from neuralao.runtime.foundation.io import read_npz
 
     frame = read_npz(work / "render" / "view_0000.npz")
     np.savez(d / "frame.npz", **frame)
@@ -879,19 +880,19 @@ def _error_lines(stderr: str) -> list[str]:
 
 def _check_output(case: Case, out: Path) -> None:
     """A success must leave a valid output: read it back."""
-    from pipeline.foundation.io import read_npz
+    from neuralao.runtime.foundation.io import read_npz
 
     if (
         case.command == "bake"
         and out.suffix == ".ply"
         or (case.command == "bake" and "--to" not in case.argv)
     ):
-        from pipeline.bakes.vertex import read_baked_mesh
+        from neuralao.pipeline.bakes.vertex import read_baked_mesh
 
         v, faces, ao, _ = read_baked_mesh(out)
         assert ao.shape == (len(v),) and np.isfinite(ao).all() and (0 <= ao).all() and (ao <= 1).all()
     elif case.command == "bake":
-        from pipeline.bakes.texture import read_texture_glb
+        from neuralao.pipeline.bakes.texture import read_texture_glb
 
         _, red = read_texture_glb(out)
         assert np.isfinite(red).all() and (0 <= red).all() and (red <= 1).all()
@@ -921,14 +922,14 @@ def _check_output(case: Case, out: Path) -> None:
         assert ao.ndim == 1 and ao.dtype == np.float32 and np.isfinite(ao).all()
         assert (0 <= ao).all() and (ao <= 1).all()
     elif case.command == "volumes":
-        from pipeline.bakes.volumes import read_volumes
+        from neuralao.pipeline.bakes.volumes import read_volumes
 
         vol = read_volumes(out)
         assert all(np.isfinite(m.coefficients).all() for m in vol.models)
     elif case.command == "view":
         assert (out / "index.html").is_file() and (out / "scene.js").stat().st_size > 0
     elif case.command == "train":
-        from pipeline.models.field import load_checkpoint
+        from neuralao.pipeline.models.field import load_checkpoint
 
         ckpt = load_checkpoint(out)
         assert np.isfinite(ckpt["metrics"]["val_rmse"])

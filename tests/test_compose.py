@@ -14,12 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.datasets.dataset import DatasetSettings, _validate, build_dataset, expand_scenes, scene_of
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import from_dict
-from pipeline.foundation.tolerances import TOL
-from pipeline.geometry.camera import _clearance, closeup, orbit
-from pipeline.geometry.compose import (
+from neuralao.pipeline.datasets.dataset import (
+    DatasetSettings,
+    _validate,
+    build_dataset,
+    expand_scenes,
+    scene_of,
+)
+from neuralao.pipeline.geometry.camera import _clearance, closeup, orbit
+from neuralao.pipeline.geometry.compose import (
     PRIMITIVES,
     ComposeSettings,
     compose,
@@ -27,8 +30,11 @@ from pipeline.geometry.compose import (
     normalized_mesh,
     plan,
 )
-from pipeline.geometry.scene import mesh_root
-from pipeline.geometry.splits import ADDED, INTERIORS, OBJECTS, all_meshes, object_meshes
+from neuralao.pipeline.geometry.scene import mesh_root
+from neuralao.pipeline.geometry.splits import ADDED, INTERIORS, OBJECTS, all_meshes, object_meshes
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import from_dict
+from neuralao.runtime.foundation.tolerances import TOL
 
 # Small train meshes (a few thousand faces at most) so the geometry checks stay fast.
 SMALL = ["suzanne", "spot", "Fox", "beetle", "GlamVelvetSofa"]
@@ -239,8 +245,8 @@ def test_generator_expands_with_room_rules():
 
 
 def test_closeups_are_clear_see_their_target_and_are_darker_than_orbits():
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.tracing.labeller import Labeller, LabelSettings
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 
     scene = compose(ComposeSettings(seed=3, meshes=SMALL, walls=(2, 2)))
     near = closeup(scene, 4, 32, 32, seed=5)
@@ -289,8 +295,8 @@ def test_same_seed_same_dataset_hash(tmp_path):
 
 
 def test_radii_in_the_dataset_leave_ao_unchanged(tmp_path):
-    from pipeline.datasets.dataset import open_dataset
-    from pipeline.foundation.io import read_npz
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.runtime.foundation.io import read_npz
 
     def build(out: str, radii: list[float] | None) -> dict:
         labels = {"rays": 16} if radii is None else {"rays": 16, "radii_rel": radii}

@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from pipeline.datasets.dataset import DatasetSettings
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import load_settings, settings_to_dict
+from neuralao.pipeline.datasets.dataset import DatasetSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import load_settings, settings_to_dict
 
 
 def test_demo_preset_resolves():

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.datasets.dataset import open_dataset
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 CONFIG = {
     "name": "tiny",
@@ -34,7 +34,16 @@ CONFIG = {
 
 def _run(config: Path, out: Path, **kw) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", "dataset", str(config), "--out", str(out), "--no-progress"],
+        [
+            sys.executable,
+            "-m",
+            "neuralao.pipeline.cli",
+            "dataset",
+            str(config),
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -160,7 +169,7 @@ class _Stop(Exception):
 
 def _stopping_engine(after: int):
     """A local engine that dies after ``after`` shards (an interrupted run, in-process)."""
-    from pipeline.engines.engine import LocalEngine
+    from neuralao.pipeline.engines.engine import LocalEngine
 
     class Stopping(LocalEngine):
         def _run(self, pending):
@@ -174,8 +183,8 @@ def _stopping_engine(after: int):
 
 @pytest.fixture(scope="module")
 def mixed(tmp_path_factory):
-    from pipeline.datasets.dataset import DatasetSettings, build_dataset
-    from pipeline.foundation.settings import from_dict
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset
+    from neuralao.runtime.foundation.settings import from_dict
 
     root = tmp_path_factory.mktemp("mixed")
     build_dataset(from_dict(DatasetSettings, MIXED), root / "a", progress=False)
@@ -203,8 +212,8 @@ def test_mixed_sizes_and_fields_of_view(mixed):
 
 
 def test_mixed_dataset_same_hash_twice_and_after_resume(mixed, tmp_path):
-    from pipeline.datasets.dataset import DatasetSettings, build_dataset
-    from pipeline.foundation.settings import from_dict
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset
+    from neuralao.runtime.foundation.settings import from_dict
 
     reference = json.loads((mixed / "a" / "manifest.json").read_text())
     settings = from_dict(DatasetSettings, MIXED)
@@ -220,7 +229,7 @@ def test_mixed_dataset_same_hash_twice_and_after_resume(mixed, tmp_path):
 
 
 def test_loader_trains_on_mixed_sizes(mixed, tmp_path):
-    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
     train_set, val_set, info = load_dataset_frames(mixed / "a")
     assert len(set(train_set.sizes)) >= 2 and isinstance(train_set.x, list)
@@ -238,10 +247,10 @@ def test_loader_trains_on_mixed_sizes(mixed, tmp_path):
 
 def test_settings_unused_leave_config_and_cameras_as_before():
     """Configs without the size / field-of-view / pool settings keep their config hash and cameras."""
-    from pipeline.datasets.dataset import DatasetSettings, _config_dict, expand_scenes, view_look
-    from pipeline.foundation.settings import load_settings
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, _config_dict, expand_scenes, view_look
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.runtime.foundation.settings import load_settings
 
     root = Path(__file__).resolve().parents[1] / "configs"
     for name in ("full.json", "demo.json"):
@@ -257,8 +266,8 @@ def test_settings_unused_leave_config_and_cameras_as_before():
 
 
 def test_bad_sizes_and_ranges_are_rejected():
-    from pipeline.datasets.dataset import DatasetSettings, _validate, expand_scenes
-    from pipeline.foundation.settings import from_dict
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, _validate, expand_scenes
+    from neuralao.runtime.foundation.settings import from_dict
 
     def check(config):
         settings = from_dict(DatasetSettings, config)
@@ -283,9 +292,9 @@ def test_bad_sizes_and_ranges_are_rejected():
 def test_corpus_config_isolates_every_mesh_and_splits_by_mesh():
     """configs/corpus.json: every object mesh alone on an orbit (no floor) in its own split, interiors
     and composed rooms as configs/full.json, several sizes and fields of view; the split check holds."""
-    from pipeline.datasets.dataset import DatasetSettings, _validate, expand_scenes
-    from pipeline.foundation.settings import from_dict, load_settings
-    from pipeline.geometry.splits import INTERIORS, OBJECTS, object_meshes
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, _validate, expand_scenes
+    from neuralao.pipeline.geometry.splits import INTERIORS, OBJECTS, object_meshes
+    from neuralao.runtime.foundation.settings import from_dict, load_settings
 
     root = Path(__file__).resolve().parents[1] / "configs"
     settings = load_settings(DatasetSettings, root / "corpus.json")

@@ -13,12 +13,12 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.cli.main import main
-from pipeline.datasets.dataset import open_dataset
-from pipeline.evaluation.categories import EvalSettings, check_settings, score_frame
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import from_dict
-from runtime.shipped import default_export
+from neuralao.pipeline.cli.main import main
+from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.pipeline.evaluation.categories import EvalSettings, check_settings, score_frame
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import from_dict
+from neuralao.runtime.shipped import default_export
 
 CONFIG = {
     "name": "tiny",
@@ -88,7 +88,7 @@ def test_labels_scored_against_themselves_are_perfect(evaluated):
 
 
 def test_manifest_gets_the_table_and_the_report_shows_it(evaluated):
-    from pipeline.evaluation.plots import shipped_markdown
+    from neuralao.pipeline.evaluation.plots import shipped_markdown
 
     _, model, result = evaluated
     manifest = json.loads((model / "manifest.json").read_text())

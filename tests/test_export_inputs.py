@@ -17,13 +17,13 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute
-from export.onnx_glsl import parity
-from export.onnx_io import run_onnxruntime
-from pipeline import cli
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_vector_fragment
+from neuralao.export.glsl import generate_compute
+from neuralao.export.onnx_glsl import parity
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.pipeline import cli
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_vector_fragment
 
 OPSET = 17
 HOSTILE = "; void main() { gl_FragColor = vec4(0.0); } //"
@@ -214,7 +214,7 @@ def test_glsl_out_that_is_a_file(tmp_path, capsys):
 def test_large_folded_constant_names_the_conv_that_uses_it(tmp_path, capsys):
     """Weights computed in the graph (as onnx's light models make them) are welcome up to what weights.bin
     holds; past that the one-line error names the constant and the node that uses it."""
-    from export.glsl.image import MAX_FOLDED_ELEMENTS
+    from neuralao.export.glsl.image import MAX_FOLDED_ELEMENTS
 
     def conv_model(shape):
         return _model(

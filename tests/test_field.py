@@ -13,13 +13,12 @@ import pytest
 import torch
 from helpers import box, floor_quad, merge, onnx_vs_torch_tol
 
-from export.field import export_checkpoint, parity, random_inputs
-from export.onnx_io import load_onnx, run_onnxruntime
-from pipeline import cli
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.scene import load_scene
-from pipeline.models.field import (
+from neuralao.export.field import export_checkpoint, parity, random_inputs
+from neuralao.export.onnx_io import load_onnx, run_onnxruntime
+from neuralao.pipeline import cli
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.models.field import (
     FieldNet,
     FieldSettings,
     bounding_box,
@@ -34,7 +33,8 @@ from pipeline.models.field import (
     train,
     train_model,
 )
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.tolerances import TOL
 
 FAST = FieldSettings(
     hidden=[16, 8],
@@ -78,8 +78,8 @@ def test_bounding_box_maps_to_unit_cube_and_survives_flat_axes():
 def test_smooth_normals_match_the_gbuffer():
     """The training inputs use the normals the G-buffer shows: at a pixel's exact surface point the
     interpolated normal of :func:`smooth_normals_at` equals the rendered normal_obj."""
-    from pipeline.geometry.camera import orbit
-    from pipeline.tracing.labeller import Labeller
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.tracing.labeller import Labeller
 
     scene = load_scene("spot")
     cam = orbit(scene, 1, 64, 64, seed=3)[0]
@@ -199,7 +199,7 @@ def test_single_sided_plane_with_a_box_on_one_side():
     top, bottom = predict(model, p, up), predict(model, p, -up)
     assert np.mean(bottom) > 0.95 and np.mean(top) < np.mean(bottom) - 0.15, (np.mean(top), np.mean(bottom))
     # the field agrees with the labeller on both sides
-    from pipeline.tracing.labeller import Labeller
+    from neuralao.pipeline.tracing.labeller import Labeller
 
     ref_top, _ = Labeller(scene, LabelSettings(rays=256)).ao_at_points(
         p.astype(np.float64), up.astype(np.float64)
@@ -256,10 +256,10 @@ def test_infer_frame_matches_torch_and_cli(spot_run, tmp_path):
     """`neuralao infer` on a field ONNX: onnxruntime on a rendered G-buffer equals the torch network."""
     from PIL import Image
 
-    from export.field import infer_frame
-    from pipeline.foundation.io import write_npz
-    from pipeline.geometry.camera import orbit
-    from pipeline.models.field import predict_frame
+    from neuralao.export.field import infer_frame
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.models.field import predict_frame
+    from neuralao.runtime.foundation.io import write_npz
 
     root, _ = spot_run
     scene = load_scene("spot")

@@ -1,4 +1,5 @@
-"""pipeline.foundation.metrics.masked_flip against the flip-evaluator package (NVIDIA FLIP, LDR) it wraps.
+"""neuralao.runtime.foundation.metrics.masked_flip against the flip-evaluator package (NVIDIA FLIP, LDR) it
+wraps.
 
 The wrapper's job: grey AO to RGB, background set to 1 in both images, the error map averaged over
 the mask. Checked against direct flip_evaluator calls on hand-built RGB images, and for the
@@ -13,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.metrics import masked_flip
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metrics import masked_flip
 
 
 def _ao(h, w, seed):

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline import cli
+from neuralao.pipeline import cli
 
 H, W = 40, 48
 

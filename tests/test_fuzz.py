@@ -29,11 +29,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute, generate_mlp_fragment
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute_all, run_mlp_fragment
+from neuralao.export.glsl import generate_compute, generate_mlp_fragment
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute_all, run_mlp_fragment
 
 OPSET = 19
 U = 2.0**-24  # unit roundoff of float32
@@ -710,10 +710,10 @@ MESH_RAYS = 64
 
 @pytest.mark.parametrize("seed", MESH_SEEDS)
 def test_random_mesh_labels_and_gbuffer_finite_and_scale_invariant(seed):
-    from pipeline.gbuffers.rasterizer import GBufferRenderer
-    from pipeline.geometry.camera import Camera, orbit
-    from pipeline.geometry.scene import scene_from_arrays
-    from pipeline.tracing.labeller import Labeller, LabelSettings
+    from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+    from neuralao.pipeline.geometry.camera import Camera, orbit
+    from neuralao.pipeline.geometry.scene import scene_from_arrays
+    from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 
     rng = np.random.default_rng(2000 + seed)
     verts, faces, kind = _random_mesh(seed)

@@ -16,11 +16,11 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import GBufferRenderer, render_gbuffer
-from pipeline.geometry.camera import Camera, interior, look_at, orbit
-from pipeline.geometry.scene import Scene, load_scene, scene_from_arrays
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer, render_gbuffer
+from neuralao.pipeline.geometry.camera import Camera, interior, look_at, orbit
+from neuralao.pipeline.geometry.scene import Scene, load_scene, scene_from_arrays
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 W, H = 96, 64
 FRAME_KEYS = ("depth", "normal_cam", "normal_obj", "position", "mask", "tri_id")
@@ -303,10 +303,10 @@ def test_bad_cameras_and_options_raise(scenes):
 _SUBPROCESS_RENDER = """
 import json, sys
 import numpy as np
-from pipeline.geometry.camera import orbit
-from pipeline.gbuffers.rasterizer import render_gbuffer
-from pipeline.geometry.scene import load_scene
-from runtime.gl import context
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.runtime.gl import context
 scene = load_scene("spot")
 frame = render_gbuffer(scene, orbit(scene, 2, {w}, {h}, seed=4)[1])
 np.savez(sys.argv[1], **{{k: v for k, v in frame.items() if k in {keys!r}}})
@@ -316,7 +316,7 @@ print(json.dumps({{"platform": context().platform}}))
 
 def test_egl_and_osmesa_render_the_same_frame(tmp_path, scenes):
     # PYOPENGL_PLATFORM is read when PyOpenGL is imported, so the other platform runs in a subprocess.
-    from runtime.gl import context
+    from neuralao.runtime.gl import context
 
     here = context().platform
     other = "egl" if here == "osmesa" else "osmesa"

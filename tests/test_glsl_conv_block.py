@@ -12,12 +12,12 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute
-from export.glsl.image import CONV_BLOCK, MAX_BLOCK_ACCUMULATORS
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute
+from neuralao.export.glsl import generate_compute
+from neuralao.export.glsl.image import CONV_BLOCK, MAX_BLOCK_ACCUMULATORS
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute
 
 H, W = 29, 37  # odd: partial blocks on both edges for every block size below
 BLOCKS = [(1, 1, 1), CONV_BLOCK, (3, 2, 1), (2, 3, 4)]
@@ -110,7 +110,7 @@ def test_blocks_match_onnxruntime(graph):
 
 
 def test_block_layers_divide_the_output():
-    from export.glsl.image import _conv_block
+    from neuralao.export.glsl.image import _conv_block
 
     assert _conv_block((8, 4, 2), 3) == (8, 4, 1)
     assert _conv_block((2, 2, 4), 6) == (2, 2, 3)

@@ -34,11 +34,11 @@ from onnx import helper as oh
 from onnx import numpy_helper as nh
 from torch import nn
 
-from export.glsl import ImageOps, VectorOps
-from export.onnx_io import run_onnxruntime, weighted_layers
-from pipeline import cli
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute_all
+from neuralao.export.glsl import ImageOps, VectorOps
+from neuralao.export.onnx_io import run_onnxruntime, weighted_layers
+from neuralao.pipeline import cli
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute_all
 
 OPSET = 17
 

@@ -17,11 +17,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute_all
+from neuralao.export.glsl import generate_compute
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute_all
 
 C, H, W = 6, 5, 7
 

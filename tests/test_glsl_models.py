@@ -17,7 +17,7 @@ from onnx import helper as oh
 from onnx import numpy_helper as nh
 from torch import nn
 
-from export.glsl import (
+from neuralao.export.glsl import (
     MAX_UNIFORM_BLOCK_BYTES,
     generate_compute,
     generate_mlp_fragment,
@@ -25,9 +25,9 @@ from export.glsl import (
     write_compute_export,
     write_mlp_export,
 )
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute, run_mlp_fragment
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute, run_mlp_fragment
 
 # ----------------------------------------------------------------------------- baked MLP
 

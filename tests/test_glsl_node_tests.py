@@ -4,7 +4,7 @@ bench/bench_conformance.py's (docs/shader-conformance.md)."""
 
 from __future__ import annotations
 
-from export.node_tests import counts_by_op, run_node_tests
+from neuralao.export.node_tests import counts_by_op, run_node_tests
 
 OPS = (
     "DepthToSpace",

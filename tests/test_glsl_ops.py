@@ -14,11 +14,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute, generate_mlp_fragment, validate_glsl
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute, run_mlp_fragment
+from neuralao.export.glsl import generate_compute, generate_mlp_fragment, validate_glsl
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute, run_mlp_fragment
 
 OPSET = 19
 H, W, C = 7, 9, 5  # odd sizes: floors in pooling and resizing are exercised

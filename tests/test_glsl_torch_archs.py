@@ -29,10 +29,10 @@ import torch
 from helpers import onnx_vs_torch_tol
 from torch import nn
 
-from export.glsl import generate_compute
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute_all
+from neuralao.export.glsl import generate_compute
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute_all
 
 
 class ESPCN(nn.Module):

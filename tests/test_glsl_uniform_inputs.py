@@ -16,14 +16,14 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute, validate_glsl, write_compute_export
-from export.onnx_glsl import parity
-from export.onnx_io import run_onnxruntime
-from pipeline import cli
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_npz
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute, run_compute_all, scalar_inputs, time_compute
+from neuralao.export.glsl import generate_compute, validate_glsl, write_compute_export
+from neuralao.export.onnx_glsl import parity
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.pipeline import cli
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_npz
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute, run_compute_all, scalar_inputs, time_compute
 
 OPSET = 17  # the U-Net exporter's opset
 H, W = 8, 12  # multiples of the pad multiple of the half-resolution graphs: no padding enters the result

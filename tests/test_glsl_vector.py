@@ -12,11 +12,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import InputBinding, generate_vector_fragment, validate_glsl
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_vector_fragment
+from neuralao.export.glsl import InputBinding, generate_vector_fragment, validate_glsl
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_vector_fragment
 
 OPSET = 19
 H, W = 6, 7
@@ -197,8 +197,8 @@ def test_activation_not_fused_into_a_value_already_read():
 def test_image_target_does_not_fuse_into_a_value_already_read():
     """The same rule in the compute target: AveragePool reads the Conv output first, then Relu (its
     last reader) must get a pass of its own instead of fusing into the Conv."""
-    from export.glsl import generate_compute
-    from runtime.glsl_runner import run_compute
+    from neuralao.export.glsl import generate_compute
+    from neuralao.runtime.glsl_runner import run_compute
 
     rng = np.random.default_rng(6)
     nodes = [
@@ -225,7 +225,7 @@ def test_image_target_does_not_fuse_into_a_value_already_read():
 @pytest.mark.parametrize("weights", ["uniform", "constant"])
 def test_weights_as_uniform_blocks_or_constants_run_from_disk(weights, tmp_path):
     """Both weight placements match onnxruntime, from the files on disk; constants need no blocks."""
-    from export.glsl import write_mlp_export
+    from neuralao.export.glsl import write_mlp_export
 
     rng = np.random.default_rng(7)
     nodes = [

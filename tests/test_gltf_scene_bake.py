@@ -7,8 +7,8 @@ binary AO is P(cos(theta) <= h / R) = (h / R)^2 wherever the disk of radius sqrt
 point lies inside the other plane. Each plane alone is open (AO 1): a bake that traced the nodes
 one by one, or ignored a node's transform, is off by O(1).
 
-The scenes are written here as glTF (pipeline.geometry.level_files.GltfWriter), nothing is copied from
-shared/.
+The scenes are written here as glTF (neuralao.pipeline.geometry.level_files.GltfWriter), nothing is copied
+from shared/.
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ import trimesh
 from helpers import mc_bound, needs_chromium
 from PIL import Image
 
-from pipeline import cli
-from pipeline.bakes.gltf_scene import read_gltf_scene
-from pipeline.geometry.level_files import GltfWriter, read_gltf_json
-from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.gltf_scene import read_gltf_scene
+from neuralao.pipeline.geometry.level_files import GltfWriter, read_gltf_json
+from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 
 ARRAY, ELEMENTS = 34962, 34963
 R, H = 2.0, 1.0  # max distance and world gap between the planes: binary AO (H / R)^2 = 0.25
@@ -187,7 +187,7 @@ def test_vertex_bake_matches_the_parallel_planes_closed_form(tmp_path, ceiling):
 def texel_points(get, prim: dict, texcoord: int, n: int) -> np.ndarray:
     """(n, n, 3) object-space points of the texel centres of an n x n map on UV set ``texcoord`` of a
     baked primitive (NaN where no UV triangle holds the centre), read back from the file."""
-    from pipeline.bakes.texture import rasterise
+    from neuralao.pipeline.bakes.texture import rasterise
 
     st = get(prim["attributes"][f"TEXCOORD_{texcoord}"])
     faces = get(prim["indices"]).astype(np.int64).reshape(-1, 3)
@@ -463,7 +463,7 @@ def test_a_shared_mesh_gets_its_own_ao_per_instance(tmp_path):
 
 def test_scene_bake_reads_the_same_world_as_the_flattened_loader(tmp_path):
     """The world scene built from the document matches trimesh's own flattening (transforms, hierarchy)."""
-    from pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.geometry.scene import load_scene
 
     src = room_gltf(tmp_path / "room.glb")
     world = read_gltf_scene(src).world

@@ -1,5 +1,5 @@
 """The standalone C host (runtime/host/neuralao_host.c, `make host`) on a real rendered frame against the
-Python runner (export.unet's run_padded + glsl_runner path) and onnxruntime.
+Python runner (neuralao.export.unet's run_padded + glsl_runner path) and onnxruntime.
 
 The host reads the shipped default export and a raw float32 G-buffer (H x W x (depth, nx, ny, nz,
 mask), row 0 on top), does the engine's steps (mean depth, input texture, radius uniform, passes,
@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from export.onnx_io import run_onnxruntime
-from export.unet import composite, glsl_runner, radius_array, render_parity_frames, run_padded
-from pipeline.foundation.tolerances import TOL
-from pipeline.models.unet import pad_to_multiple, preprocess, radius_param
-from runtime.shipped import pure_unet_export
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.export.unet import composite, glsl_runner, radius_array, render_parity_frames, run_padded
+from neuralao.pipeline.models.unet import pad_to_multiple, preprocess, radius_param
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.shipped import pure_unet_export
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -110,16 +110,16 @@ def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Pa
 
 def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(tmp_path):
     """GTAO pass, point sampling, the network at the internal size, upsampling of its correction and
-    clamp(GTAO + correction): the C host from the export's files alone against runtime.predict's
+    clamp(GTAO + correction): the C host from the export's files alone against neuralao.runtime.predict's
     reference (onnxruntime network, float64 numpy upsampler). The two differ by the generated GLSL vs
     onnxruntime (TOL.parity_unet_fp32; the correction passes through the upsampler's convex weights, so
     it does not grow) plus the GLSL vs numpy upsampler (TOL.upsample_glsl_vs_numpy); GTAO is the same
     shader on the same driver."""
     from test_hybrid import _hybrid, write_internal_export
 
-    from runtime.baselines import run_gtao
-    from runtime.internal_resolution import downsample_frame, upsample_ao
-    from runtime.predict import unet_predictor
+    from neuralao.runtime.baselines import run_gtao
+    from neuralao.runtime.internal_resolution import downsample_frame, upsample_ao
+    from neuralao.runtime.predict import unet_predictor
 
     host = _build_host()
     frame = render_parity_frames((96, 64))[0]

@@ -1,6 +1,6 @@
 """The hybrid U-Net: GTAO's AO as a fifth input channel, a learned correction as the output.
 
-GTAO stays a GL pass (runtime.baselines); the ONNX model takes its output as an input, so parity is
+GTAO stays a GL pass (neuralao.runtime.baselines); the ONNX model takes its output as an input, so parity is
 checked on a real GTAO image: torch against onnxruntime, and the generated GLSL against onnxruntime
 on the same five-channel input. With the correction zeroed the model is GTAO exactly (closed form),
 at the frame's resolution and at an internal resolution (where the correction, not the AO, is
@@ -15,12 +15,10 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import render_gbuffer
-from pipeline.geometry.camera import orbit
-from pipeline.geometry.scene import load_scene
-from pipeline.models.unet import (
+from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.models.unet import (
     HYBRID_CHANNELS,
     UNet,
     UNetArgs,
@@ -28,7 +26,9 @@ from pipeline.models.unet import (
     predict,
     preprocess_frame,
 )
-from runtime.baselines import run_gtao
+from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 WIDTHS = [4, 8, 16]
 
@@ -52,7 +52,7 @@ def frame():
 
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
-    from export.unet import export_onnx, write_glsl
+    from neuralao.export.unet import export_onnx, write_glsl
 
     out = tmp_path_factory.mktemp("hybrid")
     model = _hybrid()
@@ -69,8 +69,8 @@ def test_hybrid_needs_five_channels_at_scale_one():
 
 
 def test_metadata_names_the_gtao_channel(exported):
-    from export.onnx_io import get_metadata, load_onnx
-    from export.unet import is_hybrid
+    from neuralao.export.onnx_io import get_metadata, load_onnx
+    from neuralao.export.unet import is_hybrid
 
     meta = get_metadata(load_onnx(exported[1] / "model.onnx"))
     assert meta["input_channels"] == ",".join(HYBRID_CHANNELS) and is_hybrid(meta)
@@ -88,7 +88,7 @@ def test_zero_correction_is_gtao_exactly(frame):
 
 
 def test_onnxruntime_matches_torch_on_real_gtao(exported, frame):
-    from export.unet import ort_runner, run_padded
+    from neuralao.export.unet import ort_runner, run_padded
 
     model, out = exported
     f, radius = frame
@@ -102,7 +102,7 @@ def test_onnxruntime_matches_torch_on_real_gtao(exported, frame):
 
 def test_glsl_matches_onnxruntime_on_real_gtao(exported, frame):
     """Parity of the generated compute passes on the same five-channel input (a real GTAO image)."""
-    from export.unet import glsl_runner, ort_runner, run_padded
+    from neuralao.export.unet import glsl_runner, ort_runner, run_padded
 
     model, out = exported
     f, radius = frame
@@ -118,7 +118,7 @@ def test_glsl_matches_onnxruntime_on_real_gtao(exported, frame):
 def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp_path, frame, internal):
     """A zero-correction hybrid through the whole inference path returns the full-resolution GTAO,
     also at an internal resolution (the correction is upsampled, not the AO)."""
-    from export.unet import export_onnx, frame_predictor
+    from neuralao.export.unet import export_onnx, frame_predictor
 
     model = _hybrid()
     with torch.no_grad():
@@ -138,8 +138,8 @@ def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp
 
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("hybrid-ds")
     settings = DatasetSettings(
@@ -158,9 +158,9 @@ def tiny_dataset(tmp_path_factory):
 
 
 def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset):
-    from pipeline.datasets.dataset import open_dataset
-    from pipeline.models.unet_train import frames_to_set, network_input
-    from runtime.internal_resolution import downsample_frame
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_train import frames_to_set, network_input
+    from neuralao.runtime.internal_resolution import downsample_frame
 
     frames = list(open_dataset(tiny_dataset).frames(split="train"))
     data = frames_to_set(frames, internal_height=24, gtao=True)
@@ -184,9 +184,9 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
 
 
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
-    from export.onnx_io import get_metadata, load_onnx
-    from export.unet import export_checkpoint, is_hybrid
-    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.export.onnx_io import get_metadata, load_onnx
+    from neuralao.export.unet import export_checkpoint, is_hybrid
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 
     ts = UNetTrainSettings(
         epochs=2,
@@ -211,9 +211,9 @@ def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
 def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     """An export trained at an internal height ships the two fragment passes an engine runs around the
     network, and they compile on Mesa."""
-    from export.unet import export_checkpoint
-    from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
-    from runtime import gl
+    from neuralao.export.unet import export_checkpoint
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.runtime import gl
 
     ts = UNetTrainSettings(
         epochs=1,
@@ -241,9 +241,10 @@ def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
 
 def write_internal_export(model: UNet, out, internal_height: int) -> dict:
     """model.onnx + glsl/ + glsl/internal/ + manifest.json of ``model`` at ``internal_height``, as
-    :func:`export.unet.export_checkpoint` writes them (without a checkpoint). Returns the manifest."""
-    from export.unet import export_onnx, onnx_metadata, write_glsl, write_internal_passes
-    from pipeline.foundation.io import write_json
+    :func:`neuralao.export.unet.export_checkpoint` writes them (without a checkpoint). Returns the
+    manifest."""
+    from neuralao.export.unet import export_onnx, onnx_metadata, write_glsl, write_internal_passes
+    from neuralao.runtime.foundation.io import write_json
 
     meta = onnx_metadata(model) | {"internal_height": str(internal_height)}
     proto = export_onnx(model, out / "model.onnx", meta)
@@ -257,9 +258,9 @@ def write_internal_export(model: UNet, out, internal_height: int) -> dict:
 def run_export_gtao(export_dir, frame: dict, radius: float) -> np.ndarray:
     """The GTAO pass of a hybrid export, run from its files and manifest entry alone (as an engine
     would) on the headless GL context: (H, W) float32, 1 on background."""
-    from runtime import gl
-    from runtime.baselines import gbuffer_textures, projection_scale
-    from runtime.gl import GL
+    from neuralao.runtime import gl
+    from neuralao.runtime.baselines import gbuffer_textures, projection_scale
+    from neuralao.runtime.gl import GL
 
     entry = json.loads((export_dir / "manifest.json").read_text())["internal_resolution"]
     folder, g = export_dir / "glsl" / entry["folder"], entry["gtao"]
@@ -302,7 +303,7 @@ def run_export_gtao(export_dir, frame: dict, radius: float) -> np.ndarray:
 
 def test_hybrid_export_carries_the_gtao_pass_it_refines(tmp_path, frame):
     """gtao.frag + gtao_blur.frag and the manifest's uniforms and noise tile, run from the export alone,
-    reproduce runtime.baselines' GTAO bit for bit; a pure export carries no GTAO pass."""
+    reproduce neuralao.runtime.baselines' GTAO bit for bit; a pure export carries no GTAO pass."""
     f, radius = frame
     manifest = write_internal_export(_hybrid(), tmp_path / "hybrid", 32)
     entry = manifest["internal_resolution"]

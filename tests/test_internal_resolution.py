@@ -1,4 +1,4 @@
-"""Screen-space AO at an internal resolution (runtime.internal_resolution): the GL passes against the
+"""Screen-space AO at an internal resolution (neuralao.runtime.internal_resolution): the GL passes against the
 numpy reference, the upsampling against closed forms, and the shipped U-Net's resolution independence.
 
 Resolution independence is the property a user needs: the same view rendered at 256 and at 1024
@@ -14,12 +14,12 @@ import numpy as np
 import onnx
 import pytest
 
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import render_gbuffer
-from pipeline.geometry.camera import interior, orbit
-from pipeline.geometry.scene import load_scene
-from runtime.baselines import gbuffer_textures
-from runtime.internal_resolution import (
+from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+from neuralao.pipeline.geometry.camera import interior, orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.runtime.baselines import gbuffer_textures
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.internal_resolution import (
     ScalingPasses,
     at_internal_resolution,
     downsample_frame,
@@ -28,7 +28,7 @@ from runtime.internal_resolution import (
     sample_index,
     upsample_ao,
 )
-from runtime.shipped import default_model, pure_unet_export
+from neuralao.runtime.shipped import default_model, pure_unet_export
 
 CASES = [
     ("spot", orbit, (200, 150), 64),
@@ -132,7 +132,7 @@ def _block_mean(a: np.ndarray, mask: np.ndarray, k: int) -> tuple[np.ndarray, np
 def default_unet(request):
     """The shipped default U-Net (a hybrid: its predictor runs GTAO itself) and the shipped pure one, each
     at the frame's own size."""
-    from pipeline.evaluation.test_split import unet_predictor
+    from neuralao.pipeline.evaluation.test_split import unet_predictor
 
     onnx = default_model("unet") if request.param == "default" else pure_unet_export() / "model.onnx"
     return unet_predictor(onnx)
@@ -140,7 +140,7 @@ def default_unet(request):
 
 @pytest.fixture(scope="module")
 def pure_unet():
-    from pipeline.evaluation.test_split import unet_predictor
+    from neuralao.pipeline.evaluation.test_split import unet_predictor
 
     return unet_predictor(pure_unet_export() / "model.onnx")
 
@@ -177,7 +177,7 @@ def test_infer_frame_follows_the_declared_internal_height(pure_unet, tmp_path):
     """`infer` runs a U-Net at the height its export declares (manifest ``internal_height``)."""
     import json
 
-    from export.unet import declared_internal_height, infer_frame
+    from neuralao.export.unet import declared_internal_height, infer_frame
 
     src = pure_unet_export() / "model.onnx"
     model = onnx.load(src)  # the export's own declaration (ONNX metadata, then manifest) says 64 rows

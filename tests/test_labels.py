@@ -25,12 +25,18 @@ from helpers import (
 )
 from scipy.integrate import quad as integrate
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import load_settings
-from pipeline.foundation.tolerances import TOL
-from pipeline.geometry.camera import orbit
-from pipeline.geometry.scene import Scene, load_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings, normalize_normals, onb, pixel_directions
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.geometry.scene import Scene, load_scene
+from neuralao.pipeline.tracing.labeller import (
+    Labeller,
+    LabelSettings,
+    normalize_normals,
+    onb,
+    pixel_directions,
+)
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import load_settings
+from neuralao.runtime.foundation.tolerances import TOL
 
 RAYS = 256
 N_POINTS = 200
@@ -238,7 +244,7 @@ def test_points_scale_and_offset_invariant(spot, spot_samples, kernel, scale, of
 
 
 def _spot_frame(spot: Scene, size: int = 64) -> dict:
-    from pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
 
     return render_gbuffer(spot, orbit(spot, 3, size, size, seed=1)[0])
 
@@ -286,8 +292,8 @@ def test_label_frame_closed_form_between_planes(view):
     # visible point has the closed form (h/R)^2 (the ceiling by symmetry). Seen from below the
     # floor, the camera sees the floor's back face: its normal must be flipped to face the camera
     # (-z), where nothing occludes, so ao = 1 exactly.
-    from pipeline.gbuffers.rasterizer import render_gbuffer
-    from pipeline.geometry.camera import Camera, look_at
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.geometry.camera import Camera, look_at
 
     h, R = 1.0, 2.0
     scene = merge(floor_quad(50.0), floor_quad(50.0, z=h, up=False))

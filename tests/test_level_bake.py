@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline import cli
-from pipeline.bakes.level import bake_level
-from pipeline.bakes.level_settings import load_level_settings
-from pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
-from pipeline.geometry.level_gen import settings_for, write_level
-from pipeline.geometry.surface import interpolate, vertex_colours
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.level import bake_level
+from neuralao.pipeline.bakes.level_settings import load_level_settings
+from neuralao.pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
+from neuralao.pipeline.geometry.level_gen import settings_for, write_level
+from neuralao.pipeline.geometry.surface import interpolate, vertex_colours
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_outputs_hold_every_signal(baked):
         verts += len(ao)
     assert verts == info["counts"]["receiver_vertices"]
     # Per sample, 2 m obscurance is never darker than 300 m (rho_short(d) >= rho_long(d) for every ray).
-    from pipeline.foundation.io import read_npz
+    from neuralao.runtime.foundation.io import read_npz
 
     blocks = sorted((root / "out" / "stages" / "trace").glob("*.npz"))
     traced = np.concatenate([read_npz(f)["ao"] for f in blocks])
@@ -134,7 +134,7 @@ def test_grass_matches_the_terrain_under_it(baked):
 def test_decorator_shader_on_mesa_matches_the_model(baked):
     """The generated vertex shader, run by transform feedback, against numpy evaluating the glTF's own
     attributes: local AO x (y0 + y . (p_world - t)), with p_world from an independent quaternion."""
-    from runtime.decorator_runner import run_decorator_vertex_shader
+    from neuralao.runtime.decorator_runner import run_decorator_vertex_shader
 
     root, *_ = baked
     doc, get = _glb(root)
@@ -250,8 +250,8 @@ def test_cli_level_bake_matches_the_library(baked, tmp_path):
 def test_lod_least_squares_interpolates_the_fit(baked):
     """The LOD's stored values reproduce what least squares fitted (sanity of the stage's arrays)."""
     root, *_ = baked
-    from pipeline.foundation.io import read_npz
-    from pipeline.geometry.scene import scene_from_arrays
+    from neuralao.pipeline.geometry.scene import scene_from_arrays
+    from neuralao.runtime.foundation.io import read_npz
 
     lod = read_npz(root / "out" / "stages" / "lod" / "p00000.npz")
     scene = scene_from_arrays(lod["vertices"], lod["faces"], "lod", drop_degenerate=False)
@@ -265,8 +265,8 @@ def test_lod_least_squares_interpolates_the_fit(baked):
 def test_world10x_preset_is_ten_times_table1():
     """The 10x world keeps table1's mix (terrain, houses, buildings, trees, shrubs, grass) at ten times the
     counts and area, ~18M faces, without generating it: faces from the settings and the shared meshes."""
-    from pipeline.geometry.level_gen import BAKE_CONFIGS
-    from pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.geometry.level_gen import BAKE_CONFIGS
+    from neuralao.pipeline.geometry.scene import load_scene
 
     def faces(s):
         buildings = sum(len(load_scene(b.mesh).faces) * b.count for b in s.buildings)
@@ -285,8 +285,8 @@ def test_world10x_preset_is_ten_times_table1():
 
 
 def load_level_settings_dict(data):
-    from pipeline.bakes.level_settings import LevelBakeSettings, check_settings
-    from pipeline.foundation.settings import from_dict
+    from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, check_settings
+    from neuralao.runtime.foundation.settings import from_dict
 
     s = from_dict(LevelBakeSettings, data)
     check_settings(s)

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.level_files import GltfWriter, decompose, read_level, trs_matrices
-from pipeline.geometry.level_gen import settings_for, write_level
+from neuralao.pipeline.geometry.level_files import GltfWriter, decompose, read_level, trs_matrices
+from neuralao.pipeline.geometry.level_gen import settings_for, write_level
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 @pytest.fixture(scope="module")
@@ -204,7 +204,7 @@ def test_cli_bad_level_exits_2_with_one_line(tiny, tmp_path):
         [
             sys.executable,
             "-m",
-            "pipeline.cli",
+            "neuralao.pipeline.cli",
             "bake",
             str(path),
             "--config",
@@ -232,7 +232,7 @@ def test_cli_rejects_single_mesh_flags_and_bad_config_keys(tiny, tmp_path):
             [
                 sys.executable,
                 "-m",
-                "pipeline.cli",
+                "neuralao.pipeline.cli",
                 "bake",
                 str(tiny),
                 "--config",

@@ -11,18 +11,24 @@ import pytest
 from helpers import floor_quad, mc_bound, merge
 from scipy.special import expn
 
-from pipeline.bakes.level_decorators import FoliageSettings, build_foliage, fit_global, linear_basis
-from pipeline.bakes.level_pieces import index_level, piece_samples, piece_scene, sample_rule, scene_samples
-from pipeline.bakes.level_settings import TraceSettings
-from pipeline.bakes.level_stages import component_blocks, fit_level, opaque_scene
-from pipeline.geometry.least_squares import fit_least_squares
-from pipeline.geometry.level_files import flatten, read_level
-from pipeline.geometry.level_gen import settings_for, write_level
-from pipeline.geometry.scene import scene_from_arrays
-from pipeline.geometry.surface import surface_samples
-from pipeline.tracing.foliage import Foliage, overlap_reduced
-from pipeline.tracing.labeller import Labeller, LabelSettings
-from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
+from neuralao.pipeline.bakes.level_decorators import FoliageSettings, build_foliage, fit_global, linear_basis
+from neuralao.pipeline.bakes.level_pieces import (
+    index_level,
+    piece_samples,
+    piece_scene,
+    sample_rule,
+    scene_samples,
+)
+from neuralao.pipeline.bakes.level_settings import TraceSettings
+from neuralao.pipeline.bakes.level_stages import component_blocks, fit_level, opaque_scene
+from neuralao.pipeline.geometry.least_squares import fit_least_squares
+from neuralao.pipeline.geometry.level_files import flatten, read_level
+from neuralao.pipeline.geometry.level_gen import settings_for, write_level
+from neuralao.pipeline.geometry.scene import scene_from_arrays
+from neuralao.pipeline.geometry.surface import surface_samples
+from neuralao.pipeline.tracing.foliage import Foliage, overlap_reduced
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
 
 
 @pytest.fixture(scope="module")
@@ -287,7 +293,7 @@ def test_least_squares_columns_cg_and_amg_match_separate_direct_fits(tiny_geomet
 
 def test_edge_weights_match_unique_rows(tiny_geometry):
     """The 1-D keyed edge list (the fast path) is the lexicographic unique-rows one, weights bit for bit."""
-    from pipeline.geometry.surface import edge_weights, face_areas
+    from neuralao.pipeline.geometry.surface import edge_weights, face_areas
 
     sc = tiny_geometry.receivers
     e = np.concatenate([sc.faces[:, [0, 1]], sc.faces[:, [1, 2]], sc.faces[:, [2, 0]]])
@@ -306,7 +312,7 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
     multigrid CG for blocks of at least component_vertices) gives the global SuperLU solution."""
     from scipy.sparse.csgraph import connected_components
 
-    from pipeline.geometry.least_squares import normal_equations
+    from neuralao.pipeline.geometry.least_squares import normal_equations
 
     g = tiny_geometry
     samples = surface_samples(g.receivers, 4 * len(g.receivers.vertices), 8, 0)
@@ -329,7 +335,7 @@ def test_component_solve_is_the_global_solve(tiny_geometry):
 def test_fast_resampling_matches_the_geometric_reference(tiny_geometry):
     """The trace-speed weighting (Embree's barycentrics, weight r - |r - t|, row sums) against projected
     world hit points and bincount, on the tiny level with blockers (NaN values) in reach."""
-    from pipeline.tracing.level_tracer import _resample_block, _resample_block_geometric
+    from neuralao.pipeline.tracing.level_tracer import _resample_block, _resample_block_geometric
 
     g = tiny_geometry
     lab = LevelLabeller(g.opaque, LabelSettings(rays=8))

@@ -1,10 +1,11 @@
-"""pipeline.foundation.metrics against scikit-image's structural_similarity, the reference implementation.
+"""neuralao.runtime.foundation.metrics against scikit-image's structural_similarity, the reference
+implementation.
 
 Same Gaussian window (sigma 1.5, truncate 3.5 -> 11 taps), K1 = 0.01, K2 = 0.03, data range 1,
 population covariance. The two differ only in the border: scikit-image pads by reflection and drops
-the outer (11 - 1) / 2 = 5 pixels from its mean, pipeline.foundation.metrics replicates the edge and keeps
-them. So the per-pixel maps must agree to rounding in the interior, and the whole-image means by no more
-than what the border band can move.
+the outer (11 - 1) / 2 = 5 pixels from its mean, neuralao.runtime.foundation.metrics replicates the edge and
+keeps them. So the per-pixel maps must agree to rounding in the interior, and the whole-image means by no
+more than what the border band can move.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import pytest
 from scipy.ndimage import gaussian_filter
 from skimage.metrics import structural_similarity
 
-from pipeline.foundation.metrics import SSIM_SIGMA, image_ssim, masked_ssim, ssim_map
+from neuralao.runtime.foundation.metrics import SSIM_SIGMA, image_ssim, masked_ssim, ssim_map
 
 PAD = 5
 

@@ -10,10 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from pipeline.cli.main import main as cli_main
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import load_settings
-from pipeline.models.mlp import (
+from neuralao.pipeline.cli.main import main as cli_main
+from neuralao.pipeline.models.mlp import (
     INPUTS,
     BakedMLP,
     MLPSettings,
@@ -34,7 +32,9 @@ from pipeline.models.mlp import (
     train,
     train_model,
 )
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import load_settings
 
 # A tiny mesh-source problem: spot, 12 views at 96x96 (6,144 samples), 32 rays; 2 held-back views at 64x64.
 TINY = MLPSettings(
@@ -131,10 +131,10 @@ def test_radius_zero_inputs_repeat_the_normal():
 
 def test_mesh_source_labels_equal_label_frame(spot_samples):
     """Labelling only drawn pixels gives exactly what labelling the whole frame gives there."""
-    from pipeline.gbuffers.rasterizer import render_gbuffer
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
-    from pipeline.tracing.labeller import Labeller
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.tracing.labeller import Labeller
 
     scene = load_scene("spot")
     frame = render_gbuffer(scene, orbit(scene, 3, 48, 48)[1])
@@ -178,7 +178,7 @@ def test_split_is_seeded_and_validated():
 
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory):
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
 
     out = tmp_path_factory.mktemp("ds")
     settings = DatasetSettings(
@@ -192,7 +192,7 @@ def tiny_dataset(tmp_path_factory):
 
 
 def test_dataset_source_never_samples_held_back_views(tiny_dataset):
-    from pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.datasets.dataset import open_dataset
 
     settings = replace(TINY, samples_per_view=64)
     s = samples_from_dataset(tiny_dataset, "spot", settings)

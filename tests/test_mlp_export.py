@@ -13,7 +13,7 @@ import pytest
 import torch
 from helpers import onnx_vs_torch_tol
 
-from export.mlp import (
+from neuralao.export.mlp import (
     CHECK_BATCHES,
     INPUT,
     OUTPUT,
@@ -25,12 +25,9 @@ from export.mlp import (
     random_normals,
     render_parity_frames,
 )
-from export.onnx_io import get_metadata, run_onnxruntime, run_opencv
-from pipeline.cli.main import main as cli_main
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_npz
-from pipeline.foundation.tolerances import TOL
-from pipeline.models.mlp import (
+from neuralao.export.onnx_io import get_metadata, run_onnxruntime, run_opencv
+from neuralao.pipeline.cli.main import main as cli_main
+from neuralao.pipeline.models.mlp import (
     BakedMLP,
     MLPSettings,
     load_checkpoint,
@@ -39,7 +36,10 @@ from pipeline.models.mlp import (
     radius_zero_inputs,
     train,
 )
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_npz
+from neuralao.runtime.foundation.tolerances import TOL
 
 SMALL = MLPSettings(
     hidden=[16, 8],
@@ -244,7 +244,7 @@ def test_export_cli_and_wrong_checkpoint_kind(exported, tmp_path, capsys):
     torch.save({"kind": "something", "state_dict": {}}, other)
     assert cli_main(["export", str(other), "--out", str(tmp_path / "f")]) == 2
     assert "not a neuralao checkpoint" in capsys.readouterr().err
-    from export.mlp import export_checkpoint as export_mlp
+    from neuralao.export.mlp import export_checkpoint as export_mlp
 
     torch.save({"kind": "unet", "model_args": {}, "state_dict": {}, "config": {}}, other)
     with pytest.raises(NeuralaoError, match="not an MLP checkpoint"):
@@ -261,7 +261,7 @@ def test_parity_renders_frames_of_the_training_mesh_by_default(exported):
 def test_any_size_exports_and_matches(tmp_path, spot_frame):
     """A non-paper size (5x3) and a wider one (20x12: layers of 5 and 3 vec4s) through the whole chain.
     (64x32 is exported and checked by the benchmark: llvmpipe needs minutes to compile it uncached.)"""
-    from pipeline.models.mlp import make_checkpoint, save_checkpoint
+    from neuralao.pipeline.models.mlp import make_checkpoint, save_checkpoint
 
     for hidden in ([5, 3], [20, 12]):
         torch.manual_seed(1)

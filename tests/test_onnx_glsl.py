@@ -16,12 +16,12 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.onnx_glsl import parity
-from export.onnx_io import run_onnxruntime
-from pipeline import cli
-from pipeline.foundation.io import write_npz
-from pipeline.foundation.tolerances import TOL
-from runtime.glsl_runner import run_compute
+from neuralao.export.onnx_glsl import parity
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.pipeline import cli
+from neuralao.runtime.foundation.io import write_npz
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute
 
 OPSET = 19
 

@@ -27,12 +27,12 @@ import pytest
 os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
 ray = pytest.importorskip("ray")
 
-from pipeline.bakes.vertex import BakeSettings, bake, write_baked_mesh  # noqa: E402
-from pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
-from pipeline.engines import engine as engine_mod  # noqa: E402
-from pipeline.engines.engine import LocalEngine, RayEngine  # noqa: E402
-from pipeline.foundation.errors import NeuralaoError  # noqa: E402
-from pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.pipeline.bakes.vertex import BakeSettings, bake, write_baked_mesh  # noqa: E402
+from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
+from neuralao.pipeline.engines import engine as engine_mod  # noqa: E402
+from neuralao.pipeline.engines.engine import LocalEngine, RayEngine  # noqa: E402
+from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
+from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
 
 CONFIG = {
     "name": "tiny-ray",
@@ -91,7 +91,7 @@ def config_file(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def local_dataset(tmp_path_factory, config_file):
-    from pipeline.foundation.settings import load_settings
+    from neuralao.runtime.foundation.settings import load_settings
 
     out = tmp_path_factory.mktemp("local") / "ds"
     return out, build_dataset(load_settings(DatasetSettings, config_file, []), out, progress=False)
@@ -112,7 +112,7 @@ def _shard_bytes(root: Path, manifest: dict) -> list[bytes]:
 
 def _cli(*args: str, **kw) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "pipeline.cli", *args],
+        [sys.executable, "-m", "neuralao.pipeline.cli", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -121,7 +121,7 @@ def _cli(*args: str, **kw) -> subprocess.Popen:
 
 
 def test_two_node_dataset_is_byte_identical(ray_engine, local_dataset, config_file, tmp_path):
-    from pipeline.foundation.settings import load_settings
+    from neuralao.runtime.foundation.settings import load_settings
 
     nodes = {node for _, node in ray_engine.worker_info()}
     assert len(nodes) == 2, "one actor per node"
@@ -156,9 +156,9 @@ LEVEL_TASKS = ["trace.block_samples=256", "task_rays=4096", "piece_faces=100"]
 
 @pytest.fixture(scope="module")
 def local_level(tmp_path_factory):
-    from pipeline.bakes.level import bake_level
-    from pipeline.bakes.level_settings import load_level_settings
-    from pipeline.geometry.level_gen import settings_for, write_level
+    from neuralao.pipeline.bakes.level import bake_level
+    from neuralao.pipeline.bakes.level_settings import load_level_settings
+    from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 
     root = tmp_path_factory.mktemp("level")
     level, cfg = write_level(root / "in", settings_for("tiny", seed=2), "tiny")
@@ -168,7 +168,7 @@ def local_level(tmp_path_factory):
 
 def _stage_arrays(out: Path) -> dict[str, np.ndarray]:
     """Every array of every stored stage but the timings (seconds_*) and the trace's reuse count."""
-    from pipeline.foundation.io import read_npz
+    from neuralao.runtime.foundation.io import read_npz
 
     arrays = {}
     for f in sorted((out / "stages").rglob("*.npz")):
@@ -245,8 +245,8 @@ def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, t
 def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, tmp_path):
     """An actor SIGKILLed while the trees' in-place tasks run is restarted (its state rebuilt) and the
     bake's bytes do not change."""
-    from pipeline.bakes.level import bake_level
-    from pipeline.bakes.level_settings import load_level_settings
+    from neuralao.pipeline.bakes.level import bake_level
+    from neuralao.pipeline.bakes.level_settings import load_level_settings
 
     level, cfg, local, info = local_level
     out = tmp_path / "ray"
@@ -354,7 +354,7 @@ def test_bake_driver_killed_resumes_to_same_bytes(cluster, local_bake, tmp_path)
 
 def test_local_engine_never_imports_ray(tmp_path, config_file):
     code = (
-        "import sys; from pipeline.cli.main import main; "
+        "import sys; from neuralao.pipeline.cli.main import main; "
         f"assert main(['dataset', {str(config_file)!r}, '--out', {str(tmp_path / 'ds')!r}, "
         "'--no-progress']) == 0; "
         f"assert main(['bake', 'spot', '--rays', '8', '--out', {str(tmp_path / 'a.ply')!r}]) == 0; "
@@ -388,10 +388,10 @@ def test_bad_engine_flags_are_one_line_errors(flags, message, config_file, tmp_p
 def test_worker_error_is_a_neuralao_error(ray_engine):
     """A NeuralaoError raised on a worker (here: building the Embree scene of a flat point) fails the
     run with its own one-line message, as it would locally."""
-    from pipeline.engines.engine import Task
-    from pipeline.geometry.scene import Scene
-    from pipeline.tracing.engine_labeller import labeller_context, trace_chunk
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.engines.engine import Task
+    from neuralao.pipeline.geometry.scene import Scene
+    from neuralao.pipeline.tracing.engine_labeller import labeller_context, trace_chunk
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     point = Scene(np.zeros((3, 3)), np.array([[0, 1, 2]]), "point")
     args = (np.zeros((1, 3)), np.ones((1, 3)), np.zeros(1, np.int64))

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipeline.cli.main import main
-from pipeline.cli.render import view_seed
-from pipeline.foundation.io import read_npz
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import Camera
-from pipeline.geometry.scene import load_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.pipeline.cli.main import main
+from neuralao.pipeline.cli.render import view_seed
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import Camera
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.io import read_npz
 
 W, H, VIEWS, RAYS = 40, 28, 2, 16
 FRAME = {
@@ -169,7 +169,7 @@ def test_entry_point_subprocess_reports_nan_mesh(tmp_path):
     cmd = [
         sys.executable,
         "-m",
-        "pipeline.cli",
+        "neuralao.pipeline.cli",
         "render",
         str(nan_obj),
         "--size",

@@ -17,12 +17,12 @@ import pytest
 import torch
 from PIL import Image
 
-from pipeline import cli
-from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
-from pipeline.evaluation.selection import choose, select_from_results
-from pipeline.foundation.io import read_npz
-from pipeline.foundation.metrics import masked_rmse, masked_ssim
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline import cli
+from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
+from neuralao.pipeline.evaluation.selection import choose, select_from_results
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.io import read_npz
+from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 
 # (name, hidden sizes, constant output)
 MLPS = (("mlp-16x8", (16, 8), 0.9), ("mlp-32x16", (32, 16), 0.97))
@@ -46,7 +46,7 @@ FAST = [
 
 
 def constant_mlp_checkpoint(path: Path, hidden, value: float, scene: str) -> None:
-    from pipeline.models.mlp import KIND, BakedMLP, model_args_dict
+    from neuralao.pipeline.models.mlp import KIND, BakedMLP, model_args_dict
 
     model = BakedMLP(hidden=hidden)
     last = [m for m in model.modules() if isinstance(m, torch.nn.Linear)][-1]
@@ -69,8 +69,8 @@ def constant_mlp_checkpoint(path: Path, hidden, value: float, scene: str) -> Non
 
 
 def tiny_unet_checkpoint(path: Path) -> None:
-    from pipeline.models.unet import UNetArgs, build_model, model_args_dict
-    from pipeline.models.unet_train import KIND
+    from neuralao.pipeline.models.unet import UNetArgs, build_model, model_args_dict
+    from neuralao.pipeline.models.unet_train import KIND
 
     torch.manual_seed(0)
     args = UNetArgs(widths=[2, 4])
@@ -107,8 +107,8 @@ def workspace(tmp_path_factory):
     )
     build_dataset(settings, data, progress=False)
     exports = root / "export"
-    from export.mlp import export_checkpoint as export_mlp
-    from export.unet import export_checkpoint as export_unet
+    from neuralao.export.mlp import export_checkpoint as export_mlp
+    from neuralao.export.unet import export_checkpoint as export_unet
 
     for name, hidden, value in MLPS:
         ckpt = root / f"{name}.pt"
@@ -116,9 +116,9 @@ def workspace(tmp_path_factory):
         export_mlp(ckpt, exports / name)
     tiny_unet_checkpoint(root / "unet.pt")
     export_unet(root / "unet.pt", exports / "unet")
-    from export.field import export_checkpoint as export_field
-    from pipeline.models.field import FieldSettings
-    from pipeline.models.field import train as train_field
+    from neuralao.export.field import export_checkpoint as export_field
+    from neuralao.pipeline.models.field import FieldSettings
+    from neuralao.pipeline.models.field import train as train_field
 
     fs = FieldSettings(
         hidden=[8, 4],
@@ -353,9 +353,9 @@ def test_report_and_select_do_not_import_each_other():
         "select": "cli/select.py",
     }
     modules = {
-        "report": "pipeline.evaluation.report",
-        "selection": "pipeline.evaluation.selection",
-        "select": "pipeline.cli.select",
+        "report": "neuralao.pipeline.evaluation.report",
+        "selection": "neuralao.pipeline.evaluation.selection",
+        "select": "neuralao.pipeline.cli.select",
     }
     for module, other in (("report", "select"), ("selection", "report"), ("selection", "select")):
         tree = ast.parse((Path(__file__).parents[1] / "pipeline" / files[module]).read_text())

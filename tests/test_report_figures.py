@@ -1,11 +1,12 @@
-"""pipeline.evaluation.figures: crops to the object and finds the worst error window (planted cases)."""
+"""neuralao.pipeline.evaluation.figures: crops to the object and finds the worst error window (planted
+cases)."""
 
 from __future__ import annotations
 
 import numpy as np
 from PIL import Image
 
-from pipeline.evaluation.figures import CROP_MARGIN, contact_sheet, crop_box, worst_window
+from neuralao.pipeline.evaluation.figures import CROP_MARGIN, contact_sheet, crop_box, worst_window
 
 
 def test_crop_box_is_the_foreground_bounding_box_plus_the_margin():
@@ -49,7 +50,7 @@ def test_contact_sheet_has_one_column_per_method(tmp_path):
 
 
 def test_shipped_picks_default_and_fast_by_role_or_by_gl_time():
-    from pipeline.evaluation.report import contact_order, pick_shipped
+    from neuralao.pipeline.evaluation.report import contact_order, pick_shipped
 
     models = {
         n: {"kind": "unet", "gl_seconds": {"512x512": t}}

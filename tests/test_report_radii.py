@@ -19,15 +19,15 @@ import pytest
 import torch
 from PIL import Image
 
-from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
-from pipeline.foundation.metrics import masked_rmse, masked_ssim
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset, open_dataset
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 
 RADII = [0.0625, 0.25]  # the dataset's labels.radii_rel; max_distance_rel is 0.25
 
 
 def _fast_settings(**kw):
-    from pipeline.evaluation.report import ReportSettings
+    from neuralao.pipeline.evaluation.report import ReportSettings
 
     base = dict(
         gt_rays=16,
@@ -51,8 +51,8 @@ def _history(minutes: float, epochs: int, top: float) -> list[dict]:
 
 
 def _tiny_unet(path: Path, scale: int) -> None:
-    from pipeline.models.unet import UNetArgs, build_model, model_args_dict
-    from pipeline.models.unet_train import KIND
+    from neuralao.pipeline.models.unet import UNetArgs, build_model, model_args_dict
+    from neuralao.pipeline.models.unet_train import KIND
 
     torch.manual_seed(0)
     args = UNetArgs(widths=[2, 4], scale=scale)
@@ -80,7 +80,7 @@ def _install(models: Path, name: str, export: Path, provenance: dict, config: di
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
     """Dataset (spot orbit + a val interior, 32x32, two radii) and a models folder with two U-Nets."""
-    from export.unet import export_checkpoint
+    from neuralao.export.unet import export_checkpoint
 
     root = tmp_path_factory.mktemp("report-radii")
     data = root / "dataset"
@@ -139,7 +139,7 @@ def workspace(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def result(workspace):
-    from pipeline.evaluation.report import evaluate, write_report
+    from neuralao.pipeline.evaluation.report import evaluate, write_report
 
     root, data, models = workspace
     out = root / "out"
@@ -155,9 +155,9 @@ def test_ground_truth_at_several_radii_equals_separate_traces(workspace):
     the cache holds the same arrays and is keyed on the radii."""
     from dataclasses import replace
 
-    from pipeline.datasets.dataset import scene_of
-    from pipeline.evaluation.report import frame_key_seed, ground_truth, label_settings_of
-    from pipeline.tracing.labeller import Labeller
+    from neuralao.pipeline.datasets.dataset import scene_of
+    from neuralao.pipeline.evaluation.report import frame_key_seed, ground_truth, label_settings_of
+    from neuralao.pipeline.tracing.labeller import Labeller
 
     root, data, _ = workspace
     ds = open_dataset(data)
@@ -216,8 +216,8 @@ def test_ssao_gets_the_radius_it_is_scored_at(result, workspace):
     GTAO at the larger radius is darker on average, as the ground truth is. (This SSAO is not: at a
     radius of a pixel or two its fixed relative depth bias lets tilted neighbours self-occlude, so its
     mean AO rises with the radius on these 32x32 frames; the per-radius table shows that.)"""
-    from pipeline.foundation.io import read_npz
-    from runtime.baselines import run_screen_space
+    from neuralao.runtime.baselines import run_screen_space
+    from neuralao.runtime.foundation.io import read_npz
 
     out, r = result
     _, data, _ = workspace
@@ -260,7 +260,7 @@ def test_shipped_plots_are_pngs_and_listed(result):
 def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
     """Three models differing only in train_fraction -> one series of three points; learning curves from
     the index entries' own history; a model without data adds nothing."""
-    from pipeline.evaluation.plots import corpus_size_series, shipped_summary, write_shipped_plots
+    from neuralao.pipeline.evaluation.plots import corpus_size_series, shipped_summary, write_shipped_plots
 
     models = tmp_path / "models"
     index = {"models": {}, "default": {"unet": "full"}}
@@ -296,7 +296,7 @@ def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
 
 
 def test_no_shipped_model_is_one_line(tmp_path, workspace):
-    from pipeline.evaluation.report import evaluate, render_markdown
+    from neuralao.pipeline.evaluation.report import evaluate, render_markdown
 
     _, data, _ = workspace
     r = evaluate(
@@ -316,8 +316,8 @@ def test_no_shipped_model_is_one_line(tmp_path, workspace):
 
 
 def test_shipped_models_are_the_default_without_exports(tmp_path):
-    from pipeline.cli.report import add_arguments, shipped_folder
-    from runtime.shipped import MODELS_DIR
+    from neuralao.pipeline.cli.report import add_arguments, shipped_folder
+    from neuralao.runtime.shipped import MODELS_DIR
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
@@ -331,7 +331,7 @@ def test_shipped_models_are_the_default_without_exports(tmp_path):
 
 
 def test_radii_setting_is_checked(tmp_path, capsys):
-    from pipeline import cli
+    from neuralao.pipeline import cli
 
     assert (
         cli.main(["report", "--data", str(tmp_path), "--out", str(tmp_path), "--set", "radii_rel=[0.1,-1]"])

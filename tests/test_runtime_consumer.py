@@ -38,16 +38,16 @@ CONSUMER = textwrap.dedent("""
 
     import numpy as np
 
-    import runtime
+    import neuralao.runtime
 
-    names = [m.name for m in pkgutil.walk_packages(runtime.__path__, "runtime.")]
+    names = [m.name for m in pkgutil.walk_packages(neuralao.runtime.__path__, "neuralao.runtime.")]
     for name in names:
         importlib.import_module(name)
     print("imported", len(names))
 
-    from runtime.baselines import run_gtao
-    from runtime.infer import infer
-    from runtime.shipped import default_model
+    from neuralao.runtime.baselines import run_gtao
+    from neuralao.runtime.infer import infer
+    from neuralao.runtime.shipped import default_model
 
     h, w = 48, 64
     depth = np.full((h, w), 4.0, np.float32)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import load_scene, mesh_root, scene_from_arrays
+from neuralao.pipeline.geometry.scene import load_scene, mesh_root, scene_from_arrays
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def test_loads_obj_with_expected_counts():
@@ -76,7 +76,7 @@ def test_cli_bad_mesh_exits_nonzero_with_one_line(tmp_path):
         [
             sys.executable,
             "-m",
-            "pipeline.cli",
+            "neuralao.pipeline.cli",
             "bake",
             str(bad),
             "--rays",

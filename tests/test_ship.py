@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 TINY_TRAIN = {
     "widths": [2, 4],
@@ -29,8 +29,8 @@ TINY_TRAIN = {
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("ship-ds")
     settings = DatasetSettings(
@@ -50,7 +50,7 @@ def corpus(tmp_path_factory):
 
 
 def _settings(corpus: Path, tmp: Path, **kw):
-    from pipeline.release.ship import ShipSettings
+    from neuralao.pipeline.release.ship import ShipSettings
 
     base = dict(
         dataset=str(corpus),
@@ -70,7 +70,7 @@ def _settings(corpus: Path, tmp: Path, **kw):
 
 @pytest.fixture(scope="module")
 def shipped(corpus, tmp_path_factory):
-    from pipeline.release.ship import ship
+    from neuralao.pipeline.release.ship import ship
 
     tmp = tmp_path_factory.mktemp("ship")
     settings = _settings(corpus, tmp)
@@ -78,9 +78,9 @@ def shipped(corpus, tmp_path_factory):
 
 
 def test_ship_installs_self_describing_exports(shipped, corpus):
-    from export.onnx_io import get_metadata, load_onnx
-    from pipeline.datasets.dataset import open_dataset
-    from runtime.shipped import default_export, default_model, shipped_models
+    from neuralao.export.onnx_io import get_metadata, load_onnx
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.runtime.shipped import default_export, default_model, shipped_models
 
     settings, index, tmp = shipped
     models = Path(settings.out)
@@ -116,9 +116,9 @@ def test_ship_installs_self_describing_exports(shipped, corpus):
 
 def test_ship_test_figures_are_the_installed_models_own(shipped, corpus):
     """Recompute the test error of the installed ONNX file independently of the ship run."""
-    from pipeline.datasets.dataset import open_dataset
-    from pipeline.evaluation.test_split import unet_predictor
-    from pipeline.foundation.metrics import masked_ssim
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.evaluation.test_split import unet_predictor
+    from neuralao.runtime.foundation.metrics import masked_ssim
 
     settings, _, _ = shipped
     onnx = Path(settings.out) / "u-full" / "model.onnx"
@@ -133,7 +133,7 @@ def test_ship_test_figures_are_the_installed_models_own(shipped, corpus):
 
 
 def test_ship_rerun_resumes_and_writes_the_same_onnx(shipped, corpus):
-    from pipeline.release.ship import ship
+    from neuralao.pipeline.release.ship import ship
 
     settings, _, _ = shipped
     path = Path(settings.out) / "u-half" / "model.onnx"
@@ -143,7 +143,7 @@ def test_ship_rerun_resumes_and_writes_the_same_onnx(shipped, corpus):
 
 
 def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
-    from pipeline.release.ship import ship
+    from neuralao.pipeline.release.ship import ship
 
     with pytest.raises(NeuralaoError, match="is not one of"):
         ship(_settings(corpus, tmp_path, default={"unet": "nope"}))
@@ -168,16 +168,16 @@ def test_ship_refuses_bad_configs_and_oversized_exports(corpus, tmp_path):
 def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
     """The shipped default U-Net on real test-split frames: a larger radius input never brightens the
     frame on average (more geometry can occlude)."""
-    from runtime.shipped import MODELS_DIR, pure_unet_export
+    from neuralao.runtime.shipped import MODELS_DIR, pure_unet_export
 
     if not (MODELS_DIR / "index.json").is_file():
         pytest.skip("no model shipped yet (make models)")
-    from export.onnx_io import load_onnx
-    from export.unet import check_unet_onnx, ort_runner, run_padded
-    from pipeline.gbuffers.rasterizer import render_gbuffer
-    from pipeline.geometry.camera import orbit
-    from pipeline.geometry.scene import load_scene
-    from pipeline.models.unet import preprocess_frame, radius_param
+    from neuralao.export.onnx_io import load_onnx
+    from neuralao.export.unet import check_unet_onnx, ort_runner, run_padded
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.models.unet import preprocess_frame, radius_param
 
     onnx = pure_unet_export() / "model.onnx"
     proto = load_onnx(onnx)
@@ -195,11 +195,11 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
 
 
 def test_infer_uses_the_shipped_default_when_given_only_a_frame(shipped, corpus, tmp_path, monkeypatch):
-    import runtime.shipped as sh
-    from pipeline.cli.main import main
-    from pipeline.datasets.dataset import open_dataset
-    from pipeline.evaluation.test_split import unet_predictor
-    from pipeline.foundation.io import write_npz
+    import neuralao.runtime.shipped as sh
+    from neuralao.pipeline.cli.main import main
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.evaluation.test_split import unet_predictor
+    from neuralao.runtime.foundation.io import write_npz
 
     settings, _, _ = shipped
     frame = next(iter(open_dataset(corpus).frames(split="test")))
@@ -223,7 +223,7 @@ def test_ship_installs_a_hybrid_at_its_internal_height(corpus, tmp_path):
     """A GTAO-refining U-Net trained at an internal height goes through the whole release path: its
     parity runs on five-channel frames with real GTAO, its test split is scored with GTAO run first,
     and its export carries the internal-resolution passes."""
-    from pipeline.release.ship import ship
+    from neuralao.pipeline.release.ship import ship
 
     hybrid = {**TINY_TRAIN, "gtao_input": True, "internal_height": 32, "epochs": 2}
     settings = _settings(

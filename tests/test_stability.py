@@ -10,15 +10,15 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.gbuffers.rasterizer import render_gbuffer
-from pipeline.geometry.camera import orbit
-from pipeline.geometry.scene import load_scene, mesh_root
-from pipeline.tracing.labeller import Labeller, LabelSettings
-from runtime.glsl_runner import run_compute
+from neuralao.export.glsl import generate_compute
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.geometry.scene import load_scene, mesh_root
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute
 
 
 @pytest.mark.parametrize("name", ["beetle", "BrainStem", "2CylinderEngine"])

@@ -20,8 +20,8 @@ import trimesh
 from helpers import mc_bound, segment_fraction
 from PIL import Image
 
-from pipeline import cli
-from pipeline.bakes.texture import (
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.texture import (
     TextureBakeSettings,
     UVMesh,
     bake_texture,
@@ -36,8 +36,8 @@ from pipeline.bakes.texture import (
     scene_with_uvs,
     write_texture_glb,
 )
-from pipeline.bakes.vertex import BakeSettings, bake
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.pipeline.bakes.vertex import BakeSettings, bake
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 R = 1.0  # max distance
 UV_SCALE = 0.11  # UV units per scene unit (square texels on both planes)

@@ -17,11 +17,8 @@ import pytest
 import torch
 from helpers import onnx_vs_torch_tol
 
-from pipeline.foundation import metrics
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.models.checkpoint import count_parameters
-from pipeline.models.unet import (
+from neuralao.pipeline.models.checkpoint import count_parameters
+from neuralao.pipeline.models.unet import (
     PREPROCESS_VERSION,
     PaddedUNet,
     UNet,
@@ -31,7 +28,7 @@ from pipeline.models.unet import (
     predict,
     preprocess,
 )
-from pipeline.models.unet_train import (
+from neuralao.pipeline.models.unet_train import (
     KIND,
     FrameSet,
     UNetTrainSettings,
@@ -43,6 +40,9 @@ from pipeline.models.unet_train import (
     ssim_map,
     train,
 )
+from neuralao.runtime.foundation import metrics
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
 
 # Tiny but real: ~20 ms per epoch on one thread; threads=1 makes runs bitwise reproducible.
 TINY = UNetTrainSettings(
@@ -78,8 +78,8 @@ def _expected_parameters(widths, in_channels: int = 5) -> int:
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     out = tmp_path_factory.mktemp("unet-ds")
     settings = DatasetSettings(
@@ -113,7 +113,7 @@ def trained(frames, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def exported(trained, tmp_path_factory):
-    from export.unet import export_checkpoint
+    from neuralao.export.unet import export_checkpoint
 
     path, _ = trained
     out = tmp_path_factory.mktemp("unet-export") / "unet"
@@ -271,7 +271,7 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
         ckpt["dataset"]["training_scenes"] == ["spot"]
         and ckpt["dataset"]["dataset_hash"] == info["dataset_hash"]
     )
-    # The recorded validation metrics == pipeline.foundation.metrics on the composited prediction
+    # The recorded validation metrics == neuralao.runtime.foundation.metrics on the composited prediction
     # (background 1).
     model = model_from_checkpoint(load_checkpoint(path))
     ssim, rmse = [], []
@@ -383,9 +383,9 @@ def test_interrupted_training_resumes_to_the_same_weights(frames, tmp_path):
 
 
 def _mlp_checkpoint(path):
-    from pipeline.models.mlp import KIND as MLP_KIND
-    from pipeline.models.mlp import BakedMLP
-    from pipeline.models.mlp import model_args_dict as mlp_args
+    from neuralao.pipeline.models.mlp import KIND as MLP_KIND
+    from neuralao.pipeline.models.mlp import BakedMLP
+    from neuralao.pipeline.models.mlp import model_args_dict as mlp_args
 
     model = BakedMLP(hidden=[8, 4])
     torch.save(
@@ -421,7 +421,7 @@ def test_wrong_kind_corrupt_unsafe_and_mismatched_checkpoints(tmp_path, frames, 
     _mlp_checkpoint(mlp)
     with pytest.raises(NeuralaoError, match="not a U-Net checkpoint"):
         load_checkpoint(mlp)
-    from export.unet import export_checkpoint
+    from neuralao.export.unet import export_checkpoint
 
     with pytest.raises(NeuralaoError, match="not a U-Net checkpoint"):
         export_checkpoint(mlp, tmp_path / "exp")
@@ -460,7 +460,7 @@ def test_wrong_kind_corrupt_unsafe_and_mismatched_checkpoints(tmp_path, frames, 
 
 
 def test_onnx_has_dynamic_size_and_metadata(exported, trained):
-    from export.onnx_io import get_metadata, load_onnx
+    from neuralao.export.onnx_io import get_metadata, load_onnx
 
     out, manifest = exported
     _, ckpt = trained
@@ -491,8 +491,8 @@ def test_onnx_has_dynamic_size_and_metadata(exported, trained):
 
 @pytest.mark.parametrize(("w", "h"), [(40, 36), (37, 53), (16, 16), (5, 4), (101, 67)])
 def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
-    from export.onnx_io import run_onnxruntime, run_opencv
-    from export.unet import opencv_runner, ort_runner, run_padded
+    from neuralao.export.onnx_io import run_onnxruntime, run_opencv
+    from neuralao.export.unet import opencv_runner, ort_runner, run_padded
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
@@ -520,7 +520,7 @@ def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
 
 
 def test_infer_frame_composites_background(exported, trained, frames):
-    from export.unet import infer_frame
+    from neuralao.export.unet import infer_frame
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
@@ -545,7 +545,7 @@ def test_infer_frame_composites_background(exported, trained, frames):
 @pytest.fixture(scope="module")
 def glsl_parity(exported, frames):
     """The export's own GLSL-vs-onnxruntime parity on the two validation frames (40x36) and a 37x29 crop."""
-    from export.unet import parity
+    from neuralao.export.unet import parity
 
     out, _ = exported
     val = frames[1]
@@ -566,7 +566,7 @@ def test_glsl_matches_onnxruntime(glsl_parity):
 
 def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_parity):
     """Network input depth 1e6 and normals of length 0 and 100 (sizes reuse the parity shaders)."""
-    from export.unet import glsl_runner, ort_runner, run_padded
+    from neuralao.export.unet import glsl_runner, ort_runner, run_padded
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
@@ -590,7 +590,7 @@ def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_pari
 
 
 def test_cosine_schedule_closed_form():
-    from pipeline.models.unet_train import lr_at
+    from neuralao.pipeline.models.unet_train import lr_at
 
     s = replace(TINY, lr=1e-2, lr_schedule="cosine", warmup_steps=4, min_lr_ratio=0.1)
     total = 24
@@ -606,7 +606,7 @@ def test_cosine_schedule_closed_form():
 
 
 def test_budget_plan_fits_the_budget():
-    from pipeline.models.unet_train import plan_budget
+    from neuralao.pipeline.models.unet_train import plan_budget
 
     s = replace(TINY, epochs=1000, budget_minutes=2.0)
     cal = {"seconds_per_step": 0.5, "val_seconds": 3.0}  # 10 steps + validation = 8 s an epoch
@@ -618,7 +618,7 @@ def test_budget_plan_fits_the_budget():
 def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeypatch):
     """A budget run plans its epochs once (calibration), stores the plan, and an interrupted run
     resumed later follows the stored plan (no new calibration) to the weights of an uninterrupted run."""
-    import pipeline.models.unet_train as ut
+    import neuralao.pipeline.models.unet_train as ut
 
     train_set, val_set, info = frames
     settings = replace(
@@ -671,8 +671,8 @@ def test_reduced_resolution_variant_trains_and_starts_from_the_full_network(fram
 def test_corpus_fraction_cut_from_the_loaded_corpus_equals_a_fresh_load(tmp_path):
     """ship keeps one corpus in memory and cuts the corpus-size subsets from it: same frames, same order,
     same info as reading that fraction from disk."""
-    from pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
-    from pipeline.tracing.labeller import LabelSettings
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, SceneSpec, build_dataset
+    from neuralao.pipeline.tracing.labeller import LabelSettings
 
     settings = DatasetSettings(
         name="tiny-fractions",

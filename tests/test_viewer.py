@@ -5,7 +5,8 @@ method against an independent computation on the *same* G-buffer:
 
 * the generated ES 3.00 field and MLP shaders against onnxruntime on the read-back position / normal;
 * the vertex bake against the bake file's per-vertex AO interpolated at the read-back positions;
-* the texture bake against a bilinear lookup (pipeline.bakes.texture.sample_bilinear) of the .glb's map.
+* the texture bake against a bilinear lookup (neuralao.pipeline.bakes.texture.sample_bilinear) of the .glb's
+  map.
 
 WebGL here runs on SwiftShader (Chromium's CPU Vulkan / GL implementation): the bound stated and
 checked is TOL_SHADER (see the constant). Screenshots of every method go to NEURALAO_ARTIFACTS (if set)
@@ -27,8 +28,8 @@ import pytest
 import torch
 from helpers import needs_chromium
 
-from pipeline import cli
-from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
+from neuralao.pipeline import cli
+from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 
 pytestmark = needs_chromium
 SIZE = 96
@@ -46,26 +47,26 @@ TOL_SHADER = {
 # seams (spot.obj) the two sides carry different vertex AO, so there only the 99th percentile is.
 # Measured under SwiftShader: inside max 6e-7, 99th percentile 2.5e-7.
 TOL_VERTEX = 1e-5
-# Texture bake: the GPU's LINEAR lookup of the 8-bit map vs pipeline.bakes.texture.sample_bilinear. The
-# texel a pixel lands in can differ at chart seams (one pixel measured at 0.078), so the 99th
-# percentile and the mean are bounded. Measured under SwiftShader: p99 1.3e-6, mean <= 7e-5.
+# Texture bake: the GPU's LINEAR lookup of the 8-bit map vs neuralao.pipeline.bakes.texture.sample_bilinear.
+# The texel a pixel lands in can differ at chart seams (one pixel measured at 0.078), so the 99th percentile
+# and the mean are bounded. Measured under SwiftShader: p99 1.3e-6, mean <= 7e-5.
 TOL_TEXTURE_P99, TOL_TEXTURE_MEAN = 1e-4, 1e-3
 
 
 def _random_checkpoints(root: Path) -> tuple[Path, Path]:
     """A seeded, untrained field (16x8) and MLP (16x8) of spot: non-trivial functions, no training time."""
-    from pipeline.geometry.scene import load_scene
-    from pipeline.models.checkpoint import per_mesh_checkpoint, save_checkpoint
-    from pipeline.models.field import FORMAT_VERSION as FIELD_VERSION
-    from pipeline.models.field import KIND as FIELD_KIND
-    from pipeline.models.field import FieldNet, bounding_box
-    from pipeline.models.field import model_args_dict as field_args
-    from pipeline.models.field import parameter_bytes as field_bytes
-    from pipeline.models.mlp import FORMAT_VERSION as MLP_VERSION
-    from pipeline.models.mlp import KIND as MLP_KIND
-    from pipeline.models.mlp import BakedMLP
-    from pipeline.models.mlp import model_args_dict as mlp_args
-    from pipeline.models.mlp import parameter_bytes as mlp_bytes
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.models.checkpoint import per_mesh_checkpoint, save_checkpoint
+    from neuralao.pipeline.models.field import FORMAT_VERSION as FIELD_VERSION
+    from neuralao.pipeline.models.field import KIND as FIELD_KIND
+    from neuralao.pipeline.models.field import FieldNet, bounding_box
+    from neuralao.pipeline.models.field import model_args_dict as field_args
+    from neuralao.pipeline.models.field import parameter_bytes as field_bytes
+    from neuralao.pipeline.models.mlp import FORMAT_VERSION as MLP_VERSION
+    from neuralao.pipeline.models.mlp import KIND as MLP_KIND
+    from neuralao.pipeline.models.mlp import BakedMLP
+    from neuralao.pipeline.models.mlp import model_args_dict as mlp_args
+    from neuralao.pipeline.models.mlp import parameter_bytes as mlp_bytes
 
     scene = load_scene("spot")
     info = {"scene": "spot", "mesh": scene.source}
@@ -88,8 +89,8 @@ def _random_checkpoints(root: Path) -> tuple[Path, Path]:
 
 @pytest.fixture(scope="module")
 def page(tmp_path_factory):
-    from export.field import export_checkpoint as export_field
-    from export.mlp import export_checkpoint as export_mlp
+    from neuralao.export.field import export_checkpoint as export_field
+    from neuralao.export.mlp import export_checkpoint as export_mlp
 
     root = tmp_path_factory.mktemp("viewer")
     field_ckpt, mlp_ckpt = _random_checkpoints(root)
@@ -138,7 +139,7 @@ def _methods(driver) -> dict[str, int]:
 
 
 def test_generated_shaders_match_onnxruntime_on_the_same_gbuffer(browser, page):
-    from export.onnx_io import run_onnxruntime
+    from neuralao.export.onnx_io import run_onnxruntime
 
     methods = _methods(browser)
     worst = {}
@@ -187,8 +188,8 @@ def _locate(vertices, faces, points):
 
 
 def test_vertex_and_texture_bakes_match_their_files(browser, page):
-    from pipeline.bakes.texture import point_uvs, read_texture_glb, sample_bilinear
-    from pipeline.bakes.vertex import read_baked_mesh
+    from neuralao.pipeline.bakes.texture import point_uvs, read_texture_glb, sample_bilinear
+    from neuralao.pipeline.bakes.vertex import read_baked_mesh
 
     methods = _methods(browser)
     vertices, faces, vertex_ao, _ = read_baked_mesh(page / "vertex.glb")
@@ -259,7 +260,7 @@ def test_serve_answers_on_localhost(page):
         [
             sys.executable,
             "-m",
-            "pipeline.cli",
+            "neuralao.pipeline.cli",
             "view",
             str(page / "vertex.glb"),
             "--out",

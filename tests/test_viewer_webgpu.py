@@ -20,13 +20,13 @@ import onnx
 import pytest
 from helpers import needs_chromium
 
-from pipeline import cli
-from pipeline.bakes.viewer_inputs import method_from_unet, screen_space_mesh
-from pipeline.foundation.tolerances import TOL
-from runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
-from runtime.predict import unet_predictor
-from runtime.shipped import pure_unet_export
-from runtime.viewer import write_page
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.viewer_inputs import method_from_unet, screen_space_mesh
+from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.predict import unet_predictor
+from neuralao.runtime.shipped import pure_unet_export
+from neuralao.runtime.viewer import write_page
 
 pytestmark = needs_chromium
 W, H = 48, 40
@@ -83,9 +83,9 @@ def _capture_network(driver) -> dict:
 
 def _reference_gbuffer(pos: np.ndarray) -> dict:
     """The project's rasterizer (pipeline/gbuffers/rasterizer.py) from the camera the page uses."""
-    from pipeline.gbuffers.rasterizer import render_gbuffer
-    from pipeline.geometry.camera import Camera
-    from pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.geometry.camera import Camera
+    from neuralao.pipeline.geometry.scene import load_scene
 
     lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
     centre, diag = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
@@ -143,7 +143,7 @@ def test_webgpu_unet_matches_onnxruntime_on_the_page_gbuffer(browser, page):
 
 
 def test_the_viewer_runs_a_pure_shipped_unet():
-    from runtime.predict import is_hybrid
+    from neuralao.runtime.predict import is_hybrid
 
     folder = pure_unet_export()
     assert not is_hybrid({p.key: p.value for p in onnx.load(folder / "model.onnx").metadata_props})

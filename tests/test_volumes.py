@@ -16,8 +16,8 @@ import pytest
 import trimesh
 from helpers import box, floor_quad, merge
 
-from pipeline import cli
-from pipeline.bakes.volumes import (
+from neuralao.pipeline import cli
+from neuralao.pipeline.bakes.volumes import (
     Edge,
     Region,
     RegionModel,
@@ -30,11 +30,11 @@ from pipeline.bakes.volumes import (
     read_volumes,
     spherical_ao,
 )
-from pipeline.foundation import sh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.tolerances import TOL
-from pipeline.tracing.labeller import Labeller, LabelSettings
-from runtime.probe import TemporalBlend, VolumeProbe, blended_path
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.probe import TemporalBlend, VolumeProbe, blended_path
 
 FAST = VolumeSettings(samples=4, directions=256)
 
@@ -255,7 +255,7 @@ def test_free_space_regions_cover_free_cells_and_never_cross_a_wall():
     inside = ((surface[:, None] > lo[None] + 1e-9) & (surface[:, None] < hi[None] - 1e-9)).all(axis=2)
     assert not inside.any()
     # regions of the two rooms are never neighbours
-    from pipeline.bakes.volumes import connect
+    from neuralao.pipeline.bakes.volumes import connect
 
     for e in connect(regions, diagonal=scene.diagonal):
         assert (lo[e.i, 0] >= 0) == (lo[e.j, 0] >= 0)
@@ -291,7 +291,7 @@ def test_regions_json_and_bad_boxes_are_one_line_errors(tmp_path):
         f.write_text(json.dumps(data).replace("NaN", "NaN"))
         with pytest.raises(NeuralaoError, match=message):
             r, e = read_regions(f)
-            from pipeline.bakes.volumes import connect
+            from neuralao.pipeline.bakes.volumes import connect
 
             connect(r, e)
     f.write_text("{not json")
@@ -326,8 +326,8 @@ def test_region_inside_geometry_falls_back_to_its_neighbours_never_nan():
 
 
 def test_glsl_function_matches_the_numpy_evaluator_on_mesa():
-    from export.glsl.volume import pack_volumes, probe_shaders
-    from runtime.glsl_runner import run_vertex_feedback
+    from neuralao.export.glsl.volume import pack_volumes, probe_shaders
+    from neuralao.runtime.glsl_runner import run_vertex_feedback
 
     scene = room_with_crate()
     vol, _ = bake_volumes(scene, FAST, four_regions())
@@ -416,7 +416,7 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
     assert cli.main(args) == 0
     vol = read_volumes(out)
     assert len(vol.regions) >= 2
-    from export.glsl.volume import volume_function
+    from neuralao.export.glsl.volume import volume_function
 
     assert (glsl / "nao_volume.glsl").read_text() == volume_function("linear", vol.blend)  # what Mesa ran
     manifest = json.loads((glsl / "manifest.json").read_text())
@@ -530,9 +530,9 @@ def test_volumes_and_probe_commands_end_to_end(tmp_path):
 
 
 def test_volumes_of_a_generated_glTF_level_use_its_opaque_instances(tmp_path):
-    from pipeline.bakes.level_stages import opaque_scene
-    from pipeline.geometry.level_files import read_level
-    from pipeline.geometry.level_gen import settings_for, write_level
+    from neuralao.pipeline.bakes.level_stages import opaque_scene
+    from neuralao.pipeline.geometry.level_files import read_level
+    from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 
     path, _ = write_level(tmp_path / "lvl", settings_for("tiny"))
     out = tmp_path / "v.json"

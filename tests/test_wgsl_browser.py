@@ -22,11 +22,11 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import ComputeProgram, generate_compute
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.tolerances import TOL
-from runtime.chromium import headless_chromium
-from runtime.shipped import pure_unet_export
+from neuralao.export.glsl import ComputeProgram, generate_compute
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.chromium import headless_chromium
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.shipped import pure_unet_export
 
 pytestmark = needs_chromium
 RUNNER = Path(__file__).resolve().parents[1] / "runtime" / "viewer" / "wgsl.js"

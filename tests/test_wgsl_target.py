@@ -18,14 +18,14 @@ from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from export.glsl import generate_compute, write_compute_export
-from export.onnx_io import run_onnxruntime
-from pipeline.foundation.tolerances import TOL
-from runtime.shipped import pure_unet_export
+from neuralao.export.glsl import generate_compute, write_compute_export
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.shipped import pure_unet_export
 
 wgpu = pytest.importorskip("wgpu")
 
-from runtime.wgsl_runner import run_wgsl_all  # noqa: E402
+from neuralao.runtime.wgsl_runner import run_wgsl_all  # noqa: E402
 
 
 def _adapter_or_skip() -> None:

@@ -16,7 +16,7 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
   slots: the same op table, passes, writer and manifest write WGSL (``generate_compute(dialect="wgsl")``).
   HLSL and MSL are not written here: :mod:`.cross` makes them from the GLSL through SPIR-V.
 * **Writer.** Only the ``_write_*`` functions of :mod:`.vector` and :mod:`.image` produce shader
-  text, and only by filling the named templates of :mod:`export.glsl.templates`. Identifiers are
+  text, and only by filling the named templates of :mod:`neuralao.export.glsl.templates`. Identifiers are
   generated (``t3``, ``w0_1``, ``src0``); ONNX node and tensor names go to the manifest, never into
   shader source.
 
@@ -44,12 +44,12 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
     load_compute_export(export_dir) -> ComputeProgram
     validate_glsl(source, stage) -> None                         (glslangValidator)
 
-The runners are :mod:`runtime.glsl_runner` (GL) and :mod:`runtime.wgsl_runner` (WebGPU).
+The runners are :mod:`neuralao.runtime.glsl_runner` (GL) and :mod:`neuralao.runtime.wgsl_runner` (WebGPU).
 """
 
-from export.glsl.activations import Act
-from export.glsl.cross import cross_compile, spirv_cross_available, validate_hlsl
-from export.glsl.dialects import (
+from neuralao.export.glsl.activations import Act
+from neuralao.export.glsl.cross import cross_compile, spirv_cross_available, validate_hlsl
+from neuralao.export.glsl.dialects import (
     COMPUTE_DIALECTS,
     DIALECTS,
     ES300,
@@ -59,9 +59,14 @@ from export.glsl.dialects import (
     Dialect,
     get_dialect,
 )
-from export.glsl.files import load_compute_export, load_mlp_export, write_compute_export, write_mlp_export
-from export.glsl.graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
-from export.glsl.image import (
+from neuralao.export.glsl.files import (
+    load_compute_export,
+    load_mlp_export,
+    write_compute_export,
+    write_mlp_export,
+)
+from neuralao.export.glsl.graph import FORMAT_VERSION, OnnxGraph, OpTable, glsl_float, read_graph
+from neuralao.export.glsl.image import (
     CONV_KINDS,
     FOLDED_OPS,
     MAX_ARRAY_LAYERS,
@@ -81,8 +86,8 @@ from export.glsl.image import (
     View,
     generate_compute,
 )
-from export.glsl.validate import glslang_available, validate_glsl
-from export.glsl.vector import (
+from neuralao.export.glsl.validate import glslang_available, validate_glsl
+from neuralao.export.glsl.vector import (
     MAX_FRAGMENT_UNIFORM_BLOCKS,
     MAX_STRAIGHT_TILES,
     MAX_UNIFORM_BLOCK_BYTES,

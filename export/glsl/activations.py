@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from export.glsl.graph import glsl_float
-from export.glsl.templates import fill
+from neuralao.export.glsl.graph import glsl_float
+from neuralao.export.glsl.templates import fill
 
 
 @dataclass

@@ -20,7 +20,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # SSBO bindings move by this many, so the params buffer (GLSL binding 0) never shares an HLSL t register
 # with an input texture (at most this many inputs a pass).

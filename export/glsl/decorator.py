@@ -8,14 +8,15 @@ x, y, z, w), ``i_scale`` and ``i_ao_global`` = y, the 4 coefficients of the line
 
 The shader outputs ``v_ao = clamp(a_local_ao * G(p), 0, 1)``: the product is formed per vertex and
 interpolated by the rasteriser (what the bake's error table measures). Same habit as
-:mod:`export.glsl.templates`: the text lives in named templates here, filled strictly by :func:`fill`.
+:mod:`neuralao.export.glsl.templates`: the text lives in named templates here, filled strictly by
+:func:`fill`.
 """
 
 from __future__ import annotations
 
 from string import Template
 
-from export.glsl.templates import fill_from
+from neuralao.export.glsl.templates import fill_from
 
 _T: dict[str, str] = {}
 

@@ -3,8 +3,8 @@ and where each dialect's fragment-target files go, and WGSL (WebGPU) for the com
 
 from __future__ import annotations
 
-from export.glsl.templates import fill, fill_wgsl
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.export.glsl.templates import fill, fill_wgsl
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 class Dialect:
@@ -19,7 +19,7 @@ class Dialect:
     compute_format = "neuralao-glsl-compute"
 
     def fill(self, template: str, /, **fields: object) -> str:
-        """Fill one of this dialect's templates (strict, see :func:`export.glsl.templates.fill`)."""
+        """Fill one of this dialect's templates (strict, see :func:`neuralao.export.glsl.templates.fill`)."""
         return fill(template, **fields)
 
     def header(self) -> str:

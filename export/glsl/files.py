@@ -8,20 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from export.glsl.cross import (
+from neuralao.export.glsl.cross import (
     HLSL_SHADER_MODEL,
     MSL_VERSION,
     PARAMS_REGISTER_SHIFT,
     cross_compile,
     validate_hlsl,
 )
-from export.glsl.dialects import FRAGMENT_FILES
-from export.glsl.graph import sha256_hex
-from export.glsl.image import ComputeProgram
-from export.glsl.validate import _can_validate, validate_glsl
-from export.glsl.vector import MLPShader
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_bytes, write_json
+from neuralao.export.glsl.dialects import FRAGMENT_FILES
+from neuralao.export.glsl.graph import sha256_hex
+from neuralao.export.glsl.image import ComputeProgram
+from neuralao.export.glsl.validate import _can_validate, validate_glsl
+from neuralao.export.glsl.vector import MLPShader
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_bytes, write_json
 
 
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 import onnx
 
-from export.glsl.activations import Act, clip_bounds
-from export.glsl.dialects import COMPUTE_DIALECTS, Dialect
-from export.glsl.graph import (
+from neuralao.export.glsl.activations import Act, clip_bounds
+from neuralao.export.glsl.dialects import COMPUTE_DIALECTS, Dialect
+from neuralao.export.glsl.graph import (
     FORMAT_VERSION,
     OnnxGraph,
     OpTable,
@@ -27,7 +27,7 @@ from export.glsl.graph import (
     sha256_hex,
     shape_dims,
 )
-from export.glsl.views import (
+from neuralao.export.glsl.views import (
     Atom,
     Axes,
     axes_shape,
@@ -39,7 +39,7 @@ from export.glsl.views import (
     reshape,
     transpose,
 )
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS,
 # GL_MAX_SHADER_STORAGE_BLOCK_SIZE.

@@ -1374,7 +1374,8 @@ WGSL_TEMPLATES: dict[str, Template] = {
 def fill_from(templates: dict[str, Template], template: str, what: str, /, **fields: object) -> str:
     """Fill ``templates[template]``: every placeholder must be given and nothing else (strict, so a
     template and its caller cannot drift apart). Values are converted with ``str``; the caller formats
-    floats (see ``export.glsl.graph.glsl_float``). Shared by the generated shaders and the baselines'."""
+    floats (see ``neuralao.export.glsl.graph.glsl_float``). Shared by the generated shaders and the
+    baselines'."""
     try:
         tpl = templates[template]
     except KeyError:

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import onnx
 
-from export.glsl.activations import Act, clip_bounds
-from export.glsl.dialects import DIALECTS, FRAGMENT_FILES, Dialect, get_dialect
-from export.glsl.graph import (
+from neuralao.export.glsl.activations import Act, clip_bounds
+from neuralao.export.glsl.dialects import DIALECTS, FRAGMENT_FILES, Dialect, get_dialect
+from neuralao.export.glsl.graph import (
     FORMAT_VERSION,
     OnnxGraph,
     OpTable,
@@ -22,8 +22,8 @@ from export.glsl.graph import (
     sha256_hex,
     shape_dims,
 )
-from export.glsl.templates import fill
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.export.glsl.templates import fill
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Portable minimum GL_MAX_UNIFORM_BLOCK_SIZE (GL 3.3+, ES 3.0): every uniform block stays below it.
 MAX_UNIFORM_BLOCK_BYTES = 16384

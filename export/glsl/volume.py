@@ -2,7 +2,8 @@
 packed uniform layout and a numpy evaluator of exactly that layout.
 
 An engine tags each dynamic object with the region it is in, blends that region's packed model with
-the one it used on the previous frame (:class:`runtime.probe.TemporalBlend`) and uploads the result as
+the one it used on the previous frame (:class:`neuralao.runtime.probe.TemporalBlend`) and uploads the result
+as
 ``uniform vec4 u_nao_volume[SIZE]``; the vertex shader calls ``nao_volume_ao(world_position,
 world_normal)`` per vertex. The short and long distances are pre-blended (``blend``, Sloan et al.'s
 97% long), so one function is evaluated, with linear SH (the paper's engine: 8 vec4 = 128 bytes per
@@ -28,11 +29,11 @@ from string import Template
 
 import numpy as np
 
-from export.glsl.dialects import get_dialect
-from export.glsl.templates import fill_from
-from pipeline.foundation import sh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_bytes, write_json, write_text
+from neuralao.export.glsl.dialects import get_dialect
+from neuralao.export.glsl.templates import fill_from
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_bytes, write_json, write_text
 
 UNIFORM = "u_nao_volume"
 CHUNKS = {"linear": 1, "quadratic": 3}
@@ -136,7 +137,7 @@ def probe_shaders(order: str = "linear", blend: float = 0.97, dialect: str = "gl
 def pack_model(centre: np.ndarray, coefficients: np.ndarray, order: str, blend: float) -> np.ndarray:
     """One region's model -> (SIZE, 4) float32 in the layout of the module doc.
 
-    centre (3,), coefficients (7, 2, 9) AO-space SH (pipeline.bakes.volumes.RegionModel).
+    centre (3,), coefficients (7, 2, 9) AO-space SH (neuralao.pipeline.bakes.volumes.RegionModel).
     """
     k = _chunks(order)
     f = (1.0 - blend) * coefficients[:, 0, :] + blend * coefficients[:, 1, :]  # (7, 9)
@@ -151,7 +152,7 @@ def pack_model(centre: np.ndarray, coefficients: np.ndarray, order: str, blend: 
 
 
 def pack_volumes(vol, order: str = "linear") -> np.ndarray:
-    """(regions, SIZE, 4) float32: every region's packed model (pipeline.bakes.volumes.Volumes)."""
+    """(regions, SIZE, 4) float32: every region's packed model (neuralao.pipeline.bakes.volumes.Volumes)."""
     return np.stack([pack_model(m.centre, m.coefficients, order, vol.blend) for m in vol.models])
 
 
@@ -204,7 +205,7 @@ def write_volume_glsl(vol, out_dir: str | Path, order: str = "linear") -> dict:
         "SH constants folded in",
         "regions": [{"name": r.name, "min": list(r.lo), "max": list(r.hi)} for r in vol.regions],
         "temporal_blend": "engine side, per object and frame: linearise target and previous state at the "
-        "object's position (runtime.probe.anchored), then state = target + (previous - target) * "
+        "object's position (neuralao.runtime.probe.anchored), then state = target + (previous - target) * "
         "exp(-dt / tau)",
     }
     write_text(out / "nao_volume.glsl", volume_function(order, vol.blend))

@@ -9,11 +9,12 @@ several nodes may share, primitives with their own materials and textures. It is
    its bind pose, with a warning). A node with
    ``EXT_mesh_gpu_instancing`` adds each instance as an occluder but is not written (per-instance AO
    of instanced decorations is the level bake's job, ``--config``). Points and lines are skipped.
-2. **Trace.** The pieces form one world-space :class:`~pipeline.geometry.scene.Scene` in one Embree scene, so
-   every object occludes every other, and the distances relative to the diagonal are the whole
-   scene's. The per-vertex bake is :func:`pipeline.bakes.vertex.bake` itself (``vertex`` or ``least-squares``)
-   on that scene; the texture bake rasterises each primitive's UVs (:mod:`pipeline.bakes.texture`) and
-   labels every texel of every piece with one labeller, seeded per (piece, texel).
+2. **Trace.** The pieces form one world-space :class:`~neuralao.pipeline.geometry.scene.Scene` in one Embree
+   scene, so every object occludes every other, and the distances relative to the diagonal are the whole
+   scene's. The per-vertex bake is :func:`neuralao.pipeline.bakes.vertex.bake` itself (``vertex`` or
+   ``least-squares``) on that scene; the texture bake rasterises each primitive's UVs
+   (:mod:`neuralao.pipeline.bakes.texture`) and labels every texel of every piece with one labeller, seeded
+   per (piece, texel).
 3. **Write** by editing the input document, so what the bake does not touch (node names, hierarchy,
    transforms, materials, textures, samplers, animations, skins, extensions, extras) passes through;
    the buffers become the GLB's one binary chunk and external images are embedded.
@@ -38,7 +39,7 @@ several nodes may share, primitives with their own materials and textures. It is
    (texture), so the file grows only by what differs.
 
 The resolved settings are saved in ``asset.extras.neuralao`` (the file describes itself). A glTF
-baked to ``.ply`` is still flattened into one mesh (:mod:`pipeline.bakes.vertex`); PLY has no scene.
+baked to ``.ply`` is still flattened into one mesh (:mod:`neuralao.pipeline.bakes.vertex`); PLY has no scene.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from pipeline.bakes.texture import (
+from neuralao.pipeline.bakes.texture import (
     OVERLAP_LIMIT,
     UV_RANGE_SLACK,
     check_settings,
@@ -65,10 +66,8 @@ from pipeline.bakes.texture import (
     texel_image,
     xatlas_layout,
 )
-from pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.level_files import (
+from neuralao.pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
+from neuralao.pipeline.geometry.level_files import (
     GltfWriter,
     _Gltf,
     _instances,
@@ -76,9 +75,11 @@ from pipeline.geometry.level_files import (
     gltf_label,
     node_matrix,
 )
-from pipeline.geometry.scene import Scene, resolve_mesh_path, scene_from_arrays
-from pipeline.geometry.surface import vertex_colours
-from pipeline.tracing.labeller import Labeller
+from neuralao.pipeline.geometry.scene import Scene, resolve_mesh_path, scene_from_arrays
+from neuralao.pipeline.geometry.surface import vertex_colours
+from neuralao.pipeline.tracing.labeller import Labeller
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
 
@@ -294,7 +295,8 @@ class Layout:
 
 
 def primitive_layout(gs: GltfScene, piece: Piece, settings) -> Layout:
-    """Own UVs when usable (``settings.uv``: auto / mesh / xatlas; pipeline.bakes.texture), else xatlas."""
+    """Own UVs when usable (``settings.uv``: auto / mesh / xatlas; neuralao.pipeline.bakes.texture), else
+    xatlas."""
     prim = gs.doc["meshes"][piece.mesh]["primitives"][piece.primitive]
     attrs = prim.get("attributes", {})
     where = f"{gltf_label('mesh', piece.mesh, gs.doc['meshes'][piece.mesh])} primitive {piece.primitive}"

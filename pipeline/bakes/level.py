@@ -3,24 +3,24 @@
 The system of Sloan, Tranchida, Chen, Kavan 2013 ("Ambient Obscurance Baking on the GPU") on
 Embree, stage by stage (the rows of their Table 1; the bake log times each one):
 
-1. **geometry**: read and validate the level (:mod:`pipeline.geometry.level_files`); cut its ``static``
-   instances into pieces (:mod:`pipeline.bakes.level_pieces`) and find the opaque level's bounds, one
-   instance at a time;
+1. **geometry**: read and validate the level (:mod:`neuralao.pipeline.geometry.level_files`); cut its
+   ``static`` instances into pieces (:mod:`neuralao.pipeline.bakes.level_pieces`) and find the opaque
+   level's bounds, one instance at a time;
 2. **samples**: stratified surface samples under a per-face cap, water-filled (two passes over the pieces:
    the density, then each piece's count);
 3. **bvh**: the opaque Embree scene (here for a local bake; on every worker with an engine);
 4. **foliage**: shrub instances -> world boxes with overlap-reduced densities, tree instances ->
-   triangles with their transmission (:mod:`pipeline.tracing.foliage`);
+   triangles with their transmission (:mod:`neuralao.pipeline.tracing.foliage`);
 5. **trace**: obscurance at the short and the long half distance from one trace, attenuated by the
-   foliage, in blocks of samples (:mod:`pipeline.bakes.level_stages`);
+   foliage, in blocks of samples (:mod:`neuralao.pipeline.bakes.level_stages`);
 6. **decorators**: per tree model, local AO baked in isolation; per tree instance, the gold standard and
-   the 4 coefficients of equation 3 (:mod:`pipeline.bakes.level_decorators`);
+   the 4 coefficients of equation 3 (:mod:`neuralao.pipeline.bakes.level_decorators`);
 7. **solve**: least-squares vertex values (Kavan et al. 2011) of both distances, one task per piece;
 8. **small decorators**: one scalar per grass clump and shrub, resampled from the baked level;
 9. **lod**: per piece, a simplified LOD with AO by resampling at its vertices and by least squares over
    resampled surface samples, both measured against the gold standard;
-10. **output**: glTF streamed to disk piece by piece (:mod:`pipeline.bakes.level_output`), the decorator
-    vertex shader, the bake log (JSON + a markdown table).
+10. **output**: glTF streamed to disk piece by piece (:mod:`neuralao.pipeline.bakes.level_output`), the
+    decorator vertex shader, the bake log (JSON + a markdown table).
 
 Every heavy stage is tasks of an engine (``engine``: None runs them here); the driver holds the level's
 meshes and instance transforms, one piece's arrays at a time and one float per opaque vertex (the baked AO
@@ -43,16 +43,21 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.bakes.level_decorators import Resampler, bake_decorators, build_foliage, small_decorators
-from pipeline.bakes.level_output import write_outputs
-from pipeline.bakes.level_pieces import index_level, sample_rule
-from pipeline.bakes.level_settings import (
+from neuralao.pipeline.bakes.level_decorators import (
+    Resampler,
+    bake_decorators,
+    build_foliage,
+    small_decorators,
+)
+from neuralao.pipeline.bakes.level_output import write_outputs
+from neuralao.pipeline.bakes.level_pieces import index_level, sample_rule
+from neuralao.pipeline.bakes.level_settings import (
     LevelBakeSettings,
     blend,
     check_settings,
     label_settings,
 )
-from pipeline.bakes.level_stages import (
+from neuralao.pipeline.bakes.level_stages import (
     LabellerFrame,
     TaskFiles,
     blend_piece,
@@ -71,9 +76,11 @@ from pipeline.bakes.level_stages import (
     trace_jobs,
     worker_settings,
 )
-from pipeline.engines.engine import LocalEngine, ResultStore, Task
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import (
+from neuralao.pipeline.engines.engine import LocalEngine, ResultStore, Task
+from neuralao.pipeline.geometry.least_squares import Whole
+from neuralao.pipeline.geometry.level_files import read_level
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import (
     read_npz,
     remove_stale_temporaries,
     sha256_file,
@@ -82,10 +89,8 @@ from pipeline.foundation.io import (
     write_npz,
     write_text,
 )
-from pipeline.foundation.limits import release_free_memory
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.least_squares import Whole
-from pipeline.geometry.level_files import read_level
+from neuralao.runtime.foundation.limits import release_free_memory
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +140,8 @@ class BakeLog:
         return data
 
     def parts(self, name: str):
-        """The :class:`pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each is written
+        """The :class:`neuralao.pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each
+        is written
         as it arrives, so a killed bake's rerun skips them; removed once the stage's own file is written."""
 
         return ResultStore(self.dir / f"{name}.parts")
@@ -222,7 +228,8 @@ def bake_level(
 ) -> dict:
     """Bake the level at ``path`` into the folder ``out``; returns the bake log (also OUT/bake_log.json).
 
-    ``engine`` (:mod:`pipeline.engines.engine`): runs every heavy stage's tasks (None: here, with threads)."""
+    ``engine`` (:mod:`neuralao.pipeline.engines.engine`): runs every heavy stage's tasks (None: here, with
+    threads)."""
 
     check_settings(settings)
     path, out = Path(path), Path(out)

@@ -14,16 +14,22 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.bakes.level_pieces import level_bounds
-from pipeline.bakes.level_settings import FoliageSettings, LevelBakeSettings, blend, halves, label_settings
-from pipeline.bakes.level_stages import LabellerFrame, PieceState, gold_context, worker_settings
-from pipeline.engines.engine import Shared, Task, content_key
-from pipeline.geometry.least_squares import fit_least_squares
-from pipeline.geometry.level_files import Level, LevelNode, flatten
-from pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
-from pipeline.geometry.surface import SurfaceSamples, interpolate, surface_samples
-from pipeline.tracing.foliage import Foliage, overlap_reduced
-from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
+from neuralao.pipeline.bakes.level_pieces import level_bounds
+from neuralao.pipeline.bakes.level_settings import (
+    FoliageSettings,
+    LevelBakeSettings,
+    blend,
+    halves,
+    label_settings,
+)
+from neuralao.pipeline.bakes.level_stages import LabellerFrame, PieceState, gold_context, worker_settings
+from neuralao.pipeline.engines.engine import Shared, Task, content_key
+from neuralao.pipeline.geometry.least_squares import fit_least_squares
+from neuralao.pipeline.geometry.level_files import Level, LevelNode, flatten
+from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
+from neuralao.pipeline.geometry.surface import SurfaceSamples, interpolate, surface_samples
+from neuralao.pipeline.tracing.foliage import Foliage, overlap_reduced
+from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
 
 
 def instance_boxes(level: Level, nodes: list[LevelNode]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -86,7 +92,8 @@ _DECORATOR_ERRORS = ("local_x_global", "global_only", "in_place", "local_only", 
 
 @dataclass
 class _TreeModel:
-    """What every in-place task of one tree model reads (a :class:`pipeline.engines.engine.Shared` value)."""
+    """What every in-place task of one tree model reads (a :class:`neuralao.pipeline.engines.engine.Shared`
+    value)."""
 
     model: Scene  # the model's mesh (object space)
     train: SurfaceSamples  # fit samples (object space)
@@ -165,8 +172,8 @@ def bake_decorators(
 
     The local AO of each model is baked here; every instance's in-place trace and fits is a task of
     ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
-    ``store`` (:class:`pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered (and
-    traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
+    ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
+    (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
     ``diagonal``: the opaque level's (the rays' length)."""
 
     trees = level.nodes_with("tree")
@@ -249,7 +256,7 @@ class Resampler:
     @staticmethod
     def share(values: np.ndarray) -> Shared:
         """Per-vertex values of the opaque scene (float32, NaN on blockers) as a
-        :class:`pipeline.engines.engine.Shared`: put in the object store once, read by every task."""
+        :class:`neuralao.pipeline.engines.engine.Shared`: put in the object store once, read by every task."""
 
         values = np.asarray(values, np.float32)
         return Shared(content_key("opaque-values", values), values)

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from export.glsl.decorator import decorator_shaders, manifest
-from pipeline.foundation.io import write_json, write_text
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.level_files import GltfWriter, decompose
-from pipeline.geometry.surface import vertex_colours
+from neuralao.export.glsl.decorator import decorator_shaders, manifest
+from neuralao.pipeline.geometry.level_files import GltfWriter, decompose
+from neuralao.pipeline.geometry.surface import vertex_colours
+from neuralao.runtime.foundation.io import write_json, write_text
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 
 def write_outputs(

@@ -1,7 +1,8 @@
 """A level in pieces, so that a bake's driver never holds the flattened level.
 
 The static instances, in flatten order (node by node, instance by instance: the order of
-:func:`pipeline.geometry.level_files.flatten`), are cut into *pieces*: runs of whole instances of about
+:func:`neuralao.pipeline.geometry.level_files.flatten`), are cut into *pieces*: runs of whole instances of
+about
 ``piece_faces`` faces (an instance bigger than that is a piece of its own). Instances share no vertices,
 so everything per vertex (the least-squares solve, the LOD) depends on one piece alone. Global face,
 vertex and sample numbers are a piece's offsets plus its own, so a piece's samples and their rays are
@@ -19,9 +20,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.geometry.level_files import Level, LevelNode
-from pipeline.geometry.scene import Scene, scene_from_arrays
-from pipeline.geometry.surface import SurfaceSamples, face_areas, surface_samples
+from neuralao.pipeline.geometry.level_files import Level, LevelNode
+from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
+from neuralao.pipeline.geometry.surface import SurfaceSamples, face_areas, surface_samples
 
 # Area histogram: bins per octave of face area and the octaves covered (areas outside are clamped in).
 _BINS_PER_OCTAVE = 64

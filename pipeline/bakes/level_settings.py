@@ -10,9 +10,9 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import load_settings
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import load_settings
 
 
 @dataclass

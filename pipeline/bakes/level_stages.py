@@ -1,5 +1,5 @@
-"""The heavy stages of a level bake as tasks of an engine, one piece (:mod:`pipeline.bakes.level_pieces`) or a
-block of one piece's samples at a time.
+"""The heavy stages of a level bake as tasks of an engine, one piece
+(:mod:`neuralao.pipeline.bakes.level_pieces`) or a block of one piece's samples at a time.
 
 Every task is a pure function of its arguments and of the worker's state (the opaque level's labeller,
 built from the level's meshes and instance transforms where the task runs), so a local and a Ray bake write
@@ -22,23 +22,29 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 from tqdm import tqdm
 
-from pipeline.bakes.level_pieces import Piece, PieceIndex, SampleRule, cached_piece, instance_vertices
-from pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
-from pipeline.engines.engine import Context, LocalEngine, Task, content_key
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import remove_stale_temporaries, write_npz
-from pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
-from pipeline.geometry.level_files import Level, flatten
-from pipeline.geometry.scene import Scene, scene_from_arrays
-from pipeline.geometry.surface import (
+from neuralao.pipeline.bakes.level_pieces import (
+    Piece,
+    PieceIndex,
+    SampleRule,
+    cached_piece,
+    instance_vertices,
+)
+from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
+from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
+from neuralao.pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
+from neuralao.pipeline.geometry.level_files import Level, flatten
+from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
+from neuralao.pipeline.geometry.surface import (
     face_areas,
     interpolate,
     samples_per_face,
     surface_samples,
     vertex_colours,
 )
-from pipeline.tracing.labeller import LabelSettings
-from pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import remove_stale_temporaries, write_npz
 
 # --------------------------------------------------------------------------- scenes and worker state
 
@@ -271,7 +277,7 @@ def fit_level(
     timing: dict | None = None,
     whole: Whole | None = None,
 ) -> np.ndarray:
-    """:func:`pipeline.geometry.least_squares.fit_least_squares` with the level's solver
+    """:func:`neuralao.pipeline.geometry.least_squares.fit_least_squares` with the level's solver
     (``t.solver``, ``t.alpha``).
 
     "components": the normal equations are assembled here, split into their connected components (the
@@ -280,7 +286,7 @@ def fit_level(
     kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
     ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
     block (each task times itself, a stored one as it took then). ``whole``: see
-    :func:`pipeline.geometry.least_squares.normal_equations` (a piece of a level)."""
+    :func:`neuralao.pipeline.geometry.least_squares.normal_equations` (a piece of a level)."""
 
     if t.solver != "components":
         t0 = time.perf_counter()

@@ -11,9 +11,9 @@ Steps
    same barycentric coordinates on the 3-D triangle, with the triangle's geometric normal. A texel
    covered by several triangles (shared edges) takes the one it lies deepest inside.
 3. **Labels.** Those points go through the project's Embree labeller
-   (:class:`pipeline.tracing.labeller.Labeller`: cosine-weighted rays, the back-face rule, the origin offset
-   relative to the diagonal), seeded by texel index, so a texel's value never depends on the batch it is
-   traced in.
+   (:class:`neuralao.pipeline.tracing.labeller.Labeller`: cosine-weighted rays, the back-face rule, the
+   origin offset relative to the diagonal), seeded by texel index, so a texel's value never depends on the
+   batch it is traced in.
 4. **Holes and gutters.** Texels that are covered but invalid (back-face rule: inside geometry) and
    the uncovered texels within ``margin`` of a covered one are filled by repeated 8-neighbour
    averaging from the valid texels (dilation). Without the gutter, bilinear filtering and mip-maps
@@ -41,12 +41,12 @@ import numpy as np
 import xatlas
 from PIL import Image
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.foundation.limits import SAMPLE_BYTES, check_count
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.limits import SAMPLE_BYTES, check_count
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
 

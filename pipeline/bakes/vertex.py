@@ -11,9 +11,9 @@ neighbours (Dirichlet problem on the mesh graph).
 
 ``least-squares`` (Kavan, Bargteil, Sloan 2011, "Least Squares Vertex Baking", as used for AO by
 Sloan, Tranchida, Chen, Kavan 2013): stratified surface samples spread by area
-(:func:`pipeline.geometry.surface.surface_samples`), each with the AO traced along its face's
+(:func:`neuralao.pipeline.geometry.surface.surface_samples`), each with the AO traced along its face's
 geometric normal; the per-vertex values are the area-weighted least-squares fit with an edge
-regulariser (:mod:`pipeline.geometry.least_squares`, where the energy and the solver are described).
+regulariser (:mod:`neuralao.pipeline.geometry.least_squares`, where the energy and the solver are described).
 Samples invalidated by the back-face rule (Sloan et al. 2013: more than 25% of a sample's rays hit
 back faces, i.e. it lies inside geometry) are left out of the data term.
 
@@ -29,7 +29,7 @@ colour = grey ``round(255 * ao)`` (RGBA8, alpha 255) AND the exact float32 value
   the float is the attribute ``_AO`` (FLOAT SCALAR accessor), beside ``COLOR_0``.
 
 Error against a reference is measured over surface samples
-(:func:`pipeline.geometry.surface.surface_error`), never at the vertices (where vertex sampling is
+(:func:`neuralao.pipeline.geometry.surface.surface_error`), never at the vertices (where vertex sampling is
 exact by construction).
 """
 
@@ -43,16 +43,16 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.engines.engine import LocalEngine
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.foundation.limits import MAX_CAP, SAMPLE_BYTES, check_count, check_int_range, check_seed
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.least_squares import fill_invalid, fit_least_squares
-from pipeline.geometry.scene import Scene
-from pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
-from pipeline.tracing.engine_labeller import EngineLabeller
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.pipeline.engines.engine import LocalEngine
+from neuralao.pipeline.geometry.least_squares import fill_invalid, fit_least_squares
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
+from neuralao.pipeline.tracing.engine_labeller import EngineLabeller
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.limits import MAX_CAP, SAMPLE_BYTES, check_count, check_int_range, check_seed
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 OUTPUT_SUFFIXES = (".ply", ".glb")
 GLB_AO_ATTRIBUTE = "_AO"
@@ -129,7 +129,7 @@ def bake_least_squares(
     t0 = time.perf_counter()
     total = settings.samples_per_vertex * len(scene.vertices)
     # The samples' arrays are allocated before anything else: their number must fit
-    # (pipeline.foundation.limits).
+    # (neuralao.runtime.foundation.limits).
     check_count(
         "--samples-per-vertex",
         math.ceil(min(total, 2.0**62)) + len(scene.faces),
@@ -171,7 +171,7 @@ def bake(
 ) -> BakeResult:
     """Per-vertex AO of ``scene``: BakeResult.ao (n_vertices,) float32 in [0, 1].
 
-    The samples are traced as chunk tasks on ``engine`` (:mod:`pipeline.engines.engine`; None: a
+    The samples are traced as chunk tasks on ``engine`` (:mod:`neuralao.pipeline.engines.engine`; None: a
     LocalEngine, ``settings.workers`` threads in this process; a RayEngine: its cluster), with the same
     bits wherever they run; ``store`` keeps finished chunks for a rerun.
     """

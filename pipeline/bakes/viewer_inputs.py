@@ -1,9 +1,11 @@
-"""What ``neuralao view`` shows, read from bakes and exports: one :class:`runtime.viewer.ViewerMethod`
-per vertex bake (.ply/.glb), texture bake (.glb), scene bake (.glb) or MLP / field export folder.
+"""What ``neuralao view`` shows, read from bakes and exports: one
+:class:`neuralao.runtime.viewer.ViewerMethod` per vertex bake (.ply/.glb), texture bake (.glb), scene bake
+(.glb) or MLP / field export folder.
 
-These readers live with the bakers, not in :mod:`runtime.viewer`: they read bakes with the bakers' own
-readers (trimesh-based) and load the export's mesh (:func:`pipeline.geometry.scene.load_scene`), which a
-consumer that only writes the page from arrays does not need.
+These readers live with the bakers, not in :mod:`neuralao.runtime.viewer`: they read bakes with the bakers'
+own readers (trimesh-based) and load the export's mesh
+(:func:`neuralao.pipeline.geometry.scene.load_scene`), which a consumer that only writes the page from
+arrays does not need.
 """
 
 from __future__ import annotations
@@ -17,18 +19,18 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from export.glsl import generate_compute, load_compute_export
-from export.glsl.files import load_mlp_export
-from pipeline.bakes.gltf_scene import read_gltf_scene
-from pipeline.bakes.texture import read_texture_glb
-from pipeline.bakes.vertex import read_baked_mesh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import load_scene
-from runtime.internal_resolution import UpsampleSettings
-from runtime.onnx_io import load_onnx
-from runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
-from runtime.shipped import pure_unet_export, shipped_models
-from runtime.viewer import ViewerMethod, b64, corner_arrays
+from neuralao.export.glsl import generate_compute, load_compute_export
+from neuralao.export.glsl.files import load_mlp_export
+from neuralao.pipeline.bakes.gltf_scene import read_gltf_scene
+from neuralao.pipeline.bakes.texture import read_texture_glb
+from neuralao.pipeline.bakes.vertex import read_baked_mesh
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.internal_resolution import UpsampleSettings
+from neuralao.runtime.onnx_io import load_onnx
+from neuralao.runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
+from neuralao.runtime.shipped import pure_unet_export, shipped_models
+from neuralao.runtime.viewer import ViewerMethod, b64, corner_arrays
 
 
 def method_from_bake(path: Path) -> ViewerMethod:

@@ -13,14 +13,14 @@ Pipeline (:func:`bake_volumes`)
    ``b`` of the shared boundary.
 2. **Samples**: ``samples^3`` (8 x 8 x 8) cell centres per region. From each, ``directions`` (1024)
    jittered spherical-Fibonacci rays (uniform on the sphere) are traced with Embree
-   (:meth:`pipeline.tracing.labeller.Labeller.hits_along`). A sample is *valid* when at most
+   (:meth:`neuralao.pipeline.tracing.labeller.Labeller.hits_along`). A sample is *valid* when at most
    ``backface_threshold`` (25%) of its rays hit back faces (the back-face rule of the labeller, over
    the whole sphere): points inside closed geometry or behind single-sided walls are dropped.
 3. **Spherical obscurance** at two half distances (short, long): each ray gives
    ``rho(d) = 1 - 2^(-d / h)`` (= 1 - exp(a d), a = ln 0.5 / h) for a hit at distance d, 1 for a miss;
    projected to quadratic SH (9 coefficients per distance, 18 channels; ``rho - 1`` is projected and the
    exact SH of V = 1 added, so open space is exactly AO 1) and convolved with the clamped cosine
-   (:mod:`pipeline.foundation.sh`), so ``AO(n) = sum_j f_j Y_j(n)`` for any unit normal n.
+   (:mod:`neuralao.runtime.foundation.sh`), so ``AO(n) = sum_j f_j Y_j(n)`` for any unit normal n.
 4. **The compact model** (eq. 4): ``f(p) = v_mean + sum_i (p - c)_i v_{2i + s_i}`` with ``s_i = 0``
    where ``(p - c)_i >= 0`` and 1 otherwise; 7 vectors of 18 channels and a centre c. For a fixed c the
    7 vectors are a linear least-squares fit to the valid samples (one design matrix, 18 right-hand
@@ -66,15 +66,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.foundation import sh
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.limits import THREAD_BYTES, check_count, check_seed
-from pipeline.geometry.level_files import INSTANCING, read_gltf_json, read_level
-from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path
-from pipeline.tracing.labeller import Labeller, LabelSettings, sample_shifts
+from neuralao.pipeline.geometry.level_files import INSTANCING, read_gltf_json, read_level
+from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings, sample_shifts
+from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import THREAD_BYTES, check_count, check_seed
 
 # The file format and the model of eq. 4 are the consumer runtime's; re-exported for the baker's callers.
-from runtime.volumes import (  # noqa: F401
+from neuralao.runtime.volumes import (  # noqa: F401
     DISTANCES,
     FORMAT,
     TERMS,
@@ -554,7 +554,7 @@ def check_settings(s: VolumeSettings) -> None:
         v = getattr(s, name)
         if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "iterations" else 1):
             raise NeuralaoError(f"{name} must be a positive integer, got {v!r}")
-    # What each count allocates (pipeline.foundation.limits), checked before any of it is: a region's
+    # What each count allocates (neuralao.runtime.foundation.limits), checked before any of it is: a region's
     # samples^3 points trace `directions` rays each (directions, distances, the obscurance and its SH
     # projection, ~256 B a ray); the free-space grid is up to grid^3 cells, each tracing cell_rays rays.
     check_count("iterations", s.iterations, low=0, bytes_each=64, each="an energy record of the history")
@@ -750,13 +750,13 @@ def is_level(path: Path) -> bool:
 
 def load_level_scene(level: str | Path) -> Scene:
     """The occluders a dynamic object sees: for a level (:func:`is_level`) its opaque geometry, every
-    static and blocker instance (pipeline.bakes.level_stages.opaque_scene; trees, shrubs and grass are not
-    opaque and are left out); for any other mesh file, glTF folder or test-mesh name the whole mesh
-    (pipeline.geometry.scene.load_scene)."""
+    static and blocker instance (neuralao.pipeline.bakes.level_stages.opaque_scene; trees, shrubs and grass
+    are not opaque and are left out); for any other mesh file, glTF folder or test-mesh name the whole mesh
+    (neuralao.pipeline.geometry.scene.load_scene)."""
     path = resolve_mesh_path(level)
     if is_level(path):
         # Lazy: the level-bake stack costs 0.3 s measured on `neuralao volumes`; only a level needs it
-        from pipeline.bakes.level_stages import opaque_scene
+        from neuralao.pipeline.bakes.level_stages import opaque_scene
 
         return opaque_scene(read_level(path))
     return load_scene(path)

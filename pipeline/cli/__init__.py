@@ -1,5 +1,5 @@
-"""The ``neuralao`` command line: one module per command, dispatched by :mod:`pipeline.cli.main`."""
+"""The ``neuralao`` command line: one module per command, dispatched by :mod:`neuralao.pipeline.cli.main`."""
 
-from pipeline.cli.main import main
+from neuralao.pipeline.cli.main import main
 
 __all__ = ["main"]

@@ -1,7 +1,7 @@
-"""``python -m pipeline.cli``: the ``neuralao`` command."""
+"""``python -m neuralao.pipeline.cli``: the ``neuralao`` command."""
 
 import sys
 
-from pipeline.cli.main import main
+from neuralao.pipeline.cli.main import main
 
 sys.exit(main())

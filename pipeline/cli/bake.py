@@ -1,6 +1,7 @@
-"""`neuralao bake`: per-vertex AO of a mesh (:mod:`pipeline.bakes.vertex`), an AO texture map
-(``--to texture``, :mod:`pipeline.bakes.texture`), a glTF scene with its nodes and materials kept
-(:mod:`pipeline.bakes.gltf_scene`), or a game level (``--config``, :mod:`pipeline.bakes.level`).
+"""`neuralao bake`: per-vertex AO of a mesh (:mod:`neuralao.pipeline.bakes.vertex`), an AO texture map
+(``--to texture``, :mod:`neuralao.pipeline.bakes.texture`), a glTF scene with its nodes and materials kept
+(:mod:`neuralao.pipeline.bakes.gltf_scene`), or a game level (``--config``,
+:mod:`neuralao.pipeline.bakes.level`).
 """
 
 from __future__ import annotations
@@ -9,16 +10,16 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.bakes.gltf_scene import (
+from neuralao.pipeline.bakes.gltf_scene import (
     bake_texture_scene,
     bakes_as_scene,
     read_gltf_scene,
     write_texture_scene,
     write_vertex_scene,
 )
-from pipeline.bakes.level import bake_level
-from pipeline.bakes.level_settings import load_level_settings
-from pipeline.bakes.texture import (
+from neuralao.pipeline.bakes.level import bake_level
+from neuralao.pipeline.bakes.level_settings import load_level_settings
+from neuralao.pipeline.bakes.texture import (
     TextureBakeSettings,
     bake_texture,
     load_uv_mesh,
@@ -26,20 +27,23 @@ from pipeline.bakes.texture import (
     quantise,
     texture_glb_bytes,
 )
-from pipeline.bakes.texture import check_settings as check_texture_settings
-from pipeline.bakes.vertex import OUTPUT_SUFFIXES, BakeSettings, bake, check_settings, write_baked_mesh
-from pipeline.cli.engine_options import add_engine_arguments, engine_from_args
-from pipeline.engines.engine import ResultStore
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_bytes, write_png
-from pipeline.geometry.scene import load_scene
-from pipeline.tracing.labeller import check_label_args, label_fields
+from neuralao.pipeline.bakes.texture import check_settings as check_texture_settings
+from neuralao.pipeline.bakes.vertex import (
+    OUTPUT_SUFFIXES,
+    BakeSettings,
+    bake,
+    check_settings,
+    write_baked_mesh,
+)
+from neuralao.pipeline.cli.engine_options import add_engine_arguments, engine_from_args
+from neuralao.pipeline.engines.engine import ResultStore
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.tracing.labeller import check_label_args, label_fields
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_bytes, write_png
 
-# Each bake's summary line carries the name of the module that bakes it, as it always has.
-_log_vertex = logging.getLogger("pipeline.bakes.vertex")
-_log_texture = logging.getLogger("pipeline.bakes.texture")
-_log_scene = logging.getLogger("pipeline.bakes.gltf_scene")
-_log_level = logging.getLogger("pipeline.bakes.level")
+log = logging.getLogger(__name__)
+
 
 # Single-mesh flags that have no meaning for a level (its settings come from --config and --set).
 _MESH_ONLY_FLAGS = (
@@ -114,7 +118,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="CONFIG.json",
         help="bake a game level (.gltf/.glb with roles in node extras) with these level settings "
-        "(pipeline.bakes.level_settings.LevelBakeSettings); --out is then a folder",
+        "(neuralao.pipeline.bakes.level_settings.LevelBakeSettings); --out is then a folder",
     )
     p.add_argument(
         "--set",
@@ -128,7 +132,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=("vertex", "texture"),
         default="vertex",
         help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
-        "pipeline.bakes.texture) (default vertex)",
+        "neuralao.pipeline.bakes.texture) (default vertex)",
     )
     _add_texture_arguments(p)
     p.add_argument(
@@ -214,7 +218,8 @@ def run(args: argparse.Namespace) -> int:
             raise NeuralaoError(
                 f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
             )
-        return run_level(args)  # --engine ray: every heavy stage runs as tasks (pipeline.bakes.level)
+        # --engine ray: every heavy stage runs as tasks (neuralao.pipeline.bakes.level)
+        return run_level(args)
     if args.set:
         raise NeuralaoError("--set needs --config (level bakes only)")
     if _refused_flag(args) is not None:
@@ -234,7 +239,8 @@ def run_vertex(args: argparse.Namespace) -> int:
     if out.exists() and out.is_dir():
         raise NeuralaoError(f"--out {out} is a folder")
     engine = engine_from_args(args)
-    # a glTF to a .glb is baked as a scene (pipeline.bakes.gltf_scene): nodes, materials and textures kept
+    # a glTF to a .glb is baked as a scene (neuralao.pipeline.bakes.gltf_scene): nodes, materials and
+    # textures kept
     gltf = read_gltf_scene(args.mesh) if bakes_as_scene(args.mesh, out) else None
     scene = load_scene(args.mesh) if gltf is None else gltf.world
     # On a cluster, finished chunks are kept beside OUT until it is written (a rerun resumes).
@@ -248,7 +254,7 @@ def run_vertex(args: argparse.Namespace) -> int:
     if store is not None:
         store.clear()
     i = result.info
-    _log_vertex.info(
+    log.info(
         "baked %s (%d vertices, %s, %d samples, %d invalid) in %.1f s -> %s",
         scene.name,
         i["vertices"],
@@ -268,7 +274,9 @@ def run_texture(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--to texture writes a .glb, got --out {out.name!r}")
     if out.exists() and out.is_dir():
         raise NeuralaoError(f"--out {out} is a folder")
-    if bakes_as_scene(args.mesh, out):  # nodes, materials and textures kept (pipeline.bakes.gltf_scene)
+    if bakes_as_scene(
+        args.mesh, out
+    ):  # nodes, materials and textures kept (neuralao.pipeline.bakes.gltf_scene)
         return run_texture_scene(args.mesh, out, settings)
     mesh = load_uv_mesh(args.mesh, settings)
     result = bake_texture(mesh, settings, progress=True)
@@ -276,7 +284,7 @@ def run_texture(args: argparse.Namespace) -> int:
     write_png(png_path_for(out), quantise(result.ao))
     write_bytes(out, data)
     i = result.info
-    _log_texture.info(
+    log.info(
         "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",
         mesh.name,
         i["faces"],
@@ -299,7 +307,7 @@ def run_texture_scene(mesh: str, out: Path, settings: TextureBakeSettings) -> in
     write_texture_scene(
         out, gs, images, layouts, {"settings": info["settings"], "uv_sources": info["uv_sources"]}
     )
-    _log_scene.info(
+    log.info(
         "baked %s (%d primitives in %d nodes, %d maps %dx%d, %d texels, %d invalid) in %.1f s -> %s",
         gs.path.name,
         sum(p.written for p in gs.pieces),
@@ -325,7 +333,7 @@ def run_level(args: argparse.Namespace) -> int:
             args.mesh, settings, args.out, progress=True, engine=None if engine.name == "local" else engine
         )
     c = info["counts"]
-    _log_level.info(
+    log.info(
         "baked level %s (%d vertices, %d faces, %d samples) in %.1f s -> %s",
         args.mesh,
         c["receiver_vertices"],

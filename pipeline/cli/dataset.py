@@ -1,4 +1,4 @@
-"""`neuralao dataset`: render and label a dataset from a config, :mod:`pipeline.datasets.dataset`."""
+"""`neuralao dataset`: render and label a dataset from a config, :mod:`neuralao.pipeline.datasets.dataset`."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.cli.engine_options import add_engine_arguments, engine_from_args
-from pipeline.datasets.dataset import DatasetSettings, build_dataset, check_counts
-from pipeline.foundation.settings import add_set_option, load_settings
+from neuralao.pipeline.cli.engine_options import add_engine_arguments, engine_from_args
+from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset, check_counts
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
-log = logging.getLogger("pipeline.datasets.dataset")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

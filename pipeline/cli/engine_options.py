@@ -1,12 +1,13 @@
 """The flags that choose where a command's work runs (``--engine``, ``--address``, ``--ray-workers``,
-``--ray-threads``, ``--chunk-rays``) and the :class:`~pipeline.engines.engine.Engine` they describe."""
+``--ray-threads``, ``--chunk-rays``) and the :class:`~neuralao.pipeline.engines.engine.Engine` they
+describe."""
 
 from __future__ import annotations
 
 import argparse
 
-from pipeline.engines.engine import CHUNK_RAYS, Engine, LocalEngine, RayEngine
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.pipeline.engines.engine import CHUNK_RAYS, Engine, LocalEngine, RayEngine
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> None:

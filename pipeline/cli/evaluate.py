@@ -1,6 +1,6 @@
 """`neuralao evaluate CONFIG --models DIR... --out DIR`: screen-space AO judged where users run it.
 
-The categories, resolutions and scores are :mod:`pipeline.evaluation.categories`; this module is its
+The categories, resolutions and scores are :mod:`neuralao.pipeline.evaluation.categories`; this module is its
 command line.
 """
 
@@ -10,12 +10,12 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.evaluation.categories import EvalSettings, evaluate, write_to_manifests
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import add_set_option, load_settings
-from runtime.shipped import default_export
+from neuralao.pipeline.evaluation.categories import EvalSettings, evaluate, write_to_manifests
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
+from neuralao.runtime.shipped import default_export
 
-log = logging.getLogger("pipeline.evaluation.categories")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

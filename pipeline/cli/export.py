@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pipeline import kinds
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.models.checkpoint import read_checkpoint
+from neuralao.pipeline import kinds
+from neuralao.pipeline.models.checkpoint import read_checkpoint
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def checkpoint_kind(path: str | Path) -> str:

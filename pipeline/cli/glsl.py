@@ -1,6 +1,7 @@
 """`neuralao glsl MODEL.onnx`: GLSL (compute or fragment) for a user's own ONNX model.
 
-The export and its targets are :mod:`export.onnx_glsl`; `neuralao parity DIR` checks the folder it writes.
+The export and its targets are :mod:`neuralao.export.onnx_glsl`; `neuralao parity DIR` checks the folder it
+writes.
 """
 
 from __future__ import annotations
@@ -8,9 +9,9 @@ from __future__ import annotations
 import argparse
 import logging
 
-from export.onnx_glsl import TARGETS, export_model
+from neuralao.export.onnx_glsl import TARGETS, export_model
 
-log = logging.getLogger("export.onnx_glsl")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -4,7 +4,7 @@ model to a G-buffer. Without MODEL.onnx the shipped U-Net (``runtime/models``) i
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
 ``mask``, ``yfov`` in radians, ...) or as a user's exporter writes it from the keys docs/formats.md
 lists; a dataset shard (frames stacked on a first axis) works with ``--index K``. The work is
-:mod:`runtime.infer`'s.
+:mod:`neuralao.runtime.infer`'s.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.limits import check_finite_number
-from runtime.infer import (
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import check_finite_number
+from neuralao.runtime.infer import (
     check_frame,
     check_output,
     complete_frame,
@@ -28,9 +28,9 @@ from runtime.infer import (
     model_kind,
     write_image,
 )
-from runtime.shipped import default_model
+from neuralao.runtime.shipped import default_model
 
-log = logging.getLogger("runtime.infer")  # the logger name users see in messages (unchanged by the move)
+log = logging.getLogger(__name__)
 
 
 def field_of_view(args: argparse.Namespace) -> float | None:

@@ -1,15 +1,15 @@
 """`neuralao level`: write a seeded synthetic game level (glTF + bake config) for tests and benchmarks
-(:mod:`pipeline.geometry.level_gen`)."""
+(:mod:`neuralao.pipeline.geometry.level_gen`)."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 
-from pipeline.foundation.settings import add_set_option
-from pipeline.geometry.level_gen import PRESETS, settings_for, write_level
+from neuralao.pipeline.geometry.level_gen import PRESETS, settings_for, write_level
+from neuralao.runtime.foundation.settings import add_set_option
 
-log = logging.getLogger("pipeline.geometry.level_gen")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

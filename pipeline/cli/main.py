@@ -10,57 +10,60 @@ import logging
 import sys
 from typing import NoReturn
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "render": (
-        "pipeline.cli.render",
+        "neuralao.pipeline.cli.render",
         "render G-buffers + ray-traced AO for views of a mesh (.npz + PNG previews)",
     ),
     "bake": (
-        "pipeline.cli.bake",
+        "neuralao.pipeline.cli.bake",
         "bake per-vertex AO into a PLY/GLB (vertex colours + float 'ao' property), or a level with --config",
     ),
     "level": (
-        "pipeline.cli.level",
+        "neuralao.pipeline.cli.level",
         "write a seeded synthetic game level (glTF + bake config) for tests and benchmarks",
     ),
     "dataset": (
-        "pipeline.cli.dataset",
+        "neuralao.pipeline.cli.dataset",
         "render and label a dataset from a config (resumable shards + manifest)",
     ),
-    "train": ("pipeline.cli.train", "train the baked MLP, the DeepAO U-Net or a per-mesh AO field"),
-    "export": ("pipeline.cli.export", "export a checkpoint to ONNX + generated GLSL"),
+    "train": ("neuralao.pipeline.cli.train", "train the baked MLP, the DeepAO U-Net or a per-mesh AO field"),
+    "export": ("neuralao.pipeline.cli.export", "export a checkpoint to ONNX + generated GLSL"),
     "glsl": (
-        "pipeline.cli.glsl",
+        "neuralao.pipeline.cli.glsl",
         "generate GLSL (compute or fragment) from any ONNX model within the op set",
     ),
     "parity": (
-        "pipeline.cli.parity",
+        "neuralao.pipeline.cli.parity",
         "run generated GLSL against onnxruntime on real frames or seeded inputs",
     ),
-    "infer": ("pipeline.cli.infer", "apply an exported ONNX model to a G-buffer frame"),
-    "report": ("pipeline.cli.report", "speed-vs-error report of every method on held-back frames"),
+    "infer": ("neuralao.pipeline.cli.infer", "apply an exported ONNX model to a G-buffer frame"),
+    "report": ("neuralao.pipeline.cli.report", "speed-vs-error report of every method on held-back frames"),
     "evaluate": (
-        "pipeline.cli.evaluate",
+        "neuralao.pipeline.cli.evaluate",
         "score screen-space AO (U-Nets, SSAO, GTAO) by category and resolution on test meshes",
     ),
     "ship": (
-        "pipeline.cli.ship",
+        "neuralao.pipeline.cli.ship",
         "train, export, check and install the release models (runtime/models) from a config",
     ),
     "select": (
-        "pipeline.cli.select",
+        "neuralao.pipeline.cli.select",
         "pick the cheapest AO representation that meets an error target per scene",
     ),
     "volumes": (
-        "pipeline.cli.volumes",
+        "neuralao.pipeline.cli.volumes",
         "bake per-region volume AO models for dynamic objects (Sloan et al. 2013)",
     ),
-    "probe": ("pipeline.cli.probe", "evaluate volume AO models at points and normals (.npy in, .npy out)"),
+    "probe": (
+        "neuralao.pipeline.cli.probe",
+        "evaluate volume AO models at points and normals (.npy in, .npy out)",
+    ),
     "view": (
-        "pipeline.cli.view",
+        "neuralao.pipeline.cli.view",
         "write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders",
     ),
 }

@@ -11,14 +11,14 @@ import argparse
 import logging
 from pathlib import Path
 
-from export.manifest import read_manifest
-from pipeline import kinds
-from pipeline.datasets.dataset import open_dataset
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.limits import check_seed
+from neuralao.export.manifest import read_manifest
+from neuralao.pipeline import kinds
+from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.limits import check_seed
 
-log = logging.getLogger("export.parity")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 # The kind of a `neuralao glsl` export: checked on seeded or given inputs, not on frames.
 ONNX_GLSL = "onnx-glsl"

@@ -1,5 +1,5 @@
 """`neuralao probe VOLUMES.json --points P.npy --normals N.npy --out AO.npy`: evaluate volume AO models
-at points and normals (:class:`runtime.probe.VolumeProbe`)."""
+at points and normals (:class:`neuralao.runtime.probe.VolumeProbe`)."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.foundation.limits import check_count
-from pipeline.foundation.normals import normalize_normals
-from runtime.probe import ORDERS, POINT_BYTES, VolumeProbe
-from runtime.volumes import read_volumes
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.limits import check_count
+from neuralao.runtime.foundation.normals import normalize_normals
+from neuralao.runtime.probe import ORDERS, POINT_BYTES, VolumeProbe
+from neuralao.runtime.volumes import read_volumes
 
-log = logging.getLogger("runtime.probe")  # the logger name users see in messages (unchanged by the move)
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

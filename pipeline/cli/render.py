@@ -25,10 +25,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.datasets.dataset import frame_seed
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json, write_npz, write_png
-from pipeline.foundation.limits import (
+from neuralao.pipeline.datasets.dataset import frame_seed
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import Camera, load_poses, orbit
+from neuralao.pipeline.geometry.scene import Scene, load_scene
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, label_fields
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json, write_npz, write_png
+from neuralao.runtime.foundation.limits import (
     PIXEL_DISK_BYTES,
     check_count,
     check_disk,
@@ -36,12 +40,8 @@ from pipeline.foundation.limits import (
     check_pixels,
     check_seed,
 )
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import Camera, load_poses, orbit
-from pipeline.geometry.scene import Scene, load_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, label_fields
-from runtime.gl import context
+from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.gl import context
 
 log = logging.getLogger(__name__)
 # PyOpenGL logs "No OpenGL_accelerate module loaded" at INFO on import; it is expected and not news.
@@ -198,9 +198,9 @@ def view_seed(seed: int, view: int) -> int:
 def render_and_label(renderer, labeller, camera: Camera) -> dict[str, np.ndarray]:
     """One view: the G-buffer frame of ``camera`` plus ``ao`` (H, W) f32 and ``valid`` (H, W) bool.
 
-    renderer : :class:`pipeline.gbuffers.rasterizer.GBufferRenderer`;
-    labeller : :class:`pipeline.tracing.labeller.Labeller` (its current settings, seed included, are used
-    as they are).
+    renderer : :class:`neuralao.pipeline.gbuffers.rasterizer.GBufferRenderer`;
+    labeller : :class:`neuralao.pipeline.tracing.labeller.Labeller` (its current settings, seed included,
+    are used as they are).
     """
     frame = renderer.render(camera)
     frame["ao"], frame["valid"] = labeller.label_frame(frame)

@@ -1,6 +1,6 @@
 """`neuralao report`: every AO method on the same held-back frames, speed against error.
 
-What is measured and written is :mod:`pipeline.evaluation.report`; this module is its command line.
+What is measured and written is :mod:`neuralao.pipeline.evaluation.report`; this module is its command line.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import json
 import logging
 from pathlib import Path
 
-from pipeline.evaluation.plots import shipped_note
-from pipeline.evaluation.report import (
+from neuralao.pipeline.evaluation.plots import shipped_note
+from neuralao.pipeline.evaluation.report import (
     SHIPPED_PICKS,
     ReportSettings,
     check_settings,
@@ -19,11 +19,11 @@ from pipeline.evaluation.report import (
     method_order,
     write_report,
 )
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import add_set_option, load_settings
-from runtime.shipped import MODELS_DIR
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
+from neuralao.runtime.shipped import MODELS_DIR
 
-log = logging.getLogger("pipeline.evaluation.report")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -1,9 +1,9 @@
 """`neuralao select`: per scene, the cheapest AO representation that meets an SSIM target.
 
-The rule is :mod:`pipeline.evaluation.selection`; the measurements are the report's
-(:func:`pipeline.evaluation.report.evaluate` without the traced references): pass ``--report report.json`` to
-reuse a finished report's numbers, otherwise every representation is run here on the same frames
-with the same ground truth (cached under ``--gt-cache``).
+The rule is :mod:`neuralao.pipeline.evaluation.selection`; the measurements are the report's
+(:func:`neuralao.pipeline.evaluation.report.evaluate` without the traced references): pass ``--report
+report.json`` to reuse a finished report's numbers, otherwise every representation is run here on the same
+frames with the same ground truth (cached under ``--gt-cache``).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import json
 import logging
 from pathlib import Path
 
-from pipeline.evaluation.report import ReportSettings, check_settings, evaluate
-from pipeline.evaluation.selection import CANDIDATE_FAMILIES, DEFAULT_TARGET, select_from_results
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.settings import add_set_option, load_settings
+from neuralao.pipeline.evaluation.report import ReportSettings, check_settings, evaluate
+from neuralao.pipeline.evaluation.selection import CANDIDATE_FAMILIES, DEFAULT_TARGET, select_from_results
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """`neuralao ship CONFIG.json`: train, export, check and install the release models under ``runtime/models/``.
 
-The steps are :mod:`pipeline.release.ship`; this module is its command line.
+The steps are :mod:`neuralao.pipeline.release.ship`; this module is its command line.
 """
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.foundation.settings import load_settings
-from pipeline.release.ship import ShipSettings, ship
+from neuralao.pipeline.release.ship import ShipSettings, ship
+from neuralao.runtime.foundation.settings import load_settings
 
-log = logging.getLogger("pipeline.release.ship")  # the name its lines have always carried
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

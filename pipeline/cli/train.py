@@ -1,4 +1,5 @@
-"""`neuralao train mlp|unet|field`: the flags of each trainable kind (pipeline.kinds) and its training."""
+"""`neuralao train mlp|unet|field`: the flags of each trainable kind (neuralao.pipeline.kinds) and its
+training."""
 
 from __future__ import annotations
 
@@ -10,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline import kinds
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import add_set_option, load_settings
-from pipeline.models import field, mlp, unet_train
+from neuralao.pipeline import kinds
+from neuralao.pipeline.models import field, mlp, unet_train
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
 # The lines a training writes keep the training module's logger name.
 _log = {name: logging.getLogger(k.trainer) for name, k in kinds.TRAINED.items()}
@@ -228,7 +229,7 @@ def run_unet(args: argparse.Namespace) -> int:
     return 0
 
 
-# kind -> (its flags, its run); the kinds and their help come from pipeline.kinds
+# kind -> (its flags, its run); the kinds and their help come from neuralao.pipeline.kinds
 COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
     "mlp": (add_mlp_arguments, run_mlp),
     "unet": (add_unet_arguments, run_unet),

@@ -1,6 +1,6 @@
 """`neuralao view EXPORT_OR_BAKE... --out DIR [--mesh MESH] [--screen-space [MODEL]] [--size W H] [--serve]`:
 write a self-contained WebGL2 page showing bakes and ES 3.00 MLP / field shaders, and optionally a
-screen-space U-Net run in WebGPU on the page's own G-buffer (:mod:`runtime.viewer`)."""
+screen-space U-Net run in WebGPU on the page's own G-buffer (:mod:`neuralao.runtime.viewer`)."""
 
 from __future__ import annotations
 
@@ -8,16 +8,16 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.bakes.viewer_inputs import (
+from neuralao.pipeline.bakes.viewer_inputs import (
     SCREEN_SPACE_RADIUS_REL,
     load_method,
     method_from_unet,
     screen_space_mesh,
 )
-from pipeline.foundation.errors import NeuralaoError
-from runtime.viewer import serve, write_page
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.viewer import serve, write_page
 
-log = logging.getLogger("runtime.viewer")  # the logger name users see in messages (unchanged by the move)
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

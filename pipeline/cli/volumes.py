@@ -1,5 +1,6 @@
 """`neuralao volumes LEVEL --out VOLUMES.json [--regions REGIONS.json] [--glsl DIR]`: bake per-region
-volume AO models for dynamic objects (Sloan et al. 2013); the work is :mod:`pipeline.bakes.volumes`'s."""
+volume AO models for dynamic objects (Sloan et al. 2013); the work is
+:mod:`neuralao.pipeline.bakes.volumes`'s."""
 
 from __future__ import annotations
 
@@ -7,22 +8,20 @@ import argparse
 import logging
 from pathlib import Path
 
-from export.glsl.volume import write_volume_glsl
-from pipeline.bakes.volumes import (
+from neuralao.export.glsl.volume import write_volume_glsl
+from neuralao.pipeline.bakes.volumes import (
     VolumeSettings,
     bake_volumes,
     check_settings,
     load_level_scene,
     read_regions,
 )
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.settings import add_set_option, load_settings
-from runtime.volumes import to_json
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.settings import add_set_option, load_settings
+from neuralao.runtime.volumes import to_json
 
-log = logging.getLogger(
-    "pipeline.bakes.volumes"
-)  # the logger name users see in messages (unchanged by the move)
+log = logging.getLogger(__name__)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

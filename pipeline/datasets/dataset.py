@@ -12,12 +12,12 @@ interrupted run resumes and ends with exactly the files an uninterrupted run wri
 choice (orbit phase, interior cameras, labeller directions) is derived from ``seed``, the scene's
 index and the view index, so the same config gives the same dataset hash.
 
-Composed scenes (:mod:`pipeline.geometry.compose`) are scenes too: a scene entry with ``compose`` settings
-instead of a ``mesh``, or a config-level ``composed`` generator that expands into ``count`` of them
-(after the listed scenes, so their indices, and with them every seed, do not move). A composed
-scene draws its meshes from its split's object meshes (:mod:`pipeline.geometry.splits`), and no mesh of a
-train scene may appear in a val or test scene: the splits are by mesh. With ``labels.radii_rel``
-every frame also stores ``ao_radii`` (H, W, k) and ``valid_radii`` (H, W, k), labelled at
+Composed scenes (:mod:`neuralao.pipeline.geometry.compose`) are scenes too: a scene entry with ``compose``
+settings instead of a ``mesh``, or a config-level ``composed`` generator that expands into ``count`` of them
+(after the listed scenes, so their indices, and with them every seed, do not move). A composed scene draws
+its meshes from its split's object meshes (:mod:`neuralao.pipeline.geometry.splits`), and no mesh of a train
+scene may appear in a val or test scene: the splits are by mesh. With ``labels.radii_rel`` every frame also
+stores ``ao_radii`` (H, W, k) and ``valid_radii`` (H, W, k), labelled at
 ``radii`` (k,) scene units from one trace; without it shards, hashes and manifests are unchanged.
 
 Frames of several sizes and fields of view (a network's receptive field is fixed in pixels while
@@ -45,10 +45,21 @@ from typing import Literal
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.engines.engine import Context, LocalEngine, Task, content_key
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import read_npz, remove_stale_temporaries, sha256_file, write_json, write_npz
-from pipeline.foundation.limits import (
+from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
+from neuralao.pipeline.geometry.camera import Camera, closeup, interior, load_poses, orbit
+from neuralao.pipeline.geometry.compose import ComposeSettings, compose
+from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, slim_scene
+from neuralao.pipeline.geometry.splits import object_meshes
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import (
+    read_npz,
+    remove_stale_temporaries,
+    sha256_file,
+    write_json,
+    write_npz,
+)
+from neuralao.runtime.foundation.limits import (
     MAX_CAP,
     PIXEL_DISK_BYTES,
     check_count,
@@ -57,12 +68,7 @@ from pipeline.foundation.limits import (
     check_pixels,
     check_seed,
 )
-from pipeline.foundation.settings import from_dict, settings_to_dict
-from pipeline.geometry.camera import Camera, closeup, interior, load_poses, orbit
-from pipeline.geometry.compose import ComposeSettings, compose
-from pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, slim_scene
-from pipeline.geometry.splits import object_meshes
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +115,7 @@ class SceneSpec:
     split: Literal["train", "val", "test"] = (
         "train"  # scene-level split: the U-Net never trains on val/test scenes
     )
-    # A composed scene (instead of ``mesh``); see pipeline.geometry.compose.
+    # A composed scene (instead of ``mesh``); see neuralao.pipeline.geometry.compose.
     compose: ComposeSettings | None = None
     sizes: list[Size] | None = None  # frame sizes drawn per shard; None: the dataset's (sizes, else size)
     # Vertical fields of view (degrees) drawn per view; None: yfov_deg if set, else the dataset's range,
@@ -371,9 +377,9 @@ def build_dataset(
 ) -> dict:
     """Render and label every scene of ``settings`` into ``out``; resumable. Returns the manifest.
 
-    ``engine`` (:mod:`pipeline.engines.engine`; default: this process) runs the pending shards, one task each;
-    this process writes every shard (and ``progress.json``) as results arrive, so the files and the
-    dataset hash are the same on any engine.
+    ``engine`` (:mod:`neuralao.pipeline.engines.engine`; default: this process) runs the pending shards, one
+    task each; this process writes every shard (and ``progress.json``) as results arrive, so the files and
+    the dataset hash are the same on any engine.
     """
     own_engine = engine is None
     engine = engine or LocalEngine()
@@ -500,7 +506,7 @@ class _ShardWorker:
     def __init__(self, payload: tuple[Scene, LabelSettings]):
         # Lazy: PyOpenGL (0.16 s measured, and a GL library) is needed only where a shard renders; a
         # Ray driver and U-Net training read datasets without it.
-        from pipeline.gbuffers.rasterizer import GBufferRenderer
+        from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
 
         scene, labels = payload
         self.labels = labels
@@ -637,7 +643,8 @@ def open_dataset(root: str | Path, verify: bool = True) -> Dataset:
 
 def check_counts(settings: DatasetSettings, out: Path) -> None:
     """Every count of the config within what the machine can hold, before anything is expanded or
-    allocated (pipeline.foundation.limits): scenes and views (a camera each), frame sizes (a shard's frames
+    allocated (neuralao.runtime.foundation.limits): scenes and views (a camera each), frame sizes (a shard's
+    frames
     are in memory together), the frames on disk, seeds."""
     scene_bytes = 4096  # a scene entry or a camera, before anything is rendered
     check_seed("seed", settings.seed)

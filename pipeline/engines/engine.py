@@ -30,7 +30,7 @@ A :class:`ResultStore` (optional) keeps finished results on disk, so a driver th
 rerun skips every task it already has (the dataset stage has its own, the shards themselves).
 
 The command line chooses an engine with ``--engine local|ray [--address ADDR] [--ray-workers N]``
-(:mod:`pipeline.cli.engine_options`).
+(:mod:`neuralao.pipeline.cli.engine_options`).
 """
 
 from __future__ import annotations
@@ -49,9 +49,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import read_npz, remove_stale_temporaries, write_npz
-from pipeline.foundation.limits import release_free_memory
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import read_npz, remove_stale_temporaries, write_npz
+from neuralao.runtime.foundation.limits import release_free_memory
 
 log = logging.getLogger(__name__)
 
@@ -62,8 +62,8 @@ STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
 # (ray.init itself retries for minutes).
 CONNECT_TIMEOUT_S = 5.0
-# Rays per point-tracing task (pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one core, so Ray's
-# ~3 ms per task is noise, and enough tasks that the last ones balance across workers.
+# Rays per point-tracing task (neuralao.pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one
+# core, so Ray's ~3 ms per task is noise, and enough tasks that the last ones balance across workers.
 CHUNK_RAYS = 1 << 20
 # Environment a worker process needs to render and trace like the driver (GL platform, threads).
 FORWARDED_ENV = ("PYOPENGL_PLATFORM", "OMP_NUM_THREADS", "OMP_WAIT_POLICY", "NEURALAO_MESHES")

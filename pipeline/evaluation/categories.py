@@ -1,13 +1,14 @@
-"""Screen-space AO judged where users run it (`neuralao evaluate`, :mod:`pipeline.cli.evaluate`).
+"""Screen-space AO judged where users run it (`neuralao evaluate`, :mod:`neuralao.pipeline.cli.evaluate`).
 
 Test frames in categories (isolated scans, glTF game assets, low-poly interiors, composed rooms: all
-from test-split meshes, :mod:`pipeline.geometry.splits`) at several resolutions (128, 256, 512, 1920x1080 in
+from test-split meshes, :mod:`neuralao.pipeline.geometry.splits`) at several resolutions (128, 256, 512,
+1920x1080 in
 ``configs/eval.json``), labelled by Embree at every radius of the trained range from one trace. Each
 resolution is a dataset of its own under ``OUT/frames/<W>x<H>`` (built, or resumed, by the dataset
 stage: an interrupted run continues). Every method gets the same radius in scene units: a U-Net
 export as its radius input, SSAO and GTAO as their kernel radius in the same GL runtime. A U-Net
 runs at its frame's resolution (``native``) or at an internal height (``h256``: point-sampled
-G-buffer, joint bilateral upsampling; :mod:`runtime.internal_resolution`); ``--internal`` lists the
+G-buffer, joint bilateral upsampling; :mod:`neuralao.runtime.internal_resolution`); ``--internal`` lists the
 policies to score, ``model`` is the one the model's manifest declares.
 
 A score is masked SSIM, RMSE and FLIP over the valid foreground pixels of one (frame, radius) pair;
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.datasets.dataset import (
+from neuralao.pipeline.datasets.dataset import (
     ComposedScenes,
     DatasetSettings,
     SceneSpec,
@@ -35,12 +36,12 @@ from pipeline.datasets.dataset import (
     build_dataset,
     open_dataset,
 )
-from pipeline.evaluation.test_split import score_frame, screen_space_predictor, unet_predictor
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json, write_text
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.geometry.splits import split_of
-from pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.evaluation.test_split import score_frame, screen_space_predictor, unet_predictor
+from neuralao.pipeline.geometry.splits import split_of
+from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json, write_text
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
 

@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import uniform_filter
 
-from pipeline.bakes.viewer_inputs import method_from_export
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path, write_text
-from runtime.viewer import ViewerMethod, corner_arrays, write_page
+from neuralao.pipeline.bakes.viewer_inputs import method_from_export
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path, write_text
+from neuralao.runtime.viewer import ViewerMethod, corner_arrays, write_page
 
 CROP_MARGIN = 3  # pixels kept around the foreground's bounding box
 ERROR_VMAX = 0.3  # top of the |error| colour scale (AO units)

@@ -23,10 +23,10 @@ import logging
 import math
 from pathlib import Path
 
-from pipeline.evaluation.categories import markdown as evaluation_markdown
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from runtime.shipped import read_index
+from neuralao.pipeline.evaluation.categories import markdown as evaluation_markdown
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.shipped import read_index
 
 log = logging.getLogger(__name__)
 

@@ -13,39 +13,41 @@ settings and radii).
 Radii: the main figures are at the labels' max distance. The methods that take the AO radius at run
 time (SSAO, GTAO, the U-Nets: ``RADIUS_FAMILIES``) are also evaluated at every radius of
 ``radii_rel`` (x the scene diagonal; default the dataset's ``labels.radii_rel``), each given the same
-radius (the U-Net as its radius input rho, :func:`pipeline.models.unet.frame_radius_param`), against ground
-truth at that radius; the ground truth at all radii comes from ONE trace to the largest
-(:meth:`pipeline.tracing.labeller.Labeller.label_frame_radii`, equal to separate traces bit for bit). Methods
-with a baked-in radius (vertex bakes, MLPs, fields, traced) are evaluated at the max distance only.
+radius (the U-Net as its radius input rho, :func:`neuralao.pipeline.models.unet.frame_radius_param`),
+against ground truth at that radius; the ground truth at all radii comes from ONE trace to the largest
+(:meth:`neuralao.pipeline.tracing.labeller.Labeller.label_frame_radii`, equal to separate traces bit for
+bit). Methods with a baked-in radius (vertex bakes, MLPs, fields, traced) are evaluated at the max distance
+only.
 
 Methods (each one run on every frame it applies to):
 
-* ``ssao``, ``gtao``: the screen-space baselines of :mod:`runtime.baselines` (GLSL fragment passes),
+* ``ssao``, ``gtao``: the screen-space baselines of :mod:`neuralao.runtime.baselines` (GLSL fragment passes),
   radius = the labels' max distance (and every radius of ``radii_rel``);
-* ``vertex-sampled``, ``vertex-lsq``: AO baked per vertex (:mod:`pipeline.bakes.vertex`: sampled at vertices,
-  or least-squares fitted to surface samples) with ``bake_rays`` rays, shown as a vertex-colour draw
-  shows it (barycentric interpolation per pixel);
+* ``vertex-sampled``, ``vertex-lsq``: AO baked per vertex (:mod:`neuralao.pipeline.bakes.vertex`: sampled at
+  vertices, or least-squares fitted to surface samples) with ``bake_rays`` rays, shown as a vertex-colour
+  draw shows it (barycentric interpolation per pixel);
 * ``trace-4`` / ``-16`` / ``-64``: Embree AO of every pixel at that ray count (the labeller itself);
 * ``vertex-lsq-8bit``: the least-squares bake stored as 8-bit UNORM vertex colours (1 B per vertex);
 * ``mlp-<size>``: every exported baked MLP, on the frames of the scene it was trained for (its
   generated GLSL fragment shader on the frame's object-space normals, output clamped to [0, 1]);
-* ``field-<size>``: every exported AO field (:mod:`pipeline.models.field`), on the frames of the scene it was
-  trained for: its generated GLSL fragment shader on the frame's object-space position + normal;
-* ``unet``: the exported U-Net through onnxruntime (:func:`runtime.predict.unet_predictor`), every frame;
-  half / quarter-resolution variants (manifest metadata ``scale`` 2 / 4) are rows like any U-Net;
-* ``shipped:<name>``: the release U-Nets of ``runtime/models/`` (:mod:`runtime.shipped`), included when
-  no ``--exports`` is given, or in addition with ``--shipped``: by default the ``default`` and ``fast``
+* ``field-<size>``: every exported AO field (:mod:`neuralao.pipeline.models.field`), on the frames of the
+  scene it was trained for: its generated GLSL fragment shader on the frame's object-space position +
+  normal;
+* ``unet``: the exported U-Net through onnxruntime (:func:`neuralao.runtime.predict.unet_predictor`), every
+  frame; half / quarter-resolution variants (manifest metadata ``scale`` 2 / 4) are rows like any U-Net;
+* ``shipped:<name>``: the release U-Nets of ``runtime/models/`` (:mod:`neuralao.runtime.shipped`), included
+  when no ``--exports`` is given, or in addition with ``--shipped``: by default the ``default`` and ``fast``
   models only (:func:`pick_shipped`; ``--shipped all`` or names for others); their training curves,
   corpus-size study and test figures (from ``index.json`` and the manifests' provenance) are plotted by
-  :mod:`pipeline.evaluation.plots`. None shipped: the report says so in one line.
+  :mod:`neuralao.pipeline.evaluation.plots`. None shipped: the report says so in one line.
 
-Error: masked SSIM (:func:`pipeline.foundation.metrics.masked_ssim`) and RMSE over foreground pixels whose
-ground truth is valid, averaged over frames. Time: seconds per frame at ``time_size`` (512 x 512),
-all in this run: GL passes (SSAO, GTAO, the MLP fragment shader, the U-Net's generated compute
-shaders, the vertex-colour draw) on the same headless GL context, timed with ``glFinish`` around
-each frame with the G-buffer resident; traced AO as the wall time of the Embree trace on the CPU
-(``workers`` threads); onnxruntime (CPU) times of the models (a whole frame through
-:mod:`runtime.predict`, input packing and clamping included) are reported beside the GL ones. Each
+Error: masked SSIM (:func:`neuralao.runtime.foundation.metrics.masked_ssim`) and RMSE over foreground pixels
+whose ground truth is valid, averaged over frames. Time: seconds per frame at ``time_size`` (512 x 512), all
+in this run: GL passes (SSAO, GTAO, the MLP fragment shader, the U-Net's generated compute shaders, the
+vertex-colour draw) on the same headless GL context, timed with ``glFinish`` around each frame with the
+G-buffer resident; traced AO as the wall time of the Embree trace on the CPU (``workers`` threads);
+onnxruntime (CPU) times of the models (a whole frame through
+:mod:`neuralao.runtime.predict`, input packing and clamping included) are reported beside the GL ones. Each
 scene gets a ``time_size`` G-buffer rendered from the pose of its first evaluation frame; a
 method's time is the median over scenes. Ratios: time over SSAO's time, and RMSE (and 1 - SSIM)
 over SSAO's on the same frames.
@@ -72,26 +74,22 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from export.field import gbuffer_textures
-from export.glsl import load_compute_export, load_mlp_export
-from pipeline import kinds
-from pipeline.bakes.vertex import BakeSettings, bake
-from pipeline.datasets.dataset import open_dataset, scene_of
-from pipeline.evaluation.figures import contact_sheet as readable_sheet
-from pipeline.evaluation.figures import write_html, write_viewer_pages
-from pipeline.evaluation.plots import shipped_markdown, shipped_summary, write_shipped_plots
-from pipeline.evaluation.selection import render_markdown as select_markdown
-from pipeline.evaluation.selection import render_targets_markdown as targets_markdown
-from pipeline.evaluation.selection import select_from_results
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path, read_npz, sha256_json, write_json, write_npz, write_text
-from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
-from pipeline.foundation.settings import from_dict, settings_to_dict
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import Camera
-from pipeline.tracing.labeller import Labeller, LabelSettings
-from runtime import gl
-from runtime.baselines import (
+from neuralao.export.field import gbuffer_textures
+from neuralao.export.glsl import load_compute_export, load_mlp_export
+from neuralao.pipeline import kinds
+from neuralao.pipeline.bakes.vertex import BakeSettings, bake
+from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
+from neuralao.pipeline.evaluation.figures import contact_sheet as readable_sheet
+from neuralao.pipeline.evaluation.figures import write_html, write_viewer_pages
+from neuralao.pipeline.evaluation.plots import shipped_markdown, shipped_summary, write_shipped_plots
+from neuralao.pipeline.evaluation.selection import render_markdown as select_markdown
+from neuralao.pipeline.evaluation.selection import render_targets_markdown as targets_markdown
+from neuralao.pipeline.evaluation.selection import select_from_results
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import Camera
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime import gl
+from neuralao.runtime.baselines import (
     GTAOSettings,
     SSAOSettings,
     run_screen_space,
@@ -100,14 +98,25 @@ from runtime.baselines import (
     traced_ao,
     vertex_ao_image,
 )
-from runtime.glsl_runner import (
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import (
+    atomic_path,
+    read_npz,
+    sha256_json,
+    write_json,
+    write_npz,
+    write_text,
+)
+from neuralao.runtime.foundation.metrics import masked_flip, masked_rmse, masked_ssim
+from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
+from neuralao.runtime.glsl_runner import (
     run_mlp_fragment,
     run_vector_fragment,
     time_compute,
     time_mlp_fragment,
     time_vector_fragment,
 )
-from runtime.predict import PREDICTORS, Predictor
+from neuralao.runtime.predict import PREDICTORS, Predictor
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +124,7 @@ FORMAT_VERSION = 1
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
 BASELINE_ORDER = ("ssao", "gtao", "vertex-sampled", "vertex-lsq", "vertex-lsq-8bit")
 # The report's own families (baselines); the model families (rows loaded from exports) come from
-# pipeline.kinds.
+# neuralao.pipeline.kinds.
 FAMILY_ORDER = {
     "screen-space": 0,
     "baked": 1,
@@ -125,7 +134,7 @@ FAMILY_ORDER = {
 MODEL_FAMILIES = tuple(kinds.REPORTED)  # methods loaded from exports
 # Methods that take the AO radius at run time: evaluated at every radius of ReportSettings.radii_rel.
 RADIUS_FAMILIES = ("screen-space", *(n for n, k in kinds.REPORTED.items() if k.radius_input))
-# Scatter-plot colours of the families (pipeline.kinds gives the models').
+# Scatter-plot colours of the families (neuralao.pipeline.kinds gives the models').
 COLOURS = {
     "screen-space": "tab:blue",
     "baked": "tab:green",
@@ -170,8 +179,8 @@ class ReportSettings:
     seed: int = 0
     # Tracing threads (ground truth, baselines).
     workers: int = 2
-    # Write a contact sheet per scene (pipeline.evaluation.figures: cropped, methods side by side, error
-    # inset).
+    # Write a contact sheet per scene (neuralao.pipeline.evaluation.figures: cropped, methods side by side,
+    # error inset).
     contact_sheets: bool = True
     # The methods a contact sheet shows, in order (those present in the report); "shipped:default" and
     # "shipped:fast" stand for the shipped rows of those roles, "field" / "mlp" for the smallest of each.
@@ -189,8 +198,9 @@ class ReportSettings:
     # Write a viewer page per scene (`neuralao view`: its least-squares bake and its MLP / field shaders)
     # under OUT/viewer/, linked from report.html.
     viewer_pages: bool = True
-    # Also score every frame with NVIDIA FLIP (pipeline.foundation.metrics.masked_flip, flip-evaluator;
-    # background set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on one core.
+    # Also score every frame with NVIDIA FLIP (neuralao.runtime.foundation.metrics.masked_flip,
+    # flip-evaluator; background set to 1 in both images); about 0.1-0.3 s per method and 128x128 frame on
+    # one core.
     flip: bool = True
     # Screen-space baseline settings (radius: the labels' max distance, and each of radii_rel).
     ssao: SSAOSettings = field(default_factory=SSAOSettings)
@@ -219,7 +229,7 @@ class Method:
     available: bool = True
     reason: str = ""
     # Model methods, prepared by prepare_model: the AO its error is measured on, its onnxruntime
-    # inference (runtime.predict) and the generated GLSL program that is timed.
+    # inference (neuralao.runtime.predict) and the generated GLSL program that is timed.
     predictor: Predictor | None = None
     ort: Predictor | None = None
     program: Any = None
@@ -521,7 +531,7 @@ def discover_shipped(
 ) -> tuple[list[Method], dict]:
     """The shipped U-Nets of ``models_dir`` (runtime/models) picked by :func:`pick_shipped` (None:
     every one) as rows ``shipped:<name>``, and the summary of the index
-    (:func:`pipeline.evaluation.plots.shipped_summary`, its models cut to the picked ones and their
+    (:func:`neuralao.pipeline.evaluation.plots.shipped_summary`, its models cut to the picked ones and their
     ``roles``; its ``note`` says why none)."""
     summary = shipped_summary(models_dir)
     names = pick_shipped(summary, picks)
@@ -629,7 +639,7 @@ class GLPath:
     seconds: Callable[[Any, int, int, int], float]
     # Timed repetitions of the onnxruntime inference, from ReportSettings.repeats.
     ort_repeats: Callable[[int], int]
-    # Keyword arguments of the kind's onnxruntime predictor (runtime.predict.PREDICTORS).
+    # Keyword arguments of the kind's onnxruntime predictor (neuralao.runtime.predict.PREDICTORS).
     ort_options: dict = field(default_factory=dict)
 
 
@@ -1494,7 +1504,7 @@ def contact_order(result: dict, wanted: list[str]) -> list[str]:
 
 
 def contact_sheet(scene: str, sheet: dict, order: list[str], path: Path) -> Path:
-    """The scene's contact sheet (:func:`pipeline.evaluation.figures.contact_sheet`)."""
+    """The scene's contact sheet (:func:`neuralao.pipeline.evaluation.figures.contact_sheet`)."""
     return readable_sheet(scene, sheet, order, path)
 
 

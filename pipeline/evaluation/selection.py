@@ -9,14 +9,15 @@ scene's held-back frames is at least ``target`` is chosen. The document records,
 order tried, the choice, whether the target was met (if nothing meets it the best-scoring one is
 recorded with ``met_target: false``), and what the choice saves against the largest candidate.
 
-:mod:`pipeline.evaluation.report` (which measures) and :mod:`pipeline.cli.select` (the command)
-both import this module; it imports neither (the model families come from :mod:`pipeline.kinds`).
+:mod:`neuralao.pipeline.evaluation.report` (which measures) and :mod:`neuralao.pipeline.cli.select` (the
+command) both import this module; it imports neither (the model families come from
+:mod:`neuralao.pipeline.kinds`).
 """
 
 from __future__ import annotations
 
-from pipeline import kinds
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.pipeline import kinds
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 DEFAULT_TARGET = 0.95
 CANDIDATE_FAMILIES = ("screen-space", "baked", *kinds.REPORTED)

@@ -2,9 +2,9 @@
 
 Ground truth is the dataset's own labels at each radius (``ao_radii`` / ``valid_radii``, one trace);
 every method gets the same radius in scene units (the U-Net as its radius input, SSAO and GTAO as
-their kernel radius). A score is the masked SSIM / RMSE (pipeline.foundation.metrics) of one (frame, radius)
-pair over the valid foreground pixels; a method's figure is the mean over pairs, also per radius
-(by its ``radii_rel`` entry) and per scene.
+their kernel radius). A score is the masked SSIM / RMSE (neuralao.runtime.foundation.metrics) of one (frame,
+radius) pair over the valid foreground pixels; a method's figure is the mean over pairs, also per radius (by
+its ``radii_rel`` entry) and per scene.
 """
 
 from __future__ import annotations
@@ -14,25 +14,26 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.datasets.dataset import open_dataset
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.metrics import masked_flip, masked_rmse, masked_ssim
-from runtime.baselines import run_screen_space
-from runtime.predict import unet_predictor as runtime_unet_predictor
+from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.runtime.baselines import run_screen_space
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metrics import masked_flip, masked_rmse, masked_ssim
+from neuralao.runtime.predict import unet_predictor as runtime_unet_predictor
 
 # predictor(frame, radius in scene units) -> AO (H, W) float32, 1 on background
 Predictor = Callable[[dict, float], np.ndarray]
 
 
 def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = None) -> Predictor:
-    """onnxruntime inference of a U-Net export at a given radius (:func:`runtime.predict.unet_predictor`);
+    """onnxruntime inference of a U-Net export at a given radius
+    (:func:`neuralao.runtime.predict.unet_predictor`);
     ``internal_height`` None (the default here) runs it at the frame's own size, "model" at the height
     it declares."""
     return runtime_unet_predictor(onnx_path, internal_height)
 
 
 def screen_space_predictor(method: str, settings=None) -> Predictor:
-    """SSAO / GTAO (runtime.baselines) with the label radius as their kernel radius."""
+    """SSAO / GTAO (neuralao.runtime.baselines) with the label radius as their kernel radius."""
     return lambda frame, radius: run_screen_space(frame, method, radius, settings)
 
 

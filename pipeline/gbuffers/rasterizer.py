@@ -3,7 +3,7 @@
 How the channels are produced
 -----------------------------
 pyrender reads colour back as 8 bits and shades normals only through its own shaders, so neuralao
-uses pyrender only for the context (:mod:`runtime.gl`, OSMesa or EGL) and draws every scene with
+uses pyrender only for the context (:mod:`neuralao.runtime.gl`, OSMesa or EGL) and draws every scene with
 one program of its own into a framebuffer with five colour attachments written in one pass (MRT):
 
 * attachment 0, ``R32F``: linear depth;
@@ -45,10 +45,10 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.camera import Camera
-from pipeline.geometry.scene import Scene
-from runtime import gl as rgl  # sets PYOPENGL_PLATFORM before PyOpenGL is first imported
+from neuralao.pipeline.geometry.camera import Camera
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.runtime import gl as rgl  # sets PYOPENGL_PLATFORM before PyOpenGL is first imported
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 GL = rgl.GL
 # PyOpenGL binds some GL 4.5 core entry points only when the library exports them (libOSMesa does

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,8 @@
 AO lives in contact regions (an object's foot on the floor, a box against a wall, a vase on a
 crate), so a corpus of isolated meshes on orbits teaches a network little of it. A composed scene
 is a room (a floor, 0-4 walls, optionally a ceiling) holding objects: train-split meshes from
-:mod:`pipeline.geometry.splits` and primitives (boxes, cylinders, spheres, thin panels), each with a random
-size and rotation, placed by one of five strategies:
+:mod:`neuralao.pipeline.geometry.splits` and primitives (boxes, cylinders, spheres, thin panels), each with
+a random size and rotation, placed by one of five strategies:
 
 * ``floor``: anywhere on the floor; ``wall`` / ``corner``: its bounding box flush against one wall
   / two adjacent walls; ``stack``: dropped onto an earlier object; ``beside``: slid along the
@@ -18,8 +18,8 @@ from their probe points backwards onto it. Vertex-face and (up to the edge sampl
 contacts are caught, so objects touch without interpenetrating (tests/test_compose.py checks both).
 Walls are planes at the room's edge, so flush is exact from the rotated bounding box.
 
-Conventions: +y is up (as :mod:`pipeline.geometry.camera`: interior eye heights are along y), the floor is
-the plane y = 0 spanning the room, walls and ceiling face inwards. Every random choice comes from
+Conventions: +y is up (as :mod:`neuralao.pipeline.geometry.camera`: interior eye heights are along y), the
+floor is the plane y = 0 spanning the room, walls and ceiling face inwards. Every random choice comes from
 ``ComposeSettings.seed``: the plan (room, object kinds, meshes, sizes, rotations, strategies) from
 one generator, each object's position from its own, so the same seed and mesh pool give identical
 vertex arrays. Meshes are loaded once per process (:func:`normalized_mesh`).
@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import Scene, load_scene, scene_from_arrays
-from pipeline.geometry.splits import object_meshes
+from neuralao.pipeline.geometry.scene import Scene, load_scene, scene_from_arrays
+from neuralao.pipeline.geometry.splits import object_meshes
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 log = logging.getLogger(__name__)
 
@@ -67,9 +67,9 @@ class ComposeSettings:
     size: tuple[float, float] = (0.25, 0.9)  # range of an object's largest bounding-box extent
     tumble: float = 0.25  # probability that a mesh gets a uniformly random rotation (else upright + yaw)
     meshes: list[str] | None = None  # mesh pool; None -> the object meshes of the scene's split
-    # Revision of that split's pool (pipeline.geometry.splits.ADDED): 1 = the meshes of the first corpus,
-    # 2 adds the thin-part / shell props. Fixed per config, so adding meshes to a split never changes a
-    # config's scenes.
+    # Revision of that split's pool (neuralao.pipeline.geometry.splits.ADDED): 1 = the meshes of the first
+    # corpus, 2 adds the thin-part / shell props. Fixed per config, so adding meshes to a split never
+    # changes a config's scenes.
     pool: int = 1
 
 
@@ -243,7 +243,7 @@ def _axis_rotation(axis: int, angle: float) -> np.ndarray:
 
 def plan(settings: ComposeSettings, split: str = "train") -> Plan:
     """The seeded :class:`Plan` of a composed scene, before any mesh is loaded. Meshes come from
-    ``settings.meshes`` or else :func:`pipeline.geometry.splits.object_meshes` of ``split`` at
+    ``settings.meshes`` or else :func:`neuralao.pipeline.geometry.splits.object_meshes` of ``split`` at
     ``settings.pool``."""
     _check(settings)
     pool = tuple(settings.meshes) if settings.meshes is not None else object_meshes(split, settings.pool)

@@ -1,7 +1,7 @@
 """Least-squares vertex values from surface samples (Kavan, Bargteil, Sloan 2011, "Least Squares
 Vertex Baking", as used for AO by Sloan, Tranchida, Chen, Kavan 2013).
 
-Given surface samples ``s`` (:func:`pipeline.geometry.surface.surface_samples`) with values ``f_s``,
+Given surface samples ``s`` (:func:`neuralao.pipeline.geometry.surface.surface_samples`) with values ``f_s``,
 the per-vertex values ``v`` minimise
 
     E(v) = sum_s w_s (B_s v - f_s)^2  +  alpha * REG_SCALE * sum_(i,j) m_ij (v_i - v_j)^2
@@ -43,9 +43,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import cg, splu
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import Scene
-from pipeline.geometry.surface import SurfaceSamples, edge_laplacian, edge_weights, interpolation_matrix
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.surface import (
+    SurfaceSamples,
+    edge_laplacian,
+    edge_weights,
+    interpolation_matrix,
+)
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Base scale of the edge regulariser (module doc). With area-weighted edges a vertex's regulariser
 # stiffness is ~4x its data stiffness at alpha * REG_SCALE = 1 on a regular mesh; 0.01 makes

@@ -35,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
-from pipeline.geometry.scene import gltf_resource
+from neuralao.pipeline.geometry.scene import gltf_resource
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
 
 ROLES = ("static", "blocker", "tree", "shrub", "grass")
 # Parameters each role accepts in extras, with their defaults (Sloan et al.: trees attenuate 50%).

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import write_json
-from pipeline.foundation.settings import apply_overrides, from_dict, settings_to_dict
-from pipeline.geometry.level_files import GltfWriter, quat_to_matrix
-from pipeline.geometry.scene import load_scene
+from neuralao.pipeline.geometry.level_files import GltfWriter, quat_to_matrix
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.settings import apply_overrides, from_dict, settings_to_dict
 
 
 @dataclass
@@ -114,7 +114,7 @@ PRESETS: dict[str, dict] = {
     },
 }
 
-# The bake config each preset is written with (pipeline.bakes.level_settings.LevelBakeSettings keys).
+# The bake config each preset is written with (neuralao.pipeline.bakes.level_settings.LevelBakeSettings keys).
 BAKE_CONFIGS: dict[str, dict] = {
     "tiny": {
         "trace": {"rays": 64, "samples_per_vertex": 2.0, "samples_per_face_cap": 4},

@@ -17,7 +17,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 log = logging.getLogger(__name__)
 

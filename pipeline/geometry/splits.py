@@ -3,8 +3,8 @@
 A U-Net that is scored on frames of meshes it trained on measures memory, not generalisation, so
 the corpus splits whole meshes (never frames) into train / val / test. Every mesh of
 ``../shared/assets/meshes`` (its SOURCES.tsv) is in exactly one split. Interiors (rooms a camera
-fits inside) are listed apart from objects: the scene composer (:mod:`pipeline.geometry.compose`) places
-objects, while interiors are scenes of their own.
+fits inside) are listed apart from objects: the scene composer (:mod:`neuralao.pipeline.geometry.compose`)
+places objects, while interiors are scenes of their own.
 
 * **test** holds what the issue asks the shipped model to be judged on: glTF game assets
   (KnightArmor, RetroUFO, CesiumMilkTruck), dense scans (Lucy, the horse) and a low-poly interior
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 Split = Literal["train", "val", "test"]
 
@@ -45,7 +45,7 @@ ADDED: dict[int, tuple[str, ...]] = {
 }
 LATEST_POOL = max(ADDED)
 
-# Object meshes, by split (bare names under pipeline.geometry.scene.mesh_root()).
+# Object meshes, by split (bare names under neuralao.pipeline.geometry.scene.mesh_root()).
 OBJECTS: dict[str, tuple[str, ...]] = {
     "train": (
         "bunny",

@@ -4,7 +4,7 @@ Samples (:func:`surface_samples`): every face gets ``round(total * area share)``
 and at most ``cap`` (Sloan et al. cap samples per face so a single huge face, a floor or a wall,
 cannot eat the budget). Inside a face the k samples are a Hammersley set
 ``((i + s1) / k, frac(radinv(i) + s2))`` with a per-face random shift ``(s1, s2)``
-(:mod:`pipeline.geometry.sequences`), mapped area-preservingly to the triangle (square-root warp):
+(:mod:`neuralao.pipeline.geometry.sequences`), mapped area-preservingly to the triangle (square-root warp):
 stratified, deterministic for a seed.
 
 Interpolation (:func:`interpolate`, :func:`interpolation_matrix`): the barycentric blend of a face's
@@ -12,7 +12,7 @@ three corner values, exactly what a rasteriser shows inside the face. Error agai
 measured over surface samples (:func:`surface_error`), never at the vertices.
 
 Edges (:func:`edge_weights`, :func:`edge_laplacian`): the unique mesh edges weighted by the area they
-span, the regulariser of :mod:`pipeline.geometry.least_squares`.
+span, the regulariser of :mod:`neuralao.pipeline.geometry.least_squares`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import Scene
-from pipeline.geometry.sequences import hammersley, sample_shifts
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.sequences import hammersley, sample_shifts
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 @dataclass

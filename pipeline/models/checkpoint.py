@@ -13,8 +13,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import atomic_path
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_path
 
 REQUIRED_KEYS = ("model_args", "state_dict", "config")
 

@@ -24,14 +24,14 @@ Model (``FieldNet``; ONNX ops Sub, Mul, MatMul, Sin, Cos, Concat, Gemm, Tanh)
 Samples
 -------
 ``samples`` points drawn area-proportionally over the surface (stratified per face,
-:func:`pipeline.geometry.surface.surface_samples`, seeded), each on *both sides*: the front with the smooth
-normal the G-buffer interpolates (corner normals turned to the face's side, barycentric blend,
-renormalised) and the label of the geometric normal, the back with both negated. The labeller's
-back-face rule marks the back side of a closed surface invalid (its rays start inside) and those
-samples are dropped, so closed meshes train on their outside only, while an open, single-sided
-surface trains on both sides and the field, whose normal input tells the sides apart, represents
-both (a vertex bake holds one value per vertex and cannot). Split 80/20 train / validation by a
-seeded permutation; held-back orbit views (another phase) are fully labelled for evaluation only.
+:func:`neuralao.pipeline.geometry.surface.surface_samples`, seeded), each on *both sides*: the front with
+the smooth normal the G-buffer interpolates (corner normals turned to the face's side, barycentric blend,
+renormalised) and the label of the geometric normal, the back with both negated. The labeller's back-face
+rule marks the back side of a closed surface invalid (its rays start inside) and those samples are dropped,
+so closed meshes train on their outside only, while an open, single-sided surface trains on both sides and
+the field, whose normal input tells the sides apart, represents both (a vertex bake holds one value per
+vertex and cannot). Split 80/20 train / validation by a seeded permutation; held-back orbit views (another
+phase) are fully labelled for evaluation only.
 
 Training: Adam (seeded, full determinism on the CPU: one thread, fixed batch order), cosine learning
 rate decay, MSE loss, the weights of the best validation RMSE kept.
@@ -51,9 +51,20 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from pipeline.datasets.dataset import frame_seed, open_dataset, scene_of
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.limits import (
+from neuralao.pipeline.datasets.dataset import frame_seed, open_dataset, scene_of
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import interior, orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.geometry.surface import surface_samples
+from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
+from neuralao.pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
+from neuralao.pipeline.models.mlp import (  # count_parameters: trainable weights only
+    count_parameters,
+    size_name,
+)
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
     MAX_CAP,
     SAMPLE_BYTES,
     THREAD_BYTES,
@@ -62,19 +73,8 @@ from pipeline.foundation.limits import (
     check_pixels,
     check_seed,
 )
-from pipeline.foundation.metrics import masked_rmse, masked_ssim
-from pipeline.foundation.settings import from_dict, settings_to_dict
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import interior, orbit
-from pipeline.geometry.scene import load_scene
-from pipeline.geometry.surface import surface_samples
-from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
-from pipeline.models.mlp import (  # count_parameters: trainable weights only
-    count_parameters,
-    size_name,
-)
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
+from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 
 log = logging.getLogger(__name__)
 
@@ -313,8 +313,9 @@ def check_settings(s: FieldSettings) -> None:
         each="a validation record of the history",
         shown=f"{s.steps} (checked every {s.check_every})",
     )
-    # What the counts allocate, before any of it is (pipeline.foundation.limits): every surface sample twice
-    # (both sides), a batch of activations per layer, the held-back frames, a network of hidden widths.
+    # What the counts allocate, before any of it is (neuralao.runtime.foundation.limits): every surface
+    # sample twice (both sides), a batch of activations per layer, the held-back frames, a network of hidden
+    # widths.
     check_count(
         "samples", 2 * s.samples, bytes_each=SAMPLE_BYTES, each="per surface sample", shown=str(s.samples)
     )

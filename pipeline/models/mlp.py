@@ -55,9 +55,9 @@ Early stopping: the validation MSE is checked every ``check_every`` iterations; 
 
 Evaluation, as deployed: on held-back views the network is applied at **radius zero** (each pixel's
 own normal repeated 16 times), clamped to [0, 1], and compared with the ray-traced AO by masked SSIM
-and RMSE (:mod:`pipeline.foundation.metrics`, Gaussian window 11, sigma 1.5) over the valid foreground pixels.
-The same network applied with the radius-10 circle it was trained on is reported next to it
-(``*_r10``), to show what the radius-zero deployment costs.
+and RMSE (:mod:`neuralao.runtime.foundation.metrics`, Gaussian window 11, sigma 1.5) over the valid
+foreground pixels. The same network applied with the radius-10 circle it was trained on is reported next to
+it (``*_r10``), to show what the radius-zero deployment costs.
 """
 
 from __future__ import annotations
@@ -74,21 +74,32 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from pipeline.datasets.dataset import frame_seed, open_dataset
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.limits import SAMPLE_BYTES, THREAD_BYTES, check_count, check_pixels, check_seed
-from pipeline.foundation.metrics import image_ssim, masked_rmse, masked_ssim
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.gbuffers.rasterizer import GBufferRenderer
-from pipeline.geometry.camera import orbit
-from pipeline.geometry.scene import load_scene
-from pipeline.models.checkpoint import count_parameters, per_mesh_checkpoint, restore_model, save_checkpoint
-from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.pipeline.datasets.dataset import frame_seed, open_dataset
+from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
+from neuralao.pipeline.geometry.camera import orbit
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.models.checkpoint import (
+    count_parameters,
+    per_mesh_checkpoint,
+    restore_model,
+    save_checkpoint,
+)
+from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
+    SAMPLE_BYTES,
+    THREAD_BYTES,
+    check_count,
+    check_pixels,
+    check_seed,
+)
+from neuralao.runtime.foundation.metrics import image_ssim, masked_rmse, masked_ssim
+from neuralao.runtime.foundation.settings import settings_to_dict
 
 # The deployed input layout is the consumer runtime's (CIRCLE_SAMPLES normals, radius-zero input).
-from runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
-from runtime.predict import MLP_INPUTS as INPUTS
+from neuralao.runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
+from neuralao.runtime.predict import MLP_INPUTS as INPUTS
 
 log = logging.getLogger(__name__)
 
@@ -727,7 +738,8 @@ def model_from_checkpoint(ckpt: dict) -> BakedMLP:
 
 def check_counts(s: MLPSettings) -> None:
     """Every count of the settings within what the machine can hold, before anything is rendered or
-    allocated (pipeline.foundation.limits): the orbit's views and their samples, the view and held-back sizes,
+    allocated (neuralao.runtime.foundation.limits): the orbit's views and their samples, the view and
+    held-back sizes,
     the batch, the network and the validation history; seed and threads."""
     check_count(
         "views", s.views, bytes_each=4096 + SAMPLE_BYTES * max(s.samples_per_view, 1), each="a view's samples"

@@ -49,11 +49,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.settings import from_dict
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.settings import from_dict
 
 # The input contract is the consumer runtime's (numpy only); re-exported for training and export.
-from runtime.unet_input import (  # noqa: F401
+from neuralao.runtime.unet_input import (  # noqa: F401
     BACKGROUND_DEPTH,
     HYBRID_CHANNELS,
     HYBRID_DESCRIPTION,

@@ -1,11 +1,11 @@
 """`neuralao train unet`: train the DeepAO U-Net with a masked 1 - SSIM loss; resumable, deterministic.
 
 Data: frames of the dataset's ``train`` scenes (held-back views excluded), preprocessed ONCE per
-whole frame with :func:`pipeline.models.unet.preprocess` (so the depth normalisation of a crop is that of
-its frame, exactly as at run time), then random square crops with horizontal / vertical flips
-(flips negate n_x / n_y). Frames may differ in size (a corpus of several resolutions): crops are
-the same size whatever the frame, so a batch mixes them. Validation: whole frames of the ``val``
-scenes every epoch (held-back views of the training scenes when the dataset has no val scene).
+whole frame with :func:`neuralao.pipeline.models.unet.preprocess` (so the depth normalisation of a crop is
+that of its frame, exactly as at run time), then random square crops with horizontal / vertical flips (flips
+negate n_x / n_y). Frames may differ in size (a corpus of several resolutions): crops are the same size
+whatever the frame, so a batch mixes them. Validation: whole frames of the ``val`` scenes every epoch
+(held-back views of the training scenes when the dataset has no val scene).
 
 Loss: 1 - SSIM (Gaussian window 11, sigma 1.5, C1 = 1e-4, C2 = 9e-4) averaged over the pixels
 whose label is valid; before SSIM the prediction is replaced by the label outside the mask, so
@@ -35,13 +35,10 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from pipeline.datasets.dataset import open_dataset
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.metrics import masked_rmse, masked_ssim
-from pipeline.foundation.settings import settings_to_dict
-from pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from pipeline.models.checkpoint import restore_model, save_checkpoint
-from pipeline.models.unet import (
+from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
+from neuralao.pipeline.models.checkpoint import restore_model, save_checkpoint
+from neuralao.pipeline.models.unet import (
     PREPROCESS_DESCRIPTION,
     PaddedUNet,
     UNet,
@@ -52,8 +49,11 @@ from pipeline.models.unet import (
     model_args_dict,
     preprocess_frame,
 )
-from runtime.baselines import run_gtao
-from runtime.internal_resolution import downsample_frame, internal_size
+from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
+from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.internal_resolution import downsample_frame, internal_size
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +87,7 @@ class UNetTrainSettings:
     seed: int = 0  # seeds weight init (torch.manual_seed) and the crop / flip / order / radius generator
     threads: int = 0  # torch intra-op threads (0 = torch's default); fixed for bitwise-reproducible runs
     # Architecture beyond the widths: the G-buffer resolution divisor of the variant (1, 2 or 4) and the
-    # width of its full-resolution refinement (see pipeline.models.unet.UNet).
+    # width of its full-resolution refinement (see neuralao.pipeline.models.unet.UNet).
     scale: int = 1
     refine_width: int = 4
     # Learning-rate schedule over all steps: "constant", or "cosine" (linear warm-up over warmup_steps,
@@ -107,10 +107,11 @@ class UNetTrainSettings:
     init: str = ""  # checkpoint to start from (weights whose shapes match are copied; e.g. the full-res
     # network for a reduced-resolution variant, whose refinement then starts from scratch)
     # Rows the network runs at: every frame is point-sampled to it (labels too; shorter frames up), as
-    # inference does (runtime.internal_resolution), so the radius input always means the same number of
-    # pixels. 0 = every frame at its own size. Exported models declare it (metadata internal_height).
+    # inference does (neuralao.runtime.internal_resolution), so the radius input always means the same
+    # number of pixels. 0 = every frame at its own size. Exported models declare it (metadata
+    # internal_height).
     internal_height: int = 256
-    # Hybrid: GTAO's AO at each label radius (runtime.baselines, computed on the frame before any
+    # Hybrid: GTAO's AO at each label radius (neuralao.runtime.baselines, computed on the frame before any
     # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
     gtao_input: bool = False
 
@@ -172,11 +173,11 @@ class FrameSet:
 
     x : (N, 4, H, W) float32 network input; y : (N, K, H, W) float16 AO labels (exact: binary-kernel
     labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
-    radius parameters (:func:`pipeline.models.unet.radius_param`); radii : (N, K) float32 radii in scene
-    units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
-    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that
-    indexes them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the
-    network's input for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
+    radius parameters (:func:`neuralao.pipeline.models.unet.radius_param`); radii : (N, K) float32 radii in
+    scene units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
+    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that indexes
+    them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the network's input
+    for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
     """
 
     x: torch.Tensor | list[torch.Tensor]
@@ -243,7 +244,7 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     every frame has one size, else per-frame lists).
 
     ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels
-    included (:func:`runtime.internal_resolution.downsample_frame`; the radius parameter does not
+    included (:func:`neuralao.runtime.internal_resolution.downsample_frame`; the radius parameter does not
     change, it is relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame
     as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and

@@ -4,11 +4,11 @@ One committed config (``configs/models.json``) names the corpus and every shippe
 training settings (budget, widths, resolution, which model initialises it). For each model, in order:
 
 1. train (resumable; checkpoints under ``checkpoints``, never in the repository);
-2. export (ONNX + GLSL + manifest, with the torch / onnxruntime / OpenCV checks of ``export.unet``);
+2. export (ONNX + GLSL + manifest, with the torch / onnxruntime / OpenCV checks of ``neuralao.export.unet``);
 3. parity of the generated GLSL against onnxruntime on real test frames (<= TOL.parity_unet_fp32);
 4. error on the test split (meshes no training scene uses) at every label radius, next to SSAO
-   and GTAO at the same radius (``pipeline.evaluation.test_split``), and GL time at ``time_sizes`` next to
-   SSAO's and GTAO's on the same G-buffer;
+   and GTAO at the same radius (``neuralao.pipeline.evaluation.test_split``), and GL time at ``time_sizes``
+   next to SSAO's and GTAO's on the same G-buffer;
 5. provenance (dataset hash, commit, epochs, budget, wall time, validation and test metrics) into
    the manifest AND the ONNX metadata; the folder must stay under ``max_bytes``;
 6. installed atomically: written to a temporary folder beside the target, then renamed onto it.
@@ -29,20 +29,20 @@ from pathlib import Path
 
 import numpy as np
 
-from export.onnx_io import get_metadata, load_onnx, save_onnx
-from export.unet import export_checkpoint, parity
-from pipeline.datasets.dataset import open_dataset, scene_of
-from pipeline.evaluation.report import ReportSettings
-from pipeline.evaluation.report import timing_frame as report_timing_frame
-from pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.io import sha256_file, write_json
-from pipeline.foundation.settings import from_dict, settings_to_dict
-from pipeline.foundation.tolerances import TOL
-from pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
-from runtime.baselines import time_screen_space
-from runtime.glsl_runner import time_compute
-from runtime.internal_resolution import internal_size
+from neuralao.export.onnx_io import get_metadata, load_onnx, save_onnx
+from neuralao.export.unet import export_checkpoint, parity
+from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
+from neuralao.pipeline.evaluation.report import ReportSettings
+from neuralao.pipeline.evaluation.report import timing_frame as report_timing_frame
+from neuralao.pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
+from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+from neuralao.runtime.baselines import time_screen_space
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import sha256_file, write_json
+from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import time_compute
+from neuralao.runtime.internal_resolution import internal_size
 
 log = logging.getLogger(__name__)
 

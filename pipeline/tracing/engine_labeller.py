@@ -1,7 +1,7 @@
-"""AO at points as engine tasks: the labeller of :mod:`pipeline.tracing.labeller` split into chunks of
-points mapped over an :class:`~pipeline.engines.engine.Engine` (this process or a Ray cluster).
+"""AO at points as engine tasks: the labeller of :mod:`neuralao.pipeline.tracing.labeller` split into chunks
+of points mapped over an :class:`~neuralao.pipeline.engines.engine.Engine` (this process or a Ray cluster).
 
-* :func:`labeller_context`: the :class:`~pipeline.engines.engine.Context` a worker builds one
+* :func:`labeller_context`: the :class:`~neuralao.pipeline.engines.engine.Context` a worker builds one
   Embree scene from (keyed by the scene's content and the label settings);
 * :func:`trace_chunk`: the task body, one chunk of points -> ``{"ao", "valid"}``;
 * :class:`EngineLabeller`: what the bakers use of a Labeller, with the tracing done as tasks.
@@ -14,9 +14,9 @@ from dataclasses import replace
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.engines.engine import Context, Engine, ResultStore, Task, content_key
-from pipeline.geometry.scene import Scene, slim_scene
-from pipeline.tracing.labeller import Labeller, LabelSettings, positive_distance
+from neuralao.pipeline.engines.engine import Context, Engine, ResultStore, Task, content_key
+from neuralao.pipeline.geometry.scene import Scene, slim_scene
+from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings, positive_distance
 
 
 def _build_labeller(payload) -> Labeller:
@@ -31,7 +31,8 @@ def trace_chunk(labeller, args) -> dict[str, np.ndarray]:
 
 
 def labeller_context(scene: Scene, settings: LabelSettings, threads: int | None = None) -> Context:
-    """A worker-side :class:`~pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene`` with
+    """A worker-side :class:`~neuralao.pipeline.tracing.labeller.Labeller` (one Embree scene) of ``scene``
+    with
     ``threads`` threads (None: ``settings.workers``; labels never depend on it)."""
     if threads is not None:
         settings = replace(settings, workers=threads)
@@ -41,7 +42,8 @@ def labeller_context(scene: Scene, settings: LabelSettings, threads: int | None 
 
 
 class EngineLabeller:
-    """What the bakers use of a :class:`~pipeline.tracing.labeller.Labeller` (``ao_at_points``, ``settings``,
+    """What the bakers use of a :class:`~neuralao.pipeline.tracing.labeller.Labeller` (``ao_at_points``,
+    ``settings``,
     ``max_distance``), with the tracing split into chunks of points mapped over an engine.
 
     A point's rays depend only on (seed, id, normal), never on its chunk, so the result is bit-identical

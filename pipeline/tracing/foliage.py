@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Box candidates per point tested vectorised in origin_density (more take the exact slow path).
 _NEAREST = 8
@@ -161,7 +161,7 @@ class Foliage:
 
     def __reduce__(self):
         """Pickle as the constructor's inputs (an Embree scene does not pickle): Ray workers of
-        pipeline.engines.engine get a working copy through the object store."""
+        neuralao.pipeline.engines.engine get a working copy through the object store."""
         return (Foliage, self._args)
 
     def _walk(self, orig: np.ndarray, dirs: np.ndarray, end: np.ndarray):

@@ -80,12 +80,18 @@ from typing import Literal
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.foundation.limits import RAY_BYTES, RAY_TABLE_BYTES, THREAD_BYTES, check_count, check_seed
-from pipeline.foundation.normals import normalize_normals
-from pipeline.geometry.camera import Camera
-from pipeline.geometry.scene import Scene
-from pipeline.geometry.sequences import hammersley, sample_shifts
+from neuralao.pipeline.geometry.camera import Camera
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.sequences import hammersley, sample_shifts
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
+    RAY_BYTES,
+    RAY_TABLE_BYTES,
+    THREAD_BYTES,
+    check_count,
+    check_seed,
+)
+from neuralao.runtime.foundation.normals import normalize_normals
 
 # Rays per work item: big enough that Python overhead per chunk (~50 us) is < 1% of the trace,
 # small enough that two workers stay balanced and the float32 ray buffers stay in L2/L3.
@@ -203,7 +209,7 @@ class Labeller:
                     f"{name} must be a{' positive' if name != 'seed' else 'n'} integer, got {value!r}"
                 )
         # Before the ray tables and buffers are allocated: what they take must fit
-        # (pipeline.foundation.limits).
+        # (neuralao.runtime.foundation.limits).
         check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
         check_rays("rays", s.rays, s.workers)
         diag = self.scale
@@ -699,7 +705,7 @@ def run_chunks(
 
 def check_rays(name: str, rays: int, workers: int) -> int:
     """Rays per sample within what the labeller's buffers can hold: ``max(rays, chunk)`` rays per
-    tracing thread plus the ray tables (pipeline.foundation.limits)."""
+    tracing thread plus the ray tables (neuralao.runtime.foundation.limits)."""
     return check_count(
         name,
         rays,

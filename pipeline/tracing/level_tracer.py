@@ -1,6 +1,6 @@
 """Level tracing: obscurance at several half distances from one trace, foliage, sphere resampling.
 
-:class:`LevelLabeller` is the project's :class:`~pipeline.tracing.labeller.Labeller` (same Hammersley
+:class:`LevelLabeller` is the project's :class:`~neuralao.pipeline.tracing.labeller.Labeller` (same Hammersley
 directions, per-sample rotations, ray offset, local frame and back-face rule) with two additions:
 
 * :meth:`LevelLabeller.obscurance` traces every ray once (closest hit, to ``max_distance``) and
@@ -8,8 +8,8 @@ directions, per-sample rotations, ray offset, local frame and back-face rule) wi
   (Sloan et al.: 2 m and 300 m, blended per level). Without foliage each column equals a separate
   ``Labeller.ao_at_points`` trace with ``kernel="obscurance", half_distance=h`` bit for bit (the
   arithmetic is the same, in the same order; tests/test_level_trace.py checks it). With a
-  :class:`~pipeline.tracing.foliage.Foliage`, each ray's rho is multiplied by the transmittance of its
-  segment through the shrub boxes and tree triangles.
+  :class:`~neuralao.pipeline.tracing.foliage.Foliage`, each ray's rho is multiplied by the transmittance of
+  its segment through the shrub boxes and tree triangles.
 * :meth:`LevelLabeller.closest_hits` traces caller-chosen rays (for the sphere resampler of grass
   clumps and LODs, :func:`resample_in_spheres`).
 """
@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
-from pipeline.geometry.scene import Scene
-from pipeline.geometry.surface import interpolate
-from pipeline.tracing.labeller import Labeller, run_chunks
+from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.surface import interpolate
+from neuralao.pipeline.tracing.labeller import Labeller, run_chunks
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Rays per chunk of caller-chosen rays (as the labeller's own chunks).
 _CHUNK = 1 << 16

@@ -459,7 +459,7 @@ static char *pass_source(const char *folder, const Json *sources, const char *ke
 
 /* The export's GTAO pass (manifest "gtao") at W x H: gtao.frag, then gtao_blur.frag when it has one.
  * Returns the R32F GTAO texture. Uniforms with a "value" are set as given; the three with a formula
- * are the ones runtime.baselines computes from the frame (u_proj, u_radius, u_pixels_per_unit). */
+ * are the ones neuralao.runtime.baselines computes from the frame (u_proj, u_radius, u_pixels_per_unit). */
 static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, const Json *g, double radius,
                        double yfov) {
     Json *noise = jreq(g, "noise"), *texels = jreq(noise, "texels");
@@ -529,7 +529,7 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
     const int lh = ih, lw = (int)fmax(1.0, rint((double)W * ih / H));  /* round half to even, as Python */
     const size_t px = (size_t)W * H, lpx = (size_t)lw * lh;
 
-    /* the full-resolution G-buffer as runtime.baselines.gbuffer_textures builds it, GL order */
+    /* the full-resolution G-buffer as neuralao.runtime.baselines.gbuffer_textures builds it, GL order */
     float *pos = xmalloc(sizeof(float) * 4 * px), *nrm = xmalloc(sizeof(float) * 4 * px);
     const double t = tan(0.5 * yfov);
     for (int r = 0; r < H; r++) {

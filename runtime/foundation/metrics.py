@@ -1,7 +1,8 @@
 """Image metrics on foreground pixels only: masked SSIM and RMSE of AO images (numpy, float64 inside).
 
 SSIM (Wang et al. 2004) with a **Gaussian window of 11 taps, sigma 1.5** (the window DeepAO trains
-with and the one ``pipeline.models.unet_train.ssim_map`` uses, so training loss and reported metric agree),
+with and the one ``neuralao.pipeline.models.unet_train.ssim_map`` uses, so training loss and reported metric
+agree),
 ``C1 = 1e-4`` and ``C2 = 9e-4`` (``(0.01 L)^2``, ``(0.03 L)^2`` with dynamic range ``L = 1``), and
 replicate (``nearest``) padding at the image border.
 
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 SSIM_WINDOW = 11  # Gaussian window side in pixels (radius 5)
 SSIM_SIGMA = 1.5  # Gaussian sigma in pixels

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 LINEAR = 4  # coefficients of bands 0-1
 QUADRATIC = 9  # coefficients of bands 0-2

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 @contextlib.contextmanager

@@ -20,7 +20,7 @@ import os
 import shutil
 from pathlib import Path
 
-from pipeline.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Bytes per ray per tracing thread: the labeller's float32 ray buffers (directions, origins, two
 # scratch arrays), Embree's outputs, the direction temporaries and the per-hit int64 indices.

@@ -43,17 +43,17 @@ class Tolerances:
     # fixed absolute figure passes on one CPU and fails on another (1e-5 failed on an AMD EPYC at 1.14e-5,
     # the torchvision-style CNN of tests/test_glsl_external.py, whose outputs reach 18.1). Rule
     # (:meth:`onnx_vs_torch`): atol = onnx_vs_torch_base * max(1, max|ref|) * sqrt(depth), depth = the
-    # weighted layers (Conv, ConvTranspose, Gemm, MatMul: export.onnx_io.weighted_layers) through which
-    # rounding accumulates; base 2^-18 = 64 float32 unit roundoffs (u = 2^-24). Measured, in units of
-    # max(1, max|ref|) sqrt(depth) u: that CNN (max|ref| 18.1, 7 convs) 3.0 on an Intel Xeon, 4.0 on the
-    # AMD EPYC; its residual U-Net (sigmoid output, 15 convs, larger values inside) 29; the baked MLP <= 5.
-    # A wrong weight, index or formula (off by >= 1e-3 of max(1, max|ref|)) is 68x the bound or more up
-    # to 15 layers (16x at 256).
+    # weighted layers (Conv, ConvTranspose, Gemm, MatMul: neuralao.export.onnx_io.weighted_layers) through
+    # which rounding accumulates; base 2^-18 = 64 float32 unit roundoffs (u = 2^-24). Measured, in units of
+    # max(1, max|ref|) sqrt(depth) u: that CNN (max|ref| 18.1, 7 convs) 3.0 on an Intel Xeon, 4.0 on the AMD
+    # EPYC; its residual U-Net (sigmoid output, 15 convs, larger values inside) 29; the baked MLP <= 5. A
+    # wrong weight, index or formula (off by >= 1e-3 of max(1, max|ref|)) is 68x the bound or more up to 15
+    # layers (16x at 256).
     onnx_vs_torch_base: float = 2.0**-18
     # OpenCV dnn vs onnxruntime (same fp32 math, different kernels).
     opencv_vs_onnx: float = 1e-4
     # float32 SSIM (torch training loss, pipeline/models/unet_train.py) vs float64 SSIM
-    # (pipeline/foundation/metrics.py), per pixel or averaged. The variance terms E[x^2] - E[x]^2 cancel
+    # (runtime/foundation/metrics.py), per pixel or averaged. The variance terms E[x^2] - E[x]^2 cancel
     # catastrophically in float32 (rounding ~6e-8 for values in [0, 1]) and are then divided by
     # (var_x + var_y + C2) >= C2 = 9e-4, so a flat window can be off by ~1e-4; measured 4.2e-5 on
     # constant 0.3 / 0.7 crops and 2e-6 on random images. A wrong window, sigma, padding or mask handling
