@@ -30,12 +30,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from neuralao.pipeline.bakes.vertex import BakeSettings, bake, reference_at_samples  # noqa: E402
-from neuralao.pipeline.evaluation.report import cpu_name
 from neuralao.pipeline.geometry.least_squares import fit_least_squares  # noqa: E402
 from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
 from neuralao.pipeline.geometry.surface import surface_error, surface_samples  # noqa: E402
 from neuralao.pipeline.tracing.labeller import Labeller  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 ALPHAS = (0.0, 0.1, 1.0, 10.0, 100.0)
 

@@ -24,8 +24,8 @@ import onnx
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 OUTCOMES = ("passed", "matches_onnxruntime", "refused", "wrong", "crashed")
 

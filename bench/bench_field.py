@@ -33,8 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 LADDER = ("16x8", "32x16", "64x32")
 DEFAULT_MESHES = (

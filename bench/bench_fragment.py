@@ -26,8 +26,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 
 def mlp_graph(hidden) -> onnx.ModelProto:

@@ -31,12 +31,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name
 from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer, reversed_z_projection  # noqa: E402
 from neuralao.pipeline.geometry.camera import orbit  # noqa: E402
 from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
 from neuralao.runtime import gl as rgl  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 DEFAULT_MESHES = ("spot", "bunny", "2CylinderEngine")
 

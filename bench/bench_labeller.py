@@ -29,11 +29,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name
 from neuralao.pipeline.geometry.camera import orbit  # noqa: E402
 from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 RAW_CHUNK = 1 << 16  # rays per raw call when split over threads (same granularity as the labeller)
 

@@ -41,12 +41,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from neuralao.export.mlp import export_checkpoint, parity  # noqa: E402
-from neuralao.pipeline.evaluation.report import cpu_name
 from neuralao.pipeline.geometry.camera import orbit  # noqa: E402
 from neuralao.pipeline.geometry.scene import load_scene  # noqa: E402
 from neuralao.pipeline.models.mlp import MLPSettings, parse_size, samples_from_mesh, train  # noqa: E402
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim  # noqa: E402
 
 # Erra et al. 2017, Table 2: SSIM against ray-traced AO for NN-16x8, NN-32x16, NN-64x32.

@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 LARGE_PIXELS = 1_000_000  # sizes above this get --large-repeats timed dispatches a round
 

@@ -60,9 +60,9 @@ os.environ.setdefault("MESA_SHADER_CACHE_DISABLE", "true")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from neuralao.export.glsl.image import CONV_BLOCK  # noqa: E402
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 
 log = logging.getLogger("bench_unet")
 # The radius parameter rho of the timed runs (the cost does not depend on it).

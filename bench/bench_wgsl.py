@@ -25,8 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from neuralao.export.glsl import generate_compute  # noqa: E402
 from neuralao.export.onnx_io import run_onnxruntime  # noqa: E402
-from neuralao.pipeline.evaluation.report import cpu_name  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
+from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
 from neuralao.runtime.glsl_runner import run_compute, time_compute  # noqa: E402
 from neuralao.runtime.shipped import INDEX, MODELS_DIR  # noqa: E402
 from neuralao.runtime.wgsl_runner import adapter_info, run_wgsl, time_wgsl  # noqa: E402

@@ -47,6 +47,7 @@ from neuralao.pipeline.models.field import (
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.glsl_runner import run_vector_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
@@ -234,7 +235,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 # ----------------------------------------------------------------------------------------------- inference
 
 
-def gbuffer_textures(frame: dict) -> dict[str, np.ndarray]:
+def gbuffer_textures(frame: FrameLike) -> dict[str, np.ndarray]:
     """The shader's two RGBA32F inputs from a frame: position + mask, normal + 0."""
     p, n, mask = frame_inputs(frame)
     return {
@@ -246,7 +247,7 @@ def gbuffer_textures(frame: dict) -> dict[str, np.ndarray]:
 # ----------------------------------------------------------------------------------------------- parity
 
 
-def parity(export_dir, frames: list[dict] | None = None, dialects: tuple[str, ...] = DIALECTS) -> dict:
+def parity(export_dir, frames: list[FrameLike] | None = None, dialects: tuple[str, ...] = DIALECTS) -> dict:
     """Generated GLSL (from the export folder) vs onnxruntime on real G-buffer frames of the mesh.
 
     Raw outputs compared on every foreground pixel (gate TOL.parity_mlp_fp32); background must be

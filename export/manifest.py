@@ -1,5 +1,5 @@
-"""Export manifests: the one reader of every export folder's ``manifest.json`` (:func:`read_manifest`),
-the settings every checkpoint exporter shares (:data:`OPSET`, :data:`DIALECTS`), and the top-level
+"""Export manifests (read by :func:`neuralao.runtime.foundation.manifest.read_manifest`): the settings every
+checkpoint exporter shares (:data:`OPSET`, :data:`DIALECTS`), and the top-level
 manifest of a per-mesh export (baked MLP, AO field): files, hashes and provenance.
 
 Both exporters write ``OUT/model.onnx``, ``OUT/glsl/`` and then ``OUT/manifest.json``; the keys that
@@ -9,34 +9,18 @@ for every kind and are built here; each exporter adds what describes its own inp
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import onnx
 import torch
 
-from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file
 
 OPSET = 17  # ONNX opset of every checkpoint export (torch.onnx.export(dynamo=False))
 # GLSL dialects of the per-mesh fragment shaders that parity runs (the runner executes the ES 3.0
 # sources on the desktop context).
 DIALECTS = ("glsl330", "es300")
-
-
-def read_manifest(d: str | Path, kind: str | None = None, label: str = "") -> dict:
-    """An export folder's manifest.json; with ``kind``, one of that kind (``label`` names it in errors)."""
-    path = Path(d) / "manifest.json"
-    try:
-        manifest = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"no export manifest at {path}") from None
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{path} is corrupt") from None
-    if kind is not None and manifest.get("kind") != kind:
-        raise NeuralaoError(f"{d} is not {label or kind} export (kind {manifest.get('kind')!r})")
-    return manifest
 
 
 def glsl_summary_of(glsl_manifest: dict, **extra) -> dict:

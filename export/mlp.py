@@ -36,7 +36,7 @@ import onnx
 import torch
 
 from neuralao.export.glsl import generate_mlp_fragment, load_mlp_export, write_mlp_export
-from neuralao.export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest, read_manifest
+from neuralao.export.manifest import DIALECTS, OPSET, glsl_summary_of, per_mesh_manifest
 from neuralao.export.onnx_io import (
     backend_checks,
     load_onnx,
@@ -61,7 +61,9 @@ from neuralao.pipeline.models.mlp import (
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.glsl_runner import run_mlp_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
@@ -303,7 +305,7 @@ def parity_export(
     return manifest, proto, export_dir / manifest.get("glsl", GLSL_DIR)
 
 
-def parity_frames(export_dir: Path, manifest: dict, frames: list[dict] | None) -> tuple[list[dict], str]:
+def parity_frames(export_dir: Path, manifest: dict, frames: list[FrameLike] | None) -> tuple[list[dict], str]:
     """The frames parity runs on and where they came from: ``frames`` if given, else
     :func:`render_parity_frames` of the export's training mesh."""
     if frames:
@@ -325,7 +327,7 @@ def pixel_errors(out: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict:
 
 def parity(
     export_dir: str | Path,
-    frames: list[dict] | None = None,
+    frames: list[FrameLike] | None = None,
     fp16: bool = True,
     dialects: tuple[str, ...] = DIALECTS,
 ) -> dict:

@@ -56,10 +56,10 @@ from neuralao.export.glsl import (
     write_compute_export,
     write_mlp_export,
 )
-from neuralao.export.manifest import read_manifest as read_export_manifest
 from neuralao.export.onnx_io import load_onnx, ort_session
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import read_npz, sha256_file, write_bytes, write_json
+from neuralao.runtime.foundation.manifest import read_manifest as read_export_manifest
 from neuralao.runtime.foundation.tolerances import TOL
 
 log = logging.getLogger(__name__)

@@ -27,7 +27,7 @@ import torch
 from onnx import numpy_helper
 
 from neuralao.export.glsl import generate_compute, write_compute_export
-from neuralao.export.manifest import OPSET, read_manifest
+from neuralao.export.manifest import OPSET
 from neuralao.export.onnx_io import (
     backend_checks,
     load_onnx,
@@ -58,7 +58,9 @@ from neuralao.runtime.baselines import (
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
+from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.glsl_runner import load_compute_export, run_compute
 from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
@@ -412,7 +414,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
 # ----------------------------------------------------------------------------------------------- parity
 
 
-def crop_frame(frame: dict, width: int, height: int) -> dict:
+def crop_frame(frame: FrameLike, width: int, height: int) -> dict:
     """Centre crop of every image channel of a frame to ``width`` x ``height`` (scalars kept)."""
     h, w = frame["depth"].shape
     if width > w or height > h:
@@ -440,7 +442,7 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
     return frames
 
 
-def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
+def _gtao_at_rho(frame: FrameLike, rho: float) -> np.ndarray:
     """GTAO (neuralao.runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
     :func:`neuralao.pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
     radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))
@@ -448,7 +450,9 @@ def _gtao_at_rho(frame: dict, rho: float) -> np.ndarray:
 
 
 def parity(
-    export_dir: str | Path, frames: list[dict] | None = None, sizes: Sequence[tuple[int, int]] | None = None
+    export_dir: str | Path,
+    frames: list[FrameLike] | None = None,
+    sizes: Sequence[tuple[int, int]] | None = None,
 ) -> dict:
     """Generated GLSL (fp32) vs onnxruntime on real frames, each at its own size and at ``sizes`` (w, h).
 

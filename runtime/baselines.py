@@ -34,6 +34,7 @@ import numpy as np
 from neuralao.runtime import gl
 from neuralao.runtime.baseline_templates import fill
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.gl import GL
 from neuralao.runtime.glsl_runner import time_vertex_colour
 
@@ -79,7 +80,7 @@ def projection_scale(yfov: float, width: int, height: int) -> tuple[float, float
     return f / (width / height), f
 
 
-def camera_space_position(frame: dict) -> np.ndarray:
+def camera_space_position(frame: FrameLike) -> np.ndarray:
     """(H, W, 3) float32 camera-space points of the pixel-centre rays at the frame's linear depth
     (OpenGL camera, -z forward; zero on background)."""
     depth = np.asarray(frame["depth"], dtype=np.float64)
@@ -91,7 +92,7 @@ def camera_space_position(frame: dict) -> np.ndarray:
     return pos.astype(np.float32)
 
 
-def gbuffer_textures(frame: dict) -> tuple[np.ndarray, np.ndarray]:
+def gbuffer_textures(frame: FrameLike) -> tuple[np.ndarray, np.ndarray]:
     """The two RGBA32F inputs: position (H, W, 4) = camera-space xyz + mask, normal (H, W, 4)."""
     for key in ("depth", "normal_cam", "mask", "yfov"):
         if key not in frame:
@@ -230,7 +231,7 @@ class ScreenSpaceAO:
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
         self.yfov: float | None = None
 
-    def upload(self, frame: dict) -> None:
+    def upload(self, frame: FrameLike) -> None:
         pos, nrm = gbuffer_textures(frame)
         if pos.shape[:2] != (self.h, self.w):
             raise NeuralaoError(
@@ -338,7 +339,7 @@ def gtao_pass_description(settings: GTAOSettings | None = None) -> dict:
     }
 
 
-def run_screen_space(frame: dict, method: Method, radius: float, settings=None) -> np.ndarray:
+def run_screen_space(frame: FrameLike, method: Method, radius: float, settings=None) -> np.ndarray:
     """AO (H, W) float32 of ``method`` ("ssao" | "gtao") on a G-buffer frame; 1 on background.
 
     frame : depth (H, W), normal_cam (H, W, 3), mask (H, W), yfov; radius : scene units.
@@ -351,18 +352,18 @@ def run_screen_space(frame: dict, method: Method, radius: float, settings=None) 
     return np.where(np.asarray(frame["mask"], bool), out, np.float32(1.0)).astype(np.float32)
 
 
-def run_ssao(frame: dict, radius: float, settings: SSAOSettings | None = None) -> np.ndarray:
+def run_ssao(frame: FrameLike, radius: float, settings: SSAOSettings | None = None) -> np.ndarray:
     """Normal-oriented hemisphere SSAO of ``frame``: (H, W) float32, 1 on background."""
     return run_screen_space(frame, "ssao", radius, settings)
 
 
-def run_gtao(frame: dict, radius: float, settings: GTAOSettings | None = None) -> np.ndarray:
+def run_gtao(frame: FrameLike, radius: float, settings: GTAOSettings | None = None) -> np.ndarray:
     """GTAO of ``frame``: (H, W) float32, 1 on background."""
     return run_screen_space(frame, "gtao", radius, settings)
 
 
 def time_screen_space(
-    frame: dict, method: Method, radius: float, settings=None, repeats: int = 20, warmup: int = 3
+    frame: FrameLike, method: Method, radius: float, settings=None, repeats: int = 20, warmup: int = 3
 ) -> float:
     """Median seconds per frame of the AO pass (+ blur) on the GPU, G-buffer already resident
     (as it is in an engine); each timed frame ends with ``glFinish``."""
@@ -395,7 +396,7 @@ def barycentric(scene, tri: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.where(s > 0, bary / np.where(s > 0, s, 1.0), 1.0 / 3.0)
 
 
-def vertex_ao_image(scene, vertex_ao: np.ndarray, frame: dict) -> np.ndarray:
+def vertex_ao_image(scene, vertex_ao: np.ndarray, frame: FrameLike) -> np.ndarray:
     """Baked per-vertex AO as a vertex-colour draw shows it: (H, W) float32, 1 on background.
 
     Each foreground pixel interpolates the three corner values of triangle ``tri_id`` with the
@@ -429,7 +430,7 @@ def time_vertex_ao(scene, camera, vertex_ao: np.ndarray | None = None, repeats: 
 # --------------------------------------------------------------------------- low-ray tracing
 
 
-def traced_ao(labeller, frame: dict, rays: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+def traced_ao(labeller, frame: FrameLike, rays: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """Embree AO of every foreground pixel at ``rays`` rays (the labeller's kernel and distances).
 
     labeller : neuralao.pipeline.tracing.labeller.Labeller of the frame's scene (its settings are restored

@@ -2,8 +2,8 @@
 line is :mod:`neuralao.pipeline.cli.infer`). Without a model the shipped U-Net (``runtime/models``, see
 ``runtime.models``) is used.
 
-The model's kind comes from its ONNX metadata (``neuralao_kind``); :data:`neuralao.runtime.predict.PREDICTORS`
-holds each kind's onnxruntime predictor, ``predict(frame, radius) -> ao (H, W) float32`` (AO in [0, 1],
+The model's kind comes from its ONNX metadata (``neuralao_kind``); its entry in :mod:`neuralao.runtime.kinds`
+names its onnxruntime predictor, ``predict(frame, radius) -> ao (H, W) float32`` (AO in [0, 1],
 1 on background):
 
 * ``mlp``:  object-space normals, radius-zero input;
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
+from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import atomic_path, read_npz, write_exr, write_png
-from neuralao.runtime.foundation.limits import check_finite_arrays
+from neuralao.runtime.foundation.io import atomic_path, write_exr, write_png
+from neuralao.runtime.frame import Frame, FrameLike
 from neuralao.runtime.onnx_io import get_metadata, load_onnx
-from neuralao.runtime.predict import PREDICTORS
 
 log = logging.getLogger(__name__)
 
@@ -47,96 +47,46 @@ LIGHT_CAM = np.array([-0.3, 0.4, 1.0]) / np.linalg.norm(
 def model_kind(onnx_path: str | Path) -> str:
     """``neuralao_kind`` from the ONNX metadata; missing or unknown -> one-line error."""
     kind = get_metadata(load_onnx(onnx_path)).get("neuralao_kind")
-    if kind not in PREDICTORS:
+    if kind not in kinds.predicted():
         raise NeuralaoError(
             f"{onnx_path}: unknown model kind {kind!r} "
-            f"(ONNX metadata neuralao_kind must be one of {sorted(PREDICTORS)})"
+            f"(ONNX metadata neuralao_kind must be one of {sorted(kinds.predicted())})"
         )
     return kind
 
 
-def load_frame(path: str | Path, index: int | None = None) -> dict[str, np.ndarray]:
-    """One frame dict from an .npz: a single frame, or frame ``index`` of stacked frames (a dataset shard)."""
-    arrays = read_npz(path)
-    if "mask" not in arrays and "normal_obj" not in arrays and "depth" not in arrays:
-        raise NeuralaoError(f"{path} is not a G-buffer frame (no mask / normal_obj / depth arrays)")
-    ref = arrays.get("mask", arrays.get("depth"))
-    stacked = ref is not None and np.ndim(ref) == 3
-    if stacked:
-        n = int(np.shape(ref)[0])
-        if index is None:
-            if n != 1:
-                raise NeuralaoError(f"{path} holds {n} frames; pick one with --index K (0..{n - 1})")
-            index = 0
-        if not 0 <= index < n:
-            raise NeuralaoError(f"--index {index} is outside 0..{n - 1} for {path}")
-        return {k: (v[index] if np.ndim(v) >= 1 and np.shape(v)[0] == n else v) for k, v in arrays.items()}
-    if index not in (None, 0):
-        raise NeuralaoError(f"{path} holds one frame; --index {index} is out of range")
-    return arrays
-
-
-# G-buffer channels and their trailing shape after (H, W) (the frame format of pipeline/cli/render.py).
-IMAGE_CHANNELS = {
-    "depth": (),
-    "mask": (),
-    "tri_id": (),
-    "ao": (),
-    "valid": (),
-    "normal_cam": (3,),
-    "normal_obj": (3,),
-    "position": (3,),
-}
-
-
-def complete_frame(frame: dict, kind: str, yfov: float | None, path: str | Path) -> dict:
+def complete_frame(frame: Frame, kind: str, yfov: float | None, path: str | Path) -> Frame:
     """The frame with what the command line supplies: ``yfov`` (radians; replaces the frame's, with a
     warning when they differ) and ``mask`` = ``depth > 0`` when the frame has none. A U-Net frame
     without a field of view is a one-line error naming ``--yfov``."""
-    frame = dict(frame)
+    changes: dict = {}
     if yfov is not None:
-        if "yfov" in frame and not math.isclose(float(frame["yfov"]), yfov, rel_tol=1e-6):
+        if frame.yfov is not None and not math.isclose(frame.yfov, yfov, rel_tol=1e-6):
             log.warning(
                 "%s: using the given field of view %.4g deg, not the frame's %.4g deg",
                 path,
                 math.degrees(yfov),
-                math.degrees(float(frame["yfov"])),
+                math.degrees(frame.yfov),
             )
-        frame["yfov"] = yfov
-    if "mask" not in frame and "depth" in frame and "tri_id" not in frame:
-        frame["mask"] = np.asarray(frame["depth"]) > 0
-    if kind == "unet" and "yfov" not in frame:
+        changes["yfov"] = yfov
+    if frame.mask is None and frame.depth is not None and frame.tri_id is None:
+        changes["mask"] = np.asarray(frame.depth) > 0
+    if kind == "unet" and frame.yfov is None and yfov is None:
         raise NeuralaoError(
             f"{path} has no yfov: give the vertical field of view with --yfov DEG (or --yfov-rad RAD)"
         )
-    return frame
+    return frame.replace(**changes) if changes else frame
 
 
-def check_frame(frame: dict, path: str | Path) -> None:
-    """Refuse a frame whose G-buffer channels disagree in shape, or whose floating channels hold NaN
-    or inf (a model would turn them into finite-looking AO): one line naming the file and the channel."""
-    shapes = {k: np.shape(v) for k, v in frame.items() if k in IMAGE_CHANNELS}
-    full = [k for k in IMAGE_CHANNELS if k in shapes and len(shapes[k]) == 2 + len(IMAGE_CHANNELS[k])]
-    ref = shapes[full[0]][:2] if full else None
-    for k, shape in shapes.items():
-        if ref is None or shape != (*ref, *IMAGE_CHANNELS[k]):
-            want = "(H, W" + "".join(f", {n}" for n in IMAGE_CHANNELS[k]) + ")"
-            raise NeuralaoError(
-                f"{path}: G-buffer channel {k!r} has shape {shape}, expected {want}"
-                + (f" with (H, W) = {ref}" if ref else "")
-            )
-    check_finite_arrays(frame, str(path), "G-buffer channel")
-
-
-def infer(onnx_path: str | Path, frame: dict, radius: float | None = None) -> np.ndarray:
+def infer(onnx_path: str | Path, frame: FrameLike, radius: float | None = None) -> np.ndarray:
     """AO (H, W) float32 of ``frame`` with the model's own inference function (by ONNX metadata kind);
     ``radius`` (scene units) goes to the models that take the AO radius as an input."""
     kind = model_kind(onnx_path)
-    if kind != "unet" and radius is not None:
+    if not kinds.KINDS[kind].radius_input and radius is not None:
         raise NeuralaoError(
             f"--radius applies to U-Net models; {onnx_path} is a {kind} model (its radius is baked in)"
         )
-    ao = PREDICTORS[kind](Path(onnx_path))(frame, radius)
+    ao = kinds.role(kind, "predictor")(Path(onnx_path))(frame, radius)
     ao = np.asarray(ao, dtype=np.float32)
     if ao.ndim != 2:
         raise NeuralaoError(f"model returned AO of shape {ao.shape}, expected (H, W)")
@@ -171,7 +121,7 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
             np.save(tmp, np.asarray(image, dtype=np.float32))
 
 
-def shaded(frame: dict) -> tuple[np.ndarray, np.ndarray]:
+def shaded(frame: FrameLike) -> tuple[np.ndarray, np.ndarray]:
     """Plain render of a frame: (H, W, 3) float32 Lambert headlight + ambient, and mask (H, W) bool.
 
     Uses normal_cam (camera space; OpenGL: the viewer is along +z) when present, else flat grey.
@@ -186,14 +136,14 @@ def shaded(frame: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.where(mask[..., None], light, BACKGROUND).astype(np.float32), mask
 
 
-def composite(frame: dict, ao: np.ndarray) -> np.ndarray:
+def composite(frame: FrameLike, ao: np.ndarray) -> np.ndarray:
     """(H, W, 3) float32 in [0, 1]: the shaded render multiplied by AO on the foreground."""
     base, mask = shaded(frame)
     ao = np.clip(np.asarray(ao, dtype=np.float32), 0.0, 1.0)
     return np.where(mask[..., None], base * ao[..., None], base).astype(np.float32)
 
 
-def foreground(frame: dict) -> np.ndarray:
+def foreground(frame: FrameLike) -> np.ndarray:
     """(H, W) bool foreground of a frame: its mask, else tri_id >= 0, else depth > 0."""
     if "mask" in frame:
         return np.asarray(frame["mask"], dtype=bool)

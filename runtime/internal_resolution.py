@@ -31,6 +31,7 @@ from neuralao.runtime import gl
 from neuralao.runtime.baseline_templates import fill
 from neuralao.runtime.baselines import _program, camera_space_position, gbuffer_textures
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.gl import GL  # neuralao.runtime.gl sets PYOPENGL_PLATFORM before PyOpenGL loads
 
 
@@ -61,7 +62,7 @@ def sample_index(low: int, high: int) -> np.ndarray:
     return ((2 * np.arange(low, dtype=np.int64) + 1) * high) // (2 * low)
 
 
-def downsample_frame(frame: dict, width: int, height: int) -> dict:
+def downsample_frame(frame: FrameLike, width: int, height: int) -> dict:
     """Point-sample every image channel of ``frame`` to ``width`` x ``height`` (scalars kept).
 
     Rows are counted in GL order (bottom up) to match the GLSL pass, so numpy's top-down rows are
@@ -79,7 +80,7 @@ def downsample_frame(frame: dict, width: int, height: int) -> dict:
     return out
 
 
-def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _positions(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Camera-space positions (H, W, 3), unit normals (H, W, 3) and mask (H, W) of a frame, float64."""
     mask = np.asarray(frame["mask"], bool)
     pos = np.where(mask[..., None], camera_space_position(frame), 0.0).astype(np.float64)
@@ -88,7 +89,7 @@ def _positions(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def upsample_ao(
-    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
+    ao_low: np.ndarray, frame: FrameLike, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
 ) -> np.ndarray:
     """Joint bilateral upsampling of ``ao_low`` (h, w), computed on the point-sampled ``frame``
     (:func:`downsample_frame`), to ``frame``'s resolution. Returns (H, W) float32, 1 on background.
@@ -149,7 +150,7 @@ def at_internal_resolution(
     is upsampled, and it is added to the full-resolution image, so the input's own detail survives.
     """
 
-    def scaled(frame: dict, radius: float) -> np.ndarray:
+    def scaled(frame: FrameLike, radius: float) -> np.ndarray:
         h, w = np.shape(frame["depth"])
         lw, lh = internal_size(w, h, internal_height)
         if (lw, lh) == (w, h):
@@ -280,7 +281,7 @@ class ScalingPasses:
         self.fbo = gl.create_framebuffer([up.low_position, up.low_normal], up.lw, up.lh, depth=False)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
-    def upload(self, frame: dict, ao_low: np.ndarray | None = None) -> None:
+    def upload(self, frame: FrameLike, ao_low: np.ndarray | None = None) -> None:
         pos, nrm = gbuffer_textures(frame)
         up, GL = self.up, self.GL
         if pos.shape[:2] != (up.h, up.w):
@@ -332,7 +333,9 @@ class ScalingPasses:
         self.release()
 
 
-def time_scaling_passes(frame: dict, low_size: tuple[int, int], repeats: int = 10, warmup: int = 2) -> float:
+def time_scaling_passes(
+    frame: FrameLike, low_size: tuple[int, int], repeats: int = 10, warmup: int = 2
+) -> float:
     """Median seconds of the point-sampling and upsampling passes on the GPU for ``frame``'s size
     (G-buffer resident, as in an engine; each timed frame ends with ``glFinish``)."""
     h, w = np.shape(frame["depth"])
@@ -342,7 +345,7 @@ def time_scaling_passes(frame: dict, low_size: tuple[int, int], repeats: int = 1
 
 
 def run_upsample_gl(
-    ao_low: np.ndarray, frame: dict, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
+    ao_low: np.ndarray, frame: FrameLike, settings: UpsampleSettings = UpsampleSettings(), empty: float = 1.0
 ) -> np.ndarray:
     """:func:`upsample_ao` as the GL passes run it on Mesa (point sampling, then upsampling).
     Returns (H, W) float32, 1 on background."""

@@ -1,6 +1,7 @@
 """onnxruntime inference of an exported model on one G-buffer frame: one predictor per family.
 
-``PREDICTORS[kind](onnx_path)`` loads and checks the export once and returns a :class:`Predictor`,
+Each family's predictor (named by its kind's ``predictor`` in :mod:`neuralao.runtime.kinds`), given the
+ONNX path, loads and checks the export once and returns a :class:`Predictor`,
 ``predict(frame, radius) -> ao (H, W) float32`` in [0, 1], 1 on background:
 
 * ``unet``:  depth + camera-space normals and the AO radius in scene units (None: the largest radius
@@ -15,7 +16,6 @@ checks and the evaluation all call it (through :mod:`neuralao.export.unet`, :mod
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
@@ -25,6 +25,8 @@ import onnx
 
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_manifest
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import at_internal_resolution
 from neuralao.runtime.onnx_io import get_metadata, load_onnx, ort_session
 from neuralao.runtime.unet_input import (
@@ -38,7 +40,7 @@ from neuralao.runtime.unet_input import (
 
 
 class Predictor(Protocol):
-    def __call__(self, frame: dict, radius: float | None = None) -> np.ndarray:
+    def __call__(self, frame: FrameLike, radius: float | None = None) -> np.ndarray:
         """AO (H, W) float32 in [0, 1] (1 on background) of one G-buffer frame."""
         ...
 
@@ -83,7 +85,7 @@ def ort_runner(path_or_bytes) -> Runner:
     )[0]
 
 
-def composite(y: np.ndarray, frame: dict) -> np.ndarray:
+def composite(y: np.ndarray, frame: FrameLike) -> np.ndarray:
     """Network output (H, W) -> AO (H, W) float32 with background 1 (DESIGN: ao = 1 where nothing is hit)."""
     return np.where(np.asarray(frame["mask"], dtype=bool), y, np.float32(1.0)).astype(np.float32)
 
@@ -109,12 +111,9 @@ def declared_internal_height(onnx_path: str | Path, proto: onnx.ModelProto | Non
     meta = get_metadata(proto if proto is not None else load_onnx(onnx_path))
     value = meta.get("internal_height")
     if value in (None, "", "None"):
-        manifest = Path(onnx_path).parent / "manifest.json"
-        if manifest.is_file():
-            try:
-                value = json.loads(manifest.read_text()).get("internal_height")
-            except json.JSONDecodeError:
-                raise NeuralaoError(f"{manifest} is not valid JSON") from None
+        folder = Path(onnx_path).parent
+        if (folder / "manifest.json").is_file():
+            value = read_manifest(folder).get("internal_height")
     if value in (None, "", "None"):
         return None
     try:
@@ -157,15 +156,15 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     if not hybrid:
         return scaled
 
-    def predict_hybrid(frame: dict, radius: float | None) -> np.ndarray:
-        return scaled(frame | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
+    def predict_hybrid(frame: FrameLike, radius: float | None) -> np.ndarray:
+        return scaled(dict(frame) | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
 
     return predict_hybrid
 
 
 def unet_infer_frame(
     onnx_path: str | Path,
-    frame: dict,
+    frame: FrameLike,
     radius: float | None = None,
     internal_height: int | str | None = "model",
 ) -> np.ndarray:
@@ -204,7 +203,7 @@ def check_mlp_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
     return meta
 
 
-def frame_normals(frame: dict) -> tuple[np.ndarray, np.ndarray]:
+def frame_normals(frame: FrameLike) -> tuple[np.ndarray, np.ndarray]:
     """normal_obj (H, W, 3) float32 and mask (H, W) bool of a frame; one-line errors for wrong shapes."""
     if "normal_obj" not in frame:
         raise NeuralaoError("frame has no 'normal_obj' channel (object-space normals), which the MLP reads")
@@ -239,7 +238,7 @@ def mlp_predictor(onnx_path: str | Path) -> Predictor:
     check_mlp_onnx(proto, onnx_path)
     sess = ort_session(proto.SerializeToString())
 
-    def predict(frame: dict, radius: float | None = None) -> np.ndarray:
+    def predict(frame: FrameLike, radius: float | None = None) -> np.ndarray:
         _baked_radius("MLP", radius)
         normal_obj, mask = frame_normals(frame)
         return _clamped(run_mlp(sess, normal_obj, mask), mask)
@@ -247,7 +246,7 @@ def mlp_predictor(onnx_path: str | Path) -> Predictor:
     return predict
 
 
-def mlp_infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
+def mlp_infer_frame(onnx_path: str | Path, frame: FrameLike) -> np.ndarray:
     """AO (H, W) float32 of one G-buffer frame: :func:`mlp_predictor`."""
     return mlp_predictor(onnx_path)(frame)
 
@@ -274,7 +273,7 @@ def check_field_onnx(proto: onnx.ModelProto, where) -> dict:
     return meta
 
 
-def frame_inputs(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def frame_inputs(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """position (H, W, 3), normal_obj (H, W, 3) float32 and mask (H, W) bool; one-line errors."""
     for key in ("position", "normal_obj"):
         if key not in frame:
@@ -289,7 +288,7 @@ def frame_inputs(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return p, n, mask
 
 
-def run_field(sess, frame: dict) -> np.ndarray:
+def run_field(sess, frame: FrameLike) -> np.ndarray:
     """Raw field output (H, W) float32 through onnxruntime, NaN on background."""
     p, n, mask = frame_inputs(frame)
     out = np.full(mask.shape, np.nan, np.float32)
@@ -304,7 +303,7 @@ def field_predictor(onnx_path: str | Path) -> Predictor:
     check_field_onnx(proto, onnx_path)
     sess = ort_session(proto.SerializeToString())
 
-    def predict(frame: dict, radius: float | None = None) -> np.ndarray:
+    def predict(frame: FrameLike, radius: float | None = None) -> np.ndarray:
         _baked_radius("field", radius)
         raw = run_field(sess, frame)
         return _clamped(raw, ~np.isnan(raw))
@@ -312,14 +311,6 @@ def field_predictor(onnx_path: str | Path) -> Predictor:
     return predict
 
 
-def field_infer_frame(onnx_path: str | Path, frame: dict) -> np.ndarray:
+def field_infer_frame(onnx_path: str | Path, frame: FrameLike) -> np.ndarray:
     """AO (H, W) float32 of one G-buffer frame: :func:`field_predictor`."""
     return field_predictor(onnx_path)(frame)
-
-
-# neuralao_kind (ONNX metadata) -> the family's predictor factory
-PREDICTORS: dict[str, Callable[[str | Path], Predictor]] = {
-    "mlp": mlp_predictor,
-    "unet": unet_predictor,
-    "field": field_predictor,
-}

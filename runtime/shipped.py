@@ -7,10 +7,10 @@ when no other export is given.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_json, read_manifest
 from neuralao.runtime.onnx_io import get_metadata, load_onnx
 from neuralao.runtime.predict import is_hybrid
 
@@ -23,11 +23,8 @@ def read_index(models_dir: Path | None = None) -> dict:
     path = Path(models_dir or MODELS_DIR) / "index.json"
     if not path.is_file():
         raise NeuralaoError(f"no shipped models ({path} is missing); run `make models` or give an export")
-    try:
-        index = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise NeuralaoError(f"{path} is not valid JSON: {e.msg}") from None
-    if not isinstance(index.get("models"), dict):
+    index = read_json(path, "index of shipped models")
+    if not isinstance(index, dict) or not isinstance(index.get("models"), dict):
         raise NeuralaoError(f"{path} lists no models")
     return index
 
@@ -55,8 +52,7 @@ def default_export(kind: str, models_dir: Path | None = None) -> Path:
 def default_model(kind: str, models_dir: Path | None = None) -> Path:
     """model.onnx of the default shipped model of ``kind``."""
     folder = default_export(kind, models_dir)
-    manifest = json.loads((folder / "manifest.json").read_text())
-    return folder / manifest.get("onnx", "model.onnx")
+    return folder / read_manifest(folder).get("onnx", "model.onnx")
 
 
 def pure_unet_export(models_dir: Path | None = None) -> Path:

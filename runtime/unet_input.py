@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.frame import FrameLike
 
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and ``infer`` checks it.
 PREPROCESS_VERSION = 2
@@ -106,7 +107,7 @@ def radius_param(radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float
     return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
 
 
-def frame_radius(frame: dict, radius: float | None = None) -> float:
+def frame_radius(frame: FrameLike, radius: float | None = None) -> float:
     """The AO radius of a frame in scene units: ``radius`` if given, else the largest radius its labels
     were traced at (``radii``), else an error asking for one."""
     if radius is not None:
@@ -116,14 +117,14 @@ def frame_radius(frame: dict, radius: float | None = None) -> float:
     raise NeuralaoError("the frame has no label radii; give the AO radius in scene units (--radius)")
 
 
-def frame_radius_param(frame: dict, radius: float | None = None) -> float:
+def frame_radius_param(frame: FrameLike, radius: float | None = None) -> float:
     """rho of :func:`radius_param` for a frame dict (depth, mask, yfov) at ``frame_radius(frame, radius)``."""
     if "yfov" not in frame:
         raise NeuralaoError("frame lacks yfov (needed for the radius input)")
     return radius_param(frame_radius(frame, radius), frame["depth"], frame["mask"], float(frame["yfov"]))
 
 
-def preprocess_frame(frame: dict, gtao: np.ndarray | None = None) -> np.ndarray:
+def preprocess_frame(frame: FrameLike, gtao: np.ndarray | None = None) -> np.ndarray:
     """``preprocess`` on a frame dict (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
     (5, H, W) with ``gtao`` (H, W) as the hybrid's fifth channel (1 on background)."""
     missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]

@@ -117,3 +117,78 @@ def test_render_takes_the_field_of_view_in_degrees_or_radians(tmp_path, capsys):
     capsys.readouterr()
     assert cli.main([*base, "--yfov", "30", "--yfov-rad", "0.5", "--out", str(tmp_path / "both")]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+# ------------------------------------------------------------------------------ the one frame reader
+
+
+def _refused(tmp_path, capsys, **arrays) -> str:
+    """`neuralao infer` of a frame holding ``arrays``: exit 2 and the one stderr line."""
+    path = tmp_path / "bad.npz"
+    np.savez(path, **arrays)
+    assert _infer([str(path), "--yfov", "50", "--radius", "0.5", "--out", str(tmp_path / "ao.png")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and not (tmp_path / "ao.png").exists()
+    return lines[0]
+
+
+def _good() -> dict:
+    depth = np.full((H, W), 4.0, np.float32)
+    normal = np.zeros((H, W, 3), np.float32)
+    normal[..., 2] = 1.0
+    return {"depth": depth, "normal_cam": normal}
+
+
+def test_depth_holding_z_cam_is_refused_by_name(tmp_path, capsys):
+    """z_cam (negative in front of an OpenGL camera) instead of -z_cam, even under an explicit mask."""
+    g = _good()
+    err = _refused(
+        tmp_path, capsys, depth=-g["depth"], normal_cam=g["normal_cam"], mask=np.ones((H, W), bool)
+    )
+    assert "'depth'" in err and "z_cam" in err
+
+
+def test_a_mask_over_background_depth_is_refused(tmp_path, capsys):
+    g = _good()
+    g["depth"][:5] = 0.0
+    err = _refused(tmp_path, capsys, **g, mask=np.ones((H, W), bool))
+    assert "'mask'" in err and f"{5 * W} pixel" in err
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "words"),
+    [
+        ("depth", np.zeros((H, W), dtype=[("a", "f4"), ("b", "f4")]), "'depth' holds"),
+        ("depth", np.ones((H, W), np.complex64), "'depth' holds complex64"),
+        ("yfov", np.array([0.8, 0.9]), "'yfov' must be one number"),
+        ("yfov", np.float64(4.0), "(0, pi)"),
+        ("depth", np.ones((H, W, 1), np.float32), "'depth' has shape"),
+        ("normal_cam", np.zeros((H, W + 1, 3), np.float32), "'normal_cam' has shape"),
+        ("fov", np.float64(0.8), "unknown frame key 'fov'"),
+    ],
+)
+def test_malformed_frames_name_the_key_and_the_rule(tmp_path, capsys, key, value, words):
+    arrays = _good() | {key: value}
+    assert words in _refused(tmp_path, capsys, **arrays)
+
+
+def test_an_empty_frame_is_refused_before_the_model(tmp_path, capsys):
+    err = _refused(
+        tmp_path, capsys, depth=np.zeros((0, 0), np.float32), normal_cam=np.zeros((0, 0, 3), np.float32)
+    )
+    assert "0x0 pixels" in err
+
+
+def test_frame_round_trip_and_mapping_reads(tmp_path):
+    """write_frame then read_frame gives the same arrays; channels read by name like the file's keys."""
+    from neuralao.runtime.frame import Frame, read_frame, write_frame
+
+    g = _good()
+    frame = Frame.from_arrays(g | {"yfov": 0.8, "radii": np.array([0.5], np.float32)})
+    write_frame(tmp_path / "f.npz", frame)
+    back = read_frame(tmp_path / "f.npz")
+    assert set(back) == {"depth", "normal_cam", "yfov", "radii"} and back.size == (W, H)
+    for k in back:
+        np.testing.assert_array_equal(np.asarray(back[k]), np.asarray(frame[k]))
+    assert "mask" not in back and back.get("mask") is None and back.yfov == 0.8
+    assert back.replace(mask=g["depth"] > 0).mask.all()

@@ -50,7 +50,8 @@ def test_contact_sheet_has_one_column_per_method(tmp_path):
 
 
 def test_shipped_picks_default_and_fast_by_role_or_by_gl_time():
-    from neuralao.pipeline.evaluation.report import contact_order, pick_shipped
+    from neuralao.pipeline.evaluation.report_rows import pick_shipped
+    from neuralao.pipeline.evaluation.report_writing import contact_order
 
     models = {
         n: {"kind": "unet", "gl_seconds": {"512x512": t}}

@@ -27,7 +27,7 @@ RADII = [0.0625, 0.25]  # the dataset's labels.radii_rel; max_distance_rel is 0.
 
 
 def _fast_settings(**kw):
-    from neuralao.pipeline.evaluation.report import ReportSettings
+    from neuralao.pipeline.evaluation.report_settings import ReportSettings
 
     base = dict(
         gt_rays=16,
@@ -139,7 +139,8 @@ def workspace(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def result(workspace):
-    from neuralao.pipeline.evaluation.report import evaluate, write_report
+    from neuralao.pipeline.evaluation.report import evaluate
+    from neuralao.pipeline.evaluation.report_writing import write_report
 
     root, data, models = workspace
     out = root / "out"
@@ -156,7 +157,7 @@ def test_ground_truth_at_several_radii_equals_separate_traces(workspace):
     from dataclasses import replace
 
     from neuralao.pipeline.datasets.dataset import scene_of
-    from neuralao.pipeline.evaluation.report import frame_key_seed, ground_truth, label_settings_of
+    from neuralao.pipeline.evaluation.report_truth import frame_key_seed, ground_truth, label_settings_of
     from neuralao.pipeline.tracing.labeller import Labeller
 
     root, data, _ = workspace
@@ -296,7 +297,8 @@ def test_corpus_size_plot_from_a_synthetic_index(tmp_path):
 
 
 def test_no_shipped_model_is_one_line(tmp_path, workspace):
-    from neuralao.pipeline.evaluation.report import evaluate, render_markdown
+    from neuralao.pipeline.evaluation.report import evaluate
+    from neuralao.pipeline.evaluation.report_writing import render_markdown
 
     _, data, _ = workspace
     r = evaluate(

@@ -14,6 +14,8 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
   statements, no binding qualifiers: the host binds blocks and samplers, the manifest says where).
   :class:`WGSL` (compute target, WebGPU) overrides the template table it fills from and the binding
   slots: the same op table, passes, writer and manifest write WGSL (``generate_compute(dialect="wgsl")``).
+  In :mod:`.templates` the WGSL table likewise overrides only what differs: the shared templates are
+  written once with dialect words (types, declarations, texel fetches), which each dialect spells.
   HLSL and MSL are not written here: :mod:`.cross` makes them from the GLSL through SPIR-V.
 * **Writer.** Only the ``_write_*`` functions of :mod:`.vector` and :mod:`.image` produce shader
   text, and only by filling the named templates of :mod:`neuralao.export.glsl.templates`. Identifiers are
@@ -22,7 +24,7 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
 
 Layout (each module imports only those above it):
 
-    templates.py    every GLSL string, as named templates, :func:`fill`; the WGSL overrides, :func:`fill_wgsl`
+    templates.py    every GLSL and WGSL string, as named templates, :func:`fill` / :func:`fill_wgsl`
     graph.py        OnnxGraph / read_graph, the OpTable base (dispatch), glsl_float and small helpers
     dialects.py     Dialect, GLSL330, ES300, WGSL, DIALECTS, COMPUTE_DIALECTS, FRAGMENT_FILES
     activations.py  Act (epilogue activations, both targets)

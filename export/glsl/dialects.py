@@ -56,8 +56,9 @@ class ES300(GLSL330):
 
 
 class WGSL(Dialect):
-    """WGSL for WebGPU, compute target only: the same writer and template names, WGSL text
-    (``templates._W``); one bind group whose bindings run inputs, output, params, uniform."""
+    """WGSL for WebGPU, compute target only: the same writer and template names; its table is the
+    shared templates in WGSL words plus the WGSL overrides (``templates._WGSL_WORDS``, ``templates._W``).
+    One bind group whose bindings run inputs, output, params, uniform."""
 
     name = "wgsl"
     extension = ".wgsl"

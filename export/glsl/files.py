@@ -22,6 +22,7 @@ from neuralao.export.glsl.validate import _can_validate, validate_glsl
 from neuralao.export.glsl.vector import MLPShader
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_json
+from neuralao.runtime.foundation.manifest import read_manifest
 
 
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
@@ -55,14 +56,7 @@ def write_mlp_export(shader: MLPShader, out_dir: str | Path, validate: bool = Tr
 
 
 def _read_export(export_dir: str | Path) -> tuple[Path, dict]:
-    d = Path(export_dir)
-    try:
-        manifest = json.loads((d / "manifest.json").read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"no manifest.json in {d}") from None
-    except json.JSONDecodeError:
-        raise NeuralaoError(f"{d / 'manifest.json'} is corrupt") from None
-    return d, manifest
+    return Path(export_dir), read_manifest(export_dir)
 
 
 def _read_checked(d: Path, manifest: dict, name: str) -> bytes:

@@ -1,12 +1,28 @@
-"""Every piece of GLSL text neuralao emits, as named templates, and the one function that fills them.
+"""Every piece of GLSL and WGSL text neuralao emits, as named templates, and the one function that
+fills them.
 
 hls4ml habit: templates here, structure in the writers of ``export/glsl/``, nothing else builds
-shader text. Placeholders are ``${name}`` (:class:`string.Template`; ``$`` never occurs in GLSL, so
-braces need no escaping). :func:`fill` is strict: a missing or an unexpected field is an error, so a
-template and its caller cannot drift apart silently.
+shader text. Placeholders are ``${name}`` (:class:`string.Template`; ``$`` never occurs in GLSL or
+WGSL, so braces need no escaping). :func:`fill` is strict: a missing or an unexpected field is an
+error, so a template and its caller cannot drift apart silently.
 
 Values substituted are generated identifiers (``t3``, ``w0_1``, ``src0``), integers and float
 literals produced by the writer; ONNX node and tensor names never reach a template.
+
+Dialects (tinygrad's ``cstyle.py`` / ``wgsl.py``): ``_T`` holds the templates every dialect shares,
+written once in GLSL with *dialect words* where GLSL and WGSL differ only in spelling; ``_G`` the
+GLSL-only ones (fragment MLP, precision statements, the vertex-colour baseline); ``_W`` the WGSL
+overrides, only the templates whose structure differs. Each dialect's words (``_WORDS``, and
+``_WGSL_WORDS`` over them) are put into its table once, at import:
+
+* ``${vec4}``, ``${ivec2}``, ``${ivec3}``, ``${mat4}``, ``${float}``, ``${int}``: a type, as a
+  constructor or a cast spells it (WGSL: ``vec4<f32>``, ``f32``, ...);
+* ``${let_T} n`` / ``${var_T} n`` (T one of the types or ``bool``): declare n, a constant or a
+  variable (GLSL: ``T n``; WGSL: ``let n`` / ``var n``, the type inferred); ``${let_T:n}`` /
+  ``${var_T:n}``: the same with the type written out in WGSL too (``var n: f32``), for loop counters
+  and values initialised from a literal or a field;
+* ``${fetch}(src, p${lod})``: texel p of ``src`` at level 0; ``${size_of:src}``: its width and
+  height; ``${inc:i}``: increment i; ``${precise}``: GLSL's ``precise`` qualifier (none in WGSL).
 
 Layout conventions the templates rely on (stated again in every manifest):
 
@@ -22,7 +38,30 @@ from __future__ import annotations
 
 from string import Template
 
-_T: dict[str, str] = {}
+_T: dict[str, str] = {}  # every dialect's, in GLSL with dialect words
+_G: dict[str, str] = {}  # GLSL only
+
+# --------------------------------------------------------------------------- dialect words
+
+# GLSL's spelling of the words (see the module docstring); WGSL's follow its overrides below.
+# ``declare`` / ``declare_typed`` spell ``${let_T}`` / ``${let_T:n}`` for each type T of _TYPES.
+_TYPES = ("vec4", "ivec2", "ivec3", "mat4", "float", "int", "bool")
+_WORDS: dict[str, str] = {
+    "vec4": "vec4",
+    "ivec2": "ivec2",
+    "ivec3": "ivec3",
+    "mat4": "mat4",
+    "float": "float",
+    "int": "int",
+    "bool": "bool",
+    "declare": "${type}",
+    "declare_typed": "${type} ${name}",
+    "precise": "precise ",
+    "fetch": "texelFetch",
+    "lod": ", 0",
+    "size_of": "textureSize(${name}, 0).xy",
+    "inc": "++${name}",
+}
 
 # --------------------------------------------------------------------------- common
 
@@ -31,11 +70,11 @@ ${precision}"""
 
 # ES: float, int and sampler default precisions must be raised (sampler2D defaults to lowp in a
 # fragment shader, which would truncate RGBA32F texels).
-_T["precision_es"] = """precision highp float;
+_G["precision_es"] = """precision highp float;
 precision highp int;
 precision highp sampler2D;"""
 
-_T["precision_none"] = ""
+_G["precision_none"] = ""
 
 # Overflow-safe activations: exp() only ever receives a non-positive argument, so no input (not
 # even +-1e30) produces inf/inf = NaN, whatever the driver's own tanh/exp do with large values.
@@ -56,14 +95,14 @@ vec4 nao_leaky_relu(vec4 x, float alpha) {
 }"""
 
 # Activation expressions by ONNX op type; ``x`` is any vec4 expression.
-_T["act_Relu"] = "max(${x}, vec4(0.0))"
+_T["act_Relu"] = "max(${x}, ${vec4}(0.0))"
 _T["act_LeakyRelu"] = "nao_leaky_relu(${x}, ${alpha})"
 _T["act_Sigmoid"] = "nao_sigmoid(${x})"
 _T["act_Tanh"] = "nao_tanh(${x})"
 # min(max()) rather than clamp(): GLSL leaves clamp undefined for lo > hi; ONNX Clip then gives hi.
-_T["act_Clip"] = "min(max(${x}, vec4(${lo})), vec4(${hi}))"
-_T["act_Clip_min"] = "max(${x}, vec4(${lo}))"
-_T["act_Clip_max"] = "min(${x}, vec4(${hi}))"
+_T["act_Clip"] = "min(max(${x}, ${vec4}(${lo})), ${vec4}(${hi}))"
+_T["act_Clip_min"] = "max(${x}, ${vec4}(${lo}))"
+_T["act_Clip_max"] = "min(${x}, ${vec4}(${hi}))"
 _T["act_Identity"] = "${x}"
 # Sin / Cos: the builtins (Mesa: Cephes-style range reduction, ~1e-7 absolute for |x| <~ 1e3; the
 # field encoding keeps |x| <= 2^(octaves-1) pi and its arguments bit-identical to onnxruntime's).
@@ -71,7 +110,7 @@ _T["act_Sin"] = "sin(${x})"
 _T["act_Cos"] = "cos(${x})"
 # Elu: exp() of min(x, 0) only; Softplus as max(x, 0) + log(1 + exp(-|x|)), so exp() never overflows.
 _T["act_Elu"] = "mix(${alpha} * (exp(min(${x}, vec4(0.0))) - 1.0), ${x}, greaterThanEqual(${x}, vec4(0.0)))"
-_T["act_Softplus"] = "(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x}))))"
+_T["act_Softplus"] = "(max(${x}, ${vec4}(0.0)) + log(1.0 + exp(-abs(${x}))))"
 _T["act_HardSigmoid"] = "clamp(${alpha} * ${x} + ${beta}, 0.0, 1.0)"
 # HardSwish (opset 14; torch nn.Hardswish): x * HardSigmoid(x) with alpha 1/6, beta 1/2 (the spec's).
 _T["act_HardSwish"] = "(${x} * clamp(0.16666667 * ${x} + 0.5, 0.0, 1.0))"
@@ -94,7 +133,7 @@ _T["act_Gelu"] = "(0.5 * ${x} * (1.0 + nao_erf(${x} * 0.70710678118654752)))"
 _T["act_GeluTanh"] = (
     "(0.5 * ${x} * (1.0 + nao_tanh(0.79788456080286536 * (${x} + 0.044715 * ${x} * ${x} * ${x}))))"
 )
-_T["act_Mish"] = "(${x} * nao_tanh(max(${x}, vec4(0.0)) + log(1.0 + exp(-abs(${x})))))"
+_T["act_Mish"] = "(${x} * nao_tanh(max(${x}, ${vec4}(0.0)) + log(1.0 + exp(-abs(${x})))))"
 _T["act_Sqrt"] = "sqrt(${x})"
 _T["act_Exp"] = "exp(${x})"
 _T["act_Log"] = "log(${x})"
@@ -105,14 +144,14 @@ _T["act_Sign"] = "sign(${x})"
 _T["act_Softsign"] = "(${x} / (1.0 + abs(${x})))"
 _T["act_Floor"] = "floor(${x})"
 _T["act_Ceil"] = "ceil(${x})"
-_T["act_Pow"] = "pow(${x}, vec4(${e}))"
-_T["act_Pow_one"] = "vec4(1.0)"
+_T["act_Pow"] = "pow(${x}, ${vec4}(${e}))"
+_T["act_Pow_one"] = "${vec4}(1.0)"
 _T["act_Pow_reciprocal"] = "(1.0 / ${x})"
 _T["pow_product"] = "(${factors})"
 
 # --------------------------------------------------------------------------- fragment MLP
 
-_T["fullscreen_vertex"] = """${header}
+_G["fullscreen_vertex"] = """${header}
 // neuralao: full-screen triangle from gl_VertexID; draw 3 vertices with an empty VAO.
 void main() {
     vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
@@ -120,17 +159,17 @@ void main() {
 }
 """
 
-_T["sampler2d_decl"] = "uniform sampler2D ${name};"
-_T["sampler2d_decl_binding"] = "layout(binding = ${binding}) uniform sampler2D ${name};"
+_G["sampler2d_decl"] = "uniform sampler2D ${name};"
+_G["sampler2d_decl_binding"] = "layout(binding = ${binding}) uniform sampler2D ${name};"
 
-_T["ubo_block"] = """${layout}uniform ${block} {
+_G["ubo_block"] = """${layout}uniform ${block} {
 ${members}
 };"""
-_T["ubo_layout"] = "layout(std140) "
-_T["ubo_layout_binding"] = "layout(std140, binding = ${binding}) "
-_T["ubo_member"] = "    ${type} ${name}[${count}];"
+_G["ubo_layout"] = "layout(std140) "
+_G["ubo_layout_binding"] = "layout(std140, binding = ${binding}) "
+_G["ubo_member"] = "    ${type} ${name}[${count}];"
 
-_T["vector_fragment"] = """${header}
+_G["vector_fragment"] = """${header}
 // ${description}
 // Generated from the ONNX graph; ${weights}
 
@@ -159,34 +198,34 @@ ${body}
 }
 """
 
-_T["weights_uniform"] = "weights in ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes."
-_T["weights_constant"] = "weights as const arrays in this source (nothing to bind)."
-_T["const_array"] = "const ${type} ${name}[${count}] = ${type}[${count}](${items});"
-_T["const_item"] = "${type}(${values})"
+_G["weights_uniform"] = "weights in ${n_blocks} std140 uniform block(s), each <= ${max_block_bytes} bytes."
+_G["weights_constant"] = "weights as const arrays in this source (nothing to bind)."
+_G["const_array"] = "const ${type} ${name}[${count}] = ${type}[${count}](${items});"
+_G["const_item"] = "${type}(${values})"
 
-_T["texel_fetch"] = "    vec4 g${index} = texelFetch(${sampler}, ivec2(gl_FragCoord.xy), 0);"
+_G["texel_fetch"] = "    vec4 g${index} = texelFetch(${sampler}, ivec2(gl_FragCoord.xy), 0);"
 
-_T["vec_decl"] = "    vec4 ${name}[${count}];"
-_T["input_tile"] = "    ${dst}[${index}] = vec4(${c0}, ${c1}, ${c2}, ${c3});"
+_G["vec_decl"] = "    vec4 ${name}[${count}];"
+_G["input_tile"] = "    ${dst}[${index}] = vec4(${c0}, ${c1}, ${c2}, ${c3});"
 
 # Dense layers, straight-line: output vec4 j = act(bias[j] + sum_i tile[j, i] * src[i]) (mat4 tiles).
-_T["mat_term"] = "${weight}[${index}] * ${src}[${i}]"
-_T["dense_acc"] = "(${bias}[${j}] + ${terms})"
-_T["dense_row"] = "    ${dst}[${j}] = ${value};"
+_G["mat_term"] = "${weight}[${index}] * ${src}[${i}]"
+_G["dense_acc"] = "(${bias}[${j}] + ${terms})"
+_G["dense_row"] = "    ${dst}[${j}] = ${value};"
 # A large layer: the rows of a chunk in a loop whose bound reads u_loop_guard (always 0: uniforms start
 # at 0; never set it), so the compiler cannot see a constant trip count and unroll it.
-_T["dense_loop"] = """    for (int j = ${j_begin}; j < ${j_end} + u_loop_guard; ++j) {
+_G["dense_loop"] = """    for (int j = ${j_begin}; j < ${j_end} + u_loop_guard; ++j) {
     ${row}
     }"""
 
-_T["vec_map"] = "    ${dst}[${j}] = ${expr};"
+_G["vec_map"] = "    ${dst}[${j}] = ${expr};"
 
-_T["index_j"] = "${name}[${j}]"
-_T["binop"] = "(${a} ${op} ${b})"
-_T["vec_copy"] = "    ${dst}[${di}] = ${src}[${si}];"
-_T["lane_copy"] = "    ${dst}[${di}].${dl} = ${src}[${si}].${sl};"
-_T["lane_zero"] = "    ${dst}[${di}].${dl} = 0.0;"
-_T["index_0"] = "${name}[0]"
+_G["index_j"] = "${name}[${j}]"
+_G["binop"] = "(${a} ${op} ${b})"
+_G["vec_copy"] = "    ${dst}[${di}] = ${src}[${si}];"
+_G["lane_copy"] = "    ${dst}[${di}].${dl} = ${src}[${si}].${sl};"
+_G["lane_zero"] = "    ${dst}[${di}].${dl} = 0.0;"
+_G["index_0"] = "${name}[0]"
 
 # --------------------------------------------------------------------------- compute passes
 
@@ -223,22 +262,22 @@ _T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
 
 # Conv: one invocation = one output texel (4 output channels of layer gid.z).
 _T["conv_body"] = """${sizes}
-    vec4 r = prm[${bias_offset} + gid.z];
-    for (int ky = 0; ky < ${kh}; ++ky) {
-        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
-        for (int kx = 0; kx < ${kw}; ++kx) {
-            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
-            int tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+    ${var_vec4} r = prm[${bias_offset} + gid.z];
+    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+        ${let_int} iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+        for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
+            ${let_int} ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+            ${let_int} tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
 ${input_loops}
         }
     }"""
 
 # Zero padding: taps outside the input contribute nothing (texelFetch outside is undefined).
 _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
-                for (int l = 0; l < ${layers}; ++l) {
-                    vec4 v = texelFetch(${src}, ivec3(ix, iy, l), 0);
-                    int o = tap + (${layer_offset} + l) * 4;
-                    r += mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]) * v;
+                for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
+                    ${let_vec4} v = ${fetch}(${src}, ${ivec3}(ix, iy, l)${lod});
+                    ${let_int} o = tap + (${layer_offset} + l) * 4;
+                    r += ${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]) * v;
                 }
             }"""
 
@@ -289,85 +328,88 @@ ${stores}
 }
 """
 
-_T["conv_block_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
+_T["conv_block_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
 ${acc_init}
-    for (int ky = 0; ky < ${kh}; ++ky) {
-        for (int kx = 0; kx < ${kw}; ++kx) {
-            int tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
-            ivec2 qb = base * ivec2(${sx}, ${sy}) + ivec2(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
+    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+        for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
+            ${let_int} tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+            ${let_ivec2} qb = base * ${ivec2}(${sx}, ${sy}) + \
+${ivec2}(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
 ${coords}
 ${input_loops}
         }
     }"""
-_T["conv_block_bias"] = "    vec4 b${o} = prm[${bias_offset} + z0 + ${o}];"
-_T["conv_block_acc"] = "    vec4 ${names};"
+_T["conv_block_bias"] = "    ${let_vec4} b${o} = prm[${bias_offset} + z0 + ${o}];"
+_T["conv_block_acc"] = "    ${var_vec4} ${names};"
 _T["conv_block_acc_name"] = "a${o}_${p} = b${o}"
 _T["conv_block_acc_sep"] = ", "
 _T["conv_block_coord"] = (
     "            ivec2 q${p} = qb + ivec2(${qx}, ${qy}); float k${p} = nao_clip(q${p}, in_size);"
 )
-_T["conv_block_input_loop"] = """            for (int l = 0; l < ${layers}; ++l) {
-                int o = tap + (${layer_offset} + l) * 4;
+_T["conv_block_input_loop"] = """            for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
+                ${let_int} o = tap + (${layer_offset} + l) * 4;
 ${fetches}
 ${products}
             }"""
-_T["conv_block_fetch"] = "                vec4 v${p} = texelFetch(${src}, ivec3(q${p}, l), 0) * k${p};"
-_T["conv_block_weight"] = "                mat4 m${o} = nao_tap(o + ${off});"
+_T["conv_block_fetch"] = (
+    "                ${let_vec4} v${p} = ${fetch}(${src}, ${ivec3}(q${p}, l)${lod}) * k${p};"
+)
+_T["conv_block_weight"] = "                ${let_mat4} m${o} = nao_tap(o + ${off});"
 _T["conv_block_fma"] = "a${o}_${p} += m${o} * v${p};"
 _T["conv_block_fmas"] = "                ${fmas}"
-_T["conv_block_store"] = "    nao_store(base + ivec2(${px}, ${py}), z0 + ${o}, a${o}_${p});"
+_T["conv_block_store"] = "    nao_store(base + ${ivec2}(${px}, ${py}), z0 + ${o}, a${o}_${p});"
 
 # ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
 _T["conv_transpose_body"] = """${sizes}
-    vec4 r = prm[${bias_offset} + gid.z];
-    for (int ky = 0; ky < ${kh}; ++ky) {
-        int ty = gid.y + ${pad_top} - ky * ${dy};
+    ${var_vec4} r = prm[${bias_offset} + gid.z];
+    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+        ${let_int} ty = gid.y + ${pad_top} - ky * ${dy};
         if (ty < 0 || ty % ${sy} != 0) {
             continue;
         }
-        int iy = ty / ${sy};
-        for (int kx = 0; kx < ${kw}; ++kx) {
-            int tx = gid.x + ${pad_left} - kx * ${dx};
+        ${let_int} iy = ty / ${sy};
+        for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
+            ${let_int} tx = gid.x + ${pad_left} - kx * ${dx};
             if (tx < 0 || tx % ${sx} != 0) {
                 continue;
             }
-            int ix = tx / ${sx};
-            int tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
+            ${let_int} ix = tx / ${sx};
+            ${let_int} tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
 ${input_loops}
         }
     }"""
 
 # Depthwise conv (group = channels): output layer gid.z reads input layer gid.z only, one vec4 per tap.
-_T["conv_depthwise_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = prm[${bias_offset} + gid.z];
-    for (int ky = 0; ky < ${kh}; ++ky) {
-        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+_T["conv_depthwise_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_vec4} r = prm[${bias_offset} + gid.z];
+    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+        ${let_int} iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
         if (iy < 0 || iy >= in_size.y) {
             continue;
         }
-        for (int kx = 0; kx < ${kw}; ++kx) {
-            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+        for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
+            ${let_int} ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
             if (ix < 0 || ix >= in_size.x) {
                 continue;
             }
             r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * \
-texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+${fetch}(src0, ${ivec3}(ix, iy, gid.z)${lod});
         }
     }"""
 
 # count: taps inside the input; count_padded: taps inside the padded input (ceil_mode windows may
 # reach past the trailing pads; count_include_pad divides by count_padded, as onnxruntime does).
-_T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = ${init};
-    int count = 0;
-    int count_padded = 0;
-    for (int ky = 0; ky < ${kh}; ++ky) {
-        int iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
+_T["pool_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_vec4} r = ${init};
+    ${var_int:count} = 0;
+    ${var_int:count_padded} = 0;
+    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+        ${let_int} iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
         if (iy < -${pad_top} || iy >= in_size.y + ${pad_bottom}) {
             continue;
         }
-        for (int kx = 0; kx < ${kw}; ++kx) {
-            int ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
+        for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
+            ${let_int} ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
             if (ix < -${pad_left} || ix >= in_size.x + ${pad_right}) {
                 continue;
             }
@@ -375,39 +417,39 @@ _T["pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
             if (iy < 0 || iy >= in_size.y || ix < 0 || ix >= in_size.x) {
                 continue;
             }
-            vec4 v = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            ${let_vec4} v = ${fetch}(src0, ${ivec3}(ix, iy, gid.z)${lod});
             r = ${accumulate};
             count += 1;
         }
     }
 ${finish}"""
-_T["pool_init_avg"] = "vec4(0.0)"
-_T["pool_init_max"] = "vec4(-3.402823466e+38)"
+_T["pool_init_avg"] = "${vec4}(0.0)"
+_T["pool_init_max"] = "${vec4}(-3.402823466e+38)"
 _T["pool_acc_avg"] = "r + v"
 _T["pool_acc_max"] = "max(r, v)"
-_T["pool_finish_count"] = "    r /= float(max(count, 1));"
-_T["pool_finish_padded"] = "    r /= float(max(count_padded, 1));"
+_T["pool_finish_count"] = "    r /= ${float}(max(count, 1));"
+_T["pool_finish_padded"] = "    r /= ${float}(max(count_padded, 1));"
 _T["pool_finish_none"] = "    // max pool: no normalisation"
 # Lp pools: the sum of |x|^p over the window (padding adds nothing), then its p-th root.
-_T["pool_init_lp"] = "vec4(0.0)"
+_T["pool_init_lp"] = "${vec4}(0.0)"
 _T["pool_acc_l1"] = "r + abs(v)"
 _T["pool_acc_l2"] = "r + v * v"
-_T["pool_acc_lp"] = "r + pow(abs(v), vec4(${p}))"
+_T["pool_acc_lp"] = "r + pow(abs(v), ${vec4}(${p}))"
 _T["pool_finish_l1"] = "    // L1: the sum itself"
 _T["pool_finish_l2"] = "    r = sqrt(r);"
-_T["pool_finish_lp"] = "    r = pow(r, vec4(${inv_p}));"
+_T["pool_finish_lp"] = "    r = pow(r, ${vec4}(${inv_p}));"
 
 # Global pools: one invocation per output layer walks the whole input (the output is 1 x 1).
-_T["global_pool_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = ${init};
-    for (int iy = 0; iy < in_size.y; ++iy) {
-        for (int ix = 0; ix < in_size.x; ++ix) {
-            vec4 v = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+_T["global_pool_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_vec4} r = ${init};
+    for (${var_int:iy} = 0; iy < in_size.y; ${inc:iy}) {
+        for (${var_int:ix} = 0; ix < in_size.x; ${inc:ix}) {
+            ${let_vec4} v = ${fetch}(src0, ${ivec3}(ix, iy, gid.z)${lod});
             r = ${accumulate};
         }
     }
 ${finish}"""
-_T["global_finish_mean"] = "    r /= float(in_size.x * in_size.y);"
+_T["global_finish_mean"] = "    r /= ${float}(in_size.x * in_size.y);"
 
 # Resize: source coordinate per ONNX coordinate_transformation_mode (x: output index as float), the
 # float32 operations of the ONNX formulas in onnxruntime's order, each correctly rounded: a coordinate
@@ -438,7 +480,7 @@ _T["coord_tf_crop_and_resize"] = (
 )
 _T["scale_literal"] = "${value}"
 _T["scale_ratio"] = "nao_div(${len_out}, ${len_in})"
-_T["float_of"] = "float(${v})"
+_T["float_of"] = "${float}(${v})"
 
 # Nearest index per nearest_mode, exact for non-negative coordinates (negative ones clamp to 0).
 _T["round_round_prefer_floor"] = "(fract(${v}) > 0.5 ? ceil(${v}) : floor(${v}))"
@@ -446,73 +488,74 @@ _T["round_round_prefer_ceil"] = "(fract(${v}) >= 0.5 ? ceil(${v}) : floor(${v}))
 _T["round_floor"] = "floor(${v})"
 _T["round_ceil"] = "ceil(${v})"
 
-_T["resize_linear_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    precise float fy = ${coord_y};
-    precise float fx = ${coord_x};
+_T["resize_linear_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${precise}${var_float:fy} = ${coord_y};
+    ${precise}${var_float:fx} = ${coord_x};
 ${outside}
-    fy = clamp(fy, 0.0, float(in_size.y - 1));
-    fx = clamp(fx, 0.0, float(in_size.x - 1));
-    int y0 = int(fy);
-    int x0 = int(fx);
-    int y1 = min(y0 + 1, in_size.y - 1);
-    int x1 = min(x0 + 1, in_size.x - 1);
-    float wy = fy - float(y0);
-    float wx = fx - float(x0);
-    vec4 a = texelFetch(src0, ivec3(x0, y0, gid.z), 0);
-    vec4 b = texelFetch(src0, ivec3(x1, y0, gid.z), 0);
-    vec4 c = texelFetch(src0, ivec3(x0, y1, gid.z), 0);
-    vec4 d = texelFetch(src0, ivec3(x1, y1, gid.z), 0);
-    vec4 r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;
+    fy = clamp(fy, 0.0, ${float}(in_size.y - 1));
+    fx = clamp(fx, 0.0, ${float}(in_size.x - 1));
+    ${let_int} y0 = ${int}(fy);
+    ${let_int} x0 = ${int}(fx);
+    ${let_int} y1 = min(y0 + 1, in_size.y - 1);
+    ${let_int} x1 = min(x0 + 1, in_size.x - 1);
+    ${let_float} wy = fy - ${float}(y0);
+    ${let_float} wx = fx - ${float}(x0);
+    ${let_vec4} a = ${fetch}(src0, ${ivec3}(x0, y0, gid.z)${lod});
+    ${let_vec4} b = ${fetch}(src0, ${ivec3}(x1, y0, gid.z)${lod});
+    ${let_vec4} c = ${fetch}(src0, ${ivec3}(x0, y1, gid.z)${lod});
+    ${let_vec4} d = ${fetch}(src0, ${ivec3}(x1, y1, gid.z)${lod});
+    ${var_vec4} r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;
     if (outside) {
-        r = vec4(${extrapolation});
+        r = ${vec4}(${extrapolation});
     }"""
 
-_T["resize_nearest_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    precise float fy = ${coord_y};
-    precise float fx = ${coord_x};
+_T["resize_nearest_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${precise}${let_float:fy} = ${coord_y};
+    ${precise}${let_float:fx} = ${coord_x};
 ${outside}
-    int iy = clamp(int(${round_y}), 0, in_size.y - 1);
-    int ix = clamp(int(${round_x}), 0, in_size.x - 1);
-    vec4 r = texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+    ${let_int} iy = clamp(${int}(${round_y}), 0, in_size.y - 1);
+    ${let_int} ix = clamp(${int}(${round_x}), 0, in_size.x - 1);
+    ${var_vec4} r = ${fetch}(src0, ${ivec3}(ix, iy, gid.z)${lod});
     if (outside) {
-        r = vec4(${extrapolation});
+        r = ${vec4}(${extrapolation});
     }"""
 
 # tf_crop_and_resize: a source coordinate outside the input gives extrapolation_value.
 _T["resize_outside"] = (
-    "    bool outside = fy < 0.0 || fy > float(in_size.y - 1) || fx < 0.0 || fx > float(in_size.x - 1);"
+    "    ${let_bool} outside = "
+    "fy < 0.0 || fy > ${float}(in_size.y - 1) || fx < 0.0 || fx > ${float}(in_size.x - 1);"
 )
 _T["resize_inside"] = "    const bool outside = false;"
 
 # Separable filter (cubic, or linear / cubic widened by 1 / scale when antialiasing a downscale):
 # taps floor(f) - half + 1 .. floor(f) + half per axis, weights normalised by their sum (onnxruntime).
-_T["resize_filter_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    precise float fy = ${coord_y};
-    precise float fx = ${coord_x};
+_T["resize_filter_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${precise}${let_float:fy} = ${coord_y};
+    ${precise}${let_float:fx} = ${coord_x};
 ${outside}
-    int y_first = int(floor(fy)) - ${half_y} + 1;
-    int x_first = int(floor(fx)) - ${half_x} + 1;
-    vec4 acc = vec4(0.0);
-    float wsum = 0.0;
-    for (int j = 0; j < ${taps_y}; ++j) {
-        int iy = y_first + j;
-        float wy = ${weight_y};
+    ${let_int} y_first = ${int}(floor(fy)) - ${half_y} + 1;
+    ${let_int} x_first = ${int}(floor(fx)) - ${half_x} + 1;
+    ${var_vec4} acc = ${vec4}(0.0);
+    ${var_float:wsum} = 0.0;
+    for (${var_int:j} = 0; j < ${taps_y}; ${inc:j}) {
+        ${var_int} iy = y_first + j;
+        ${var_float:wy} = ${weight_y};
 ${exclude_y}
         iy = clamp(iy, 0, in_size.y - 1);
-        for (int i = 0; i < ${taps_x}; ++i) {
-            int ix = x_first + i;
-            float wx = ${weight_x};
+        for (${var_int:i} = 0; i < ${taps_x}; ${inc:i}) {
+            ${var_int} ix = x_first + i;
+            ${var_float:wx} = ${weight_x};
 ${exclude_x}
             ix = clamp(ix, 0, in_size.x - 1);
-            acc += (wy * wx) * texelFetch(src0, ivec3(ix, iy, gid.z), 0);
+            acc += (wy * wx) * ${fetch}(src0, ${ivec3}(ix, iy, gid.z)${lod});
             wsum += wy * wx;
         }
     }
-    vec4 r = acc / wsum;
+    ${var_vec4} r = acc / wsum;
     if (outside) {
-        r = vec4(${extrapolation});
+        r = ${vec4}(${extrapolation});
     }"""
-_T["filter_arg"] = "((float(${i}) - ${f}) * ${widen})"
+_T["filter_arg"] = "((${float}(${i}) - ${f}) * ${widen})"
 _T["kernel_linear"] = "max(0.0, 1.0 - abs(${t}))"
 _T["kernel_cubic"] = "nao_cubic(${t}, ${a})"
 _T["filter_exclude_y"] = """        if (iy < 0 || iy >= in_size.y) {
@@ -535,29 +578,29 @@ _T["prelude_cubic"] = """float nao_cubic(float t, float a) {
     return 0.0;
 }"""
 
-_T["concat_body"] = """    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int c = gid.z * 4 + lane;
+_T["concat_body"] = """    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} c = gid.z * 4 + lane;
 ${branches}
     }"""
 _T["concat_branch"] = """        if (c >= ${begin} && c < ${end}) {
-            r[lane] = texelFetch(${src}, ivec3(gid.xy, (c - ${begin}) / 4), 0)[(c - ${begin}) % 4];
+            r[lane] = ${fetch}(${src}, ${ivec3}(gid.xy, (c - ${begin}) / 4)${lod})[(c - ${begin}) % 4];
         }"""
 
 # A scalar graph input (a uniform) as a 1x1 one-channel texture; the padding lanes hold 0.
-_T["uniform_body"] = "    vec4 r = vec4(${name}, 0.0, 0.0, 0.0);"
+_T["uniform_body"] = "    ${var_vec4} r = ${vec4}(${name}, 0.0, 0.0, 0.0);"
 
-_T["elementwise_body"] = "    vec4 r = texelFetch(src0, gid, 0);"
+_T["elementwise_body"] = "    ${var_vec4} r = ${fetch}(src0, gid${lod});"
 
 # Two images a (src0) and b (src1); a 1x1 or one-channel operand is broadcast.
-_T["binary_body"] = """    vec4 a = ${fetch_a};
-    vec4 b = ${fetch_b};
+_T["binary_body"] = """    ${let_vec4} a = ${fetch_a};
+    ${var_vec4} b = ${fetch_b};
 ${guard}
-    vec4 r = ${expr};"""
-_T["fetch_full"] = "texelFetch(${src}, gid, 0)"
-_T["fetch_pixel"] = "texelFetch(${src}, ivec3(0, 0, gid.z), 0)"
-_T["fetch_channel"] = "texelFetch(${src}, ivec3(gid.xy, 0), 0).xxxx"
-_T["fetch_scalar"] = "texelFetch(${src}, ivec3(0), 0).xxxx"
+    ${var_vec4} r = ${expr};"""
+_T["fetch_full"] = "${fetch}(${src}, gid${lod})"
+_T["fetch_pixel"] = "${fetch}(${src}, ${ivec3}(0, 0, gid.z)${lod})"
+_T["fetch_channel"] = "${fetch}(${src}, ${ivec3}(gid.xy, 0)${lod}).xxxx"
+_T["fetch_scalar"] = "${fetch}(${src}, ${ivec3}(0)${lod}).xxxx"
 # Padding lanes divide by 1, so they stay finite (a later conv multiplies them by zero weights).
 _T["binary_guard_div"] = (
     "    b = mix(vec4(1.0), b, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), ivec4(${channels})));"
@@ -571,21 +614,22 @@ _T["binop_Max"] = "max(a, b)"
 _T["binop_Min"] = "min(a, b)"
 
 # ONNX Pad on H, W (negative pads crop): output texel (x, y) reads input (x - left, y - top).
-_T["spatial_pad_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    int x = gid.x - ${left};
-    int y = gid.y - ${top};
+_T["spatial_pad_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_int} x = gid.x - ${left};
+    ${var_int} y = gid.y - ${top};
 ${mode}"""
-_T["pad_constant"] = """    vec4 r = vec4(${value});
+_T["pad_constant"] = """    ${var_vec4} r = ${vec4}(${value});
     if (x >= 0 && x < in_size.x && y >= 0 && y < in_size.y) {
-        r = texelFetch(src0, ivec3(x, y, gid.z), 0);
+        r = ${fetch}(src0, ${ivec3}(x, y, gid.z)${lod});
     }"""
 _T["pad_edge"] = (
-    "    vec4 r = texelFetch(src0, ivec3(clamp(x, 0, in_size.x - 1), clamp(y, 0, in_size.y - 1), gid.z), 0);"
+    "    ${var_vec4} r = "
+    "${fetch}(src0, ${ivec3}(clamp(x, 0, in_size.x - 1), clamp(y, 0, in_size.y - 1), gid.z)${lod});"
 )
 # Reflect (edge sample not repeated) for any pad width: fold |x| into one period 2 (n - 1).
-_T["pad_reflect"] = """    ivec2 period = max(2 * (in_size - 1), ivec2(1));
-    ivec2 m = abs(ivec2(x, y)) % period;
-    vec4 r = texelFetch(src0, ivec3(min(m, period - m), gid.z), 0);"""
+_T["pad_reflect"] = """    ${let_ivec2} period = max(2 * (in_size - 1), ${ivec2}(1));
+    ${let_ivec2} m = abs(${ivec2}(x, y)) % period;
+    ${var_vec4} r = ${fetch}(src0, ${ivec3}(min(m, period - m), gid.z)${lod});"""
 # Wrap: GLSL leaves % of negative operands undefined, so negative indices count from the end.
 _T["pad_wrap"] = """    x = x >= 0 ? x % in_size.x : in_size.x - 1 - (-x - 1) % in_size.x;
     y = y >= 0 ? y % in_size.y : in_size.y - 1 - (-y - 1) % in_size.y;
@@ -623,20 +667,20 @@ _T["epilogue_guard"] = (
 # Gather (a view materialised: DepthToSpace, SpaceToDepth, channel shuffles, transposes): each output
 # coordinate is split into its digits, innermost first; each digit moves one source coordinate (s.z:
 # the channel) by its stride. The outermost digit of an axis takes the rest of the index (no modulo).
-_T["gather_body"] = """    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int c = gid.z * 4 + lane;
+_T["gather_body"] = """    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} c = gid.z * 4 + lane;
         if (c >= ${channels}) {
             break;
         }
-        ivec3 s = ivec3(0);  // source x, y, channel
-        int v = c;
+        ${var_ivec3} s = ${ivec3}(0);  // source x, y, channel
+        ${var_int} v = c;
 ${digits_c}
         v = gid.y;
 ${digits_y}
         v = gid.x;
 ${digits_x}
-        r[lane] = texelFetch(src0, ivec3(s.xy, s.z / 4), 0)[s.z % 4];
+        r[lane] = ${fetch}(src0, ${ivec3}(s.xy, s.z / 4)${lod})[s.z % 4];
     }"""
 _T["gather_digit"] = """        s.${coord} += (v % ${size}) * ${stride};
         v /= ${size};"""
@@ -644,25 +688,25 @@ _T["gather_digit_last"] = "        s.${coord} += v * ${stride};"
 
 # Member loops of a reduction (reduce, moments): the pixels of the output texel's window (the whole
 # image on a reduced axis) x the members of channel group g (prm tables: base per group, offsets).
-_T["member_loops"] = """        for (int iy = ${y_begin}; iy < ${y_end}; ++iy) {
-            for (int ix = ${x_begin}; ix < ${x_end}; ++ix) {
-                for (int k = 0; k < ${members}; ++k) {
-                    int c = base + int(prm[${offsets_offset} + k / 4][k % 4]);
-                    float v = texelFetch(src0, ivec3(ix, iy, c / 4), 0)[c % 4];
+_T["member_loops"] = """        for (${var_int:iy} = ${y_begin}; iy < ${y_end}; ${inc:iy}) {
+            for (${var_int:ix} = ${x_begin}; ix < ${x_end}; ${inc:ix}) {
+                for (${var_int:k} = 0; k < ${members}; ${inc:k}) {
+                    ${let_int} c = base + ${int}(prm[${offsets_offset} + k / 4][k % 4]);
+                    ${let_float} v = ${fetch}(src0, ${ivec3}(ix, iy, c / 4)${lod})[c % 4];
                     ${statement}
                 }
             }
         }"""
-_T["reduce_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int g = gid.z * 4 + lane;
+_T["reduce_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} g = gid.z * 4 + lane;
         if (g >= ${groups}) {
             break;
         }
-        int base = int(prm[${base_offset} + g / 4][g % 4]);
-        float n = float(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
-        float s = ${init};
+        ${let_int} base = ${int}(prm[${base_offset} + g / 4][g % 4]);
+        ${let_float} n = ${float}(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
+        ${var_float:s} = ${init};
 ${loops}
         r[lane] = ${finish};
     }"""
@@ -683,19 +727,19 @@ _T["reduce_finish_log"] = "log(s)"
 
 # Moments: channel j < groups holds the mean of group j, channel groups + j its 1 / sqrt(var + epsilon)
 # (two passes over the members: the mean, then the squared deviations from it, as onnxruntime does).
-_T["moments_body"] = """    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int j = gid.z * 4 + lane;
+_T["moments_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
+    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} j = gid.z * 4 + lane;
         if (j >= ${channels}) {
             break;
         }
-        int g = j % ${groups};
-        int base = int(prm[${base_offset} + g / 4][g % 4]);
-        float n = float(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
-        float s = 0.0;
+        ${let_int} g = j % ${groups};
+        ${let_int} base = ${int}(prm[${base_offset} + g / 4][g % 4]);
+        ${let_float} n = ${float}(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
+        ${var_float:s} = 0.0;
 ${sum_loops}
-        float mean = s / n;
+        ${let_float} mean = s / n;
         if (j < ${groups}) {
             r[lane] = mean;
             continue;
@@ -708,34 +752,34 @@ _T["moments_acc_square"] = "s += (v - mean) * (v - mean);"
 
 # Normalize: src0 the image, src1 its moments (mean at channel g, 1/std at groups + g); the group of
 # each channel in prm (padding lanes: group 0, so they stay finite).
-_T["normalize_body"] = """    vec4 x = texelFetch(src0, gid, 0);
-    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int g = int(prm[${group_offset} + gid.z][lane]);
-        int h = g + ${groups};
-        float mean = texelFetch(src1, ivec3(${stats_x}, ${stats_y}, g / 4), 0)[g % 4];
-        float rstd = texelFetch(src1, ivec3(${stats_x}, ${stats_y}, h / 4), 0)[h % 4];
+_T["normalize_body"] = """    ${let_vec4} x = ${fetch}(src0, gid${lod});
+    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} g = ${int}(prm[${group_offset} + gid.z][lane]);
+        ${let_int} h = g + ${groups};
+        ${let_float} mean = ${fetch}(src1, ${ivec3}(${stats_x}, ${stats_y}, g / 4)${lod})[g % 4];
+        ${let_float} rstd = ${fetch}(src1, ${ivec3}(${stats_x}, ${stats_y}, h / 4)${lod})[h % 4];
         r[lane] = (x[lane] - mean) * rstd;
     }"""
 
 # Softmax over the channels of a group at one pixel (prm: the group's first channel per channel, offsets).
-_T["softmax_body"] = """    vec4 x = texelFetch(src0, gid, 0);
-    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int c = gid.z * 4 + lane;
+_T["softmax_body"] = """    ${let_vec4} x = ${fetch}(src0, gid${lod});
+    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} c = gid.z * 4 + lane;
         if (c >= ${channels}) {
             break;
         }
-        int base = int(prm[${base_offset} + gid.z][lane]);
-        float m = -3.402823466e+38;
-        for (int k = 0; k < ${members}; ++k) {
-            int q = base + int(prm[${offsets_offset} + k / 4][k % 4]);
-            m = max(m, texelFetch(src0, ivec3(gid.xy, q / 4), 0)[q % 4]);
+        ${let_int} base = ${int}(prm[${base_offset} + gid.z][lane]);
+        ${var_float:m} = -3.402823466e+38;
+        for (${var_int:k} = 0; k < ${members}; ${inc:k}) {
+            ${let_int} q = base + ${int}(prm[${offsets_offset} + k / 4][k % 4]);
+            m = max(m, ${fetch}(src0, ${ivec3}(gid.xy, q / 4)${lod})[q % 4]);
         }
-        float s = 0.0;
-        for (int k = 0; k < ${members}; ++k) {
-            int q = base + int(prm[${offsets_offset} + k / 4][k % 4]);
-            s += exp(texelFetch(src0, ivec3(gid.xy, q / 4), 0)[q % 4] - m);
+        ${var_float:s} = 0.0;
+        for (${var_int:k} = 0; k < ${members}; ${inc:k}) {
+            ${let_int} q = base + ${int}(prm[${offsets_offset} + k / 4][k % 4]);
+            s += exp(${fetch}(src0, ${ivec3}(gid.xy, q / 4)${lod})[q % 4] - m);
         }
         r[lane] = ${finish};
     }"""
@@ -743,16 +787,16 @@ _T["softmax_finish"] = "exp(x[lane] - m) / s"
 _T["log_softmax_finish"] = "x[lane] - m - log(s)"
 
 # LRN across channels: x / (bias + alpha / size * sum of squares over the window) ^ beta.
-_T["lrn_body"] = """    vec4 x = texelFetch(src0, gid, 0);
-    vec4 r = vec4(0.0);
-    for (int lane = 0; lane < 4; ++lane) {
-        int c = gid.z * 4 + lane;
+_T["lrn_body"] = """    ${let_vec4} x = ${fetch}(src0, gid${lod});
+    ${var_vec4} r = ${vec4}(0.0);
+    for (${var_int:lane} = 0; lane < 4; ${inc:lane}) {
+        ${let_int} c = gid.z * 4 + lane;
         if (c >= ${channels}) {
             break;
         }
-        float s = 0.0;
-        for (int k = max(c - ${before}, 0); k <= min(c + ${after}, ${channels} - 1); ++k) {
-            float v = texelFetch(src0, ivec3(gid.xy, k / 4), 0)[k % 4];
+        ${var_float:s} = 0.0;
+        for (${var_int:k} = max(c - ${before}, 0); k <= min(c + ${after}, ${channels} - 1); ${inc:k}) {
+            ${let_float} v = ${fetch}(src0, ${ivec3}(gid.xy, k / 4)${lod})[k % 4];
             s += v * v;
         }
         r[lane] = x[lane] / pow(${bias} + ${alpha} * s, ${beta});
@@ -762,7 +806,7 @@ _T["lrn_body"] = """    vec4 x = texelFetch(src0, gid, 0);
 
 # The cheapest AO an engine can draw (baked per-vertex values, Sloan et al. style), used by the
 # benchmark as the reference cost next to the MLP pass.
-_T["vertex_colour_vert"] = """${header}
+_G["vertex_colour_vert"] = """${header}
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in float a_ao;
 uniform mat4 u_mvp;
@@ -773,7 +817,7 @@ void main() {
 }
 """
 
-_T["vertex_colour_frag"] = """${header}
+_G["vertex_colour_frag"] = """${header}
 in float v_ao;
 layout(location = 0) out vec4 o_colour;
 void main() {
@@ -781,20 +825,35 @@ void main() {
 }
 """
 
-
 # --------------------------------------------------------------------------- WGSL compute (WebGPU)
 
-# The same passes in WGSL: every compute template whose GLSL text is not also valid WGSL has an
-# override here; the rest (pure arithmetic on the same identifiers) are shared by name in
-# _WGSL_SHARED. A template in neither is missing on purpose: the writer refuses that pass for WGSL
-# with one line, rather than emit GLSL into a WGSL file. Conventions: one bind group (0); ``r`` is a
-# ``var``; ``nao_fetch`` is texelFetch on a 2-D array texture, ``nao_size`` its size.
+# WGSL overrides only what differs from _T: its words, and the templates whose structure differs
+# (entry points, resource declarations, helper functions, ternaries and boolean-vector mix() as
+# select()). _G is not part of WGSL: the writer refuses, with one line, a pass that would need it,
+# rather than emit GLSL into a WGSL file. Conventions: one bind group (0); ``r`` is a ``var``;
+# ``nao_fetch`` is texelFetch on a 2-D array texture, ``nao_size`` its size.
+_WGSL_WORDS: dict[str, str] = {
+    "vec4": "vec4<f32>",
+    "ivec2": "vec2<i32>",
+    "ivec3": "vec3<i32>",
+    "mat4": "mat4x4<f32>",
+    "float": "f32",
+    "int": "i32",
+    "declare": "${kind}",
+    "declare_typed": "${kind} ${name}: ${type}",
+    "precise": "",
+    "fetch": "nao_fetch",
+    "lod": "",
+    "size_of": "nao_size(${name})",
+    "inc": "${name}++",
+}
+
 _W: dict[str, str] = {}
 
 _W["header"] = "// WGSL (WebGPU compute), generated by neuralao from the same templates as the GLSL"
 _W["storage_format_rgba32f"] = "rgba32float"
 _W["storage_format_rgba16f"] = "rgba16float"
-_W["conv_block_acc_sep"] = "; var "
+_W["conv_block_acc_sep"] = "; var "  # one name per WGSL declaration
 
 _W["prelude"] = """// Overflow-safe activations (exp() only sees arguments <= 0).
 fn nao_tanh(x: vec4<f32>) -> vec4<f32> {
@@ -820,17 +879,10 @@ fn nao_size(t: texture_2d_array<f32>) -> vec2<i32> {
     return vec2<i32>(textureDimensions(t));
 }"""
 
-_W["act_Relu"] = "max(${x}, vec4<f32>(0.0))"
-_W["act_Clip"] = "min(max(${x}, vec4<f32>(${lo})), vec4<f32>(${hi}))"
-_W["act_Clip_min"] = "max(${x}, vec4<f32>(${lo}))"
-_W["act_Clip_max"] = "min(${x}, vec4<f32>(${hi}))"
 _W["act_Elu"] = "select(${alpha} * (exp(min(${x}, vec4<f32>(0.0))) - 1.0), ${x}, ${x} >= vec4<f32>(0.0))"
-_W["act_Softplus"] = "(max(${x}, vec4<f32>(0.0)) + log(1.0 + exp(-abs(${x}))))"
+# WGSL's clamp() takes bounds of its argument's type.
 _W["act_HardSigmoid"] = "clamp(${alpha} * ${x} + ${beta}, vec4<f32>(0.0), vec4<f32>(1.0))"
 _W["act_HardSwish"] = "(${x} * clamp(0.16666667 * ${x} + 0.5, vec4<f32>(0.0), vec4<f32>(1.0)))"
-_W["act_Mish"] = "(${x} * nao_tanh(max(${x}, vec4<f32>(0.0)) + log(1.0 + exp(-abs(${x})))))"
-_W["act_Pow"] = "pow(${x}, vec4<f32>(${e}))"
-_W["act_Pow_one"] = "vec4<f32>(1.0)"
 _W["prelude_erf"] = """fn nao_erf(x: vec4<f32>) -> vec4<f32> {
     let z = abs(x);
     let t = 1.0 / (1.0 + 0.5 * z);
@@ -869,24 +921,6 @@ _W["params_decl"] = "@group(0) @binding(${binding}) var<storage, read> prm: arra
 _W["uniform_int_decl"] = "@group(0) @binding(${slot}) var<uniform> ${name}: i32;"
 _W["uniform_float_decl"] = "@group(0) @binding(${slot}) var<uniform> ${name}: f32;"
 _W["size_decl"] = "    let ${size} = nao_size(${src});"
-
-_W["conv_body"] = """${sizes}
-    var r = prm[${bias_offset} + gid.z];
-    for (var ky: i32 = 0; ky < ${kh}; ky++) {
-        let iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
-        for (var kx: i32 = 0; kx < ${kw}; kx++) {
-            let ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
-            let tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
-${input_loops}
-        }
-    }"""
-_W["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
-                for (var l: i32 = 0; l < ${layers}; l++) {
-                    let v = nao_fetch(${src}, vec3<i32>(ix, iy, l));
-                    let o = tap + (${layer_offset} + l) * 4;
-                    r += mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]) * v;
-                }
-            }"""
 
 _W["compute_pass_block"] = """${header}
 // neuralao compute pass ${pass_index}: ${summary}
@@ -929,108 +963,10 @@ ${body}
 ${stores}
 }
 """
-_W["conv_block_body"] = """    let in_size = nao_size(src0);
-${acc_init}
-    for (var ky: i32 = 0; ky < ${kh}; ky++) {
-        for (var kx: i32 = 0; kx < ${kw}; kx++) {
-            let tap = ${weight_offset} + ((z0 * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
-            let qb = base * vec2<i32>(${sx}, ${sy}) + \
-vec2<i32>(kx * ${dx} - ${pad_left}, ky * ${dy} - ${pad_top});
-${coords}
-${input_loops}
-        }
-    }"""
-_W["conv_block_bias"] = "    let b${o} = prm[${bias_offset} + z0 + ${o}];"
-_W["conv_block_acc"] = "    var ${names};"
+# WGSL has no inout: nao_clip takes q by pointer.
 _W["conv_block_coord"] = (
     "            var q${p} = qb + vec2<i32>(${qx}, ${qy}); let k${p} = nao_clip(&q${p}, in_size);"
 )
-_W["conv_block_input_loop"] = """            for (var l: i32 = 0; l < ${layers}; l++) {
-                let o = tap + (${layer_offset} + l) * 4;
-${fetches}
-${products}
-            }"""
-_W["conv_block_fetch"] = "                let v${p} = nao_fetch(${src}, vec3<i32>(q${p}, l)) * k${p};"
-_W["conv_block_weight"] = "                let m${o} = nao_tap(o + ${off});"
-_W["conv_block_store"] = "    nao_store(base + vec2<i32>(${px}, ${py}), z0 + ${o}, a${o}_${p});"
-
-_W["conv_transpose_body"] = """${sizes}
-    var r = prm[${bias_offset} + gid.z];
-    for (var ky: i32 = 0; ky < ${kh}; ky++) {
-        let ty = gid.y + ${pad_top} - ky * ${dy};
-        if (ty < 0 || ty % ${sy} != 0) {
-            continue;
-        }
-        let iy = ty / ${sy};
-        for (var kx: i32 = 0; kx < ${kw}; kx++) {
-            let tx = gid.x + ${pad_left} - kx * ${dx};
-            if (tx < 0 || tx % ${sx} != 0) {
-                continue;
-            }
-            let ix = tx / ${sx};
-            let tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
-${input_loops}
-        }
-    }"""
-
-_W["conv_depthwise_body"] = """    let in_size = nao_size(src0);
-    var r = prm[${bias_offset} + gid.z];
-    for (var ky: i32 = 0; ky < ${kh}; ky++) {
-        let iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
-        if (iy < 0 || iy >= in_size.y) {
-            continue;
-        }
-        for (var kx: i32 = 0; kx < ${kw}; kx++) {
-            let ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
-            if (ix < 0 || ix >= in_size.x) {
-                continue;
-            }
-            r += prm[${weight_offset} + (gid.z * ${kh} + ky) * ${kw} + kx] * \
-nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
-        }
-    }"""
-
-_W["pool_body"] = """    let in_size = nao_size(src0);
-    var r = ${init};
-    var count: i32 = 0;
-    var count_padded: i32 = 0;
-    for (var ky: i32 = 0; ky < ${kh}; ky++) {
-        let iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
-        if (iy < -${pad_top} || iy >= in_size.y + ${pad_bottom}) {
-            continue;
-        }
-        for (var kx: i32 = 0; kx < ${kw}; kx++) {
-            let ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
-            if (ix < -${pad_left} || ix >= in_size.x + ${pad_right}) {
-                continue;
-            }
-            count_padded += 1;
-            if (iy < 0 || iy >= in_size.y || ix < 0 || ix >= in_size.x) {
-                continue;
-            }
-            let v = nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
-            r = ${accumulate};
-            count += 1;
-        }
-    }
-${finish}"""
-_W["pool_init_avg"] = "vec4<f32>(0.0)"
-_W["pool_init_max"] = "vec4<f32>(-3.402823466e+38)"
-_W["pool_finish_count"] = "    r /= f32(max(count, 1));"
-_W["pool_finish_padded"] = "    r /= f32(max(count_padded, 1));"
-_W["pool_init_lp"] = "vec4<f32>(0.0)"
-_W["pool_acc_lp"] = "r + pow(abs(v), vec4<f32>(${p}))"
-_W["pool_finish_lp"] = "    r = pow(r, vec4<f32>(${inv_p}));"
-_W["global_pool_body"] = """    let in_size = nao_size(src0);
-    var r = ${init};
-    for (var iy: i32 = 0; iy < in_size.y; iy++) {
-        for (var ix: i32 = 0; ix < in_size.x; ix++) {
-            let v = nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
-            r = ${accumulate};
-        }
-    }
-${finish}"""
-_W["global_finish_mean"] = "    r /= f32(in_size.x * in_size.y);"
 
 # WGSL has no ``precise``: the coordinates rely on nao_div's fma residual step alone.
 _W["prelude_div"] = """fn nao_div(a: f32, b: f32) -> f32 {
@@ -1047,71 +983,10 @@ _W["coord_tf_crop_and_resize"] = (
     "${start} * (${len_in} - 1.0) + nao_div(${x} * (${end} - "
     "${start}) * (${len_in} - 1.0), ${len_out} - 1.0), ${len_out} > 1.0)"
 )
-_W["float_of"] = "f32(${v})"
 _W["round_round_prefer_floor"] = "select(floor(${v}), ceil(${v}), fract(${v}) > 0.5)"
 _W["round_round_prefer_ceil"] = "select(floor(${v}), ceil(${v}), fract(${v}) >= 0.5)"
 
-_W["resize_linear_body"] = """    let in_size = nao_size(src0);
-    var fy: f32 = ${coord_y};
-    var fx: f32 = ${coord_x};
-${outside}
-    fy = clamp(fy, 0.0, f32(in_size.y - 1));
-    fx = clamp(fx, 0.0, f32(in_size.x - 1));
-    let y0 = i32(fy);
-    let x0 = i32(fx);
-    let y1 = min(y0 + 1, in_size.y - 1);
-    let x1 = min(x0 + 1, in_size.x - 1);
-    let wy = fy - f32(y0);
-    let wx = fx - f32(x0);
-    let a = nao_fetch(src0, vec3<i32>(x0, y0, gid.z));
-    let b = nao_fetch(src0, vec3<i32>(x1, y0, gid.z));
-    let c = nao_fetch(src0, vec3<i32>(x0, y1, gid.z));
-    let d = nao_fetch(src0, vec3<i32>(x1, y1, gid.z));
-    var r = (a * (1.0 - wx) + b * wx) * (1.0 - wy) + (c * (1.0 - wx) + d * wx) * wy;
-    if (outside) {
-        r = vec4<f32>(${extrapolation});
-    }"""
-_W["resize_nearest_body"] = """    let in_size = nao_size(src0);
-    let fy: f32 = ${coord_y};
-    let fx: f32 = ${coord_x};
-${outside}
-    let iy = clamp(i32(${round_y}), 0, in_size.y - 1);
-    let ix = clamp(i32(${round_x}), 0, in_size.x - 1);
-    var r = nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
-    if (outside) {
-        r = vec4<f32>(${extrapolation});
-    }"""
-_W["resize_outside"] = (
-    "    let outside = fy < 0.0 || fy > f32(in_size.y - 1) || fx < 0.0 || fx > f32(in_size.x - 1);"
-)
 _W["resize_inside"] = "    let outside = false;"
-_W["resize_filter_body"] = """    let in_size = nao_size(src0);
-    let fy: f32 = ${coord_y};
-    let fx: f32 = ${coord_x};
-${outside}
-    let y_first = i32(floor(fy)) - ${half_y} + 1;
-    let x_first = i32(floor(fx)) - ${half_x} + 1;
-    var acc = vec4<f32>(0.0);
-    var wsum: f32 = 0.0;
-    for (var j: i32 = 0; j < ${taps_y}; j++) {
-        var iy = y_first + j;
-        var wy: f32 = ${weight_y};
-${exclude_y}
-        iy = clamp(iy, 0, in_size.y - 1);
-        for (var i: i32 = 0; i < ${taps_x}; i++) {
-            var ix = x_first + i;
-            var wx: f32 = ${weight_x};
-${exclude_x}
-            ix = clamp(ix, 0, in_size.x - 1);
-            acc += (wy * wx) * nao_fetch(src0, vec3<i32>(ix, iy, gid.z));
-            wsum += wy * wx;
-        }
-    }
-    var r = acc / wsum;
-    if (outside) {
-        r = vec4<f32>(${extrapolation});
-    }"""
-_W["filter_arg"] = "((f32(${i}) - ${f}) * ${widen})"
 _W["prelude_cubic"] = """fn nao_cubic(t: f32, a: f32) -> f32 {
     let x = abs(t);
     if (x <= 1.0) {
@@ -1123,43 +998,11 @@ _W["prelude_cubic"] = """fn nao_cubic(t: f32, a: f32) -> f32 {
     return 0.0;
 }"""
 
-_W["concat_body"] = """    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let c = gid.z * 4 + lane;
-${branches}
-    }"""
-_W["concat_branch"] = """        if (c >= ${begin} && c < ${end}) {
-            r[lane] = nao_fetch(${src}, vec3<i32>(gid.xy, (c - ${begin}) / 4))[(c - ${begin}) % 4];
-        }"""
-_W["uniform_body"] = "    var r = vec4<f32>(${name}, 0.0, 0.0, 0.0);"
-_W["elementwise_body"] = "    var r = nao_fetch(src0, gid);"
-_W["binary_body"] = """    let a = ${fetch_a};
-    var b = ${fetch_b};
-${guard}
-    var r = ${expr};"""
-_W["fetch_full"] = "nao_fetch(${src}, gid)"
-_W["fetch_pixel"] = "nao_fetch(${src}, vec3<i32>(0, 0, gid.z))"
-_W["fetch_channel"] = "nao_fetch(${src}, vec3<i32>(gid.xy, 0)).xxxx"
-_W["fetch_scalar"] = "nao_fetch(${src}, vec3<i32>(0)).xxxx"
 _W["binary_guard_div"] = (
     "    b = select(vec4<f32>(1.0), b, "
     "vec4<i32>(4 * gid.z) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
 )
 
-_W["spatial_pad_body"] = """    let in_size = nao_size(src0);
-    var x = gid.x - ${left};
-    var y = gid.y - ${top};
-${mode}"""
-_W["pad_constant"] = """    var r = vec4<f32>(${value});
-    if (x >= 0 && x < in_size.x && y >= 0 && y < in_size.y) {
-        r = nao_fetch(src0, vec3<i32>(x, y, gid.z));
-    }"""
-_W["pad_edge"] = (
-    "    var r = nao_fetch(src0, vec3<i32>(clamp(x, 0, in_size.x - 1), clamp(y, 0, in_size.y - 1), gid.z));"
-)
-_W["pad_reflect"] = """    let period = max(2 * (in_size - 1), vec2<i32>(1));
-    let m = abs(vec2<i32>(x, y)) % period;
-    var r = nao_fetch(src0, vec3<i32>(min(m, period - m), gid.z));"""
 _W["pad_wrap"] = """    x = select(in_size.x - 1 - (-x - 1) % in_size.x, x % in_size.x, x >= 0);
     y = select(in_size.y - 1 - (-y - 1) % in_size.y, y % in_size.y, y >= 0);
     var r = nao_fetch(src0, vec3<i32>(x, y, gid.z));"""
@@ -1184,191 +1027,48 @@ _W["epilogue_guard"] = (
     "    r = select(vec4<f32>(0.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
 )
 
-_W["gather_body"] = """    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let c = gid.z * 4 + lane;
-        if (c >= ${channels}) {
-            break;
-        }
-        var s = vec3<i32>(0);  // source x, y, channel
-        var v = c;
-${digits_c}
-        v = gid.y;
-${digits_y}
-        v = gid.x;
-${digits_x}
-        r[lane] = nao_fetch(src0, vec3<i32>(s.xy, s.z / 4))[s.z % 4];
-    }"""
-_W["member_loops"] = """        for (var iy: i32 = ${y_begin}; iy < ${y_end}; iy++) {
-            for (var ix: i32 = ${x_begin}; ix < ${x_end}; ix++) {
-                for (var k: i32 = 0; k < ${members}; k++) {
-                    let c = base + i32(prm[${offsets_offset} + k / 4][k % 4]);
-                    let v = nao_fetch(src0, vec3<i32>(ix, iy, c / 4))[c % 4];
-                    ${statement}
-                }
-            }
-        }"""
-_W["reduce_body"] = """    let in_size = nao_size(src0);
-    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let g = gid.z * 4 + lane;
-        if (g >= ${groups}) {
-            break;
-        }
-        let base = i32(prm[${base_offset} + g / 4][g % 4]);
-        let n = f32(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
-        var s: f32 = ${init};
-${loops}
-        r[lane] = ${finish};
-    }"""
-_W["moments_body"] = """    let in_size = nao_size(src0);
-    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let j = gid.z * 4 + lane;
-        if (j >= ${channels}) {
-            break;
-        }
-        let g = j % ${groups};
-        let base = i32(prm[${base_offset} + g / 4][g % 4]);
-        let n = f32(${members} * (${y_end} - ${y_begin}) * (${x_end} - ${x_begin}));
-        var s: f32 = 0.0;
-${sum_loops}
-        let mean = s / n;
-        if (j < ${groups}) {
-            r[lane] = mean;
-            continue;
-        }
-        s = 0.0;
-${square_loops}
-        r[lane] = 1.0 / sqrt(s / n + ${epsilon});
-    }"""
-_W["normalize_body"] = """    let x = nao_fetch(src0, gid);
-    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let g = i32(prm[${group_offset} + gid.z][lane]);
-        let h = g + ${groups};
-        let mean = nao_fetch(src1, vec3<i32>(${stats_x}, ${stats_y}, g / 4))[g % 4];
-        let rstd = nao_fetch(src1, vec3<i32>(${stats_x}, ${stats_y}, h / 4))[h % 4];
-        r[lane] = (x[lane] - mean) * rstd;
-    }"""
-_W["softmax_body"] = """    let x = nao_fetch(src0, gid);
-    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let c = gid.z * 4 + lane;
-        if (c >= ${channels}) {
-            break;
-        }
-        let base = i32(prm[${base_offset} + gid.z][lane]);
-        var m: f32 = -3.402823466e+38;
-        for (var k: i32 = 0; k < ${members}; k++) {
-            let q = base + i32(prm[${offsets_offset} + k / 4][k % 4]);
-            m = max(m, nao_fetch(src0, vec3<i32>(gid.xy, q / 4))[q % 4]);
-        }
-        var s: f32 = 0.0;
-        for (var k: i32 = 0; k < ${members}; k++) {
-            let q = base + i32(prm[${offsets_offset} + k / 4][k % 4]);
-            s += exp(nao_fetch(src0, vec3<i32>(gid.xy, q / 4))[q % 4] - m);
-        }
-        r[lane] = ${finish};
-    }"""
-_W["lrn_body"] = """    let x = nao_fetch(src0, gid);
-    var r = vec4<f32>(0.0);
-    for (var lane: i32 = 0; lane < 4; lane++) {
-        let c = gid.z * 4 + lane;
-        if (c >= ${channels}) {
-            break;
-        }
-        var s: f32 = 0.0;
-        for (var k: i32 = max(c - ${before}, 0); k <= min(c + ${after}, ${channels} - 1); k++) {
-            let v = nao_fetch(src0, vec3<i32>(gid.xy, k / 4))[k % 4];
-            s += v * v;
-        }
-        r[lane] = x[lane] / pow(${bias} + ${alpha} * s, ${beta});
-    }"""
 
-# GLSL templates whose text is valid WGSL as it stands (expressions and statements on identifiers
-# the WGSL bodies declare the same way).
-_WGSL_SHARED = (
-    "act_LeakyRelu",
-    "act_Sigmoid",
-    "act_Tanh",
-    "act_Identity",
-    "act_Sin",
-    "act_Cos",
-    "act_Erf",
-    "act_Gelu",
-    "act_GeluTanh",
-    "act_Sqrt",
-    "act_Exp",
-    "act_Log",
-    "act_Abs",
-    "act_Neg",
-    "act_Reciprocal",
-    "act_Sign",
-    "act_Softsign",
-    "act_Floor",
-    "act_Ceil",
-    "act_Pow_reciprocal",
-    "pow_product",
-    "conv_block_acc_name",
-    "conv_block_fma",
-    "conv_block_fmas",
-    "pool_acc_avg",
-    "pool_acc_max",
-    "pool_finish_none",
-    "pool_acc_l1",
-    "pool_acc_l2",
-    "pool_finish_l1",
-    "pool_finish_l2",
-    "coord_half_pixel",
-    "coord_asymmetric",
-    "coord_half_pixel_symmetric",
-    "scale_literal",
-    "scale_ratio",
-    "round_floor",
-    "round_ceil",
-    "kernel_linear",
-    "kernel_cubic",
-    "filter_exclude_y",
-    "filter_exclude_x",
-    "filter_edge_y",
-    "filter_edge_x",
-    "binary_guard_none",
-    "binop_Add",
-    "binop_Sub",
-    "binop_Mul",
-    "binop_Div",
-    "binop_Max",
-    "binop_Min",
-    "epilogue_act",
-    "epilogue_affine",
-    "epilogue_none",
-    "gather_digit",
-    "gather_digit_last",
-    "reduce_init_zero",
-    "reduce_init_one",
-    "reduce_init_max",
-    "reduce_init_min",
-    "reduce_acc_sum",
-    "reduce_acc_square",
-    "reduce_acc_abs",
-    "reduce_acc_max",
-    "reduce_acc_min",
-    "reduce_acc_prod",
-    "reduce_finish_none",
-    "reduce_finish_mean",
-    "reduce_finish_sqrt",
-    "reduce_finish_log",
-    "moments_acc_square",
-    "softmax_finish",
-    "log_softmax_finish",
-)
+# --------------------------------------------------------------------------- filling
 
-TEMPLATES: dict[str, Template] = {name: Template(text) for name, text in _T.items()}
-WGSL_TEMPLATES: dict[str, Template] = {
-    **{name: TEMPLATES[name] for name in _WGSL_SHARED if name in TEMPLATES},
-    **{name: Template(text) for name, text in _W.items()},
-}
+
+class _WithWords(Template):
+    """A template of ``_T`` / ``_G`` / ``_W``: a braced placeholder may also be ``${word:name}``."""
+
+    braceidpattern = r"(?a:[_a-z][_a-z0-9]*(?::[_a-z][_a-z0-9]*)?)"
+
+
+def _word(words: dict[str, str], ident: str) -> str | None:
+    """The text of the dialect word ``ident`` (``word`` or ``word:name``) in ``words``; None when
+    ``ident`` is a field that the writer fills."""
+    word, named, name = ident.partition(":")
+    kind, _, type_ = word.partition("_")
+    if kind in ("let", "var") and type_ in _TYPES:
+        form = words["declare_typed" if named else "declare"]
+        return Template(form).substitute(kind=kind, type=words[type_], name=name)
+    if word in words:
+        text = Template(words[word])
+        takes_name = "name" in text.get_identifiers()
+        if takes_name != bool(named):
+            raise KeyError(f"${{{ident}}}: dialect word {word!r} takes {'a' if takes_name else 'no'} name")
+        return text.substitute(name=name)
+    if named:
+        raise KeyError(f"no dialect word {word!r} (in ${{{ident}}})")
+    return None
+
+
+def _with_words(texts: dict[str, str], words: dict[str, str]) -> dict[str, Template]:
+    """``texts`` with the dialect's ``words`` put in, once, at import: what is left to fill is the
+    writer's fields."""
+    out = {}
+    for name, text in texts.items():
+        tpl = _WithWords(text)
+        found = {i: w for i in tpl.get_identifiers() if (w := _word(words, i)) is not None}
+        out[name] = Template(tpl.safe_substitute(found))
+    return out
+
+
+TEMPLATES: dict[str, Template] = _with_words({**_T, **_G}, _WORDS)
+WGSL_TEMPLATES: dict[str, Template] = _with_words({**_T, **_W}, {**_WORDS, **_WGSL_WORDS})
 
 
 def fill_from(templates: dict[str, Template], template: str, what: str, /, **fields: object) -> str:
@@ -1395,6 +1095,6 @@ def fill(template: str, /, **fields: object) -> str:
 
 
 def fill_wgsl(template: str, /, **fields: object) -> str:
-    """Fill the WGSL template named ``template`` (a WGSL override, or a GLSL template listed as valid
-    WGSL)."""
+    """Fill the WGSL template named ``template`` (a WGSL override, else the shared template in WGSL
+    words); every placeholder must be given and nothing else."""
     return fill_from(WGSL_TEMPLATES, template, "WGSL", **fields)

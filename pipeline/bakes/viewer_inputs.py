@@ -26,6 +26,7 @@ from neuralao.pipeline.bakes.texture import read_texture_glb
 from neuralao.pipeline.bakes.vertex import read_baked_mesh
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.internal_resolution import UpsampleSettings
 from neuralao.runtime.onnx_io import load_onnx
 from neuralao.runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
@@ -147,10 +148,9 @@ def _texture_uri(gs, texture: int) -> str:
 
 def method_from_export(folder: Path, mesh: str | None) -> ViewerMethod:
     """An MLP or field export: its ES 3.00 fragment pass, on ``mesh`` (default: the export's own mesh)."""
-    try:
-        top = json.loads((folder / "manifest.json").read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
-        raise NeuralaoError(f"{folder} is not an export folder (no readable manifest.json)") from None
+    if not (folder / "manifest.json").is_file():
+        raise NeuralaoError(f"{folder} is not an export folder (no manifest.json)")
+    top = read_manifest(folder)
     glsl_dir = folder / "glsl"
     if not (glsl_dir / "manifest.json").exists():
         raise NeuralaoError(
@@ -212,8 +212,7 @@ SCREEN_SPACE_RADIUS_REL = 0.125
 
 def _unet_meta(folder: Path) -> dict:
     """ONNX metadata of the U-Net export in ``folder`` (checked: a U-Net, this preprocessing)."""
-    manifest = json.loads((folder / "manifest.json").read_text())
-    path = folder / manifest.get("onnx", "model.onnx")
+    path = folder / read_manifest(folder).get("onnx", "model.onnx")
     return check_unet_onnx(load_onnx(path), path)
 
 
@@ -245,10 +244,7 @@ def method_from_unet(
     one-line error naming a pure one: the page has no GTAO pass.
     """
     folder = _screen_space_folder(model)
-    try:
-        meta = _unet_meta(folder)
-    except (FileNotFoundError, json.JSONDecodeError):
-        raise NeuralaoError(f"{folder} is not a U-Net export folder (no readable manifest.json)") from None
+    meta = _unet_meta(folder)
     if is_hybrid(meta):
         try:
             pure = f"; use a pure one, e.g. --screen-space {pure_unet_export().name}"
@@ -259,7 +255,7 @@ def method_from_unet(
         )
     if not (np.isfinite(radius_rel) and radius_rel > 0):
         raise NeuralaoError(f"--screen-space-radius must be a positive fraction, got {radius_rel}")
-    onnx_path = folder / json.loads((folder / "manifest.json").read_text()).get("onnx", "model.onnx")
+    onnx_path = folder / read_manifest(folder).get("onnx", "model.onnx")
     if conv_block is None and (folder / "wgsl" / "manifest.json").is_file():
         program = load_compute_export(folder / "wgsl")
     else:

@@ -72,7 +72,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "mesh", help="mesh file (.obj .ply .gltf .glb .stl .off), glTF folder, or a bare test-mesh name"
     )
-    p.add_argument("--rays", type=int, default=d.rays, help=f"AO rays per sample (default {d.rays})")
+    p.add_argument("--rays", type=int, default=None, help=f"AO rays per sample (default {d.rays})")
     p.add_argument(
         "--max-distance",
         type=float,
@@ -80,7 +80,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="longest AO ray, scene units (default 0.25 x diagonal)",
     )
     p.add_argument(
-        "--kernel", choices=("binary", "obscurance"), default=d.kernel, help="AO kernel (default binary)"
+        "--kernel", choices=("binary", "obscurance"), default=None, help="AO kernel (default binary)"
     )
     p.add_argument(
         "--half-distance",
@@ -91,28 +91,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--method",
         choices=("vertex", "least-squares"),
-        default=d.method,
+        default=None,
         help="sample at vertices, or fit vertex values to surface samples (default least-squares)",
     )
     p.add_argument(
-        "--alpha", type=float, default=d.alpha, help="least-squares edge regulariser weight (default 1)"
+        "--alpha", type=float, default=None, help="least-squares edge regulariser weight (default 1)"
     )
     p.add_argument(
         "--samples-per-vertex",
         type=float,
-        default=d.samples_per_vertex,
+        default=None,
         help=f"least-squares surface sample budget per vertex (default {d.samples_per_vertex:g})",
     )
     p.add_argument(
         "--samples-per-face-cap",
         type=int,
-        default=d.samples_per_face_cap,
+        default=None,
         help=f"least-squares: at most this many samples on one face (default {d.samples_per_face_cap})",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="seed of sample positions and ray directions (default 0)"
+        "--seed", type=int, default=None, help="seed of sample positions and ray directions (default 0)"
     )
-    p.add_argument("--workers", type=int, default=2, help="tracing threads (default 2)")
+    p.add_argument("--workers", type=int, default=None, help="tracing threads (default 2)")
     p.add_argument(
         "--config",
         default=None,
@@ -130,7 +130,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--to",
         choices=("vertex", "texture"),
-        default="vertex",
+        default=None,
         help="per-vertex AO, or an AO texture map (occlusionTexture of OUT.glb + OUT.ao.png; "
         "neuralao.pipeline.bakes.texture) (default vertex)",
     )
@@ -194,36 +194,52 @@ def texture_settings_from_args(args: argparse.Namespace) -> TextureBakeSettings:
     return s
 
 
-def _defaults(args: argparse.Namespace) -> argparse.Namespace:
-    """What the command line would hold with only the mesh and --out given."""
-    defaults = argparse.ArgumentParser()
-    add_arguments(defaults)
-    return defaults.parse_args([args.mesh, "--out", args.out])
+def _given(args: argparse.Namespace, flags: tuple[str, ...]) -> list[str]:
+    """The flags of ``flags`` given on the command line (each defaults to None: given means set)."""
+    return [f for f in flags if getattr(args, f) is not None]
 
 
-def _refused_flag(args: argparse.Namespace) -> str | None:
-    """The first flag given that the chosen ``--to`` has no use for, or None."""
-    base = _defaults(args)
-    other = _VERTEX_ONLY_FLAGS if args.to == "texture" else _TEXTURE_ONLY_FLAGS
-    return next((f for f in other if getattr(args, f) != getattr(base, f)), None)
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _fill_defaults(args: argparse.Namespace) -> None:
+    """Every mesh flag left out takes its default (one place for them: the settings classes)."""
+    d = BakeSettings()
+    defaults = {
+        "rays": d.rays,
+        "kernel": d.kernel,
+        "method": d.method,
+        "alpha": d.alpha,
+        "samples_per_vertex": d.samples_per_vertex,
+        "samples_per_face_cap": d.samples_per_face_cap,
+        "seed": 0,
+        "workers": 2,
+        "to": "vertex",
+    }
+    for name, value in defaults.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
 
 
 def run(args: argparse.Namespace) -> int:
-    if getattr(args, "config", None) is not None:
+    """One parser for the four bakes: the mode follows from the input (a level with ``--config``, a glTF
+    scene, a mesh) and ``--to``; a flag of another mode is refused in one line before any work."""
+    if args.config is not None:
         if Path(args.mesh).suffix.lower() not in (".gltf", ".glb"):
             raise NeuralaoError(f"--config bakes a level: expected a .gltf or .glb file, got {args.mesh!r}")
-        base = _defaults(args)
-        given = [f for f in _MESH_ONLY_FLAGS if getattr(args, f) != getattr(base, f)]
+        given = _given(args, _MESH_ONLY_FLAGS)
         if given:
-            raise NeuralaoError(
-                f"--{given[0].replace('_', '-')} does not apply to a level; use --set trace.KEY=VALUE"
-            )
+            raise NeuralaoError(f"{_flag(given[0])} does not apply to a level; use --set trace.KEY=VALUE")
         # --engine ray: every heavy stage runs as tasks (neuralao.pipeline.bakes.level)
         return run_level(args)
     if args.set:
         raise NeuralaoError("--set needs --config (level bakes only)")
-    if _refused_flag(args) is not None:
-        raise NeuralaoError(f"--{_refused_flag(args).replace('_', '-')} does not apply to --to {args.to}")
+    to = args.to or "vertex"
+    refused = _given(args, _VERTEX_ONLY_FLAGS if to == "texture" else _TEXTURE_ONLY_FLAGS)
+    if refused:
+        raise NeuralaoError(f"{_flag(refused[0])} does not apply to --to {to}")
+    _fill_defaults(args)
     if args.to == "texture":
         if getattr(args, "engine", "local") != "local":
             raise NeuralaoError("texture bakes run locally (--engine ray is for vertex bakes and datasets)")

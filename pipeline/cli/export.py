@@ -5,17 +5,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from neuralao.pipeline import kinds
 from neuralao.pipeline.models.checkpoint import read_checkpoint
+from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 def checkpoint_kind(path: str | Path) -> str:
     """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
     kind = read_checkpoint(path).get("kind")
-    if kind not in kinds.TRAINED:
+    trained = kinds.trained()
+    if kind not in trained or trained[kind].exporter is None:
         raise NeuralaoError(
-            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(kinds.TRAINED)})"
+            f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(trained)})"
         )
     return kind
 
@@ -27,5 +28,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     kind = checkpoint_kind(args.model)
-    kinds.module(kind).export_checkpoint(Path(args.model), Path(args.out))
+    kinds.role(kind, "exporter")(Path(args.model), Path(args.out))
     return 0

@@ -17,14 +17,13 @@ import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import check_finite_number
+from neuralao.runtime.frame import read_frame
 from neuralao.runtime.infer import (
-    check_frame,
     check_output,
     complete_frame,
     composite,
     foreground,
     infer,
-    load_frame,
     model_kind,
     write_image,
 )
@@ -89,8 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if args.radius is not None:
         check_finite_number("--radius", args.radius, low=0.0)
     yfov = field_of_view(args)
-    frame = complete_frame(load_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
-    check_frame(frame, frame_path)
+    frame = complete_frame(read_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
     ao = infer(model, frame, args.radius)
     write_image(args.out, ao)
     if args.composite:

@@ -11,17 +11,14 @@ import argparse
 import logging
 from pathlib import Path
 
-from neuralao.export.manifest import read_manifest
-from neuralao.pipeline import kinds
 from neuralao.pipeline.datasets.dataset import open_dataset
+from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.limits import check_seed
+from neuralao.runtime.foundation.manifest import read_manifest
 
 log = logging.getLogger(__name__)
-
-# The kind of a `neuralao glsl` export: checked on seeded or given inputs, not on frames.
-ONNX_GLSL = "onnx-glsl"
 
 
 def export_dirs(root: Path) -> list[Path]:
@@ -66,7 +63,7 @@ def check_exports(
         kind = manifest.get("kind")
         if kind not in kinds.KINDS:
             raise NeuralaoError(f"{d}: unknown export kind {kind!r}")
-        if kind != ONNX_GLSL and (size is not None or inputs is not None):
+        if not kinds.KINDS[kind].parity_on_inputs and (size is not None or inputs is not None):
             raise NeuralaoError(
                 f"{d} is a {kind} export, checked on rendered or --data frames: "
                 "--size and --inputs apply to `neuralao glsl` exports only"
@@ -74,12 +71,12 @@ def check_exports(
     results = {}
     for d, manifest in manifests.items():
         kind = manifest["kind"]
-        module = kinds.module(kind)
+        parity = kinds.role(kind, "parity")
         log.info("parity: %s (%s)", d.name, kind)
-        if kind == ONNX_GLSL:
-            results[d.name] = module.parity(d, inputs=inputs, seed=seed, size=size)
+        if kinds.KINDS[kind].parity_on_inputs:
+            results[d.name] = parity(d, inputs=inputs, seed=seed, size=size)
         else:
-            results[d.name] = module.parity(d, parity_frames(data, manifest))
+            results[d.name] = parity(d, parity_frames(data, manifest))
     return results
 
 

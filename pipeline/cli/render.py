@@ -31,7 +31,7 @@ from neuralao.pipeline.geometry.camera import Camera, load_poses, orbit
 from neuralao.pipeline.geometry.scene import Scene, load_scene
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings, check_label_args, label_fields
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import write_json, write_npz, write_png
+from neuralao.runtime.foundation.io import write_json, write_png
 from neuralao.runtime.foundation.limits import (
     PIXEL_DISK_BYTES,
     check_count,
@@ -41,6 +41,7 @@ from neuralao.runtime.foundation.limits import (
     check_seed,
 )
 from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.frame import Frame, FrameLike, write_frame
 from neuralao.runtime.gl import context
 
 log = logging.getLogger(__name__)
@@ -255,10 +256,9 @@ def render_views(
     }
 
 
-def write_view(out: Path, stem: str, frame: dict, seed: int) -> dict:
+def write_view(out: Path, stem: str, frame: FrameLike, seed: int) -> dict:
     """Write ``stem.npz`` and the previews atomically; return the view's summary for render.json."""
-    arrays = {k: np.asarray(v) for k, v in frame.items()}
-    write_npz(out / f"{stem}.npz", **arrays)
+    write_frame(out / f"{stem}.npz", Frame.from_arrays(frame, f"{out / stem}"))
     write_png(out / f"{stem}_ao.png", ao_preview(frame))
     write_png(out / f"{stem}_normal.png", normal_preview(frame))
     write_png(out / f"{stem}_depth.png", depth_preview(frame))
@@ -286,7 +286,7 @@ def _with_background(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def ao_preview(frame: dict) -> np.ndarray:
+def ao_preview(frame: FrameLike) -> np.ndarray:
     """(H, W, 3) float32 in [0, 1]: AO in grey; invalid foreground pixels tinted red; background grey."""
     ao = np.clip(np.asarray(frame["ao"], np.float32), 0.0, 1.0)
     rgb = np.repeat(ao[..., None], 3, axis=-1)
@@ -295,12 +295,12 @@ def ao_preview(frame: dict) -> np.ndarray:
     return _with_background(rgb, frame["mask"])
 
 
-def normal_preview(frame: dict) -> np.ndarray:
+def normal_preview(frame: FrameLike) -> np.ndarray:
     """(H, W, 3) float32: camera-space normal as 0.5 + 0.5 n (facing the viewer is blue), background grey."""
     return _with_background(0.5 + 0.5 * np.asarray(frame["normal_cam"], np.float32), frame["mask"])
 
 
-def depth_preview(frame: dict) -> np.ndarray:
+def depth_preview(frame: FrameLike) -> np.ndarray:
     """(H, W, 3) float32: depth normalised to the foreground's range (near = bright, magma), background
     grey."""
     from matplotlib import colormaps  # measured: ~0.5 s to import; only the depth preview needs it

@@ -1,6 +1,7 @@
 """`neuralao report`: every AO method on the same held-back frames, speed against error.
 
-What is measured and written is :mod:`neuralao.pipeline.evaluation.report`; this module is its command line.
+What is measured is :mod:`neuralao.pipeline.evaluation.report` and what is written
+:mod:`neuralao.pipeline.evaluation.report_writing`; this module is its command line.
 """
 
 from __future__ import annotations
@@ -11,14 +12,9 @@ import logging
 from pathlib import Path
 
 from neuralao.pipeline.evaluation.plots import shipped_note
-from neuralao.pipeline.evaluation.report import (
-    SHIPPED_PICKS,
-    ReportSettings,
-    check_settings,
-    evaluate,
-    method_order,
-    write_report,
-)
+from neuralao.pipeline.evaluation.report import evaluate
+from neuralao.pipeline.evaluation.report_settings import SHIPPED_PICKS, ReportSettings, check_settings
+from neuralao.pipeline.evaluation.report_writing import method_order, write_report
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 from neuralao.runtime.shipped import MODELS_DIR

@@ -13,8 +13,9 @@ import json
 import logging
 from pathlib import Path
 
-from neuralao.pipeline.evaluation.report import ReportSettings, check_settings, evaluate
-from neuralao.pipeline.evaluation.selection import CANDIDATE_FAMILIES, DEFAULT_TARGET, select_from_results
+from neuralao.pipeline.evaluation.report import evaluate
+from neuralao.pipeline.evaluation.report_settings import ReportSettings, check_settings
+from neuralao.pipeline.evaluation.selection import DEFAULT_TARGET, candidate_families, select_from_results
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         check_settings(settings)
         cache = Path(args.gt_cache) if args.gt_cache else out.parent / "gt-cache"
         result = evaluate(
-            args.data, args.exports, settings, cache, families=set(CANDIDATE_FAMILIES), keep_images=False
+            args.data, args.exports, settings, cache, families=set(candidate_families()), keep_images=False
         )
         result.pop("_sheets", None)
     selection = select_from_results(result, args.target)

@@ -1,23 +1,26 @@
-"""`neuralao train mlp|unet|field`: the flags of each trainable kind (neuralao.pipeline.kinds) and its
-training."""
+"""`neuralao train mlp|unet|field`: the flags of each trainable kind and its training.
+
+The subcommands are the kinds :func:`neuralao.runtime.kinds.trained` lists; each kind's entry names its
+flags and run function (``train_flags``, ``train_run``), those of mlp, unet and field are here."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from neuralao.pipeline import kinds
 from neuralao.pipeline.models import field, mlp, unet_train
+from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
-# The lines a training writes keep the training module's logger name.
-_log = {name: logging.getLogger(k.trainer) for name, k in kinds.TRAINED.items()}
+
+def _log(kind: str) -> logging.Logger:
+    """The lines a training writes keep the training module's logger name (the kind's ``trainer``)."""
+    return logging.getLogger(kinds.KINDS[kind].trainer)
 
 
 # ------------------------------------------------------------------------------------- per-mesh kinds
@@ -100,7 +103,7 @@ def run_mlp(args: argparse.Namespace) -> int:
         settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
     )
     m = ckpt["metrics"]
-    _log["mlp"].info(
+    _log("mlp").info(
         "wrote %s: %s, %d parameters, %.1f s, test RMSE %.4f (constant %.4f), held-back SSIM %s RMSE %s",
         args.out,
         mlp.size_name(ckpt["model_args"]["hidden"]),
@@ -150,7 +153,7 @@ def run_field(args: argparse.Namespace) -> int:
         settings, args.out, data=args.data, scene=args.scene, mesh=args.mesh, progress=not args.no_progress
     )
     m = ckpt["metrics"]
-    _log["field"].info(
+    _log("field").info(
         "wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), "
         "held-back SSIM %s RMSE %s",
         args.out,
@@ -200,7 +203,7 @@ def run_unet(args: argparse.Namespace) -> int:
         internal_height=settings.internal_height,
         gtao=settings.gtao_input,
     )
-    log = _log["unet"]
+    log = _log("unet")
     log.info(
         "U-Net: %d training frames (%s), %d validation frames (%s)",
         len(train_set),
@@ -229,19 +232,12 @@ def run_unet(args: argparse.Namespace) -> int:
     return 0
 
 
-# kind -> (its flags, its run); the kinds and their help come from neuralao.pipeline.kinds
-COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
-    "mlp": (add_mlp_arguments, run_mlp),
-    "unet": (add_unet_arguments, run_unet),
-    "field": (add_field_arguments, run_field),
-}
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="model", metavar="MODEL", required=True)
-    for name, kind in kinds.TRAINED.items():
-        COMMANDS[name][0](sub.add_parser(name, help=kind.train_help, description=kind.train_help))
+    for name, kind in kinds.trained().items():
+        flags = kinds.role(name, "train_flags")
+        flags(sub.add_parser(name, help=kind.train_help, description=kind.train_help))
 
 
 def run(args: argparse.Namespace) -> int:
-    return int(COMMANDS[args.model][1](args) or 0)
+    return int(kinds.role(args.model, "train_run")(args) or 0)

@@ -69,6 +69,7 @@ from neuralao.runtime.foundation.limits import (
     check_seed,
 )
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
+from neuralao.runtime.frame import Frame, FrameLike
 
 log = logging.getLogger(__name__)
 
@@ -539,7 +540,7 @@ def _render_shard(state: _ShardWorker, args: tuple) -> dict[str, np.ndarray]:
     return {key: np.stack([np.asarray(f[key]) for f in frames]) for key in frame_keys}
 
 
-def _label_with_radii(labeller: Labeller, frame: dict) -> None:
+def _label_with_radii(labeller: Labeller, frame: FrameLike) -> None:
     """Set ``ao``, ``valid``, ``ao_radii``, ``valid_radii`` and ``radii`` of a frame from one trace
     when the max distance is one of the radii (bit-identical to :meth:`Labeller.label_frame`, which
     tests/test_labels.py checks), else from that trace plus the usual one."""
@@ -610,9 +611,9 @@ class Dataset:
 
     def frames(
         self, split: str | None = None, scene: str | None = None, holdout: bool | None = None
-    ) -> Iterator[dict]:
-        """Yield frame dicts (COMMON G-buffer keys + ao, valid, pose..., and RADII_KEYS where stored)
-        with 'scene', 'view', 'split', 'holdout'."""
+    ) -> Iterator[Frame]:
+        """Yield the frames (G-buffer keys + ao, valid, pose..., and RADII_KEYS where stored) with their
+        scene, view, split and holdout, checked as :class:`~neuralao.runtime.frame.Frame` checks them."""
         for entry in self.manifest["shards"]:
             if split is not None and entry["split"] != split:
                 continue
@@ -625,16 +626,16 @@ class Dataset:
             for i in range(len(arrays["view"])):
                 if holdout is not None and bool(arrays["holdout"][i]) != holdout:
                     continue
-                frame = {k: arrays[k][i] for k in keys}
-                for k in ("yfov", "znear", "zfar"):
-                    frame[k] = float(frame[k])
-                frame.update(
-                    scene=entry["scene"],
-                    view=int(arrays["view"][i]),
-                    split=entry["split"],
-                    holdout=bool(arrays["holdout"][i]),
+                yield Frame.from_arrays(
+                    {k: arrays[k][i] for k in keys}
+                    | {
+                        "scene": entry["scene"],
+                        "view": int(arrays["view"][i]),
+                        "split": entry["split"],
+                        "holdout": bool(arrays["holdout"][i]),
+                    },
+                    f"{entry['file']} frame {i}",
                 )
-                yield frame
 
 
 def open_dataset(root: str | Path, verify: bool = True) -> Dataset:

@@ -41,6 +41,7 @@ from neuralao.pipeline.geometry.splits import split_of
 from neuralao.pipeline.tracing.labeller import LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json, write_text
+from neuralao.runtime.foundation.manifest import read_json, read_manifest
 from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
@@ -130,11 +131,10 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
 def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress: bool) -> None:
     """The labelled frames of one resolution: kept when ``folder`` holds a finished dataset of exactly
     this config (its manifest's config), else built or resumed by the dataset stage."""
-    manifest = folder / "manifest.json"
-    if manifest.is_file():
+    if (folder / "manifest.json").is_file():
         try:
-            done = json.loads(manifest.read_text()).get("config")
-        except json.JSONDecodeError:
+            done = read_json(folder / "manifest.json", "dataset manifest").get("config")
+        except (NeuralaoError, AttributeError):
             done = None
         if done == json.loads(json.dumps(_config_dict(ds), default=str)):
             return
@@ -172,10 +172,9 @@ def check_settings(settings: EvalSettings) -> None:
 
 def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
     """A predictor per internal-resolution policy of one U-Net export folder (onnxruntime)."""
-    manifest_path = folder / "manifest.json"
-    if not manifest_path.is_file():
+    if not (folder / "manifest.json").is_file():
         raise NeuralaoError(f"{folder} is not an export folder (no manifest.json)")
-    manifest = json.loads(manifest_path.read_text())
+    manifest = read_manifest(folder)
     if manifest.get("kind") != "unet":
         raise NeuralaoError(
             f"{folder}: evaluate scores screen-space U-Nets, this export is {manifest.get('kind')!r}"
@@ -347,7 +346,7 @@ def write_to_manifests(result: dict, models: list[Path]) -> None:
     """Each U-Net export's manifest gets its rows of the table (and SSAO's and GTAO's beside them)."""
     for folder in models:
         path = Path(folder) / "manifest.json"
-        manifest = json.loads(path.read_text())
+        manifest = read_manifest(folder)
         mine = {
             k: v
             for k, v in result["methods"].items()

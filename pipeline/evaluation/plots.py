@@ -18,7 +18,6 @@ Plots (PNG, each skipped, returning None, when its data is absent):
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 from pathlib import Path
@@ -26,6 +25,7 @@ from pathlib import Path
 from neuralao.pipeline.evaluation.categories import markdown as evaluation_markdown
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.shipped import read_index
 
 log = logging.getLogger(__name__)
@@ -36,8 +36,8 @@ FRONT_SIZES = ("512x512", "1920x1080")
 
 def _read_json(path: Path) -> dict | None:
     try:
-        data = json.loads(Path(path).read_text())
-    except (OSError, json.JSONDecodeError):
+        data = read_json(path)
+    except NeuralaoError:
         return None
     return data if isinstance(data, dict) else None
 

@@ -9,25 +9,30 @@ scene's held-back frames is at least ``target`` is chosen. The document records,
 order tried, the choice, whether the target was met (if nothing meets it the best-scoring one is
 recorded with ``met_target: false``), and what the choice saves against the largest candidate.
 
-:mod:`neuralao.pipeline.evaluation.report` (which measures) and :mod:`neuralao.pipeline.cli.select` (the
-command) both import this module; it imports neither (the model families come from
-:mod:`neuralao.pipeline.kinds`).
+:mod:`neuralao.pipeline.evaluation.report_writing` (which writes the report's selection section) and
+:mod:`neuralao.pipeline.cli.select` (the command) both import this module; it imports neither (the model
+families come from :mod:`neuralao.runtime.kinds`).
 """
 
 from __future__ import annotations
 
-from neuralao.pipeline import kinds
+from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 DEFAULT_TARGET = 0.95
-CANDIDATE_FAMILIES = ("screen-space", "baked", *kinds.REPORTED)
+
+
+def candidate_families() -> tuple[str, ...]:
+    """The families a selection picks from: screen-space, baked and every reported model kind."""
+    return ("screen-space", "baked", *kinds.reported())
 
 
 def scene_candidates(result: dict) -> dict[str, list[dict]]:
     """Per scene: [{name, family, bytes, ssim, seconds, frames}] of the available models measured on it."""
     out: dict[str, list[dict]] = {}
+    families = candidate_families()
     for name, e in result["methods"].items():
-        if e.get("family") not in CANDIDATE_FAMILIES or not e.get("available"):
+        if e.get("family") not in families or not e.get("available"):
             continue
         for scene, ps in e.get("per_scene", {}).items():
             out.setdefault(scene, []).append(
@@ -99,10 +104,11 @@ def select_from_results(result: dict, target: float = DEFAULT_TARGET) -> dict:
     per_scene = {}
     for scene, cands in sorted(scene_candidates(result).items()):
         per_scene[scene] = choose(cands, target)
+    families = candidate_families()
     unavailable = {
         n: e.get("reason", "")
         for n, e in result["methods"].items()
-        if e.get("family") in CANDIDATE_FAMILIES and not e.get("available")
+        if e.get("family") in families and not e.get("available")
     }
     return {
         "format": "neuralao-select",

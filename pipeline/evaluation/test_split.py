@@ -18,6 +18,7 @@ from neuralao.pipeline.datasets.dataset import open_dataset
 from neuralao.runtime.baselines import run_screen_space
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.metrics import masked_flip, masked_rmse, masked_ssim
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.predict import unet_predictor as runtime_unet_predictor
 
 # predictor(frame, radius in scene units) -> AO (H, W) float32, 1 on background
@@ -37,7 +38,7 @@ def screen_space_predictor(method: str, settings=None) -> Predictor:
     return lambda frame, radius: run_screen_space(frame, method, radius, settings)
 
 
-def score_frame(frame: dict, methods: dict[str, Predictor], flip: bool = True) -> list[dict]:
+def score_frame(frame: FrameLike, methods: dict[str, Predictor], flip: bool = True) -> list[dict]:
     """One row {method, radius (index), ssim, rmse, flip} per (method, radius) of a labelled frame, over
     its valid foreground pixels at that radius; a radius with none is skipped. ``flip`` False: FLIP nan.
     A method returning non-finite AO on those pixels is a one-line error."""

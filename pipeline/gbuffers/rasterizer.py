@@ -49,6 +49,7 @@ from neuralao.pipeline.geometry.camera import Camera
 from neuralao.pipeline.geometry.scene import Scene
 from neuralao.runtime import gl as rgl  # sets PYOPENGL_PLATFORM before PyOpenGL is first imported
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.frame import FrameLike
 
 GL = rgl.GL
 # PyOpenGL binds some GL 4.5 core entry points only when the library exports them (libOSMesa does
@@ -333,7 +334,7 @@ class GBufferRenderer:
 
     def _read_back(self, camera: Camera, pose: np.ndarray, w: int, h: int) -> dict[str, np.ndarray]:
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
-        frame: dict = {}
+        frame: FrameLike = {}
         for k, (name, internal) in enumerate(_TARGETS):
             if internal == GL.GL_RGBA32F:
                 raw = self._read_raw(k, GL.GL_RGB, GL.GL_FLOAT, 3, np.float32, w, h)

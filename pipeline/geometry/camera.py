@@ -8,7 +8,6 @@ Pixel (row i, column j) has its centre at ``((j + 0.5) / W, (i + 0.5) / H)``; ro
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -19,6 +18,7 @@ import numpy as np
 
 from neuralao.pipeline.geometry.scene import Scene
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_json
 
 
 @dataclass(frozen=True)
@@ -304,12 +304,7 @@ def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -
     ``{"pose": 4x4 camera-to-world, "yfov_deg": 45?}``; optional ``znear``/``zfar``.
     """
     p = Path(path)
-    if not p.is_file():
-        raise NeuralaoError(f"camera file not found: {p}")
-    try:
-        data = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise NeuralaoError(f"camera file {p} is not valid JSON: {e.msg} at line {e.lineno}") from None
+    data = read_json(p, "camera file")
     items = data.get("cameras") if isinstance(data, dict) else data
     if not isinstance(items, list) or not items:
         raise NeuralaoError(f"camera file {p} must hold a non-empty list of cameras")

@@ -75,6 +75,7 @@ from neuralao.runtime.foundation.limits import (
 )
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
+from neuralao.runtime.frame import FrameLike
 
 log = logging.getLogger(__name__)
 
@@ -386,7 +387,7 @@ def predict(model: FieldNet, position: np.ndarray, normal: np.ndarray, batch: in
     return out
 
 
-def predict_frame(model: FieldNet, frame: dict) -> np.ndarray:
+def predict_frame(model: FieldNet, frame: FrameLike) -> np.ndarray:
     """(H, W) float32 AO of a G-buffer frame (position, normal_obj, mask), clamped; background 1."""
     mask = np.asarray(frame["mask"], bool)
     ao = np.ones(mask.shape, np.float32)
@@ -463,7 +464,7 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
     return model.eval(), info
 
 
-def evaluate_frames(model: FieldNet | float, frames: list[dict]) -> dict:
+def evaluate_frames(model: FieldNet | float, frames: list[FrameLike]) -> dict:
     """Masked SSIM / RMSE over valid foreground pixels of held-back frames (``model`` a number: constant)."""
     rows = []
     for f in frames:

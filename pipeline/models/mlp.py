@@ -96,6 +96,7 @@ from neuralao.runtime.foundation.limits import (
 )
 from neuralao.runtime.foundation.metrics import image_ssim, masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.frame import FrameLike
 
 # The deployed input layout is the consumer runtime's (CIRCLE_SAMPLES normals, radius-zero input).
 from neuralao.runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
@@ -314,7 +315,7 @@ def split_samples(n: int, fractions: list[float], seed: int) -> np.ndarray:
     return out
 
 
-def _eval_frame(frame: dict, view: int) -> dict:
+def _eval_frame(frame: FrameLike, view: int) -> dict:
     """The channels evaluation needs (and what relabelling needs: tri_id, pose, yfov, depth), compact."""
     out = {
         "normal_obj": np.asarray(frame["normal_obj"], dtype=np.float32),
@@ -392,7 +393,7 @@ def samples_from_dataset(
     return _finish(parts, holdout, settings, info)
 
 
-def label_pixels(labeller, frame: dict, pix: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def label_pixels(labeller, frame: FrameLike, pix: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """AO of some foreground pixels of a frame, exactly as ``label_frame`` (same seed) would label them.
 
     pix : (k,) int64 flat pixel indices (foreground). Points and normals come from
@@ -642,7 +643,7 @@ def predict_frame(
     return ao
 
 
-def evaluate_frames(model: BakedMLP | float, frames: list[dict], radius: float = 0.0) -> dict:
+def evaluate_frames(model: BakedMLP | float, frames: list[FrameLike], radius: float = 0.0) -> dict:
     """Masked SSIM / RMSE (and whole-image SSIM) against ray-traced AO over valid foreground pixels,
     per frame and mean. ``model`` may be a number: the constant predictor (baseline)."""
     rows = []

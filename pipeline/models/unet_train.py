@@ -53,6 +53,7 @@ from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
 
 log = logging.getLogger(__name__)
@@ -222,7 +223,7 @@ def network_input(data: FrameSet, f: int, j: int) -> torch.Tensor:
     return torch.cat([data.x[f], data.g[f][j : j + 1].float()], dim=0)
 
 
-def frame_labels(frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def frame_labels(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ao (K, H, W) float32, valid (K, H, W) bool, radii (K,) float32) of a frame's labels at every radius.
 
     Frames from a dataset with ``labels.radii_rel`` carry ``ao_radii``/``valid_radii``/``radii``; others
@@ -261,7 +262,7 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
                 f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset"
             )
         if gtao:
-            f = f | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
+            f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
         h, w = np.shape(f["depth"])
         lw, lh = internal_size(w, h, internal_height or None)
         if (lw, lh) != (w, h):

@@ -32,8 +32,8 @@ import numpy as np
 from neuralao.export.onnx_io import get_metadata, load_onnx, save_onnx
 from neuralao.export.unet import export_checkpoint, parity
 from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
-from neuralao.pipeline.evaluation.report import ReportSettings
-from neuralao.pipeline.evaluation.report import timing_frame as report_timing_frame
+from neuralao.pipeline.evaluation.report_baselines import timing_frame as report_timing_frame
+from neuralao.pipeline.evaluation.report_settings import ReportSettings
 from neuralao.pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
 from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
 from neuralao.runtime.baselines import time_screen_space

@@ -92,6 +92,7 @@ from neuralao.runtime.foundation.limits import (
     check_seed,
 )
 from neuralao.runtime.foundation.normals import normalize_normals
+from neuralao.runtime.frame import FrameLike
 
 # Rays per work item: big enough that Python overhead per chunk (~50 us) is < 1% of the trace,
 # small enough that two workers stay balanced and the float32 ray buffers stay in L2/L3.
@@ -310,7 +311,7 @@ class Labeller:
             raise NeuralaoError(f"ids must be ({len(points)},), got {ids.shape}")
         return (points - self.center) / self.scale, normals, ids
 
-    def label_frame(self, frame: dict, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def label_frame(self, frame: FrameLike, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """AO labels of a G-buffer frame.
 
         Uses ``frame['tri_id']`` (H, W) int (-1 on background), ``frame['pose']`` (4, 4) and
@@ -352,7 +353,7 @@ class Labeller:
         return self._ao_local(local, normals, ids, progress, radii_local)
 
     def label_frame_radii(
-        self, frame: dict, radii: list[float] | np.ndarray | None = None, progress: bool = False
+        self, frame: FrameLike, radii: list[float] | np.ndarray | None = None, progress: bool = False
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`label_frame` at several radii from one trace (see :meth:`ao_radii_at_points`).
 
@@ -378,7 +379,7 @@ class Labeller:
             radii = _radii(list(np.asarray(radii, dtype=np.float64).reshape(-1)), 1.0)
         return np.array([np.float32(r / self.scale) for r in radii], dtype=np.float32)
 
-    def visible_points(self, frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def visible_points(self, frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The float64 surface points :meth:`label_frame` labels.
 
         Each foreground pixel's point is the intersection of its pixel-centre ray
@@ -394,7 +395,7 @@ class Labeller:
         local, normal, pix, exact = self._frame_points_local(frame)
         return local * self.scale + self.center, normal, pix, exact
 
-    def _frame_points_local(self, frame: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _frame_points_local(self, frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`visible_points` in local units ``(x - center) / diagonal``."""
         for key in ("tri_id", "pose", "yfov"):
             if key not in frame:

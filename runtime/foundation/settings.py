@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_json
 
 T = TypeVar("T")
 
@@ -115,12 +116,7 @@ def load_settings(cls: type[T], preset: str | Path | None = None, overrides: lis
     data: dict[str, Any] = {}
     if preset is not None:
         path = Path(preset)
-        if not path.is_file():
-            raise NeuralaoError(f"config file not found: {path}")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise NeuralaoError(f"config file {path} is not valid JSON: {e.msg} at line {e.lineno}") from None
+        data = read_json(path, "config file")
         if not isinstance(data, dict):
             raise NeuralaoError(f"config file {path} must hold a JSON object")
     return from_dict(cls, apply_overrides(data, overrides))

@@ -1,0 +1,86 @@
+"""The one reader of manifests: an export folder's ``manifest.json`` (the kind, files, hashes, passes and
+provenance an engine and every command here follow), and the JSON of the files beside it.
+
+Torch-free and below every layer, so the consumer runtime, the shader generator and the pipeline read a
+manifest the same way. A manifest is JSON; before parsing, its size and nesting depth are bounded, so a
+hostile file is a one-line error and never a MemoryError or a RecursionError.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from neuralao.runtime.foundation.errors import NeuralaoError
+
+NAME = "manifest.json"
+# A shipped model's manifest is ~60 KB (the U-Net's with its evaluation tables); 64 MiB is far beyond any
+# manifest or bake config and far below what the parser's objects would take of memory.
+MAX_JSON_BYTES = 64 << 20
+# Manifests nest 6 deep; Python's parser recurses per level and fails near 1,000.
+MAX_JSON_DEPTH = 64
+
+
+def _depth(text: str) -> int:
+    """Deepest nesting of brackets outside strings (the parser's recursion depth)."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+        elif ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    return deepest
+
+
+def read_json(path: str | os.PathLike, what: str = "JSON file") -> Any:
+    """The parsed JSON of ``path`` (UTF-8), bounded in size and depth; any failure is one line naming it."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise NeuralaoError(f"{path}: {what} of {path.stat().st_size} bytes is over {MAX_JSON_BYTES}")
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise NeuralaoError(f"{what} not found: {path}") from None
+    except IsADirectoryError:
+        raise NeuralaoError(f"{path} is a folder, not a {what}") from None
+    except OSError as e:
+        raise NeuralaoError(f"cannot read {path}: {e.strerror or type(e).__name__}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise NeuralaoError(f"{path}: {what} is not UTF-8 (byte {e.start})") from None
+    if _depth(text) > MAX_JSON_DEPTH:
+        raise NeuralaoError(f"{path}: {what} nests deeper than {MAX_JSON_DEPTH} levels")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise NeuralaoError(
+            f"{path} is corrupt: not valid JSON (line {e.lineno}, column {e.colno})"
+        ) from None
+
+
+def read_manifest(folder: str | os.PathLike, kind: str | None = None, label: str = "") -> dict:
+    """``folder``'s manifest.json as a dict; with ``kind``, one of that kind (``label`` names it in errors:
+    "{folder} is not {label or kind} export")."""
+    path = Path(folder) / NAME
+    if not path.is_file():
+        raise NeuralaoError(f"no export manifest at {path}")
+    manifest = read_json(path, "export manifest")
+    if not isinstance(manifest, dict):
+        raise NeuralaoError(f"{path} is corrupt: an export manifest is a JSON object")
+    if kind is not None and manifest.get("kind") != kind:
+        raise NeuralaoError(f"{folder} is not {label or kind} export (kind {manifest.get('kind')!r})")
+    return manifest
