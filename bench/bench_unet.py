@@ -143,7 +143,7 @@ def export(model, ckpt: dict | None, out: Path) -> dict:
 
 def make_input(mesh: str, width: int, height: int, seed: int) -> tuple[np.ndarray, str, float]:
     """(x (4, H, W) float32 network input, its source in words, foreground fraction)."""
-    from neuralao.pipeline.models.unet import preprocess_frame
+    from neuralao.runtime.unet_input import preprocess_frame
 
     try:
         from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer

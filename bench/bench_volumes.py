@@ -34,9 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from neuralao.pipeline.bakes.volumes import (  # noqa: E402
-    Volumes,
-    VolumeSettings,
+from neuralao.pipeline.bakes.volumes import (
     bake_volumes,
     boundary_jumps,
     face_jumps,
@@ -51,6 +49,7 @@ from neuralao.pipeline.tracing.labeller import LabelSettings  # noqa: E402
 from neuralao.runtime.foundation import sh  # noqa: E402
 from neuralao.runtime.foundation.io import atomic_path, write_json, write_text  # noqa: E402
 from neuralao.runtime.probe import VolumeProbe, blended_path  # noqa: E402
+from neuralao.runtime.volumes import Volumes, VolumeSettings
 
 BETAS = (0.0, 0.25, 1.0, 4.0, 16.0)
 Z_OVER_H = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0, math.inf)

@@ -51,8 +51,7 @@ from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.glsl_runner import run_vector_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
-from neuralao.runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs  # noqa: F401
-from neuralao.runtime.predict import field_infer_frame as infer_frame  # noqa: F401
+from neuralao.runtime.predict import FIELD_NORMAL, FIELD_POSITION, check_field_onnx, frame_inputs
 from neuralao.runtime.predict import run_field as run_network
 
 log = logging.getLogger(__name__)

@@ -67,8 +67,7 @@ from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.glsl_runner import run_mlp_fragment
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for parity and callers.
-from neuralao.runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals  # noqa: F401
-from neuralao.runtime.predict import mlp_infer_frame as infer_frame  # noqa: F401
+from neuralao.runtime.predict import MLP_INPUT, check_mlp_onnx, frame_normals
 from neuralao.runtime.predict import run_mlp as run_network
 
 log = logging.getLogger(__name__)

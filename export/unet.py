@@ -38,16 +38,7 @@ from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
 from neuralao.pipeline.geometry.camera import interior, orbit
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.pipeline.models.checkpoint import count_parameters
-from neuralao.pipeline.models.unet import (
-    HYBRID_DESCRIPTION,
-    PAD_MODE,
-    PREPROCESS_DESCRIPTION,
-    PREPROCESS_VERSION,
-    UNet,
-    depth_scale,
-    predict,
-    preprocess_frame,
-)
+from neuralao.pipeline.models.unet import UNet, predict
 from neuralao.pipeline.models.unet_train import load_checkpoint, model_from_checkpoint
 from neuralao.runtime.baselines import (
     GTAOSettings,
@@ -65,20 +56,24 @@ from neuralao.runtime.glsl_runner import load_compute_export, run_compute
 from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
 # onnxruntime inference is the consumer runtime's (one copy); re-exported for the export checks and callers.
-from neuralao.runtime.predict import (  # noqa: F401
+from neuralao.runtime.predict import (
     UNET_INPUT,
     UNET_RADIUS,
     Runner,
     check_unet_onnx,
-    composite,
-    declared_internal_height,
     is_hybrid,
     ort_runner,
     radius_array,
     run_padded,
 )
-from neuralao.runtime.predict import unet_infer_frame as infer_frame  # noqa: F401
-from neuralao.runtime.predict import unet_predictor as frame_predictor  # noqa: F401
+from neuralao.runtime.unet_input import (
+    HYBRID_DESCRIPTION,
+    PAD_MODE,
+    PREPROCESS_DESCRIPTION,
+    PREPROCESS_VERSION,
+    depth_scale,
+    preprocess_frame,
+)
 
 log = logging.getLogger(__name__)
 

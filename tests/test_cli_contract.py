@@ -290,7 +290,7 @@ def test_usage_errors_and_a_missing_command_are_one_line(capsys):
 
 def _two_regions(slope: float = 0.0):
     """Boxes x in [-1, 0] and [0.5, 1.5] with constant AO 0.2 and 0.9 (``slope``: d AO / dx on the right)."""
-    from neuralao.pipeline.bakes.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
+    from neuralao.runtime.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings
 
     regions = [Region("left", (-1, -1, -1), (0, 1, 1)), Region("right", (0.5, -1, -1), (1.5, 1, 1))]
     y0 = sh.basis(np.eye(3)[:1], 1)[0, 0]
@@ -317,8 +317,8 @@ def test_probe_far_from_the_level_uses_the_nearest_region(distance):
 
 
 def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
-    from neuralao.pipeline.bakes.volumes import to_json
     from neuralao.runtime.foundation.io import write_json
+    from neuralao.runtime.volumes import to_json
 
     write_json(tmp_path / "v.json", to_json(_two_regions(slope=3.0)))
     np.save(tmp_path / "p.npy", np.array([[1.0, 0, 0], [1.7e308, 0, 0]]))

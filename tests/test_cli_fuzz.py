@@ -922,7 +922,7 @@ def _check_output(case: Case, out: Path) -> None:
         assert ao.ndim == 1 and ao.dtype == np.float32 and np.isfinite(ao).all()
         assert (0 <= ao).all() and (ao <= 1).all()
     elif case.command == "volumes":
-        from neuralao.pipeline.bakes.volumes import read_volumes
+        from neuralao.runtime.volumes import read_volumes
 
         vol = read_volumes(out)
         assert all(np.isfinite(m.coefficients).all() for m in vol.models)

@@ -214,7 +214,7 @@ def test_glsl_out_that_is_a_file(tmp_path, capsys):
 def test_large_folded_constant_names_the_conv_that_uses_it(tmp_path, capsys):
     """Weights computed in the graph (as onnx's light models make them) are welcome up to what weights.bin
     holds; past that the one-line error names the constant and the node that uses it."""
-    from neuralao.export.glsl.image import MAX_FOLDED_ELEMENTS
+    from neuralao.export.glsl import MAX_FOLDED_ELEMENTS
 
     def conv_model(shape):
         return _model(

@@ -256,10 +256,10 @@ def test_infer_frame_matches_torch_and_cli(spot_run, tmp_path):
     """`neuralao infer` on a field ONNX: onnxruntime on a rendered G-buffer equals the torch network."""
     from PIL import Image
 
-    from neuralao.export.field import infer_frame
     from neuralao.pipeline.geometry.camera import orbit
     from neuralao.pipeline.models.field import predict_frame
     from neuralao.runtime.foundation.io import write_npz
+    from neuralao.runtime.predict import field_infer_frame as infer_frame
 
     root, _ = spot_run
     scene = load_scene("spot")

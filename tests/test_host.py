@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 
 from neuralao.export.onnx_io import run_onnxruntime
-from neuralao.export.unet import composite, glsl_runner, radius_array, render_parity_frames, run_padded
-from neuralao.pipeline.models.unet import pad_to_multiple, preprocess, radius_param
+from neuralao.export.unet import glsl_runner, render_parity_frames
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.predict import composite, radius_array, run_padded
 from neuralao.runtime.shipped import pure_unet_export
+from neuralao.runtime.unet_input import pad_to_multiple, preprocess, radius_param
 
 REPO = Path(__file__).resolve().parents[1]
 

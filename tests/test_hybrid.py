@@ -18,17 +18,11 @@ import torch
 from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
 from neuralao.pipeline.geometry.camera import orbit
 from neuralao.pipeline.geometry.scene import load_scene
-from neuralao.pipeline.models.unet import (
-    HYBRID_CHANNELS,
-    UNet,
-    UNetArgs,
-    frame_radius_param,
-    predict,
-    preprocess_frame,
-)
+from neuralao.pipeline.models.unet import UNet, UNetArgs, predict
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.unet_input import HYBRID_CHANNELS, frame_radius_param, preprocess_frame
 
 WIDTHS = [4, 8, 16]
 
@@ -70,7 +64,7 @@ def test_hybrid_needs_five_channels_at_scale_one():
 
 def test_metadata_names_the_gtao_channel(exported):
     from neuralao.export.onnx_io import get_metadata, load_onnx
-    from neuralao.export.unet import is_hybrid
+    from neuralao.runtime.predict import is_hybrid
 
     meta = get_metadata(load_onnx(exported[1] / "model.onnx"))
     assert meta["input_channels"] == ",".join(HYBRID_CHANNELS) and is_hybrid(meta)
@@ -88,7 +82,7 @@ def test_zero_correction_is_gtao_exactly(frame):
 
 
 def test_onnxruntime_matches_torch_on_real_gtao(exported, frame):
-    from neuralao.export.unet import ort_runner, run_padded
+    from neuralao.runtime.predict import ort_runner, run_padded
 
     model, out = exported
     f, radius = frame
@@ -102,7 +96,8 @@ def test_onnxruntime_matches_torch_on_real_gtao(exported, frame):
 
 def test_glsl_matches_onnxruntime_on_real_gtao(exported, frame):
     """Parity of the generated compute passes on the same five-channel input (a real GTAO image)."""
-    from neuralao.export.unet import glsl_runner, ort_runner, run_padded
+    from neuralao.export.unet import glsl_runner
+    from neuralao.runtime.predict import ort_runner, run_padded
 
     model, out = exported
     f, radius = frame
@@ -118,7 +113,8 @@ def test_glsl_matches_onnxruntime_on_real_gtao(exported, frame):
 def test_frame_predictor_runs_gtao_and_keeps_it_where_the_correction_is_zero(tmp_path, frame, internal):
     """A zero-correction hybrid through the whole inference path returns the full-resolution GTAO,
     also at an internal resolution (the correction is upsampled, not the AO)."""
-    from neuralao.export.unet import export_onnx, frame_predictor
+    from neuralao.export.unet import export_onnx
+    from neuralao.runtime.predict import unet_predictor as frame_predictor
 
     model = _hybrid()
     with torch.no_grad():
@@ -185,8 +181,9 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
 
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     from neuralao.export.onnx_io import get_metadata, load_onnx
-    from neuralao.export.unet import export_checkpoint, is_hybrid
+    from neuralao.export.unet import export_checkpoint
     from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.runtime.predict import is_hybrid
 
     ts = UNetTrainSettings(
         epochs=2,

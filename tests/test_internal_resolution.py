@@ -177,7 +177,8 @@ def test_infer_frame_follows_the_declared_internal_height(pure_unet, tmp_path):
     """`infer` runs a U-Net at the height its export declares (manifest ``internal_height``)."""
     import json
 
-    from neuralao.export.unet import declared_internal_height, infer_frame
+    from neuralao.runtime.predict import declared_internal_height
+    from neuralao.runtime.predict import unet_infer_frame as infer_frame
 
     src = pure_unet_export() / "model.onnx"
     model = onnx.load(src)  # the export's own declaration (ONNX metadata, then manifest) says 64 rows

@@ -121,3 +121,34 @@ def test_wheel_installs_one_top_level_name(tmp_path):
             assert f"neuralao/{shipped.relative_to(ROOT)}" in names
     assert "neuralao/runtime/viewer/index.html" in names
     assert "neuralao/runtime/host/neuralao_host.c" in names
+
+
+def test_one_import_path_per_name():
+    """No module imports a name only to hand it on (a ``noqa: F401`` import), and code outside the shader
+    generator takes the generator's public names from the package, never also from its submodules."""
+    relayed = [
+        f"{p.relative_to(ROOT)}:{n}"
+        for p in _python_files()
+        if p.name != "__init__.py" and p.parent.name not in ("tests", "bench")
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if "noqa: F401" in line
+    ]
+    assert relayed == []
+    glsl_api = set(ast.literal_eval(_assigned(ROOT / "export" / "glsl" / "__init__.py", "__all__")))
+    deep = [
+        f"{p.relative_to(ROOT)}:{node.lineno} {a.name}"
+        for p in _python_files()
+        if ROOT / "export" / "glsl" not in p.parents
+        for node in ast.walk(ast.parse(p.read_text()))
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("neuralao.export.glsl.")
+        for a in node.names
+        if a.name in glsl_api
+    ]
+    assert deep == []
+
+
+def _assigned(path: Path, name: str) -> str:
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name for t in node.targets):
+            return ast.unparse(node.value)
+    raise AssertionError(f"{path} assigns no {name}")

@@ -19,7 +19,6 @@ from neuralao.export.mlp import (
     OUTPUT,
     check_backends,
     export_checkpoint,
-    infer_frame,
     onnx_bytes,
     parity,
     random_normals,
@@ -40,6 +39,7 @@ from neuralao.pipeline.tracing.labeller import LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_npz
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.predict import mlp_infer_frame as infer_frame
 
 SMALL = MLPSettings(
     hidden=[16, 8],

@@ -173,11 +173,11 @@ def test_shipped_model_mean_ao_does_not_increase_with_the_radius():
     if not (MODELS_DIR / "index.json").is_file():
         pytest.skip("no model shipped yet (make models)")
     from neuralao.export.onnx_io import load_onnx
-    from neuralao.export.unet import check_unet_onnx, ort_runner, run_padded
     from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
     from neuralao.pipeline.geometry.camera import orbit
     from neuralao.pipeline.geometry.scene import load_scene
-    from neuralao.pipeline.models.unet import preprocess_frame, radius_param
+    from neuralao.runtime.predict import check_unet_onnx, ort_runner, run_padded
+    from neuralao.runtime.unet_input import preprocess_frame, radius_param
 
     onnx = pure_unet_export() / "model.onnx"
     proto = load_onnx(onnx)

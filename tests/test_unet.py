@@ -18,16 +18,7 @@ import torch
 from helpers import onnx_vs_torch_tol
 
 from neuralao.pipeline.models.checkpoint import count_parameters
-from neuralao.pipeline.models.unet import (
-    PREPROCESS_VERSION,
-    PaddedUNet,
-    UNet,
-    UNetArgs,
-    build_model,
-    model_args_dict,
-    predict,
-    preprocess,
-)
+from neuralao.pipeline.models.unet import PaddedUNet, UNet, UNetArgs, build_model, model_args_dict, predict
 from neuralao.pipeline.models.unet_train import (
     KIND,
     FrameSet,
@@ -43,6 +34,7 @@ from neuralao.pipeline.models.unet_train import (
 from neuralao.runtime.foundation import metrics
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.unet_input import PREPROCESS_VERSION, preprocess
 
 # Tiny but real: ~20 ms per epoch on one thread; threads=1 makes runs bitwise reproducible.
 TINY = UNetTrainSettings(
@@ -492,7 +484,8 @@ def test_onnx_has_dynamic_size_and_metadata(exported, trained):
 @pytest.mark.parametrize(("w", "h"), [(40, 36), (37, 53), (16, 16), (5, 4), (101, 67)])
 def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
     from neuralao.export.onnx_io import run_onnxruntime, run_opencv
-    from neuralao.export.unet import opencv_runner, ort_runner, run_padded
+    from neuralao.export.unet import opencv_runner
+    from neuralao.runtime.predict import ort_runner, run_padded
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
@@ -520,7 +513,7 @@ def test_onnxruntime_and_opencv_match_torch(exported, trained, w, h):
 
 
 def test_infer_frame_composites_background(exported, trained, frames):
-    from neuralao.export.unet import infer_frame
+    from neuralao.runtime.predict import unet_infer_frame as infer_frame
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
@@ -566,7 +559,8 @@ def test_glsl_matches_onnxruntime(glsl_parity):
 
 def test_out_of_range_inputs_stay_finite_everywhere(exported, trained, glsl_parity):
     """Network input depth 1e6 and normals of length 0 and 100 (sizes reuse the parity shaders)."""
-    from neuralao.export.unet import glsl_runner, ort_runner, run_padded
+    from neuralao.export.unet import glsl_runner
+    from neuralao.runtime.predict import ort_runner, run_padded
 
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))

@@ -18,16 +18,10 @@ from helpers import box, floor_quad, merge
 
 from neuralao.pipeline import cli
 from neuralao.pipeline.bakes.volumes import (
-    Edge,
-    Region,
-    RegionModel,
-    Volumes,
-    VolumeSettings,
     bake_volumes,
     free_space_regions,
     make_labeller,
     read_regions,
-    read_volumes,
     spherical_ao,
 )
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
@@ -35,6 +29,7 @@ from neuralao.runtime.foundation import sh
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.probe import TemporalBlend, VolumeProbe, blended_path
+from neuralao.runtime.volumes import Edge, Region, RegionModel, Volumes, VolumeSettings, read_volumes
 
 FAST = VolumeSettings(samples=4, directions=256)
 

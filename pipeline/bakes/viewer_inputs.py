@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from neuralao.export.glsl import generate_compute, load_compute_export
-from neuralao.export.glsl.files import load_mlp_export
+from neuralao.export.glsl import generate_compute, load_compute_export, load_mlp_export
 from neuralao.pipeline.bakes.gltf_scene import read_gltf_scene
 from neuralao.pipeline.bakes.texture import read_texture_glb
 from neuralao.pipeline.bakes.vertex import read_baked_mesh

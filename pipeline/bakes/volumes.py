@@ -74,11 +74,7 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import THREAD_BYTES, check_count, check_seed
 
 # The file format and the model of eq. 4 are the consumer runtime's; re-exported for the baker's callers.
-from neuralao.runtime.volumes import (  # noqa: F401
-    DISTANCES,
-    FORMAT,
-    TERMS,
-    VERSION,
+from neuralao.runtime.volumes import (
     Edge,
     Region,
     RegionModel,
@@ -86,10 +82,7 @@ from neuralao.runtime.volumes import (  # noqa: F401
     VolumeSettings,
     check_regions,
     design,
-    from_json,
     model_at,
-    read_volumes,
-    to_json,
 )
 
 log = logging.getLogger(__name__)

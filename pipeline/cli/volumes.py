@@ -9,17 +9,11 @@ import logging
 from pathlib import Path
 
 from neuralao.export.glsl.volume import write_volume_glsl
-from neuralao.pipeline.bakes.volumes import (
-    VolumeSettings,
-    bake_volumes,
-    check_settings,
-    load_level_scene,
-    read_regions,
-)
+from neuralao.pipeline.bakes.volumes import bake_volumes, check_settings, load_level_scene, read_regions
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
-from neuralao.runtime.volumes import to_json
+from neuralao.runtime.volumes import VolumeSettings, to_json
 
 log = logging.getLogger(__name__)
 

@@ -51,28 +51,13 @@ from torch import nn
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import from_dict
-
-# The input contract is the consumer runtime's (numpy only); re-exported for training and export.
-from neuralao.runtime.unet_input import (  # noqa: F401
-    BACKGROUND_DEPTH,
+from neuralao.runtime.unet_input import (
     HYBRID_CHANNELS,
-    HYBRID_DESCRIPTION,
     INPUT_CHANNELS,
-    PAD_MODE,
-    PREPROCESS_DESCRIPTION,
-    PREPROCESS_VERSION,
     RADIUS_CAP,
     RADIUS_DEPTH_FLOOR,
-    RADIUS_INPUT,
     check_padable,
-    depth_scale,
-    frame_radius,
-    frame_radius_param,
     pad_amount,
-    pad_to_multiple,
-    preprocess,
-    preprocess_frame,
-    radius_param,
 )
 
 

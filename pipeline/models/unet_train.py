@@ -38,23 +38,14 @@ from tqdm import tqdm
 from neuralao.pipeline.datasets.dataset import open_dataset
 from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from neuralao.pipeline.models.checkpoint import restore_model, save_checkpoint
-from neuralao.pipeline.models.unet import (
-    PREPROCESS_DESCRIPTION,
-    PaddedUNet,
-    UNet,
-    UNetArgs,
-    build_model,
-    flip_input,
-    frame_radius_param,
-    model_args_dict,
-    preprocess_frame,
-)
+from neuralao.pipeline.models.unet import PaddedUNet, UNet, UNetArgs, build_model, flip_input, model_args_dict
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
+from neuralao.runtime.unet_input import PREPROCESS_DESCRIPTION, frame_radius_param, preprocess_frame
 
 log = logging.getLogger(__name__)
 
