@@ -67,19 +67,21 @@ from neuralao.runtime.predict import (
     run_padded,
 )
 from neuralao.runtime.unet_input import (
+    DESCRIPTIONS,
     HYBRID_DESCRIPTION,
     PAD_MODE,
-    PREPROCESS_DESCRIPTION,
-    PREPROCESS_VERSION,
-    depth_scale,
+    check_version,
     preprocess_frame,
+    radius_of_param,
 )
 
 log = logging.getLogger(__name__)
 
 INPUT, RADIUS, OUTPUT = UNET_INPUT, UNET_RADIUS, "ao"
 # Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
-CHECK_RHOS: tuple[float, ...] = (0.05, 0.4)
+# Radius parameters the backend and GLSL checks run at, per preprocessing version (version 3's reach the
+# radius channel's cap on the check inputs' depths around 1, and its small end).
+CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4), 3: (-1.5, 0.5, 2.5)}
 # Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
 # 8, odd sizes that need padding on both axes (through the pad/crop wrapper).
 CHECK_SIZES: tuple[tuple[int, int], ...] = ((64, 64), (96, 72), (101, 67), (37, 53))
@@ -107,7 +109,7 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
     }
     meta = {
         "neuralao_kind": "unet",
-        **PREPROCESS_DESCRIPTION,
+        **DESCRIPTIONS[int(model.args.preprocess_version)],
         **(HYBRID_DESCRIPTION if model.args.gtao_input else {}),
         "pad_multiple": str(model.pad_multiple),
         "pad_mode": PAD_MODE,
@@ -280,7 +282,8 @@ def check_backends(
     rows, ref_max = [], 0.0
     for k, (w, h) in enumerate(sizes):
         x = random_input(w, h, seed + k, model.args.in_channels)
-        rho = CHECK_RHOS[k % len(CHECK_RHOS)]
+        rhos = CHECK_RHOS[int(model.args.preprocess_version)]
+        rho = rhos[k % len(rhos)]
         ref_torch = predict(model, x, rho)
         ref_max = max(ref_max, float(np.abs(ref_torch).max()))
         y_ort = run_padded(ort, x, m, rho)
@@ -381,7 +384,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
         "metadata": metadata,
         "pad_multiple": model.pad_multiple,
         "pad_mode": PAD_MODE,
-        "preprocess_version": PREPROCESS_VERSION,
+        "preprocess_version": int(model.args.preprocess_version),
         "parameters": n_params,
         "bytes_fp32": 4 * n_params,
         "internal_height": (ckpt.get("dataset") or {}).get("internal_height") or None,
@@ -437,10 +440,9 @@ def render_parity_frames(size: tuple[int, int] = (128, 128)) -> list[dict]:
     return frames
 
 
-def _gtao_at_rho(frame: FrameLike, rho: float) -> np.ndarray:
-    """GTAO (neuralao.runtime.baselines) of ``frame`` at the radius whose parameter is ``rho`` (the inverse of
-    :func:`neuralao.pipeline.models.unet.radius_param`: R = rho * mean foreground depth * tan(yfov / 2))."""
-    radius = rho * depth_scale(frame["depth"], frame["mask"]) * float(np.tan(0.5 * float(frame["yfov"])))
+def _gtao_at_rho(frame: FrameLike, rho: float, version: int) -> np.ndarray:
+    """GTAO (neuralao.runtime.baselines) of ``frame`` at the radius whose parameter is ``rho``."""
+    radius = radius_of_param(rho, frame["depth"], frame["mask"], float(frame["yfov"]), version)
     return run_gtao(frame, radius)
 
 
@@ -467,6 +469,7 @@ def parity(
     sizes = list(PARITY_SIZES if sizes is None else sizes)
     ort, gl = ort_runner(proto.SerializeToString()), glsl_runner(glsl_dir)
     hybrid = is_hybrid(meta)
+    version = check_version(meta.get("preprocess_version"), str(onnx_path))
     rows = []
     for i, frame in enumerate(frames):
         h0, w0 = frame["depth"].shape
@@ -475,9 +478,9 @@ def parity(
                 rows.append({"frame": i, "size": [w, h], "skipped": f"larger than the {w0}x{h0} frame"})
                 continue
             f = crop_frame(frame, w, h)
-            rho = CHECK_RHOS[len(rows) % len(CHECK_RHOS)]
+            rho = CHECK_RHOS[version][len(rows) % len(CHECK_RHOS[version])]
             # a hybrid's fifth channel: GTAO on the same frame at the radius rho stands for
-            x = preprocess_frame(f, _gtao_at_rho(f, rho) if hybrid else None)
+            x = preprocess_frame(f, _gtao_at_rho(f, rho, version) if hybrid else None, version)
             y_ort = run_padded(ort, x, m, rho)
             t0 = time.perf_counter()
             y_gl = run_padded(gl, x, m, rho)

@@ -30,8 +30,8 @@ from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import at_internal_resolution
 from neuralao.runtime.onnx_io import get_metadata, load_onnx, ort_session
 from neuralao.runtime.unet_input import (
-    PREPROCESS_VERSION,
     RADIUS_INPUT,
+    check_version,
     frame_radius,
     frame_radius_param,
     pad_to_multiple,
@@ -97,11 +97,7 @@ def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
         raise NeuralaoError(
             f"{where} is not a neuralao U-Net ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})"
         )
-    if str(meta.get("preprocess_version")) != str(PREPROCESS_VERSION):
-        raise NeuralaoError(
-            f"{where} expects preprocessing version {meta.get('preprocess_version')}, "
-            f"this neuralao has {PREPROCESS_VERSION}"
-        )
+    check_version(meta.get("preprocess_version"), str(where))
     return meta
 
 
@@ -147,10 +143,11 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     run = ort_runner(proto.SerializeToString())
     multiple = int(meta["pad_multiple"])
     hybrid = is_hybrid(meta)
+    version = int(meta["preprocess_version"])
 
     def predict(f: dict, r: float | None) -> np.ndarray:
-        x = preprocess_frame(f, f["gtao"] if hybrid else None)
-        return composite(run_padded(run, x, multiple, frame_radius_param(f, r)), f)
+        x = preprocess_frame(f, f["gtao"] if hybrid else None, version)
+        return composite(run_padded(run, x, multiple, frame_radius_param(f, r, version)), f)
 
     scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
     if not hybrid:

@@ -1,15 +1,29 @@
 """The U-Net's input contract, numpy only: G-buffer preprocessing, the radius input, reflect padding.
 
+Two versions of the contract exist; an exported model records its own (ONNX metadata
+``preprocess_version``) and every consumer follows it.
+
+Version 3, frame-local (models trained from now on). A pixel's input depends on that pixel alone, so
+its AO depends only on its receptive field, nothing is read back to the CPU, and scaling the whole
+scene (depth and R together) changes nothing:
+
     x : (4, H, W) float32, channels [depth, n_x, n_y, n_z]
-        depth    linear camera-space depth (-z_cam) divided by the frame's MEAN foreground depth
-                 (scene-scale invariant); 0 on background.
+        depth    log of linear camera-space depth (-z_cam, scene units); 0 on background.
         n_x..z   camera-space unit normal, OpenGL convention (x right, y up, z towards the viewer),
                  flipped to face the viewer; 0 on background.
-    radius   rho = R / (mean foreground depth * tan(yfov / 2)), (1, 1, 1, 1) float32.
+    radius   rho = log(R / tan(yfov / 2)), (1, 1, 1, 1) float32: the AO radius R in scene units and
+             the projection, as an engine has them per frame.
+    Inside the graph the depth channel becomes log(z tan(yfov / 2) / R) = depth - rho (0 on background)
+    and the radius channel R / (z tan(yfov / 2)) its exp(-.), clipped to [0, RADIUS_CAP].
+
+Version 2, whole-frame (the models shipped before): depth divided by the frame's MEAN foreground depth,
+rho = R / (mean foreground depth * tan(yfov / 2)); the graph's radius channel is
+clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP). The mean couples every pixel of a frame and
+needs a reduction (or a read-back) before the network runs.
 
 The ONE preprocessing that training, export checks, parity and inference use (see
-:mod:`neuralao.pipeline.models.unet` for the reasons behind it and the model); a consumer runs it without
-torch. The ONNX graph needs H and W multiples of ``pad_multiple``: the consumer reflect-pads bottom/right
+:mod:`neuralao.pipeline.models.unet` for the model); a consumer runs it without torch. The ONNX graph
+needs H and W multiples of ``pad_multiple``: the consumer reflect-pads bottom/right
 (:func:`pad_to_multiple`) and crops the output back.
 """
 
@@ -20,11 +34,16 @@ import numpy as np
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 
-# Bumped whenever ``preprocess`` changes meaning; exported models record it and ``infer`` checks it.
-PREPROCESS_VERSION = 2
+# Bumped whenever ``preprocess`` changes meaning; exported models record it and consumers follow it.
+# New models are trained with PREPROCESS_VERSION; every version of VERSIONS still runs.
+PREPROCESS_VERSION = 3
+VERSIONS = (2, 3)
 # The radius channel (see the module docstring): a floor on normalised depth and a cap on the value.
 RADIUS_DEPTH_FLOOR = 1e-3
 RADIUS_CAP = 8.0
+# Version 3's graph reads foreground as clip(|n|^2 * FOREGROUND_GAIN, 0, 1): 1 for any normal longer than
+# 1e-3 (unit normals on foreground), 0 for the zero normal of background.
+FOREGROUND_GAIN = 1e6
 RADIUS_INPUT = "radius"
 INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
 # The hybrid's input: the G-buffer channels and GTAO's AO at the same radius (1 on background).
@@ -32,28 +51,48 @@ HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
 BACKGROUND_DEPTH = 0.0
 PAD_MODE = "reflect"
 
-# Written verbatim into the ONNX metadata and the export manifest (input semantics, units).
-PREPROCESS_DESCRIPTION = {
-    "preprocess_version": str(PREPROCESS_VERSION),
+_COMMON_DESCRIPTION = {
     "input_name": "gbuffer",
     "input_layout": "NCHW float32, N=1, C=4, H and W multiples of pad_multiple (pad, run, crop)",
     "input_channels": ",".join(INPUT_CHANNELS),
-    "depth_units": "linear camera-space depth (-z_cam) divided by the mean depth over foreground pixels "
-    "of the whole frame (dimensionless, scene-scale invariant)",
-    "depth_normalisation": "depth / mean(depth[mask]); background 0",
     "normal_space": "camera space, OpenGL convention (x right, y up, z towards the viewer), unit length, "
     "flipped to face the viewer",
-    "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and "
-    "normal (0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
-    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), "
-    "R = AO radius in scene units (the distance beyond which nothing occludes); the graph feeds the network "
-    f"clip(rho / max(depth, {RADIUS_DEPTH_FLOOR:g}), 0, {RADIUS_CAP:g}) as a fifth channel",
     "radius_glsl": "uniform float u_radius (the same rho), set per frame",
     "output_name": "ao",
     "output": "(1,1,H,W) accessibility in [0,1], 1 = open (sigmoid)",
     "pad_mode": PAD_MODE,
     "pad_side": "bottom,right",
 }
+# Written verbatim into the ONNX metadata and the export manifest (input semantics, units), by version.
+DESCRIPTIONS: dict[int, dict[str, str]] = {
+    2: _COMMON_DESCRIPTION
+    | {
+        "preprocess_version": "2",
+        "depth_units": "linear camera-space depth (-z_cam) divided by the mean depth over foreground pixels "
+        "of the whole frame (dimensionless, scene-scale invariant)",
+        "depth_normalisation": "depth / mean(depth[mask]); background 0",
+        "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and "
+        "normal (0,0,0) in the input and AO 1 in the output (the network's value there is overwritten)",
+        "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = R / (mean foreground depth * tan(yfov/2)), "
+        "R = AO radius in scene units (the distance beyond which nothing occludes); the graph feeds the "
+        f"network clip(rho / max(depth, {RADIUS_DEPTH_FLOOR:g}), 0, {RADIUS_CAP:g}) as a fifth channel",
+    },
+    3: _COMMON_DESCRIPTION
+    | {
+        "preprocess_version": "3",
+        "depth_units": "natural log of linear camera-space depth (-z_cam, scene units); frame-local: no "
+        "statistic of the frame, nothing read back",
+        "depth_normalisation": "log(depth) on foreground; background 0",
+        "mask_convention": "foreground = depth > 0 (the G-buffer mask); background pixels have depth 0 and "
+        "normal (0,0,0) in the input and AO 1 in the output (the network's value there is overwritten); "
+        "the graph finds foreground from the normal's length",
+        "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = log(R / tan(yfov/2)), R = AO radius in "
+        "scene units (the distance beyond which nothing occludes), yfov the vertical field of view; the "
+        "graph replaces the depth channel by depth - rho (log(z tan(yfov/2) / R), 0 on background) and adds "
+        f"clip(exp(rho - depth), 0, {RADIUS_CAP:g}) (the radius on screen) as a fifth channel",
+    },
+}
+PREPROCESS_DESCRIPTION = DESCRIPTIONS[PREPROCESS_VERSION]
 
 # Added to the metadata of a hybrid (GTAO-input) U-Net.
 HYBRID_DESCRIPTION = {
@@ -76,7 +115,19 @@ def depth_scale(depth: np.ndarray, mask: np.ndarray) -> float:
     return float(fg.mean())
 
 
-def preprocess(depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def check_version(version: object, where: str = "the model") -> int:
+    """``version`` as an int of :data:`VERSIONS`; another is a one-line error naming ``where``."""
+    if str(version) not in {str(v) for v in VERSIONS}:
+        raise NeuralaoError(
+            f"{where} expects preprocessing version {version}, this neuralao runs "
+            + " and ".join(str(v) for v in VERSIONS)
+        )
+    return int(str(version))
+
+
+def preprocess(
+    depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray, version: int = PREPROCESS_VERSION
+) -> np.ndarray:
     """G-buffer channels -> network input.
 
     depth : (H, W) float32 linear depth, 0 on background; normal_cam : (H, W, 3) float32;
@@ -91,20 +142,38 @@ def preprocess(depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray) -> n
             f"G-buffer shapes do not match: depth {depth.shape}, normal_cam {normal_cam.shape}, "
             f"mask {mask.shape}"
         )
-    scale = depth_scale(depth, mask)
     x = np.empty((4,) + depth.shape, dtype=np.float32)
-    x[0] = np.where(mask, depth / np.float32(scale), np.float32(BACKGROUND_DEPTH))
+    if check_version(version) == 2:
+        x[0] = np.where(mask, depth / np.float32(depth_scale(depth, mask)), np.float32(BACKGROUND_DEPTH))
+    else:
+        fg = mask & (depth > 0)  # a foreground pixel at depth 0 has no logarithm: it reads as background
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x[0] = np.where(fg, np.log(np.where(fg, depth, np.float32(1.0))), np.float32(BACKGROUND_DEPTH))
+        mask = fg
     x[1:] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
     return x
 
 
-def radius_param(radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float) -> float:
-    """rho = R / (mean foreground depth * tan(yfov / 2)) for AO radius R in scene units (> 0)."""
+def radius_param(
+    radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float, version: int = PREPROCESS_VERSION
+) -> float:
+    """rho for AO radius R in scene units (> 0): log(R / tan(yfov / 2)) (version 3, the frame's depth
+    unused), or R / (mean foreground depth * tan(yfov / 2)) (version 2)."""
     if not (np.isfinite(radius) and radius > 0):
         raise NeuralaoError(f"the AO radius must be a positive number of scene units, got {radius}")
     if not (np.isfinite(yfov) and 0 < yfov < np.pi):
         raise NeuralaoError(f"yfov must lie in (0, pi) radians, got {yfov}")
-    return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
+    if check_version(version) == 2:
+        return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
+    return float(np.log(float(radius)) - np.log(np.tan(0.5 * float(yfov))))
+
+
+def radius_of_param(rho: float, depth: np.ndarray, mask: np.ndarray, yfov: float, version: int) -> float:
+    """The AO radius R in scene units whose parameter is ``rho`` (the inverse of :func:`radius_param`)."""
+    tan = float(np.tan(0.5 * float(yfov)))
+    if check_version(version) == 2:
+        return float(rho) * depth_scale(depth, mask) * tan
+    return float(np.exp(float(rho))) * tan
 
 
 def frame_radius(frame: FrameLike, radius: float | None = None) -> float:
@@ -117,20 +186,25 @@ def frame_radius(frame: FrameLike, radius: float | None = None) -> float:
     raise NeuralaoError("the frame has no label radii; give the AO radius in scene units (--radius)")
 
 
-def frame_radius_param(frame: FrameLike, radius: float | None = None) -> float:
-    """rho of :func:`radius_param` for a frame dict (depth, mask, yfov) at ``frame_radius(frame, radius)``."""
+def frame_radius_param(
+    frame: FrameLike, radius: float | None = None, version: int = PREPROCESS_VERSION
+) -> float:
+    """rho of :func:`radius_param` for a frame (depth, mask, yfov) at ``frame_radius(frame, radius)``."""
     if "yfov" not in frame:
         raise NeuralaoError("frame lacks yfov (needed for the radius input)")
-    return radius_param(frame_radius(frame, radius), frame["depth"], frame["mask"], float(frame["yfov"]))
+    r = frame_radius(frame, radius)
+    return radius_param(r, frame["depth"], frame["mask"], float(frame["yfov"]), version)
 
 
-def preprocess_frame(frame: FrameLike, gtao: np.ndarray | None = None) -> np.ndarray:
-    """``preprocess`` on a frame dict (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
+def preprocess_frame(
+    frame: FrameLike, gtao: np.ndarray | None = None, version: int = PREPROCESS_VERSION
+) -> np.ndarray:
+    """``preprocess`` on a frame (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
     (5, H, W) with ``gtao`` (H, W) as the hybrid's fifth channel (1 on background)."""
     missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]
     if missing:
         raise NeuralaoError(f"frame lacks G-buffer channel(s) {', '.join(missing)}")
-    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
+    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"], version)
     if gtao is None:
         return x
     gtao = np.asarray(gtao, np.float32)

@@ -72,8 +72,9 @@ def test_c_host_matches_python_runner(tmp_path):
     assert r.returncode == 0, r.stderr
     ao = np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
 
-    rho = radius_param(radius, frame["depth"], frame["mask"], yfov)
-    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"])
+    version = int(manifest["preprocess_version"])  # the host follows the export's input contract
+    rho = radius_param(radius, frame["depth"], frame["mask"], yfov, version)
+    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"], version)
     python = composite(run_padded(glsl_runner(export / "glsl"), x, 8, rho), frame)
     assert float(np.abs(ao - python).max()) <= TOL.glsl_op_fp32  # same shaders, same driver
     ort = run_onnxruntime(

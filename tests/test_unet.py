@@ -34,7 +34,7 @@ from neuralao.pipeline.models.unet_train import (
 from neuralao.runtime.foundation import metrics
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.tolerances import TOL
-from neuralao.runtime.unet_input import PREPROCESS_VERSION, preprocess
+from neuralao.runtime.unet_input import PREPROCESS_VERSION, preprocess, radius_param
 
 # Tiny but real: ~20 ms per epoch on one thread; threads=1 makes runs bitwise reproducible.
 TINY = UNetTrainSettings(
@@ -160,19 +160,32 @@ def test_parameter_count_matches_a_hand_count():
             UNet(UNetArgs(widths=bad))
 
 
-def test_preprocess_is_scale_invariant_and_zeroes_background():
+@pytest.mark.parametrize("version", [2, 3])
+def test_preprocess_is_scale_invariant_and_zeroes_background(version):
+    """Scaling depth and the radius together leaves what the network sees unchanged: version 2's depth
+    over the mean; version 3's log depth minus rho (what its graph feeds the network)."""
     rng = np.random.default_rng(0)
     depth = rng.uniform(2.0, 5.0, (9, 11)).astype(np.float32)
     normals = rng.standard_normal((9, 11, 3)).astype(np.float32)
     mask = rng.uniform(size=(9, 11)) < 0.7
     depth[~mask] = 0.0
-    x = preprocess(depth, normals, mask)
+    x = preprocess(depth, normals, mask, version)
     assert x.shape == (4, 9, 11) and x.dtype == np.float32
     assert np.all(x[:, ~mask] == 0.0)
-    assert float(x[0][mask].mean()) == pytest.approx(1.0, abs=1e-6)  # depth / mean foreground depth
-    np.testing.assert_allclose(preprocess(depth * 37.0, normals, mask), x, rtol=1e-6)
+    scaled = preprocess(depth * 37.0, normals, mask, version)
+    rho, rho_scaled = (
+        radius_param(r, d, mask, 0.8, version) for r, d in ((0.5, depth), (18.5, depth * 37.0))
+    )
+    if version == 2:
+        assert float(x[0][mask].mean()) == pytest.approx(1.0, abs=1e-6)  # depth / mean foreground depth
+        np.testing.assert_allclose(scaled, x, rtol=1e-6)
+        assert rho_scaled == pytest.approx(rho, rel=1e-6)
+    else:
+        np.testing.assert_allclose(x[0][mask], np.log(depth[mask]), rtol=1e-6)
+        np.testing.assert_allclose(scaled[0][mask] - rho_scaled, x[0][mask] - rho, atol=1e-6)
+        np.testing.assert_array_equal(scaled[1:], x[1:])
     with pytest.raises(NeuralaoError, match="shapes"):
-        preprocess(depth, normals[..., :2], mask)
+        preprocess(depth, normals[..., :2], mask, version)
 
 
 # ----------------------------------------------------------------------------------------------- loss
@@ -472,7 +485,7 @@ def test_onnx_has_dynamic_size_and_metadata(exported, trained):
     assert meta["validation_error"]["val_ssim"] == pytest.approx(ckpt["metrics"]["val_ssim"])
     assert int(meta["epochs"]) == TINY.epochs and meta["dataset_hash"] == ckpt["dataset"]["dataset_hash"]
     assert "depth_units" in meta and "normal_space" in meta and "mask_convention" in meta
-    assert "rho = R / (mean foreground depth" in meta["radius_input"] and "u_radius" in meta["radius_glsl"]
+    assert "rho = log(R / tan(yfov/2))" in meta["radius_input"] and "u_radius" in meta["radius_glsl"]
     assert meta["trained_radii_rel"] == [0.125, 0.25]
     assert "BatchNormalization" not in manifest["ops"]  # the TorchScript exporter folds it
     checks = manifest["checks"]
@@ -518,7 +531,8 @@ def test_infer_frame_composites_background(exported, trained, frames):
     out, _ = exported
     model = model_from_checkpoint(load_checkpoint(trained[0]))
     val = frames[1]
-    depth = val.x[0, 0].numpy() * 3.0  # any positive scale: preprocessing divides it out
+    fg = np.abs(val.x[0, 1:].numpy()).sum(axis=0) > 0
+    depth = np.where(fg, np.exp(val.x[0, 0].numpy()) * 3.0, 0.0).astype(np.float32)  # log depth back
     frame = {
         "depth": depth,
         "normal_cam": np.moveaxis(val.x[0, 1:].numpy(), 0, -1),
@@ -530,7 +544,7 @@ def test_infer_frame_composites_background(exported, trained, frames):
         infer_frame(out / "model.onnx", frame)
     ao = infer_frame(out / "model.onnx", frame, radius=0.5)
     assert ao.shape == depth.shape and np.all(ao[~frame["mask"]] == 1.0)
-    rho = 0.5 / (float(depth[fg].astype(np.float64).mean()) * np.tan(0.4))  # R / (mean depth tan(yfov/2))
+    rho = np.log(0.5 / np.tan(0.4))  # log(R / tan(yfov / 2))
     want = predict(model, preprocess(depth, frame["normal_cam"], fg), rho)[fg]
     assert np.abs(ao[fg] - want).max() <= onnx_vs_torch_tol(want, out / "model.onnx")
 

@@ -267,6 +267,7 @@ def method_from_unet(
         "sources": program.sources,
         "weights": b64(program.weights),
         "internal_height": declared_internal_height(onnx_path),
+        "preprocess_version": int(meta["preprocess_version"]),
         "radius": radius,
         "upsample": dataclasses.asdict(UpsampleSettings()),
         "model": folder.name,

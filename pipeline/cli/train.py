@@ -202,6 +202,7 @@ def run_unet(args: argparse.Namespace) -> int:
         settings.train_fraction,
         internal_height=settings.internal_height,
         gtao=settings.gtao_input,
+        version=settings.preprocess_version,
     )
     log = _log("unet")
     log.info(

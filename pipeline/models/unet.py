@@ -1,29 +1,15 @@
 """DeepAO screen-space U-Net (Zhang et al. 2020): input preprocessing, the model, the pad/crop wrapper.
 
-Input contract (``preprocess``; the ONE function that training, export checks, parity and
-inference all use, and that the ONNX metadata states in words):
-
-    x : (4, H, W) float32, channels [depth, n_x, n_y, n_z]
-        depth    linear camera-space depth (-z_cam) divided by the frame's MEAN foreground depth,
-                 so the input does not depend on scene scale (scaling a scene, or moving the camera
-                 away proportionally, gives the same input); 0 on background.
-        n_x..z   camera-space unit normal, OpenGL convention (x right, y up, z towards the viewer),
-                 flipped to face the viewer; 0 on background.
-
-    radius   (a second input, not a channel) rho = R / (mean foreground depth * tan(yfov / 2)): the
-             AO radius R in scene units, as every engine's SSAO/GTAO takes it, made dimensionless
-             with the same mean depth and the vertical field of view. (1, 1, 1, 1) float32.
-             Inside the graph it becomes the per-pixel channel
-             clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP) = R / (z tan(yfov / 2)):
-             the radius's size on screen in units of half the screen height (background: the cap
-             or rho / floor). Labels exist at several radii per frame (one trace, ``ao_radii``), so
-             one network serves any radius in the trained range.
-
-Why the mean for depth: a per-frame statistic keeps the input free of scene scale; the mean
-(not the median) because a GPU gets it from one mip-chain reduction of depth and mask
-(``sum(depth) / sum(mask)``). It is computed on the whole frame BEFORE any crop, in training too.
-Background depth is 0 because no real surface can have it (znear > 0), whereas any positive constant
-could coincide with a real far wall; with the zero normal it marks background unambiguously.
+Input contract: :mod:`neuralao.runtime.unet_input` (numpy, the ONE preprocessing that training, export
+checks, parity and inference use, stated in words in the ONNX metadata). Version 3, what new models
+train with, is frame-local: channel 0 is log(-z_cam) (0 on background), the radius input is
+rho = log(R / tan(yfov / 2)), and the graph makes the depth relative to the radius (depth - rho) and
+adds the radius on screen, exp(rho - depth), as a channel. Every input of a pixel is the pixel's own, so
+its AO depends only on the receptive field (no statistic of the frame, nothing read back), and scaling
+the scene (depth and R together) leaves the input unchanged. Version 2 (the earlier shipped models)
+divided depth by the frame's mean foreground depth. Labels exist at several radii per frame (one trace,
+``ao_radii``), so one network serves any radius in the trained range. Background depth is 0 and its
+normal zero, which marks it unambiguously (no unit normal is zero).
 
 Model (``UNet``): encoder level i = 3x3 conv (stride 1) + LeakyReLU(0.01), then 2x2 average pool;
 decoder level i = bilinear x2 upsample, 3x3 conv halving the channels, batch norm, LeakyReLU,
@@ -52,11 +38,14 @@ from torch import nn
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import from_dict
 from neuralao.runtime.unet_input import (
+    FOREGROUND_GAIN,
     HYBRID_CHANNELS,
     INPUT_CHANNELS,
+    PREPROCESS_VERSION,
     RADIUS_CAP,
     RADIUS_DEPTH_FLOOR,
     check_padable,
+    check_version,
     pad_amount,
 )
 
@@ -88,6 +77,9 @@ class UNetArgs:
     # Hybrid: GTAO's AO at the same radius is a fifth input channel and the network predicts a
     # correction to it: ao = clip(gtao + conv(x), 0, 1) (GTAO stays a GL pass the engine runs first).
     gtao_input: bool = False
+    # The input contract (neuralao.runtime.unet_input): 3 = frame-local (log depth, rho =
+    # log(R / tan(yfov/2))); 2 = the whole frame's mean depth. Checkpoints without it are version 2.
+    preprocess_version: int = PREPROCESS_VERSION
 
     @property
     def depth(self) -> int:
@@ -107,11 +99,12 @@ class UNet(nn.Module):
     parameter rho (N, 1, 1, 1) float32 -> AO (N, 1, H, W) in [0, 1].
 
     This is exactly what is exported to ONNX (no padding inside). With ``radius_input`` the first
-    operation builds the radius channel ``clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP)``
-    (the screen-space radius in units of half the screen height at the pixel's depth) and
-    concatenates it to x; the depth channel is read by a fixed 1x1 channel-select convolution so the
-    graph needs no Slice. With ``scale`` s > 1 the G-buffer is point-sampled to 1/s resolution
-    (nearest, every s-th pixel), the U-Net runs there, its AO is upsampled bilinearly and a small
+    operations build the radius channel, the screen-space radius R / (z tan(yfov / 2)) in units of half
+    the screen height at the pixel's depth, clipped to [0, RADIUS_CAP], and concatenate it to x (version
+    3 also makes the depth channel relative to the radius: log(z tan(yfov / 2) / R); see
+    :mod:`neuralao.runtime.unet_input`); the depth channel is read by a fixed 1x1 channel-select
+    convolution so the graph needs no Slice. With ``scale`` s > 1 the G-buffer is point-sampled to 1/s
+    resolution (nearest, every s-th pixel), the U-Net runs there, its AO is upsampled bilinearly and a small
     full-resolution refinement (3x3 conv on [upsampled AO, full-resolution G-buffer, upsampled
     low-resolution depth] -> LeakyReLU -> 1x1 conv) adds a correction, clipped to [0, 1]: it sees
     where the full-resolution depth and normals differ from what the low-resolution pass saw, so
@@ -138,9 +131,16 @@ class UNet(nn.Module):
         w = [int(v) for v in args.widths]
         slope = args.negative_slope
         cin = args.in_channels + (1 if args.radius_input else 0)
+        check_version(args.preprocess_version, "this U-Net")
         select = torch.zeros(1, args.in_channels, 1, 1)
         select[0, 0] = 1.0  # channel 0 = normalised depth
         self.register_buffer("select", select, persistent=False)
+        # Version 3 reads foreground from the normal's squared length (1x1 conv over x * x) and replaces
+        # the depth channel (x + a 1x1 conv spreading new - old into channel 0): no Slice, no Where.
+        normal_sq = torch.zeros(1, args.in_channels, 1, 1)
+        normal_sq[0, 1:4] = 1.0
+        self.register_buffer("normal_sq", normal_sq, persistent=False)
+        self.register_buffer("first", select.clone().view(-1, 1, 1, 1), persistent=False)
         if args.gtao_input:
             guide = torch.zeros(1, cin, 1, 1)  # _unet sees the radius channel appended after GTAO
             guide[0, len(INPUT_CHANNELS)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
@@ -179,8 +179,15 @@ class UNet(nn.Module):
             return x
         if radius is None:
             raise NeuralaoError("this U-Net takes the AO radius as an input; pass radius (N, 1, 1, 1)")
-        r = torch.clamp(radius / torch.clamp(self._depth(x), min=RADIUS_DEPTH_FLOOR), 0.0, RADIUS_CAP)
-        return torch.cat([x, r], dim=1)
+        if int(self.args.preprocess_version) == 2:
+            r = torch.clamp(radius / torch.clamp(self._depth(x), min=RADIUS_DEPTH_FLOOR), 0.0, RADIUS_CAP)
+            return torch.cat([x, r], dim=1)
+        # log(z tan(yfov/2) / R) on foreground, 0 on background; its exp(-.) is the radius on screen
+        fg = torch.clamp(F.conv2d(x * x, self.normal_sq) * FOREGROUND_GAIN, 0.0, 1.0)
+        depth = self._depth(x)
+        relative = (depth - radius) * fg
+        r = torch.clamp(torch.exp(-relative), 0.0, RADIUS_CAP) * fg
+        return torch.cat([x + F.conv2d(relative - depth, self.first), r], dim=1)
 
     def _unet(self, x: torch.Tensor) -> torch.Tensor:
         gtao = F.conv2d(x, self.guide) if self.args.gtao_input else None
@@ -242,6 +249,7 @@ def build_model(model_args: dict | UNetArgs | None = None) -> UNet:
 
     model_args = dict(model_args)
     model_args.setdefault("radius_input", False)  # checkpoints from before the radius input
+    model_args.setdefault("preprocess_version", 2)  # checkpoints from before the frame-local contract
     return UNet(from_dict(UNetArgs, model_args))
 
 

@@ -45,7 +45,13 @@ from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
-from neuralao.runtime.unet_input import PREPROCESS_DESCRIPTION, frame_radius_param, preprocess_frame
+from neuralao.runtime.unet_input import (
+    DESCRIPTIONS,
+    PREPROCESS_VERSION,
+    check_version,
+    frame_radius_param,
+    preprocess_frame,
+)
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +112,9 @@ class UNetTrainSettings:
     # Hybrid: GTAO's AO at each label radius (neuralao.runtime.baselines, computed on the frame before any
     # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
     gtao_input: bool = False
+    # The input contract the model is trained for (neuralao.runtime.unet_input): 3 = frame-local (log
+    # depth, the radius through the projection); 2 = the whole frame's mean depth, as the earlier models.
+    preprocess_version: int = PREPROCESS_VERSION
 
 
 # ----------------------------------------------------------------------------------------------- loss
@@ -231,7 +240,9 @@ def frame_labels(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return ao, valid, np.asarray(frame["radii"], dtype=np.float32).reshape(-1)
 
 
-def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> FrameSet:
+def frames_to_set(
+    frames, internal_height: int = 0, gtao: bool = False, version: int = PREPROCESS_VERSION
+) -> FrameSet:
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
     every frame has one size, else per-frame lists).
 
@@ -240,7 +251,7 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
     change, it is relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame
     as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
-    only the compact arrays are kept.
+    only the compact arrays are kept. ``version``: the input contract the frames are preprocessed for.
     """
     xs, ys, ms, gs, rhos, radii, names, scenes = [], [], [], [], [], [], [], []
     count = None
@@ -259,12 +270,12 @@ def frames_to_set(frames, internal_height: int = 0, gtao: bool = False) -> Frame
         if (lw, lh) != (w, h):
             f = downsample_frame(f, lw, lh)
         ao, valid, r = frame_labels(f)
-        xs.append(torch.from_numpy(preprocess_frame(f)))
+        xs.append(torch.from_numpy(preprocess_frame(f, version=version)))
         ys.append(torch.from_numpy(ao.astype(np.float16)))
         ms.append(torch.from_numpy(valid & np.asarray(f["mask"], dtype=bool)[None]))
         if gtao:
             gs.append(torch.from_numpy(np.moveaxis(f["gtao_radii"], -1, 0).astype(np.float16)))
-        rhos.append([frame_radius_param(f, float(v)) for v in r])
+        rhos.append([frame_radius_param(f, float(v), version) for v in r])
         radii.append(r)
         scene = str(f.get("scene", "frames"))
         names.append(f"{scene}/{f.get('view', i)}")
@@ -302,13 +313,15 @@ def load_dataset_frames(
     loaded: tuple | None = None,
     internal_height: int = 0,
     gtao: bool = False,
+    version: int = PREPROCESS_VERSION,
 ) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
     ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
     the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
     dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
-    instead of read from disk again. ``internal_height`` and ``gtao``: see :func:`frames_to_set`.
+    instead of read from disk again. ``internal_height``, ``gtao`` and ``version``: see
+    :func:`frames_to_set`.
     """
     ds = open_dataset(data)
     train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
@@ -326,6 +339,7 @@ def load_dataset_frames(
             or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
             or full_info.get("internal_height") != internal_height
             or full_info.get("gtao") != gtao
+            or full_info.get("preprocess_version") != version
         ):
             raise NeuralaoError(
                 "load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1"
@@ -336,11 +350,13 @@ def load_dataset_frames(
             (f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
             internal_height,
             gtao,
+            version,
         )
         val = frames_to_set(
             ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
             internal_height,
             gtao,
+            version,
         )
     info = {
         "path": str(data),
@@ -355,6 +371,7 @@ def load_dataset_frames(
         "train_fraction": train_fraction,
         "internal_height": internal_height,
         "gtao": gtao,
+        "preprocess_version": version,
     }
     return train, val, info
 
@@ -625,6 +642,7 @@ def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
         scale=int(settings.scale),
         refine_width=int(settings.refine_width),
         gtao_input=bool(settings.gtao_input),
+        preprocess_version=int(settings.preprocess_version),
     )
 
 
@@ -720,6 +738,7 @@ def train(
         raise NeuralaoError("epochs, batch_size and crops_per_frame must be >= 1")
     if settings.budget_minutes < 0 or not math.isfinite(settings.budget_minutes):
         raise NeuralaoError(f"budget_minutes must be >= 0, got {settings.budget_minutes}")
+    check_version(settings.preprocess_version, "preprocess_version")
     lr_at(settings, 0, 1)  # validates the schedule name
     args = model_args_of(settings)
     model = UNet(args)  # validates widths / scale
@@ -731,6 +750,12 @@ def train(
         load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
     device = pick_device(settings.device)
     info = dict(dataset_info or {})
+    loaded_for = info.get("preprocess_version", settings.preprocess_version)
+    if int(loaded_for) != int(settings.preprocess_version):
+        raise NeuralaoError(
+            f"the frames were preprocessed for input contract {loaded_for}, the model is trained for "
+            f"{settings.preprocess_version}; load them with version={settings.preprocess_version}"
+        )
     info.setdefault("training_scenes", sorted(set(train_set.scenes)))
     info.setdefault("val_scenes", sorted(set(val_set.scenes)) if val_set is not None else [])
     config = settings_to_dict(settings)
@@ -847,7 +872,7 @@ def train(
                 "model_args": model_args_dict(args),
                 "state_dict": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
                 "config": config,
-                "preprocess": dict(PREPROCESS_DESCRIPTION),
+                "preprocess": dict(DESCRIPTIONS[int(args.preprocess_version)]),
                 "dataset": info,
                 "metrics": metrics,
                 "history": history,

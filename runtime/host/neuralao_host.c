@@ -10,10 +10,14 @@
  * RADIUS       AO radius in scene units; YFOV the vertical field of view in radians
  * OUT.f32      raw float32, HEIGHT x WIDTH, row 0 = the top row: AO in [0, 1], 1 on background
  *
- * What an engine does around the generated passes (docs/engine-integration.md, steps 1-4):
- *   1. mean foreground depth m (here on the CPU, in double; an engine runs a reduction pass);
- *   2. the network input texture t0: (z / m, n) on foreground, 0 on background, RGBA32F layers;
- *   3. the radius uniform rho = R / (m * tan(yfov / 2)) of the pass the manifest's "uniforms" names;
+ * What an engine does around the generated passes (docs/engine-integration.md, steps 1-4), by the input
+ * contract the export's ONNX metadata names (source_model_metadata.preprocess_version):
+ *   version 3 (frame-local):
+ *   1. nothing: no statistic of the frame is needed;
+ *   2. the network input texture t0: (log z, n) on foreground, 0 on background, RGBA32F layers;
+ *   3. the radius uniform rho = log(R / tan(yfov / 2)) of the pass the manifest's "uniforms" names;
+ *   version 2 (whole frame): 1. mean foreground depth m (here on the CPU, in double; an engine runs a
+ *   reduction pass); 2. t0 = (z / m, n); 3. rho = R / (m * tan(yfov / 2));
  *   4. every texture of the manifest allocated at its size formula (W, Wp = ceil(W / p) * p, ...);
  *      the passes in order (the generated pad pass pads, the crop pass crops), one dispatch each,
  *      a memory barrier between them; the output texture read back, background set to 1.
@@ -413,14 +417,37 @@ static float *run_network(const Json *m, const char *dir, int w, int h, const fl
     return y;
 }
 
-/* Steps 1-2 on a G-buffer of w x h pixels, row 0 on top: mean foreground depth m (double, as the
- * Python reference), the input planes (z / m, n on foreground, 0 on background; extra planes after). */
+/* Mean foreground depth m (double, as the Python reference): version 2's one statistic of the frame. */
 static double mean_depth_of(const float *depth, const float *mask, size_t px) {
     double sum = 0.0;
     long count = 0;
     for (size_t i = 0; i < px; i++)
         if (mask[i] >= 0.5f) sum += depth[i], count++;
     return count ? sum / (double)count : 1.0;
+}
+
+/* The input contract of the export (its ONNX metadata's preprocess_version); 2 when it names none. */
+static int preprocess_version(const Json *m) {
+    const Json *meta = jget(m, "source_model_metadata");
+    const Json *v = meta && meta->type == J_OBJ ? jget(meta, "preprocess_version") : NULL;
+    if (!v) return 2;
+    const int version = v->type == J_STR ? atoi(v->str) : v->type == J_NUM ? (int)v->num : 0;
+    if (version != 2 && version != 3) die("the export expects input contract %d; this host runs 2 and 3", version);
+    return version;
+}
+
+/* Steps 1-3 on a G-buffer of px pixels: the depth plane (log z, or z / m for version 2) on foreground and
+ * 0 on background, written to depth_plane; returns rho. */
+static float depth_plane_and_rho(int version, const float *depth, const float *mask, size_t px,
+                                 double radius, double yfov, float *depth_plane) {
+    if (version == 3) {
+        for (size_t i = 0; i < px; i++) depth_plane[i] = mask[i] >= 0.5f && depth[i] > 0.0f ? logf(depth[i]) : 0.0f;
+        return (float)(log(radius) - log(tan(0.5 * yfov)));
+    }
+    const double mean = mean_depth_of(depth, mask, px);
+    const float m32 = (float)mean;
+    for (size_t i = 0; i < px; i++) depth_plane[i] = mask[i] >= 0.5f ? depth[i] / m32 : 0.0f;
+    return (float)(radius / (mean * tan(0.5 * yfov)));
 }
 
 /* ------------------------------------------------------------------ the internal-resolution passes */
@@ -584,16 +611,13 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
                 lgtao[top] = gtao[(size_t)qy * W + (size_t)qx];
             }
         }
-    const double mean = mean_depth_of(ldepth, lmask, lpx);
-    const float m32 = (float)mean;
+    const float rho = depth_plane_and_rho(preprocess_version(m), ldepth, lmask, lpx, radius, yfov, planes);
     for (size_t i = 0; i < lpx; i++) {
         const int fg = lmask[i] >= 0.5f;
         const size_t r = i / (size_t)lw, c = i % (size_t)lw, gl_i = ((size_t)lh - 1 - r) * (size_t)lw + c;
-        planes[i] = fg ? ldepth[i] / m32 : 0.0f;
         for (int k = 0; k < 3; k++) planes[(size_t)(1 + k) * lpx + i] = fg ? lnrm[gl_i * 4 + (size_t)k] : 0.0f;
         if (hybrid) planes[4 * lpx + i] = fg ? lgtao[i] : 1.0f;
     }
-    const float rho = (float)(radius / (mean * tan(0.5 * yfov)));
     float *y = run_network(m, dir, lw, lh, planes, channels, rho, n_passes);
 
     /* upsample.frag: the AO (hybrid: its correction to the point-sampled GTAO) to W x H, GL order */
@@ -684,17 +708,15 @@ int main(int argc, char **argv) {
     } else {
         if ((int)jnum(jreq(m, "input"), "channels") != 4)
             die("a hybrid export runs its GTAO pass at an internal resolution; this one declares none");
-        /* steps 1-3 at the frame's own size: mean depth, input planes, rho */
+        /* steps 1-3 at the frame's own size: input planes, rho */
         const size_t px = (size_t)W * H;
         float *planes = xmalloc(sizeof(float) * 4 * px), *depth = xmalloc(sizeof(float) * px);
         float *mask = xmalloc(sizeof(float) * px);
         for (size_t i = 0; i < px; i++) depth[i] = gb[i * 5], mask[i] = gb[i * 5 + 4];
-        const double mean = mean_depth_of(depth, mask, px);
-        const float m32 = (float)mean;
+        const float rho = depth_plane_and_rho(preprocess_version(m), depth, mask, px, radius, yfov, planes);
         for (size_t i = 0; i < px; i++)
             if (mask[i] >= 0.5f)
-                for (int k = 0; k < 4; k++) planes[(size_t)k * px + i] = k ? gb[i * 5 + (size_t)k] : gb[i * 5] / m32;
-        const float rho = (float)(radius / (mean * tan(0.5 * yfov)));
+                for (int k = 1; k < 4; k++) planes[(size_t)k * px + i] = gb[i * 5 + (size_t)k];
         ao = run_network(m, dir, W, H, planes, 4, rho, &n_passes);
         for (size_t i = 0; i < px; i++) if (!(mask[i] >= 0.5f)) ao[i] = 1.0f;
         free(planes), free(depth), free(mask);

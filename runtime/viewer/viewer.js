@@ -207,8 +207,9 @@ void main() {
   // ------------------------------------------------------------------ screen-space U-Net (WebGPU)
   // A method with a `network` runs a U-Net's WGSL compute export (wgsl.js) on the page's camera-space
   // G-buffer, as runtime/predict.py unet_predictor does with onnxruntime: point-sampled to the model's
-  // internal height (runtime/internal_resolution.py), preprocessed (runtime/unet_input.py: depth over
-  // the mean foreground depth, camera-space normals, rho = R / (mean depth * tan(yfov / 2))), run,
+  // internal height (runtime/internal_resolution.py), preprocessed by the model's input contract
+  // (runtime/unet_input.py; version 3: log depth, camera-space normals, rho = log(R / tan(yfov / 2));
+  // version 2: depth over the mean foreground depth, rho = R / (mean depth * tan(yfov / 2))), run,
   // background set to 1, upsampled by the joint bilateral filter. WebGPU is asynchronous: a frame
   // shows the latest finished AO; while one run is in flight, newer frames coalesce into one more run.
   const net = { device: null, state: "none", error: null, busy: null, dirty: false, last: null };
@@ -216,7 +217,8 @@ void main() {
     : net.state === "pending" ? " (starting WebGPU...)" : " (" + net.state + ")";
   function networkOf(n) {
     return { program: { manifest: n.manifest, sources: n.sources, weights: b64floats(n.weights).buffer },
-      internalHeight: n.internal_height, radius: n.radius, upsample: n.upsample, model: n.model };
+      internalHeight: n.internal_height, version: n.preprocess_version, radius: n.radius,
+      upsample: n.upsample, model: n.model };
   }
   async function startWebGPU() {
     net.state = "pending";
@@ -349,19 +351,22 @@ void main() {
       : { position: pointSample(gb.position, lw, lh), normal: pointSample(gb.normal, lw, lh) };
     const P = low.position, N = low.normal, count = lw * lh;
     let sum = 0, fg = 0;
-    for (let i = 0; i < count; i++) if (P[4 * i + 3] >= 0.5) { sum += -P[4 * i + 2]; fg++; }
-    const scale = fg ? sum / fg : 1.0;  // mean foreground depth (float64, as depth_scale)
+    if (n.version === 2)
+      for (let i = 0; i < count; i++) if (P[4 * i + 3] >= 0.5) { sum += -P[4 * i + 2]; fg++; }
+    const scale = fg ? sum / fg : 1.0;  // version 2: mean foreground depth (float64, as depth_scale)
     const scale32 = Math.fround(scale);
     const x = new Float32Array(4 * count);  // (4, lh, lw), row 0 at the top
     for (let r = 0; r < lh; r++) {
       for (let c = 0; c < lw; c++) {
         const src = (lh - 1 - r) * lw + c, dst = r * lw + c;
         if (!(P[4 * src + 3] >= 0.5)) continue;
-        x[dst] = -P[4 * src + 2] / scale32;
+        const z = -P[4 * src + 2];
+        x[dst] = n.version === 2 ? z / scale32 : Math.log(Math.fround(z));
         for (let k = 0; k < 3; k++) x[(k + 1) * count + dst] = N[4 * src + k];
       }
     }
-    const rho = n.radius / (scale * Math.tan(0.5 * YFOV));
+    const rho = n.version === 2 ? n.radius / (scale * Math.tan(0.5 * YFOV))
+      : Math.log(n.radius) - Math.log(Math.tan(0.5 * YFOV));
     const y = await neuralaoWgsl.run(net.device, n.program, x, lw, lh, { radius: rho }, false);
     const aoLow = new Float32Array(count);  // GL rows, background 1 (runtime/predict.py composite)
     for (let r = 0; r < lh; r++)
