@@ -37,7 +37,7 @@ from neuralao.pipeline.datasets.dataset import (
     open_dataset,
 )
 from neuralao.pipeline.evaluation.test_split import score_frame, screen_space_predictor, unet_predictor
-from neuralao.pipeline.geometry.splits import split_of
+from neuralao.pipeline.geometry.splits import HELD_ASIDE, split_of
 from neuralao.pipeline.tracing.labeller import LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json, write_text
@@ -59,6 +59,9 @@ class EvalCategory:
     cameras: str = "orbit"  # camera kind of the meshes: orbit (isolated objects) or interior (rooms)
     composed: int = 0  # number of composed rooms of test-split meshes (instead of ``meshes``)
     composed_seed: int = 20000  # room i is composed with composed_seed + i
+    # The meshes are held aside (pipeline.geometry.splits.HELD_ASIDE): in no frame of the larger corpus.
+    # Only such meshes are accepted outside the test split; score models trained on that corpus with it.
+    held_aside: bool = False
 
 
 @dataclass
@@ -157,7 +160,12 @@ def check_settings(settings: EvalSettings) -> None:
             raise NeuralaoError(f"category {cat.name!r} has no meshes and no composed rooms")
         for mesh in cat.meshes:
             split = split_of(mesh)
-            if split not in (None, "test") and not settings.allow_trained_meshes:
+            if cat.held_aside and mesh not in HELD_ASIDE:
+                raise NeuralaoError(
+                    f"category {cat.name!r}: mesh {mesh!r} is not held aside "
+                    f"(those are {', '.join(HELD_ASIDE)})"
+                )
+            if split not in (None, "test") and not settings.allow_trained_meshes and not cat.held_aside:
                 raise NeuralaoError(
                     f"category {cat.name!r}: mesh {mesh!r} is in the {split} split; evaluate on test meshes"
                 )
@@ -181,10 +189,18 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
         )
     onnx_path = folder / manifest.get("onnx", "model.onnx")
     out = {}
+    if trained_on_held_aside(manifest):
+        log.info("%s trained on held-aside meshes: its held-aside rows are left out", folder.name)
     for policy in policies:
         label = folder.name if policy == "model" else f"{folder.name}@{policy}"
         out[label] = unet_predictor(onnx_path, internal_height_of(policy, manifest))
     return out
+
+
+def trained_on_held_aside(manifest: dict) -> bool:
+    """Whether an export's training scenes include a held-aside mesh (alone or as a close-up of it)."""
+    scenes = (manifest.get("metadata") or {}).get("training_scenes") or []
+    return any(str(s).split("-close")[0] in HELD_ASIDE for s in scenes)
 
 
 def internal_height_of(policy: str, manifest: dict) -> int | None:
@@ -292,8 +308,13 @@ def evaluate(
     """Build (or resume) the frames of every resolution, score every method, write the tables."""
     check_settings(settings)
     methods: dict[str, Predictor] = {}
+    saw_held_aside: set[str] = set()  # methods whose model trained on the held-aside meshes
     for folder in models:
-        methods.update(unet_predictors(Path(folder), policies))
+        mine = unet_predictors(Path(folder), policies)
+        if trained_on_held_aside(read_manifest(Path(folder))):
+            saw_held_aside.update(mine)
+        methods.update(mine)
+    held_aside = {c.name for c in settings.categories if c.held_aside}
     methods.update(baseline_predictors())
     rows: list[dict] = []
     build_times = {}
@@ -305,11 +326,14 @@ def evaluate(
         build_times[key] = time.perf_counter() - t0
         t0 = time.perf_counter()
         for frame in open_dataset(out / "frames" / key).frames(split="test"):
+            category = category_of(frame["scene"], settings)
             for row in score_frame(frame, methods, flip):
+                if category in held_aside and row["method"] in saw_held_aside:
+                    continue  # not held aside for this model: its score there would be one of memory
                 rows.append(
                     row
                     | {
-                        "category": category_of(frame["scene"], settings),
+                        "category": category,
                         "resolution": key,
                         "scene": frame["scene"],
                         "view": frame["view"],
