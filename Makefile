@@ -52,7 +52,7 @@ DEMO_REPORT_FLAGS := --gt-rays 512 --frames-per-scene 2 --time-size 256 256 --re
 	--set 'expected_exports=[$(subst $(space),$(comma),$(foreach s,$(MLP_SIZES),"mlp-$(s)") "unet")]'
 VIEWER_PNG := $(BUILD)/viewer.png
 
-.PHONY: help setup system-deps dataset corpus corpus-large corpus-full experiments evaluate models train export parity report select demo host test fuzz bench lint clean
+.PHONY: help setup system-deps dataset corpus corpus-large corpus-full curve experiments evaluate models train export parity report select demo host test fuzz bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -128,6 +128,14 @@ MODELS_CONFIG := configs/models.json
 MODELS ?=
 models: $(CORPUS) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
 	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
+
+# Learning curves of the screen-space U-Net on the larger corpus (configs/curve.json): one run per line of
+# the config, snapshots at 0.25-4 hours scored on the validation split and the test categories against
+# GTAO; the table and plot replace the learning-curve section of docs/results.md. Hours of training:
+# resumable, rerun to continue.
+CURVE_CONFIG := configs/curve.json
+curve: $(CORPUS_LARGE) $(CURVE_CONFIG) | $(STAMP) ## Learning curves of the U-Net (hours, resumable) into docs/results.md
+	$(PY) bench/learning_curve.py --config $(CURVE_CONFIG) --out build/curve --results docs/results.md
 
 # The budget and corpus-size experiments (configs/experiments.json) on the composed-room corpus;
 # exports go to build/experiments/models (not shipped); their figures are in docs/results.md.
