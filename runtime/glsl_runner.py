@@ -10,14 +10,19 @@ files on disk, so the runner doubles as the check that an export is self-suffici
     time_vector_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_mlp_fragment(shader_or_dir, height, width, repeats=30, fp16=False, dialect=None) -> s/frame
     time_vertex_colour(scene, camera, repeats=30, ao=None) -> s/frame
-    run_compute(program_or_dir, x, flip_y=False, scalars=None) -> (1, C, H, W) f32   (first graph output)
-    run_compute_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
+    run_compute(program_or_dir, x, flip_y=False, scalars=None, aliasing=False) -> (1, C, H, W) f32
+                                                                            (first graph output)
+    run_compute_all(program_or_dir, x, flip_y=False, scalars=None, aliasing=False)
+        -> {onnx output name: (1, C, H, W) f32}
     time_compute(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
     scalar_inputs(program_or_dir) -> [ONNX names of the scalar graph inputs (uniforms)]
     texture_sizes(manifest, height, width) -> {texture id: (w, h, layers, bytes)}   (checks the size first)
 
 ``scalars`` gives each scalar graph input of a compute program (manifest ``uniforms``: e.g. the AO
-radius of a (1, 1, 1, 1) input) by its ONNX name: a float or any one-element array.
+radius of a (1, 1, 1, 1) input) by its ONNX name: a float or any one-element array. ``aliasing`` runs
+the passes with textures sharing memory as an aliasing plan says (True: the program's own,
+:func:`neuralao.export.glsl.memory_schedule`; or a list of slots, each a list of texture ids): the
+check that the plan never lets a pass overwrite a texture that is still to be read.
 
 Timings are medians of per-frame wall times, each frame closed by ``glFinish``.
 """
@@ -27,7 +32,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +44,7 @@ from neuralao.export.glsl import (
     MLPShader,
     load_compute_export,
     load_mlp_export,
+    memory_schedule,
 )
 from neuralao.export.glsl.templates import fill
 from neuralao.runtime import gl
@@ -393,13 +399,31 @@ def scalar_values(manifest: dict, scalars: dict | None) -> dict[str, float]:
     return out
 
 
+Aliasing = bool | Sequence[Sequence[str]]
+
+
 class _ComputeRun:
     """Textures sized for one input resolution, compiled passes and the parameter buffer.
 
     scalars : {ONNX name: value} of the scalar inputs (uniforms); settable later by :meth:`set_scalars`,
-    needed before :meth:`dispatch`."""
+    needed before :meth:`dispatch`. aliasing : False (a texture each), True (the program's aliasing
+    plan) or slots (lists of texture ids; ids of other textures are ignored).
 
-    def __init__(self, program: ComputeProgram, height: int, width: int, scalars: dict | None = None):
+    Aliased, the textures of one slot with the same format and size are one GL texture with the most
+    layers of them (the passes touch only their own layers). GL cannot place textures of different
+    sizes in one memory, so whenever a texture's lifetime begins (before the pass that first writes
+    it, or the upload of the input) every GL texture of its slot is filled with NaN: what that first
+    write would do to the other members' data in shared memory, and more. A plan that lets two members
+    live at once then changes the output."""
+
+    def __init__(
+        self,
+        program: ComputeProgram,
+        height: int,
+        width: int,
+        scalars: dict | None = None,
+        aliasing: Aliasing = False,
+    ):
         gl.context()
         m = program.manifest
         self.manifest = m
@@ -408,9 +432,30 @@ class _ComputeRun:
             self.set_scalars(scalars)
         sizes = texture_sizes(m, height, width, int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE)))
         self.textures: dict[str, tuple[int, int, int, int, int]] = {}  # id -> (tex, w, h, layers, internal)
+        self.allocated: dict[int, int] = {}  # GL texture -> layers allocated
+        # pass index (None: the input's upload) -> the GL textures of each slot a lifetime begins in
+        self.acquire: dict[int | None, list[list[int]]] = {}
+        schedule = memory_schedule(m) if aliasing is not False else None
+        slots = [] if schedule is None else schedule.slots if aliasing is True else aliasing
+        slots = [[t for t in slot if t in m["textures"]] for slot in slots]  # the network's textures
+        slot_of = {ident: k for k, slot in enumerate(slots) for ident in slot}
+        keys = {  # textures of one key share a GL texture: one slot, format and size
+            ident: (slot_of.get(ident, ident), m["textures"][ident]["format"], tw, th)
+            for ident, (tw, th, _, _) in sizes.items()
+        }
+        shared: dict[tuple, int] = {}
+        for key in dict.fromkeys(keys.values()):
+            layers = max(sizes[ident][2] for ident, k in keys.items() if k == key)
+            shared[key] = _array_texture(key[2], key[3], layers, _IMAGE_FORMATS[key[1]])
+            self.allocated[shared[key]] = layers
         for ident, (tw, th, layers, _) in sizes.items():
-            internal = _IMAGE_FORMATS[m["textures"][ident]["format"]]
-            self.textures[ident] = (_array_texture(tw, th, layers, internal), tw, th, layers, internal)
+            self.textures[ident] = (shared[keys[ident]], tw, th, layers, _IMAGE_FORMATS[keys[ident][1]])
+        if schedule is not None:  # as each texture's lifetime begins, its slot's GL textures are poisoned
+            for ident, k in slot_of.items():
+                step = schedule.steps[schedule.textures[ident].first]
+                at = None if ident == m["input"]["texture"] else step.pass_index
+                members = sorted({shared[key] for key in shared if key[0] == k})
+                self.acquire.setdefault(at, []).append(members)
         self.ssbo = None
         if program.weights:
             align = int(GL.glGetIntegerv(GL.GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT))
@@ -428,7 +473,14 @@ class _ComputeRun:
             groups = (-(-tw // (lx * bx)), -(-th // (ly * by)), layers // bl)
             self.passes.append((p, prog, groups))
 
+    def _poison(self, at: int | None) -> None:
+        nan = np.full(4, np.nan, np.float32)
+        for slot in self.acquire.get(at, []):
+            for tex in slot:
+                GL.glClearTexImage(tex, 0, GL.GL_RGBA, GL.GL_FLOAT, nan)
+
     def upload(self, x: np.ndarray) -> None:
+        self._poison(None)
         ident = self.manifest["input"]["texture"]
         tex, w, h, layers, _ = self.textures[ident]
         c = x.shape[1]
@@ -446,7 +498,8 @@ class _ComputeRun:
         if self.scalars is None:  # names the first missing input
             self.set_scalars(None)
         barrier = GL.GL_TEXTURE_FETCH_BARRIER_BIT | GL.GL_SHADER_IMAGE_ACCESS_BARRIER_BIT
-        for p, prog, groups in self.passes:
+        for k, (p, prog, groups) in enumerate(self.passes):
+            self._poison(k)
             GL.glUseProgram(prog)
             for inp in p["inputs"]:
                 GL.glActiveTexture(GL.GL_TEXTURE0 + inp["binding"])
@@ -471,12 +524,13 @@ class _ComputeRun:
         tex, w, h, layers, _ = self.textures[ident]
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
         GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
-        buf = np.empty((layers, h, w, 4), np.float32)
+        buf = np.empty((self.allocated[tex], h, w, 4), np.float32)
         GL.glGetTexImage(GL.GL_TEXTURE_2D_ARRAY, 0, GL.GL_RGBA, GL.GL_FLOAT, buf)
+        buf = buf[:layers]
         return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
 
     def release(self) -> None:
-        GL.glDeleteTextures(len(self.textures), [t[0] for t in self.textures.values()])
+        GL.glDeleteTextures(len(self.allocated), list(self.allocated))
         if self.ssbo is not None:
             GL.glDeleteBuffers(1, [self.ssbo])
 
@@ -520,16 +574,19 @@ def run_compute_all(
     x: np.ndarray,
     flip_y: bool = False,
     scalars: dict[str, float] | None = None,
+    aliasing: Aliasing = False,
 ) -> dict:
     """Run every pass on x : (1, C, H, W) float32; returns {onnx output name: (1, C_out, H, W) float32}.
 
     flip_y : the input/output textures are bottom-up GL images (here: x is given bottom row first).
     scalars : {ONNX input name: float} for each scalar graph input (manifest ``uniforms``).
+    aliasing : textures share memory per the program's aliasing plan (True) or the slots given
+    (lists of texture ids), see :class:`_ComputeRun`; False: a texture each.
     """
     prog = _compute_program(program_or_dir)
     x = compute_input(prog.manifest, x)
     values = scalar_values(prog.manifest, scalars)  # before any GL object exists
-    run = _ComputeRun(prog, x.shape[2], x.shape[3], values)
+    run = _ComputeRun(prog, x.shape[2], x.shape[3], values, aliasing)
     try:
         run.upload(x)
         run.dispatch(flip_y)
@@ -543,10 +600,11 @@ def run_compute(
     x: np.ndarray,
     flip_y: bool = False,
     scalars: dict[str, float] | None = None,
+    aliasing: Aliasing = False,
 ) -> np.ndarray:
     """The first graph output of :func:`run_compute_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
     prog = _compute_program(program_or_dir)
-    return run_compute_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
+    return run_compute_all(prog, x, flip_y, scalars, aliasing)[prog.manifest["outputs"][0]["onnx_name"]]
 
 
 def time_compute(

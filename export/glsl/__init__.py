@@ -29,6 +29,8 @@ Layout (each module imports only those above it):
     dialects.py     Dialect, GLSL330, ES300, WGSL, DIALECTS, COMPUTE_DIALECTS, FRAGMENT_FILES
     activations.py  Act (epilogue activations, both targets)
     views.py        image tensors through Reshape / Transpose as index digits (atoms), no shader text
+    memory.py       texture lifetimes, the aliasing plan and peak texture memory of a compute
+                    manifest (its "memory" entry), storage formats by precision; no shader text
     vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
     image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
     validate.py     glslangValidator
@@ -44,6 +46,10 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
         -> ComputeProgram
     write_compute_export(program, out_dir, validate=True, cross=False) -> Path   (cross: + HLSL, MSL)
     load_compute_export(export_dir) -> ComputeProgram
+    memory_plan(manifest, width, height, precision="fp32") -> MemoryPlan
+        texture bytes of a compute manifest's frame at width x height pixels: per texture, per
+        aliasing slot, in all (separate, aliased, live); the manifest's "memory" entry is its output
+    memory_schedule(manifest) -> MemorySchedule   steps, lifetimes, aliasing slots (no sizes)
     validate_glsl(source, stage) -> None                         (glslangValidator)
 
 The runners are :mod:`neuralao.runtime.glsl_runner` (GL) and :mod:`neuralao.runtime.wgsl_runner` (WebGPU).
@@ -87,6 +93,13 @@ from neuralao.export.glsl.image import (
     Texture,
     View,
     generate_compute,
+)
+from neuralao.export.glsl.memory import (
+    MemoryPlan,
+    MemorySchedule,
+    memory_plan,
+    memory_schedule,
+    plan_slots,
 )
 from neuralao.export.glsl.validate import glslang_available, validate_glsl
 from neuralao.export.glsl.vector import (
@@ -138,6 +151,8 @@ __all__ = [
     "InputBinding",
     "MLPShader",
     "MapOp",
+    "MemoryPlan",
+    "MemorySchedule",
     "OnnxGraph",
     "OpTable",
     "Pass",
@@ -156,6 +171,9 @@ __all__ = [
     "glslang_available",
     "load_compute_export",
     "load_mlp_export",
+    "memory_plan",
+    "memory_schedule",
+    "plan_slots",
     "read_graph",
     "spirv_cross_available",
     "validate_glsl",

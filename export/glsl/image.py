@@ -27,6 +27,7 @@ from neuralao.export.glsl.graph import (
     sha256_hex,
     shape_dims,
 )
+from neuralao.export.glsl.memory import FP32_KINDS, memory_section
 from neuralao.export.glsl.views import (
     Atom,
     Axes,
@@ -2277,14 +2278,9 @@ def _spatial_pad_body(p: Pass, d: Dialect) -> str:
     return d.fill("spatial_pad_body", top=f["pads"][0], left=f["pads"][1], mode=mode)
 
 
-# Passes whose output stays RGBA32F under fp16 storage: the cropped outputs, and the scalar inputs
-# (an engine's radius keeps its float32 value).
-_FP32_KINDS = ("crop", "uniform")
-
-
 def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d: Dialect) -> str:
     """One pass's shader source in dialect ``d`` (GLSL 4.30 compute or WGSL)."""
-    fmt = "rgba16f" if precision == "fp16" and p.kind not in _FP32_KINDS else "rgba32f"
+    fmt = "rgba16f" if precision == "fp16" and p.kind not in FP32_KINDS else "rgba32f"
     slots = d.compute_slots(len(p.inputs))
     decls = [d.fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
     decls.append(d.fill("image_array_decl", binding=slots["output"], format=d.fill(f"storage_format_{fmt}")))
@@ -2559,6 +2555,7 @@ def generate_compute(
     for entry in manifest["outputs"]:
         if entry["onnx_name"] in shapes:
             entry["shape"] = shapes[entry["onnx_name"]]
+    manifest["memory"] = memory_section(manifest)
     if d.name == "wgsl":
         _wgsl_manifest(manifest, d)
     return ComputeProgram(sources, bytes(blob), manifest)
@@ -2630,7 +2627,7 @@ def _uniform_entry(vi: onnx.ValueInfoProto, p: Pass, metadata: dict[str, str]) -
 def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, multiple, local_size) -> dict:
     internal = "RGBA16F" if precision == "fp16" else "RGBA32F"
     textures = {}
-    fp32 = {p.output.ident for p in table.passes if p.kind in _FP32_KINDS}
+    fp32 = {p.output.ident for p in table.passes if p.kind in FP32_KINDS}
     for t in table.textures:
         raw = t.base == "raw"
         fmt = "RGBA32F" if raw or t.ident in fp32 else internal
