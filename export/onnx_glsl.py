@@ -12,6 +12,9 @@ Targets (the op tables of :mod:`neuralao.export.glsl`):
   intermediate textures as RGBA16F (arithmetic stays fp32).
 * ``wgsl``: the image target's passes in WGSL for WebGPU (same op table, writer and manifest; folder
   ``wgsl/``, format ``neuralao-wgsl-compute``); parity runs them with ``wgpu`` (lavapipe here).
+* ``image`` with ``--dialect vulkan``: the passes in Vulkan GLSL and their SPIR-V (folder ``vulkan/``,
+  format ``neuralao-vulkan-compute``; descriptor set and bindings per pass in its manifest); parity
+  runs the SPIR-V with ``wgpu`` on its Vulkan adapter.
 * ``vector``: a per-pixel network, every input (N, k) bound to channels of a named RGBA32F texture
   (``--bind position=position.xyz --bind normal=normal.xyz``; an input of width <= 4 without a
   ``--bind`` reads the texture of its own name, channels ``xyzw[:k]``). The first texture's w channel
@@ -44,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 import onnx
+from onnx.external_data_helper import uses_external_data
 
 from neuralao.export.glsl import (
     DIALECTS,
@@ -59,6 +63,7 @@ from neuralao.export.glsl import (
 from neuralao.export.onnx_io import load_onnx, ort_session
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import read_npz, sha256_file, write_bytes, write_json
+from neuralao.runtime.foundation.limits import FLOAT32_MAX, check_finite_arrays
 from neuralao.runtime.foundation.manifest import read_manifest as read_export_manifest
 from neuralao.runtime.foundation.tolerances import TOL
 
@@ -68,6 +73,7 @@ KIND = "onnx-glsl"
 GLSL_DIR = "glsl"
 TARGETS = ("image", "vector", "wgsl")
 SHADER_DIRS = {"image": GLSL_DIR, "vector": GLSL_DIR, "wgsl": "wgsl"}
+VULKAN_DIR = "vulkan"  # the image target's folder with --dialect vulkan
 _BIND = re.compile(
     r"^(?P<input>[^=]+)=(?P<texture>[A-Za-z_][A-Za-z0-9_]*)\.(?P<channels>[xyzw]{1,4})(x(?P<rep>\d+))?$"
 )
@@ -149,6 +155,26 @@ def _check_out_dir(out_dir: Path) -> None:
             return
 
 
+# protobuf's limit on one serialized message: past it, ONNX keeps weights in external files.
+_PROTO_MAX_BYTES = (2 << 30) - 1
+
+
+def _self_contained(onnx_path: Path, proto: onnx.ModelProto) -> bytes:
+    """The bytes of the export's model.onnx: the file as it is, or, when it keeps weights in external data
+    files beside it, the model with those weights inlined (``proto`` was loaded with them), so the export
+    holds everything it needs and its own ``parity`` loads it."""
+    raw = onnx.load(str(onnx_path), load_external_data=False)
+    tensors = [*raw.graph.initializer, *(a.t for n in raw.graph.node for a in n.attribute if a.HasField("t"))]
+    if not any(uses_external_data(t) for t in tensors):
+        return onnx_path.read_bytes()
+    if proto.ByteSize() > _PROTO_MAX_BYTES:
+        raise NeuralaoError(
+            f"{onnx_path} keeps {proto.ByteSize()} bytes of weights in external data, more than one ONNX "
+            "file can hold inline (2 GiB): the export cannot carry them"
+        )
+    return proto.SerializeToString()
+
+
 def export_model(
     onnx_path,
     target: str,
@@ -166,17 +192,26 @@ def export_model(
         raise NeuralaoError(f"--precision must be fp32 or fp16, got {precision!r}")
     if hlsl_msl and target != "image":
         raise NeuralaoError("--hlsl-msl applies to --target image (HLSL and MSL are made from its GLSL)")
+    if hlsl_msl and dialects == ["vulkan"]:
+        raise NeuralaoError("--hlsl-msl is made from the GLSL 4.30 passes: leave out --dialect vulkan")
     onnx_path, out_dir = Path(onnx_path), Path(out_dir)
     _check_out_dir(out_dir)
     proto = load_onnx(onnx_path)
-    glsl_dir = out_dir / SHADER_DIRS[target]
+    shader_dir = VULKAN_DIR if target == "image" and dialects == ["vulkan"] else SHADER_DIRS[target]
+    glsl_dir = out_dir / shader_dir
     extra: dict = {}
     if target in ("image", "wgsl"):
         if bind:
             raise NeuralaoError("--bind applies to --target vector only")
-        if dialects and dialects != ["glsl430"]:
-            raise NeuralaoError("the image target is GLSL 4.30 compute only (--dialect glsl430)")
-        dialect = "wgsl" if target == "wgsl" else "glsl430"
+        allowed = (["glsl430"], ["vulkan"]) if target == "image" else (["glsl430"],)
+        if dialects and dialects not in allowed:
+            raise NeuralaoError(
+                "the image target is GLSL 4.30 compute (--dialect glsl430) or Vulkan GLSL with its SPIR-V "
+                "(--dialect vulkan), one of them"
+            )
+        dialect = "wgsl" if target == "wgsl" else (dialects or ["glsl430"])[0]
+        if dialect == "vulkan":
+            extra["dialect"] = dialect
         program = generate_compute(proto, precision=precision, kind="onnx", dialect=dialect)
         out_dir.mkdir(parents=True, exist_ok=True)
         write_compute_export(program, glsl_dir, cross=hlsl_msl)
@@ -203,7 +238,7 @@ def export_model(
         write_mlp_export(shader, glsl_dir)
         extra["bindings"] = {n: b.to_json() for n, b in bindings.items()}
         extra["dialects"] = sorted(shader.sources)
-    write_bytes(out_dir / "model.onnx", onnx_path.read_bytes())
+    write_bytes(out_dir / "model.onnx", _self_contained(onnx_path, proto))
     manifest = {
         "kind": KIND,
         "format_version": 1,
@@ -212,7 +247,7 @@ def export_model(
         "onnx": "model.onnx",
         "onnx_sha256": sha256_file(out_dir / "model.onnx"),
         "source": str(onnx_path),
-        "glsl": SHADER_DIRS[target],  # the shader folder (WGSL too, under this key for older readers)
+        "glsl": shader_dir,  # the shader folder (WGSL, Vulkan too, under this key for older readers)
         "glsl_manifest_sha256": sha256_file(glsl_dir / "manifest.json"),
         "inputs": {
             n: [str(d) if d is not None else None for d in dims] for n, dims in _input_dims(proto).items()
@@ -349,6 +384,23 @@ def _run_per_pixel(sess, feeds: dict[str, np.ndarray], batch: int | None, width:
     return np.concatenate(parts)
 
 
+def read_inputs(path: str | Path, names: list[str]) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of a ``--inputs`` .npz (no other member is inflated), each of real numbers,
+    finite and within float32 (the shaders and onnxruntime run in float32): a value that is not is refused
+    here, naming the array, rather than blamed on the shaders it would break."""
+    arrays = read_npz(path, names)
+    for key, a in arrays.items():
+        if a.dtype.kind not in "iufb" or a.dtype.names is not None:
+            raise NeuralaoError(f"--inputs {path}: array {key!r} holds {a.dtype} values, not real numbers")
+        check_finite_arrays({key: a}, f"--inputs {path}", "array")
+        if a.dtype.kind == "f" and a.size and np.abs(a).max() > FLOAT32_MAX:
+            raise NeuralaoError(
+                f"--inputs {path}: array {key!r} holds values up to {np.abs(a).max():.3g}, past float32's "
+                f"{FLOAT32_MAX:.4g} (the shaders and onnxruntime run in float32)"
+            )
+    return arrays
+
+
 def parity(
     export_dir,
     frames=None,
@@ -368,7 +420,7 @@ def parity(
         texture_names,
         texture_sizes,
     )
-    from neuralao.runtime.wgsl_runner import run_wgsl_all
+    from neuralao.runtime.wgsl_runner import run_spirv_all, run_wgsl_all
 
     export_dir = Path(export_dir)
     manifest = read_manifest(export_dir)
@@ -376,7 +428,6 @@ def parity(
         raise NeuralaoError("--size applies to seeded inputs; with --inputs the arrays give the size")
     proto = load_onnx(export_dir / manifest["onnx"])
     sess = ort_session(proto.SerializeToString())
-    given = read_npz(inputs) if inputs is not None else None
     rng = np.random.default_rng(seed)
     rows = []
     if manifest["target"] in ("image", "wgsl"):
@@ -384,6 +435,7 @@ def parity(
         name = program.manifest["input"]["onnx_name"]
         dims = manifest["inputs"][name]
         scalar_names = [u["onnx_input"] for u in program.manifest.get("uniforms", [])]
+        given = read_inputs(inputs, [name, *scalar_names]) if inputs is not None else None
         if given is not None:
             absent = [n for n in [name, *scalar_names] if n not in given]
             if absent:
@@ -409,7 +461,10 @@ def parity(
                 raise NeuralaoError(f"scalar input {n!r} of shape {list(v.shape)} must hold one value")
             feeds[n] = v.reshape(shape)
         ref = dict(zip(manifest["outputs"], sess.run(None, feeds), strict=True))
-        runner = run_wgsl_all if manifest["target"] == "wgsl" else run_compute_all
+        runner = {
+            "neuralao-wgsl-compute": run_wgsl_all,
+            "neuralao-vulkan-compute": run_spirv_all,
+        }.get(program.manifest["format"], run_compute_all)
         got = runner(program, x, scalars={n: feeds[n] for n in scalar_names})
         for o in manifest["outputs"]:
             if got[o].shape != ref[o].shape:
@@ -424,6 +479,7 @@ def parity(
         shaders = {d: load_mlp_export(export_dir / manifest["glsl"], dialect=d) for d in manifest["dialects"]}
         first = shaders[manifest["dialects"][0]]
         textures_names = texture_names(first)
+        given = read_inputs(inputs, textures_names) if inputs is not None else None
         if given is not None:
             missing = [t for t in textures_names if t not in given]
             if missing:

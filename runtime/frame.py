@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import read_npz, write_npz
+from neuralao.runtime.foundation.io import npz_keys, read_npz, write_npz
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,10 @@ CHANNELS: dict[str, Channel] = {
 # Keys of a frame that are not arrays of the view: where it came from (dataset frames carry them).
 PROVENANCE = ("scene", "view", "split", "holdout")
 _SCALARS = ("yfov", "znear", "zfar")
+_NORMALS = ("normal_cam", "normal_obj")
+# The longest normal a frame may hold. Models normalise in float32, where the square of a length past
+# 1.8e19 is inf (the AO then comes out NaN): such a normal is a broken exporter, named where it enters.
+MAX_NORMAL_LENGTH = 1e18
 
 
 @dataclass(frozen=True, eq=False)  # eq=False: arrays have no truth value to compare by
@@ -186,6 +190,17 @@ class Frame(Mapping):
                 raise NeuralaoError(
                     f"{where}: G-buffer channel {k!r} has {bad} non-finite value(s) (NaN or inf) of {a.size}"
                 )
+        for k in _NORMALS:
+            v = getattr(self, k)
+            if v is None or np.asarray(v).dtype.kind != "f":
+                continue
+            length = np.sqrt(np.square(np.asarray(v, np.float64)).sum(axis=-1))
+            if (length > MAX_NORMAL_LENGTH).any():
+                raise NeuralaoError(
+                    f"{where}: {k!r} has {int((length > MAX_NORMAL_LENGTH).sum())} normal(s) of length up to "
+                    f"{length.max():.3g}; a normal is a direction (unit length; lengths up to "
+                    f"{MAX_NORMAL_LENGTH:g} are normalised)"
+                )
         if self.depth is not None:
             depth = np.asarray(self.depth)
             if (depth < 0).any():
@@ -230,15 +245,16 @@ def read_frame(path: str | os.PathLike, index: int | None = None) -> Frame:
     """The checked frame of an .npz: a single frame, or frame ``index`` of stacked frames (a dataset
     shard, whose bookkeeping keys are left out). A key that looks like a misspelt frame key (``fov``) is
     refused; other extra arrays (a user's own ``albedo``) are not frame keys and are left out."""
-    arrays = read_npz(path)
-    if not {"mask", "normal_obj", "depth", "normal_cam"} & set(arrays):
+    keys = npz_keys(path)
+    if not {"mask", "normal_obj", "depth", "normal_cam"} & set(keys):
         raise NeuralaoError(
             f"{path} is not a G-buffer frame (no depth / normal_cam / mask / normal_obj arrays)"
         )
-    for key in arrays:
+    for key in keys:
         near = difflib.get_close_matches(key, Frame.KEYS, n=1, cutoff=0.75)
         if key not in Frame.KEYS and near:
             raise NeuralaoError(f"{path}: unknown frame key {key!r} (did you mean {near[0]!r}?)")
+    arrays = read_npz(path, Frame.KEYS)  # a user's own extra arrays are never inflated
     n = _stacked_frames(arrays)
     if n is not None:
         if index is None:

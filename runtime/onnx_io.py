@@ -6,7 +6,6 @@ ONNX consumer can read what the model expects without neuralao; :mod:`neuralao.e
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ import onnx
 import onnxruntime as ort
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import parse_json
 
 
 def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
@@ -23,8 +23,10 @@ def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for p in model.metadata_props:
         try:
-            out[p.key] = json.loads(p.value)
-        except json.JSONDecodeError:
+            out[p.key] = parse_json(p.value, f"ONNX metadata {p.key!r}", "value")
+        except NeuralaoError as e:
+            if "not valid JSON" not in str(e):
+                raise  # too deep or too big: not a plain string either
             out[p.key] = p.value
     return out
 

@@ -8,7 +8,7 @@ dataclasses (regions, edges, per-region models, the bake's settings) and the mod
 
 from __future__ import annotations
 
-import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,12 +16,43 @@ import numpy as np
 
 from neuralao.runtime.foundation import sh
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 
 FORMAT = "neuralao-volumes"
 VERSION = 1
 TERMS = ("mean", "+x", "-x", "+y", "-y", "+z", "-z")
 DISTANCES = ("short", "long")
+# The keys :func:`to_json` writes: a file holding another is refused (a misspelt key would be ignored).
+FILE_KEYS = (
+    "format",
+    "version",
+    "method",
+    "scene",
+    "settings",
+    "half_distances",
+    "distances",
+    "blend",
+    "sh",
+    "terms",
+    "model",
+    "lookup",
+    "regions",
+    "edges",
+    "stats",
+)
+REGION_KEYS = (
+    "name",
+    "min",
+    "max",
+    "centre",
+    "centre_choice",
+    "valid_samples",
+    "fit_rmse",
+    "fallback",
+    "coefficients",
+)
+EDGE_KEYS = ("regions", "area", "centre")
 
 
 @dataclass
@@ -195,6 +226,13 @@ def from_json(data: dict, what: str = "volumes") -> Volumes:
         raise NeuralaoError(f"{what} is not a {FORMAT} file")
     if data.get("version") != VERSION:
         raise NeuralaoError(f"{what}: unsupported version {data.get('version')!r} (expected {VERSION})")
+    _known_keys(data, FILE_KEYS, what, "key")
+    for k, r in enumerate(data.get("regions", []) if isinstance(data.get("regions"), list) else []):
+        if isinstance(r, dict):
+            _known_keys(r, REGION_KEYS, what, f"key of region {k}")
+    for k, e in enumerate(data.get("edges", []) if isinstance(data.get("edges"), list) else []):
+        if isinstance(e, dict):
+            _known_keys(e, EDGE_KEYS, what, f"key of edge {k}")
     try:
         settings = from_dict(VolumeSettings, data["settings"])
         regions, models = [], []
@@ -224,6 +262,10 @@ def from_json(data: dict, what: str = "volumes") -> Volumes:
         ]
         halves = tuple(float(v) for v in data["half_distances"])
         blend = float(data["blend"])
+        if len(halves) != 2 or not all(math.isfinite(h) and h > 0 for h in halves):
+            raise NeuralaoError(f"{what}: half_distances must be two positive numbers, got {list(halves)}")
+        if not 0.0 <= blend <= 1.0:
+            raise NeuralaoError(f"{what}: blend must be in [0, 1], got {blend}")
     except NeuralaoError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as e:
@@ -235,11 +277,11 @@ def from_json(data: dict, what: str = "volumes") -> Volumes:
 
 
 def read_volumes(path: str | Path) -> Volumes:
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"volumes file not found: {path}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise NeuralaoError(f"volumes file {path} is not valid JSON ({type(e).__name__})") from None
-    return from_json(data, str(path))
+    """The models of a VOLUMES.json (bounded UTF-8 JSON, known keys only, finite numbers); one-line errors."""
+    return from_json(read_json(Path(path), "volumes file"), str(path))
+
+
+def _known_keys(item: dict, known: tuple[str, ...], what: str, kind: str) -> None:
+    unknown = sorted(set(item) - set(known))
+    if unknown:
+        raise NeuralaoError(f"{what}: unknown {kind} {unknown[0]!r} (known: {', '.join(known)})")

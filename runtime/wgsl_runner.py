@@ -1,11 +1,17 @@
-"""Headless executor for the generated WGSL compute passes: WebGPU through ``wgpu`` (wgpu-native),
-on Mesa's lavapipe Vulkan driver here (any WebGPU adapter elsewhere).
+"""Headless executor for the generated WGSL compute passes and the Vulkan passes' SPIR-V: WebGPU
+through ``wgpu`` (wgpu-native), on Mesa's lavapipe Vulkan driver here (any WebGPU adapter elsewhere).
 
 The WGSL twin of :func:`neuralao.runtime.glsl_runner.run_compute`, driven only by what an engine reads: the
-``.wgsl`` sources, ``weights.bin`` and the manifest (format ``neuralao-wgsl-compute``).
+``.wgsl`` sources, ``weights.bin`` and the manifest (format ``neuralao-wgsl-compute``). The Vulkan
+dialect's passes (format ``neuralao-vulkan-compute``) bind the same way (one bind group = descriptor set
+0, the same bindings), so the same machinery runs their SPIR-V: ``via="passthrough"`` hands the SPIR-V
+words to the Vulkan driver unchanged (wgpu's SPIR-V passthrough: what an engine's
+``vkCreateShaderModule`` gets), ``via="naga"`` translates them with naga's SPIR-V front end first (what
+a WebGPU implementation that takes SPIR-V does).
 
     run_wgsl_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
     run_wgsl(program_or_dir, x, flip_y=False, scalars=None) -> (1, C_out, H, W) f32   (first graph output)
+    run_spirv_all(program_or_dir, x, flip_y=False, scalars=None, via="passthrough") -> as run_wgsl_all
     time_wgsl(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
     adapter_info() -> {"device": ..., "backend": ...}
 
@@ -23,13 +29,18 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.export.glsl import ComputeProgram, load_compute_export
+from neuralao.export.glsl import ComputeProgram, compile_spirv, load_compute_export
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.glsl_runner import compute_input, compute_outputs, scalar_values, texture_sizes
 
 log = logging.getLogger(__name__)
 
 _FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
+# Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
+_STORAGE_FORMATS = {"rgba32f": "rgba32float", "rgba16f": "rgba16float"}
+WGSL_FORMAT = "neuralao-wgsl-compute"
+VULKAN_FORMAT = "neuralao-vulkan-compute"
+_PASSTHROUGH = "spirv-shader-passthrough"
 
 
 @functools.cache
@@ -42,7 +53,9 @@ def _device():
     adapter = wgpu.gpu.request_adapter_sync(power_preference="high-performance")
     if adapter is None:
         raise NeuralaoError("no WebGPU adapter (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)")
-    return wgpu, adapter, adapter.request_device_sync(required_limits={})
+    # SPIR-V passthrough (Vulkan adapters) is only used by run_spirv_all(via="passthrough")
+    features = [_PASSTHROUGH] if _PASSTHROUGH in adapter.features else []
+    return wgpu, adapter, adapter.request_device_sync(required_features=features, required_limits={})
 
 
 def adapter_info() -> dict[str, str]:
@@ -52,28 +65,55 @@ def adapter_info() -> dict[str, str]:
     return {"device": info["device"], "backend": info["backend_type"], "description": info["description"]}
 
 
-def _program(program_or_dir: ComputeProgram | str | Path) -> ComputeProgram:
+def _program(program_or_dir: ComputeProgram | str | Path, fmt: str = WGSL_FORMAT) -> ComputeProgram:
     prog = (
         program_or_dir if isinstance(program_or_dir, ComputeProgram) else load_compute_export(program_or_dir)
     )
-    if prog.manifest.get("format") != "neuralao-wgsl-compute":
-        raise NeuralaoError("not a WGSL program (generate it with dialect='wgsl' / --target wgsl)")
+    if prog.manifest.get("format") != fmt:
+        how = (
+            "dialect='wgsl' / --target wgsl" if fmt == WGSL_FORMAT else "dialect='vulkan' / --dialect vulkan"
+        )
+        raise NeuralaoError(f"not a {fmt} program (generate it with {how})")
     return prog
 
 
-_PIPELINES: dict[tuple[str, str], tuple] = {}
+def _spirv_passthrough(dev, words: bytes):
+    """A shader module of SPIR-V ``words`` handed to the Vulkan driver as they are (wgpu-native's
+    ``wgpuDeviceCreateShaderModuleSpirV``; wgpu's Python API exposes SPIR-V only through naga)."""
+    from wgpu.backends.wgpu_native import _api
+    from wgpu.backends.wgpu_native._ffi import ffi
+
+    if _PASSTHROUGH not in dev.features:
+        raise NeuralaoError(f"this adapter has no {_PASSTHROUGH} (a Vulkan adapter has): use via='naga'")
+    # code and label are locals, so the memory they point to lives until wgpu has copied it
+    code = ffi.new("uint32_t[]", len(words) // 4)
+    ffi.memmove(code, words, len(words))
+    label = _api.to_c_string_view("neuralao pass")
+    desc = ffi.new("WGPUShaderModuleDescriptorSpirV *")
+    desc.label, desc.sourceSize, desc.source = label, len(words) // 4, code
+    module = _api.libf.wgpuDeviceCreateShaderModuleSpirV(dev._internal, desc)
+    return _api.GPUShaderModule("neuralao pass", module, dev)
 
 
-def _pipeline(source: str, layout_key: str) -> tuple:
-    """(bind group layout, compute pipeline) of a pass (layout_key: its layout entries as JSON), cached
-    for the process: compiling is the slow part on lavapipe."""
-    key = (source, layout_key)
+_PIPELINES: dict[tuple, tuple] = {}
+
+
+def _pipeline(code: str | bytes, layout_key: str, via: str = "naga") -> tuple:
+    """(bind group layout, compute pipeline) of a pass (``code``: WGSL source or SPIR-V bytes; layout_key:
+    its layout entries as JSON; ``via``: how SPIR-V reaches the driver), cached for the process:
+    compiling is the slow part on lavapipe."""
+    key = (code, layout_key, via)
     if key not in _PIPELINES:
         wgpu, _, dev = _device()
         bgl = dev.create_bind_group_layout(entries=json.loads(layout_key))
+        module = (
+            _spirv_passthrough(dev, code)
+            if isinstance(code, bytes) and via == "passthrough"
+            else dev.create_shader_module(code=code)
+        )
         pipeline = dev.create_compute_pipeline(
             layout=dev.create_pipeline_layout(bind_group_layouts=[bgl]),
-            compute={"module": dev.create_shader_module(code=source), "entry_point": "main"},
+            compute={"module": module, "entry_point": "main"},
         )
         _PIPELINES[key] = (bgl, pipeline)
     return _PIPELINES[key]
@@ -83,7 +123,13 @@ class _WgslRun:
     """Textures for one input size, one pipeline and bind group per pass, the weights buffer."""
 
     def __init__(
-        self, prog: ComputeProgram, height: int, width: int, scalars: dict[str, float], flip_y: bool
+        self,
+        prog: ComputeProgram,
+        height: int,
+        width: int,
+        scalars: dict[str, float],
+        flip_y: bool,
+        via: str = "naga",
     ):
         wgpu, _, dev = _device()
         self.wgpu, self.dev, self.m = wgpu, dev, prog.manifest
@@ -101,16 +147,17 @@ class _WgslRun:
         bu = wgpu.BufferUsage
         weights = prog.weights or b"\0" * 16
         self.weights = dev.create_buffer_with_data(data=weights, usage=bu.STORAGE)
+        self.via = via
         self.passes = []
         for p in self.m["passes"]:
-            self.passes.append(self._pass(prog.sources[p["shader"]], p, scalars, flip_y))
+            self.passes.append(self._pass(_code(prog, p["shader"]), p, scalars, flip_y))
 
     def _uniform(self, value: float | int, dtype: str):
         data = np.zeros(4, dtype)
         data[0] = value
         return self.dev.create_buffer_with_data(data=data.tobytes(), usage=self.wgpu.BufferUsage.UNIFORM)
 
-    def _pass(self, source: str, p: dict, scalars: dict[str, float], flip_y: bool):
+    def _pass(self, code: str | bytes, p: dict, scalars: dict[str, float], flip_y: bool):
         wgpu, dev = self.wgpu, self.dev
         stage = wgpu.ShaderStage.COMPUTE
         layout, group = [], []
@@ -130,7 +177,7 @@ class _WgslRun:
                 "visibility": stage,
                 "storage_texture": {
                     "access": "write-only",
-                    "format": out["format"],
+                    "format": _STORAGE_FORMATS.get(out["format"], out["format"]),
                     "view_dimension": "2d-array",
                 },
             }
@@ -155,7 +202,7 @@ class _WgslRun:
             )
             layout.append({"binding": u["binding"], "visibility": stage, "buffer": {"type": "uniform"}})
             group.append({"binding": u["binding"], "resource": {"buffer": buf, "offset": 0, "size": 16}})
-        bgl, pipeline = _pipeline(source, json.dumps(layout))
+        bgl, pipeline = _pipeline(code, json.dumps(layout), self.via)
         _, _, tw, th, layers, _ = self.textures[out["texture"]]
         lx, ly, _ = p["local_size"]
         bx, by, bl = p.get("block", [1, 1, 1])
@@ -191,6 +238,16 @@ class _WgslRun:
         return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
 
 
+def _code(prog: ComputeProgram, shader: str) -> str | bytes:
+    """What a pass's module is made from: WGSL source, or a Vulkan pass's SPIR-V (read from the export,
+    or compiled from the source when the program was generated in this process)."""
+    if prog.manifest["format"] != VULKAN_FORMAT:
+        return prog.sources[shader]
+    if shader not in prog.spirv:
+        prog.spirv[shader] = compile_spirv(prog.sources[shader])
+    return prog.spirv[shader]
+
+
 def run_wgsl_all(
     program_or_dir: ComputeProgram | str | Path,
     x: np.ndarray,
@@ -215,6 +272,27 @@ def run_wgsl(
     """The first graph output of :func:`run_wgsl_all`: (1, C_out, H, W) float32 (the U-Net's ao)."""
     prog = _program(program_or_dir)
     return run_wgsl_all(prog, x, flip_y, scalars)[prog.manifest["outputs"][0]["onnx_name"]]
+
+
+def run_spirv_all(
+    program_or_dir: ComputeProgram | str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+    via: str = "passthrough",
+) -> dict:
+    """Run every pass of a Vulkan program (``generate_compute(dialect="vulkan")`` or its export folder) as
+    SPIR-V on x : (1, C, H, W) float32; {onnx output name: (1, C_out, H, W) float32}. ``via``:
+    "passthrough" (the SPIR-V words to the Vulkan driver as they are) or "naga" (translated by naga's
+    SPIR-V front end first)."""
+    if via not in ("passthrough", "naga"):
+        raise NeuralaoError(f"via must be 'passthrough' or 'naga', got {via!r}")
+    prog = _program(program_or_dir, VULKAN_FORMAT)
+    x = compute_input(prog.manifest, x)
+    run = _WgslRun(prog, x.shape[2], x.shape[3], scalar_values(prog.manifest, scalars), flip_y, via)
+    run.upload(x)
+    run.dispatch()
+    return compute_outputs(prog.manifest, run.read)
 
 
 def time_wgsl(

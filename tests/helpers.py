@@ -124,3 +124,71 @@ def onnx_vs_torch_tol(ref: np.ndarray | float, model) -> float:
 needs_chromium = pytest.mark.skipif(
     not all(chromium_paths()), reason="needs Debian's chromium and chromium-driver (make system-deps)"
 )
+
+
+def smooth_values(points: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(k, 2) float64 in [0, 1] at ``points`` (k, 3), metres: two smooth signals of the position plus
+    N(0, 0.05) noise, like the two AO distances' traced samples."""
+    x, y, z = np.asarray(points, np.float64).T
+    v = np.stack([0.5 + 0.4 * np.sin(x / 5) * np.cos(z / 7), 0.5 + 0.3 * np.sin(y / 3 + x / 11)], axis=1)
+    return np.clip(v + rng.normal(0.0, 0.05, v.shape), 0.0, 1.0)
+
+
+def under_footprints(points: np.ndarray, rng: np.random.Generator, count: int, half: float) -> np.ndarray:
+    """(k,) bool: which of ``points`` (k, 3), Y up, lie under one of ``count`` yawed 4-9 m house footprints
+    centred in [-half, half]^2 (x, z): the terrain inside the level generator's houses, which the back-face
+    rule leaves without valid samples."""
+    from scipy.spatial import cKDTree
+
+    centres, sizes = rng.uniform(-half, half, (count, 2)), rng.uniform(4, 9, (count, 2))
+    yaws = rng.uniform(0, math.pi, count)
+    xz = np.asarray(points, np.float64)[:, [0, 2]]
+    inside = np.zeros(len(xz), bool)
+    for c, (w, d), yaw, near in zip(
+        centres, sizes, yaws, cKDTree(xz).query_ball_point(centres, 6.5), strict=True
+    ):
+        near = np.asarray(near, np.int64)
+        dx, dz = (xz[near] - c).T
+        u, v = math.cos(yaw) * dx + math.sin(yaw) * dz, -math.sin(yaw) * dx + math.cos(yaw) * dz
+        inside[near[(np.abs(u) < w / 2) & (np.abs(v) < d / 2)]] = True
+    return inside
+
+
+def ribbon(rng: np.random.Generator, quads: int, length: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+    """A wavy vertical strip of ``quads`` quads through the origin, ``length`` long: vertices (2 quads + 2,
+    3) float64 and faces (2 quads, 3) int64; one connected part that crosses any cut of a soup."""
+    t = np.linspace(-length / 2, length / 2, quads + 1)
+    heading = rng.uniform(0, math.pi)
+    along = np.array([math.cos(heading), 0.0, math.sin(heading)])
+    side = np.array([-math.sin(heading), 0.0, math.cos(heading)])
+    mid = t[:, None] * along + (3 * np.sin(t / 4 + rng.uniform(0, 6)))[:, None] * side + [0, 2, 0]
+    i, j = np.arange(quads), np.arange(quads) + quads + 1
+    faces = np.concatenate([np.stack([i, i + 1, j + 1], 1), np.stack([i, j + 1, j], 1)])
+    return np.concatenate([mid, mid + [0, 1.5, 0]]), faces
+
+
+def soup_scene(rng: np.random.Generator, houses: int = 30, half: float = 40.0) -> tuple[Scene, int]:
+    """Triangle soup over [-half, half]^2: ``houses`` of the level generator's houses (overlapping boxes with
+    split vertices), 300 interpenetrating random triangles, 100 of them duplicated (own vertices, same
+    positions), 20 fans sharing a vertex, 8 closed ellipsoids through it all and 6 ribbons across it.
+    Returns the scene and the index of the first ribbon's first face (its faces: the next 2 x 150)."""
+    from neuralao.pipeline.geometry.level_gen import ellipsoid, house, merge_parts
+
+    parts = []
+    for _ in range(houses):
+        v, f = house(rng, 5)
+        parts.append((v + [rng.uniform(-half, half), 0.0, rng.uniform(-half, half)], f))
+    tri = (rng.uniform(-half, half, (300, 3)) * [1, 0.2, 1])[:, None] + rng.normal(0, 2.0, (300, 3, 3))
+    parts.append((tri.reshape(-1, 3), np.arange(900).reshape(-1, 3)))
+    parts.append((tri[:100].reshape(-1, 3).copy(), np.arange(300).reshape(-1, 3)))
+    for _ in range(20):
+        centre = rng.uniform(-half, half, 3) * [1, 0.2, 1]
+        ring = centre + rng.normal(0, 1.5, (8, 3))
+        parts.append((np.r_[centre[None], ring], np.array([[0, 1 + i, 1 + (i + 1) % 8] for i in range(8)])))
+    for _ in range(8):
+        parts.append(
+            ellipsoid(rng.uniform(-0.75 * half, 0.75 * half, 3) * [1, 0.1, 1], rng.uniform(3, 8, 3), 2)
+        )
+    first_ribbon = sum(len(f) for _, f in parts)
+    parts += [ribbon(rng, 150, 1.5 * half) for _ in range(6)]
+    return scene_from_arrays(*merge_parts(*parts), "soup", drop_degenerate=False), first_ribbon

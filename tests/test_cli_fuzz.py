@@ -11,7 +11,16 @@ The contract every case is held to:
   names the flag, setting or file that was bad (one of the case's culprits);
 * never a traceback or another exit status, never a Python warning (a real process prints it on stderr),
   never a temporary file left in the output folder, never the output itself after a refusal;
-* an input holding NaN or inf that the command reads is refused (never a finite-looking result).
+* an input holding NaN or inf that the command reads is refused (never a finite-looking result), and so
+  is every hostile input marked as one that must be refused (a glTF breaking the specification's rules, a
+  camera with a misspelt key or a scaled pose, a complex-valued array, a float past float32...);
+* an output that cannot be written (below a file, inside /proc, an existing folder where a file is wanted,
+  the same path as an input or as another output) is refused before any work, and an input given as the
+  output is left as it was; every file written has the umask's permissions;
+* an export folder written over an earlier export holds nothing of it afterwards (replaced whole), and a
+  folder of other files is refused without ``--force``;
+* SIGINT or SIGTERM at a random moment ends the command in one line with 130 / 143, leaving no temporary
+  and no partial output (what is there is complete and valid).
 
 Values are drawn from small pools: cheap valid ones (a 4-triangle mesh, 1-3 rays, 8-pixel frames) and
 absurd ones (0, -1, 2^63, 1e12, nan, inf, words), so a case that legitimately succeeds stays cheap.
@@ -22,13 +31,17 @@ absurd ones (0, -1, 2^63, 1e12, nan, inf, words), so a case that legitimately su
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import json
 import os
 import re
+import shutil
+import signal
 import struct
 import time
 import warnings
+import zipfile
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,8 +76,9 @@ INT_ABSURD = [
     "3.5",
     "0x10",
 ]
-FLOAT_ABSURD = ["nan", "inf", "-inf", "1e999", "-1", "0", "x", "", "1e-320"]
-FLOAT_NONFINITE = {"nan", "inf", "-inf", "1e999", "-1e999"}
+FLOAT_ABSURD = ["nan", "inf", "-inf", "1e999", "-1", "0", "x", "", "1e-320", "1e300", "-1e300"]
+# Values every command must refuse: not finite, or past float32 (where every number ends up).
+FLOAT_NONFINITE = {"nan", "inf", "-inf", "1e999", "-1e999", "1e300", "-1e300"}
 SEED_ABSURD = ["-1", "9223372036854775808", "1" + "0" * 30, "x", "1.5"]
 
 
@@ -100,7 +114,7 @@ def _pick(draw, files: dict[str, bool], culprits: list[str], flags: dict) -> str
     name = draw(st.sampled_from(sorted(files) if _bad(draw, flags, 0.5) or not good else good))
     if not files[name]:
         culprits.append(Path(name).name)
-        flags["nonfinite"] |= name.startswith("nan") or name.startswith("inf")
+        flags["nonfinite"] |= name.startswith("nan") or name.startswith("inf") or name in MUST_REFUSE
     return "@" + name
 
 
@@ -135,6 +149,11 @@ MESHES = {
     "missing.obj": False,
     "folder": False,
     "tet.txt": False,
+    "negcount.gltf": False,
+    "stride.gltf": False,
+    "extreq.gltf": False,
+    "deep.gltf": False,
+    "badview.gltf": False,
 }
 FRAMES = {
     "frame.npz": True,
@@ -150,6 +169,10 @@ FRAMES = {
     "junk.npz": False,
     "missing.npz": False,
     "huge_depth.npz": False,
+    "bomb.npz": True,
+    "depthbomb.npz": False,
+    "bignormal.npz": False,
+    "cplx_depth.npz": False,
 }
 MODELS = {
     "unet.onnx": True,
@@ -173,8 +196,18 @@ POINTS = {
     "pempty.npy": True,
     "pint.npy": True,
     "missing_p.npy": False,
+    "cplx_p.npy": False,
+    "bool_p.npy": False,
 }
-NORMALS = {"n.npy": True, "zero_n.npy": True, "nan_n.npy": True, "n2.npy": False}
+NORMALS = {
+    "n.npy": True,
+    "zero_n.npy": True,
+    "big_n.npy": True,
+    "nan_n.npy": False,
+    "inf_n.npy": False,
+    "cplx_n.npy": False,
+    "n2.npy": False,
+}
 VOLUMES = {
     "vol.json": True,
     "truncated_vol.json": False,
@@ -182,6 +215,9 @@ VOLUMES = {
     "nan_vol.json": False,
     "list.json": False,
     "missing_vol.json": False,
+    "deep_vol.json": False,
+    "latin1_vol.json": False,
+    "typo_vol.json": False,
 }
 BAKES = {
     "baked.ply": True,
@@ -200,6 +236,12 @@ POSES = {
     "empty_poses.json": False,
     "bad_poses.json": False,
     "huge_poses.json": False,
+    "typo_poses.json": False,
+    "scaled_poses.json": False,
+    "singular_poses.json": False,
+    "same_poses.json": False,
+    "deep_poses.json": False,
+    "latin1_poses.json": False,
 }
 REGIONS = {
     "regions.json": True,
@@ -208,6 +250,8 @@ REGIONS = {
     "flat_regions.json": False,
     "bad_edges.json": False,
     "far_regions.json": True,
+    "deep_regions.json": False,
+    "typo_regions.json": False,
 }
 DATASETS = {
     "dataset.json": True,
@@ -217,8 +261,45 @@ DATASETS = {
     "noscene_dataset.json": False,
     "typo_dataset.json": False,
     "empty.json": False,
+    "deep_dataset.json": False,
+    "latin1_dataset.json": False,
 }
 EXPORTS = {"export": True, "empty_dir": False, "missing_dir": False, "bad_manifest": False}
+PARITY_INPUTS = {"pin.npz": True, "bomb_pin.npz": True, "nan_pin.npz": False, "big_pin.npz": False}
+LEVELS = {
+    "level/level.gltf": True,
+    "badlevel/zero_trees.gltf": False,
+    "badlevel/deep.gltf": False,
+    "badlevel/typo.gltf": False,
+    "badlevel/negcount.gltf": False,
+    "badlevel/stride.gltf": False,
+}
+LEVEL_CONFIGS = {
+    "level/fast.json": True,
+    "badlevel/latin1.json": False,
+    "badlevel/deep.json": False,
+    "badlevel/typo.json": False,
+    "badlevel/nan.json": False,
+}
+# Hostile fixtures no command may accept (a success reading one is nonsense accepted).
+MUST_REFUSE = {
+    *(n for n in MESHES if n.endswith(".gltf") and not MESHES[n]),
+    "depthbomb.npz",
+    "bignormal.npz",
+    "cplx_depth.npz",
+    "cplx_p.npy",
+    "bool_p.npy",
+    "cplx_n.npy",
+    *(n for n in VOLUMES if not VOLUMES[n]),
+    *(n for n in POSES if not POSES[n]),
+    "deep_regions.json",
+    "typo_regions.json",
+    "deep_dataset.json",
+    "latin1_dataset.json",
+    "big_pin.npz",
+    *(n for n in LEVELS if not LEVELS[n]),
+    *(n for n in LEVEL_CONFIGS if not LEVEL_CONFIGS[n]),
+}
 
 
 # ----------------------------------------------------------------------------- cases
@@ -231,17 +312,40 @@ class Case:
     out: str  # output name inside the case folder ("" when the command writes nothing)
     out_is_dir: bool
     culprits: list[str] = field(default_factory=list)
-    nonfinite: bool = False
+    nonfinite: bool = False  # an input that must be refused went in (NaN, inf, a hostile fixture)
+    bad_out: str = ""  # the output replaced by one that cannot be written (BAD_OUTPUTS)
+    signal: str = ""  # SIGINT / SIGTERM sent after ``delay`` seconds
+    delay: float = 0.0
+    prefill: str = ""  # glsl: the output folder holds an earlier "export" or a "user" folder first
+    copies: list[str] = field(
+        default_factory=list
+    )  # fixtures copied into the case folder (inputs as outputs)
+
+
+# Outputs that cannot be written: below a regular file, inside /proc, an existing path of the other kind
+# (a folder where a file is wanted, a file where a folder is), a name longer than a file system allows.
+BAD_OUTPUTS = ("below_file", "proc", "wrong_kind", "long_name")
+# Commands a signal is sent to (no GL context: an interrupted OSMesa context would outlive the case).
+SIGNALLED = ("bake", "volumes", "probe", "level")
 
 
 def _flags(draw) -> dict:
     """Per case: how hostile it is (0: every choice valid, so the command must succeed and its output is
-    checked; higher: more bad choices) and whether a non-finite value went in."""
-    return {"hostility": draw(st.sampled_from([0.0, 0.0, 0.5, 1.0, 2.0])), "nonfinite": False}
+    checked; higher: more bad choices), whether a non-finite value went in, whether its output is one that
+    cannot be written, and whether a signal interrupts it."""
+    hostility = draw(st.sampled_from([0.0, 0.0, 0.5, 1.0, 2.0]))
+    bad_out = draw(st.sampled_from(BAD_OUTPUTS)) if draw(st.floats(0, 1)) < 0.06 * hostility else ""
+    sig = draw(st.sampled_from(["SIGINT", "SIGTERM"])) if draw(st.floats(0, 1)) < 0.06 else ""
+    delay = draw(st.sampled_from([0.0, 0.02, 0.08, 0.2, 0.5])) if sig else 0.0
+    return {"hostility": hostility, "nonfinite": False, "bad_out": bad_out, "signal": sig, "delay": delay}
 
 
 def _finish(command, argv, out, out_is_dir, culprits, flags) -> Case:
-    return Case(command, argv, out, out_is_dir, culprits, flags["nonfinite"])
+    bad_out = flags["bad_out"] if out and "@OUT" in argv else ""
+    if bad_out:
+        culprits.append("--out")
+    sig = flags["signal"] if command in SIGNALLED else ""
+    return Case(command, argv, out, out_is_dir, culprits, flags["nonfinite"], bad_out, sig, flags["delay"])
 
 
 def _choice(
@@ -494,7 +598,10 @@ def dataset_case(draw) -> Case:
 @st.composite
 def glsl_case(draw) -> Case:
     c, f = [], _flags(draw)
-    argv = ["glsl", _pick(draw, {**MODELS, "relu.onnx": True, "unet.onnx": False}, c, f)]
+    argv = [
+        "glsl",
+        _pick(draw, {**MODELS, "relu.onnx": True, "unet.onnx": False, "ext/conv.onnx": True}, c, f),
+    ]
     argv += ["--target", _choice(draw, f, c, "--target", ["image"], ["vector"], 0.3)]
     if _maybe(draw, 0.3):
         argv += ["--precision", draw(st.sampled_from(["fp32", "fp16"]))]
@@ -508,13 +615,27 @@ def glsl_case(draw) -> Case:
             ),
         ]
         c.append("--bind")
-    return _finish("glsl", [*argv, "--out", "@OUT"], "glsl", True, c, f)
+    prefill = draw(st.sampled_from(["", "", "export", "user"]))
+    if prefill == "user":
+        if _maybe(draw):
+            argv.append("--force")
+        else:
+            c.append("--out")
+            f["nonfinite"] = True  # a folder of other files is never replaced without --force
+    case = _finish("glsl", [*argv, "--out", "@OUT"], "glsl", True, c, f)
+    case.prefill = "" if case.bad_out else prefill
+    return case
 
 
 @st.composite
 def parity_case(draw) -> Case:
     c, f = [], _flags(draw)
     argv = ["parity", _pick(draw, EXPORTS, c, f)]
+    if _maybe(
+        draw, 0.3
+    ):  # the export's own inputs from a file: real arrays, NaN, past float32, unread members
+        argv += ["--inputs", _pick(draw, PARITY_INPUTS, c, f)]
+        return _finish("parity", [*argv, "--out", "@OUT"], "parity.json", False, c, f)
     argv += [
         "--size",
         _int(draw, "--size", ["4", "8"], c, f, p_bad=0.5)[1],
@@ -526,6 +647,101 @@ def parity_case(draw) -> Case:
         argv += ["--inputs", _pick(draw, FRAMES, c, f)]
         c.append("--inputs")
     return _finish("parity", [*argv, "--out", "@OUT"], "parity.json", False, c, f)
+
+
+LEVEL_GEN_SETS = {
+    "terrain_cells": ["1", "2", "4"],
+    "houses": ["0", "1", "2"],
+    "house_boxes": ["1", "2"],
+    "trees": ["0", "1"],
+    "shrubs": ["0", "2"],
+    "grass": ["0", "3"],
+    "crown_subdivisions": ["0", "1"],
+}
+LEVEL_GEN_FLOATS = {
+    "terrain_size": ["10", "40"],
+    "terrain_height": ["0", "2"],
+    "blocker_height": ["0", "6"],
+    "shrub_density": ["0", "0.8"],
+    "tree_transmission": ["0", "0.5", "1"],
+}
+
+
+@st.composite
+def level_case(draw) -> Case:
+    """``neuralao level``: generator parameters from small to absurd (a count past memory, a NaN size)."""
+    c, f = [], _flags(draw)
+    argv = ["level", "--set", "buildings=[]", "--set", "terrain_cells=3", "--set", "crown_subdivisions=0"]
+    if _maybe(draw, 0.3):
+        argv += _seed(draw, f, c)
+    keys = sorted(LEVEL_GEN_SETS) + sorted(LEVEL_GEN_FLOATS)
+    for key in draw(st.lists(st.sampled_from(keys), max_size=3, unique=True)):  # a later --set would win
+        if key in LEVEL_GEN_SETS:
+            value = _int(draw, key, LEVEL_GEN_SETS[key], c, f, p_bad=0.6)[1]
+        else:
+            value = _float(draw, key, LEVEL_GEN_FLOATS[key], c, f, p_bad=0.6)[1]
+        argv += ["--set", f"{key}={value}"]
+    return _finish("level", [*argv, "--out", "@OUT"], "lvl", True, c, f)
+
+
+LEVEL_BAKE_SETS = {
+    "trace.rays": ["2", "4"],
+    "workers": ["1", "2"],
+    "seed": ["0", "3"],
+    "trace.samples_per_face_cap": ["1", "2"],
+    "decorators.local_rays": ["2", "4"],
+}
+LEVEL_BAKE_FLOATS = {
+    "trace.alpha": ["0", "1"],
+    "trace.samples_per_vertex": ["0.5", "1"],
+    "blend.long_weight": ["0", "0.5", "1"],
+    "trace.backface_threshold": ["0", "0.25"],
+}
+
+
+@st.composite
+def level_bake_case(draw) -> Case:
+    """``neuralao bake LEVEL --config``: hostile level files and configs, absurd settings."""
+    c, f = [], _flags(draw)
+    argv = ["bake", _pick(draw, LEVELS, c, f), "--config", _pick(draw, LEVEL_CONFIGS, c, f)]
+    keys = sorted(LEVEL_BAKE_SETS) + sorted(LEVEL_BAKE_FLOATS)
+    for key in draw(st.lists(st.sampled_from(keys), max_size=2, unique=True)):
+        if key in LEVEL_BAKE_SETS:
+            value = _int(draw, key, LEVEL_BAKE_SETS[key], c, f, p_bad=0.6)[1]
+        else:
+            value = _float(draw, key, LEVEL_BAKE_FLOATS[key], c, f, p_bad=0.6)[1]
+        argv += ["--set", f"{key}={value}"]
+    return _finish("bake", [*argv, "--out", "@OUT"], "baked_level", True, c, f)
+
+
+@st.composite
+def same_path_case(draw) -> Case:
+    """An output that is also an input (or two outputs on one path): refused, the input left as it was."""
+    kind = draw(st.sampled_from(["bake", "probe", "infer", "composite", "volumes"]))
+    if kind == "bake":
+        argv = ["bake", "@COPY:tet.obj", "--rays", "2", "--out", "@COPY:tet.obj"]
+    elif kind == "probe":
+        argv = [
+            "probe",
+            "@vol.json",
+            "--points",
+            "@COPY:p.npy",
+            "--normals",
+            "@n.npy",
+            "--out",
+            "@COPY:p.npy",
+        ]
+    elif kind == "infer":
+        argv = ["infer", "@COPY:frame.npz", "--out", "@COPY:frame.npz"]
+    elif kind == "composite":
+        argv = ["infer", "@frame.npz", "--out", "@OUT", "--composite", "@OUT"]
+    else:
+        argv = ["volumes", "@tet.obj", "--regions", "@COPY:regions.json", "--out", "@COPY:regions.json"]
+    command = argv[0]
+    copies = sorted({t.split(":", 1)[1] for t in argv if t.startswith("@COPY:")})
+    case = Case(command, argv, "ao.png" if kind == "composite" else "", False, ["--out", "--composite"], True)
+    case.copies = copies
+    return case
 
 
 @st.composite
@@ -568,6 +784,9 @@ CASES = st.one_of(
     dataset_case(),
     glsl_case(),
     parity_case(),
+    level_case(),
+    level_bake_case(),
+    same_path_case(),
     garbage_case(),
 )
 
@@ -822,6 +1041,165 @@ def _write_files(d: Path, work: Path) -> None:
     (d / "big_dataset.json").write_text(json.dumps({**base, "scenes": [{**scene, "views": 10**15}]}))
     (d / "noscene_dataset.json").write_text(json.dumps({**base, "scenes": []}))
     (d / "typo_dataset.json").write_text(json.dumps({**base, "sizee": [8, 8]}))
+    _write_round_two(d, work, frame, base, pose, unet)
+
+
+DEEP = "[" * 5000 + "]" * 5000  # JSON nested past any parser's recursion
+
+
+def _deep_in(doc: dict, key: str) -> str:
+    """``doc`` as JSON with ``key``'s value nested 5,000 deep (what the bounded reader must refuse)."""
+    return json.dumps({**doc, key: "@DEEP@"}).replace('"@DEEP@"', DEEP)
+
+
+def _latin1(doc: dict) -> bytes:
+    """``doc`` as JSON in Latin-1 with a non-ASCII string: not UTF-8."""
+    return json.dumps({**doc, "name": "caf\u00e9"}, ensure_ascii=False).encode("latin-1")
+
+
+def _npz_bomb(arrays: dict, key: str, shape: tuple[int, ...]) -> bytes:
+    """An npz of ``arrays`` plus member ``key`` whose header declares ``shape`` (float64): it would inflate
+    past any machine's memory; its stored bytes are a few hundred."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for k, v in arrays.items():
+            member = io.BytesIO()
+            np.lib.format.write_array(member, np.asarray(v))
+            zf.writestr(f"{k}.npy", member.getvalue())
+        header = f"{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}"
+        header += " " * (-(len(header) + 11) % 64) + "\n"
+        zf.writestr(
+            f"{key}.npy", b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header.encode() + bytes(512)
+        )
+    return buf.getvalue()
+
+
+def _gltf_variants(d: Path, doc: dict, stem: str) -> None:
+    """Hostile copies of a glTF document (its buffers beside it): a negative accessor count, a byteStride
+    below its element, a required extension nobody implements, JSON nested 5,000 deep in extras, a
+    bufferView past its buffer."""
+    negcount = json.loads(json.dumps(doc))
+    negcount["accessors"][0]["count"] = -3
+    (d / f"{stem}negcount.gltf").write_text(json.dumps(negcount))
+    stride = json.loads(json.dumps(doc))
+    view = stride["accessors"][0]["bufferView"]
+    stride["bufferViews"][view]["byteStride"] = 4
+    (d / f"{stem}stride.gltf").write_text(json.dumps(stride))
+    required = {**doc, "extensionsRequired": ["KHR_nonexistent"], "extensionsUsed": ["KHR_nonexistent"]}
+    (d / f"{stem}extreq.gltf").write_text(json.dumps(required))
+    (d / f"{stem}deep.gltf").write_text(_deep_in(doc, "extras"))
+    badview = json.loads(json.dumps(doc))
+    badview["bufferViews"][0]["byteOffset"] = 1 << 40
+    (d / f"{stem}badview.gltf").write_text(json.dumps(badview))
+
+
+def _write_round_two(d: Path, work: Path, frame: dict, dataset: dict, pose: dict, unet: Path) -> None:
+    """The hostile fixtures of the readers, outputs and generators (module doc)."""
+    import onnx
+    from onnx import TensorProto, numpy_helper
+    from onnx import helper as oh
+
+    rng = np.random.default_rng(1)
+    # glTF: a valid tetrahedron with an index buffer, then its hostile copies
+    pos = np.array(TET, np.float32)
+    idx = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3], np.uint16)
+    blob = pos.tobytes() + idx.tobytes()
+    tet = _tet_gltf("data:application/octet-stream;base64," + __import__("base64").b64encode(blob).decode())
+    tet["meshes"][0]["primitives"][0]["indices"] = 1
+    tet["accessors"].append({"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"})
+    tet["bufferViews"] = [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}]
+    tet["buffers"] = [{"uri": tet["buffers"][0]["uri"], "byteLength": len(blob)}]
+    _gltf_variants(d, tet, "")
+    # frames: an unread member past memory (valid), a read one (refused), normals past float32's
+    # squares, a complex channel
+    d.joinpath("bomb.npz").write_bytes(_npz_bomb(frame, "albedo", (1 << 40,)))
+    d.joinpath("depthbomb.npz").write_bytes(
+        _npz_bomb({k: v for k, v in frame.items() if k != "depth"}, "depth", (1 << 20, 1 << 20))
+    )
+    np.savez(d / "bignormal.npz", **{**frame, "normal_cam": frame["normal_cam"] * np.float32(1e20)})
+    np.savez(d / "cplx_depth.npz", **{**frame, "depth": frame["depth"] + 1j})
+    # points and normals: complex, boolean, non-finite, longer than float32's square root
+    p = np.load(d / "p.npy")
+    np.save(d / "cplx_p.npy", p + 0j)
+    np.save(d / "bool_p.npy", p > 0.5)
+    n = np.load(d / "n.npy")
+    np.save(d / "nan_n.npy", np.where(np.arange(6)[:, None] == 1, np.nan, n))
+    np.save(d / "inf_n.npy", np.where(np.arange(6)[:, None] == 3, np.inf, n))
+    np.save(d / "cplx_n.npy", n + 1j)
+    np.save(d / "big_n.npy", n * np.array([1, 1e20, 1e-30, 1e300, 1, 1])[:, None])
+    # volumes and regions files: deep, Latin-1, a misspelt key
+    vol = json.loads((d / "vol.json").read_text())
+    (d / "deep_vol.json").write_text(_deep_in(vol, "stats"))
+    (d / "latin1_vol.json").write_bytes(_latin1(vol))
+    (d / "typo_vol.json").write_text(json.dumps({**vol, "blnd": 0.5}))
+    regions = json.loads((d / "regions.json").read_text())
+    (d / "deep_regions.json").write_text(_deep_in(regions, "edges"))
+    typo = json.loads(json.dumps(regions))
+    typo["regions"][0]["mxa"] = [1, 1, 1]
+    (d / "typo_regions.json").write_text(json.dumps(typo))
+    # camera files: a misspelt key, a scaled pose, a singular pose, eye on target, deep, Latin-1
+    (d / "typo_poses.json").write_text(
+        json.dumps([{**{k: v for k, v in pose.items() if k != "yfov_deg"}, "fov": 50}])
+    )
+    scaled = [[2.0, 0, 0, 2.0], [0, 2.0, 0, 1.5], [0, 0, 2.0, 2.0], [0, 0, 0, 1]]
+    (d / "scaled_poses.json").write_text(json.dumps([{"pose": scaled}]))
+    singular = [[1.0, 0, 0, 2.0], [0, 0, 0, 1.5], [0, 0, 1.0, 2.0], [0, 0, 0, 1]]
+    (d / "singular_poses.json").write_text(json.dumps([{"pose": singular}]))
+    (d / "same_poses.json").write_text(json.dumps([{**pose, "target": pose["eye"]}]))
+    (d / "deep_poses.json").write_text(_deep_in({"cameras": [pose]}, "x"))
+    (d / "latin1_poses.json").write_bytes(_latin1({"cameras": [pose]}))
+    # dataset configs: deep, Latin-1
+    (d / "deep_dataset.json").write_text(_deep_in(dataset, "labels"))
+    (d / "latin1_dataset.json").write_bytes(_latin1(dataset))
+    # parity inputs for the relu export: real, an unread member past memory, NaN, past float32
+    x = rng.standard_normal((1, 4, 8, 8)).astype(np.float32)
+    np.savez(d / "pin.npz", x=x)
+    (d / "bomb_pin.npz").write_bytes(_npz_bomb({"x": x}, "unused", (1 << 40,)))
+    np.savez(d / "nan_pin.npz", x=np.where(x > 1.5, np.nan, x))
+    np.savez(d / "big_pin.npz", x=x.astype(np.float64) * 1e300)
+    # an ONNX model whose weights are external data beside it
+    xi = oh.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4, "h", "w"])
+    yo = oh.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4, "h", "w"])
+    w = numpy_helper.from_array(rng.standard_normal((4, 4, 1, 1)).astype(np.float32), "w")
+    conv = oh.make_model(
+        oh.make_graph([oh.make_node("Conv", ["x", "w"], ["y"], name="c")], "g", [xi], [yo], [w]),
+        opset_imports=[oh.make_opsetid("", 19)],
+    )
+    (d / "ext").mkdir()
+    onnx.save(
+        conv, d / "ext" / "conv.onnx", save_as_external_data=True, location="conv.weights", size_threshold=0
+    )
+    # a level (small, fast to bake) and its hostile copies and configs
+    level = d / "level"
+    sets = ["buildings=[]", "terrain_cells=3", "crown_subdivisions=0", "houses=1", "trees=1", "shrubs=2"]
+    assert main(["level", *(a for v in [*sets, "grass=2"] for a in ("--set", v)), "--out", str(level)]) == 0
+    fast = {
+        "trace": {"rays": 4, "samples_per_vertex": 1.0, "samples_per_face_cap": 2, "block_samples": 4096},
+        "decorators": {"samples_per_instance": 16, "holdout_samples": 16, "local_rays": 4},
+        "grass": {"rays": 4},
+        "lod": {"enabled": False},
+        "workers": 1,
+    }
+    (level / "fast.json").write_text(json.dumps(fast))
+    bad = d / "badlevel"
+    bad.mkdir()
+    shutil.copy(level / "level.bin", bad / "level.bin")
+    doc = json.loads((level / "level.gltf").read_text())
+    zero = json.loads(json.dumps(doc))
+    tree = next(n for n in zero["nodes"] if n.get("extras", {}).get("role") == "tree")
+    for a in tree["extensions"]["EXT_mesh_gpu_instancing"]["attributes"].values():
+        zero["accessors"][a]["count"] = 0
+    (bad / "zero_trees.gltf").write_text(json.dumps(zero))
+    typo = json.loads(json.dumps(doc))
+    next(n for n in typo["nodes"] if n.get("extras", {}).get("role") == "shrub")["extras"]["densty"] = 1.0
+    (bad / "typo.gltf").write_text(json.dumps(typo))
+    _gltf_variants(bad, doc, "")
+    (bad / "latin1.json").write_bytes(_latin1({"trace": fast["trace"]}).replace(b'"name"', b'"output"'))
+    (bad / "deep.json").write_text(_deep_in(fast, "blend"))
+    (bad / "typo.json").write_text(json.dumps({**fast, "trace": {**fast["trace"], "rayz": 4}}))
+    (bad / "nan.json").write_text(
+        json.dumps(fast).replace('"rays": 4, "samples', '"rays": 4, "alpha": NaN, "samples', 1)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -830,8 +1208,16 @@ def fuzz_env(tmp_path_factory):
     files = root / "in"
     files.mkdir()
     _write_files(files, root)
+    # every command module imported now: a signal that lands in a first import would leave a half-imported
+    # library (torch, PyOpenGL) behind for the next cases
+    from neuralao.pipeline.cli.main import COMMANDS
+
+    for module, _ in COMMANDS.values():
+        __import__(module)
     yield root, files
     report = os.environ.get("NEURALAO_FUZZ_REPORT")
+    for never in ("internal errors", "warnings", "partial outputs", "temporaries left"):
+        STATS[never] += 0  # asserted never to happen: a case that did would have failed the run
     if report:
         Path(report).write_text(json.dumps(dict(sorted(STATS.items())), indent=2) + "\n")
 
@@ -839,23 +1225,106 @@ def fuzz_env(tmp_path_factory):
 # ----------------------------------------------------------------------------- the contract
 
 PROGRESS = re.compile(r"\[\d\d:\d\d")  # a tqdm bar: "... 1/1 [00:00<00:00, 6.4view/s]"
-MARKERS = {"render": "render.json", "view": "index.html", "dataset": "manifest.json", "glsl": "manifest.json"}
+MARKERS = {
+    "render": "render.json",
+    "view": "index.html",
+    "dataset": "manifest.json",
+    "glsl": "manifest.json",
+    "level": "level.gltf",
+}
+SIGNAL_EXIT = {"SIGINT": (130, "interrupted (Ctrl-C)"), "SIGTERM": (143, "terminated (SIGTERM)")}
+# What a file written by a command must have: the umask's permissions, as any command-line tool gives.
+UMASK = os.umask(0o022)
+os.umask(UMASK)
+
+
+def _bad_output(case: Case, work: Path) -> Path:
+    """An output of ``case``'s kind that cannot be written (BAD_OUTPUTS)."""
+    suffix = Path(case.out).suffix
+    if case.bad_out == "below_file":
+        (work / "a_file").write_text("x")
+        return work / "a_file" / ("out" + suffix)
+    if case.bad_out == "proc":
+        return Path("/proc/neuralao-fuzz") / ("out" + suffix)
+    if case.bad_out == "long_name":
+        return work / ("x" * 300 + suffix)
+    if case.out_is_dir:
+        (work / ("a_file" + suffix)).write_text("x")
+        return work / ("a_file" + suffix)
+    (work / ("a_folder" + suffix)).mkdir()
+    return work / ("a_folder" + suffix)
 
 
 def _materialise(case: Case, files: Path, work: Path) -> tuple[list[str], Path, Path]:
     out = work / case.out if case.out else work / "none"
+    if case.bad_out:
+        out = _bad_output(case, work)
     out2 = work / ("composite" + Path(case.out).suffix if case.command == "infer" else "glsl_out")
+    if case.prefill == "export":  # an earlier export, with a pass the new one does not have
+        shutil.copytree(files / "export", out)
+        (out / "glsl" / "stale_pass.comp").write_text("// an earlier model's pass\n")
+    elif case.prefill == "user":
+        out.mkdir()
+        (out / "notes.txt").write_text("a user's own file\n")
+    for name in case.copies:
+        shutil.copy(files / name, work / name)
     argv = []
     for token in case.argv:
         if token == "@OUT":
             argv.append(str(out))
         elif token == "@OUT2":
             argv.append(str(out2))
+        elif token.startswith("@COPY:"):
+            argv.append(str(work / token.split(":", 1)[1]))
         elif token.startswith("@"):
             argv.append(str(files / token[1:]))
         else:
             argv.append(token)
     return argv, out, out2
+
+
+class _LateSignal(BaseException):
+    """The signal arrived outside the command (before main took it over, or after it returned): what a
+    process's default disposition would do then, not the command's to handle."""
+
+
+def _run_signalled(argv: list[str], name: str, delay: float) -> tuple[int | None, str, list]:
+    """``_run`` with signal ``name`` sent to this process after ``delay`` seconds (a timer that the
+    command's own code never sees); rc None when it came outside the command."""
+    sig = getattr(signal, name)
+    armed = {"on": True}
+
+    def fire(signum, frame):
+        if armed["on"]:
+            os.kill(os.getpid(), sig)
+
+    def late(signum, frame):  # SIGTERM outside the command (main restores this handler when it returns)
+        raise _LateSignal()
+
+    def late_int(signum, frame):
+        raise KeyboardInterrupt()
+
+    # no garbage collection meanwhile: a signal handled inside a gc callback (hypothesis keeps one) is
+    # swallowed there, which no real process would do
+    gc.disable()
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGALRM, signal.SIGTERM, signal.SIGINT)}
+    signal.signal(signal.SIGALRM, fire)
+    signal.signal(signal.SIGTERM, late)
+    signal.signal(signal.SIGINT, late_int)
+    try:
+        try:
+            signal.setitimer(signal.ITIMER_REAL, max(delay, 1e-4))
+            result = _run(argv)
+        finally:
+            armed["on"] = False
+            signal.setitimer(signal.ITIMER_REAL, 0)
+    except (KeyboardInterrupt, _LateSignal):
+        result = (None, "", [])
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+        gc.enable()
+    return result
 
 
 def _run(argv: list[str]) -> tuple[int, str, list[warnings.WarningMessage]]:
@@ -879,9 +1348,25 @@ def _error_lines(stderr: str) -> list[str]:
 
 
 def _check_output(case: Case, out: Path) -> None:
-    """A success must leave a valid output: read it back."""
+    """A success must leave a valid output: read it back; every file in it has the umask's permissions."""
     from neuralao.runtime.foundation.io import read_npz
 
+    for f in [out] if out.is_file() else [p for p in out.rglob("*") if p.is_file()]:
+        mode = f.stat().st_mode & 0o777
+        assert mode == 0o666 & ~UMASK, f"{f} was written with mode {oct(mode)}, umask {oct(UMASK)}"
+    if case.command == "bake" and "--config" in case.argv:
+        from neuralao.pipeline.geometry.level_files import read_gltf_json
+
+        doc, _ = read_gltf_json(out / "level_baked.glb")
+        assert doc["meshes"]
+        return
+    if case.command == "level":
+        from neuralao.pipeline.geometry.level_files import read_level
+
+        assert read_level(out / "level.gltf").nodes and isinstance(
+            json.loads((out / "bake.json").read_text()), dict
+        )
+        return
     if (
         case.command == "bake"
         and out.suffix == ".ply"
@@ -936,7 +1421,11 @@ def _check_output(case: Case, out: Path) -> None:
     elif case.command == "dataset":
         assert json.loads((out / "manifest.json").read_text())["scenes"]
     elif case.command == "glsl":
+        import onnx
+
         assert json.loads((out / "manifest.json").read_text())["kind"] == "onnx-glsl"
+        onnx.checker.check_model(onnx.load(str(out / "model.onnx")))  # its weights inside, none beside
+        assert not (out / "glsl" / "stale_pass.comp").exists() and not (out / "notes.txt").exists()
     elif case.command == "parity":
         json.loads(out.read_text())
 
@@ -952,35 +1441,58 @@ def check_case(root: Path, files: Path, case: Case) -> None:
     work.mkdir()
     argv, out, out2 = _materialise(case, files, work)
     t0 = time.perf_counter()
-    rc, stderr, caught = _run(argv)
+    rc, stderr, caught = _run_signalled(argv, case.signal, case.delay) if case.signal else _run(argv)
+    if case.signal:  # an interrupt between a library's open() and its `with` leaves the file to the garbage
+        # collector: a ResourceWarning, which Python shows only in development mode, never in a normal run
+        caught = [w for w in caught if not issubclass(w.category, ResourceWarning)]
     STATS["seconds"] = round(STATS["seconds"] + time.perf_counter() - t0, 3)
     STATS[f"exit {rc}"] += 1
     STATS[f"{case.command or 'top'} exit {rc}"] += 1
     lines = _error_lines(stderr)
     assert "Traceback" not in stderr, f"traceback for {argv}:\n{stderr}"
-    assert rc in (0, 2), f"exit {rc} for {argv}: {stderr.strip()}"
     assert not caught, f"warning for {argv}: {[str(w.message) for w in caught]}"
     leftovers = _leftovers(work)
     assert not leftovers, f"temporary files left by {argv}: {leftovers}"
-    if rc == 2:
+    for name in case.copies:  # an input named as an output is left as it was
+        assert (work / name).read_bytes() == (files / name).read_bytes(), f"{argv} changed its input {name}"
+    marker = out / MARKERS.get(case.command, "") if case.out_is_dir and case.command in MARKERS else out
+    if rc is None:  # the signal came outside the command
+        STATS["signal outside the command"] += 1
+    elif case.signal and rc in (130, 143):
+        STATS["interrupted"] += 1
+        want_rc, words = SIGNAL_EXIT[case.signal]
+        assert rc == want_rc and len(lines) == 1 and words in lines[0], (
+            f"{argv} on {case.signal}: {rc} {lines}"
+        )
+        if "--config" in case.argv:  # a level bake keeps its finished stages for the rerun: not an output
+            marker = out / "level_baked.glb"
+        if case.out and not case.bad_out and marker.exists():  # what is there is whole and valid
+            _check_output(case, out)
+    elif rc == 2:
         assert len(lines) == 1, f"{argv}: expected one stderr line, got {lines}"
         prefix = f"neuralao {case.command}" if case.command else "neuralao"
         assert lines[0].startswith(prefix) and ": error: " in lines[0], lines[0]
+        STATS["refused"] += 1
         if (
             case.culprits
         ):  # a flag may be named as the setting it sets: --samples-per-vertex, samples_per_vertex
             names = {n for c in case.culprits for n in (c, c.lstrip("-"), c.lstrip("-").replace("-", "_"))}
             assert any(n in lines[0] for n in names), f"{argv}: {lines[0]!r} names none of {case.culprits}"
-        marker = out / MARKERS[case.command] if case.command in MARKERS else out
-        assert not (case.out and marker.exists()), f"{argv} refused but left {marker}"
+        if case.prefill == "export":  # refused: the earlier export is still there, untouched
+            assert (out / "glsl" / "stale_pass.comp").is_file(), f"{argv} refused but removed the old export"
+        elif case.prefill == "user":
+            assert (out / "notes.txt").is_file(), f"{argv} refused but removed the user's folder"
+        elif case.out and not case.bad_out:
+            assert not marker.exists(), f"{argv} refused but left {marker}"
     else:
-        assert not case.nonfinite, f"{argv}: exit 0 from a non-finite input"
+        assert rc == 0, f"exit {rc} for {argv}: {stderr.strip()}"
+        assert not case.nonfinite, f"{argv}: exit 0 from an input that must be refused"
+        assert not case.bad_out, f"{argv}: exit 0 writing an output that cannot be written ({case.bad_out})"
         assert not lines or case.command == "", f"{argv}: success with stderr {lines}"
+        STATS["valid result"] += 1
         if case.out:
             _check_output(case, out)
     with contextlib.suppress(OSError):
-        import shutil
-
         shutil.rmtree(work)
 
 

@@ -193,6 +193,29 @@ def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
     assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
 
 
+def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
+    """``trace.subdomains``: the terrain's component (625 vertices, over ``component_vertices``) is solved
+    on the driver in 4 subdomains, a task each per CG iteration, and every static vertex gets the default
+    bake's AO; a rerun reuses the driver-solved piece's file and writes the same bytes."""
+    root, level, cfg, info = baked
+    s = load_level_settings(cfg, ["trace.subdomains=4", "trace.component_vertices=200", "lod.enabled=false"])
+    out = tmp_path / "sub"
+    sub = bake_level(level, s, out)
+    whole, split = _static_ao(root / "out" / "level_baked.glb"), _static_ao(out / "level_baked.glb")
+    assert whole.keys() == split.keys()
+    for name, ao in whole.items():
+        np.testing.assert_allclose(split[name], ao, atol=1e-6, err_msg=name)
+    solve = next(st for st in sub["stages"] if st["stage"] == "solve")
+    assert solve["tasks"] > 4 * 5 and solve["seconds_driver"] > 0  # subdomain tasks, >= 5 iterations
+    first = (out / "level_baked.glb").read_bytes()
+    (out / "stages" / "solve.npz").unlink()
+    (out / "level_baked.glb").unlink()
+    again = bake_level(level, s, out)
+    solve = next(st for st in again["stages"] if st["stage"] == "solve")
+    assert not solve["reused"] and solve.get("tasks", 0) == 0  # the piece's file was kept and read back
+    assert (out / "level_baked.glb").read_bytes() == first
+
+
 def test_changed_settings_invalidate_stored_stages(baked, tmp_path):
     root, level, cfg, _ = baked
     out = tmp_path / "out"

@@ -14,6 +14,9 @@ Structure (tinygrad's ``onnx.py`` / ``cstyle.py`` and hls4ml's templates + write
   statements, no binding qualifiers: the host binds blocks and samplers, the manifest says where).
   :class:`WGSL` (compute target, WebGPU) overrides the template table it fills from and the binding
   slots: the same op table, passes, writer and manifest write WGSL (``generate_compute(dialect="wgsl")``).
+  :class:`Vulkan` (compute target, ``dialect="vulkan"``) is the GLSL table with Vulkan's resource
+  declarations (``#version 450``, descriptor set 0, a binding per resource, sampled images without a
+  sampler, a std140 uniform block for a pass's scalar); the writer adds each pass's SPIR-V.
   In :mod:`.templates` the WGSL table likewise overrides only what differs: the shared templates are
   written once with dialect words (types, declarations, texel fetches), which each dialect spells.
   HLSL and MSL are not written here: :mod:`.cross` makes them from the GLSL through SPIR-V.
@@ -26,7 +29,7 @@ Layout (each module imports only those above it):
 
     templates.py    every GLSL and WGSL string, as named templates, :func:`fill` / :func:`fill_wgsl`
     graph.py        OnnxGraph / read_graph, the OpTable base (dispatch), glsl_float and small helpers
-    dialects.py     Dialect, GLSL330, ES300, WGSL, DIALECTS, COMPUTE_DIALECTS, FRAGMENT_FILES
+    dialects.py     Dialect, GLSL330, ES300, WGSL, Vulkan, DIALECTS, COMPUTE_DIALECTS, FRAGMENT_FILES
     activations.py  Act (epilogue activations, both targets)
     views.py        image tensors through Reshape / Transpose as index digits (atoms), no shader text
     memory.py       texture lifetimes, the aliasing plan and peak texture memory of a compute
@@ -34,7 +37,7 @@ Layout (each module imports only those above it):
     vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
     image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
     validate.py     glslangValidator
-    cross.py        HLSL / MSL from the GLSL passes (glslangValidator -> SPIR-V -> SPIRV-Cross)
+    cross.py        SPIR-V of the Vulkan passes; HLSL / MSL from the GLSL passes (SPIR-V -> SPIRV-Cross)
     files.py        export folders: write_* / load_* for both targets, hashes checked
 
 Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
@@ -42,21 +45,24 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
     generate_mlp_fragment(model, dialect="glsl330", fold_repeated_input=True) -> MLPShader
     write_mlp_export(shader, out_dir, validate=True) -> Path      (manifest.json path)
     load_mlp_export(export_dir, dialect="glsl330") -> MLPShader
-    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8), dialect="glsl430"|"wgsl")
-        -> ComputeProgram
-    write_compute_export(program, out_dir, validate=True, cross=False) -> Path   (cross: + HLSL, MSL)
+    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8),
+                     dialect="glsl430"|"wgsl"|"vulkan") -> ComputeProgram
+    write_compute_export(program, out_dir, validate=True, cross=False) -> Path
+        (cross: + HLSL, MSL; a Vulkan program: + <pass>.spv)
     load_compute_export(export_dir) -> ComputeProgram
     memory_plan(manifest, width, height, precision="fp32") -> MemoryPlan
         texture bytes of a compute manifest's frame at width x height pixels: per texture, per
         aliasing slot, in all (separate, aliased, live); the manifest's "memory" entry is its output
     memory_schedule(manifest) -> MemorySchedule   steps, lifetimes, aliasing slots (no sizes)
     validate_glsl(source, stage) -> None                         (glslangValidator)
+    compile_spirv(source) -> bytes                               (Vulkan GLSL -> SPIR-V, glslangValidator -V)
 
-The runners are :mod:`neuralao.runtime.glsl_runner` (GL) and :mod:`neuralao.runtime.wgsl_runner` (WebGPU).
+The runners are :mod:`neuralao.runtime.glsl_runner` (GL) and :mod:`neuralao.runtime.wgsl_runner` (WebGPU:
+WGSL, and the Vulkan passes' SPIR-V).
 """
 
 from neuralao.export.glsl.activations import Act
-from neuralao.export.glsl.cross import cross_compile, spirv_cross_available, validate_hlsl
+from neuralao.export.glsl.cross import compile_spirv, cross_compile, spirv_cross_available, validate_hlsl
 from neuralao.export.glsl.dialects import (
     COMPUTE_DIALECTS,
     DIALECTS,
@@ -65,6 +71,7 @@ from neuralao.export.glsl.dialects import (
     GLSL330,
     WGSL,
     Dialect,
+    Vulkan,
     get_dialect,
 )
 from neuralao.export.glsl.files import (
@@ -161,7 +168,9 @@ __all__ = [
     "VecValue",
     "VectorOps",
     "View",
+    "Vulkan",
     "WGSL",
+    "compile_spirv",
     "cross_compile",
     "generate_compute",
     "generate_mlp_fragment",

@@ -1,10 +1,12 @@
-"""HLSL and MSL of the generated GLSL compute passes, through SPIR-V: glslangValidator compiles the
-GLSL 4.30 source to (OpenGL) SPIR-V, SPIRV-Cross writes HLSL (shader model 5.0) and MSL (2.1) from it.
-The GLSL stays the one source; nothing here writes shader text of its own.
+"""SPIR-V of the generated compute passes, and HLSL and MSL through it: glslangValidator compiles the
+GLSL 4.30 source to (OpenGL) SPIR-V, SPIRV-Cross writes HLSL (shader model 5.0) and MSL (2.1) from it;
+the Vulkan dialect's source compiles to Vulkan SPIR-V, the files an engine loads. The GLSL stays the
+one source; nothing here writes shader text of its own.
 
     spirv_cross_available() -> bool
     cross_compile(source) -> {"hlsl": str, "msl": str}
     validate_hlsl(source) -> None        (glslang's HLSL front end: -D -V -e main -S comp)
+    compile_spirv(source) -> bytes       (Vulkan GLSL -> SPIR-V: glslangValidator -V, spirv-val if present)
 
 Registers and buffer indices follow the GLSL bindings: input i is ``t<i>`` (HLSL; MSL texture(i+1),
 the output image taking texture(0)), the output ``u0``, the params buffer ``t16`` (HLSL
@@ -27,6 +29,9 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 PARAMS_REGISTER_SHIFT = 16
 HLSL_SHADER_MODEL = "50"
 MSL_VERSION = "20100"
+# Vulkan SPIR-V: Vulkan 1.0's environment (SPIR-V 1.0), which every Vulkan driver takes.
+SPIRV_TARGET_ENV = "vulkan1.0"
+SPIRV_COMMAND = f"glslangValidator -V --target-env {SPIRV_TARGET_ENV}"
 
 
 def spirv_cross_available() -> bool:
@@ -112,3 +117,25 @@ def validate_hlsl(source: str) -> None:
             ],
             "glslangValidator -D (HLSL)",
         )
+
+
+def spirv_validator_available() -> bool:
+    return shutil.which("spirv-val") is not None
+
+
+def compile_spirv(source: str, validate: bool = True) -> bytes:
+    """Vulkan GLSL compute ``source`` -> SPIR-V (the words as little-endian bytes), by
+    ``glslangValidator -V``; ``validate``: the module is checked by ``spirv-val`` for the same Vulkan
+    environment too, where it is installed. NeuralaoError when glslangValidator is missing or rejects it."""
+    if shutil.which("glslangValidator") is None:
+        raise NeuralaoError("SPIR-V needs glslangValidator (apt-get install glslang-tools)")
+    with tempfile.TemporaryDirectory(prefix="nao_spirv_") as tmp:
+        d = Path(tmp)
+        (d / "pass.comp").write_text(source)
+        _run(
+            [*SPIRV_COMMAND.split(), "-o", str(d / "pass.spv"), str(d / "pass.comp")],
+            "glslangValidator -V (Vulkan GLSL -> SPIR-V)",
+        )
+        if validate and spirv_validator_available():
+            _run(["spirv-val", "--target-env", SPIRV_TARGET_ENV, str(d / "pass.spv")], "spirv-val")
+        return (d / "pass.spv").read_bytes()

@@ -1,9 +1,10 @@
 """The shading-language dialects: desktop GLSL 4.3 (explicit bindings), the 3.30 / ES 3.00 overrides
-and where each dialect's fragment-target files go, and WGSL (WebGPU) for the compute target."""
+and where each dialect's fragment-target files go, and, for the compute target, WGSL (WebGPU) and
+Vulkan GLSL (SPIR-V)."""
 
 from __future__ import annotations
 
-from neuralao.export.glsl.templates import fill, fill_wgsl
+from neuralao.export.glsl.templates import fill, fill_vulkan, fill_wgsl
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 
@@ -74,8 +75,26 @@ class WGSL(Dialect):
         return {"output": n_inputs, "params": n_inputs + 1, "uniform": n_inputs + 2}
 
 
+class Vulkan(Dialect):
+    """Vulkan GLSL 4.50 (compiled to SPIR-V by ``glslangValidator -V``), compute target only: the GLSL
+    table with the overrides of ``templates._V`` (version line, resource declarations). Bindings as
+    WGSL's, all in descriptor set 0; a pass's scalar uniform is a std140 block at its own binding."""
+
+    name = "vulkan"
+    version = "450"
+    compute_format = "neuralao-vulkan-compute"
+
+    def fill(self, template: str, /, **fields: object) -> str:
+        return fill_vulkan(template, **fields)
+
+    def header(self) -> str:
+        return fill_vulkan("header", version=self.version)
+
+    compute_slots = WGSL.compute_slots
+
+
 DIALECTS: dict[str, Dialect] = {d.name: d() for d in (Dialect, GLSL330, ES300)}
-COMPUTE_DIALECTS: dict[str, Dialect] = {"glsl430": DIALECTS["glsl430"], "wgsl": WGSL()}
+COMPUTE_DIALECTS: dict[str, Dialect] = {"glsl430": DIALECTS["glsl430"], "wgsl": WGSL(), "vulkan": Vulkan()}
 FRAGMENT_FILES = {
     "glsl330": ("mlp.vert", "mlp.frag"),
     "es300": ("mlp_es300.vert", "mlp_es300.frag"),

@@ -4,6 +4,7 @@ atomically, the manifest last, every file hashed in it) and load them back, hash
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -12,17 +13,25 @@ from neuralao.export.glsl.cross import (
     HLSL_SHADER_MODEL,
     MSL_VERSION,
     PARAMS_REGISTER_SHIFT,
+    SPIRV_COMMAND,
+    SPIRV_TARGET_ENV,
+    compile_spirv,
     cross_compile,
+    spirv_validator_available,
     validate_hlsl,
 )
 from neuralao.export.glsl.dialects import FRAGMENT_FILES
 from neuralao.export.glsl.graph import sha256_hex
 from neuralao.export.glsl.image import ComputeProgram
-from neuralao.export.glsl.validate import _can_validate, validate_glsl
+from neuralao.export.glsl.validate import _can_validate, glslang_available, validate_glsl
 from neuralao.export.glsl.vector import MLPShader
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_json
 from neuralao.runtime.foundation.manifest import read_manifest
+
+log = logging.getLogger(__name__)
+
+COMPUTE_FORMATS = ("neuralao-glsl-compute", "neuralao-wgsl-compute", "neuralao-vulkan-compute")
 
 
 def _write_export_files(out_dir: Path, files: dict[str, bytes], manifest: dict) -> Path:
@@ -100,10 +109,17 @@ def write_compute_export(
     """Write every pass as <name>.comp (GLSL) or <name>.wgsl, weights.bin and manifest.json (atomically);
     returns the manifest path. ``cross``: also <name>.hlsl and <name>.metal beside each GLSL pass
     (SPIR-V + SPIRV-Cross, :mod:`.cross`); the HLSL is compiled back with glslang's HLSL front end when
-    ``validate``. The manifest's ``cross_compiled`` says how they were made and checked."""
+    ``validate``. The manifest's ``cross_compiled`` says how they were made and checked. A Vulkan
+    program's passes get <name>.spv beside them (:func:`_with_spirv`)."""
     files: dict[str, bytes] = {}
-    validate = validate and _can_validate()
     manifest = program.manifest
+    if manifest.get("format") == "neuralao-vulkan-compute":
+        if cross:
+            raise NeuralaoError("HLSL / MSL are made from the GLSL 4.30 passes, not the Vulkan ones")
+        files.update({name: src.encode() for name, src in program.sources.items()})
+        files["weights.bin"] = program.weights
+        return _write_export_files(Path(out_dir), files, _with_spirv(program, files, validate))
+    validate = validate and _can_validate()
     if cross and manifest.get("format") != "neuralao-glsl-compute":
         raise NeuralaoError(
             "HLSL / MSL are made from the GLSL passes: export the image target (GLSL) for them"
@@ -137,11 +153,45 @@ def write_compute_export(
     return _write_export_files(Path(out_dir), files, manifest)
 
 
+def _with_spirv(program: ComputeProgram, files: dict[str, bytes], validate: bool) -> dict:
+    """The Vulkan program's manifest with its SPIR-V: each pass compiled by glslangValidator -V (which
+    also validates the source; ``validate``: spirv-val checks the module too, where installed) into
+    ``files`` as <name>.spv, recorded in the pass's ``spirv`` (file, bytes, sha256) and the manifest's.
+    Without glslangValidator the passes are written as source only and the manifest says how to
+    compile them."""
+    manifest = json.loads(json.dumps(program.manifest))
+    if not glslang_available():
+        log.warning("glslangValidator not found: writing the Vulkan passes without their SPIR-V")
+        manifest["spirv"] = {"compiled": False, "how": f"{SPIRV_COMMAND} -o <name>.spv <name>.comp"}
+        return manifest
+    for entry in manifest["passes"]:
+        words = compile_spirv(program.sources[entry["shader"]], validate=validate)
+        name = entry["shader"].removesuffix(".comp") + ".spv"
+        files[name] = words
+        entry["spirv"] = {"file": name, "bytes": len(words), "sha256": sha256_hex(words)}
+    manifest["spirv"] = {
+        "compiled": True,
+        "how": f"{SPIRV_COMMAND} -o <name>.spv <name>.comp",
+        "target_env": SPIRV_TARGET_ENV,
+        "entry_point": "main",
+        "validated": f"spirv-val --target-env {SPIRV_TARGET_ENV}"
+        if validate and spirv_validator_available()
+        else "glslangValidator only",
+    }
+    return manifest
+
+
 def load_compute_export(export_dir: str | Path) -> ComputeProgram:
-    """Rebuild a :class:`ComputeProgram` from an export folder (manifest + shaders + weights.bin)."""
+    """Rebuild a :class:`ComputeProgram` from an export folder (manifest + shaders + weights.bin, and a
+    Vulkan export's SPIR-V where it holds them)."""
     d, manifest = _read_export(export_dir)
-    if manifest.get("format") not in ("neuralao-glsl-compute", "neuralao-wgsl-compute"):
+    if manifest.get("format") not in COMPUTE_FORMATS:
         raise NeuralaoError(f"{d} is not a compute-shader export")
     sources = {p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in manifest["passes"]}
     weights = _read_checked(d, manifest, manifest["weights"]["file"])
-    return ComputeProgram(sources, weights, manifest)
+    spirv = {
+        p["shader"]: _read_checked(d, manifest, p["spirv"]["file"])
+        for p in manifest["passes"]
+        if "spirv" in p
+    }
+    return ComputeProgram(sources, weights, manifest, spirv)

@@ -1,6 +1,11 @@
 """The compute target: NCHW image networks as GLSL 4.30 compute passes over 2-D array textures, the
 parameters in one weights.bin. :class:`ImageOps` is the op table, ``_pack_conv`` the weight packing,
-the ``_write_*`` functions the writer, :func:`generate_compute` the entry point."""
+the ``_write_*`` functions the writer, :func:`generate_compute` the entry point.
+
+One module of about 2,900 lines on purpose: the op table is one class (as a renderer's op table is in
+tinygrad), and its ~90 handlers share the pass builders, views and epilogue fusion around them; split
+by op family, each part would import the others' private helpers. Dialect text lives in templates.py,
+storage and memory planning in memory.py, reading the graph in graph.py and views.py."""
 
 from __future__ import annotations
 
@@ -2279,7 +2284,7 @@ def _spatial_pad_body(p: Pass, d: Dialect) -> str:
 
 
 def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d: Dialect) -> str:
-    """One pass's shader source in dialect ``d`` (GLSL 4.30 compute or WGSL)."""
+    """One pass's shader source in dialect ``d`` (GLSL 4.30 compute, WGSL or Vulkan GLSL)."""
     fmt = "rgba16f" if precision == "fp16" and p.kind not in FP32_KINDS else "rgba32f"
     slots = d.compute_slots(len(p.inputs))
     decls = [d.fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
@@ -2408,14 +2413,17 @@ def _epilogue(p: Pass, offs: dict[str, int], z: str, d: Dialect) -> str:
 class ComputeProgram:
     """Generated compute passes for an image network.
 
-    sources : {shader file name: GLSL 4.30 compute source}, in pass order; weights : the bytes of
-    weights.bin (float32 little-endian, each pass's range aligned to 256 bytes); manifest : dict
-    (passes, textures, weights, pad/crop, the scalar inputs' ``uniforms``; see :func:`write_compute_export`).
+    sources : {shader file name: GLSL 4.30 compute source (or WGSL, Vulkan GLSL)}, in pass order;
+    weights : the bytes of weights.bin (float32 little-endian, each pass's range aligned to 256 bytes);
+    manifest : dict (passes, textures, weights, pad/crop, the scalar inputs' ``uniforms``; see
+    :func:`write_compute_export`); spirv : {shader file name: SPIR-V words as bytes} of a Vulkan
+    program read back from an export that holds them (empty otherwise: the generator writes source).
     """
 
     sources: dict[str, str]
     weights: bytes
     manifest: dict
+    spirv: dict[str, bytes] = field(default_factory=dict)
 
     @property
     def pad_multiple(self) -> int:
@@ -2469,7 +2477,8 @@ def generate_compute(
     dialect: str = "glsl430",
 ) -> ComputeProgram:
     """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
-    ``dialect="wgsl"`` writes the same passes in WGSL (WebGPU; see :func:`_wgsl_manifest`).
+    ``dialect="wgsl"`` writes the same passes in WGSL (WebGPU; see :func:`_wgsl_manifest`),
+    ``dialect="vulkan"`` in Vulkan GLSL for SPIR-V (see :func:`_vulkan_manifest`).
 
     Storage: every tensor is a 2-D array texture, 4 channels per texel (channel c in layer c // 4,
     lane c % 4), RGBA32F (``precision="fp32"``) or RGBA16F (``"fp16"``: storage only, arithmetic
@@ -2558,6 +2567,8 @@ def generate_compute(
     manifest["memory"] = memory_section(manifest)
     if d.name == "wgsl":
         _wgsl_manifest(manifest, d)
+    elif d.name == "vulkan":
+        _vulkan_manifest(manifest, d)
     return ComputeProgram(sources, bytes(blob), manifest)
 
 
@@ -2599,6 +2610,110 @@ def _wgsl_manifest(manifest: dict, d: Dialect) -> None:
             p["uniforms"][u["wgsl_name"]]["binding"] for p in manifest["passes"] if p["name"] == u["pass"]
         )
         u["set_with"] = "queue.writeBuffer of one f32 into the pass's uniform buffer before its dispatch"
+
+
+# Vulkan descriptor kinds of the manifest's ``bindings``: the Vulkan descriptor type and Godot
+# RenderingDevice's uniform type of each.
+VULKAN_KINDS = {
+    "sampled_image": "VK_DESCRIPTOR_TYPE_SAMPLED_IMAGE (Godot: UNIFORM_TYPE_TEXTURE): texture2DArray, "
+    "texelFetch only, no sampler",
+    "storage_image": "VK_DESCRIPTOR_TYPE_STORAGE_IMAGE (Godot: UNIFORM_TYPE_IMAGE): image2DArray writeonly",
+    "storage_buffer": "VK_DESCRIPTOR_TYPE_STORAGE_BUFFER (Godot: UNIFORM_TYPE_STORAGE_BUFFER): std430 "
+    "readonly buffer { vec4 prm[]; }, the pass's range of weights.bin",
+    "uniform_buffer": "VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER (Godot: UNIFORM_TYPE_UNIFORM_BUFFER): the pass's "
+    "std140 uniform block PassUniforms",
+}
+VULKAN_FORMATS = {"RGBA32F": "VK_FORMAT_R32G32B32A32_SFLOAT", "RGBA16F": "VK_FORMAT_R16G16B16A16_SFLOAT"}
+# A pass's uniform buffer: one vec4's worth (as the WGSL export's), the block's one member at offset 0.
+UNIFORM_BLOCK_BYTES = 16
+
+
+def _vulkan_manifest(manifest: dict, d: Dialect) -> None:
+    """Restate the GLSL manifest for the Vulkan GLSL sources: descriptor set 0, each resource at its own
+    binding (inputs 0..n-1, output n, params n + 1, uniform block n + 2), per pass a ``bindings`` list
+    (set, binding, kind, resource: what a descriptor set layout and its writes need) and the
+    ``uniform_block`` (std140, member offsets). Textures, sizes, dispatch and weights.bin are the same.
+    The SPIR-V files are the writer's (:func:`neuralao.export.glsl.files.write_compute_export`)."""
+    manifest["format"] = d.compute_format
+    manifest["glsl"] = (
+        "450 compute for Vulkan (GL_EXT_samplerless_texture_functions), SPIR-V by glslangValidator -V"
+    )
+    manifest["storage"]["type"] = "VkImage 2D array (view type 2D_ARRAY), 4 channels per texel"
+    manifest["vulkan"] = {
+        "descriptor_set": 0,
+        "bindings": "per pass: inputs 0..n-1, output n, params n + 1, uniform block n + 2 (if any)",
+        "kinds": VULKAN_KINDS,
+        "formats": VULKAN_FORMATS,
+        "image_layout": "VK_IMAGE_LAYOUT_GENERAL for every texture (storage writes and sampled reads)",
+        "image_usage": "SAMPLED | STORAGE (+ TRANSFER_DST for the input you upload, TRANSFER_SRC for "
+        "outputs you read back)",
+        "uniforms": "a pass's scalar (u_flip_y, a scalar graph input) is the one member of a std140 uniform "
+        f"block at offset 0, in a {UNIFORM_BLOCK_BYTES}-byte uniform buffer: a uniform buffer needs no "
+        "optional feature on any API (WebGPU has no push constants) and keeps one binding model with the "
+        "WGSL export",
+    }
+    manifest["barrier"] = (
+        "vkCmdPipelineBarrier after each dispatch: COMPUTE_SHADER -> COMPUTE_SHADER, SHADER_WRITE -> "
+        "SHADER_READ (images stay in GENERAL)"
+    )
+    for entry in manifest["passes"]:
+        n = len(entry["inputs"])
+        slots = d.compute_slots(n)
+        bindings = []
+        for inp in entry["inputs"]:
+            inp.update(set=0, kind="sampled_image", **{"as": "texture2DArray (texelFetch, no sampler)"})
+            bindings.append({"binding": inp["binding"], "kind": "sampled_image", "resource": inp["texture"]})
+        out = entry["output"]
+        out.update(
+            set=0,
+            binding=slots["output"],
+            kind="storage_image",
+            **{"as": f"image2DArray writeonly, {out['format']}, layered"},
+        )
+        bindings.append({"binding": out["binding"], "kind": "storage_image", "resource": out["texture"]})
+        if "params" in entry:
+            prm = entry["params"]
+            prm.update(
+                set=0,
+                binding=slots["params"],
+                kind="storage_buffer",
+                **{"as": "std430 readonly buffer { vec4 prm[]; }, bound at the range's offset and size"},
+            )
+            bindings.append(
+                {
+                    "binding": prm["binding"],
+                    "kind": "storage_buffer",
+                    "resource": f"weights.bin bytes {prm['offset']} .. {prm['offset'] + prm['bytes']}",
+                }
+            )
+        if "uniforms" in entry:
+            members = []
+            for name, u in entry["uniforms"].items():
+                kind = "int" if name == "u_flip_y" else "float"
+                u.pop("location", None)
+                u.update(set=0, binding=slots["uniform"], block="PassUniforms", offset=0, type=kind)
+                members.append({"name": name, "type": kind, "offset": 0, "bytes": 4})
+            entry["uniform_block"] = {
+                "set": 0,
+                "binding": slots["uniform"],
+                "kind": "uniform_buffer",
+                "name": "PassUniforms",
+                "layout": "std140",
+                "bytes": UNIFORM_BLOCK_BYTES,
+                "members": members,
+            }
+            bindings.append(
+                {"binding": slots["uniform"], "kind": "uniform_buffer", "resource": "PassUniforms"}
+            )
+        entry["bindings"] = [{"set": 0, **b} for b in bindings]
+    for u in manifest["uniforms"]:
+        u.pop("location", None)
+        p = next(p for p in manifest["passes"] if p["name"] == u["pass"])
+        u.update(set=0, binding=p["uniform_block"]["binding"], block="PassUniforms", offset=0)
+        u["set_with"] = (
+            "the value as a float32 at offset 0 of the pass's uniform buffer (std140 block PassUniforms, "
+            f"{UNIFORM_BLOCK_BYTES} bytes) before its dispatch"
+        )
 
 
 def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:

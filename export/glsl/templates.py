@@ -24,6 +24,10 @@ overrides, only the templates whose structure differs. Each dialect's words (``_
 * ``${fetch}(src, p${lod})``: texel p of ``src`` at level 0; ``${size_of:src}``: its width and
   height; ``${inc:i}``: increment i; ``${precise}``: GLSL's ``precise`` qualifier (none in WGSL).
 
+``_V`` holds the Vulkan GLSL overrides of the GLSL table (compiled to SPIR-V): the version line and the
+resource declarations only (set and binding on every resource, sampled images without a sampler, a
+uniform block instead of loose uniforms); the bodies are the GLSL ones.
+
 Layout conventions the templates rely on (stated again in every manifest):
 
 * fragment MLP: activations are local ``vec4`` arrays, lane ``i % 4`` of element ``i // 4``;
@@ -1028,6 +1032,33 @@ _W["epilogue_guard"] = (
 )
 
 
+# --------------------------------------------------------------------------- Vulkan GLSL (SPIR-V)
+
+# The GLSL compute passes as Vulkan GLSL (glslangValidator -V): the GLSL table with these overrides.
+# Every resource sits in descriptor set 0 at its own binding (inputs 0..n-1, output n, params n + 1,
+# uniform block n + 2). Inputs are sampled images without a sampler (``texture2DArray``,
+# GL_EXT_samplerless_texture_functions): the passes only texelFetch, so an engine binds no VkSampler,
+# and naga's SPIR-V front end (wgpu) reads OpImageFetch on an image but not the OpImage that a
+# combined ``sampler2DArray`` needs. Loose uniforms are not allowed in Vulkan GLSL: a pass's scalar
+# (``u_flip_y``, a scalar graph input) is the one member of a std140 uniform block, at offset 0.
+_V: dict[str, str] = {}
+_V["header"] = """#version ${version}
+#extension GL_EXT_samplerless_texture_functions : require"""
+_V["sampler_array_decl"] = "layout(set = 0, binding = ${binding}) uniform highp texture2DArray ${name};"
+_V["image_array_decl"] = (
+    "layout(set = 0, binding = ${binding}, ${format}) writeonly uniform highp image2DArray dst;"
+)
+_V["params_decl"] = """layout(std430, set = 0, binding = ${binding}) readonly buffer Params {
+    vec4 prm[];
+};"""
+_V["uniform_int_decl"] = """layout(std140, set = 0, binding = ${slot}) uniform PassUniforms {
+    int ${name};
+};"""
+_V["uniform_float_decl"] = """layout(std140, set = 0, binding = ${slot}) uniform PassUniforms {
+    float ${name};
+};"""
+
+
 # --------------------------------------------------------------------------- filling
 
 
@@ -1069,6 +1100,7 @@ def _with_words(texts: dict[str, str], words: dict[str, str]) -> dict[str, Templ
 
 TEMPLATES: dict[str, Template] = _with_words({**_T, **_G}, _WORDS)
 WGSL_TEMPLATES: dict[str, Template] = _with_words({**_T, **_W}, {**_WORDS, **_WGSL_WORDS})
+VULKAN_TEMPLATES: dict[str, Template] = _with_words({**_T, **_G, **_V}, _WORDS)
 
 
 def fill_from(templates: dict[str, Template], template: str, what: str, /, **fields: object) -> str:
@@ -1098,3 +1130,9 @@ def fill_wgsl(template: str, /, **fields: object) -> str:
     """Fill the WGSL template named ``template`` (a WGSL override, else the shared template in WGSL
     words); every placeholder must be given and nothing else."""
     return fill_from(WGSL_TEMPLATES, template, "WGSL", **fields)
+
+
+def fill_vulkan(template: str, /, **fields: object) -> str:
+    """Fill the Vulkan GLSL template named ``template`` (a Vulkan override, else the GLSL template);
+    every placeholder must be given and nothing else."""
+    return fill_from(VULKAN_TEMPLATES, template, "Vulkan GLSL", **fields)

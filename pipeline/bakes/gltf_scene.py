@@ -67,14 +67,8 @@ from neuralao.pipeline.bakes.texture import (
     xatlas_layout,
 )
 from neuralao.pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
-from neuralao.pipeline.geometry.level_files import (
-    GltfWriter,
-    _Gltf,
-    _instances,
-    check_transforms,
-    gltf_label,
-    node_matrix,
-)
+from neuralao.pipeline.geometry.gltf import GltfFile, gltf_label
+from neuralao.pipeline.geometry.level_files import GltfWriter, _instances, check_transforms, node_matrix
 from neuralao.pipeline.geometry.scene import Scene, resolve_mesh_path, scene_from_arrays
 from neuralao.pipeline.geometry.surface import vertex_colours
 from neuralao.pipeline.tracing.labeller import Labeller
@@ -84,8 +78,6 @@ from neuralao.runtime.foundation.settings import settings_to_dict
 log = logging.getLogger(__name__)
 
 GLTF_SUFFIXES = (".gltf", ".glb")
-# Geometry compression extensions: their primitives' accessors have no readable data without a decoder.
-_COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
 _LINEAR, _CLAMP = 9729, 33071
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
@@ -128,7 +120,7 @@ class GltfScene:
     """A glTF file read for baking: the parsed document, its pieces and their world scene."""
 
     path: Path
-    gltf: _Gltf
+    gltf: GltfFile
     pieces: list[Piece]
     world: Scene
     skipped: dict[str, int] = field(default_factory=dict)
@@ -166,7 +158,7 @@ def triangles(index: np.ndarray, mode: int, where: str) -> np.ndarray | None:
 
 
 def _primitive_pieces(
-    g: _Gltf, node: int, mi: int, transforms: np.ndarray, written: bool, skipped: dict[str, int]
+    g: GltfFile, node: int, mi: int, transforms: np.ndarray, written: bool, skipped: dict[str, int]
 ) -> list[Piece]:
     mesh = g.doc["meshes"][mi]
     out = []
@@ -197,13 +189,8 @@ def _primitive_pieces(
 def read_gltf_scene(path: str | Path) -> GltfScene:
     """Read a .gltf/.glb for baking (module doc, step 1); one-line :class:`NeuralaoError` on bad input."""
     path = resolve_mesh_path(path)
-    g = _Gltf(path)
+    g = GltfFile(path)
     doc = g.doc
-    compressed = [e for e in doc.get("extensionsRequired", []) if e in _COMPRESSION]
-    if compressed:
-        raise NeuralaoError(
-            f"{path.name}: compressed geometry ({compressed[0]}) is not supported; decompress it first"
-        )
     nodes, meshes, scenes = doc.get("nodes", []), doc.get("meshes", []), doc.get("scenes", [])
     if scenes:
         si = doc.get("scene", 0)

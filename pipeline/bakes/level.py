@@ -15,7 +15,8 @@ Embree, stage by stage (the rows of their Table 1; the bake log times each one):
    foliage, in blocks of samples (:mod:`neuralao.pipeline.bakes.level_stages`);
 6. **decorators**: per tree model, local AO baked in isolation; per tree instance, the gold standard and
    the 4 coefficients of equation 3 (:mod:`neuralao.pipeline.bakes.level_decorators`);
-7. **solve**: least-squares vertex values (Kavan et al. 2011) of both distances, one task per piece;
+7. **solve**: least-squares vertex values (Kavan et al. 2011) of both distances, one task per piece (with
+   ``trace.subdomains`` > 1 a big component is cut into spatial subdomains, a task each per iteration);
 8. **small decorators**: one scalar per grass clump and shrub, resampled from the baked level;
 9. **lod**: per piece, a simplified LOD with AO by resampling at its vertices and by least squares over
    resampled surface samples, both measured against the gold standard;
@@ -31,7 +32,6 @@ and ends with the same bytes; changed settings recompute.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import resource
@@ -71,7 +71,7 @@ from neuralao.pipeline.bakes.level_stages import (
     pieces_context,
     run_to_files,
     simplify_level,
-    solve_jobs,
+    solve_stage,
     split_lod,
     trace_jobs,
     worker_settings,
@@ -90,6 +90,7 @@ from neuralao.runtime.foundation.io import (
     write_text,
 )
 from neuralao.runtime.foundation.limits import release_free_memory
+from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
@@ -210,12 +211,12 @@ def level_key(path: Path, settings: LevelBakeSettings) -> str:
     files = [sha256_file(path)]
     if path.suffix.lower() == ".gltf":
         try:
-            doc = json.loads(path.read_text())
+            doc = read_json(path, "glTF JSON")
             for b in doc.get("buffers", []):
                 uri = b.get("uri", "")
                 if uri and not uri.startswith("data:") and (path.parent / uri).is_file():
                     files.append(sha256_file(path.parent / uri))
-        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
+        except (NeuralaoError, AttributeError, TypeError):
             pass  # read_level reports it
     return sha256_json({"files": files, "settings": settings_to_dict(settings), "version": 1})
 
@@ -301,16 +302,11 @@ def bake_level(
         "solve",
         "Least squares solve (both distances)",
         lambda: _summary(
-            run_to_files(
-                solve_files,
-                runner,
-                solve_jobs(light, pieces, rule, trace_files, s, whole),
-                "solve",
-                progress,
-            ),
+            solve_stage(solve_files, runner, light, pieces, rule, trace_files, s, whole, progress),
             seconds_assembly=lambda r: float(r["seconds_assembly"]),
             seconds_blocks=lambda r: float(r["seconds_blocks"]),
             seconds_largest_block=lambda r: float(r["seconds_largest_block"]),
+            seconds_driver=lambda r: float(r["seconds_driver"]),
         ),
         vertices=index.vertices,
     )

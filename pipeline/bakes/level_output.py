@@ -47,72 +47,75 @@ def write_outputs(
     # Named as atomic_path names its temporaries, so a killed bake's rerun sweeps a stale one away.
     spill = path.with_name(f".{path.name}.spill.tmp")
     w = GltfWriter("neuralao level bake", spill=spill)
-    w.doc["extras"] = {
-        "bake": {
-            "blend": settings_to_dict(s.blend),
-            "half_distances": [s.trace.half_distance_short, s.trace.half_distance_long],
-            "rays": s.trace.rays,
-        }
-    }
-    for piece, (_, r, _) in zip(pieces, static_results, strict=True):
-        rows = index.table[piece.first : piece.stop]
-        for k, j, v0, f0, nv, nf in rows:
-            node = index.nodes[k]
-            sl, fl = slice(v0 - piece.v0, v0 - piece.v0 + nv), slice(f0 - piece.f0, f0 - piece.f0 + nf)
-            attrs = {
-                "COLOR_0": r["colour"][sl],
-                "_AO": r["ao"][sl],
-                "_AO_SHORT": r["short"][sl],
-                "_AO_LONG": r["long"][sl],
+    try:  # an interrupted bake leaves no spill file behind
+        w.doc["extras"] = {
+            "bake": {
+                "blend": settings_to_dict(s.blend),
+                "half_distances": [s.trace.half_distance_short, s.trace.half_distance_long],
+                "rays": s.trace.rays,
             }
-            mi = w.mesh(f"{node.name}_{j}", r["positions"][sl], r["faces"][fl], attrs)
-            w.node(
-                f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
-                mi,
-                extras={"role": "static", "source_node": node.index, "instance": int(j)},
-            )
-    trees = level.nodes_with("tree")
-    rows = _coefficient_rows(trees, deco)
-    written: dict[int, int] = {}
-    for node in trees:
-        mesh = level.meshes[node.mesh]
-        if node.mesh not in written:
-            written[node.mesh] = w.mesh(
-                mesh.name, mesh.vertices, mesh.faces, {"_AO_LOCAL": deco[f"local_{node.mesh}"]}
-            )
-        t, q, sc = decompose(node.transforms)
-        w.node(
-            node.name,
-            written[node.mesh],
-            extras={"role": "tree", **node.params},
-            instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO_GLOBAL": rows[node.index]},
-        )
-    for role, nodes in (("grass", level.nodes_with("grass")), ("shrub", level.nodes_with("shrub"))):
-        for kk, node in enumerate(nodes):
+        }
+        for piece, (_, r, _) in zip(pieces, static_results, strict=True):
+            rows = index.table[piece.first : piece.stop]
+            for k, j, v0, f0, nv, nf in rows:
+                node = index.nodes[k]
+                sl, fl = slice(v0 - piece.v0, v0 - piece.v0 + nv), slice(f0 - piece.f0, f0 - piece.f0 + nf)
+                attrs = {
+                    "COLOR_0": r["colour"][sl],
+                    "_AO": r["ao"][sl],
+                    "_AO_SHORT": r["short"][sl],
+                    "_AO_LONG": r["long"][sl],
+                }
+                mi = w.mesh(f"{node.name}_{j}", r["positions"][sl], r["faces"][fl], attrs)
+                w.node(
+                    f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
+                    mi,
+                    extras={"role": "static", "source_node": node.index, "instance": int(j)},
+                )
+        trees = level.nodes_with("tree")
+        rows = _coefficient_rows(trees, deco)
+        written: dict[int, int] = {}
+        for node in trees:
             mesh = level.meshes[node.mesh]
+            if node.mesh not in written:
+                written[node.mesh] = w.mesh(
+                    mesh.name, mesh.vertices, mesh.faces, {"_AO_LOCAL": deco[f"local_{node.mesh}"]}
+                )
             t, q, sc = decompose(node.transforms)
-            mi = w.mesh(mesh.name, mesh.vertices, mesh.faces)
             w.node(
                 node.name,
-                mi,
-                extras={"role": role, **node.params},
-                instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]},
+                written[node.mesh],
+                extras={"role": "tree", **node.params},
+                instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO_GLOBAL": rows[node.index]},
             )
-    if lod_files is not None:
-        for piece in pieces:
-            lod = lod_files.get(f"p{piece.index:05d}")
-            if len(lod["faces"]) == 0:
-                continue
-            ao = np.asarray(lod["ao_least_squares"], np.float32)
-            attrs = {
-                "COLOR_0": vertex_colours(ao),
-                "_AO": ao,
-                "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32),
-            }
-            name = "lod1" if len(pieces) == 1 else f"lod1_{piece.index}"
-            mi = w.mesh(name, lod["vertices"], lod["faces"], attrs)
-            w.node(name, mi, extras={"role": "static", "lod": 1, "piece": piece.index})
-    w.write(path)
+        for role, nodes in (("grass", level.nodes_with("grass")), ("shrub", level.nodes_with("shrub"))):
+            for kk, node in enumerate(nodes):
+                mesh = level.meshes[node.mesh]
+                t, q, sc = decompose(node.transforms)
+                mi = w.mesh(mesh.name, mesh.vertices, mesh.faces)
+                w.node(
+                    node.name,
+                    mi,
+                    extras={"role": role, **node.params},
+                    instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]},
+                )
+        if lod_files is not None:
+            for piece in pieces:
+                lod = lod_files.get(f"p{piece.index:05d}")
+                if len(lod["faces"]) == 0:
+                    continue
+                ao = np.asarray(lod["ao_least_squares"], np.float32)
+                attrs = {
+                    "COLOR_0": vertex_colours(ao),
+                    "_AO": ao,
+                    "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32),
+                }
+                name = "lod1" if len(pieces) == 1 else f"lod1_{piece.index}"
+                mi = w.mesh(name, lod["vertices"], lod["faces"], attrs)
+                w.node(name, mi, extras={"role": "static", "lod": 1, "piece": piece.index})
+        w.write(path)
+    finally:
+        w.close()
     shaders = decorator_shaders()
     write_text(out / "shaders" / "decorator.vert", shaders["vertex"])
     write_text(out / "shaders" / "decorator.frag", shaders["fragment"])

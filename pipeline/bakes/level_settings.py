@@ -10,8 +10,17 @@ from typing import Literal
 
 import numpy as np
 
-from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings, check_rays
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
+    MAX_CAP,
+    RAY_BYTES,
+    SAMPLE_BYTES,
+    THREAD_BYTES,
+    check_count,
+    check_int_range,
+    check_seed,
+)
 from neuralao.runtime.foundation.settings import load_settings
 
 
@@ -43,6 +52,12 @@ class TraceSettings:
     # "components": blocks of at least this many vertices use multigrid CG (SuperLU's fill-in grows
     # faster than linearly on a terrain grid), and smaller components are packed into tasks of this size.
     component_vertices: int = 100_000
+    # "components": a block of at least component_vertices is cut into this many spatial subdomains, solved
+    # as separate tasks (per iteration) by Schwarz-preconditioned CG, the iteration on the driver
+    # (neuralao.pipeline.geometry.partitioned_solve; 3e-7 from SuperLU on Table 1's terrain). 1: the block is
+    # one multigrid-CG task. The Ray engine gives each actor two subdomains in turn (its two task slots), so
+    # 2 x its actors uses them all and keeps each subdomain's factor on one actor.
+    subdomains: int = 1
 
 
 @dataclass
@@ -129,6 +144,7 @@ def check_settings(s: LevelBakeSettings) -> None:
         ("task_rays", s.task_rays),
         ("piece_faces", s.piece_faces),
         ("trace.component_vertices", t.component_vertices),
+        ("trace.subdomains", t.subdomains),
         ("grass.rays", s.grass.rays),
         ("lod.rays", s.lod.rays),
         ("decorators.local_rays", s.decorators.local_rays),
@@ -163,6 +179,41 @@ def check_settings(s: LevelBakeSettings) -> None:
         raise NeuralaoError(f"lod.target_reduction must be in (0, 1), got {s.lod.target_reduction}")
     if Path(s.output).suffix.lower() not in (".glb", ".gltf") or Path(s.output).name != s.output:
         raise NeuralaoError(f"output must be a file name ending in .glb or .gltf, got {s.output!r}")
+    _check_ranges(s)
+
+
+def _check_ranges(s: LevelBakeSettings) -> None:
+    """What the checks above leave: the seed, the remaining weights and fractions, and every count a
+    stage allocates per unit of, against the memory (each refusal names the setting and its bound)."""
+    t = s.trace
+    check_seed("seed", s.seed)
+    check_count("workers", s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
+    for name, rays in (
+        ("trace.rays", t.rays),
+        ("grass.rays", s.grass.rays),
+        ("lod.rays", s.lod.rays),
+        ("decorators.local_rays", s.decorators.local_rays),
+    ):
+        check_rays(name, rays, s.workers)
+    for name, count in (
+        ("trace.block_samples", t.block_samples),
+        ("decorators.samples_per_instance", s.decorators.samples_per_instance),
+        ("decorators.holdout_samples", s.decorators.holdout_samples),
+        ("lod.holdout_samples", s.lod.holdout_samples),
+    ):
+        check_count(name, count, bytes_each=SAMPLE_BYTES, each="per surface sample")
+    check_count("foliage.max_hits", s.foliage.max_hits, bytes_each=RAY_BYTES, each="per crossing of a ray")
+    check_int_range("trace.samples_per_face_cap", t.samples_per_face_cap, 1, MAX_CAP)
+    if not t.alpha >= 0:
+        raise NeuralaoError(f"trace.alpha must be >= 0, got {t.alpha}")
+    if not s.decorators.local_samples_per_vertex > 0:
+        raise NeuralaoError(
+            f"decorators.local_samples_per_vertex must be > 0, got {s.decorators.local_samples_per_vertex}"
+        )
+    if t.backface_threshold is not None and not 0 <= t.backface_threshold <= 1:
+        raise NeuralaoError(f"trace.backface_threshold must be in [0, 1] or null, got {t.backface_threshold}")
+    if s.lod.radius is not None and not s.lod.radius > 0:
+        raise NeuralaoError(f"lod.radius must be > 0 (or null), got {s.lod.radius}")
 
 
 def blend(short: np.ndarray, long: np.ndarray, s: BlendSettings) -> np.ndarray:

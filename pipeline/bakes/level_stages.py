@@ -28,11 +28,14 @@ from neuralao.pipeline.bakes.level_pieces import (
     SampleRule,
     cached_piece,
     instance_vertices,
+    piece_samples,
+    piece_scene,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
 from neuralao.pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
 from neuralao.pipeline.geometry.level_files import Level, flatten
+from neuralao.pipeline.geometry.partitioned_solve import SolveInfo, solve_partitioned
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
     face_areas,
@@ -180,11 +183,17 @@ class TaskFiles:
 
 
 def run_to_files(
-    files: TaskFiles, runner, jobs: list[tuple[str, Callable[[], Task]]], desc: str, progress: bool
+    files: TaskFiles,
+    runner,
+    jobs: list[tuple[str, Callable[[], Task]]],
+    desc: str,
+    progress: bool,
+    keep: frozenset[str] = frozenset(),
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """Run the jobs (file stem, task maker) a file does not hold yet on ``runner``, writing each result as it
-    arrives; then yield (stem, result, reused) for every job in order, one file read at a time."""
-    files.keep_only({stem for stem, _ in jobs})
+    arrives; then yield (stem, result, reused) for every job in order, one file read at a time. ``keep``:
+    stems of files the stage writes otherwise (left in place)."""
+    files.keep_only({stem for stem, _ in jobs} | keep)
     pending = [(stem, make) for stem, make in jobs if not files.has(stem)]
     with tqdm(total=len(pending), desc=desc, disable=not progress, leave=False) as bar:
         for i, r in runner.map(make() for _, make in pending):
@@ -252,8 +261,13 @@ def _solve_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     """Engine task: the least-squares vertex values of one piece (both distances)."""
     piece, rule, ao, valid, t, whole = args
     scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    return _piece_values(scene, samples, ao, valid, t, whole)
+
+
+def _piece_values(scene, samples, ao, valid, t: TraceSettings, whole, engine=None, context=None):
+    """A piece's solve result: its "short" and "long" vertex values and the solve's seconds."""
     timing: dict[str, float] = {}
-    v = fit_level(scene, samples, ao, valid, t, timing=timing, whole=whole)
+    v = fit_level(scene, samples, ao, valid, t, engine=engine, timing=timing, whole=whole, context=context)
     return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
 
 
@@ -263,6 +277,44 @@ def solve_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, 
         return Task(ctx, _solve_piece, (p, rule, ao, valid, s.trace, whole))
 
     return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
+
+
+def solve_stage(
+    files: TaskFiles, runner, ctx: Context, pieces, rule, trace_files: TaskFiles, s, whole, progress: bool
+) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
+    """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece of at
+    least ``trace.component_vertices`` vertices (it may hold a component that big) is solved here: its big
+    components' subdomain solves are tasks of ``runner`` under ``ctx`` (its workers hold it already) and the
+    iteration runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`). Every other piece is one task.
+    The results are the same bytes either way: each subdomain solve is a pure function of its block and
+    residual, and the driver adds them in subdomain order."""
+    t = s.trace
+    here = [
+        p for p in pieces if t.solver == "components" and t.subdomains > 1 and p.nv >= t.component_vertices
+    ]
+    stems = frozenset(piece_stem(p) for p in here)
+    files.keep_only({piece_stem(p) for p in pieces})
+    fresh = set()
+    for p in here:
+        if not files.has(piece_stem(p)):
+            files.put(piece_stem(p), _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole))
+            fresh.add(piece_stem(p))
+    rest = [p for p in pieces if piece_stem(p) not in stems]
+    yield from run_to_files(
+        files, runner, solve_jobs(ctx, rest, rule, trace_files, s, whole), "solve", progress, stems
+    )
+    for stem in sorted(stems):
+        yield stem, files.get(stem), stem not in fresh
+
+
+def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole):
+    """:func:`_solve_piece` on the driver, its subdomain solves tasks of ``runner``; the piece's geometry and
+    samples are made here and dropped with the result (the driver keeps no piece)."""
+    level, index, _ = ctx.payload
+    scene = piece_scene(level, index, piece)
+    samples = piece_samples(scene, piece, rule)
+    ao, valid = piece_trace(trace_files, piece, s.trace.block_samples)
+    return _piece_values(scene, samples, ao, valid, s.trace, whole, runner, ctx)
 
 
 def fit_level(
@@ -276,6 +328,7 @@ def fit_level(
     tag: str = "",
     timing: dict | None = None,
     whole: Whole | None = None,
+    context: Context | None = None,
 ) -> np.ndarray:
     """:func:`neuralao.pipeline.geometry.least_squares.fit_least_squares` with the level's solver
     (``t.solver``, ``t.alpha``).
@@ -283,9 +336,12 @@ def fit_level(
     "components": the normal equations are assembled here, split into their connected components (the
     matrix couples only vertices that share a face, so the blocks' solutions are the global solution),
     and each block, or a pack of small ones, is a task of ``engine`` (None: this process), its result
-    kept in ``store`` (keys: ``tag`` and the block) as it arrives. Returns (n,) or (n, c) float32.
-    ``timing`` (a dict, filled in): seconds of the assembly here, of all blocks, and of the largest
-    block (each task times itself, a stored one as it took then). ``whole``: see
+    kept in ``store`` (keys: ``tag`` and the block) as it arrives; with ``t.subdomains`` > 1 a big block is
+    solved here by :func:`neuralao.pipeline.geometry.partitioned_solve.solve_partitioned`, its subdomain
+    solves tasks of ``engine``. The tasks run under ``context`` (they read no state; None: a stateless
+    one). Returns (n,) or (n, c) float32. ``timing`` (a dict, filled in): seconds of the assembly here, of
+    all tasks, of the largest task (each task times itself, a stored one as it took then) and of the
+    partitioned solves' own work here ("driver"). ``whole``: see
     :func:`neuralao.pipeline.geometry.least_squares.normal_equations` (a piece of a level)."""
 
     if t.solver != "components":
@@ -293,18 +349,19 @@ def fit_level(
         v = fit_least_squares(scene, samples, values, valid, t.alpha, t.solver, whole)
         if timing is not None:
             took = time.perf_counter() - t0
-            timing.update(assembly=0.0, blocks=took, largest_block=took)
+            timing.update(assembly=0.0, blocks=took, largest_block=took, driver=0.0)
         return v
     t0 = time.perf_counter()
     a, rhs = normal_equations(scene, samples, values, valid, t.alpha, whole)
-    blocks = component_blocks(a, t.component_vertices)
+    blocks = component_blocks(a, t.component_vertices, t.subdomains)
     a = a.tocsr()
     timing = {} if timing is None else timing
-    timing.update(assembly=time.perf_counter() - t0, blocks=0.0, largest_block=0.0)
-    ctx = Context("level-solve", _no_state, None)
+    timing.update(assembly=time.perf_counter() - t0, blocks=0.0, largest_block=0.0, driver=0.0)
+    ctx = context or Context("level-solve", _no_state, None)
+    tasked = [b for b in blocks if b[1] != "partitioned"]
 
     def tasks():
-        for idx, method in blocks:
+        for idx, method in tasked:
             sub = a[idx][:, idx].tocsc()
             yield Task(
                 ctx,
@@ -315,24 +372,40 @@ def fit_level(
 
     out = np.empty(rhs.shape)
     for i, r in (engine or LocalEngine()).map(tasks(), store):
-        out[blocks[i][0]] = r["v"]
+        out[tasked[i][0]] = r["v"]
         took = float(r.get("seconds", 0.0))
         timing["blocks"] += took
         timing["largest_block"] = max(timing["largest_block"], took)
+    for idx, method in blocks:
+        if method == "partitioned":
+            info = SolveInfo()
+            out[idx] = solve_partitioned(
+                a[idx][:, idx],
+                rhs[idx],
+                scene.vertices[idx],
+                t.subdomains,
+                engine=engine,
+                context=ctx,
+                info=info,
+            )
+            timing["blocks"] += sum(info.seconds_tasks)
+            timing["largest_block"] = max(timing["largest_block"], info.largest_task)
+            timing["driver"] += info.seconds_setup + info.seconds_driver
     return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-def component_blocks(a, big: int) -> list[tuple[np.ndarray, str]]:
-    """The connected components of the sparse symmetric ``a`` as solve tasks: (vertex indices (ascending)
-    int64, "amg" | "direct"). A component of at least ``big`` vertices is a task of its own solved by
-    multigrid CG; smaller ones (SuperLU) are packed, largest first, into tasks of about ``big`` vertices."""
+def component_blocks(a, big: int, subdomains: int = 1) -> list[tuple[np.ndarray, str]]:
+    """The connected components of the sparse symmetric ``a`` as solves: (vertex indices (ascending) int64,
+    "amg" | "partitioned" | "direct"). A component of at least ``big`` vertices is a solve of its own: one
+    multigrid-CG task, or with ``subdomains`` > 1 a partitioned CG; smaller ones (SuperLU) are packed,
+    largest first, into tasks of about ``big`` vertices."""
     _, label = connected_components(a, directed=False)
     sizes = np.bincount(label)
     members = np.split(np.argsort(label, kind="stable"), np.cumsum(sizes)[:-1])
     blocks, pack, packed = [], [], 0
     for c in np.argsort(-sizes, kind="stable"):
         if sizes[c] >= big:
-            blocks.append((members[c], "amg"))
+            blocks.append((members[c], "amg" if subdomains <= 1 else "partitioned"))
             continue
         pack.append(members[c])
         packed += sizes[c]

@@ -41,6 +41,7 @@ import numpy as np
 import xatlas
 from PIL import Image
 
+from neuralao.pipeline.geometry.gltf import check_gltf
 from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, scene_from_arrays
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -522,6 +523,8 @@ def read_texture_glb(path: str | Path) -> tuple[UVMesh, np.ndarray]:
     import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
     path = Path(path)
+    if path.suffix.lower() in (".gltf", ".glb") and path.is_file() and path.stat().st_size:
+        check_gltf(path)  # the specification's rules before trimesh reads it
     try:
         loaded = trimesh.load(str(path), process=False)
     except Exception as e:

@@ -44,6 +44,7 @@ from typing import Literal
 import numpy as np
 
 from neuralao.pipeline.engines.engine import LocalEngine
+from neuralao.pipeline.geometry.gltf import check_gltf
 from neuralao.pipeline.geometry.least_squares import fill_invalid, fit_least_squares
 from neuralao.pipeline.geometry.scene import Scene
 from neuralao.pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_colours
@@ -242,6 +243,8 @@ def read_baked_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarra
     path = Path(path)
     if path.is_file() and path.stat().st_size == 0:
         raise NeuralaoError(f"{path} is empty: it has no geometry")
+    if path.suffix.lower() in (".gltf", ".glb") and path.is_file() and path.stat().st_size:
+        check_gltf(path)  # the specification's rules before trimesh reads it
     try:
         loaded = trimesh.load(str(path), process=False)
     except Exception as e:

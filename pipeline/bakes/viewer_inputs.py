@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import struct
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from neuralao.pipeline.bakes.texture import read_texture_glb
 from neuralao.pipeline.bakes.vertex import read_baked_mesh
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.manifest import read_manifest
+from neuralao.runtime.foundation.manifest import parse_json, read_manifest
 from neuralao.runtime.internal_resolution import UpsampleSettings
 from neuralao.runtime.onnx_io import load_onnx
 from neuralao.runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
@@ -70,8 +69,8 @@ def _is_scene_bake(path: Path) -> bool:
         if len(head) < 20 or head[:4] != b"glTF":
             return False
         try:
-            doc = json.loads(f.read(struct.unpack_from("<I", head, 12)[0]))
-        except (json.JSONDecodeError, UnicodeDecodeError):
+            doc = parse_json(f.read(struct.unpack_from("<I", head, 12)[0]), path, "GLB JSON chunk")
+        except NeuralaoError:
             return False
     extras = doc.get("asset", {}).get("extras", {}) if isinstance(doc, dict) else {}
     return (

@@ -56,7 +56,6 @@ Bad input and fallbacks (never NaN)
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
@@ -66,12 +65,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from neuralao.pipeline.geometry.level_files import INSTANCING, read_gltf_json, read_level
+from neuralao.pipeline.geometry.gltf import INSTANCING
+from neuralao.pipeline.geometry.level_files import read_gltf_json, read_level
 from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings, sample_shifts
 from neuralao.runtime.foundation import sh
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import THREAD_BYTES, check_count, check_seed
+from neuralao.runtime.foundation.manifest import read_json
 
 # The file format and the model of eq. 4 are the consumer runtime's; re-exported for the baker's callers.
 from neuralao.runtime.volumes import (
@@ -101,17 +102,18 @@ def read_regions(path: str | Path) -> tuple[list[Region], list[tuple[int, int]] 
     """Regions from JSON: ``{"regions": [{"name": ..., "min": [x, y, z], "max": [x, y, z]}, ...],
     "edges": [[i, j], ...]}`` (or a bare list of regions; edges optional, else from the geometry)."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise NeuralaoError(f"regions file not found: {path}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise NeuralaoError(f"regions file {path} is not valid JSON: {type(e).__name__}") from None
+    data = read_json(path, "regions file")
+    if isinstance(data, dict) and set(data) - {"regions", "edges"}:
+        unknown = sorted(set(data) - {"regions", "edges"})[0]
+        raise NeuralaoError(f"regions file {path}: unknown key {unknown!r} (known: regions, edges)")
     items = data if isinstance(data, list) else data.get("regions") if isinstance(data, dict) else None
     if not isinstance(items, list):
         raise NeuralaoError(f"regions file {path} must hold a list of regions or {{'regions': [...]}}")
     regions = []
     for k, item in enumerate(items):
+        unknown = sorted(set(item) - {"name", "min", "max"}) if isinstance(item, dict) else []
+        if unknown:  # before the missing keys: a misspelt "mx" is named as what it is
+            raise NeuralaoError(f"{path}: region {k}: unknown key {unknown[0]!r} (known: name, min, max)")
         if not isinstance(item, dict) or "min" not in item or "max" not in item:
             raise NeuralaoError(f"{path}: region {k} needs 'min' and 'max'")
         try:

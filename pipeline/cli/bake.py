@@ -41,8 +41,17 @@ from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.pipeline.tracing.labeller import check_label_args, label_fields
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_png
+from neuralao.runtime.foundation.paths import FILE, FOLDER
 
 log = logging.getLogger(__name__)
+
+# What the command reads, checked with its outputs before it runs (cli.main.check_arguments).
+INPUTS = ("mesh", "config")
+
+
+def OUTPUTS(args: argparse.Namespace) -> dict[str, str]:  # noqa: N802 (the name every command module uses)
+    """--out is a mesh file, or with --config a level bake's folder (what is checked before any work)."""
+    return {"out": FOLDER if args.config is not None else FILE}
 
 
 # Single-mesh flags that have no meaning for a level (its settings come from --config and --set).

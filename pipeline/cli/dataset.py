@@ -8,9 +8,15 @@ from pathlib import Path
 
 from neuralao.pipeline.cli.engine_options import add_engine_arguments, engine_from_args
 from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset, check_counts
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("config",)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

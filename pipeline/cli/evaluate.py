@@ -12,10 +12,16 @@ from pathlib import Path
 
 from neuralao.pipeline.evaluation.categories import EvalSettings, evaluate, write_to_manifests
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 from neuralao.runtime.shipped import default_export
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("config", "models")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

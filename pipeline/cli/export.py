@@ -8,6 +8,13 @@ from pathlib import Path
 from neuralao.pipeline.models.checkpoint import read_checkpoint
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import atomic_folder
+from neuralao.runtime.foundation.paths import FOLDER, check_replaceable_folder
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("model",)
 
 
 def checkpoint_kind(path: str | Path) -> str:
@@ -23,10 +30,17 @@ def checkpoint_kind(path: str | Path) -> str:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="checkpoint written by `neuralao train` (MODEL.pt)")
-    p.add_argument("--out", required=True, help="export folder: model.onnx, GLSL shaders, manifest.json")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="export folder: model.onnx, GLSL shaders, manifest.json (replaced whole, never merged)",
+    )
+    p.add_argument("--force", action="store_true", help="replace --out even when it holds files of no export")
 
 
 def run(args: argparse.Namespace) -> int:
     kind = checkpoint_kind(args.model)
-    kinds.role(kind, "exporter")(Path(args.model), Path(args.out))
+    check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
+    with atomic_folder(args.out) as folder:  # written whole, then put in --out's place
+        kinds.role(kind, "exporter")(Path(args.model), folder)
     return 0

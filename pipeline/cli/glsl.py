@@ -10,8 +10,16 @@ import argparse
 import logging
 
 from neuralao.export.onnx_glsl import TARGETS, export_model
+from neuralao.runtime import kinds
+from neuralao.runtime.foundation.io import atomic_folder
+from neuralao.runtime.foundation.paths import FOLDER, check_replaceable_folder
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("model",)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,7 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--dialect",
         action="append",
         default=[],
-        help="vector: keep only these of glsl330, es300, glsl430 (repeatable)",
+        help="vector: keep only these of glsl330, es300, glsl430 (repeatable); "
+        "image: vulkan writes Vulkan GLSL and its SPIR-V",
     )
     p.add_argument(
         "--bind",
@@ -46,12 +55,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="image: also write HLSL and MSL of every pass beside its GLSL (SPIR-V + SPIRV-Cross)",
     )
-    p.add_argument("--out", required=True, help="export folder")
+    p.add_argument("--out", required=True, help="export folder (replaced whole, never merged)")
+    p.add_argument("--force", action="store_true", help="replace --out even when it holds files of no export")
 
 
 def run(args: argparse.Namespace) -> int:
-    m = export_model(
-        args.model, args.target, args.out, args.precision, args.bind, args.dialect or None, args.hlsl_msl
-    )
+    check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
+    with atomic_folder(args.out) as folder:  # written whole, then put in --out's place
+        m = export_model(
+            args.model, args.target, folder, args.precision, args.bind, args.dialect or None, args.hlsl_msl
+        )
     log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
     return 0

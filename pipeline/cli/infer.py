@@ -17,6 +17,7 @@ import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import check_finite_number
+from neuralao.runtime.foundation.paths import FILE
 from neuralao.runtime.frame import read_frame
 from neuralao.runtime.infer import (
     check_output,
@@ -30,6 +31,11 @@ from neuralao.runtime.infer import (
 from neuralao.runtime.shipped import default_model
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE, "composite": FILE}
+INPUTS = ("inputs",)
 
 
 def field_of_view(args: argparse.Namespace) -> float | None:

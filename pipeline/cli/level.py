@@ -7,9 +7,15 @@ import argparse
 import logging
 
 from neuralao.pipeline.geometry.level_gen import PRESETS, settings_for, write_level
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import add_set_option
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ()
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

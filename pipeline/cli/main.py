@@ -7,7 +7,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
+import threading
 from typing import NoReturn
 
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -91,11 +93,117 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread like KeyboardInterrupt is for SIGINT, so both unwind the same way:
+    every ``finally`` runs (temporaries removed, nothing half-written) and the command ends in one line."""
+
+
+# The signals this run received: an interrupt that a library turned into another error (numpy's import
+# reports one as an ImportError) still ends as an interrupt.
+_RECEIVED: list[int] = []
+
+
+def _on_signal(signum, frame) -> NoReturn:
+    _RECEIVED.append(signum)
+    raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
+
+
+def _unraisable(hook):
+    """``sys.unraisablehook`` that sends a signal again when its exception could not be raised (it came
+    while a finalizer ran, which swallows it and prints a traceback): Python runs the handler once more at
+    the next chance, where the command can act on it. Anything else goes to ``hook``."""
+
+    def resend(unraisable) -> None:
+        exc = unraisable.exc_value
+        if isinstance(exc, KeyboardInterrupt | Terminated):
+            signal.raise_signal(signal.SIGINT if isinstance(exc, KeyboardInterrupt) else signal.SIGTERM)
+        else:
+            hook(unraisable)
+
+    return resend
+
+
+def _flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, argparse.Action]:
+    """dest -> action of every argument the parsed command line went through (the command's, and a
+    nested subcommand's such as ``train field``): how a message names each, by its flag or metavar."""
+    out: dict[str, argparse.Action] = {}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            chosen = action.choices.get(getattr(args, action.dest, None) or "")
+            if chosen is not None:
+                out.update(_flags(chosen, args))
+        else:
+            out[action.dest] = action
+    return out
+
+
+def _name(action: argparse.Action | None, dest: str) -> str:
+    if action is None:
+        return dest
+    if action.option_strings:
+        return max(action.option_strings, key=len)
+    return str(action.metavar or dest.upper())
+
+
+def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Namespace) -> None:
+    """What holds for every command, checked before it runs: each float flag is a finite number within
+    float32's range (every value here ends up in float32 somewhere, where a larger one is inf), and the
+    paths the command writes (its module's ``OUTPUTS``: dest -> FILE or FOLDER, or a function of the
+    arguments giving them) can be written and are distinct from each other and from its ``INPUTS``."""
+    # here, not at the top: the module stays light, so Ctrl-C meets main's handler as early as possible
+    from neuralao.runtime.foundation.limits import check_float32
+    from neuralao.runtime.foundation.paths import check_outputs
+
+    actions = _flags(parser, args)
+    for dest, action in actions.items():
+        value = getattr(args, dest, None)
+        if action.type is float and value is not None:
+            for v in value if isinstance(value, list) else [value]:
+                check_float32(_name(action, dest), v)
+    outputs = getattr(module, "OUTPUTS", {})
+    outputs = outputs(args) if callable(outputs) else outputs
+    check_outputs(
+        {_name(actions.get(d), d): (getattr(args, d, None), kind) for d, kind in outputs.items()},
+        {_name(actions.get(d), d): getattr(args, d, None) for d in getattr(module, "INPUTS", ())},
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    command = next((a for a in argv if a in COMMANDS), None)
-    parser = build_parser(load=command)
-    args = parser.parse_args(argv)
+    """Run one command. Bad input ends in one line and exit 2; Ctrl-C (SIGINT) in one line and 130, SIGTERM
+    in one line and 143, whenever it comes (an import, the parse, the work): never a traceback."""
+    command, previous, hook = "neuralao", {}, None
+    _RECEIVED.clear()
+    try:
+        if threading.current_thread() is threading.main_thread():  # inside the try: a signal may come now
+            sys.unraisablehook = _unraisable(hook := sys.unraisablehook)
+            for s in (signal.SIGINT, signal.SIGTERM):
+                previous[s] = signal.signal(s, _on_signal)
+        argv = list(sys.argv[1:] if argv is None else argv)
+        load = next((a for a in argv if a in COMMANDS), None)
+        command = f"neuralao {load}" if load else command
+        parser = build_parser(load=load)
+        args = parser.parse_args(argv)
+        return _run(parser, args, f"neuralao {args.command}" if args.command else command)
+    except (KeyboardInterrupt, Terminated, Exception) as e:
+        if isinstance(e, KeyboardInterrupt) or _RECEIVED[:1] == [signal.SIGINT]:
+            sys.stderr.write(f"\n{command}: interrupted (Ctrl-C)\n")
+            return 130
+        if isinstance(e, Terminated) or _RECEIVED:
+            sys.stderr.write(f"\n{command}: terminated (SIGTERM)\n")
+            return 143
+        if {"-v", "--verbose"} & set(argv or []):
+            raise
+        first = str(e).splitlines()[0][:300] if str(e) else ""
+        sys.stderr.write(f"{command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n")
+        return 1
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if hook is not None:
+            sys.unraisablehook = hook
+
+
+def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, command: str) -> int:
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
     )
@@ -106,22 +214,23 @@ def main(argv: list[str] | None = None) -> int:
             f"neuralao: error: no command given, one of {', '.join(COMMANDS)} (see neuralao --help)\n"
         )
         return 2
-    module = importlib.import_module(COMMANDS[args.command][0])
     try:
+        module = importlib.import_module(COMMANDS[args.command][0])
+        check_arguments(parser, module, args)
         return int(module.run(args) or 0)
     except NeuralaoError as e:
-        sys.stderr.write(f"neuralao {args.command}: error: {e}\n")
+        sys.stderr.write(f"{command}: error: {e}\n")
         return 2
-    except KeyboardInterrupt:
-        sys.stderr.write(f"neuralao {args.command}: interrupted\n")
-        return 130
+    except OSError as e:  # the system refused a file (no space left, permissions): named, in one line
+        if args.verbose or _RECEIVED or e.filename is None:
+            raise
+        sys.stderr.write(f"{command}: error: {str(e.filename)[:200]}: {e.strerror or type(e).__name__}\n")
+        return 2
     except Exception as e:  # a bug, not bad input: still one line (the traceback with -v), exit 1
-        if args.verbose:
+        if args.verbose or _RECEIVED:  # with -v the traceback; after a signal, main reports the signal
             raise
         first = str(e).splitlines()[0][:300] if str(e) else ""
-        sys.stderr.write(
-            f"neuralao {args.command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n"
-        )
+        sys.stderr.write(f"{command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n")
         return 1
 
 

@@ -17,8 +17,14 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.limits import check_seed
 from neuralao.runtime.foundation.manifest import read_manifest
+from neuralao.runtime.foundation.paths import FILE
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE}
+INPUTS = ("exports", "data", "inputs")
 
 
 def export_dirs(root: Path) -> list[Path]:

@@ -10,13 +10,19 @@ from pathlib import Path
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import atomic_path
+from neuralao.runtime.foundation.io import atomic_path, read_npy
 from neuralao.runtime.foundation.limits import check_count
 from neuralao.runtime.foundation.normals import normalize_normals
+from neuralao.runtime.foundation.paths import FILE
 from neuralao.runtime.probe import ORDERS, POINT_BYTES, VolumeProbe
 from neuralao.runtime.volumes import read_volumes
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE}
+INPUTS = ("volumes", "points", "normals")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,21 +39,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--order", choices=tuple(ORDERS), default="quadratic", help="SH order (default quadratic)")
 
 
-def _load_rows(path: str, what: str) -> np.ndarray:
-    try:
-        a = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise NeuralaoError(f"{what} file not found: {path}") from None
-    except Exception as e:
-        raise NeuralaoError(f"cannot read {what} {path}: {type(e).__name__}") from None
-    if (
-        not isinstance(a, np.ndarray)
-        or a.ndim != 2
-        or a.shape[1] != 3
-        or not np.issubdtype(a.dtype, np.number)
-    ):
-        raise NeuralaoError(f"{what} {path} must be an (n, 3) numeric array, got {getattr(a, 'shape', '?')}")
-    return a.astype(np.float64)
+def _load_rows(path: str, what: str, flag: str) -> np.ndarray:
+    """(n, 3) float64 rows of an .npy of real numbers, every value finite (NaN or inf refused, naming
+    ``flag``)."""
+    a = read_npy(path, what)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise NeuralaoError(f"{what} {path} must be an (n, 3) numeric array, got {a.shape}")
+    a = a.astype(np.float64)
+    bad = int((~np.isfinite(a).all(axis=1)).sum())
+    if bad:
+        raise NeuralaoError(f"{flag} {path} has {bad} row(s) with NaN or inf")
+    return a
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".npy":
         raise NeuralaoError(f"--out must end in .npy, got {out.name!r}")
     vol = read_volumes(args.volumes)
-    points = _load_rows(args.points, "points")
-    normals = _load_rows(args.normals, "normals")
+    points = _load_rows(args.points, "points", "--points")
+    normals = _load_rows(args.normals, "normals", "--normals")
     if len(points) != len(normals):
         raise NeuralaoError(
             f"--points {args.points} has {len(points)} rows and --normals {args.normals} has {len(normals)}"
@@ -68,12 +70,9 @@ def run(args: argparse.Namespace) -> int:
         bytes_each=POINT_BYTES * len(vol.regions),
         each=f"per point and region, {len(vol.regions)} regions",
     )
-    bad = int((~np.isfinite(points).all(axis=1)).sum())
-    if bad:
-        raise NeuralaoError(f"points {args.points} has {bad} rows with NaN or inf")
     unit, ok = normalize_normals(normals)
     if not ok.all():
-        log.warning("%d zero or non-finite normals evaluated as +z", int((~ok).sum()))
+        log.warning("%d zero normals evaluated as +z", int((~ok).sum()))
     ao = VolumeProbe(vol).ao(points, unit, args.distance, args.order)
     with atomic_path(out) as tmp:
         np.save(tmp, ao)

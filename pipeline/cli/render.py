@@ -40,11 +40,17 @@ from neuralao.runtime.foundation.limits import (
     check_pixels,
     check_seed,
 )
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import settings_to_dict
 from neuralao.runtime.frame import Frame, FrameLike, write_frame
 from neuralao.runtime.gl import context
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("mesh", "cameras")
 # PyOpenGL logs "No OpenGL_accelerate module loaded" at INFO on import; it is expected and not news.
 logging.getLogger("OpenGL.acceleratesupport").setLevel(logging.WARNING)
 

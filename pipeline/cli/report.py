@@ -16,10 +16,16 @@ from neuralao.pipeline.evaluation.report import evaluate
 from neuralao.pipeline.evaluation.report_settings import SHIPPED_PICKS, ReportSettings, check_settings
 from neuralao.pipeline.evaluation.report_writing import method_order, write_report
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 from neuralao.runtime.shipped import MODELS_DIR
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("data", "models", "config")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

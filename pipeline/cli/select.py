@@ -9,7 +9,6 @@ frames with the same ground truth (cached under ``--gt-cache``).
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 
@@ -18,9 +17,16 @@ from neuralao.pipeline.evaluation.report_settings import ReportSettings, check_s
 from neuralao.pipeline.evaluation.selection import DEFAULT_TARGET, candidate_families, select_from_results
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.paths import FILE, FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE, "gt_cache": FOLDER}
+INPUTS = ("data", "exports")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,13 +51,8 @@ def run(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--target must be in (0, 1], got {args.target}")
     if args.report:
         path = Path(args.report)
-        try:
-            result = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise NeuralaoError(f"report not found: {path}") from None
-        except json.JSONDecodeError:
-            raise NeuralaoError(f"{path} is not valid JSON") from None
-        if result.get("format") != "neuralao-report":
+        result = read_json(path, "report")
+        if not isinstance(result, dict) or result.get("format") != "neuralao-report":
             raise NeuralaoError(f"{path} is not a neuralao report.json")
     else:
         settings = load_settings(ReportSettings, None, list(args.set))

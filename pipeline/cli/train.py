@@ -15,7 +15,14 @@ import numpy as np
 from neuralao.pipeline.models import field, mlp, unet_train
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import check_count
+from neuralao.runtime.foundation.paths import FILE
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE}
+INPUTS = ("mesh", "data", "config")
 
 
 def _log(kind: str) -> logging.Logger:
@@ -81,10 +88,21 @@ def add_mlp_arguments(p: argparse.ArgumentParser) -> None:
     add_checkpoint_arguments(p, "MLPSettings", "--set optimizer=adam")
 
 
+def hidden_widths(size: str) -> list[int]:
+    """``--size`` as hidden widths, each bounded by the memory its weights and activations take, so a
+    width past the machine is refused naming ``--size`` (not the batch or sample count it would inflate)."""
+    widths = mlp.parse_size(size)
+    check_count(
+        "--size", max(widths) ** 2 * len(widths), bytes_each=64, each="per weight of the network", shown=size
+    )
+    check_count("--size", sum(widths), bytes_each=64 * 1024, each="per unit of a hidden width", shown=size)
+    return widths
+
+
 def mlp_settings_from_args(args: argparse.Namespace) -> mlp.MLPSettings:
     overrides: list[str] = []
     if args.size is not None:
-        overrides.append(f"hidden={mlp.parse_size(args.size)}")
+        overrides.append(f"hidden={hidden_widths(args.size)}")
     if getattr(args, "views", None) is not None:
         overrides.append(f"views={args.views}")
     if getattr(args, "resolution", None) is not None:
@@ -138,7 +156,7 @@ def add_field_arguments(p: argparse.ArgumentParser) -> None:
 def field_settings_from_args(args: argparse.Namespace) -> field.FieldSettings:
     overrides: list[str] = []
     if args.size is not None:
-        overrides.append(f"hidden={mlp.parse_size(args.size)}")
+        overrides.append(f"hidden={hidden_widths(args.size)}")
     if args.octaves is not None:
         overrides.append(f"octaves={args.octaves}")
     if args.rays is not None:

@@ -15,9 +15,15 @@ from neuralao.pipeline.bakes.viewer_inputs import (
     screen_space_mesh,
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.viewer import serve, write_page
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FOLDER}
+INPUTS = ("inputs", "mesh")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

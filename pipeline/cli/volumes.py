@@ -12,10 +12,16 @@ from neuralao.export.glsl.volume import write_volume_glsl
 from neuralao.pipeline.bakes.volumes import bake_volumes, check_settings, load_level_scene, read_regions
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.paths import FILE, FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 from neuralao.runtime.volumes import VolumeSettings, to_json
 
 log = logging.getLogger(__name__)
+
+# What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+OUTPUTS = {"out": FILE, "glsl": FOLDER}
+INPUTS = ("level", "regions", "config")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

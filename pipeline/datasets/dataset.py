@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import json
 import logging
 import math
 from collections.abc import Callable, Iterator
@@ -61,6 +60,7 @@ from neuralao.runtime.foundation.io import (
 )
 from neuralao.runtime.foundation.limits import (
     MAX_CAP,
+    PIXEL_BYTES,
     PIXEL_DISK_BYTES,
     check_count,
     check_disk,
@@ -68,6 +68,7 @@ from neuralao.runtime.foundation.limits import (
     check_pixels,
     check_seed,
 )
+from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.frame import Frame, FrameLike
 
@@ -400,8 +401,8 @@ def build_dataset(
     progress_path = out / "progress.json"
     done: dict[str, str] = {}
     if progress_path.exists():
-        state = json.loads(progress_path.read_text())
-        if state.get("config_hash") == config_hash:
+        state = read_json(progress_path, "dataset progress file")
+        if isinstance(state, dict) and state.get("config_hash") == config_hash:
             done = state.get("shards", {})
         else:
             log.warning("%s: config changed since the interrupted run; starting over", out)
@@ -576,11 +577,8 @@ class Dataset:
                 else ""
             )
             raise NeuralaoError(f"no dataset manifest at {mpath}{hint}")
-        try:
-            self.manifest = json.loads(mpath.read_text())
-        except json.JSONDecodeError:
-            raise NeuralaoError(f"dataset manifest {mpath} is corrupt") from None
-        if self.manifest.get("format") != "neuralao-dataset":
+        self.manifest = read_json(mpath, "dataset manifest")
+        if not isinstance(self.manifest, dict) or self.manifest.get("format") != "neuralao-dataset":
             raise NeuralaoError(f"{mpath} is not a neuralao dataset manifest")
         self.verify = verify
         self._verified: set[str] = set()
@@ -665,6 +663,13 @@ def check_counts(settings: DatasetSettings, out: Path) -> None:
         sizes += list(item.sizes or [])
         views += item.views * (item.count if isinstance(item, ComposedScenes) else 1)
     for w, h in sizes:
-        check_pixels("size", w, h, frames=settings.frames_per_shard)
+        check_pixels("size", w, h)
     w, h = max(w for w, _ in sizes), max(h for _, h in sizes)
+    # a shard's frames are in memory together: a count past that is named as itself, not as the size
+    check_count(
+        "frames_per_shard",
+        settings.frames_per_shard,
+        bytes_each=PIXEL_BYTES * w * h,
+        each=f"a frame of up to {w}x{h} pixels",
+    )
     check_disk("views", views * w * h * PIXEL_DISK_BYTES, out, f"{views} at up to {w} {h}")

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.pipeline.geometry.scene import Scene
+from neuralao.pipeline.geometry.scene import MAX_COORDINATE, Scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.tolerances import TOL
 
 
 @dataclass(frozen=True)
@@ -297,37 +298,123 @@ def closeup(
     raise NeuralaoError(f"scene {scene.name}: found only {len(cams)} of {views} close-up camera positions")
 
 
+# The keys of a camera in a camera file (anything else is refused: a misspelt "fov" would otherwise leave
+# the default field of view without a word).
+CAMERA_KEYS = ("eye", "target", "up", "pose", "yfov_deg", "znear", "zfar")
+
+
 def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -> list[Camera]:
     """Explicit cameras from JSON: a list (or ``{"cameras": [...]}``) of objects with either
 
     ``{"eye": [x,y,z], "target": [x,y,z], "up": [0,1,0]?, "yfov_deg": 45?}`` or
     ``{"pose": 4x4 camera-to-world, "yfov_deg": 45?}``; optional ``znear``/``zfar``.
+
+    Every camera is checked (:func:`camera_from_json`): known keys only, finite numbers, a rigid pose
+    (rotation and translation: no scale, shear or mirror, within ``TOL.rigid_pose``), ``eye`` apart
+    from ``target``, a field of view in (0, 180) degrees, 0 < znear < zfar. Each refusal is one line
+    naming the file, the camera and the key.
     """
     p = Path(path)
     data = read_json(p, "camera file")
-    items = data.get("cameras") if isinstance(data, dict) else data
+    if isinstance(data, dict):
+        unknown = sorted(set(data) - {"cameras"})
+        if unknown:
+            raise NeuralaoError(
+                f"camera file {p}: unknown key {unknown[0]!r} (a camera file holds 'cameras')"
+            )
+        items = data.get("cameras")
+    else:
+        items = data
     if not isinstance(items, list) or not items:
         raise NeuralaoError(f"camera file {p} must hold a non-empty list of cameras")
-    cams = []
-    for k, c in enumerate(items):
-        try:
-            if "pose" in c:
-                pose = np.asarray(c["pose"], dtype=np.float64)
-                if pose.shape != (4, 4) or not np.isfinite(pose).all():
-                    raise ValueError("pose must be a finite 4x4 matrix")
-            else:
-                pose = look_at(
-                    np.asarray(c["eye"], float),
-                    np.asarray(c["target"], float),
-                    np.asarray(c.get("up", [0, 1, 0]), float),
-                )
-            yfov = math.radians(float(c.get("yfov_deg", 45.0)))
-            znear, zfar = _clip_planes(scene, pose[:3, 3])
-            if np.all(np.abs(pose[:3, 3] - scene.center) <= (scene.bounds[1] - scene.bounds[0]) / 2):
-                znear, zfar = scene.diagonal * 1e-3, scene.diagonal * 1.5  # inside the scene
-            cams.append(
-                Camera(pose, width, height, yfov, float(c.get("znear", znear)), float(c.get("zfar", zfar)))
-            )
-        except (KeyError, TypeError, ValueError) as e:
-            raise NeuralaoError(f"camera {k} in {p} is invalid: {e}") from None
-    return cams
+    return [
+        camera_from_json(c, scene, width, height, f"camera file {p}: camera {k}") for k, c in enumerate(items)
+    ]
+
+
+def _vector(c: dict, key: str, n: int, where: str) -> np.ndarray:
+    value = c[key]
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != ((n,) if n != 16 else (4, 4)) or isinstance(value, str):
+        want = "a 4x4 matrix (4 rows of 4 numbers)" if n == 16 else f"a list of {n} numbers"
+        raise NeuralaoError(f"{where}: {key!r} must be {want}, got {value!r}"[:300])
+    if not np.isfinite(a).all():
+        raise NeuralaoError(f"{where}: {key!r} has NaN or inf")
+    if np.abs(a).max() > MAX_COORDINATE:
+        raise NeuralaoError(
+            f"{where}: {key!r} reaches {np.abs(a).max():.3g}; coordinates lie within +-{MAX_COORDINATE:g}"
+        )
+    return a
+
+
+def _number(c: dict, key: str, where: str) -> float | None:
+    if key not in c:
+        return None
+    v = c[key]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise NeuralaoError(f"{where}: {key!r} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def rigid_pose(pose: np.ndarray, where: str) -> np.ndarray:
+    """``pose`` (4, 4) if it is a rigid camera-to-world transform: a rotation (orthonormal, det +1) and a
+    translation, bottom row [0, 0, 0, 1], within ``TOL.rigid_pose``; else a one-line error saying what it
+    holds instead (a scale, a shear or mirror, a singular matrix)."""
+    r = pose[:3, :3]
+    if np.abs(pose[3] - [0.0, 0.0, 0.0, 1.0]).max() > TOL.rigid_pose:
+        raise NeuralaoError(f"{where}: 'pose' bottom row must be [0, 0, 0, 1], got {pose[3].tolist()}")
+    scales = np.linalg.norm(r, axis=0)
+    if scales.min() <= TOL.rigid_pose:
+        raise NeuralaoError(f"{where}: 'pose' is singular (a zero column): a camera pose is a rotation")
+    if np.abs(r.T @ r - np.eye(3)).max() > TOL.rigid_pose or np.linalg.det(r) < 0:
+        if np.abs(scales - 1.0).max() > TOL.rigid_pose:
+            what = f"scales its axes by {np.round(scales, 6).tolist()}"
+        else:
+            what = "shears or mirrors its axes"
+        raise NeuralaoError(
+            f"{where}: 'pose' {what}; a camera pose must be rigid (a rotation and a translation, "
+            f"within {TOL.rigid_pose:g})"
+        )
+    return pose
+
+
+def camera_from_json(c: object, scene: Scene, width: int, height: int, where: str) -> Camera:
+    """One camera of a camera file (see :func:`load_poses`), checked; ``where`` names it in errors."""
+    if not isinstance(c, dict):
+        raise NeuralaoError(f"{where} must be a JSON object, got {type(c).__name__}")
+    unknown = sorted(set(c) - set(CAMERA_KEYS))
+    if unknown:
+        raise NeuralaoError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(CAMERA_KEYS)})")
+    if "pose" in c:
+        clash = sorted(set(c) & {"eye", "target", "up"})
+        if clash:
+            raise NeuralaoError(f"{where}: give either 'pose' or 'eye' / 'target', not both ({clash[0]!r})")
+        pose = rigid_pose(_vector(c, "pose", 16, where), where)
+    else:
+        missing = [k for k in ("eye", "target") if k not in c]
+        if missing:
+            raise NeuralaoError(f"{where}: needs 'pose', or 'eye' and 'target' (no {missing[0]!r})")
+        eye, target = _vector(c, "eye", 3, where), _vector(c, "target", 3, where)
+        up = _vector(c, "up", 3, where) if "up" in c else np.array([0.0, 1.0, 0.0])
+        span = np.abs(np.concatenate([eye, target])).max()
+        if not np.linalg.norm(target - eye) > 1e-9 * max(span, 1e-300):
+            raise NeuralaoError(f"{where}: 'eye' and 'target' are the same point; a camera looks somewhere")
+        if not np.abs(up).max() > 0:
+            raise NeuralaoError(f"{where}: 'up' is the zero vector")
+        pose = look_at(eye, target, up)
+    yfov_deg = _number(c, "yfov_deg", where)
+    if yfov_deg is not None and not 0 < yfov_deg < 180:
+        raise NeuralaoError(f"{where}: 'yfov_deg' must be in (0, 180) degrees, got {yfov_deg}")
+    yfov = math.radians(45.0 if yfov_deg is None else yfov_deg)
+    znear, zfar = _clip_planes(scene, pose[:3, 3])
+    if np.all(np.abs(pose[:3, 3] - scene.center) <= (scene.bounds[1] - scene.bounds[0]) / 2):
+        znear, zfar = scene.diagonal * 1e-3, scene.diagonal * 1.5  # inside the scene
+    given_near, given_far = _number(c, "znear", where), _number(c, "zfar", where)
+    znear = znear if given_near is None else given_near
+    zfar = zfar if given_far is None else given_far
+    if not 0 < znear < zfar:
+        raise NeuralaoError(f"{where}: clip planes need 0 < znear < zfar, got znear {znear:g}, zfar {zfar:g}")
+    return Camera(pose, width, height, yfov, znear, zfar)

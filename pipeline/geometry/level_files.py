@@ -24,7 +24,6 @@ unknown roles or parameters in ``extras``, a non-finite or zero-scale (singular)
 
 from __future__ import annotations
 
-import base64
 import json
 import math
 import shutil
@@ -35,7 +34,15 @@ from typing import Any
 
 import numpy as np
 
-from neuralao.pipeline.geometry.scene import gltf_resource
+from neuralao.pipeline.geometry.gltf import (
+    BIN_CHUNK,
+    COMPONENT,
+    GLB_MAGIC,
+    INSTANCING,
+    JSON_CHUNK,
+    GltfFile,
+    gltf_label,
+)
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_path
 
@@ -48,24 +55,12 @@ ROLE_PARAMS: dict[str, dict[str, float]] = {
     "shrub": {"density": 1.0},
     "grass": {},
 }
-INSTANCING = "EXT_mesh_gpu_instancing"
 # Keys of a node's extras the reader understands (anything else there is an error: a typo such as
 # "densty" would otherwise silently bake with the default).
 _EXTRAS_KEYS = {"role", "transmission", "density", "name"}
 # An instance whose |det| of the 3x3 part is below this fraction of (its largest axis scale)^3 is
 # singular (a zero scale on some axis): its normals and its box would be undefined.
 _SINGULAR_REL = 1e-9
-
-_COMPONENT = {
-    5120: np.int8,
-    5121: np.uint8,
-    5122: np.int16,
-    5123: np.uint16,
-    5125: np.uint32,
-    5126: np.float32,
-}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
-_GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
 @dataclass
@@ -204,13 +199,6 @@ def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return m[:, :3, 3].copy(), matrix_to_quat(rot), s
 
 
-def gltf_label(kind: str, index: int, item: Any) -> str:
-    """How every message names a glTF node, mesh or other indexed item: ``node 3 'Chair'`` when it
-    has a name, ``node 3 (unnamed)`` when it has none (the index is always there: names repeat)."""
-    name = item.get("name") if isinstance(item, dict) else None
-    return f"{kind} {index} {str(name)!r}" if name not in (None, "") else f"{kind} {index} (unnamed)"
-
-
 def node_matrix(node: dict, where: str) -> np.ndarray:
     """The local 4x4 of a glTF node (``matrix`` column-major, or TRS)."""
     if "matrix" in node:
@@ -251,111 +239,6 @@ def check_transforms(m: np.ndarray, where: str) -> None:
 # --------------------------------------------------------------------------- reading
 
 
-class _Gltf:
-    """Parsed JSON + buffers of a .gltf (external or data-URI buffers) or a .glb file."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        raw = path.read_bytes()
-        glb_bin = None
-        if raw[:4] == b"glTF":
-            glb_bin, text = self._split_glb(raw)
-        else:
-            text = raw
-        try:
-            self.doc = json.loads(text)
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise NeuralaoError(f"level {path} is not valid glTF JSON: {e}") from None
-        if not isinstance(self.doc, dict):
-            raise NeuralaoError(f"level {path}: the glTF root must be a JSON object")
-        version = str(self.doc.get("asset", {}).get("version", ""))
-        if not version.startswith("2"):
-            raise NeuralaoError(f"level {path}: glTF asset.version must be 2.x, got {version!r}")
-        self.buffers = [self._buffer(i, b, glb_bin) for i, b in enumerate(self.doc.get("buffers", []))]
-
-    def _split_glb(self, raw: bytes) -> tuple[bytes | None, bytes]:
-        if len(raw) < 20:
-            raise NeuralaoError(f"level {self.path}: truncated GLB header")
-        magic, version, length = struct.unpack_from("<III", raw, 0)
-        if magic != _GLB_MAGIC or version != 2 or length > len(raw):
-            raise NeuralaoError(
-                f"level {self.path}: bad or truncated GLB (version {version}, length {length})"
-            )
-        pos, text, binary = 12, None, None
-        while pos + 8 <= length:
-            size, kind = struct.unpack_from("<II", raw, pos)
-            chunk = raw[pos + 8 : pos + 8 + size]
-            if len(chunk) != size:
-                raise NeuralaoError(f"level {self.path}: truncated GLB chunk")
-            if kind == _JSON_CHUNK:
-                text = chunk
-            elif kind == _BIN_CHUNK:
-                binary = chunk
-            pos += 8 + size
-        if text is None:
-            raise NeuralaoError(f"level {self.path}: GLB has no JSON chunk")
-        return binary, text
-
-    def _buffer(self, index: int, spec: dict, glb_bin: bytes | None) -> bytes:
-        uri = spec.get("uri")
-        if uri is None:
-            if glb_bin is None:
-                raise NeuralaoError(f"level {self.path}: buffer {index} has no uri and there is no GLB chunk")
-            data = glb_bin
-        elif isinstance(uri, str) and uri.startswith("data:"):
-            try:
-                data = base64.b64decode(uri.split(",", 1)[1])
-            except Exception:
-                raise NeuralaoError(f"level {self.path}: buffer {index} has a bad data URI") from None
-        else:
-            if not isinstance(uri, str):
-                raise NeuralaoError(f"level {self.path}: buffer {index} uri must be a string, got {uri!r}")
-            p = gltf_resource(self.path, uri)  # never a file outside the glTF's folder
-            if not p.is_file():
-                raise NeuralaoError(f"level {self.path}: buffer {index} file not found: {uri}")
-            data = p.read_bytes()
-        if len(data) < int(spec.get("byteLength", 0)):
-            raise NeuralaoError(
-                f"level {self.path}: buffer {index} has {len(data)} bytes, "
-                f"byteLength says {spec.get('byteLength')}"
-            )
-        return data
-
-    def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:
-        """Accessor ``index`` as a (count, width) or (count,) array (normalised integers -> float,
-        unless ``normalize`` is False: then the stored integers, e.g. to copy an attribute as it is)."""
-        accs = self.doc.get("accessors", [])
-        if not isinstance(index, int) or not 0 <= index < len(accs):
-            raise NeuralaoError(f"{where}: accessor {index!r} is not in the file ({len(accs)} accessors)")
-        a = accs[index]
-        try:
-            dtype = np.dtype(_COMPONENT[a["componentType"]]).newbyteorder("<")
-            width = _WIDTH[a["type"]]
-            count = int(a["count"])
-            view = self.doc["bufferViews"][a["bufferView"]]
-            buf = self.buffers[view["buffer"]]
-        except (KeyError, IndexError, TypeError):
-            raise NeuralaoError(
-                f"{where}: accessor {index} is malformed (or sparse, which is not supported)"
-            ) from None
-        offset = int(view.get("byteOffset", 0)) + int(a.get("byteOffset", 0))
-        item = dtype.itemsize * width
-        stride = int(view.get("byteStride", item))
-        end = offset + (count - 1) * stride + item if count else offset
-        if end > len(buf) or end > int(view.get("byteOffset", 0)) + int(view.get("byteLength", 0)):
-            raise NeuralaoError(
-                f"{where}: accessor {index} runs past the end of its buffer (truncated file?)"
-            )
-        arr = np.lib.stride_tricks.as_strided(
-            np.frombuffer(buf, dtype=dtype, count=max(0, (end - offset) // dtype.itemsize), offset=offset),
-            shape=(count, width),
-            strides=(stride, dtype.itemsize),
-        ).copy()
-        if normalize and a.get("normalized") and dtype.kind in "iu":
-            arr = np.maximum(arr / float(np.iinfo(dtype).max), -1.0)
-        return arr[:, 0] if width == 1 else arr
-
-
 def _role_and_params(node: dict, inherited: tuple[str, dict] | None, where: str) -> tuple[str, dict]:
     extras = node.get("extras", {})
     if not isinstance(extras, dict):
@@ -391,19 +274,23 @@ def _role_and_params(node: dict, inherited: tuple[str, dict] | None, where: str)
     return role, params
 
 
-def _instances(g: _Gltf, node: dict, where: str) -> np.ndarray | None:
+def _instances(g: GltfFile, node: dict, where: str) -> np.ndarray | None:
     ext = node.get("extensions", {}).get(INSTANCING)
     if ext is None:
         return None
-    attrs = ext.get("attributes", {})
+    attrs = ext.get("attributes", {}) if isinstance(ext, dict) else None
     known = {"TRANSLATION", "ROTATION", "SCALE"}
-    if not attrs or not (set(attrs) & known):
+    if not isinstance(attrs, dict) or not (set(attrs) & known):
         raise NeuralaoError(f"{where}: {INSTANCING} has no TRANSLATION, ROTATION or SCALE attribute")
     arrays = {k: g.accessor(attrs[k], f"{where} {INSTANCING}.{k}") for k in known if k in attrs}
     counts = {len(v) for v in arrays.values()}
     if len(counts) != 1:
         raise NeuralaoError(f"{where}: {INSTANCING} attributes have different counts {sorted(counts)}")
     count = counts.pop()
+    if count == 0:  # a node of no instances: nothing to place, bake or fit (each step needs one)
+        raise NeuralaoError(
+            f"{where}: {INSTANCING} has 0 instances; give the node instances or remove it from the level"
+        )
     for k, w in (("TRANSLATION", 3), ("ROTATION", 4), ("SCALE", 3)):
         if k in arrays and arrays[k].shape != (count, w):
             raise NeuralaoError(f"{where}: {INSTANCING}.{k} must be VEC{w}")
@@ -413,7 +300,7 @@ def _instances(g: _Gltf, node: dict, where: str) -> np.ndarray | None:
         raise NeuralaoError(f"{where}: {INSTANCING}: {e}") from None
 
 
-def _mesh(g: _Gltf, index: int, where: str) -> LevelMesh:
+def _mesh(g: GltfFile, index: int, where: str) -> LevelMesh:
     spec = g.doc["meshes"][index]
     name = str(spec.get("name", f"mesh{index}"))
     verts, faces, offset = [], [], 0
@@ -450,7 +337,7 @@ def read_level(path: str | Path) -> Level:
         raise NeuralaoError(f"a level must be a .gltf or .glb file, got {path.name!r}")
     if not path.is_file():
         raise NeuralaoError(f"level file not found: {path}")
-    g = _Gltf(path)
+    g = GltfFile(path)
     doc = g.doc
     nodes = doc.get("nodes", [])
     n_meshes = len(doc.get("meshes", []))
@@ -608,7 +495,7 @@ class GltfWriter:
             arr = arr.astype(np.float32)
         if arr.dtype == np.int64:
             arr = arr.astype(np.uint32)
-        code = {np.dtype(v): k for k, v in _COMPONENT.items()}[arr.dtype]
+        code = {np.dtype(v): k for k, v in COMPONENT.items()}[arr.dtype]
         width = 1 if arr.ndim == 1 else arr.shape[1]
         kind = kind or {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}[width]
         while len(self._blob) % 4:
@@ -699,9 +586,9 @@ class GltfWriter:
                 text += b" " * (-len(text) % 4)
                 total = 12 + 8 + len(text) + 8 + len(self._blob)
                 with atomic_path(path) as tmp, open(tmp, "wb") as f:
-                    f.write(struct.pack("<III", _GLB_MAGIC, 2, total))
-                    f.write(struct.pack("<II", len(text), _JSON_CHUNK) + text)
-                    f.write(struct.pack("<II", len(self._blob), _BIN_CHUNK))
+                    f.write(struct.pack("<III", GLB_MAGIC, 2, total))
+                    f.write(struct.pack("<II", len(text), JSON_CHUNK) + text)
+                    f.write(struct.pack("<II", len(self._blob), BIN_CHUNK))
                     self._write_blob(f)
             else:
                 bin_path = path.with_suffix(".bin")
@@ -715,6 +602,12 @@ class GltfWriter:
                 self._blob.close()
         return path
 
+    def close(self) -> None:
+        """Remove the spill file (a no-op without one, or once written): for a write that never happens,
+        such as an interrupted bake's."""
+        if isinstance(self._blob, _SpillBuffer):
+            self._blob.close()
+
     def _write_blob(self, f) -> None:
         if isinstance(self._blob, _SpillBuffer):
             self._blob.copy_to(f)
@@ -724,5 +617,5 @@ class GltfWriter:
 
 def read_gltf_json(path: str | Path) -> tuple[dict, Any]:
     """The JSON of a .gltf/.glb and an accessor reader ``get(index) -> array`` (for outputs and tests)."""
-    g = _Gltf(Path(path))
+    g = GltfFile(Path(path))
     return g.doc, lambda i: g.accessor(i, str(path))

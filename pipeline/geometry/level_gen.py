@@ -21,9 +21,16 @@ from pathlib import Path
 import numpy as np
 
 from neuralao.pipeline.geometry.level_files import GltfWriter, quat_to_matrix
-from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.geometry.scene import MAX_COORDINATE, load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.limits import (
+    available_memory,
+    check_count,
+    check_int_range,
+    check_seed,
+    format_bytes,
+)
 from neuralao.runtime.foundation.settings import apply_overrides, from_dict, settings_to_dict
 
 
@@ -270,7 +277,7 @@ def _yaw_quats(rng: np.random.Generator, n: int) -> np.ndarray:
 def _scatter(
     rng: np.random.Generator, n: int, s: LevelGenSettings, phases: np.ndarray, margin: float, sink: float
 ):
-    half = s.terrain_size / 2 - margin
+    half = max(s.terrain_size / 2 - margin, 0.0)  # a terrain narrower than the margins: at its centre
     x, z = rng.uniform(-half, half, n), rng.uniform(-half, half, n)
     return np.stack([x, terrain_height(x, z, s, phases) - sink, z], 1)
 
@@ -336,18 +343,95 @@ def generate(s: LevelGenSettings) -> GltfWriter:
     return g
 
 
+# Bytes the generator allocates per unit of each count (generous: the numpy arrays, their float32 copies in
+# the glTF writer, its binary buffer and the JSON of nodes), so a count the machine cannot hold is refused
+# before anything is allocated, naming the setting and its bound.
+TERRAIN_VERTEX_BYTES = 512  # (terrain_cells + 1)^2 vertices, two faces per cell, height temporaries
+HOUSE_BYTES = 4096  # a node: its matrix, name and extras in the document, and its JSON text
+HOUSE_BOX_BYTES = 16 * 4096  # one box in each of the (up to 16) house models
+INSTANCE_BYTES = 512  # a tree, shrub or grass instance: TRS arrays, float32 copies, buffer bytes
+CROWN_FACE_BYTES = 6 * 256  # an icosphere face in each of the tree's 5 crown clusters and the shrub
+# Icosphere subdivisions: 20 x 4^k faces; past 10 (21M faces a sphere) no level needs them.
+MAX_CROWN_SUBDIVISIONS = 10
+
+
+def _memory(s: LevelGenSettings) -> dict[str, float]:
+    """Bytes each count of ``s`` makes the generator allocate (see the constants above)."""
+    return {
+        "terrain_cells": (s.terrain_cells + 1) ** 2 * TERRAIN_VERTEX_BYTES,
+        "houses": s.houses * HOUSE_BYTES,
+        "house_boxes": s.house_boxes * HOUSE_BOX_BYTES,
+        "trees": s.trees * INSTANCE_BYTES,
+        "shrubs": s.shrubs * INSTANCE_BYTES,
+        "grass": s.grass * INSTANCE_BYTES,
+        "crown_subdivisions": 20 * 4**s.crown_subdivisions * CROWN_FACE_BYTES,
+        "buildings": sum(b.count for b in s.buildings) * HOUSE_BYTES,
+    }
+
+
 def check(s: LevelGenSettings) -> None:
-    for name in ("terrain_cells", "houses", "house_boxes", "trees", "shrubs", "grass"):
-        v = getattr(s, name)
-        if v < (1 if name in ("terrain_cells", "house_boxes") else 0):
-            raise NeuralaoError(
-                f"{name} must be >= {1 if name in ('terrain_cells', 'house_boxes') else 0}, got {v}"
-            )
-    if not s.terrain_size > 0:
-        raise NeuralaoError(f"terrain_size must be > 0, got {s.terrain_size}")
+    """Every setting in its range, and every count within what this machine can hold, before anything is
+    allocated; each refusal is one line naming the setting (and the bound)."""
+    check_seed("seed", s.seed)
+    for name in ("terrain_cells", "house_boxes", "houses", "trees", "shrubs", "grass"):
+        low = 1 if name in ("terrain_cells", "house_boxes") else 0
+        check_count(name, getattr(s, name), low=low, bytes_each=1)  # an integer >= low; memory below
+    check_int_range("crown_subdivisions", s.crown_subdivisions, 0, MAX_CROWN_SUBDIVISIONS)
+    if not 0 < s.terrain_size <= MAX_COORDINATE:
+        raise NeuralaoError(f"terrain_size must be in (0, {MAX_COORDINATE:g}] m, got {s.terrain_size}")
+    for name in ("terrain_height", "blocker_height"):
+        if not abs(getattr(s, name)) <= MAX_COORDINATE:
+            raise NeuralaoError(f"{name} must be within +-{MAX_COORDINATE:g} m, got {getattr(s, name)}")
+    if not s.shrub_density >= 0:
+        raise NeuralaoError(f"shrub_density must be >= 0, got {s.shrub_density}")
+    if not 0 <= s.tree_transmission <= 1:
+        raise NeuralaoError(f"tree_transmission must be in [0, 1], got {s.tree_transmission}")
     for b in s.buildings:
-        if b.count < 0 or not b.scale > 0:
-            raise NeuralaoError(f"building {b.mesh!r}: count must be >= 0 and scale > 0")
+        if b.count < 0 or not 0 < b.scale <= MAX_COORDINATE:
+            raise NeuralaoError(
+                f"building {b.mesh!r}: count must be >= 0 and scale in (0, {MAX_COORDINATE:g}], "
+                f"got count {b.count}, scale {b.scale}"
+            )
+    need = _memory(s)
+    avail = available_memory()
+    for name, nbytes in need.items():
+        if nbytes > avail:
+            raise NeuralaoError(
+                f"{name} {_shown(s, name)} is more than this machine can hold: about {format_bytes(nbytes)} "
+                f"of memory, {format_bytes(avail)} available (at most {_largest(name, s, avail)})"
+            )
+    if sum(need.values()) > avail:
+        top = sorted(need, key=need.get, reverse=True)[:3]
+        raise NeuralaoError(
+            f"the level's counts together need about {format_bytes(sum(need.values()))} of memory, "
+            f"{format_bytes(avail)} available (most: {', '.join(f'{n} {_shown(s, n)}' for n in top)})"
+        )
+
+
+def _shown(s: LevelGenSettings, name: str) -> str:
+    if name == "buildings":
+        return f"({sum(b.count for b in s.buildings)} placements)"
+    return str(getattr(s, name))
+
+
+def _largest(name: str, s: LevelGenSettings, avail: int) -> str:
+    """The largest value of count ``name`` that fits ``avail`` bytes alone (for the message)."""
+    per = {
+        "houses": HOUSE_BYTES,
+        "house_boxes": HOUSE_BOX_BYTES,
+        "trees": INSTANCE_BYTES,
+        "shrubs": INSTANCE_BYTES,
+        "grass": INSTANCE_BYTES,
+        "buildings": HOUSE_BYTES,
+    }
+    if name == "terrain_cells":
+        return f"{max(math.isqrt(avail // TERRAIN_VERTEX_BYTES) - 1, 0)} cells per side"
+    if name == "crown_subdivisions":
+        k = 0
+        while 20 * 4 ** (k + 1) * CROWN_FACE_BYTES <= avail:
+            k += 1
+        return f"{k} subdivisions"
+    return f"{avail // per[name]}"
 
 
 def write_level(out: str | Path, s: LevelGenSettings, preset: str = "tiny") -> tuple[Path, Path]:
@@ -355,10 +439,11 @@ def write_level(out: str | Path, s: LevelGenSettings, preset: str = "tiny") -> t
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} is a file, expected a folder")
-    path = generate(s).write(out / "level.gltf")
+    writer = generate(s)
     cfg = out / "bake.json"
     write_json(cfg, BAKE_CONFIGS.get(preset, {}))
-    return path, cfg
+    # level.gltf last (after its .bin): its presence marks a complete level, even after an interrupt
+    return writer.write(out / "level.gltf"), cfg
 
 
 def settings_for(preset: str, seed: int = 0, overrides: list[str] | None = None) -> LevelGenSettings:

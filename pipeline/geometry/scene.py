@@ -13,10 +13,10 @@ import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
+from neuralao.pipeline.geometry.gltf import check_gltf, outside_folder_message
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 log = logging.getLogger(__name__)
@@ -111,6 +111,8 @@ def _read_geometries(path: Path) -> list:
     line lost coordinates parses, then fails inside trimesh's transform code."""
     import trimesh  # measured: ~1 s to import; only the file readers and writers need it
 
+    if path.suffix.lower() in (".gltf", ".glb"):
+        check_gltf(path)  # the specification's rules first: trimesh reads some broken files as nonsense
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
         return list(loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded])
@@ -125,25 +127,6 @@ def _read_geometries(path: Path) -> list:
 
 # trimesh's FilePathResolver: "'NAME' escapes resolver root 'ROOT' ..."
 _ESCAPED = re.compile(r"^'(.*)' escapes resolver root ")
-
-
-def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
-    """The one-line refusal of a glTF resource (buffer or image) outside the glTF's own folder."""
-    folder = Path(gltf).resolve().parent
-    return (
-        f"{Path(gltf).name} refers to {uri!r}, which is outside its folder {folder}: only files in the "
-        "glTF's folder or below it are read; copy the file there and point the uri at it, or use a .glb"
-    )
-
-
-def gltf_resource(gltf: str | os.PathLike, uri: str) -> Path:
-    """The file a glTF's relative ``uri`` names (percent-decoded), refused when it leaves the glTF's
-    folder."""
-    folder = Path(gltf).resolve().parent
-    target = (folder / unquote(uri)).resolve()
-    if not target.is_relative_to(folder):
-        raise NeuralaoError(outside_folder_message(gltf, uri))
-    return target
 
 
 def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate: bool = True) -> Scene:

@@ -19,7 +19,6 @@ training settings (budget, widths, resolution, which model initialises it). For 
 
 from __future__ import annotations
 
-import json
 import logging
 import shutil
 import subprocess
@@ -39,6 +38,7 @@ from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_
 from neuralao.runtime.baselines import time_screen_space
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json
+from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.glsl_runner import time_compute
@@ -319,7 +319,7 @@ def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
     commit = git_commit()
     out = _path(settings.out)
     index_path = out / "index.json"
-    index = json.loads(index_path.read_text()) if index_path.is_file() else {}
+    index = read_json(index_path, "model index") if index_path.is_file() else {}
     index.setdefault("models", {})
     checkpoints: dict[str, Path] = {}
     t0 = time.perf_counter()

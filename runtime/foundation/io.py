@@ -10,11 +10,16 @@ import contextlib
 import hashlib
 import io as _io
 import json
+import math
 import os
+import shutil
+import signal
+import stat
 import struct
 import tempfile
+import threading
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +27,61 @@ import numpy as np
 from PIL import Image
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import available_memory, format_bytes
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it (``os.umask`` can only read it by setting it, which
+    races with any thread creating a file meanwhile)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def new_file_mode(path: str | os.PathLike | None = None) -> int:
+    """The permissions a written file gets: those of the file it replaces, else 0o666 less the umask (what
+    ``open(path, "w")`` gives; ``mkstemp`` alone would make every output private, 0o600)."""
+    if path is not None:
+        try:
+            st = os.stat(path)
+            if stat.S_ISREG(st.st_mode):
+                return stat.S_IMODE(st.st_mode)
+        except OSError:
+            pass
+    return 0o666 & ~_umask()
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) and SIGTERM over the few statements that create a temporary and note its name,
+    then act on one that came meanwhile: an interrupt between the two would leave a temporary no cleanup
+    knows of. Signals reach Python code in the main thread only, so elsewhere there is nothing to hold."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[tuple[int, object]] = []
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    saved = {s: h for s, h in saved.items() if h is not None}  # None: a handler Python did not install
+    for s in saved:
+        signal.signal(s, lambda signum, frame: pending.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
+        for signum, frame in pending[:1]:
+            handler = saved[signum]
+            if callable(handler):
+                handler(signum, frame)  # raises KeyboardInterrupt (or the command's SIGTERM exception)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
 
 
 @contextlib.contextmanager
@@ -29,25 +89,62 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
 
     ``suffix`` defaults to the target's suffix so libraries that infer a format from the file name
-    (numpy, PIL, trimesh) still do the right thing.
+    (numpy, PIL, trimesh) still do the right thing. The file gets :func:`new_file_mode`'s permissions.
+    Whatever ends the block (an error, Ctrl-C, SIGTERM), the temporary is removed.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{path.name}.",
-        suffix=".tmp" + (suffix if suffix is not None else path.suffix),
-        dir=path.parent,
-    )
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path: Path | None = None
     try:
+        with _signals_held():
+            fd, tmp = tempfile.mkstemp(
+                prefix=f".{path.name}.",
+                suffix=".tmp" + (suffix if suffix is not None else path.suffix),
+                dir=path.parent,
+            )
+            tmp_path = Path(tmp)
+            try:
+                os.fchmod(fd, new_file_mode(path))
+            finally:
+                os.close(fd)
         yield tmp_path
         with open(tmp_path, "rb+") as f:
             os.fsync(f.fileno())
         os.replace(tmp_path, path)
     finally:
-        if tmp_path.exists():
+        if tmp_path is not None and tmp_path.exists():
             tmp_path.unlink()
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield an empty temporary folder next to ``path``; if the block succeeds it takes ``path``'s place
+    whole (a folder there before is removed, never merged with: no file of an earlier output survives
+    beside the new ones), else it is removed and ``path`` is left as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp: Path | None = None
+    old: Path | None = None
+    try:
+        with _signals_held():
+            tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+            old = tmp.with_name(tmp.name.removesuffix(".tmp") + ".old.tmp")
+        os.chmod(tmp, 0o777 & ~_umask())
+        yield tmp
+        with _signals_held():  # both renames or neither: an interrupt never leaves the old folder aside
+            moved = path.is_dir() and not path.is_symlink()
+            if moved:
+                os.rename(path, old)
+            try:
+                os.replace(tmp, path)
+            except OSError:
+                if moved:
+                    os.rename(old, path)
+                raise
+    finally:
+        for leftover in (tmp, old):
+            if leftover is not None and leftover.is_dir():
+                shutil.rmtree(leftover, ignore_errors=True)
 
 
 def remove_stale_temporaries(directory: str | os.PathLike) -> list[Path]:
@@ -101,15 +198,103 @@ def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
                 zf.writestr(info, buf.getvalue())
 
 
-def read_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Load every array of an npz (no pickles); a truncated or corrupt file is a one-line error."""
+def read_npz(path: str | os.PathLike, keys: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+    """The arrays of an npz (no pickles): every one, or those of ``keys`` it holds (a member nothing reads
+    is never inflated). Before a member is inflated, its header is checked against the bytes it stores
+    and the memory available, so a member that cannot fit is named as such, not taken for corruption; a
+    truncated or corrupt file is a one-line error."""
     try:  # our own handle: np.load leaves its file open when the zip directory is unreadable
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
+            wanted = z.files if keys is None else [k for k in z.files if k in set(keys)]
+            out = {}
+            for k in wanted:
+                _check_npz_member(z.zip, k, path)
+                out[k] = z[k]
+            return out
     except FileNotFoundError:
         raise NeuralaoError(f"file not found: {path}") from None
+    except IsADirectoryError:
+        raise NeuralaoError(f"{path} is a folder, not an .npz file") from None
+    except NeuralaoError:
+        raise
     except Exception as e:
         raise NeuralaoError(f"cannot read {path}: corrupt or truncated ({type(e).__name__})") from None
+
+
+def npz_keys(path: str | os.PathLike) -> list[str]:
+    """The array names of an npz, read from its zip directory (nothing inflated)."""
+    return list(read_npz_directory(path))
+
+
+def read_npz_directory(path: str | os.PathLike) -> dict[str, int]:
+    """Array name -> inflated bytes of each member of an npz (its zip directory only)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return {i.filename.removesuffix(".npy"): i.file_size for i in zf.infolist()}
+    except FileNotFoundError:
+        raise NeuralaoError(f"file not found: {path}") from None
+    except IsADirectoryError:
+        raise NeuralaoError(f"{path} is a folder, not an .npz file") from None
+    except Exception as e:
+        raise NeuralaoError(f"cannot read {path}: corrupt or truncated ({type(e).__name__})") from None
+
+
+def _check_npz_member(zf: zipfile.ZipFile, key: str, path: str | os.PathLike) -> None:
+    """Refuse member ``key`` before inflating it when it cannot be read: Python objects, a header that
+    declares more bytes than the member holds, or more than the memory available."""
+    names = set(zf.namelist())
+    info = zf.getinfo(key + ".npy" if key + ".npy" in names else key)
+    with zf.open(info) as f:
+        shape, dtype = _npy_header(f)
+    _check_npy_size(f"{path}: array {key!r}", shape, dtype, info.file_size)
+
+
+def _npy_header(f) -> tuple[tuple[int, ...], np.dtype]:
+    version = np.lib.format.read_magic(f)
+    read = np.lib.format.read_array_header_2_0 if version >= (2, 0) else np.lib.format.read_array_header_1_0
+    shape, _, dtype = read(f)
+    return tuple(shape), dtype
+
+
+def _check_npy_size(where: str, shape: tuple[int, ...], dtype: np.dtype, stored: int) -> None:
+    if dtype.hasobject:
+        raise NeuralaoError(f"{where} holds Python objects ({dtype}); only plain arrays are read")
+    nbytes = math.prod(shape) * dtype.itemsize
+    avail = available_memory()
+    if nbytes > avail:
+        raise NeuralaoError(
+            f"{where} of shape {shape} ({format_bytes(nbytes)}) is more than the "
+            f"{format_bytes(avail)} of memory available"
+        )
+    if nbytes > stored:
+        raise NeuralaoError(
+            f"{where}: its header declares shape {shape} ({nbytes} bytes) but it holds {stored} bytes "
+            "(truncated or corrupt)"
+        )
+
+
+def read_npy(path: str | os.PathLike, what: str) -> np.ndarray:
+    """The array of an .npy file of real numbers (ints or floats): its header is checked before anything
+    is allocated (size against the file and the memory), and complex, boolean, structured or object arrays
+    are refused (numpy would drop an imaginary part with only a warning). ``what`` names it in errors."""
+    try:
+        size = os.stat(path).st_size
+        with open(path, "rb") as f:
+            shape, dtype = _npy_header(f)
+            header = f.tell()
+    except FileNotFoundError:
+        raise NeuralaoError(f"{what} file not found: {path}") from None
+    except IsADirectoryError:
+        raise NeuralaoError(f"{what} {path} is a folder, not an .npy file") from None
+    except Exception as e:
+        raise NeuralaoError(f"cannot read {what} {path}: not an .npy array ({type(e).__name__})") from None
+    if dtype.kind not in "iuf" or dtype.names is not None:
+        raise NeuralaoError(f"{what} {path} holds {dtype} values; it must hold real numbers (int or float)")
+    _check_npy_size(f"{what} {path}", shape, dtype, size - header)
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as e:
+        raise NeuralaoError(f"cannot read {what} {path}: corrupt or truncated ({type(e).__name__})") from None
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:

@@ -40,6 +40,9 @@ PIXEL_DISK_BYTES = 64
 # The largest cap (samples per face and the like): caps allocate nothing, but they meet int64
 # arithmetic, so any value up to here behaves as "no cap".
 MAX_CAP = 1 << 62
+# The largest float32. Distances, sizes and weights end up in float32 buffers (rays, G-buffers, shader
+# uniforms), where a larger float64 turns into inf: such a value is refused where it is typed.
+FLOAT32_MAX = 3.4028234663852886e38
 # The largest seed: numpy's SeedSequence and torch.manual_seed both take any value in [0, 2^63).
 MAX_SEED = (1 << 63) - 1
 
@@ -186,6 +189,17 @@ def check_finite_number(name: str, value: object, low: float | None = None, stri
     if low is not None and (value <= low if strict else value < low):
         raise NeuralaoError(f"{name} must be {'>' if strict else '>='} {low:g}, got {value!r}")
     return float(value)
+
+
+def check_float32(name: str, value: object) -> float:
+    """A finite number that float32 holds (|value| <= FLOAT32_MAX): what every float flag and setting must
+    be, whatever it means, before any command uses it."""
+    number = check_finite_number(name, value)
+    if abs(number) > FLOAT32_MAX:
+        raise NeuralaoError(
+            f"{name} {value!r} is out of range: it is used in float32, whose largest is {FLOAT32_MAX:.4g}"
+        )
+    return number
 
 
 def check_finite_arrays(arrays: dict, what: str, kind: str = "channel") -> None:

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 
@@ -23,26 +26,46 @@ MAX_JSON_BYTES = 64 << 20
 MAX_JSON_DEPTH = 64
 
 
-def _depth(text: str) -> int:
-    """Deepest nesting of brackets outside strings (the parser's recursion depth)."""
-    depth = deepest = 0
-    in_string = escaped = False
-    for ch in text:
-        if in_string:
-            if escaped:
-                escaped = False
-            elif ch == "\\":
-                escaped = True
-            elif ch == '"':
-                in_string = False
-        elif ch == '"':
-            in_string = True
-        elif ch in "[{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif ch in "]}":
-            depth -= 1
-    return deepest
+# A JSON string literal (escapes included): what the depth count skips.
+_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+# Per byte: +1 for an opening bracket, -1 for a closing one.
+_STEP = np.zeros(256, np.int8)
+_STEP[[ord("["), ord("{")]], _STEP[[ord("]"), ord("}")]] = 1, -1
+
+
+def _depth(raw: bytes) -> int:
+    """Deepest nesting of brackets outside strings (the parser's recursion depth), in C speed: strings
+    are cut out, then the running count of openers minus closers is a cumulative sum."""
+    if raw.count(b"[") + raw.count(b"{") <= MAX_JSON_DEPTH:
+        return 0  # cannot nest deeper than the bound (the common case: no scan)
+    step = _STEP[np.frombuffer(_STRING.sub(b"", raw), np.uint8)]
+    return int(np.cumsum(step, dtype=np.int64).max(initial=0))
+
+
+def parse_json(data: bytes | str, where: str | os.PathLike, what: str = "JSON") -> Any:
+    """The parsed JSON of ``data`` (UTF-8 bytes or text), bounded in size and nesting depth; any failure is
+    one line naming ``where`` (a file, a GLB's JSON chunk, a --set value). Every JSON a user hands in is
+    parsed here: Python's parser recurses per level and would fail with a RecursionError."""
+    try:  # text from the command line may carry undecodable bytes (as surrogates)
+        raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    except UnicodeEncodeError as e:
+        raise NeuralaoError(f"{where}: {what} is not UTF-8 (character {e.start})") from None
+    if len(raw) > MAX_JSON_BYTES:
+        raise NeuralaoError(f"{where}: {what} of {len(raw)} bytes is over {MAX_JSON_BYTES}")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise NeuralaoError(f"{where}: {what} is not UTF-8 (byte {e.start}); save it as UTF-8") from None
+    if _depth(raw) > MAX_JSON_DEPTH:
+        raise NeuralaoError(f"{where}: {what} nests deeper than {MAX_JSON_DEPTH} levels")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise NeuralaoError(
+            f"cannot read {where}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})"
+        ) from None
+    except RecursionError:  # nesting the count above could not see (never expected)
+        raise NeuralaoError(f"{where}: {what} nests too deep") from None
 
 
 def read_json(path: str | os.PathLike, what: str = "JSON file") -> Any:
@@ -58,18 +81,7 @@ def read_json(path: str | os.PathLike, what: str = "JSON file") -> Any:
         raise NeuralaoError(f"{path} is a folder, not a {what}") from None
     except OSError as e:
         raise NeuralaoError(f"cannot read {path}: {e.strerror or type(e).__name__}") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise NeuralaoError(f"{path}: {what} is not UTF-8 (byte {e.start})") from None
-    if _depth(text) > MAX_JSON_DEPTH:
-        raise NeuralaoError(f"{path}: {what} nests deeper than {MAX_JSON_DEPTH} levels")
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as e:
-        raise NeuralaoError(
-            f"{path} is corrupt: not valid JSON (line {e.lineno}, column {e.colno})"
-        ) from None
+    return parse_json(raw, path, what)
 
 
 def read_manifest(folder: str | os.PathLike, kind: str | None = None, label: str = "") -> dict:

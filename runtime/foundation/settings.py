@@ -11,13 +11,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.limits import FLOAT32_MAX
+from neuralao.runtime.foundation.manifest import parse_json, read_json
 
 T = TypeVar("T")
 
@@ -74,6 +76,13 @@ def _coerce(name: str, value: Any, tp: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise NeuralaoError(f"setting {name!r}: expected a number, got {value!r}")
+        # NaN or inf is no setting's meaning, and a value past float32 becomes inf where it is used:
+        # refused here, before any work, naming the setting
+        if not math.isfinite(value) or abs(value) > FLOAT32_MAX:
+            raise NeuralaoError(
+                f"setting {name!r}: {value!r} is not a finite number within float32's range "
+                f"(|x| <= {FLOAT32_MAX:.4g})"
+            )
         return float(value)
     if tp is str:
         if not isinstance(value, str):
@@ -105,8 +114,10 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise NeuralaoError(f"override {text!r} is not key=value")
     key, raw = text.split("=", 1)
     try:
-        value = json.loads(raw)
-    except json.JSONDecodeError:
+        value = parse_json(raw, f"override {key.strip()!r}", "value")
+    except NeuralaoError as e:
+        if "not valid JSON" not in str(e):
+            raise  # too deep or too big: not a bare word either
         value = raw
     return key.strip(), value
 
@@ -119,6 +130,10 @@ def load_settings(cls: type[T], preset: str | Path | None = None, overrides: lis
         data = read_json(path, "config file")
         if not isinstance(data, dict):
             raise NeuralaoError(f"config file {path} must hold a JSON object")
+        try:  # the file alone first, so a refusal of what it holds names it
+            from_dict(cls, json.loads(json.dumps(data)))
+        except NeuralaoError as e:
+            raise NeuralaoError(f"config file {path}: {e}") from None
     return from_dict(cls, apply_overrides(data, overrides))
 
 

@@ -102,6 +102,10 @@ class Tolerances:
     # test_internal_resolution.py). Measured 0.0008-0.019 on test meshes (GTAO itself: 0.003-0.032); a
     # network run at the frame's own resolution differs by 0.036-0.12.
     resolution_independence_mean_abs: float = 0.025
+    # Camera poses from a user's file (and instance transforms): max |R^T R - I| and |bottom row - [0 0 0
+    # 1]| for a pose to count as rigid. A rotation typed with 5-6 significant digits is off by ~1e-5; a
+    # scale of 1.001 (or any shear) by >= 2e-3, which the renderer would draw as a distorted view.
+    rigid_pose: float = 1e-4
 
     def onnx_vs_torch(self, ref_max_abs: float, depth: int) -> float:
         """Allowed max |onnxruntime - torch| for outputs of largest magnitude ``ref_max_abs`` from a

@@ -1,0 +1,353 @@
+"""The one reader of glTF 2.0 files (.gltf with external or data-URI buffers, .glb): the document, checked
+against the specification's rules before any accessor is read, and its buffers.
+
+Every command that takes a glTF reads it here first: the bakers through :class:`GltfFile` itself, and the
+commands whose geometry comes from trimesh (render, volumes, datasets, training) through
+:func:`check_gltf`, which runs the same checks without keeping the buffers. What is checked (each refusal
+is one line naming the file, the item and the rule):
+
+* the JSON: UTF-8, bounded in size and nesting (``neuralao.runtime.foundation.manifest.parse_json``), a GLB's
+  header and chunks whole;
+* ``extensionsRequired``: only extensions the reader implements (a required extension changes what the
+  file means; one that is not implemented would be silently misread);
+* buffers: ``byteLength`` an integer >= 0, the data (GLB chunk, file beside the glTF, data URI) at least
+  that long, a file never outside the glTF's folder;
+* bufferViews: ``buffer`` an index of the file, ``byteOffset`` >= 0, ``byteLength`` >= 1, the range inside
+  its buffer, ``byteStride`` a multiple of 4 in [4, 252];
+* accessors: a known ``componentType`` and ``type``, ``count`` an integer >= 0, ``byteOffset`` >= 0 and a
+  multiple of the component size, a ``byteStride`` no smaller than the element, every element inside its
+  bufferView;
+* meshes, nodes, scenes: every index they hold (attributes, indices, mesh, children, scene nodes) inside
+  the file.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import struct
+from pathlib import Path
+from typing import Any
+from urllib.parse import unquote
+
+import numpy as np
+
+from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.manifest import parse_json
+
+COMPONENT = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
+INSTANCING = "EXT_mesh_gpu_instancing"
+# Geometry compression: the primitives' accessors hold no readable data without a decoder.
+COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
+# Extensions that change only how a file shades (materials, textures, lights): AO is geometry, and a bake
+# passes them through untouched, so a file that requires one is read correctly without them.
+SHADING_EXTENSION_PREFIXES = ("KHR_materials_", "KHR_texture_", "KHR_lights_", "EXT_texture_", "EXT_lights_")
+# What the bakers' reader implements besides those: instancing and quantised attributes (integer
+# positions, normalised or not, dequantised by the node transforms it applies).
+BAKER_EXTENSIONS = frozenset({INSTANCING, "KHR_mesh_quantization"})
+# What the trimesh-based readers implement besides those: nothing of geometry (trimesh ignores instancing
+# and does not dequantise normalised positions).
+TRIMESH_EXTENSIONS: frozenset[str] = frozenset()
+
+
+def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
+    """The one-line refusal of a glTF resource (buffer or image) outside the glTF's own folder."""
+    folder = Path(gltf).resolve().parent
+    return (
+        f"{Path(gltf).name} refers to {uri!r}, which is outside its folder {folder}: only files in the "
+        "glTF's folder or below it are read; copy the file there and point the uri at it, or use a .glb"
+    )
+
+
+def gltf_resource(gltf: str | os.PathLike, uri: str) -> Path:
+    """The file a glTF's relative ``uri`` names (percent-decoded), refused when it leaves the glTF's
+    folder."""
+    folder = Path(gltf).resolve().parent
+    target = (folder / unquote(uri)).resolve()
+    if not target.is_relative_to(folder):
+        raise NeuralaoError(outside_folder_message(gltf, uri))
+    return target
+
+
+def gltf_label(kind: str, index: int, item: Any) -> str:
+    """How every message names a glTF node, mesh or other indexed item: ``node 3 'Chair'`` when it
+    has a name, ``node 3 (unnamed)`` when it has none (the index is always there: names repeat)."""
+    name = item.get("name") if isinstance(item, dict) else None
+    return f"{kind} {index} {str(name)!r}" if name not in (None, "") else f"{kind} {index} (unnamed)"
+
+
+def _integer(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+class GltfFile:
+    """The checked document of a .gltf / .glb (module doc) and, with ``buffers``, its buffers' bytes.
+
+    ``implemented``: the extensions the caller's reader implements beyond the shading ones (a file that
+    requires another is refused)."""
+
+    def __init__(self, path: str | os.PathLike, implemented: frozenset[str] = BAKER_EXTENSIONS, buffers=True):
+        self.path = Path(path)
+        try:
+            text, bin_span = self._read_document()
+        except FileNotFoundError:
+            raise NeuralaoError(f"glTF file not found: {self.path}") from None
+        except IsADirectoryError:
+            raise NeuralaoError(f"{self.path} is a folder, not a glTF file") from None
+        except OSError as e:
+            raise NeuralaoError(f"cannot read {self.path}: {e.strerror or type(e).__name__}") from None
+        self.doc = parse_json(text, self.path, "glTF JSON")
+        if not isinstance(self.doc, dict):
+            raise NeuralaoError(f"{self.path}: the glTF root must be a JSON object")
+        asset = self.doc.get("asset")
+        version = str(asset.get("version", "")) if isinstance(asset, dict) else ""
+        if not version.startswith("2"):
+            raise NeuralaoError(f"{self.path}: glTF asset.version must be 2.x, got {version!r}")
+        self._check_extensions(implemented)
+        specs = self._items("buffers")
+        data = [self._buffer(i, b, bin_span, keep=buffers) for i, b in enumerate(specs)]
+        self._check_views([b["byteLength"] for b in specs])
+        self._check_accessors()
+        self._check_indices()
+        self.buffers: list[bytes] = data if buffers else []
+
+    # ------------------------------------------------------------------ the document
+    def _read_document(self) -> tuple[bytes, tuple[int, int] | None]:
+        """The JSON bytes and, for a GLB, (offset, size) of its BIN chunk; a GLB is read chunk by chunk,
+        so a large binary chunk is not read here."""
+        with open(self.path, "rb") as f:
+            head = f.read(12)
+            if head[:4] != b"glTF":
+                return head + f.read(), None
+            size = os.fstat(f.fileno()).st_size
+            if len(head) < 12:
+                raise NeuralaoError(f"{self.path}: truncated GLB header")
+            magic, version, length = struct.unpack("<III", head)
+            if magic != GLB_MAGIC or version != 2 or length > size:
+                raise NeuralaoError(f"{self.path}: bad or truncated GLB (version {version}, length {length})")
+            pos, text, binary = 12, None, None
+            while pos + 8 <= length:
+                f.seek(pos)
+                chunk_size, kind = struct.unpack("<II", f.read(8))
+                if pos + 8 + chunk_size > length:
+                    raise NeuralaoError(f"{self.path}: truncated GLB chunk")
+                if kind == JSON_CHUNK and text is None:
+                    text = f.read(chunk_size)
+                elif kind == BIN_CHUNK and binary is None:
+                    binary = (pos + 8, chunk_size)
+                pos += 8 + chunk_size
+        if text is None:
+            raise NeuralaoError(f"{self.path}: GLB has no JSON chunk")
+        return text, binary
+
+    def _items(self, key: str) -> list[dict]:
+        items = self.doc.get(key, [])
+        if not isinstance(items, list) or not all(isinstance(x, dict) for x in items):
+            raise NeuralaoError(f"{self.path.name}: {key} must be a list of JSON objects")
+        return items
+
+    def _fail(self, item: str, rule: str) -> NeuralaoError:
+        return NeuralaoError(f"{self.path.name}: {item} {rule} (glTF 2.0)")
+
+    def _check_extensions(self, implemented: frozenset[str]) -> None:
+        required = self.doc.get("extensionsRequired", [])
+        if not isinstance(required, list) or not all(isinstance(e, str) for e in required):
+            raise self._fail("extensionsRequired", "must be a list of extension names")
+        for ext in required:
+            if ext in COMPRESSION:
+                raise NeuralaoError(
+                    f"{self.path.name}: compressed geometry ({ext}) is not supported; decompress it first"
+                )
+            if ext not in implemented and not ext.startswith(SHADING_EXTENSION_PREFIXES):
+                known = ", ".join(sorted(implemented)) or "none that change geometry"
+                raise NeuralaoError(
+                    f"{self.path.name}: extensionsRequired names {ext!r}, which this reader does not "
+                    f"implement (implemented: {known}, and material / texture / light extensions)"
+                )
+
+    def _buffer(self, index: int, spec: dict, bin_span: tuple[int, int] | None, keep: bool) -> bytes:
+        length = spec.get("byteLength")
+        if not _integer(length) or length < 0:  # the spec asks >= 1; an empty buffer nothing uses is harmless
+            raise self._fail(f"buffers[{index}].byteLength", f"must be an integer >= 0, got {length!r}")
+        uri = spec.get("uri")
+        if uri is None:
+            if bin_span is None:
+                raise NeuralaoError(f"{self.path}: buffer {index} has no uri and there is no GLB chunk")
+            data = self._read_span(*bin_span) if keep else b""
+            size = bin_span[1]
+        elif isinstance(uri, str) and uri.startswith("data:"):
+            try:
+                data = base64.b64decode(uri.split(",", 1)[1])
+            except Exception:
+                raise NeuralaoError(f"{self.path}: buffer {index} has a bad data URI") from None
+            size = len(data)
+        else:
+            if not isinstance(uri, str):
+                raise NeuralaoError(f"{self.path}: buffer {index} uri must be a string, got {uri!r}")
+            p = gltf_resource(self.path, uri)  # never a file outside the glTF's folder
+            if not p.is_file():
+                raise NeuralaoError(f"{self.path}: buffer {index} file not found: {uri}")
+            size = p.stat().st_size
+            data = p.read_bytes() if keep else b""
+        if size < length:
+            raise NeuralaoError(f"{self.path}: buffer {index} has {size} bytes, byteLength says {length}")
+        return data
+
+    def _read_span(self, offset: int, size: int) -> bytes:
+        with open(self.path, "rb") as f:
+            f.seek(offset)
+            return f.read(size)
+
+    def _check_views(self, buffer_lengths: list[int]) -> None:
+        for i, v in enumerate(self._items("bufferViews")):
+            item = f"bufferViews[{i}]"
+            b, offset, length = v.get("buffer"), v.get("byteOffset", 0), v.get("byteLength")
+            if not _integer(b) or not 0 <= b < len(buffer_lengths):
+                n = len(buffer_lengths)
+                raise self._fail(f"{item}.buffer", f"{b!r} is not a buffer of the file ({n} buffers)")
+            if not _integer(offset) or offset < 0:
+                raise self._fail(f"{item}.byteOffset", f"must be an integer >= 0, got {offset!r}")
+            if not _integer(length) or length < 1:
+                raise self._fail(f"{item}.byteLength", f"must be an integer >= 1, got {length!r}")
+            if offset + length > buffer_lengths[b]:
+                raise self._fail(
+                    item, f"runs past its buffer: bytes {offset}..{offset + length} of {buffer_lengths[b]}"
+                )
+            stride = v.get("byteStride")
+            if stride is not None and (not _integer(stride) or not 4 <= stride <= 252 or stride % 4):
+                raise self._fail(f"{item}.byteStride", f"must be a multiple of 4 in [4, 252], got {stride!r}")
+
+    def _check_accessors(self) -> None:
+        views = self._items("bufferViews")
+        for i, a in enumerate(self._items("accessors")):
+            item = f"accessors[{i}]"
+            kind, type_, count = a.get("componentType"), a.get("type"), a.get("count")
+            if kind not in COMPONENT or isinstance(kind, bool):
+                raise self._fail(f"{item}.componentType", f"{kind!r} is not one of {sorted(COMPONENT)}")
+            if type_ not in WIDTH:
+                raise self._fail(f"{item}.type", f"{type_!r} is not one of {', '.join(WIDTH)}")
+            if not _integer(count) or count < 0:
+                raise self._fail(f"{item}.count", f"must be an integer >= 0, got {count!r}")
+            offset = a.get("byteOffset", 0)
+            if not _integer(offset) or offset < 0:
+                raise self._fail(f"{item}.byteOffset", f"must be an integer >= 0, got {offset!r}")
+            if "bufferView" not in a:
+                continue  # zeros (or sparse): nothing to read from a buffer
+            vi = a["bufferView"]
+            if not _integer(vi) or not 0 <= vi < len(views):
+                n = len(views)
+                raise self._fail(f"{item}.bufferView", f"{vi!r} is not a bufferView of the file ({n} views)")
+            size = np.dtype(COMPONENT[kind]).itemsize
+            element = size * WIDTH[type_]
+            if offset % size:
+                raise self._fail(
+                    f"{item}.byteOffset", f"{offset} is not a multiple of the component size {size}"
+                )
+            stride = views[vi].get("byteStride", element)
+            if stride < element:
+                raise self._fail(
+                    f"bufferViews[{vi}].byteStride",
+                    f"{stride} is smaller than the {element}-byte element of {item} ({type_} of {size}-byte "
+                    "components): elements would overlap",
+                )
+            end = offset + (count - 1) * stride + element if count else offset
+            if end > views[vi]["byteLength"]:
+                raise self._fail(
+                    item,
+                    f"runs past its bufferView: {count} elements end at byte {end} of "
+                    f"{views[vi]['byteLength']}",
+                )
+
+    def _check_indices(self) -> None:
+        """Every index a mesh, node or scene holds is an item of the file."""
+        n_acc, meshes, nodes = len(self._items("accessors")), self._items("meshes"), self._items("nodes")
+        n_materials = len(self._items("materials"))
+
+        def accessor(value: Any, item: str) -> None:
+            if not _integer(value) or not 0 <= value < n_acc:
+                raise self._fail(item, f"{value!r} is not an accessor of the file ({n_acc} accessors)")
+
+        for m, mesh in enumerate(meshes):
+            prims = mesh.get("primitives", [])
+            if not isinstance(prims, list) or not all(isinstance(p, dict) for p in prims):
+                raise self._fail(f"meshes[{m}].primitives", "must be a list of JSON objects")
+            for k, prim in enumerate(prims):
+                attrs = prim.get("attributes", {})
+                if not isinstance(attrs, dict):
+                    raise self._fail(f"meshes[{m}].primitives[{k}].attributes", "must be a JSON object")
+                for name, value in attrs.items():
+                    accessor(value, f"meshes[{m}].primitives[{k}].attributes.{name}")
+                if "indices" in prim:
+                    accessor(prim["indices"], f"meshes[{m}].primitives[{k}].indices")
+                mode = prim.get("mode", 4)
+                if not _integer(mode) or not 0 <= mode <= 6:
+                    raise self._fail(
+                        f"meshes[{m}].primitives[{k}].mode", f"must be an integer in [0, 6], got {mode!r}"
+                    )
+                material = prim.get("material")
+                if material is not None and (not _integer(material) or not 0 <= material < n_materials):
+                    raise self._fail(
+                        f"meshes[{m}].primitives[{k}].material", f"{material!r} is not a material of the file"
+                    )
+        for i, node in enumerate(nodes):
+            where = f"{self.path.name} {gltf_label('node', i, node)}"
+            mi = node.get("mesh")
+            if mi is not None and (not _integer(mi) or not 0 <= mi < len(meshes)):
+                raise NeuralaoError(f"{where}: references mesh {mi!r}, the file has {len(meshes)}")
+            for key in ("extensions", "extras"):
+                if key in node and not isinstance(node[key], dict):
+                    raise NeuralaoError(
+                        f"{where}: {key} must be a JSON object, got {type(node[key]).__name__}"
+                    )
+            children = node.get("children", [])
+            inside = isinstance(children, list) and all(_integer(c) and 0 <= c < len(nodes) for c in children)
+            if not inside:
+                raise NeuralaoError(f"{where}: children {children!r} are not all nodes of the file"[:300])
+        for s, scene in enumerate(self._items("scenes")):
+            roots = scene.get("nodes", [])
+            if not isinstance(roots, list) or not all(_integer(r) and 0 <= r < len(nodes) for r in roots):
+                raise self._fail(f"scenes[{s}].nodes", f"are not all nodes of the file ({len(nodes)} nodes)")
+
+    # ------------------------------------------------------------------ data
+    def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:
+        """Accessor ``index`` as a (count, width) or (count,) array (normalised integers -> float,
+        unless ``normalize`` is False: then the stored integers, e.g. to copy an attribute as it is)."""
+        accs = self.doc.get("accessors", [])
+        if not isinstance(index, int) or not 0 <= index < len(accs):
+            raise NeuralaoError(f"{where}: accessor {index!r} is not in the file ({len(accs)} accessors)")
+        a = accs[index]
+        if "bufferView" not in a or "sparse" in a:
+            raise NeuralaoError(f"{where}: accessor {index} has no bufferView or is sparse (not supported)")
+        dtype = np.dtype(COMPONENT[a["componentType"]]).newbyteorder("<")
+        width, count = WIDTH[a["type"]], a["count"]
+        view = self.doc["bufferViews"][a["bufferView"]]
+        buf = self.buffers[view["buffer"]]
+        offset = view.get("byteOffset", 0) + a.get("byteOffset", 0)
+        item = dtype.itemsize * width
+        stride = view.get("byteStride", item)
+        end = offset + (count - 1) * stride + item if count else offset
+        if end > len(buf):
+            raise NeuralaoError(f"{where}: accessor {index} runs past the end of its buffer (truncated?)")
+        arr = np.lib.stride_tricks.as_strided(
+            np.frombuffer(buf, dtype=dtype, count=max(0, (end - offset) // dtype.itemsize), offset=offset),
+            shape=(count, width),
+            strides=(stride, dtype.itemsize),
+        ).copy()
+        if normalize and a.get("normalized") and dtype.kind in "iu":
+            arr = np.maximum(arr / float(np.iinfo(dtype).max), -1.0)
+        return arr[:, 0] if width == 1 else arr
+
+
+def check_gltf(path: str | os.PathLike, implemented: frozenset[str] = TRIMESH_EXTENSIONS) -> None:
+    """Check a .gltf / .glb as :class:`GltfFile` does, without keeping its buffers (for readers that
+    take the geometry from another library afterwards)."""
+    GltfFile(path, implemented, buffers=False)
