@@ -9,7 +9,6 @@ storage and memory planning in memory.py, reading the graph in graph.py and view
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from dataclasses import dataclass, field
@@ -2502,7 +2501,8 @@ def generate_compute(
     graph = read_graph(model, max_inputs=1 + MAX_SCALAR_INPUTS)
     meta = graph.metadata.get("pad_multiple")
     try:
-        meta_multiple = None if meta is None else int(json.loads(meta))
+        # an integer's digits only: json.loads of hostile metadata recurses or overflows
+        meta_multiple = None if meta is None else int(str(meta).strip())
     except (ValueError, TypeError):
         raise NeuralaoError(f"metadata pad_multiple {meta!r} is not an integer") from None
     if meta_multiple is not None and meta_multiple < 1:
