@@ -336,7 +336,9 @@ def test_radii_setting_is_checked(tmp_path, capsys):
     from neuralao.pipeline import cli
 
     assert (
-        cli.main(["report", "--data", str(tmp_path), "--out", str(tmp_path), "--set", "radii_rel=[0.1,-1]"])
+        cli.main(
+            ["report", "--data", str(tmp_path), "--out", str(tmp_path / "r"), "--set", "radii_rel=[0.1,-1]"]
+        )
         == 2
     )
     assert "radii_rel must be positive" in capsys.readouterr().err
