@@ -8,7 +8,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import onnx
 import pytest
+from onnx import TensorProto
+from onnx import helper as oh
+from onnx import numpy_helper as nh
 
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.runtime.chromium import chromium_paths
@@ -192,3 +196,29 @@ def soup_scene(rng: np.random.Generator, houses: int = 30, half: float = 40.0) -
     first_ribbon = sum(len(f) for _, f in parts)
     parts += [ribbon(rng, 150, 1.5 * half) for _ in range(6)]
     return scene_from_arrays(*merge_parts(*parts), "soup", drop_degenerate=False), first_ribbon
+
+
+# ------------------------------------------------------------------ small image graphs of the shader targets
+
+
+def image_model(nodes, inits=(), in_shape=(1, 6, 5, 7), extra_inputs=(), opset=20) -> onnx.ModelProto:
+    """A graph of ``nodes`` from input ``x`` (float, ``in_shape``) and ``extra_inputs`` to output ``y``,
+    with the initializers ``inits`` ((name, array) pairs)."""
+    graph = oh.make_graph(
+        nodes,
+        "g",
+        [oh.make_tensor_value_info("x", TensorProto.FLOAT, list(in_shape)), *extra_inputs],
+        [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
+        [nh.from_array(np.asarray(v), k) for k, v in inits],
+    )
+    return oh.make_model(graph, opset_imports=[oh.make_opsetid("", opset)])
+
+
+def seeded_weights(shape, seed=1) -> np.ndarray:
+    """Normal weights of ``shape``, float32, from ``seed``."""
+    return np.random.default_rng(seed).normal(size=shape).astype(np.float32)
+
+
+def named_node(op, inputs=("x",), out="y", **attrs) -> onnx.NodeProto:
+    """A node of ``op`` with a name holding spaces (names never reach shader text)."""
+    return oh.make_node(op, list(inputs), [out], name=f"my {op.lower()} {out}", **attrs)

@@ -22,9 +22,9 @@ import warnings
 import numpy as np
 import onnx
 import pytest
+from helpers import image_model, named_node, seeded_weights
 from onnx import TensorProto
 from onnx import helper as oh
-from onnx import numpy_helper as nh
 
 from neuralao.export.glsl import compile_spirv, generate_compute, load_compute_export, write_compute_export
 from neuralao.export.glsl.graph import sha256_hex
@@ -171,60 +171,51 @@ def test_node_test_graphs_compile_to_spirv(node_test_graphs):
 # ----------------------------------------------------------------------------- executed
 
 
-def _model(nodes, inits=(), in_shape=(1, 6, 5, 7), extra_inputs=(), opset=20) -> onnx.ModelProto:
-    graph = oh.make_graph(
-        nodes,
-        "g",
-        [oh.make_tensor_value_info("x", TensorProto.FLOAT, list(in_shape)), *extra_inputs],
-        [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
-        [nh.from_array(np.asarray(v), k) for k, v in inits],
-    )
-    return oh.make_model(graph, opset_imports=[oh.make_opsetid("", opset)])
-
-
-def _w(shape, seed=1):
-    return np.random.default_rng(seed).normal(size=shape).astype(np.float32)
-
-
-def _n(op, inputs=("x",), out="y", **attrs):
-    return oh.make_node(op, list(inputs), [out], name=f"my {op.lower()} {out}", **attrs)
-
-
 # One case per kind of pass: conv (blocked), transposed, depthwise, pools, resize (nearest reads the
 # ``precise`` coordinates), pad, concat + binary, moments + normalize, and a scalar graph input (the
 # uniform pass: a float in the uniform block).
 CASES = {
     "conv_blocked_leaky": (
-        [_n("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]), _n("LeakyRelu", ("c",), alpha=0.1)],
-        [("w", _w((9, 6, 3, 3))), ("b", _w((9,), 2))],
+        [
+            named_node("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]),
+            named_node("LeakyRelu", ("c",), alpha=0.1),
+        ],
+        [("w", seeded_weights((9, 6, 3, 3))), ("b", seeded_weights((9,), 2))],
     ),
     "conv_transpose": (
-        [_n("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])],
-        [("w", _w((6, 5, 3, 3)))],
+        [named_node("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])],
+        [("w", seeded_weights((6, 5, 3, 3)))],
     ),
     "depthwise_hardswish": (
-        [_n("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), _n("HardSwish", ("c",))],
-        [("w", _w((6, 1, 3, 3)))],
+        [named_node("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), named_node("HardSwish", ("c",))],
+        [("w", seeded_weights((6, 1, 3, 3)))],
     ),
-    "maxpool_ceil": ([_n("MaxPool", kernel_shape=[2, 2], strides=[2, 2], ceil_mode=1)], []),
+    "maxpool_ceil": ([named_node("MaxPool", kernel_shape=[2, 2], strides=[2, 2], ceil_mode=1)], []),
     "resize_nearest": (
-        [_n("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
+        [named_node("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
         [("s", np.array([1, 1, 1.5, 2], np.float32))],
     ),
     "resize_cubic": (
-        [_n("Resize", ("x", "", "s"), mode="cubic")],
+        [named_node("Resize", ("x", "", "s"), mode="cubic")],
         [("s", np.array([1, 1, 2, 2], np.float32))],
     ),
-    "pad_wrap": ([_n("Pad", ("x", "p"), mode="wrap")], [("p", np.array([0, 0, 2, 1, 0, 0, 1, 3], np.int64))]),
+    "pad_wrap": (
+        [named_node("Pad", ("x", "p"), mode="wrap")],
+        [("p", np.array([0, 0, 2, 1, 0, 0, 1, 3], np.int64))],
+    ),
     "concat_mul_elu": (
-        [_n("Concat", ("x", "x"), "c", axis=1), _n("Mul", ("c", "c"), "m"), _n("Elu", ("m",))],
+        [
+            named_node("Concat", ("x", "x"), "c", axis=1),
+            named_node("Mul", ("c", "c"), "m"),
+            named_node("Elu", ("m",)),
+        ],
         [],
     ),
     "instance_norm_gelu": (
-        [_n("InstanceNormalization", ("x", "s", "b"), "n"), _n("Gelu", ("n",))],
-        [("s", _w((6,), 4)), ("b", _w((6,), 5))],
+        [named_node("InstanceNormalization", ("x", "s", "b"), "n"), named_node("Gelu", ("n",))],
+        [("s", seeded_weights((6,), 4)), ("b", seeded_weights((6,), 5))],
     ),
-    "scalar_input": ([_n("Mul", ("x", "k"))], []),
+    "scalar_input": ([named_node("Mul", ("x", "k"))], []),
 }
 
 
@@ -234,7 +225,7 @@ def test_single_ops_spirv_vs_onnxruntime(name, via):
     nodes, inits = CASES[name]
     scalar = name == "scalar_input"
     extra = [oh.make_tensor_value_info("k", TensorProto.FLOAT, [1, 1, 1, 1])] if scalar else []
-    model = _model(nodes, inits, extra_inputs=extra)
+    model = image_model(nodes, inits, extra_inputs=extra)
     rng = np.random.default_rng(0)
     x = rng.normal(size=(1, 6, 5, 7)).astype(np.float32)
     feeds = {"x": x, **({"k": np.full((1, 1, 1, 1), 0.7, np.float32)} if scalar else {})}
@@ -252,12 +243,14 @@ def test_dynamic_size_pad_crop_and_bottom_up_input(via):
     """A dynamic-size graph (pad multiple 2: the pad and crop passes, whose u_flip_y is the int of their
     uniform blocks) at an odd size; a bottom-up input with flip_y=True gives the bottom-up output."""
     nodes = [
-        _n("Conv", ("x", "w"), "c", pads=[1, 1, 1, 1]),
-        _n("AveragePool", ("c",), "p", kernel_shape=[2, 2], strides=[2, 2]),
-        _n("Resize", ("p", "", "s"), mode="linear"),
+        named_node("Conv", ("x", "w"), "c", pads=[1, 1, 1, 1]),
+        named_node("AveragePool", ("c",), "p", kernel_shape=[2, 2], strides=[2, 2]),
+        named_node("Resize", ("p", "", "s"), mode="linear"),
     ]
-    model = _model(
-        nodes, [("w", _w((5, 3, 3, 3))), ("s", np.array([1, 1, 2, 2], np.float32))], (1, 3, "H", "W")
+    model = image_model(
+        nodes,
+        [("w", seeded_weights((5, 3, 3, 3))), ("s", np.array([1, 1, 2, 2], np.float32))],
+        (1, 3, "H", "W"),
     )
     x = np.random.default_rng(1).normal(size=(1, 3, 7, 9)).astype(np.float32)
     program = generate_compute(model, dialect="vulkan")
@@ -309,8 +302,10 @@ def test_shipped_fast_unet_spirv_on_a_real_frame(tmp_path):
 @needs_glslang
 def test_cli_writes_vulkan_passes_and_spirv_and_parity_runs_them(tmp_path, capsys):
     nodes, inits = CASES["conv_blocked_leaky"]
-    model = _model(
-        nodes + [_n("AveragePool", ("y",), "z", kernel_shape=[2, 2], strides=[2, 2])], inits, (1, 6, "H", "W")
+    model = image_model(
+        nodes + [named_node("AveragePool", ("y",), "z", kernel_shape=[2, 2], strides=[2, 2])],
+        inits,
+        (1, 6, "H", "W"),
     )
     model.graph.output[0].CopyFrom(oh.make_tensor_value_info("z", TensorProto.FLOAT, [1, 9, None, None]))
     path = tmp_path / "m.onnx"

@@ -14,9 +14,7 @@ import shutil
 import numpy as np
 import onnx
 import pytest
-from onnx import TensorProto
-from onnx import helper as oh
-from onnx import numpy_helper as nh
+from helpers import image_model, named_node, seeded_weights
 
 from neuralao.export.glsl import generate_compute, write_compute_export
 from neuralao.export.onnx_io import run_onnxruntime
@@ -37,81 +35,75 @@ def _adapter_or_skip() -> None:
         pytest.skip("no WebGPU adapter (Debian: mesa-vulkan-drivers)")
 
 
-def _model(nodes, inits=(), in_shape=(1, 6, 5, 7), opset=20) -> onnx.ModelProto:
-    graph = oh.make_graph(
-        nodes,
-        "g",
-        [oh.make_tensor_value_info("x", TensorProto.FLOAT, list(in_shape))],
-        [oh.make_tensor_value_info("y", TensorProto.FLOAT, None)],
-        [nh.from_array(np.asarray(v), k) for k, v in inits],
-    )
-    return oh.make_model(graph, opset_imports=[oh.make_opsetid("", opset)])
-
-
-def _w(shape, seed=1):
-    return np.random.default_rng(seed).normal(size=shape).astype(np.float32)
-
-
-def _n(op, inputs=("x",), out="y", **attrs):
-    return oh.make_node(op, list(inputs), [out], name=f"my {op.lower()} {out}", **attrs)
-
-
 # One case per kind of pass the writer emits (conv, blocked conv, transposed, depthwise, pools, resize
 # modes, pads, concat, binary, gather, reduce, moments + normalize, softmax, LRN) and the activations
 # whose WGSL text differs from the GLSL.
 CASES = {
     "conv_blocked_leaky": (
-        [_n("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]), _n("LeakyRelu", ("c",), alpha=0.1)],
-        [("w", _w((9, 6, 3, 3))), ("b", _w((9,), 2))],
+        [
+            named_node("Conv", ("x", "w", "b"), "c", pads=[1, 1, 1, 1]),
+            named_node("LeakyRelu", ("c",), alpha=0.1),
+        ],
+        [("w", seeded_weights((9, 6, 3, 3))), ("b", seeded_weights((9,), 2))],
     ),
     "conv_transpose": (
-        [_n("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])],
-        [("w", _w((6, 5, 3, 3)))],
+        [named_node("ConvTranspose", ("x", "w"), strides=[2, 2], pads=[0, 1, 0, 1])],
+        [("w", seeded_weights((6, 5, 3, 3)))],
     ),
     "depthwise_hardswish": (
-        [_n("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), _n("HardSwish", ("c",))],
-        [("w", _w((6, 1, 3, 3)))],
+        [named_node("Conv", ("x", "w"), "c", group=6, pads=[1, 1, 1, 1]), named_node("HardSwish", ("c",))],
+        [("w", seeded_weights((6, 1, 3, 3)))],
     ),
-    "maxpool_ceil": ([_n("MaxPool", kernel_shape=[2, 2], strides=[2, 2], ceil_mode=1)], []),
-    "avgpool_pads": ([_n("AveragePool", kernel_shape=[3, 3], pads=[1, 1, 1, 1], count_include_pad=1)], []),
+    "maxpool_ceil": ([named_node("MaxPool", kernel_shape=[2, 2], strides=[2, 2], ceil_mode=1)], []),
+    "avgpool_pads": (
+        [named_node("AveragePool", kernel_shape=[3, 3], pads=[1, 1, 1, 1], count_include_pad=1)],
+        [],
+    ),
     "resize_nearest": (
-        [_n("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
+        [named_node("Resize", ("x", "", "s"), mode="nearest", coordinate_transformation_mode="asymmetric")],
         [("s", np.array([1, 1, 1.5, 2], np.float32))],
     ),
     "resize_linear_align": (
-        [_n("Resize", ("x", "", "s"), mode="linear", coordinate_transformation_mode="align_corners")],
+        [named_node("Resize", ("x", "", "s"), mode="linear", coordinate_transformation_mode="align_corners")],
         [("s", np.array([1, 1, 2, 2], np.float32))],
     ),
     "resize_cubic": (
-        [_n("Resize", ("x", "", "s"), mode="cubic")],
+        [named_node("Resize", ("x", "", "s"), mode="cubic")],
         [("s", np.array([1, 1, 2, 2], np.float32))],
     ),
-    "pad_wrap": ([_n("Pad", ("x", "p"), mode="wrap")], [("p", np.array([0, 0, 2, 1, 0, 0, 1, 3], np.int64))]),
+    "pad_wrap": (
+        [named_node("Pad", ("x", "p"), mode="wrap")],
+        [("p", np.array([0, 0, 2, 1, 0, 0, 1, 3], np.int64))],
+    ),
     "concat_mul_elu": (
-        [_n("Concat", ("x", "x"), "c", axis=1), _n("Mul", ("c", "c"), "m"), _n("Elu", ("m",))],
+        [
+            named_node("Concat", ("x", "x"), "c", axis=1),
+            named_node("Mul", ("c", "c"), "m"),
+            named_node("Elu", ("m",)),
+        ],
         [],
     ),
     "div_prelu": (
-        [_n("Div", ("x", "k"), "d"), _n("PRelu", ("d", "s"))],
-        [("k", np.full((1, 6, 1, 1), 3.0, np.float32)), ("s", _w((6, 1, 1), 3))],
+        [named_node("Div", ("x", "k"), "d"), named_node("PRelu", ("d", "s"))],
+        [("k", np.full((1, 6, 1, 1), 3.0, np.float32)), ("s", seeded_weights((6, 1, 1), 3))],
     ),
     "depth_to_space": (
-        [_n("DepthToSpace", blocksize=2, mode="CRD")],
+        [named_node("DepthToSpace", blocksize=2, mode="CRD")],
         [],
     ),  # C = 6 is not divisible: see shape
     "instance_norm_gelu": (
-        [_n("InstanceNormalization", ("x", "s", "b"), "n"), _n("Gelu", ("n",))],
-        [("s", _w((6,), 4)), ("b", _w((6,), 5))],
+        [named_node("InstanceNormalization", ("x", "s", "b"), "n"), named_node("Gelu", ("n",))],
+        [("s", seeded_weights((6,), 4)), ("b", seeded_weights((6,), 5))],
     ),
     "reduce_mean_softmax": (
         [
-            _n("ReduceMean", ("x", "a"), "r", keepdims=1),
-            _n("Softmax", ("x",), "s", axis=1),
-            _n("Add", ("s", "r")),
+            named_node("ReduceMean", ("x", "a"), "r", keepdims=1),
+            named_node("Softmax", ("x",), "s", axis=1),
+            named_node("Add", ("s", "r")),
         ],
         [("a", np.array([2, 3], np.int64))],
     ),
-    "lrn_mish": ([_n("LRN", ("x",), "l", size=3), _n("Mish", ("l",))], []),
+    "lrn_mish": ([named_node("LRN", ("x",), "l", size=3), named_node("Mish", ("l",))], []),
 }
 
 
@@ -120,7 +112,7 @@ def test_single_ops_wgsl_vs_onnxruntime(name):
     _adapter_or_skip()
     nodes, inits = CASES[name]
     shape = (1, 8, 3, 5) if name == "depth_to_space" else (1, 6, 5, 7)
-    model = _model(nodes, inits, in_shape=shape)
+    model = image_model(nodes, inits, in_shape=shape)
     x = np.random.default_rng(0).normal(size=shape).astype(np.float32)
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
     program = generate_compute(model, dialect="wgsl")
@@ -164,11 +156,11 @@ def test_hlsl_and_msl_beside_the_glsl(tmp_path):
     """--hlsl-msl writes <pass>.hlsl and <pass>.metal for every pass; each HLSL compiles back with glslang's
     HLSL front end (write_compute_export validates it), each MSL declares the kernel."""
     nodes, inits = CASES["conv_blocked_leaky"]
-    model = _model(
+    model = image_model(
         nodes
         + [
-            _n("AveragePool", ("y",), "p", kernel_shape=[2, 2], strides=[2, 2]),
-            _n("Resize", ("p", "", "s"), "r", mode="linear"),
+            named_node("AveragePool", ("y",), "p", kernel_shape=[2, 2], strides=[2, 2]),
+            named_node("Resize", ("p", "", "s"), "r", mode="linear"),
         ],
         inits + [("s", np.array([1, 1, 2, 2], np.float32))],
         in_shape=(1, 6, "H", "W"),

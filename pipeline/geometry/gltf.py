@@ -32,7 +32,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError, reading
 from neuralao.runtime.foundation.manifest import parse_json
 
 COMPONENT = {
@@ -97,14 +97,8 @@ class GltfFile:
 
     def __init__(self, path: str | os.PathLike, implemented: frozenset[str] = BAKER_EXTENSIONS, buffers=True):
         self.path = Path(path)
-        try:
+        with reading(self.path, "glTF file"):
             text, bin_span = self._read_document()
-        except FileNotFoundError:
-            raise NeuralaoError(f"glTF file not found: {self.path}") from None
-        except IsADirectoryError:
-            raise NeuralaoError(f"{self.path} is a folder, not a glTF file") from None
-        except OSError as e:
-            raise NeuralaoError(f"cannot read {self.path}: {e.strerror or type(e).__name__}") from None
         self.doc = parse_json(text, self.path, "glTF JSON")
         if not isinstance(self.doc, dict):
             raise NeuralaoError(f"{self.path}: the glTF root must be a JSON object")

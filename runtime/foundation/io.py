@@ -203,14 +203,22 @@ def read_npz(path: str | os.PathLike, keys: Iterable[str] | None = None) -> dict
     is never inflated). Before a member is inflated, its header is checked against the bytes it stores
     and the memory available, so a member that cannot fit is named as such, not taken for corruption; a
     truncated or corrupt file is a one-line error."""
-    try:  # our own handle: np.load leaves its file open when the zip directory is unreadable
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            wanted = z.files if keys is None else [k for k in z.files if k in set(keys)]
-            out = {}
-            for k in wanted:
-                _check_npz_member(z.zip, k, path)
-                out[k] = z[k]
-            return out
+    # our own handle: np.load leaves its file open when the zip directory is unreadable
+    with _reading_npz(path), open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+        wanted = z.files if keys is None else [k for k in z.files if k in set(keys)]
+        out = {}
+        for k in wanted:
+            _check_npz_member(z.zip, k, path)
+            out[k] = z[k]
+        return out
+
+
+@contextlib.contextmanager
+def _reading_npz(path: str | os.PathLike) -> Iterator[None]:
+    """Any failure to read an npz as one line: missing, a folder, or (whatever numpy or zipfile raise)
+    corrupt or truncated; the npz checks' own errors pass through."""
+    try:
+        yield
     except FileNotFoundError:
         raise NeuralaoError(f"file not found: {path}") from None
     except IsADirectoryError:
@@ -228,15 +236,8 @@ def npz_keys(path: str | os.PathLike) -> list[str]:
 
 def read_npz_directory(path: str | os.PathLike) -> dict[str, int]:
     """Array name -> inflated bytes of each member of an npz (its zip directory only)."""
-    try:
-        with zipfile.ZipFile(path) as zf:
-            return {i.filename.removesuffix(".npy"): i.file_size for i in zf.infolist()}
-    except FileNotFoundError:
-        raise NeuralaoError(f"file not found: {path}") from None
-    except IsADirectoryError:
-        raise NeuralaoError(f"{path} is a folder, not an .npz file") from None
-    except Exception as e:
-        raise NeuralaoError(f"cannot read {path}: corrupt or truncated ({type(e).__name__})") from None
+    with _reading_npz(path), zipfile.ZipFile(path) as zf:
+        return {i.filename.removesuffix(".npy"): i.file_size for i in zf.infolist()}
 
 
 def _check_npz_member(zf: zipfile.ZipFile, key: str, path: str | os.PathLike) -> None:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.errors import NeuralaoError, reading
 
 NAME = "manifest.json"
 # A shipped model's manifest is ~60 KB (the U-Net's with its evaluation tables); 64 MiB is far beyond any
@@ -71,16 +71,10 @@ def parse_json(data: bytes | str, where: str | os.PathLike, what: str = "JSON") 
 def read_json(path: str | os.PathLike, what: str = "JSON file") -> Any:
     """The parsed JSON of ``path`` (UTF-8), bounded in size and depth; any failure is one line naming it."""
     path = Path(path)
-    try:
+    with reading(path, what):
         if path.stat().st_size > MAX_JSON_BYTES:
             raise NeuralaoError(f"{path}: {what} of {path.stat().st_size} bytes is over {MAX_JSON_BYTES}")
         raw = path.read_bytes()
-    except FileNotFoundError:
-        raise NeuralaoError(f"{what} not found: {path}") from None
-    except IsADirectoryError:
-        raise NeuralaoError(f"{path} is a folder, not a {what}") from None
-    except OSError as e:
-        raise NeuralaoError(f"cannot read {path}: {e.strerror or type(e).__name__}") from None
     return parse_json(raw, path, what)
 
 
