@@ -99,11 +99,10 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
     return folder
 
 
-def light_export(ckpt_path: Path, out: Path) -> Path:
+def light_export(model, ckpt: dict, out: Path) -> Path:
     """model.onnx and a manifest of a snapshot: what `neuralao evaluate` reads (no GLSL, no parity)."""
     if (out / "manifest.json").exists():
         return out
-    model, ckpt = load_model(ckpt_path)
     meta = onnx_metadata(model, ckpt)
     out.mkdir(parents=True, exist_ok=True)
     export_onnx(model, out / "model.onnx", meta)
@@ -120,9 +119,8 @@ def score_point(cfg: dict, run: dict, folder: Path, hours: float, out: Path) -> 
     path = folder / f"{point_name(hours)}.json"
     if path.exists():
         return read_json(path)
-    ckpt_path = folder / f"{point_name(hours)}.pt"
-    export = light_export(ckpt_path, folder / point_name(hours))
-    _, ckpt = load_model(ckpt_path)
+    model, ckpt = load_model(folder / f"{point_name(hours)}.pt")
+    export = light_export(model, ckpt, folder / point_name(hours))
     settings = from_dict(EvalSettings, cfg["eval"], prefix="eval.")
     result = evaluate(settings, out / "eval", [export], ["model"], ROOT, flip=False, progress=False)
     record = {

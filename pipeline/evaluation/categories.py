@@ -189,8 +189,6 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
         )
     onnx_path = folder / manifest.get("onnx", "model.onnx")
     out = {}
-    if trained_on_held_aside(manifest):
-        log.info("%s trained on held-aside meshes: its held-aside rows are left out", folder.name)
     for policy in policies:
         label = folder.name if policy == "model" else f"{folder.name}@{policy}"
         out[label] = unet_predictor(onnx_path, internal_height_of(policy, manifest))
@@ -312,6 +310,7 @@ def evaluate(
     for folder in models:
         mine = unet_predictors(Path(folder), policies)
         if trained_on_held_aside(read_manifest(Path(folder))):
+            log.info("%s trained on held-aside meshes: its held-aside rows are left out", Path(folder).name)
             saw_held_aside.update(mine)
         methods.update(mine)
     held_aside = {c.name for c in settings.categories if c.held_aside}
