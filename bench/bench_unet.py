@@ -399,7 +399,8 @@ def training_cost(args: argparse.Namespace, out: Path) -> dict:
     epochs)."""
     import torch
 
-    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
 
     if args.no_train:
         return {"skipped": "--no-train"}

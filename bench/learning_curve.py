@@ -4,7 +4,8 @@
         [--only main corpus-half] [--report-only] [--results docs/results.md]
 
 Each run of the config trains one model (the config's ``base`` settings, the run's ``train`` overrides)
-for ``hours`` of wall-clock time at a constant learning rate after warm-up, and keeps a snapshot of the
+for ``hours`` CPU-hours (wall-clock hours times the run's ``threads``) at a constant learning rate after
+warm-up, and keeps a snapshot of the
 weights when the run's plan reaches each of ``points_hours``: the curve's points come from one run, as
 a longer run passes through them (the release run then anneals over the budget the curve chooses).
 The plan (epochs for the budget) is measured once when the run starts and stored in its checkpoint,
@@ -33,7 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 from neuralao.export.unet import export_onnx, load_model, onnx_metadata  # noqa: E402
 from neuralao.pipeline.evaluation.categories import EvalSettings, evaluate  # noqa: E402
 from neuralao.pipeline.models.checkpoint import save_checkpoint  # noqa: E402
-from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train  # noqa: E402
+from neuralao.pipeline.models.unet_frames import load_dataset_frames  # noqa: E402
+from neuralao.pipeline.models.unet_train import UNetTrainSettings, train  # noqa: E402
 from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
@@ -59,7 +61,9 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
     """Train (or resume) one run; its snapshots land in ``out / run / <point>.pt``. Returns the run folder."""
     folder = out / run["name"]
     folder.mkdir(parents=True, exist_ok=True)
-    merged = cfg["base"] | run.get("train", {}) | {"budget_minutes": 60.0 * float(run["hours"])}
+    merged = cfg["base"] | run.get("train", {})
+    threads = max(1, int(merged.get("threads", 1)))
+    merged["budget_minutes"] = 60.0 * float(run["hours"]) / threads  # CPU-hours over the run's threads
     settings = from_dict(UNetTrainSettings, merged, prefix=f"runs.{run['name']}.train.")
     points = [float(p) for p in cfg["points_hours"]]
     done = folder / "model.pt"
@@ -157,7 +161,9 @@ def ratio_to_gtao(record: dict, metric: str) -> dict[str, float]:
 def markdown(records: list[dict], cfg: dict, machine: str) -> str:
     cats = sorted({c for r in records for c in r["categories"].get("model", {})})
     head = (
-        "| run | hours | steps | val SSIM | val RMSE | " + " | ".join(f"{c} RMSE / GTAO" for c in cats) + " |"
+        "| run | CPU-hours | steps | val SSIM | val RMSE | "
+        + " | ".join(f"{c} RMSE / GTAO" for c in cats)
+        + " |"
     )
     lines = [
         f"Measured on {machine} by `bench/learning_curve.py --config configs/curve.json`; "
@@ -196,7 +202,7 @@ def plot(records: list[dict], path: Path) -> None:
         axes[1].plot(hours, mean_ratio, marker="o", label=run)
     for ax, title in zip(axes, ("validation RMSE", "test categories: RMSE / GTAO's (mean)"), strict=True):
         ax.set_xscale("log", base=2)
-        ax.set_xlabel("training hours (wall clock)")
+        ax.set_xlabel("training CPU-hours (wall clock x threads)")
         ax.set_title(title)
         ax.grid(True, alpha=0.3)
     axes[1].axhline(1.0, color="k", lw=0.8)

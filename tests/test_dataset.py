@@ -229,7 +229,8 @@ def test_mixed_dataset_same_hash_twice_and_after_resume(mixed, tmp_path):
 
 
 def test_loader_trains_on_mixed_sizes(mixed, tmp_path):
-    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
 
     train_set, val_set, info = load_dataset_frames(mixed / "a")
     assert len(set(train_set.sizes)) >= 2 and isinstance(train_set.x, list)

@@ -155,7 +155,7 @@ def tiny_dataset(tmp_path_factory):
 
 def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset):
     from neuralao.pipeline.datasets.dataset import open_dataset
-    from neuralao.pipeline.models.unet_train import frames_to_set, network_input
+    from neuralao.pipeline.models.unet_frames import frames_to_set, network_input
     from neuralao.runtime.internal_resolution import downsample_frame
 
     frames = list(open_dataset(tiny_dataset).frames(split="train"))
@@ -182,7 +182,8 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     from neuralao.export.onnx_io import get_metadata, load_onnx
     from neuralao.export.unet import export_checkpoint
-    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
     from neuralao.runtime.predict import is_hybrid
 
     ts = UNetTrainSettings(
@@ -209,7 +210,8 @@ def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     """An export trained at an internal height ships the two fragment passes an engine runs around the
     network, and they compile on Mesa."""
     from neuralao.export.unet import export_checkpoint
-    from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
     from neuralao.runtime import gl
 
     ts = UNetTrainSettings(

@@ -19,12 +19,11 @@ from helpers import onnx_vs_torch_tol
 
 from neuralao.pipeline.models.checkpoint import count_parameters
 from neuralao.pipeline.models.unet import PaddedUNet, UNet, UNetArgs, build_model, model_args_dict, predict
+from neuralao.pipeline.models.unet_frames import FrameSet, load_dataset_frames
 from neuralao.pipeline.models.unet_train import (
     KIND,
-    FrameSet,
     UNetTrainSettings,
     load_checkpoint,
-    load_dataset_frames,
     masked_ssim_loss,
     model_from_checkpoint,
     partial_path,
@@ -283,7 +282,8 @@ def test_training_lowers_the_loss_and_records_validation(trained, frames):
     for i in range(len(val_set)):
         x = val_set.x[i].numpy()
         for j in range(val_set.y.shape[1]):  # every label radius
-            pred = np.where(x[0] > 0, predict(model, x, float(val_set.rho[i, j])), 1.0).astype(np.float32)
+            fg = np.any(x[1:4] != 0, axis=0)  # a zero normal is background; log depth can be <= 0
+            pred = np.where(fg, predict(model, x, float(val_set.rho[i, j])), 1.0).astype(np.float32)
             ref, mask = val_set.y[i, j].float().numpy(), val_set.m[i, j].numpy()
             ssim.append(metrics.masked_ssim(pred, ref, mask))
             rmse.append(metrics.masked_rmse(pred, ref, mask))
@@ -706,3 +706,41 @@ def test_corpus_fraction_cut_from_the_loaded_corpus_equals_a_fresh_load(tmp_path
     assert len(load_dataset_frames(tmp_path, 0.34)[2]["training_scenes"]) == 1
     with pytest.raises(NeuralaoError, match="train_fraction 1"):
         load_dataset_frames(tmp_path, 0.5, loaded=load_dataset_frames(tmp_path, 0.5))
+
+
+def test_prepared_frames_match_the_frames_and_resume(dataset, frames, monkeypatch):
+    """The frames prepared on disk and read back memory-mapped equal the frames converted in memory; a
+    shard whose preparation was interrupted (no description) is prepared again, the others are read."""
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models import unet_frames
+
+    train, val, _ = frames
+    ds = open_dataset(dataset)
+    direct = unet_frames.frames_to_set(ds.frames(split="train", holdout=False))
+    folder = next((dataset.parent / f"{dataset.name}.prepared").iterdir())
+    described = sorted(folder.glob("*.json"))
+    assert described and len(described) == len(list(folder.glob("*.bin")))
+    described[0].unlink()
+    monkeypatch.setattr(unet_frames, "STACK_BYTES", 0)  # one memory-mapped view per frame
+    again, val_again, _ = load_dataset_frames(dataset)
+    assert described[0].exists() and isinstance(again.x, list)
+    for a, b in ((direct, train), (train, again), (val, val_again)):
+        assert a.names == b.names and torch.equal(a.rho, b.rho) and torch.equal(a.radii, b.radii)
+        for key in ("x", "y", "m"):
+            assert all(torch.equal(getattr(a, key)[i], getattr(b, key)[i]) for i in range(len(a)))
+
+
+def test_foreground_is_read_from_the_normal_under_every_contract():
+    """Version 3's depth channel is log depth: 0 at depth 1 and negative nearer, so only the normal tells
+    foreground from background (crop selection and validation read it so)."""
+    from neuralao.pipeline.models.unet_frames import foreground
+    from neuralao.runtime.unet_input import preprocess
+
+    depth = np.array([[0.5, 1.0, 2.0, 0.0]], np.float32)
+    normal = np.zeros((1, 4, 3), np.float32)
+    normal[..., 2] = depth > 0
+    for version in (2, 3):
+        x = preprocess(depth, normal, depth > 0, version)
+        assert foreground(x).tolist() == [[True, True, True, False]]
+        assert foreground(torch.from_numpy(x)[None]).tolist() == [[[True, True, True, False]]]
+    assert preprocess(depth, normal, depth > 0, 3)[0, 0, 1] == 0.0

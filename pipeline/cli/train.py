@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.pipeline.models import field, mlp, unet_train
+from neuralao.pipeline.models import field, mlp, unet_frames, unet_train
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import check_count
@@ -215,7 +215,7 @@ def add_unet_arguments(p: argparse.ArgumentParser) -> None:
 def run_unet(args: argparse.Namespace) -> int:
     overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
     settings = load_settings(unet_train.UNetTrainSettings, args.config, overrides)
-    train_set, val_set, info = unet_train.load_dataset_frames(
+    train_set, val_set, info = unet_frames.load_dataset_frames(
         Path(args.data),
         settings.train_fraction,
         internal_height=settings.internal_height,

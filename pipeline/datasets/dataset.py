@@ -619,21 +619,25 @@ class Dataset:
                 continue
             if holdout is not None and not any(h == holdout for h in entry["holdout"]):
                 continue
-            arrays = self.load_shard(entry)
-            keys = [k for k in self.manifest.get("frame_keys", FRAME_KEYS) if k in arrays]
-            for i in range(len(arrays["view"])):
-                if holdout is not None and bool(arrays["holdout"][i]) != holdout:
-                    continue
-                yield Frame.from_arrays(
-                    {k: arrays[k][i] for k in keys}
-                    | {
-                        "scene": entry["scene"],
-                        "view": int(arrays["view"][i]),
-                        "split": entry["split"],
-                        "holdout": bool(arrays["holdout"][i]),
-                    },
-                    f"{entry['file']} frame {i}",
-                )
+            for frame in self.shard_frames(entry):
+                if holdout is None or frame["holdout"] == holdout:
+                    yield frame
+
+    def shard_frames(self, entry: dict) -> Iterator[Frame]:
+        """Every frame of one shard (an entry of the manifest's ``shards``), in order."""
+        arrays = self.load_shard(entry)
+        keys = [k for k in self.manifest.get("frame_keys", FRAME_KEYS) if k in arrays]
+        for i in range(len(arrays["view"])):
+            yield Frame.from_arrays(
+                {k: arrays[k][i] for k in keys}
+                | {
+                    "scene": entry["scene"],
+                    "view": int(arrays["view"][i]),
+                    "split": entry["split"],
+                    "holdout": bool(arrays["holdout"][i]),
+                },
+                f"{entry['file']} frame {i}",
+            )
 
 
 def open_dataset(root: str | Path, verify: bool = True) -> Dataset:

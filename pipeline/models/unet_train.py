@@ -35,22 +35,17 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from neuralao.pipeline.datasets.dataset import open_dataset
 from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
 from neuralao.pipeline.models.checkpoint import restore_model, save_checkpoint
 from neuralao.pipeline.models.unet import PaddedUNet, UNet, UNetArgs, build_model, flip_input, model_args_dict
-from neuralao.runtime.baselines import run_gtao
+from neuralao.pipeline.models.unet_frames import FrameSet, foreground, network_input
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
-from neuralao.runtime.frame import FrameLike
-from neuralao.runtime.internal_resolution import downsample_frame, internal_size
 from neuralao.runtime.unet_input import (
     DESCRIPTIONS,
     PREPROCESS_VERSION,
     check_version,
-    frame_radius_param,
-    preprocess_frame,
 )
 
 log = logging.getLogger(__name__)
@@ -168,214 +163,6 @@ def _ssim_kw(settings: UNetTrainSettings) -> dict:
 # ----------------------------------------------------------------------------------------------- data
 
 
-@dataclass
-class FrameSet:
-    """Preprocessed frames in memory, with labels at K radii.
-
-    x : (N, 4, H, W) float32 network input; y : (N, K, H, W) float16 AO labels (exact: binary-kernel
-    labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
-    radius parameters (:func:`neuralao.pipeline.models.unet.radius_param`); radii : (N, K) float32 radii in
-    scene units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
-    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that indexes
-    them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the network's input
-    for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
-    """
-
-    x: torch.Tensor | list[torch.Tensor]
-    y: torch.Tensor | list[torch.Tensor]
-    m: torch.Tensor | list[torch.Tensor]
-    rho: torch.Tensor
-    radii: torch.Tensor
-    names: list[str]
-    scenes: list[str]
-    g: torch.Tensor | list[torch.Tensor] | None = None  # hybrid: GTAO (N, K, H, W) float16 at each radius
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    @property
-    def sizes(self) -> list[tuple[int, int]]:
-        """(H, W) of every frame."""
-        if isinstance(self.x, torch.Tensor):
-            return [tuple(self.x.shape[-2:])] * len(self)
-        return [tuple(x.shape[-2:]) for x in self.x]
-
-    def subset(self, index: list[int]) -> FrameSet:
-        i = torch.as_tensor(index, dtype=torch.int64)
-        pick = lambda a: None if a is None else a[i] if isinstance(a, torch.Tensor) else [a[k] for k in index]  # noqa: E731
-        return FrameSet(
-            pick(self.x),
-            pick(self.y),
-            pick(self.m),
-            self.rho[i],
-            self.radii[i],
-            [self.names[k] for k in index],
-            [self.scenes[k] for k in index],
-            pick(self.g),
-        )
-
-
-def network_input(data: FrameSet, f: int, j: int) -> torch.Tensor:
-    """(C, H, W) float32 input of frame ``f`` at radius index ``j``: the G-buffer channels, and for a
-    hybrid set GTAO at that radius as the fifth."""
-    if data.g is None:
-        return data.x[f]
-    return torch.cat([data.x[f], data.g[f][j : j + 1].float()], dim=0)
-
-
-def frame_labels(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ao (K, H, W) float32, valid (K, H, W) bool, radii (K,) float32) of a frame's labels at every radius.
-
-    Frames from a dataset with ``labels.radii_rel`` carry ``ao_radii``/``valid_radii``/``radii``; others
-    are refused (the network takes the radius as an input, so it needs to know each label's radius).
-    """
-    name = f"{frame.get('scene', '?')}/{frame.get('view', '?')}"
-    if not all(k in frame for k in ("ao_radii", "valid_radii", "radii")):
-        raise NeuralaoError(
-            f"frame {name} has no labels at known radii (ao_radii, valid_radii, radii): "
-            "build the dataset with labels.radii_rel set"
-        )
-    ao = np.moveaxis(np.asarray(frame["ao_radii"], dtype=np.float32), -1, 0)
-    valid = np.moveaxis(np.asarray(frame["valid_radii"], dtype=bool), -1, 0)
-    return ao, valid, np.asarray(frame["radii"], dtype=np.float32).reshape(-1)
-
-
-def frames_to_set(
-    frames, internal_height: int = 0, gtao: bool = False, version: int = PREPROCESS_VERSION
-) -> FrameSet:
-    """Frame dicts (with labels at several radii) -> :class:`FrameSet` (one radius count; stacked when
-    every frame has one size, else per-frame lists).
-
-    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels
-    included (:func:`neuralao.runtime.internal_resolution.downsample_frame`; the radius parameter does not
-    change, it is relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame
-    as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
-    ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
-    only the compact arrays are kept. ``version``: the input contract the frames are preprocessed for.
-    """
-    xs, ys, ms, gs, rhos, radii, names, scenes = [], [], [], [], [], [], [], []
-    count = None
-    for i, f in enumerate(frames):
-        _, _, r = frame_labels(f)
-        if count is None:
-            count = len(r)
-        elif len(r) != count:
-            raise NeuralaoError(
-                f"frames have labels at {count} and {len(r)} radii; use one radius list per dataset"
-            )
-        if gtao:
-            f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
-        h, w = np.shape(f["depth"])
-        lw, lh = internal_size(w, h, internal_height or None)
-        if (lw, lh) != (w, h):
-            f = downsample_frame(f, lw, lh)
-        ao, valid, r = frame_labels(f)
-        xs.append(torch.from_numpy(preprocess_frame(f, version=version)))
-        ys.append(torch.from_numpy(ao.astype(np.float16)))
-        ms.append(torch.from_numpy(valid & np.asarray(f["mask"], dtype=bool)[None]))
-        if gtao:
-            gs.append(torch.from_numpy(np.moveaxis(f["gtao_radii"], -1, 0).astype(np.float16)))
-        rhos.append([frame_radius_param(f, float(v), version) for v in r])
-        radii.append(r)
-        scene = str(f.get("scene", "frames"))
-        names.append(f"{scene}/{f.get('view', i)}")
-        scenes.append(scene)
-    if not names:
-        raise NeuralaoError("no frames to train or validate on")
-    g = gs if gtao else None
-    if len({x.shape for x in xs}) == 1:
-        xs, ys, ms = torch.stack(xs), torch.stack(ys), torch.stack(ms)
-        g = torch.stack(gs) if gtao else None
-    return FrameSet(
-        xs,
-        ys,
-        ms,
-        torch.tensor(rhos, dtype=torch.float32),
-        torch.from_numpy(np.stack(radii)),
-        names,
-        scenes,
-        g,
-    )
-
-
-def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
-    """The training scenes a ``train_fraction`` keeps: every k-th of the sorted scenes (all at 1)."""
-    if not 0.0 < train_fraction <= 1.0:
-        raise NeuralaoError(f"train_fraction must lie in (0, 1], got {train_fraction}")
-    scenes = sorted(train_scenes)
-    n = max(1, round(len(scenes) * train_fraction))  # n = all of them at 1
-    return [scenes[int(i * len(scenes) / n)] for i in range(n)]
-
-
-def load_dataset_frames(
-    data: Path,
-    train_fraction: float = 1.0,
-    loaded: tuple | None = None,
-    internal_height: int = 0,
-    gtao: bool = False,
-    version: int = PREPROCESS_VERSION,
-) -> tuple[FrameSet, FrameSet | None, dict]:
-    """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
-
-    ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
-    the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
-    dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
-    instead of read from disk again. ``internal_height``, ``gtao`` and ``version``: see
-    :func:`frames_to_set`.
-    """
-    ds = open_dataset(data)
-    train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
-    if not train_scenes:
-        raise NeuralaoError(f"dataset {data} has no training frames (no scene with split 'train')")
-    keep_set = set(kept_training_scenes(train_scenes, train_fraction))
-    val_source = "val scenes"
-    has_val = any(e["split"] == "val" for e in ds.manifest["shards"])
-    if not has_val:
-        val_source = "held-back views of the training scenes (the dataset has no val scene)"
-    if loaded is not None:
-        full, val, full_info = loaded
-        if (
-            full_info.get("train_fraction") != 1.0
-            or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
-            or full_info.get("internal_height") != internal_height
-            or full_info.get("gtao") != gtao
-            or full_info.get("preprocess_version") != version
-        ):
-            raise NeuralaoError(
-                "load_dataset_frames: `loaded` must be this dataset's frames at train_fraction 1"
-            )
-        train = full.subset([i for i, sc in enumerate(full.scenes) if sc in keep_set])
-    else:
-        train = frames_to_set(
-            (f for f in ds.frames(split="train", holdout=False) if f["scene"] in keep_set),
-            internal_height,
-            gtao,
-            version,
-        )
-        val = frames_to_set(
-            ds.frames(split="val") if has_val else ds.frames(split="train", holdout=True),
-            internal_height,
-            gtao,
-            version,
-        )
-    info = {
-        "path": str(data),
-        "name": ds.manifest.get("name"),
-        "dataset_hash": ds.manifest.get("dataset_hash"),
-        "labels": ds.manifest.get("config", {}).get("labels"),
-        "training_scenes": sorted(set(train.scenes)),
-        "val_scenes": sorted(set(val.scenes)),
-        "val_source": val_source,
-        "train_frames": len(train),
-        "val_frames": len(val),
-        "train_fraction": train_fraction,
-        "internal_height": internal_height,
-        "gtao": gtao,
-        "preprocess_version": version,
-    }
-    return train, val, info
-
-
 def _integral(m: torch.Tensor) -> torch.Tensor:
     """(N, H, W) bool mask -> (N, H+1, W+1) int32 summed-area table."""
     s = torch.zeros(m.shape[0], m.shape[1] + 1, m.shape[2] + 1, dtype=torch.int32)
@@ -396,9 +183,9 @@ class Foreground:
     @classmethod
     def of(cls, data: FrameSet) -> Foreground:
         if isinstance(data.x, torch.Tensor):
-            tables = [_integral(data.x[:, 0] > 0)]
+            tables = [_integral(foreground(data.x))]
         else:
-            tables = [_integral(x[None, 0] > 0) for x in data.x]
+            tables = [_integral(foreground(x)[None]) for x in data.x]
         sizes = torch.tensor([(h + 1) * (w + 1) for h, w in data.sizes], dtype=torch.int64)
         offset = torch.cumsum(sizes, 0) - sizes
         stride = torch.tensor([w + 1 for _, w in data.sizes], dtype=torch.int64)
@@ -475,7 +262,7 @@ def make_batch(
     for k in idx:
         f, t, l0, j = int(plan.frame[k]), int(plan.top[k]), int(plan.left[k]), int(plan.radius[k])
         ch, cw = (crop, crop) if crop else data.x[f].shape[-2:]
-        x = network_input(data, f, j)[None, :, t : t + ch, l0 : l0 + cw]
+        x = network_input(data, f, j, (slice(t, t + ch), slice(l0, l0 + cw)))[None]
         y = data.y[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         m = data.m[f][None, j : j + 1, t : t + ch, l0 : l0 + cw].float()
         if plan.hflip[k]:
@@ -518,7 +305,7 @@ def evaluate(model: UNet, data: FrameSet, device: str | torch.device = "cpu") ->
     per = []  # (scene, radius index, ssim, rmse)
     with torch.no_grad():
         for i in range(len(data)):
-            fg = data.x[i][0].numpy() > 0
+            fg = foreground(data.x[i]).numpy()
             for j in range(data.rho.shape[1]):
                 mask = data.m[i][j].numpy()
                 if not mask.any():

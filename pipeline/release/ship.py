@@ -34,7 +34,8 @@ from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
 from neuralao.pipeline.evaluation.report_baselines import timing_frame as report_timing_frame
 from neuralao.pipeline.evaluation.report_settings import ReportSettings
 from neuralao.pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
-from neuralao.pipeline.models.unet_train import UNetTrainSettings, load_dataset_frames, train
+from neuralao.pipeline.models.unet_frames import load_dataset_frames
+from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
 from neuralao.runtime.baselines import time_screen_space
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json
