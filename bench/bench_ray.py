@@ -226,7 +226,7 @@ def stage_costs(info: dict) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
     seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake:
     the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with;
-    the LOD stage's first task is its one simplification, single-threaded), the states workers build
+    the LOD stage's first tasks are its simplifications, single-threaded), the states workers build
     (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
     tasks = info.get("task_seconds", {})
@@ -238,8 +238,9 @@ def stage_costs(info: dict) -> list[dict]:
             continue
         t = list(tasks.get(name, []))
         cores = [x * (threads if name in TRACING_STAGES else 1) for x in t]
-        if name == "lod" and cores:
-            cores[0] = t[0]
+        if name == "lod" and cores:  # its simplifications: one of the whole level or one per piece
+            n = int(st.get("simplify_tasks", 1))
+            cores[:n] = t[:n]
         state = 0.0
         if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
             state, driver = st["seconds"], 0.0

@@ -270,6 +270,21 @@ def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, 
     _assert_same_level_bake(out, local, info)
 
 
+def test_level_lod_per_piece_in_tiles_is_byte_identical(ray_engine, local_level, tmp_path):
+    """The LOD simplified per piece at one quadric error, the terrain in tiles (a task each), with the
+    samples' passes and the glTF's parts as tasks: the same bytes on two nodes as in this process."""
+    from neuralao.pipeline.bakes.level import bake_level
+    from neuralao.pipeline.bakes.level_settings import load_level_settings
+
+    level, cfg, *_ = local_level
+    settings = load_level_settings(cfg, [*LEVEL_TASKS, "lod.max_error=1.0", "lod.tile_faces=300"])
+    info = bake_level(level, settings, tmp_path / "local")
+    lod = next(st for st in info["stages"] if st["stage"] == "lod")
+    assert lod["simplify_tasks"] > info["counts"]["pieces"]  # the terrain piece in tiles
+    bake_level(level, settings, tmp_path / "ray", engine=ray_engine)
+    _assert_same_level_bake(tmp_path / "ray", tmp_path / "local", info)
+
+
 def test_worker_killed_mid_run_changes_nothing(ray_engine, local_bake, monkeypatch):
     monkeypatch.setattr(engine_mod, "CHUNK_RAYS", 1 << 14)  # ~100 tasks, a few ms each
     scene, ao, _ = local_bake

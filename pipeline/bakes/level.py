@@ -61,8 +61,11 @@ from neuralao.pipeline.bakes.level_stages import (
     LabellerFrame,
     TaskFiles,
     blend_piece,
+    engine_each,
+    join_tiles,
     lod_jobs,
     lod_resample_jobs,
+    lod_tiles,
     opaque_context,
     output_jobs,
     piece_resampled,
@@ -71,6 +74,7 @@ from neuralao.pipeline.bakes.level_stages import (
     pieces_context,
     run_to_files,
     simplify_level,
+    simplify_piece,
     solve_stage,
     split_lod,
     trace_jobs,
@@ -161,6 +165,8 @@ class BakeLog:
         )
         if (peak := _peak_rss()) is not None:
             self.stages[-1]["peak_rss_bytes"] = peak
+        done: list[float] = []
+        built: list[float] = []
         if self.runner is not None and self.runner.task_seconds:
             done, self.runner.task_seconds = self.runner.task_seconds, []
             self.task_seconds[name] = done
@@ -169,6 +175,14 @@ class BakeLog:
             built, self.runner.state_seconds = self.runner.state_seconds, []
             self.state_seconds[name] = built
             self.stages[-1].update(states_built=len(built))
+        # The driver's own seconds: what no task did. Here (no engine, or the local one) the tasks ran in
+        # this process, so the stage's wall time less theirs; on a cluster the driver waits for them, so
+        # its CPU time (Ray's client work included).
+        row = self.stages[-1]
+        if self.runner is None or self.runner.name == "local":
+            row["driver_seconds"] = max(0.0, row["seconds"] - sum(done) - sum(built))
+        else:
+            row["driver_seconds"] = row["cpu_seconds"]
 
     def note(self, name: str, **counts) -> None:
         for st in self.stages:
@@ -251,13 +265,23 @@ def bake_level(
         pieces=len(index.pieces),
     )
     t = s.trace
+    light = pieces_context(key, level, index)
+    # The samples' two passes over the pieces are a task per piece each (here: in this process).
+    blog.runner = engine or LocalEngine()
     rule, pieces = blog.timed(
         "samples",
         "Sample mesh",
         lambda: sample_rule(
-            level, index, t.samples_per_vertex, t.min_samples_per_face, t.samples_per_face_cap, s.seed
+            level,
+            index,
+            t.samples_per_vertex,
+            t.min_samples_per_face,
+            t.samples_per_face_cap,
+            s.seed,
+            engine_each(blog.runner, light, index.pieces),
         ),
     )
+    blog.runner = None
     total_samples = sum(p.ns for p in pieces)
     blog.note("samples", samples=total_samples)
     settings_here = worker_settings(label_settings(s, index.diagonal), engine)
@@ -271,7 +295,6 @@ def bake_level(
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
     ctx = opaque_context(key, level, index, settings_here, foliage)
-    light = pieces_context(key, level, index)
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:
@@ -336,6 +359,7 @@ def bake_level(
             lod_vertices=int(lod["lod_vertices"]),
             lod_faces=int(lod["lod_faces"]),
             resample_points=int(lod["resample_points"]),
+            simplify_tasks=int(lod.get("simplify_tasks", 1)),
             **{
                 k: float(lod[k])
                 for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")
@@ -468,15 +492,43 @@ def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSett
 
 
 def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
-    """LOD 1 of the level's static instances (one task: one simplification of them all), split by piece
-    as it arrives; then per piece its LOD resampled, solved and measured (a task each). The resampling
-    radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it."""
+    """LOD 1 of the level's static instances: one task, one simplification of them all, split by piece as
+    it arrives; or with ``lod.max_error`` a task per piece, each simplified alone to that shared error.
+    Then per piece its LOD resampled, solved and measured (a task each). The resampling radius is 1.5 x
+    the LOD's median edge unless ``lod.radius`` sets it."""
     ctx, light = contexts
     t0 = time.perf_counter()
     mesh_files = TaskFiles(lod_files.folder.parent / "lod_meshes", lod_files.key)
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
-    if not all(mesh_files.has(stem) for stem in stems):
+    have_meshes = all(mesh_files.has(stem) for stem in stems)
+    if s.lod.max_error is not None and not have_meshes:
+        # Per piece (a big one in tiles), a task each, at one shared error; the pieces' meshes joined from
+        # their tiles here, the radius from the level's median LOD edge.
+        tile_files = TaskFiles(lod_files.folder.parent / "lod_tiles", lod_files.key)
+        jobs = [
+            (
+                f"{piece_stem(p)}_{t:04d}",
+                lambda p=p, t=t, n=n: Task(light, simplify_piece, (p, n, t, s.lod.max_error)),
+            )
+            for p in pieces
+            for n in [lod_tiles(p, s.lod.tile_faces)]
+            for t in range(n)
+        ]
+        edges, tiles = [], []
+        for stem, r, _ in run_to_files(tile_files, runner, jobs, "lod simplify", progress):
+            edges.append(r["edges"])
+            tiles.append(r)
+            p = pieces[int(stem[1:6])]
+            if len(tiles) == lod_tiles(p, s.lod.tile_faces):
+                mesh_files.put(piece_stem(p), join_tiles(tiles))
+                tiles = []
+        edges = np.concatenate(edges)
+        median = float(np.median(edges.astype(np.float64))) if len(edges) else 1.0
+        del edges
+        mesh_files.put("radius", {"median_edge": np.array(median)})
+        shutil.rmtree(tile_files.folder, ignore_errors=True)  # joined into the pieces' meshes
+    elif not have_meshes:
         # A heavy context: its worker drops the opaque BVH while it simplifies the flattened level.
         simplify_ctx = pieces_context(lod_files.key, level, index, heavy=True)
         ((_, result),) = list(runner.map([Task(simplify_ctx, simplify_level, (s.lod.target_reduction,))]))
@@ -499,6 +551,9 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, trace_files, s)
     out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress))
     out["seconds_simplify"] = np.array(t1 - t0)
+    # The stage's first tasks: its simplifications (one of the whole level, or one per piece).
+    per_piece = s.lod.max_error is not None
+    out["simplify_tasks"] = np.array(sum(lod_tiles(p, s.lod.tile_faces) for p in pieces) if per_piece else 1)
     out["seconds_resample"] = np.array(t2 - t1)
     out["radius"] = np.array(radius)
     return out

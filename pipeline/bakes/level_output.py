@@ -41,9 +41,10 @@ def write_outputs(
     lod_files,
     pieces,
 ) -> None:
-    """Write the baked glTF, streamed: ``static_results`` yields each piece's arrays (the output tasks'
-    results, in piece order, one at a time) and the LOD comes from ``lod_files`` piece by piece; the binary
-    data goes to a file beside ``path`` as it is made, so memory holds one piece."""
+    """Write the baked glTF, streamed: ``static_results`` yields each piece's glTF part (the output tasks'
+    results, in piece order, one at a time: its instances' meshes and nodes, made by the task) and the LOD
+    comes from ``lod_files`` piece by piece; the binary data goes to a file beside ``path`` as it is made,
+    so memory holds one piece."""
     # Named as atomic_path names its temporaries, so a killed bake's rerun sweeps a stale one away.
     spill = path.with_name(f".{path.name}.spill.tmp")
     w = GltfWriter("neuralao level bake", spill=spill)
@@ -55,23 +56,8 @@ def write_outputs(
                 "rays": s.trace.rays,
             }
         }
-        for piece, (_, r, _) in zip(pieces, static_results, strict=True):
-            rows = index.table[piece.first : piece.stop]
-            for k, j, v0, f0, nv, nf in rows:
-                node = index.nodes[k]
-                sl, fl = slice(v0 - piece.v0, v0 - piece.v0 + nv), slice(f0 - piece.f0, f0 - piece.f0 + nf)
-                attrs = {
-                    "COLOR_0": r["colour"][sl],
-                    "_AO": r["ao"][sl],
-                    "_AO_SHORT": r["short"][sl],
-                    "_AO_LONG": r["long"][sl],
-                }
-                mi = w.mesh(f"{node.name}_{j}", r["positions"][sl], r["faces"][fl], attrs)
-                w.node(
-                    f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
-                    mi,
-                    extras={"role": "static", "source_node": node.index, "instance": int(j)},
-                )
+        for _, r, _ in static_results:  # each piece's instances, written by its task
+            w.append(str(r["part"]), r["blob"])
         trees = level.nodes_with("tree")
         rows = _coefficient_rows(trees, deco)
         written: dict[int, int] = {}

@@ -16,6 +16,7 @@ stream indexed by global face number (each piece skips ahead to its first face).
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -164,10 +165,20 @@ class AreaHistogram:
         self.count = np.zeros(len(self.edges) - 1)
         self.area = np.zeros(len(self.edges) - 1)
 
-    def add(self, areas: np.ndarray) -> None:
+    def bins(self, areas: np.ndarray) -> dict[str, np.ndarray]:
+        """The face count and area sum per bin of ``areas`` (what :meth:`add_bins` adds)."""
         b = np.clip(np.searchsorted(self.edges, areas, side="right") - 1, 0, len(self.count) - 1)
-        self.count += np.bincount(b, minlength=len(self.count))
-        self.area += np.bincount(b, weights=areas, minlength=len(self.count))
+        return {
+            "count": np.bincount(b, minlength=len(self.count)),
+            "area": np.bincount(b, weights=areas, minlength=len(self.count)),
+        }
+
+    def add_bins(self, bins: dict[str, np.ndarray]) -> None:
+        self.count += bins["count"]
+        self.area += bins["area"]
+
+    def add(self, areas: np.ndarray) -> None:
+        self.add_bins(self.bins(areas))
 
     def expected(self, rho: float, floor: int, cap: int) -> float:
         """About sum(clip(rho * area, floor, cap)) over every face added: exact for bins wholly below the
@@ -235,21 +246,54 @@ def cached_piece(
     return value
 
 
-def sample_rule(level: Level, index: PieceIndex, samples_per_vertex: float, floor: int, cap: int, seed: int):
+def piece_area_bins(level: Level, index: PieceIndex, piece: Piece) -> dict[str, np.ndarray]:
+    """The area histogram's bins of one piece's faces (the samples' first pass)."""
+    return AreaHistogram().bins(face_areas(piece_scene(level, index, piece)))
+
+
+def piece_sample_count(
+    level: Level, index: PieceIndex, piece: Piece, rule: SampleRule
+) -> dict[str, np.ndarray]:
+    """One piece's sample count and the areas of its faces with samples and of all (the second pass)."""
+    areas = face_areas(piece_scene(level, index, piece))
+    counts = face_counts(areas, piece.f0, rule)
+    return {
+        "samples": np.array(int(counts.sum())),
+        "area_sampled": np.array(float(areas[counts > 0].sum())),
+        "area": np.array(float(areas.sum())),
+    }
+
+
+def sample_rule(
+    level: Level,
+    index: PieceIndex,
+    samples_per_vertex: float,
+    floor: int,
+    cap: int,
+    seed: int,
+    each: Callable | None = None,
+):
     """The :class:`SampleRule` of the level and the pieces with their sample offsets and counts: two passes
-    over the pieces (areas into the histogram; then counts), one piece in memory at a time."""
+    over the pieces (areas into the histogram; then counts), one piece in memory at a time.
+
+    each : ``each(fn, *args)`` -> ``fn(level, index, piece, *args)`` of every piece, in piece order (a
+    bake's engine runs them as tasks); None: here, one after the other. The driver adds the pieces' sums in
+    piece order either way, so the rule is the same to the last bit."""
+    if each is None:
+
+        def each(fn, *args):
+            return (fn(level, index, piece, *args) for piece in index.pieces)
+
     hist = AreaHistogram()
-    for piece in index.pieces:
-        hist.add(face_areas(piece_scene(level, index, piece)))
+    for bins in each(piece_area_bins):
+        hist.add_bins(bins)
     rho = water_fill(hist, samples_per_vertex * index.vertices, floor, cap)
     rule = SampleRule(rho, floor, cap, seed)
     pieces, s0, area_total, area_all = [], 0, 0.0, 0.0
-    for piece in index.pieces:
-        areas = face_areas(piece_scene(level, index, piece))
-        counts = face_counts(areas, piece.f0, rule)
-        area_total += float(areas[counts > 0].sum())
-        area_all += float(areas.sum())
-        ns = int(counts.sum())
+    for piece, r in zip(index.pieces, each(piece_sample_count, rule), strict=True):
+        area_total += float(r["area_sampled"])
+        area_all += float(r["area"])
+        ns = int(r["samples"])
         pieces.append(replace(piece, s0=s0, ns=ns))
         s0 += ns
     return SampleRule(rho, floor, cap, seed, area_total, area_all), pieces

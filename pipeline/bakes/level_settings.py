@@ -101,8 +101,16 @@ class SmallDecoratorSettings:
 class LodSettings:
     # Make and bake one lower LOD of the receivers.
     enabled: bool = True
-    # Fraction of faces the simplifier removes (the paper's LOD: 1.8M -> 0.8M faces, 0.55).
+    # Fraction of faces the simplifier removes (the paper's LOD: 1.8M -> 0.8M faces, 0.55), in one
+    # simplification of the whole level (one task: what a cluster cannot split).
     target_reduction: float = 0.55
+    # Instead, each piece simplified on its own (a task each) down to this shared quadric error, scene
+    # units squared (the sum of squared distances from a collapsed vertex to the planes it replaces;
+    # coincident vertices welded first, so houses keep their boxes). None: the one global pass above.
+    max_error: float | None = None
+    # With max_error: a piece of more faces than this is simplified in spatial tiles of about this many
+    # (a task each; the cuts between tiles are kept, as borders are), so no piece is one long task.
+    tile_faces: int = 262144
     # Resampling sphere radius, scene units; None -> 1.5 x the LOD's median edge length.
     radius: float | None = None
     # Rays per resampling sphere.
@@ -147,6 +155,7 @@ def check_settings(s: LevelBakeSettings) -> None:
         ("trace.subdomains", t.subdomains),
         ("grass.rays", s.grass.rays),
         ("lod.rays", s.lod.rays),
+        ("lod.tile_faces", s.lod.tile_faces),
         ("decorators.local_rays", s.decorators.local_rays),
         ("decorators.samples_per_instance", s.decorators.samples_per_instance),
         ("decorators.holdout_samples", s.decorators.holdout_samples),
@@ -212,6 +221,8 @@ def _check_ranges(s: LevelBakeSettings) -> None:
         )
     if t.backface_threshold is not None and not 0 <= t.backface_threshold <= 1:
         raise NeuralaoError(f"trace.backface_threshold must be in [0, 1] or null, got {t.backface_threshold}")
+    if s.lod.max_error is not None and not (math.isfinite(s.lod.max_error) and s.lod.max_error > 0):
+        raise NeuralaoError(f"lod.max_error must be a positive number (or null), got {s.lod.max_error}")
     if s.lod.radius is not None and not s.lod.radius > 0:
         raise NeuralaoError(f"lod.radius must be > 0 (or null), got {s.lod.radius}")
 

@@ -11,6 +11,7 @@ skips the files it finds, and the driver's memory is one piece's, not the level'
 from __future__ import annotations
 
 import copy
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -34,7 +35,7 @@ from neuralao.pipeline.bakes.level_pieces import (
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
 from neuralao.pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
-from neuralao.pipeline.geometry.level_files import Level, flatten
+from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import SolveInfo, solve_partitioned
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
@@ -139,6 +140,24 @@ def pieces_context(key: str, level: Level, index: PieceIndex, heavy: bool = Fals
     world), which has its worker drop the opaque BVH first."""
     name = "level-simplify" if heavy else "level-pieces"
     return Context(f"{name}/{key}", _pieces_state, (level, index, key), heavy=heavy)
+
+
+def _piece_fn(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: ``fn(level, index, piece, *rest)`` of a piece function of
+    :mod:`neuralao.pipeline.bakes.level_pieces` on the worker's copy of the level."""
+    fn, piece, *rest = args
+    return fn(state.level, state.index, piece, *rest)
+
+
+def engine_each(runner, ctx: Context, pieces: list[Piece]) -> Callable:
+    """``each(fn, *args)`` for :func:`neuralao.pipeline.bakes.level_pieces.sample_rule`: a task per piece on
+    ``runner``, the results yielded in piece order (they arrive in any)."""
+
+    def each(fn, *args):
+        results = dict(runner.map(Task(ctx, _piece_fn, (fn, p, *args)) for p in pieces))
+        return (results.pop(i) for i in range(len(pieces)))
+
+    return each
 
 
 # --------------------------------------------------------------------------- per-task files
@@ -437,15 +456,93 @@ def simplify(scene: Scene, reduction: float | None = None, target_count: int | N
     """Quadric-error simplification (fast-simplification) to a fraction removed or a face count."""
     import fast_simplification  # measured: ~0.3 s to import; only the LOD stage needs it
 
-    v, f = fast_simplification.simplify(
-        scene.vertices.astype(np.float32),
-        scene.faces.astype(np.int32),
-        target_reduction=reduction,
-        target_count=target_count,
-    )
+    with _SIMPLIFY_LOCK:
+        v, f = fast_simplification.simplify(
+            scene.vertices.astype(np.float32),
+            scene.faces.astype(np.int32),
+            target_reduction=reduction,
+            target_count=target_count,
+        )
     if len(f) == 0:  # nothing left: the mesh is its own LOD
         return scene
     return scene_from_arrays(np.asarray(v, np.float64), np.asarray(f, np.int64), "lod1", scene.source)
+
+
+# fast-simplification's passes: pass i collapses every edge whose quadric error is below
+# 1e-9 (i + 3) ** agg (its Simplify.h); there are 100, so the last threshold is 1e-9 * 102 ** agg.
+_PASS_THRESHOLD, _LAST_PASS_BASE = 1e-9, 102.0
+# The simplifier keeps its mesh in module globals: one simplification at a time per process.
+_SIMPLIFY_LOCK = threading.Lock()
+
+
+def simplify_to_error(vertices: np.ndarray, faces: np.ndarray, max_error: float):
+    """Quadric-error simplification that stops at an error instead of a face count.
+
+    vertices : (n, 3) float64, faces : (m, 3) int64 -> (vertices (n', 3) float64, faces (m', 3) int64).
+    No collapse is made whose quadric error (the sum of squared distances from the new vertex to the
+    planes of the original faces merged into it, scene units squared) exceeds ``max_error``, and no
+    vertex of an open border moves: a quadric does not see a border pulled in (a house's split-vertex box
+    is six open quads, each of which folds to a line at zero error and vanishes), so borders are kept.
+    fast-simplification has no error stop but raises its threshold over a fixed number of passes: asked
+    for zero faces with ``agg`` chosen so that the last pass's threshold is ``max_error``, it stops there."""
+    import fast_simplification  # measured: ~0.3 s to import; only the LOD stage needs it
+
+    agg = max(np.log(max_error / _PASS_THRESHOLD) / np.log(_LAST_PASS_BASE), 0.0)
+    with _SIMPLIFY_LOCK:
+        v, f = fast_simplification.simplify(
+            vertices, faces.astype(np.int32), target_count=0, agg=agg, preserve_border=True
+        )
+    return np.asarray(v, np.float64), np.asarray(f, np.int64).reshape(-1, 3)
+
+
+def lod_tiles(piece: Piece, tile_faces: int) -> int:
+    """How many spatial tiles the per-piece LOD cuts ``piece`` into (1: the piece whole)."""
+    return max(1, -(-piece.nf // tile_faces))
+
+
+def tile_faces_of(scene: Scene, tiles: int, tile: int) -> np.ndarray:
+    """The faces (indices into ``scene.faces``) of tile ``tile`` of ``tiles``: a grid over the x-z extent
+    of the face centroids, ceil(sqrt(tiles)) columns, a face in the cell of its centroid."""
+    if tiles == 1:
+        return np.arange(len(scene.faces))
+    c = scene.vertices[scene.faces].mean(axis=1)
+    nx = int(np.ceil(np.sqrt(tiles)))
+    nz = -(-tiles // nx)
+    lo, hi = c.min(axis=0), c.max(axis=0)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    ix = np.minimum(((c[:, 0] - lo[0]) / span[0] * nx).astype(np.int64), nx - 1)
+    iz = np.minimum(((c[:, 2] - lo[2]) / span[2] * nz).astype(np.int64), nz - 1)
+    cell = np.minimum(ix * nz + iz, tiles - 1)  # the grid's spare cells fold into the last tile
+    return np.flatnonzero(cell == tile)
+
+
+def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: LOD 1 of one piece, or of one spatial tile of a big one (:func:`tile_faces_of`),
+    simplified alone to the level's shared quadric error (:func:`simplify_to_error`; a tile's cut is an
+    open border, kept). Returns vertices, faces and every face's first-edge length (float32: the driver
+    takes the level's median for the resampling radius)."""
+    piece, tiles, tile, max_error = args
+    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
+    mine = scene.faces[tile_faces_of(scene, tiles, tile)]
+    used, local = np.unique(mine, return_inverse=True)
+    v, f = simplify_to_error(scene.vertices[used], local.reshape(-1, 3), max_error)
+    if len(f):  # the same faces the LOD's own scene keeps (degenerate ones dropped)
+        lod = scene_from_arrays(v, f, f"lod{piece.index}", state.level.source)
+        used, local = np.unique(lod.faces, return_inverse=True)
+        v, f = lod.vertices[used], local.reshape(-1, 3)
+    edges = np.linalg.norm(v[f[:, 1]] - v[f[:, 0]], axis=1) if len(f) else np.zeros(0)
+    return {"vertices": v, "faces": f, "edges": edges.astype(np.float32)}
+
+
+def join_tiles(tiles: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """One piece's LOD from its tiles' (vertices, faces), in tile order (vertices renumbered)."""
+    offsets = np.cumsum([0] + [len(t["vertices"]) for t in tiles])
+    return {
+        "vertices": np.concatenate([t["vertices"] for t in tiles]).reshape(-1, 3),
+        "faces": np.concatenate([t["faces"] + o for t, o in zip(tiles, offsets, strict=False)]).reshape(
+            -1, 3
+        ),
+    }
 
 
 def simplify_level(state: PieceState, args) -> dict[str, np.ndarray]:
@@ -727,21 +824,25 @@ def output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings):
 
 
 def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: the glTF arrays of one piece's static instances, concatenated in instance order: world
-    positions (float32), faces (local to each instance), COLOR_0 and the three AO attributes."""
+    """Engine task: one piece's static instances as a glTF part (:meth:`GltfWriter.part`): a mesh and a
+    node per instance in instance order (world positions, faces, COLOR_0 and the three AO attributes); the
+    driver appends the parts in piece order, so the glTF's bytes are those of one writer."""
     piece, short, long_, blend_settings = args
     final = blend(short, long_, blend_settings)
+    colour = vertex_colours(final)
+    short, long_ = np.asarray(short, np.float32), np.asarray(long_, np.float32)
     level, index = state.level, state.index
-    verts, faces = [], []
-    for k, j, _, _, _, _ in index.table[piece.first : piece.stop]:
+    w = GltfWriter()
+    for k, j, v0, _, nv, _ in index.table[piece.first : piece.stop]:
         node = index.nodes[k]
-        verts.append(instance_vertices(level, node, int(j)).astype(np.float32))
-        faces.append(level.meshes[node.mesh].faces.astype(np.uint32))
-    return {
-        "positions": np.concatenate(verts),
-        "faces": np.concatenate(faces),
-        "colour": vertex_colours(final),
-        "ao": final,
-        "short": np.asarray(short, np.float32),
-        "long": np.asarray(long_, np.float32),
-    }
+        sl = slice(v0 - piece.v0, v0 - piece.v0 + nv)
+        attrs = {"COLOR_0": colour[sl], "_AO": final[sl], "_AO_SHORT": short[sl], "_AO_LONG": long_[sl]}
+        positions = instance_vertices(level, node, int(j)).astype(np.float32)
+        mi = w.mesh(f"{node.name}_{j}", positions, level.meshes[node.mesh].faces.astype(np.uint32), attrs)
+        w.node(
+            f"{node.name}_{j}" if len(node.transforms) > 1 else node.name,
+            mi,
+            extras={"role": "static", "source_node": node.index, "instance": int(j)},
+        )
+    doc, blob = w.part()
+    return {"part": np.array(doc), "blob": blob}

@@ -565,6 +565,46 @@ class GltfWriter:
         self.doc["scenes"][0]["nodes"].append(len(self.doc["nodes"]) - 1)
         return len(self.doc["nodes"]) - 1
 
+    def part(self) -> tuple[str, np.ndarray]:
+        """This writer's nodes, meshes, accessors and views (JSON) and its bytes ((n,) uint8): a part that
+        another writer adds with :meth:`append`, made elsewhere (a worker writes its piece of a level)."""
+        keys = ("nodes", "meshes", "accessors", "bufferViews", "extensionsUsed")
+        doc = {k: self.doc[k] for k in keys if k in self.doc}
+        return json.dumps(doc, separators=(",", ":")), np.frombuffer(bytes(self._blob), np.uint8)
+
+    def append(self, part_json: str, blob: np.ndarray) -> None:
+        """Add a :meth:`part`: its views move to the end of this buffer (4-byte aligned, as its own start
+        was) and its indices past this writer's, so the bytes are those of the same calls made here."""
+        part = json.loads(part_json)
+        while len(self._blob) % 4:
+            self._blob.append(0)
+        base = len(self._blob)
+        d = self.doc
+        n_views, n_acc, n_mesh = (len(d[k]) for k in ("bufferViews", "accessors", "meshes"))
+        for v in part.get("bufferViews", []):
+            v["byteOffset"] += base
+            d["bufferViews"].append(v)
+        for a in part.get("accessors", []):
+            a["bufferView"] += n_views
+            d["accessors"].append(a)
+        for m in part.get("meshes", []):
+            for prim in m["primitives"]:
+                prim["attributes"] = {k: i + n_acc for k, i in prim["attributes"].items()}
+                prim["indices"] += n_acc
+            d["meshes"].append(m)
+        for node in part.get("nodes", []):
+            if "mesh" in node:
+                node["mesh"] += n_mesh
+            inst = node.get("extensions", {}).get(INSTANCING)
+            if inst:
+                inst["attributes"] = {k: i + n_acc for k, i in inst["attributes"].items()}
+            d["nodes"].append(node)
+            d["scenes"][0]["nodes"].append(len(d["nodes"]) - 1)
+        for ext in part.get("extensionsUsed", []):
+            if ext not in d.setdefault("extensionsUsed", []):
+                d["extensionsUsed"].append(ext)
+        self._blob.extend(np.ascontiguousarray(blob, np.uint8).tobytes())
+
     def _json(self, uri: str | None) -> bytes:
         while len(self._blob) % 4:
             self._blob.append(0)
