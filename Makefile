@@ -52,7 +52,7 @@ DEMO_REPORT_FLAGS := --gt-rays 512 --frames-per-scene 2 --time-size 256 256 --re
 	--set 'expected_exports=[$(subst $(space),$(comma),$(foreach s,$(MLP_SIZES),"mlp-$(s)") "unet")]'
 VIEWER_PNG := $(BUILD)/viewer.png
 
-.PHONY: help setup system-deps dataset corpus corpus-large corpus-full curve experiments evaluate models train export parity report select demo host test fuzz bench lint clean
+.PHONY: bench-gpu help setup system-deps dataset corpus corpus-large corpus-full curve experiments evaluate models model-shaders train export parity report select demo host test fuzz bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
@@ -129,6 +129,11 @@ MODELS ?=
 models: $(CORPUS) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
 	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
 
+# The installed models' shaders regenerated from their committed ONNX files (no corpus, no training): after
+# a change of the shader generator. Checked against onnxruntime before each folder is replaced.
+model-shaders: $(MODELS_CONFIG) | $(STAMP) ## Regenerate the shipped models' shaders from their ONNX files (no training)
+	$(NEURALAO) ship $(MODELS_CONFIG) --shaders-only $(if $(MODELS),--only $(MODELS))
+
 # Learning curves of the screen-space U-Net on the larger corpus (configs/curve.json): one run per line of
 # the config, snapshots at 0.25-4 hours scored on the validation split and the test categories against
 # GTAO; the table and plot replace the learning-curve section of docs/results.md. Hours of training:
@@ -201,6 +206,9 @@ demo: $(REPORT) $(VIEWER_PNG) ## Set up if needed, then dataset -> train -> expo
 # The C reference host (runtime/host/): EGL (surfaceless Mesa) + OpenGL 4.3 compute, no Python.
 HOST := build/host/neuralao_host
 HOST_CFLAGS := -O2 -std=c11 -Wall -Wextra -Werror
+
+bench-gpu: $(STAMP) ## GPU time of the shipped U-Nets and GTAO (C host, GL timer queries): bench/gpu.sh
+	bench/gpu.sh
 
 host: $(HOST) ## Build the standalone C host that runs a shipped export on a raw float32 G-buffer
 

@@ -60,12 +60,14 @@ from neuralao.export.glsl import (
     write_compute_export,
     write_mlp_export,
 )
+from neuralao.export.glsl.frame import generate_frame
 from neuralao.export.onnx_io import load_onnx, ort_session
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import read_npz, sha256_file, write_bytes, write_json
 from neuralao.runtime.foundation.limits import FLOAT32_MAX, check_finite_arrays
 from neuralao.runtime.foundation.manifest import read_manifest as read_export_manifest
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame_runner import frame_settings
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +177,11 @@ def _self_contained(onnx_path: Path, proto: onnx.ModelProto) -> bytes:
     return proto.SerializeToString()
 
 
+def is_neuralao_unet(proto: onnx.ModelProto) -> bool:
+    """True for a screen-space U-Net exported by neuralao (its ONNX metadata says so)."""
+    return any(p.key == "neuralao_kind" and p.value == "unet" for p in proto.metadata_props)
+
+
 def export_model(
     onnx_path,
     target: str,
@@ -183,9 +190,11 @@ def export_model(
     bind: list[str] | None = None,
     dialects: list[str] | None = None,
     hlsl_msl: bool = False,
+    preset: str = "gpu",
 ) -> dict:
     """Generate and write the export of a user's ONNX file; returns its manifest. ``hlsl_msl`` (image
-    target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross)."""
+    target): HLSL and MSL of every pass beside its GLSL (SPIRV-Cross); ``preset`` (image, wgsl targets):
+    a name of :data:`neuralao.export.glsl.image.PRESETS`."""
     if target not in TARGETS:
         raise NeuralaoError(f"--target must be one of {TARGETS}, got {target!r}")
     if precision not in ("fp32", "fp16"):
@@ -212,10 +221,14 @@ def export_model(
         dialect = "wgsl" if target == "wgsl" else (dialects or ["glsl430"])[0]
         if dialect == "vulkan":
             extra["dialect"] = dialect
-        program = generate_compute(proto, precision=precision, kind="onnx", dialect=dialect)
+        program = generate_compute(proto, precision=precision, kind="onnx", dialect=dialect, preset=preset)
+        if is_neuralao_unet(proto):  # a neuralao U-Net: its frame passes around the network
+            program = generate_frame(program, frame_settings())
+            extra["frame_passes"] = len(program.manifest["frame"]["passes"])
         out_dir.mkdir(parents=True, exist_ok=True)
         write_compute_export(program, glsl_dir, cross=hlsl_msl)
         extra["passes"] = len(program.manifest["passes"])
+        extra["preset"] = preset
         name_key = "wgsl_name" if target == "wgsl" else "glsl_name"
         extra["uniforms"] = {u["onnx_input"]: u[name_key] for u in program.manifest["uniforms"]}
     else:

@@ -26,7 +26,8 @@ import onnx
 import torch
 from onnx import numpy_helper
 
-from neuralao.export.glsl import generate_compute, write_compute_export
+from neuralao.export.glsl import generate_compute, spirv_cross_available, write_compute_export
+from neuralao.export.glsl.frame import generate_frame
 from neuralao.export.manifest import OPSET
 from neuralao.export.onnx_io import (
     backend_checks,
@@ -52,6 +53,7 @@ from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
 from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.frame import FrameLike
+from neuralao.runtime.frame_runner import frame_settings
 from neuralao.runtime.glsl_runner import load_compute_export, run_compute
 from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
@@ -352,10 +354,23 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
     return entry
 
 
-def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32") -> Path:
-    """Generate the compute passes from the ONNX graph and write them (and their manifest) to ``out_dir``."""
-    program = generate_compute(proto, precision=precision)
-    write_compute_export(program, out_dir)
+# The compute dialects an export carries besides glsl/ (GLSL 4.30, HLSL and MSL), each in its own folder
+# beside it, with the frame passes: (folder, dialect).
+FRAME_TARGETS = (("vulkan", "vulkan"), ("wgsl", "wgsl"))
+
+
+def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32", preset: str = "gpu") -> Path:
+    """Generate the compute passes from the ONNX graph, with the frame passes around the network
+    (:mod:`neuralao.export.glsl.frame`), and write them (and their manifest) to ``out_dir`` in GLSL 4.30,
+    with HLSL and MSL beside each pass where SPIRV-Cross is installed; the same passes in Vulkan GLSL +
+    SPIR-V and in WGSL go to the folders of :data:`FRAME_TARGETS` beside ``out_dir``
+    (``preset``: a name of :data:`neuralao.export.glsl.image.PRESETS`)."""
+    settings = frame_settings()
+    program = generate_frame(generate_compute(proto, precision=precision, preset=preset), settings)
+    write_compute_export(program, out_dir, cross=spirv_cross_available())
+    for folder, dialect in FRAME_TARGETS:
+        other = generate_compute(proto, precision=precision, preset=preset, dialect=dialect)
+        write_compute_export(generate_frame(other, settings), out_dir.parent / folder)
     return out_dir
 
 

@@ -7,11 +7,13 @@ dialect's passes (format ``neuralao-vulkan-compute``) bind the same way (one bin
 0, the same bindings), so the same machinery runs their SPIR-V: ``via="passthrough"`` hands the SPIR-V
 words to the Vulkan driver unchanged (wgpu's SPIR-V passthrough: what an engine's
 ``vkCreateShaderModule`` gets), ``via="naga"`` translates them with naga's SPIR-V front end first (what
-a WebGPU implementation that takes SPIR-V does).
+a WebGPU implementation that takes SPIR-V does). The HLSL of a GLSL export runs the same way, compiled to
+SPIR-V by glslang's HLSL front end and bound by its registers.
 
     run_wgsl_all(program_or_dir, x, flip_y=False, scalars=None) -> {onnx output name: (1, C, H, W) f32}
     run_wgsl(program_or_dir, x, flip_y=False, scalars=None) -> (1, C_out, H, W) f32   (first graph output)
     run_spirv_all(program_or_dir, x, flip_y=False, scalars=None, via="passthrough") -> as run_wgsl_all
+    run_hlsl_all(export_dir, x, flip_y=False, scalars=None) -> as run_wgsl_all  (HLSL -> SPIR-V, passthrough)
     time_wgsl(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
     adapter_info() -> {"device": ..., "backend": ...}
 
@@ -29,7 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.export.glsl import ComputeProgram, compile_spirv, load_compute_export
+from neuralao.export.glsl import (
+    ComputeProgram,
+    compile_hlsl,
+    compile_spirv,
+    load_compute_export,
+    load_cross_sources,
+)
+from neuralao.export.glsl.cross import hlsl_spirv_binding
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.glsl_runner import compute_input, compute_outputs, scalar_values, texture_sizes
 
@@ -40,7 +49,10 @@ _FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
 _STORAGE_FORMATS = {"rgba32f": "rgba32float", "rgba16f": "rgba16float"}
 WGSL_FORMAT = "neuralao-wgsl-compute"
 VULKAN_FORMAT = "neuralao-vulkan-compute"
+GLSL_FORMAT = "neuralao-glsl-compute"
 _PASSTHROUGH = "spirv-shader-passthrough"
+# WGSL f16 arithmetic (enable f16): requested where the adapter has it; else the fp32 types run
+_SHADER_F16 = "shader-f16"
 
 
 @functools.cache
@@ -54,7 +66,7 @@ def _device():
     if adapter is None:
         raise NeuralaoError("no WebGPU adapter (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)")
     # SPIR-V passthrough (Vulkan adapters) is only used by run_spirv_all(via="passthrough")
-    features = [_PASSTHROUGH] if _PASSTHROUGH in adapter.features else []
+    features = [f for f in (_PASSTHROUGH, _SHADER_F16) if f in adapter.features]
     return wgpu, adapter, adapter.request_device_sync(required_features=features, required_limits={})
 
 
@@ -70,9 +82,11 @@ def _program(program_or_dir: ComputeProgram | str | Path, fmt: str = WGSL_FORMAT
         program_or_dir if isinstance(program_or_dir, ComputeProgram) else load_compute_export(program_or_dir)
     )
     if prog.manifest.get("format") != fmt:
-        how = (
-            "dialect='wgsl' / --target wgsl" if fmt == WGSL_FORMAT else "dialect='vulkan' / --dialect vulkan"
-        )
+        how = {
+            WGSL_FORMAT: "dialect='wgsl' / --target wgsl",
+            VULKAN_FORMAT: "dialect='vulkan' / --dialect vulkan",
+            GLSL_FORMAT: "--target image --hlsl-msl",
+        }[fmt]
         raise NeuralaoError(f"not a {fmt} program (generate it with {how})")
     return prog
 
@@ -98,11 +112,11 @@ def _spirv_passthrough(dev, words: bytes):
 _PIPELINES: dict[tuple, tuple] = {}
 
 
-def _pipeline(code: str | bytes, layout_key: str, via: str = "naga") -> tuple:
+def _pipeline(code: str | bytes, layout_key: str, via: str = "naga", entry: str = "main") -> tuple:
     """(bind group layout, compute pipeline) of a pass (``code``: WGSL source or SPIR-V bytes; layout_key:
-    its layout entries as JSON; ``via``: how SPIR-V reaches the driver), cached for the process:
-    compiling is the slow part on lavapipe."""
-    key = (code, layout_key, via)
+    its layout entries as JSON; ``via``: how SPIR-V reaches the driver; ``entry``: the entry point),
+    cached for the process: compiling is the slow part on lavapipe."""
+    key = (code, layout_key, via, entry)
     if key not in _PIPELINES:
         wgpu, _, dev = _device()
         bgl = dev.create_bind_group_layout(entries=json.loads(layout_key))
@@ -113,7 +127,7 @@ def _pipeline(code: str | bytes, layout_key: str, via: str = "naga") -> tuple:
         )
         pipeline = dev.create_compute_pipeline(
             layout=dev.create_pipeline_layout(bind_group_layouts=[bgl]),
-            compute={"module": module, "entry_point": "main"},
+            compute={"module": module, "entry_point": entry},
         )
         _PIPELINES[key] = (bgl, pipeline)
     return _PIPELINES[key]
@@ -238,11 +252,76 @@ class _WgslRun:
         return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
 
 
+class _HlslRun(_WgslRun):
+    """The HLSL passes of a GLSL export written with HLSL / MSL, each compiled back to SPIR-V by glslang's
+    HLSL front end and passed to the Vulkan driver as it is. Bound as Unity or Unreal would from the
+    manifest's ``hlsl.resources``: each at the binding its register gets, each pass's params a buffer of
+    its own (its range of weights.bin), the uniform a 16-byte $Globals."""
+
+    def __init__(self, prog: ComputeProgram, hlsl: dict[str, str], height, width, scalars, flip_y):
+        self.hlsl, self.weights_bytes = hlsl, prog.weights
+        super().__init__(prog, height, width, scalars, flip_y, via="passthrough")
+
+    def _pass(self, code: str | bytes, p: dict, scalars: dict[str, float], flip_y: bool):
+        wgpu, dev = self.wgpu, self.dev
+        stage = wgpu.ShaderStage.COMPUTE
+        spirv = _hlsl_spirv(self.hlsl[p["name"]], p["hlsl"]["entry"])
+        layout, group = [], []
+        for r in p["hlsl"]["resources"]:
+            entry = {"binding": hlsl_spirv_binding(r["register"]), "visibility": stage}
+            if r["type"] == "Texture2DArray<float4>":
+                entry["texture"] = {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}
+                resource = self.textures[r["texture"]][1]
+            elif r["type"] == "RWTexture2DArray<float4>":
+                fmt = _STORAGE_FORMATS[p["output"]["format"]]
+                entry["storage_texture"] = {
+                    "access": "write-only",
+                    "format": fmt,
+                    "view_dimension": "2d-array",
+                }
+                resource = self.textures[r["texture"]][1]
+            elif r["type"] == "ByteAddressBuffer":
+                w = r["weights"]
+                data = self.weights_bytes[w["offset"] : w["offset"] + w["bytes"]]
+                buf = dev.create_buffer_with_data(data=data, usage=wgpu.BufferUsage.STORAGE)
+                entry["buffer"] = {"type": "read-only-storage"}
+                resource = {"buffer": buf, "offset": 0, "size": w["bytes"]}
+            else:  # a $Globals member at offset 0: the pass's one uniform
+                value = (
+                    int(flip_y)
+                    if r["name"] == "u_flip_y"
+                    else scalars[p["uniforms"][r["name"]]["onnx_input"]]
+                )
+                entry["buffer"] = {"type": "uniform"}
+                resource = {
+                    "buffer": self._uniform(value, "<i4" if r["type"] == "int" else "<f4"),
+                    "size": 16,
+                }
+            layout.append(entry)
+            group.append({"binding": entry["binding"], "resource": resource})
+        bgl, pipeline = _pipeline(spirv, json.dumps(layout), "passthrough", p["hlsl"]["entry"])
+        _, _, tw, th, layers, _ = self.textures[p["output"]["texture"]]
+        lx, ly, _ = p["hlsl"]["numthreads"]
+        bx, by, bl = p.get("block", [1, 1, 1])
+        groups = (-(-tw // (lx * bx)), -(-th // (ly * by)), layers // bl)
+        return pipeline, dev.create_bind_group(layout=bgl, entries=group), groups
+
+
+@functools.cache
+def _hlsl_spirv(source: str, entry: str) -> bytes:
+    return compile_hlsl(source, entry)
+
+
 def _code(prog: ComputeProgram, shader: str) -> str | bytes:
     """What a pass's module is made from: WGSL source, or a Vulkan pass's SPIR-V (read from the export,
     or compiled from the source when the program was generated in this process)."""
     if prog.manifest["format"] != VULKAN_FORMAT:
-        return prog.sources[shader]
+        code = prog.sources[shader]
+        arithmetic = prog.manifest.get("arithmetic", {})
+        if arithmetic.get("precision") == "fp16" and _SHADER_F16 not in _device()[2].features:
+            # no f16 on this device: the same passes with the fp32 accumulation types the manifest gives
+            code = code.replace(arithmetic["declarations"], arithmetic["fp32_declarations"])
+        return code
     if shader not in prog.spirv:
         prog.spirv[shader] = compile_spirv(prog.sources[shader])
     return prog.spirv[shader]
@@ -290,6 +369,25 @@ def run_spirv_all(
     prog = _program(program_or_dir, VULKAN_FORMAT)
     x = compute_input(prog.manifest, x)
     run = _WgslRun(prog, x.shape[2], x.shape[3], scalar_values(prog.manifest, scalars), flip_y, via)
+    run.upload(x)
+    run.dispatch()
+    return compute_outputs(prog.manifest, run.read)
+
+
+def run_hlsl_all(
+    export_dir: str | Path,
+    x: np.ndarray,
+    flip_y: bool = False,
+    scalars: dict[str, float] | None = None,
+) -> dict:
+    """Run the HLSL of every pass of a GLSL export written with HLSL / MSL (``neuralao glsl ...
+    --hlsl-msl``) on x : (1, C, H, W) float32, each pass compiled to SPIR-V by glslang's HLSL front end
+    (:func:`neuralao.export.glsl.compile_hlsl`) and run on the Vulkan adapter through wgpu's SPIR-V
+    passthrough; {onnx output name: (1, C_out, H, W) float32}."""
+    prog = _program(export_dir, GLSL_FORMAT)
+    x = compute_input(prog.manifest, x)
+    hlsl = load_cross_sources(export_dir, "hlsl")
+    run = _HlslRun(prog, hlsl, x.shape[2], x.shape[3], scalar_values(prog.manifest, scalars), flip_y)
     run.upload(x)
     run.dispatch()
     return compute_outputs(prog.manifest, run.read)

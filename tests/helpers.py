@@ -222,3 +222,74 @@ def seeded_weights(shape, seed=1) -> np.ndarray:
 def named_node(op, inputs=("x",), out="y", **attrs) -> onnx.NodeProto:
     """A node of ``op`` with a name holding spaces (names never reach shader text)."""
     return oh.make_node(op, list(inputs), [out], name=f"my {op.lower()} {out}", **attrs)
+
+
+# ------------------------------------------------------------------ a G-buffer without a renderer
+
+
+def analytic_gbuffer(width: int, height: int, yfov: float = 0.9) -> dict:
+    """A G-buffer frame ray-cast in numpy (no GL): a floor (y = -1), a back wall (z = -6, up to y = 1.2, so
+    the top rows are background), a sphere resting on the floor and a box against the wall, seen by an
+    OpenGL camera at the origin looking down -z. Keys as a rendered frame's: depth (H, W) float32 (-z_cam,
+    0 on background), normal_cam (H, W, 3) float32 (unit, facing the viewer), mask (H, W) bool, yfov."""
+    t = math.tan(yfov / 2)
+    x = ((np.arange(width) + 0.5) / width * 2 - 1) * t * width / height
+    y = (1 - (np.arange(height) + 0.5) / height * 2) * t
+    d = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -np.ones((height, width))), -1)  # ray at depth 1
+    best = np.full((height, width), np.inf)
+    normal = np.zeros((height, width, 3))
+
+    def hit(s, n, ok):
+        better = ok & (s > 1e-6) & (s < best)
+        best[better] = s[better]
+        normal[better] = np.broadcast_to(n, normal.shape)[better]
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = -1.0 / d[..., 1]  # floor y = -1
+        p = d * s[..., None]
+        hit(s, np.array([0.0, 1.0, 0.0]), (p[..., 2] > -9) & (np.abs(p[..., 0]) < 4))
+        s = np.full((height, width), 6.0)  # wall z = -6
+        p = d * 6.0
+        hit(s, np.array([0.0, 0.0, 1.0]), (p[..., 1] < 1.2) & (np.abs(p[..., 0]) < 3))
+        c, r = np.array([0.4, -0.45, -3.6]), 0.55  # sphere on the floor
+        b = np.einsum("hwc,c->hw", d, c)
+        dd = np.einsum("hwc,hwc->hw", d, d)
+        disc = b * b - dd * (c @ c - r * r)
+        s = (b - np.sqrt(np.maximum(disc, 0))) / dd
+        hit(s, (d * s[..., None] - c) / r, disc > 0)
+        lo, hi = np.array([-1.9, -1.0, -5.9]), np.array([-0.9, 0.1, -4.8])  # box against the wall
+        t0, t1 = (lo - 0.0) / d, (hi - 0.0) / d
+        tn, tf = np.minimum(t0, t1), np.maximum(t0, t1)
+        near, far = tn.max(-1), tf.min(-1)
+        axis = tn.argmax(-1)
+        n = np.zeros((height, width, 3))
+        np.put_along_axis(n, axis[..., None], -np.sign(np.take_along_axis(d, axis[..., None], -1)), -1)
+        hit(near, n, near < far)
+    mask = np.isfinite(best)
+    depth = np.where(mask, best, 0.0)  # the ray at depth 1 has z = -1: the parameter is the depth
+    normal = np.where(mask[..., None], normal, 0.0)
+    return {
+        "depth": depth.astype(np.float32),
+        "normal_cam": normal.astype(np.float32),
+        "mask": mask,
+        "yfov": float(yfov),
+    }
+
+
+def both_presets(model: onnx.ModelProto, ref: np.ndarray, run, tol: float, relative: bool = False, **options):
+    """Generate ``model``'s compute GLSL under the ``gpu`` and the ``cpu`` preset (``options`` go to
+    generate_compute), validate every shader, run each with ``run(program)`` and compare with ``ref``
+    (absolute error, or relative to max(1, |ref|)). Returns the ``cpu`` program: its passes are unfused,
+    one per layer or fused group, which is what structural assertions read."""
+    from neuralao.export.glsl import generate_compute, validate_glsl
+
+    programs = {preset: generate_compute(model, preset=preset, **options) for preset in ("gpu", "cpu")}
+    for preset, program in programs.items():
+        for src in program.sources.values():
+            validate_glsl(src, "comp")
+        got = run(program)
+        assert got.shape == ref.shape and got.dtype == ref.dtype == np.float32, (preset, got.shape)
+        diff = np.abs(got - ref) / (np.maximum(1.0, np.abs(ref)) if relative else 1.0)
+        err = float(diff.max())
+        assert err <= tol, f"{preset} preset: max abs err {err:.3g} > {tol}"
+    return programs["cpu"]

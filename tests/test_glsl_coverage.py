@@ -11,11 +11,12 @@ from __future__ import annotations
 import numpy as np
 import onnx
 import pytest
+from helpers import both_presets
 from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from neuralao.export.glsl import generate_compute, validate_glsl
+from neuralao.export.glsl import generate_compute
 from neuralao.export.onnx_io import run_onnxruntime
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.tolerances import TOL
@@ -47,17 +48,10 @@ def _w(shape, seed=1, scale=0.3):
 
 
 def _check(model, x, tol=TOL.glsl_op_fp32, reference=None):
-    """GLSL of ``model`` vs onnxruntime on ``reference`` (default: the same model)."""
+    """GLSL of ``model`` under both presets vs onnxruntime on ``reference`` (default: the same model);
+    returns the ``cpu`` preset's (unfused) program."""
     ref = run_onnxruntime((reference or model).SerializeToString(), {"x": x})[0]
-    program = generate_compute(model)
-    for src in program.sources.values():
-        validate_glsl(src, "comp")
-    got = run_compute(program, x)
-    assert got.shape == ref.shape, (got.shape, ref.shape)
-    assert got.dtype == ref.dtype == np.float32
-    err = float(np.abs(got - ref).max())
-    assert err <= tol, f"max abs err {err:.3g} > {tol}"
-    return program
+    return both_presets(model, ref, lambda program: run_compute(program, x), tol)
 
 
 def _kinds(program):

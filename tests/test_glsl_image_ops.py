@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import onnx
 import pytest
+from helpers import both_presets
 from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
@@ -52,13 +53,9 @@ def _node(op, inputs=("x",), out="y", **attrs):
 
 
 def _check(model, x, tol=TOL.glsl_op_fp32):
+    """Both presets' GLSL vs onnxruntime; the kinds of the ``cpu`` preset's (unfused) inner passes."""
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
-    program = generate_compute(model)
-    got = run_compute_all(program, x)["y"]
-    assert got.shape == ref.shape, (got.shape, ref.shape)
-    assert got.dtype == ref.dtype == np.float32
-    err = float(np.abs(got - ref).max())
-    assert err <= tol, f"max abs err {err:.3g} > {tol}"
+    program = both_presets(model, ref, lambda program: run_compute_all(program, x)["y"], tol)
     return [p["kind"] for p in program.manifest["passes"][1:-1]]
 
 

@@ -297,13 +297,15 @@ SIZES = [
 ]  # 40x24: a non-power-of-two multiple of 8; 37x21 pads to it (same internal sizes)
 
 
+@pytest.mark.parametrize("preset", ["cpu", "gpu"])
 @pytest.mark.parametrize("build", ["torch", "helper_bn"])
-def test_unet_parity_fp32(build, tmp_path):
+def test_unet_parity_fp32(build, preset, tmp_path):
     net = TinyUNet()
     model = _export_unet(net) if build == "torch" else _helper_unet(net)
     ops = {n.op_type for n in model.graph.node}
     assert ("BatchNormalization" in ops) == (build == "helper_bn")
-    program = generate_compute(model)
+    program = generate_compute(model, preset=preset)
+    assert program.manifest["preset"]["name"] == preset
     assert program.pad_multiple == 8
     convs = [p for p in program.manifest["passes"] if p["kind"] == "conv"]
     assert sum(p.get("folded_batch_norm", False) for p in convs) == (3 if build == "helper_bn" else 0)
@@ -330,10 +332,11 @@ def test_unet_parity_fp32(build, tmp_path):
     np.testing.assert_array_equal(flipped[:, :, ::-1], from_disk)
 
 
-def test_unet_parity_fp16():
+@pytest.mark.parametrize("preset", ["cpu", "gpu"])
+def test_unet_parity_fp16(preset):
     net = TinyUNet(seed=5)
     model = _export_unet(net)
-    program = generate_compute(model, precision="fp16")
+    program = generate_compute(model, precision="fp16", preset=preset)
     assert program.manifest["storage"]["internal_format"] == "RGBA16F"
     for h, w in SIZES:
         x = _gbuffer(h, w, seed=2)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import onnx
 import pytest
+from helpers import both_presets
 from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
@@ -51,15 +52,9 @@ def _validate_compute(program):
 
 
 def _check_image(model, x, tol=TOL.glsl_op_fp32, precision="fp32", relative=False):
-    ref = _ort(model, x)
-    program = generate_compute(model, precision=precision)
-    _validate_compute(program)
-    got = run_compute(program, x)
-    assert got.shape == ref.shape and got.dtype == ref.dtype == np.float32
-    diff = np.abs(got - ref) / (np.maximum(1.0, np.abs(ref)) if relative else 1.0)
-    err = float(diff.max())
-    assert err <= tol, f"max abs err {err:.3g} > {tol}"
-    return program
+    """Both presets' GLSL vs onnxruntime; returns the ``cpu`` preset's (unfused) program."""
+    run = lambda program: run_compute(program, x)  # noqa: E731
+    return both_presets(model, _ort(model, x), run, tol, relative, precision=precision)
 
 
 def _x(shape=(1, C, H, W), seed=0, scale=1.0):

@@ -12,11 +12,12 @@ import json
 import numpy as np
 import onnx
 import pytest
+from helpers import both_presets
 from onnx import TensorProto
 from onnx import helper as oh
 from onnx import numpy_helper as nh
 
-from neuralao.export.glsl import generate_compute, validate_glsl, write_compute_export
+from neuralao.export.glsl import generate_compute, write_compute_export
 from neuralao.export.onnx_glsl import parity
 from neuralao.export.onnx_io import run_onnxruntime
 from neuralao.pipeline import cli
@@ -49,18 +50,11 @@ def _model(nodes, inputs, inits=(), metadata=None) -> onnx.ModelProto:
 def _check(
     model, feeds: dict[str, np.ndarray], image: str, tol=TOL.glsl_op_fp32, precision="fp32", relative=False
 ):
-    """GLSL vs onnxruntime on ``feeds`` (the image and every scalar, by ONNX name)."""
+    """Both presets' GLSL vs onnxruntime on ``feeds`` (the image and every scalar, by ONNX name)."""
     ref = run_onnxruntime(model.SerializeToString(), feeds)[0]
-    program = generate_compute(model, precision=precision)
-    for src in program.sources.values():
-        validate_glsl(src, "comp")
     scalars = {n: v for n, v in feeds.items() if n != image}
-    got = run_compute(program, feeds[image], scalars=scalars)
-    assert got.shape == ref.shape and got.dtype == ref.dtype == np.float32
-    diff = np.abs(got - ref) / (np.maximum(1.0, np.abs(ref)) if relative else 1.0)
-    err = float(diff.max())
-    assert err <= tol, f"max abs err {err:.3g} > {tol}"
-    return program
+    run = lambda program: run_compute(program, feeds[image], scalars=scalars)  # noqa: E731
+    return both_presets(model, ref, run, tol, relative, precision=precision)
 
 
 def _x(shape=(1, 3, H, W), seed=0, offset=0.0):

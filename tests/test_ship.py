@@ -236,3 +236,38 @@ def test_ship_installs_a_hybrid_at_its_internal_height(corpus, tmp_path):
     assert (tmp_path / "models" / "u-gtao" / "glsl" / "internal" / "upsample.frag").is_file()
     assert manifest["provenance"]["parity"]["glsl_vs_onnxruntime"] <= TOL.parity_unet_fp32
     assert np.isfinite(entry["test"]["ssim"]) and np.isfinite(entry["test"]["rmse"])
+
+
+def test_shaders_only_regenerates_from_the_onnx_and_keeps_the_model(shipped, tmp_path):
+    """`neuralao ship --shaders-only`: a damaged shader folder is rewritten from model.onnx, byte-equal to
+    what ship wrote; the ONNX and the training figures stay; a model that is not installed is an error."""
+    import shutil
+
+    from neuralao.pipeline.release.ship import ShipSettings, refresh_shipped
+
+    settings, _, _ = shipped
+    models = tmp_path / "models"
+    shutil.copytree(settings.out, models)
+    copy = ShipSettings(**{**settings.__dict__, "out": str(models)})
+    before = {p.relative_to(models): p.read_bytes() for p in models.rglob("*") if p.is_file()}
+    (models / "u-full" / "glsl" / "p02_conv.comp").write_text("damaged")
+    shutil.rmtree(models / "u-full" / "wgsl")
+    figures = refresh_shipped(copy, ["u-full"])
+    assert figures["u-full"]["passed"] and figures["u-full"]["max_abs_err"] <= TOL.parity_unet_fp32
+    after = {p.relative_to(models): p.read_bytes() for p in models.rglob("*") if p.is_file()}
+    changed = {p for p in before.keys() | after.keys() if before.get(p) != after.get(p)}
+    folders = {Path("u-full") / f / "manifest.json" for f in ("glsl", "vulkan", "wgsl")}
+    assert changed <= {Path("u-full/manifest.json"), Path("index.json")} | folders, sorted(map(str, changed))
+    for path in folders & changed:  # ship wrote these before it added the provenance to the ONNX metadata
+        new, old = (json.loads(m[path]) for m in (after, before))
+        assert new.pop("source_model_metadata")["provenance"] and "provenance" not in old.pop(
+            "source_model_metadata"
+        )
+        assert new == old, path
+    manifest = json.loads((models / "u-full" / "manifest.json").read_text())
+    old = json.loads(before[Path("u-full/manifest.json")])
+    assert manifest["onnx_sha256"] == old["onnx_sha256"] and manifest["metrics"] == old["metrics"]
+    assert manifest["shaders"]["folders"] == ["glsl", "vulkan", "wgsl"]
+    assert not list(models.glob(".*"))
+    with pytest.raises(NeuralaoError, match="no installed model nope"):
+        refresh_shipped(copy, ["nope"])

@@ -154,7 +154,8 @@ def test_shipped_default_wgsl_vs_onnxruntime(tmp_path):
 )
 def test_hlsl_and_msl_beside_the_glsl(tmp_path):
     """--hlsl-msl writes <pass>.hlsl and <pass>.metal for every pass; each HLSL compiles back with glslang's
-    HLSL front end (write_compute_export validates it), each MSL declares the kernel."""
+    HLSL front end (write_compute_export validates it), each declares its entry point named after the pass
+    (tests/test_hlsl_target.py checks names and registers and runs the HLSL)."""
     nodes, inits = CASES["conv_blocked_leaky"]
     model = image_model(
         nodes
@@ -169,7 +170,8 @@ def test_hlsl_and_msl_beside_the_glsl(tmp_path):
     manifest = json.loads(write_compute_export(generate_compute(model), tmp_path, cross=True).read_text())
     assert "HLSL front end" in manifest["cross_compiled"]["validated"]
     for p in manifest["passes"]:
-        hlsl, msl = (tmp_path / p["hlsl"]).read_text(), (tmp_path / p["msl"]).read_text()
-        assert "[numthreads(8, 8, 1)]" in hlsl and "RWTexture2DArray<float4> dst : register(u0)" in hlsl
-        assert "kernel void main0(" in msl
-        assert manifest["files"][p["hlsl"]] and manifest["files"][p["msl"]]
+        hlsl, msl = (tmp_path / p["hlsl"]["file"]).read_text(), (tmp_path / p["msl"]["file"]).read_text()
+        assert f"[numthreads(8, 8, 1)]\nvoid {p['name']}(" in hlsl
+        assert "RWTexture2DArray<float4> dst : register(u0)" in hlsl
+        assert f"kernel void {p['name']}(" in msl
+        assert manifest["files"][p["hlsl"]["file"]] and manifest["files"][p["msl"]["file"]]

@@ -37,32 +37,48 @@ Layout (each module imports only those above it):
     vector.py       fragment target: VectorOps, uniform-block packing, writer, manifest, MLPShader
     image.py        compute target: ImageOps, conv weight packing, writer, manifest, ComputeProgram
     validate.py     glslangValidator
-    cross.py        SPIR-V of the Vulkan passes; HLSL / MSL from the GLSL passes (SPIR-V -> SPIRV-Cross)
+    cross.py        SPIR-V of the Vulkan passes; HLSL / MSL from the GLSL passes (SPIR-V -> SPIRV-Cross),
+                    their entry points, resource names and registers
     files.py        export folders: write_* / load_* for both targets, hashes checked
+    engine_templates.py  Unity / Unreal / Godot wrapper text, as named templates
+    engines.py      engine wrappers of a program from its GLSL and Vulkan manifests (docs/engines/)
 
 Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
 
     generate_mlp_fragment(model, dialect="glsl330", fold_repeated_input=True) -> MLPShader
     write_mlp_export(shader, out_dir, validate=True) -> Path      (manifest.json path)
     load_mlp_export(export_dir, dialect="glsl330") -> MLPShader
-    generate_compute(model, precision="fp32", kind="unet", local_size=(8, 8),
-                     dialect="glsl430"|"wgsl"|"vulkan") -> ComputeProgram
+    generate_compute(model, precision="fp32", kind="unet", local_size=None, conv_block=None,
+                     dialect="glsl430"|"wgsl"|"vulkan", preset="gpu"|"cpu", fuse=None) -> ComputeProgram
+        (PRESETS: gpu = 1 texel x 1 layer per invocation, 8x8 groups, cheap passes fused; cpu = llvmpipe's
+        8x4x2 blocks, no fusion; fp16 = RGBA16F storage + fp16 conv accumulation where the compiler has it)
     write_compute_export(program, out_dir, validate=True, cross=False) -> Path
-        (cross: + HLSL, MSL; a Vulkan program: + <pass>.spv)
+        (cross: + HLSL, MSL, each pass's names and registers in its "hlsl" / "msl" entry; a Vulkan
+        program: + <pass>.spv)
     load_compute_export(export_dir) -> ComputeProgram
+    load_cross_sources(export_dir, language="hlsl"|"msl") -> {pass name: text}
     memory_plan(manifest, width, height, precision="fp32") -> MemoryPlan
         texture bytes of a compute manifest's frame at width x height pixels: per texture, per
         aliasing slot, in all (separate, aliased, live); the manifest's "memory" entry is its output
     memory_schedule(manifest) -> MemorySchedule   steps, lifetimes, aliasing slots (no sizes)
     validate_glsl(source, stage) -> None                         (glslangValidator)
     compile_spirv(source) -> bytes                               (Vulkan GLSL -> SPIR-V, glslangValidator -V)
+    compile_hlsl(source, entry) -> bytes                  (HLSL -> Vulkan SPIR-V, glslang's HLSL front end)
 
 The runners are :mod:`neuralao.runtime.glsl_runner` (GL) and :mod:`neuralao.runtime.wgsl_runner` (WebGPU:
-WGSL, and the Vulkan passes' SPIR-V).
+WGSL, the Vulkan passes' SPIR-V, and the HLSL compiled back to SPIR-V).
 """
 
 from neuralao.export.glsl.activations import Act
-from neuralao.export.glsl.cross import compile_spirv, cross_compile, spirv_cross_available, validate_hlsl
+from neuralao.export.glsl.cross import (
+    compile_hlsl,
+    compile_spirv,
+    cross_compile,
+    hlsl_interface,
+    msl_interface,
+    spirv_cross_available,
+    validate_hlsl,
+)
 from neuralao.export.glsl.dialects import (
     COMPUTE_DIALECTS,
     DIALECTS,
@@ -76,6 +92,7 @@ from neuralao.export.glsl.dialects import (
 )
 from neuralao.export.glsl.files import (
     load_compute_export,
+    load_cross_sources,
     load_mlp_export,
     write_compute_export,
     write_mlp_export,
@@ -170,6 +187,7 @@ __all__ = [
     "View",
     "Vulkan",
     "WGSL",
+    "compile_hlsl",
     "compile_spirv",
     "cross_compile",
     "generate_compute",
@@ -178,10 +196,13 @@ __all__ = [
     "get_dialect",
     "glsl_float",
     "glslang_available",
+    "hlsl_interface",
     "load_compute_export",
+    "load_cross_sources",
     "load_mlp_export",
     "memory_plan",
     "memory_schedule",
+    "msl_interface",
     "plan_slots",
     "read_graph",
     "spirv_cross_available",

@@ -4,20 +4,35 @@ the Vulkan dialect's source compiles to Vulkan SPIR-V, the files an engine loads
 one source; nothing here writes shader text of its own.
 
     spirv_cross_available() -> bool
-    cross_compile(source) -> {"hlsl": str, "msl": str}
-    validate_hlsl(source) -> None        (glslang's HLSL front end: -D -V -e main -S comp)
+    cross_compile(source, entry="main") -> {"hlsl": str, "msl": str}
+    compile_hlsl(source, entry="main") -> bytes   (HLSL -> Vulkan SPIR-V, glslang's HLSL front end)
+    hlsl_spirv_binding(register) -> int   the binding an HLSL register gets in compile_hlsl's SPIR-V
+    validate_hlsl(source, entry="main") -> None
+    hlsl_interface(pass_entry) -> dict    the HLSL file's entry, threads and resources (manifest "hlsl")
+    msl_interface(pass_entry) -> dict     the MSL file's kernel, threads and argument indices ("msl")
     compile_spirv(source) -> bytes       (Vulkan GLSL -> SPIR-V: glslangValidator -V, spirv-val if present)
 
-Registers and buffer indices follow the GLSL bindings: input i is ``t<i>`` (HLSL; MSL texture(i+1),
-the output image taking texture(0)), the output ``u0``, the params buffer ``t16`` (HLSL
-``ByteAddressBuffer``; shifted past the inputs so the two never share a register), a pass's loose
-uniform (``u_flip_y``, a scalar input) a member of the ``$Globals`` constant buffer (HLSL); in MSL the
-params and uniform buffers take ``[[buffer(k)]]`` in declaration order (``main0``'s signature).
+Names are stable: each pass's entry point is the pass's name (``p02_conv``) in both languages; input i is
+``src<i>``, the output ``dst``, the parameter buffer ``params`` (glslang leaves the GLSL's block instance
+unnamed, so its OpName is set before SPIRV-Cross reads the module, which would call it ``_<id>``), a
+pass's uniform keeps its GLSL name (``u_flip_y``, ``u_radius``).
+
+HLSL registers follow the GLSL bindings: input i ``t<i>`` (plus an unused ``SamplerState s<i>``: the
+passes only ``Load``), the output ``u0``, the params ``ByteAddressBuffer`` ``t16`` (shifted past the
+inputs so the two never share a register), the uniform a member of ``$Globals`` (the compiler's ``b0``).
+MSL: the output ``texture(0)``, input i ``texture(i + 1)`` (its unused sampler ``sampler(i + 1)``), the
+uniform ``buffer(0)``, the params ``buffer(1)`` (``--msl-decoration-binding``: the SPIR-V bindings,
+shifted, are the indices; none is left to SPIRV-Cross's order).
+
+The params buffer of a pass is a buffer of its own: its range of ``weights.bin`` (``params.offset``,
+``params.bytes``), which the HLSL and MSL read from byte 0. Unity and Unreal bind whole buffers, so
+each pass gets one; D3D12 and Metal may instead view one buffer at the offset (256-byte aligned).
 """
 
 from __future__ import annotations
 
 import shutil
+import struct
 import subprocess
 import tempfile
 from pathlib import Path
@@ -29,9 +44,23 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 PARAMS_REGISTER_SHIFT = 16
 HLSL_SHADER_MODEL = "50"
 MSL_VERSION = "20100"
+# MSL indices (--msl-decoration-binding): sampled textures move past the output image's texture(0), the
+# params buffer past the uniform's buffer(0) (a loose uniform has no binding, so it takes 0).
+MSL_TEXTURE_SHIFT = 1
+MSL_BUFFER_SHIFT = 1
+# GLSL block types whose instance is anonymous -> the name the instance gets in HLSL / MSL.
+BLOCK_INSTANCE_NAMES = {"Params": "params"}
+# glslang's HLSL front end (the HLSL compiled back to Vulkan SPIR-V): each register class in its own
+# binding range, textures and SRV buffers at their register numbers, $Globals auto-mapped into 64..
+HLSL_BINDING_SHIFTS = {"uav": 32, "sampler": 48, "cbuffer": 64}
+HLSL_SPIRV_COMMAND = "glslangValidator -D -V -S comp -e <entry> --hlsl-iomap --auto-map-bindings " + " ".join(
+    f"--shift-{k}-binding comp {v}" for k, v in HLSL_BINDING_SHIFTS.items()
+)
 # Vulkan SPIR-V: Vulkan 1.0's environment (SPIR-V 1.0), which every Vulkan driver takes.
 SPIRV_TARGET_ENV = "vulkan1.0"
 SPIRV_COMMAND = f"glslangValidator -V --target-env {SPIRV_TARGET_ENV}"
+
+_OP_NAME, _OP_TYPE_POINTER, _OP_VARIABLE = 5, 32, 59
 
 
 def spirv_cross_available() -> bool:
@@ -45,35 +74,77 @@ def _run(args: list[str], what: str) -> None:
         raise NeuralaoError(f"{what} failed: {(lines or [r.stdout.strip() or r.stderr.strip()])[0]}")
 
 
-def cross_compile(source: str) -> dict[str, str]:
-    """GLSL 4.30 compute ``source`` -> {"hlsl": HLSL SM 5.0 text, "msl": MSL 2.1 text}."""
+def _spirv_string(words: list[int]) -> str:
+    return struct.pack(f"<{len(words)}I", *words).split(b"\0")[0].decode()
+
+
+def _spirv_words(text: str) -> list[int]:
+    data = text.encode() + b"\0"
+    data += b"\0" * (-len(data) % 4)
+    return list(struct.unpack(f"<{len(data) // 4}I", data))
+
+
+def name_block_instances(spv: bytes, names: dict[str, str] = BLOCK_INSTANCE_NAMES) -> bytes:
+    """SPIR-V ``spv`` with the OpName of each variable whose type is a block named in ``names`` (by its
+    type's OpName) set to the name given: glslang names an anonymous instance "", which SPIRV-Cross
+    writes as ``_<id>``. Only debug names change; NeuralaoError when such a variable has no OpName."""
+    words = list(struct.unpack(f"<{len(spv) // 4}I", spv))
+    header, insts, i = words[:5], [], 5
+    while i < len(words):
+        count = words[i] >> 16
+        insts.append(words[i : i + count])
+        i += count
+    op_names = {w[1]: _spirv_string(w[2:]) for w in insts if w[0] & 0xFFFF == _OP_NAME}
+    pointee = {w[1]: w[3] for w in insts if w[0] & 0xFFFF == _OP_TYPE_POINTER}
+    wanted = {}
+    for w in insts:
+        if w[0] & 0xFFFF == _OP_VARIABLE:
+            block = op_names.get(pointee.get(w[1], -1), "")
+            if block in names:
+                wanted[w[2]] = names[block]
+    out = []
+    for w in insts:
+        if w[0] & 0xFFFF == _OP_NAME and w[1] in wanted:
+            body = [w[1], *_spirv_words(wanted.pop(w[1]))]
+            w = [(len(body) + 1) << 16 | _OP_NAME, *body]
+        out.append(w)
+    if wanted:
+        raise NeuralaoError(f"SPIR-V variables {sorted(wanted)} have no OpName to set")
+    flat = header + [x for w in out for x in w]
+    return struct.pack(f"<{len(flat)}I", *flat)
+
+
+def _glsl_to_spirv(d: Path, shifts: dict[str, int], out: str) -> Path:
+    args = ["glslangValidator", "-G"]
+    for kind, n in shifts.items():
+        args += [f"--shift-{kind}-binding", "comp", str(n)]
+    _run([*args, "-o", str(d / out), str(d / "pass.comp")], "glslangValidator (GLSL -> SPIR-V)")
+    path = d / out
+    path.write_bytes(name_block_instances(path.read_bytes()))
+    return path
+
+
+def cross_compile(source: str, entry: str = "main") -> dict[str, str]:
+    """GLSL 4.30 compute ``source`` -> {"hlsl": HLSL SM 5.0 text, "msl": MSL 2.1 text}, each with its
+    entry point (HLSL function, MSL kernel) named ``entry``."""
     if not spirv_cross_available():
         raise NeuralaoError(
             "HLSL / MSL need spirv-cross and glslangValidator (apt-get install spirv-cross glslang-tools)"
         )
+    rename = ["--rename-entry-point", "main", entry, "comp"]
     with tempfile.TemporaryDirectory(prefix="nao_cross_") as tmp:
         d = Path(tmp)
         (d / "pass.comp").write_text(source)
-        _run(
-            [
-                "glslangValidator",
-                "-G",
-                "--shift-ssbo-binding",
-                "comp",
-                str(PARAMS_REGISTER_SHIFT),
-                "-o",
-                str(d / "pass.spv"),
-                str(d / "pass.comp"),
-            ],
-            "glslangValidator (GLSL -> SPIR-V)",
-        )
+        hlsl_spv = _glsl_to_spirv(d, {"ssbo": PARAMS_REGISTER_SHIFT}, "hlsl.spv")
+        msl_spv = _glsl_to_spirv(d, {"texture": MSL_TEXTURE_SHIFT, "ssbo": MSL_BUFFER_SHIFT}, "msl.spv")
         _run(
             [
                 "spirv-cross",
-                str(d / "pass.spv"),
+                str(hlsl_spv),
                 "--hlsl",
                 "--shader-model",
                 HLSL_SHADER_MODEL,
+                *rename,
                 "--output",
                 str(d / "pass.hlsl"),
             ],
@@ -82,10 +153,12 @@ def cross_compile(source: str) -> dict[str, str]:
         _run(
             [
                 "spirv-cross",
-                str(d / "pass.spv"),
+                str(msl_spv),
                 "--msl",
                 "--msl-version",
                 MSL_VERSION,
+                "--msl-decoration-binding",
+                *rename,
                 "--output",
                 str(d / "pass.metal"),
             ],
@@ -94,29 +167,141 @@ def cross_compile(source: str) -> dict[str, str]:
         return {"hlsl": (d / "pass.hlsl").read_text(), "msl": (d / "pass.metal").read_text()}
 
 
-def validate_hlsl(source: str) -> None:
-    """Compile HLSL compute ``source`` (entry ``main``) with glslang's HLSL front end; NeuralaoError on
-    failure."""
+def compile_hlsl(source: str, entry: str = "main") -> bytes:
+    """HLSL compute ``source`` with entry ``entry`` -> Vulkan SPIR-V (little-endian words) by glslang's
+    HLSL front end, each register class at its own bindings (:data:`HLSL_BINDING_SHIFTS`); the
+    resources keep their HLSL names. NeuralaoError when glslang rejects it or is missing."""
     if shutil.which("glslangValidator") is None:
         raise NeuralaoError("glslangValidator is not installed (apt-get install glslang-tools)")
     with tempfile.TemporaryDirectory(prefix="nao_hlsl_") as tmp:
         path = Path(tmp) / "pass.hlsl"
         path.write_text(source)
-        _run(
-            [
-                "glslangValidator",
-                "-D",
-                "-V",
-                "-e",
-                "main",
-                "-S",
-                "comp",
-                "-o",
-                str(Path(tmp) / "pass.spv"),
-                str(path),
-            ],
-            "glslangValidator -D (HLSL)",
+        args = [
+            "glslangValidator",
+            "-D",
+            "-V",
+            "-S",
+            "comp",
+            "-e",
+            entry,
+            "--hlsl-iomap",
+            "--auto-map-bindings",
+        ]
+        for kind, n in HLSL_BINDING_SHIFTS.items():
+            args += [f"--shift-{kind}-binding", "comp", str(n)]
+        _run([*args, "-o", str(Path(tmp) / "pass.spv"), str(path)], "glslangValidator -D (HLSL)")
+        return (Path(tmp) / "pass.spv").read_bytes()
+
+
+def hlsl_spirv_binding(register: str) -> int:
+    """The Vulkan binding (set 0) that an HLSL register ("t3", "u0", "b0") gets in :func:`compile_hlsl`'s
+    SPIR-V ($Globals, the compiler's b0, is auto-mapped to the first cbuffer binding)."""
+    base = {"t": 0, "u": HLSL_BINDING_SHIFTS["uav"], "s": HLSL_BINDING_SHIFTS["sampler"]}
+    base["b"] = HLSL_BINDING_SHIFTS["cbuffer"]
+    return base[register[0]] + int(register[1:])
+
+
+def validate_hlsl(source: str, entry: str = "main") -> None:
+    """Compile HLSL compute ``source`` (entry ``entry``) with glslang's HLSL front end; NeuralaoError on
+    failure."""
+    compile_hlsl(source, entry)
+
+
+def _uniform_type(name: str, u: dict) -> str:
+    return "int" if name == "u_flip_y" else u.get("type", "float")
+
+
+def hlsl_interface(p: dict) -> dict:
+    """What an engine binds for GLSL 4.30 manifest pass ``p`` in its HLSL: {"entry", "numthreads",
+    "resources": [{"name", "type", "register", and "texture" (an input, the output) or "weights"
+    (params: the pass's range of weights.bin, a buffer of its own) or "cbuffer" + "offset" (a uniform)}]}.
+    """
+    res = [
+        {
+            "name": f"src{inp['binding']}",
+            "type": "Texture2DArray<float4>",
+            "register": f"t{inp['binding']}",
+            "texture": inp["texture"],
+        }
+        for inp in p["inputs"]
+    ]
+    out = p["output"]
+    res.append(
+        {
+            "name": "dst",
+            "type": "RWTexture2DArray<float4>",
+            "register": f"u{out['binding']}",
+            "texture": out["texture"],
+        }
+    )
+    if "params" in p:
+        prm = p["params"]
+        res.append(
+            {
+                "name": "params",
+                "type": "ByteAddressBuffer",
+                "register": f"t{PARAMS_REGISTER_SHIFT + prm['binding']}",
+                "weights": {"file": prm["buffer"], "offset": prm["offset"], "bytes": prm["bytes"]},
+            }
         )
+    uniforms = p.get("uniforms", {})
+    if len(uniforms) > 1:  # pragma: no cover - one uniform a pass (pad, crop: u_flip_y; uniform: its input)
+        raise NeuralaoError(f"pass {p['name']}: more than one uniform")
+    for name, u in uniforms.items():
+        res.append(
+            {
+                "name": name,
+                "type": _uniform_type(name, u),
+                "register": "b0",
+                "cbuffer": "$Globals",
+                "offset": 0,
+            }
+        )
+    return {"entry": p["name"], "numthreads": list(p["local_size"]), "resources": res}
+
+
+def msl_interface(p: dict) -> dict:
+    """What an engine binds for GLSL 4.30 manifest pass ``p`` in its MSL: {"kernel",
+    "threads_per_threadgroup", "arguments": [{"name", "type", "index" ("texture(k)", "buffer(k)"), and
+    "texture" / "weights" / "value" as in :func:`hlsl_interface`}]}. The unused samplers are left out."""
+    out = p["output"]
+    args = [
+        {
+            "name": "dst",
+            "type": "texture2d_array<float, access::write>",
+            "index": f"texture({out['binding']})",
+            "texture": out["texture"],
+        }
+    ]
+    args += [
+        {
+            "name": f"src{inp['binding']}",
+            "type": "texture2d_array<float>",
+            "index": f"texture({inp['binding'] + MSL_TEXTURE_SHIFT})",
+            "texture": inp["texture"],
+        }
+        for inp in p["inputs"]
+    ]
+    if "params" in p:
+        prm = p["params"]
+        args.append(
+            {
+                "name": "params",
+                "type": "const device Params&",
+                "index": f"buffer({prm['binding'] + MSL_BUFFER_SHIFT})",
+                "weights": {"file": prm["buffer"], "offset": prm["offset"], "bytes": prm["bytes"]},
+            }
+        )
+    for name, u in p.get("uniforms", {}).items():
+        args.append(
+            {
+                "name": name,
+                "type": f"constant {_uniform_type(name, u)}&",
+                "index": "buffer(0)",
+                "value": "setBytes",
+            }
+        )
+    return {"kernel": p["name"], "threads_per_threadgroup": list(p["local_size"]), "arguments": args}
 
 
 def spirv_validator_available() -> bool:

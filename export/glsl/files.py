@@ -11,16 +11,22 @@ import numpy as np
 
 from neuralao.export.glsl.cross import (
     HLSL_SHADER_MODEL,
+    HLSL_SPIRV_COMMAND,
+    MSL_BUFFER_SHIFT,
+    MSL_TEXTURE_SHIFT,
     MSL_VERSION,
     PARAMS_REGISTER_SHIFT,
     SPIRV_COMMAND,
     SPIRV_TARGET_ENV,
     compile_spirv,
     cross_compile,
+    hlsl_interface,
+    msl_interface,
     spirv_validator_available,
     validate_hlsl,
 )
 from neuralao.export.glsl.dialects import FRAGMENT_FILES
+from neuralao.export.glsl.frame import shader_entries
 from neuralao.export.glsl.graph import sha256_hex
 from neuralao.export.glsl.image import ComputeProgram
 from neuralao.export.glsl.validate import _can_validate, glslang_available, validate_glsl
@@ -108,8 +114,7 @@ def write_compute_export(
 ) -> Path:
     """Write every pass as <name>.comp (GLSL) or <name>.wgsl, weights.bin and manifest.json (atomically);
     returns the manifest path. ``cross``: also <name>.hlsl and <name>.metal beside each GLSL pass
-    (SPIR-V + SPIRV-Cross, :mod:`.cross`); the HLSL is compiled back with glslang's HLSL front end when
-    ``validate``. The manifest's ``cross_compiled`` says how they were made and checked. A Vulkan
+    (SPIR-V + SPIRV-Cross, :mod:`.cross`; see :func:`_with_cross`). A Vulkan
     program's passes get <name>.spv beside them (:func:`_with_spirv`)."""
     files: dict[str, bytes] = {}
     manifest = program.manifest
@@ -129,28 +134,47 @@ def write_compute_export(
             validate_glsl(src, "comp")
         files[name] = src.encode()
     if cross:
-        manifest = json.loads(json.dumps(manifest))
-        for entry in manifest["passes"]:
-            out = cross_compile(program.sources[entry["shader"]])
-            if validate:
-                validate_hlsl(out["hlsl"])
-            stem = entry["shader"].removesuffix(".comp")
-            entry["hlsl"], entry["msl"] = f"{stem}.hlsl", f"{stem}.metal"
-            files[entry["hlsl"]], files[entry["msl"]] = out["hlsl"].encode(), out["msl"].encode()
-        manifest["cross_compiled"] = {
-            "how": "GLSL -> SPIR-V (glslangValidator -G, SSBO bindings shifted by "
-            f"{PARAMS_REGISTER_SHIFT}) -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / "
-            f"--msl --msl-version {MSL_VERSION}",
-            "hlsl": "entry main, [numthreads] as local_size; input i: Texture2DArray t<i> "
-            "(+ SamplerState s<i>, unused: Load only); output: RWTexture2DArray u0; params: "
-            f"ByteAddressBuffer t{PARAMS_REGISTER_SHIFT} at the pass's weights.bin range; "
-            "u_flip_y / scalar uniforms: $Globals cbuffer",
-            "msl": "kernel main0; output texture(0), input i texture(i + 1); the params (device) and uniform "
-            "(constant) buffers take [[buffer(k)]] in declaration order: see main0's signature",
-            "validated": "HLSL compiled back by glslang's HLSL front end" if validate else "not validated",
-        }
+        manifest = _with_cross(program, files, validate)
     files["weights.bin"] = program.weights
     return _write_export_files(Path(out_dir), files, manifest)
+
+
+def _with_cross(program: ComputeProgram, files: dict[str, bytes], validate: bool) -> dict:
+    """The GLSL program's manifest with each pass's HLSL and MSL: <name>.hlsl and <name>.metal into
+    ``files``, the pass's ``hlsl`` ({"file", "entry", "numthreads", "resources"}) and ``msl`` ({"file",
+    "kernel", "threads_per_threadgroup", "arguments"}) saying what an engine binds by which name and
+    register / index; ``validate``: each HLSL file is compiled back by glslang's HLSL front end."""
+    manifest = json.loads(json.dumps(program.manifest))
+    for entry in shader_entries(manifest):  # the network's passes and the frame's
+        out = cross_compile(program.sources[entry["shader"]], entry["name"])
+        if validate:
+            validate_hlsl(out["hlsl"], entry["name"])
+        stem = entry["shader"].removesuffix(".comp")
+        entry["hlsl"] = {"file": f"{stem}.hlsl", **hlsl_interface(entry)}
+        entry["msl"] = {"file": f"{stem}.metal", **msl_interface(entry)}
+        files[entry["hlsl"]["file"]] = out["hlsl"].encode()
+        files[entry["msl"]["file"]] = out["msl"].encode()
+    manifest["cross_compiled"] = {
+        "how": "GLSL -> SPIR-V (glslangValidator -G; HLSL: SSBO bindings shifted by "
+        f"{PARAMS_REGISTER_SHIFT}; "
+        f"MSL: sampled textures by {MSL_TEXTURE_SHIFT}, SSBOs by {MSL_BUFFER_SHIFT}; the params block "
+        f"instance named 'params') -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / --msl "
+        f"--msl-version {MSL_VERSION} --msl-decoration-binding; entry points renamed to the pass names",
+        "hlsl": "shader model 5.0, one file and entry point per pass (the pass's name), [numthreads] = "
+        "local_size; input i: Texture2DArray src<i> at t<i> (its SamplerState s<i> is unused: Load only, "
+        f"bind none); output: RWTexture2DArray dst at u0; params: ByteAddressBuffer params at "
+        f"t{PARAMS_REGISTER_SHIFT}, a buffer of its own holding the pass's range of weights.bin "
+        "(params.offset, params.bytes; read from byte 0); u_flip_y / a scalar input: a member of $Globals. "
+        "Per pass: hlsl.resources",
+        "msl": "MSL 2.1, kernel named after the pass; output texture(0), input i texture(i + 1) (its "
+        "sampler(i + 1) unused), the uniform buffer(0) (setBytes), params buffer(1) (the pass's range of "
+        "weights.bin, from its start or at its offset); threadsPerThreadgroup = local_size. Per pass: "
+        "msl.arguments",
+        "validated": f"HLSL compiled back by glslang's HLSL front end ({HLSL_SPIRV_COMMAND})"
+        if validate
+        else "not validated",
+    }
+    return manifest
 
 
 def _with_spirv(program: ComputeProgram, files: dict[str, bytes], validate: bool) -> dict:
@@ -164,7 +188,7 @@ def _with_spirv(program: ComputeProgram, files: dict[str, bytes], validate: bool
         log.warning("glslangValidator not found: writing the Vulkan passes without their SPIR-V")
         manifest["spirv"] = {"compiled": False, "how": f"{SPIRV_COMMAND} -o <name>.spv <name>.comp"}
         return manifest
-    for entry in manifest["passes"]:
+    for entry in shader_entries(manifest):  # the network's passes and the frame's
         words = compile_spirv(program.sources[entry["shader"]], validate=validate)
         name = entry["shader"].removesuffix(".comp") + ".spv"
         files[name] = words
@@ -187,11 +211,24 @@ def load_compute_export(export_dir: str | Path) -> ComputeProgram:
     d, manifest = _read_export(export_dir)
     if manifest.get("format") not in COMPUTE_FORMATS:
         raise NeuralaoError(f"{d} is not a compute-shader export")
-    sources = {p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in manifest["passes"]}
+    sources = {
+        p["shader"]: _read_checked(d, manifest, p["shader"]).decode() for p in shader_entries(manifest)
+    }
     weights = _read_checked(d, manifest, manifest["weights"]["file"])
     spirv = {
         p["shader"]: _read_checked(d, manifest, p["spirv"]["file"])
-        for p in manifest["passes"]
+        for p in shader_entries(manifest)
         if "spirv" in p
     }
     return ComputeProgram(sources, weights, manifest, spirv)
+
+
+def load_cross_sources(export_dir: str | Path, language: str = "hlsl") -> dict[str, str]:
+    """{pass name: HLSL (``language="hlsl"``) or MSL (``"msl"``) text} of an export written with
+    ``cross=True``, hashes checked."""
+    if language not in ("hlsl", "msl"):
+        raise NeuralaoError(f"language must be 'hlsl' or 'msl', got {language!r}")
+    d, manifest = _read_export(export_dir)
+    if "cross_compiled" not in manifest:
+        raise NeuralaoError(f"export {d} has no HLSL / MSL (write it with --hlsl-msl)")
+    return {p["name"]: _read_checked(d, manifest, p[language]["file"]).decode() for p in manifest["passes"]}

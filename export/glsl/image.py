@@ -31,7 +31,7 @@ from neuralao.export.glsl.graph import (
     sha256_hex,
     shape_dims,
 )
-from neuralao.export.glsl.memory import FP32_KINDS, memory_section
+from neuralao.export.glsl.memory import FP32_KINDS, memory_section, texture_sizes
 from neuralao.export.glsl.views import (
     Atom,
     Axes,
@@ -56,6 +56,46 @@ MAX_KERNEL = 15
 # the choices); at most MAX_BLOCK_ACCUMULATORS vec4 accumulators per invocation.
 CONV_BLOCK = (8, 4, 2)
 MAX_BLOCK_ACCUMULATORS = 64
+
+
+@dataclass(frozen=True)
+class ComputePreset:
+    """How the compute passes are shaped for the machine that runs them (``generate_compute(preset=)``,
+    ``neuralao glsl --preset``). Every preset computes the same outputs (to float rounding)."""
+
+    name: str
+    # invocations per workgroup (x, y); z is 1, the grid's z runs over output layers / block layers
+    local_size: tuple[int, int]
+    # a dense conv invocation's output: texels x, texels y, output layers ((1, 1, 1): one texel, one layer)
+    conv_block: tuple[int, int, int]
+    # fold cheap passes into a neighbour: a two-image op into the conv producing one operand, the
+    # output crop into the pass producing its input (fewer dispatches and barriers)
+    fuse: bool
+    # what the preset is for, in the manifest
+    purpose: str
+
+
+PRESETS: dict[str, ComputePreset] = {
+    "gpu": ComputePreset(
+        "gpu",
+        (8, 8),
+        (1, 1, 1),
+        True,
+        "GPUs: one output texel of one layer per invocation in 8x8 workgroups, so that the smallest conv "
+        "pass of the shipped U-Nets (1/8 of the network's size, 8 output layers) still launches about "
+        "15,000 threads at 1080p; cheap passes fused into their neighbours",
+    ),
+    "cpu": ComputePreset(
+        "cpu",
+        (8, 8),
+        CONV_BLOCK,
+        False,
+        "CPU rasterisers (Mesa llvmpipe): 8x4 texels x 2 output layers per invocation, so each of a few "
+        "hundred workgroups reuses every fetched texel and weight; no fusion",
+    ),
+}
+# The frame whose per-pass workgroups and threads the manifest states ("occupancy").
+OCCUPANCY_FRAME = (1920, 1080)
 # Alignment of each pass's parameter range in weights.bin (>= any GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT).
 PARAM_ALIGN = 256
 
@@ -147,12 +187,16 @@ class Epilogue:
 
     form "act": ``act``; "affine": r * prm[arrays[0]] + prm[arrays[1]] (batch norm, arithmetic with
     per-channel constants); "prelu": slope prm[arrays[0]] where r < 0; "rdiv": prm[arrays[0]] / r;
-    "guard": padding lanes set to 0 (after an activation that can make them non-finite).
+    "guard": padding lanes set to 0 (after an activation that can make them non-finite); "binary": r
+    op'd with a texel of another input (``side``), a two-image op fused into its operand's conv pass.
     """
 
     act: Act | None = None
     form: str = "act"
     arrays: tuple[str, ...] = ()  # param array names, in the order above
+    # form "binary" (a two-image op fused into the conv producing one operand): (input index of the
+    # other operand, its fetch: full | pixel | channel | scalar, the op, 0 if r is the op's A else 1)
+    side: tuple = ()
 
 
 @dataclass
@@ -417,7 +461,10 @@ class ImageOps(OpTable):
         self.metadata_multiple = metadata_multiple
         raw = self.new_texture(c, hd, wd, base="raw", onnx_name=name)
         padded = self.new_texture(c, hd, wd, onnx_name=name)
-        self.add_pass(Pass(0, "pad", ["Pad"], [raw], padded))
+        # The pad pass is the only reader of the raw input: it zeroes the lanes past channel c of the
+        # last layer, so whatever an engine leaves there (NaN included) never reaches a conv.
+        guard = [Epilogue(form="guard")] if c % 4 else []
+        self.add_pass(Pass(0, "pad", ["Pad"], [raw], padded, epilogue=guard))
         self.env[name] = padded
         self.input_texture, self.padded_texture = raw, padded
         # Scalar inputs: a 1x1 one-channel texture each, written from a uniform by its own pass, so
@@ -2022,7 +2069,8 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     }
     if p.kind == "conv_depthwise":
         return d.fill("conv_depthwise_body", **window)
-    sizes = "\n".join(d.fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(p.inputs)))
+    parts = _conv_parts(p)
+    sizes = "\n".join(d.fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(parts)))
     loops = "\n".join(
         d.fill(
             "conv_input_loop",
@@ -2031,12 +2079,18 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
             src=f"src{i}",
             layer_offset=f["layer_offsets"][i],
         )
-        for i, t in enumerate(p.inputs)
+        for i, t in enumerate(parts)
     )
     if _blocked(p):
         return _conv_block_body(p, window, d)
     tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
     return d.fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+
+
+def _conv_parts(p: Pass) -> list[Texture]:
+    """The inputs a conv pass convolves (a concatenation's parts); inputs after them are the other
+    operands of fused two-image ops (epilogue form "binary")."""
+    return p.inputs[: len(p.fields.get("layer_offsets", [0]))]
 
 
 def _blocked(p: Pass) -> bool:
@@ -2064,7 +2118,7 @@ def _conv_block_body(p: Pass, window: dict, d: Dialect) -> str:
     )
     layer_stride = window["kh"] * window["kw"] * 4 * f["in_layers"]  # vec4s between output layers' taps
     loops = []
-    for i, t in enumerate(p.inputs):
+    for i, t in enumerate(_conv_parts(p)):
         fetches = "\n".join(d.fill("conv_block_fetch", p=k, src=f"src{i}") for k in range(texels))
         products = []
         for o in range(bl):
@@ -2284,13 +2338,13 @@ def _spatial_pad_body(p: Pass, d: Dialect) -> str:
 
 def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d: Dialect) -> str:
     """One pass's shader source in dialect ``d`` (GLSL 4.30 compute, WGSL or Vulkan GLSL)."""
-    fmt = "rgba16f" if precision == "fp16" and p.kind not in FP32_KINDS else "rgba32f"
+    fmt = "rgba16f" if precision == "fp16" and not _fp32_output(p) else "rgba32f"
     slots = d.compute_slots(len(p.inputs))
     decls = [d.fill("sampler_array_decl", binding=i, name=f"src{i}") for i in range(len(p.inputs))]
     decls.append(d.fill("image_array_decl", binding=slots["output"], format=d.fill(f"storage_format_{fmt}")))
     if p.params:
         decls.append(d.fill("params_decl", binding=slots["params"]))
-    if p.kind in ("pad", "crop"):
+    if _flips(p):
         decls.append(d.fill("uniform_int_decl", slot=slots["uniform"], name="u_flip_y"))
     if p.kind == "uniform":
         slot = p.fields["location"] if d.name == "glsl430" else slots["uniform"]
@@ -2349,7 +2403,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
         prelude.append(d.fill("prelude_cubic"))
     if p.fields.get("erf"):
         prelude.append(d.fill("prelude_erf"))
-    epi = _epilogue(p, offs, "gid.z", d)
+    epi = _epilogue(p, offs, "gid.xy", "gid.z", d)
     if _blocked(p):
         bx, by, bl = p.fields["block"]
         stores = [
@@ -2357,7 +2411,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
             for o in range(bl)
             for k in range(bx * by)
         ]
-        epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "z", d).split("\n"))
+        epi_z = "\n".join("    " + line for line in _epilogue(p, offs, "xy", "z", d).split("\n"))
         return d.fill(
             "compute_pass_block",
             header=d.header(),
@@ -2373,6 +2427,8 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
             epilogue=epi_z,
             body=body,
             stores="\n".join(stores),
+            arithmetic=d.fill(f"arithmetic_{precision}"),
+            store_xy=_store_xy(p, "xy", d.fill("dst_size"), d),
         )
     return d.fill(
         "compute_pass",
@@ -2386,14 +2442,50 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
         out_layers=p.output.layers,
         body=body,
         epilogue=epi,
+        arithmetic=d.fill(f"arithmetic_{precision}"),
+        store_xy=_store_xy(p, "gid.xy", "out_size", d),
     )
 
 
-def _epilogue(p: Pass, offs: dict[str, int], z: str, d: Dialect) -> str:
-    """The pass's per-texel epilogue on ``r``; ``z`` is the GLSL expression of the output layer."""
+def _fp32_output(p: Pass) -> bool:
+    """The pass writes an RGBA32F texture whatever the precision: a cropped output, a scalar input."""
+    return p.kind in FP32_KINDS or p.output.base == "raw"
+
+
+def _flips(p: Pass) -> bool:
+    """The pass reads or writes an engine's texture, which may be stored bottom-up (uniform u_flip_y):
+    the pad and crop passes, and a pass the crop was fused into."""
+    return p.kind in ("pad", "crop") or bool(p.fields.get("flip_store"))
+
+
+def _store_xy(p: Pass, xy: str, size: str, d: Dialect) -> str:
+    """Where texel ``xy`` is stored: itself, or row-flipped when a crop was fused into the pass."""
+    return d.fill("flip_xy", xy=xy, size=size) if p.fields.get("flip_store") else xy
+
+
+def _side_operand(e: Epilogue, xy: str, z: str, d: Dialect) -> str:
+    """The other operand of a fused two-image op at output texel ``xy``, layer ``z``."""
+    index, how = e.side[0], e.side[1]
+    at = {"full": {"xy": xy, "z": z}, "pixel": {"z": z}, "channel": {"xy": xy}, "scalar": {}}[how]
+    return d.fill(f"side_{how}", src=f"src{index}", **at)
+
+
+def _epilogue(p: Pass, offs: dict[str, int], xy: str, z: str, d: Dialect) -> str:
+    """The pass's per-texel epilogue on ``r``; ``xy`` and ``z`` are the expressions of the output texel
+    and layer."""
     epi = []
     for e in p.epilogue:
-        if e.form == "act":
+        if e.form == "binary":
+            _, _, op, r_is = e.side
+            other = _side_operand(e, xy, z, d)
+            a, b = ("r", other) if r_is == 0 else (other, "r")
+            guard = (
+                d.fill("epilogue_guard_div", channels=p.output.channels, z=z)
+                if op == "Div"
+                else d.fill("binary_guard_none")
+            )
+            epi.append(d.fill("epilogue_binary", a=a, b=b, guard=guard, expr=d.fill(f"binop_{op}")))
+        elif e.form == "act":
             epi.append(d.fill("epilogue_act", expr=e.act.expr("r", d.fill)))
         elif e.form == "affine":
             epi.append(
@@ -2467,13 +2559,93 @@ def _conv_block(block: tuple[int, int, int], layers: int) -> tuple[int, int, int
     return bx, by, max(d for d in range(1, min(bl, layers) + 1) if layers % d == 0)
 
 
+# Two-image ops an epilogue can apply (templates binop_<op>) and the pass kinds a crop folds into: those
+# whose body reads no out_size (the crop makes the output the raw size).
+_FUSED_BINOPS = ("Add", "Sub", "Mul", "Div", "Max", "Min")
+_CROP_INTO = (*CONV_KINDS, "binary", "elementwise")
+
+
+def _readers(table: ImageOps, t: Texture) -> list[Pass]:
+    return [q for q in table.passes if any(i.ident == t.ident for i in q.inputs)]
+
+
+def _drop(table: ImageOps, gone: Pass, texture: Texture) -> None:
+    table.passes.remove(gone)
+    table.textures = [t for t in table.textures if t.ident != texture.ident]
+
+
+def _fuse_binary(table: ImageOps, b: Pass) -> str | None:
+    """Fold binary pass ``b`` into the conv producing one operand when b alone reads that output and
+    the other operand exists before the conv runs: the conv's epilogue applies the op (form "binary")."""
+    if b.fields["op"] not in _FUSED_BINOPS:
+        return None
+    index = {p.output.ident: k for k, p in enumerate(table.passes)}
+    for k in (0, 1):
+        t, other = b.inputs[k], b.inputs[1 - k]
+        p = table.passes[index[t.ident]] if t.ident in index else None
+        if p is None or p.kind not in CONV_KINDS or b.fields["fetch"][k] != "full" or t.ident == other.ident:
+            continue
+        if _readers(table, t) != [b] or index.get(other.ident, -1) > index[t.ident]:
+            continue
+        p.inputs.append(other)
+        p.epilogue.append(
+            Epilogue(form="binary", side=(len(p.inputs) - 1, b.fields["fetch"][1 - k], b.fields["op"], k))
+        )
+        p.epilogue += b.epilogue
+        p.params.update(b.params)
+        p.ops += b.ops
+        p.nodes += b.nodes
+        p.output = b.output
+        _drop(table, b, t)
+        return f"{' + '.join(b.ops)} into the conv producing its operand {t.ident}"
+    return None
+
+
+def _fuse_crop(table: ImageOps, c: Pass) -> str | None:
+    """Fold crop pass ``c`` into the pass producing its input when c alone reads it: that pass writes
+    the raw-size output (row-flipped by u_flip_y) instead of the padded texture."""
+    t = c.inputs[0]
+    p = next((q for q in table.passes if q.output.ident == t.ident), None)
+    if p is None or p.kind not in _CROP_INTO or p.fields.get("flip_store") or _readers(table, t) != [c]:
+        return None
+    p.fields["flip_store"] = True
+    p.output = c.output
+    p.ops.append("Crop")
+    _drop(table, c, t)
+    return f"Crop into the {p.kind} pass producing {t.ident}"
+
+
+def _fuse(table: ImageOps) -> list[str]:
+    """The gpu preset's fusions, until none applies; passes renumbered. Returns what was fused."""
+    made: list[str] = []
+    while True:
+        for q in table.passes:
+            step = (
+                _fuse_binary(table, q)
+                if q.kind == "binary"
+                else _fuse_crop(table, q)
+                if q.kind == "crop"
+                else None
+            )
+            if step:
+                made.append(step)
+                break
+        else:
+            break
+    for k, q in enumerate(table.passes):
+        q.index = k
+    return made
+
+
 def generate_compute(
     model: onnx.ModelProto,
     precision: str = "fp32",
     kind: str = "unet",
-    local_size: tuple[int, int] = (8, 8),
-    conv_block: tuple[int, int, int] = CONV_BLOCK,
+    local_size: tuple[int, int] | None = None,
+    conv_block: tuple[int, int, int] | None = None,
     dialect: str = "glsl430",
+    preset: str = "gpu",
+    fuse: bool | None = None,
 ) -> ComputeProgram:
     """One GLSL 4.30 compute shader per layer or fused group, from an image graph (1, C, H, W) -> outputs.
     ``dialect="wgsl"`` writes the same passes in WGSL (WebGPU; see :func:`_wgsl_manifest`),
@@ -2490,11 +2662,20 @@ def generate_compute(
     Beside the image, graph inputs of one element ((1, 1, 1, 1), (1,) or ()) are scalars: each is a
     ``uniform float`` that a "uniform" pass writes to a 1x1 one-channel RGBA32F texture (manifest
     ``uniforms``: ONNX input, declared shape, meaning, GLSL name, location, pass).
-    conv_block : (texels x, texels y, output layers) that one invocation of a (dense) conv pass
-    computes; (1, 1, 1) is one texel of one layer. The manifest's ``dispatch`` states the groups.
+    preset : a name of :data:`PRESETS` ("gpu", the default: small invocations, many workgroups, cheap
+    passes fused; "cpu": llvmpipe's large blocks, no fusion); ``local_size``, ``conv_block`` and
+    ``fuse`` override its fields. conv_block : (texels x, texels y, output layers) that one invocation
+    of a (dense) conv pass computes; (1, 1, 1) is one texel of one layer. The manifest's ``dispatch``
+    states the groups, ``occupancy`` the workgroups and threads of each pass at 1920x1080.
     """
     if precision not in ("fp32", "fp16"):
         raise NeuralaoError(f"precision must be fp32 or fp16, got {precision!r}")
+    if preset not in PRESETS:
+        raise NeuralaoError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
+    chosen = PRESETS[preset]
+    local_size = tuple(local_size or chosen.local_size)
+    conv_block = tuple(conv_block or chosen.conv_block)
+    fuse = chosen.fuse if fuse is None else bool(fuse)
     if dialect not in COMPUTE_DIALECTS:
         raise NeuralaoError(f"compute dialect must be one of {sorted(COMPUTE_DIALECTS)}, got {dialect!r}")
     d = COMPUTE_DIALECTS[dialect]
@@ -2531,6 +2712,7 @@ def generate_compute(
             _pack_conv(p)
         if p.kind == "conv":
             p.fields["block"] = _conv_block(conv_block, p.output.layers)
+    fused = _fuse(table) if fuse else []
     multiple = _pad_multiple(table)
     if multiple > 1 and table.global_reads:
         raise NeuralaoError(
@@ -2565,11 +2747,54 @@ def generate_compute(
         if entry["onnx_name"] in shapes:
             entry["shape"] = shapes[entry["onnx_name"]]
     manifest["memory"] = memory_section(manifest)
+    manifest["arithmetic"] = {
+        "precision": precision,
+        "declarations": d.fill(f"arithmetic_{precision}"),
+        "fp32_declarations": d.fill("arithmetic_fp32"),
+        "fallback": "each pass starts with the declarations (after its version line); GLSL and Vulkan GLSL "
+        "pick fp32 in the preprocessor where the compiler has no half type; a WebGPU device without "
+        "shader-f16 runs the WGSL with fp32_declarations in their place",
+    }
+    manifest["preset"] = {
+        "name": preset,
+        "local_size": list(local_size),
+        "conv_block": list(conv_block),
+        "fuse": fuse,
+        "purpose": chosen.purpose,
+        "fused": fused,
+        "dispatches": len(manifest["passes"]),
+    }
+    _occupancy(manifest)
     if d.name == "wgsl":
         _wgsl_manifest(manifest, d)
     elif d.name == "vulkan":
         _vulkan_manifest(manifest, d)
     return ComputeProgram(sources, bytes(blob), manifest)
+
+
+def _occupancy(manifest: dict) -> None:
+    """Each pass's workgroups and threads (invocations) at :data:`OCCUPANCY_FRAME` (``occupancy``),
+    from the textures' sizes there (the network's internal size for a U-Net that declares one)."""
+    try:
+        sizes = texture_sizes(manifest, *OCCUPANCY_FRAME)
+    except NeuralaoError:
+        return  # a program that cannot run at that frame size (a fixed input size)
+    frame = "x".join(map(str, OCCUPANCY_FRAME))
+    for entry in manifest["passes"]:
+        (lx, ly, _), (bx, by, bl) = entry["local_size"], entry["block"]
+        tw, th = sizes[entry["output"]["texture"]]
+        groups = [
+            -(-tw // (lx * bx)),
+            -(-th // (ly * by)),
+            manifest["textures"][entry["output"]["texture"]]["layers"] // bl,
+        ]
+        workgroups = groups[0] * groups[1] * groups[2]
+        entry["occupancy"] = {
+            "frame": frame,
+            "groups": groups,
+            "workgroups": workgroups,
+            "threads": workgroups * lx * ly,
+        }
 
 
 def _wgsl_manifest(manifest: dict, d: Dialect) -> None:
@@ -2716,6 +2941,16 @@ def _vulkan_manifest(manifest: dict, d: Dialect) -> None:
         )
 
 
+def _unused_lanes(channels: int) -> str:
+    """What the input texture's lanes past the last channel hold: anything; the pad pass zeroes them."""
+    if channels % 4 == 0:
+        return "none"
+    return (
+        f"layer {channels // 4} lanes {channels % 4}..3 (channels {channels}..{4 * ceil4(channels) - 1}): "
+        "any value, NaN included; the pad pass zeroes them"
+    )
+
+
 def _input_meaning(vi: onnx.ValueInfoProto, metadata: dict[str, str]) -> str:
     """What a graph input means: its doc_string, else metadata "<name>_description", "<name>_input",
     "input_<name>" or "<name>" (the first present)."""
@@ -2829,7 +3064,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
                     "value": f"graph input {vi.name!r} (glUniform1f)",
                 }
             }
-        if p.kind in ("pad", "crop"):
+        if _flips(p):
             entry["uniforms"] = {
                 "u_flip_y": {
                     "location": 0,
@@ -2859,12 +3094,18 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "io_format": "RGBA32F",
             "channel": "layer = c // 4, lane = c % 4 (padding lanes hold finite junk, never read)",
             "rows": "texel (x, y) = tensor[..., y, x]: row 0 is the tensor's first (top) row",
-            "arithmetic": "fp32",
+            "arithmetic": "fp32"
+            if precision == "fp32"
+            else "dense conv accumulation in fp16 where the compiler has a half type (GL, Vulkan: "
+            "GL_EXT_shader_explicit_arithmetic_types_float16 or GL_AMD_gpu_shader_half_float, chosen by "
+            "the preprocessor, else fp32; WGSL: enable f16, the device feature shader-f16); epilogues "
+            "and other passes in fp32",
         },
         "input": {
             "onnx_name": table.image_input.name,
             "texture": table.input_texture.ident,
             "channels": table.input_texture.channels,
+            "unused_lanes": _unused_lanes(table.input_texture.channels),
             "declared_shape": [str(v) for v in shape_dims(table.image_input)],
         },
         "uniforms": [_uniform_entry(vi, p, graph.metadata) for vi, p in table.uniforms],
@@ -2877,7 +3118,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "side": "bottom,right",
             "pass": table.passes[0].name,
             "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",
-            "crop_passes": [p.name for p in table.passes if p.kind == "crop"],
+            "crop_passes": [p.name for p in table.passes if p.kind == "crop" or p.fields.get("flip_store")],
         },
         "static_input_size": list(table.input_dims) if table.static else None,
         "textures": textures,

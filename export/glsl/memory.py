@@ -18,6 +18,7 @@ largest member favour size order over first-use order, which minimises the count
 
     memory_schedule(manifest) -> MemorySchedule     steps, lifetimes and slots (no sizes)
     memory_plan(manifest, width, height, precision="fp32") -> MemoryPlan   bytes at one frame size
+    texture_sizes(manifest, width, height) -> {id: (w, h)}      the program's textures at one frame size
     memory_section(manifest) -> dict                the manifest's "memory" entry
     plan_slots(lifetimes, sizes) -> list[list[str]] the slot planner on its own
 """
@@ -35,7 +36,11 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 FP32_KINDS = ("crop", "uniform")
 
 # Bytes per texel of every format a frame allocates.
-TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4}
+TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2}
+# At fp16 the one-channel AO targets around the network (full resolution and the network's AO) are R16F:
+# AO lies in [0, 1], where half floats step by at most 2^-11. The point-sampled G-buffer stays RGBA32F
+# (camera-space positions need float32's range and precision).
+FP16_FRAME_FORMATS = {"R32F": "R16F"}
 
 # The frame whose texture sizes order the slot planner, and the frames the manifest gives figures for.
 REFERENCE_FRAME = (1920, 1080)
@@ -69,7 +74,7 @@ class TextureLife:
     first, last : indices into the schedule's steps, both included. width, height : size formulas,
     dicts ``{"of": symbol, "num", "den", "offset", "formula"}`` = symbol * num / den + offset, symbol
     one of W, H (the frame), w, h (the network's input), wp, hp (that input padded); num 0 is a fixed
-    size. formats : {precision: GL internal format} (a frame texture keeps its format at fp16).
+    size. formats : {precision: GL internal format} (at fp16 a frame's one-channel AO target is R16F).
     """
 
     ident: str
@@ -263,7 +268,7 @@ def _frame_texture(fmt: str, size: str, meaning: str) -> dict:
         "width": width,
         "height": height,
         "layers": 1,
-        "formats": dict.fromkeys(PRECISIONS, fmt),
+        "formats": {"fp32": fmt, "fp16": FP16_FRAME_FORMATS.get(fmt, fmt)},
         "meaning": meaning,
     }
 
@@ -402,11 +407,19 @@ def memory_plan(manifest: Mapping, width: int, height: int, precision: str = "fp
 
     precision : "fp32" (every texture as the manifest gives it at fp32) or "fp16" (the network's
     textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, outputs and
-    scalar textures RGBA32F; the frame's other targets keep their formats). Whatever the manifest's
-    own precision. Raises NeuralaoError where the program cannot run at that size (a fixed size, below
-    the pad multiple, a texture of fractional size).
+    scalar textures RGBA32F; the frame's AO targets R16F, its point-sampled G-buffer RGBA32F).
+    Whatever the manifest's own precision. Raises NeuralaoError where the program cannot run at that
+    size (a fixed size, below the pad multiple, a texture of fractional size).
     """
     return _plan(memory_schedule(manifest), width, height, precision)
+
+
+def texture_sizes(manifest: Mapping, width: int, height: int) -> dict[str, tuple[int, int]]:
+    """{texture id: (width, height) in texels} of a compute manifest's own textures for a width x height
+    frame (the network's internal size where the model declares one). Raises NeuralaoError where the
+    program cannot run at that size."""
+    plan = memory_plan(manifest, width, height)
+    return {k: (t.width, t.height) for k, t in plan.textures.items() if t.network}
 
 
 def _plan(schedule: MemorySchedule, width: int, height: int, precision: str) -> MemoryPlan:
@@ -535,7 +548,8 @@ def memory_section(manifest: Mapping) -> dict:
         "peak_bytes": peaks,
         "peak_bytes_are": "separate: every texture its own memory; aliased: the sum of the slots' sizes; "
         "live: the most bytes alive at one step (no plan needs less). fp16: the program's textures "
-        "stored as --precision fp16 stores them, the other targets as they are.",
+        "stored as --precision fp16 stores them, the frame's one-channel AO targets (full resolution and the "
+        "network's AO) R16F, the point-sampled G-buffer RGBA32F.",
         "compute": "neuralao.export.glsl.memory_plan(manifest, width, height, precision) gives the same "
         "figures and each slot's size for any frame",
     }

@@ -49,7 +49,7 @@ _G: dict[str, str] = {}  # GLSL only
 
 # GLSL's spelling of the words (see the module docstring); WGSL's follow its overrides below.
 # ``declare`` / ``declare_typed`` spell ``${let_T}`` / ``${let_T:n}`` for each type T of _TYPES.
-_TYPES = ("vec4", "ivec2", "ivec3", "mat4", "float", "int", "bool")
+_TYPES = ("vec4", "ivec2", "ivec3", "mat4", "float", "int", "bool", "hvec4", "hmat4")
 _WORDS: dict[str, str] = {
     "vec4": "vec4",
     "ivec2": "ivec2",
@@ -58,6 +58,9 @@ _WORDS: dict[str, str] = {
     "float": "float",
     "int": "int",
     "bool": "bool",
+    # the conv accumulation's types: defined per precision by the pass's arithmetic_* block
+    "hvec4": "hvec4",
+    "hmat4": "hmat4",
     "declare": "${type}",
     "declare_typed": "${type} ${name}",
     "precise": "precise ",
@@ -234,6 +237,7 @@ _G["index_0"] = "${name}[0]"
 # --------------------------------------------------------------------------- compute passes
 
 _T["compute_pass"] = """${header}
+${arithmetic}
 // neuralao compute pass ${pass_index}: ${summary}
 layout(local_size_x = ${local_x}, local_size_y = ${local_y}, local_size_z = 1) in;
 
@@ -249,10 +253,27 @@ void main() {
     }
 ${body}
 ${epilogue}
-    imageStore(dst, gid, r);
+    imageStore(dst, ivec3(${store_xy}, gid.z), r);
 }
 """
 
+# The types of a dense conv's accumulation (hvec4, hmat4): fp32, or fp16 where the compiler has a half
+# type (GL: GL_EXT_shader_explicit_arithmetic_types_float16 or GL_AMD_gpu_shader_half_float; Vulkan:
+# the first, with the device feature shaderFloat16), else fp32 (the preprocessor picks; no driver
+# refuses the shader). Weights and texels are converted as they are read; epilogues run in fp32.
+_T["arithmetic_fp32"] = """// conv accumulation: fp32
+#define hvec4 vec4
+#define hmat4 mat4"""
+_T["arithmetic_fp16"] = """// conv accumulation: fp16 where the compiler has a half type, else fp32
+#extension GL_EXT_shader_explicit_arithmetic_types_float16 : enable
+#extension GL_AMD_gpu_shader_half_float : enable
+#if defined(GL_EXT_shader_explicit_arithmetic_types_float16) || defined(GL_AMD_gpu_shader_half_float)
+#define hvec4 f16vec4
+#define hmat4 f16mat4
+#else
+#define hvec4 vec4
+#define hmat4 mat4
+#endif"""
 _T["sampler_array_decl"] = "layout(binding = ${binding}) uniform highp sampler2DArray ${name};"
 _T["image_array_decl"] = "layout(binding = ${binding}, ${format}) writeonly uniform highp image2DArray dst;"
 _T["params_decl"] = """layout(std430, binding = ${binding}) readonly buffer Params {
@@ -266,7 +287,7 @@ _T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
 
 # Conv: one invocation = one output texel (4 output channels of layer gid.z).
 _T["conv_body"] = """${sizes}
-    ${var_vec4} r = prm[${bias_offset} + gid.z];
+    ${var_hvec4} acc = ${hvec4}(prm[${bias_offset} + gid.z]);
     for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
         ${let_int} iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
         for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
@@ -274,14 +295,15 @@ _T["conv_body"] = """${sizes}
             ${let_int} tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
 ${input_loops}
         }
-    }"""
+    }
+    ${var_vec4} r = ${vec4}(acc);"""
 
 # Zero padding: taps outside the input contribute nothing (texelFetch outside is undefined).
 _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
                 for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
                     ${let_vec4} v = ${fetch}(${src}, ${ivec3}(ix, iy, l)${lod});
                     ${let_int} o = tap + (${layer_offset} + l) * 4;
-                    r += ${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]) * v;
+                    acc += ${hmat4}(${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * ${hvec4}(v);
                 }
             }"""
 
@@ -291,6 +313,7 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
 # registers (layer o, texel p), the tap and input-layer loops stay loops. Helper functions keep the
 # source short (the compiler inlines them).
 _T["compute_pass_block"] = """${header}
+${arithmetic}
 // neuralao compute pass ${pass_index}: ${summary}
 // One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) \
 from layer ${block_layers} * gid.z.
@@ -316,7 +339,7 @@ mat4 nao_tap(int o) {
 void nao_store(ivec2 xy, int z, vec4 r) {
     if (all(lessThan(xy, imageSize(dst).xy))) {
 ${epilogue}
-        imageStore(dst, ivec3(xy, z), r);
+        imageStore(dst, ivec3(${store_xy}, z), r);
     }
 }
 
@@ -343,8 +366,8 @@ ${coords}
 ${input_loops}
         }
     }"""
-_T["conv_block_bias"] = "    ${let_vec4} b${o} = prm[${bias_offset} + z0 + ${o}];"
-_T["conv_block_acc"] = "    ${var_vec4} ${names};"
+_T["conv_block_bias"] = "    ${let_hvec4} b${o} = ${hvec4}(prm[${bias_offset} + z0 + ${o}]);"
+_T["conv_block_acc"] = "    ${var_hvec4} ${names};"
 _T["conv_block_acc_name"] = "a${o}_${p} = b${o}"
 _T["conv_block_acc_sep"] = ", "
 _T["conv_block_coord"] = (
@@ -356,16 +379,16 @@ ${fetches}
 ${products}
             }"""
 _T["conv_block_fetch"] = (
-    "                ${let_vec4} v${p} = ${fetch}(${src}, ${ivec3}(q${p}, l)${lod}) * k${p};"
+    "                ${let_hvec4} v${p} = ${hvec4}(${fetch}(${src}, ${ivec3}(q${p}, l)${lod}) * k${p});"
 )
-_T["conv_block_weight"] = "                ${let_mat4} m${o} = nao_tap(o + ${off});"
+_T["conv_block_weight"] = "                ${let_hmat4} m${o} = ${hmat4}(nao_tap(o + ${off}));"
 _T["conv_block_fma"] = "a${o}_${p} += m${o} * v${p};"
 _T["conv_block_fmas"] = "                ${fmas}"
-_T["conv_block_store"] = "    nao_store(base + ${ivec2}(${px}, ${py}), z0 + ${o}, a${o}_${p});"
+_T["conv_block_store"] = "    nao_store(base + ${ivec2}(${px}, ${py}), z0 + ${o}, ${vec4}(a${o}_${p}));"
 
 # ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
 _T["conv_transpose_body"] = """${sizes}
-    ${var_vec4} r = prm[${bias_offset} + gid.z];
+    ${var_hvec4} acc = ${hvec4}(prm[${bias_offset} + gid.z]);
     for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
         ${let_int} ty = gid.y + ${pad_top} - ky * ${dy};
         if (ty < 0 || ty % ${sy} != 0) {
@@ -381,7 +404,8 @@ _T["conv_transpose_body"] = """${sizes}
             ${let_int} tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
 ${input_loops}
         }
-    }"""
+    }
+    ${var_vec4} r = ${vec4}(acc);"""
 
 # Depthwise conv (group = channels): output layer gid.z reads input layer gid.z only, one vec4 per tap.
 _T["conv_depthwise_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
@@ -663,6 +687,25 @@ _T["epilogue_rdiv"] = (
     "ivec4(${channels})));"
 )
 _T["epilogue_none"] = "    // no epilogue"
+# A two-image op fused into the conv producing one operand (r): the other operand is a texel of an
+# input at the output texel ${xy}, layer ${z} (or broadcast), as the binary pass would fetch it.
+_T["epilogue_binary"] = """    {
+        ${let_vec4} a = ${a};
+        ${var_vec4} b = ${b};
+${guard}
+        r = ${expr};
+    }"""
+_T["epilogue_guard_div"] = (
+    "        b = mix(vec4(1.0), b, lessThan(ivec4(4 * ${z}) + ivec4(0, 1, 2, 3), ivec4(${channels})));"
+)
+_T["side_full"] = "${fetch}(${src}, ${ivec3}(${xy}, ${z})${lod})"
+_T["side_pixel"] = "${fetch}(${src}, ${ivec3}(0, 0, ${z})${lod})"
+_T["side_channel"] = "${fetch}(${src}, ${ivec3}(${xy}, 0)${lod}).xxxx"
+_T["side_scalar"] = "${fetch}(${src}, ${ivec3}(0)${lod}).xxxx"
+# A crop fused into the pass producing its input: texel xy stored row-flipped when u_flip_y is set
+# (a bottom-up engine texture); ${size} is the output's size.
+_T["flip_xy"] = "ivec2(${xy}.x, u_flip_y != 0 ? ${size}.y - 1 - ${xy}.y : ${xy}.y)"
+_T["dst_size"] = "imageSize(dst).xy"
 # Padding lanes (channels >= ${channels}) to 0 after an activation that could make them inf or NaN.
 _T["epilogue_guard"] = (
     "    r = mix(vec4(0.0), r, lessThan(ivec4(4 * ${z}) + ivec4(0, 1, 2, 3), ivec4(${channels})));"
@@ -843,6 +886,8 @@ _WGSL_WORDS: dict[str, str] = {
     "mat4": "mat4x4<f32>",
     "float": "f32",
     "int": "i32",
+    "hvec4": "hvec4",
+    "hmat4": "hmat4",
     "declare": "${kind}",
     "declare_typed": "${kind} ${name}: ${type}",
     "precise": "",
@@ -855,6 +900,15 @@ _WGSL_WORDS: dict[str, str] = {
 _W: dict[str, str] = {}
 
 _W["header"] = "// WGSL (WebGPU compute), generated by neuralao from the same templates as the GLSL"
+# WGSL: the accumulation types as aliases; fp16 needs the device feature shader-f16 (a runner without it
+# puts arithmetic_fp32 in place of arithmetic_fp16: the manifest's "arithmetic" gives both texts).
+_W["arithmetic_fp32"] = """// conv accumulation: fp32
+alias hvec4 = vec4<f32>;
+alias hmat4 = mat4x4<f32>;"""
+_W["arithmetic_fp16"] = """// conv accumulation: fp16 (device feature shader-f16)
+enable f16;
+alias hvec4 = vec4<f16>;
+alias hmat4 = mat4x4<f16>;"""
 _W["storage_format_rgba32f"] = "rgba32float"
 _W["storage_format_rgba16f"] = "rgba16float"
 _W["conv_block_acc_sep"] = "; var "  # one name per WGSL declaration
@@ -900,6 +954,7 @@ _W["prelude_erf"] = """fn nao_erf(x: vec4<f32>) -> vec4<f32> {
 }"""
 
 _W["compute_pass"] = """${header}
+${arithmetic}
 // neuralao compute pass ${pass_index}: ${summary}
 
 ${prelude}
@@ -915,7 +970,7 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     }
 ${body}
 ${epilogue}
-    textureStore(dst, gid.xy, gid.z, r);
+    textureStore(dst, ${store_xy}, gid.z, r);
 }
 """
 
@@ -927,6 +982,7 @@ _W["uniform_float_decl"] = "@group(0) @binding(${slot}) var<uniform> ${name}: f3
 _W["size_decl"] = "    let ${size} = nao_size(${src});"
 
 _W["compute_pass_block"] = """${header}
+${arithmetic}
 // neuralao compute pass ${pass_index}: ${summary}
 // One invocation: ${block_x}x${block_y} output texels x ${block_layers} output layer(s) \
 from layer ${block_layers} * gid.z.
@@ -951,7 +1007,7 @@ fn nao_store(xy: vec2<i32>, z: i32, acc: vec4<f32>) {
     if (all(xy < vec2<i32>(textureDimensions(dst)))) {
         var r = acc;
 ${epilogue}
-        textureStore(dst, xy, z, r);
+        textureStore(dst, ${store_xy}, z, r);
     }
 }
 
@@ -1027,6 +1083,12 @@ _W["epilogue_rdiv"] = (
     "    r = prm[${offset} + ${z}] / select(vec4<f32>(1.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < "
     "vec4<i32>(${channels}));"
 )
+_W["epilogue_guard_div"] = (
+    "        b = select(vec4<f32>(1.0), b, "
+    "vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
+)
+_W["flip_xy"] = "vec2<i32>(${xy}.x, select(${xy}.y, ${size}.y - 1 - ${xy}.y, u_flip_y != 0))"
+_W["dst_size"] = "vec2<i32>(textureDimensions(dst))"
 _W["epilogue_guard"] = (
     "    r = select(vec4<f32>(0.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
 )

@@ -34,7 +34,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         ),
     )
     p.add_argument(
-        "--precision", default="fp32", choices=("fp32", "fp16"), help="texture storage (default fp32)"
+        "--precision",
+        default="fp32",
+        choices=("fp32", "fp16"),
+        help="image, wgsl: fp16 stores textures as RGBA16F and accumulates convs in fp16 where the GPU "
+        "has a half type (default fp32)",
+    )
+    p.add_argument(
+        "--preset",
+        default="gpu",
+        choices=("gpu", "cpu"),
+        help="image, wgsl: gpu (default) many small invocations and fused passes for GPUs; cpu large "
+        "per-invocation blocks for CPU rasterisers such as Mesa's llvmpipe (same outputs)",
     )
     p.add_argument(
         "--dialect",
@@ -63,7 +74,14 @@ def run(args: argparse.Namespace) -> int:
     check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
     with atomic_folder(args.out) as folder:  # written whole, then put in --out's place
         m = export_model(
-            args.model, args.target, folder, args.precision, args.bind, args.dialect or None, args.hlsl_msl
+            args.model,
+            args.target,
+            folder,
+            args.precision,
+            args.bind,
+            args.dialect or None,
+            args.hlsl_msl,
+            preset=args.preset,
         )
     log.info("wrote %s: %s target, %s, ops %s", args.out, m["target"], m["precision"], ", ".join(m["ops"]))
     return 0

@@ -108,6 +108,14 @@ def _on_signal(signum, frame) -> NoReturn:
     raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
 
 
+def _raise_received() -> None:
+    """Raise the first signal this run received again: a library that catches BaseException around an
+    optional import (trimesh does) swallows the KeyboardInterrupt raised inside it, and the command would
+    go on as if no Ctrl-C had come."""
+    if _RECEIVED:
+        raise KeyboardInterrupt() if _RECEIVED[0] == signal.SIGINT else Terminated()
+
+
 def _unraisable(hook):
     """``sys.unraisablehook`` that sends a signal again when its exception could not be raised (it came
     while a finalizer ran, which swallows it and prints a traceback): Python runs the handler once more at
@@ -182,6 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         load = next((a for a in argv if a in COMMANDS), None)
         command = f"neuralao {load}" if load else command
         parser = build_parser(load=load)
+        _raise_received()
         args = parser.parse_args(argv)
         return _run(parser, args, f"neuralao {args.command}" if args.command else command)
     except (KeyboardInterrupt, Terminated, Exception) as e:
@@ -216,8 +225,11 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, command: str
         return 2
     try:
         module = importlib.import_module(COMMANDS[args.command][0])
+        _raise_received()
         check_arguments(parser, module, args)
-        return int(module.run(args) or 0)
+        code = int(module.run(args) or 0)
+        _raise_received()
+        return code
     except NeuralaoError as e:
         sys.stderr.write(f"{command}: error: {e}\n")
         return 2

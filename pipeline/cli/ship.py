@@ -9,7 +9,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from neuralao.pipeline.release.ship import ShipSettings, ship
+from neuralao.pipeline.release.ship import ShipSettings, refresh_shipped, ship
 from neuralao.runtime.foundation.settings import load_settings
 
 log = logging.getLogger(__name__)
@@ -20,10 +20,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--only", nargs="+", metavar="NAME", help="ship only these models (their init checkpoints must exist)"
     )
+    p.add_argument(
+        "--shaders-only",
+        action="store_true",
+        help="retrain nothing: regenerate the installed models' shaders from their ONNX files, check "
+        "them against onnxruntime and reinstall each folder",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     settings = load_settings(ShipSettings, args.config, [])
+    if args.shaders_only:
+        for name, par in refresh_shipped(settings, args.only).items():
+            log.info("%-14s shaders regenerated, GLSL vs onnxruntime %.2g", name, par["max_abs_err"])
+        return 0
     index = ship(settings, args.only)
     for name, entry in index["models"].items():
         log.info("%-14s test SSIM %.4f RMSE %.4f", name, entry["test"]["ssim"], entry["test"]["rmse"])

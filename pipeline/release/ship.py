@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from neuralao.export.onnx_io import get_metadata, load_onnx, save_onnx
-from neuralao.export.unet import export_checkpoint, parity
+from neuralao.export.unet import FRAME_TARGETS, export_checkpoint, parity, write_glsl, write_internal_passes
 from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
 from neuralao.pipeline.evaluation.report_baselines import timing_frame as report_timing_frame
 from neuralao.pipeline.evaluation.report_settings import ReportSettings
@@ -44,6 +44,7 @@ from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.glsl_runner import time_compute
 from neuralao.runtime.internal_resolution import internal_size
+from neuralao.runtime.predict import is_hybrid
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +75,9 @@ class ShipSettings:
     parity_frames: int = 2  # real test frames for the GLSL parity (plus a crop of each)
     time_sizes: list[list[int]] = field(default_factory=lambda: [[512, 512], [1920, 1080]])
     time_repeats: int = 3
-    max_bytes: int = 1 << 20  # each installed folder must be smaller
+    # each installed folder must be smaller (glsl/, vulkan/ and wgsl/ each carry the weights, so that an
+    # engine copies one folder)
+    max_bytes: int = 4 << 20
 
 
 def git_commit() -> str:
@@ -338,3 +341,70 @@ def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
     index["seconds"] = time.perf_counter() - t0
     write_json(index_path, index)
     return index
+
+
+def refresh_shaders(model_dir: Path, max_bytes: int, commit: str | None = None) -> dict:
+    """Regenerate an installed model's shaders (glsl/ with HLSL and MSL, vulkan/, wgsl/, the internal
+    passes) from its own model.onnx with this version of the generator, check the GLSL against
+    onnxruntime on rendered frames, and reinstall the folder atomically. The ONNX bytes, the training
+    provenance and the test figures stay as they were; the manifest records the commit that wrote the
+    shaders. Returns the parity figures."""
+    model_dir = Path(model_dir)
+    manifest = read_json(model_dir / "manifest.json", "model manifest")
+    onnx_path = model_dir / manifest.get("onnx", "model.onnx")
+    proto = load_onnx(onnx_path)
+    meta = get_metadata(proto)
+    tmp = model_dir.with_name(f".{model_dir.name}.tmp")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        shutil.copy2(onnx_path, tmp / onnx_path.name)
+        glsl_dir = write_glsl(proto, tmp / "glsl", "fp32")
+        height = manifest.get("internal_height")
+        internal = write_internal_passes(glsl_dir, int(height), is_hybrid(meta)) if height else None
+        manifest.update(glsl=glsl_dir.name, internal_resolution=internal)
+        manifest["shaders"] = {
+            "commit": commit or git_commit(),
+            "folders": [glsl_dir.name] + [folder for folder, _ in FRAME_TARGETS],
+        }
+        write_json(tmp / "manifest.json", manifest)
+        par = parity(tmp)
+        if not par["passed"]:
+            raise NeuralaoError(
+                f"{model_dir.name}: regenerated GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > "
+                f"{par['tolerance']:g}"
+            )
+        manifest.setdefault("provenance", {})["parity_shaders"] = {
+            "glsl_vs_onnxruntime": par["max_abs_err"],
+            "tolerance_glsl": par["tolerance"],
+        }
+        write_json(tmp / "manifest.json", manifest)
+        size = folder_bytes(tmp)
+        if size > max_bytes:
+            raise NeuralaoError(f"{model_dir.name}: export is {size} bytes, over the {max_bytes} limit")
+        install(tmp, model_dir)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return par | {"bytes": size}
+
+
+def refresh_shipped(settings: ShipSettings, only: list[str] | None = None) -> dict[str, dict]:
+    """:func:`refresh_shaders` for every model of ``settings`` (or those in ``only``) installed under
+    ``settings.out``; the index records each folder's new size. Returns the parity figures by name."""
+    out = _path(settings.out)
+    names = only or [m.get("name", "") for m in settings.models]
+    missing = [n for n in names if not (out / n / "manifest.json").is_file()]
+    if missing:
+        raise NeuralaoError(f"no installed model {', '.join(missing)} under {out} (run `make models` first)")
+    commit = git_commit()
+    figures = {name: refresh_shaders(out / name, settings.max_bytes, commit) for name in names}
+    index_path = out / "index.json"
+    if index_path.is_file():
+        index = read_json(index_path, "model index")
+        for name, par in figures.items():
+            if name in index.get("models", {}):
+                index["models"][name]["bytes"] = par["bytes"]
+        write_json(index_path, index)
+    return figures

@@ -97,6 +97,12 @@ class Tolerances:
     # reference on AO in [0, 1]. Same taps and integer sampling; the weights' exp/pow in float32 differ
     # by a few ulps (measured max 1.3e-5); a wrong tap, flip or weight moves values by > 1e-2.
     upsample_glsl_vs_numpy: float = 1e-4
+    # A U-Net's whole frame from its generated compute passes (GTAO, point sampling, the mean-depth
+    # reduction, input assembly, the network, upsampling with the hybrid's correction) vs the references
+    # (GTAO's GL fragment shaders, numpy, onnxruntime), AO in [0, 1]: the largest of its parts' tolerances
+    # (the network's parity_unet_fp32, the upsampling's upsample_glsl_vs_numpy). Measured max 1.2e-6 on
+    # llvmpipe and lavapipe (tests/test_frame_passes.py); a wrong tap, row order or formula is off by > 1e-2.
+    frame_passes_vs_reference: float = 1e-4
     # The same view at 256 and at 1024 pixels, the 1024 AO averaged over 4 x 4 foreground blocks, with
     # the network at the internal height 256: mean |difference| over foreground (tests/
     # test_internal_resolution.py). Measured 0.0008-0.019 on test meshes (GTAO itself: 0.003-0.032); a

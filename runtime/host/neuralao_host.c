@@ -27,9 +27,15 @@
  * the point-sampled G-buffer, GTAO point-sampled as the fifth channel), the upsampling pass back to
  * W x H, and for a hybrid AO = clamp(GTAO + upsampled correction, 0, 1).
  *
- * Context: EGL on Mesa's surfaceless platform (no window, no display server), OpenGL 4.3 core.
+ * Timing (bench/gpu.sh): with NEURALAO_HOST_REPEATS=N set, the network's passes (and a hybrid's GTAO
+ * passes) run N more times after the frame, each run between GL_TIME_ELAPSED queries, and one JSON line
+ * goes to stdout: {"renderer", "width", "height", "network_ms", "gtao_ms", "passes"} (medians, GPU time).
+ * GBUFFER.f32 may be the word "synthetic": a seeded wavy surface filling the frame (all foreground).
+ *
+ * Context: EGL's surfaceless platform (Mesa, or NVIDIA's EGL through glvnd), OpenGL 4.3 core.
  * The manifest is read by the small JSON reader below (objects, arrays, strings, numbers, literals).
  */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #define GL_GLEXT_PROTOTYPES 1
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
@@ -39,6 +45,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 static void die(const char *fmt, ...) {
     va_list ap;
@@ -67,6 +74,49 @@ static char *read_file(const char *path, size_t *size) {
     fclose(f);
     if (size) *size = (size_t)n;
     return buf;
+}
+
+/* ------------------------------------------------------------------ GPU timing */
+
+static int g_repeats = 0;                        /* NEURALAO_HOST_REPEATS: timed runs after the frame */
+static double g_network_ms = -1, g_gtao_ms = -1; /* medians of the timed runs (GL_TIME_ELAPSED); -1: not timed */
+/* the same runs on the wall clock between glFinish calls: Mesa's llvmpipe reports 0 GPU time for compute */
+static double g_network_wall_ms = -1, g_gtao_wall_ms = -1;
+static double g_wall_start;
+
+static int cmp_double(const void *a, const void *b) {
+    const double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static GLuint g_query;
+
+static double wall_ms(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static void time_begin(void) {
+    if (!g_query) glGenQueries(1, &g_query);
+    glFinish();
+    g_wall_start = wall_ms();
+    glBeginQuery(GL_TIME_ELAPSED, g_query);
+}
+
+/* GPU ms of the run since time_begin; *wall: its wall-clock ms */
+static double time_end_ms(double *wall) {
+    glEndQuery(GL_TIME_ELAPSED);
+    glFinish();
+    *wall = wall_ms() - g_wall_start;
+    GLuint64 ns = 0;
+    glGetQueryObjectui64v(g_query, GL_QUERY_RESULT, &ns);
+    return (double)ns * 1e-6;
+}
+
+static double median(double *v, int n) {
+    qsort(v, (size_t)n, sizeof(double), cmp_double);
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 /* ------------------------------------------------------------------ JSON reader */
@@ -358,15 +408,23 @@ static float *run_network(const Json *m, const char *dir, int w, int h, const fl
     glBufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)(w_bytes ? w_bytes : 16), weights, GL_STATIC_DRAW);
     free(weights);
 
-    /* step 3 (rho) and 4: the passes, in order */
+    /* step 3 (rho) and 4: the passes, in order (compiled once: timed runs dispatch them again) */
     Json *passes = jreq(m, "passes");
+    GLuint *progs = xmalloc(sizeof(GLuint) * (size_t)(passes->n ? passes->n : 1));
     for (int i = 0; i < passes->n; i++) {
-        Json *ps = passes->items[i];
-        const char *shader = jstr(ps, "shader"), *kind = jstr(ps, "kind");
+        const char *shader = jstr(passes->items[i], "shader");
         snprintf(path, sizeof path, "%s/%s", dir, shader);
         char *src = read_file(path, NULL);
-        GLuint prog = compile_compute(src, shader);
+        progs[i] = compile_compute(src, shader);
         free(src);
+    }
+    double *runs = xmalloc(sizeof(double) * (size_t)(g_repeats + 1) * 2), *walls = runs + g_repeats + 1;
+    for (int run = 0; run <= g_repeats; run++) {
+    if (run > 0) time_begin();
+    for (int i = 0; i < passes->n; i++) {
+        Json *ps = passes->items[i];
+        const char *kind = jstr(ps, "kind");
+        GLuint prog = progs[i];
         glUseProgram(prog);
         Json *inputs = jreq(ps, "inputs");
         for (int k = 0; k < inputs->n; k++) {
@@ -397,8 +455,12 @@ static float *run_network(const Json *m, const char *dir, int w, int h, const fl
         glDispatchCompute((GLuint)((o->w + lx * bx - 1) / (lx * bx)), (GLuint)((o->h + ly * by - 1) / (ly * by)),
                           (GLuint)(o->layers / bl));
         glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
-        glDeleteProgram(prog);
     }
+    if (run > 0) runs[run - 1] = time_end_ms(&walls[run - 1]);
+    }
+    if (g_repeats > 0) g_network_ms = median(runs, g_repeats), g_network_wall_ms = median(walls, g_repeats);
+    for (int i = 0; i < passes->n; i++) glDeleteProgram(progs[i]);
+    free(progs), free(runs);
     *n_passes = passes->n;
 
     /* the output: lane 0 of layer 0 of the first output texture */
@@ -518,26 +580,34 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
     GLuint by_name[] = {f->position, f->normal, noise_tex, raw};
     Json *blur = jget(g, "blur");
     const Json *stages[2] = {jreq(g, "textures"), blur && blur->type == J_OBJ ? jreq(blur, "textures") : NULL};
-    GLuint out = raw;
-    for (int s = 0; s < 2 && stages[s]; s++) {
-        if (s == 1) {
-            out = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
-            frag = pass_source(folder, sources, "gtao_blur");
-            glDeleteProgram(prog);
-            prog = compile_pipeline(f->vertex, frag, jstr(sources, "gtao_blur"));
-            free(frag);
-        }
-        for (int k = 0; k < stages[s]->n; k++) {
-            int which = -1;
-            for (int b = 0; b < 4; b++) if (!strcmp(stages[s]->keys[k], bound[b])) which = b;
-            if (which < 0) die("manifest: GTAO texture %s is not one this host has", stages[s]->keys[k]);
-            glActiveTexture(GL_TEXTURE0 + (GLenum)stages[s]->items[k]->num);
-            glBindTexture(GL_TEXTURE_2D, by_name[which]);
-        }
-        glActiveTexture(GL_TEXTURE0);
-        draw_fullscreen(prog, &out, 1, f->W, f->H);
+    GLuint progs[2] = {prog, 0}, targets[2] = {raw, raw};
+    if (stages[1]) {
+        targets[1] = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
+        frag = pass_source(folder, sources, "gtao_blur");
+        progs[1] = compile_pipeline(f->vertex, frag, jstr(sources, "gtao_blur"));
+        free(frag);
     }
-    glDeleteProgram(prog);
+    double *runs = xmalloc(sizeof(double) * (size_t)(g_repeats + 1) * 2), *walls = runs + g_repeats + 1;
+    for (int run = 0; run <= g_repeats; run++) {
+        if (run > 0) time_begin();
+        for (int s = 0; s < 2 && stages[s]; s++) {
+            for (int k = 0; k < stages[s]->n; k++) {
+                int which = -1;
+                for (int b = 0; b < 4; b++) if (!strcmp(stages[s]->keys[k], bound[b])) which = b;
+                if (which < 0) die("manifest: GTAO texture %s is not one this host has", stages[s]->keys[k]);
+                glActiveTexture(GL_TEXTURE0 + (GLenum)stages[s]->items[k]->num);
+                glBindTexture(GL_TEXTURE_2D, by_name[which]);
+            }
+            glActiveTexture(GL_TEXTURE0);
+            draw_fullscreen(progs[s], &targets[s], 1, f->W, f->H);
+        }
+        if (run > 0) runs[run - 1] = time_end_ms(&walls[run - 1]);
+    }
+    if (g_repeats > 0) g_gtao_ms = median(runs, g_repeats), g_gtao_wall_ms = median(walls, g_repeats);
+    free(runs);
+    GLuint out = stages[1] ? targets[1] : raw;
+    glDeleteProgram(progs[0]);
+    if (progs[1]) glDeleteProgram(progs[1]);
     glDeleteTextures(1, &noise_tex);
     if (out != raw) glDeleteTextures(1, &raw);
     return out;
@@ -694,8 +764,25 @@ int main(int argc, char **argv) {
     Json *m = parse_value(&rd);
     if (strcmp(jstr(m, "format"), "neuralao-glsl-compute")) die("%s is not a GLSL compute export", path);
 
+    const char *repeats = getenv("NEURALAO_HOST_REPEATS");
+    g_repeats = repeats ? atoi(repeats) : 0;
+    if (g_repeats < 0 || g_repeats > 10000) die("NEURALAO_HOST_REPEATS must be 0..10000");
     size_t gb_bytes;
-    float *gb = (float *)read_file(argv[2], &gb_bytes);
+    float *gb;
+    if (!strcmp(argv[2], "synthetic")) {  /* a wavy surface facing the camera, every pixel foreground */
+        gb_bytes = (size_t)W * H * 5 * sizeof(float);
+        gb = xmalloc(gb_bytes);
+        for (int r = 0; r < H; r++)
+            for (int c = 0; c < W; c++) {
+                float *g = gb + ((size_t)r * W + c) * 5;
+                const double u = 12.0 * c / W, v = 8.0 * r / H, dzu = 0.3 * cos(u) * sin(v), dzv = 0.3 * sin(u) * cos(v);
+                const double n = sqrt(dzu * dzu + dzv * dzv + 1.0);
+                g[0] = (float)(3.0 + 0.3 * sin(u) * sin(v)), g[1] = (float)(dzu / n), g[2] = (float)(-dzv / n);
+                g[3] = (float)(1.0 / n), g[4] = 1.0f;
+            }
+    } else {
+        gb = (float *)read_file(argv[2], &gb_bytes);
+    }
     if (gb_bytes != (size_t)W * H * 5 * sizeof(float))
         die("%s holds %zu bytes, a %dx%d G-buffer of 5 floats a pixel needs %zu", argv[2], gb_bytes, W, H,
             (size_t)W * H * 5 * sizeof(float));
@@ -730,5 +817,11 @@ int main(int argc, char **argv) {
     if (rename(tmp, argv[7])) die("cannot rename %s to %s", tmp, argv[7]);
     fprintf(stderr, "neuralao_host: %dx%d%s, %d passes -> %s\n", W, H, internal ? " (internal resolution)" : "",
             n_passes, argv[7]);
+    if (g_repeats > 0)
+        printf("{\"renderer\": \"%s\", \"version\": \"%s\", \"width\": %d, \"height\": %d, \"repeats\": %d, "
+               "\"network_ms\": %.4f, \"gtao_ms\": %.4f, \"network_wall_ms\": %.4f, \"gtao_wall_ms\": %.4f, "
+               "\"passes\": %d}\n",
+               (const char *)glGetString(GL_RENDERER), (const char *)glGetString(GL_VERSION), W, H, g_repeats,
+               g_network_ms, g_gtao_ms, g_network_wall_ms, g_gtao_wall_ms, n_passes);
     return 0;
 }

@@ -1,5 +1,8 @@
 #version 430 core
 
+// conv accumulation: fp32
+#define hvec4 vec4
+#define hmat4 mat4
 // neuralao compute pass 0: Pad
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
@@ -38,6 +41,6 @@ void main() {
         y = in_size.y - 1 - y;  // source texture stored bottom-up (a GL render target)
     }
     vec4 r = texelFetch(src0, ivec3(x, y, gid.z), 0);
-    // no epilogue
-    imageStore(dst, gid, r);
+    r = mix(vec4(0.0), r, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), ivec4(5)));
+    imageStore(dst, ivec3(gid.xy, gid.z), r);
 }

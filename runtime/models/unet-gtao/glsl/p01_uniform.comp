@@ -1,5 +1,8 @@
 #version 430 core
 
+// conv accumulation: fp32
+#define hvec4 vec4
+#define hmat4 mat4
 // neuralao compute pass 1: Uniform
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
@@ -30,5 +33,5 @@ void main() {
     }
     vec4 r = vec4(u_radius, 0.0, 0.0, 0.0);
     // no epilogue
-    imageStore(dst, gid, r);
+    imageStore(dst, ivec3(gid.xy, gid.z), r);
 }

@@ -1,7 +1,9 @@
 #version 430 core
 
-// neuralao compute pass 19: Conv + LeakyRelu
-// One invocation: 8x4 output texels x 1 output layer(s) from layer 1 * gid.z.
+// conv accumulation: fp32
+#define hvec4 vec4
+#define hmat4 mat4
+// neuralao compute pass 19: Concat + Conv + LeakyRelu
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
@@ -21,153 +23,43 @@ vec4 nao_leaky_relu(vec4 x, float alpha) {
 }
 
 layout(binding = 0) uniform highp sampler2DArray src0;
+layout(binding = 1) uniform highp sampler2DArray src1;
 layout(binding = 0, rgba32f) writeonly uniform highp image2DArray dst;
 layout(std430, binding = 0) readonly buffer Params {
     vec4 prm[];
 };
 
-// Zero padding without a branch: q is clamped into the input; returns 1 inside, 0 outside (texels
-// are finite, so 0 * texel is 0).
-float nao_clip(inout ivec2 q, ivec2 size) {
-    float k = all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, size)) ? 1.0 : 0.0;
-    q = clamp(q, ivec2(0), size - 1);
-    return k;
-}
-
-mat4 nao_tap(int o) {
-    return mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
-}
-
-// Epilogue and store of output texel xy, layer z (skipped outside the output: partial blocks).
-void nao_store(ivec2 xy, int z, vec4 r) {
-    if (all(lessThan(xy, imageSize(dst).xy))) {
-        r = nao_leaky_relu(r, 0.01);
-        imageStore(dst, ivec3(xy, z), r);
-    }
-}
-
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
-    ivec2 base = gid.xy * ivec2(8, 4);
-    int z0 = gid.z * 1;
-    if (any(greaterThanEqual(base, imageSize(dst).xy))) {
+    ivec2 out_size = imageSize(dst).xy;
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 1) {
         return;
     }
-    ivec2 in_size = textureSize(src0, 0).xy;
-    vec4 b0 = prm[72 + z0 + 0];
-    vec4 a0_0 = b0, a0_1 = b0, a0_2 = b0, a0_3 = b0, a0_4 = b0, a0_5 = b0, a0_6 = b0, a0_7 = b0, a0_8 = b0, a0_9 = b0, a0_10 = b0, a0_11 = b0, a0_12 = b0, a0_13 = b0, a0_14 = b0, a0_15 = b0, a0_16 = b0, a0_17 = b0, a0_18 = b0, a0_19 = b0, a0_20 = b0, a0_21 = b0, a0_22 = b0, a0_23 = b0, a0_24 = b0, a0_25 = b0, a0_26 = b0, a0_27 = b0, a0_28 = b0, a0_29 = b0, a0_30 = b0, a0_31 = b0;
+    ivec2 size0 = textureSize(src0, 0).xy;
+    ivec2 size1 = textureSize(src1, 0).xy;
+    hvec4 acc = hvec4(prm[72 + gid.z]);
     for (int ky = 0; ky < 3; ++ky) {
+        int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
-            int tap = 0 + ((z0 * 3 + ky) * 3 + kx) * 8;
-            ivec2 qb = base * ivec2(1, 1) + ivec2(kx * 1 - 1, ky * 1 - 1);
-            ivec2 q0 = qb + ivec2(0, 0); float k0 = nao_clip(q0, in_size);
-            ivec2 q1 = qb + ivec2(1, 0); float k1 = nao_clip(q1, in_size);
-            ivec2 q2 = qb + ivec2(2, 0); float k2 = nao_clip(q2, in_size);
-            ivec2 q3 = qb + ivec2(3, 0); float k3 = nao_clip(q3, in_size);
-            ivec2 q4 = qb + ivec2(4, 0); float k4 = nao_clip(q4, in_size);
-            ivec2 q5 = qb + ivec2(5, 0); float k5 = nao_clip(q5, in_size);
-            ivec2 q6 = qb + ivec2(6, 0); float k6 = nao_clip(q6, in_size);
-            ivec2 q7 = qb + ivec2(7, 0); float k7 = nao_clip(q7, in_size);
-            ivec2 q8 = qb + ivec2(0, 1); float k8 = nao_clip(q8, in_size);
-            ivec2 q9 = qb + ivec2(1, 1); float k9 = nao_clip(q9, in_size);
-            ivec2 q10 = qb + ivec2(2, 1); float k10 = nao_clip(q10, in_size);
-            ivec2 q11 = qb + ivec2(3, 1); float k11 = nao_clip(q11, in_size);
-            ivec2 q12 = qb + ivec2(4, 1); float k12 = nao_clip(q12, in_size);
-            ivec2 q13 = qb + ivec2(5, 1); float k13 = nao_clip(q13, in_size);
-            ivec2 q14 = qb + ivec2(6, 1); float k14 = nao_clip(q14, in_size);
-            ivec2 q15 = qb + ivec2(7, 1); float k15 = nao_clip(q15, in_size);
-            ivec2 q16 = qb + ivec2(0, 2); float k16 = nao_clip(q16, in_size);
-            ivec2 q17 = qb + ivec2(1, 2); float k17 = nao_clip(q17, in_size);
-            ivec2 q18 = qb + ivec2(2, 2); float k18 = nao_clip(q18, in_size);
-            ivec2 q19 = qb + ivec2(3, 2); float k19 = nao_clip(q19, in_size);
-            ivec2 q20 = qb + ivec2(4, 2); float k20 = nao_clip(q20, in_size);
-            ivec2 q21 = qb + ivec2(5, 2); float k21 = nao_clip(q21, in_size);
-            ivec2 q22 = qb + ivec2(6, 2); float k22 = nao_clip(q22, in_size);
-            ivec2 q23 = qb + ivec2(7, 2); float k23 = nao_clip(q23, in_size);
-            ivec2 q24 = qb + ivec2(0, 3); float k24 = nao_clip(q24, in_size);
-            ivec2 q25 = qb + ivec2(1, 3); float k25 = nao_clip(q25, in_size);
-            ivec2 q26 = qb + ivec2(2, 3); float k26 = nao_clip(q26, in_size);
-            ivec2 q27 = qb + ivec2(3, 3); float k27 = nao_clip(q27, in_size);
-            ivec2 q28 = qb + ivec2(4, 3); float k28 = nao_clip(q28, in_size);
-            ivec2 q29 = qb + ivec2(5, 3); float k29 = nao_clip(q29, in_size);
-            ivec2 q30 = qb + ivec2(6, 3); float k30 = nao_clip(q30, in_size);
-            ivec2 q31 = qb + ivec2(7, 3); float k31 = nao_clip(q31, in_size);
-            for (int l = 0; l < 2; ++l) {
-                int o = tap + (0 + l) * 4;
-                vec4 v0 = texelFetch(src0, ivec3(q0, l), 0) * k0;
-                vec4 v1 = texelFetch(src0, ivec3(q1, l), 0) * k1;
-                vec4 v2 = texelFetch(src0, ivec3(q2, l), 0) * k2;
-                vec4 v3 = texelFetch(src0, ivec3(q3, l), 0) * k3;
-                vec4 v4 = texelFetch(src0, ivec3(q4, l), 0) * k4;
-                vec4 v5 = texelFetch(src0, ivec3(q5, l), 0) * k5;
-                vec4 v6 = texelFetch(src0, ivec3(q6, l), 0) * k6;
-                vec4 v7 = texelFetch(src0, ivec3(q7, l), 0) * k7;
-                vec4 v8 = texelFetch(src0, ivec3(q8, l), 0) * k8;
-                vec4 v9 = texelFetch(src0, ivec3(q9, l), 0) * k9;
-                vec4 v10 = texelFetch(src0, ivec3(q10, l), 0) * k10;
-                vec4 v11 = texelFetch(src0, ivec3(q11, l), 0) * k11;
-                vec4 v12 = texelFetch(src0, ivec3(q12, l), 0) * k12;
-                vec4 v13 = texelFetch(src0, ivec3(q13, l), 0) * k13;
-                vec4 v14 = texelFetch(src0, ivec3(q14, l), 0) * k14;
-                vec4 v15 = texelFetch(src0, ivec3(q15, l), 0) * k15;
-                vec4 v16 = texelFetch(src0, ivec3(q16, l), 0) * k16;
-                vec4 v17 = texelFetch(src0, ivec3(q17, l), 0) * k17;
-                vec4 v18 = texelFetch(src0, ivec3(q18, l), 0) * k18;
-                vec4 v19 = texelFetch(src0, ivec3(q19, l), 0) * k19;
-                vec4 v20 = texelFetch(src0, ivec3(q20, l), 0) * k20;
-                vec4 v21 = texelFetch(src0, ivec3(q21, l), 0) * k21;
-                vec4 v22 = texelFetch(src0, ivec3(q22, l), 0) * k22;
-                vec4 v23 = texelFetch(src0, ivec3(q23, l), 0) * k23;
-                vec4 v24 = texelFetch(src0, ivec3(q24, l), 0) * k24;
-                vec4 v25 = texelFetch(src0, ivec3(q25, l), 0) * k25;
-                vec4 v26 = texelFetch(src0, ivec3(q26, l), 0) * k26;
-                vec4 v27 = texelFetch(src0, ivec3(q27, l), 0) * k27;
-                vec4 v28 = texelFetch(src0, ivec3(q28, l), 0) * k28;
-                vec4 v29 = texelFetch(src0, ivec3(q29, l), 0) * k29;
-                vec4 v30 = texelFetch(src0, ivec3(q30, l), 0) * k30;
-                vec4 v31 = texelFetch(src0, ivec3(q31, l), 0) * k31;
-                mat4 m0 = nao_tap(o + 0);
-                a0_0 += m0 * v0; a0_1 += m0 * v1; a0_2 += m0 * v2; a0_3 += m0 * v3;
-                a0_4 += m0 * v4; a0_5 += m0 * v5; a0_6 += m0 * v6; a0_7 += m0 * v7;
-                a0_8 += m0 * v8; a0_9 += m0 * v9; a0_10 += m0 * v10; a0_11 += m0 * v11;
-                a0_12 += m0 * v12; a0_13 += m0 * v13; a0_14 += m0 * v14; a0_15 += m0 * v15;
-                a0_16 += m0 * v16; a0_17 += m0 * v17; a0_18 += m0 * v18; a0_19 += m0 * v19;
-                a0_20 += m0 * v20; a0_21 += m0 * v21; a0_22 += m0 * v22; a0_23 += m0 * v23;
-                a0_24 += m0 * v24; a0_25 += m0 * v25; a0_26 += m0 * v26; a0_27 += m0 * v27;
-                a0_28 += m0 * v28; a0_29 += m0 * v29; a0_30 += m0 * v30; a0_31 += m0 * v31;
+            int ix = gid.x * 1 - 1 + kx * 1;
+            int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 8;
+            if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
+                for (int l = 0; l < 1; ++l) {
+                    vec4 v = texelFetch(src0, ivec3(ix, iy, l), 0);
+                    int o = tap + (0 + l) * 4;
+                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                }
+            }
+            if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
+                for (int l = 0; l < 1; ++l) {
+                    vec4 v = texelFetch(src1, ivec3(ix, iy, l), 0);
+                    int o = tap + (1 + l) * 4;
+                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                }
             }
         }
     }
-    nao_store(base + ivec2(0, 0), z0 + 0, a0_0);
-    nao_store(base + ivec2(1, 0), z0 + 0, a0_1);
-    nao_store(base + ivec2(2, 0), z0 + 0, a0_2);
-    nao_store(base + ivec2(3, 0), z0 + 0, a0_3);
-    nao_store(base + ivec2(4, 0), z0 + 0, a0_4);
-    nao_store(base + ivec2(5, 0), z0 + 0, a0_5);
-    nao_store(base + ivec2(6, 0), z0 + 0, a0_6);
-    nao_store(base + ivec2(7, 0), z0 + 0, a0_7);
-    nao_store(base + ivec2(0, 1), z0 + 0, a0_8);
-    nao_store(base + ivec2(1, 1), z0 + 0, a0_9);
-    nao_store(base + ivec2(2, 1), z0 + 0, a0_10);
-    nao_store(base + ivec2(3, 1), z0 + 0, a0_11);
-    nao_store(base + ivec2(4, 1), z0 + 0, a0_12);
-    nao_store(base + ivec2(5, 1), z0 + 0, a0_13);
-    nao_store(base + ivec2(6, 1), z0 + 0, a0_14);
-    nao_store(base + ivec2(7, 1), z0 + 0, a0_15);
-    nao_store(base + ivec2(0, 2), z0 + 0, a0_16);
-    nao_store(base + ivec2(1, 2), z0 + 0, a0_17);
-    nao_store(base + ivec2(2, 2), z0 + 0, a0_18);
-    nao_store(base + ivec2(3, 2), z0 + 0, a0_19);
-    nao_store(base + ivec2(4, 2), z0 + 0, a0_20);
-    nao_store(base + ivec2(5, 2), z0 + 0, a0_21);
-    nao_store(base + ivec2(6, 2), z0 + 0, a0_22);
-    nao_store(base + ivec2(7, 2), z0 + 0, a0_23);
-    nao_store(base + ivec2(0, 3), z0 + 0, a0_24);
-    nao_store(base + ivec2(1, 3), z0 + 0, a0_25);
-    nao_store(base + ivec2(2, 3), z0 + 0, a0_26);
-    nao_store(base + ivec2(3, 3), z0 + 0, a0_27);
-    nao_store(base + ivec2(4, 3), z0 + 0, a0_28);
-    nao_store(base + ivec2(5, 3), z0 + 0, a0_29);
-    nao_store(base + ivec2(6, 3), z0 + 0, a0_30);
-    nao_store(base + ivec2(7, 3), z0 + 0, a0_31);
+    vec4 r = vec4(acc);
+    r = nao_leaky_relu(r, 0.01);
+    imageStore(dst, ivec3(gid.xy, gid.z), r);
 }

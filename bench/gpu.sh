@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# GPU time of the shipped default (unet-gtao), the fast model (unet-fast) and this project's GTAO, measured
+# by the C host (runtime/host) with GL timer queries (GL_TIME_ELAPSED), at 1920x1080 and 3840x2160, for
+# both generator presets (gpu, cpu) and both precisions (fp32, fp16). Prints a markdown table of ms and
+# ratios to GTAO and writes JSON.
+#
+#   bench/gpu.sh prepare   here, with the venv: build the host, generate the exports into build/bench-gpu
+#   bench/gpu.sh run       anywhere with EGL and OpenGL 4.3 (no Python packages needed): time, table, JSON
+#   bench/gpu.sh           both
+#
+# Environment: SIZES ("1920x1080 3840x2160"), REPEATS (timed runs per case, 20), MODELS ("unet-gtao
+# unet-fast"), PRESETS ("gpu cpu"), PRECISIONS ("fp32 fp16"), OUT (build/bench-gpu/gpu.json),
+# BENCH_GPU_SMALL=1 (one 128x96 frame, 1 run: what the test runs on llvmpipe).
+#
+# On an NVIDIA GPU (the device machine, which fetches nothing): `bench/gpu.sh prepare` here, then one call
+# carrying .gl (the GL/EGL loader debs, /work/.library/device/README.md) and build/bench-gpu:
+#   for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig; \
+#   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json; \
+#   bench/gpu.sh run
+# Frames are the host's synthetic G-buffer (a wavy surface, every pixel foreground, as in a game frame).
+# The network's time is its compute passes at its internal size (the engine's resampling passes are not
+# counted); a hybrid's frame adds its GTAO passes at the frame's size. Where GL reports no GPU time
+# (Mesa's llvmpipe: 0 for compute), the wall clock between glFinish calls is used and the JSON says so.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD=build/bench-gpu
+HOST=$BUILD/neuralao_host
+PY=${PY:-.venv/bin/python}
+SIZES=${SIZES:-1920x1080 3840x2160}
+REPEATS=${REPEATS:-20}
+MODELS=${MODELS:-unet-gtao unet-fast}
+PRESETS=${PRESETS:-gpu cpu}
+PRECISIONS=${PRECISIONS:-fp32 fp16}
+OUT=${OUT:-$BUILD/gpu.json}
+if [[ ${BENCH_GPU_SMALL:-0} == 1 ]]; then SIZES=128x96 REPEATS=1; fi
+
+prepare() {
+  mkdir -p "$BUILD"
+  ${CC:-cc} -O2 -std=c11 -Wall -Wextra -Werror -o "$HOST" runtime/host/neuralao_host.c -lEGL -lOpenGL -lm
+  "$PY" - "$BUILD" "$MODELS" "$PRESETS" "$PRECISIONS" <<'PYEOF'
+import shutil, sys
+from pathlib import Path
+
+import onnx
+
+from neuralao.export.glsl import generate_compute, write_compute_export
+
+build, models, presets, precisions = Path(sys.argv[1]), *(a.split() for a in sys.argv[2:])
+for model in models:
+    src = Path("runtime/models") / model
+    for preset in presets:
+        for precision in precisions:
+            out = build / "exports" / f"{model}-{preset}-{precision}"
+            shutil.rmtree(out, ignore_errors=True)
+            out.mkdir(parents=True)
+            shutil.copy(src / "manifest.json", out / "manifest.json")
+            program = generate_compute(onnx.load(src / "model.onnx"), precision=precision, preset=preset)
+            write_compute_export(program, out / "glsl", validate=False)
+            if (src / "glsl" / "internal").is_dir():
+                shutil.copytree(src / "glsl" / "internal", out / "glsl" / "internal")
+PYEOF
+}
+
+run() {
+  [[ -x $HOST ]] || { echo "bench/gpu.sh: no $HOST: run 'bench/gpu.sh prepare' first" >&2; exit 1; }
+  local lines=$BUILD/runs.jsonl
+  : >"$lines"
+  for size in $SIZES; do
+    for model in $MODELS; do
+      for preset in $PRESETS; do
+        for precision in $PRECISIONS; do
+          local export=$BUILD/exports/$model-$preset-$precision
+          [[ -d $export ]] || { echo "bench/gpu.sh: no $export: run 'bench/gpu.sh prepare'" >&2; exit 1; }
+          local json
+          json=$(NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
+            "$BUILD/ao.f32" 2>/dev/null)
+          echo "{\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\", ${json#\{}" >>"$lines"
+        done
+      done
+    done
+  done
+  python3 bench/gpu_table.py "$lines" "$OUT"
+}
+
+case ${1:-all} in
+  prepare) prepare ;;
+  run) run ;;
+  all) prepare && run ;;
+  *) echo "usage: bench/gpu.sh [prepare|run]" >&2; exit 2 ;;
+esac

@@ -1,0 +1,58 @@
+#version 430 core
+// neuralao frame pass f_composite: the network's AO, 1 on background
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(binding = 0) uniform highp sampler2DArray src0;
+layout(binding = 1) uniform highp sampler2DArray src1;
+layout(binding = 2, r32f) writeonly uniform highp image2DArray dst;
+layout(std140, binding = 3) uniform FrameUniforms {
+    vec2 u_proj;               // (P00, P11) of the projection matrix
+    float u_radius;            // R, the AO radius in scene units
+    float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
+    int u_flip_y;              // 1: textures bottom-up (GL), 0: row 0 at the top
+};
+
+// GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
+ivec2 nao_texel(ivec2 p, ivec2 size) {
+    return u_flip_y != 0 ? p : ivec2(p.x, size.y - 1 - p.y);
+}
+
+ivec2 nao_size(highp sampler2DArray t) {
+    return textureSize(t, 0).xy;
+}
+
+vec4 nao_load(highp sampler2DArray t, ivec2 p, int layer) {
+    return texelFetch(t, ivec3(nao_texel(p, nao_size(t)), layer), 0);
+}
+
+void nao_store(ivec2 p, int layer, vec4 v) {
+    imageStore(dst, ivec3(nao_texel(p, imageSize(dst).xy), layer), v);
+}
+
+bool nao_inside(ivec2 q, ivec2 size) {
+    return all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, size));
+}
+
+float nao_acos(float x) {
+    return acos(clamp(x, -1.0, 1.0));
+}
+
+// floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
+int nao_floor_div(int a, int b) {
+    return a >= 0 ? a / b : -((-a + b - 1) / b);
+}
+
+
+void main() {
+    ivec2 gid = ivec2(gl_GlobalInvocationID.xy);
+    ivec2 out_size = imageSize(dst).xy;
+    if (gid.x >= out_size.x || gid.y >= out_size.y) {
+        return;
+    }
+    ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
+    if (nao_load(src0, px, 0).w < 0.5) {
+        nao_store(px, 0, vec4(1.0));
+        return;
+    }
+    nao_store(px, 0, vec4(nao_load(src1, px, 0).x));
+}

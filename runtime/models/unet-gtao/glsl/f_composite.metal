@@ -1,0 +1,95 @@
+#pragma clang diagnostic ignored "-Wmissing-prototypes"
+
+#include <metal_stdlib>
+#include <simd/simd.h>
+
+using namespace metal;
+
+struct FrameUniforms
+{
+    float2 u_proj;
+    float u_radius;
+    float u_pixels_per_unit;
+    int u_flip_y;
+};
+
+constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
+
+static inline __attribute__((always_inline))
+int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& v_40)
+{
+    int2 _48;
+    if (v_40.u_flip_y != 0)
+    {
+        _48 = p;
+    }
+    else
+    {
+        _48 = int2(p.x, (size.y - 1) - p.y);
+    }
+    return _48;
+}
+
+static inline __attribute__((always_inline))
+int2 nao_size(texture2d_array<float> t, sampler tSmplr)
+{
+    return int3(t.get_width(), t.get_height(), t.get_array_size()).xy;
+}
+
+static inline __attribute__((always_inline))
+float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& v_40)
+{
+    int2 param = p;
+    int2 param_1 = nao_size(t, tSmplr);
+    int3 _85 = int3(nao_texel(param, param_1, v_40), layer);
+    return t.read(uint2(_85.xy), uint(_85.z), 0);
+}
+
+static inline __attribute__((always_inline))
+void nao_store(thread const int2& p, thread const int& layer, thread const float4& v, constant FrameUniforms& v_40, texture2d_array<float, access::write> dst)
+{
+    int2 param = p;
+    int2 param_1 = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
+    int3 _104 = int3(nao_texel(param, param_1, v_40), layer);
+    dst.write(v, uint2(_104.xy), uint(_104.z));
+}
+
+kernel void f_composite(constant FrameUniforms& v_40 [[buffer(3)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float, access::write> dst [[texture(2)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+{
+    int2 gid = int2(gl_GlobalInvocationID.xy);
+    int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
+    bool _122 = gid.x >= out_size.x;
+    bool _131;
+    if (!_122)
+    {
+        _131 = gid.y >= out_size.y;
+    }
+    else
+    {
+        _131 = _122;
+    }
+    if (_131)
+    {
+        return;
+    }
+    int2 param = gid;
+    int2 param_1 = out_size;
+    int2 px = nao_texel(param, param_1, v_40);
+    int2 param_2 = px;
+    int param_3 = 0;
+    if (nao_load(src0, src0Smplr, param_2, param_3, v_40).w < 0.5)
+    {
+        int2 param_4 = px;
+        int param_5 = 0;
+        float4 param_6 = float4(1.0);
+        nao_store(param_4, param_5, param_6, v_40, dst);
+        return;
+    }
+    int2 param_7 = px;
+    int param_8 = 0;
+    int2 param_9 = px;
+    int param_10 = 0;
+    float4 param_11 = float4(nao_load(src1, src1Smplr, param_7, param_8, v_40).x);
+    nao_store(param_9, param_10, param_11, v_40, dst);
+}
+

@@ -1,0 +1,156 @@
+static const uint3 gl_WorkGroupSize = uint3(8u, 8u, 1u);
+
+cbuffer FrameUniforms : register(b3)
+{
+    float2 _46_u_proj : packoffset(c0);
+    float _46_u_radius : packoffset(c0.z);
+    float _46_u_pixels_per_unit : packoffset(c0.w);
+    int _46_u_flip_y : packoffset(c1);
+};
+
+RWTexture2DArray<float> dst : register(u2);
+Texture2DArray<float4> src0 : register(t0);
+SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
+
+static uint3 gl_GlobalInvocationID;
+struct SPIRV_Cross_Input
+{
+    uint3 gl_GlobalInvocationID : SV_DispatchThreadID;
+};
+
+uint3 spvTextureSize(Texture2DArray<float4> Tex, uint Level, out uint Param)
+{
+    uint3 ret;
+    Tex.GetDimensions(Level, ret.x, ret.y, ret.z, Param);
+    return ret;
+}
+
+uint3 spvImageSize(RWTexture2DArray<float> Tex, out uint Param)
+{
+    uint3 ret;
+    Tex.GetDimensions(ret.x, ret.y, ret.z);
+    Param = 0u;
+    return ret;
+}
+
+int2 nao_texel(int2 p, int2 size)
+{
+    int2 _53;
+    if (_46_u_flip_y != 0)
+    {
+        _53 = p;
+    }
+    else
+    {
+        _53 = int2(p.x, (size.y - 1) - p.y);
+    }
+    return _53;
+}
+
+int2 nao_size(Texture2DArray<float4> t, SamplerState _t_sampler)
+{
+    uint _77_dummy_parameter;
+    return int3(spvTextureSize(t, uint(0), _77_dummy_parameter)).xy;
+}
+
+float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int layer)
+{
+    int2 param = p;
+    int2 param_1 = nao_size(t, _t_sampler);
+    return t.Load(int4(int3(nao_texel(param, param_1), layer), 0));
+}
+
+void nao_store(int2 p, int layer, float4 v)
+{
+    uint _100_dummy_parameter;
+    int2 param = p;
+    int2 param_1 = int3(spvImageSize(dst, _100_dummy_parameter)).xy;
+    dst[int3(nao_texel(param, param_1), layer)] = v.x;
+}
+
+bool nao_inside(int2 q, int2 size)
+{
+    bool _115 = all(bool2(q.x >= int2(0, 0).x, q.y >= int2(0, 0).y));
+    bool _122;
+    if (_115)
+    {
+        _122 = all(bool2(q.x < size.x, q.y < size.y));
+    }
+    else
+    {
+        _122 = _115;
+    }
+    return _122;
+}
+
+void f_gtao_blur_inner()
+{
+    int2 gid = int2(gl_GlobalInvocationID.xy);
+    uint _135_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _135_dummy_parameter)).xy;
+    bool _141 = gid.x >= out_size.x;
+    bool _150;
+    if (!_141)
+    {
+        _150 = gid.y >= out_size.y;
+    }
+    else
+    {
+        _150 = _141;
+    }
+    if (_150)
+    {
+        return;
+    }
+    int2 param = gid;
+    int2 param_1 = out_size;
+    int2 px = nao_texel(param, param_1);
+    int2 param_2 = px;
+    int param_3 = 0;
+    if (nao_load(src0, _src0_sampler, param_2, param_3).w < 0.5f)
+    {
+        int2 param_4 = px;
+        int param_5 = 0;
+        float4 param_6 = 1.0f.xxxx;
+        nao_store(param_4, param_5, param_6);
+        return;
+    }
+    float sum = 0.0f;
+    float count = 0.0f;
+    for (int y = -2; y < 2; y++)
+    {
+        for (int x = -2; x < 2; x++)
+        {
+            int2 q = px + int2(x, y);
+            int2 param_7 = q;
+            int2 param_8 = out_size;
+            if (!nao_inside(param_7, param_8))
+            {
+                continue;
+            }
+            int2 param_9 = q;
+            int param_10 = 0;
+            if (nao_load(src0, _src0_sampler, param_9, param_10).w < 0.5f)
+            {
+                continue;
+            }
+            int2 param_11 = q;
+            int param_12 = 0;
+            sum += nao_load(src1, _src1_sampler, param_11, param_12).x;
+            count += 1.0f;
+        }
+    }
+    int2 param_13 = px;
+    int param_14 = 0;
+    float4 param_15 = (sum / max(count, 1.0f)).xxxx;
+    nao_store(param_13, param_14, param_15);
+}
+
+[numthreads(8, 8, 1)]
+void f_gtao_blur(SPIRV_Cross_Input stage_input)
+{
+    gl_GlobalInvocationID = stage_input.gl_GlobalInvocationID;
+    f_gtao_blur_inner();
+}

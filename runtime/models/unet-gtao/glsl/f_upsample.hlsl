@@ -1,0 +1,185 @@
+static const uint3 gl_WorkGroupSize = uint3(8u, 8u, 1u);
+
+cbuffer FrameUniforms : register(b5)
+{
+    float2 _45_u_proj : packoffset(c0);
+    float _45_u_radius : packoffset(c0.z);
+    float _45_u_pixels_per_unit : packoffset(c0.w);
+    int _45_u_flip_y : packoffset(c1);
+};
+
+RWTexture2DArray<float> dst : register(u4);
+Texture2DArray<float4> src0 : register(t0);
+SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
+Texture2DArray<float4> src2 : register(t2);
+SamplerState _src2_sampler : register(s2);
+Texture2DArray<float4> src3 : register(t3);
+SamplerState _src3_sampler : register(s3);
+
+static uint3 gl_GlobalInvocationID;
+struct SPIRV_Cross_Input
+{
+    uint3 gl_GlobalInvocationID : SV_DispatchThreadID;
+};
+
+uint3 spvTextureSize(Texture2DArray<float4> Tex, uint Level, out uint Param)
+{
+    uint3 ret;
+    Tex.GetDimensions(Level, ret.x, ret.y, ret.z, Param);
+    return ret;
+}
+
+uint3 spvImageSize(RWTexture2DArray<float> Tex, out uint Param)
+{
+    uint3 ret;
+    Tex.GetDimensions(ret.x, ret.y, ret.z);
+    Param = 0u;
+    return ret;
+}
+
+int2 nao_texel(int2 p, int2 size)
+{
+    int2 _53;
+    if (_45_u_flip_y != 0)
+    {
+        _53 = p;
+    }
+    else
+    {
+        _53 = int2(p.x, (size.y - 1) - p.y);
+    }
+    return _53;
+}
+
+int2 nao_size(Texture2DArray<float4> t, SamplerState _t_sampler)
+{
+    uint _77_dummy_parameter;
+    return int3(spvTextureSize(t, uint(0), _77_dummy_parameter)).xy;
+}
+
+float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int layer)
+{
+    int2 param = p;
+    int2 param_1 = nao_size(t, _t_sampler);
+    return t.Load(int4(int3(nao_texel(param, param_1), layer), 0));
+}
+
+void nao_store(int2 p, int layer, float4 v)
+{
+    uint _100_dummy_parameter;
+    int2 param = p;
+    int2 param_1 = int3(spvImageSize(dst, _100_dummy_parameter)).xy;
+    dst[int3(nao_texel(param, param_1), layer)] = v.x;
+}
+
+int nao_floor_div(int a, int b)
+{
+    int _113;
+    if (a >= 0)
+    {
+        _113 = a / b;
+    }
+    else
+    {
+        _113 = -((((-a) + b) - 1) / b);
+    }
+    return _113;
+}
+
+void f_upsample_inner()
+{
+    int2 gid = int2(gl_GlobalInvocationID.xy);
+    uint _141_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _141_dummy_parameter)).xy;
+    bool _147 = gid.x >= out_size.x;
+    bool _156;
+    if (!_147)
+    {
+        _156 = gid.y >= out_size.y;
+    }
+    else
+    {
+        _156 = _147;
+    }
+    if (_156)
+    {
+        return;
+    }
+    int2 param = gid;
+    int2 param_1 = out_size;
+    int2 px = nao_texel(param, param_1);
+    int2 param_2 = px;
+    int param_3 = 0;
+    float4 pw = nao_load(src0, _src0_sampler, param_2, param_3);
+    if (pw.w < 0.5f)
+    {
+        int2 param_4 = px;
+        int param_5 = 0;
+        float4 param_6 = 1.0f.xxxx;
+        nao_store(param_4, param_5, param_6);
+        return;
+    }
+    int2 param_7 = px;
+    int param_8 = 1;
+    float3 n = nao_load(src0, _src0_sampler, param_7, param_8).xyz;
+    float depth = max(-pw.z, 1.0000000031710768509710513471353e-30f);
+    int2 hi = out_size;
+    int2 lo = nao_size(src1, _src1_sampler);
+    float2 uv = (((float2(px) + 0.5f.xx) * float2(lo)) / float2(hi)) - 0.5f.xx;
+    int2 num = (((int2(2, 2) * px) + int2(1, 1)) * lo) - hi;
+    int param_9 = num.x;
+    int param_10 = 2 * hi.x;
+    int param_11 = num.y;
+    int param_12 = 2 * hi.y;
+    int2 base = int2(nao_floor_div(param_9, param_10), nao_floor_div(param_11, param_12)) - int2(1, 1);
+    float sum = 0.0f;
+    float total = 0.0f;
+    for (int y = 0; y < 4; y++)
+    {
+        for (int x = 0; x < 4; x++)
+        {
+            int2 q = clamp(base + int2(x, y), int2(0, 0), lo - int2(1, 1));
+            int2 param_13 = q;
+            int param_14 = 0;
+            float4 qw = nao_load(src2, _src2_sampler, param_13, param_14);
+            if (qw.w < 0.5f)
+            {
+                continue;
+            }
+            float2 d = float2(base + int2(x, y)) - uv;
+            float spatial = exp((-dot(d, d)) / 0.7200000286102294921875f);
+            int2 param_15 = q;
+            int param_16 = 1;
+            float3 qn = nao_load(src2, _src2_sampler, param_15, param_16).xyz;
+            float plane = abs(dot(qn, pw.xyz - qw.xyz)) / (0.02999999932944774627685546875f * depth);
+            float agree = pow(max(dot(qn, n), 0.0f), 8.0f);
+            float w = spatial * (0.001000000047497451305389404296875f + (exp((-plane) * plane) * agree));
+            int2 param_17 = q;
+            int param_18 = 0;
+            int2 param_19 = q;
+            int param_20 = 2;
+            sum += (w * (nao_load(src1, _src1_sampler, param_17, param_18).x - nao_load(src2, _src2_sampler, param_19, param_20).x));
+            total += w;
+        }
+    }
+    float up = 0.0f;
+    if (total > 0.0f)
+    {
+        up = sum / total;
+    }
+    int2 param_21 = px;
+    int param_22 = 0;
+    int2 param_23 = px;
+    int param_24 = 0;
+    float4 param_25 = clamp(nao_load(src3, _src3_sampler, param_21, param_22).x + up, 0.0f, 1.0f).xxxx;
+    nao_store(param_23, param_24, param_25);
+}
+
+[numthreads(8, 8, 1)]
+void f_upsample(SPIRV_Cross_Input stage_input)
+{
+    gl_GlobalInvocationID = stage_input.gl_GlobalInvocationID;
+    f_upsample_inner();
+}

@@ -1,0 +1,93 @@
+#include <metal_stdlib>
+#include <simd/simd.h>
+
+using namespace metal;
+
+struct Params
+{
+    float4 prm[1];
+};
+
+constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
+
+kernel void p02_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+{
+    int3 gid = int3(gl_GlobalInvocationID);
+    int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
+    bool _33 = gid.x >= out_size.x;
+    bool _43;
+    if (!_33)
+    {
+        _43 = gid.y >= out_size.y;
+    }
+    else
+    {
+        _43 = _33;
+    }
+    bool _52;
+    if (!_43)
+    {
+        _52 = gid.z >= 1;
+    }
+    else
+    {
+        _52 = _43;
+    }
+    if (_52)
+    {
+        return;
+    }
+    int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
+    float4 acc = float4(params.prm[8 + gid.z]);
+    for (int ky = 0; ky < 1; ky++)
+    {
+        int iy = ((gid.y * 1) - 0) + (ky * 1);
+        for (int kx = 0; kx < 1; kx++)
+        {
+            int ix = ((gid.x * 1) - 0) + (kx * 1);
+            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 8);
+            bool _129 = iy >= 0;
+            bool _136;
+            if (_129)
+            {
+                _136 = iy < size0.y;
+            }
+            else
+            {
+                _136 = _129;
+            }
+            bool _139 = _136 && (ix >= 0);
+            bool _146;
+            if (_139)
+            {
+                _146 = ix < size0.x;
+            }
+            else
+            {
+                _146 = _139;
+            }
+            if (_146)
+            {
+                for (int l = 0; l < 2; l++)
+                {
+                    int3 _163 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_163.xy), uint(_163.z), 0);
+                    int o = tap + ((0 + l) * 4);
+                    float4x4 _212 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += (float4x4(_212[0], _212[1], _212[2], _212[3]) * float4(v));
+                }
+            }
+        }
+    }
+    float4 r = float4(acc);
+    r = fast::max(r, float4(0.001000000047497451305389404296875));
+    int3 _249 = int3(0, 0, gid.z);
+    float4 a = src1.read(uint2(_249.xy), uint(_249.z), 0);
+    float4 b = r;
+    b = select(float4(1.0), b, (int4(4 * gid.z) + int4(0, 1, 2, 3)) < int4(1));
+    r = a / b;
+    r = fast::min(fast::max(r, float4(0.0)), float4(8.0));
+    int3 _283 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_283.xy), uint(_283.z));
+}
+

@@ -1,0 +1,92 @@
+#version 450
+#extension GL_EXT_samplerless_texture_functions : require
+// neuralao frame pass f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+layout(set = 0, binding = 0) uniform highp texture2DArray src0;
+layout(set = 0, binding = 1) uniform highp texture2DArray src1;
+layout(set = 0, binding = 2) uniform highp texture2DArray src2;
+layout(set = 0, binding = 3) uniform highp texture2DArray src3;
+layout(set = 0, binding = 4, r32f) writeonly uniform highp image2DArray dst;
+layout(std140, set = 0, binding = 5) uniform FrameUniforms {
+    vec2 u_proj;               // (P00, P11) of the projection matrix
+    float u_radius;            // R, the AO radius in scene units
+    float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
+    int u_flip_y;              // 1: textures bottom-up (GL), 0: row 0 at the top
+};
+
+// GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
+ivec2 nao_texel(ivec2 p, ivec2 size) {
+    return u_flip_y != 0 ? p : ivec2(p.x, size.y - 1 - p.y);
+}
+
+ivec2 nao_size(highp texture2DArray t) {
+    return textureSize(t, 0).xy;
+}
+
+vec4 nao_load(highp texture2DArray t, ivec2 p, int layer) {
+    return texelFetch(t, ivec3(nao_texel(p, nao_size(t)), layer), 0);
+}
+
+void nao_store(ivec2 p, int layer, vec4 v) {
+    imageStore(dst, ivec3(nao_texel(p, imageSize(dst).xy), layer), v);
+}
+
+bool nao_inside(ivec2 q, ivec2 size) {
+    return all(greaterThanEqual(q, ivec2(0))) && all(lessThan(q, size));
+}
+
+float nao_acos(float x) {
+    return acos(clamp(x, -1.0, 1.0));
+}
+
+// floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
+int nao_floor_div(int a, int b) {
+    return a >= 0 ? a / b : -((-a + b - 1) / b);
+}
+
+
+void main() {
+    ivec2 gid = ivec2(gl_GlobalInvocationID.xy);
+    ivec2 out_size = imageSize(dst).xy;
+    if (gid.x >= out_size.x || gid.y >= out_size.y) {
+        return;
+    }
+    ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
+    vec4 pw = nao_load(src0, px, 0);
+    if (pw.w < 0.5) {
+        nao_store(px, 0, vec4(1.0));
+        return;
+    }
+    vec3 n = nao_load(src0, px, 1).xyz;
+    float depth = max(-pw.z, 1e-30);
+    ivec2 hi = out_size;
+    ivec2 lo = nao_size(src1);
+    vec2 uv = (vec2(px) + 0.5) * vec2(lo) / vec2(hi) - 0.5;
+    ivec2 num = (2 * px + 1) * lo - hi;
+    ivec2 base = ivec2(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+    float sum = 0.0;
+    float total = 0.0;
+    for (int y = 0; y < 4; ++y) {
+        for (int x = 0; x < 4; ++x) {
+            ivec2 q = clamp(base + ivec2(x, y), ivec2(0), lo - 1);
+            vec4 qw = nao_load(src2, q, 0);
+            if (qw.w < 0.5) {
+                continue;
+            }
+            vec2 d = vec2(base + ivec2(x, y)) - uv;
+            float spatial = exp(-dot(d, d) / (2.0 * 0.6 * 0.6));
+            vec3 qn = nao_load(src2, q, 1).xyz;
+            float plane = abs(dot(qn, pw.xyz - qw.xyz)) / (0.03 * depth);
+            float agree = pow(max(dot(qn, n), 0.0), 8.0);
+            float w = spatial * (0.001 + exp(-plane * plane) * agree);
+            sum += w * (nao_load(src1, q, 0).x - nao_load(src2, q, 2).x);
+            total += w;
+        }
+    }
+    float up = 0.0;
+    if (total > 0.0) {
+        up = sum / total;
+    }
+    nao_store(px, 0, vec4(clamp(nao_load(src3, px, 0).x + up, 0.0, 1.0)));
+}

@@ -1,0 +1,210 @@
+"""The frame passes (export/glsl/frame.py): a shipped U-Net's whole frame, generated as compute passes and
+executed, against the references a user's ``neuralao infer`` computes.
+
+* both shipped models, the whole frame (position from depth, GTAO and its blur, point sampling, the
+  mean-depth reduction, the network's input and radius, the network's passes, upsampling with the hybrid's
+  correction and combine) in GLSL 4.30 on llvmpipe, Vulkan SPIR-V on lavapipe (wgpu's passthrough) and
+  WGSL through wgpu, at three frame sizes (one not a multiple of 8) and three radii, against
+  ``neuralao.runtime.predict.unet_predictor`` (GTAO in GL fragment shaders, numpy point sampling and
+  upsampling, onnxruntime); GTAO's own texture against ``run_gtao``;
+* the screen origin: the same frame stored bottom-up (u_flip_y = 1) and top row first gives the same AO;
+* the manifest's frame section: every step in order, the network's uniform pass replaced, sizes and
+  dispatch counts; HLSL and MSL written for every frame pass.
+
+The network runs at an internal height of 64 rows here (the shipped 256 makes each frame ~1 s on
+llvmpipe): the sources are the same at any height, and 64 rows point-sample the 48- and 53-row frames up
+and the 96-row frame down, as 256 does for 1080p frames. ``test_shipped_internal_height`` runs 256 rows.
+"""
+
+from __future__ import annotations
+
+import functools
+import shutil
+
+import numpy as np
+import onnx
+import pytest
+from helpers import analytic_gbuffer
+
+from neuralao.export.glsl.frame import active_steps, dispatch_counts, frame_sizes, shader_entries
+from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame_runner import FrameRunner, frame_program
+from neuralao.runtime.predict import unet_predictor
+from neuralao.runtime.shipped import shipped_models
+
+MODELS = ("unet-gtao", "unet-fast")
+SIZES = ((64, 48), (75, 53), (96, 96))
+RADII = (0.15, 0.4, 1.0)
+INTERNAL_HEIGHT = 64
+DIALECTS = ("glsl430", "vulkan", "wgsl")
+
+
+def _needs(dialect: str) -> None:
+    """Skip (with the reason) where a dialect's tools or driver are missing."""
+    if dialect == "glsl430":
+        return
+    wgpu = pytest.importorskip("wgpu", reason="the wgpu package is not installed (pyproject pins it)")
+    if dialect == "vulkan" and shutil.which("glslangValidator") is None:
+        pytest.skip("glslangValidator not installed (Debian: glslang-tools)")
+    try:
+        adapter = wgpu.gpu.request_adapter_sync()
+    except RuntimeError:
+        adapter = None
+    if adapter is None:
+        pytest.skip("no WebGPU adapter (Debian: mesa-vulkan-drivers)")
+    if dialect == "vulkan" and "spirv-shader-passthrough" not in adapter.features:
+        pytest.skip("the adapter has no SPIR-V passthrough (not a Vulkan adapter)")
+
+
+@functools.cache
+def _program(name: str, height: int | None, dialect: str):
+    """A shipped model's program with its frame passes, at internal height ``height`` (None: as shipped)."""
+    proto = (
+        onnx.load(str(shipped_models()[name] / "model.onnx"))
+        if height is None
+        else _with_internal_height(name, height)
+    )
+    return frame_program(proto, dialect)
+
+
+def _with_internal_height(name: str, height: int) -> onnx.ModelProto:
+    proto = onnx.load(str(shipped_models()[name] / "model.onnx"))
+    for p in proto.metadata_props:
+        if p.key == "internal_height":
+            p.value = str(height)
+    return proto
+
+
+@pytest.fixture(scope="module")
+def frames() -> dict:
+    return {size: analytic_gbuffer(*size) for size in SIZES}
+
+
+@pytest.fixture(scope="module", params=MODELS)
+def model(request, tmp_path_factory, frames):
+    """(name, ONNX proto at INTERNAL_HEIGHT, {(size, radius): reference AO}) of a shipped U-Net."""
+    proto = _with_internal_height(request.param, INTERNAL_HEIGHT)
+    path = tmp_path_factory.mktemp(request.param) / "model.onnx"
+    onnx.save(proto, str(path))
+    predict = unet_predictor(path)
+    refs = {(size, r): predict(frames[size], r) for size in SIZES for r in RADII}
+    return request.param, proto, refs
+
+
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_whole_frame_matches_the_references(model, dialect, frames):
+    _needs(dialect)
+    name, _, refs = model
+    program = _program(name, INTERNAL_HEIGHT, dialect)
+    errors = []
+    for size in SIZES:
+        with FrameRunner(program, *size) as runner:
+            for r in RADII:
+                f = frames[size]
+                ao = runner.run(f, r)
+                assert ao.shape == refs[size, r].shape == size[::-1] and ao.dtype == np.float32
+                errors.append(float(np.abs(ao - refs[size, r]).max()))
+                assert np.all(ao[~f["mask"]] == 1.0)
+                if name == "unet-gtao":  # GTAO itself, against the GL fragment shaders
+                    gtao = runner.read("gtao")[..., 0]
+                    assert float(np.abs(gtao - run_gtao(f, r)).max()) <= TOL.frame_passes_vs_reference
+    assert max(errors) <= TOL.frame_passes_vs_reference, (name, dialect, errors)
+    # the frames are not trivial: occlusion somewhere, and it grows with the radius
+    assert min(float(refs[SIZES[1], r].min()) for r in RADII) < 0.8
+
+
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_origin_uniform_both_ways_gives_the_same_ao(dialect, frames):
+    """The same frame stored bottom-up (GL, u_flip_y = 1) and top row first (u_flip_y = 0): the AO read
+    back top row first is the same, bit for bit (flipped input -> flipped output)."""
+    _needs(dialect)
+    program = _program("unet-gtao", INTERNAL_HEIGHT, dialect)
+    size = SIZES[1]
+    with FrameRunner(program, *size, flip_y=False) as top, FrameRunner(program, *size, flip_y=True) as bottom:
+        a, b = top.run(frames[size], RADII[1]), bottom.run(frames[size], RADII[1])
+        assert np.array_equal(a, b)
+        assert np.array_equal(top.read("gtao"), bottom.read("gtao"))
+    assert float(a.min()) < 0.9
+
+
+def test_frame_section_lists_the_whole_frame_in_order():
+    for name in MODELS:
+        program = _program(name, None, "glsl430")
+        m = program.manifest
+        frame = m["frame"]
+        steps = frame["steps"]
+        frame_names = [s.get("frame_pass") for s in steps if "frame_pass" in s]
+        hybrid = name == "unet-gtao"
+        assert frame["hybrid"] is hybrid and frame["preprocess_version"] == 2
+        assert frame_names[0] == "f_position" and frame_names[-2:] == ["f_upsample", "f_composite"]
+        assert ("f_gtao" in frame_names) is hybrid and "f_depth_mean" in frame_names
+        network = [s["network_pass"] for s in steps if "network_pass" in s]
+        skipped = [s["skip"] for s in steps if "skip" in s]
+        assert network + skipped == [p["name"] for p in m["passes"] if p["name"] not in skipped] + skipped
+        assert [
+            m["passes"][i]["kind"] for i in range(len(m["passes"])) if m["passes"][i]["name"] in skipped
+        ] == ["uniform"]
+        # the network's input and radius textures are written by frame passes, its output read by one
+        written = {p["output"]["texture"] for p in frame["passes"]}
+        assert {m["input"]["texture"], m["outputs"][0]["texture"]} <= set(frame["textures"])
+        assert m["input"]["texture"] in written
+        for entry in shader_entries(m):
+            assert entry["shader"] in program.sources
+        sizes = frame_sizes(m, 1920, 1080)
+        assert sizes["low_gbuffer"][:2] == (455, 256) and sizes["ao"][:2] == (1920, 1080)
+        counts = dispatch_counts(m, 1920, 1080)
+        assert counts["passes"] == len(frame["passes"]) - 1 + len(network)  # upsample or composite
+
+
+def test_frame_passes_compile_to_spirv_hlsl_and_msl():
+    """Every frame pass of both models: Vulkan GLSL -> SPIR-V that spirv-val accepts; GLSL 4.30 -> HLSL
+    (compiled back by glslang's HLSL front end) and MSL through SPIRV-Cross."""
+    from neuralao.export.glsl import compile_spirv, cross_compile, spirv_cross_available, validate_hlsl
+
+    if not spirv_cross_available():
+        pytest.skip("spirv-cross / glslangValidator not installed (make system-deps)")
+    seen = set()
+    for name in MODELS:
+        gl, vk = _program(name, None, "glsl430"), _program(name, None, "vulkan")
+        for entry, vk_entry in zip(
+            gl.manifest["frame"]["passes"], vk.manifest["frame"]["passes"], strict=True
+        ):
+            assert compile_spirv(vk.sources[vk_entry["shader"]])[:4] == b"\x03\x02\x23\x07"
+            source = gl.sources[entry["shader"]]
+            if source in seen:
+                continue
+            seen.add(source)
+            out = cross_compile(source)
+            validate_hlsl(out["hlsl"])
+            assert "[numthreads(" in out["hlsl"] and "FrameUniforms" in out["hlsl"]
+            assert "kernel void" in out["msl"]
+
+
+def test_network_at_the_frame_size_is_composited_not_upsampled(tmp_path):
+    """A frame exactly the network's size (64 x 64 at 64 rows) runs f_composite instead of f_upsample,
+    as the reference skips resampling then."""
+    name = "unet-fast"
+    program = _program(name, INTERNAL_HEIGHT, "glsl430")
+    f = analytic_gbuffer(64, 64)
+    with FrameRunner(program, 64, 64) as runner:
+        ao = runner.run(f, 0.4)
+    onnx.save(_with_internal_height(name, INTERNAL_HEIGHT), str(tmp_path / "model.onnx"))
+    want = unet_predictor(tmp_path / "model.onnx")(f, 0.4)
+    assert float(np.abs(ao - want).max()) <= TOL.frame_passes_vs_reference
+    names = [s.get("frame_pass") for s in active_steps(program.manifest, 64, 64)]
+    assert "f_composite" in names and "f_upsample" not in names
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_shipped_internal_height(dialect, frames):
+    """The shipped models as they ship (256 rows), one size and radius: the 53-row frame point-sampled up."""
+    _needs(dialect)
+    size, r = SIZES[1], RADII[1]
+    for name in MODELS:
+        onnx_path = shipped_models()[name] / "model.onnx"
+        want = unet_predictor(onnx_path)(frames[size], r)
+        with FrameRunner(_program(name, None, dialect), *size) as runner:
+            got = runner.run(frames[size], r)
+        assert float(np.abs(got - want).max()) <= TOL.frame_passes_vs_reference, name
