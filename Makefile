@@ -120,13 +120,16 @@ $(CORPUS_FULL): $(FULL_CONFIG) | $(STAMP)
 
 corpus-full: $(CORPUS_FULL) ## Render and label the composed-room corpus of the experiments (configs/full.json)
 
-# The release U-Nets: configs/models.json trains each model on the corpus with its wall-clock budget
+# The release U-Nets: configs/models.json trains each model on the larger corpus with its wall-clock budget
 # (resumable: checkpoints under build/ship), exports, checks parity, evaluates the test split against
 # SSAO/GTAO at every radius and installs runtime/models/<name>/ + index.json; `make models MODELS=...`
-# ships only those. `make evaluate` then scores them where users run them (configs/eval.json).
+# ships only those. The default continues the learning curve's main run (its 4-CPU-hour snapshot, constant
+# rate) with a cosine decay of 4 CPU-hours, so `make curve` comes first. `make evaluate` then scores them
+# where users run them (configs/eval.json). The whole chain, resumable across sessions:
+# `make corpus-large curve models evaluate`.
 MODELS_CONFIG := configs/models.json
 MODELS ?=
-models: $(CORPUS) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
+models: $(CORPUS_LARGE) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
 	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
 
 # The installed models' shaders regenerated from their committed ONNX files (no corpus, no training): after

@@ -3,13 +3,16 @@
     python3 bench/gpu_table.py RUNS.jsonl OUT.json
 
 Standard library only: it runs where bench/gpu.sh runs, a GPU machine without the project's venv.
-A model's frame time is its network passes, plus its GTAO passes for a hybrid (GTAO is its input);
-GTAO's own row is the default model's GTAO passes at the same size, from the same runs.
+A model's frame time is its network passes, plus its GTAO passes for a hybrid (GTAO is its input).
+GTAO's own row is the median of the hybrid runs' GTAO passes at that size. A hybrid's ratio to GTAO is
+taken within its own run (its frame over its own GTAO passes), so a load that changes between runs (a
+shared machine) does not move it; a pure model's ratio is to the median.
 """
 
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 
 
@@ -21,13 +24,13 @@ def _ms(run: dict, key: str) -> float:
 
 def main(src: str, out: str) -> None:
     runs = [json.loads(line) for line in open(src) if line.strip()]
-    rows, gtao = [], {}
+    rows, gtao_runs = [], {}
     for r in runs:
         size = f"{r['width']}x{r['height']}"
         hybrid = r["gtao_ms"] >= 0
         ms = _ms(r, "network") + (_ms(r, "gtao") if hybrid else 0.0)
         if hybrid:
-            gtao.setdefault(size, _ms(r, "gtao"))
+            gtao_runs.setdefault(size, []).append(_ms(r, "gtao"))
         rows.append(
             {
                 **r,
@@ -36,8 +39,10 @@ def main(src: str, out: str) -> None:
                 "clock": "GL_TIME_ELAPSED" if r["network_ms"] > 0 else "wall (glFinish)",
             }
         )
+    gtao = {size: statistics.median(v) for size, v in gtao_runs.items()}
     for r in rows:
-        r["over_gtao"] = r["frame_ms"] / gtao[r["size"]] if gtao.get(r["size"]) else None
+        own = _ms(r, "gtao") if r["gtao_ms"] >= 0 else gtao.get(r["size"])
+        r["over_gtao"] = r["frame_ms"] / own if own else None
     renderer = runs[0]["renderer"] if runs else "-"
     print(f"GL renderer: {renderer} ({runs[0]['version'] if runs else '-'})\n")
     print("| size | model | preset | precision | ms | / GTAO | clock |")

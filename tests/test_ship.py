@@ -271,3 +271,22 @@ def test_shaders_only_regenerates_from_the_onnx_and_keeps_the_model(shipped, tmp
     assert not list(models.glob(".*"))
     with pytest.raises(NeuralaoError, match="no installed model nope"):
         refresh_shipped(copy, ["nope"])
+
+
+def test_init_checkpoint_continues_a_snapshot_and_names_it(shipped, corpus, tmp_path):
+    """A model may start from a checkpoint file (a learning-curve snapshot): its provenance names the file
+    and its hash; a missing file is a one-line error before any training."""
+    from neuralao.pipeline.release.ship import ship
+    from neuralao.runtime.foundation.io import sha256_file
+
+    settings, _, _ = shipped
+    snapshot = Path(settings.checkpoints) / "u-full.pt"
+    spec = {"name": "u-cont", "init_checkpoint": str(snapshot), "train": {**TINY_TRAIN, "epochs": 1}}
+    index = ship(_settings(corpus, tmp_path, default={}, models=[spec]))
+    assert index["models"]["u-cont"]["epochs"] == 1
+    prov = json.loads((tmp_path / "models" / "u-cont" / "manifest.json").read_text())["provenance"]
+    assert prov["init_checkpoint"]["sha256"] == sha256_file(snapshot)
+    assert prov["init_checkpoint"]["epoch"] == 3
+    missing = {**spec, "name": "u-none", "init_checkpoint": str(tmp_path / "nope.pt")}
+    with pytest.raises(NeuralaoError, match="nope.pt does not exist"):
+        ship(_settings(corpus, tmp_path / "b", default={}, models=[missing]))

@@ -58,6 +58,9 @@ class ShippedModel:
     name: str = ""
     kind: str = "unet"
     init: str = ""  # name of an earlier model of this config whose checkpoint initialises this one
+    # or a checkpoint file that does (relative to the repository): e.g. a learning-curve snapshot whose
+    # constant-rate phase this model continues with its own schedule
+    init_checkpoint: str = ""
     train: dict = field(default_factory=dict)  # UNetTrainSettings fields
 
 
@@ -106,6 +109,22 @@ def _path(p: str) -> Path:
 
 def folder_bytes(folder: Path) -> int:
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())
+
+
+def _checkpoint_provenance(path: str) -> dict | None:
+    """The init checkpoint a model continued from: its path, hash and the training it holds."""
+    if not path:
+        return None
+    import torch
+
+    ckpt = torch.load(_path(path), map_location="cpu", weights_only=False)
+    return {
+        "path": path,
+        "sha256": sha256_file(_path(path)),
+        "epoch": ckpt.get("epoch"),
+        "wall_seconds": ckpt.get("wall_seconds"),
+        "threads": (ckpt.get("config") or {}).get("threads"),
+    }
 
 
 def install(tmp: Path, target: Path) -> None:
@@ -168,6 +187,11 @@ def ship_model(
                 f"model {spec.name}: init {spec.init!r} is not an earlier model of this config"
             )
         train_cfg["init"] = str(checkpoints[spec.init])
+    elif spec.init_checkpoint:
+        path = _path(spec.init_checkpoint)
+        if not path.is_file():
+            raise NeuralaoError(f"model {spec.name}: init_checkpoint {path} does not exist")
+        train_cfg["init"] = str(path)
     ts = from_dict(UNetTrainSettings, train_cfg, prefix=f"models.{spec.name}.train.")
     ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
     ckpt_path.parent.mkdir(parents=True, exist_ok=True)
@@ -248,6 +272,7 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
         "device": ckpt.get("device"),
         "plan": ckpt.get("plan", {}),
         "init": spec.init or None,
+        "init_checkpoint": _checkpoint_provenance(spec.init_checkpoint),
         "validation": {k: v for k, v in ckpt.get("metrics", {}).items() if k != "per_scene"},
         "test": {k: v for k, v in unet_test.items() if k != "per_scene"},
         "test_per_scene": unet_test["per_scene"],
