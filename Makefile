@@ -210,7 +210,7 @@ demo: $(REPORT) $(VIEWER_PNG) ## Set up if needed, then dataset -> train -> expo
 HOST := build/host/neuralao_host
 HOST_CFLAGS := -O2 -std=c11 -Wall -Wextra -Werror
 
-bench-gpu: $(STAMP) ## GPU time of the shipped U-Nets and GTAO (C host, GL timer queries): bench/gpu.sh
+bench-gpu: $(STAMP) ## GPU time of the shipped U-Nets' whole frames, GTAO and SSAO (C host, GL timer queries): bench/gpu.sh
 	bench/gpu.sh
 
 host: $(HOST) ## Build the standalone C host that runs a shipped export on a raw float32 G-buffer

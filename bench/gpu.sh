@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# GPU time of the shipped default (unet-gtao), the fast model (unet-fast) and this project's GTAO, measured
-# by the C host (runtime/host) with GL timer queries (GL_TIME_ELAPSED), at 1920x1080 and 3840x2160, for
-# both generator presets (gpu, cpu) and both precisions (fp32, fp16). Prints a markdown table of ms and
+# GPU time of the shipped default (unet-gtao), the fast model (unet-fast), this project's GTAO and its SSAO,
+# measured by the C host (runtime/host) with GL timer queries (GL_TIME_ELAPSED), at 1920x1080 and 3840x2160,
+# for both generator presets (gpu, cpu) and both precisions (fp32, fp16). Prints a markdown table of ms and
 # ratios to GTAO and writes JSON.
 #
-#   bench/gpu.sh prepare   here, with the venv: build the host, generate the exports into build/bench-gpu
+#   bench/gpu.sh prepare   here, with the venv: build the host, generate the exports (network + frame passes)
+#                          and the SSAO baseline's shaders into build/bench-gpu
 #   bench/gpu.sh run       anywhere with EGL and OpenGL 4.3 (no Python packages needed): time, table, JSON
 #   bench/gpu.sh           both
 #
@@ -18,9 +19,13 @@
 #   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json; \
 #   bench/gpu.sh run
 # Frames are the host's synthetic G-buffer (a wavy surface, every pixel foreground, as in a game frame).
-# The network's time is its compute passes at its internal size (the engine's resampling passes are not
-# counted); a hybrid's frame adds its GTAO passes at the frame's size. Where GL reports no GPU time
-# (Mesa's llvmpipe: 0 for compute), the wall clock between glFinish calls is used and the JSON says so.
+# A model's time is its whole frame as an engine runs it, every step of the manifest's frame.steps
+# (position from depth, a hybrid's GTAO and blur, point sampling, the input assembly, the network,
+# upsampling with the correction and combine); the JSON also has its network steps alone. GTAO is the
+# hybrid's own GTAO steps (f_gtao + f_gtao_blur) in the same runs; SSAO is the project's SSAO and its blur
+# (neuralao.runtime.baselines' fragment shaders) on the same G-buffer in every run. Where GL reports no
+# GPU time (Mesa's llvmpipe: 0 for compute), the wall clock between glFinish calls is used and the table
+# says so.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=build/bench-gpu
@@ -38,12 +43,45 @@ prepare() {
   mkdir -p "$BUILD"
   ${CC:-cc} -O2 -std=c11 -Wall -Wextra -Werror -o "$HOST" runtime/host/neuralao_host.c -lEGL -lOpenGL -lm
   "$PY" - "$BUILD" "$MODELS" "$PRESETS" "$PRECISIONS" <<'PYEOF'
-import shutil, sys
+import dataclasses, json, shutil, sys
 from pathlib import Path
 
 import onnx
 
-from neuralao.export.glsl import generate_compute, write_compute_export
+from neuralao.export.glsl import write_compute_export
+from neuralao.runtime.baselines import SSAOSettings, blur_source, fragment_source, noise_tile, ssao_kernel
+from neuralao.runtime.frame_runner import frame_program
+from neuralao.runtime.internal_resolution import vertex_source
+
+
+def ssao_entry(out: Path) -> dict:
+    """The SSAO baseline's fragment passes under out/ssao/ and how the host runs them (the layout of an
+    export's "gtao" entry): what neuralao.runtime.baselines.ScreenSpaceAO binds and sets."""
+    s = SSAOSettings()
+    sources = {"vertex": "fullscreen.vert", "ssao": "ssao.frag", "ssao_blur": "ssao_blur.frag"}
+    texts = {"vertex": vertex_source(), "ssao": fragment_source("ssao", s), "ssao_blur": blur_source(s.noise_size)}
+    (out / "ssao").mkdir()
+    for key, name in sources.items():
+        (out / "ssao" / name).write_text(texts[key])
+    tile = noise_tile(s.noise_size, s.seed, "ssao")[::-1]  # GL rows, bottom up
+    return {
+        "folder": "ssao",
+        "sources": sources,
+        "settings": dataclasses.asdict(s),
+        "textures": {"u_position": 0, "u_normal": 1, "u_noise": 2},
+        "noise": {"width": s.noise_size, "height": s.noise_size, "texels": [float(v) for v in tile.reshape(-1)]},
+        "uniforms": {
+            "u_proj": {"type": "vec2", "formula": "(P00, P11) = (f * H / W, f), f = 1 / tan(yfov / 2)"},
+            "u_radius": {"type": "float", "formula": "R, the AO radius in scene units"},
+            "u_bias": {"type": "float", "times_radius": s.bias_rel},
+            "u_kernel": {
+                "type": f"vec3[{s.samples}]",
+                "value": [float(v) for v in ssao_kernel(s.samples, s.seed).reshape(-1)],
+            },
+        },
+        "blur": {"textures": {"u_position": 0, "u_raw": 3}} if s.blur else None,
+    }
+
 
 build, models, presets, precisions = Path(sys.argv[1]), *(a.split() for a in sys.argv[2:])
 for model in models:
@@ -53,11 +91,12 @@ for model in models:
             out = build / "exports" / f"{model}-{preset}-{precision}"
             shutil.rmtree(out, ignore_errors=True)
             out.mkdir(parents=True)
-            shutil.copy(src / "manifest.json", out / "manifest.json")
-            program = generate_compute(onnx.load(src / "model.onnx"), precision=precision, preset=preset)
+            manifest = json.loads((src / "manifest.json").read_text())
+            manifest.pop("internal_resolution", None)  # its fragment passes: the frame section replaces them
+            manifest["ssao"] = ssao_entry(out)
+            (out / "manifest.json").write_text(json.dumps(manifest, indent=1))
+            program = frame_program(onnx.load(src / "model.onnx"), precision=precision, preset=preset)
             write_compute_export(program, out / "glsl", validate=False)
-            if (src / "glsl" / "internal").is_dir():
-                shutil.copytree(src / "glsl" / "internal", out / "glsl" / "internal")
 PYEOF
 }
 

@@ -5,20 +5,26 @@ network's passes, in the order of the manifest's ``frame.steps``, as an engine f
 
     frame_settings() -> FrameSettings                the runtime references' settings (GTAO, upsampling)
     frame_program(model_onnx, dialect) -> ComputeProgram     the network's passes + the frame's
-    FrameRunner(program, width, height, flip_y=False, via=None)  textures and pipelines of one frame size
+    FrameRunner(program, width, height, flip_y=False, via=None, hlsl=None)  textures and pipelines of one
+                                                     frame size
         .run(frame, radius) -> ao (H, W) float32      (1 on background, top row first)
         .read(texture) -> (H, W, 4 * layers) float32  any texture of the frame, top row first
-    run_frame(program, frame, radius, flip_y=False, via=None) -> ao (H, W) float32
+    run_frame(program, frame, radius, flip_y=False, via=None, hlsl=None) -> ao (H, W) float32
 
 Backends by the program's dialect: GLSL 4.30 on the headless GL context (:mod:`neuralao.runtime.gl`),
 WGSL through wgpu, Vulkan SPIR-V through wgpu's SPIR-V passthrough (``via="passthrough"``) or naga
-(``via="naga"``). ``flip_y``: the textures are stored bottom-up (GL's convention; the frame uniform and the
-pad / crop passes' ``u_flip_y`` = 1) rather than top row first; the AO read back is top row first either
-way.
+(``via="naga"``). A GLSL 4.30 program with ``via="hlsl"``: every step from its HLSL, compiled to SPIR-V
+by glslang's HLSL front end and run through wgpu's passthrough, bound by the manifest's registers
+(``hlsl``: {pass name: HLSL text}, e.g. an export's files by
+:func:`neuralao.export.glsl.load_cross_sources`; passes not in it are cross-compiled from the program's
+GLSL as the export writer does). ``flip_y``: the textures are stored bottom-up (GL's convention; the
+frame uniform and the pad / crop passes' ``u_flip_y`` = 1) rather than top row first; the AO read back is
+top row first either way.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from concurrent.futures import ThreadPoolExecutor
@@ -40,7 +46,7 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
 
-_GL_FORMATS = {"RGBA32F": "GL_RGBA32F", "R32F": "GL_R32F"}
+_GL_FORMATS = {"RGBA32F": "GL_RGBA32F", "R32F": "GL_R32F", "RGBA16F": "GL_RGBA16F", "R16F": "GL_R16F"}
 _WGPU_FORMATS = {"RGBA32F": ("rgba32float", 16), "R32F": ("r32float", 4)}
 
 
@@ -101,7 +107,13 @@ class FrameRunner:
     returns the AO (H, W) float32, top row first."""
 
     def __init__(
-        self, program: ComputeProgram, width: int, height: int, flip_y: bool = False, via: str | None = None
+        self,
+        program: ComputeProgram,
+        width: int,
+        height: int,
+        flip_y: bool = False,
+        via: str | None = None,
+        hlsl: dict[str, str] | None = None,
     ):
         if "frame" not in program.manifest:
             raise NeuralaoError("this program has no frame passes (generate_frame adds them)")
@@ -109,7 +121,14 @@ class FrameRunner:
         self.width, self.height, self.flip_y = int(width), int(height), bool(flip_y)
         self.sizes = frame_sizes(self.m, self.width, self.height)
         fmt = self.m["format"]
-        self.backend = _GLBackend(self) if fmt == "neuralao-glsl-compute" else _WgpuBackend(self, via)
+        if via == "hlsl":
+            if fmt != "neuralao-glsl-compute":
+                raise NeuralaoError("the HLSL is made from the GLSL 4.30 passes: give a glsl430 program")
+            self.backend = _HlslBackend(self, hlsl)
+        elif fmt == "neuralao-glsl-compute":
+            self.backend = _GLBackend(self)
+        else:
+            self.backend = _WgpuBackend(self, via)
 
     def run(self, frame: FrameLike, radius: float) -> np.ndarray:
         if np.shape(frame["depth"]) != (self.height, self.width):
@@ -142,12 +161,17 @@ class FrameRunner:
 
 
 def run_frame(
-    program: ComputeProgram, frame: FrameLike, radius: float, flip_y: bool = False, via: str | None = None
+    program: ComputeProgram,
+    frame: FrameLike,
+    radius: float,
+    flip_y: bool = False,
+    via: str | None = None,
+    hlsl: dict[str, str] | None = None,
 ) -> np.ndarray:
     """AO (H, W) float32 of one G-buffer frame (depth, normal_cam, mask, yfov) at AO radius ``radius``
     (scene units) by the program's whole frame on the GPU; 1 on background."""
     h, w = np.shape(frame["depth"])
-    with FrameRunner(program, w, h, flip_y, via) as runner:
+    with FrameRunner(program, w, h, flip_y, via, hlsl) as runner:
         return runner.run(frame, radius)
 
 
@@ -237,12 +261,13 @@ class _GLBackend:
 
 class _WgpuBackend:
     def __init__(self, runner: FrameRunner, via: str | None):
-        from neuralao.runtime.wgsl_runner import _code, _device, _pipeline
+        from neuralao.runtime.wgsl_runner import _device
 
         wgpu, _, dev = _device()
         self.wgpu, self.dev, self.r = wgpu, dev, runner
         vulkan = runner.m["format"] == "neuralao-vulkan-compute"
         self.via = (via or "passthrough") if vulkan else "naga"
+        self._prepare()
         tu = wgpu.TextureUsage
         self.textures = {}
         for ident, (tw, th, layers, fmt) in runner.sizes.items():
@@ -273,14 +298,24 @@ class _WgpuBackend:
         self.steps = []
         for step in active_steps(runner.m, runner.width, runner.height):
             p = by_name[step["frame_pass"]] if "frame_pass" in step else runner.m["passes"][step["index"]]
-            layout, group = self._bindings(p)
-            bgl, pipeline = _pipeline(_code(runner.program, p["shader"]), json.dumps(layout), self.via)
+            bgl, pipeline, group = self._pipeline(p)
             _, _, tw, th, layers, _, _ = self.textures[p["output"]["texture"]]
             lx, ly, _ = p["local_size"]
             bx, by, bl = p.get("block", [1, 1, 1])
             z = 1 if "stage" in p else layers // bl
             groups = (-(-tw // (lx * bx)), -(-th // (ly * by)), z)
             self.steps.append((pipeline, dev.create_bind_group(layout=bgl, entries=group), groups))
+
+    def _pipeline(self, p: dict) -> tuple:
+        """(bind group layout, pipeline, bind group entries) of pass ``p``."""
+        from neuralao.runtime.wgsl_runner import _code, _pipeline
+
+        layout, group = self._bindings(p)
+        bgl, pipeline = _pipeline(_code(self.r.program, p["shader"]), json.dumps(layout), self.via)
+        return bgl, pipeline, group
+
+    def _prepare(self) -> None:
+        """Work before the pipelines are made (the HLSL backend's cross-compiling)."""
 
     def _bindings(self, p: dict) -> tuple[list, list]:
         stage = self.wgpu.ShaderStage.COMPUTE
@@ -355,3 +390,67 @@ class _WgpuBackend:
         out = np.zeros((layers, h, w, 4), np.float32)
         out[..., 0] = data[..., 0]
         return out
+
+
+# --------------------------------------------------------------------------- HLSL
+
+
+class _HlslBackend(_WgpuBackend):
+    """Every step from its HLSL (shader model 5.0, SPIRV-Cross's from the GLSL 4.30 passes; the files of
+    an export written with HLSL / MSL, or made here from the program's GLSL as the export writer makes
+    them), compiled to SPIR-V by glslang's HLSL front end and run through wgpu's SPIR-V passthrough. Bound
+    as Unity or Unreal would from each pass's ``hlsl.resources``: a register's binding, each network pass's
+    params a buffer of its own (its range of weights.bin), $Globals' u_flip_y a 16-byte buffer, every
+    frame pass's ``FrameUniforms`` cbuffer the frame's one 32-byte buffer."""
+
+    def __init__(self, runner: FrameRunner, hlsl: dict[str, str] | None):
+        self.hlsl = dict(hlsl or {})
+        self._weights: dict[tuple[int, int], dict] = {}
+        super().__init__(runner, "passthrough")
+
+    def _prepare(self) -> None:
+        from neuralao.export.glsl import hlsl_interface
+        from neuralao.runtime.wgsl_runner import hlsl_spirv
+
+        entries = [*self.r.m["passes"], *self.r.m["frame"]["passes"]]
+        self.interface = {p["name"]: p.get("hlsl") or hlsl_interface(p) for p in entries}
+        missing = [p for p in entries if p["name"] not in self.hlsl]
+        with ThreadPoolExecutor(4) as pool:
+            texts = pool.map(lambda p: _cross_hlsl(self.r.program.sources[p["shader"]], p["name"]), missing)
+            self.hlsl.update(zip([p["name"] for p in missing], texts, strict=True))
+            # glslang compiles every pass side by side (hlsl_spirv caches them for _pipeline)
+            names = [p["name"] for p in entries]
+            list(pool.map(lambda n: hlsl_spirv(self.hlsl[n], self.interface[n]["entry"]), names))
+
+    def _pipeline(self, p: dict) -> tuple:
+        from neuralao.runtime.wgsl_runner import _pipeline, hlsl_bindings, hlsl_spirv, weights_range
+
+        p = dict(p, hlsl=self.interface[p["name"]])
+
+        def resource(r: dict):
+            if "texture" in r:
+                return self.textures[r["texture"]][1]
+            if "weights" in r:
+                key = (r["weights"]["offset"], r["weights"]["bytes"])
+                if key not in self._weights:
+                    self._weights[key] = weights_range(self.r.program.weights, r["weights"])
+                return self._weights[key]
+            if "uniform_block" in r:
+                return {"buffer": self.ubo, "offset": 0, "size": UNIFORM_BLOCK_BYTES}
+            if r["name"] != "u_flip_y":
+                raise NeuralaoError(f"pass {p['name']}: the frame sets no uniform {r['name']!r}")
+            return {"buffer": self.flip, "offset": 0, "size": 16}
+
+        layout, group = hlsl_bindings(p, resource)
+        entry = p["hlsl"]["entry"]
+        spirv = hlsl_spirv(self.hlsl[p["name"]], entry)
+        bgl, pipeline = _pipeline(spirv, json.dumps(layout), "passthrough", entry)
+        return bgl, pipeline, group
+
+
+@functools.cache
+def _cross_hlsl(source: str, name: str) -> str:
+    """The HLSL SPIRV-Cross writes of GLSL 4.30 pass ``source`` (entry point ``name``), cached."""
+    from neuralao.export.glsl import cross_compile
+
+    return cross_compile(source, name)["hlsl"]

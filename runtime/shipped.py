@@ -58,7 +58,7 @@ def default_model(kind: str, models_dir: Path | None = None) -> Path:
 def pure_unet_export(models_dir: Path | None = None) -> Path:
     """The export folder of a shipped pure U-Net (one that needs no GTAO input): the index's default U-Net
     if it is pure, else the first pure one by name (read from each model's ONNX metadata). For consumers
-    without a GTAO pass, such as the viewer's WebGPU path."""
+    without a GTAO pass."""
     index = read_index(models_dir)
     default = index.get("default", {}).get("unet")
     models = shipped_models(models_dir)

@@ -27,16 +27,18 @@ no third-party code) draws every frame in three passes:
    reads the position target, any other (``normal``, the MLP's ``gbuffer``) the normal target
    (xyz normal, w mask); for a **screen-space U-Net** (``neuralao view --screen-space``) a camera-space
    G-buffer (position, -z = linear depth, w mask; camera-space normal, as pipeline/gbuffers/rasterizer.py)
-   is read back and the model's WGSL compute passes (``wgsl.js``) run on it in WebGPU, as
-   runtime/predict.py ``unet_predictor`` does (internal height, preprocessing, joint bilateral
-   upsampling); asynchronous: a frame shows the latest finished AO. Without WebGPU the page says so and
-   the other methods still work;
+   is read back, its depth and normal uploaded to WebGPU, and the export's whole frame (``wgsl.js``
+   ``runFrame``: the manifest's ``frame.steps``, GTAO for a hybrid, point sampling to the internal height,
+   the input contract, the network, upsampling) runs there, as runtime/frame_runner.py does through
+   wgpu; asynchronous: a frame shows the latest finished AO. Without WebGPU the page says so and the
+   other methods still work;
 3. display: AO as grey on a dark background, to the canvas (a scene bake: base colour x AO, sRGB).
 
 An orbit camera (drag to rotate, wheel to zoom, keys 1-9 pick a method) and, for tests, a small API on
 ``window.neuralao``: ``setPose(azimuth_deg, elevation_deg, distance_in_diagonals)``, ``setMethod(i)`` and
 ``capture()``, which renders and returns the float targets (position, normal, AO; bottom row first) as
-base64 float32, and ``captureNetwork()``, a promise of the U-Net's camera-space G-buffer and AO. All
+base64 float32, ``captureNetwork()``, a promise of the U-Net's camera-space G-buffer and AO, and
+``readNetworkTexture(id)``, a promise of any texture of its latest frame (e.g. ``gtao``). All
 data (geometry, textures, shader sources, weights) is inlined as base64 in
 ``scene.js``, so the page works from ``file://`` as well as over ``--serve``.
 """
@@ -77,9 +79,8 @@ class ViewerMethod:
     uv_base   : (3m, 2) float32 glTF UVs of the base colour textures (scene bakes) or None
     parts     : scene bakes: one draw per primitive, {"first", "count", "factor" (RGBA base colour
                 factor), "base" / "occlusion" (PNG or JPEG data URIs, or absent)}; None otherwise
-    network   : screen-space U-Nets: {"manifest", "sources" (a WGSL compute export), "weights" (base64),
-                "internal_height" (rows or None), "radius" (scene units), "upsample" (UpsampleSettings
-                fields), "model"}; None otherwise
+    network   : screen-space U-Nets: {"manifest", "sources" (a WGSL compute export with frame passes),
+                "weights" (base64), "radius" (scene units), "model"}; None otherwise
     """
 
     name: str

@@ -14,6 +14,7 @@ SPIR-V by glslang's HLSL front end and bound by its registers.
     run_wgsl(program_or_dir, x, flip_y=False, scalars=None) -> (1, C_out, H, W) f32   (first graph output)
     run_spirv_all(program_or_dir, x, flip_y=False, scalars=None, via="passthrough") -> as run_wgsl_all
     run_hlsl_all(export_dir, x, flip_y=False, scalars=None) -> as run_wgsl_all  (HLSL -> SPIR-V, passthrough)
+    hlsl_bindings(pass_entry, resource) -> (layout, group entries)  an HLSL pass bound by its registers
     time_wgsl(program_or_dir, height, width, repeats=5, scalars=None) -> s/frame
     adapter_info() -> {"device": ..., "backend": ...}
 
@@ -27,6 +28,7 @@ import functools
 import json
 import logging
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +48,7 @@ log = logging.getLogger(__name__)
 
 _FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
 # Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
-_STORAGE_FORMATS = {"rgba32f": "rgba32float", "rgba16f": "rgba16float"}
+_STORAGE_FORMATS = {"rgba32f": "rgba32float", "rgba16f": "rgba16float", "r32f": "r32float"}
 WGSL_FORMAT = "neuralao-wgsl-compute"
 VULKAN_FORMAT = "neuralao-vulkan-compute"
 GLSL_FORMAT = "neuralao-glsl-compute"
@@ -252,6 +254,29 @@ class _WgslRun:
         return np.ascontiguousarray(buf.transpose(0, 3, 1, 2).reshape(layers * 4, h, w)[None, :channels])
 
 
+def hlsl_bindings(p: dict, resource: Callable[[dict], object]) -> tuple[list, list]:
+    """(bind group layout entries, bind group entries) of a pass's HLSL compiled by
+    :func:`neuralao.export.glsl.compile_hlsl`, from its manifest ``hlsl.resources``: each at the binding its
+    register gets; ``resource(r)`` is what is bound for resource ``r`` (a texture view, or a buffer binding
+    {"buffer", "offset", "size"})."""
+    wgpu = _device()[0]
+    layout, group = [], []
+    for r in p["hlsl"]["resources"]:
+        entry = {"binding": hlsl_spirv_binding(r["register"]), "visibility": wgpu.ShaderStage.COMPUTE}
+        if r["type"].startswith("Texture2DArray"):
+            entry["texture"] = {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}
+        elif r["type"].startswith("RWTexture2DArray"):
+            fmt = _STORAGE_FORMATS[p["output"]["format"]]
+            entry["storage_texture"] = {"access": "write-only", "format": fmt, "view_dimension": "2d-array"}
+        elif r["type"] == "ByteAddressBuffer":
+            entry["buffer"] = {"type": "read-only-storage"}
+        else:  # a $Globals member (a network pass's uniform) or a frame pass's FrameUniforms cbuffer
+            entry["buffer"] = {"type": "uniform"}
+        layout.append(entry)
+        group.append({"binding": entry["binding"], "resource": resource(r)})
+    return layout, group
+
+
 class _HlslRun(_WgslRun):
     """The HLSL passes of a GLSL export written with HLSL / MSL, each compiled back to SPIR-V by glslang's
     HLSL front end and passed to the Vulkan driver as it is. Bound as Unity or Unreal would from the
@@ -263,42 +288,20 @@ class _HlslRun(_WgslRun):
         super().__init__(prog, height, width, scalars, flip_y, via="passthrough")
 
     def _pass(self, code: str | bytes, p: dict, scalars: dict[str, float], flip_y: bool):
-        wgpu, dev = self.wgpu, self.dev
-        stage = wgpu.ShaderStage.COMPUTE
-        spirv = _hlsl_spirv(self.hlsl[p["name"]], p["hlsl"]["entry"])
-        layout, group = [], []
-        for r in p["hlsl"]["resources"]:
-            entry = {"binding": hlsl_spirv_binding(r["register"]), "visibility": stage}
-            if r["type"] == "Texture2DArray<float4>":
-                entry["texture"] = {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}
-                resource = self.textures[r["texture"]][1]
-            elif r["type"] == "RWTexture2DArray<float4>":
-                fmt = _STORAGE_FORMATS[p["output"]["format"]]
-                entry["storage_texture"] = {
-                    "access": "write-only",
-                    "format": fmt,
-                    "view_dimension": "2d-array",
-                }
-                resource = self.textures[r["texture"]][1]
-            elif r["type"] == "ByteAddressBuffer":
-                w = r["weights"]
-                data = self.weights_bytes[w["offset"] : w["offset"] + w["bytes"]]
-                buf = dev.create_buffer_with_data(data=data, usage=wgpu.BufferUsage.STORAGE)
-                entry["buffer"] = {"type": "read-only-storage"}
-                resource = {"buffer": buf, "offset": 0, "size": w["bytes"]}
-            else:  # a $Globals member at offset 0: the pass's one uniform
-                value = (
-                    int(flip_y)
-                    if r["name"] == "u_flip_y"
-                    else scalars[p["uniforms"][r["name"]]["onnx_input"]]
-                )
-                entry["buffer"] = {"type": "uniform"}
-                resource = {
-                    "buffer": self._uniform(value, "<i4" if r["type"] == "int" else "<f4"),
-                    "size": 16,
-                }
-            layout.append(entry)
-            group.append({"binding": entry["binding"], "resource": resource})
+        dev = self.dev
+        spirv = hlsl_spirv(self.hlsl[p["name"]], p["hlsl"]["entry"])
+
+        def resource(r: dict):
+            if "texture" in r:
+                return self.textures[r["texture"]][1]
+            if "weights" in r:
+                return weights_range(self.weights_bytes, r["weights"])
+            # a $Globals member at offset 0: the pass's one uniform
+            name = r["name"]
+            value = int(flip_y) if name == "u_flip_y" else scalars[p["uniforms"][name]["onnx_input"]]
+            return {"buffer": self._uniform(value, "<i4" if r["type"] == "int" else "<f4"), "size": 16}
+
+        layout, group = hlsl_bindings(p, resource)
         bgl, pipeline = _pipeline(spirv, json.dumps(layout), "passthrough", p["hlsl"]["entry"])
         _, _, tw, th, layers, _ = self.textures[p["output"]["texture"]]
         lx, ly, _ = p["hlsl"]["numthreads"]
@@ -307,8 +310,18 @@ class _HlslRun(_WgslRun):
         return pipeline, dev.create_bind_group(layout=bgl, entries=group), groups
 
 
+def weights_range(weights: bytes, w: dict) -> dict:
+    """A buffer binding of a pass's own params buffer: its range of weights.bin (``w``: the resource's
+    "weights" {"offset", "bytes"}), as Unity and Unreal bind it."""
+    wgpu, _, dev = _device()
+    data = weights[w["offset"] : w["offset"] + w["bytes"]]
+    buf = dev.create_buffer_with_data(data=data, usage=wgpu.BufferUsage.STORAGE)
+    return {"buffer": buf, "offset": 0, "size": w["bytes"]}
+
+
 @functools.cache
-def _hlsl_spirv(source: str, entry: str) -> bytes:
+def hlsl_spirv(source: str, entry: str) -> bytes:
+    """:func:`neuralao.export.glsl.compile_hlsl`, cached for the process (glslang is the slow part)."""
     return compile_hlsl(source, entry)
 
 

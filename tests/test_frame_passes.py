@@ -3,8 +3,10 @@ executed, against the references a user's ``neuralao infer`` computes.
 
 * both shipped models, the whole frame (position from depth, GTAO and its blur, point sampling, the
   mean-depth reduction, the network's input and radius, the network's passes, upsampling with the hybrid's
-  correction and combine) in GLSL 4.30 on llvmpipe, Vulkan SPIR-V on lavapipe (wgpu's passthrough) and
-  WGSL through wgpu, at three frame sizes (one not a multiple of 8) and three radii, against
+  correction and combine) in GLSL 4.30 on llvmpipe, Vulkan SPIR-V on lavapipe (wgpu's passthrough),
+  WGSL through wgpu and HLSL (SPIRV-Cross's from the GLSL 4.30, compiled to SPIR-V by glslang's HLSL front
+  end, bound by the manifest's registers, on lavapipe), at three frame sizes (one not a multiple of 8) and
+  three radii, against
   ``neuralao.runtime.predict.unet_predictor`` (GTAO in GL fragment shaders, numpy point sampling and
   upsampling, onnxruntime); GTAO's own texture against ``run_gtao``;
 * the screen origin: the same frame stored bottom-up (u_flip_y = 1) and top row first gives the same AO;
@@ -26,6 +28,7 @@ import onnx
 import pytest
 from helpers import analytic_gbuffer
 
+from neuralao.export.glsl import load_compute_export, load_cross_sources
 from neuralao.export.glsl.frame import active_steps, dispatch_counts, frame_sizes, shader_entries
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.tolerances import TOL
@@ -37,7 +40,14 @@ MODELS = ("unet-gtao", "unet-fast")
 SIZES = ((64, 48), (75, 53), (96, 96))
 RADII = (0.15, 0.4, 1.0)
 INTERNAL_HEIGHT = 64
-DIALECTS = ("glsl430", "vulkan", "wgsl")
+# The APIs the whole frame runs in: {name: (the program's dialect, FrameRunner's via)}.
+APIS = {
+    "glsl430": ("glsl430", None),
+    "vulkan": ("vulkan", None),
+    "wgsl": ("wgsl", None),
+    "hlsl": ("glsl430", "hlsl"),
+}
+DIALECTS = tuple(APIS)
 
 
 def _needs(dialect: str) -> None:
@@ -47,25 +57,32 @@ def _needs(dialect: str) -> None:
     wgpu = pytest.importorskip("wgpu", reason="the wgpu package is not installed (pyproject pins it)")
     if dialect == "vulkan" and shutil.which("glslangValidator") is None:
         pytest.skip("glslangValidator not installed (Debian: glslang-tools)")
+    if dialect == "hlsl" and not all(shutil.which(t) for t in ("glslangValidator", "spirv-cross")):
+        pytest.skip("HLSL needs spirv-cross and glslangValidator (Debian: spirv-cross, glslang-tools)")
     try:
         adapter = wgpu.gpu.request_adapter_sync()
     except RuntimeError:
         adapter = None
     if adapter is None:
         pytest.skip("no WebGPU adapter (Debian: mesa-vulkan-drivers)")
-    if dialect == "vulkan" and "spirv-shader-passthrough" not in adapter.features:
+    if dialect in ("vulkan", "hlsl") and "spirv-shader-passthrough" not in adapter.features:
         pytest.skip("the adapter has no SPIR-V passthrough (not a Vulkan adapter)")
 
 
 @functools.cache
 def _program(name: str, height: int | None, dialect: str):
-    """A shipped model's program with its frame passes, at internal height ``height`` (None: as shipped)."""
+    """A shipped model's program with its frame passes, at internal height ``height`` (None: as shipped);
+    ``dialect``: a compute dialect or an API of :data:`APIS`."""
     proto = (
         onnx.load(str(shipped_models()[name] / "model.onnx"))
         if height is None
         else _with_internal_height(name, height)
     )
-    return frame_program(proto, dialect)
+    return frame_program(proto, APIS.get(dialect, (dialect,))[0])
+
+
+def _runner(program, size: tuple[int, int], api: str, flip_y: bool = False) -> FrameRunner:
+    return FrameRunner(program, *size, flip_y=flip_y, via=APIS[api][1])
 
 
 def _with_internal_height(name: str, height: int) -> onnx.ModelProto:
@@ -99,7 +116,7 @@ def test_whole_frame_matches_the_references(model, dialect, frames):
     program = _program(name, INTERNAL_HEIGHT, dialect)
     errors = []
     for size in SIZES:
-        with FrameRunner(program, *size) as runner:
+        with _runner(program, size, dialect) as runner:
             for r in RADII:
                 f = frames[size]
                 ao = runner.run(f, r)
@@ -109,6 +126,7 @@ def test_whole_frame_matches_the_references(model, dialect, frames):
                 if name == "unet-gtao":  # GTAO itself, against the GL fragment shaders
                     gtao = runner.read("gtao")[..., 0]
                     assert float(np.abs(gtao - run_gtao(f, r)).max()) <= TOL.frame_passes_vs_reference
+    print(f"{name} {dialect}: whole frame max abs error {max(errors):.3g} vs the reference")
     assert max(errors) <= TOL.frame_passes_vs_reference, (name, dialect, errors)
     # the frames are not trivial: occlusion somewhere, and it grows with the radius
     assert min(float(refs[SIZES[1], r].min()) for r in RADII) < 0.8
@@ -121,7 +139,7 @@ def test_origin_uniform_both_ways_gives_the_same_ao(dialect, frames):
     _needs(dialect)
     program = _program("unet-gtao", INTERNAL_HEIGHT, dialect)
     size = SIZES[1]
-    with FrameRunner(program, *size, flip_y=False) as top, FrameRunner(program, *size, flip_y=True) as bottom:
+    with _runner(program, size, dialect) as top, _runner(program, size, dialect, flip_y=True) as bottom:
         a, b = top.run(frames[size], RADII[1]), bottom.run(frames[size], RADII[1])
         assert np.array_equal(a, b)
         assert np.array_equal(top.read("gtao"), bottom.read("gtao"))
@@ -199,12 +217,21 @@ def test_network_at_the_frame_size_is_composited_not_upsampled(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("dialect", DIALECTS)
 def test_shipped_internal_height(dialect, frames):
-    """The shipped models as they ship (256 rows), one size and radius: the 53-row frame point-sampled up."""
+    """The shipped models as they ship (256 rows), one size and radius: the 53-row frame point-sampled up.
+    HLSL: the shipped export's files (runtime/models/<name>/glsl/*.hlsl), as an engine loads them."""
     _needs(dialect)
     size, r = SIZES[1], RADII[1]
     for name in MODELS:
         onnx_path = shipped_models()[name] / "model.onnx"
         want = unet_predictor(onnx_path)(frames[size], r)
-        with FrameRunner(_program(name, None, dialect), *size) as runner:
+        if dialect == "hlsl":
+            export = shipped_models()[name] / "glsl"
+            program, hlsl = load_compute_export(export), load_cross_sources(export, "hlsl")
+            runner = FrameRunner(program, *size, via="hlsl", hlsl=hlsl)
+        else:
+            runner = _runner(_program(name, None, dialect), size, dialect)
+        with runner:
             got = runner.run(frames[size], r)
-        assert float(np.abs(got - want).max()) <= TOL.frame_passes_vs_reference, name
+        err = float(np.abs(got - want).max())
+        print(f"{name} {dialect} (shipped internal height): max abs error {err:.3g}")
+        assert err <= TOL.frame_passes_vs_reference, name

@@ -3,9 +3,11 @@
 
 The plan holds on random lifetimes, random ONNX graphs and the shipped U-Nets; running the passes on
 Mesa with textures aliased as it says gives the same output bit for bit, and a plan that lets two
-textures live at once does not; the peak figures equal a count done here from the lifetimes with
-sizes computed independently (the GL runner's texture sizes, the internal-resolution module's
-network size); the shipped models' figures are the ones docs/engine-integration.md gives.
+textures live at once does not; the peak figures of the shipped frames (the frame section's steps and
+textures) equal a count done here from those steps with sizes computed independently (the frame
+section's own sizes, the internal-resolution module's network size), as do those of a program without
+frame passes (the fragment steps; the GL runner's texture sizes); the shipped models' figures are the
+ones docs/engine-integration.md and docs/results.md give.
 """
 
 from __future__ import annotations
@@ -28,8 +30,10 @@ from neuralao.export.glsl import (
     memory_schedule,
     plan_slots,
 )
-from neuralao.export.glsl.memory import MANIFEST_FRAMES, TEXEL_BYTES
+from neuralao.export.glsl.frame import frame_sizes
+from neuralao.export.glsl.memory import MANIFEST_FRAMES, PRECISIONS, TEXEL_BYTES
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.frame_runner import frame_program
 from neuralao.runtime.glsl_runner import run_compute, run_compute_all, texture_sizes
 from neuralao.runtime.internal_resolution import internal_size
 from neuralao.runtime.shipped import MODELS_DIR
@@ -238,8 +242,8 @@ def _preset(folder) -> str:
 def _frame_bytes(
     name: str, frame: tuple[int, int], net: tuple[int, int], noise: int, precision: str = "fp32"
 ) -> int:
-    """Bytes of the resampling / GTAO targets as docs/engine-integration.md and runtime/host allocate them
-    (at fp16 the one-channel AO targets are R16F)."""
+    """Bytes of the fragment steps' resampling / GTAO targets as runtime/host allocates them (at fp16 the
+    one-channel AO targets are R16F)."""
     (W, H), (w, h) = frame, net
     ao = 4 if precision == "fp32" else 2
     return {
@@ -254,20 +258,87 @@ def _frame_bytes(
     }[name]
 
 
+def _lifetimes_from_frame(manifest: dict) -> dict[str, tuple[int, int]]:
+    """A frame program's lifetimes recounted from its frame section: the steps (the skipped uniform pass
+    left out) each texture is read or written at, the frame's output to the last step; the engine's
+    depth and normal left out."""
+    frame = manifest["frame"]
+    by_name = {p["name"]: p for p in frame["passes"]}
+    steps: dict[str, list[int]] = {}
+    active = [s for s in frame["steps"] if "skip" not in s]
+    for i, step in enumerate(active):
+        p = by_name[step["frame_pass"]] if "frame_pass" in step else manifest["passes"][step["index"]]
+        for t in [*(x["texture"] for x in p["inputs"]), p["output"]["texture"]]:
+            steps.setdefault(t, []).append(i)
+    steps[frame["output"]].append(len(active) - 1)
+    return {t: (min(s), max(s)) for t, s in steps.items() if t not in ("depth", "normal")}
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_peaks_equal_a_brute_force_count(name):
-    """For the shipped manifests at fp32 and at fp16 (the fp16 manifest generated from model.onnx),
-    at the manifest's frames and others: every texture's bytes, and separate / aliased / live, counted
-    here from the lifetimes with sizes from the GL runner and the internal-resolution module."""
+    """For the shipped frame programs at fp32 and at fp16 (the fp16 one generated from model.onnx), at
+    the manifest's frames and others: every texture of the frame but the engine's depth and normal, its
+    bytes from the frame section's own sizes and formats (at fp16: the formats the fp16 passes write),
+    and separate / aliased / live, counted here from the frame's steps."""
     folder = _shipped(name)
     top = json.loads((folder / "manifest.json").read_text())
     manifests = {
         "fp32": json.loads((folder / "glsl" / "manifest.json").read_text()),
         # the passes the shipped fp32 manifest has (its preset), stored as fp16
-        "fp16": generate_compute(
-            onnx.load(folder / "model.onnx"), precision="fp16", preset=_preset(folder)
-        ).manifest,
+        "fp16": frame_program(folder / "model.onnx", precision="fp16", preset=_preset(folder)).manifest,
     }
+    schedule = memory_schedule(manifests["fp32"])
+    lifetimes = _lifetimes_from_frame(manifests["fp32"])
+    assert {k: (t.first, t.last) for k, t in schedule.textures.items()} == lifetimes
+    assert [s.name for s in schedule.steps] == [
+        s.get("frame_pass", s.get("network_pass"))
+        for s in manifests["fp32"]["frame"]["steps"]
+        if "skip" not in s
+    ]
+    _assert_valid(schedule.slots, lifetimes)
+    for W, H in (*MANIFEST_FRAMES, (1280, 720), (640, 480), (200, 300)):
+        net = internal_size(W, H, top["internal_resolution"]["height"])
+        for precision, m in manifests.items():
+            sizes = frame_sizes(m, W, H)
+            nbytes = {k: tw * th * layers * TEXEL_BYTES[fmt] for k, (tw, th, layers, fmt) in sizes.items()}
+            nbytes = {k: v for k, v in nbytes.items() if k in lifetimes}
+            plan = memory_plan(manifests["fp32"], W, H, precision)
+            assert plan.network_size == net == sizes[m["input"]["texture"]][:2]
+            assert {k: t.bytes for k, t in plan.textures.items()} == nbytes
+            want = _figures(schedule.slots, lifetimes, nbytes)
+            assert plan.figures() == want, (W, H, precision)
+            assert memory_plan(m, W, H, precision).figures() == want  # whatever the manifest's precision
+            if (W, H) in MANIFEST_FRAMES:
+                assert m["memory"]["peak_bytes"][f"{W}x{H}"][precision] == want
+
+
+def test_fp16_counts_the_formats_the_passes_write():
+    """At fp16 the network's textures are RGBA16F but its input, radius and output; the frame passes'
+    own targets stay 32-bit (they write rgba32f / r32f at either precision): memory_plan's formats are
+    the fp16 program's, pass by pass."""
+    folder = _shipped("unet-gtao")
+    m16 = frame_program(folder / "model.onnx", precision="fp16", preset=_preset(folder)).manifest
+    plan = memory_plan(m16, 1920, 1080, "fp16")
+    written = {p["output"]["texture"]: p["output"]["format"] for p in m16["frame"]["passes"]}
+    for ident, t in plan.textures.items():
+        assert t.format == m16["frame"]["textures"][ident]["format"], ident
+        if ident in written:
+            assert written[ident] == t.format.lower(), ident
+    assert {t.format for t in plan.textures.values() if not t.network} == {"RGBA32F", "R32F"}
+    assert "RGBA16F" in {t.format for t in plan.textures.values() if t.network}
+    assert "stay RGBA32F / R32F" in m16["memory"]["peak_bytes_are"]
+    assert "depth, normal" in m16["memory"]["counted"]
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_fragment_steps_without_frame_passes(name):
+    """A program without frame passes (generate_compute alone) keeps the schedule of the fragment steps
+    of its internal/ folder: their targets in the formats runtime/host allocates, counted here from the
+    lifetimes with sizes from the GL runner and the internal-resolution module."""
+    folder = _shipped(name)
+    top = json.loads((folder / "manifest.json").read_text())
+    proto = onnx.load(folder / "model.onnx")
+    manifests = {p: generate_compute(proto, precision=p, preset=_preset(folder)).manifest for p in PRECISIONS}
     internal = top["internal_resolution"]
     noise = internal["gtao"]["noise"] if "gtao" in internal else {"width": 4, "height": 4}
     assert noise["width"] == noise["height"] == 4  # memory.GTAO_NOISE_SIZE
@@ -283,38 +354,39 @@ def test_shipped_peaks_equal_a_brute_force_count(name):
             assert (folder / "glsl" / step.runs).is_file()
     lifetimes = {k: (t.first, t.last) for k, t in schedule.textures.items()}
     _assert_valid(schedule.slots, lifetimes)
-    for W, H in (*MANIFEST_FRAMES, (1280, 720), (640, 480), (200, 300)):
+    for W, H in (MANIFEST_FRAMES[0], (640, 480)):
         net = internal_size(W, H, internal["height"])
         for precision, m in manifests.items():
             nbytes = {k: v[3] for k, v in texture_sizes(m, net[1], net[0]).items()}
             nbytes |= {k: _frame_bytes(k, (W, H), net, 4, precision) for k in frame_textures}
             plan = memory_plan(manifests["fp32"], W, H, precision)
-            assert plan.network_size == net
             assert {k: t.bytes for k, t in plan.textures.items()} == nbytes
             want = _figures(schedule.slots, lifetimes, nbytes)
             assert plan.figures() == want, (W, H, precision)
-            assert memory_plan(m, W, H, precision).figures() == want  # whatever the manifest's precision
             if (W, H) in MANIFEST_FRAMES:
                 assert m["memory"]["peak_bytes"][f"{W}x{H}"][precision] == want
 
 
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_manifest_memory_is_what_the_generator_writes(name):
-    """The shipped glsl/manifest.json carries the entry the generator writes for its model.onnx."""
+    """The shipped glsl/manifest.json carries the entry the generator writes for its model.onnx and its
+    frame; the WGSL and Vulkan programs' entries are the same."""
     folder = _shipped(name)
     shipped = json.loads((folder / "glsl" / "manifest.json").read_text())
-    generated = generate_compute(onnx.load(folder / "model.onnx"), preset=_preset(folder)).manifest
+    generated = frame_program(folder / "model.onnx", preset=_preset(folder)).manifest
     assert shipped["memory"] == json.loads(json.dumps(generated["memory"]))
-    wgsl = generate_compute(onnx.load(folder / "model.onnx"), dialect="wgsl", preset=_preset(folder)).manifest
-    assert wgsl["memory"] == generated["memory"]
+    assert memory_schedule(shipped).slots == memory_schedule(generated).slots  # whatever the mappings' order
+    for dialect in ("wgsl", "vulkan"):
+        other = frame_program(folder / "model.onnx", dialect=dialect, preset=_preset(folder)).manifest
+        assert other["memory"] == generated["memory"]
 
 
 # Texture memory at 1080p, MiB (2**20 bytes) to 2 decimals, as memory_plan computes it (the docs table
 # gives them to 1): fp32 separate, fp32 aliased, fp16 separate, fp16 aliased, fp32 live; then the
 # network's own textures at fp32: separate, the most alive at one step.
 SHIPPED_1080P = {
-    "unet-gtao": (64.68, 33.07, 36.79, 19.2, 23.73, 29.04, 8.91),
-    "unet-fast": (52.2, 23.04, 29.66, 14.19, 17.8, 40.29, 14.25),
+    "unet-gtao": (121.4, 93.33, 109.54, 91.55, 86.21, 29.04, 8.91),
+    "unet-fast": (115.05, 86.32, 96.68, 81.42, 81.09, 40.29, 14.25),
 }
 
 
@@ -348,6 +420,20 @@ def test_docs_table_is_memory_plan():
         fp32, fp16 = (memory_plan(m, int(w), int(h), p) for p in ("fp32", "fp16"))
         want = [fp32.separate_bytes, fp32.aliased_bytes, fp16.separate_bytes, fp16.aliased_bytes]
         want.append(fp32.live_bytes)
+        assert [float(c) for c in cells.split("|") if c.strip()] == [round(b / MIB, 1) for b in want]
+
+
+def test_results_table_is_memory_plan():
+    """Every row of the peak-memory table in docs/results.md (the default model, both presets) is what
+    memory_plan gives for the frame program of that preset."""
+    text = (ROOT / "docs" / "results.md").read_text()
+    rows = re.findall(r"^\| (\d+)x(\d+) \((cpu|gpu) passes\) \|((?: [\d.]+ \|)+)$", text, re.M)
+    assert len(rows) == 4
+    onnx_path = _shipped("unet-gtao") / "model.onnx"
+    programs = {p: frame_program(onnx_path, preset=p).manifest for p in ("cpu", "gpu")}
+    for w, h, preset, cells in rows:
+        fp32, fp16 = (memory_plan(programs[preset], int(w), int(h), p) for p in PRECISIONS)
+        want = [fp32.separate_bytes, fp32.aliased_bytes, fp16.separate_bytes, fp16.aliased_bytes]
         assert [float(c) for c in cells.split("|") if c.strip()] == [round(b / MIB, 1) for b in want]
 
 

@@ -1,33 +1,86 @@
-"""bench/gpu.sh runs unchanged on llvmpipe: one small frame, one timed run, the fast model, both presets."""
+"""bench/gpu.sh runs unchanged on llvmpipe: one small frame, one timed run, both shipped models, both
+presets; its table has GTAO's and SSAO's rows and each model's ratio to GTAO. The SSAO the host times is
+the project's SSAO: its output on a frame matches ``neuralao.runtime.baselines.run_ssao``."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
+from helpers import analytic_gbuffer
+
+from neuralao.runtime.baselines import run_ssao
+from neuralao.runtime.foundation.tolerances import TOL
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def test_gpu_bench_runs_small(tmp_path):
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory) -> tuple[str, dict, Path]:
+    """(stdout, gpu.json, build folder) of one small bench run."""
     if shutil.which("cc") is None and shutil.which("gcc") is None:
         pytest.skip("no C compiler (Debian: gcc)")
     if not Path("/usr/include/EGL/egl.h").exists():
         pytest.skip("no EGL/egl.h (Debian: libegl-dev)")
-    out = tmp_path / "gpu.json"
+    out = tmp_path_factory.mktemp("bench") / "gpu.json"
     env = os.environ | {
         "BENCH_GPU_SMALL": "1",
-        "MODELS": "unet-fast",
+        "MODELS": "unet-gtao unet-fast",
         "PRECISIONS": "fp32",
         "OUT": str(out),
     }
     r = subprocess.run(["bench/gpu.sh"], cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "| 128x96 | unet-fast | gpu | fp32 |" in r.stdout
-    result = json.loads(out.read_text())
+    return r.stdout, json.loads(out.read_text()), REPO / "build/bench-gpu"
+
+
+def test_gpu_bench_runs_small(bench):
+    stdout, result, _ = bench
+    for row in (
+        "| 128x96 | GTAO | - | fp32 |",
+        "| 128x96 | SSAO | - | fp32 |",
+        "| 128x96 | unet-fast | gpu | fp32 |",
+    ):
+        assert row in stdout, stdout
     assert {row["preset"] for row in result["rows"]} == {"gpu", "cpu"}
-    assert all(row["frame_ms"] > 0 for row in result["rows"])
+    assert {row["model"] for row in result["rows"]} == {"unet-gtao", "unet-fast"}
+    assert all(
+        row["path"] == "frame" and row["frame_ms"] > 0 and row["network_ms"] > 0 for row in result["rows"]
+    )
+    assert all(row["over_gtao"] and row["over_gtao"] > 0 for row in result["rows"])
+    assert result["gtao_ms"]["128x96"] > 0 and result["ssao_ms"]["128x96"] > 0
+    hybrid = [row for row in result["rows"] if row["model"] == "unet-gtao"]
+    # a hybrid's frame holds its GTAO steps and its network steps
+    assert all(row["frame_ms"] > row["network_ms"] for row in hybrid)
+
+
+def test_host_ssao_is_the_projects_ssao(bench, tmp_path):
+    """The SSAO entry bench/gpu.sh prepares, run by the host (NEURALAO_HOST_SSAO_OUT): the same fragment
+    shaders with the same kernel, noise, bias and blur as run_ssao, on the same driver."""
+    _, _, build = bench
+    frame = analytic_gbuffer(75, 53)
+    h, w = frame["depth"].shape
+    gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
+    gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
+    radius = 0.4
+    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius), repr(math.degrees(frame["yfov"]))]
+    export = build / "exports" / "unet-fast-gpu-fp32"
+    env = os.environ | {"NEURALAO_HOST_SSAO_OUT": str(tmp_path / "ssao.f32")}
+    r = subprocess.run(
+        [str(build / "neuralao_host"), str(export), *args, str(tmp_path / "ao.f32")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    ssao = np.fromfile(tmp_path / "ssao.f32", "<f4").reshape(h, w)
+    want = run_ssao(frame, radius)
+    assert float(np.abs(ssao - want).max()) <= TOL.glsl_op_fp32
+    assert float(want[frame["mask"]].min()) < 0.8  # occlusion somewhere: the comparison means something

@@ -1,20 +1,25 @@
 """HLSL and MSL of the compute passes: the names, registers and indices the manifest lists, and the HLSL
 executed.
 
-* HLSL: every pass of both shipped U-Nets, written by SPIRV-Cross from the GLSL (shader model 5.0, an
-  entry point named after each pass), is compiled back to Vulkan SPIR-V by glslang's HLSL front end and
-  run on Mesa lavapipe through wgpu's SPIR-V passthrough (``runtime/wgsl_runner.run_hlsl_all``), bound
-  by the manifest's registers with a weight buffer of its own per pass, against onnxruntime at three
-  frame sizes (two not multiples of 8) and three radii;
-* the HLSL declarations (type, name, register) are exactly the manifest's ``hlsl.resources`` (plus one
-  unused SamplerState per input), ``[numthreads]`` is the pass's ``local_size`` and the entry point is
-  the pass's name; the SPIR-V glslang makes of it names each resource at the binding its register maps
-  to (SPIRV-Cross's reflection): what Unity and Unreal bind by name, a D3D host by register;
-* MSL (no Metal compiler or runtime here, so this is all that is checked for it): the kernel's
-  signature, parsed, is exactly the manifest's ``msl.arguments`` (type, name, ``[[texture(k)]]`` /
-  ``[[buffer(k)]]``) plus the unused samplers and the thread position, the kernel is named after the
-  pass, no two arguments of a kind share an index, every listed argument is used in the body, and the
-  MSL declares ``gl_WorkGroupSize`` as the pass's ``threads_per_threadgroup``.
+* HLSL: every network pass of both shipped U-Nets, written by SPIRV-Cross from the GLSL (shader model
+  5.0, an entry point named after each pass), is compiled back to Vulkan SPIR-V by glslang's HLSL front
+  end and run on Mesa lavapipe through wgpu's SPIR-V passthrough (``runtime/wgsl_runner.run_hlsl_all``),
+  bound by the manifest's registers with a weight buffer of its own per pass, against onnxruntime at
+  three frame sizes (two not multiples of 8) and three radii; the whole frame's HLSL (frame passes and
+  network) runs in tests/test_frame_passes.py (``FrameRunner(..., via="hlsl")``);
+* every pass, the network's and the frame's (position, GTAO, blur, downsample, depth reduction, input
+  assembly, upsample, composite): the HLSL declarations (type, name, register) are exactly the
+  manifest's ``hlsl.resources`` (plus one unused SamplerState per input; a frame pass's
+  ``cbuffer FrameUniforms`` at ``b0`` with the listed members at their std140 offsets),
+  ``[numthreads]`` is the pass's ``local_size`` and the entry point is the pass's name; the SPIR-V
+  glslang makes of it names each resource at the binding its register maps to (SPIRV-Cross's
+  reflection): what Unity and Unreal bind by name, a D3D host by register;
+* MSL (no Metal compiler or runtime here, so this is all that is checked for it), every pass: the
+  kernel's signature, parsed, is exactly the manifest's ``msl.arguments`` (type, name,
+  ``[[texture(k)]]`` / ``[[buffer(k)]]``) plus the unused samplers and the thread position, the kernel
+  is named after the pass, no two arguments of a kind share an index, every listed argument is used in
+  the body, the MSL declares ``gl_WorkGroupSize`` as the pass's ``threads_per_threadgroup``, and a frame
+  pass's ``struct FrameUniforms`` has the manifest's members in order.
 """
 
 from __future__ import annotations
@@ -28,10 +33,12 @@ import numpy as np
 import onnx
 import pytest
 
-from neuralao.export.glsl import compile_hlsl, generate_compute, write_compute_export
+from neuralao.export.glsl import compile_hlsl, write_compute_export
 from neuralao.export.glsl.cross import hlsl_spirv_binding
+from neuralao.export.glsl.frame import UNIFORM_MEMBERS, shader_entries
 from neuralao.export.onnx_io import run_onnxruntime
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame_runner import frame_program
 from neuralao.runtime.shipped import shipped_models
 
 pytestmark = pytest.mark.skipif(
@@ -46,10 +53,11 @@ RADII = (0.05, 0.2, 0.8)  # rho of the radius input: the network's radius channe
 
 @pytest.fixture(scope="module", params=MODELS)
 def cross_export(request, tmp_path_factory):
-    """(model name, export folder, manifest) of a shipped U-Net's GLSL passes with their HLSL and MSL.
-    Written unvalidated: the tests below compile every HLSL pass themselves."""
+    """(model name, export folder, manifest) of a shipped U-Net's GLSL passes, the network's and the
+    frame's, with their HLSL and MSL. Written unvalidated: the tests below compile every HLSL pass
+    themselves."""
     model = request.param
-    program = generate_compute(onnx.load(shipped_models()[model] / "model.onnx"))
+    program = frame_program(onnx.load(shipped_models()[model] / "model.onnx"))
     out = tmp_path_factory.mktemp(model)
     manifest = json.loads(write_compute_export(program, out, validate=False, cross=True).read_text())
     return model, out, manifest
@@ -107,9 +115,11 @@ def test_hlsl_runs_on_lavapipe_vs_onnxruntime(cross_export):
             assert err <= TOL.parity_unet_fp32, f"{model} {w}x{h} rho {rho}: max abs err {err:.3g}"
 
 
-# HLSL resource declarations as SPIRV-Cross writes them: "TYPE NAME : register(REG);" or "uniform T N;"
+# HLSL resource declarations as SPIRV-Cross writes them: "TYPE NAME : register(REG);", "uniform T N;" or
+# "cbuffer NAME : register(REG)" (its members on the lines after)
 _HLSL_DECL = re.compile(
-    r"^(?:(?P<type>\S+) (?P<name>\w+) : register\((?P<reg>\w+)\)|uniform (?P<utype>\w+) (?P<uname>\w+));$"
+    r"^(?:(?P<type>\S+) (?P<name>\w+) : register\((?P<reg>\w+)\)|uniform (?P<utype>\w+) (?P<uname>\w+))"
+    r"(?(type);?|;)$"
 )
 
 
@@ -124,9 +134,23 @@ def _hlsl_declarations(source: str) -> list[dict]:
     return decls
 
 
+# A cbuffer member as SPIRV-Cross writes it: "    TYPE NAME : packoffset(cN[.xyzw]);"
+_HLSL_MEMBER = re.compile(r"^    (\w+) (\w+) : packoffset\(c(\d+)(?:\.([xyzw]))?\);$", re.M)
+
+
+def _cbuffer_members(source: str, name: str) -> list[dict]:
+    """The members of ``cbuffer <name>``: [{"name", "type", "offset" (bytes)}] in order."""
+    body = source[source.index(f"cbuffer {name} :") :].split("};", 1)[0]
+    return [
+        {"name": m[2], "type": m[1], "offset": 16 * int(m[3]) + 4 * "xyzw".index(m[4] or "x")}
+        for m in _HLSL_MEMBER.finditer(body)
+    ]
+
+
 def test_hlsl_declares_the_manifest_resources_and_entry(cross_export):
     _, out, manifest = cross_export
-    for p in manifest["passes"]:
+    assert {p["name"] for p in manifest["frame"]["passes"]} <= {p["name"] for p in shader_entries(manifest)}
+    for p in shader_entries(manifest):
         hlsl = p["hlsl"]
         source = (out / hlsl["file"]).read_text()
         want = [{k: r[k] for k in ("name", "type", "register")} for r in hlsl["resources"]]
@@ -140,8 +164,17 @@ def test_hlsl_declares_the_manifest_resources_and_entry(cross_export):
         assert hlsl["entry"] == p["name"] and hlsl["numthreads"] == p["local_size"]
         lx, ly, lz = p["local_size"]
         assert f"[numthreads({lx}, {ly}, {lz})]\nvoid {p['name']}(SPIRV_Cross_Input stage_input)" in source
-        assert "_60" not in source and "_76" not in source  # no generated resource names
+        assert not re.search(r"\b_\d+_\w+ :", source)  # no generated resource or member names
         assert manifest["files"][hlsl["file"]]
+        if "uniform_block" in p:  # a frame pass: FrameUniforms at b0, the members at their std140 offsets
+            (cb,) = [r for r in hlsl["resources"] if r["type"] == "cbuffer"]
+            assert cb["name"] == "FrameUniforms" and cb["register"] == "b0" and cb["bytes"] == 32
+            assert _cbuffer_members(source, "FrameUniforms") == cb["members"], p["name"]
+            assert [(m["name"], m["offset"]) for m in cb["members"]] == [
+                (f"frame_{name}", offset) for name, _, offset, _ in UNIFORM_MEMBERS
+            ]
+            (dst,) = [r for r in hlsl["resources"] if r["name"] == "dst"]
+            assert dst["register"] == "u0"
         if "params" in p:  # the pass's own buffer: its weights.bin range, read from byte 0
             (prm,) = [r for r in hlsl["resources"] if r["type"] == "ByteAddressBuffer"]
             assert prm["weights"] == {
@@ -153,19 +186,19 @@ def test_hlsl_declares_the_manifest_resources_and_entry(cross_export):
 
 
 _REFLECT_KINDS = {
-    "separate_images": "Texture2DArray<float4>",
-    "images": "RWTexture2DArray<float4>",
+    "separate_images": "Texture2DArray",
+    "images": "RWTexture2DArray",
     "ssbos": "ByteAddressBuffer",
 }
 
 
 def test_hlsl_spirv_binds_each_name_at_its_register(cross_export, tmp_path):
     """glslang's SPIR-V of each HLSL pass (what the run above executes) has exactly the manifest's
-    resources, by name and type, each at the binding its register maps to; the uniform is the one member
-    of $Globals, at offset 0."""
+    resources, by name and type, each at the binding its register maps to; a network pass's uniform is
+    the one member of $Globals, at offset 0; a frame pass's FrameUniforms has the listed members."""
     _, out, manifest = cross_export
     spv = tmp_path / "pass.spv"
-    for p in manifest["passes"]:
+    for p in shader_entries(manifest):
         hlsl = p["hlsl"]
         spv.write_bytes(compile_hlsl((out / hlsl["file"]).read_text(), hlsl["entry"]))
         r = subprocess.run(["spirv-cross", str(spv), "--reflect"], capture_output=True, text=True, timeout=60)
@@ -178,18 +211,22 @@ def test_hlsl_spirv_binds_each_name_at_its_register(cross_export, tmp_path):
             for res in refl.get(key, [])
         )
         want = sorted(
-            (res["name"], res["type"], 0, hlsl_spirv_binding(res["register"]))
+            (res["name"], res["type"].split("<")[0], 0, hlsl_spirv_binding(res["register"]))
             for res in hlsl["resources"]
-            if "cbuffer" not in res
+            if "cbuffer" not in res and "uniform_block" not in res
         )
         assert got == want, p["name"]
-        uniforms = [res for res in hlsl["resources"] if "cbuffer" in res]
+        uniforms = [res for res in hlsl["resources"] if "cbuffer" in res or "uniform_block" in res]
         ubos = refl.get("ubos", [])
         assert len(ubos) == len(uniforms) <= 1, p["name"]
         for ubo, res in zip(ubos, uniforms, strict=True):
-            assert ubo["name"] == "$Global" and ubo["binding"] == hlsl_spirv_binding(res["register"])
-            members = refl["types"][ubo["type"]]["members"]
-            assert [(m["name"], m["offset"]) for m in members] == [(res["name"], res["offset"])]
+            assert ubo["binding"] == hlsl_spirv_binding(res["register"]), p["name"]
+            members = [(m["name"], m["offset"]) for m in refl["types"][ubo["type"]]["members"]]
+            if "uniform_block" in res:
+                assert ubo["name"] == "FrameUniforms"
+                assert members == [(m["name"], m["offset"]) for m in res["members"]]
+            else:
+                assert ubo["name"] == "$Global" and members == [(res["name"], res["offset"])]
 
 
 def _msl_signature(source: str, kernel: str) -> list[dict]:
@@ -206,7 +243,7 @@ def _msl_signature(source: str, kernel: str) -> list[dict]:
 
 def test_msl_kernel_is_the_manifest_arguments(cross_export):
     _, out, manifest = cross_export
-    for p in manifest["passes"]:
+    for p in shader_entries(manifest):
         msl = p["msl"]
         source = (out / msl["file"]).read_text()
         assert msl["kernel"] == p["name"] and msl["threads_per_threadgroup"] == p["local_size"]
@@ -226,5 +263,9 @@ def test_msl_kernel_is_the_manifest_arguments(cross_export):
         for a in msl["arguments"]:
             assert re.search(rf"\b{a['name']}\b", body), (p["name"], a["name"])
         lx, ly, lz = p["local_size"]
-        assert f"gl_WorkGroupSize [[maybe_unused]] = uint3({lx}u, {ly}u, {lz}u);" in source
+        if (lx, ly, lz) != (1, 1, 1):  # SPIRV-Cross leaves the constant out of a one-thread group
+            assert f"gl_WorkGroupSize [[maybe_unused]] = uint3({lx}u, {ly}u, {lz}u);" in source
         assert "main0" not in source and "v_60" not in source
+        if "uniform_block" in p:  # the struct an engine fills: the GLSL block's members, in order
+            struct = source[source.index("struct FrameUniforms\n{") :].split("};", 1)[0]
+            assert re.findall(r"^    \w+ (\w+);$", struct, re.M) == [m[0] for m in UNIFORM_MEMBERS]

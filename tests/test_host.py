@@ -1,9 +1,13 @@
-"""The standalone C host (runtime/host/neuralao_host.c, `make host`) on a real rendered frame against the
-Python runner (neuralao.export.unet's run_padded + glsl_runner path) and onnxruntime.
+"""The standalone C host (runtime/host/neuralao_host.c, `make host`) against the Python runners.
 
-The host reads the shipped default export and a raw float32 G-buffer (H x W x (depth, nx, ny, nz,
-mask), row 0 on top), does the engine's steps (mean depth, input texture, radius uniform, passes,
-crop) and writes AO (H x W float32, 1 on background).
+The host reads an export and a raw float32 G-buffer (H x W x (depth, nx, ny, nz, mask), row 0 on top)
+and writes AO (H x W float32, 1 on background):
+
+* an export with a frame section (the shipped ones): the whole frame on the GPU in the order of
+  ``frame.steps``, against ``neuralao.runtime.frame_runner``'s FrameRunner on the same files;
+* an export without one: the network's passes with the engine's steps on the CPU around them (mean
+  depth, input texture, radius uniform), against the glsl_runner path and onnxruntime, and a hybrid's
+  fragment passes at its internal resolution against ``neuralao.runtime.predict``.
 """
 
 from __future__ import annotations
@@ -16,12 +20,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import analytic_gbuffer
 
+from neuralao.export.glsl import load_compute_export
 from neuralao.export.onnx_io import run_onnxruntime
 from neuralao.export.unet import glsl_runner, render_parity_frames
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame_runner import FrameRunner
 from neuralao.runtime.predict import composite, radius_array, run_padded
-from neuralao.runtime.shipped import pure_unet_export
+from neuralao.runtime.shipped import pure_unet_export, shipped_models
 from neuralao.runtime.unet_input import pad_to_multiple, preprocess, radius_param
 
 REPO = Path(__file__).resolve().parents[1]
@@ -39,16 +46,55 @@ def _build_host() -> Path:
     return REPO / "build/host/neuralao_host"
 
 
+def _drop_frame_section(export: Path) -> None:
+    """The export as one written before frame passes existed: the host takes its older path."""
+    path = export / "glsl" / "manifest.json"
+    glsl = json.loads(path.read_text())
+    glsl.pop("frame")
+    path.write_text(json.dumps(glsl))
+
+
+FRAME_SIZE = (75, 53)  # neither side a multiple of 8; the network at 362 x 256, point-sampled up
+FRAME_RADII = (0.15, 1.0)
+
+
+@pytest.mark.parametrize("name", ["unet-gtao", "unet-fast"])
+def test_c_host_runs_the_frame_steps_as_the_python_runner(name, tmp_path):
+    """A shipped model's whole frame from its frame section (position, GTAO, point sampling, the mean depth,
+    the network's input and radius, the network, upsampling with the hybrid's correction) in the C host
+    against FrameRunner on the same files (same shaders, same driver: measured identical on llvmpipe) and
+    against the reference ``neuralao infer`` runs (GTAO in fragment shaders, numpy resampling,
+    onnxruntime; measured <= 1.2e-6), at two radii."""
+    from neuralao.runtime.predict import unet_predictor
+
+    host = _build_host()
+    export = shipped_models()[name]
+    frame = analytic_gbuffer(*FRAME_SIZE)
+    reference = unet_predictor(export / "model.onnx")
+    errors, aos = [], []
+    with FrameRunner(load_compute_export(export / "glsl"), *FRAME_SIZE) as runner:
+        for radius in FRAME_RADII:
+            ao = _run_host(host, export, frame, radius, tmp_path)
+            errors.append(float(np.abs(ao - runner.run(frame, radius)).max()))
+            errors.append(float(np.abs(ao - reference(frame, radius)).max()))
+            assert np.all(ao[~frame["mask"]] == 1.0) and frame["mask"].any()
+            aos.append(ao)
+    assert max(errors) <= TOL.frame_passes_vs_reference, (name, errors)
+    # the test can fail: the radius moves the AO far more than the tolerance
+    assert float(np.abs(aos[0] - aos[1]).max()) > 100 * TOL.frame_passes_vs_reference
+
+
 def test_c_host_matches_python_runner(tmp_path):
     host = _build_host()
     # the network's own pass chain at the frame's size: a copy of the pure shipped export without its
-    # internal-resolution passes (those are checked by the hybrid test below)
+    # frame section and internal-resolution passes (those are checked by the tests below)
     export = tmp_path / "export"
     shutil.copytree(pure_unet_export(), export)
     manifest = json.loads((export / "manifest.json").read_text())
     manifest.pop("internal_resolution", None)
     manifest.pop("internal_height", None)
     (export / "manifest.json").write_text(json.dumps(manifest))
+    _drop_frame_section(export)
     frame = render_parity_frames((61, 45))[0]  # odd size: the pad pass pads to 64 x 48, the crop pass crops
     h, w = frame["depth"].shape
     gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
@@ -110,9 +156,12 @@ def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Pa
     return np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
 
 
-def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(tmp_path):
+@pytest.mark.parametrize("route", ["frame", "fragment"])
+def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, tmp_path):
     """GTAO pass, point sampling, the network at the internal size, upsampling of its correction and
-    clamp(GTAO + correction): the C host from the export's files alone against neuralao.runtime.predict's
+    clamp(GTAO + correction), by the export's frame section (compute passes, ``frame``) or, without one,
+    by its internal-resolution fragment passes with the CPU between them (``fragment``): the C host from
+    the export's files alone against neuralao.runtime.predict's
     reference (onnxruntime network, float64 numpy upsampler). The two differ by the generated GLSL vs
     onnxruntime (TOL.parity_unet_fp32; the correction passes through the upsampler's convex weights, so
     it does not grow) plus the GLSL vs numpy upsampler (TOL.upsample_glsl_vs_numpy); GTAO is the same
@@ -127,6 +176,8 @@ def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(tmp_path):
     frame = render_parity_frames((96, 64))[0]
     radius, internal = 0.3, 40  # the network runs at 60 x 40
     write_internal_export(_hybrid(), tmp_path / "export", internal)
+    if route == "fragment":
+        _drop_frame_section(tmp_path / "export")
     ao = _run_host(host, tmp_path / "export", frame, radius, tmp_path)
     ref = unet_predictor(tmp_path / "export" / "model.onnx", "model")(frame, radius)
     tol = TOL.parity_unet_fp32 + TOL.upsample_glsl_vs_numpy

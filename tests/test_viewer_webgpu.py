@@ -1,58 +1,71 @@
-"""`neuralao view --screen-space` in headless Chromium with WebGPU (Dawn on SwiftShader): the page's own
-camera-space G-buffer against the project's rasterizer, and the AO its WebGPU path computed from that
-G-buffer against runtime's onnxruntime predictor on the same (read-back) G-buffer.
+"""`neuralao view --screen-space` in headless Chromium with WebGPU (Dawn, its Tint compiler, SwiftShader):
+the shipped U-Nets' whole frame run by the page from the export's ``wgsl/`` folder alone, following the
+manifest's ``frame.steps`` (runtime/viewer/wgsl.js ``runFrame``).
 
-The page is written from Python (not the CLI) so the test can ask for one texel per conv invocation
-(conv_block (1, 1, 1)): SwiftShader compiles the default blocked conv shaders far too slowly (see
-tests/test_wgsl_browser.py). The model runs at its declared internal height (point-sampled up from the
-small canvas, AO upsampled by the joint bilateral filter), exactly as ``unet_predictor`` does.
+* the page's own camera-space G-buffer against the project's rasterizer (pipeline/gbuffers/rasterizer.py);
+* the AO the page computed in WebGPU from that G-buffer (depth and normal uploaded, FrameUniforms from its
+  camera, u_flip_y = 0) against the references on the same (read-back) G-buffer: what ``neuralao infer``
+  computes (``unet_predictor``: GTAO in GL fragment shaders, numpy point sampling and upsampling,
+  onnxruntime) and the same WGSL run by runtime/frame_runner.py through wgpu (naga, lavapipe), for the
+  default hybrid (GTAO refined by the network) and the pure unet-fast;
+* the command writes the default (a hybrid) without refusing it; without WebGPU the page says so.
+
+The frame is 64 x 48 pixels and the network runs at the shipped internal height (256 rows: 341 x 256,
+point-sampled up from the frame, its AO upsampled back), exactly as shipped: the page gets the export's
+files unchanged.
 """
 
 from __future__ import annotations
 
 import base64
-import json
 import math
 import time
 
 import numpy as np
-import onnx
 import pytest
 from helpers import needs_chromium
 
+from neuralao.export.glsl import ComputeProgram
 from neuralao.pipeline import cli
 from neuralao.pipeline.bakes.viewer_inputs import method_from_unet, screen_space_mesh
+from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.predict import unet_predictor
-from neuralao.runtime.shipped import pure_unet_export
+from neuralao.runtime.shipped import default_export
 from neuralao.runtime.viewer import write_page
 
 pytestmark = needs_chromium
-W, H = 48, 40
+W, H = 64, 48
+MODELS = ("unet-gtao", "unet-fast")  # the page's methods, in this order; the first is the default
 POSE = (30.0, 20.0, 0.9)  # azimuth, elevation (degrees), distance (diagonals), as the page's setPose
 # Page G-buffer vs pipeline/gbuffers/rasterizer.py (llvmpipe): both snap vertices to their own sub-pixel
-# grid, so at 48 x 40 a pixel samples the surface up to a fraction of a pixel apart and depth differs by
-# that fraction of its per-pixel change (measured: median 1.7e-4 relative, the ratio to the per-pixel
-# change <= 0.094 px, p99 0.032 px). Held to SNAP_PX pixels of the reference's depth gradient plus
-# TOL.gbuffer_depth_rel; a wrong depth convention (clip depth, distance, a scale) is O(1) pixels.
+# grid, so at this size a pixel samples the surface up to a fraction of a pixel apart and depth differs by
+# that fraction of its per-pixel change (measured at 48 x 40: median 1.7e-4 relative, the ratio to the
+# per-pixel change <= 0.094 px, p99 0.032 px). Held to SNAP_PX pixels of the reference's depth gradient
+# plus TOL.gbuffer_depth_rel; a wrong depth convention (clip depth, distance, a scale) is O(1) pixels.
 SNAP_PX = 0.125
+# A hybrid's frame on SwiftShader: GTAO taps that land on the neighbouring pixel (TOL.frame_passes_browser)
+# move their texel, its 4 x 4 blur window and the network's input there; share of foreground pixels above
+# TOL.frame_passes_vs_reference, measured 1.6%. A wrong tap, row order or radius moves most of them.
+FLIPPED_SHARE = 0.05
 
 
 @pytest.fixture(scope="module")
 def page(tmp_path_factory):
+    """(page folder, {model: ViewerMethod}) of a page with both shipped U-Nets, from their wgsl/ folders."""
     root = tmp_path_factory.mktemp("viewer_webgpu")
     pos, nrm = screen_space_mesh([], "spot")
-    method = method_from_unet(None, pos, nrm, conv_block=(1, 1, 1))
-    write_page([method], root / "page", (W, H))
-    return root, method
+    methods = {name: method_from_unet(name, pos, nrm) for name in MODELS}
+    write_page(list(methods.values()), root / "page", (W, H))
+    return root / "page", methods
 
 
 @pytest.fixture(scope="module")
 def browser(page):
     flags = ("--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--enable-unsafe-webgpu")
     with headless_chromium(*flags, "--window-size=400,300") as driver:
-        driver.get((page[0] / "page" / "index.html").as_uri())  # file:// is a secure context
+        driver.get((page[0] / "index.html").as_uri())  # file:// is a secure context
         if not driver.execute_script("return !!navigator.gpu"):
             pytest.skip("this Chromium exposes no WebGPU")
         state = wait_for_page(driver)
@@ -60,17 +73,19 @@ def browser(page):
         yield driver
 
 
-def _capture_network(driver) -> dict:
-    """The page's U-Net run at POSE: G-buffer and AO, row 0 at the top."""
+def _capture_network(driver, method: int) -> dict:
+    """The page's frame run of method ``method`` at POSE: G-buffer and AO, row 0 at the top."""
     driver.execute_script(
-        "window.__nao = null; neuralao.setPose(...arguments[0]); neuralao.captureNetwork().then("
+        "window.__nao = null; neuralao.setMethod(arguments[1]); neuralao.setPose(...arguments[0]);"
+        "neuralao.captureNetwork().then("
         "r => { window.__nao = r; }, e => { window.__nao = { error: String(e) }; });",
         list(POSE),
+        method,
     )
     deadline = time.monotonic() + 300
     while (r := driver.execute_script("return window.__nao")) is None:
-        assert time.monotonic() < deadline, "the page's U-Net did not finish within 300 s"
-        time.sleep(0.2)
+        assert time.monotonic() < deadline, "the page's frame did not finish within 300 s"
+        time.sleep(0.1)
     assert "error" not in r, r["error"]
     h, w = r["height"], r["width"]
     img = {
@@ -79,6 +94,19 @@ def _capture_network(driver) -> dict:
     }
     img["ao"] = np.frombuffer(base64.b64decode(r["ao"]), np.float32).reshape(h, w)[::-1]
     return r | img
+
+
+def _read_network_texture(driver, ident: str) -> np.ndarray:
+    """Texture ``ident`` of the page's latest frame: float32 (layers * h * w * lanes,), top row first."""
+    driver.execute_script(
+        "window.__nao = null; neuralao.readNetworkTexture(arguments[0]).then("
+        "r => { window.__nao = { out: r }; }, e => { window.__nao = { error: String(e) }; });",
+        ident,
+    )
+    while (r := driver.execute_script("return window.__nao")) is None:
+        time.sleep(0.05)
+    assert "error" not in r, r["error"]
+    return np.frombuffer(base64.b64decode(r["out"]), np.float32)
 
 
 def _reference_gbuffer(pos: np.ndarray) -> dict:
@@ -100,15 +128,38 @@ def _reference_gbuffer(pos: np.ndarray) -> dict:
     return render_gbuffer(load_scene("spot"), camera)
 
 
-def test_webgpu_unet_matches_onnxruntime_on_the_page_gbuffer(browser, page):
-    _, method = page
-    r = _capture_network(browser)
+def _frame(r: dict) -> dict:
+    """The G-buffer frame the page's run read (what its depth and normal textures held)."""
+    mask = r["position"][..., 3] > 0.5
+    return {
+        "depth": np.where(mask, -r["position"][..., 2], 0.0).astype(np.float32),
+        "normal_cam": np.where(mask[..., None], r["normal"][..., :3], 0.0).astype(np.float32),
+        "mask": mask,
+        "yfov": r["yfov"],
+    }
+
+
+def _wgpu_frame(method, frame: dict, radius: float) -> np.ndarray | None:
+    """The same WGSL through runtime/frame_runner.py on wgpu (naga, lavapipe); None without an adapter."""
+    wgpu = pytest.importorskip("wgpu", reason="the wgpu package is not installed (pyproject pins it)")
+    try:
+        if wgpu.gpu.request_adapter_sync() is None:
+            return None
+    except RuntimeError:
+        return None
+    from neuralao.runtime.frame_runner import run_frame
+
+    n = method.network
+    program = ComputeProgram(n["sources"], base64.b64decode(n["weights"]), n["manifest"])
+    return run_frame(program, frame, radius)
+
+
+def test_the_page_gbuffer_matches_the_rasterizer(browser, page):
+    r = _capture_network(browser, 0)
     mask = r["position"][..., 3] > 0.5
     assert mask.mean() > 0.15  # the mesh fills much of the frame
     assert np.all(r["position"][~mask] == 0) and np.all(r["normal"][~mask] == 0)
-
-    # the G-buffer itself, against the rasterizer the U-Net's training frames come from
-    ref = _reference_gbuffer(method.positions)
+    ref = _reference_gbuffer(page[1][MODELS[0]].positions)
     depth = np.where(mask, -r["position"][..., 2], 0.0)
     assert np.mean(mask != ref["mask"]) <= TOL.gbuffer_id_mismatch_frac
     both = mask & ref["mask"]
@@ -120,56 +171,53 @@ def test_webgpu_unet_matches_onnxruntime_on_the_page_gbuffer(browser, page):
     assert np.mean(outside) <= TOL.gbuffer_id_mismatch_frac, np.quantile(rel / slope, 0.99)
     assert np.mean(cos < TOL.gbuffer_normal_cos) <= TOL.gbuffer_id_mismatch_frac, np.quantile(cos, 0.01)
 
-    # the AO, against onnxruntime on the same G-buffer (internal height, upsampling and all)
-    frame = {
-        "depth": depth.astype(np.float32),
-        "normal_cam": np.where(mask[..., None], r["normal"][..., :3], 0.0).astype(np.float32),
-        "mask": mask,
-        "yfov": math.radians(45.0),
-    }
-    onnx_path = method.info["onnx"]
-    expected = unet_predictor(onnx_path)(frame, r["radius"])
-    err = np.abs(r["ao"] - expected)
+
+@pytest.mark.parametrize("index", range(len(MODELS)), ids=MODELS)
+def test_the_page_runs_the_whole_frame_as_the_references(browser, page, index):
+    name = MODELS[index]
+    method = page[1][name]
+    hybrid = method.network["manifest"]["frame"]["hybrid"]
+    r = _capture_network(browser, index)
+    assert r["model"] == name and r["internal"] == [341, 256]  # round(64 * 256 / 48) x the shipped 256
+    frame = _frame(r)
+    references = {"unet_predictor": unet_predictor(method.info["onnx"])(frame, r["radius"])}
+    if hybrid:  # GTAO itself, against the GL fragment shaders
+        gtao = _read_network_texture(browser, "gtao").reshape(H, W)
+        references["run_gtao"] = run_gtao(frame, r["radius"])
+    wgpu_ao = _wgpu_frame(method, frame, r["radius"])
+    if wgpu_ao is not None:
+        references["wgpu"] = wgpu_ao
+    report = []
+    for what, expected in references.items():
+        got = gtao if what == "run_gtao" else r["ao"]
+        err = np.abs(got - expected)[frame["mask"]]
+        over = np.mean(err > TOL.frame_passes_vs_reference)
+        report.append(f"{what} max {err.max():.2e} ({over:.2%} of the foreground > 1e-4)")
+        if hybrid:  # SwiftShader's cos / sin move a few GTAO taps (TOL.frame_passes_browser)
+            assert float(err.max()) <= TOL.frame_passes_browser, what
+            assert over <= FLIPPED_SHARE, what
+        else:
+            assert float(err.max()) <= TOL.frame_passes_vs_reference, what
     print(
-        f"\nWebGPU U-Net ({r['model']}, internal {r['internal']}, {r['ms']:.0f} ms, "
-        f"adapter {r['adapter']!r}) "
-        f"vs onnxruntime: max {err.max():.2e} mean {err.mean():.2e}; G-buffer depth rel p99 "
-        f"{np.quantile(rel, 0.99):.2e}, normal cos p1 {np.quantile(cos, 0.01):.7f}, "
-        f"mask mismatch {np.mean(mask != ref['mask']):.4f}"
+        f"\nWebGPU frame of {name} in Chromium (adapter {r['adapter']!r}, {W}x{H}, network "
+        f"{r['internal']}, {r['ms']:.0f} ms) vs " + "; ".join(report)
     )
-    assert np.all(r["ao"][~mask] == 1.0)
-    assert np.ptp(expected[mask]) > 0.05  # a non-trivial AO over the view
-    assert float(err.max()) <= TOL.parity_unet_fp32
+    assert np.all(r["ao"][~frame["mask"]] == 1.0)
+    assert np.ptp(references["unet_predictor"][frame["mask"]]) > 0.05  # a non-trivial AO over the view
 
 
-def test_the_viewer_runs_a_pure_shipped_unet():
-    from neuralao.runtime.predict import is_hybrid
-
-    folder = pure_unet_export()
-    assert not is_hybrid({p.key: p.value for p in onnx.load(folder / "model.onnx").metadata_props})
-
-
-def test_a_hybrid_is_a_one_line_error_naming_a_pure_model(tmp_path, capsys):
-    folder = pure_unet_export()
-    hybrid = tmp_path / "hybrid"
-    hybrid.mkdir()
-    model = onnx.load(folder / "model.onnx")
-    for p in model.metadata_props:
-        if p.key == "input_channels":
-            p.value += ",gtao"
-    onnx.save(model, hybrid / "model.onnx")
-    (hybrid / "manifest.json").write_text(json.dumps({"kind": "unet", "onnx": "model.onnx"}))
+def test_the_command_writes_the_default_hybrid(tmp_path):
     out = tmp_path / "out"
-    assert cli.main(["view", "--mesh", "spot", "--screen-space", str(hybrid), "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "hybrid" in err and folder.name in err and "\n" not in err
-    assert not out.exists()
+    assert cli.main(["view", "--mesh", "spot", "--screen-space", "--out", str(out)]) == 0
+    scene = (out / "scene.js").read_text()
+    assert f'"model": "{default_export("unet").name}"' in scene and '"hybrid": true' in scene
+    assert '"frame_pass": "f_gtao"' in scene
 
 
 def test_without_webgpu_the_page_says_so_and_still_draws(page):
     """Chromium without --enable-unsafe-webgpu (WebGL2 on SwiftShader only): a visible note, no error."""
     with headless_chromium(*SWIFTSHADER_WEBGL) as driver:
-        driver.get((page[0] / "page" / "index.html").as_uri())
+        driver.get((page[0] / "index.html").as_uri())
         deadline = time.monotonic() + 60
         note = ""
         while "WebGPU" not in note and time.monotonic() < deadline:

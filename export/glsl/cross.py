@@ -15,14 +15,20 @@ one source; nothing here writes shader text of its own.
 Names are stable: each pass's entry point is the pass's name (``p02_conv``) in both languages; input i is
 ``src<i>``, the output ``dst``, the parameter buffer ``params`` (glslang leaves the GLSL's block instance
 unnamed, so its OpName is set before SPIRV-Cross reads the module, which would call it ``_<id>``), a
-pass's uniform keeps its GLSL name (``u_flip_y``, ``u_radius``).
+network pass's uniform keeps its GLSL name (``u_flip_y``, ``u_radius``). A frame pass's uniform block is
+``cbuffer FrameUniforms`` in HLSL, its members ``frame_u_proj``, ``frame_u_radius``,
+``frame_u_pixels_per_unit``, ``frame_u_flip_y`` (the instance is named ``frame``), and the argument
+``constant FrameUniforms& frame`` in MSL (members as in GLSL).
 
-HLSL registers follow the GLSL bindings: input i ``t<i>`` (plus an unused ``SamplerState s<i>``: the
-passes only ``Load``), the output ``u0``, the params ``ByteAddressBuffer`` ``t16`` (shifted past the
-inputs so the two never share a register), the uniform a member of ``$Globals`` (the compiler's ``b0``).
-MSL: the output ``texture(0)``, input i ``texture(i + 1)`` (its unused sampler ``sampler(i + 1)``), the
-uniform ``buffer(0)``, the params ``buffer(1)`` (``--msl-decoration-binding``: the SPIR-V bindings,
-shifted, are the indices; none is left to SPIRV-Cross's order).
+HLSL registers: input i ``t<i>`` (plus an unused ``SamplerState s<i>``: the passes only ``Load``), the
+output ``u0``, the params ``ByteAddressBuffer`` ``t16`` (shifted past the inputs so the two never share a
+register), a network pass's uniform a member of ``$Globals`` (the compiler's ``b0``), a frame pass's
+``FrameUniforms`` ``b0``. MSL: the output ``texture(0)``, input i ``texture(i + 1)`` (its unused sampler
+``sampler(i + 1)``), the uniform or ``FrameUniforms`` ``buffer(0)``, the params ``buffer(1)``
+(``--msl-decoration-binding``: the SPIR-V bindings, shifted, are the indices; none is left to
+SPIRV-Cross's order). The frame passes' GLSL numbers its bindings in one sequence (inputs, output, block:
+Vulkan's and WebGPU's single namespace), so the output and the block are moved to binding 0 in the SPIR-V
+SPIRV-Cross reads (:data:`FIXED_BINDINGS`): the same registers and indices in every pass.
 
 The params buffer of a pass is a buffer of its own: its range of ``weights.bin`` (``params.offset``,
 ``params.bytes``), which the HLSL and MSL read from byte 0. Unity and Unreal bind whole buffers, so
@@ -37,6 +43,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+from neuralao.export.glsl.frame import UNIFORM_BLOCK_BYTES, UNIFORM_MEMBERS
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # SSBO bindings move by this many, so the params buffer (GLSL binding 0) never shares an HLSL t register
@@ -49,7 +56,13 @@ MSL_VERSION = "20100"
 MSL_TEXTURE_SHIFT = 1
 MSL_BUFFER_SHIFT = 1
 # GLSL block types whose instance is anonymous -> the name the instance gets in HLSL / MSL.
-BLOCK_INSTANCE_NAMES = {"Params": "params"}
+BLOCK_INSTANCE_NAMES = {"Params": "params", "FrameUniforms": "frame"}
+# Variables (by name, after BLOCK_INSTANCE_NAMES) given a fixed binding in the SPIR-V SPIRV-Cross reads:
+# the output and the frame passes' uniform block, whatever binding the pass's GLSL gives them.
+FIXED_BINDINGS = {"dst": 0, "frame": 0}
+# A frame pass's uniform block in HLSL / MSL: the GLSL block name, its instance, its std140 bytes.
+FRAME_BLOCK, FRAME_INSTANCE, FRAME_BLOCK_BYTES = "FrameUniforms", "frame", UNIFORM_BLOCK_BYTES
+_HLSL_TYPES = {"vec2": "float2", "float": "float", "int": "int"}
 # glslang's HLSL front end (the HLSL compiled back to Vulkan SPIR-V): each register class in its own
 # binding range, textures and SRV buffers at their register numbers, $Globals auto-mapped into 64..
 HLSL_BINDING_SHIFTS = {"uav": 32, "sampler": 48, "cbuffer": 64}
@@ -60,7 +73,7 @@ HLSL_SPIRV_COMMAND = "glslangValidator -D -V -S comp -e <entry> --hlsl-iomap --a
 SPIRV_TARGET_ENV = "vulkan1.0"
 SPIRV_COMMAND = f"glslangValidator -V --target-env {SPIRV_TARGET_ENV}"
 
-_OP_NAME, _OP_TYPE_POINTER, _OP_VARIABLE = 5, 32, 59
+_OP_NAME, _OP_TYPE_POINTER, _OP_VARIABLE, _OP_DECORATE, _DECORATION_BINDING = 5, 32, 59, 71, 33
 
 
 def spirv_cross_available() -> bool:
@@ -114,13 +127,33 @@ def name_block_instances(spv: bytes, names: dict[str, str] = BLOCK_INSTANCE_NAME
     return struct.pack(f"<{len(flat)}I", *flat)
 
 
+def set_bindings(spv: bytes, bindings: dict[str, int] = FIXED_BINDINGS) -> bytes:
+    """SPIR-V ``spv`` with the Binding decoration of each variable named in ``bindings`` (by its OpName)
+    set to the binding given; names the module does not have are skipped."""
+    words = list(struct.unpack(f"<{len(spv) // 4}I", spv))
+    ids, i = {}, 5
+    while i < len(words):
+        count = words[i] >> 16
+        if words[i] & 0xFFFF == _OP_NAME and _spirv_string(words[i + 2 : i + count]) in bindings:
+            ids[words[i + 1]] = bindings[_spirv_string(words[i + 2 : i + count])]
+        i += count
+    i = 5
+    while i < len(words):
+        count = words[i] >> 16
+        op = words[i : i + count]
+        if op[0] & 0xFFFF == _OP_DECORATE and count == 4 and op[2] == _DECORATION_BINDING and op[1] in ids:
+            words[i + 3] = ids[op[1]]
+        i += count
+    return struct.pack(f"<{len(words)}I", *words)
+
+
 def _glsl_to_spirv(d: Path, shifts: dict[str, int], out: str) -> Path:
     args = ["glslangValidator", "-G"]
     for kind, n in shifts.items():
         args += [f"--shift-{kind}-binding", "comp", str(n)]
     _run([*args, "-o", str(d / out), str(d / "pass.comp")], "glslangValidator (GLSL -> SPIR-V)")
     path = d / out
-    path.write_bytes(name_block_instances(path.read_bytes()))
+    path.write_bytes(set_bindings(name_block_instances(path.read_bytes())))
     return path
 
 
@@ -211,10 +244,32 @@ def _uniform_type(name: str, u: dict) -> str:
     return "int" if name == "u_flip_y" else u.get("type", "float")
 
 
+def _output_lanes(p: dict) -> str:
+    """The HLSL element type of a pass's output: one lane for an R32F texture, four otherwise."""
+    return "float" if p["output"].get("format") == "r32f" else "float4"
+
+
+def _frame_cbuffer() -> dict:
+    """A frame pass's FrameUniforms resource in HLSL: register b0, each member's HLSL name and offset."""
+    return {
+        "name": FRAME_BLOCK,
+        "type": "cbuffer",
+        "register": "b0",
+        "bytes": FRAME_BLOCK_BYTES,
+        "uniform_block": FRAME_BLOCK,
+        "members": [
+            {"name": f"{FRAME_INSTANCE}_{name}", "type": _HLSL_TYPES[kind], "offset": offset}
+            for name, kind, offset, _ in UNIFORM_MEMBERS
+        ],
+    }
+
+
 def hlsl_interface(p: dict) -> dict:
-    """What an engine binds for GLSL 4.30 manifest pass ``p`` in its HLSL: {"entry", "numthreads",
-    "resources": [{"name", "type", "register", and "texture" (an input, the output) or "weights"
-    (params: the pass's range of weights.bin, a buffer of its own) or "cbuffer" + "offset" (a uniform)}]}.
+    """What an engine binds for GLSL 4.30 manifest pass ``p`` (a network pass or a frame pass) in its
+    HLSL: {"entry", "numthreads", "resources": [{"name", "type", "register", and "texture" (an input, the
+    output) or "weights" (params: the pass's range of weights.bin, a buffer of its own) or "cbuffer" +
+    "offset" (a network pass's uniform, a $Globals member) or "uniform_block" + "bytes" + "members" (a
+    frame pass's FrameUniforms, a cbuffer of its own)}]}.
     """
     res = [
         {
@@ -229,8 +284,8 @@ def hlsl_interface(p: dict) -> dict:
     res.append(
         {
             "name": "dst",
-            "type": "RWTexture2DArray<float4>",
-            "register": f"u{out['binding']}",
+            "type": f"RWTexture2DArray<{_output_lanes(p)}>",
+            "register": f"u{FIXED_BINDINGS['dst']}",
             "texture": out["texture"],
         }
     )
@@ -244,6 +299,8 @@ def hlsl_interface(p: dict) -> dict:
                 "weights": {"file": prm["buffer"], "offset": prm["offset"], "bytes": prm["bytes"]},
             }
         )
+    if "uniform_block" in p:
+        res.append(_frame_cbuffer())
     uniforms = p.get("uniforms", {})
     if len(uniforms) > 1:  # pragma: no cover - one uniform a pass (pad, crop: u_flip_y; uniform: its input)
         raise NeuralaoError(f"pass {p['name']}: more than one uniform")
@@ -263,14 +320,14 @@ def hlsl_interface(p: dict) -> dict:
 def msl_interface(p: dict) -> dict:
     """What an engine binds for GLSL 4.30 manifest pass ``p`` in its MSL: {"kernel",
     "threads_per_threadgroup", "arguments": [{"name", "type", "index" ("texture(k)", "buffer(k)"), and
-    "texture" / "weights" / "value" as in :func:`hlsl_interface`}]}. The unused samplers are left out."""
-    out = p["output"]
+    "texture" / "weights" / "value" as in :func:`hlsl_interface`, or "uniform_block" + "bytes" (a frame
+    pass's FrameUniforms, set with setBytes or a buffer)}]}. The unused samplers are left out."""
     args = [
         {
             "name": "dst",
             "type": "texture2d_array<float, access::write>",
-            "index": f"texture({out['binding']})",
-            "texture": out["texture"],
+            "index": f"texture({FIXED_BINDINGS['dst']})",
+            "texture": p["output"]["texture"],
         }
     ]
     args += [
@@ -290,6 +347,16 @@ def msl_interface(p: dict) -> dict:
                 "type": "const device Params&",
                 "index": f"buffer({prm['binding'] + MSL_BUFFER_SHIFT})",
                 "weights": {"file": prm["buffer"], "offset": prm["offset"], "bytes": prm["bytes"]},
+            }
+        )
+    if "uniform_block" in p:
+        args.append(
+            {
+                "name": FRAME_INSTANCE,
+                "type": f"constant {FRAME_BLOCK}&",
+                "index": f"buffer({FIXED_BINDINGS[FRAME_INSTANCE]})",
+                "uniform_block": FRAME_BLOCK,
+                "bytes": FRAME_BLOCK_BYTES,
             }
         )
     for name, u in p.get("uniforms", {}).items():

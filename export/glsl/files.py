@@ -158,16 +158,19 @@ def _with_cross(program: ComputeProgram, files: dict[str, bytes], validate: bool
         "how": "GLSL -> SPIR-V (glslangValidator -G; HLSL: SSBO bindings shifted by "
         f"{PARAMS_REGISTER_SHIFT}; "
         f"MSL: sampled textures by {MSL_TEXTURE_SHIFT}, SSBOs by {MSL_BUFFER_SHIFT}; the params block "
-        f"instance named 'params') -> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / --msl "
+        "instance named 'params', the FrameUniforms instance 'frame'; dst and FrameUniforms at binding 0) "
+        f"-> spirv-cross --hlsl --shader-model {HLSL_SHADER_MODEL} / --msl "
         f"--msl-version {MSL_VERSION} --msl-decoration-binding; entry points renamed to the pass names",
         "hlsl": "shader model 5.0, one file and entry point per pass (the pass's name), [numthreads] = "
         "local_size; input i: Texture2DArray src<i> at t<i> (its SamplerState s<i> is unused: Load only, "
         f"bind none); output: RWTexture2DArray dst at u0; params: ByteAddressBuffer params at "
         f"t{PARAMS_REGISTER_SHIFT}, a buffer of its own holding the pass's range of weights.bin "
-        "(params.offset, params.bytes; read from byte 0); u_flip_y / a scalar input: a member of $Globals. "
+        "(params.offset, params.bytes; read from byte 0); u_flip_y / a scalar input: a member of $Globals; "
+        "a frame pass's uniform block: cbuffer FrameUniforms at b0 (members frame_<GLSL name>). "
         "Per pass: hlsl.resources",
         "msl": "MSL 2.1, kernel named after the pass; output texture(0), input i texture(i + 1) (its "
-        "sampler(i + 1) unused), the uniform buffer(0) (setBytes), params buffer(1) (the pass's range of "
+        "sampler(i + 1) unused), the uniform or a frame pass's FrameUniforms buffer(0), params buffer(1) "
+        "(the pass's range of "
         "weights.bin, from its start or at its offset); threadsPerThreadgroup = local_size. Per pass: "
         "msl.arguments",
         "validated": f"HLSL compiled back by glslang's HLSL front end ({HLSL_SPIRV_COMMAND})"
@@ -224,11 +227,13 @@ def load_compute_export(export_dir: str | Path) -> ComputeProgram:
 
 
 def load_cross_sources(export_dir: str | Path, language: str = "hlsl") -> dict[str, str]:
-    """{pass name: HLSL (``language="hlsl"``) or MSL (``"msl"``) text} of an export written with
-    ``cross=True``, hashes checked."""
+    """{pass name: HLSL (``language="hlsl"``) or MSL (``"msl"``) text} of every pass of an export written
+    with ``cross=True`` (the network's and the frame's), hashes checked."""
     if language not in ("hlsl", "msl"):
         raise NeuralaoError(f"language must be 'hlsl' or 'msl', got {language!r}")
     d, manifest = _read_export(export_dir)
     if "cross_compiled" not in manifest:
         raise NeuralaoError(f"export {d} has no HLSL / MSL (write it with --hlsl-msl)")
-    return {p["name"]: _read_checked(d, manifest, p[language]["file"]).decode() for p in manifest["passes"]}
+    return {
+        p["name"]: _read_checked(d, manifest, p[language]["file"]).decode() for p in shader_entries(manifest)
+    }

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field, replace
 from neuralao.export.glsl.frame_templates import FILLS
 from neuralao.export.glsl.graph import glsl_float
 from neuralao.export.glsl.image import ComputeProgram
+from neuralao.export.glsl.memory import memory_section
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 FRAME_FORMAT_VERSION = 1
@@ -527,7 +528,8 @@ def _section(
 
 def generate_frame(program: ComputeProgram, settings: FrameSettings) -> ComputeProgram:
     """``program`` (a U-Net's compute program in any compute dialect) with its frame: the frame passes'
-    sources added to ``sources`` and the manifest's ``frame`` section (textures, passes, steps)."""
+    sources added to ``sources``, the manifest's ``frame`` section (textures, passes, steps) and its
+    ``memory`` entry recomputed for the whole frame (:func:`.memory.memory_section`)."""
     dialect = _DIALECT.get(program.manifest.get("format", ""))
     if dialect is None:
         raise NeuralaoError(f"no frame passes for a {program.manifest.get('format')!r} program")
@@ -541,6 +543,7 @@ def generate_frame(program: ComputeProgram, settings: FrameSettings) -> ComputeP
         sources[p.name + ext] = _write_pass(p, formats, settings, dialect)
     manifest = dict(program.manifest)
     manifest["frame"] = _section(program.manifest, passes, tex, settings, dialect)
+    manifest["memory"] = memory_section(manifest)  # the frame's steps and textures, not the network's alone
     return replace(program, sources=sources, manifest=manifest)
 
 

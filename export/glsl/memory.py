@@ -1,13 +1,19 @@
 """Texture memory of a compute program: when each texture is alive, which textures can share memory
 (the aliasing plan) and how many bytes a frame needs, with and without sharing. No shader text.
 
-A frame is a list of **steps**: the program's passes in order, and, for a model that declares
-``internal_height`` (the U-Nets), the steps around them that run the network at that height
-(docs/engine-integration.md, "Internal-resolution passes" and "The hybrid"): the GTAO passes of a
-hybrid, the point-sampling pass, the engine building the network input, the engine taking the
-network's AO, the upsampling pass and, for a hybrid, the sum with GTAO. A texture is **alive** from
-the first step that writes or reads it to the last one (both included); the engine's input texture
-from the first step (the engine writes it before), the output the engine reads until the last step.
+A frame is a list of **steps**. A program with frame passes (the manifest's ``frame`` section, written
+by :mod:`.frame`: the shipped U-Nets) runs the frame's ``steps`` in order: the frame passes before the
+network, the network's passes (its uniform pass left out: ``f_network_radius`` writes its texture), the
+frame passes after it (``f_upsample``, or ``f_composite`` when the network runs at the frame's own size:
+both are steps, one of them runs). Its textures are every texture of the frame section (the frame's own
+at the formats its passes write, and the network's) but the engine's G-buffer (``depth``, ``normal``).
+A program without frame passes runs its own passes, and, for a model that declares ``internal_height``,
+the fragment steps around them that run the network at that height (the export's ``internal/`` folder,
+the reference host's: docs/engine-integration.md, "Internal-resolution passes" and "The hybrid"): the
+GTAO passes of a hybrid, the point-sampling pass, the engine building the network input, the engine
+taking the network's AO, the upsampling pass and, for a hybrid, the sum with GTAO. A texture is
+**alive** from the first step that writes or reads it to the last one (both included); an input the
+engine writes from the first step (it writes it before), the output the engine reads until the last.
 
 Textures whose lifetimes are disjoint may share a **slot**: one block of memory as large as its
 largest member at the frame's size. The slots are planned once, from the lifetimes alone, so one plan
@@ -25,6 +31,7 @@ largest member favour size order over first-use order, which minimises the count
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from fractions import Fraction
@@ -35,11 +42,17 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 # and the scalar inputs (an engine's radius keeps its float32 value). The raw input is RGBA32F too.
 FP32_KINDS = ("crop", "uniform")
 
+# The frame's textures that are the engine's G-buffer (the frame section's inputs the engine writes each
+# frame): read by f_position only, never counted.
+ENGINE_TEXTURES = ("depth", "normal")
+
 # Bytes per texel of every format a frame allocates.
 TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2}
-# At fp16 the one-channel AO targets around the network (full resolution and the network's AO) are R16F:
-# AO lies in [0, 1], where half floats step by at most 2^-11. The point-sampled G-buffer stays RGBA32F
-# (camera-space positions need float32's range and precision).
+# Programs without frame passes (the fragment steps of internal/): at fp16 the one-channel AO targets
+# around the network (full resolution and the network's AO) are R16F: AO lies in [0, 1], where half floats
+# step by at most 2^-11. The point-sampled G-buffer stays RGBA32F (camera-space positions need float32's
+# range and precision). The frame passes (frame.py) store their own targets as RGBA32F / R32F at either
+# precision: only the network's textures change with it.
 FP16_FRAME_FORMATS = {"R32F": "R16F"}
 
 # The frame whose texture sizes order the slot planner, and the frames the manifest gives figures for.
@@ -95,6 +108,8 @@ class MemorySchedule:
     internal_height : the network's rows whatever the frame's (None: it runs at the frame's size);
     static_size : (width, height) of a program generated for one input size, else None.
     slots : lists of texture ids; textures of one slot are never alive at the same step.
+    frame_passes : the steps are the manifest's frame section's (else the program's passes and, with an
+    internal height, the fragment steps of its internal/ folder).
     """
 
     steps: tuple[Step, ...]
@@ -104,6 +119,7 @@ class MemorySchedule:
     hybrid: bool
     pad_multiple: int
     static_size: tuple[int, int] | None
+    frame_passes: bool = False
 
 
 @dataclass(frozen=True)
@@ -353,6 +369,67 @@ def _network_textures(manifest: Mapping) -> dict[str, dict]:
     return out
 
 
+_FORMULA = re.compile(r"(?:(W|H|w|h|wp|hp)(?:\*(\d+)/(\d+))?)?([+-]?\d+)?")
+
+
+def _parse_dim(formula: str) -> dict:
+    """A size formula of the frame section (``W``, ``w``, ``1``, ``wp*1/4``, ``hp*1/2+1``) as a dict of
+    :func:`_dim_json`."""
+    m = _FORMULA.fullmatch(str(formula))
+    if m is None or not (m.group(1) or m.group(4)):
+        raise NeuralaoError(f"size formula {formula!r} is not symbol[*num/den][+-offset]")
+    of, num, den, offset = m.groups()
+    if of is None:
+        return _dim_json("W", 0, 1, int(offset))
+    return _dim_json(of, int(num or 1), int(den or 1), int(offset or 0))
+
+
+def _frame_pass_steps(manifest: Mapping) -> tuple[tuple[Step, ...], dict[str, dict]]:
+    """The steps of a program with frame passes (its frame section's ``steps``, the skipped uniform pass
+    left out) and the textures they allocate: the frame's own but the engine's G-buffer
+    (:data:`ENGINE_TEXTURES`), at the formats their passes write at either precision, and the network's,
+    in order of first use (whatever the order of the manifest's mappings, so that a manifest read back
+    from disk plans the same slots)."""
+    frame = manifest["frame"]
+    by_name = {p["name"]: p for p in frame["passes"]}
+    steps = []
+    for entry in frame["steps"]:
+        if "frame_pass" in entry:
+            p = by_name[entry["frame_pass"]]
+            runs = "frame pass" + (f", when {entry['when']}" if "when" in entry else "")
+            reads = tuple(i["texture"] for i in p["inputs"])
+            steps.append(Step(p["name"], runs, reads, (p["output"]["texture"],)))
+        elif "network_pass" in entry:
+            k = int(entry["index"])
+            p = manifest["passes"][k]
+            reads = tuple(i["texture"] for i in p["inputs"])
+            steps.append(Step(p["name"], "pass", reads, (p["output"]["texture"],), k))
+    network = _network_textures(manifest)
+    specs = {}
+    for ident, t in frame["textures"].items():
+        if ident in ENGINE_TEXTURES or ident in network:
+            continue
+        specs[ident] = {
+            "width": _parse_dim(t["width"]),
+            "height": _parse_dim(t["height"]),
+            "layers": int(t["layers"]),
+            "formats": dict.fromkeys(PRECISIONS, t["format"]),
+            "meaning": t["meaning"],
+        }
+    specs |= network
+    used = [i for s in steps for i in (*s.reads, *s.writes) if i in specs]
+    order = [*dict.fromkeys(used), *sorted(set(specs) - set(used))]
+    return tuple(steps), {ident: specs[ident] for ident in order}
+
+
+def _network_steps(manifest: Mapping) -> list[Step]:
+    """The program's own passes as steps, in the manifest's order."""
+    return [
+        Step(p["name"], "pass", tuple(i["texture"] for i in p["inputs"]), (p["output"]["texture"],), k)
+        for k, p in enumerate(manifest["passes"])
+    ]
+
+
 def memory_schedule(manifest: Mapping) -> MemorySchedule:
     """Steps, texture lifetimes and the aliasing plan of a compute manifest (``neuralao-glsl-compute`` or
     ``neuralao-wgsl-compute``: its passes, textures, input, outputs and source_model_metadata). Needs no
@@ -362,18 +439,18 @@ def memory_schedule(manifest: Mapping) -> MemorySchedule:
     internal = None if static is not None else _internal_height(metadata)
     hybrid = internal is not None and str(metadata.get("input_channels", "")).split(",")[-1] == "gtao"
     net_in, outputs = manifest["input"]["texture"], [o["texture"] for o in manifest["outputs"]]
-    passes = [
-        Step(p["name"], "pass", tuple(i["texture"] for i in p["inputs"]), (p["output"]["texture"],), k)
-        for k, p in enumerate(manifest["passes"])
-    ]
-    specs = _network_textures(manifest)
-    if internal is None:
-        steps = tuple(passes)
+    if "frame" in manifest:
+        steps, specs = _frame_pass_steps(manifest)
+        # every texture is written by a step of the frame; the frame's AO is what the engine reads
+        engine_input, engine_outputs = [], [manifest["frame"]["output"], *outputs[1:]]
+    elif internal is None:
+        steps = tuple(_network_steps(manifest))
+        specs = _network_textures(manifest)
         engine_input, engine_outputs = [net_in], outputs  # written before the first pass, read after the last
     else:
         before, after, frame = _frame_steps(hybrid, net_in, outputs[0])
-        steps = (*before, *passes, *after)
-        specs |= frame
+        steps = (*before, *_network_steps(manifest), *after)
+        specs = _network_textures(manifest) | frame
         # the network's input is written by a step of the frame; the frame's AO is what the engine reads
         engine_input, engine_outputs = (["gtao_noise"] if hybrid else []), ["ao", *outputs[1:]]
     touched: dict[str, list[int]] = {}
@@ -395,6 +472,7 @@ def memory_schedule(manifest: Mapping) -> MemorySchedule:
         hybrid=hybrid,
         pad_multiple=int(manifest["pad"]["multiple"]),
         static_size=None if static is None else (int(static[1]), int(static[0])),
+        frame_passes="frame" in manifest,
     )
     sizes = _symbols(schedule, *REFERENCE_FRAME)
     reference = {k: _bytes(t, sizes, "fp32", exact=False)[2] for k, t in textures.items()}
@@ -407,9 +485,10 @@ def memory_plan(manifest: Mapping, width: int, height: int, precision: str = "fp
 
     precision : "fp32" (every texture as the manifest gives it at fp32) or "fp16" (the network's
     textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, outputs and
-    scalar textures RGBA32F; the frame's AO targets R16F, its point-sampled G-buffer RGBA32F).
-    Whatever the manifest's own precision. Raises NeuralaoError where the program cannot run at that
-    size (a fixed size, below the pad multiple, a texture of fractional size).
+    scalar textures RGBA32F; a program with frame passes: the frame's own targets as its passes write
+    them, RGBA32F / R32F at either precision; else the fragment steps' AO targets R16F, their
+    point-sampled G-buffer RGBA32F). Whatever the manifest's own precision. Raises NeuralaoError where
+    the program cannot run at that size (a fixed size, below the pad multiple, a fractional size).
     """
     return _plan(memory_schedule(manifest), width, height, precision)
 
@@ -460,15 +539,25 @@ _RULE = (
     "format, size or layer count are placed at its start (a transient resource pool or heap with "
     "aliasing: Vulkan and D3D12 placed resources, Metal heap aliasing). The plan is valid at every frame "
     "size; only the slots' sizes change. Planned greedily: textures largest first (sizes at 1920x1080), "
-    "each into the smallest slot none of whose members is alive at the same time. The input the engine "
-    "writes is alive from the first step (the network's own input step when the frame has one), the "
-    "output the engine reads until the last step. APIs without memory aliasing (GL, WebGPU) can share "
-    "one texture among a slot's members of the same format, width and height, allocated with the most "
-    "layers of them: the passes read and write only their own layers."
+    "each into the smallest slot none of whose members is alive at the same time. A texture the engine "
+    "writes is alive from the first step, the output the engine reads until the last step. APIs without "
+    "memory aliasing (GL, WebGPU) can share one texture among a slot's members of the same format, width "
+    "and height, allocated with the most layers of them: the passes read and write only their own layers."
 )
 
 
 def _counted(schedule: MemorySchedule, manifest: Mapping) -> str:
+    weights = f"weights.bin ({manifest['weights']['bytes']} bytes, a buffer)"
+    if schedule.frame_passes:
+        own = [k for k, t in schedule.textures.items() if not t.network]
+        return (
+            "every texture of the frame's steps (frame.textures): the network's (textures) and the frame's "
+            f"own ({', '.join(own)}), in the formats their passes write. Not counted: the engine's G-buffer "
+            f"that f_position reads ({', '.join(ENGINE_TEXTURES)}: frame.inputs, written by the engine each "
+            f"frame), {weights} and the frame's uniform block ({manifest['frame']['uniform_block']['bytes']} "
+            "bytes). An engine that writes gbuffer itself skips f_position and need not have depth and "
+            "normal; gbuffer is counted either way."
+        )
     what = "every texture of the program's passes (textures)"
     if schedule.internal_height is not None:
         what += (
@@ -480,7 +569,25 @@ def _counted(schedule: MemorySchedule, manifest: Mapping) -> str:
         )
     return (
         f"{what}. Not counted: the engine's G-buffer (position, normal), its mean-depth reduction and "
-        f"weights.bin ({manifest['weights']['bytes']} bytes, a buffer)."
+        f"{weights}."
+    )
+
+
+def _fp16_text(schedule: MemorySchedule) -> str:
+    network = (
+        "fp16: the network's textures as --precision fp16 stores them (RGBA16F; its input, scalar and "
+        "output textures RGBA32F)"
+    )
+    if schedule.frame_passes:
+        return (
+            f"{network}; the frame passes' own targets stay RGBA32F / R32F (they store 32-bit floats at "
+            "either precision), and are counted so."
+        )
+    if schedule.internal_height is None:
+        return network + "."
+    return (
+        f"{network}; the one-channel AO targets around the network (full resolution and the network's AO) "
+        "R16F, the point-sampled G-buffer RGBA32F."
     )
 
 
@@ -547,9 +654,7 @@ def memory_section(manifest: Mapping) -> dict:
         "aliasing": {"rule": _RULE, "slots": [list(s) for s in schedule.slots]},
         "peak_bytes": peaks,
         "peak_bytes_are": "separate: every texture its own memory; aliased: the sum of the slots' sizes; "
-        "live: the most bytes alive at one step (no plan needs less). fp16: the program's textures "
-        "stored as --precision fp16 stores them, the frame's one-channel AO targets (full resolution and the "
-        "network's AO) R16F, the point-sampled G-buffer RGBA32F.",
+        "live: the most bytes alive at one step (no plan needs less). " + _fp16_text(schedule),
         "compute": "neuralao.export.glsl.memory_plan(manifest, width, height, precision) gives the same "
         "figures and each slot's size for any frame",
     }

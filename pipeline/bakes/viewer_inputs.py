@@ -10,7 +10,6 @@ arrays does not need.
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import struct
 from pathlib import Path
@@ -18,17 +17,17 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from neuralao.export.glsl import generate_compute, load_compute_export, load_mlp_export
+from neuralao.export.glsl import load_compute_export, load_mlp_export
 from neuralao.pipeline.bakes.gltf_scene import read_gltf_scene
 from neuralao.pipeline.bakes.texture import read_texture_glb
 from neuralao.pipeline.bakes.vertex import read_baked_mesh
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.manifest import parse_json, read_manifest
-from neuralao.runtime.internal_resolution import UpsampleSettings
+from neuralao.runtime.frame_runner import frame_program
 from neuralao.runtime.onnx_io import load_onnx
-from neuralao.runtime.predict import check_unet_onnx, declared_internal_height, is_hybrid
-from neuralao.runtime.shipped import pure_unet_export, shipped_models
+from neuralao.runtime.predict import check_unet_onnx
+from neuralao.runtime.shipped import default_export, shipped_models
 from neuralao.runtime.viewer import ViewerMethod, b64, corner_arrays
 
 
@@ -216,7 +215,7 @@ def _unet_meta(folder: Path) -> dict:
 
 def _screen_space_folder(model: str | None) -> Path:
     if model is None:
-        return pure_unet_export()
+        return default_export("unet")
     if Path(model).is_dir():
         return Path(model)
     models = shipped_models()
@@ -234,41 +233,32 @@ def method_from_unet(
     radius_rel: float = SCREEN_SPACE_RADIUS_REL,
     conv_block: tuple[int, int, int] | None = None,
 ) -> ViewerMethod:
-    """A screen-space U-Net (an export folder or a shipped model's name; None: the default pure one) run
-    by the page in WebGPU on the mesh ``positions`` / ``normals`` (3m, 3) float32 (corner_arrays).
+    """A screen-space U-Net (an export folder or a shipped model's name; None: the default shipped one,
+    a hybrid) whose whole frame the page runs in WebGPU on the mesh ``positions`` / ``normals`` (3m, 3)
+    float32 (corner_arrays).
 
-    Its WGSL: the export's ``wgsl/`` folder if it has one and ``conv_block`` is None, else generated
-    from model.onnx (``conv_block`` None: the generator's default). A hybrid (GTAO-input) model is a
-    one-line error naming a pure one: the page has no GTAO pass.
+    Its WGSL: the export's ``wgsl/`` folder if it has one with frame passes and ``conv_block`` is None,
+    else the network generated from model.onnx (``conv_block`` None: the generator's default) with its
+    frame passes (GTAO for a hybrid, resampling, the input contract, upsampling).
     """
     folder = _screen_space_folder(model)
-    meta = _unet_meta(folder)
-    if is_hybrid(meta):
-        try:
-            pure = f"; use a pure one, e.g. --screen-space {pure_unet_export().name}"
-        except NeuralaoError:
-            pure = ""
-        raise NeuralaoError(
-            f"{folder.name} is a hybrid U-Net (it refines GTAO, which the viewer does not compute){pure}"
-        )
+    _unet_meta(folder)
     if not (np.isfinite(radius_rel) and radius_rel > 0):
         raise NeuralaoError(f"--screen-space-radius must be a positive fraction, got {radius_rel}")
     onnx_path = folder / read_manifest(folder).get("onnx", "model.onnx")
-    if conv_block is None and (folder / "wgsl" / "manifest.json").is_file():
-        program = load_compute_export(folder / "wgsl")
+    wgsl = folder / "wgsl"
+    if conv_block is None and (wgsl / "manifest.json").is_file() and "frame" in read_manifest(wgsl):
+        program = load_compute_export(wgsl)
     else:
         block = {} if conv_block is None else {"conv_block": tuple(conv_block)}
-        program = generate_compute(load_onnx(onnx_path), dialect="wgsl", **block)
+        program = frame_program(load_onnx(onnx_path), "wgsl", **block)
     diagonal = float(np.linalg.norm(np.ptp(np.asarray(positions, np.float64), axis=0)))
     radius = radius_rel * diagonal
     network = {
         "manifest": program.manifest,
         "sources": program.sources,
         "weights": b64(program.weights),
-        "internal_height": declared_internal_height(onnx_path),
-        "preprocess_version": int(meta["preprocess_version"]),
         "radius": radius,
-        "upsample": dataclasses.asdict(UpsampleSettings()),
         "model": folder.name,
     }
     return ViewerMethod(

@@ -44,9 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         nargs="?",
         const="",
         metavar="MODEL",
-        help="add a screen-space U-Net run live in WebGPU on the page's G-buffer: an export folder or a "
-        "shipped model's name (no value: the default shipped pure U-Net; hybrids, which need GTAO, are "
-        "refused)",
+        help="add a screen-space U-Net whose whole frame (GTAO for a hybrid, the network, upsampling) runs "
+        "live in WebGPU on the page's G-buffer: an export folder or a shipped model's name (no value: the "
+        "default shipped U-Net)",
     )
     p.add_argument(
         "--screen-space-radius",

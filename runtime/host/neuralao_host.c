@@ -1,35 +1,48 @@
 /*
  * neuralao_host: the reference engine integration of a shipped screen-space AO export, in C.
  *
- *   neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV OUT.f32
+ *   neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV_DEG OUT.f32
  *
  * EXPORT_DIR   a shipped export (runtime/models/<name>, holding glsl/manifest.json) or its glsl/ folder
  * GBUFFER.f32  raw float32 little-endian, HEIGHT x WIDTH pixels, row 0 = the top row, 5 floats a pixel:
  *              linear camera-space depth z (> 0 in front of the camera, 0 on background),
  *              camera-space unit normal nx, ny, nz (OpenGL axes, facing the viewer), mask (>= 0.5 foreground)
- * RADIUS       AO radius in scene units; YFOV the vertical field of view in radians
+ * RADIUS       AO radius in scene units; YFOV_DEG the vertical field of view in degrees
  * OUT.f32      raw float32, HEIGHT x WIDTH, row 0 = the top row: AO in [0, 1], 1 on background
  *
- * What an engine does around the generated passes (docs/engine-integration.md, steps 1-4), by the input
- * contract the export's ONNX metadata names (source_model_metadata.preprocess_version):
- *   version 3 (frame-local):
- *   1. nothing: no statistic of the frame is needed;
- *   2. the network input texture t0: (log z, n) on foreground, 0 on background, RGBA32F layers;
- *   3. the radius uniform rho = log(R / tan(yfov / 2)) of the pass the manifest's "uniforms" names;
- *   version 2 (whole frame): 1. mean foreground depth m (here on the CPU, in double; an engine runs a
- *   reduction pass); 2. t0 = (z / m, n); 3. rho = R / (m * tan(yfov / 2));
- *   4. every texture of the manifest allocated at its size formula (W, Wp = ceil(W / p) * p, ...);
- *      the passes in order (the generated pad pass pads, the crop pass crops), one dispatch each,
- *      a memory barrier between them; the output texture read back, background set to 1.
- * An export whose manifest.json declares "internal_resolution" runs around them the fragment passes it
- * names (docs/engine-integration.md, "Internal resolution"): for a hybrid first its GTAO pass (gtao.frag,
- * its blur) at W x H, then the point-sampling pass to the internal size, the network there (steps 1-4 on
- * the point-sampled G-buffer, GTAO point-sampled as the fifth channel), the upsampling pass back to
- * W x H, and for a hybrid AO = clamp(GTAO + upsampled correction, 0, 1).
+ * An export whose glsl/manifest.json has a "frame" section (the shipped ones) runs its whole frame on the
+ * GPU as the section's "steps" list it (docs/engine-integration.md), with no CPU work between passes:
+ *   1. every texture of frame.textures allocated (2-D arrays) at its size formula: W x H the frame,
+ *      w x h the network's input (max(1, round(W * internal_height / H)) x internal_height, or W x H when
+ *      the export has no internal height), wp x hp those rounded up to the pad multiple;
+ *   2. the engine's two inputs uploaded: "depth" (depth on foreground, 0 on background) and "normal"
+ *      (the unit normal on foreground, 0 on background), row 0 = the top row;
+ *   3. the FrameUniforms block (frame.uniform_block) filled from the camera: u_proj = (P00, P11),
+ *      u_radius = RADIUS, u_pixels_per_unit = 0.5 * H * P11, u_flip_y = 0 (textures top row first);
+ *   4. each step in order (those marked "skip" left out, of those with a "when" the one whose condition
+ *      holds): a frame pass (frame.passes) or a network pass (the manifest's passes[index]), its input
+ *      textures, output image, uniform block and weight range bound at their bindings, its groups
+ *      dispatched, a memory barrier; the network's pad and crop passes get u_flip_y = 0;
+ *   5. only the output texture (frame.output, the AO) read back.
  *
- * Timing (bench/gpu.sh): with NEURALAO_HOST_REPEATS=N set, the network's passes (and a hybrid's GTAO
- * passes) run N more times after the frame, each run between GL_TIME_ELAPSED queries, and one JSON line
- * goes to stdout: {"renderer", "width", "height", "network_ms", "gtao_ms", "passes"} (medians, GPU time).
+ * An export without a frame section runs the older way, with CPU work around the network's passes, by
+ * the input contract its ONNX metadata names (source_model_metadata.preprocess_version):
+ *   version 3: t0 = (log z, n) on foreground, 0 on background; rho = log(R / tan(yfov / 2));
+ *   version 2: the mean foreground depth m (on the CPU, in double); t0 = (z / m, n); rho = R / (m tan(yfov / 2));
+ *   then every texture of the manifest at its size formula, the passes in order, the output read back,
+ *   background set to 1. If EXPORT_DIR/manifest.json declares "internal_resolution", the fragment passes
+ *   it names run around the network: for a hybrid first GTAO (gtao.frag, its blur) at W x H, then point
+ *   sampling to the internal size, the network there (GTAO point-sampled as its fifth channel), upsampling
+ *   back to W x H, and for a hybrid AO = clamp(GTAO + upsampled correction, 0, 1).
+ *
+ * Timing (bench/gpu.sh): with NEURALAO_HOST_REPEATS=N set, after the frame N timed runs of the whole frame
+ * (every step), of its GTAO steps (f_gtao, f_gtao_blur; a hybrid's) and of its network steps, each between
+ * GL_TIME_ELAPSED queries and on the wall clock between glFinish calls (Mesa's llvmpipe reports 0 GPU time
+ * for compute). When EXPORT_DIR/manifest.json has an "ssao" entry (the screen-space AO baseline's fragment
+ * passes, written by bench/gpu.sh prepare), SSAO runs N timed times on the same G-buffer too. One JSON line
+ * goes to stdout, medians in ms (-1: not run): {"renderer", "version", "width", "height", "repeats", "path",
+ * "frame_ms", "network_ms", "gtao_ms", "ssao_ms", the same with _wall_ms, "passes"}. With
+ * NEURALAO_HOST_SSAO_OUT=PATH set, that SSAO's AO is written to PATH as OUT.f32 is (what tests check it by).
  * GBUFFER.f32 may be the word "synthetic": a seeded wavy surface filling the frame (all foreground).
  *
  * Context: EGL's surfaceless platform (Mesa, or NVIDIA's EGL through glvnd), OpenGL 4.3 core.
@@ -40,6 +53,7 @@
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
 #include <GL/glcorearb.h>
+#include <ctype.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -78,10 +92,11 @@ static char *read_file(const char *path, size_t *size) {
 
 /* ------------------------------------------------------------------ GPU timing */
 
-static int g_repeats = 0;                        /* NEURALAO_HOST_REPEATS: timed runs after the frame */
-static double g_network_ms = -1, g_gtao_ms = -1; /* medians of the timed runs (GL_TIME_ELAPSED); -1: not timed */
+static int g_repeats = 0; /* NEURALAO_HOST_REPEATS: timed runs after the frame */
+/* medians of the timed runs (GL_TIME_ELAPSED); -1: not timed */
+static double g_frame_ms = -1, g_network_ms = -1, g_gtao_ms = -1, g_ssao_ms = -1;
 /* the same runs on the wall clock between glFinish calls: Mesa's llvmpipe reports 0 GPU time for compute */
-static double g_network_wall_ms = -1, g_gtao_wall_ms = -1;
+static double g_frame_wall_ms = -1, g_network_wall_ms = -1, g_gtao_wall_ms = -1, g_ssao_wall_ms = -1;
 static double g_wall_start;
 
 static int cmp_double(const void *a, const void *b) {
@@ -546,14 +561,19 @@ static char *pass_source(const char *folder, const Json *sources, const char *ke
     return read_file(path, NULL);
 }
 
-/* The export's GTAO pass (manifest "gtao") at W x H: gtao.frag, then gtao_blur.frag when it has one.
- * Returns the R32F GTAO texture. Uniforms with a "value" are set as given; the three with a formula
- * are the ones neuralao.runtime.baselines computes from the frame (u_proj, u_radius, u_pixels_per_unit). */
-static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, const Json *g, double radius,
-                       double yfov) {
+/* A screen-space AO pass described as neuralao.runtime.baselines describes one (an export's "gtao" entry,
+ * the bench's "ssao" entry) at W x H: sources[name] (gtao.frag, ssao.frag), then sources[name + "_blur"] on
+ * its output when the description has a blur. Returns the R32F AO texture. A uniform with a "value" is set
+ * as given (a number, or a list for an array: vec3 / float by its "type"), one with "times_radius" to that
+ * multiple of the radius; the rest are the formulas neuralao.runtime.baselines computes from the frame
+ * (u_proj, u_radius, u_pixels_per_unit). With NEURALAO_HOST_REPEATS the passes run that many more times,
+ * timed: medians to *ms (GPU) and *wall (wall clock). */
+static GLuint run_screen_space(const Frame *f, const char *folder, const Json *sources, const char *name,
+                               const Json *g, double radius, double yfov, double *ms, double *wall) {
     Json *noise = jreq(g, "noise"), *texels = jreq(noise, "texels");
     const int nw = (int)jnum(noise, "width"), nh = (int)jnum(noise, "height");
-    if (texels->n != nw * nh * 4) die("manifest: the GTAO noise tile has %d values, not %d", texels->n, nw * nh * 4);
+    if (texels->n != nw * nh * 4)
+        die("manifest: the %s noise tile has %d values, not %d", name, texels->n, nw * nh * 4);
     float *tile = xmalloc(sizeof(float) * (size_t)texels->n);
     for (int i = 0; i < texels->n; i++) tile[i] = (float)texels->items[i]->num;
     GLuint noise_tex = texture_2d(nw, nh, GL_RGBA32F, GL_RGBA, tile);
@@ -561,20 +581,27 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
     GLuint raw = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
     const double focal = 1.0 / tan(0.5 * yfov), p00 = focal / ((double)f->W / f->H), p11 = focal;
 
-    char *frag = pass_source(folder, sources, "gtao");
-    GLuint prog = compile_pipeline(f->vertex, frag, jstr(sources, "gtao"));
+    char *frag = pass_source(folder, sources, name);
+    GLuint prog = compile_pipeline(f->vertex, frag, jstr(sources, name));
     free(frag);
     glUseProgram(prog);
     Json *uniforms = jreq(g, "uniforms");
     for (int k = 0; k < uniforms->n; k++) {
-        const char *name = uniforms->keys[k];
-        GLint loc = glGetUniformLocation(prog, name);
-        Json *value = jget(uniforms->items[k], "value");
-        if (value) glUniform1f(loc, (float)value->num);
-        else if (!strcmp(name, "u_proj")) glUniform2f(loc, (float)p00, (float)p11);
-        else if (!strcmp(name, "u_radius")) glUniform1f(loc, (float)radius);
-        else if (!strcmp(name, "u_pixels_per_unit")) glUniform1f(loc, (float)(0.5 * f->H * p11));
-        else die("manifest: GTAO uniform %s has a formula this host does not know", name);
+        const char *uname = uniforms->keys[k];
+        GLint loc = glGetUniformLocation(prog, uname);
+        Json *value = jget(uniforms->items[k], "value"), *times = jget(uniforms->items[k], "times_radius");
+        if (value && value->type == J_ARR) {
+            float *v = xmalloc(sizeof(float) * (size_t)value->n);
+            for (int i = 0; i < value->n; i++) v[i] = (float)value->items[i]->num;
+            if (!strncmp(jstr(uniforms->items[k], "type"), "vec3", 4)) glUniform3fv(loc, value->n / 3, v);
+            else glUniform1fv(loc, value->n, v);
+            free(v);
+        } else if (value) glUniform1f(loc, (float)value->num);
+        else if (times) glUniform1f(loc, (float)(times->num * radius));
+        else if (!strcmp(uname, "u_proj")) glUniform2f(loc, (float)p00, (float)p11);
+        else if (!strcmp(uname, "u_radius")) glUniform1f(loc, (float)radius);
+        else if (!strcmp(uname, "u_pixels_per_unit")) glUniform1f(loc, (float)(0.5 * f->H * p11));
+        else die("manifest: %s uniform %s has a formula this host does not know", name, uname);
     }
     const char *bound[] = {"u_position", "u_normal", "u_noise", "u_raw"};
     GLuint by_name[] = {f->position, f->normal, noise_tex, raw};
@@ -582,9 +609,11 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
     const Json *stages[2] = {jreq(g, "textures"), blur && blur->type == J_OBJ ? jreq(blur, "textures") : NULL};
     GLuint progs[2] = {prog, 0}, targets[2] = {raw, raw};
     if (stages[1]) {
+        char blur_key[64];
+        snprintf(blur_key, sizeof blur_key, "%s_blur", name);
         targets[1] = texture_2d(f->W, f->H, GL_R32F, GL_RED, NULL);
-        frag = pass_source(folder, sources, "gtao_blur");
-        progs[1] = compile_pipeline(f->vertex, frag, jstr(sources, "gtao_blur"));
+        frag = pass_source(folder, sources, blur_key);
+        progs[1] = compile_pipeline(f->vertex, frag, jstr(sources, blur_key));
         free(frag);
     }
     double *runs = xmalloc(sizeof(double) * (size_t)(g_repeats + 1) * 2), *walls = runs + g_repeats + 1;
@@ -594,7 +623,7 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
             for (int k = 0; k < stages[s]->n; k++) {
                 int which = -1;
                 for (int b = 0; b < 4; b++) if (!strcmp(stages[s]->keys[k], bound[b])) which = b;
-                if (which < 0) die("manifest: GTAO texture %s is not one this host has", stages[s]->keys[k]);
+                if (which < 0) die("manifest: %s texture %s is not one this host has", name, stages[s]->keys[k]);
                 glActiveTexture(GL_TEXTURE0 + (GLenum)stages[s]->items[k]->num);
                 glBindTexture(GL_TEXTURE_2D, by_name[which]);
             }
@@ -603,7 +632,7 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
         }
         if (run > 0) runs[run - 1] = time_end_ms(&walls[run - 1]);
     }
-    if (g_repeats > 0) g_gtao_ms = median(runs, g_repeats), g_gtao_wall_ms = median(walls, g_repeats);
+    if (g_repeats > 0) *ms = median(runs, g_repeats), *wall = median(walls, g_repeats);
     free(runs);
     GLuint out = stages[1] ? targets[1] : raw;
     glDeleteProgram(progs[0]);
@@ -613,20 +642,11 @@ static GLuint run_gtao(const Frame *f, const char *folder, const Json *sources, 
     return out;
 }
 
-/* The whole frame at the manifest's internal resolution: (GTAO,) downsample, network, upsample (, clamp).
- * gb: W x H x 5 floats, row 0 on top. Returns AO W x H, row 0 on top, 1 on background. */
-static float *run_internal(const Json *m, const char *dir, const Json *ir, const float *gb,
-                           int W, int H, double radius, double yfov, int *n_passes) {
-    char folder[4200];
-    snprintf(folder, sizeof folder, "%s/%s", dir, jstr(ir, "folder"));
-    Json *sources = jreq(ir, "sources");
-    const int hybrid = jget(sources, "gtao") != NULL;
-    if (hybrid && !jget(ir, "gtao")) die("manifest: a gtao source without its \"gtao\" entry");
-    const int ih = (int)jnum(ir, "height");
-    const int lh = ih, lw = (int)fmax(1.0, rint((double)W * ih / H));  /* round half to even, as Python */
-    const size_t px = (size_t)W * H, lpx = (size_t)lw * lh;
-
-    /* the full-resolution G-buffer as neuralao.runtime.baselines.gbuffer_textures builds it, GL order */
+/* The full-resolution G-buffer as neuralao.runtime.baselines.gbuffer_textures builds it, for the fragment
+ * passes: position (camera-space xyz, mask in w) and normal, RGBA32F 2-D textures in GL order (row 0 = the
+ * bottom row), zeros on background; and an empty VAO to draw with. gb: H x W x 5 floats, row 0 on top. */
+static Frame gbuffer_frame(const float *gb, int W, int H, double yfov, const char *vertex) {
+    const size_t px = (size_t)W * H;
     float *pos = xmalloc(sizeof(float) * 4 * px), *nrm = xmalloc(sizeof(float) * 4 * px);
     const double t = tan(0.5 * yfov);
     for (int r = 0; r < H; r++) {
@@ -644,14 +664,38 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
     glGenVertexArrays(1, &vao);
     glBindVertexArray(vao);
     Frame f = {texture_2d(W, H, GL_RGBA32F, GL_RGBA, pos), texture_2d(W, H, GL_RGBA32F, GL_RGBA, nrm), vao,
-               pass_source(folder, sources, "vertex"), W, H};
+               vertex, W, H};
+    free(pos), free(nrm);
     glDisable(GL_DEPTH_TEST), glDisable(GL_BLEND), glDisable(GL_CULL_FACE), glDisable(GL_SCISSOR_TEST);
+    return f;
+}
+
+static void release_frame(Frame *f) {
+    glDeleteTextures(1, &f->position), glDeleteTextures(1, &f->normal), glDeleteVertexArrays(1, &f->vao);
+}
+
+/* The whole frame at the manifest's internal resolution: (GTAO,) downsample, network, upsample (, clamp).
+ * gb: W x H x 5 floats, row 0 on top. Returns AO W x H, row 0 on top, 1 on background. */
+static float *run_internal(const Json *m, const char *dir, const Json *ir, const float *gb,
+                           int W, int H, double radius, double yfov, int *n_passes) {
+    char folder[4200];
+    snprintf(folder, sizeof folder, "%s/%s", dir, jstr(ir, "folder"));
+    Json *sources = jreq(ir, "sources");
+    const int hybrid = jget(sources, "gtao") != NULL;
+    if (hybrid && !jget(ir, "gtao")) die("manifest: a gtao source without its \"gtao\" entry");
+    const int ih = (int)jnum(ir, "height");
+    const int lh = ih, lw = (int)fmax(1.0, rint((double)W * ih / H));  /* round half to even, as Python */
+    const size_t px = (size_t)W * H, lpx = (size_t)lw * lh;
+
+    char *vertex = pass_source(folder, sources, "vertex");
+    Frame f = gbuffer_frame(gb, W, H, yfov, vertex);
 
     /* hybrid, first: GTAO at the frame's own resolution */
     GLuint gtao_tex = 0;
     float *gtao = NULL;
     if (hybrid) {
-        gtao_tex = run_gtao(&f, folder, sources, jreq(ir, "gtao"), radius, yfov);
+        gtao_tex = run_screen_space(&f, folder, sources, "gtao", jreq(ir, "gtao"), radius, yfov, &g_gtao_ms,
+                                    &g_gtao_wall_ms);
         gtao = read_2d(gtao_tex, W, H, GL_RED, 1);
     }
 
@@ -718,9 +762,333 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
             ao[top] = gb[top * 5 + 4] >= 0.5f ? v : 1.0f;
         }
     *n_passes += 2 + (hybrid ? 1 + (jget(sources, "gtao_blur") ? 1 : 0) : 0);
-    free(pos), free(nrm), free(lpos), free(lnrm), free(planes), free(ldepth), free(lmask), free(lgtao);
+    release_frame(&f), free(vertex);
+    free(lpos), free(lnrm), free(planes), free(ldepth), free(lmask), free(lgtao);
     free(y), free(low_ao), free(upsampled), free(gtao);
     return ao;
+}
+
+/* Writes W x H floats to path through a temporary file: a failed run leaves no partial output. */
+static void write_ao(const char *path, const float *ao, int W, int H) {
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *f = fopen(tmp, "wb");
+    if (!f || fwrite(ao, sizeof(float), (size_t)W * H, f) != (size_t)W * H || fclose(f)) die("cannot write %s", tmp);
+    if (rename(tmp, path)) die("cannot rename %s to %s", tmp, path);
+}
+
+/* ------------------------------------------------------------------ the whole frame (manifest "frame") */
+
+/* A size formula of the frame section: a number ("1"), or a symbol (W, H: the frame; w, h: the network's
+ * input; wp, hp: those padded) with an optional "*num/den", then an optional "+n" / "-n" ("wp*1/8"). */
+static int frame_formula(const char *formula, const int sym[6]) {
+    static const char *names[6] = {"W", "H", "w", "h", "wp", "hp"};
+    const char *s = formula;
+    char name[16] = {0};
+    size_t n = 0;
+    while ((isalnum((unsigned char)*s) || *s == '_') && n + 1 < sizeof name) name[n++] = *s++;
+    long value = 0;
+    char *end;
+    if (n && strspn(name, "0123456789") == n) {
+        value = atol(name);
+    } else if (n) {
+        int k = 0;
+        while (k < 6 && strcmp(name, names[k])) k++;
+        if (k == 6) die("manifest: size formula %s names no size this host knows", formula);
+        value = sym[k];
+        if (*s == '*') {
+            const long num = strtol(s + 1, &end, 10);
+            if (*end != '/') die("manifest: size formula %s is not symbol[*num/den][+-offset]", formula);
+            const long den = strtol(end + 1, &end, 10);
+            if (den <= 0) die("manifest: size formula %s divides by %ld", formula, den);
+            value = value * num / den, s = end;
+        }
+    }
+    if (*s == '+' || *s == '-') value += strtol(s, &end, 10), s = end, n = 1;
+    if (*s || !n) die("manifest: size formula %s is not symbol[*num/den][+-offset]", formula);
+    return (int)value;
+}
+
+static GLenum internal_format(const char *name) {
+    static const char *names[] = {"RGBA32F", "RGBA16F", "R32F", "R16F"};
+    static const GLenum formats[] = {GL_RGBA32F, GL_RGBA16F, GL_R32F, GL_R16F};
+    for (int i = 0; i < 4; i++) if (!strcmp(name, names[i])) return formats[i];
+    die("manifest: texture format %s is not one this host allocates", name);
+    return 0;
+}
+
+enum { STEP_OTHER, STEP_GTAO, STEP_NETWORK }; /* what the timed runs time apart */
+
+typedef struct {
+    GLuint prog;
+    int n_inputs, in_binding[8];
+    Texture *in[8], *out;
+    int out_binding, ubo_binding;           /* ubo_binding: -1 for a network pass */
+    int params_binding;                     /* -1: no weights */
+    GLintptr params_offset;
+    GLsizeiptr params_bytes;
+    int flip_location;                      /* -1: no u_flip_y */
+    GLuint groups[3];
+    int kind;                               /* STEP_* */
+} Step;
+
+typedef struct {
+    Texture *tex;
+    int n_tex;
+    Step *steps;
+    int n_steps;
+    GLuint ssbo, ubo;
+} FrameRun;
+
+/* The step's pass entry: a frame pass by name, or the network's pass at "index". */
+static const Json *step_pass(const Json *m, const Json *step) {
+    Json *name = jget(step, "frame_pass");
+    if (!name) {
+        const Json *passes = jreq(m, "passes");
+        const int i = (int)jnum(step, "index");
+        if (i < 0 || i >= passes->n) die("manifest: frame step index %d is not a pass", i);
+        return passes->items[i];
+    }
+    const Json *passes = jreq(jreq(m, "frame"), "passes");
+    for (int i = 0; i < passes->n; i++)
+        if (!strcmp(jstr(passes->items[i], "name"), name->str)) return passes->items[i];
+    die("manifest: frame step %s is no frame pass", name->str);
+    return NULL;
+}
+
+static Step make_step(const char *dir, const Json *p, FrameRun *fr) {
+    char path[4200];
+    Step s = {0};
+    snprintf(path, sizeof path, "%s/%s", dir, jstr(p, "shader"));
+    char *src = read_file(path, NULL);
+    s.prog = compile_compute(src, jstr(p, "shader"));
+    free(src);
+    Json *inputs = jreq(p, "inputs");
+    if (inputs->n > 8) die("pass %s reads %d textures, this host binds up to 8", jstr(p, "name"), inputs->n);
+    s.n_inputs = inputs->n;
+    for (int k = 0; k < inputs->n; k++) {
+        s.in_binding[k] = (int)jnum(inputs->items[k], "binding");
+        s.in[k] = find_texture(fr->tex, fr->n_tex, jstr(inputs->items[k], "texture"));
+    }
+    Json *out = jreq(p, "output"), *ub = jget(p, "uniform_block"), *params = jget(p, "params");
+    s.out = find_texture(fr->tex, fr->n_tex, jstr(out, "texture"));
+    s.out_binding = (int)jnum(out, "binding");
+    s.ubo_binding = ub ? (int)jnum(ub, "binding") : -1;
+    s.params_binding = params ? (int)jnum(params, "binding") : -1;
+    if (params) s.params_offset = (GLintptr)jnum(params, "offset"), s.params_bytes = (GLsizeiptr)jnum(params, "bytes");
+    s.flip_location = -1;
+    Json *uniforms = jget(p, "uniforms");
+    for (int k = 0; uniforms && k < uniforms->n; k++) {
+        if (strcmp(uniforms->keys[k], "u_flip_y"))
+            die("pass %s: the frame sets no uniform %s", jstr(p, "name"), uniforms->keys[k]);
+        s.flip_location = (int)jnum(uniforms->items[k], "location");
+    }
+    Json *ls = jreq(p, "local_size"), *block = jget(p, "block");
+    const int bx = block ? (int)block->items[0]->num : 1, by = block ? (int)block->items[1]->num : 1;
+    const int bl = block ? (int)block->items[2]->num : 1;
+    const int lx = (int)ls->items[0]->num, ly = (int)ls->items[1]->num;
+    s.groups[0] = (GLuint)((s.out->w + lx * bx - 1) / (lx * bx));
+    s.groups[1] = (GLuint)((s.out->h + ly * by - 1) / (ly * by));
+    s.groups[2] = jget(p, "stage") ? 1 : (GLuint)(s.out->layers / bl); /* a frame pass writes every layer */
+    const char *name = jstr(p, "name");
+    s.kind = !jget(p, "stage") ? STEP_NETWORK : !strncmp(name, "f_gtao", 6) ? STEP_GTAO : STEP_OTHER;
+    return s;
+}
+
+/* Dispatches the frame's steps of one kind (or all of them: kind < 0), in order. */
+static void dispatch_steps(const FrameRun *fr, int kind) {
+    for (int i = 0; i < fr->n_steps; i++) {
+        const Step *s = &fr->steps[i];
+        if (kind >= 0 && s->kind != kind) continue;
+        glUseProgram(s->prog);
+        for (int k = 0; k < s->n_inputs; k++) {
+            glActiveTexture(GL_TEXTURE0 + (GLenum)s->in_binding[k]);
+            glBindTexture(GL_TEXTURE_2D_ARRAY, s->in[k]->tex);
+        }
+        glBindImageTexture((GLuint)s->out_binding, s->out->tex, 0, GL_TRUE, 0, GL_WRITE_ONLY, s->out->internal);
+        if (s->ubo_binding >= 0) glBindBufferBase(GL_UNIFORM_BUFFER, (GLuint)s->ubo_binding, fr->ubo);
+        if (s->params_binding >= 0)
+            glBindBufferRange(GL_SHADER_STORAGE_BUFFER, (GLuint)s->params_binding, fr->ssbo, s->params_offset,
+                              s->params_bytes);
+        if (s->flip_location >= 0) glUniform1i(s->flip_location, 0); /* the frame's u_flip_y */
+        glDispatchCompute(s->groups[0], s->groups[1], s->groups[2]);
+        glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
+    }
+    glActiveTexture(GL_TEXTURE0);
+}
+
+/* Medians of N timed dispatches of the steps of one kind (all: kind < 0); -1 when the frame has none. */
+static void time_steps(const FrameRun *fr, int kind, double *ms, double *wall) {
+    int any = kind < 0;
+    for (int i = 0; i < fr->n_steps; i++) any |= fr->steps[i].kind == kind;
+    if (!any || g_repeats < 1) return;
+    double *runs = xmalloc(sizeof(double) * (size_t)g_repeats * 2), *walls = runs + g_repeats;
+    for (int run = 0; run < g_repeats; run++) {
+        time_begin();
+        dispatch_steps(fr, kind);
+        runs[run] = time_end_ms(&walls[run]);
+    }
+    *ms = median(runs, g_repeats), *wall = median(walls, g_repeats);
+    free(runs);
+}
+
+/* Writes one value of the FrameUniforms block: its member `name` at `offset`, as the camera gives it. */
+static void uniform_member(unsigned char *block, size_t bytes, const char *name, size_t offset, int W, int H,
+                           double radius, double yfov) {
+    const double focal = 1.0 / tan(0.5 * yfov), p00 = focal / ((double)W / H), p11 = focal;
+    float v[2];
+    int flip = 0, n = 1;
+    if (!strcmp(name, "u_proj")) v[0] = (float)p00, v[1] = (float)p11, n = 2;
+    else if (!strcmp(name, "u_radius")) v[0] = (float)radius;
+    else if (!strcmp(name, "u_pixels_per_unit")) v[0] = (float)(0.5 * H * p11);
+    else if (!strcmp(name, "u_flip_y")) n = 0;  /* textures top row first */
+    else die("manifest: FrameUniforms member %s is not one this host fills", name);
+    const size_t size = n ? sizeof(float) * (size_t)n : sizeof flip;
+    if (offset + size > bytes) die("manifest: FrameUniforms member %s lies outside the block", name);
+    memcpy(block + offset, n ? (const void *)v : (const void *)&flip, size);
+}
+
+/* The whole frame from the manifest's "frame" section (see the header, steps 1-5). gb: H x W x 5 floats,
+ * row 0 on top. Returns the AO, H x W, row 0 on top. */
+static float *run_frame(const Json *m, const char *dir, const float *gb, int W, int H, double radius, double yfov,
+                        int *n_passes) {
+    char path[4200];
+    const Json *frame = jreq(m, "frame");
+    const Json *ih_json = jget(frame, "internal_height");
+    const int ih = ih_json && ih_json->type == J_NUM ? (int)ih_json->num : 0;
+    /* round half to even, as Python's round */
+    const int w = ih ? (int)fmax(1.0, rint((double)W * ih / H)) : W, h = ih ? ih : H;
+    const int p = (int)jnum(jreq(m, "pad"), "multiple");
+    if (w < p || h < p) die("the network's input %dx%d is smaller than the pad multiple %d", w, h, p);
+    const int sym[6] = {W, H, w, h, (w + p - 1) / p * p, (h + p - 1) / p * p};
+
+    /* 1. the textures */
+    FrameRun fr = {0};
+    const Json *tex_json = jreq(frame, "textures");
+    fr.n_tex = tex_json->n;
+    fr.tex = xmalloc(sizeof(Texture) * (size_t)(fr.n_tex ? fr.n_tex : 1));
+    for (int i = 0; i < fr.n_tex; i++) {
+        const Json *t = tex_json->items[i];
+        Texture *x = &fr.tex[i];
+        x->id = tex_json->keys[i];
+        x->w = frame_formula(jstr(t, "width"), sym), x->h = frame_formula(jstr(t, "height"), sym);
+        x->layers = (int)jnum(t, "layers");
+        x->internal = internal_format(jstr(t, "format"));
+        if (x->w < 1 || x->h < 1 || x->layers < 1) die("texture %s is %dx%dx%d", x->id, x->w, x->h, x->layers);
+        glGenTextures(1, &x->tex);
+        glBindTexture(GL_TEXTURE_2D_ARRAY, x->tex);
+        glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, x->internal, x->w, x->h, x->layers);
+        glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    }
+
+    /* 2. the engine's inputs: depth and normal, zero on background, row 0 on top */
+    const size_t px = (size_t)W * H;
+    const char *input_ids[2] = {"depth", "normal"};
+    for (int k = 0; k < 2; k++) {
+        Texture *t = find_texture(fr.tex, fr.n_tex, input_ids[k]);
+        if (t->w != W || t->h != H) die("input texture %s is %dx%d, the frame %dx%d", t->id, t->w, t->h, W, H);
+        const int lanes = t->internal == GL_R32F || t->internal == GL_R16F ? 1 : 4;
+        float *data = xmalloc(sizeof(float) * (size_t)lanes * px);
+        for (size_t i = 0; i < px; i++) {
+            const float *g = gb + i * 5;
+            if (!(g[4] >= 0.5f)) continue;
+            float *texel = data + i * (size_t)lanes;
+            if (k == 0) texel[0] = g[0];
+            else for (int c = 0; c < 3 && c < lanes; c++) texel[c] = isfinite(g[1 + c]) ? g[1 + c] : 0.0f;
+        }
+        glBindTexture(GL_TEXTURE_2D_ARRAY, t->tex);
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, W, H, 1, lanes == 1 ? GL_RED : GL_RGBA, GL_FLOAT, data);
+        free(data);
+    }
+
+    /* 3. the FrameUniforms block, the weights */
+    const Json *ub = jreq(frame, "uniform_block"), *members = jreq(ub, "members");
+    const size_t ub_bytes = (size_t)jnum(ub, "bytes");
+    unsigned char *block = xmalloc(ub_bytes);
+    for (int k = 0; k < members->n; k++)
+        uniform_member(block, ub_bytes, jstr(members->items[k], "name"), (size_t)jnum(members->items[k], "offset"),
+                       W, H, radius, yfov);
+    glGenBuffers(1, &fr.ubo);
+    glBindBuffer(GL_UNIFORM_BUFFER, fr.ubo);
+    glBufferData(GL_UNIFORM_BUFFER, (GLsizeiptr)ub_bytes, block, GL_STATIC_DRAW);
+    free(block);
+    const Json *wj = jreq(m, "weights");
+    snprintf(path, sizeof path, "%s/%s", dir, jstr(wj, "file"));
+    size_t w_bytes;
+    char *weights = read_file(path, &w_bytes);
+    if ((double)w_bytes != jnum(wj, "bytes"))
+        die("%s holds %zu bytes, the manifest says %.0f", path, w_bytes, jnum(wj, "bytes"));
+    glGenBuffers(1, &fr.ssbo);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, fr.ssbo);
+    glBufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)(w_bytes ? w_bytes : 16), weights, GL_STATIC_DRAW);
+    free(weights);
+
+    /* 4. the steps that run at this size, compiled once; dispatched, then timed */
+    const Texture *net_in = find_texture(fr.tex, fr.n_tex, jstr(jreq(m, "input"), "texture"));
+    const int same = net_in->w == W && net_in->h == H;
+    const Json *steps = jreq(frame, "steps");
+    fr.steps = xmalloc(sizeof(Step) * (size_t)(steps->n ? steps->n : 1));
+    for (int k = 0; k < steps->n; k++) {
+        const Json *st = steps->items[k], *when = jget(st, "when");
+        if (jget(st, "skip")) continue;
+        if (when) {
+            const int at_frame_size = !strcmp(when->str, "(w, h) == (W, H)");
+            if (!at_frame_size && strcmp(when->str, "(w, h) != (W, H)")) die("manifest: step condition %s", when->str);
+            if (at_frame_size != same) continue;
+        }
+        fr.steps[fr.n_steps++] = make_step(dir, step_pass(m, st), &fr);
+    }
+    dispatch_steps(&fr, -1);
+
+    /* 5. the AO, lane 0 of the output texture */
+    Texture *res = find_texture(fr.tex, fr.n_tex, jstr(frame, "output"));
+    if (res->w != W || res->h != H) die("output texture %s is %dx%d, the frame %dx%d", res->id, res->w, res->h, W, H);
+    float *rgba = xmalloc(sizeof(float) * 4 * px * (size_t)res->layers);
+    glBindTexture(GL_TEXTURE_2D_ARRAY, res->tex);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glGetTexImage(GL_TEXTURE_2D_ARRAY, 0, GL_RGBA, GL_FLOAT, rgba);
+    float *ao = xmalloc(sizeof(float) * px);
+    for (size_t i = 0; i < px; i++) ao[i] = rgba[i * 4];
+    free(rgba);
+
+    time_steps(&fr, -1, &g_frame_ms, &g_frame_wall_ms);
+    time_steps(&fr, STEP_GTAO, &g_gtao_ms, &g_gtao_wall_ms);
+    time_steps(&fr, STEP_NETWORK, &g_network_ms, &g_network_wall_ms);
+
+    *n_passes = fr.n_steps;
+    for (int i = 0; i < fr.n_steps; i++) glDeleteProgram(fr.steps[i].prog);
+    for (int i = 0; i < fr.n_tex; i++) glDeleteTextures(1, &fr.tex[i].tex);
+    glDeleteBuffers(1, &fr.ssbo), glDeleteBuffers(1, &fr.ubo);
+    free(fr.steps), free(fr.tex);
+    return ao;
+}
+
+/* The bench's SSAO (EXPORT_DIR/manifest.json "ssao": its fragment passes and how to run them) on the same
+ * G-buffer, timed into g_ssao_ms; its AO (H x W, row 0 on top, 1 on background) written to `out` unless
+ * that is NULL. */
+static void run_ssao(const Json *ssao, const char *export_dir, const float *gb, int W, int H, double radius,
+                     double yfov, const char *out_path) {
+    char folder[4200];
+    snprintf(folder, sizeof folder, "%s/%s", export_dir, jstr(ssao, "folder"));
+    const Json *sources = jreq(ssao, "sources");
+    char *vertex = pass_source(folder, sources, "vertex");
+    Frame f = gbuffer_frame(gb, W, H, yfov, vertex);
+    GLuint out = run_screen_space(&f, folder, sources, "ssao", ssao, radius, yfov, &g_ssao_ms, &g_ssao_wall_ms);
+    if (out_path) {
+        float *gl_rows = read_2d(out, W, H, GL_RED, 1), *ao = xmalloc(sizeof(float) * (size_t)W * H);
+        for (int r = 0; r < H; r++)
+            for (int c = 0; c < W; c++) {
+                const size_t top = (size_t)r * W + c;
+                ao[top] = gb[top * 5 + 4] >= 0.5f ? gl_rows[(size_t)(H - 1 - r) * W + c] : 1.0f;
+            }
+        write_ao(out_path, ao, W, H);
+        free(gl_rows), free(ao);
+    }
+    glDeleteTextures(1, &out);
+    release_frame(&f);
+    free(vertex);
 }
 
 /* ------------------------------------------------------------------ main */
@@ -738,12 +1106,13 @@ int main(int argc, char **argv) {
     if (!(radius > 0) || !(yfov_deg > 0 && yfov_deg < 180)) die("RADIUS must be > 0 and YFOV_DEG in (0, 180) degrees");
 
     /* the export: glsl/manifest.json under EXPORT_DIR (and EXPORT_DIR/manifest.json, whose
-     * "internal_resolution" names the fragment passes around the network), or EXPORT_DIR/manifest.json */
+     * "internal_resolution" names the fragment passes around the network of an export without a frame
+     * section, and whose "ssao" the bench's SSAO), or EXPORT_DIR/manifest.json */
     char dir[4096], path[4200];
     snprintf(dir, sizeof dir, "%s/glsl", argv[1]);
     snprintf(path, sizeof path, "%s/manifest.json", dir);
     FILE *probe = fopen(path, "rb");
-    Json *internal = NULL;
+    Json *internal = NULL, *ssao = NULL;
     if (probe) {
         fclose(probe);
         char top_path[4200];
@@ -752,8 +1121,11 @@ int main(int argc, char **argv) {
         if (top) {
             fclose(top);
             Reader tr = {read_file(top_path, NULL)};
-            internal = jget(parse_value(&tr), "internal_resolution");
+            Json *top_manifest = parse_value(&tr);
+            internal = jget(top_manifest, "internal_resolution");
             if (internal && internal->type != J_OBJ) internal = NULL;  /* null: the frame's own size */
+            ssao = jget(top_manifest, "ssao");
+            if (ssao && ssao->type != J_OBJ) ssao = NULL;
         }
     } else {
         snprintf(dir, sizeof dir, "%s", argv[1]);
@@ -790,7 +1162,11 @@ int main(int argc, char **argv) {
     egl_context();
     int n_passes = 0;
     float *ao;
-    if (internal) {
+    const Json *frame = jget(m, "frame");
+    const char *route = frame ? "frame" : internal ? "internal" : "network";
+    if (frame) {
+        ao = run_frame(m, dir, gb, W, H, radius, yfov, &n_passes);
+    } else if (internal) {
         ao = run_internal(m, dir, internal, gb, W, H, radius, yfov, &n_passes);
     } else {
         if ((int)jnum(jreq(m, "input"), "channels") != 4)
@@ -808,20 +1184,20 @@ int main(int argc, char **argv) {
         for (size_t i = 0; i < px; i++) if (!(mask[i] >= 0.5f)) ao[i] = 1.0f;
         free(planes), free(depth), free(mask);
     }
+    const char *ssao_out = getenv("NEURALAO_HOST_SSAO_OUT");
+    if (ssao && (g_repeats > 0 || ssao_out)) run_ssao(ssao, argv[1], gb, W, H, radius, yfov, ssao_out);
+    else if (ssao_out) die("NEURALAO_HOST_SSAO_OUT is set, but %s/manifest.json has no \"ssao\" entry", argv[1]);
     if (glGetError() != GL_NO_ERROR) die("OpenGL reported an error");
 
-    char tmp[4200];
-    snprintf(tmp, sizeof tmp, "%s.tmp", argv[7]);
-    FILE *f = fopen(tmp, "wb");
-    if (!f || fwrite(ao, sizeof(float), (size_t)W * H, f) != (size_t)W * H || fclose(f)) die("cannot write %s", tmp);
-    if (rename(tmp, argv[7])) die("cannot rename %s to %s", tmp, argv[7]);
-    fprintf(stderr, "neuralao_host: %dx%d%s, %d passes -> %s\n", W, H, internal ? " (internal resolution)" : "",
-            n_passes, argv[7]);
+    write_ao(argv[7], ao, W, H);
+    fprintf(stderr, "neuralao_host: %dx%d (%s), %d passes -> %s\n", W, H, route, n_passes, argv[7]);
     if (g_repeats > 0)
         printf("{\"renderer\": \"%s\", \"version\": \"%s\", \"width\": %d, \"height\": %d, \"repeats\": %d, "
-               "\"network_ms\": %.4f, \"gtao_ms\": %.4f, \"network_wall_ms\": %.4f, \"gtao_wall_ms\": %.4f, "
-               "\"passes\": %d}\n",
+               "\"path\": \"%s\", \"frame_ms\": %.4f, \"network_ms\": %.4f, \"gtao_ms\": %.4f, \"ssao_ms\": %.4f, "
+               "\"frame_wall_ms\": %.4f, \"network_wall_ms\": %.4f, \"gtao_wall_ms\": %.4f, "
+               "\"ssao_wall_ms\": %.4f, \"passes\": %d}\n",
                (const char *)glGetString(GL_RENDERER), (const char *)glGetString(GL_VERSION), W, H, g_repeats,
-               g_network_ms, g_gtao_ms, g_network_wall_ms, g_gtao_wall_ms, n_passes);
+               route, g_frame_ms, g_network_ms, g_gtao_ms, g_ssao_ms, g_frame_wall_ms, g_network_wall_ms,
+               g_gtao_wall_ms, g_ssao_wall_ms, n_passes);
     return 0;
 }

@@ -205,20 +205,20 @@ void main() {
   gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, W, H, gl.RED, gl.FLOAT, new Float32Array(W * H).fill(1));
 
   // ------------------------------------------------------------------ screen-space U-Net (WebGPU)
-  // A method with a `network` runs a U-Net's WGSL compute export (wgsl.js) on the page's camera-space
-  // G-buffer, as runtime/predict.py unet_predictor does with onnxruntime: point-sampled to the model's
-  // internal height (runtime/internal_resolution.py), preprocessed by the model's input contract
-  // (runtime/unet_input.py; version 3: log depth, camera-space normals, rho = log(R / tan(yfov / 2));
-  // version 2: depth over the mean foreground depth, rho = R / (mean depth * tan(yfov / 2))), run,
-  // background set to 1, upsampled by the joint bilateral filter. WebGPU is asynchronous: a frame
-  // shows the latest finished AO; while one run is in flight, newer frames coalesce into one more run.
+  // A method with a `network` runs a U-Net export's whole frame in WebGPU (wgsl.js runFrame), as an
+  // engine would: the page's camera-space G-buffer gives the frame's two inputs (linear depth -z, the
+  // camera-space normal), the camera gives FrameUniforms (projection, AO radius, u_flip_y = 0: WebGPU's
+  // row 0 is the top row), and the export's passes do the rest in the order of manifest.frame.steps
+  // (a hybrid's GTAO and its blur, point sampling to the internal height, the model's input contract,
+  // the network, upsampling with the hybrid's correction), as runtime/frame_runner.py does through wgpu.
+  // WebGPU is asynchronous: a frame shows the latest finished AO; while one run is in flight, newer
+  // frames coalesce into one more run.
   const net = { device: null, state: "none", error: null, busy: null, dirty: false, last: null };
   net.note = () => net.error ? " (error: " + net.error + ")" : net.state === "ready" ? ""
     : net.state === "pending" ? " (starting WebGPU...)" : " (" + net.state + ")";
   function networkOf(n) {
     return { program: { manifest: n.manifest, sources: n.sources, weights: b64floats(n.weights).buffer },
-      internalHeight: n.internal_height, version: n.preprocess_version, radius: n.radius,
-      upsample: n.upsample, model: n.model };
+      radius: n.radius, model: n.model };
   }
   async function startWebGPU() {
     net.state = "pending";
@@ -272,110 +272,29 @@ void main() {
       if (net.dirty) { net.dirty = false; render(); } else display(m, tNetwork);
     });
   }
-  // Python's round(): halves to even (runtime/internal_resolution.py internal_size)
-  function roundHalfEven(v) {
-    const f = Math.floor(v), d = v - f;
-    return d > 0.5 ? f + 1 : d < 0.5 ? f : (f % 2 === 0 ? f : f + 1);
-  }
-  function internalSize(h) {
-    return h === null || h === undefined ? [W, H] : [Math.max(1, roundHalfEven(W * h / H)), h];
-  }
-  // low texel t of n samples pixel floor((t + 0.5) N / n) of N, per axis, GL row order
-  function pointSample(img, lw, lh) {
-    const out = new Float32Array(lw * lh * 4);
-    for (let ty = 0; ty < lh; ty++) {
-      const sy = Math.min(Math.floor((2 * ty + 1) * H / (2 * lh)), H - 1);
-      for (let tx = 0; tx < lw; tx++) {
-        const sx = Math.min(Math.floor((2 * tx + 1) * W / (2 * lw)), W - 1);
-        for (let c = 0; c < 4; c++) out[(ty * lw + tx) * 4 + c] = img[(sy * W + sx) * 4 + c];
+  // gb: {position, normal} RGBA float32 W x H, GL rows (bottom first). The frame's inputs, top row first:
+  // depth (H, W) -z on the foreground (position w = 1), 0 on background; normal (H, W, 4) xyz, w 0.
+  function frameInputs(gb) {
+    const depth = new Float32Array(W * H), normal = new Float32Array(4 * W * H);
+    for (let r = 0; r < H; r++) {
+      for (let c = 0; c < W; c++) {
+        const src = (H - 1 - r) * W + c, dst = r * W + c;
+        if (!(gb.position[4 * src + 3] >= 0.5)) continue;
+        depth[dst] = -gb.position[4 * src + 2];
+        for (let k = 0; k < 3; k++) normal[4 * dst + k] = gb.normal[4 * src + k];
       }
     }
-    return out;
+    return { depth, normal };
   }
-  // camera-space points of the pixel-centre rays at the depth, as runtime/baselines.py camera_space_position
-  // (GL row order; float32 like its result)
-  function rayPositions(pos, w, h) {
-    const t = Math.tan(YFOV / 2), out = new Float32Array(w * h * 3);
-    for (let r = 0; r < h; r++) {
-      const yc = (1.0 - ((h - 1 - r) + 0.5) / h * 2.0) * t;
-      for (let c = 0; c < w; c++) {
-        const i = r * w + c, fg = pos[4 * i + 3] >= 0.5, d = fg ? -pos[4 * i + 2] : 0;
-        const xc = ((c + 0.5) / w * 2.0 - 1.0) * t * (w / h);
-        out[3 * i] = fg ? xc * d : 0; out[3 * i + 1] = fg ? yc * d : 0; out[3 * i + 2] = fg ? -d : 0;
-      }
-    }
-    return out;
-  }
-  // joint bilateral upsampling of ao (lh x lw, GL rows), runtime/internal_resolution.py upsample_ao
-  function upsample(aoLow, lw, lh, gb, lowGb, s) {
-    const hp = rayPositions(gb.position, W, H), lp = rayPositions(lowGb.position, lw, lh);
-    const out = new Float32Array(W * H);
-    const div = (a, b) => Math.floor(a / b);  // floor division of integers
-    for (let py = 0; py < H; py++) {
-      const v = (py + 0.5) * lh / H - 0.5, by = div((2 * py + 1) * lh - H, 2 * H) - 1;
-      for (let px = 0; px < W; px++) {
-        const i = py * W + px;
-        if (!(gb.position[4 * i + 3] >= 0.5)) { out[i] = 1; continue; }
-        const u = (px + 0.5) * lw / W - 0.5, bx = div((2 * px + 1) * lw - W, 2 * W) - 1;
-        const hx = hp[3 * i], hy = hp[3 * i + 1], hz = hp[3 * i + 2];
-        const nx = gb.normal[4 * i], ny = gb.normal[4 * i + 1], nz = gb.normal[4 * i + 2];
-        const depth = Math.max(-hz, 1e-30);
-        let acc = 0, total = 0;
-        for (let ty = 0; ty < 4; ty++) {
-          const qyr = by + ty, qy = Math.min(Math.max(qyr, 0), lh - 1), dy = qyr - v;
-          for (let tx = 0; tx < 4; tx++) {
-            const qxr = bx + tx, qx = Math.min(Math.max(qxr, 0), lw - 1), dx = qxr - u;
-            const q = qy * lw + qx;
-            if (!(lowGb.position[4 * q + 3] >= 0.5)) continue;
-            const spatial = Math.exp(-(dx * dx + dy * dy) / (2.0 * s.spatial_sigma * s.spatial_sigma));
-            const qnx = lowGb.normal[4 * q], qny = lowGb.normal[4 * q + 1], qnz = lowGb.normal[4 * q + 2];
-            const off = qnx * (hx - lp[3 * q]) + qny * (hy - lp[3 * q + 1]) + qnz * (hz - lp[3 * q + 2]);
-            const plane = Math.abs(off) / (s.plane_sigma * depth);
-            const agree = Math.pow(Math.max(qnx * nx + qny * ny + qnz * nz, 0.0), s.normal_power);
-            const weight = spatial * (s.floor + Math.exp(-plane * plane) * agree);
-            acc += weight * aoLow[q];
-            total += weight;
-          }
-        }
-        out[i] = total > 0 ? acc / total : 1.0;
-      }
-    }
-    return out;
-  }
-  // gb: {position, normal} RGBA float32 W x H, GL rows. Returns {ao (W x H, GL rows), rho, size, ms}.
+  // Returns {ao (W x H, GL rows), internal [w, h], ms, gbuffer}.
   async function runNetwork(n, gb) {
     const t0 = performance.now();
-    const [lw, lh] = internalSize(n.internalHeight);
-    const same = lw === W && lh === H;
-    const low = same ? gb
-      : { position: pointSample(gb.position, lw, lh), normal: pointSample(gb.normal, lw, lh) };
-    const P = low.position, N = low.normal, count = lw * lh;
-    let sum = 0, fg = 0;
-    if (n.version === 2)
-      for (let i = 0; i < count; i++) if (P[4 * i + 3] >= 0.5) { sum += -P[4 * i + 2]; fg++; }
-    const scale = fg ? sum / fg : 1.0;  // version 2: mean foreground depth (float64, as depth_scale)
-    const scale32 = Math.fround(scale);
-    const x = new Float32Array(4 * count);  // (4, lh, lw), row 0 at the top
-    for (let r = 0; r < lh; r++) {
-      for (let c = 0; c < lw; c++) {
-        const src = (lh - 1 - r) * lw + c, dst = r * lw + c;
-        if (!(P[4 * src + 3] >= 0.5)) continue;
-        const z = -P[4 * src + 2];
-        x[dst] = n.version === 2 ? z / scale32 : Math.log(Math.fround(z));
-        for (let k = 0; k < 3; k++) x[(k + 1) * count + dst] = N[4 * src + k];
-      }
-    }
-    const rho = n.version === 2 ? n.radius / (scale * Math.tan(0.5 * YFOV))
-      : Math.log(n.radius) - Math.log(Math.tan(0.5 * YFOV));
-    const y = await neuralaoWgsl.run(net.device, n.program, x, lw, lh, { radius: rho }, false);
-    const aoLow = new Float32Array(count);  // GL rows, background 1 (runtime/predict.py composite)
-    for (let r = 0; r < lh; r++)
-      for (let c = 0; c < lw; c++) {
-        const i = r * lw + c;
-        aoLow[i] = P[4 * i + 3] >= 0.5 ? y[(lh - 1 - r) * lw + c] : 1.0;
-      }
-    const ao = same ? aoLow : upsample(aoLow, lw, lh, gb, low, n.upsample);
-    return { ao: ao, rho: rho, size: [lw, lh], ms: performance.now() - t0, gbuffer: gb };
+    const { depth, normal } = frameInputs(gb);
+    const r = await neuralaoWgsl.runFrame(net.device, n.program, depth, normal, W, H,
+      { yfov: YFOV, radius: n.radius }, false);
+    const ao = new Float32Array(W * H);  // back to GL rows for the display texture
+    for (let row = 0; row < H; row++) ao.set(r.ao.subarray((H - 1 - row) * W, (H - row) * W), row * W);
+    return { ao: ao, internal: r.internal, ms: performance.now() - t0, gbuffer: gb };
   }
 
   // ------------------------------------------------------------------ methods
@@ -634,8 +553,14 @@ void main() {
     if (net.error) throw new Error(net.error);
     const r = net.last;
     return { width: W, height: H, method: m.name, model: m.network.model, radius: m.network.radius,
-      yfov: YFOV, rho: r.rho, internal: r.size, ms: r.ms, adapter: net.adapter,
+      yfov: YFOV, internal: r.internal, ms: r.ms, adapter: net.adapter,
       position: b64bytes(r.gbuffer.position), normal: b64bytes(r.gbuffer.normal), ao: b64bytes(r.ao) };
+  };
+  // a texture of the current U-Net's latest frame (e.g. "gtao"): base64 float32 (layers, h, w, lanes), the
+  // rows as WebGPU stores them (row 0 at the top)
+  api.readNetworkTexture = async (id) => {
+    while (net.busy) await net.busy;
+    return b64bytes(await neuralaoWgsl.readFrame(net.device, methods[current].network.program, id));
   };
   api.webgpu = !methods.some((m) => m.network) ? Promise.resolve()
     : startWebGPU().catch((e) => { net.state = "WebGPU failed: " + e; });

@@ -16,10 +16,10 @@ struct FrameUniforms
 constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(64u, 1u, 1u);
 
 static inline __attribute__((always_inline))
-int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& v_40)
+int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& frame)
 {
     int2 _48;
-    if (v_40.u_flip_y != 0)
+    if (frame.u_flip_y != 0)
     {
         _48 = p;
     }
@@ -37,24 +37,24 @@ int2 nao_size(texture2d_array<float> t, sampler tSmplr)
 }
 
 static inline __attribute__((always_inline))
-float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& v_40)
+float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& frame)
 {
     int2 param = p;
     int2 param_1 = nao_size(t, tSmplr);
-    int3 _85 = int3(nao_texel(param, param_1, v_40), layer);
+    int3 _85 = int3(nao_texel(param, param_1, frame), layer);
     return t.read(uint2(_85.xy), uint(_85.z), 0);
 }
 
 static inline __attribute__((always_inline))
-void nao_store(thread const int2& p, thread const int& layer, thread const float4& v, constant FrameUniforms& v_40, texture2d_array<float, access::write> dst)
+void nao_store(thread const int2& p, thread const int& layer, thread const float4& v, constant FrameUniforms& frame, texture2d_array<float, access::write> dst)
 {
     int2 param = p;
     int2 param_1 = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    int3 _104 = int3(nao_texel(param, param_1, v_40), layer);
+    int3 _104 = int3(nao_texel(param, param_1, frame), layer);
     dst.write(v, uint2(_104.xy), uint(_104.z));
 }
 
-kernel void f_depth_columns(constant FrameUniforms& v_40 [[buffer(2)]], texture2d_array<float, access::write> dst [[texture(1)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_depth_columns(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -74,7 +74,7 @@ kernel void f_depth_columns(constant FrameUniforms& v_40 [[buffer(2)]], texture2
     }
     int2 param = gid;
     int2 param_1 = out_size;
-    int2 px = nao_texel(param, param_1, v_40);
+    int2 px = nao_texel(param, param_1, frame);
     int rows = nao_size(src0, src0Smplr).y;
     float sum = 0.0;
     float count = 0.0;
@@ -82,7 +82,7 @@ kernel void f_depth_columns(constant FrameUniforms& v_40 [[buffer(2)]], texture2
     {
         int2 param_2 = int2(px.x, y);
         int param_3 = 0;
-        float4 pw = nao_load(src0, src0Smplr, param_2, param_3, v_40);
+        float4 pw = nao_load(src0, src0Smplr, param_2, param_3, frame);
         if (pw.w >= 0.5)
         {
             sum += (-pw.z);
@@ -92,6 +92,6 @@ kernel void f_depth_columns(constant FrameUniforms& v_40 [[buffer(2)]], texture2
     int2 param_4 = px;
     int param_5 = 0;
     float4 param_6 = float4(sum, count, 0.0, 0.0);
-    nao_store(param_4, param_5, param_6, v_40, dst);
+    nao_store(param_4, param_5, param_6, frame, dst);
 }
 

@@ -2,15 +2,15 @@ static const uint3 gl_WorkGroupSize = uint3(8u, 8u, 1u);
 
 static const float2 _191[16] = { float2(0.377857029438018798828125f, 0.1678416728973388671875f), float2(0.968745052814483642578125f, 0.7069942951202392578125f), float2(0.08153782784938812255859375f, 0.599261462688446044921875f), float2(0.0065644229762256145477294921875f, 0.521755874156951904296875f), float2(0.86076271533966064453125f, 0.293343722820281982421875f), float2(0.804016172885894775390625f, 0.8365204334259033203125f), float2(0.3537027537822723388671875f, 0.930650174617767333984375f), float2(0.732333123683929443359375f, 0.747238457202911376953125f), float2(0.65405738353729248046875f, 0.18946956098079681396484375f), float2(0.1374433934688568115234375f, 0.517999827861785888671875f), float2(0.4956852495670318603515625f, 0.862544834613800048828125f), float2(0.524612128734588623046875f, 0.896280705928802490234375f), float2(0.93087482452392578125f, 0.195674479007720947265625f), float2(0.2630412876605987548828125f, 0.0488224588334560394287109375f), float2(0.2038518488407135009765625f, 0.999011993408203125f), float2(0.585066139698028564453125f, 0.251001894474029541015625f) };
 
-cbuffer FrameUniforms : register(b2)
+cbuffer FrameUniforms : register(b0)
 {
-    float2 _55_u_proj : packoffset(c0);
-    float _55_u_radius : packoffset(c0.z);
-    float _55_u_pixels_per_unit : packoffset(c0.w);
-    int _55_u_flip_y : packoffset(c1);
+    float2 frame_u_proj : packoffset(c0);
+    float frame_u_radius : packoffset(c0.z);
+    float frame_u_pixels_per_unit : packoffset(c0.w);
+    int frame_u_flip_y : packoffset(c1);
 };
 
-RWTexture2DArray<float> dst : register(u1);
+RWTexture2DArray<float> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
 
@@ -38,7 +38,7 @@ uint3 spvImageSize(RWTexture2DArray<float> Tex, out uint Param)
 int2 nao_texel(int2 p, int2 size)
 {
     int2 _62;
-    if (_55_u_flip_y != 0)
+    if (frame_u_flip_y != 0)
     {
         _62 = p;
     }
@@ -142,7 +142,7 @@ void f_gtao_inner()
         n = float3(0.0f, 0.0f, 1.0f);
     }
     float3 view_v = normalize(-p);
-    float radius_px = (_55_u_radius * _55_u_pixels_per_unit) / max(-p.z, 1.0000000031710768509710513471353e-30f);
+    float radius_px = (frame_u_radius * frame_u_pixels_per_unit) / max(-p.z, 1.0000000031710768509710513471353e-30f);
     if (!(radius_px > 1.0f))
     {
         int2 param_9 = px;
@@ -153,9 +153,9 @@ void f_gtao_inner()
     }
     int2 param_12 = px;
     float2 _noise = nao_noise(param_12);
-    float falloff_range = 0.20000000298023223876953125f * _55_u_radius;
+    float falloff_range = 0.20000000298023223876953125f * frame_u_radius;
     float falloff_mul = (-1.0f) / falloff_range;
-    float falloff_add = ((_55_u_radius - falloff_range) / falloff_range) + 1.0f;
+    float falloff_add = ((frame_u_radius - falloff_range) / falloff_range) + 1.0f;
     float min_s = 1.2999999523162841796875f / radius_px;
     float2 centre = float2(px) + 0.5f.xx;
     float visibility = 0.0f;

@@ -57,10 +57,10 @@ constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
 constant spvUnsafeArray<float2, 16> _191 = spvUnsafeArray<float2, 16>({ float2(0.377857029438018798828125, 0.1678416728973388671875), float2(0.968745052814483642578125, 0.7069942951202392578125), float2(0.08153782784938812255859375, 0.599261462688446044921875), float2(0.0065644229762256145477294921875, 0.521755874156951904296875), float2(0.86076271533966064453125, 0.293343722820281982421875), float2(0.804016172885894775390625, 0.8365204334259033203125), float2(0.3537027537822723388671875, 0.930650174617767333984375), float2(0.732333123683929443359375, 0.747238457202911376953125), float2(0.65405738353729248046875, 0.18946956098079681396484375), float2(0.1374433934688568115234375, 0.517999827861785888671875), float2(0.4956852495670318603515625, 0.862544834613800048828125), float2(0.524612128734588623046875, 0.896280705928802490234375), float2(0.93087482452392578125, 0.195674479007720947265625), float2(0.2630412876605987548828125, 0.0488224588334560394287109375), float2(0.2038518488407135009765625, 0.999011993408203125), float2(0.585066139698028564453125, 0.251001894474029541015625) });
 
 static inline __attribute__((always_inline))
-int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& v_55)
+int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& frame)
 {
     int2 _62;
-    if (v_55.u_flip_y != 0)
+    if (frame.u_flip_y != 0)
     {
         _62 = p;
     }
@@ -78,20 +78,20 @@ int2 nao_size(texture2d_array<float> t, sampler tSmplr)
 }
 
 static inline __attribute__((always_inline))
-float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& v_55)
+float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& frame)
 {
     int2 param = p;
     int2 param_1 = nao_size(t, tSmplr);
-    int3 _99 = int3(nao_texel(param, param_1, v_55), layer);
+    int3 _99 = int3(nao_texel(param, param_1, frame), layer);
     return t.read(uint2(_99.xy), uint(_99.z), 0);
 }
 
 static inline __attribute__((always_inline))
-void nao_store(thread const int2& p, thread const int& layer, thread const float4& v, constant FrameUniforms& v_55, texture2d_array<float, access::write> dst)
+void nao_store(thread const int2& p, thread const int& layer, thread const float4& v, constant FrameUniforms& frame, texture2d_array<float, access::write> dst)
 {
     int2 param = p;
     int2 param_1 = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    int3 _118 = int3(nao_texel(param, param_1, v_55), layer);
+    int3 _118 = int3(nao_texel(param, param_1, frame), layer);
     dst.write(v, uint2(_118.xy), uint(_118.z));
 }
 
@@ -123,7 +123,7 @@ bool nao_inside(thread const int2& q, thread const int2& size)
     return _131;
 }
 
-kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<float, access::write> dst [[texture(1)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_gtao(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -143,22 +143,22 @@ kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<f
     }
     int2 param = gid;
     int2 param_1 = out_size;
-    int2 px = nao_texel(param, param_1, v_55);
+    int2 px = nao_texel(param, param_1, frame);
     int2 param_2 = px;
     int param_3 = 0;
-    float4 pw = nao_load(src0, src0Smplr, param_2, param_3, v_55);
+    float4 pw = nao_load(src0, src0Smplr, param_2, param_3, frame);
     if (pw.w < 0.5)
     {
         int2 param_4 = px;
         int param_5 = 0;
         float4 param_6 = float4(1.0);
-        nao_store(param_4, param_5, param_6, v_55, dst);
+        nao_store(param_4, param_5, param_6, frame, dst);
         return;
     }
     float3 p = pw.xyz;
     int2 param_7 = px;
     int param_8 = 1;
-    float3 n = nao_load(src0, src0Smplr, param_7, param_8, v_55).xyz;
+    float3 n = nao_load(src0, src0Smplr, param_7, param_8, frame).xyz;
     float ln = length(n);
     if (ln > 9.9999996826552253889678874634872e-21)
     {
@@ -169,20 +169,20 @@ kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<f
         n = float3(0.0, 0.0, 1.0);
     }
     float3 view_v = fast::normalize(-p);
-    float radius_px = (v_55.u_radius * v_55.u_pixels_per_unit) / fast::max(-p.z, 1.0000000031710768509710513471353e-30);
+    float radius_px = (frame.u_radius * frame.u_pixels_per_unit) / fast::max(-p.z, 1.0000000031710768509710513471353e-30);
     if (!(radius_px > 1.0))
     {
         int2 param_9 = px;
         int param_10 = 0;
         float4 param_11 = float4(1.0);
-        nao_store(param_9, param_10, param_11, v_55, dst);
+        nao_store(param_9, param_10, param_11, frame, dst);
         return;
     }
     int2 param_12 = px;
     float2 _noise = nao_noise(param_12);
-    float falloff_range = 0.20000000298023223876953125 * v_55.u_radius;
+    float falloff_range = 0.20000000298023223876953125 * frame.u_radius;
     float falloff_mul = (-1.0) / falloff_range;
-    float falloff_add = ((v_55.u_radius - falloff_range) / falloff_range) + 1.0;
+    float falloff_add = ((frame.u_radius - falloff_range) / falloff_range) + 1.0;
     float min_s = 1.2999999523162841796875 / radius_px;
     float2 centre = float2(px) + float2(0.5);
     float visibility = 0.0;
@@ -220,7 +220,7 @@ kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<f
             {
                 int2 param_16 = q0;
                 int param_17 = 0;
-                float4 sw = nao_load(src0, src0Smplr, param_16, param_17, v_55);
+                float4 sw = nao_load(src0, src0Smplr, param_16, param_17, frame);
                 if (sw.w >= 0.5)
                 {
                     float3 d = sw.xyz - p;
@@ -238,7 +238,7 @@ kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<f
             {
                 int2 param_20 = q1;
                 int param_21 = 0;
-                float4 sw_1 = nao_load(src0, src0Smplr, param_20, param_21, v_55);
+                float4 sw_1 = nao_load(src0, src0Smplr, param_20, param_21, frame);
                 if (sw_1.w >= 0.5)
                 {
                     float3 d_1 = sw_1.xyz - p;
@@ -265,6 +265,6 @@ kernel void f_gtao(constant FrameUniforms& v_55 [[buffer(2)]], texture2d_array<f
     int2 param_24 = px;
     int param_25 = 0;
     float4 param_26 = float4(fast::clamp(visibility / 4.0, 0.0, 1.0));
-    nao_store(param_24, param_25, param_26, v_55, dst);
+    nao_store(param_24, param_25, param_26, frame, dst);
 }
 

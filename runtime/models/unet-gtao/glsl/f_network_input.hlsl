@@ -1,14 +1,14 @@
 static const uint3 gl_WorkGroupSize = uint3(8u, 8u, 1u);
 
-cbuffer FrameUniforms : register(b3)
+cbuffer FrameUniforms : register(b0)
 {
-    float2 _40_u_proj : packoffset(c0);
-    float _40_u_radius : packoffset(c0.z);
-    float _40_u_pixels_per_unit : packoffset(c0.w);
-    int _40_u_flip_y : packoffset(c1);
+    float2 frame_u_proj : packoffset(c0);
+    float frame_u_radius : packoffset(c0.z);
+    float frame_u_pixels_per_unit : packoffset(c0.w);
+    int frame_u_flip_y : packoffset(c1);
 };
 
-RWTexture2DArray<float4> dst : register(u2);
+RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
 Texture2DArray<float4> src1 : register(t1);
@@ -38,7 +38,7 @@ uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
 int2 nao_texel(int2 p, int2 size)
 {
     int2 _48;
-    if (_40_u_flip_y != 0)
+    if (frame_u_flip_y != 0)
     {
         _48 = p;
     }
