@@ -1,6 +1,7 @@
 """Run a U-Net export's whole frame on the GPU from its generated passes alone: the frame passes
-(:mod:`neuralao.export.glsl.frame`: position from depth, GTAO and its blur, point sampling, the mean-depth
-reduction, the network's input and radius, upsampling with the hybrid's correction and combine) and the
+(:mod:`neuralao.export.glsl.frame`: GTAO and its blur, point sampling, the mean-depth reduction, the
+network's input and radius, upsampling with the hybrid's correction and combine, each reading the engine's
+depth and normal directly) and the
 network's passes, in the order of the manifest's ``frame.steps``, as an engine follows it.
 
     frame_settings() -> FrameSettings                the runtime references' settings (GTAO, upsampling)

@@ -155,7 +155,12 @@ def test_frame_section_lists_the_whole_frame_in_order():
         frame_names = [s.get("frame_pass") for s in steps if "frame_pass" in s]
         hybrid = name == "unet-gtao"
         assert frame["hybrid"] is hybrid and frame["preprocess_version"] == 2
-        assert frame_names[0] == "f_position" and frame_names[-2:] == ["f_upsample", "f_composite"]
+        assert frame_names[0] == ("f_gtao" if hybrid else "f_downsample")
+        assert frame_names[-2:] == ["f_upsample", "f_composite"]
+        # no full-resolution copy of the G-buffer: the passes read the engine's depth and normal
+        assert "f_position" not in frame_names and "gbuffer" not in frame["textures"]
+        full = [k for k, t in frame["textures"].items() if (t["width"], t["height"]) == ("W", "H")]
+        assert sorted(full) == sorted(["depth", "normal", "ao", *(["gtao_raw", "gtao"] if hybrid else [])])
         assert ("f_gtao" in frame_names) is hybrid and "f_depth_mean" in frame_names
         network = [s["network_pass"] for s in steps if "network_pass" in s]
         skipped = [s["skip"] for s in steps if "skip" in s]
@@ -212,6 +217,29 @@ def test_network_at_the_frame_size_is_composited_not_upsampled(tmp_path):
     assert float(np.abs(ao - want).max()) <= TOL.frame_passes_vs_reference
     names = [s.get("frame_pass") for s in active_steps(program.manifest, 64, 64)]
     assert "f_composite" in names and "f_upsample" not in names
+
+
+def test_fp16_stores_the_ao_targets_as_half_floats(frames):
+    """At fp16 the full-resolution AO targets are R16F (GL, Vulkan) and stay r32float in WGSL (no r16float
+    storage texture in core WebGPU); the whole frame at fp16 (GL on llvmpipe) stays within parity_fp16 of
+    the fp32 reference."""
+    for dialect, half in (("glsl430", "R16F"), ("vulkan", "R16F"), ("wgsl", "R32F")):
+        frame = frame_program(_with_internal_height("unet-gtao", INTERNAL_HEIGHT), dialect, precision="fp16")
+        textures = frame.manifest["frame"]["textures"]
+        assert {textures[k]["format"] for k in ("gtao_raw", "gtao", "ao")} == {half}
+        assert (
+            textures["low_gbuffer"]["format"] == "RGBA32F" and textures["depth_mean"]["format"] == "RGBA32F"
+        )
+    errors = {}
+    for name in MODELS:
+        proto = _with_internal_height(name, INTERNAL_HEIGHT)
+        fp32, fp16 = frame_program(proto, "glsl430"), frame_program(proto, "glsl430", precision="fp16")
+        size = SIZES[1]
+        with FrameRunner(fp32, *size) as a, FrameRunner(fp16, *size) as b:
+            for r in RADII:
+                errors[name, r] = float(np.abs(b.run(frames[size], r) - a.run(frames[size], r)).max())
+    print(f"fp16 frame vs fp32 frame: max abs AO difference {max(errors.values()):.3g}")
+    assert max(errors.values()) <= TOL.parity_fp16, errors
 
 
 @pytest.mark.slow

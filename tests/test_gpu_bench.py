@@ -55,9 +55,11 @@ def test_gpu_bench_runs_small(bench):
     )
     assert all(row["over_gtao"] and row["over_gtao"] > 0 for row in result["rows"])
     assert result["gtao_ms"]["128x96"] > 0 and result["ssao_ms"]["128x96"] > 0
-    hybrid = [row for row in result["rows"] if row["model"] == "unet-gtao"]
-    # a hybrid's frame holds its GTAO steps and its network steps
-    assert all(row["frame_ms"] > row["network_ms"] for row in hybrid)
+    # a hybrid's frame has GTAO steps, timed on their own; the fast model's has none (times are not
+    # compared here: one run on a shared machine orders them by chance)
+    for row in result["rows"]:
+        timed = max(row["gtao_ms"], row["gtao_wall_ms"]) > 0
+        assert timed == (row["model"] == "unet-gtao"), row
 
 
 def test_host_ssao_is_the_projects_ssao(bench, tmp_path):

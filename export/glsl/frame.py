@@ -4,10 +4,8 @@ through :mod:`.cross`), and the manifest section that lists the whole frame in o
 
 A frame of a U-Net export that declares ``internal_height`` (the shipped ones), in order:
 
-    position        the engine's linear depth + normal -> the G-buffer (camera-space position + mask,
-                    normal), W x H                                      (skip it if you have positions)
     gtao, gtao_blur GTAO and its blur at W x H                          (a hybrid: GTAO-input U-Net)
-    downsample      the G-buffer (and GTAO) point-sampled to the network's w x h
+    downsample      the engine's depth and normal (and GTAO) point-sampled to the network's w x h
     depth_columns,  the mean foreground depth of the point-sampled G-buffer, on the GPU
     depth_mean                                                          (preprocess version 2 only)
     network_input   the network's input texture (depth as the model's contract says, normal, GTAO)
@@ -17,6 +15,10 @@ A frame of a U-Net export that declares ``internal_height`` (the shipped ones), 
                     correction (network AO minus point-sampled GTAO) and adds it to GTAO, clamped
     (composite      instead of downsample / upsample when the network runs at the frame's own size)
 
+No pass reads a full-resolution copy of the G-buffer: the passes read the engine's linear depth and
+normal and reconstruct camera-space positions from depth, the pixel and the projection (as XeGTAO does).
+At fp16 the full-resolution AO targets are R16F (WGSL: r32float, see :data:`AO_FORMATS`).
+
 Each pass is a :class:`FramePass` (template, fields, textures); :func:`_write_pass` is the one writer,
 filling :mod:`.frame_templates`. The maths are those of the Python references the shipped models were
 trained and are checked with: ``neuralao.runtime.baselines`` (GTAO, ``GTAOSettings``),
@@ -25,6 +27,7 @@ trained and are checked with: ``neuralao.runtime.baselines`` (GTAO, ``GTAOSettin
 (this layer imports no runtime module: ``neuralao.runtime.frame_runner.frame_settings()`` builds it).
 
     frame_passes(manifest, settings, dialect) -> (list[FramePass], dict of FrameTexture)
+    slice_directions(settings) -> list of (cos, sin)      GTAO's baked slice directions
     generate_frame(program, settings) -> ComputeProgram   (the program with its frame: sources + "frame")
     shader_entries(manifest) -> list[dict]                every pass entry with a shader (network + frame)
 """
@@ -35,6 +38,8 @@ import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 from neuralao.export.glsl.frame_templates import FILLS
 from neuralao.export.glsl.graph import glsl_float
@@ -59,7 +64,16 @@ UNIFORM_MEMBERS = (
         "top row (D3D, Vulkan, Metal, WebGPU). Set the network's pad and crop passes' u_flip_y the same",
     ),
 )
-FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f"}
+FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f", "R16F": "r16f"}
+# The frame's one-channel AO targets at full resolution (GTAO, its blur, the AO) at each precision of the
+# program and dialect. AO lies in [0, 1], where half floats step by at most 2^-11, so fp16 stores them
+# R16F: GL's r16f and Vulkan's r16f (a storage image with shaderStorageImageExtendedFormats) are storage
+# formats; core WebGPU has no r16float storage texture, so WGSL keeps r32float. Depth-derived data (the
+# point-sampled position, the mean depth) stays 32-bit at either precision.
+AO_FORMATS = {"fp32": "R32F", "fp16": "R16F"}
+WGSL_AO_FORMAT_NOTE = (
+    "WGSL: r16float is not a storage texture format in core WebGPU, so the AO targets stay r32float at fp16"
+)
 
 
 @dataclass(frozen=True)
@@ -89,7 +103,8 @@ class FrameSettings:
                 "falloff": self.falloff,
                 "noise_size": self.noise_size,
                 "blur": self.blur,
-                "noise_texels": "baked into the gtao pass as constants (GL rows, lanes 0 and 1)",
+                "noise_texels": "baked into the gtao pass as constants (GL rows): per texel its slice "
+                "directions (cos, sin) of (slice + lane 0) * pi / slices and its step jitter (lane 1)",
             },
             "upsample": {
                 "spatial_sigma": self.spatial_sigma,
@@ -103,14 +118,25 @@ class FrameSettings:
 @dataclass(frozen=True)
 class FrameTexture:
     """A texture of the frame: size formulas over the frame's symbols (W, H: the frame; w, h: the
-    network's input; wp, hp: that padded), layers of 4 channels (one lane for R32F), format."""
+    network's input; wp, hp: that padded), layers of 4 channels (one lane for R32F / R16F), format."""
 
     ident: str
     width: str
     height: str
     layers: int
-    format: str
+    format: str  # the format this program's passes write
     meaning: str
+    fp16_format: str = ""  # the format at fp16 where it differs from format at fp32 ("": the same)
+
+
+def _ao_format(precision: str, dialect: str) -> str:
+    """The format of the frame's full-resolution AO targets for a program at ``precision`` in ``dialect``."""
+    return "R32F" if dialect == "wgsl" else AO_FORMATS[precision]
+
+
+def _ao_texture(ident: str, precision: str, dialect: str, meaning: str) -> FrameTexture:
+    fp16 = _ao_format("fp16", dialect)
+    return FrameTexture(ident, "W", "H", 1, _ao_format(precision, dialect), meaning, fp16)
 
 
 @dataclass(frozen=True)
@@ -153,8 +179,12 @@ def _network_io(manifest: dict) -> tuple[str, str, str]:
     return manifest["input"]["texture"], radius[0]["output"]["texture"], manifest["outputs"][0]["texture"]
 
 
-def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePass], dict[str, FrameTexture]]:
-    """The frame passes of a U-Net compute manifest (in order) and the frame's own textures."""
+def frame_passes(
+    manifest: dict, settings: FrameSettings, dialect: str = "glsl430"
+) -> tuple[list[FramePass], dict[str, FrameTexture]]:
+    """The frame passes of a U-Net compute manifest (in order) and the frame's own textures, for the
+    manifest's precision in ``dialect`` (glsl430, vulkan or wgsl)."""
+    precision = str(manifest.get("precision", "fp32"))
     hybrid, version, internal = _model_facts(manifest)
     net_in, net_radius, net_out = _network_io(manifest)
     scaled = internal is not None
@@ -166,28 +196,16 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
         "normal": FrameTexture(
             "normal", "W", "H", 1, "RGBA32F", "the engine's camera-space unit normal (xyz), facing the viewer"
         ),
-        "gbuffer": FrameTexture(
-            "gbuffer", "W", "H", 2, "RGBA32F", "layer 0: camera-space position + mask (w), layer 1: normal"
-        ),
     }
-    passes = [
-        FramePass(
-            "f_position",
-            "position_body",
-            ("depth", "normal"),
-            "gbuffer",
-            "camera-space position from depth",
-            "before",
-        )
-    ]
+    passes = []
     if hybrid:
-        tex["gtao_raw"] = FrameTexture("gtao_raw", "W", "H", 1, "R32F", "GTAO before its blur")
-        tex["gtao"] = FrameTexture("gtao", "W", "H", 1, "R32F", "GTAO, 1 on background")
+        tex["gtao_raw"] = _ao_texture("gtao_raw", precision, dialect, "GTAO before its blur")
+        tex["gtao"] = _ao_texture("gtao", precision, dialect, "GTAO, 1 on background")
         passes.append(
             FramePass(
                 "f_gtao",
                 "gtao_body",
-                ("gbuffer",),
+                ("depth", "normal"),
                 "gtao_raw" if s.blur else "gtao",
                 f"GTAO, {s.slices} slices x {s.steps} steps per side",
                 "before",
@@ -199,7 +217,7 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
                 FramePass(
                     "f_gtao_blur",
                     "gtao_blur_body",
-                    ("gbuffer", "gtao_raw"),
+                    ("depth", "gtao_raw"),
                     "gtao",
                     f"GTAO's {s.noise_size}x{s.noise_size} foreground-only blur",
                     "before",
@@ -213,16 +231,16 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
         "h",
         3 if hybrid else 2,
         "RGBA32F",
-        "the G-buffer point-sampled to the network's size"
-        + ("; layer 2: GTAO point-sampled" if hybrid else ""),
+        "the engine's depth and normal point-sampled to the network's size: layer 0 camera-space position "
+        "+ mask (w), layer 1 normal" + ("; layer 2: GTAO point-sampled" if hybrid else ""),
     )
     passes.append(
         FramePass(
             "f_downsample",
             "downsample_body",
-            ("gbuffer", "gtao") if hybrid else ("gbuffer",),
+            ("depth", "normal", "gtao") if hybrid else ("depth", "normal"),
             low,
-            "point sampling to the network's size" + (" (G-buffer and GTAO)" if hybrid else ""),
+            "point sampling to the network's size, position from depth" + (", GTAO" if hybrid else ""),
             "before",
             {"gtao": ("downsample_gtao", {}) if hybrid else ""},
         )
@@ -285,13 +303,13 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
             local_size=(1, 1),
         )
     )
-    tex["ao"] = FrameTexture("ao", "W", "H", 1, "R32F", "the AO, in [0, 1], 1 on background")
+    tex["ao"] = _ao_texture("ao", precision, dialect, "the AO, in [0, 1], 1 on background")
     if scaled:
         passes.append(
             FramePass(
                 "f_upsample",
                 "upsample_body",
-                ("gbuffer", net_out, low, "gtao") if hybrid else ("gbuffer", net_out, low),
+                ("depth", "normal", net_out, low, "gtao") if hybrid else ("depth", "normal", net_out, low),
                 "ao",
                 "joint bilateral upsampling"
                 + (" of the correction to GTAO, added to GTAO and clamped" if hybrid else " of the AO"),
@@ -312,7 +330,7 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
         FramePass(
             "f_composite",
             "composite_body",
-            ("gbuffer", net_out),
+            ("depth", net_out),
             "ao",
             "the network's AO, 1 on background",
             "after",
@@ -324,15 +342,40 @@ def frame_passes(manifest: dict, settings: FrameSettings) -> tuple[list[FramePas
 # --------------------------------------------------------------------------- the writer
 
 
-def _noise_table(settings: FrameSettings, fill: Callable[..., str]) -> str:
-    n = settings.noise_size
+def slice_directions(settings: FrameSettings) -> list[tuple[float, float]]:
+    """GTAO's screen-space slice directions (cos phi, sin phi), phi = (slice + noise.x) * pi / slices, for
+    every texel i of the noise tile and slice k (entry i * slices + k). phi is rounded to float32 step by
+    step as a float32 shader computes it, its cosine and sine taken in float64: each direction is the
+    float32 nearest the exact one, the same on every GPU (a GPU's own cos / sin may err by 2^-11)."""
+    n, slices = settings.noise_size, settings.slices
     if len(settings.noise) != n * n * 4:
         raise NeuralaoError(f"GTAO noise tile needs {n * n * 4} floats, got {len(settings.noise)}")
-    items = [
-        fill("noise_item", x=glsl_float(settings.noise[4 * i]), y=glsl_float(settings.noise[4 * i + 1]))
-        for i in range(n * n)
+    f32 = np.float32
+    step = f32(f32(math.pi) / f32(slices))
+    out = []
+    for i in range(n * n):
+        for k in range(slices):
+            phi = float(f32(f32(f32(k) + f32(settings.noise[4 * i])) * step))
+            out.append((float(f32(math.cos(phi))), float(f32(math.sin(phi)))))
+    return out
+
+
+def _noise_table(settings: FrameSettings, fill: Callable[..., str]) -> str:
+    """GTAO's noise tile as constants: the slice directions and the step jitter (noise.y) per texel."""
+    n = settings.noise_size
+    directions = [
+        fill("direction_item", x=glsl_float(x), y=glsl_float(y)) for x, y in slice_directions(settings)
     ]
-    return fill("noise_table", count=n * n, size=n, items=",\n".join(items))
+    jitter = [fill("jitter_item", y=glsl_float(settings.noise[4 * i + 1])) for i in range(n * n)]
+    return fill(
+        "noise_table",
+        count=n * n,
+        entries=n * n * settings.slices,
+        size=n,
+        slices=settings.slices,
+        directions=",\n".join(directions),
+        jitter=",\n".join(jitter),
+    )
 
 
 def _field(value: object, fill: Callable[..., str]) -> str:
@@ -427,6 +470,19 @@ def _pass_entry(p: FramePass, dialect: str, textures: dict[str, FrameTexture | d
     return entry
 
 
+def _texture_entry(t: FrameTexture) -> dict:
+    entry = {
+        "width": t.width,
+        "height": t.height,
+        "layers": t.layers,
+        "format": t.format,
+        "meaning": t.meaning,
+    }
+    if t.fp16_format:  # the memory plan's formats at each precision (memory.memory_section)
+        entry["formats"] = {"fp32": "R32F", "fp16": t.fp16_format}
+    return entry
+
+
 def _format_of(t: FrameTexture | dict) -> str:
     return t.format if isinstance(t, FrameTexture) else t["format"]
 
@@ -466,17 +522,21 @@ def _section(
         }
         for ident, t in manifest["textures"].items()
     }
-    textures = {
-        t.ident: {
-            "width": t.width,
-            "height": t.height,
-            "layers": t.layers,
-            "format": t.format,
-            "meaning": t.meaning,
-        }
-        for t in tex.values()
-    } | network
+    textures = {t.ident: _texture_entry(t) for t in tex.values()} | network
     entries = [_pass_entry(p, dialect, tex | network) for p in passes]
+    precision = str(manifest.get("precision", "fp32"))
+    ao_formats = {
+        "fp32": _ao_format("fp32", dialect),
+        "fp16": _ao_format("fp16", dialect),
+        "this_program": _ao_format(precision, dialect),
+        "why": "AO lies in [0, 1], where half floats step by at most 2^-11; depth-derived textures stay "
+        "32-bit at either precision"
+        + (
+            "; " + WGSL_AO_FORMAT_NOTE
+            if dialect == "wgsl"
+            else "; Vulkan: r16f is a storage image format under shaderStorageImageExtendedFormats"
+        ),
+    }
     size = f"max(1, round(W * {internal} / H)) x {internal} (round halves to even)" if internal else "W x H"
     multiple = int(manifest["pad"]["multiple"])
     return {
@@ -493,12 +553,12 @@ def _section(
             "wp, hp": f"w, h rounded up to a multiple of {multiple}",
         },
         "inputs": {
-            "depth": "write each frame: linear depth -z_cam in scene units (lane 0), 0 on background",
+            "depth": "write each frame: linear depth -z_cam in scene units (lane 0), 0 on background; the "
+            "passes reconstruct camera-space positions from it, the pixel and u_proj",
             "normal": "write each frame: camera-space unit normal (xyz), OpenGL axes, facing the viewer",
-            "gbuffer": "or write this yourself and skip f_position (layer 0: camera-space position, "
-            "w = 1 on foreground; layer 1: the normal; zeros on background)",
         },
         "output": "ao",
+        "ao_formats": ao_formats,
         "origin": {
             "uniform": "u_flip_y",
             "values": {
@@ -533,7 +593,7 @@ def generate_frame(program: ComputeProgram, settings: FrameSettings) -> ComputeP
     dialect = _DIALECT.get(program.manifest.get("format", ""))
     if dialect is None:
         raise NeuralaoError(f"no frame passes for a {program.manifest.get('format')!r} program")
-    passes, tex = frame_passes(program.manifest, settings)
+    passes, tex = frame_passes(program.manifest, settings, dialect)
     formats = {t.ident: t.format for t in tex.values()} | {
         ident: t["format"] for ident, t in program.manifest["textures"].items()
     }

@@ -19,7 +19,10 @@ Conventions every body relies on:
   AO image, stored the same way. ``nao_load(src, p, layer)`` and ``nao_store(p, layer, v)`` take GL-order
   pixels; ``nao_size(src)`` is a texture's width and height.
 * every texture is a 2-D array texture (layers of 4 channels, fetched without a sampler); a pass writes
-  one output ``dst``, ``rgba32f`` or ``r32f``.
+  one output ``dst``, ``rgba32f``, ``r32f`` or ``r16f``.
+* no pass reads a full-resolution position texture: ``nao_position(p, size, z)`` reconstructs the
+  camera-space position of pixel ``p`` of a ``size`` frame from the engine's linear depth ``z`` and
+  ``u_proj`` (as XeGTAO does from its depth); a pixel is foreground where ``z > 0``.
 * values substituted by the writer are integers, GLSL float literals (``glsl_float``: they parse back to
   the exact float32) and other templates of this table.
 """
@@ -85,6 +88,7 @@ _FG["input_decl"] = "layout(binding = ${binding}) uniform highp sampler2DArray $
 _FG["output_decl"] = "layout(binding = ${binding}, ${format}) writeonly uniform highp image2DArray dst;"
 _FG["format_rgba32f"] = "rgba32f"
 _FG["format_r32f"] = "r32f"
+_FG["format_r16f"] = "r16f"
 # One per-frame uniform block, the same bytes for every frame pass (std140: offsets 0, 8, 12, 16).
 _FG["uniforms_decl"] = """layout(std140, binding = ${binding}) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
@@ -120,6 +124,13 @@ float nao_acos(float x) {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+vec3 nao_position(ivec2 p, ivec2 size, float z) {
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    return vec3(ndc.x / u_proj.x * z, ndc.y / u_proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
 int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);
@@ -127,12 +138,24 @@ int nao_floor_div(int a, int b) {
 """
 _FG["sampler"] = "sampler2DArray"
 
-# GTAO's noise tile as constants: entry y * size + x is tile texel (x, y), GL rows.
-_FG["noise_table"] = """const vec2 NAO_NOISE[${count}] = vec2[${count}](
-${items});
+# GTAO's noise tile as constants, texel t = y * size + x of the tile at (x, y), GL rows: its slice
+# directions (cos phi, sin phi), phi = (slice + noise.x) * pi / slices, baked so that no GPU's cos / sin
+# moves a horizon sample to the next pixel (entry t * slices + slice), and its step jitter noise.y.
+_FG["noise_table"] = """const vec2 NAO_DIRECTIONS[${entries}] = vec2[${entries}](
+${directions});
+const float NAO_JITTER[${count}] = float[${count}](
+${jitter});
 
-vec2 nao_noise(ivec2 p) {
-    return NAO_NOISE[(p.y % ${size}) * ${size} + p.x % ${size}];
+int nao_tile(ivec2 p) {
+    return (p.y % ${size}) * ${size} + p.x % ${size};
+}
+
+vec2 nao_direction(int tile, int slice) {
+    return NAO_DIRECTIONS[tile * ${slices} + slice];
+}
+
+float nao_jitter(int tile) {
+    return NAO_JITTER[tile];
 }
 """
 
@@ -211,6 +234,13 @@ fn nao_acos(x: f32) -> f32 {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+fn nao_position(p: vec2<i32>, size: vec2<i32>, z: f32) -> vec3<f32> {
+    let ndc = (vec2<f32>(p) + 0.5) / vec2<f32>(size) * 2.0 - 1.0;
+    return vec3<f32>(ndc.x / nao_frame.proj.x * z, ndc.y / nao_frame.proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (WGSL's i32 division truncates toward 0)
 fn nao_floor_div(a: i32, b: i32) -> i32 {
     if (a >= 0) {
@@ -220,43 +250,45 @@ fn nao_floor_div(a: i32, b: i32) -> i32 {
 }
 """
 
-_FW["noise_table"] = """// GTAO's noise tile as constants: entry y * size + x is tile texel (x, y), GL rows.
-fn nao_noise(p: vec2<i32>) -> vec2<f32> {
-    var table = array<vec2<f32>, ${count}>(
-${items});
-    return table[(p.y % ${size}) * ${size} + p.x % ${size}];
+_FW[
+    "noise_table"
+] = """// GTAO's noise tile as constants, texel t = y * size + x of the tile at (x, y), GL rows: its slice
+// directions (cos phi, sin phi), phi = (slice + noise.x) * pi / slices, baked so that no GPU's cos / sin
+// moves a horizon sample to the next pixel (entry t * slices + slice), and its step jitter noise.y.
+fn nao_tile(p: vec2<i32>) -> i32 {
+    return (p.y % ${size}) * ${size} + p.x % ${size};
+}
+
+fn nao_direction(tile: i32, slice: i32) -> vec2<f32> {
+    var table = array<vec2<f32>, ${entries}>(
+${directions});
+    return table[tile * ${slices} + slice];
+}
+
+fn nao_jitter(tile: i32) -> f32 {
+    var table = array<f32, ${count}>(
+${jitter});
+    return table[tile];
 }
 """
 
 # --------------------------------------------------------------------------- shared bodies
 
-_FT["noise_item"] = "    ${vec2}(${x}, ${y})"
-
-# Camera-space position from linear depth (OpenGL camera, -z forward): the pixel centre's ray at depth z.
-# src0: the engine's linear depth (lane 0, 0 or less on background), src1: its camera-space unit normal
-# (xyz). Output: layer 0 = (position, mask), layer 1 = (normal, 0); zeros on background.
-_FT["position_body"] = """    ${let_float} z = nao_load(src0, px, 0).x;
-    if (!(z > 0.0)) {
-        nao_store(px, 0, ${vec4}(0.0));
-        nao_store(px, 1, ${vec4}(0.0));
-        return;
-    }
-    ${let_vec2} ndc = (${vec2}(px) + 0.5) / ${vec2}(out_size) * 2.0 - 1.0;
-    nao_store(px, 0, ${vec4}(ndc.x / ${u_proj}.x * z, ndc.y / ${u_proj}.y * z, -z, 1.0));
-    nao_store(px, 1, ${vec4}(nao_load(src1, px, 0).xyz, 0.0));"""
+_FT["direction_item"] = "    ${vec2}(${x}, ${y})"
+_FT["jitter_item"] = "    ${y}"
 
 # GTAO (Jimenez et al. 2016, structured as Intel's XeGTAO), the maths of neuralao.runtime.baselines'
 # gtao fragment shader, which the shipped hybrid was trained on: ${slices} slice directions rotated by
 # the noise tile, ${steps} horizon samples per side up to the projected radius (quadratic spacing,
 # jittered), horizons faded over the last ${falloff} of the radius, the cosine-weighted visibility
-# integrated analytically per slice. src0: the G-buffer (layer 0 position + mask, layer 1 normal).
-_FT["gtao_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+# integrated analytically per slice. src0: the engine's linear depth, src1: its normal.
+_FT["gtao_body"] = """    ${let_float} z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, ${vec4}(1.0));
         return;
     }
-    ${let_vec3} p = pw.xyz;
-    ${var_vec3} n = nao_load(src0, px, 1).xyz;
+    ${let_vec3} p = nao_position(px, out_size, z);
+    ${var_vec3} n = nao_load(src1, px, 0).xyz;
     ${let_float} ln = length(n);
     if (ln > 1e-20) {
         n = n / ln;
@@ -269,7 +301,8 @@ _FT["gtao_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
         nao_store(px, 0, ${vec4}(1.0));  // the radius stays inside this pixel
         return;
     }
-    ${let_vec2} noise = nao_noise(px);
+    ${let_int} tile = nao_tile(px);
+    ${let_float} jitter = nao_jitter(tile);
     ${let_float} falloff_range = max(${falloff}, 1e-6) * ${u_radius};
     ${let_float} falloff_mul = -1.0 / falloff_range;
     ${let_float} falloff_add = (${u_radius} - falloff_range) / falloff_range + 1.0;
@@ -277,8 +310,7 @@ _FT["gtao_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
     ${let_vec2} centre = ${vec2}(px) + 0.5;
     ${var_float:visibility} = 0.0;
     for (${var_int:slice} = 0; slice < ${slices}; ${inc:slice}) {
-        ${let_float} phi = (${float}(slice) + noise.x) * (3.14159265358979 / ${float}(${slices}));
-        ${let_vec2} omega = ${vec2}(cos(phi), sin(phi));  // screen direction = camera-space (x, y)
+        ${let_vec2} omega = nao_direction(tile, slice);  // screen direction = camera-space (x, y)
         ${let_vec3} dir_v = ${vec3}(omega, 0.0);
         ${let_vec3} ortho_v = dir_v - dot(dir_v, view_v) * view_v;
         ${let_vec3} axis_v = normalize(cross(dir_v, view_v));
@@ -295,7 +327,7 @@ _FT["gtao_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
         ${var_float:hc0} = low0;
         ${var_float:hc1} = low1;
         for (${var_int:k} = 0; k < ${steps}; ${inc:k}) {
-            ${var_float:s} = (${float}(k) + noise.y) / ${float}(${steps});
+            ${var_float:s} = (${float}(k) + jitter) / ${float}(${steps});
             s = min_s + (1.0 - min_s) * s * s;
             ${let_vec2} off = omega * (s * radius_px);
             ${let_ivec2} q0 = ${ivec2}(floor(centre + off));
@@ -314,12 +346,12 @@ ${sample1}
     }
     nao_store(px, 0, ${vec4}(clamp(visibility / ${float}(${slices}), 0.0, 1.0)));"""
 
-# One horizon sample of one side: the G-buffer point at pixel ${q} raises that side's horizon cosine
-# ${hc} (from its low bound ${low}), faded by distance.
+# One horizon sample of one side: the point at pixel ${q} (from its depth) raises that side's horizon
+# cosine ${hc} (from its low bound ${low}), faded by distance.
 _FT["gtao_sample"] = """            if (nao_inside(${q}, out_size)) {
-                ${let_vec4} sw = nao_load(src0, ${q}, 0);
-                if (sw.w >= 0.5) {
-                    ${let_vec3} d = sw.xyz - p;
+                ${let_float} zq = nao_load(src0, ${q}, 0).x;
+                if (zq > 0.0) {
+                    ${let_vec3} d = nao_position(${q}, out_size, zq) - p;
                     ${let_float} dist = length(d);
                     if (dist > 1e-30) {
                         ${let_float} w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);
@@ -329,8 +361,8 @@ _FT["gtao_sample"] = """            if (nao_inside(${q}, out_size)) {
             }"""
 
 # Mask-aware box blur over the noise tile (window = tile size, offsets -n/2 .. n/2-1): averages
-# foreground pixels only, so the background's 1 never bleeds in. src0: G-buffer, src1: raw GTAO.
-_FT["gtao_blur_body"] = """    if (nao_load(src0, px, 0).w < 0.5) {
+# foreground pixels only, so the background's 1 never bleeds in. src0: the depth, src1: raw GTAO.
+_FT["gtao_blur_body"] = """    if (!(nao_load(src0, px, 0).x > 0.0)) {
         nao_store(px, 0, ${vec4}(1.0));
         return;
     }
@@ -342,7 +374,7 @@ _FT["gtao_blur_body"] = """    if (nao_load(src0, px, 0).w < 0.5) {
             if (!nao_inside(q, out_size)) {
                 continue;
             }
-            if (nao_load(src0, q, 0).w < 0.5) {
+            if (!(nao_load(src0, q, 0).x > 0.0)) {
                 continue;
             }
             sum += nao_load(src1, q, 0).x;
@@ -352,14 +384,21 @@ _FT["gtao_blur_body"] = """    if (nao_load(src0, px, 0).w < 0.5) {
     nao_store(px, 0, ${vec4}(sum / max(count, 1.0)));"""
 
 # Point sampling to the network's size: low texel t of an axis of n texels copies pixel
-# floor((t + 0.5) * N / n) (GL order) of N, exactly, never a blend across an edge. src0: the G-buffer
-# (layers 0, 1); a hybrid's src1: GTAO, into layer 2.
+# floor((t + 0.5) * N / n) (GL order) of N, exactly, never a blend across an edge. src0: the depth, src1:
+# the normal, into layer 0 = (camera-space position, mask) and layer 1 = (normal, 0), zeros on
+# background; a hybrid's src2: GTAO, into layer 2.
 _FT["downsample_body"] = """    ${let_ivec2} hi = nao_size(src0);
     ${let_ivec2} q = min(((2 * px + 1) * hi) / (2 * out_size), hi - 1);
-    nao_store(px, 0, nao_load(src0, q, 0));
-    nao_store(px, 1, nao_load(src0, q, 1));${gtao}"""
+    ${let_float} z = nao_load(src0, q, 0).x;
+    if (z > 0.0) {
+        nao_store(px, 0, ${vec4}(nao_position(q, hi, z), 1.0));
+        nao_store(px, 1, ${vec4}(nao_load(src1, q, 0).xyz, 0.0));
+    } else {
+        nao_store(px, 0, ${vec4}(0.0));
+        nao_store(px, 1, ${vec4}(0.0));
+    }${gtao}"""
 _FT["downsample_gtao"] = """
-    nao_store(px, 2, ${vec4}(nao_load(src1, q, 0).x, 0.0, 0.0, 0.0));"""
+    nao_store(px, 2, ${vec4}(nao_load(src2, q, 0).x, 0.0, 0.0, 0.0));"""
 
 # The mean foreground depth, in two passes: the sum and count of each column (GL row order, so a frame
 # stored either way sums in the same order), then of the columns; 1 with no foreground.
@@ -420,17 +459,19 @@ _FT["rho_log"] = "log(${u_radius} * ${u_proj}.y)"
 # the point-sampled GTAO) to the frame: the 4 x 4 nearest low texels, each weighted by a Gaussian of its
 # distance in low texels, by how close this pixel lies to the texel's tangent plane (relative to depth)
 # and by how well the normals agree; background texels get no weight, a small floor keeps the nearest
-# foreground texels in charge where no texel matches. src0: the G-buffer, src1: the network's output,
-# src2: the point-sampled G-buffer (a hybrid's layer 2: GTAO point-sampled), a hybrid's src3: GTAO.
-_FT["upsample_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+# foreground texels in charge where no texel matches. src0: the depth, src1: the normal, src2: the
+# network's output, src3: the point-sampled G-buffer (a hybrid's layer 2: GTAO point-sampled), a hybrid's
+# src4: GTAO.
+_FT["upsample_body"] = """    ${let_float} z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, ${vec4}(1.0));
         return;
     }
-    ${let_vec3} n = nao_load(src0, px, 1).xyz;
-    ${let_float} depth = max(-pw.z, 1e-30);
+    ${let_vec3} p = nao_position(px, out_size, z);
+    ${let_vec3} n = nao_load(src1, px, 0).xyz;
+    ${let_float} depth = max(z, 1e-30);
     ${let_ivec2} hi = out_size;
-    ${let_ivec2} lo = nao_size(src1);
+    ${let_ivec2} lo = nao_size(src2);
     ${let_vec2} uv = (${vec2}(px) + 0.5) * ${vec2}(lo) / ${vec2}(hi) - 0.5;
     ${let_ivec2} num = (2 * px + 1) * lo - hi;
     ${let_ivec2} base = ${ivec2}(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
@@ -439,14 +480,14 @@ _FT["upsample_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
     for (${var_int:y} = 0; y < 4; ${inc:y}) {
         for (${var_int:x} = 0; x < 4; ${inc:x}) {
             ${let_ivec2} q = clamp(base + ${ivec2}(x, y), ${ivec2}(0), lo - 1);
-            ${let_vec4} qw = nao_load(src2, q, 0);
+            ${let_vec4} qw = nao_load(src3, q, 0);
             if (qw.w < 0.5) {
                 continue;
             }
             ${let_vec2} d = ${vec2}(base + ${ivec2}(x, y)) - uv;
             ${let_float} spatial = exp(-dot(d, d) / (2.0 * ${spatial_sigma} * ${spatial_sigma}));
-            ${let_vec3} qn = nao_load(src2, q, 1).xyz;
-            ${let_float} plane = abs(dot(qn, pw.xyz - qw.xyz)) / (${plane_sigma} * depth);
+            ${let_vec3} qn = nao_load(src3, q, 1).xyz;
+            ${let_float} plane = abs(dot(qn, p - qw.xyz)) / (${plane_sigma} * depth);
             ${let_float} agree = pow(max(dot(qn, n), 0.0), ${normal_power});
             ${let_float} w = spatial * (${floor} + exp(-plane * plane) * agree);
             sum += w * ${low_value};
@@ -458,13 +499,14 @@ _FT["upsample_body"] = """    ${let_vec4} pw = nao_load(src0, px, 0);
         up = sum / total;
     }
     nao_store(px, 0, ${vec4}(${result}));"""
-_FT["low_ao"] = "nao_load(src1, q, 0).x"
-_FT["low_correction"] = "(nao_load(src1, q, 0).x - nao_load(src2, q, 2).x)"
+_FT["low_ao"] = "nao_load(src2, q, 0).x"
+_FT["low_correction"] = "(nao_load(src2, q, 0).x - nao_load(src3, q, 2).x)"
 _FT["result_ao"] = "up"
-_FT["result_combined"] = "clamp(nao_load(src3, px, 0).x + up, 0.0, 1.0)"
+_FT["result_combined"] = "clamp(nao_load(src4, px, 0).x + up, 0.0, 1.0)"
 
-# The network at the frame's own size: its output where foreground, 1 on background.
-_FT["composite_body"] = """    if (nao_load(src0, px, 0).w < 0.5) {
+# The network at the frame's own size: its output where foreground, 1 on background. src0: the depth,
+# src1: the network's output.
+_FT["composite_body"] = """    if (!(nao_load(src0, px, 0).x > 0.0)) {
         nao_store(px, 0, ${vec4}(1.0));
         return;
     }

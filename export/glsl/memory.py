@@ -43,7 +43,7 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 FP32_KINDS = ("crop", "uniform")
 
 # The frame's textures that are the engine's G-buffer (the frame section's inputs the engine writes each
-# frame): read by f_position only, never counted.
+# frame): read by the frame passes directly (no pass copies them), never counted.
 ENGINE_TEXTURES = ("depth", "normal")
 
 # Bytes per texel of every format a frame allocates.
@@ -51,8 +51,8 @@ TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2}
 # Programs without frame passes (the fragment steps of internal/): at fp16 the one-channel AO targets
 # around the network (full resolution and the network's AO) are R16F: AO lies in [0, 1], where half floats
 # step by at most 2^-11. The point-sampled G-buffer stays RGBA32F (camera-space positions need float32's
-# range and precision). The frame passes (frame.py) store their own targets as RGBA32F / R32F at either
-# precision: only the network's textures change with it.
+# range and precision). The frame passes (frame.py) give each of their own targets' format at each
+# precision in the frame section (``formats``; at fp16 the full-resolution AO targets are R16F but in WGSL).
 FP16_FRAME_FORMATS = {"R32F": "R16F"}
 
 # The frame whose texture sizes order the slot planner, and the frames the manifest gives figures for.
@@ -413,7 +413,7 @@ def _frame_pass_steps(manifest: Mapping) -> tuple[tuple[Step, ...], dict[str, di
             "width": _parse_dim(t["width"]),
             "height": _parse_dim(t["height"]),
             "layers": int(t["layers"]),
-            "formats": dict.fromkeys(PRECISIONS, t["format"]),
+            "formats": dict(t.get("formats") or dict.fromkeys(PRECISIONS, t["format"])),
             "meaning": t["meaning"],
         }
     specs |= network
@@ -485,8 +485,9 @@ def memory_plan(manifest: Mapping, width: int, height: int, precision: str = "fp
 
     precision : "fp32" (every texture as the manifest gives it at fp32) or "fp16" (the network's
     textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, outputs and
-    scalar textures RGBA32F; a program with frame passes: the frame's own targets as its passes write
-    them, RGBA32F / R32F at either precision; else the fragment steps' AO targets R16F, their
+    scalar textures RGBA32F; a program with frame passes: the frame's own targets as its fp16 passes
+    write them, the frame section's ``formats``: full-resolution AO targets R16F (WGSL: R32F), the
+    depth-derived ones RGBA32F; else the fragment steps' AO targets R16F, their
     point-sampled G-buffer RGBA32F). Whatever the manifest's own precision. Raises NeuralaoError where
     the program cannot run at that size (a fixed size, below the pad multiple, a fractional size).
     """
@@ -553,10 +554,9 @@ def _counted(schedule: MemorySchedule, manifest: Mapping) -> str:
         return (
             "every texture of the frame's steps (frame.textures): the network's (textures) and the frame's "
             f"own ({', '.join(own)}), in the formats their passes write. Not counted: the engine's G-buffer "
-            f"that f_position reads ({', '.join(ENGINE_TEXTURES)}: frame.inputs, written by the engine each "
-            f"frame), {weights} and the frame's uniform block ({manifest['frame']['uniform_block']['bytes']} "
-            "bytes). An engine that writes gbuffer itself skips f_position and need not have depth and "
-            "normal; gbuffer is counted either way."
+            f"that the frame passes read ({', '.join(ENGINE_TEXTURES)}: frame.inputs, written by the engine "
+            f"each frame; no pass copies it), {weights} and the frame's uniform block "
+            f"({manifest['frame']['uniform_block']['bytes']} bytes)."
         )
     what = "every texture of the program's passes (textures)"
     if schedule.internal_height is not None:
@@ -579,10 +579,13 @@ def _fp16_text(schedule: MemorySchedule) -> str:
         "output textures RGBA32F)"
     )
     if schedule.frame_passes:
-        return (
-            f"{network}; the frame passes' own targets stay RGBA32F / R32F (they store 32-bit floats at "
-            "either precision), and are counted so."
+        half = any(t.formats["fp16"] == "R16F" for t in schedule.textures.values() if not t.network)
+        ao = (
+            "the full-resolution AO targets R16F"
+            if half
+            else "the full-resolution AO targets R32F (WGSL: core WebGPU has no r16float storage texture)"
         )
+        return f"{network}; of the frame passes' own targets {ao}, the depth-derived ones RGBA32F."
     if schedule.internal_height is None:
         return network + "."
     return (

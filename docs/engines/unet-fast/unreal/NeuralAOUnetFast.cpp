@@ -1,12 +1,17 @@
-// Generated from the manifest of unet-fast by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifest and the generated shaders.
+// Generated from the manifests of unet-fast by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifests and the exported shaders.
 #include "NeuralAOUnetFast.h"
 
 #include "RenderGraphUtils.h"
 
 namespace NeuralAOUnetFast
 {
+IMPLEMENT_GLOBAL_SHADER_PARAMETER_STRUCT(FFrameUniforms, "FrameUniforms");
+IMPLEMENT_GLOBAL_SHADER(Ff_downsample, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_downsample", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_depth_columns, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_depth_columns", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_depth_mean, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_depth_mean", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_network_input, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_network_input", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_network_radius, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_network_radius", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp00_pad, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p00_pad", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp01_uniform, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p01_uniform", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp02_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p02_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp03_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p03_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp04_pool_avg, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p04_pool_avg", SF_Compute);
@@ -25,31 +30,120 @@ IMPLEMENT_GLOBAL_SHADER(Fp16_resize_linear, "/Plugin/NeuralAO/NeuralAOUnetFast.u
 IMPLEMENT_GLOBAL_SHADER(Fp17_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p17_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp18_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p18_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp19_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p19_conv", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_upsample, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_upsample", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Ff_composite, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_composite", SF_Compute);
 
-void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, bool bFlipY)
+TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoint Frame)
+{
+    const int32 W = Frame.X, H = Frame.Y;
+    const int32 w = InternalHeight > 0 ? FMath::Max(1, (int32)FMath::RoundHalfToEven((double)W * InternalHeight / H)) : W;
+    const int32 h = InternalHeight > 0 ? InternalHeight : H;
+    const int32 wp = FMath::DivideAndRoundUp(w, PadMultiple) * PadMultiple, hp = FMath::DivideAndRoundUp(h, PadMultiple) * PadMultiple;
+    TMap<FString, FRDGTextureRef> T;
+    auto Make = [&](const TCHAR* Id, int32 X, int32 Y, int32 Layers, EPixelFormat Format) {
+        T.Add(Id, GraphBuilder.CreateTexture(FRDGTextureDesc::Create2DArray(FIntPoint(X, Y), Format, FClearValueBinding::None,
+            TexCreate_ShaderResource | TexCreate_UAV, Layers), Id));
+    };
+    Make(TEXT("ao"), W, H, 1, PF_R32_FLOAT);
+    Make(TEXT("depth"), W, H, 1, PF_R32_FLOAT);
+    Make(TEXT("depth_columns"), w, 1, 1, PF_A32B32G32R32F);
+    Make(TEXT("depth_mean"), 1, 1, 1, PF_A32B32G32R32F);
+    Make(TEXT("low_gbuffer"), w, h, 2, PF_A32B32G32R32F);
+    Make(TEXT("normal"), W, H, 1, PF_A32B32G32R32F);
+    Make(TEXT("t0"), w, h, 1, PF_A32B32G32R32F);
+    Make(TEXT("t1"), wp, hp, 1, PF_A32B32G32R32F);
+    Make(TEXT("t10"), wp * 1 / 8, hp * 1 / 8, 8, PF_A32B32G32R32F);
+    Make(TEXT("t11"), wp * 1 / 8, hp * 1 / 8, 16, PF_A32B32G32R32F);
+    Make(TEXT("t12"), wp * 1 / 4, hp * 1 / 4, 16, PF_A32B32G32R32F);
+    Make(TEXT("t13"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t14"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t15"), wp * 1 / 2, hp * 1 / 2, 8, PF_A32B32G32R32F);
+    Make(TEXT("t16"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t17"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t18"), wp, hp, 4, PF_A32B32G32R32F);
+    Make(TEXT("t19"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t2"), 1, 1, 1, PF_A32B32G32R32F);
+    Make(TEXT("t20"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t22"), w, h, 1, PF_A32B32G32R32F);
+    Make(TEXT("t4"), wp, hp, 1, PF_A32B32G32R32F);
+    Make(TEXT("t5"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t6"), wp * 1 / 2, hp * 1 / 2, 2, PF_A32B32G32R32F);
+    Make(TEXT("t7"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t8"), wp * 1 / 4, hp * 1 / 4, 4, PF_A32B32G32R32F);
+    Make(TEXT("t9"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    return T;
+}
+
+FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoint Frame, const FMatrix& Projection, float Radius)
 {
     FGlobalShaderMap* ShaderMap = GetGlobalShaderMap(GMaxRHIFeatureLevel);
     auto Srv = [&](const TCHAR* T) { return GraphBuilder.CreateSRV(FRDGTextureSRVDesc::Create(R.Textures[T])); };
     auto Uav = [&](const TCHAR* T) { return GraphBuilder.CreateUAV(FRDGTextureUAVDesc(R.Textures[T])); };
-    // each weights buffer made with FRDGBufferDesc::CreateByteAddressDesc(bytes): a raw view
     auto Raw = [&](int32 Pass) { return GraphBuilder.CreateSRV(R.Weights[Pass]); };
     auto Size = [&](const TCHAR* T) { return R.Textures[T]->Desc.Extent; };
-    {  // p00_pad: Pad
+    const float p00 = Projection.M[0][0], p11 = Projection.M[1][1];
+    const float radius = Radius;
+    const float pixels_per_unit = 0.5f * Frame.Y * p11;
+    const int32 flip = 0;  // row 0 is the top row on every RHI Unreal renders with (D3D, Vulkan, Metal)
+    const bool bSameSize = Size(TEXT("t0")) == Frame;  // the steps marked (w, h) == (W, H) run
+    auto* U = GraphBuilder.AllocParameters<FFrameUniforms>();
+    U->frame_u_proj = FVector2f(p00, p11);
+    U->frame_u_radius = radius;
+    U->frame_u_pixels_per_unit = pixels_per_unit;
+    U->frame_u_flip_y = flip;
+    TRDGUniformBufferRef<FFrameUniforms> FrameUniformBuffer = GraphBuilder.CreateUniformBuffer(U);
+    {  // step 0: f_downsample: point sampling to the network's size, position from depth
+        auto* P = GraphBuilder.AllocParameters<Ff_downsample::FParameters>();
+        P->src0 = Srv(TEXT("depth"));
+        P->src1 = Srv(TEXT("normal"));
+        P->dst = Uav(TEXT("low_gbuffer"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_downsample"), TShaderMapRef<Ff_downsample>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("low_gbuffer")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("low_gbuffer")).Y, 8), 1));
+    }
+    {  // step 1: f_depth_columns: foreground depth summed per column
+        auto* P = GraphBuilder.AllocParameters<Ff_depth_columns::FParameters>();
+        P->src0 = Srv(TEXT("low_gbuffer"));
+        P->dst = Uav(TEXT("depth_columns"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_depth_columns"), TShaderMapRef<Ff_depth_columns>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("depth_columns")).X, 64), FMath::DivideAndRoundUp(Size(TEXT("depth_columns")).Y, 1), 1));
+    }
+    {  // step 2: f_depth_mean: the mean foreground depth
+        auto* P = GraphBuilder.AllocParameters<Ff_depth_mean::FParameters>();
+        P->src0 = Srv(TEXT("depth_columns"));
+        P->dst = Uav(TEXT("depth_mean"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_depth_mean"), TShaderMapRef<Ff_depth_mean>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("depth_mean")).X, 1), FMath::DivideAndRoundUp(Size(TEXT("depth_mean")).Y, 1), 1));
+    }
+    {  // step 3: f_network_input: the network's input: depth / m, normal
+        auto* P = GraphBuilder.AllocParameters<Ff_network_input::FParameters>();
+        P->src0 = Srv(TEXT("low_gbuffer"));
+        P->src1 = Srv(TEXT("depth_mean"));
+        P->dst = Uav(TEXT("t0"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_network_input"), TShaderMapRef<Ff_network_input>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t0")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t0")).Y, 8), 1));
+    }
+    {  // step 4: f_network_radius: the network's radius input R P11 / m
+        auto* P = GraphBuilder.AllocParameters<Ff_network_radius::FParameters>();
+        P->src0 = Srv(TEXT("depth_mean"));
+        P->dst = Uav(TEXT("t2"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_network_radius"), TShaderMapRef<Ff_network_radius>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t2")).X, 1), FMath::DivideAndRoundUp(Size(TEXT("t2")).Y, 1), 1));
+    }
+    {  // step 5: p00_pad: Pad
         auto* P = GraphBuilder.AllocParameters<Fp00_pad::FParameters>();
         P->src0 = Srv(TEXT("t0"));
         P->dst = Uav(TEXT("t1"));
-        P->u_flip_y = bFlipY ? 1 : 0;
+        P->u_flip_y = flip;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p00_pad"), TShaderMapRef<Fp00_pad>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t1")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t1")).Y, 8), 1));
     }
-    {  // p01_uniform: Uniform
-        auto* P = GraphBuilder.AllocParameters<Fp01_uniform::FParameters>();
-        P->dst = Uav(TEXT("t2"));
-        P->u_radius = u_radius;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p01_uniform"), TShaderMapRef<Fp01_uniform>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t2")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t2")).Y, 8), 1));
-    }
-    {  // p02_conv: Conv + Clip + Div + Clip
+    // step 6: p01_uniform skipped: f_network_radius writes its texture
+    {  // step 7: p02_conv: Conv + Clip + Div + Clip
         auto* P = GraphBuilder.AllocParameters<Fp02_conv::FParameters>();
         P->src0 = Srv(TEXT("t1"));
         P->src1 = Srv(TEXT("t2"));
@@ -58,7 +152,7 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p02_conv"), TShaderMapRef<Fp02_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t4")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t4")).Y, 8), 1));
     }
-    {  // p03_conv: Concat + Conv + LeakyRelu
+    {  // step 8: p03_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp03_conv::FParameters>();
         P->src0 = Srv(TEXT("t1"));
         P->src1 = Srv(TEXT("t4"));
@@ -67,14 +161,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p03_conv"), TShaderMapRef<Fp03_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t5")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t5")).Y, 8), 2));
     }
-    {  // p04_pool_avg: AveragePool
+    {  // step 9: p04_pool_avg: AveragePool
         auto* P = GraphBuilder.AllocParameters<Fp04_pool_avg::FParameters>();
         P->src0 = Srv(TEXT("t5"));
         P->dst = Uav(TEXT("t6"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p04_pool_avg"), TShaderMapRef<Fp04_pool_avg>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t6")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t6")).Y, 8), 2));
     }
-    {  // p05_conv: Conv + LeakyRelu
+    {  // step 10: p05_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp05_conv::FParameters>();
         P->src0 = Srv(TEXT("t6"));
         P->dst = Uav(TEXT("t7"));
@@ -82,14 +176,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p05_conv"), TShaderMapRef<Fp05_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t7")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t7")).Y, 8), 4));
     }
-    {  // p06_pool_avg: AveragePool
+    {  // step 11: p06_pool_avg: AveragePool
         auto* P = GraphBuilder.AllocParameters<Fp06_pool_avg::FParameters>();
         P->src0 = Srv(TEXT("t7"));
         P->dst = Uav(TEXT("t8"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p06_pool_avg"), TShaderMapRef<Fp06_pool_avg>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t8")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t8")).Y, 8), 4));
     }
-    {  // p07_conv: Conv + LeakyRelu
+    {  // step 12: p07_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp07_conv::FParameters>();
         P->src0 = Srv(TEXT("t8"));
         P->dst = Uav(TEXT("t9"));
@@ -97,14 +191,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p07_conv"), TShaderMapRef<Fp07_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t9")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t9")).Y, 8), 8));
     }
-    {  // p08_pool_avg: AveragePool
+    {  // step 13: p08_pool_avg: AveragePool
         auto* P = GraphBuilder.AllocParameters<Fp08_pool_avg::FParameters>();
         P->src0 = Srv(TEXT("t9"));
         P->dst = Uav(TEXT("t10"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p08_pool_avg"), TShaderMapRef<Fp08_pool_avg>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t10")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t10")).Y, 8), 8));
     }
-    {  // p09_conv: Conv + LeakyRelu
+    {  // step 14: p09_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp09_conv::FParameters>();
         P->src0 = Srv(TEXT("t10"));
         P->dst = Uav(TEXT("t11"));
@@ -112,14 +206,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p09_conv"), TShaderMapRef<Fp09_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t11")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t11")).Y, 8), 16));
     }
-    {  // p10_resize_linear: Resize
+    {  // step 15: p10_resize_linear: Resize
         auto* P = GraphBuilder.AllocParameters<Fp10_resize_linear::FParameters>();
         P->src0 = Srv(TEXT("t11"));
         P->dst = Uav(TEXT("t12"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p10_resize_linear"), TShaderMapRef<Fp10_resize_linear>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t12")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t12")).Y, 8), 16));
     }
-    {  // p11_conv: Conv + LeakyRelu
+    {  // step 16: p11_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp11_conv::FParameters>();
         P->src0 = Srv(TEXT("t12"));
         P->dst = Uav(TEXT("t13"));
@@ -127,7 +221,7 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p11_conv"), TShaderMapRef<Fp11_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t13")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t13")).Y, 8), 8));
     }
-    {  // p12_conv: Concat + Conv + LeakyRelu
+    {  // step 17: p12_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp12_conv::FParameters>();
         P->src0 = Srv(TEXT("t13"));
         P->src1 = Srv(TEXT("t9"));
@@ -136,14 +230,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p12_conv"), TShaderMapRef<Fp12_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t14")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t14")).Y, 8), 8));
     }
-    {  // p13_resize_linear: Resize
+    {  // step 18: p13_resize_linear: Resize
         auto* P = GraphBuilder.AllocParameters<Fp13_resize_linear::FParameters>();
         P->src0 = Srv(TEXT("t14"));
         P->dst = Uav(TEXT("t15"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p13_resize_linear"), TShaderMapRef<Fp13_resize_linear>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t15")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t15")).Y, 8), 8));
     }
-    {  // p14_conv: Conv + LeakyRelu
+    {  // step 19: p14_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp14_conv::FParameters>();
         P->src0 = Srv(TEXT("t15"));
         P->dst = Uav(TEXT("t16"));
@@ -151,7 +245,7 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p14_conv"), TShaderMapRef<Fp14_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t16")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t16")).Y, 8), 4));
     }
-    {  // p15_conv: Concat + Conv + LeakyRelu
+    {  // step 20: p15_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp15_conv::FParameters>();
         P->src0 = Srv(TEXT("t16"));
         P->src1 = Srv(TEXT("t7"));
@@ -160,14 +254,14 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p15_conv"), TShaderMapRef<Fp15_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t17")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t17")).Y, 8), 4));
     }
-    {  // p16_resize_linear: Resize
+    {  // step 21: p16_resize_linear: Resize
         auto* P = GraphBuilder.AllocParameters<Fp16_resize_linear::FParameters>();
         P->src0 = Srv(TEXT("t17"));
         P->dst = Uav(TEXT("t18"));
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p16_resize_linear"), TShaderMapRef<Fp16_resize_linear>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t18")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t18")).Y, 8), 4));
     }
-    {  // p17_conv: Conv + LeakyRelu
+    {  // step 22: p17_conv: Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp17_conv::FParameters>();
         P->src0 = Srv(TEXT("t18"));
         P->dst = Uav(TEXT("t19"));
@@ -175,7 +269,7 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p17_conv"), TShaderMapRef<Fp17_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t19")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t19")).Y, 8), 2));
     }
-    {  // p18_conv: Concat + Conv + LeakyRelu
+    {  // step 23: p18_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp18_conv::FParameters>();
         P->src0 = Srv(TEXT("t19"));
         P->src1 = Srv(TEXT("t5"));
@@ -184,14 +278,37 @@ void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, b
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p18_conv"), TShaderMapRef<Fp18_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t20")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t20")).Y, 8), 2));
     }
-    {  // p19_conv: Conv + Sigmoid + Crop
+    {  // step 24: p19_conv: Conv + Sigmoid + Crop
         auto* P = GraphBuilder.AllocParameters<Fp19_conv::FParameters>();
         P->src0 = Srv(TEXT("t20"));
         P->dst = Uav(TEXT("t22"));
         P->params = Raw(19);
-        P->u_flip_y = bFlipY ? 1 : 0;
+        P->u_flip_y = flip;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p19_conv"), TShaderMapRef<Fp19_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t22")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t22")).Y, 8), 1));
     }
+    if (!bSameSize)  // (w, h) != (W, H)
+    {  // step 25: f_upsample: joint bilateral upsampling of the AO
+        auto* P = GraphBuilder.AllocParameters<Ff_upsample::FParameters>();
+        P->src0 = Srv(TEXT("depth"));
+        P->src1 = Srv(TEXT("normal"));
+        P->src2 = Srv(TEXT("t22"));
+        P->src3 = Srv(TEXT("low_gbuffer"));
+        P->dst = Uav(TEXT("ao"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_upsample"), TShaderMapRef<Ff_upsample>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("ao")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("ao")).Y, 8), 1));
+    }
+    if (bSameSize)  // (w, h) == (W, H)
+    {  // step 26: f_composite: the network's AO, 1 on background
+        auto* P = GraphBuilder.AllocParameters<Ff_composite::FParameters>();
+        P->src0 = Srv(TEXT("depth"));
+        P->src1 = Srv(TEXT("t22"));
+        P->dst = Uav(TEXT("ao"));
+        P->FrameUniforms = FrameUniformBuffer;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_composite"), TShaderMapRef<Ff_composite>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("ao")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("ao")).Y, 8), 1));
+    }
+    return R.Textures[TEXT("ao")];
 }
 }  // namespace NeuralAOUnetFast

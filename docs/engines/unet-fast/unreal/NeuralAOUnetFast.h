@@ -1,6 +1,6 @@
-// Generated from the manifest of unet-fast by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifest and the generated shaders.
-// Not run here (no Unreal): the HLSL these classes bind, by these names, runs on Vulkan in
-// tests/test_hlsl_target.py.
+// Generated from the manifests of unet-fast by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifests and the exported shaders.
+// Not run here (no Unreal): the HLSL these classes bind, by these names and registers, runs the whole
+// frame on Vulkan (lavapipe) in tests/test_frame_passes.py.
 #pragma once
 
 #include "GlobalShader.h"
@@ -10,6 +10,107 @@
 namespace NeuralAOUnetFast
 {
 constexpr int32 PadMultiple = 8;
+constexpr int32 InternalHeight = 256;  // network rows; 0: the network runs at W x H
+
+/** The frame passes' cbuffer FrameUniforms (b0), members at the HLSL's offsets (32 bytes). */
+BEGIN_GLOBAL_SHADER_PARAMETER_STRUCT(FFrameUniforms, )
+    SHADER_PARAMETER(FVector2f, frame_u_proj)  // offset 0
+    SHADER_PARAMETER(float, frame_u_radius)  // offset 8
+    SHADER_PARAMETER(float, frame_u_pixels_per_unit)  // offset 12
+    SHADER_PARAMETER(int32, frame_u_flip_y)  // offset 16
+END_GLOBAL_SHADER_PARAMETER_STRUCT()
+
+class Ff_downsample : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_downsample);
+    SHADER_USE_PARAMETER_STRUCT(Ff_downsample, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 0);
+    }
+};
+
+class Ff_depth_columns : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_depth_columns);
+    SHADER_USE_PARAMETER_STRUCT(Ff_depth_columns, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 1);
+    }
+};
+
+class Ff_depth_mean : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_depth_mean);
+    SHADER_USE_PARAMETER_STRUCT(Ff_depth_mean, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 2);
+    }
+};
+
+class Ff_network_input : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_network_input);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 3);
+    }
+};
+
+class Ff_network_radius : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_network_radius);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 4);
+    }
+};
 
 class Fp00_pad : public FGlobalShader
 {
@@ -25,24 +126,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 0);
-    }
-};
-
-class Fp01_uniform : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp01_uniform);
-    SHADER_USE_PARAMETER_STRUCT(Fp01_uniform, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER(float, u_radius)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 1);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
     }
 };
 
@@ -61,7 +145,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 2);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
     }
 };
 
@@ -80,7 +164,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 3);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
     }
 };
 
@@ -97,7 +181,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 4);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
     }
 };
 
@@ -115,7 +199,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
     }
 };
 
@@ -132,7 +216,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
     }
 };
 
@@ -150,7 +234,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
     }
 };
 
@@ -167,7 +251,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
     }
 };
 
@@ -185,7 +269,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
     }
 };
 
@@ -202,7 +286,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
     }
 };
 
@@ -220,7 +304,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
     }
 };
 
@@ -239,7 +323,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
     }
 };
 
@@ -256,7 +340,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
     }
 };
 
@@ -274,7 +358,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
     }
 };
 
@@ -293,7 +377,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
     }
 };
 
@@ -310,7 +394,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
     }
 };
 
@@ -328,7 +412,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
     }
 };
 
@@ -347,7 +431,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 22);
     }
 };
 
@@ -366,17 +450,66 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 23);
     }
 };
 
-/** The textures (t0 the input, t22 the output) and per-pass weight buffers of one frame size. */
+class Ff_upsample : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_upsample);
+    SHADER_USE_PARAMETER_STRUCT(Ff_upsample, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src2)  // t2
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src3)  // t3
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 24);
+    }
+};
+
+class Ff_composite : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_composite);
+    SHADER_USE_PARAMETER_STRUCT(Ff_composite, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 25);
+    }
+};
+
+/** The frame's textures (CreateTextures) and the per-pass weight buffers (each made with
+ * FRDGBufferDesc::CreateByteAddressDesc(bytes), filled with the pass's range of weights.bin). */
 struct FResources
 {
     TMap<FString, FRDGTextureRef> Textures;
-    TMap<int32, FRDGBufferRef> Weights;  // a buffer per pass with params: its range of weights.bin
+    TMap<int32, FRDGBufferRef> Weights;
 };
 
-/** Every pass in order (RDG orders the dispatches by their texture reads and writes). */
-void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, bool bFlipY);
+/** Every texture of the frame (frame.textures) for a Frame.X x Frame.Y frame. Before AddPasses, write the
+ * inputs:
+ *  depth: write each frame: linear depth -z_cam in scene units (lane 0), 0 on background; the passes reconstruct camera-space positions from it, the pixel and u_proj
+ *  normal: write each frame: camera-space unit normal (xyz), OpenGL axes, facing the viewer
+ */
+TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoint Frame);
+
+/** Every step of the frame in order (RDG orders the dispatches by their texture reads and writes);
+ * Projection: the view's projection matrix. Returns the AO texture "ao". */
+FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoint Frame, const FMatrix& Projection, float Radius);
 }  // namespace NeuralAOUnetFast

@@ -1,18 +1,28 @@
-// Generated from the manifest of unet-gtao by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifest and the generated shaders.
-// Not run here (no Unity): the HLSL it binds, by these names, runs on Vulkan in tests/test_hlsl_target.py.
+// Generated from the manifests of unet-gtao by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifests and the exported shaders.
+// Not run here (no Unity): the HLSL it binds, by these names and registers, runs the whole frame on
+// Vulkan (lavapipe) in tests/test_frame_passes.py.
 using System.Collections.Generic;
 using UnityEngine;
 using UnityEngine.Rendering;
 
-/// <summary>The unet-gtao network: 21 compute passes from the input texture t0 (fill it
-/// first: 5 channels, 4 a layer) to the output t24.</summary>
+/// <summary>The whole unet-gtao frame: 29 steps in the order of the manifest's frame.steps,
+/// from the textures the engine writes to the AO texture "ao".
+/// Each frame: Resize(W, H) when the size changes, write the inputs, Run(camera, radius), read AO.
+/// The inputs (Texture(id), W x H):
+///  depth: write each frame: linear depth -z_cam in scene units (lane 0), 0 on background; the passes reconstruct camera-space positions from it, the pixel and u_proj
+///  normal: write each frame: camera-space unit normal (xyz), OpenGL axes, facing the viewer
+/// </summary>
 public sealed class NeuralAOUnetGtao : System.IDisposable
 {
     public const int PadMultiple = 8;
+    public const int InternalHeight = 256;  // network rows; 0: the network runs at W x H
     readonly ComputeShader shader;  // NeuralAOUnetGtao.compute
     readonly float[] weights;       // weights.bin as floats
     readonly Dictionary<int, GraphicsBuffer> passWeights = new Dictionary<int, GraphicsBuffer>();
     readonly Dictionary<string, RenderTexture> tex = new Dictionary<string, RenderTexture>();
+    readonly GraphicsBuffer frameUniforms = new GraphicsBuffer(GraphicsBuffer.Target.Constant, 8, 4);
+    bool sameSize;    // the network's input is W x H: the steps marked (w, h) == (W, H) run
+    int frameHeight;  // H
 
     public NeuralAOUnetGtao(ComputeShader shader, byte[] weightsBin)
     {
@@ -54,169 +64,266 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
 
     static int CeilDiv(int n, int d) => (n + d - 1) / d;
 
-    public RenderTexture Input => tex["t0"];
-    public RenderTexture Output => tex["t24"];
+    public RenderTexture Texture(string id) => tex[id];
+    public RenderTexture AO => tex["ao"];
 
-    /// <summary>Allocate every texture for a width x height frame (both at least PadMultiple).</summary>
+    /// <summary>Allocate every texture of the frame (frame.textures) for a W x H frame: w x h the network's
+    /// input (InternalHeight rows, the width rounded half to even), wp x hp those padded.</summary>
     public void Resize(int W, int H)
     {
         Release();
-        int Wp = CeilDiv(W, PadMultiple) * PadMultiple, Hp = CeilDiv(H, PadMultiple) * PadMultiple;
-        tex["t0"] = Array2D(W, H, 2, RenderTextureFormat.ARGBFloat);
-        tex["t1"] = Array2D(Wp, Hp, 2, RenderTextureFormat.ARGBFloat);
+        frameHeight = H;
+        int w = InternalHeight > 0 ? Mathf.Max(1, (int)System.Math.Round((double)W * InternalHeight / H)) : W;
+        int h = InternalHeight > 0 ? InternalHeight : H;
+        int wp = CeilDiv(w, PadMultiple) * PadMultiple, hp = CeilDiv(h, PadMultiple) * PadMultiple;
+        tex["ao"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
+        tex["depth"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
+        tex["depth_columns"] = Array2D(w, 1, 1, RenderTextureFormat.ARGBFloat);
+        tex["depth_mean"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
+        tex["gtao"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
+        tex["gtao_raw"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
+        tex["low_gbuffer"] = Array2D(w, h, 3, RenderTextureFormat.ARGBFloat);
+        tex["normal"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
+        tex["t0"] = Array2D(w, h, 2, RenderTextureFormat.ARGBFloat);
+        tex["t1"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t10"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
+        tex["t11"] = Array2D(wp * 1 / 8, hp * 1 / 8, 4, RenderTextureFormat.ARGBFloat);
+        tex["t12"] = Array2D(wp * 1 / 8, hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
+        tex["t13"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
+        tex["t14"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
+        tex["t15"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
+        tex["t16"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
+        tex["t17"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t18"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t19"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
         tex["t2"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
-        tex["t4"] = Array2D(Wp, Hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t5"] = Array2D(Wp, Hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t6"] = Array2D(Wp, Hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t7"] = Array2D(Wp * 1 / 2, Hp * 1 / 2, 1, RenderTextureFormat.ARGBFloat);
-        tex["t8"] = Array2D(Wp * 1 / 2, Hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t9"] = Array2D(Wp * 1 / 4, Hp * 1 / 4, 2, RenderTextureFormat.ARGBFloat);
-        tex["t10"] = Array2D(Wp * 1 / 4, Hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t11"] = Array2D(Wp * 1 / 8, Hp * 1 / 8, 4, RenderTextureFormat.ARGBFloat);
-        tex["t12"] = Array2D(Wp * 1 / 8, Hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
-        tex["t13"] = Array2D(Wp * 1 / 4, Hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
-        tex["t14"] = Array2D(Wp * 1 / 4, Hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t15"] = Array2D(Wp * 1 / 4, Hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t16"] = Array2D(Wp * 1 / 2, Hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t17"] = Array2D(Wp * 1 / 2, Hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t18"] = Array2D(Wp * 1 / 2, Hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t19"] = Array2D(Wp, Hp, 2, RenderTextureFormat.ARGBFloat);
-        tex["t20"] = Array2D(Wp, Hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t21"] = Array2D(Wp, Hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t24"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
+        tex["t20"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t21"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t24"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
+        tex["t4"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t5"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t6"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t7"] = Array2D(wp * 1 / 2, hp * 1 / 2, 1, RenderTextureFormat.ARGBFloat);
+        tex["t8"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t9"] = Array2D(wp * 1 / 4, hp * 1 / 4, 2, RenderTextureFormat.ARGBFloat);
+        sameSize = tex["t0"].width == W && tex["t0"].height == H;
     }
 
-    /// <summary>Every pass in order. flipY: the input and output are bottom-up (row 0 at the bottom).</summary>
-    public void Run(float u_radius, bool flipY)
+    /// <summary>The frame for a camera: its projection, and the row order of the graphics API (row 0 is the
+    /// top row on D3D, Vulkan and Metal; the bottom row on OpenGL).</summary>
+    public void Run(Camera camera, float radius)
     {
+        Matrix4x4 p = camera.projectionMatrix;
+        Run(p.m00, p.m11, radius, !SystemInfo.graphicsUVStartsAtTop);
+    }
+
+    /// <summary>Every step in order. p00, p11: the projection's scales (f * H / W, f); radius in scene
+    /// units; flipY: the textures are stored bottom-up (row 0 = the bottom row).</summary>
+    public void Run(float p00, float p11, float radius, bool flipY)
+    {
+        int flip = flipY ? 1 : 0;
+        float pixels_per_unit = 0.5f * frameHeight * p11;
+        var u = new float[8];  // FrameUniforms (cbuffer, b0): 32 bytes
+        u[0] = (float)(p00);  // frame_u_proj
+        u[1] = (float)(p11);  // frame_u_proj
+        u[2] = (float)(radius);  // frame_u_radius
+        u[3] = (float)(pixels_per_unit);  // frame_u_pixels_per_unit
+        u[4] = System.BitConverter.Int32BitsToSingle(flip);  // frame_u_flip_y
+        frameUniforms.SetData(u);
         int k;
-        // p00_pad: Pad
+        // step 0: f_gtao: GTAO, 4 slices x 8 steps per side
+        k = shader.FindKernel("f_gtao");
+        shader.SetTexture(k, "src0", tex["depth"]);
+        shader.SetTexture(k, "src1", tex["normal"]);
+        shader.SetTexture(k, "dst", tex["gtao_raw"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["gtao_raw"].width, 8), CeilDiv(tex["gtao_raw"].height, 8), 1);
+        // step 1: f_gtao_blur: GTAO's 4x4 foreground-only blur
+        k = shader.FindKernel("f_gtao_blur");
+        shader.SetTexture(k, "src0", tex["depth"]);
+        shader.SetTexture(k, "src1", tex["gtao_raw"]);
+        shader.SetTexture(k, "dst", tex["gtao"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["gtao"].width, 8), CeilDiv(tex["gtao"].height, 8), 1);
+        // step 2: f_downsample: point sampling to the network's size, position from depth, GTAO
+        k = shader.FindKernel("f_downsample");
+        shader.SetTexture(k, "src0", tex["depth"]);
+        shader.SetTexture(k, "src1", tex["normal"]);
+        shader.SetTexture(k, "src2", tex["gtao"]);
+        shader.SetTexture(k, "dst", tex["low_gbuffer"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["low_gbuffer"].width, 8), CeilDiv(tex["low_gbuffer"].height, 8), 1);
+        // step 3: f_depth_columns: foreground depth summed per column
+        k = shader.FindKernel("f_depth_columns");
+        shader.SetTexture(k, "src0", tex["low_gbuffer"]);
+        shader.SetTexture(k, "dst", tex["depth_columns"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["depth_columns"].width, 64), CeilDiv(tex["depth_columns"].height, 1), 1);
+        // step 4: f_depth_mean: the mean foreground depth
+        k = shader.FindKernel("f_depth_mean");
+        shader.SetTexture(k, "src0", tex["depth_columns"]);
+        shader.SetTexture(k, "dst", tex["depth_mean"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["depth_mean"].width, 1), CeilDiv(tex["depth_mean"].height, 1), 1);
+        // step 5: f_network_input: the network's input: depth / m, normal, GTAO
+        k = shader.FindKernel("f_network_input");
+        shader.SetTexture(k, "src0", tex["low_gbuffer"]);
+        shader.SetTexture(k, "src1", tex["depth_mean"]);
+        shader.SetTexture(k, "dst", tex["t0"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["t0"].width, 8), CeilDiv(tex["t0"].height, 8), 1);
+        // step 6: f_network_radius: the network's radius input R P11 / m
+        k = shader.FindKernel("f_network_radius");
+        shader.SetTexture(k, "src0", tex["depth_mean"]);
+        shader.SetTexture(k, "dst", tex["t2"]);
+        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+        shader.Dispatch(k, CeilDiv(tex["t2"].width, 1), CeilDiv(tex["t2"].height, 1), 1);
+        // step 7: p00_pad: Pad
         k = shader.FindKernel("p00_pad");
         shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "dst", tex["t1"]);
-        shader.SetInt("u_flip_y", flipY ? 1 : 0);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t1"].width, 8), CeilDiv(tex["t1"].height, 8), 2);
-        // p01_uniform: Uniform
-        k = shader.FindKernel("p01_uniform");
-        shader.SetTexture(k, "dst", tex["t2"]);
-        shader.SetFloat("u_radius", u_radius);
-        shader.Dispatch(k, CeilDiv(tex["t2"].width, 8), CeilDiv(tex["t2"].height, 8), 1);
-        // p02_conv: Conv + Clip + Div + Clip
+        // step 8: p01_uniform skipped: f_network_radius writes its texture
+        // step 9: p02_conv: Conv + Clip + Div + Clip
         k = shader.FindKernel("p02_conv");
         shader.SetTexture(k, "src0", tex["t1"]);
         shader.SetTexture(k, "src1", tex["t2"]);
         shader.SetTexture(k, "dst", tex["t4"]);
         shader.SetBuffer(k, "params", passWeights[2]);
         shader.Dispatch(k, CeilDiv(tex["t4"].width, 8), CeilDiv(tex["t4"].height, 8), 1);
-        // p03_conv: Concat + Conv
+        // step 10: p03_conv: Concat + Conv
         k = shader.FindKernel("p03_conv");
         shader.SetTexture(k, "src0", tex["t1"]);
         shader.SetTexture(k, "src1", tex["t4"]);
         shader.SetTexture(k, "dst", tex["t5"]);
         shader.SetBuffer(k, "params", passWeights[3]);
         shader.Dispatch(k, CeilDiv(tex["t5"].width, 8), CeilDiv(tex["t5"].height, 8), 1);
-        // p04_conv: Concat + Conv + LeakyRelu
+        // step 11: p04_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p04_conv");
         shader.SetTexture(k, "src0", tex["t1"]);
         shader.SetTexture(k, "src1", tex["t4"]);
         shader.SetTexture(k, "dst", tex["t6"]);
         shader.SetBuffer(k, "params", passWeights[4]);
         shader.Dispatch(k, CeilDiv(tex["t6"].width, 8), CeilDiv(tex["t6"].height, 8), 1);
-        // p05_pool_avg: AveragePool
+        // step 12: p05_pool_avg: AveragePool
         k = shader.FindKernel("p05_pool_avg");
         shader.SetTexture(k, "src0", tex["t6"]);
         shader.SetTexture(k, "dst", tex["t7"]);
         shader.Dispatch(k, CeilDiv(tex["t7"].width, 8), CeilDiv(tex["t7"].height, 8), 1);
-        // p06_conv: Conv + LeakyRelu
+        // step 13: p06_conv: Conv + LeakyRelu
         k = shader.FindKernel("p06_conv");
         shader.SetTexture(k, "src0", tex["t7"]);
         shader.SetTexture(k, "dst", tex["t8"]);
         shader.SetBuffer(k, "params", passWeights[6]);
         shader.Dispatch(k, CeilDiv(tex["t8"].width, 8), CeilDiv(tex["t8"].height, 8), 2);
-        // p07_pool_avg: AveragePool
+        // step 14: p07_pool_avg: AveragePool
         k = shader.FindKernel("p07_pool_avg");
         shader.SetTexture(k, "src0", tex["t8"]);
         shader.SetTexture(k, "dst", tex["t9"]);
         shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 2);
-        // p08_conv: Conv + LeakyRelu
+        // step 15: p08_conv: Conv + LeakyRelu
         k = shader.FindKernel("p08_conv");
         shader.SetTexture(k, "src0", tex["t9"]);
         shader.SetTexture(k, "dst", tex["t10"]);
         shader.SetBuffer(k, "params", passWeights[8]);
         shader.Dispatch(k, CeilDiv(tex["t10"].width, 8), CeilDiv(tex["t10"].height, 8), 4);
-        // p09_pool_avg: AveragePool
+        // step 16: p09_pool_avg: AveragePool
         k = shader.FindKernel("p09_pool_avg");
         shader.SetTexture(k, "src0", tex["t10"]);
         shader.SetTexture(k, "dst", tex["t11"]);
         shader.Dispatch(k, CeilDiv(tex["t11"].width, 8), CeilDiv(tex["t11"].height, 8), 4);
-        // p10_conv: Conv + LeakyRelu
+        // step 17: p10_conv: Conv + LeakyRelu
         k = shader.FindKernel("p10_conv");
         shader.SetTexture(k, "src0", tex["t11"]);
         shader.SetTexture(k, "dst", tex["t12"]);
         shader.SetBuffer(k, "params", passWeights[10]);
         shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 8);
-        // p11_resize_linear: Resize
+        // step 18: p11_resize_linear: Resize
         k = shader.FindKernel("p11_resize_linear");
         shader.SetTexture(k, "src0", tex["t12"]);
         shader.SetTexture(k, "dst", tex["t13"]);
         shader.Dispatch(k, CeilDiv(tex["t13"].width, 8), CeilDiv(tex["t13"].height, 8), 8);
-        // p12_conv: Conv + LeakyRelu
+        // step 19: p12_conv: Conv + LeakyRelu
         k = shader.FindKernel("p12_conv");
         shader.SetTexture(k, "src0", tex["t13"]);
         shader.SetTexture(k, "dst", tex["t14"]);
         shader.SetBuffer(k, "params", passWeights[12]);
         shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 4);
-        // p13_conv: Concat + Conv + LeakyRelu
+        // step 20: p13_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p13_conv");
         shader.SetTexture(k, "src0", tex["t14"]);
         shader.SetTexture(k, "src1", tex["t10"]);
         shader.SetTexture(k, "dst", tex["t15"]);
         shader.SetBuffer(k, "params", passWeights[13]);
         shader.Dispatch(k, CeilDiv(tex["t15"].width, 8), CeilDiv(tex["t15"].height, 8), 4);
-        // p14_resize_linear: Resize
+        // step 21: p14_resize_linear: Resize
         k = shader.FindKernel("p14_resize_linear");
         shader.SetTexture(k, "src0", tex["t15"]);
         shader.SetTexture(k, "dst", tex["t16"]);
         shader.Dispatch(k, CeilDiv(tex["t16"].width, 8), CeilDiv(tex["t16"].height, 8), 4);
-        // p15_conv: Conv + LeakyRelu
+        // step 22: p15_conv: Conv + LeakyRelu
         k = shader.FindKernel("p15_conv");
         shader.SetTexture(k, "src0", tex["t16"]);
         shader.SetTexture(k, "dst", tex["t17"]);
         shader.SetBuffer(k, "params", passWeights[15]);
         shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 2);
-        // p16_conv: Concat + Conv + LeakyRelu
+        // step 23: p16_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p16_conv");
         shader.SetTexture(k, "src0", tex["t17"]);
         shader.SetTexture(k, "src1", tex["t8"]);
         shader.SetTexture(k, "dst", tex["t18"]);
         shader.SetBuffer(k, "params", passWeights[16]);
         shader.Dispatch(k, CeilDiv(tex["t18"].width, 8), CeilDiv(tex["t18"].height, 8), 2);
-        // p17_resize_linear: Resize
+        // step 24: p17_resize_linear: Resize
         k = shader.FindKernel("p17_resize_linear");
         shader.SetTexture(k, "src0", tex["t18"]);
         shader.SetTexture(k, "dst", tex["t19"]);
         shader.Dispatch(k, CeilDiv(tex["t19"].width, 8), CeilDiv(tex["t19"].height, 8), 2);
-        // p18_conv: Conv + LeakyRelu
+        // step 25: p18_conv: Conv + LeakyRelu
         k = shader.FindKernel("p18_conv");
         shader.SetTexture(k, "src0", tex["t19"]);
         shader.SetTexture(k, "dst", tex["t20"]);
         shader.SetBuffer(k, "params", passWeights[18]);
         shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 1);
-        // p19_conv: Concat + Conv + LeakyRelu
+        // step 26: p19_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p19_conv");
         shader.SetTexture(k, "src0", tex["t20"]);
         shader.SetTexture(k, "src1", tex["t6"]);
         shader.SetTexture(k, "dst", tex["t21"]);
         shader.SetBuffer(k, "params", passWeights[19]);
         shader.Dispatch(k, CeilDiv(tex["t21"].width, 8), CeilDiv(tex["t21"].height, 8), 1);
-        // p20_conv: Conv + Add + Clip + Crop
+        // step 27: p20_conv: Conv + Add + Clip + Crop
         k = shader.FindKernel("p20_conv");
         shader.SetTexture(k, "src0", tex["t21"]);
         shader.SetTexture(k, "src1", tex["t5"]);
         shader.SetTexture(k, "dst", tex["t24"]);
         shader.SetBuffer(k, "params", passWeights[20]);
-        shader.SetInt("u_flip_y", flipY ? 1 : 0);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t24"].width, 8), CeilDiv(tex["t24"].height, 8), 1);
+        if (!sameSize)  // (w, h) != (W, H)
+        {
+            // step 28: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
+            k = shader.FindKernel("f_upsample");
+            shader.SetTexture(k, "src0", tex["depth"]);
+            shader.SetTexture(k, "src1", tex["normal"]);
+            shader.SetTexture(k, "src2", tex["t24"]);
+            shader.SetTexture(k, "src3", tex["low_gbuffer"]);
+            shader.SetTexture(k, "src4", tex["gtao"]);
+            shader.SetTexture(k, "dst", tex["ao"]);
+            shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+            shader.Dispatch(k, CeilDiv(tex["ao"].width, 8), CeilDiv(tex["ao"].height, 8), 1);
+        }
+        if (sameSize)  // (w, h) == (W, H)
+        {
+            // step 29: f_composite: the network's AO, 1 on background
+            k = shader.FindKernel("f_composite");
+            shader.SetTexture(k, "src0", tex["depth"]);
+            shader.SetTexture(k, "src1", tex["t24"]);
+            shader.SetTexture(k, "dst", tex["ao"]);
+            shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
+            shader.Dispatch(k, CeilDiv(tex["ao"].width, 8), CeilDiv(tex["ao"].height, 8), 1);
+        }
     }
 
     void Release()
@@ -229,5 +336,6 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
     {
         Release();
         foreach (var b in passWeights.Values) b.Release();
+        frameUniforms.Release();
     }
 }

@@ -1,6 +1,6 @@
-// Generated from the manifest of unet-gtao by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifest and the generated shaders.
-// Not run here (no Unreal): the HLSL these classes bind, by these names, runs on Vulkan in
-// tests/test_hlsl_target.py.
+// Generated from the manifests of unet-gtao by `python -m neuralao.export.glsl.engines`; tests/test_engine_wrappers.py checks it against the manifests and the exported shaders.
+// Not run here (no Unreal): the HLSL these classes bind, by these names and registers, runs the whole
+// frame on Vulkan (lavapipe) in tests/test_frame_passes.py.
 #pragma once
 
 #include "GlobalShader.h"
@@ -10,6 +10,146 @@
 namespace NeuralAOUnetGtao
 {
 constexpr int32 PadMultiple = 8;
+constexpr int32 InternalHeight = 256;  // network rows; 0: the network runs at W x H
+
+/** The frame passes' cbuffer FrameUniforms (b0), members at the HLSL's offsets (32 bytes). */
+BEGIN_GLOBAL_SHADER_PARAMETER_STRUCT(FFrameUniforms, )
+    SHADER_PARAMETER(FVector2f, frame_u_proj)  // offset 0
+    SHADER_PARAMETER(float, frame_u_radius)  // offset 8
+    SHADER_PARAMETER(float, frame_u_pixels_per_unit)  // offset 12
+    SHADER_PARAMETER(int32, frame_u_flip_y)  // offset 16
+END_GLOBAL_SHADER_PARAMETER_STRUCT()
+
+class Ff_gtao : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_gtao);
+    SHADER_USE_PARAMETER_STRUCT(Ff_gtao, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 0);
+    }
+};
+
+class Ff_gtao_blur : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_gtao_blur);
+    SHADER_USE_PARAMETER_STRUCT(Ff_gtao_blur, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 1);
+    }
+};
+
+class Ff_downsample : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_downsample);
+    SHADER_USE_PARAMETER_STRUCT(Ff_downsample, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src2)  // t2
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 2);
+    }
+};
+
+class Ff_depth_columns : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_depth_columns);
+    SHADER_USE_PARAMETER_STRUCT(Ff_depth_columns, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 3);
+    }
+};
+
+class Ff_depth_mean : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_depth_mean);
+    SHADER_USE_PARAMETER_STRUCT(Ff_depth_mean, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 4);
+    }
+};
+
+class Ff_network_input : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_network_input);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
+    }
+};
+
+class Ff_network_radius : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_network_radius);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
+    }
+};
 
 class Fp00_pad : public FGlobalShader
 {
@@ -25,24 +165,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 0);
-    }
-};
-
-class Fp01_uniform : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp01_uniform);
-    SHADER_USE_PARAMETER_STRUCT(Fp01_uniform, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER(float, u_radius)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 1);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
     }
 };
 
@@ -61,7 +184,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 2);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
     }
 };
 
@@ -80,7 +203,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 3);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
     }
 };
 
@@ -99,7 +222,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 4);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
     }
 };
 
@@ -116,7 +239,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
     }
 };
 
@@ -134,7 +257,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
     }
 };
 
@@ -151,7 +274,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
     }
 };
 
@@ -169,7 +292,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
     }
 };
 
@@ -186,7 +309,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
     }
 };
 
@@ -204,7 +327,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
     }
 };
 
@@ -221,7 +344,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
     }
 };
 
@@ -239,7 +362,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
     }
 };
 
@@ -258,7 +381,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
     }
 };
 
@@ -275,7 +398,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
     }
 };
 
@@ -293,7 +416,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
     }
 };
 
@@ -312,7 +435,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 22);
     }
 };
 
@@ -329,7 +452,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 23);
     }
 };
 
@@ -347,7 +470,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 24);
     }
 };
 
@@ -366,7 +489,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 25);
     }
 };
 
@@ -386,17 +509,67 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 26);
     }
 };
 
-/** The textures (t0 the input, t24 the output) and per-pass weight buffers of one frame size. */
+class Ff_upsample : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_upsample);
+    SHADER_USE_PARAMETER_STRUCT(Ff_upsample, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src2)  // t2
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src3)  // t3
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src4)  // t4
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 27);
+    }
+};
+
+class Ff_composite : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Ff_composite);
+    SHADER_USE_PARAMETER_STRUCT(Ff_composite, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float>, dst)  // u0
+        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 28);
+    }
+};
+
+/** The frame's textures (CreateTextures) and the per-pass weight buffers (each made with
+ * FRDGBufferDesc::CreateByteAddressDesc(bytes), filled with the pass's range of weights.bin). */
 struct FResources
 {
     TMap<FString, FRDGTextureRef> Textures;
-    TMap<int32, FRDGBufferRef> Weights;  // a buffer per pass with params: its range of weights.bin
+    TMap<int32, FRDGBufferRef> Weights;
 };
 
-/** Every pass in order (RDG orders the dispatches by their texture reads and writes). */
-void AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, float u_radius, bool bFlipY);
+/** Every texture of the frame (frame.textures) for a Frame.X x Frame.Y frame. Before AddPasses, write the
+ * inputs:
+ *  depth: write each frame: linear depth -z_cam in scene units (lane 0), 0 on background; the passes reconstruct camera-space positions from it, the pixel and u_proj
+ *  normal: write each frame: camera-space unit normal (xyz), OpenGL axes, facing the viewer
+ */
+TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoint Frame);
+
+/** Every step of the frame in order (RDG orders the dispatches by their texture reads and writes);
+ * Projection: the view's projection matrix. Returns the AO texture "ao". */
+FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoint Frame, const FMatrix& Projection, float Radius);
 }  // namespace NeuralAOUnetGtao

@@ -77,7 +77,7 @@ kernel void f_composite(constant FrameUniforms& frame [[buffer(0)]], texture2d_a
     int2 px = nao_texel(param, param_1, frame);
     int2 param_2 = px;
     int param_3 = 0;
-    if (nao_load(src0, src0Smplr, param_2, param_3, frame).w < 0.5)
+    if (!(nao_load(src0, src0Smplr, param_2, param_3, frame).x > 0.0))
     {
         int2 param_4 = px;
         int param_5 = 0;

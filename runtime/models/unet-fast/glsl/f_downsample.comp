@@ -1,10 +1,11 @@
 #version 430 core
-// neuralao frame pass f_downsample: point sampling to the network's size
+// neuralao frame pass f_downsample: point sampling to the network's size, position from depth
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(binding = 0) uniform highp sampler2DArray src0;
-layout(binding = 1, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std140, binding = 2) uniform FrameUniforms {
+layout(binding = 1) uniform highp sampler2DArray src1;
+layout(binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std140, binding = 3) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -36,6 +37,13 @@ float nao_acos(float x) {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+vec3 nao_position(ivec2 p, ivec2 size, float z) {
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    return vec3(ndc.x / u_proj.x * z, ndc.y / u_proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
 int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);
@@ -51,6 +59,12 @@ void main() {
     ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
     ivec2 hi = nao_size(src0);
     ivec2 q = min(((2 * px + 1) * hi) / (2 * out_size), hi - 1);
-    nao_store(px, 0, nao_load(src0, q, 0));
-    nao_store(px, 1, nao_load(src0, q, 1));
+    float z = nao_load(src0, q, 0).x;
+    if (z > 0.0) {
+        nao_store(px, 0, vec4(nao_position(q, hi, z), 1.0));
+        nao_store(px, 1, vec4(nao_load(src1, q, 0).xyz, 0.0));
+    } else {
+        nao_store(px, 0, vec4(0.0));
+        nao_store(px, 1, vec4(0.0));
+    }
 }

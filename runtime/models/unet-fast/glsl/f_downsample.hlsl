@@ -11,6 +11,8 @@ cbuffer FrameUniforms : register(b0)
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -35,22 +37,22 @@ uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
 
 int2 nao_texel(int2 p, int2 size)
 {
-    int2 _48;
+    int2 _56;
     if (frame_u_flip_y != 0)
     {
-        _48 = p;
+        _56 = p;
     }
     else
     {
-        _48 = int2(p.x, (size.y - 1) - p.y);
+        _56 = int2(p.x, (size.y - 1) - p.y);
     }
-    return _48;
+    return _56;
 }
 
 int2 nao_size(Texture2DArray<float4> t, SamplerState _t_sampler)
 {
-    uint _72_dummy_parameter;
-    return int3(spvTextureSize(t, uint(0), _72_dummy_parameter)).xy;
+    uint _80_dummy_parameter;
+    return int3(spvTextureSize(t, uint(0), _80_dummy_parameter)).xy;
 }
 
 float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int layer)
@@ -60,30 +62,36 @@ float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int l
     return t.Load(int4(int3(nao_texel(param, param_1), layer), 0));
 }
 
+float3 nao_position(int2 p, int2 size, float z)
+{
+    float2 ndc = (((float2(p) + 0.5f.xx) / float2(size)) * 2.0f) - 1.0f.xx;
+    return float3((ndc.x / frame_u_proj.x) * z, (ndc.y / frame_u_proj.y) * z, -z);
+}
+
 void nao_store(int2 p, int layer, float4 v)
 {
-    uint _95_dummy_parameter;
+    uint _103_dummy_parameter;
     int2 param = p;
-    int2 param_1 = int3(spvImageSize(dst, _95_dummy_parameter)).xy;
+    int2 param_1 = int3(spvImageSize(dst, _103_dummy_parameter)).xy;
     dst[int3(nao_texel(param, param_1), layer)] = v;
 }
 
 void f_downsample_inner()
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
-    uint _116_dummy_parameter;
-    int2 out_size = int3(spvImageSize(dst, _116_dummy_parameter)).xy;
-    bool _122 = gid.x >= out_size.x;
-    bool _131;
-    if (!_122)
+    uint _159_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _159_dummy_parameter)).xy;
+    bool _165 = gid.x >= out_size.x;
+    bool _174;
+    if (!_165)
     {
-        _131 = gid.y >= out_size.y;
+        _174 = gid.y >= out_size.y;
     }
     else
     {
-        _131 = _122;
+        _174 = _165;
     }
-    if (_131)
+    if (_174)
     {
         return;
     }
@@ -94,16 +102,34 @@ void f_downsample_inner()
     int2 q = min(((((int2(2, 2) * px) + int2(1, 1)) * hi) / (int2(2, 2) * out_size)), (hi - int2(1, 1)));
     int2 param_2 = q;
     int param_3 = 0;
-    int2 param_4 = px;
-    int param_5 = 0;
-    float4 param_6 = nao_load(src0, _src0_sampler, param_2, param_3);
-    nao_store(param_4, param_5, param_6);
-    int2 param_7 = q;
-    int param_8 = 1;
-    int2 param_9 = px;
-    int param_10 = 1;
-    float4 param_11 = nao_load(src0, _src0_sampler, param_7, param_8);
-    nao_store(param_9, param_10, param_11);
+    float z = nao_load(src0, _src0_sampler, param_2, param_3).x;
+    if (z > 0.0f)
+    {
+        int2 param_4 = q;
+        int2 param_5 = hi;
+        float param_6 = z;
+        int2 param_7 = px;
+        int param_8 = 0;
+        float4 param_9 = float4(nao_position(param_4, param_5, param_6), 1.0f);
+        nao_store(param_7, param_8, param_9);
+        int2 param_10 = q;
+        int param_11 = 0;
+        int2 param_12 = px;
+        int param_13 = 1;
+        float4 param_14 = float4(nao_load(src1, _src1_sampler, param_10, param_11).xyz, 0.0f);
+        nao_store(param_12, param_13, param_14);
+    }
+    else
+    {
+        int2 param_15 = px;
+        int param_16 = 0;
+        float4 param_17 = 0.0f.xxxx;
+        nao_store(param_15, param_16, param_17);
+        int2 param_18 = px;
+        int param_19 = 1;
+        float4 param_20 = 0.0f.xxxx;
+        nao_store(param_18, param_19, param_20);
+    }
 }
 
 [numthreads(8, 8, 1)]

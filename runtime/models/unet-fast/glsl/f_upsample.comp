@@ -5,8 +5,9 @@ layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 layout(binding = 0) uniform highp sampler2DArray src0;
 layout(binding = 1) uniform highp sampler2DArray src1;
 layout(binding = 2) uniform highp sampler2DArray src2;
-layout(binding = 3, r32f) writeonly uniform highp image2DArray dst;
-layout(std140, binding = 4) uniform FrameUniforms {
+layout(binding = 3) uniform highp sampler2DArray src3;
+layout(binding = 4, r32f) writeonly uniform highp image2DArray dst;
+layout(std140, binding = 5) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -38,6 +39,13 @@ float nao_acos(float x) {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+vec3 nao_position(ivec2 p, ivec2 size, float z) {
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    return vec3(ndc.x / u_proj.x * z, ndc.y / u_proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
 int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);
@@ -51,15 +59,16 @@ void main() {
         return;
     }
     ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
-    vec4 pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+    float z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, vec4(1.0));
         return;
     }
-    vec3 n = nao_load(src0, px, 1).xyz;
-    float depth = max(-pw.z, 1e-30);
+    vec3 p = nao_position(px, out_size, z);
+    vec3 n = nao_load(src1, px, 0).xyz;
+    float depth = max(z, 1e-30);
     ivec2 hi = out_size;
-    ivec2 lo = nao_size(src1);
+    ivec2 lo = nao_size(src2);
     vec2 uv = (vec2(px) + 0.5) * vec2(lo) / vec2(hi) - 0.5;
     ivec2 num = (2 * px + 1) * lo - hi;
     ivec2 base = ivec2(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
@@ -68,17 +77,17 @@ void main() {
     for (int y = 0; y < 4; ++y) {
         for (int x = 0; x < 4; ++x) {
             ivec2 q = clamp(base + ivec2(x, y), ivec2(0), lo - 1);
-            vec4 qw = nao_load(src2, q, 0);
+            vec4 qw = nao_load(src3, q, 0);
             if (qw.w < 0.5) {
                 continue;
             }
             vec2 d = vec2(base + ivec2(x, y)) - uv;
             float spatial = exp(-dot(d, d) / (2.0 * 0.6 * 0.6));
-            vec3 qn = nao_load(src2, q, 1).xyz;
-            float plane = abs(dot(qn, pw.xyz - qw.xyz)) / (0.03 * depth);
+            vec3 qn = nao_load(src3, q, 1).xyz;
+            float plane = abs(dot(qn, p - qw.xyz)) / (0.03 * depth);
             float agree = pow(max(dot(qn, n), 0.0), 8.0);
             float w = spatial * (0.001 + exp(-plane * plane) * agree);
-            sum += w * nao_load(src1, q, 0).x;
+            sum += w * nao_load(src2, q, 0).x;
             total += w;
         }
     }

@@ -94,7 +94,7 @@ void f_composite_inner()
     int2 px = nao_texel(param, param_1);
     int2 param_2 = px;
     int param_3 = 0;
-    if (nao_load(src0, _src0_sampler, param_2, param_3).w < 0.5f)
+    if (!(nao_load(src0, _src0_sampler, param_2, param_3).x > 0.0f))
     {
         int2 param_4 = px;
         int param_5 = 0;

@@ -18,16 +18,16 @@ constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
 static inline __attribute__((always_inline))
 int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& frame)
 {
-    int2 _48;
+    int2 _56;
     if (frame.u_flip_y != 0)
     {
-        _48 = p;
+        _56 = p;
     }
     else
     {
-        _48 = int2(p.x, (size.y - 1) - p.y);
+        _56 = int2(p.x, (size.y - 1) - p.y);
     }
-    return _48;
+    return _56;
 }
 
 static inline __attribute__((always_inline))
@@ -41,8 +41,15 @@ float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, 
 {
     int2 param = p;
     int2 param_1 = nao_size(t, tSmplr);
-    int3 _85 = int3(nao_texel(param, param_1, frame), layer);
-    return t.read(uint2(_85.xy), uint(_85.z), 0);
+    int3 _93 = int3(nao_texel(param, param_1, frame), layer);
+    return t.read(uint2(_93.xy), uint(_93.z), 0);
+}
+
+static inline __attribute__((always_inline))
+float3 nao_position(thread const int2& p, thread const int2& size, thread const float& z, constant FrameUniforms& frame)
+{
+    float2 ndc = (((float2(p) + float2(0.5)) / float2(size)) * 2.0) - float2(1.0);
+    return float3((ndc.x / frame.u_proj.x) * z, (ndc.y / frame.u_proj.y) * z, -z);
 }
 
 static inline __attribute__((always_inline))
@@ -50,25 +57,25 @@ void nao_store(thread const int2& p, thread const int& layer, thread const float
 {
     int2 param = p;
     int2 param_1 = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    int3 _104 = int3(nao_texel(param, param_1, frame), layer);
-    dst.write(v, uint2(_104.xy), uint(_104.z));
+    int3 _112 = int3(nao_texel(param, param_1, frame), layer);
+    dst.write(v, uint2(_112.xy), uint(_112.z));
 }
 
-kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], texture2d_array<float> src2 [[texture(3)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], sampler src2Smplr [[sampler(3)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    bool _122 = gid.x >= out_size.x;
-    bool _131;
-    if (!_122)
+    bool _165 = gid.x >= out_size.x;
+    bool _174;
+    if (!_165)
     {
-        _131 = gid.y >= out_size.y;
+        _174 = gid.y >= out_size.y;
     }
     else
     {
-        _131 = _122;
+        _174 = _165;
     }
-    if (_131)
+    if (_174)
     {
         return;
     }
@@ -79,21 +86,39 @@ kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_
     int2 q = min(((((int2(2) * px) + int2(1)) * hi) / (int2(2) * out_size)), (hi - int2(1)));
     int2 param_2 = q;
     int param_3 = 0;
-    int2 param_4 = px;
-    int param_5 = 0;
-    float4 param_6 = nao_load(src0, src0Smplr, param_2, param_3, frame);
-    nao_store(param_4, param_5, param_6, frame, dst);
-    int2 param_7 = q;
-    int param_8 = 1;
-    int2 param_9 = px;
-    int param_10 = 1;
-    float4 param_11 = nao_load(src0, src0Smplr, param_7, param_8, frame);
-    nao_store(param_9, param_10, param_11, frame, dst);
-    int2 param_12 = q;
-    int param_13 = 0;
-    int2 param_14 = px;
-    int param_15 = 2;
-    float4 param_16 = float4(nao_load(src1, src1Smplr, param_12, param_13, frame).x, 0.0, 0.0, 0.0);
-    nao_store(param_14, param_15, param_16, frame, dst);
+    float z = nao_load(src0, src0Smplr, param_2, param_3, frame).x;
+    if (z > 0.0)
+    {
+        int2 param_4 = q;
+        int2 param_5 = hi;
+        float param_6 = z;
+        int2 param_7 = px;
+        int param_8 = 0;
+        float4 param_9 = float4(nao_position(param_4, param_5, param_6, frame), 1.0);
+        nao_store(param_7, param_8, param_9, frame, dst);
+        int2 param_10 = q;
+        int param_11 = 0;
+        int2 param_12 = px;
+        int param_13 = 1;
+        float4 param_14 = float4(nao_load(src1, src1Smplr, param_10, param_11, frame).xyz, 0.0);
+        nao_store(param_12, param_13, param_14, frame, dst);
+    }
+    else
+    {
+        int2 param_15 = px;
+        int param_16 = 0;
+        float4 param_17 = float4(0.0);
+        nao_store(param_15, param_16, param_17, frame, dst);
+        int2 param_18 = px;
+        int param_19 = 1;
+        float4 param_20 = float4(0.0);
+        nao_store(param_18, param_19, param_20, frame, dst);
+    }
+    int2 param_21 = q;
+    int param_22 = 0;
+    int2 param_23 = px;
+    int param_24 = 2;
+    float4 param_25 = float4(nao_load(src2, src2Smplr, param_21, param_22, frame).x, 0.0, 0.0, 0.0);
+    nao_store(param_23, param_24, param_25, frame, dst);
 }
 

@@ -109,7 +109,7 @@ void f_gtao_blur_inner()
     int2 px = nao_texel(param, param_1);
     int2 param_2 = px;
     int param_3 = 0;
-    if (nao_load(src0, _src0_sampler, param_2, param_3).w < 0.5f)
+    if (!(nao_load(src0, _src0_sampler, param_2, param_3).x > 0.0f))
     {
         int2 param_4 = px;
         int param_5 = 0;
@@ -132,7 +132,7 @@ void f_gtao_blur_inner()
             }
             int2 param_9 = q;
             int param_10 = 0;
-            if (nao_load(src0, _src0_sampler, param_9, param_10).w < 0.5f)
+            if (!(nao_load(src0, _src0_sampler, param_9, param_10).x > 0.0f))
             {
                 continue;
             }

@@ -17,6 +17,8 @@ Texture2DArray<float4> src2 : register(t2);
 SamplerState _src2_sampler : register(s2);
 Texture2DArray<float4> src3 : register(t3);
 SamplerState _src3_sampler : register(s3);
+Texture2DArray<float4> src4 : register(t4);
+SamplerState _src4_sampler : register(s4);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -41,22 +43,22 @@ uint3 spvImageSize(RWTexture2DArray<float> Tex, out uint Param)
 
 int2 nao_texel(int2 p, int2 size)
 {
-    int2 _53;
+    int2 _61;
     if (frame_u_flip_y != 0)
     {
-        _53 = p;
+        _61 = p;
     }
     else
     {
-        _53 = int2(p.x, (size.y - 1) - p.y);
+        _61 = int2(p.x, (size.y - 1) - p.y);
     }
-    return _53;
+    return _61;
 }
 
 int2 nao_size(Texture2DArray<float4> t, SamplerState _t_sampler)
 {
-    uint _77_dummy_parameter;
-    return int3(spvTextureSize(t, uint(0), _77_dummy_parameter)).xy;
+    uint _85_dummy_parameter;
+    return int3(spvTextureSize(t, uint(0), _85_dummy_parameter)).xy;
 }
 
 float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int layer)
@@ -68,42 +70,48 @@ float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int l
 
 void nao_store(int2 p, int layer, float4 v)
 {
-    uint _100_dummy_parameter;
+    uint _108_dummy_parameter;
     int2 param = p;
-    int2 param_1 = int3(spvImageSize(dst, _100_dummy_parameter)).xy;
+    int2 param_1 = int3(spvImageSize(dst, _108_dummy_parameter)).xy;
     dst[int3(nao_texel(param, param_1), layer)] = v.x;
+}
+
+float3 nao_position(int2 p, int2 size, float z)
+{
+    float2 ndc = (((float2(p) + 0.5f.xx) / float2(size)) * 2.0f) - 1.0f.xx;
+    return float3((ndc.x / frame_u_proj.x) * z, (ndc.y / frame_u_proj.y) * z, -z);
 }
 
 int nao_floor_div(int a, int b)
 {
-    int _113;
+    int _156;
     if (a >= 0)
     {
-        _113 = a / b;
+        _156 = a / b;
     }
     else
     {
-        _113 = -((((-a) + b) - 1) / b);
+        _156 = -((((-a) + b) - 1) / b);
     }
-    return _113;
+    return _156;
 }
 
 void f_upsample_inner()
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
-    uint _141_dummy_parameter;
-    int2 out_size = int3(spvImageSize(dst, _141_dummy_parameter)).xy;
-    bool _147 = gid.x >= out_size.x;
-    bool _156;
-    if (!_147)
+    uint _184_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _184_dummy_parameter)).xy;
+    bool _190 = gid.x >= out_size.x;
+    bool _199;
+    if (!_190)
     {
-        _156 = gid.y >= out_size.y;
+        _199 = gid.y >= out_size.y;
     }
     else
     {
-        _156 = _147;
+        _199 = _190;
     }
-    if (_156)
+    if (_199)
     {
         return;
     }
@@ -112,8 +120,8 @@ void f_upsample_inner()
     int2 px = nao_texel(param, param_1);
     int2 param_2 = px;
     int param_3 = 0;
-    float4 pw = nao_load(src0, _src0_sampler, param_2, param_3);
-    if (pw.w < 0.5f)
+    float z = nao_load(src0, _src0_sampler, param_2, param_3).x;
+    if (!(z > 0.0f))
     {
         int2 param_4 = px;
         int param_5 = 0;
@@ -122,18 +130,22 @@ void f_upsample_inner()
         return;
     }
     int2 param_7 = px;
-    int param_8 = 1;
-    float3 n = nao_load(src0, _src0_sampler, param_7, param_8).xyz;
-    float depth = max(-pw.z, 1.0000000031710768509710513471353e-30f);
+    int2 param_8 = out_size;
+    float param_9 = z;
+    float3 p = nao_position(param_7, param_8, param_9);
+    int2 param_10 = px;
+    int param_11 = 0;
+    float3 n = nao_load(src1, _src1_sampler, param_10, param_11).xyz;
+    float depth = max(z, 1.0000000031710768509710513471353e-30f);
     int2 hi = out_size;
-    int2 lo = nao_size(src1, _src1_sampler);
+    int2 lo = nao_size(src2, _src2_sampler);
     float2 uv = (((float2(px) + 0.5f.xx) * float2(lo)) / float2(hi)) - 0.5f.xx;
     int2 num = (((int2(2, 2) * px) + int2(1, 1)) * lo) - hi;
-    int param_9 = num.x;
-    int param_10 = 2 * hi.x;
-    int param_11 = num.y;
-    int param_12 = 2 * hi.y;
-    int2 base = int2(nao_floor_div(param_9, param_10), nao_floor_div(param_11, param_12)) - int2(1, 1);
+    int param_12 = num.x;
+    int param_13 = 2 * hi.x;
+    int param_14 = num.y;
+    int param_15 = 2 * hi.y;
+    int2 base = int2(nao_floor_div(param_12, param_13), nao_floor_div(param_14, param_15)) - int2(1, 1);
     float sum = 0.0f;
     float total = 0.0f;
     for (int y = 0; y < 4; y++)
@@ -141,26 +153,26 @@ void f_upsample_inner()
         for (int x = 0; x < 4; x++)
         {
             int2 q = clamp(base + int2(x, y), int2(0, 0), lo - int2(1, 1));
-            int2 param_13 = q;
-            int param_14 = 0;
-            float4 qw = nao_load(src2, _src2_sampler, param_13, param_14);
+            int2 param_16 = q;
+            int param_17 = 0;
+            float4 qw = nao_load(src3, _src3_sampler, param_16, param_17);
             if (qw.w < 0.5f)
             {
                 continue;
             }
             float2 d = float2(base + int2(x, y)) - uv;
             float spatial = exp((-dot(d, d)) / 0.7200000286102294921875f);
-            int2 param_15 = q;
-            int param_16 = 1;
-            float3 qn = nao_load(src2, _src2_sampler, param_15, param_16).xyz;
-            float plane = abs(dot(qn, pw.xyz - qw.xyz)) / (0.02999999932944774627685546875f * depth);
+            int2 param_18 = q;
+            int param_19 = 1;
+            float3 qn = nao_load(src3, _src3_sampler, param_18, param_19).xyz;
+            float plane = abs(dot(qn, p - qw.xyz)) / (0.02999999932944774627685546875f * depth);
             float agree = pow(max(dot(qn, n), 0.0f), 8.0f);
             float w = spatial * (0.001000000047497451305389404296875f + (exp((-plane) * plane) * agree));
-            int2 param_17 = q;
-            int param_18 = 0;
-            int2 param_19 = q;
-            int param_20 = 2;
-            sum += (w * (nao_load(src1, _src1_sampler, param_17, param_18).x - nao_load(src2, _src2_sampler, param_19, param_20).x));
+            int2 param_20 = q;
+            int param_21 = 0;
+            int2 param_22 = q;
+            int param_23 = 2;
+            sum += (w * (nao_load(src2, _src2_sampler, param_20, param_21).x - nao_load(src3, _src3_sampler, param_22, param_23).x));
             total += w;
         }
     }
@@ -169,12 +181,12 @@ void f_upsample_inner()
     {
         up = sum / total;
     }
-    int2 param_21 = px;
-    int param_22 = 0;
-    int2 param_23 = px;
-    int param_24 = 0;
-    float4 param_25 = clamp(nao_load(src3, _src3_sampler, param_21, param_22).x + up, 0.0f, 1.0f).xxxx;
-    nao_store(param_23, param_24, param_25);
+    int2 param_24 = px;
+    int param_25 = 0;
+    int2 param_26 = px;
+    int param_27 = 0;
+    float4 param_28 = clamp(nao_load(src4, _src4_sampler, param_24, param_25).x + up, 0.0f, 1.0f).xxxx;
+    nao_store(param_26, param_27, param_28);
 }
 
 [numthreads(8, 8, 1)]

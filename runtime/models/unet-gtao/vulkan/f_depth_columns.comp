@@ -37,6 +37,13 @@ float nao_acos(float x) {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+vec3 nao_position(ivec2 p, ivec2 size, float z) {
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    return vec3(ndc.x / u_proj.x * z, ndc.y / u_proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
 int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);

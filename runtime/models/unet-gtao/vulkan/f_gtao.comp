@@ -4,8 +4,9 @@
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(set = 0, binding = 0) uniform highp texture2DArray src0;
-layout(set = 0, binding = 1, r32f) writeonly uniform highp image2DArray dst;
-layout(std140, set = 0, binding = 2) uniform FrameUniforms {
+layout(set = 0, binding = 1) uniform highp texture2DArray src1;
+layout(set = 0, binding = 2, r32f) writeonly uniform highp image2DArray dst;
+layout(std140, set = 0, binding = 3) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -37,31 +38,111 @@ float nao_acos(float x) {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+vec3 nao_position(ivec2 p, ivec2 size, float z) {
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    return vec3(ndc.x / u_proj.x * z, ndc.y / u_proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (GLSL's int division truncates toward 0)
 int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);
 }
 
-const vec2 NAO_NOISE[16] = vec2[16](
-    vec2(0.37785703, 0.16784167),
-    vec2(0.96874505, 0.7069943),
-    vec2(0.08153783, 0.59926146),
-    vec2(0.006564423, 0.5217559),
-    vec2(0.8607627, 0.29334372),
-    vec2(0.8040162, 0.83652043),
-    vec2(0.35370275, 0.9306502),
-    vec2(0.7323331, 0.74723846),
-    vec2(0.6540574, 0.18946956),
-    vec2(0.1374434, 0.5179998),
-    vec2(0.49568525, 0.86254483),
-    vec2(0.5246121, 0.8962807),
-    vec2(0.9308748, 0.19567448),
-    vec2(0.2630413, 0.04882246),
-    vec2(0.20385185, 0.999012),
-    vec2(0.58506614, 0.2510019));
+const vec2 NAO_DIRECTIONS[64] = vec2[64](
+    vec2(0.95628655, 0.29243124),
+    vec2(0.46941665, 0.8829768),
+    vec2((-0.29243124), 0.95628655),
+    vec2((-0.88297683), 0.46941662),
+    vec2(0.7242497, 0.68953776),
+    vec2(0.024545068, 0.9996987),
+    vec2((-0.68953776), 0.7242498),
+    vec2((-0.9996987), 0.024545025),
+    vec2(0.99795014, 0.0639959),
+    vec2(0.6604054, 0.75090927),
+    vec2((-0.06399587), 0.99795014),
+    vec2((-0.75090927), 0.66040534),
+    vec2(0.9999867, 0.005155663),
+    vec2(0.7034518, 0.71074295),
+    vec2((-0.0051557035), 0.9999867),
+    vec2((-0.71074307), 0.7034517),
+    vec2(0.7800557, 0.62571007),
+    vec2(0.10913888, 0.9940265),
+    vec2((-0.6257101), 0.7800557),
+    vec2((-0.9940265), 0.10913896),
+    vec2(0.80715895, 0.5903342),
+    vec2(0.15331827, 0.9881769),
+    vec2((-0.5903341), 0.80715895),
+    vec2((-0.9881769), 0.15331823),
+    vec2(0.96166176, 0.27423826),
+    vec2(0.4860818, 0.8739133),
+    vec2((-0.27423838), 0.96166176),
+    vec2((-0.8739134), 0.48608166),
+    vec2(0.83909816, 0.54398),
+    vec2(0.2086799, 0.977984),
+    vec2((-0.54398024), 0.83909804),
+    vec2((-0.977984), 0.20867997),
+    vec2(0.8709345, 0.4913991),
+    vec2(0.26837197, 0.96331537),
+    vec2((-0.49139926), 0.8709344),
+    vec2((-0.9633154), 0.26837182),
+    vec2(0.9941793, 0.107738264),
+    vec2(0.6268084, 0.77917343),
+    vec2((-0.10773823), 0.9941793),
+    vec2((-0.7791734), 0.6268084),
+    vec2(0.9251711, 0.37955043),
+    vec2(0.38581204, 0.9225774),
+    vec2((-0.37955052), 0.925171),
+    vec2((-0.92257744), 0.38581198),
+    vec2(0.91631, 0.40046972),
+    vec2(0.3647541, 0.9311039),
+    vec2((-0.40046984), 0.91630995),
+    vec2((-0.9311039), 0.36475405),
+    vec2(0.7444354, 0.66769445),
+    vec2(0.05426406, 0.99852663),
+    vec2((-0.66769445), 0.7444354),
+    vec2((-0.99852663), 0.054264016),
+    vec2(0.9787356, 0.2051257),
+    vec2(0.5470248, 0.8371164),
+    vec2((-0.20512569), 0.9787356),
+    vec2((-0.83711636), 0.54702485),
+    vec2(0.9872106, 0.15942174),
+    vec2(0.5853351, 0.8107915),
+    vec2((-0.15942189), 0.9872106),
+    vec2((-0.81079155), 0.585335),
+    vec2(0.89627, 0.4435089),
+    vec2(0.3201505, 0.9473667),
+    vec2((-0.44350877), 0.89627004),
+    vec2((-0.9473667), 0.32015046));
+const float NAO_JITTER[16] = float[16](
+    0.16784167,
+    0.7069943,
+    0.59926146,
+    0.5217559,
+    0.29334372,
+    0.83652043,
+    0.9306502,
+    0.74723846,
+    0.18946956,
+    0.5179998,
+    0.86254483,
+    0.8962807,
+    0.19567448,
+    0.04882246,
+    0.999012,
+    0.2510019);
 
-vec2 nao_noise(ivec2 p) {
-    return NAO_NOISE[(p.y % 4) * 4 + p.x % 4];
+int nao_tile(ivec2 p) {
+    return (p.y % 4) * 4 + p.x % 4;
+}
+
+vec2 nao_direction(int tile, int slice) {
+    return NAO_DIRECTIONS[tile * 4 + slice];
+}
+
+float nao_jitter(int tile) {
+    return NAO_JITTER[tile];
 }
 
 void main() {
@@ -71,13 +152,13 @@ void main() {
         return;
     }
     ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
-    vec4 pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+    float z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, vec4(1.0));
         return;
     }
-    vec3 p = pw.xyz;
-    vec3 n = nao_load(src0, px, 1).xyz;
+    vec3 p = nao_position(px, out_size, z);
+    vec3 n = nao_load(src1, px, 0).xyz;
     float ln = length(n);
     if (ln > 1e-20) {
         n = n / ln;
@@ -90,7 +171,8 @@ void main() {
         nao_store(px, 0, vec4(1.0));  // the radius stays inside this pixel
         return;
     }
-    vec2 noise = nao_noise(px);
+    int tile = nao_tile(px);
+    float jitter = nao_jitter(tile);
     float falloff_range = max(0.2, 1e-6) * u_radius;
     float falloff_mul = -1.0 / falloff_range;
     float falloff_add = (u_radius - falloff_range) / falloff_range + 1.0;
@@ -98,8 +180,7 @@ void main() {
     vec2 centre = vec2(px) + 0.5;
     float visibility = 0.0;
     for (int slice = 0; slice < 4; ++slice) {
-        float phi = (float(slice) + noise.x) * (3.14159265358979 / float(4));
-        vec2 omega = vec2(cos(phi), sin(phi));  // screen direction = camera-space (x, y)
+        vec2 omega = nao_direction(tile, slice);  // screen direction = camera-space (x, y)
         vec3 dir_v = vec3(omega, 0.0);
         vec3 ortho_v = dir_v - dot(dir_v, view_v) * view_v;
         vec3 axis_v = normalize(cross(dir_v, view_v));
@@ -116,15 +197,15 @@ void main() {
         float hc0 = low0;
         float hc1 = low1;
         for (int k = 0; k < 8; ++k) {
-            float s = (float(k) + noise.y) / float(8);
+            float s = (float(k) + jitter) / float(8);
             s = min_s + (1.0 - min_s) * s * s;
             vec2 off = omega * (s * radius_px);
             ivec2 q0 = ivec2(floor(centre + off));
             ivec2 q1 = ivec2(floor(centre - off));
             if (nao_inside(q0, out_size)) {
-                vec4 sw = nao_load(src0, q0, 0);
-                if (sw.w >= 0.5) {
-                    vec3 d = sw.xyz - p;
+                float zq = nao_load(src0, q0, 0).x;
+                if (zq > 0.0) {
+                    vec3 d = nao_position(q0, out_size, zq) - p;
                     float dist = length(d);
                     if (dist > 1e-30) {
                         float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);
@@ -133,9 +214,9 @@ void main() {
                 }
             }
             if (nao_inside(q1, out_size)) {
-                vec4 sw = nao_load(src0, q1, 0);
-                if (sw.w >= 0.5) {
-                    vec3 d = sw.xyz - p;
+                float zq = nao_load(src0, q1, 0).x;
+                if (zq > 0.0) {
+                    vec3 d = nao_position(q1, out_size, zq) - p;
                     float dist = length(d);
                     if (dist > 1e-30) {
                         float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);

@@ -2,14 +2,15 @@
 // neuralao frame pass f_gtao: GTAO, 4 slices x 8 steps per side
 
 @group(0) @binding(0) var src0: texture_2d_array<f32>;
-@group(0) @binding(1) var dst: texture_storage_2d_array<r32float, write>;
+@group(0) @binding(1) var src1: texture_2d_array<f32>;
+@group(0) @binding(2) var dst: texture_storage_2d_array<r32float, write>;
 struct FrameUniforms {
     proj: vec2<f32>,           // (P00, P11) of the projection matrix
     radius: f32,               // R, the AO radius in scene units
     pixels_per_unit: f32,      // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
     flip_y: i32,               // 1: textures bottom-up (GL), 0: row 0 at the top
 };
-@group(0) @binding(2) var<uniform> nao_frame: FrameUniforms;
+@group(0) @binding(3) var<uniform> nao_frame: FrameUniforms;
 
 // GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
 fn nao_texel(p: vec2<i32>, size: vec2<i32>) -> vec2<i32> {
@@ -39,6 +40,13 @@ fn nao_acos(x: f32) -> f32 {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+fn nao_position(p: vec2<i32>, size: vec2<i32>, z: f32) -> vec3<f32> {
+    let ndc = (vec2<f32>(p) + 0.5) / vec2<f32>(size) * 2.0 - 1.0;
+    return vec3<f32>(ndc.x / nao_frame.proj.x * z, ndc.y / nao_frame.proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (WGSL's i32 division truncates toward 0)
 fn nao_floor_div(a: i32, b: i32) -> i32 {
     if (a >= 0) {
@@ -47,26 +55,101 @@ fn nao_floor_div(a: i32, b: i32) -> i32 {
     return -((-a + b - 1) / b);
 }
 
-// GTAO's noise tile as constants: entry y * size + x is tile texel (x, y), GL rows.
-fn nao_noise(p: vec2<i32>) -> vec2<f32> {
-    var table = array<vec2<f32>, 16>(
-    vec2<f32>(0.37785703, 0.16784167),
-    vec2<f32>(0.96874505, 0.7069943),
-    vec2<f32>(0.08153783, 0.59926146),
-    vec2<f32>(0.006564423, 0.5217559),
-    vec2<f32>(0.8607627, 0.29334372),
-    vec2<f32>(0.8040162, 0.83652043),
-    vec2<f32>(0.35370275, 0.9306502),
-    vec2<f32>(0.7323331, 0.74723846),
-    vec2<f32>(0.6540574, 0.18946956),
-    vec2<f32>(0.1374434, 0.5179998),
-    vec2<f32>(0.49568525, 0.86254483),
-    vec2<f32>(0.5246121, 0.8962807),
-    vec2<f32>(0.9308748, 0.19567448),
-    vec2<f32>(0.2630413, 0.04882246),
-    vec2<f32>(0.20385185, 0.999012),
-    vec2<f32>(0.58506614, 0.2510019));
-    return table[(p.y % 4) * 4 + p.x % 4];
+// GTAO's noise tile as constants, texel t = y * size + x of the tile at (x, y), GL rows: its slice
+// directions (cos phi, sin phi), phi = (slice + noise.x) * pi / slices, baked so that no GPU's cos / sin
+// moves a horizon sample to the next pixel (entry t * slices + slice), and its step jitter noise.y.
+fn nao_tile(p: vec2<i32>) -> i32 {
+    return (p.y % 4) * 4 + p.x % 4;
+}
+
+fn nao_direction(tile: i32, slice: i32) -> vec2<f32> {
+    var table = array<vec2<f32>, 64>(
+    vec2<f32>(0.95628655, 0.29243124),
+    vec2<f32>(0.46941665, 0.8829768),
+    vec2<f32>((-0.29243124), 0.95628655),
+    vec2<f32>((-0.88297683), 0.46941662),
+    vec2<f32>(0.7242497, 0.68953776),
+    vec2<f32>(0.024545068, 0.9996987),
+    vec2<f32>((-0.68953776), 0.7242498),
+    vec2<f32>((-0.9996987), 0.024545025),
+    vec2<f32>(0.99795014, 0.0639959),
+    vec2<f32>(0.6604054, 0.75090927),
+    vec2<f32>((-0.06399587), 0.99795014),
+    vec2<f32>((-0.75090927), 0.66040534),
+    vec2<f32>(0.9999867, 0.005155663),
+    vec2<f32>(0.7034518, 0.71074295),
+    vec2<f32>((-0.0051557035), 0.9999867),
+    vec2<f32>((-0.71074307), 0.7034517),
+    vec2<f32>(0.7800557, 0.62571007),
+    vec2<f32>(0.10913888, 0.9940265),
+    vec2<f32>((-0.6257101), 0.7800557),
+    vec2<f32>((-0.9940265), 0.10913896),
+    vec2<f32>(0.80715895, 0.5903342),
+    vec2<f32>(0.15331827, 0.9881769),
+    vec2<f32>((-0.5903341), 0.80715895),
+    vec2<f32>((-0.9881769), 0.15331823),
+    vec2<f32>(0.96166176, 0.27423826),
+    vec2<f32>(0.4860818, 0.8739133),
+    vec2<f32>((-0.27423838), 0.96166176),
+    vec2<f32>((-0.8739134), 0.48608166),
+    vec2<f32>(0.83909816, 0.54398),
+    vec2<f32>(0.2086799, 0.977984),
+    vec2<f32>((-0.54398024), 0.83909804),
+    vec2<f32>((-0.977984), 0.20867997),
+    vec2<f32>(0.8709345, 0.4913991),
+    vec2<f32>(0.26837197, 0.96331537),
+    vec2<f32>((-0.49139926), 0.8709344),
+    vec2<f32>((-0.9633154), 0.26837182),
+    vec2<f32>(0.9941793, 0.107738264),
+    vec2<f32>(0.6268084, 0.77917343),
+    vec2<f32>((-0.10773823), 0.9941793),
+    vec2<f32>((-0.7791734), 0.6268084),
+    vec2<f32>(0.9251711, 0.37955043),
+    vec2<f32>(0.38581204, 0.9225774),
+    vec2<f32>((-0.37955052), 0.925171),
+    vec2<f32>((-0.92257744), 0.38581198),
+    vec2<f32>(0.91631, 0.40046972),
+    vec2<f32>(0.3647541, 0.9311039),
+    vec2<f32>((-0.40046984), 0.91630995),
+    vec2<f32>((-0.9311039), 0.36475405),
+    vec2<f32>(0.7444354, 0.66769445),
+    vec2<f32>(0.05426406, 0.99852663),
+    vec2<f32>((-0.66769445), 0.7444354),
+    vec2<f32>((-0.99852663), 0.054264016),
+    vec2<f32>(0.9787356, 0.2051257),
+    vec2<f32>(0.5470248, 0.8371164),
+    vec2<f32>((-0.20512569), 0.9787356),
+    vec2<f32>((-0.83711636), 0.54702485),
+    vec2<f32>(0.9872106, 0.15942174),
+    vec2<f32>(0.5853351, 0.8107915),
+    vec2<f32>((-0.15942189), 0.9872106),
+    vec2<f32>((-0.81079155), 0.585335),
+    vec2<f32>(0.89627, 0.4435089),
+    vec2<f32>(0.3201505, 0.9473667),
+    vec2<f32>((-0.44350877), 0.89627004),
+    vec2<f32>((-0.9473667), 0.32015046));
+    return table[tile * 4 + slice];
+}
+
+fn nao_jitter(tile: i32) -> f32 {
+    var table = array<f32, 16>(
+    0.16784167,
+    0.7069943,
+    0.59926146,
+    0.5217559,
+    0.29334372,
+    0.83652043,
+    0.9306502,
+    0.74723846,
+    0.18946956,
+    0.5179998,
+    0.86254483,
+    0.8962807,
+    0.19567448,
+    0.04882246,
+    0.999012,
+    0.2510019);
+    return table[tile];
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -77,13 +160,13 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
         return;
     }
     let px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
-    let pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+    let z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, vec4<f32>(1.0));
         return;
     }
-    let p = pw.xyz;
-    var n = nao_load(src0, px, 1).xyz;
+    let p = nao_position(px, out_size, z);
+    var n = nao_load(src1, px, 0).xyz;
     let ln = length(n);
     if (ln > 1e-20) {
         n = n / ln;
@@ -96,7 +179,8 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
         nao_store(px, 0, vec4<f32>(1.0));  // the radius stays inside this pixel
         return;
     }
-    let noise = nao_noise(px);
+    let tile = nao_tile(px);
+    let jitter = nao_jitter(tile);
     let falloff_range = max(0.2, 1e-6) * nao_frame.radius;
     let falloff_mul = -1.0 / falloff_range;
     let falloff_add = (nao_frame.radius - falloff_range) / falloff_range + 1.0;
@@ -104,8 +188,7 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let centre = vec2<f32>(px) + 0.5;
     var visibility: f32 = 0.0;
     for (var slice: i32 = 0; slice < 4; slice++) {
-        let phi = (f32(slice) + noise.x) * (3.14159265358979 / f32(4));
-        let omega = vec2<f32>(cos(phi), sin(phi));  // screen direction = camera-space (x, y)
+        let omega = nao_direction(tile, slice);  // screen direction = camera-space (x, y)
         let dir_v = vec3<f32>(omega, 0.0);
         let ortho_v = dir_v - dot(dir_v, view_v) * view_v;
         let axis_v = normalize(cross(dir_v, view_v));
@@ -122,15 +205,15 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
         var hc0: f32 = low0;
         var hc1: f32 = low1;
         for (var k: i32 = 0; k < 8; k++) {
-            var s: f32 = (f32(k) + noise.y) / f32(8);
+            var s: f32 = (f32(k) + jitter) / f32(8);
             s = min_s + (1.0 - min_s) * s * s;
             let off = omega * (s * radius_px);
             let q0 = vec2<i32>(floor(centre + off));
             let q1 = vec2<i32>(floor(centre - off));
             if (nao_inside(q0, out_size)) {
-                let sw = nao_load(src0, q0, 0);
-                if (sw.w >= 0.5) {
-                    let d = sw.xyz - p;
+                let zq = nao_load(src0, q0, 0).x;
+                if (zq > 0.0) {
+                    let d = nao_position(q0, out_size, zq) - p;
                     let dist = length(d);
                     if (dist > 1e-30) {
                         let w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);
@@ -139,9 +222,9 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
                 }
             }
             if (nao_inside(q1, out_size)) {
-                let sw = nao_load(src0, q1, 0);
-                if (sw.w >= 0.5) {
-                    let d = sw.xyz - p;
+                let zq = nao_load(src0, q1, 0).x;
+                if (zq > 0.0) {
+                    let d = nao_position(q1, out_size, zq) - p;
                     let dist = length(d);
                     if (dist > 1e-30) {
                         let w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);

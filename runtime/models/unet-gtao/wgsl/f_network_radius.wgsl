@@ -39,6 +39,13 @@ fn nao_acos(x: f32) -> f32 {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+fn nao_position(p: vec2<i32>, size: vec2<i32>, z: f32) -> vec3<f32> {
+    let ndc = (vec2<f32>(p) + 0.5) / vec2<f32>(size) * 2.0 - 1.0;
+    return vec3<f32>(ndc.x / nao_frame.proj.x * z, ndc.y / nao_frame.proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (WGSL's i32 division truncates toward 0)
 fn nao_floor_div(a: i32, b: i32) -> i32 {
     if (a >= 0) {

@@ -5,14 +5,15 @@
 @group(0) @binding(1) var src1: texture_2d_array<f32>;
 @group(0) @binding(2) var src2: texture_2d_array<f32>;
 @group(0) @binding(3) var src3: texture_2d_array<f32>;
-@group(0) @binding(4) var dst: texture_storage_2d_array<r32float, write>;
+@group(0) @binding(4) var src4: texture_2d_array<f32>;
+@group(0) @binding(5) var dst: texture_storage_2d_array<r32float, write>;
 struct FrameUniforms {
     proj: vec2<f32>,           // (P00, P11) of the projection matrix
     radius: f32,               // R, the AO radius in scene units
     pixels_per_unit: f32,      // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
     flip_y: i32,               // 1: textures bottom-up (GL), 0: row 0 at the top
 };
-@group(0) @binding(5) var<uniform> nao_frame: FrameUniforms;
+@group(0) @binding(6) var<uniform> nao_frame: FrameUniforms;
 
 // GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
 fn nao_texel(p: vec2<i32>, size: vec2<i32>) -> vec2<i32> {
@@ -42,6 +43,13 @@ fn nao_acos(x: f32) -> f32 {
     return acos(clamp(x, -1.0, 1.0));
 }
 
+// Camera-space position of GL-order pixel p of a size-pixel frame at linear depth z (OpenGL camera, -z
+// forward): the pixel centre's ray at depth z.
+fn nao_position(p: vec2<i32>, size: vec2<i32>, z: f32) -> vec3<f32> {
+    let ndc = (vec2<f32>(p) + 0.5) / vec2<f32>(size) * 2.0 - 1.0;
+    return vec3<f32>(ndc.x / nao_frame.proj.x * z, ndc.y / nao_frame.proj.y * z, -z);
+}
+
 // floor(a / b) for b > 0 (WGSL's i32 division truncates toward 0)
 fn nao_floor_div(a: i32, b: i32) -> i32 {
     if (a >= 0) {
@@ -59,15 +67,16 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
         return;
     }
     let px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
-    let pw = nao_load(src0, px, 0);
-    if (pw.w < 0.5) {
+    let z = nao_load(src0, px, 0).x;
+    if (!(z > 0.0)) {
         nao_store(px, 0, vec4<f32>(1.0));
         return;
     }
-    let n = nao_load(src0, px, 1).xyz;
-    let depth = max(-pw.z, 1e-30);
+    let p = nao_position(px, out_size, z);
+    let n = nao_load(src1, px, 0).xyz;
+    let depth = max(z, 1e-30);
     let hi = out_size;
-    let lo = nao_size(src1);
+    let lo = nao_size(src2);
     let uv = (vec2<f32>(px) + 0.5) * vec2<f32>(lo) / vec2<f32>(hi) - 0.5;
     let num = (2 * px + 1) * lo - hi;
     let base = vec2<i32>(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
@@ -76,17 +85,17 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     for (var y: i32 = 0; y < 4; y++) {
         for (var x: i32 = 0; x < 4; x++) {
             let q = clamp(base + vec2<i32>(x, y), vec2<i32>(0), lo - 1);
-            let qw = nao_load(src2, q, 0);
+            let qw = nao_load(src3, q, 0);
             if (qw.w < 0.5) {
                 continue;
             }
             let d = vec2<f32>(base + vec2<i32>(x, y)) - uv;
             let spatial = exp(-dot(d, d) / (2.0 * 0.6 * 0.6));
-            let qn = nao_load(src2, q, 1).xyz;
-            let plane = abs(dot(qn, pw.xyz - qw.xyz)) / (0.03 * depth);
+            let qn = nao_load(src3, q, 1).xyz;
+            let plane = abs(dot(qn, p - qw.xyz)) / (0.03 * depth);
             let agree = pow(max(dot(qn, n), 0.0), 8.0);
             let w = spatial * (0.001 + exp(-plane * plane) * agree);
-            sum += w * (nao_load(src1, q, 0).x - nao_load(src2, q, 2).x);
+            sum += w * (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x);
             total += w;
         }
     }
@@ -94,5 +103,5 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     if (total > 0.0) {
         up = sum / total;
     }
-    nao_store(px, 0, vec4<f32>(clamp(nao_load(src3, px, 0).x + up, 0.0, 1.0)));
+    nao_store(px, 0, vec4<f32>(clamp(nao_load(src4, px, 0).x + up, 0.0, 1.0)));
 }
