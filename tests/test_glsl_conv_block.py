@@ -89,7 +89,9 @@ def test_blocks_match_onnxruntime(graph):
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
     outs = {}
     for block in BLOCKS:
-        program = generate_compute(model, conv_block=block)
+        # fuse=False: only the (1, 1, 1) conv can read the input in place of the pad pass, and its guard
+        # on the unused lanes lets the compiler drop the zero lanes' products (last-bit differences)
+        program = generate_compute(model, conv_block=block, fuse=False)
         convs = [p for p in program.manifest["passes"] if p["kind"] == "conv"]
         assert convs
         for p in convs:

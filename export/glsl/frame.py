@@ -61,7 +61,8 @@ UNIFORM_MEMBERS = (
         "int",
         16,
         "1: every texture of the frame is stored bottom-up (GL: row 0 = the bottom row); 0: row 0 is the "
-        "top row (D3D, Vulkan, Metal, WebGPU). Set the network's pad and crop passes' u_flip_y the same",
+        "top row (D3D, Vulkan, Metal, WebGPU). Set the u_flip_y of the network's passes that have one "
+        "(pad and crop, or the convs they were fused into) the same",
     ),
 )
 FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f", "R16F": "r16f"}
@@ -495,7 +496,7 @@ def _order(manifest: dict, passes: list[FramePass]) -> list[dict]:
             steps.append({"skip": p["name"], "why": "f_network_radius writes its texture"})
             continue
         step = {"network_pass": p["name"], "index": k}
-        if p["kind"] in ("pad", "crop"):
+        if "u_flip_y" in p.get("uniforms", {}):  # pad and crop, or the convs they were fused into
             step["u_flip_y"] = "the frame's u_flip_y"
         steps.append(step)
     for p in passes:

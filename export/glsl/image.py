@@ -69,7 +69,8 @@ class ComputePreset:
     # a dense conv invocation's output: texels x, texels y, output layers ((1, 1, 1): one texel, one layer)
     conv_block: tuple[int, int, int]
     # fold cheap passes into a neighbour: a two-image op into the conv producing one operand, the
-    # output crop into the pass producing its input (fewer dispatches and barriers)
+    # output crop into the pass producing its input, the input's pad, 2x2 average pools and x2 linear
+    # resizes into the convs reading them (CONV_READS; fewer dispatches, barriers and textures)
     fuse: bool
     # what the preset is for, in the manifest
     purpose: str
@@ -462,7 +463,8 @@ class ImageOps(OpTable):
         raw = self.new_texture(c, hd, wd, base="raw", onnx_name=name)
         padded = self.new_texture(c, hd, wd, onnx_name=name)
         # The pad pass is the only reader of the raw input: it zeroes the lanes past channel c of the
-        # last layer, so whatever an engine leaves there (NaN included) never reaches a conv.
+        # last layer, so whatever an engine leaves there (NaN included) never reaches a conv (a conv
+        # that reads the input in its place zeroes them as it reads: conv_read_reflect_guard).
         guard = [Epilogue(form="guard")] if c % 4 else []
         self.add_pass(Pass(0, "pad", ["Pad"], [raw], padded, epilogue=guard))
         self.env[name] = padded
@@ -2070,21 +2072,50 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     if p.kind == "conv_depthwise":
         return d.fill("conv_depthwise_body", **window)
     parts = _conv_parts(p)
-    sizes = "\n".join(d.fill("size_decl", size=f"size{i}", src=f"src{i}") for i in range(len(parts)))
+    reads = f.get("reads", ["texel"] * len(parts))
+    sizes = "\n".join(_conv_size(i, read, f.get("pad_multiple", 1), d) for i, read in enumerate(reads))
     loops = "\n".join(
-        d.fill(
-            "conv_input_loop",
-            size=f"size{i}",
-            layers=t.layers,
-            src=f"src{i}",
-            layer_offset=f["layer_offsets"][i],
-        )
-        for i, t in enumerate(parts)
+        _conv_input_loop(i, t, read, f["layer_offsets"][i], d)
+        for i, (t, read) in enumerate(zip(parts, reads, strict=True))
     )
     if _blocked(p):
         return _conv_block_body(p, window, d)
     tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
     return d.fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+
+
+def _conv_size(i: int, read: str, multiple: int, d: Dialect) -> str:
+    """Declares ``size<i>``, the size of conv input part i as the conv sees it (see :data:`CONV_READS`)."""
+    if read == "texel":
+        return d.fill("size_decl", size=f"size{i}", src=f"src{i}")
+    source = d.fill("size_decl", size=f"src_size{i}", src=f"src{i}")
+    pad = {"below": multiple - 1, "multiple": multiple} if read == "reflect" else {}
+    return source + "\n" + d.fill(CONV_READS[read][1], size=f"size{i}", src_size=f"src_size{i}", **pad)
+
+
+def _conv_input_loop(i: int, t: Texture, read: str, layer_offset: int, d: Dialect) -> str:
+    """The accumulation over conv input part i (texture src<i>, read as :data:`CONV_READS` says)."""
+    if read == "texel":
+        return d.fill(
+            "conv_input_loop", size=f"size{i}", layers=t.layers, src=f"src{i}", layer_offset=layer_offset
+        )
+    sizes = {"src_size": f"src_size{i}"} | ({"size": f"size{i}"} if read == "reflect" else {})
+    setup = d.fill(f"conv_setup_{read}", src=f"src{i}", **({} if read == "pool2" else sizes))
+    return d.fill(
+        "conv_input_loop_fused",
+        size=f"size{i}",
+        layers=t.layers,
+        layer_offset=layer_offset,
+        setup=setup,
+        read=_conv_read_expr(i, t, read, d),
+    )
+
+
+def _conv_read_expr(i: int, t: Texture, read: str, d: Dialect) -> str:
+    """The vec4 that conv input part i contributes at (ix, iy), layer l, in mode ``read``."""
+    if read == "reflect" and t.channels % 4:  # the pad pass's guard: lanes past the last channel are 0
+        return d.fill("conv_read_reflect_guard", src=f"src{i}", channels=t.channels)
+    return d.fill(f"conv_read_{read}", src=f"src{i}")
 
 
 def _conv_parts(p: Pass) -> list[Texture]:
@@ -2454,8 +2485,9 @@ def _fp32_output(p: Pass) -> bool:
 
 def _flips(p: Pass) -> bool:
     """The pass reads or writes an engine's texture, which may be stored bottom-up (uniform u_flip_y):
-    the pad and crop passes, and a pass the crop was fused into."""
-    return p.kind in ("pad", "crop") or bool(p.fields.get("flip_store"))
+    the pad and crop passes, a pass the crop was fused into and a conv reading the input as the pad would."""
+    reflects = "reflect" in p.fields.get("reads", ())
+    return p.kind in ("pad", "crop") or bool(p.fields.get("flip_store")) or reflects
 
 
 def _store_xy(p: Pass, xy: str, size: str, d: Dialect) -> str:
@@ -2565,6 +2597,17 @@ _FUSED_BINOPS = ("Add", "Sub", "Mul", "Div", "Max", "Min")
 _CROP_INTO = (*CONV_KINDS, "binary", "elementwise")
 
 
+# How a dense conv reads an input part (fields["reads"], one per part; absent: all "texel"): mode ->
+# (what the conv sees, the template of its size from the source's). "pool2", "up2" and "reflect" are
+# passes fused into the conv (:func:`_fuse_read`): templates conv_setup_<mode> and conv_read_<mode>.
+CONV_READS: dict[str, tuple[str, str]] = {
+    "texel": ("the texture itself", "size_decl"),
+    "pool2": ("AveragePool 2x2 stride 2 of the texture", "size_halved"),
+    "up2": ("Resize x2 linear half_pixel of the texture", "size_doubled"),
+    "reflect": ("the network's input reflect-padded, as the pad pass would (u_flip_y)", "size_padded"),
+}
+
+
 def _readers(table: ImageOps, t: Texture) -> list[Pass]:
     return [q for q in table.passes if any(i.ident == t.ident for i in q.inputs)]
 
@@ -2601,6 +2644,69 @@ def _fuse_binary(table: ImageOps, b: Pass) -> str | None:
     return None
 
 
+def _doubled(big: Texture, small: Texture) -> bool:
+    """``big`` is exactly twice ``small`` on both axes, whatever the input size."""
+    return all(
+        b.scale == 2 * a.scale and b.offset == 2 * a.offset
+        for b, a in ((big.height, small.height), (big.width, small.width))
+    )
+
+
+def _conv_read(q: Pass) -> str | None:
+    """The :data:`CONV_READS` mode in which a conv can read the output of pass ``q`` straight from q's
+    input, or None. Only the exact ops the read templates implement: AveragePool 2x2 stride 2 without
+    pads on an input twice its output (every window whole, so ceil_mode and count_include_pad change
+    nothing); Resize linear half_pixel to exactly twice its input (scale 2, given or from sizes)."""
+    f, x = q.fields, q.inputs[0] if q.inputs else None
+    if q.epilogue or x is None:
+        return None
+    if q.kind == "pool_avg":
+        window = (f["kernel"], f["strides"], f["dilations"], tuple(f["pads"]))
+        if window == ((2, 2), (2, 2), (1, 1), (0, 0, 0, 0)) and _doubled(x, q.output):
+            return "pool2"
+    if q.kind == "resize_linear" and f["coord"] == "half_pixel" and _doubled(q.output, x):
+        if all(s in (("literal", glsl_float(2.0)), ("ratio", "")) for s in f["scales"]):
+            return "up2"
+    return None
+
+
+def _reads_in_place(r: Pass, t: Texture) -> bool:
+    """Conv pass ``r`` convolves texture ``t`` (as one of its parts, read texel by texel) and reads it
+    nowhere else; one texel of one layer per invocation (the gpu preset's conv)."""
+    if r.kind != "conv" or _blocked(r):
+        return False
+    parts = _conv_parts(r)
+    reads = r.fields.get("reads", ["texel"] * len(parts))
+    here = [k for k, u in enumerate(parts) if u.ident == t.ident]
+    others = r.inputs[len(parts) :]
+    return bool(here) and all(reads[k] == "texel" for k in here) and all(u.ident != t.ident for u in others)
+
+
+def _fuse_read(table: ImageOps, q: Pass, multiple: int) -> str | None:
+    """Fold pass ``q`` (a pool, a resize, the pad pass) into the convs that read its output (all of its
+    readers must be): each reads q's input through the average, the bilinear sample or the reflection
+    (fields["reads"]; the pad's ``multiple`` in fields["pad_multiple"])."""
+    # the pad's guard (lanes past the last channel zeroed) the reflect read repeats; nothing else
+    pad_plain = q.kind == "pad" and all(e.form == "guard" for e in q.epilogue)
+    mode = ("reflect" if pad_plain else None) if q.kind == "pad" else _conv_read(q)
+    t = q.output
+    readers = _readers(table, t)
+    if mode is None or not readers or not all(_reads_in_place(r, t) for r in readers):
+        return None
+    for r in readers:
+        reads = r.fields.setdefault("reads", ["texel"] * len(_conv_parts(r)))
+        for k, u in enumerate(_conv_parts(r)):
+            if u.ident == t.ident:
+                r.inputs[k] = q.inputs[0]
+                reads[k] = mode
+        r.ops[:0] = q.ops
+        r.nodes[:0] = q.nodes
+        if mode == "reflect":
+            r.fields["pad_multiple"] = multiple
+    _drop(table, q, t)
+    return f"{' + '.join(q.ops)} into the conv(s) reading {t.ident} (read from {q.inputs[0].ident})"
+
+
 def _fuse_crop(table: ImageOps, c: Pass) -> str | None:
     """Fold crop pass ``c`` into the pass producing its input when c alone reads it: that pass writes
     the raw-size output (row-flipped by u_flip_y) instead of the padded texture."""
@@ -2615,7 +2721,7 @@ def _fuse_crop(table: ImageOps, c: Pass) -> str | None:
     return f"Crop into the {p.kind} pass producing {t.ident}"
 
 
-def _fuse(table: ImageOps) -> list[str]:
+def _fuse(table: ImageOps, multiple: int) -> list[str]:
     """The gpu preset's fusions, until none applies; passes renumbered. Returns what was fused."""
     made: list[str] = []
     while True:
@@ -2625,6 +2731,8 @@ def _fuse(table: ImageOps) -> list[str]:
                 if q.kind == "binary"
                 else _fuse_crop(table, q)
                 if q.kind == "crop"
+                else _fuse_read(table, q, multiple)
+                if q.kind in ("pool_avg", "resize_linear", "pad")
                 else None
             )
             if step:
@@ -2712,8 +2820,8 @@ def generate_compute(
             _pack_conv(p)
         if p.kind == "conv":
             p.fields["block"] = _conv_block(conv_block, p.output.layers)
-    fused = _fuse(table) if fuse else []
     multiple = _pad_multiple(table)
+    fused = _fuse(table, multiple) if fuse else []
     if multiple > 1 and table.global_reads:
         raise NeuralaoError(
             f"{table.global_reads[0]}: a global pool over a dynamic size needs pad_multiple 1 (the padding "
@@ -2743,6 +2851,11 @@ def generate_compute(
     manifest = _compute_manifest(
         table, graph, outputs, ranges, bytes(blob), precision, kind, multiple, local_size
     )
+    read_by = [p.name for p in table.passes if "reflect" in p.fields.get("reads", ())]
+    if read_by:  # the convs that read the input reflect-padded, in place of the pad pass
+        manifest["pad"]["read_by"] = read_by
+        zeroed_by = "the convs reading the input zero them"
+        manifest["input"]["unused_lanes"] = _unused_lanes(table.input_texture.channels, zeroed_by)
     for entry in manifest["outputs"]:
         if entry["onnx_name"] in shapes:
             entry["shape"] = shapes[entry["onnx_name"]]
@@ -2941,13 +3054,14 @@ def _vulkan_manifest(manifest: dict, d: Dialect) -> None:
         )
 
 
-def _unused_lanes(channels: int) -> str:
-    """What the input texture's lanes past the last channel hold: anything; the pad pass zeroes them."""
+def _unused_lanes(channels: int, zeroed_by: str = "the pad pass zeroes them") -> str:
+    """What the input texture's lanes past the last channel hold: anything; ``zeroed_by`` says who
+    zeroes them (the pad pass, or the convs reading the input in its place)."""
     if channels % 4 == 0:
         return "none"
     return (
         f"layer {channels // 4} lanes {channels % 4}..3 (channels {channels}..{4 * ceil4(channels) - 1}): "
-        "any value, NaN included; the pad pass zeroes them"
+        f"any value, NaN included; {zeroed_by}"
     )
 
 
@@ -3116,7 +3230,8 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "multiple": multiple,
             "mode": "reflect",
             "side": "bottom,right",
-            "pass": table.passes[0].name,
+            # the pad pass, or none where the convs reading the input pad it as they read (gpu preset)
+            "pass": next((p.name for p in table.passes if p.kind == "pad"), None),
             "padded_size": "Hp = ceil(H / multiple) * multiple, Wp likewise; needs H, W >= multiple",
             "crop_passes": [p.name for p in table.passes if p.kind == "crop" or p.fields.get("flip_store")],
         },

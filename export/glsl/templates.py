@@ -307,6 +307,59 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
                 }
             }"""
 
+# A conv input read through a pass fused into the conv (gpu preset): ``${src}`` holds the pass's
+# source, ``${src_size}`` its size, ``${size}`` the size the conv sees (the fused pass's output). The
+# read is the fused pass's arithmetic in the same order: AveragePool 2x2 stride 2 ("pool2": the
+# window's sum in row order, then / 4) or Resize x2 linear half_pixel ("up2": the resize_linear_body
+# source coordinate, exact here, and blend).
+_T["size_halved"] = "    ${let_ivec2} ${size} = ${src_size} / 2;"
+_T["size_doubled"] = "    ${let_ivec2} ${size} = ${src_size} * 2;"
+_T["conv_input_loop_fused"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
+${setup}
+                for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
+                    ${let_vec4} v = ${read};
+                    ${let_int} o = tap + (${layer_offset} + l) * 4;
+                    acc += ${hmat4}(${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * ${hvec4}(v);
+                }
+            }"""
+_T["conv_setup_pool2"] = (
+    "                // input texel (ix, iy): the mean of ${src}'s 2x2 texels from (2 ix, 2 iy)"
+)
+_T["conv_read_pool2"] = """(${fetch}(${src}, ${ivec3}(2 * ix, 2 * iy, l)${lod})
+                        + ${fetch}(${src}, ${ivec3}(2 * ix + 1, 2 * iy, l)${lod})
+                        + ${fetch}(${src}, ${ivec3}(2 * ix, 2 * iy + 1, l)${lod})
+                        + ${fetch}(${src}, ${ivec3}(2 * ix + 1, 2 * iy + 1, l)${lod})) / 4.0"""
+_T["conv_setup_up2"] = """                // input texel (ix, iy): ${src} upsampled x2 (bilinear, half_pixel)
+                ${let_float} fy = clamp(${float}(iy) * 0.5 - 0.25, 0.0, ${float}(${src_size}.y - 1));
+                ${let_float} fx = clamp(${float}(ix) * 0.5 - 0.25, 0.0, ${float}(${src_size}.x - 1));
+                ${let_int} y0 = ${int}(fy);
+                ${let_int} x0 = ${int}(fx);
+                ${let_int} y1 = min(y0 + 1, ${src_size}.y - 1);
+                ${let_int} x1 = min(x0 + 1, ${src_size}.x - 1);
+                ${let_float} wy = fy - ${float}(y0);
+                ${let_float} wx = fx - ${float}(x0);"""
+# The network's input read in place of the pad pass (reflect at the bottom/right, as pad_reflect_body):
+# (ix, iy) below the padded size ${size} maps into the ${src_size} input, rows flipped by u_flip_y.
+_T["size_padded"] = "    ${let_ivec2} ${size} = (${src_size} + ${below}) / ${multiple} * ${multiple};"
+_T[
+    "conv_setup_reflect"
+] = """                // input texel (ix, iy): ${src} reflect-padded at the bottom/right to ${size}
+                ${let_int} rx = clamp(${src_size}.x - 1 - abs(${src_size}.x - 1 - ix), 0, ${src_size}.x - 1);
+                ${var_int:ry} = clamp(${src_size}.y - 1 - abs(${src_size}.y - 1 - iy), 0, ${src_size}.y - 1);
+                if (u_flip_y != 0) {
+                    ry = ${src_size}.y - 1 - ry;  // the input is stored bottom-up (a GL render target)
+                }"""
+_T["conv_read_reflect"] = "${fetch}(${src}, ${ivec3}(rx, ry, l)${lod})"
+# ... with the pad pass's guard: lanes past the last channel read as 0 whatever they hold (NaN too).
+_T["conv_read_reflect_guard"] = (
+    "mix(vec4(0.0), ${fetch}(${src}, ${ivec3}(rx, ry, l)${lod}), "
+    "lessThan(ivec4(4 * l) + ivec4(0, 1, 2, 3), ivec4(${channels})))"
+)
+_T["conv_read_up2"] = """(${fetch}(${src}, ${ivec3}(x0, y0, l)${lod}) * (1.0 - wx)
+                        + ${fetch}(${src}, ${ivec3}(x1, y0, l)${lod}) * wx) * (1.0 - wy)
+                        + (${fetch}(${src}, ${ivec3}(x0, y1, l)${lod}) * (1.0 - wx)
+                        + ${fetch}(${src}, ${ivec3}(x1, y1, l)${lod}) * wx) * wy"""
+
 # Conv, blocked: one invocation = a ${block_x} x ${block_y} block of output texels x ${block_layers}
 # output layers (z0 = block_layers * gid.z ..). Each input texel fetched feeds every output layer of
 # the block and each mat4 of weights every texel of it; accumulators a<o>_<p> are straight-line
@@ -1089,6 +1142,10 @@ _W["epilogue_guard_div"] = (
 )
 _W["flip_xy"] = "vec2<i32>(${xy}.x, select(${xy}.y, ${size}.y - 1 - ${xy}.y, u_flip_y != 0))"
 _W["dst_size"] = "vec2<i32>(textureDimensions(dst))"
+_W["conv_read_reflect_guard"] = (
+    "select(vec4<f32>(0.0), nao_fetch(${src}, vec3<i32>(rx, ry, l)), "
+    "vec4<i32>(4 * l) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}))"
+)
 _W["epilogue_guard"] = (
     "    r = select(vec4<f32>(0.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
 )

@@ -5,7 +5,7 @@ using System.Collections.Generic;
 using UnityEngine;
 using UnityEngine.Rendering;
 
-/// <summary>The whole unet-fast frame: 26 steps in the order of the manifest's frame.steps,
+/// <summary>The whole unet-fast frame: 19 steps in the order of the manifest's frame.steps,
 /// from the textures the engine writes to the AO texture "ao".
 /// Each frame: Resize(W, H) when the size changes, write the inputs, Run(camera, radius), read AO.
 /// The inputs (Texture(id), W x H):
@@ -29,18 +29,18 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         this.shader = shader;
         weights = new float[weightsBin.Length / 4];
         System.Buffer.BlockCopy(weightsBin, 0, weights, 0, weightsBin.Length);
-        Weights(2, 0, 80);
-        Weights(3, 256, 2336);
-        Weights(5, 2816, 4672);
-        Weights(7, 7680, 18560);
-        Weights(9, 26368, 73984);
-        Weights(11, 100352, 73856);
-        Weights(12, 174336, 73856);
-        Weights(14, 248320, 18496);
-        Weights(15, 267008, 18496);
-        Weights(17, 285696, 4640);
-        Weights(18, 290560, 4640);
-        Weights(19, 295424, 144);
+        Weights(1, 0, 80);
+        Weights(2, 256, 2336);
+        Weights(3, 2816, 4672);
+        Weights(4, 7680, 18560);
+        Weights(5, 26368, 73984);
+        Weights(6, 100352, 73856);
+        Weights(7, 174336, 73856);
+        Weights(8, 248320, 18496);
+        Weights(9, 267008, 18496);
+        Weights(10, 285696, 4640);
+        Weights(11, 290560, 4640);
+        Weights(12, 295424, 144);
     }
 
     /// <summary>A buffer of the pass's own: its range of weights.bin (the HLSL reads from byte 0).</summary>
@@ -82,25 +82,18 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         tex["low_gbuffer"] = Array2D(w, h, 2, RenderTextureFormat.ARGBFloat);
         tex["normal"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
         tex["t0"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
-        tex["t1"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t10"] = Array2D(wp * 1 / 8, hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
         tex["t11"] = Array2D(wp * 1 / 8, hp * 1 / 8, 16, RenderTextureFormat.ARGBFloat);
-        tex["t12"] = Array2D(wp * 1 / 4, hp * 1 / 4, 16, RenderTextureFormat.ARGBFloat);
         tex["t13"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
         tex["t14"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
-        tex["t15"] = Array2D(wp * 1 / 2, hp * 1 / 2, 8, RenderTextureFormat.ARGBFloat);
         tex["t16"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
         tex["t17"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t18"] = Array2D(wp, hp, 4, RenderTextureFormat.ARGBFloat);
         tex["t19"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
         tex["t2"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
         tex["t20"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
         tex["t22"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
         tex["t4"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         tex["t5"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
-        tex["t6"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
         tex["t7"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t8"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
         tex["t9"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
         sameSize = tex["t0"].width == W && tex["t0"].height == H;
     }
@@ -159,124 +152,90 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         shader.SetTexture(k, "dst", tex["t2"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t2"].width, 1), CeilDiv(tex["t2"].height, 1), 1);
-        // step 5: p00_pad: Pad
-        k = shader.FindKernel("p00_pad");
+        // step 5: p00_uniform skipped: f_network_radius writes its texture
+        // step 6: p01_conv: Pad + Conv + Clip + Div + Clip
+        k = shader.FindKernel("p01_conv");
         shader.SetTexture(k, "src0", tex["t0"]);
-        shader.SetTexture(k, "dst", tex["t1"]);
-        shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t1"].width, 8), CeilDiv(tex["t1"].height, 8), 1);
-        // step 6: p01_uniform skipped: f_network_radius writes its texture
-        // step 7: p02_conv: Conv + Clip + Div + Clip
-        k = shader.FindKernel("p02_conv");
-        shader.SetTexture(k, "src0", tex["t1"]);
         shader.SetTexture(k, "src1", tex["t2"]);
         shader.SetTexture(k, "dst", tex["t4"]);
-        shader.SetBuffer(k, "params", passWeights[2]);
+        shader.SetBuffer(k, "params", passWeights[1]);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t4"].width, 8), CeilDiv(tex["t4"].height, 8), 1);
-        // step 8: p03_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p03_conv");
-        shader.SetTexture(k, "src0", tex["t1"]);
+        // step 7: p02_conv: Pad + Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p02_conv");
+        shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "src1", tex["t4"]);
         shader.SetTexture(k, "dst", tex["t5"]);
-        shader.SetBuffer(k, "params", passWeights[3]);
+        shader.SetBuffer(k, "params", passWeights[2]);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t5"].width, 8), CeilDiv(tex["t5"].height, 8), 2);
-        // step 9: p04_pool_avg: AveragePool
-        k = shader.FindKernel("p04_pool_avg");
+        // step 8: p03_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p03_conv");
         shader.SetTexture(k, "src0", tex["t5"]);
-        shader.SetTexture(k, "dst", tex["t6"]);
-        shader.Dispatch(k, CeilDiv(tex["t6"].width, 8), CeilDiv(tex["t6"].height, 8), 2);
-        // step 10: p05_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p05_conv");
-        shader.SetTexture(k, "src0", tex["t6"]);
         shader.SetTexture(k, "dst", tex["t7"]);
-        shader.SetBuffer(k, "params", passWeights[5]);
+        shader.SetBuffer(k, "params", passWeights[3]);
         shader.Dispatch(k, CeilDiv(tex["t7"].width, 8), CeilDiv(tex["t7"].height, 8), 4);
-        // step 11: p06_pool_avg: AveragePool
-        k = shader.FindKernel("p06_pool_avg");
+        // step 9: p04_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p04_conv");
         shader.SetTexture(k, "src0", tex["t7"]);
-        shader.SetTexture(k, "dst", tex["t8"]);
-        shader.Dispatch(k, CeilDiv(tex["t8"].width, 8), CeilDiv(tex["t8"].height, 8), 4);
-        // step 12: p07_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p07_conv");
-        shader.SetTexture(k, "src0", tex["t8"]);
         shader.SetTexture(k, "dst", tex["t9"]);
-        shader.SetBuffer(k, "params", passWeights[7]);
+        shader.SetBuffer(k, "params", passWeights[4]);
         shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 8);
-        // step 13: p08_pool_avg: AveragePool
-        k = shader.FindKernel("p08_pool_avg");
+        // step 10: p05_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p05_conv");
         shader.SetTexture(k, "src0", tex["t9"]);
-        shader.SetTexture(k, "dst", tex["t10"]);
-        shader.Dispatch(k, CeilDiv(tex["t10"].width, 8), CeilDiv(tex["t10"].height, 8), 8);
-        // step 14: p09_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p09_conv");
-        shader.SetTexture(k, "src0", tex["t10"]);
         shader.SetTexture(k, "dst", tex["t11"]);
-        shader.SetBuffer(k, "params", passWeights[9]);
+        shader.SetBuffer(k, "params", passWeights[5]);
         shader.Dispatch(k, CeilDiv(tex["t11"].width, 8), CeilDiv(tex["t11"].height, 8), 16);
-        // step 15: p10_resize_linear: Resize
-        k = shader.FindKernel("p10_resize_linear");
+        // step 11: p06_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p06_conv");
         shader.SetTexture(k, "src0", tex["t11"]);
-        shader.SetTexture(k, "dst", tex["t12"]);
-        shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 16);
-        // step 16: p11_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p11_conv");
-        shader.SetTexture(k, "src0", tex["t12"]);
         shader.SetTexture(k, "dst", tex["t13"]);
-        shader.SetBuffer(k, "params", passWeights[11]);
+        shader.SetBuffer(k, "params", passWeights[6]);
         shader.Dispatch(k, CeilDiv(tex["t13"].width, 8), CeilDiv(tex["t13"].height, 8), 8);
-        // step 17: p12_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p12_conv");
+        // step 12: p07_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p07_conv");
         shader.SetTexture(k, "src0", tex["t13"]);
         shader.SetTexture(k, "src1", tex["t9"]);
         shader.SetTexture(k, "dst", tex["t14"]);
-        shader.SetBuffer(k, "params", passWeights[12]);
+        shader.SetBuffer(k, "params", passWeights[7]);
         shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 8);
-        // step 18: p13_resize_linear: Resize
-        k = shader.FindKernel("p13_resize_linear");
+        // step 13: p08_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p08_conv");
         shader.SetTexture(k, "src0", tex["t14"]);
-        shader.SetTexture(k, "dst", tex["t15"]);
-        shader.Dispatch(k, CeilDiv(tex["t15"].width, 8), CeilDiv(tex["t15"].height, 8), 8);
-        // step 19: p14_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p14_conv");
-        shader.SetTexture(k, "src0", tex["t15"]);
         shader.SetTexture(k, "dst", tex["t16"]);
-        shader.SetBuffer(k, "params", passWeights[14]);
+        shader.SetBuffer(k, "params", passWeights[8]);
         shader.Dispatch(k, CeilDiv(tex["t16"].width, 8), CeilDiv(tex["t16"].height, 8), 4);
-        // step 20: p15_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p15_conv");
+        // step 14: p09_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p09_conv");
         shader.SetTexture(k, "src0", tex["t16"]);
         shader.SetTexture(k, "src1", tex["t7"]);
         shader.SetTexture(k, "dst", tex["t17"]);
-        shader.SetBuffer(k, "params", passWeights[15]);
+        shader.SetBuffer(k, "params", passWeights[9]);
         shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 4);
-        // step 21: p16_resize_linear: Resize
-        k = shader.FindKernel("p16_resize_linear");
+        // step 15: p10_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p10_conv");
         shader.SetTexture(k, "src0", tex["t17"]);
-        shader.SetTexture(k, "dst", tex["t18"]);
-        shader.Dispatch(k, CeilDiv(tex["t18"].width, 8), CeilDiv(tex["t18"].height, 8), 4);
-        // step 22: p17_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p17_conv");
-        shader.SetTexture(k, "src0", tex["t18"]);
         shader.SetTexture(k, "dst", tex["t19"]);
-        shader.SetBuffer(k, "params", passWeights[17]);
+        shader.SetBuffer(k, "params", passWeights[10]);
         shader.Dispatch(k, CeilDiv(tex["t19"].width, 8), CeilDiv(tex["t19"].height, 8), 2);
-        // step 23: p18_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p18_conv");
+        // step 16: p11_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p11_conv");
         shader.SetTexture(k, "src0", tex["t19"]);
         shader.SetTexture(k, "src1", tex["t5"]);
         shader.SetTexture(k, "dst", tex["t20"]);
-        shader.SetBuffer(k, "params", passWeights[18]);
+        shader.SetBuffer(k, "params", passWeights[11]);
         shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 2);
-        // step 24: p19_conv: Conv + Sigmoid + Crop
-        k = shader.FindKernel("p19_conv");
+        // step 17: p12_conv: Conv + Sigmoid + Crop
+        k = shader.FindKernel("p12_conv");
         shader.SetTexture(k, "src0", tex["t20"]);
         shader.SetTexture(k, "dst", tex["t22"]);
-        shader.SetBuffer(k, "params", passWeights[19]);
+        shader.SetBuffer(k, "params", passWeights[12]);
         shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t22"].width, 8), CeilDiv(tex["t22"].height, 8), 1);
         if (!sameSize)  // (w, h) != (W, H)
         {
-            // step 25: f_upsample: joint bilateral upsampling of the AO
+            // step 18: f_upsample: joint bilateral upsampling of the AO
             k = shader.FindKernel("f_upsample");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["normal"]);
@@ -288,7 +247,7 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         }
         if (sameSize)  // (w, h) == (W, H)
         {
-            // step 26: f_composite: the network's AO, 1 on background
+            // step 19: f_composite: the network's AO, 1 on background
             k = shader.FindKernel("f_composite");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["t22"]);

@@ -112,14 +112,16 @@ public:
     }
 };
 
-class Fp00_pad : public FGlobalShader
+class Fp01_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp00_pad);
-    SHADER_USE_PARAMETER_STRUCT(Fp00_pad, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp01_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp01_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
         SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
@@ -140,6 +142,7 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -156,7 +159,6 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp03_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -168,14 +170,15 @@ public:
     }
 };
 
-class Fp04_pool_avg : public FGlobalShader
+class Fp04_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp04_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp04_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp04_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp04_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -203,14 +206,15 @@ public:
     }
 };
 
-class Fp06_pool_avg : public FGlobalShader
+class Fp06_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp06_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp06_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp06_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp06_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -227,6 +231,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp07_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -238,14 +243,15 @@ public:
     }
 };
 
-class Fp08_pool_avg : public FGlobalShader
+class Fp08_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp08_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp08_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp08_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp08_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -262,6 +268,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp09_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -273,14 +280,15 @@ public:
     }
 };
 
-class Fp10_resize_linear : public FGlobalShader
+class Fp10_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp10_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp10_resize_linear, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp10_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp10_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -297,6 +305,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp11_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -315,133 +324,6 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp12_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
-    }
-};
-
-class Fp13_resize_linear : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp13_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp13_resize_linear, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
-    }
-};
-
-class Fp14_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp14_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp14_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
-    }
-};
-
-class Fp15_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp15_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp15_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
-    }
-};
-
-class Fp16_resize_linear : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp16_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp16_resize_linear, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
-    }
-};
-
-class Fp17_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp17_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp17_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
-    }
-};
-
-class Fp18_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp18_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp18_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 22);
-    }
-};
-
-class Fp19_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp19_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp19_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
         SHADER_PARAMETER(int32, u_flip_y)  // $Globals
@@ -450,7 +332,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 23);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
     }
 };
 
@@ -471,7 +353,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 24);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
     }
 };
 
@@ -490,7 +372,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 25);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
     }
 };
 

@@ -5,7 +5,7 @@ using System.Collections.Generic;
 using UnityEngine;
 using UnityEngine.Rendering;
 
-/// <summary>The whole unet-gtao frame: 29 steps in the order of the manifest's frame.steps,
+/// <summary>The whole unet-gtao frame: 22 steps in the order of the manifest's frame.steps,
 /// from the textures the engine writes to the AO texture "ao".
 /// Each frame: Resize(W, H) when the size changes, write the inputs, Run(camera, radius), read AO.
 /// The inputs (Texture(id), W x H):
@@ -29,19 +29,19 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         this.shader = shader;
         weights = new float[weightsBin.Length / 4];
         System.Buffer.BlockCopy(weightsBin, 0, weights, 0, weightsBin.Length);
-        Weights(2, 0, 144);
-        Weights(3, 256, 208);
-        Weights(4, 512, 1744);
-        Weights(6, 2304, 1184);
-        Weights(8, 3584, 4672);
-        Weights(10, 8448, 18560);
-        Weights(12, 27136, 18496);
-        Weights(13, 45824, 18496);
-        Weights(15, 64512, 4640);
-        Weights(16, 69376, 4640);
-        Weights(18, 74240, 1168);
-        Weights(19, 75520, 1168);
-        Weights(20, 76800, 80);
+        Weights(1, 0, 144);
+        Weights(2, 256, 208);
+        Weights(3, 512, 1744);
+        Weights(4, 2304, 1184);
+        Weights(5, 3584, 4672);
+        Weights(6, 8448, 18560);
+        Weights(7, 27136, 18496);
+        Weights(8, 45824, 18496);
+        Weights(9, 64512, 4640);
+        Weights(10, 69376, 4640);
+        Weights(11, 74240, 1168);
+        Weights(12, 75520, 1168);
+        Weights(13, 76800, 80);
     }
 
     /// <summary>A buffer of the pass's own: its range of weights.bin (the HLSL reads from byte 0).</summary>
@@ -85,17 +85,12 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         tex["low_gbuffer"] = Array2D(w, h, 3, RenderTextureFormat.ARGBFloat);
         tex["normal"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
         tex["t0"] = Array2D(w, h, 2, RenderTextureFormat.ARGBFloat);
-        tex["t1"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
         tex["t10"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t11"] = Array2D(wp * 1 / 8, hp * 1 / 8, 4, RenderTextureFormat.ARGBFloat);
         tex["t12"] = Array2D(wp * 1 / 8, hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
-        tex["t13"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
         tex["t14"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
         tex["t15"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t16"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
         tex["t17"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
         tex["t18"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t19"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
         tex["t2"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
         tex["t20"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         tex["t21"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
@@ -103,9 +98,7 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         tex["t4"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         tex["t5"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         tex["t6"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t7"] = Array2D(wp * 1 / 2, hp * 1 / 2, 1, RenderTextureFormat.ARGBFloat);
         tex["t8"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t9"] = Array2D(wp * 1 / 4, hp * 1 / 4, 2, RenderTextureFormat.ARGBFloat);
         sameSize = tex["t0"].width == W && tex["t0"].height == H;
     }
 
@@ -178,132 +171,99 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         shader.SetTexture(k, "dst", tex["t2"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t2"].width, 1), CeilDiv(tex["t2"].height, 1), 1);
-        // step 7: p00_pad: Pad
-        k = shader.FindKernel("p00_pad");
+        // step 7: p00_uniform skipped: f_network_radius writes its texture
+        // step 8: p01_conv: Pad + Conv + Clip + Div + Clip
+        k = shader.FindKernel("p01_conv");
         shader.SetTexture(k, "src0", tex["t0"]);
-        shader.SetTexture(k, "dst", tex["t1"]);
-        shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t1"].width, 8), CeilDiv(tex["t1"].height, 8), 2);
-        // step 8: p01_uniform skipped: f_network_radius writes its texture
-        // step 9: p02_conv: Conv + Clip + Div + Clip
-        k = shader.FindKernel("p02_conv");
-        shader.SetTexture(k, "src0", tex["t1"]);
         shader.SetTexture(k, "src1", tex["t2"]);
         shader.SetTexture(k, "dst", tex["t4"]);
-        shader.SetBuffer(k, "params", passWeights[2]);
+        shader.SetBuffer(k, "params", passWeights[1]);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t4"].width, 8), CeilDiv(tex["t4"].height, 8), 1);
-        // step 10: p03_conv: Concat + Conv
-        k = shader.FindKernel("p03_conv");
-        shader.SetTexture(k, "src0", tex["t1"]);
+        // step 9: p02_conv: Pad + Concat + Conv
+        k = shader.FindKernel("p02_conv");
+        shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "src1", tex["t4"]);
         shader.SetTexture(k, "dst", tex["t5"]);
-        shader.SetBuffer(k, "params", passWeights[3]);
+        shader.SetBuffer(k, "params", passWeights[2]);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t5"].width, 8), CeilDiv(tex["t5"].height, 8), 1);
-        // step 11: p04_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p04_conv");
-        shader.SetTexture(k, "src0", tex["t1"]);
+        // step 10: p03_conv: Pad + Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p03_conv");
+        shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "src1", tex["t4"]);
         shader.SetTexture(k, "dst", tex["t6"]);
-        shader.SetBuffer(k, "params", passWeights[4]);
+        shader.SetBuffer(k, "params", passWeights[3]);
+        shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t6"].width, 8), CeilDiv(tex["t6"].height, 8), 1);
-        // step 12: p05_pool_avg: AveragePool
-        k = shader.FindKernel("p05_pool_avg");
+        // step 11: p04_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p04_conv");
         shader.SetTexture(k, "src0", tex["t6"]);
-        shader.SetTexture(k, "dst", tex["t7"]);
-        shader.Dispatch(k, CeilDiv(tex["t7"].width, 8), CeilDiv(tex["t7"].height, 8), 1);
-        // step 13: p06_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p06_conv");
-        shader.SetTexture(k, "src0", tex["t7"]);
         shader.SetTexture(k, "dst", tex["t8"]);
-        shader.SetBuffer(k, "params", passWeights[6]);
+        shader.SetBuffer(k, "params", passWeights[4]);
         shader.Dispatch(k, CeilDiv(tex["t8"].width, 8), CeilDiv(tex["t8"].height, 8), 2);
-        // step 14: p07_pool_avg: AveragePool
-        k = shader.FindKernel("p07_pool_avg");
+        // step 12: p05_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p05_conv");
         shader.SetTexture(k, "src0", tex["t8"]);
-        shader.SetTexture(k, "dst", tex["t9"]);
-        shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 2);
-        // step 15: p08_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p08_conv");
-        shader.SetTexture(k, "src0", tex["t9"]);
         shader.SetTexture(k, "dst", tex["t10"]);
-        shader.SetBuffer(k, "params", passWeights[8]);
+        shader.SetBuffer(k, "params", passWeights[5]);
         shader.Dispatch(k, CeilDiv(tex["t10"].width, 8), CeilDiv(tex["t10"].height, 8), 4);
-        // step 16: p09_pool_avg: AveragePool
-        k = shader.FindKernel("p09_pool_avg");
+        // step 13: p06_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p06_conv");
         shader.SetTexture(k, "src0", tex["t10"]);
-        shader.SetTexture(k, "dst", tex["t11"]);
-        shader.Dispatch(k, CeilDiv(tex["t11"].width, 8), CeilDiv(tex["t11"].height, 8), 4);
-        // step 17: p10_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p10_conv");
-        shader.SetTexture(k, "src0", tex["t11"]);
         shader.SetTexture(k, "dst", tex["t12"]);
-        shader.SetBuffer(k, "params", passWeights[10]);
+        shader.SetBuffer(k, "params", passWeights[6]);
         shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 8);
-        // step 18: p11_resize_linear: Resize
-        k = shader.FindKernel("p11_resize_linear");
+        // step 14: p07_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p07_conv");
         shader.SetTexture(k, "src0", tex["t12"]);
-        shader.SetTexture(k, "dst", tex["t13"]);
-        shader.Dispatch(k, CeilDiv(tex["t13"].width, 8), CeilDiv(tex["t13"].height, 8), 8);
-        // step 19: p12_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p12_conv");
-        shader.SetTexture(k, "src0", tex["t13"]);
         shader.SetTexture(k, "dst", tex["t14"]);
-        shader.SetBuffer(k, "params", passWeights[12]);
+        shader.SetBuffer(k, "params", passWeights[7]);
         shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 4);
-        // step 20: p13_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p13_conv");
+        // step 15: p08_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p08_conv");
         shader.SetTexture(k, "src0", tex["t14"]);
         shader.SetTexture(k, "src1", tex["t10"]);
         shader.SetTexture(k, "dst", tex["t15"]);
-        shader.SetBuffer(k, "params", passWeights[13]);
+        shader.SetBuffer(k, "params", passWeights[8]);
         shader.Dispatch(k, CeilDiv(tex["t15"].width, 8), CeilDiv(tex["t15"].height, 8), 4);
-        // step 21: p14_resize_linear: Resize
-        k = shader.FindKernel("p14_resize_linear");
+        // step 16: p09_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p09_conv");
         shader.SetTexture(k, "src0", tex["t15"]);
-        shader.SetTexture(k, "dst", tex["t16"]);
-        shader.Dispatch(k, CeilDiv(tex["t16"].width, 8), CeilDiv(tex["t16"].height, 8), 4);
-        // step 22: p15_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p15_conv");
-        shader.SetTexture(k, "src0", tex["t16"]);
         shader.SetTexture(k, "dst", tex["t17"]);
-        shader.SetBuffer(k, "params", passWeights[15]);
+        shader.SetBuffer(k, "params", passWeights[9]);
         shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 2);
-        // step 23: p16_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p16_conv");
+        // step 17: p10_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p10_conv");
         shader.SetTexture(k, "src0", tex["t17"]);
         shader.SetTexture(k, "src1", tex["t8"]);
         shader.SetTexture(k, "dst", tex["t18"]);
-        shader.SetBuffer(k, "params", passWeights[16]);
+        shader.SetBuffer(k, "params", passWeights[10]);
         shader.Dispatch(k, CeilDiv(tex["t18"].width, 8), CeilDiv(tex["t18"].height, 8), 2);
-        // step 24: p17_resize_linear: Resize
-        k = shader.FindKernel("p17_resize_linear");
+        // step 18: p11_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p11_conv");
         shader.SetTexture(k, "src0", tex["t18"]);
-        shader.SetTexture(k, "dst", tex["t19"]);
-        shader.Dispatch(k, CeilDiv(tex["t19"].width, 8), CeilDiv(tex["t19"].height, 8), 2);
-        // step 25: p18_conv: Conv + LeakyRelu
-        k = shader.FindKernel("p18_conv");
-        shader.SetTexture(k, "src0", tex["t19"]);
         shader.SetTexture(k, "dst", tex["t20"]);
-        shader.SetBuffer(k, "params", passWeights[18]);
+        shader.SetBuffer(k, "params", passWeights[11]);
         shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 1);
-        // step 26: p19_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p19_conv");
+        // step 19: p12_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p12_conv");
         shader.SetTexture(k, "src0", tex["t20"]);
         shader.SetTexture(k, "src1", tex["t6"]);
         shader.SetTexture(k, "dst", tex["t21"]);
-        shader.SetBuffer(k, "params", passWeights[19]);
+        shader.SetBuffer(k, "params", passWeights[12]);
         shader.Dispatch(k, CeilDiv(tex["t21"].width, 8), CeilDiv(tex["t21"].height, 8), 1);
-        // step 27: p20_conv: Conv + Add + Clip + Crop
-        k = shader.FindKernel("p20_conv");
+        // step 20: p13_conv: Conv + Add + Clip + Crop
+        k = shader.FindKernel("p13_conv");
         shader.SetTexture(k, "src0", tex["t21"]);
         shader.SetTexture(k, "src1", tex["t5"]);
         shader.SetTexture(k, "dst", tex["t24"]);
-        shader.SetBuffer(k, "params", passWeights[20]);
+        shader.SetBuffer(k, "params", passWeights[13]);
         shader.SetInt("u_flip_y", flip);
         shader.Dispatch(k, CeilDiv(tex["t24"].width, 8), CeilDiv(tex["t24"].height, 8), 1);
         if (!sameSize)  // (w, h) != (W, H)
         {
-            // step 28: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
+            // step 21: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
             k = shader.FindKernel("f_upsample");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["normal"]);
@@ -316,7 +276,7 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         }
         if (sameSize)  // (w, h) == (W, H)
         {
-            // step 29: f_composite: the network's AO, 1 on background
+            // step 22: f_composite: the network's AO, 1 on background
             k = shader.FindKernel("f_composite");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["t24"]);

@@ -13,26 +13,19 @@ IMPLEMENT_GLOBAL_SHADER(Ff_depth_columns, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf
 IMPLEMENT_GLOBAL_SHADER(Ff_depth_mean, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "f_depth_mean", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_network_input, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "f_network_input", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_network_radius, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "f_network_radius", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp00_pad, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p00_pad", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp01_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p01_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp02_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p02_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp03_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p03_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp04_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p04_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp05_pool_avg, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p05_pool_avg", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp05_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p05_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp06_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p06_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp07_pool_avg, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p07_pool_avg", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp07_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p07_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp08_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p08_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp09_pool_avg, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p09_pool_avg", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp09_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p09_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp10_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p10_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp11_resize_linear, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p11_resize_linear", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp11_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p11_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp12_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p12_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp13_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p13_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp14_resize_linear, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p14_resize_linear", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp15_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p15_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp16_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p16_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp17_resize_linear, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p17_resize_linear", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp18_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p18_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp19_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p19_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp20_conv, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "p20_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_upsample, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "f_upsample", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_composite, "/Plugin/NeuralAO/NeuralAOUnetGtao.usf", "f_composite", SF_Compute);
 
@@ -56,17 +49,12 @@ TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoin
     Make(TEXT("low_gbuffer"), w, h, 3, PF_A32B32G32R32F);
     Make(TEXT("normal"), W, H, 1, PF_A32B32G32R32F);
     Make(TEXT("t0"), w, h, 2, PF_A32B32G32R32F);
-    Make(TEXT("t1"), wp, hp, 2, PF_A32B32G32R32F);
     Make(TEXT("t10"), wp * 1 / 4, hp * 1 / 4, 4, PF_A32B32G32R32F);
-    Make(TEXT("t11"), wp * 1 / 8, hp * 1 / 8, 4, PF_A32B32G32R32F);
     Make(TEXT("t12"), wp * 1 / 8, hp * 1 / 8, 8, PF_A32B32G32R32F);
-    Make(TEXT("t13"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
     Make(TEXT("t14"), wp * 1 / 4, hp * 1 / 4, 4, PF_A32B32G32R32F);
     Make(TEXT("t15"), wp * 1 / 4, hp * 1 / 4, 4, PF_A32B32G32R32F);
-    Make(TEXT("t16"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
     Make(TEXT("t17"), wp * 1 / 2, hp * 1 / 2, 2, PF_A32B32G32R32F);
     Make(TEXT("t18"), wp * 1 / 2, hp * 1 / 2, 2, PF_A32B32G32R32F);
-    Make(TEXT("t19"), wp, hp, 2, PF_A32B32G32R32F);
     Make(TEXT("t2"), 1, 1, 1, PF_A32B32G32R32F);
     Make(TEXT("t20"), wp, hp, 1, PF_A32B32G32R32F);
     Make(TEXT("t21"), wp, hp, 1, PF_A32B32G32R32F);
@@ -74,9 +62,7 @@ TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoin
     Make(TEXT("t4"), wp, hp, 1, PF_A32B32G32R32F);
     Make(TEXT("t5"), wp, hp, 1, PF_A32B32G32R32F);
     Make(TEXT("t6"), wp, hp, 1, PF_A32B32G32R32F);
-    Make(TEXT("t7"), wp * 1 / 2, hp * 1 / 2, 1, PF_A32B32G32R32F);
     Make(TEXT("t8"), wp * 1 / 2, hp * 1 / 2, 2, PF_A32B32G32R32F);
-    Make(TEXT("t9"), wp * 1 / 4, hp * 1 / 4, 2, PF_A32B32G32R32F);
     return T;
 }
 
@@ -159,171 +145,124 @@ FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoi
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_network_radius"), TShaderMapRef<Ff_network_radius>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t2")).X, 1), FMath::DivideAndRoundUp(Size(TEXT("t2")).Y, 1), 1));
     }
-    {  // step 7: p00_pad: Pad
-        auto* P = GraphBuilder.AllocParameters<Fp00_pad::FParameters>();
+    // step 7: p00_uniform skipped: f_network_radius writes its texture
+    {  // step 8: p01_conv: Pad + Conv + Clip + Div + Clip
+        auto* P = GraphBuilder.AllocParameters<Fp01_conv::FParameters>();
         P->src0 = Srv(TEXT("t0"));
-        P->dst = Uav(TEXT("t1"));
-        P->u_flip_y = flip;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p00_pad"), TShaderMapRef<Fp00_pad>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t1")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t1")).Y, 8), 2));
-    }
-    // step 8: p01_uniform skipped: f_network_radius writes its texture
-    {  // step 9: p02_conv: Conv + Clip + Div + Clip
-        auto* P = GraphBuilder.AllocParameters<Fp02_conv::FParameters>();
-        P->src0 = Srv(TEXT("t1"));
         P->src1 = Srv(TEXT("t2"));
         P->dst = Uav(TEXT("t4"));
-        P->params = Raw(2);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p02_conv"), TShaderMapRef<Fp02_conv>(ShaderMap), P,
+        P->params = Raw(1);
+        P->u_flip_y = flip;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p01_conv"), TShaderMapRef<Fp01_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t4")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t4")).Y, 8), 1));
     }
-    {  // step 10: p03_conv: Concat + Conv
-        auto* P = GraphBuilder.AllocParameters<Fp03_conv::FParameters>();
-        P->src0 = Srv(TEXT("t1"));
+    {  // step 9: p02_conv: Pad + Concat + Conv
+        auto* P = GraphBuilder.AllocParameters<Fp02_conv::FParameters>();
+        P->src0 = Srv(TEXT("t0"));
         P->src1 = Srv(TEXT("t4"));
         P->dst = Uav(TEXT("t5"));
-        P->params = Raw(3);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p03_conv"), TShaderMapRef<Fp03_conv>(ShaderMap), P,
+        P->params = Raw(2);
+        P->u_flip_y = flip;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p02_conv"), TShaderMapRef<Fp02_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t5")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t5")).Y, 8), 1));
     }
-    {  // step 11: p04_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp04_conv::FParameters>();
-        P->src0 = Srv(TEXT("t1"));
+    {  // step 10: p03_conv: Pad + Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp03_conv::FParameters>();
+        P->src0 = Srv(TEXT("t0"));
         P->src1 = Srv(TEXT("t4"));
         P->dst = Uav(TEXT("t6"));
-        P->params = Raw(4);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p04_conv"), TShaderMapRef<Fp04_conv>(ShaderMap), P,
+        P->params = Raw(3);
+        P->u_flip_y = flip;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p03_conv"), TShaderMapRef<Fp03_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t6")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t6")).Y, 8), 1));
     }
-    {  // step 12: p05_pool_avg: AveragePool
-        auto* P = GraphBuilder.AllocParameters<Fp05_pool_avg::FParameters>();
+    {  // step 11: p04_conv: AveragePool + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp04_conv::FParameters>();
         P->src0 = Srv(TEXT("t6"));
-        P->dst = Uav(TEXT("t7"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p05_pool_avg"), TShaderMapRef<Fp05_pool_avg>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t7")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t7")).Y, 8), 1));
-    }
-    {  // step 13: p06_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp06_conv::FParameters>();
-        P->src0 = Srv(TEXT("t7"));
         P->dst = Uav(TEXT("t8"));
-        P->params = Raw(6);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p06_conv"), TShaderMapRef<Fp06_conv>(ShaderMap), P,
+        P->params = Raw(4);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p04_conv"), TShaderMapRef<Fp04_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t8")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t8")).Y, 8), 2));
     }
-    {  // step 14: p07_pool_avg: AveragePool
-        auto* P = GraphBuilder.AllocParameters<Fp07_pool_avg::FParameters>();
+    {  // step 12: p05_conv: AveragePool + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp05_conv::FParameters>();
         P->src0 = Srv(TEXT("t8"));
-        P->dst = Uav(TEXT("t9"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p07_pool_avg"), TShaderMapRef<Fp07_pool_avg>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t9")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t9")).Y, 8), 2));
-    }
-    {  // step 15: p08_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp08_conv::FParameters>();
-        P->src0 = Srv(TEXT("t9"));
         P->dst = Uav(TEXT("t10"));
-        P->params = Raw(8);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p08_conv"), TShaderMapRef<Fp08_conv>(ShaderMap), P,
+        P->params = Raw(5);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p05_conv"), TShaderMapRef<Fp05_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t10")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t10")).Y, 8), 4));
     }
-    {  // step 16: p09_pool_avg: AveragePool
-        auto* P = GraphBuilder.AllocParameters<Fp09_pool_avg::FParameters>();
+    {  // step 13: p06_conv: AveragePool + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp06_conv::FParameters>();
         P->src0 = Srv(TEXT("t10"));
-        P->dst = Uav(TEXT("t11"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p09_pool_avg"), TShaderMapRef<Fp09_pool_avg>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t11")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t11")).Y, 8), 4));
-    }
-    {  // step 17: p10_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp10_conv::FParameters>();
-        P->src0 = Srv(TEXT("t11"));
         P->dst = Uav(TEXT("t12"));
-        P->params = Raw(10);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p10_conv"), TShaderMapRef<Fp10_conv>(ShaderMap), P,
+        P->params = Raw(6);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p06_conv"), TShaderMapRef<Fp06_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t12")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t12")).Y, 8), 8));
     }
-    {  // step 18: p11_resize_linear: Resize
-        auto* P = GraphBuilder.AllocParameters<Fp11_resize_linear::FParameters>();
+    {  // step 14: p07_conv: Resize + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp07_conv::FParameters>();
         P->src0 = Srv(TEXT("t12"));
-        P->dst = Uav(TEXT("t13"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p11_resize_linear"), TShaderMapRef<Fp11_resize_linear>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t13")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t13")).Y, 8), 8));
-    }
-    {  // step 19: p12_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp12_conv::FParameters>();
-        P->src0 = Srv(TEXT("t13"));
         P->dst = Uav(TEXT("t14"));
-        P->params = Raw(12);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p12_conv"), TShaderMapRef<Fp12_conv>(ShaderMap), P,
+        P->params = Raw(7);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p07_conv"), TShaderMapRef<Fp07_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t14")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t14")).Y, 8), 4));
     }
-    {  // step 20: p13_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp13_conv::FParameters>();
+    {  // step 15: p08_conv: Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp08_conv::FParameters>();
         P->src0 = Srv(TEXT("t14"));
         P->src1 = Srv(TEXT("t10"));
         P->dst = Uav(TEXT("t15"));
-        P->params = Raw(13);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p13_conv"), TShaderMapRef<Fp13_conv>(ShaderMap), P,
+        P->params = Raw(8);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p08_conv"), TShaderMapRef<Fp08_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t15")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t15")).Y, 8), 4));
     }
-    {  // step 21: p14_resize_linear: Resize
-        auto* P = GraphBuilder.AllocParameters<Fp14_resize_linear::FParameters>();
+    {  // step 16: p09_conv: Resize + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp09_conv::FParameters>();
         P->src0 = Srv(TEXT("t15"));
-        P->dst = Uav(TEXT("t16"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p14_resize_linear"), TShaderMapRef<Fp14_resize_linear>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t16")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t16")).Y, 8), 4));
-    }
-    {  // step 22: p15_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp15_conv::FParameters>();
-        P->src0 = Srv(TEXT("t16"));
         P->dst = Uav(TEXT("t17"));
-        P->params = Raw(15);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p15_conv"), TShaderMapRef<Fp15_conv>(ShaderMap), P,
+        P->params = Raw(9);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p09_conv"), TShaderMapRef<Fp09_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t17")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t17")).Y, 8), 2));
     }
-    {  // step 23: p16_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp16_conv::FParameters>();
+    {  // step 17: p10_conv: Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp10_conv::FParameters>();
         P->src0 = Srv(TEXT("t17"));
         P->src1 = Srv(TEXT("t8"));
         P->dst = Uav(TEXT("t18"));
-        P->params = Raw(16);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p16_conv"), TShaderMapRef<Fp16_conv>(ShaderMap), P,
+        P->params = Raw(10);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p10_conv"), TShaderMapRef<Fp10_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t18")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t18")).Y, 8), 2));
     }
-    {  // step 24: p17_resize_linear: Resize
-        auto* P = GraphBuilder.AllocParameters<Fp17_resize_linear::FParameters>();
+    {  // step 18: p11_conv: Resize + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp11_conv::FParameters>();
         P->src0 = Srv(TEXT("t18"));
-        P->dst = Uav(TEXT("t19"));
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p17_resize_linear"), TShaderMapRef<Fp17_resize_linear>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t19")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t19")).Y, 8), 2));
-    }
-    {  // step 25: p18_conv: Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp18_conv::FParameters>();
-        P->src0 = Srv(TEXT("t19"));
         P->dst = Uav(TEXT("t20"));
-        P->params = Raw(18);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p18_conv"), TShaderMapRef<Fp18_conv>(ShaderMap), P,
+        P->params = Raw(11);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p11_conv"), TShaderMapRef<Fp11_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t20")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t20")).Y, 8), 1));
     }
-    {  // step 26: p19_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp19_conv::FParameters>();
+    {  // step 19: p12_conv: Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp12_conv::FParameters>();
         P->src0 = Srv(TEXT("t20"));
         P->src1 = Srv(TEXT("t6"));
         P->dst = Uav(TEXT("t21"));
-        P->params = Raw(19);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p19_conv"), TShaderMapRef<Fp19_conv>(ShaderMap), P,
+        P->params = Raw(12);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p12_conv"), TShaderMapRef<Fp12_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t21")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t21")).Y, 8), 1));
     }
-    {  // step 27: p20_conv: Conv + Add + Clip + Crop
-        auto* P = GraphBuilder.AllocParameters<Fp20_conv::FParameters>();
+    {  // step 20: p13_conv: Conv + Add + Clip + Crop
+        auto* P = GraphBuilder.AllocParameters<Fp13_conv::FParameters>();
         P->src0 = Srv(TEXT("t21"));
         P->src1 = Srv(TEXT("t5"));
         P->dst = Uav(TEXT("t24"));
-        P->params = Raw(20);
+        P->params = Raw(13);
         P->u_flip_y = flip;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p20_conv"), TShaderMapRef<Fp20_conv>(ShaderMap), P,
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p13_conv"), TShaderMapRef<Fp13_conv>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t24")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t24")).Y, 8), 1));
     }
     if (!bSameSize)  // (w, h) != (W, H)
-    {  // step 28: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
+    {  // step 21: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
         auto* P = GraphBuilder.AllocParameters<Ff_upsample::FParameters>();
         P->src0 = Srv(TEXT("depth"));
         P->src1 = Srv(TEXT("normal"));
@@ -336,7 +275,7 @@ FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoi
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("ao")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("ao")).Y, 8), 1));
     }
     if (bSameSize)  // (w, h) == (W, H)
-    {  // step 29: f_composite: the network's AO, 1 on background
+    {  // step 22: f_composite: the network's AO, 1 on background
         auto* P = GraphBuilder.AllocParameters<Ff_composite::FParameters>();
         P->src0 = Srv(TEXT("depth"));
         P->src1 = Srv(TEXT("t24"));

@@ -151,14 +151,16 @@ public:
     }
 };
 
-class Fp00_pad : public FGlobalShader
+class Fp01_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp00_pad);
-    SHADER_USE_PARAMETER_STRUCT(Fp00_pad, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp01_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp01_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
         SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
@@ -179,6 +181,7 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -198,6 +201,7 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -214,7 +218,6 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp04_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -226,14 +229,15 @@ public:
     }
 };
 
-class Fp05_pool_avg : public FGlobalShader
+class Fp05_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp05_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp05_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp05_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp05_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -261,14 +265,15 @@ public:
     }
 };
 
-class Fp07_pool_avg : public FGlobalShader
+class Fp07_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp07_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp07_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp07_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp07_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -285,6 +290,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp08_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -296,14 +302,15 @@ public:
     }
 };
 
-class Fp09_pool_avg : public FGlobalShader
+class Fp09_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp09_pool_avg);
-    SHADER_USE_PARAMETER_STRUCT(Fp09_pool_avg, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp09_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp09_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -320,6 +327,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp10_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -331,14 +339,15 @@ public:
     }
 };
 
-class Fp11_resize_linear : public FGlobalShader
+class Fp11_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp11_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp11_resize_linear, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp11_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp11_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -355,6 +364,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp12_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -376,140 +386,13 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
-    }
-};
-
-class Fp14_resize_linear : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp14_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp14_resize_linear, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
-    }
-};
-
-class Fp15_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp15_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp15_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
-    }
-};
-
-class Fp16_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp16_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp16_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 22);
-    }
-};
-
-class Fp17_resize_linear : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp17_resize_linear);
-    SHADER_USE_PARAMETER_STRUCT(Fp17_resize_linear, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 23);
-    }
-};
-
-class Fp18_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp18_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp18_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 24);
-    }
-};
-
-class Fp19_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp19_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp19_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 25);
-    }
-};
-
-class Fp20_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp20_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp20_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
         SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 26);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
     }
 };
 
@@ -531,7 +414,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 27);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
     }
 };
 
@@ -550,7 +433,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 28);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
     }
 };
 

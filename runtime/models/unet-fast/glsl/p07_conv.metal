@@ -18,7 +18,7 @@ float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
     return select(x * alpha, x, x >= float4(0.0));
 }
 
-kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -46,43 +46,75 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
         return;
     }
     int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    float4 acc = float4(params.prm[1152 + gid.z]);
+    int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
+    float4 acc = float4(params.prm[4608 + gid.z]);
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
         for (int kx = 0; kx < 3; kx++)
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 16);
-            bool _150 = iy >= 0;
-            bool _157;
-            if (_150)
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 64);
+            bool _156 = iy >= 0;
+            bool _163;
+            if (_156)
             {
-                _157 = iy < size0.y;
+                _163 = iy < size0.y;
             }
             else
             {
-                _157 = _150;
+                _163 = _156;
             }
-            bool _160 = _157 && (ix >= 0);
-            bool _167;
-            if (_160)
+            bool _166 = _163 && (ix >= 0);
+            bool _173;
+            if (_166)
             {
-                _167 = ix < size0.x;
+                _173 = ix < size0.x;
             }
             else
             {
-                _167 = _160;
+                _173 = _166;
             }
-            if (_167)
+            if (_173)
             {
-                for (int l = 0; l < 4; l++)
+                for (int l = 0; l < 8; l++)
                 {
-                    int3 _184 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_184.xy), uint(_184.z), 0);
+                    int3 _189 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_189.xy), uint(_189.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _231 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_231[0], _231[1], _231[2], _231[3]) * float4(v));
+                    float4x4 _237 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += (float4x4(_237[0], _237[1], _237[2], _237[3]) * float4(v));
+                }
+            }
+            bool _255 = iy >= 0;
+            bool _262;
+            if (_255)
+            {
+                _262 = iy < size1.y;
+            }
+            else
+            {
+                _262 = _255;
+            }
+            bool _265 = _262 && (ix >= 0);
+            bool _272;
+            if (_265)
+            {
+                _272 = ix < size1.x;
+            }
+            else
+            {
+                _272 = _265;
+            }
+            if (_272)
+            {
+                for (int l_1 = 0; l_1 < 8; l_1++)
+                {
+                    int3 _288 = int3(ix, iy, l_1);
+                    float4 v_1 = src1.read(uint2(_288.xy), uint(_288.z), 0);
+                    int o_1 = tap + ((8 + l_1) * 4);
+                    float4x4 _332 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
+                    acc += (float4x4(_332[0], _332[1], _332[2], _332[3]) * float4(v_1));
                 }
             }
         }
@@ -91,7 +123,7 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _271 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_271.xy), uint(_271.z));
+    int3 _372 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_372.xy), uint(_372.z));
 }
 

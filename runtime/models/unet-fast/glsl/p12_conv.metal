@@ -13,117 +13,95 @@ struct Params
 constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
 
 static inline __attribute__((always_inline))
-float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
+float4 nao_sigmoid(thread const float4& x)
 {
-    return select(x * alpha, x, x >= float4(0.0));
+    float4 e = exp(-abs(x));
+    float4 r = float4(1.0) / (float4(1.0) + e);
+    return select(e * r, r, x >= float4(0.0));
 }
 
-kernel void p12_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p12_conv(constant int& u_flip_y [[buffer(0)]], const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    bool _53 = gid.x >= out_size.x;
-    bool _63;
-    if (!_53)
-    {
-        _63 = gid.y >= out_size.y;
-    }
-    else
-    {
-        _63 = _53;
-    }
-    bool _72;
+    bool _63 = gid.x >= out_size.x;
+    bool _73;
     if (!_63)
     {
-        _72 = gid.z >= 8;
+        _73 = gid.y >= out_size.y;
     }
     else
     {
-        _72 = _63;
+        _73 = _63;
     }
-    if (_72)
+    bool _82;
+    if (!_73)
+    {
+        _82 = gid.z >= 1;
+    }
+    else
+    {
+        _82 = _73;
+    }
+    if (_82)
     {
         return;
     }
     int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[4608 + gid.z]);
-    for (int ky = 0; ky < 3; ky++)
+    float4 acc = float4(params.prm[8 + gid.z]);
+    for (int ky = 0; ky < 1; ky++)
     {
-        int iy = ((gid.y * 1) - 1) + (ky * 1);
-        for (int kx = 0; kx < 3; kx++)
+        int iy = ((gid.y * 1) - 0) + (ky * 1);
+        for (int kx = 0; kx < 1; kx++)
         {
-            int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 64);
-            bool _156 = iy >= 0;
-            bool _163;
-            if (_156)
+            int ix = ((gid.x * 1) - 0) + (kx * 1);
+            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 8);
+            bool _157 = iy >= 0;
+            bool _164;
+            if (_157)
             {
-                _163 = iy < size0.y;
+                _164 = iy < size0.y;
             }
             else
             {
-                _163 = _156;
+                _164 = _157;
             }
-            bool _166 = _163 && (ix >= 0);
-            bool _173;
-            if (_166)
+            bool _167 = _164 && (ix >= 0);
+            bool _174;
+            if (_167)
             {
-                _173 = ix < size0.x;
+                _174 = ix < size0.x;
             }
             else
             {
-                _173 = _166;
+                _174 = _167;
             }
-            if (_173)
+            if (_174)
             {
-                for (int l = 0; l < 8; l++)
+                for (int l = 0; l < 2; l++)
                 {
-                    int3 _189 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_189.xy), uint(_189.z), 0);
+                    int3 _191 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_191.xy), uint(_191.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _237 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_237[0], _237[1], _237[2], _237[3]) * float4(v));
-                }
-            }
-            bool _255 = iy >= 0;
-            bool _262;
-            if (_255)
-            {
-                _262 = iy < size1.y;
-            }
-            else
-            {
-                _262 = _255;
-            }
-            bool _265 = _262 && (ix >= 0);
-            bool _272;
-            if (_265)
-            {
-                _272 = ix < size1.x;
-            }
-            else
-            {
-                _272 = _265;
-            }
-            if (_272)
-            {
-                for (int l_1 = 0; l_1 < 8; l_1++)
-                {
-                    int3 _288 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_288.xy), uint(_288.z), 0);
-                    int o_1 = tap + ((8 + l_1) * 4);
-                    float4x4 _332 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_332[0], _332[1], _332[2], _332[3]) * float4(v_1));
+                    float4x4 _238 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += (float4x4(_238[0], _238[1], _238[2], _238[3]) * float4(v));
                 }
             }
         }
     }
     float4 r = float4(acc);
     float4 param = r;
-    float param_1 = 0.00999999977648258209228515625;
-    r = nao_leaky_relu(param, param_1);
-    int3 _372 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_372.xy), uint(_372.z));
+    r = nao_sigmoid(param);
+    int _276;
+    if (u_flip_y != 0)
+    {
+        _276 = (out_size.y - 1) - gid.y;
+    }
+    else
+    {
+        _276 = gid.y;
+    }
+    int3 _294 = int3(int2(gid.x, _276), gid.z);
+    dst.write(r, uint2(_294.xy), uint(_294.z));
 }
 

@@ -2,7 +2,7 @@
 // conv accumulation: fp32
 alias hvec4 = vec4<f32>;
 alias hmat4 = mat4x4<f32>;
-// neuralao compute pass 2: Conv + Clip + Div + Clip
+// neuralao compute pass 2: Pad + Concat + Conv + LeakyRelu
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
 fn nao_tanh(x: vec4<f32>) -> vec4<f32> {
@@ -32,38 +32,47 @@ fn nao_size(t: texture_2d_array<f32>) -> vec2<i32> {
 @group(0) @binding(1) var src1: texture_2d_array<f32>;
 @group(0) @binding(2) var dst: texture_storage_2d_array<rgba32float, write>;
 @group(0) @binding(3) var<storage, read> prm: array<vec4<f32>>;
+@group(0) @binding(4) var<uniform> u_flip_y: i32;
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let gid = vec3<i32>(gid_u);
     let out_size = vec2<i32>(textureDimensions(dst));
-    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 1) {
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 2) {
         return;
     }
-    let size0 = nao_size(src0);
-    var acc = hvec4(prm[4 + gid.z]);
-    for (var ky: i32 = 0; ky < 1; ky++) {
-        let iy = gid.y * 1 - 0 + ky * 1;
-        for (var kx: i32 = 0; kx < 1; kx++) {
-            let ix = gid.x * 1 - 0 + kx * 1;
-            let tap = 0 + ((gid.z * 1 + ky) * 1 + kx) * 4;
+    let src_size0 = nao_size(src0);
+    let size0 = (src_size0 + 7) / 8 * 8;
+    let size1 = nao_size(src1);
+    var acc = hvec4(prm[144 + gid.z]);
+    for (var ky: i32 = 0; ky < 3; ky++) {
+        let iy = gid.y * 1 - 1 + ky * 1;
+        for (var kx: i32 = 0; kx < 3; kx++) {
+            let ix = gid.x * 1 - 1 + kx * 1;
+            let tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 8;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
+                // input texel (ix, iy): src0 reflect-padded at the bottom/right to size0
+                let rx = clamp(src_size0.x - 1 - abs(src_size0.x - 1 - ix), 0, src_size0.x - 1);
+                var ry: i32 = clamp(src_size0.y - 1 - abs(src_size0.y - 1 - iy), 0, src_size0.y - 1);
+                if (u_flip_y != 0) {
+                    ry = src_size0.y - 1 - ry;  // the input is stored bottom-up (a GL render target)
+                }
                 for (var l: i32 = 0; l < 1; l++) {
-                    let v = nao_fetch(src0, vec3<i32>(ix, iy, l));
+                    let v = nao_fetch(src0, vec3<i32>(rx, ry, l));
                     let o = tap + (0 + l) * 4;
+                    acc += hmat4(mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                }
+            }
+            if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
+                for (var l: i32 = 0; l < 1; l++) {
+                    let v = nao_fetch(src1, vec3<i32>(ix, iy, l));
+                    let o = tap + (1 + l) * 4;
                     acc += hmat4(mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
                 }
             }
         }
     }
     var r = vec4<f32>(acc);
-    r = max(r, vec4<f32>(0.001));
-    {
-        let a = nao_fetch(src1, vec3<i32>(0, 0, gid.z));
-        var b = r;
-        b = select(vec4<f32>(1.0), b, vec4<i32>(4 * gid.z) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(1));
-        r = a / b;
-    }
-    r = min(max(r, vec4<f32>(0.0)), vec4<f32>(8.0));
+    r = nao_leaky_relu(r, 0.01);
     textureStore(dst, gid.xy, gid.z, r);
 }

@@ -6,6 +6,7 @@ Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
 Texture2DArray<float4> src1 : register(t1);
 SamplerState _src1_sampler : register(s1);
+uniform int u_flip_y;
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -28,109 +29,129 @@ uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
     return ret;
 }
 
+float4 nao_leaky_relu(float4 x, float alpha)
+{
+    float4 _17 = x * alpha;
+    bool4 _24 = bool4(x.x >= 0.0f.xxxx.x, x.y >= 0.0f.xxxx.y, x.z >= 0.0f.xxxx.z, x.w >= 0.0f.xxxx.w);
+    return float4(_24.x ? x.x : _17.x, _24.y ? x.y : _17.y, _24.z ? x.z : _17.z, _24.w ? x.w : _17.w);
+}
+
 void p03_conv_inner()
 {
     int3 gid = int3(gl_GlobalInvocationID);
-    uint _24_dummy_parameter;
-    int2 out_size = int3(spvImageSize(dst, _24_dummy_parameter)).xy;
-    bool _33 = gid.x >= out_size.x;
-    bool _43;
-    if (!_33)
+    uint _45_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _45_dummy_parameter)).xy;
+    bool _53 = gid.x >= out_size.x;
+    bool _63;
+    if (!_53)
     {
-        _43 = gid.y >= out_size.y;
+        _63 = gid.y >= out_size.y;
     }
     else
     {
-        _43 = _33;
+        _63 = _53;
     }
-    bool _52;
-    if (!_43)
+    bool _72;
+    if (!_63)
     {
-        _52 = gid.z >= 1;
+        _72 = gid.z >= 1;
     }
     else
     {
-        _52 = _43;
+        _72 = _63;
     }
-    if (_52)
+    if (_72)
     {
         return;
     }
-    uint _64_dummy_parameter;
-    int2 size0 = int3(spvTextureSize(src0, uint(0), _64_dummy_parameter)).xy;
-    uint _70_dummy_parameter;
-    int2 size1 = int3(spvTextureSize(src1, uint(0), _70_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((12 + gid.z) * 16 + 0)));
-    for (int ky = 0; ky < 1; ky++)
+    uint _84_dummy_parameter;
+    int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
+    int2 size0 = ((src_size0 + int2(7, 7)) / int2(8, 8)) * int2(8, 8);
+    uint _100_dummy_parameter;
+    int2 size1 = int3(spvTextureSize(src1, uint(0), _100_dummy_parameter)).xy;
+    float4 acc = float4(asfloat(params.Load4((108 + gid.z) * 16 + 0)));
+    for (int ky = 0; ky < 3; ky++)
     {
-        int iy = ((gid.y * 1) - 0) + (ky * 1);
-        for (int kx = 0; kx < 1; kx++)
+        int iy = ((gid.y * 1) - 1) + (ky * 1);
+        for (int kx = 0; kx < 3; kx++)
         {
-            int ix = ((gid.x * 1) - 0) + (kx * 1);
-            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 12);
-            bool _135 = iy >= 0;
-            bool _142;
-            if (_135)
+            int ix = ((gid.x * 1) - 1) + (kx * 1);
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 12);
+            bool _165 = iy >= 0;
+            bool _172;
+            if (_165)
             {
-                _142 = iy < size0.y;
+                _172 = iy < size0.y;
             }
             else
             {
-                _142 = _135;
+                _172 = _165;
             }
-            bool _145 = _142 && (ix >= 0);
-            bool _152;
-            if (_145)
+            bool _175 = _172 && (ix >= 0);
+            bool _182;
+            if (_175)
             {
-                _152 = ix < size0.x;
+                _182 = ix < size0.x;
             }
             else
             {
-                _152 = _145;
+                _182 = _175;
             }
-            if (_152)
+            if (_182)
             {
+                int rx = clamp((src_size0.x - 1) - abs((src_size0.x - 1) - ix), 0, src_size0.x - 1);
+                int ry = clamp((src_size0.y - 1) - abs((src_size0.y - 1) - iy), 0, src_size0.y - 1);
+                if (u_flip_y != 0)
+                {
+                    ry = (src_size0.y - 1) - ry;
+                }
                 for (int l = 0; l < 2; l++)
                 {
-                    float4 v = src0.Load(int4(int3(ix, iy, l), 0));
+                    float4 _242 = src0.Load(int4(int3(rx, ry, l), 0));
+                    int4 _249 = (4 * l).xxxx + int4(0, 1, 2, 3);
+                    bool4 _252 = bool4(_249.x < int4(5, 5, 5, 5).x, _249.y < int4(5, 5, 5, 5).y, _249.z < int4(5, 5, 5, 5).z, _249.w < int4(5, 5, 5, 5).w);
+                    float4 v = float4(_252.x ? _242.x : 0.0f.xxxx.x, _252.y ? _242.y : 0.0f.xxxx.y, _252.z ? _242.z : 0.0f.xxxx.z, _252.w ? _242.w : 0.0f.xxxx.w);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _218 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_218[0], _218[1], _218[2], _218[3]));
+                    float4x4 _297 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += mul(float4(v), float4x4(_297[0], _297[1], _297[2], _297[3]));
                 }
             }
-            bool _236 = iy >= 0;
-            bool _243;
-            if (_236)
+            bool _315 = iy >= 0;
+            bool _322;
+            if (_315)
             {
-                _243 = iy < size1.y;
+                _322 = iy < size1.y;
             }
             else
             {
-                _243 = _236;
+                _322 = _315;
             }
-            bool _246 = _243 && (ix >= 0);
-            bool _253;
-            if (_246)
+            bool _325 = _322 && (ix >= 0);
+            bool _332;
+            if (_325)
             {
-                _253 = ix < size1.x;
+                _332 = ix < size1.x;
             }
             else
             {
-                _253 = _246;
+                _332 = _325;
             }
-            if (_253)
+            if (_332)
             {
                 for (int l_1 = 0; l_1 < 1; l_1++)
                 {
                     float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
                     int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _313 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
-                    acc += mul(float4(v_1), float4x4(_313[0], _313[1], _313[2], _313[3]));
+                    float4x4 _392 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += mul(float4(v_1), float4x4(_392[0], _392[1], _392[2], _392[3]));
                 }
             }
         }
     }
     float4 r = float4(acc);
+    float4 param = r;
+    float param_1 = 0.00999999977648258209228515625f;
+    r = nao_leaky_relu(param, param_1);
     dst[int3(gid.xy, gid.z)] = r;
 }
 

@@ -1,3 +1,5 @@
+#pragma clang diagnostic ignored "-Wmissing-prototypes"
+
 #include <metal_stdlib>
 #include <simd/simd.h>
 
@@ -10,109 +12,125 @@ struct Params
 
 constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
 
-kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+static inline __attribute__((always_inline))
+float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
+{
+    return select(x * alpha, x, x >= float4(0.0));
+}
+
+kernel void p03_conv(constant int& u_flip_y [[buffer(0)]], const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    bool _33 = gid.x >= out_size.x;
-    bool _43;
-    if (!_33)
+    bool _53 = gid.x >= out_size.x;
+    bool _63;
+    if (!_53)
     {
-        _43 = gid.y >= out_size.y;
+        _63 = gid.y >= out_size.y;
     }
     else
     {
-        _43 = _33;
+        _63 = _53;
     }
-    bool _52;
-    if (!_43)
+    bool _72;
+    if (!_63)
     {
-        _52 = gid.z >= 1;
+        _72 = gid.z >= 1;
     }
     else
     {
-        _52 = _43;
+        _72 = _63;
     }
-    if (_52)
+    if (_72)
     {
         return;
     }
-    int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
+    int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
+    int2 size0 = ((src_size0 + int2(7)) / int2(8)) * int2(8);
     int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[12 + gid.z]);
-    for (int ky = 0; ky < 1; ky++)
+    float4 acc = float4(params.prm[108 + gid.z]);
+    for (int ky = 0; ky < 3; ky++)
     {
-        int iy = ((gid.y * 1) - 0) + (ky * 1);
-        for (int kx = 0; kx < 1; kx++)
+        int iy = ((gid.y * 1) - 1) + (ky * 1);
+        for (int kx = 0; kx < 3; kx++)
         {
-            int ix = ((gid.x * 1) - 0) + (kx * 1);
-            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 12);
-            bool _135 = iy >= 0;
-            bool _142;
-            if (_135)
+            int ix = ((gid.x * 1) - 1) + (kx * 1);
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 12);
+            bool _165 = iy >= 0;
+            bool _172;
+            if (_165)
             {
-                _142 = iy < size0.y;
+                _172 = iy < size0.y;
             }
             else
             {
-                _142 = _135;
+                _172 = _165;
             }
-            bool _145 = _142 && (ix >= 0);
-            bool _152;
-            if (_145)
+            bool _175 = _172 && (ix >= 0);
+            bool _182;
+            if (_175)
             {
-                _152 = ix < size0.x;
+                _182 = ix < size0.x;
             }
             else
             {
-                _152 = _145;
+                _182 = _175;
             }
-            if (_152)
+            if (_182)
             {
+                int rx = clamp((src_size0.x - 1) - abs((src_size0.x - 1) - ix), 0, src_size0.x - 1);
+                int ry = clamp((src_size0.y - 1) - abs((src_size0.y - 1) - iy), 0, src_size0.y - 1);
+                if (u_flip_y != 0)
+                {
+                    ry = (src_size0.y - 1) - ry;
+                }
                 for (int l = 0; l < 2; l++)
                 {
-                    int3 _169 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_169.xy), uint(_169.z), 0);
+                    int3 _240 = int3(rx, ry, l);
+                    float4 v = select(float4(0.0), src0.read(uint2(_240.xy), uint(_240.z), 0), (int4(4 * l) + int4(0, 1, 2, 3)) < int4(5));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _218 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_218[0], _218[1], _218[2], _218[3]) * float4(v));
+                    float4x4 _297 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += (float4x4(_297[0], _297[1], _297[2], _297[3]) * float4(v));
                 }
             }
-            bool _236 = iy >= 0;
-            bool _243;
-            if (_236)
+            bool _315 = iy >= 0;
+            bool _322;
+            if (_315)
             {
-                _243 = iy < size1.y;
+                _322 = iy < size1.y;
             }
             else
             {
-                _243 = _236;
+                _322 = _315;
             }
-            bool _246 = _243 && (ix >= 0);
-            bool _253;
-            if (_246)
+            bool _325 = _322 && (ix >= 0);
+            bool _332;
+            if (_325)
             {
-                _253 = ix < size1.x;
+                _332 = ix < size1.x;
             }
             else
             {
-                _253 = _246;
+                _332 = _325;
             }
-            if (_253)
+            if (_332)
             {
                 for (int l_1 = 0; l_1 < 1; l_1++)
                 {
-                    int3 _269 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_269.xy), uint(_269.z), 0);
+                    int3 _348 = int3(ix, iy, l_1);
+                    float4 v_1 = src1.read(uint2(_348.xy), uint(_348.z), 0);
                     int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _313 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_313[0], _313[1], _313[2], _313[3]) * float4(v_1));
+                    float4x4 _392 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
+                    acc += (float4x4(_392[0], _392[1], _392[2], _392[3]) * float4(v_1));
                 }
             }
         }
     }
     float4 r = float4(acc);
-    int3 _348 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_348.xy), uint(_348.z));
+    float4 param = r;
+    float param_1 = 0.00999999977648258209228515625;
+    r = nao_leaky_relu(param, param_1);
+    int3 _432 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_432.xy), uint(_432.z));
 }
 

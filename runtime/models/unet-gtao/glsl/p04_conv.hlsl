@@ -4,8 +4,6 @@ ByteAddressBuffer params : register(t16);
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
-Texture2DArray<float4> src1 : register(t1);
-SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -53,7 +51,7 @@ void p04_conv_inner()
     bool _72;
     if (!_63)
     {
-        _72 = gid.z >= 1;
+        _72 = gid.z >= 2;
     }
     else
     {
@@ -64,75 +62,44 @@ void p04_conv_inner()
         return;
     }
     uint _84_dummy_parameter;
-    int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    uint _90_dummy_parameter;
-    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((108 + gid.z) * 16 + 0)));
+    int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
+    int2 size0 = src_size0 / int2(2, 2);
+    float4 acc = float4(asfloat(params.Load4((72 + gid.z) * 16 + 0)));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
         for (int kx = 0; kx < 3; kx++)
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 12);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 4);
+            bool _154 = iy >= 0;
+            bool _161;
+            if (_154)
             {
-                _162 = iy < size0.y;
+                _161 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _161 = _154;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _164 = _161 && (ix >= 0);
+            bool _171;
+            if (_164)
             {
-                _172 = ix < size0.x;
+                _171 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _171 = _164;
             }
-            if (_172)
+            if (_171)
             {
-                for (int l = 0; l < 2; l++)
+                for (int l = 0; l < 1; l++)
                 {
-                    float4 v = src0.Load(int4(int3(ix, iy, l), 0));
+                    float4 v = (((src0.Load(int4(int3(2 * ix, 2 * iy, l), 0)) + src0.Load(int4(int3((2 * ix) + 1, 2 * iy, l), 0))) + src0.Load(int4(int3(2 * ix, (2 * iy) + 1, l), 0))) + src0.Load(int4(int3((2 * ix) + 1, (2 * iy) + 1, l), 0))) / 4.0f.xxxx;
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _236 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_236[0], _236[1], _236[2], _236[3]));
-                }
-            }
-            bool _254 = iy >= 0;
-            bool _261;
-            if (_254)
-            {
-                _261 = iy < size1.y;
-            }
-            else
-            {
-                _261 = _254;
-            }
-            bool _264 = _261 && (ix >= 0);
-            bool _271;
-            if (_264)
-            {
-                _271 = ix < size1.x;
-            }
-            else
-            {
-                _271 = _264;
-            }
-            if (_271)
-            {
-                for (int l_1 = 0; l_1 < 1; l_1++)
-                {
-                    float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
-                    int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _331 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
-                    acc += mul(float4(v_1), float4x4(_331[0], _331[1], _331[2], _331[3]));
+                    float4x4 _272 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += mul(float4(v), float4x4(_272[0], _272[1], _272[2], _272[3]));
                 }
             }
         }

@@ -4,6 +4,8 @@ ByteAddressBuffer params : register(t16);
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -51,7 +53,7 @@ void p12_conv_inner()
     bool _72;
     if (!_63)
     {
-        _72 = gid.z >= 4;
+        _72 = gid.z >= 1;
     }
     else
     {
@@ -63,42 +65,74 @@ void p12_conv_inner()
     }
     uint _84_dummy_parameter;
     int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((1152 + gid.z) * 16 + 0)));
+    uint _90_dummy_parameter;
+    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
+    float4 acc = float4(asfloat(params.Load4((72 + gid.z) * 16 + 0)));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
         for (int kx = 0; kx < 3; kx++)
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 32);
-            bool _150 = iy >= 0;
-            bool _157;
-            if (_150)
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 8);
+            bool _155 = iy >= 0;
+            bool _162;
+            if (_155)
             {
-                _157 = iy < size0.y;
+                _162 = iy < size0.y;
             }
             else
             {
-                _157 = _150;
+                _162 = _155;
             }
-            bool _160 = _157 && (ix >= 0);
-            bool _167;
-            if (_160)
+            bool _165 = _162 && (ix >= 0);
+            bool _172;
+            if (_165)
             {
-                _167 = ix < size0.x;
+                _172 = ix < size0.x;
             }
             else
             {
-                _167 = _160;
+                _172 = _165;
             }
-            if (_167)
+            if (_172)
             {
-                for (int l = 0; l < 8; l++)
+                for (int l = 0; l < 1; l++)
                 {
                     float4 v = src0.Load(int4(int3(ix, iy, l), 0));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _231 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_231[0], _231[1], _231[2], _231[3]));
+                    float4x4 _236 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += mul(float4(v), float4x4(_236[0], _236[1], _236[2], _236[3]));
+                }
+            }
+            bool _254 = iy >= 0;
+            bool _261;
+            if (_254)
+            {
+                _261 = iy < size1.y;
+            }
+            else
+            {
+                _261 = _254;
+            }
+            bool _264 = _261 && (ix >= 0);
+            bool _271;
+            if (_264)
+            {
+                _271 = ix < size1.x;
+            }
+            else
+            {
+                _271 = _264;
+            }
+            if (_271)
+            {
+                for (int l_1 = 0; l_1 < 1; l_1++)
+                {
+                    float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
+                    int o_1 = tap + ((1 + l_1) * 4);
+                    float4x4 _331 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += mul(float4(v_1), float4x4(_331[0], _331[1], _331[2], _331[3]));
                 }
             }
         }

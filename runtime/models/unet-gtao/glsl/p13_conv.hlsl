@@ -6,6 +6,7 @@ Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
 Texture2DArray<float4> src1 : register(t1);
 SamplerState _src1_sampler : register(s1);
+uniform int u_flip_y;
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -28,120 +29,91 @@ uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
     return ret;
 }
 
-float4 nao_leaky_relu(float4 x, float alpha)
-{
-    float4 _17 = x * alpha;
-    bool4 _24 = bool4(x.x >= 0.0f.xxxx.x, x.y >= 0.0f.xxxx.y, x.z >= 0.0f.xxxx.z, x.w >= 0.0f.xxxx.w);
-    return float4(_24.x ? x.x : _17.x, _24.y ? x.y : _17.y, _24.z ? x.z : _17.z, _24.w ? x.w : _17.w);
-}
-
 void p13_conv_inner()
 {
     int3 gid = int3(gl_GlobalInvocationID);
-    uint _45_dummy_parameter;
-    int2 out_size = int3(spvImageSize(dst, _45_dummy_parameter)).xy;
-    bool _53 = gid.x >= out_size.x;
-    bool _63;
-    if (!_53)
+    uint _24_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _24_dummy_parameter)).xy;
+    bool _33 = gid.x >= out_size.x;
+    bool _43;
+    if (!_33)
     {
-        _63 = gid.y >= out_size.y;
+        _43 = gid.y >= out_size.y;
     }
     else
     {
-        _63 = _53;
+        _43 = _33;
     }
-    bool _72;
-    if (!_63)
+    bool _52;
+    if (!_43)
     {
-        _72 = gid.z >= 4;
+        _52 = gid.z >= 1;
     }
     else
     {
-        _72 = _63;
+        _52 = _43;
     }
-    if (_72)
+    if (_52)
     {
         return;
     }
-    uint _84_dummy_parameter;
-    int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    uint _90_dummy_parameter;
-    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((1152 + gid.z) * 16 + 0)));
-    for (int ky = 0; ky < 3; ky++)
+    uint _64_dummy_parameter;
+    int2 size0 = int3(spvTextureSize(src0, uint(0), _64_dummy_parameter)).xy;
+    float4 acc = float4(asfloat(params.Load4((4 + gid.z) * 16 + 0)));
+    for (int ky = 0; ky < 1; ky++)
     {
-        int iy = ((gid.y * 1) - 1) + (ky * 1);
-        for (int kx = 0; kx < 3; kx++)
+        int iy = ((gid.y * 1) - 0) + (ky * 1);
+        for (int kx = 0; kx < 1; kx++)
         {
-            int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 32);
-            bool _156 = iy >= 0;
-            bool _163;
-            if (_156)
+            int ix = ((gid.x * 1) - 0) + (kx * 1);
+            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 4);
+            bool _129 = iy >= 0;
+            bool _136;
+            if (_129)
             {
-                _163 = iy < size0.y;
+                _136 = iy < size0.y;
             }
             else
             {
-                _163 = _156;
+                _136 = _129;
             }
-            bool _166 = _163 && (ix >= 0);
-            bool _173;
-            if (_166)
+            bool _139 = _136 && (ix >= 0);
+            bool _146;
+            if (_139)
             {
-                _173 = ix < size0.x;
+                _146 = ix < size0.x;
             }
             else
             {
-                _173 = _166;
+                _146 = _139;
             }
-            if (_173)
+            if (_146)
             {
-                for (int l = 0; l < 4; l++)
+                for (int l = 0; l < 1; l++)
                 {
                     float4 v = src0.Load(int4(int3(ix, iy, l), 0));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _236 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_236[0], _236[1], _236[2], _236[3]));
-                }
-            }
-            bool _254 = iy >= 0;
-            bool _261;
-            if (_254)
-            {
-                _261 = iy < size1.y;
-            }
-            else
-            {
-                _261 = _254;
-            }
-            bool _264 = _261 && (ix >= 0);
-            bool _271;
-            if (_264)
-            {
-                _271 = ix < size1.x;
-            }
-            else
-            {
-                _271 = _264;
-            }
-            if (_271)
-            {
-                for (int l_1 = 0; l_1 < 4; l_1++)
-                {
-                    float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
-                    int o_1 = tap + ((4 + l_1) * 4);
-                    float4x4 _331 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
-                    acc += mul(float4(v_1), float4x4(_331[0], _331[1], _331[2], _331[3]));
+                    float4x4 _211 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += mul(float4(v), float4x4(_211[0], _211[1], _211[2], _211[3]));
                 }
             }
         }
     }
     float4 r = float4(acc);
-    float4 param = r;
-    float param_1 = 0.00999999977648258209228515625f;
-    r = nao_leaky_relu(param, param_1);
-    dst[int3(gid.xy, gid.z)] = r;
+    float4 a = src1.Load(int4(int3(gid.xy, gid.z), 0));
+    float4 b = r;
+    r = a + b;
+    r = min(max(r, 0.0f.xxxx), 1.0f.xxxx);
+    int _268;
+    if (u_flip_y != 0)
+    {
+        _268 = (out_size.y - 1) - gid.y;
+    }
+    else
+    {
+        _268 = gid.y;
+    }
+    dst[int3(int2(gid.x, _268), gid.z)] = r;
 }
 
 [numthreads(8, 8, 1)]

@@ -1,5 +1,3 @@
-#pragma clang diagnostic ignored "-Wmissing-prototypes"
-
 #include <metal_stdlib>
 #include <simd/simd.h>
 
@@ -12,118 +10,91 @@ struct Params
 
 constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(8u, 8u, 1u);
 
-static inline __attribute__((always_inline))
-float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
-{
-    return select(x * alpha, x, x >= float4(0.0));
-}
-
-kernel void p13_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p13_conv(constant int& u_flip_y [[buffer(0)]], const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    bool _53 = gid.x >= out_size.x;
-    bool _63;
-    if (!_53)
+    bool _33 = gid.x >= out_size.x;
+    bool _43;
+    if (!_33)
     {
-        _63 = gid.y >= out_size.y;
+        _43 = gid.y >= out_size.y;
     }
     else
     {
-        _63 = _53;
+        _43 = _33;
     }
-    bool _72;
-    if (!_63)
+    bool _52;
+    if (!_43)
     {
-        _72 = gid.z >= 4;
+        _52 = gid.z >= 1;
     }
     else
     {
-        _72 = _63;
+        _52 = _43;
     }
-    if (_72)
+    if (_52)
     {
         return;
     }
     int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[1152 + gid.z]);
-    for (int ky = 0; ky < 3; ky++)
+    float4 acc = float4(params.prm[4 + gid.z]);
+    for (int ky = 0; ky < 1; ky++)
     {
-        int iy = ((gid.y * 1) - 1) + (ky * 1);
-        for (int kx = 0; kx < 3; kx++)
+        int iy = ((gid.y * 1) - 0) + (ky * 1);
+        for (int kx = 0; kx < 1; kx++)
         {
-            int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 32);
-            bool _156 = iy >= 0;
-            bool _163;
-            if (_156)
+            int ix = ((gid.x * 1) - 0) + (kx * 1);
+            int tap = 0 + (((((gid.z * 1) + ky) * 1) + kx) * 4);
+            bool _129 = iy >= 0;
+            bool _136;
+            if (_129)
             {
-                _163 = iy < size0.y;
+                _136 = iy < size0.y;
             }
             else
             {
-                _163 = _156;
+                _136 = _129;
             }
-            bool _166 = _163 && (ix >= 0);
-            bool _173;
-            if (_166)
+            bool _139 = _136 && (ix >= 0);
+            bool _146;
+            if (_139)
             {
-                _173 = ix < size0.x;
+                _146 = ix < size0.x;
             }
             else
             {
-                _173 = _166;
+                _146 = _139;
             }
-            if (_173)
+            if (_146)
             {
-                for (int l = 0; l < 4; l++)
+                for (int l = 0; l < 1; l++)
                 {
-                    int3 _189 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_189.xy), uint(_189.z), 0);
+                    int3 _162 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_162.xy), uint(_162.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _236 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_236[0], _236[1], _236[2], _236[3]) * float4(v));
-                }
-            }
-            bool _254 = iy >= 0;
-            bool _261;
-            if (_254)
-            {
-                _261 = iy < size1.y;
-            }
-            else
-            {
-                _261 = _254;
-            }
-            bool _264 = _261 && (ix >= 0);
-            bool _271;
-            if (_264)
-            {
-                _271 = ix < size1.x;
-            }
-            else
-            {
-                _271 = _264;
-            }
-            if (_271)
-            {
-                for (int l_1 = 0; l_1 < 4; l_1++)
-                {
-                    int3 _287 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_287.xy), uint(_287.z), 0);
-                    int o_1 = tap + ((4 + l_1) * 4);
-                    float4x4 _331 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_331[0], _331[1], _331[2], _331[3]) * float4(v_1));
+                    float4x4 _211 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += (float4x4(_211[0], _211[1], _211[2], _211[3]) * float4(v));
                 }
             }
         }
     }
     float4 r = float4(acc);
-    float4 param = r;
-    float param_1 = 0.00999999977648258209228515625;
-    r = nao_leaky_relu(param, param_1);
-    int3 _371 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_371.xy), uint(_371.z));
+    int3 _248 = int3(gid.xy, gid.z);
+    float4 a = src1.read(uint2(_248.xy), uint(_248.z), 0);
+    float4 b = r;
+    r = a + b;
+    r = fast::min(fast::max(r, float4(0.0)), float4(1.0));
+    int _268;
+    if (u_flip_y != 0)
+    {
+        _268 = (out_size.y - 1) - gid.y;
+    }
+    else
+    {
+        _268 = gid.y;
+    }
+    int3 _286 = int3(int2(gid.x, _268), gid.z);
+    dst.write(r, uint2(_286.xy), uint(_286.z));
 }
 

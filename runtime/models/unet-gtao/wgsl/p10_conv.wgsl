@@ -2,7 +2,7 @@
 // conv accumulation: fp32
 alias hvec4 = vec4<f32>;
 alias hmat4 = mat4x4<f32>;
-// neuralao compute pass 10: Conv + LeakyRelu
+// neuralao compute pass 10: Concat + Conv + LeakyRelu
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
 fn nao_tanh(x: vec4<f32>) -> vec4<f32> {
@@ -29,27 +29,36 @@ fn nao_size(t: texture_2d_array<f32>) -> vec2<i32> {
 }
 
 @group(0) @binding(0) var src0: texture_2d_array<f32>;
-@group(0) @binding(1) var dst: texture_storage_2d_array<rgba32float, write>;
-@group(0) @binding(2) var<storage, read> prm: array<vec4<f32>>;
+@group(0) @binding(1) var src1: texture_2d_array<f32>;
+@group(0) @binding(2) var dst: texture_storage_2d_array<rgba32float, write>;
+@group(0) @binding(3) var<storage, read> prm: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let gid = vec3<i32>(gid_u);
     let out_size = vec2<i32>(textureDimensions(dst));
-    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 8) {
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 2) {
         return;
     }
     let size0 = nao_size(src0);
-    var acc = hvec4(prm[1152 + gid.z]);
+    let size1 = nao_size(src1);
+    var acc = hvec4(prm[288 + gid.z]);
     for (var ky: i32 = 0; ky < 3; ky++) {
         let iy = gid.y * 1 - 1 + ky * 1;
         for (var kx: i32 = 0; kx < 3; kx++) {
             let ix = gid.x * 1 - 1 + kx * 1;
             let tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 16;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
-                for (var l: i32 = 0; l < 4; l++) {
+                for (var l: i32 = 0; l < 2; l++) {
                     let v = nao_fetch(src0, vec3<i32>(ix, iy, l));
                     let o = tap + (0 + l) * 4;
+                    acc += hmat4(mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                }
+            }
+            if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
+                for (var l: i32 = 0; l < 2; l++) {
+                    let v = nao_fetch(src1, vec3<i32>(ix, iy, l));
+                    let o = tap + (2 + l) * 4;
                     acc += hmat4(mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
                 }
             }

@@ -1,0 +1,74 @@
+#version 450
+#extension GL_EXT_samplerless_texture_functions : require
+// conv accumulation: fp32
+#define hvec4 vec4
+#define hmat4 mat4
+// neuralao compute pass 1: Pad + Conv + Clip + Div + Clip
+layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
+
+// Overflow-safe activations (exp() only sees arguments <= 0).
+vec4 nao_tanh(vec4 x) {
+    vec4 e = exp(-2.0 * abs(x));
+    return sign(x) * ((1.0 - e) / (1.0 + e));
+}
+
+vec4 nao_sigmoid(vec4 x) {
+    vec4 e = exp(-abs(x));
+    vec4 r = 1.0 / (1.0 + e);
+    return mix(e * r, r, greaterThanEqual(x, vec4(0.0)));
+}
+
+vec4 nao_leaky_relu(vec4 x, float alpha) {
+    return mix(alpha * x, x, greaterThanEqual(x, vec4(0.0)));
+}
+
+layout(set = 0, binding = 0) uniform highp texture2DArray src0;
+layout(set = 0, binding = 1) uniform highp texture2DArray src1;
+layout(set = 0, binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std430, set = 0, binding = 3) readonly buffer Params {
+    vec4 prm[];
+};
+layout(std140, set = 0, binding = 4) uniform PassUniforms {
+    int u_flip_y;
+};
+
+void main() {
+    ivec3 gid = ivec3(gl_GlobalInvocationID);
+    ivec2 out_size = imageSize(dst).xy;
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 1) {
+        return;
+    }
+    ivec2 src_size0 = textureSize(src0, 0).xy;
+    ivec2 size0 = (src_size0 + 7) / 8 * 8;
+    hvec4 acc = hvec4(prm[8 + gid.z]);
+    for (int ky = 0; ky < 1; ++ky) {
+        int iy = gid.y * 1 - 0 + ky * 1;
+        for (int kx = 0; kx < 1; ++kx) {
+            int ix = gid.x * 1 - 0 + kx * 1;
+            int tap = 0 + ((gid.z * 1 + ky) * 1 + kx) * 8;
+            if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
+                // input texel (ix, iy): src0 reflect-padded at the bottom/right to size0
+                int rx = clamp(src_size0.x - 1 - abs(src_size0.x - 1 - ix), 0, src_size0.x - 1);
+                int ry = clamp(src_size0.y - 1 - abs(src_size0.y - 1 - iy), 0, src_size0.y - 1);
+                if (u_flip_y != 0) {
+                    ry = src_size0.y - 1 - ry;  // the input is stored bottom-up (a GL render target)
+                }
+                for (int l = 0; l < 2; ++l) {
+                    vec4 v = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, l), 0), lessThan(ivec4(4 * l) + ivec4(0, 1, 2, 3), ivec4(5)));
+                    int o = tap + (0 + l) * 4;
+                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                }
+            }
+        }
+    }
+    vec4 r = vec4(acc);
+    r = max(r, vec4(0.001));
+    {
+        vec4 a = texelFetch(src1, ivec3(0, 0, gid.z), 0);
+        vec4 b = r;
+        b = mix(vec4(1.0), b, lessThan(ivec4(4 * gid.z) + ivec4(0, 1, 2, 3), ivec4(1)));
+        r = a / b;
+    }
+    r = min(max(r, vec4(0.0)), vec4(8.0));
+    imageStore(dst, ivec3(gid.xy, gid.z), r);
+}

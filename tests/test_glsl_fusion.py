@@ -1,0 +1,196 @@
+"""The gpu preset's reads fused into a conv: AveragePool 2x2 and Resize x2 (linear, half_pixel) are not
+passes of their own but the way the consuming conv reads its input (directly or through a Concat read in
+place). Each case: the gpu preset has fewer passes and the same output as onnxruntime (GLSL on Mesa,
+and WGSL where a WebGPU adapter exists), the cpu preset keeps its passes; a case the read templates do
+not implement keeps its pass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import onnx
+import pytest
+from helpers import both_presets, image_model, named_node, seeded_weights
+
+from neuralao.export.glsl import generate_compute
+from neuralao.export.onnx_io import run_onnxruntime
+from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.glsl_runner import run_compute_all
+
+C = 5
+SHAPE = (1, C, "H", "W")  # dynamic: sizes are multiples of the pad multiple the pools and resizes need
+
+
+def _conv(x: str, out: str, cin: int, seed: int, cout: int = 6) -> tuple[list, list]:
+    """A 3x3 conv (pads 1) ``x`` -> ``out`` with seeded weights, and its initializers."""
+    w, b = f"w_{out}", f"b_{out}"
+    inits = [(w, seeded_weights((cout, cin, 3, 3), seed) * 0.3), (b, seeded_weights((cout,), seed + 1))]
+    return [named_node("Conv", (x, w, b), out, pads=[1, 1, 1, 1])], inits
+
+
+def _up(x: str, out: str, mode: str = "half_pixel") -> tuple[list, list]:
+    scales = f"s_{out}"
+    node = named_node("Resize", (x, "", scales), out, mode="linear", coordinate_transformation_mode=mode)
+    return [node], [(scales, np.array([1, 1, 2, 2], np.float32))]
+
+
+def _pool(x: str, out: str) -> list:
+    return [named_node("AveragePool", (x,), out, kernel_shape=[2, 2], strides=[2, 2])]
+
+
+def _check(nodes, inits, x: np.ndarray) -> tuple[dict, dict]:
+    """Both presets vs onnxruntime (GLSL 4.30 on Mesa); the (gpu, cpu) manifests."""
+    model = image_model(nodes, inits, in_shape=SHAPE)
+    ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
+    cpu = both_presets(model, ref, lambda program: run_compute_all(program, x)["y"], TOL.glsl_op_fp32)
+    gpu = generate_compute(model, preset="gpu")
+    _wgsl_matches(model, x, ref)
+    return gpu.manifest, cpu.manifest
+
+
+def _wgsl_matches(model: onnx.ModelProto, x: np.ndarray, ref: np.ndarray) -> None:
+    """The gpu preset's WGSL vs onnxruntime too, where wgpu finds an adapter."""
+    try:
+        import wgpu
+
+        adapter = wgpu.gpu.request_adapter_sync()
+    except (ImportError, RuntimeError):
+        adapter = None
+    if adapter is None:
+        return
+    from neuralao.runtime.wgsl_runner import run_wgsl_all
+
+    got = run_wgsl_all(generate_compute(model, preset="gpu", dialect="wgsl"), x)["y"]
+    assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+def _x(h: int, w: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).normal(size=(1, C, h, w)).astype(np.float32)
+
+
+def _kinds(manifest: dict) -> list[str]:
+    return [p["kind"] for p in manifest["passes"]]
+
+
+def test_pool_read_by_conv():
+    conv, inits = _conv("p", "y", C, 3)
+    gpu, cpu = _check(_pool("x", "p") + conv, inits, _x(12, 20))
+    assert "pool_avg" in _kinds(cpu) and "pool_avg" not in _kinds(gpu)
+    assert len(gpu["passes"]) < len(cpu["passes"])
+    assert ["AveragePool", "Conv"] == next(p["ops"] for p in gpu["passes"] if p["kind"] == "conv")[:2]
+    assert len(gpu["memory"]["textures"]) < len(cpu["memory"]["textures"])  # the pooled texture is gone
+
+
+def test_pool_read_by_two_convs_in_a_concat():
+    """A pool feeding two convs, one of them through a Concat with the pool's own input pooled again."""
+    a, ia = _conv("p", "a", C, 3)
+    b, ib = _conv("c", "y0", C + 6, 5)
+    nodes = _pool("x", "p") + a + [named_node("Concat", ("a", "p"), "c", axis=1)] + b
+    nodes.append(named_node("Relu", ("y0",), "y"))
+    gpu, cpu = _check(nodes, ia + ib, _x(16, 12, 1))
+    assert _kinds(cpu).count("pool_avg") == 1 and "pool_avg" not in _kinds(gpu)
+
+
+@pytest.mark.parametrize("skip", [False, True])
+def test_resize_read_by_conv(skip):
+    """Conv(Resize(x)) and Conv(Concat(Resize(x), skip)), the U-Net's decoder step."""
+    if skip:
+        conv, inits = _conv("c", "y", 2 * C, 7)
+        nodes = _up("h", "u")[0] + [named_node("Concat", ("u", "x"), "c", axis=1)] + conv
+        nodes = [*_pool("x", "h"), *nodes]
+        inits = _up("h", "u")[1] + inits
+    else:
+        conv, inits = _conv("u", "y", C, 7)
+        nodes, up_inits = _up("x", "u")
+        nodes, inits = nodes + conv, up_inits + inits
+    gpu, cpu = _check(nodes, inits, _x(8, 16, 2))
+    assert "resize_linear" in _kinds(cpu) and "resize_linear" not in _kinds(gpu)
+    assert len(cpu["passes"]) - len(gpu["passes"]) == 2  # the resize and the crop (into the conv)
+
+
+def test_the_shipped_unet_fuses_the_pad_every_pool_and_resize():
+    """unet-gtao: the pad, 3 pools and 3 resizes gone (24 passes -> 14), the same output as onnxruntime
+    on the reflect-padded input at an odd size."""
+    from neuralao.runtime.shipped import shipped_models
+
+    model = onnx.load(shipped_models()["unet-gtao"] / "model.onnx")
+    gpu = generate_compute(model, preset="gpu")
+    cpu = generate_compute(model, preset="cpu")
+    assert _kinds(cpu.manifest).count("pool_avg") == 3 and _kinds(cpu.manifest).count("resize_linear") == 3
+    assert not {"pad", "pool_avg", "resize_linear"} & set(_kinds(gpu.manifest))
+    assert len(gpu.manifest["passes"]) == 14 and len(cpu.manifest["passes"]) == 24
+    x = np.random.default_rng(6).normal(size=(1, 5, 29, 35)).astype(np.float32)
+    x[:, 0] = np.abs(x[:, 0]) + 0.5  # depth
+    padded = np.pad(x, ((0, 0), (0, 0), (0, 3), (0, 5)), mode="reflect")
+    feeds = {"gbuffer": padded, "radius": np.full((1, 1, 1, 1), 0.3, np.float32)}
+    ref = run_onnxruntime(model.SerializeToString(), feeds)[0][:, :, :29, :35]
+    got = next(iter(run_compute_all(gpu, x, scalars={"radius": 0.3}).values()))
+    assert got.shape == ref.shape and float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["asymmetric", "pool_relu", "pool_output", "pool_3x3", "pad_relu"],
+)
+def test_reads_not_implemented_keep_their_pass(case):
+    """Only the exact pool and resize the read templates implement fuse; others stay passes."""
+    conv, inits = _conv("p", "y", C, 3)
+    if case == "asymmetric":
+        nodes, up_inits = _up("x", "p", mode="asymmetric")
+        nodes, inits, kind = nodes + conv, up_inits + inits, "resize_linear"
+    elif case == "pool_relu":  # the Relu joins the pool's epilogue: the read would skip it
+        nodes = _pool("x", "q") + [named_node("Relu", ("q",), "p")] + conv
+        kind = "pool_avg"
+    elif case == "pad_relu":  # the Relu of the input joins the pad pass's epilogue
+        nodes, kind = [named_node("Relu", ("x",), "p"), *conv], "pad"
+    elif case == "pool_output":  # the pooled image is also a graph output (a crop reads it)
+        nodes, kind = _pool("x", "p") + conv, "pool_avg"
+    else:
+        nodes = [
+            named_node("AveragePool", ("x",), "p", kernel_shape=[3, 3], strides=[2, 2], pads=[1, 1, 1, 1])
+        ]
+        nodes, kind = nodes + conv, "pool_avg"
+    model = image_model(nodes, inits, in_shape=SHAPE)
+    if case == "pool_output":
+        model.graph.output.append(onnx.helper.make_tensor_value_info("p", onnx.TensorProto.FLOAT, None))
+    gpu = generate_compute(model, preset="gpu")
+    assert kind in _kinds(gpu.manifest)
+    x = _x(8, 16, 4)
+    ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
+    got = run_compute_all(gpu, x)["y"]
+    assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+@pytest.mark.parametrize("flip_y", [False, True])
+def test_pad_read_by_the_first_convs(flip_y):
+    """The reflect pad (to a multiple of 8, bottom/right) read by the convs of the input, also through
+    a Concat, with the input stored bottom-up (u_flip_y): no pad pass, the padded texture gone."""
+    a, ia = _conv("x", "a", C, 3)
+    b, ib = _conv("c", "y", C + 6, 5, cout=3)
+    model = image_model(a + [named_node("Concat", ("x", "a"), "c", axis=1)] + b, ia + ib, in_shape=SHAPE)
+    onnx.helper.set_model_props(model, {"pad_multiple": "8"})
+    x = _x(13, 21, 5)
+    padded = np.pad(x, ((0, 0), (0, 0), (0, 3), (0, 3)), mode="reflect")
+    ref = run_onnxruntime(model.SerializeToString(), {"x": padded})[0][:, :, :13, :21]
+    gpu, cpu = (generate_compute(model, preset=p) for p in ("gpu", "cpu"))
+    assert _kinds(cpu.manifest)[0] == "pad" and "pad" not in _kinds(gpu.manifest)
+    assert gpu.manifest["pad"]["pass"] is None and len(gpu.manifest["pad"]["read_by"]) == 2
+    assert cpu.manifest["pad"]["pass"] == "p00_pad" and "read_by" not in cpu.manifest["pad"]
+    assert all("u_flip_y" in p["uniforms"] for p in gpu.manifest["passes"])
+    assert len(gpu.manifest["memory"]["textures"]) < len(cpu.manifest["memory"]["textures"])
+    for program in (gpu, cpu):
+        stored = x[:, :, ::-1] if flip_y else x
+        got = run_compute_all(program, np.ascontiguousarray(stored), flip_y=flip_y)["y"]
+        got = got[:, :, ::-1] if flip_y else got
+        assert got.shape == ref.shape and float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+    try:
+        import wgpu
+
+        adapter = wgpu.gpu.request_adapter_sync()
+    except (ImportError, RuntimeError):
+        adapter = None
+    if adapter is not None:
+        from neuralao.runtime.wgsl_runner import run_wgsl_all
+
+        got = run_wgsl_all(generate_compute(model, preset="gpu", dialect="wgsl"), x)["y"]
+        assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
