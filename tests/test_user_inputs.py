@@ -534,3 +534,36 @@ def test_ctrl_c_and_sigterm_end_in_one_line_and_leave_nothing(tmp_path, sig, aft
     rc, err = _interrupt(argv, sig, after, tmp_path)
     assert rc == code and len(err) == 1 and words in err[0], (rc, err)
     assert "Traceback" not in err[0] and not (tmp_path / "out.ply").exists() and not temporaries(tmp_path)
+
+
+SWALLOWED = """
+import importlib, os, signal, sys, types
+from pathlib import Path
+from neuralao.runtime.foundation.io import {writer}
+
+def work(parser, args, command):
+    try:  # what trimesh does around an optional import: the signal's exception is swallowed
+        os.kill(os.getpid(), signal.{sig})
+    except BaseException:
+        pass
+    with {writer}(Path("out")) as tmp:
+        (tmp / "ao.txt" if tmp.is_dir() else tmp).write_text("done")
+    return 0
+
+cli = importlib.import_module("neuralao.pipeline.cli.main")
+cli.build_parser = lambda load=None: types.SimpleNamespace(parse_args=lambda argv: types.SimpleNamespace(command=None))
+cli._run = work
+sys.exit(cli.main([]))
+"""
+
+
+@pytest.mark.parametrize("writer", ["atomic_path", "atomic_folder"])
+@pytest.mark.parametrize("sig,code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_a_signal_a_library_swallows_still_stops_the_output(tmp_path, writer, sig, code):
+    """A library catching BaseException eats the interrupt, the work goes on and finishes: the rename
+    is where it must stop, so nothing is published and the command ends as interrupted."""
+    script = SWALLOWED.format(sig=sig, writer=writer)
+    proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert proc.returncode == code and len(lines) == 1 and "Traceback" not in lines[0], (proc.returncode, lines)
+    assert not (tmp_path / "out").exists() and not temporaries(tmp_path)

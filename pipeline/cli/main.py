@@ -13,6 +13,7 @@ import threading
 from typing import NoReturn
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.signals import RECEIVED as _RECEIVED
 
 # subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -96,11 +97,6 @@ def build_parser(load: str | None = None) -> argparse.ArgumentParser:
 class Terminated(BaseException):
     """SIGTERM, raised in the main thread like KeyboardInterrupt is for SIGINT, so both unwind the same way:
     every ``finally`` runs (temporaries removed, nothing half-written) and the command ends in one line."""
-
-
-# The signals this run received: an interrupt that a library turned into another error (numpy's import
-# reports one as an ImportError) still ends as an interrupt.
-_RECEIVED: list[int] = []
 
 
 def _on_signal(signum, frame) -> NoReturn:
@@ -192,7 +188,9 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser(load=load)
         _raise_received()
         args = parser.parse_args(argv)
-        return _run(parser, args, f"neuralao {args.command}" if args.command else command)
+        rc = _run(parser, args, f"neuralao {args.command}" if args.command else command)
+        _raise_received()  # a signal a library swallowed: the command still ends as interrupted
+        return rc
     except (KeyboardInterrupt, Terminated, Exception) as e:
         if isinstance(e, KeyboardInterrupt) or _RECEIVED[:1] == [signal.SIGINT]:
             sys.stderr.write(f"\n{command}: interrupted (Ctrl-C)\n")
@@ -206,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"{command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n")
         return 1
     finally:
+        _RECEIVED.clear()  # this run's: a later call in the same process starts with none
         for s, handler in previous.items():
             signal.signal(s, handler)
         if hook is not None:

@@ -28,6 +28,7 @@ from PIL import Image
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import available_memory, format_bytes
+from neuralao.runtime.foundation.signals import raise_received
 
 
 def _umask() -> int:
@@ -110,6 +111,7 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
         yield tmp_path
         with open(tmp_path, "rb+") as f:
             os.fsync(f.fileno())
+        raise_received()  # a signal a library swallowed meanwhile: the output is not published
         os.replace(tmp_path, path)
     finally:
         if tmp_path is not None and tmp_path.exists():
@@ -131,6 +133,7 @@ def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
             old = tmp.with_name(tmp.name.removesuffix(".tmp") + ".old.tmp")
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
+        raise_received()
         with _signals_held():  # both renames or neither: an interrupt never leaves the old folder aside
             moved = path.is_dir() and not path.is_symlink()
             if moved:
