@@ -38,7 +38,7 @@ from neuralao.pipeline.models.unet_frames import load_dataset_frames
 from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
 from neuralao.runtime.baselines import time_screen_space
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import sha256_file, write_json
+from neuralao.runtime.foundation.io import atomic_folder, sha256_file, write_json
 from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
@@ -127,18 +127,6 @@ def _checkpoint_provenance(path: str) -> dict | None:
     }
 
 
-def install(tmp: Path, target: Path) -> None:
-    """Replace ``target`` by ``tmp`` with renames only (an interrupted install leaves one of the two)."""
-    old = target.with_name(f".{target.name}.old")
-    if old.exists():
-        shutil.rmtree(old)
-    if target.exists():
-        target.rename(old)
-    tmp.rename(target)
-    if old.exists():
-        shutil.rmtree(old)
-
-
 def timing_frame(data: Path, split: str, size: tuple[int, int]) -> tuple[dict, float]:
     """A G-buffer at ``size`` (W, H) from the pose of the split's first frame, and its label radius."""
     ds = open_dataset(data)
@@ -216,20 +204,12 @@ def ship_model(
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
     checkpoints[spec.name] = ckpt_path
 
-    out = _path(settings.out)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = out / f".{spec.name}.tmp"
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    try:
-        entry = _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, out, commit)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
-    return entry
+    with atomic_folder(_path(settings.out) / spec.name) as tmp:  # replaces the installed folder whole
+        return _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit)
 
 
-def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, out, commit) -> dict:
+def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dict:
+    """Export, check and time one trained model into the folder ``tmp``; returns its index entry."""
     manifest = export_checkpoint(ckpt_path, tmp)
     ds = open_dataset(data)
     frames = []
@@ -309,7 +289,6 @@ def _export_and_install(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, ou
     size = folder_bytes(tmp)
     if size > settings.max_bytes:
         raise NeuralaoError(f"model {spec.name}: export is {size} bytes, over the {settings.max_bytes} limit")
-    install(tmp, out / spec.name)
     log.info(
         "%s: test SSIM %.4f RMSE %.4f, GL %s, %d bytes",
         spec.name,
@@ -379,11 +358,7 @@ def refresh_shaders(model_dir: Path, max_bytes: int, commit: str | None = None) 
     onnx_path = model_dir / manifest.get("onnx", "model.onnx")
     proto = load_onnx(onnx_path)
     meta = get_metadata(proto)
-    tmp = model_dir.with_name(f".{model_dir.name}.tmp")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    try:
+    with atomic_folder(model_dir) as tmp:
         shutil.copy2(onnx_path, tmp / onnx_path.name)
         glsl_dir = write_glsl(proto, tmp / "glsl", "fp32")
         height = manifest.get("internal_height")
@@ -408,10 +383,6 @@ def refresh_shaders(model_dir: Path, max_bytes: int, commit: str | None = None) 
         size = folder_bytes(tmp)
         if size > max_bytes:
             raise NeuralaoError(f"{model_dir.name}: export is {size} bytes, over the {max_bytes} limit")
-        install(tmp, model_dir)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp)
     return par | {"bytes": size}
 
 
