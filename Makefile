@@ -52,16 +52,16 @@ DEMO_REPORT_FLAGS := --gt-rays 512 --frames-per-scene 2 --time-size 256 256 --re
 	--set 'expected_exports=[$(subst $(space),$(comma),$(foreach s,$(MLP_SIZES),"mlp-$(s)") "unet")]'
 VIEWER_PNG := $(BUILD)/viewer.png
 
-.PHONY: bench-gpu help setup system-deps dataset corpus corpus-large corpus-full curve experiments evaluate models model-shaders train export parity report select demo host test fuzz bench lint clean
+.PHONY: bench-gpu help setup system-deps dataset corpus corpus-large corpus-full curve experiments evaluate models model-shaders train export parity report select demo host host-vk test fuzz bench lint clean
 
 help: ## Show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*?## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*?## "}; {printf "  \033[36m%-10s\033[0m %s\n", $$1, $$2}'
 
 # chromium + chromium-driver: the headless browser of the viewer test (tests/test_viewer.py, selenium).
 SYSTEM_PACKAGES := libosmesa6 libegl1 libgles2 libgl1-mesa-dri glslang-tools chromium chromium-driver \
-  mesa-vulkan-drivers spirv-cross gcc libegl-dev libgl-dev
+  mesa-vulkan-drivers spirv-cross gcc libegl-dev libgl-dev libvulkan-dev
 
-system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator, headless Chromium, lavapipe (Vulkan, for WGSL), SPIRV-Cross, EGL/GL headers (C host)
+system-deps: ## Install Debian packages: OSMesa, EGL/GLES (Mesa llvmpipe), glslangValidator, headless Chromium, lavapipe (Vulkan, for WGSL and the Vulkan runner), SPIRV-Cross, EGL/GL headers (C host), Vulkan headers (Vulkan runner)
 	@if ! dpkg -s $(SYSTEM_PACKAGES) >/dev/null 2>&1; then \
 	  echo "installing system packages (apt-get)"; \
 	  apt-get update -qq; \
@@ -206,18 +206,26 @@ select: $(EXPORTS) ## Pick the smallest model meeting the error target per scene
 demo: $(REPORT) $(VIEWER_PNG) ## Set up if needed, then dataset -> train -> export -> parity -> report on the default scenes
 	@echo "demo done: $(REPORT) (and report.html, contact sheets, viewer pages in $(BUILD)/report/), $(VIEWER_PNG)"
 
-# The C reference host (runtime/host/): EGL (surfaceless Mesa) + OpenGL 4.3 compute, no Python.
+# The C reference hosts (runtime/host/), no Python: EGL (surfaceless Mesa) + OpenGL 4.3 compute, and the
+# Vulkan runner (the export's SPIR-V through libvulkan: lavapipe here).
 HOST := build/host/neuralao_host
+VK_HOST := build/host/neuralao_vk
 HOST_CFLAGS := -O2 -std=c11 -Wall -Wextra -Werror
 
-bench-gpu: $(STAMP) ## GPU time of the shipped U-Nets' whole frames, GTAO and SSAO (C host, GL timer queries): bench/gpu.sh
+bench-gpu: $(STAMP) ## GPU time of the shipped U-Nets' whole frames, GTAO and SSAO (C host: GL timer queries; Vulkan runner: timestamps): bench/gpu.sh
 	bench/gpu.sh
 
 host: $(HOST) ## Build the standalone C host that runs a shipped export on a raw float32 G-buffer
 
-$(HOST): runtime/host/neuralao_host.c
+$(HOST): runtime/host/neuralao_host.c runtime/host/host_common.h
 	mkdir -p $(@D)
 	$${CC:-cc} $(HOST_CFLAGS) -o $@ $< -lEGL -lOpenGL -lm
+
+host-vk: $(VK_HOST) ## Build the standalone C Vulkan runner of a shipped export's SPIR-V (same command line as the host)
+
+$(VK_HOST): runtime/host/neuralao_vk.c runtime/host/host_common.h
+	mkdir -p $(@D)
+	$${CC:-cc} $(HOST_CFLAGS) -o $@ $< -lvulkan -lm
 
 test: $(STAMP) ## Set up if needed, check the import layers, then run the test suite
 	$(VENV)/bin/lint-imports --no-cache

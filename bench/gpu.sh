@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # GPU time of the shipped default (unet-gtao), the fast model (unet-fast), this project's GTAO and its SSAO,
-# measured by the C host (runtime/host) with GL timer queries (GL_TIME_ELAPSED), at 1920x1080 and 3840x2160,
-# for both generator presets (gpu, cpu) and both precisions (fp32, fp16). Prints a markdown table of ms and
-# ratios to GTAO and writes JSON.
+# measured by the C host (runtime/host/neuralao_host.c) with GL timer queries (GL_TIME_ELAPSED) and by the
+# Vulkan runner (runtime/host/neuralao_vk.c) with vkCmdWriteTimestamp, at 1920x1080 and 3840x2160, for both
+# generator presets (gpu, cpu) and both precisions (fp32, fp16). Prints a markdown table of ms and ratios to
+# GTAO, a row per API (gl, vulkan), and writes JSON.
 #
-#   bench/gpu.sh prepare   here, with the venv: build the host, generate the exports (network + frame passes)
-#                          and the SSAO baseline's shaders into build/bench-gpu
-#   bench/gpu.sh run       anywhere with EGL and OpenGL 4.3 (no Python packages needed): time, table, JSON
+#   bench/gpu.sh prepare   here, with the venv: build the host (and the Vulkan runner where vulkan/vulkan.h
+#                          exists), generate the exports (network + frame passes, GLSL and, for the runner,
+#                          Vulkan SPIR-V) and the SSAO baseline's shaders into build/bench-gpu
+#   bench/gpu.sh run       anywhere with EGL and OpenGL 4.3 (no Python packages needed): time, table, JSON;
+#                          each case through Vulkan too where the runner was built and finds a Vulkan device
 #   bench/gpu.sh           both
 #
 # Environment: SIZES ("1920x1080 3840x2160"), REPEATS (timed runs per case, 20), MODELS ("unet-gtao
@@ -14,9 +17,11 @@
 # BENCH_GPU_SMALL=1 (one 128x96 frame, 1 run: what the test runs on llvmpipe).
 #
 # On an NVIDIA GPU (the device machine, which fetches nothing): `bench/gpu.sh prepare` here, then one call
-# carrying .gl (the GL/EGL loader debs, /work/.library/device/README.md) and build/bench-gpu:
+# carrying .gl (the GL/EGL and Vulkan loader debs, libvulkan1 among them, /work/.library/device/README.md) and
+# build/bench-gpu:
 #   for f in .gl/*.deb; do dpkg -x $f /; done; ldconfig; \
-#   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json; \
+#   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json \
+#     VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json; \
 #   bench/gpu.sh run
 # Frames are the host's synthetic G-buffer (a wavy surface, every pixel foreground, as in a game frame).
 # A model's time is its whole frame as an engine runs it, every step of the manifest's frame.steps
@@ -25,11 +30,12 @@
 # hybrid's own GTAO steps (f_gtao + f_gtao_blur) in the same runs; SSAO is the project's SSAO and its blur
 # (neuralao.runtime.baselines' fragment shaders) on the same G-buffer in every run. Where GL reports no
 # GPU time (Mesa's llvmpipe: 0 for compute), the wall clock between glFinish calls is used and the table
-# says so.
+# says so; Vulkan rows likewise where the queue has no timestamps (the wall clock from submission to fence).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=build/bench-gpu
 HOST=$BUILD/neuralao_host
+VK=$BUILD/neuralao_vk
 PY=${PY:-.venv/bin/python}
 SIZES=${SIZES:-1920x1080 3840x2160}
 REPEATS=${REPEATS:-20}
@@ -42,7 +48,15 @@ if [[ ${BENCH_GPU_SMALL:-0} == 1 ]]; then SIZES=128x96 REPEATS=1; fi
 prepare() {
   mkdir -p "$BUILD"
   ${CC:-cc} -O2 -std=c11 -Wall -Wextra -Werror -o "$HOST" runtime/host/neuralao_host.c -lEGL -lOpenGL -lm
-  "$PY" - "$BUILD" "$MODELS" "$PRESETS" "$PRECISIONS" <<'PYEOF'
+  local vulkan=0
+  rm -f "$VK"
+  if [[ -f /usr/include/vulkan/vulkan.h ]]; then
+    ${CC:-cc} -O2 -std=c11 -Wall -Wextra -Werror -o "$VK" runtime/host/neuralao_vk.c -lvulkan -lm
+    vulkan=1
+  else
+    echo "bench/gpu.sh: no vulkan/vulkan.h (Debian: libvulkan-dev): GL only" >&2
+  fi
+  "$PY" - "$BUILD" "$MODELS" "$PRESETS" "$PRECISIONS" "$vulkan" <<'PYEOF'
 import dataclasses, json, shutil, sys
 from pathlib import Path
 
@@ -83,7 +97,8 @@ def ssao_entry(out: Path) -> dict:
     }
 
 
-build, models, presets, precisions = Path(sys.argv[1]), *(a.split() for a in sys.argv[2:])
+build, vulkan = Path(sys.argv[1]), sys.argv[5] == "1"
+models, presets, precisions = (a.split() for a in sys.argv[2:5])
 for model in models:
     src = Path("runtime/models") / model
     for preset in presets:
@@ -95,25 +110,45 @@ for model in models:
             manifest.pop("internal_resolution", None)  # its fragment passes: the frame section replaces them
             manifest["ssao"] = ssao_entry(out)
             (out / "manifest.json").write_text(json.dumps(manifest, indent=1))
-            program = frame_program(onnx.load(src / "model.onnx"), precision=precision, preset=preset)
+            proto = onnx.load(src / "model.onnx")
+            program = frame_program(proto, precision=precision, preset=preset)
             write_compute_export(program, out / "glsl", validate=False)
+            if vulkan:  # the same passes as Vulkan GLSL, compiled to SPIR-V, for the Vulkan runner
+                program = frame_program(proto, dialect="vulkan", precision=precision, preset=preset)
+                write_compute_export(program, out / "vulkan", validate=False)
 PYEOF
+}
+
+# Whether the Vulkan runner was built and runs here (a Vulkan device): one small frame of the first export.
+vulkan_runs() {
+  [[ -x $VK ]] || return 1
+  local first=${MODELS%% *}-${PRESETS%% *}-${PRECISIONS%% *} err
+  if ! err=$("$VK" "$BUILD/exports/$first" synthetic 64 48 0.5 60 "$BUILD/ao-vk.f32" 2>&1 >/dev/null); then
+    echo "bench/gpu.sh: the Vulkan runner does not run here (${err##*neuralao_vk: }): GL only" >&2
+    return 1
+  fi
 }
 
 run() {
   [[ -x $HOST ]] || { echo "bench/gpu.sh: no $HOST: run 'bench/gpu.sh prepare' first" >&2; exit 1; }
-  local lines=$BUILD/runs.jsonl
+  local lines=$BUILD/runs.jsonl vulkan=0
   : >"$lines"
+  if vulkan_runs; then vulkan=1; fi
   for size in $SIZES; do
     for model in $MODELS; do
       for preset in $PRESETS; do
         for precision in $PRECISIONS; do
           local export=$BUILD/exports/$model-$preset-$precision
           [[ -d $export ]] || { echo "bench/gpu.sh: no $export: run 'bench/gpu.sh prepare'" >&2; exit 1; }
-          local json
+          local json case="\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\""
           json=$(NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
             "$BUILD/ao.f32" 2>/dev/null)
-          echo "{\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\", ${json#\{}" >>"$lines"
+          echo "{$case, \"api\": \"gl\", ${json#\{}" >>"$lines"
+          if ((vulkan)); then  # its line names its api
+            json=$(NEURALAO_HOST_REPEATS=$REPEATS "$VK" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
+              "$BUILD/ao-vk.f32" 2>/dev/null)
+            echo "{$case, ${json#\{}" >>"$lines"
+          fi
         done
       done
     done

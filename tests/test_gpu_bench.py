@@ -1,6 +1,7 @@
 """bench/gpu.sh runs unchanged on llvmpipe: one small frame, one timed run, both shipped models, both
-presets; its table has GTAO's and SSAO's rows and each model's ratio to GTAO. The SSAO the host times is
-the project's SSAO: its output on a frame matches ``neuralao.runtime.baselines.run_ssao``."""
+presets; its table has GTAO's and SSAO's rows and each model's ratio to GTAO, for the GL host and, where
+the Vulkan runner was built (vulkan/vulkan.h), for Vulkan on lavapipe too. The SSAO the host times is the
+project's SSAO: its output on a frame matches ``neuralao.runtime.baselines.run_ssao``."""
 
 from __future__ import annotations
 
@@ -41,20 +42,33 @@ def bench(tmp_path_factory) -> tuple[str, dict, Path]:
 
 
 def test_gpu_bench_runs_small(bench):
-    stdout, result, _ = bench
+    stdout, result, build = bench
     for row in (
-        "| 128x96 | GTAO | - | fp32 |",
-        "| 128x96 | SSAO | - | fp32 |",
-        "| 128x96 | unet-fast | gpu | fp32 |",
+        "| 128x96 | gl | GTAO | - | fp32 |",
+        "| 128x96 | gl | SSAO | - | fp32 |",
+        "| 128x96 | gl | unet-fast | gpu | fp32 |",
     ):
         assert row in stdout, stdout
-    assert {row["preset"] for row in result["rows"]} == {"gpu", "cpu"}
-    assert {row["model"] for row in result["rows"]} == {"unet-gtao", "unet-fast"}
+    # the Vulkan runner is built where its headers are (the Makefile's system-deps install them) and runs
+    # on lavapipe: a row per case, with GTAO's (the Vulkan runner has no SSAO)
+    apis = {"gl", "vulkan"} if (build / "neuralao_vk").exists() else {"gl"}
+    assert {row["api"] for row in result["rows"]} == apis
+    if "vulkan" in apis:
+        assert (
+            "| 128x96 | vulkan | GTAO | - | fp32 |" in stdout and "| 128x96 | vulkan | SSAO |" not in stdout
+        )
+        assert "| 128x96 | vulkan | unet-gtao | cpu | fp32 |" in stdout, stdout
+        assert result["gtao_ms"]["vulkan"]["128x96"] > 0 and "vulkan" not in result["ssao_ms"]
+    for api in apis:
+        rows = [row for row in result["rows"] if row["api"] == api]
+        assert len(rows) == 4  # 2 models x 2 presets x fp32
+        assert {row["preset"] for row in rows} == {"gpu", "cpu"}
+        assert {row["model"] for row in rows} == {"unet-gtao", "unet-fast"}
     assert all(
         row["path"] == "frame" and row["frame_ms"] > 0 and row["network_ms"] > 0 for row in result["rows"]
     )
     assert all(row["over_gtao"] and row["over_gtao"] > 0 for row in result["rows"])
-    assert result["gtao_ms"]["128x96"] > 0 and result["ssao_ms"]["128x96"] > 0
+    assert result["gtao_ms"]["gl"]["128x96"] > 0 and result["ssao_ms"]["gl"]["128x96"] > 0
     # a hybrid's frame has GTAO steps, timed on their own; the fast model's has none (times are not
     # compared here: one run on a shared machine orders them by chance)
     for row in result["rows"]:

@@ -46,49 +46,16 @@
  * GBUFFER.f32 may be the word "synthetic": a seeded wavy surface filling the frame (all foreground).
  *
  * Context: EGL's surfaceless platform (Mesa, or NVIDIA's EGL through glvnd), OpenGL 4.3 core.
- * The manifest is read by the small JSON reader below (objects, arrays, strings, numbers, literals).
+ * The manifest is read by the small JSON reader of host_common.h (shared with the Vulkan runner, neuralao_vk.c).
  */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #define GL_GLEXT_PROTOTYPES 1
 #include <EGL/egl.h>
 #include <EGL/eglext.h>
 #include <GL/glcorearb.h>
-#include <ctype.h>
-#include <math.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
 
-static void die(const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    fputs("neuralao_host: ", stderr);
-    vfprintf(stderr, fmt, ap);
-    fputc('\n', stderr);
-    va_end(ap);
-    exit(1);
-}
-
-static void *xmalloc(size_t n) {
-    void *p = calloc(1, n ? n : 1);
-    if (!p) die("out of memory");
-    return p;
-}
-
-static char *read_file(const char *path, size_t *size) {
-    FILE *f = fopen(path, "rb");
-    if (!f) die("cannot open %s", path);
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *buf = xmalloc((size_t)n + 1);
-    if (n > 0 && fread(buf, 1, (size_t)n, f) != (size_t)n) die("cannot read %s", path);
-    fclose(f);
-    if (size) *size = (size_t)n;
-    return buf;
-}
+#define HOST_NAME "neuralao_host"
+#include "host_common.h"
 
 /* ------------------------------------------------------------------ GPU timing */
 
@@ -99,18 +66,7 @@ static double g_frame_ms = -1, g_network_ms = -1, g_gtao_ms = -1, g_ssao_ms = -1
 static double g_frame_wall_ms = -1, g_network_wall_ms = -1, g_gtao_wall_ms = -1, g_ssao_wall_ms = -1;
 static double g_wall_start;
 
-static int cmp_double(const void *a, const void *b) {
-    const double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
 static GLuint g_query;
-
-static double wall_ms(void) {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
 
 static void time_begin(void) {
     if (!g_query) glGenQueries(1, &g_query);
@@ -127,135 +83,6 @@ static double time_end_ms(double *wall) {
     GLuint64 ns = 0;
     glGetQueryObjectui64v(g_query, GL_QUERY_RESULT, &ns);
     return (double)ns * 1e-6;
-}
-
-static double median(double *v, int n) {
-    qsort(v, (size_t)n, sizeof(double), cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-/* ------------------------------------------------------------------ JSON reader */
-
-enum { J_NULL, J_BOOL, J_NUM, J_STR, J_ARR, J_OBJ };
-
-typedef struct Json {
-    int type;
-    double num;
-    char *str;            /* J_STR value */
-    int n;                /* J_ARR / J_OBJ: number of items */
-    char **keys;          /* J_OBJ */
-    struct Json **items;  /* J_ARR / J_OBJ */
-} Json;
-
-typedef struct { const char *s; } Reader;
-
-static void skip_ws(Reader *r) {
-    while (*r->s == ' ' || *r->s == '\n' || *r->s == '\r' || *r->s == '\t') r->s++;
-}
-
-static Json *parse_value(Reader *r);
-
-static char *parse_string(Reader *r) {
-    if (*r->s != '"') die("manifest: expected a string");
-    r->s++;
-    size_t cap = 16, len = 0;
-    char *out = xmalloc(cap);
-    while (*r->s != '"') {
-        char c = *r->s++;
-        if (!c) die("manifest: unterminated string");
-        if (c == '\\') {
-            char e = *r->s++;
-            switch (e) {
-                case 'n': c = '\n'; break;
-                case 't': c = '\t'; break;
-                case 'r': c = '\r'; break;
-                case 'b': c = '\b'; break;
-                case 'f': c = '\f'; break;
-                case 'u': {  /* keep ASCII, replace the rest by '?': names only, never parsed further */
-                    unsigned v = 0;
-                    for (int i = 0; i < 4; i++) {
-                        char h = *r->s++;
-                        v = v * 16 + (unsigned)(h <= '9' ? h - '0' : (h | 32) - 'a' + 10);
-                    }
-                    c = v < 128 ? (char)v : '?';
-                    break;
-                }
-                default: c = e;  /* \" \\ \/ */
-            }
-        }
-        if (len + 2 > cap) out = realloc(out, cap *= 2);
-        out[len++] = c;
-    }
-    r->s++;
-    out[len] = 0;
-    return out;
-}
-
-static void push(Json *j, char *key, Json *item) {
-    j->items = realloc(j->items, sizeof(Json *) * (size_t)(j->n + 1));
-    if (j->type == J_OBJ) j->keys = realloc(j->keys, sizeof(char *) * (size_t)(j->n + 1)), j->keys[j->n] = key;
-    j->items[j->n++] = item;
-}
-
-static Json *parse_value(Reader *r) {
-    skip_ws(r);
-    Json *j = xmalloc(sizeof(Json));
-    char c = *r->s;
-    if (c == '{' || c == '[') {
-        j->type = c == '{' ? J_OBJ : J_ARR;
-        char close = c == '{' ? '}' : ']';
-        r->s++;
-        skip_ws(r);
-        if (*r->s == close) { r->s++; return j; }
-        for (;;) {
-            char *key = NULL;
-            if (j->type == J_OBJ) {
-                skip_ws(r);
-                key = parse_string(r);
-                skip_ws(r);
-                if (*r->s++ != ':') die("manifest: expected ':'");
-            }
-            push(j, key, parse_value(r));
-            skip_ws(r);
-            if (*r->s == ',') { r->s++; continue; }
-            if (*r->s++ != close) die("manifest: expected ',' or '%c'", close);
-            return j;
-        }
-    }
-    if (c == '"') { j->type = J_STR; j->str = parse_string(r); return j; }
-    if (!strncmp(r->s, "true", 4)) { j->type = J_BOOL; j->num = 1; r->s += 4; return j; }
-    if (!strncmp(r->s, "false", 5)) { j->type = J_BOOL; r->s += 5; return j; }
-    if (!strncmp(r->s, "null", 4)) { j->type = J_NULL; r->s += 4; return j; }
-    char *end;
-    j->type = J_NUM;
-    j->num = strtod(r->s, &end);
-    if (end == r->s) die("manifest: unexpected character '%c'", c);
-    r->s = end;
-    return j;
-}
-
-static Json *jget(const Json *j, const char *key) {  /* NULL when absent */
-    if (!j || j->type != J_OBJ) return NULL;
-    for (int i = 0; i < j->n; i++) if (!strcmp(j->keys[i], key)) return j->items[i];
-    return NULL;
-}
-
-static Json *jreq(const Json *j, const char *key) {
-    Json *v = jget(j, key);
-    if (!v) die("manifest: missing \"%s\"", key);
-    return v;
-}
-
-static double jnum(const Json *j, const char *key) {
-    Json *v = jreq(j, key);
-    if (v->type != J_NUM) die("manifest: \"%s\" is not a number", key);
-    return v->num;
-}
-
-static const char *jstr(const Json *j, const char *key) {
-    Json *v = jreq(j, key);
-    if (v->type != J_STR) die("manifest: \"%s\" is not a string", key);
-    return v->str;
 }
 
 /* ------------------------------------------------------------------ GL context */
@@ -412,11 +239,8 @@ static float *run_network(const Json *m, const char *dir, int w, int h, const fl
     free(x);
 
     /* the weights: one SSBO, each pass binds its range */
-    Json *wj = jreq(m, "weights");
-    snprintf(path, sizeof path, "%s/%s", dir, jstr(wj, "file"));
     size_t w_bytes;
-    char *weights = read_file(path, &w_bytes);
-    if ((double)w_bytes != jnum(wj, "bytes")) die("%s holds %zu bytes, the manifest says %.0f", path, w_bytes, jnum(wj, "bytes"));
+    char *weights = read_weights(m, dir, &w_bytes);
     GLuint ssbo;
     glGenBuffers(1, &ssbo);
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, ssbo);
@@ -768,46 +592,7 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
     return ao;
 }
 
-/* Writes W x H floats to path through a temporary file: a failed run leaves no partial output. */
-static void write_ao(const char *path, const float *ao, int W, int H) {
-    char tmp[4200];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    FILE *f = fopen(tmp, "wb");
-    if (!f || fwrite(ao, sizeof(float), (size_t)W * H, f) != (size_t)W * H || fclose(f)) die("cannot write %s", tmp);
-    if (rename(tmp, path)) die("cannot rename %s to %s", tmp, path);
-}
-
 /* ------------------------------------------------------------------ the whole frame (manifest "frame") */
-
-/* A size formula of the frame section: a number ("1"), or a symbol (W, H: the frame; w, h: the network's
- * input; wp, hp: those padded) with an optional "*num/den", then an optional "+n" / "-n" ("wp*1/8"). */
-static int frame_formula(const char *formula, const int sym[6]) {
-    static const char *names[6] = {"W", "H", "w", "h", "wp", "hp"};
-    const char *s = formula;
-    char name[16] = {0};
-    size_t n = 0;
-    while ((isalnum((unsigned char)*s) || *s == '_') && n + 1 < sizeof name) name[n++] = *s++;
-    long value = 0;
-    char *end;
-    if (n && strspn(name, "0123456789") == n) {
-        value = atol(name);
-    } else if (n) {
-        int k = 0;
-        while (k < 6 && strcmp(name, names[k])) k++;
-        if (k == 6) die("manifest: size formula %s names no size this host knows", formula);
-        value = sym[k];
-        if (*s == '*') {
-            const long num = strtol(s + 1, &end, 10);
-            if (*end != '/') die("manifest: size formula %s is not symbol[*num/den][+-offset]", formula);
-            const long den = strtol(end + 1, &end, 10);
-            if (den <= 0) die("manifest: size formula %s divides by %ld", formula, den);
-            value = value * num / den, s = end;
-        }
-    }
-    if (*s == '+' || *s == '-') value += strtol(s, &end, 10), s = end, n = 1;
-    if (*s || !n) die("manifest: size formula %s is not symbol[*num/den][+-offset]", formula);
-    return (int)value;
-}
 
 static GLenum internal_format(const char *name) {
     static const char *names[] = {"RGBA32F", "RGBA16F", "R32F", "R16F"};
@@ -839,22 +624,6 @@ typedef struct {
     int n_steps;
     GLuint ssbo, ubo;
 } FrameRun;
-
-/* The step's pass entry: a frame pass by name, or the network's pass at "index". */
-static const Json *step_pass(const Json *m, const Json *step) {
-    Json *name = jget(step, "frame_pass");
-    if (!name) {
-        const Json *passes = jreq(m, "passes");
-        const int i = (int)jnum(step, "index");
-        if (i < 0 || i >= passes->n) die("manifest: frame step index %d is not a pass", i);
-        return passes->items[i];
-    }
-    const Json *passes = jreq(jreq(m, "frame"), "passes");
-    for (int i = 0; i < passes->n; i++)
-        if (!strcmp(jstr(passes->items[i], "name"), name->str)) return passes->items[i];
-    die("manifest: frame step %s is no frame pass", name->str);
-    return NULL;
-}
 
 static Step make_step(const char *dir, const Json *p, FrameRun *fr) {
     char path[4200];
@@ -932,35 +701,13 @@ static void time_steps(const FrameRun *fr, int kind, double *ms, double *wall) {
     free(runs);
 }
 
-/* Writes one value of the FrameUniforms block: its member `name` at `offset`, as the camera gives it. */
-static void uniform_member(unsigned char *block, size_t bytes, const char *name, size_t offset, int W, int H,
-                           double radius, double yfov) {
-    const double focal = 1.0 / tan(0.5 * yfov), p00 = focal / ((double)W / H), p11 = focal;
-    float v[2];
-    int flip = 0, n = 1;
-    if (!strcmp(name, "u_proj")) v[0] = (float)p00, v[1] = (float)p11, n = 2;
-    else if (!strcmp(name, "u_radius")) v[0] = (float)radius;
-    else if (!strcmp(name, "u_pixels_per_unit")) v[0] = (float)(0.5 * H * p11);
-    else if (!strcmp(name, "u_flip_y")) n = 0;  /* textures top row first */
-    else die("manifest: FrameUniforms member %s is not one this host fills", name);
-    const size_t size = n ? sizeof(float) * (size_t)n : sizeof flip;
-    if (offset + size > bytes) die("manifest: FrameUniforms member %s lies outside the block", name);
-    memcpy(block + offset, n ? (const void *)v : (const void *)&flip, size);
-}
-
 /* The whole frame from the manifest's "frame" section (see the header, steps 1-5). gb: H x W x 5 floats,
  * row 0 on top. Returns the AO, H x W, row 0 on top. */
 static float *run_frame(const Json *m, const char *dir, const float *gb, int W, int H, double radius, double yfov,
                         int *n_passes) {
-    char path[4200];
     const Json *frame = jreq(m, "frame");
-    const Json *ih_json = jget(frame, "internal_height");
-    const int ih = ih_json && ih_json->type == J_NUM ? (int)ih_json->num : 0;
-    /* round half to even, as Python's round */
-    const int w = ih ? (int)fmax(1.0, rint((double)W * ih / H)) : W, h = ih ? ih : H;
-    const int p = (int)jnum(jreq(m, "pad"), "multiple");
-    if (w < p || h < p) die("the network's input %dx%d is smaller than the pad multiple %d", w, h, p);
-    const int sym[6] = {W, H, w, h, (w + p - 1) / p * p, (h + p - 1) / p * p};
+    int sym[6];
+    frame_symbols(m, W, H, sym);
 
     /* 1. the textures */
     FrameRun fr = {0};
@@ -989,14 +736,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
         Texture *t = find_texture(fr.tex, fr.n_tex, input_ids[k]);
         if (t->w != W || t->h != H) die("input texture %s is %dx%d, the frame %dx%d", t->id, t->w, t->h, W, H);
         const int lanes = t->internal == GL_R32F || t->internal == GL_R16F ? 1 : 4;
-        float *data = xmalloc(sizeof(float) * (size_t)lanes * px);
-        for (size_t i = 0; i < px; i++) {
-            const float *g = gb + i * 5;
-            if (!(g[4] >= 0.5f)) continue;
-            float *texel = data + i * (size_t)lanes;
-            if (k == 0) texel[0] = g[0];
-            else for (int c = 0; c < 3 && c < lanes; c++) texel[c] = isfinite(g[1 + c]) ? g[1 + c] : 0.0f;
-        }
+        float *data = input_texels(gb, px, k, lanes);
         glBindTexture(GL_TEXTURE_2D_ARRAY, t->tex);
         glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
         glTexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, W, H, 1, lanes == 1 ? GL_RED : GL_RGBA, GL_FLOAT, data);
@@ -1004,22 +744,14 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     }
 
     /* 3. the FrameUniforms block, the weights */
-    const Json *ub = jreq(frame, "uniform_block"), *members = jreq(ub, "members");
-    const size_t ub_bytes = (size_t)jnum(ub, "bytes");
-    unsigned char *block = xmalloc(ub_bytes);
-    for (int k = 0; k < members->n; k++)
-        uniform_member(block, ub_bytes, jstr(members->items[k], "name"), (size_t)jnum(members->items[k], "offset"),
-                       W, H, radius, yfov);
+    size_t ub_bytes;
+    unsigned char *block = frame_uniforms(frame, W, H, radius, yfov, &ub_bytes);
     glGenBuffers(1, &fr.ubo);
     glBindBuffer(GL_UNIFORM_BUFFER, fr.ubo);
     glBufferData(GL_UNIFORM_BUFFER, (GLsizeiptr)ub_bytes, block, GL_STATIC_DRAW);
     free(block);
-    const Json *wj = jreq(m, "weights");
-    snprintf(path, sizeof path, "%s/%s", dir, jstr(wj, "file"));
     size_t w_bytes;
-    char *weights = read_file(path, &w_bytes);
-    if ((double)w_bytes != jnum(wj, "bytes"))
-        die("%s holds %zu bytes, the manifest says %.0f", path, w_bytes, jnum(wj, "bytes"));
+    char *weights = read_weights(m, dir, &w_bytes);
     glGenBuffers(1, &fr.ssbo);
     glBindBuffer(GL_SHADER_STORAGE_BUFFER, fr.ssbo);
     glBufferData(GL_SHADER_STORAGE_BUFFER, (GLsizeiptr)(w_bytes ? w_bytes : 16), weights, GL_STATIC_DRAW);
@@ -1030,16 +762,8 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     const int same = net_in->w == W && net_in->h == H;
     const Json *steps = jreq(frame, "steps");
     fr.steps = xmalloc(sizeof(Step) * (size_t)(steps->n ? steps->n : 1));
-    for (int k = 0; k < steps->n; k++) {
-        const Json *st = steps->items[k], *when = jget(st, "when");
-        if (jget(st, "skip")) continue;
-        if (when) {
-            const int at_frame_size = !strcmp(when->str, "(w, h) == (W, H)");
-            if (!at_frame_size && strcmp(when->str, "(w, h) != (W, H)")) die("manifest: step condition %s", when->str);
-            if (at_frame_size != same) continue;
-        }
-        fr.steps[fr.n_steps++] = make_step(dir, step_pass(m, st), &fr);
-    }
+    for (int k = 0; k < steps->n; k++)
+        if (step_runs(steps->items[k], same)) fr.steps[fr.n_steps++] = make_step(dir, step_pass(m, steps->items[k]), &fr);
     dispatch_steps(&fr, -1);
 
     /* 5. the AO, lane 0 of the output texture */
@@ -1094,16 +818,9 @@ static void run_ssao(const Json *ssao, const char *export_dir, const float *gb, 
 /* ------------------------------------------------------------------ main */
 
 int main(int argc, char **argv) {
-    if (argc != 8) {
-        fprintf(stderr, "usage: neuralao_host EXPORT_DIR GBUFFER.f32 WIDTH HEIGHT RADIUS YFOV_DEG OUT.f32\n"
-                        "  GBUFFER.f32: HEIGHT x WIDTH x (depth, nx, ny, nz, mask) float32, row 0 on top\n");
-        return 2;
-    }
-    const int W = atoi(argv[3]), H = atoi(argv[4]);
-    const double radius = atof(argv[5]), yfov_deg = atof(argv[6]);
-    const double yfov = yfov_deg * 3.14159265358979323846 / 180.0; /* degrees, as on every neuralao command */
-    if (W < 1 || H < 1) die("WIDTH and HEIGHT must be positive");
-    if (!(radius > 0) || !(yfov_deg > 0 && yfov_deg < 180)) die("RADIUS must be > 0 and YFOV_DEG in (0, 180) degrees");
+    const HostArgs args = parse_args(argc, argv);
+    const int W = args.W, H = args.H;
+    const double radius = args.radius, yfov = args.yfov;
 
     /* the export: glsl/manifest.json under EXPORT_DIR (and EXPORT_DIR/manifest.json, whose
      * "internal_resolution" names the fragment passes around the network of an export without a frame
@@ -1111,17 +828,12 @@ int main(int argc, char **argv) {
     char dir[4096], path[4200];
     snprintf(dir, sizeof dir, "%s/glsl", argv[1]);
     snprintf(path, sizeof path, "%s/manifest.json", dir);
-    FILE *probe = fopen(path, "rb");
     Json *internal = NULL, *ssao = NULL;
-    if (probe) {
-        fclose(probe);
+    if (file_exists(path)) {
         char top_path[4200];
         snprintf(top_path, sizeof top_path, "%s/manifest.json", argv[1]);
-        FILE *top = fopen(top_path, "rb");
-        if (top) {
-            fclose(top);
-            Reader tr = {read_file(top_path, NULL)};
-            Json *top_manifest = parse_value(&tr);
+        if (file_exists(top_path)) {
+            Json *top_manifest = read_json(top_path);
             internal = jget(top_manifest, "internal_resolution");
             if (internal && internal->type != J_OBJ) internal = NULL;  /* null: the frame's own size */
             ssao = jget(top_manifest, "ssao");
@@ -1131,33 +843,11 @@ int main(int argc, char **argv) {
         snprintf(dir, sizeof dir, "%s", argv[1]);
     }
     snprintf(path, sizeof path, "%s/manifest.json", dir);
-    char *text = read_file(path, NULL);
-    Reader rd = {text};
-    Json *m = parse_value(&rd);
+    Json *m = read_json(path);
     if (strcmp(jstr(m, "format"), "neuralao-glsl-compute")) die("%s is not a GLSL compute export", path);
 
-    const char *repeats = getenv("NEURALAO_HOST_REPEATS");
-    g_repeats = repeats ? atoi(repeats) : 0;
-    if (g_repeats < 0 || g_repeats > 10000) die("NEURALAO_HOST_REPEATS must be 0..10000");
-    size_t gb_bytes;
-    float *gb;
-    if (!strcmp(argv[2], "synthetic")) {  /* a wavy surface facing the camera, every pixel foreground */
-        gb_bytes = (size_t)W * H * 5 * sizeof(float);
-        gb = xmalloc(gb_bytes);
-        for (int r = 0; r < H; r++)
-            for (int c = 0; c < W; c++) {
-                float *g = gb + ((size_t)r * W + c) * 5;
-                const double u = 12.0 * c / W, v = 8.0 * r / H, dzu = 0.3 * cos(u) * sin(v), dzv = 0.3 * sin(u) * cos(v);
-                const double n = sqrt(dzu * dzu + dzv * dzv + 1.0);
-                g[0] = (float)(3.0 + 0.3 * sin(u) * sin(v)), g[1] = (float)(dzu / n), g[2] = (float)(-dzv / n);
-                g[3] = (float)(1.0 / n), g[4] = 1.0f;
-            }
-    } else {
-        gb = (float *)read_file(argv[2], &gb_bytes);
-    }
-    if (gb_bytes != (size_t)W * H * 5 * sizeof(float))
-        die("%s holds %zu bytes, a %dx%d G-buffer of 5 floats a pixel needs %zu", argv[2], gb_bytes, W, H,
-            (size_t)W * H * 5 * sizeof(float));
+    g_repeats = host_repeats();
+    float *gb = load_gbuffer(argv[2], W, H);
 
     egl_context();
     int n_passes = 0;
@@ -1189,7 +879,7 @@ int main(int argc, char **argv) {
     else if (ssao_out) die("NEURALAO_HOST_SSAO_OUT is set, but %s/manifest.json has no \"ssao\" entry", argv[1]);
     if (glGetError() != GL_NO_ERROR) die("OpenGL reported an error");
 
-    write_ao(argv[7], ao, W, H);
+    write_ao(args.out, ao, W, H);
     fprintf(stderr, "neuralao_host: %dx%d (%s), %d passes -> %s\n", W, H, route, n_passes, argv[7]);
     if (g_repeats > 0)
         printf("{\"renderer\": \"%s\", \"version\": \"%s\", \"width\": %d, \"height\": %d, \"repeats\": %d, "
