@@ -48,7 +48,14 @@ from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
 
 _GL_FORMATS = {"RGBA32F": "GL_RGBA32F", "R32F": "GL_R32F", "RGBA16F": "GL_RGBA16F", "R16F": "GL_R16F"}
-_WGPU_FORMATS = {"RGBA32F": ("rgba32float", 16), "R32F": ("r32float", 4)}
+# format -> (WebGPU format, bytes a texel, numpy type of a channel)
+_WGPU_FORMATS = {
+    "RGBA32F": ("rgba32float", 16, np.float32),
+    "R32F": ("r32float", 4, np.float32),
+    "RGBA16F": ("rgba16float", 8, np.float16),
+    "R16F": ("r16float", 2, np.float16),
+}
+_CHANNEL_TYPES = {name: dtype for name, _, dtype in _WGPU_FORMATS.values()}
 
 
 def frame_settings(
@@ -185,7 +192,8 @@ class _GLBackend:
         from neuralao.runtime.gl import GL
         from neuralao.runtime.glsl_runner import _program
 
-        gl.context()
+        self.context = gl.context  # made current again before each use: a wgpu device made meanwhile
+        self.context()  # (its GL backend's probe) leaves another context current
         self.GL, self.r = GL, runner
         self.textures = {}
         for ident, (tw, th, layers, fmt) in runner.sizes.items():
@@ -212,6 +220,7 @@ class _GLBackend:
 
     def upload(self, ident: str, data: np.ndarray) -> None:
         GL = self.GL
+        self.context()
         tex, w, h, _, internal = self.textures[ident]
         fmt = GL.GL_RED if internal == GL.GL_R32F else GL.GL_RGBA
         GL.glPixelStorei(GL.GL_UNPACK_ALIGNMENT, 1)
@@ -220,6 +229,7 @@ class _GLBackend:
 
     def dispatch(self, uniforms: bytes) -> None:
         GL = self.GL
+        self.context()
         GL.glBindBuffer(GL.GL_UNIFORM_BUFFER, self.ubo)
         GL.glBufferSubData(GL.GL_UNIFORM_BUFFER, 0, len(uniforms), np.frombuffer(uniforms, np.uint8))
         barrier = GL.GL_TEXTURE_FETCH_BARRIER_BIT | GL.GL_SHADER_IMAGE_ACCESS_BARRIER_BIT
@@ -245,6 +255,7 @@ class _GLBackend:
 
     def read(self, ident: str) -> np.ndarray:
         GL = self.GL
+        self.context()
         tex, w, h, layers, _ = self.textures[ident]
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
         GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
@@ -253,6 +264,7 @@ class _GLBackend:
         return buf
 
     def release(self) -> None:
+        self.context()
         self.GL.glDeleteTextures(len(self.textures), [t[0] for t in self.textures.values()])
         self.GL.glDeleteBuffers(2, [self.ssbo, self.ubo])
 
@@ -272,7 +284,7 @@ class _WgpuBackend:
         tu = wgpu.TextureUsage
         self.textures = {}
         for ident, (tw, th, layers, fmt) in runner.sizes.items():
-            name, texel = _WGPU_FORMATS[fmt]
+            name, texel, _ = _WGPU_FORMATS[fmt]
             tex = dev.create_texture(
                 size=(tw, th, layers),
                 format=name,
@@ -364,9 +376,14 @@ class _WgpuBackend:
         return layout, group
 
     def upload(self, ident: str, data: np.ndarray) -> None:
-        tex, _, w, h, _, texel, _ = self.textures[ident]
+        tex, _, w, h, _, texel, name = self.textures[ident]
+        dtype = _CHANNEL_TYPES[name]
+        data = np.asarray(data, np.float32).reshape(h, w, -1)[..., : texel // np.dtype(dtype).itemsize]
         self.dev.queue.write_texture(
-            {"texture": tex}, data.tobytes(), {"bytes_per_row": w * texel, "rows_per_image": h}, (w, h, 1)
+            {"texture": tex},
+            np.ascontiguousarray(data, dtype).tobytes(),
+            {"bytes_per_row": w * texel, "rows_per_image": h},
+            (w, h, 1),
         )
 
     def dispatch(self, uniforms: bytes) -> None:
@@ -381,15 +398,13 @@ class _WgpuBackend:
         self.dev.queue.submit([enc.finish()])
 
     def read(self, ident: str) -> np.ndarray:
-        tex, _, w, h, layers, texel, _ = self.textures[ident]
+        tex, _, w, h, layers, texel, name = self.textures[ident]
         raw = self.dev.queue.read_texture(
             {"texture": tex}, {"bytes_per_row": w * texel, "rows_per_image": h}, (w, h, layers)
         )
-        data = np.frombuffer(raw, np.float32).reshape(layers, h, w, texel // 4)
-        if texel == 16:
-            return data.copy()
+        data = np.frombuffer(raw, _CHANNEL_TYPES[name]).reshape(layers, h, w, -1)
         out = np.zeros((layers, h, w, 4), np.float32)
-        out[..., 0] = data[..., 0]
+        out[..., : data.shape[-1]] = data
         return out
 
 

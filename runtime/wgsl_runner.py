@@ -48,13 +48,21 @@ log = logging.getLogger(__name__)
 
 _FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
 # Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
-_STORAGE_FORMATS = {"rgba32f": "rgba32float", "rgba16f": "rgba16float", "r32f": "r32float"}
+_STORAGE_FORMATS = {
+    "rgba32f": "rgba32float",
+    "rgba16f": "rgba16float",
+    "r32f": "r32float",
+    "r16f": "r16float",
+}
 WGSL_FORMAT = "neuralao-wgsl-compute"
 VULKAN_FORMAT = "neuralao-vulkan-compute"
 GLSL_FORMAT = "neuralao-glsl-compute"
 _PASSTHROUGH = "spirv-shader-passthrough"
 # WGSL f16 arithmetic (enable f16): requested where the adapter has it; else the fp32 types run
 _SHADER_F16 = "shader-f16"
+# Storage use of the formats core WebGPU leaves out (r16float: the fp16 AO targets of Vulkan SPIR-V and
+# HLSL run through passthrough), where the adapter has them
+_ADAPTER_FORMATS = "texture-adapter-specific-format-features"
 
 
 @functools.cache
@@ -68,7 +76,7 @@ def _device():
     if adapter is None:
         raise NeuralaoError("no WebGPU adapter (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)")
     # SPIR-V passthrough (Vulkan adapters) is only used by run_spirv_all(via="passthrough")
-    features = [f for f in (_PASSTHROUGH, _SHADER_F16) if f in adapter.features]
+    features = [f for f in (_PASSTHROUGH, _SHADER_F16, _ADAPTER_FORMATS) if f in adapter.features]
     return wgpu, adapter, adapter.request_device_sync(required_features=features, required_limits={})
 
 

@@ -66,8 +66,14 @@ _HLSL_TYPES = {"vec2": "float2", "float": "float", "int": "int"}
 # glslang's HLSL front end (the HLSL compiled back to Vulkan SPIR-V): each register class in its own
 # binding range, textures and SRV buffers at their register numbers, $Globals auto-mapped into 64..
 HLSL_BINDING_SHIFTS = {"uav": 32, "sampler": 48, "cbuffer": 64}
-HLSL_SPIRV_COMMAND = "glslangValidator -D -V -S comp -e <entry> --hlsl-iomap --auto-map-bindings " + " ".join(
-    f"--shift-{k}-binding comp {v}" for k, v in HLSL_BINDING_SHIFTS.items()
+# glslang's HLSL front end has no min16float4x4 constructor (SPIRV-Cross writes one in the fp16 passes'
+# matrix products); a minimum-precision type is "at least 16 bits", so it compiles as float4x4 here, what
+# a D3D driver without 16-bit ALUs does too. FXC and DXC take the text as it is.
+HLSL_DEFINES = {"min16float4x4": "float4x4"}
+HLSL_SPIRV_COMMAND = (
+    "glslangValidator -D -V -S comp -e <entry> --hlsl-iomap --auto-map-bindings "
+    + " ".join(f"--shift-{k}-binding comp {v}" for k, v in HLSL_BINDING_SHIFTS.items())
+    + "".join(f" -D{k}={v}" for k, v in HLSL_DEFINES.items())
 )
 # Vulkan SPIR-V: Vulkan 1.0's environment (SPIR-V 1.0), which every Vulkan driver takes.
 SPIRV_TARGET_ENV = "vulkan1.0"
@@ -222,6 +228,7 @@ def compile_hlsl(source: str, entry: str = "main") -> bytes:
         ]
         for kind, n in HLSL_BINDING_SHIFTS.items():
             args += [f"--shift-{kind}-binding", "comp", str(n)]
+        args += [f"-D{k}={v}" for k, v in HLSL_DEFINES.items()]
         _run([*args, "-o", str(Path(tmp) / "pass.spv"), str(path)], "glslangValidator -D (HLSL)")
         return (Path(tmp) / "pass.spv").read_bytes()
 
