@@ -53,7 +53,7 @@ from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
 from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.frame import FrameLike
-from neuralao.runtime.frame_runner import frame_settings
+from neuralao.runtime.frame_runner import FrameRunner, frame_program, frame_settings
 from neuralao.runtime.glsl_runner import load_compute_export, run_compute
 from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
@@ -67,6 +67,7 @@ from neuralao.runtime.predict import (
     ort_runner,
     radius_array,
     run_padded,
+    unet_predictor,
 )
 from neuralao.runtime.unet_input import (
     DESCRIPTIONS,
@@ -87,6 +88,12 @@ CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4), 3: (-1.5, 0.5, 2.5)}
 # Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
 # 8, odd sizes that need padding on both axes (through the pad/crop wrapper).
 CHECK_SIZES: tuple[tuple[int, int], ...] = ((64, 64), (96, 72), (101, 67), (37, 53))
+# A model's fp16 bound: its largest measured fp16 error on the export's check frames times this margin
+# (frames the check did not see), rounded up to two significant digits, and never below the project's
+# TOL.parity_fp16 (a few check frames can miss the worst pixel of another frame by a factor of 2).
+FP16_BOUND_MARGIN = 1.5
+# Half an 8-bit AO step (1 / 510): an fp16 error below it does not show in an 8-bit AO target.
+FP16_INVISIBLE_IN_8_BIT = 1.0 / 510.0
 # Parity sizes: the frames' own size, plus crops to a non-power-of-two and an odd size.
 PARITY_SIZES: tuple[tuple[int, int], ...] = ((96, 72), (101, 67))
 
@@ -524,4 +531,57 @@ def parity(
         "passed": bool(max_err <= TOL.parity_unet_fp32),
         "checks": rows,
         "frames": len(frames),
+    }
+
+
+def _round_up(x: float, digits: int = 2) -> float:
+    if x <= 0:
+        return 0.0
+    scale = 10.0 ** (np.floor(np.log10(x)) - digits + 1)
+    return float(np.ceil(x / scale) * scale)
+
+
+def parity_fp16(onnx_path: str | Path, frames: list[FrameLike] | None = None) -> dict:
+    """The model's whole frame at fp16 (frame passes + network, GL) against onnxruntime's reference
+    (``unet_predictor``, the model at its internal height) on real frames, at the check radii of its
+    input contract: the fp16 error a user of this model gets, and the bound the manifest states for it
+    (:data:`FP16_BOUND_MARGIN` times the largest error, two significant digits, at least
+    TOL.parity_fp16). The fp32 frame's error is measured beside it."""
+    onnx_path = Path(onnx_path)
+    proto = load_onnx(onnx_path)
+    version = check_version(check_unet_onnx(proto, onnx_path).get("preprocess_version"), str(onnx_path))
+    frames = frames if frames else render_parity_frames()
+    reference = unet_predictor(onnx_path)
+    programs = {p: frame_program(proto, "glsl430", precision=p) for p in ("fp32", "fp16")}
+    rows = []
+    for i, frame in enumerate(frames):
+        h, w = np.shape(frame["depth"])
+        with FrameRunner(programs["fp32"], w, h) as fp32, FrameRunner(programs["fp16"], w, h) as fp16:
+            for rho in CHECK_RHOS[version]:
+                radius = radius_of_param(rho, frame["depth"], frame["mask"], float(frame["yfov"]), version)
+                want = reference(frame, radius)
+                rows.append(
+                    {
+                        "frame": i,
+                        "scene": str(frame.get("scene", "")),
+                        "size": [int(w), int(h)],
+                        "radius": float(radius),
+                        "fp16_max_abs_err": float(np.abs(fp16.run(frame, radius) - want).max()),
+                        "fp32_max_abs_err": float(np.abs(fp32.run(frame, radius) - want).max()),
+                    }
+                )
+    err = max(r["fp16_max_abs_err"] for r in rows)
+    return {
+        "precision": "fp16",
+        "max_abs_err": err,
+        "fp32_max_abs_err": max(r["fp32_max_abs_err"] for r in rows),
+        "bound": max(TOL.parity_fp16, _round_up(FP16_BOUND_MARGIN * err)),
+        "visible_in_8_bit": bool(err > FP16_INVISIBLE_IN_8_BIT),
+        "how": (
+            "the whole frame (frame passes + network) in GL at fp16 against onnxruntime's AO, over every "
+            f"pixel of {len(frames)} rendered frames at the radii of rho {list(CHECK_RHOS[version])}; "
+            f"bound = {FP16_BOUND_MARGIN} x the largest error, rounded up to two significant digits, "
+            f"at least {TOL.parity_fp16:g}"
+        ),
+        "checks": rows,
     }

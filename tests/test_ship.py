@@ -103,6 +103,9 @@ def test_ship_installs_self_describing_exports(shipped, corpus):
         assert prov["parity"]["glsl_vs_onnxruntime"] <= TOL.parity_unet_fp32
         assert prov["parity"]["onnxruntime_vs_torch"] <= prov["parity"]["tolerance_onnx"]
         assert len(prov["history"]) == prov["epochs"] and prov["gl_seconds"]["32x32"] > 0
+        fp16 = manifest["fp16"]  # the bound a user's fp16 build is held to, from the model's own error
+        assert 0 < fp16["max_abs_err"] <= fp16["bound"] and fp16["bound"] >= TOL.parity_fp16
+        assert fp16["fp32_max_abs_err"] <= TOL.frame_passes_vs_reference and fp16["checks"] > 0
         meta = get_metadata(load_onnx(models / name / "model.onnx"))
         assert meta["provenance"]["dataset_hash"] == ds_hash and meta["provenance"]["test"] == prov["test"]
         assert (

@@ -29,7 +29,14 @@ from pathlib import Path
 import numpy as np
 
 from neuralao.export.onnx_io import get_metadata, load_onnx, save_onnx
-from neuralao.export.unet import FRAME_TARGETS, export_checkpoint, parity, write_glsl, write_internal_passes
+from neuralao.export.unet import (
+    FRAME_TARGETS,
+    export_checkpoint,
+    parity,
+    parity_fp16,
+    write_glsl,
+    write_internal_passes,
+)
 from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
 from neuralao.pipeline.evaluation.report_baselines import timing_frame as report_timing_frame
 from neuralao.pipeline.evaluation.report_settings import ReportSettings
@@ -162,6 +169,15 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
 _LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
 
 
+def _fp16_figures(name: str, onnx_path: Path, frames: list | None = None) -> dict:
+    """What the export's fp16 option costs this model (:func:`parity_fp16`, without the per-check rows): the
+    bound its manifest states, which the tests and a user's fp16 build are held to."""
+    fig = parity_fp16(onnx_path, frames)
+    if fig["visible_in_8_bit"]:
+        log.warning("%s: fp16 moves the AO by %.3g, more than half an 8-bit step", name, fig["max_abs_err"])
+    return {k: v for k, v in fig.items() if k != "checks"} | {"checks": len(fig["checks"])}
+
+
 def ship_model(
     settings: ShipSettings, spec: ShippedModel, data: Path, checkpoints: dict[str, Path], commit: str
 ) -> dict:
@@ -280,6 +296,7 @@ def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dic
     }
     save_onnx(proto, onnx_path, meta)
     manifest.update(name=spec.name, onnx_sha256=sha256_file(onnx_path), metadata=meta, provenance=provenance)
+    manifest["fp16"] = _fp16_figures(spec.name, onnx_path, frames)
     manifest["checkpoint"] = {
         "file": ckpt_path.name,
         "sha256": sha256_file(ckpt_path),
@@ -379,6 +396,7 @@ def refresh_shaders(model_dir: Path, max_bytes: int, commit: str | None = None) 
             "glsl_vs_onnxruntime": par["max_abs_err"],
             "tolerance_glsl": par["tolerance"],
         }
+        manifest["fp16"] = _fp16_figures(model_dir.name, tmp / onnx_path.name)
         write_json(tmp / "manifest.json", manifest)
         size = folder_bytes(tmp)
         if size > max_bytes:
