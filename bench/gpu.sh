@@ -131,8 +131,9 @@ vulkan_runs() {
 
 run() {
   [[ -x $HOST ]] || { echo "bench/gpu.sh: no $HOST: run 'bench/gpu.sh prepare' first" >&2; exit 1; }
-  local lines=$BUILD/runs.jsonl vulkan=0
+  local lines=$BUILD/runs.jsonl errors=$BUILD/errors.log vulkan=0
   : >"$lines"
+  : >"$errors"
   if vulkan_runs; then vulkan=1; fi
   for size in $SIZES; do
     for model in $MODELS; do
@@ -141,13 +142,20 @@ run() {
           local export=$BUILD/exports/$model-$preset-$precision
           [[ -d $export ]] || { echo "bench/gpu.sh: no $export: run 'bench/gpu.sh prepare'" >&2; exit 1; }
           local json case="\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\""
-          json=$(NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
-            "$BUILD/ao.f32" 2>/dev/null)
-          echo "{$case, \"api\": \"gl\", ${json#\{}" >>"$lines"
+          # a case that fails is reported and left out; the others still run (the errors in $errors)
+          if json=$(NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
+            "$BUILD/ao.f32" 2>>"$errors"); then
+            echo "{$case, \"api\": \"gl\", ${json#\{}" >>"$lines"
+          else
+            echo "bench/gpu.sh: GL failed: $model $preset $precision $size (see $errors)" >&2
+          fi
           if ((vulkan)); then  # its line names its api
-            json=$(NEURALAO_HOST_REPEATS=$REPEATS "$VK" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
-              "$BUILD/ao-vk.f32" 2>/dev/null)
-            echo "{$case, ${json#\{}" >>"$lines"
+            if json=$(NEURALAO_HOST_REPEATS=$REPEATS "$VK" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
+              "$BUILD/ao-vk.f32" 2>>"$errors"); then
+              echo "{$case, ${json#\{}" >>"$lines"
+            else
+              echo "bench/gpu.sh: Vulkan failed: $model $preset $precision $size (see $errors)" >&2
+            fi
           fi
         done
       done

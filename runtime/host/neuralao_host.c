@@ -38,14 +38,16 @@
  * Timing (bench/gpu.sh): with NEURALAO_HOST_REPEATS=N set, after the frame N timed runs of the whole frame
  * (every step), of its GTAO steps (f_gtao, f_gtao_blur; a hybrid's) and of its network steps, each between
  * GL_TIME_ELAPSED queries and on the wall clock between glFinish calls (Mesa's llvmpipe reports 0 GPU time
- * for compute). When EXPORT_DIR/manifest.json has an "ssao" entry (the screen-space AO baseline's fragment
+ * for compute). With NEURALAO_HOST_PROFILE=1 too, each step is timed alone and printed on stderr, a line a
+ * step. When EXPORT_DIR/manifest.json has an "ssao" entry (the screen-space AO baseline's fragment
  * passes, written by bench/gpu.sh prepare), SSAO runs N timed times on the same G-buffer too. One JSON line
  * goes to stdout, medians in ms (-1: not run): {"renderer", "version", "width", "height", "repeats", "path",
  * "frame_ms", "network_ms", "gtao_ms", "ssao_ms", the same with _wall_ms, "passes"}. With
  * NEURALAO_HOST_SSAO_OUT=PATH set, that SSAO's AO is written to PATH as OUT.f32 is (what tests check it by).
  * GBUFFER.f32 may be the word "synthetic": a seeded wavy surface filling the frame (all foreground).
  *
- * Context: EGL's surfaceless platform (Mesa, or NVIDIA's EGL through glvnd), OpenGL 4.3 core.
+ * Context: EGL without a window system (Mesa's surfaceless platform, else an EGL device: NVIDIA's EGL through
+ * glvnd), OpenGL 4.3 core.
  * The manifest is read by the small JSON reader of host_common.h (shared with the Vulkan runner, neuralao_vk.c).
  */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
@@ -87,13 +89,34 @@ static double time_end_ms(double *wall) {
 
 /* ------------------------------------------------------------------ GL context */
 
-static void egl_context(void) {
+/* An EGL display with no window system: Mesa's surfaceless platform, else the first EGL device that
+ * initializes (NVIDIA's EGL through glvnd offers EGL_EXT_platform_device), else the default display. */
+static EGLDisplay egl_display(void) {
     PFNEGLGETPLATFORMDISPLAYEXTPROC get_display =
         (PFNEGLGETPLATFORMDISPLAYEXTPROC)eglGetProcAddress("eglGetPlatformDisplayEXT");
-    if (!get_display) die("EGL lacks eglGetPlatformDisplayEXT");
-    EGLDisplay dpy = get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, NULL);
     EGLint major, minor;
-    if (dpy == EGL_NO_DISPLAY || !eglInitialize(dpy, &major, &minor)) die("no surfaceless EGL display (Mesa)");
+    if (get_display) {
+        EGLDisplay dpy = get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, NULL);
+        if (dpy != EGL_NO_DISPLAY && eglInitialize(dpy, &major, &minor)) return dpy;
+        PFNEGLQUERYDEVICESEXTPROC query_devices =
+            (PFNEGLQUERYDEVICESEXTPROC)eglGetProcAddress("eglQueryDevicesEXT");
+        EGLDeviceEXT devices[16];
+        EGLint n = 0;
+        if (query_devices && query_devices(16, devices, &n)) {
+            for (EGLint i = 0; i < n; i++) {
+                dpy = get_display(EGL_PLATFORM_DEVICE_EXT, devices[i], NULL);
+                if (dpy != EGL_NO_DISPLAY && eglInitialize(dpy, &major, &minor)) return dpy;
+            }
+        }
+    }
+    EGLDisplay dpy = eglGetDisplay(EGL_DEFAULT_DISPLAY);
+    if (dpy != EGL_NO_DISPLAY && eglInitialize(dpy, &major, &minor)) return dpy;
+    die("no EGL display without a window system (surfaceless, device or default)");
+    return EGL_NO_DISPLAY;
+}
+
+static void egl_context(void) {
+    EGLDisplay dpy = egl_display();
     if (!eglBindAPI(EGL_OPENGL_API)) die("EGL cannot bind the OpenGL API");
     const EGLint cfg_attr[] = {EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_NONE};
     EGLConfig cfg;
@@ -615,6 +638,7 @@ typedef struct {
     int flip_location;                      /* -1: no u_flip_y */
     GLuint groups[3];
     int kind;                               /* STEP_* */
+    char name[64];                          /* the pass's name, for the per-step profile */
 } Step;
 
 typedef struct {
@@ -628,6 +652,7 @@ typedef struct {
 static Step make_step(const char *dir, const Json *p, FrameRun *fr) {
     char path[4200];
     Step s = {0};
+    snprintf(s.name, sizeof s.name, "%s", jstr(p, "name"));
     snprintf(path, sizeof path, "%s/%s", dir, jstr(p, "shader"));
     char *src = read_file(path, NULL);
     s.prog = compile_compute(src, jstr(p, "shader"));
@@ -665,25 +690,45 @@ static Step make_step(const char *dir, const Json *p, FrameRun *fr) {
 }
 
 /* Dispatches the frame's steps of one kind (or all of them: kind < 0), in order. */
+static void dispatch_step(const FrameRun *fr, const Step *s) {
+    glUseProgram(s->prog);
+    for (int k = 0; k < s->n_inputs; k++) {
+        glActiveTexture(GL_TEXTURE0 + (GLenum)s->in_binding[k]);
+        glBindTexture(GL_TEXTURE_2D_ARRAY, s->in[k]->tex);
+    }
+    glBindImageTexture((GLuint)s->out_binding, s->out->tex, 0, GL_TRUE, 0, GL_WRITE_ONLY, s->out->internal);
+    if (s->ubo_binding >= 0) glBindBufferBase(GL_UNIFORM_BUFFER, (GLuint)s->ubo_binding, fr->ubo);
+    if (s->params_binding >= 0)
+        glBindBufferRange(GL_SHADER_STORAGE_BUFFER, (GLuint)s->params_binding, fr->ssbo, s->params_offset,
+                          s->params_bytes);
+    if (s->flip_location >= 0) glUniform1i(s->flip_location, 0); /* the frame's u_flip_y */
+    glDispatchCompute(s->groups[0], s->groups[1], s->groups[2]);
+    glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
+}
+
 static void dispatch_steps(const FrameRun *fr, int kind) {
+    for (int i = 0; i < fr->n_steps; i++)
+        if (kind < 0 || fr->steps[i].kind == kind) dispatch_step(fr, &fr->steps[i]);
+    glActiveTexture(GL_TEXTURE0);
+}
+
+/* NEURALAO_HOST_PROFILE set (with NEURALAO_HOST_REPEATS): each step timed alone, N times, after the frame
+ * has run once (its inputs hold the frame's values); one line per step on stderr, medians in ms. */
+static void profile_steps(const FrameRun *fr) {
+    if (!getenv("NEURALAO_HOST_PROFILE") || g_repeats < 1) return;
+    double *runs = xmalloc(sizeof(double) * (size_t)g_repeats * 2), *walls = runs + g_repeats;
     for (int i = 0; i < fr->n_steps; i++) {
         const Step *s = &fr->steps[i];
-        if (kind >= 0 && s->kind != kind) continue;
-        glUseProgram(s->prog);
-        for (int k = 0; k < s->n_inputs; k++) {
-            glActiveTexture(GL_TEXTURE0 + (GLenum)s->in_binding[k]);
-            glBindTexture(GL_TEXTURE_2D_ARRAY, s->in[k]->tex);
+        for (int run = 0; run < g_repeats; run++) {
+            time_begin();
+            dispatch_step(fr, s);
+            runs[run] = time_end_ms(&walls[run]);
         }
-        glBindImageTexture((GLuint)s->out_binding, s->out->tex, 0, GL_TRUE, 0, GL_WRITE_ONLY, s->out->internal);
-        if (s->ubo_binding >= 0) glBindBufferBase(GL_UNIFORM_BUFFER, (GLuint)s->ubo_binding, fr->ubo);
-        if (s->params_binding >= 0)
-            glBindBufferRange(GL_SHADER_STORAGE_BUFFER, (GLuint)s->params_binding, fr->ssbo, s->params_offset,
-                              s->params_bytes);
-        if (s->flip_location >= 0) glUniform1i(s->flip_location, 0); /* the frame's u_flip_y */
-        glDispatchCompute(s->groups[0], s->groups[1], s->groups[2]);
-        glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT | GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
+        fprintf(stderr, "neuralao_host: step %2d %-22s %8.4f ms (wall %.4f), groups %u x %u x %u\n", i, s->name,
+                median(runs, g_repeats), median(walls, g_repeats), s->groups[0], s->groups[1], s->groups[2]);
     }
     glActiveTexture(GL_TEXTURE0);
+    free(runs);
 }
 
 /* Medians of N timed dispatches of the steps of one kind (all: kind < 0); -1 when the frame has none. */
@@ -780,6 +825,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     time_steps(&fr, -1, &g_frame_ms, &g_frame_wall_ms);
     time_steps(&fr, STEP_GTAO, &g_gtao_ms, &g_gtao_wall_ms);
     time_steps(&fr, STEP_NETWORK, &g_network_ms, &g_network_wall_ms);
+    profile_steps(&fr);
 
     *n_passes = fr.n_steps;
     for (int i = 0; i < fr.n_steps; i++) glDeleteProgram(fr.steps[i].prog);
