@@ -38,7 +38,9 @@ from neuralao.runtime.predict import unet_predictor
 from neuralao.runtime.shipped import shipped_models
 
 MODELS = ("unet-gtao", "unet-fast")
-SIZES = ((64, 48), (75, 53), (96, 96))
+# (64 x 48, 75 x 53: the network at 64 rows is larger than the frame; 101 x 83: smaller, the upsampling's
+# workgroups share their low texels, and the last ones stick out of the frame)
+SIZES = ((64, 48), (75, 53), (101, 83))
 RADII = (0.15, 0.4, 1.0)
 INTERNAL_HEIGHT = 64
 # The APIs the whole frame runs in: {name: (the program's dialect, FrameRunner's via)}.
@@ -139,12 +141,12 @@ def test_origin_uniform_both_ways_gives_the_same_ao(dialect, frames):
     back top row first is the same, bit for bit (flipped input -> flipped output)."""
     _needs(dialect)
     program = _program("unet-gtao", INTERNAL_HEIGHT, dialect)
-    size = SIZES[1]
-    with _runner(program, size, dialect) as top, _runner(program, size, dialect, flip_y=True) as bottom:
-        a, b = top.run(frames[size], RADII[1]), bottom.run(frames[size], RADII[1])
-        assert np.array_equal(a, b)
-        assert np.array_equal(top.read("gtao"), bottom.read("gtao"))
-    assert float(a.min()) < 0.9
+    for size in SIZES[1:]:
+        with _runner(program, size, dialect) as top, _runner(program, size, dialect, flip_y=True) as bottom:
+            a, b = top.run(frames[size], RADII[1]), bottom.run(frames[size], RADII[1])
+            assert np.array_equal(a, b)
+            assert np.array_equal(top.read("gtao"), bottom.read("gtao"))
+        assert float(a.min()) < 0.9
 
 
 def test_frame_section_lists_the_whole_frame_in_order():

@@ -407,17 +407,30 @@ def _write_pass(p: FramePass, textures: dict[str, str], settings: FrameSettings,
     )
     prelude = fill("prelude") if dialect == "wgsl" else fill("prelude", sampler=fill("sampler"))
     functions = _noise_table(settings, fill) if p.body == "gtao_body" else ""
+    lx, ly = p.local_size
+    skeleton = {"local_x": lx, "local_y": ly}
+    if p.body == "upsample_body":  # its workgroup shares the low texels (see the template)
+        tile = max(lx, ly) + 4
+        decls.append(fill("upsample_shared", entries=tile * tile))
+        functions = fill("upsample_functions")
+        skeleton["load"] = fill(
+            "upsample_load",
+            last_x=lx - 1,
+            last_y=ly - 1,
+            tile=tile,
+            threads=lx * ly,
+            low_value=fields["low_value"],
+        )
     return fill(
-        "frame_pass",
+        "frame_pass_tiled" if "load" in skeleton else "frame_pass",
         header=fill("header"),
         name=p.name,
         summary=p.summary,
-        local_x=p.local_size[0],
-        local_y=p.local_size[1],
         declarations="\n".join(decls),
         prelude=prelude,
         functions=functions,
         body=body,
+        **skeleton,
     )
 
 

@@ -83,6 +83,32 @@ ${body}
 }
 """
 
+# A pass whose workgroup first loads what its pixels share into workgroup memory: every invocation runs
+# ${load} (none returns before the barrier), then those outside the frame stop.
+_FG["frame_pass_tiled"] = """${header}
+// neuralao frame pass ${name}: ${summary}
+layout(local_size_x = ${local_x}, local_size_y = ${local_y}, local_size_z = 1) in;
+
+${declarations}
+
+${prelude}
+${functions}
+void main() {
+    ivec2 gid = ivec2(gl_GlobalInvocationID.xy);
+    ivec2 out_size = imageSize(dst).xy;
+    int lid = int(gl_LocalInvocationIndex);
+    ivec2 group0 = ivec2(gl_WorkGroupID.xy) * ivec2(${local_x}, ${local_y});
+${load}
+    memoryBarrierShared();
+    barrier();
+    if (gid.x >= out_size.x || gid.y >= out_size.y) {
+        return;
+    }
+    ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
+${body}
+}
+"""
+
 _FG["header"] = "#version 430 core"
 _FG["input_decl"] = "layout(binding = ${binding}) uniform highp sampler2DArray ${name};"
 _FG["output_decl"] = "layout(binding = ${binding}, ${format}) writeonly uniform highp image2DArray dst;"
@@ -183,6 +209,33 @@ ${functions}
 fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let gid = vec2<i32>(gid_u.xy);
     let out_size = vec2<i32>(textureDimensions(dst));
+    if (gid.x >= out_size.x || gid.y >= out_size.y) {
+        return;
+    }
+    let px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
+${body}
+}
+"""
+
+_FW["frame_pass_tiled"] = """${header}
+// neuralao frame pass ${name}: ${summary}
+
+${declarations}
+
+${prelude}
+${functions}
+@compute @workgroup_size(${local_x}, ${local_y}, 1)
+fn main(
+    @builtin(global_invocation_id) gid_u: vec3<u32>,
+    @builtin(local_invocation_index) lid_u: u32,
+    @builtin(workgroup_id) group_u: vec3<u32>,
+) {
+    let gid = vec2<i32>(gid_u.xy);
+    let out_size = vec2<i32>(textureDimensions(dst));
+    let lid = i32(lid_u);
+    let group0 = vec2<i32>(group_u.xy) * vec2<i32>(${local_x}, ${local_y});
+${load}
+    workgroupBarrier();
     if (gid.x >= out_size.x || gid.y >= out_size.y) {
         return;
     }
@@ -462,6 +515,41 @@ _FT["rho_log"] = "log(${u_radius} * ${u_proj}.y)"
 # foreground texels in charge where no texel matches. src0: the depth, src1: the normal, src2: the
 # network's output, src3: the point-sampled G-buffer (a hybrid's layer 2: GTAO point-sampled), a hybrid's
 # src4: GTAO.
+#
+# The workgroup's pixels share their low texels: while the network is smaller than the frame, the 4 x 4
+# taps of an 8 x 8 tile of pixels span at most 12 x 12 low texels, loaded once into workgroup memory
+# (position and foreground flag; normal and the value upsampled) instead of 16 x 3-4 fetches a pixel.
+# A frame smaller than the network (a wider span) reads its taps directly; the arithmetic is the same.
+_FT["upsample_load"] = """    ${let_ivec2} hi = out_size;
+    ${let_ivec2} lo = nao_size(src2);
+    // the workgroup's first and last pixels in GL order (nao_texel flips rows where row 0 is the top)
+    ${let_ivec2} c0 = nao_texel(min(group0, out_size - 1), out_size);
+    ${let_ivec2} c1 = nao_texel(min(group0 + ${ivec2}(${last_x}, ${last_y}), out_size - 1), out_size);
+    ${let_ivec2} t0 = nao_up_base(min(c0, c1), lo, hi);
+    ${let_ivec2} t_size = nao_up_base(max(c0, c1), lo, hi) + 4 - t0;
+    ${let_bool} tiled = t_size.x <= ${tile} && t_size.y <= ${tile};
+    if (tiled) {
+        for (${var_int:k} = lid; k < t_size.x * t_size.y; k = k + ${threads}) {
+            ${let_ivec2} q = clamp(t0 + ${ivec2}(k % t_size.x, k / t_size.x), ${ivec2}(0), lo - 1);
+            nao_tile_a[k] = nao_load(src3, q, 0);
+            nao_tile_b[k] = ${vec4}(nao_load(src3, q, 1).xyz, ${low_value});
+        }
+    }"""
+_FG["upsample_shared"] = """shared vec4 nao_tile_a[${entries}];  // the low texels' position, foreground flag
+shared vec4 nao_tile_b[${entries}];  // their normal and the value upsampled"""
+_FW["upsample_shared"] = """var<workgroup> nao_tile_a: array<vec4<f32>, ${entries}>;  // the low texels' position, foreground flag
+var<workgroup> nao_tile_b: array<vec4<f32>, ${entries}>;  // their normal and the value upsampled"""
+# the 4 x 4 taps' first low texel of GL-order pixel p (lo: the network's size, hi: the frame's)
+_FG["upsample_functions"] = """ivec2 nao_up_base(ivec2 p, ivec2 lo, ivec2 hi) {
+    ivec2 num = (2 * p + 1) * lo - hi;
+    return ivec2(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+}
+"""
+_FW["upsample_functions"] = """fn nao_up_base(p: vec2<i32>, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
+    let num = (2 * p + 1) * lo - hi;
+    return vec2<i32>(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+}
+"""
 _FT["upsample_body"] = """    ${let_float} z = nao_load(src0, px, 0).x;
     if (!(z > 0.0)) {
         nao_store(px, 0, ${vec4}(1.0));
@@ -470,27 +558,34 @@ _FT["upsample_body"] = """    ${let_float} z = nao_load(src0, px, 0).x;
     ${let_vec3} p = nao_position(px, out_size, z);
     ${let_vec3} n = nao_load(src1, px, 0).xyz;
     ${let_float} depth = max(z, 1e-30);
-    ${let_ivec2} hi = out_size;
-    ${let_ivec2} lo = nao_size(src2);
     ${let_vec2} uv = (${vec2}(px) + 0.5) * ${vec2}(lo) / ${vec2}(hi) - 0.5;
-    ${let_ivec2} num = (2 * px + 1) * lo - hi;
-    ${let_ivec2} base = ${ivec2}(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+    ${let_ivec2} base = nao_up_base(px, lo, hi);
     ${var_float:sum} = 0.0;
     ${var_float:total} = 0.0;
     for (${var_int:y} = 0; y < 4; ${inc:y}) {
         for (${var_int:x} = 0; x < 4; ${inc:x}) {
-            ${let_ivec2} q = clamp(base + ${ivec2}(x, y), ${ivec2}(0), lo - 1);
-            ${let_vec4} qw = nao_load(src3, q, 0);
+            ${let_ivec2} o = base + ${ivec2}(x, y);
+            ${var_vec4:qw} = ${vec4}(0.0);
+            ${var_vec4:qv} = ${vec4}(0.0);
+            if (tiled) {
+                ${let_int} k = (o.y - t0.y) * t_size.x + (o.x - t0.x);
+                qw = nao_tile_a[k];
+                qv = nao_tile_b[k];
+            } else {
+                ${let_ivec2} q = clamp(o, ${ivec2}(0), lo - 1);
+                qw = nao_load(src3, q, 0);
+                qv = ${vec4}(nao_load(src3, q, 1).xyz, ${low_value});
+            }
             if (qw.w < 0.5) {
                 continue;
             }
-            ${let_vec2} d = ${vec2}(base + ${ivec2}(x, y)) - uv;
+            ${let_vec2} d = ${vec2}(o) - uv;
             ${let_float} spatial = exp(-dot(d, d) / (2.0 * ${spatial_sigma} * ${spatial_sigma}));
-            ${let_vec3} qn = nao_load(src3, q, 1).xyz;
+            ${let_vec3} qn = qv.xyz;
             ${let_float} plane = abs(dot(qn, p - qw.xyz)) / (${plane_sigma} * depth);
             ${let_float} agree = pow(max(dot(qn, n), 0.0), ${normal_power});
             ${let_float} w = spatial * (${floor} + exp(-plane * plane) * agree);
-            sum += w * ${low_value};
+            sum += w * qv.w;
             total += w;
         }
     }
