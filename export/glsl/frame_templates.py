@@ -537,8 +537,9 @@ _FT["upsample_load"] = """    ${let_ivec2} hi = out_size;
     }"""
 _FG["upsample_shared"] = """shared vec4 nao_tile_a[${entries}];  // the low texels' position, foreground flag
 shared vec4 nao_tile_b[${entries}];  // their normal and the value upsampled"""
-_FW["upsample_shared"] = """var<workgroup> nao_tile_a: array<vec4<f32>, ${entries}>;  // the low texels' position, foreground flag
-var<workgroup> nao_tile_b: array<vec4<f32>, ${entries}>;  // their normal and the value upsampled"""
+_FW["upsample_shared"] = """// the low texels' position and foreground flag; their normal and value upsampled
+var<workgroup> nao_tile_a: array<vec4<f32>, ${entries}>;
+var<workgroup> nao_tile_b: array<vec4<f32>, ${entries}>;"""
 # the 4 x 4 taps' first low texel of GL-order pixel p (lo: the network's size, hi: the frame's)
 _FG["upsample_functions"] = """ivec2 nao_up_base(ivec2 p, ivec2 lo, ivec2 hi) {
     ivec2 num = (2 * p + 1) * lo - hi;
