@@ -14,6 +14,8 @@ layout(std140, binding = 6) uniform FrameUniforms {
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
     int u_flip_y;              // 1: textures bottom-up (GL), 0: row 0 at the top
 };
+shared vec4 nao_tile_a[144];  // the low texels' position, foreground flag
+shared vec4 nao_tile_b[144];  // their normal and the value upsampled
 
 // GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
 ivec2 nao_texel(ivec2 p, ivec2 size) {
@@ -52,10 +54,33 @@ int nao_floor_div(int a, int b) {
     return a >= 0 ? a / b : -((-a + b - 1) / b);
 }
 
+ivec2 nao_up_base(ivec2 p, ivec2 lo, ivec2 hi) {
+    ivec2 num = (2 * p + 1) * lo - hi;
+    return ivec2(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+}
 
 void main() {
     ivec2 gid = ivec2(gl_GlobalInvocationID.xy);
     ivec2 out_size = imageSize(dst).xy;
+    int lid = int(gl_LocalInvocationIndex);
+    ivec2 group0 = ivec2(gl_WorkGroupID.xy) * ivec2(8, 8);
+    ivec2 hi = out_size;
+    ivec2 lo = nao_size(src2);
+    // the workgroup's first and last pixels in GL order (nao_texel flips rows where row 0 is the top)
+    ivec2 c0 = nao_texel(min(group0, out_size - 1), out_size);
+    ivec2 c1 = nao_texel(min(group0 + ivec2(7, 7), out_size - 1), out_size);
+    ivec2 t0 = nao_up_base(min(c0, c1), lo, hi);
+    ivec2 t_size = nao_up_base(max(c0, c1), lo, hi) + 4 - t0;
+    bool tiled = t_size.x <= 12 && t_size.y <= 12;
+    if (tiled) {
+        for (int k = lid; k < t_size.x * t_size.y; k = k + 64) {
+            ivec2 q = clamp(t0 + ivec2(k % t_size.x, k / t_size.x), ivec2(0), lo - 1);
+            nao_tile_a[k] = nao_load(src3, q, 0);
+            nao_tile_b[k] = vec4(nao_load(src3, q, 1).xyz, (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x));
+        }
+    }
+    memoryBarrierShared();
+    barrier();
     if (gid.x >= out_size.x || gid.y >= out_size.y) {
         return;
     }
@@ -68,27 +93,34 @@ void main() {
     vec3 p = nao_position(px, out_size, z);
     vec3 n = nao_load(src1, px, 0).xyz;
     float depth = max(z, 1e-30);
-    ivec2 hi = out_size;
-    ivec2 lo = nao_size(src2);
     vec2 uv = (vec2(px) + 0.5) * vec2(lo) / vec2(hi) - 0.5;
-    ivec2 num = (2 * px + 1) * lo - hi;
-    ivec2 base = ivec2(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+    ivec2 base = nao_up_base(px, lo, hi);
     float sum = 0.0;
     float total = 0.0;
     for (int y = 0; y < 4; ++y) {
         for (int x = 0; x < 4; ++x) {
-            ivec2 q = clamp(base + ivec2(x, y), ivec2(0), lo - 1);
-            vec4 qw = nao_load(src3, q, 0);
+            ivec2 o = base + ivec2(x, y);
+            vec4 qw = vec4(0.0);
+            vec4 qv = vec4(0.0);
+            if (tiled) {
+                int k = (o.y - t0.y) * t_size.x + (o.x - t0.x);
+                qw = nao_tile_a[k];
+                qv = nao_tile_b[k];
+            } else {
+                ivec2 q = clamp(o, ivec2(0), lo - 1);
+                qw = nao_load(src3, q, 0);
+                qv = vec4(nao_load(src3, q, 1).xyz, (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x));
+            }
             if (qw.w < 0.5) {
                 continue;
             }
-            vec2 d = vec2(base + ivec2(x, y)) - uv;
+            vec2 d = vec2(o) - uv;
             float spatial = exp(-dot(d, d) / (2.0 * 0.6 * 0.6));
-            vec3 qn = nao_load(src3, q, 1).xyz;
+            vec3 qn = qv.xyz;
             float plane = abs(dot(qn, p - qw.xyz)) / (0.03 * depth);
             float agree = pow(max(dot(qn, n), 0.0), 8.0);
             float w = spatial * (0.001 + exp(-plane * plane) * agree);
-            sum += w * (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x);
+            sum += w * qv.w;
             total += w;
         }
     }

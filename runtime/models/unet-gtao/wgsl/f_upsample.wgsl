@@ -14,6 +14,9 @@ struct FrameUniforms {
     flip_y: i32,               // 1: textures bottom-up (GL), 0: row 0 at the top
 };
 @group(0) @binding(6) var<uniform> nao_frame: FrameUniforms;
+// the low texels' position and foreground flag; their normal and value upsampled
+var<workgroup> nao_tile_a: array<vec4<f32>, 144>;
+var<workgroup> nao_tile_b: array<vec4<f32>, 144>;
 
 // GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
 fn nao_texel(p: vec2<i32>, size: vec2<i32>) -> vec2<i32> {
@@ -58,11 +61,37 @@ fn nao_floor_div(a: i32, b: i32) -> i32 {
     return -((-a + b - 1) / b);
 }
 
+fn nao_up_base(p: vec2<i32>, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
+    let num = (2 * p + 1) * lo - hi;
+    return vec2<i32>(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+}
 
 @compute @workgroup_size(8, 8, 1)
-fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
+fn main(
+    @builtin(global_invocation_id) gid_u: vec3<u32>,
+    @builtin(local_invocation_index) lid_u: u32,
+    @builtin(workgroup_id) group_u: vec3<u32>,
+) {
     let gid = vec2<i32>(gid_u.xy);
     let out_size = vec2<i32>(textureDimensions(dst));
+    let lid = i32(lid_u);
+    let group0 = vec2<i32>(group_u.xy) * vec2<i32>(8, 8);
+    let hi = out_size;
+    let lo = nao_size(src2);
+    // the workgroup's first and last pixels in GL order (nao_texel flips rows where row 0 is the top)
+    let c0 = nao_texel(min(group0, out_size - 1), out_size);
+    let c1 = nao_texel(min(group0 + vec2<i32>(7, 7), out_size - 1), out_size);
+    let t0 = nao_up_base(min(c0, c1), lo, hi);
+    let t_size = nao_up_base(max(c0, c1), lo, hi) + 4 - t0;
+    let tiled = t_size.x <= 12 && t_size.y <= 12;
+    if (tiled) {
+        for (var k: i32 = lid; k < t_size.x * t_size.y; k = k + 64) {
+            let q = clamp(t0 + vec2<i32>(k % t_size.x, k / t_size.x), vec2<i32>(0), lo - 1);
+            nao_tile_a[k] = nao_load(src3, q, 0);
+            nao_tile_b[k] = vec4<f32>(nao_load(src3, q, 1).xyz, (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x));
+        }
+    }
+    workgroupBarrier();
     if (gid.x >= out_size.x || gid.y >= out_size.y) {
         return;
     }
@@ -75,27 +104,34 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let p = nao_position(px, out_size, z);
     let n = nao_load(src1, px, 0).xyz;
     let depth = max(z, 1e-30);
-    let hi = out_size;
-    let lo = nao_size(src2);
     let uv = (vec2<f32>(px) + 0.5) * vec2<f32>(lo) / vec2<f32>(hi) - 0.5;
-    let num = (2 * px + 1) * lo - hi;
-    let base = vec2<i32>(nao_floor_div(num.x, 2 * hi.x), nao_floor_div(num.y, 2 * hi.y)) - 1;
+    let base = nao_up_base(px, lo, hi);
     var sum: f32 = 0.0;
     var total: f32 = 0.0;
     for (var y: i32 = 0; y < 4; y++) {
         for (var x: i32 = 0; x < 4; x++) {
-            let q = clamp(base + vec2<i32>(x, y), vec2<i32>(0), lo - 1);
-            let qw = nao_load(src3, q, 0);
+            let o = base + vec2<i32>(x, y);
+            var qw: vec4<f32> = vec4<f32>(0.0);
+            var qv: vec4<f32> = vec4<f32>(0.0);
+            if (tiled) {
+                let k = (o.y - t0.y) * t_size.x + (o.x - t0.x);
+                qw = nao_tile_a[k];
+                qv = nao_tile_b[k];
+            } else {
+                let q = clamp(o, vec2<i32>(0), lo - 1);
+                qw = nao_load(src3, q, 0);
+                qv = vec4<f32>(nao_load(src3, q, 1).xyz, (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x));
+            }
             if (qw.w < 0.5) {
                 continue;
             }
-            let d = vec2<f32>(base + vec2<i32>(x, y)) - uv;
+            let d = vec2<f32>(o) - uv;
             let spatial = exp(-dot(d, d) / (2.0 * 0.6 * 0.6));
-            let qn = nao_load(src3, q, 1).xyz;
+            let qn = qv.xyz;
             let plane = abs(dot(qn, p - qw.xyz)) / (0.03 * depth);
             let agree = pow(max(dot(qn, n), 0.0), 8.0);
             let w = spatial * (0.001 + exp(-plane * plane) * agree);
-            sum += w * (nao_load(src2, q, 0).x - nao_load(src3, q, 2).x);
+            sum += w * qv.w;
             total += w;
         }
     }
