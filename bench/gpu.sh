@@ -14,7 +14,8 @@
 #
 # Environment: SIZES ("1920x1080 3840x2160"), REPEATS (timed runs per case, 20), MODELS ("unet-gtao
 # unet-fast"), PRESETS ("gpu cpu"), PRECISIONS ("fp32 fp16"), OUT (build/bench-gpu/gpu.json),
-# BENCH_GPU_SMALL=1 (one 128x96 frame, 1 run: what the test runs on llvmpipe).
+# BENCH_GPU_SMALL=1 (one 128x96 frame, 1 run: what the test runs on llvmpipe). Each model's steps are also
+# timed one by one (GL, the first preset and precision) into build/bench-gpu/profile.txt.
 #
 # On an NVIDIA GPU (the device machine, which fetches nothing): `bench/gpu.sh prepare` here, then one call
 # carrying .gl (the GL/EGL and Vulkan loader debs, libvulkan1 among them, /work/.library/device/README.md) and
@@ -161,6 +162,17 @@ run() {
       done
     done
   done
+  # where each model's frame goes: every step timed alone (GL, the first preset and precision)
+  local profile=$BUILD/profile.txt first=${PRESETS%% *}-${PRECISIONS%% *}
+  : >"$profile"
+  for size in $SIZES; do
+    for model in $MODELS; do
+      echo "== $model $first $size (GL)" >>"$profile"
+      NEURALAO_HOST_PROFILE=1 NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$BUILD/exports/$model-$first" synthetic \
+        "${size%x*}" "${size#*x}" 0.5 60 "$BUILD/ao.f32" 2>&1 >/dev/null | grep "step" >>"$profile" || true
+    done
+  done
+  echo "bench/gpu.sh: per-step times in $profile" >&2
   python3 bench/gpu_table.py "$lines" "$OUT"
 }
 

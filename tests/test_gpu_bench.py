@@ -100,3 +100,15 @@ def test_host_ssao_is_the_projects_ssao(bench, tmp_path):
     want = run_ssao(frame, radius)
     assert float(np.abs(ssao - want).max()) <= TOL.glsl_op_fp32
     assert float(want[frame["mask"]].min()) < 0.8  # occlusion somewhere: the comparison means something
+
+
+def test_gpu_bench_profiles_every_step(bench):
+    """profile.txt: per model, each step of its frame timed alone, as many lines as the frame has passes."""
+    _, result, build = bench
+    text = (build / "profile.txt").read_text()
+    for row in result["rows"]:
+        if row["api"] != "gl" or row["preset"] != "gpu":
+            continue
+        block = text.split(f"== {row['model']} gpu-fp32 128x96 (GL)\n", 1)[1].split("==", 1)[0]
+        steps = [ln for ln in block.splitlines() if " step " in ln]
+        assert len(steps) == row["passes"] and all("ms (wall" in ln for ln in steps), block
