@@ -14,6 +14,7 @@ from typing import NoReturn
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.signals import RECEIVED as _RECEIVED
+from neuralao.runtime.foundation.signals import raise_received
 
 # subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -104,14 +105,6 @@ def _on_signal(signum, frame) -> NoReturn:
     raise KeyboardInterrupt() if signum == signal.SIGINT else Terminated()
 
 
-def _raise_received() -> None:
-    """Raise the first signal this run received again: a library that catches BaseException around an
-    optional import (trimesh does) swallows the KeyboardInterrupt raised inside it, and the command would
-    go on as if no Ctrl-C had come."""
-    if _RECEIVED:
-        raise KeyboardInterrupt() if _RECEIVED[0] == signal.SIGINT else Terminated()
-
-
 def _unraisable(hook):
     """``sys.unraisablehook`` that sends a signal again when its exception could not be raised (it came
     while a finalizer ran, which swallows it and prints a traceback): Python runs the handler once more at
@@ -186,11 +179,9 @@ def main(argv: list[str] | None = None) -> int:
         load = next((a for a in argv if a in COMMANDS), None)
         command = f"neuralao {load}" if load else command
         parser = build_parser(load=load)
-        _raise_received()
+        raise_received()  # one a library swallowed during the imports (trimesh catches BaseException)
         args = parser.parse_args(argv)
-        rc = _run(parser, args, f"neuralao {args.command}" if args.command else command)
-        _raise_received()  # a signal a library swallowed: the command still ends as interrupted
-        return rc
+        return _run(parser, args, f"neuralao {args.command}" if args.command else command)
     except (KeyboardInterrupt, Terminated, Exception) as e:
         if isinstance(e, KeyboardInterrupt) or _RECEIVED[:1] == [signal.SIGINT]:
             sys.stderr.write(f"\n{command}: interrupted (Ctrl-C)\n")
@@ -224,10 +215,10 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, command: str
         return 2
     try:
         module = importlib.import_module(COMMANDS[args.command][0])
-        _raise_received()
+        raise_received()
         check_arguments(parser, module, args)
         code = int(module.run(args) or 0)
-        _raise_received()
+        raise_received()
         return code
     except NeuralaoError as e:
         sys.stderr.write(f"{command}: error: {e}\n")
