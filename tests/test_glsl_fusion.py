@@ -194,3 +194,127 @@ def test_pad_read_by_the_first_convs(flip_y):
 
         got = run_wgsl_all(generate_compute(model, preset="gpu", dialect="wgsl"), x)["y"]
         assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+def _pointwise_preamble() -> tuple[list, list]:
+    """A network's input assembly as a chain of per-pixel ops (a foreground mask from the squared input
+    through a 1x1 conv, depth against a scalar input, a clipped exponential, a channel-broadcast Div, a
+    1x1 conv added back onto the input with a Tanh), read by a 3x3 conv through a Concat."""
+    k = np.zeros((1, C, 1, 1), np.float32)
+    k[0, 1:4] = 1.0
+    sel = np.zeros((1, C, 1, 1), np.float32)
+    sel[0, 0] = 1.0
+    back = seeded_weights((C, 1, 1, 1), 9) * 0.5
+    nodes = [
+        named_node("Mul", ("x", "x"), "sq"),
+        named_node("Conv", ("sq", "k"), "m"),
+        named_node("Mul", ("m", "gain"), "mg0"),
+        named_node("Clip", ("mg0", "zero", "one"), "mg"),
+        named_node("Conv", ("x", "sel"), "d"),
+        named_node("Sub", ("d", "r"), "dr"),
+        named_node("Mul", ("dr", "mg"), "rel"),
+        named_node("Neg", ("rel",), "nrel"),
+        named_node("Exp", ("nrel",), "e0"),
+        named_node("Clip", ("e0", "zero", "four"), "e1"),
+        named_node("Mul", ("e1", "mg"), "e"),
+        named_node("Div", ("x", "d"), "xd"),
+        named_node("Sub", ("rel", "d"), "g"),
+        named_node("Conv", ("g", "back", "back_b"), "gb"),
+        named_node("Add", ("xd", "gb"), "a0"),
+        named_node("Tanh", ("a0",), "a"),
+        named_node("Concat", ("a", "e"), "c", axis=1),
+    ]
+    conv, inits = _conv("c", "y", C + 1, 11, cout=3)
+    consts = [
+        ("k", k),
+        ("sel", sel),
+        ("back", back),
+        ("back_b", seeded_weights((C,), 10)),
+        ("gain", np.array(3.0, np.float32)),
+        ("zero", np.array(0.0, np.float32)),
+        ("one", np.array(1.0, np.float32)),
+        ("four", np.array(4.0, np.float32)),
+    ]
+    return nodes + conv, consts + inits
+
+
+def _scalar_input(name: str) -> onnx.ValueInfoProto:
+    return onnx.helper.make_tensor_value_info(name, onnx.TensorProto.FLOAT, [1, 1, 1, 1])
+
+
+def _depth_like(h: int, w: int, seed: int) -> np.ndarray:
+    x = _x(h, w, seed)
+    x[:, 0] = np.abs(x[:, 0]) + 0.5  # the Div's denominator, a depth
+    return x
+
+
+def test_pointwise_chain_computed_in_its_readers():
+    """The gpu preset computes a chain of per-pixel passes inside the passes that read it (each texel
+    recomputes its inputs' chain): 10 passes and textures fewer, the same output as
+    onnxruntime in GLSL (and WGSL where a WebGPU adapter exists); the cpu preset keeps a pass per op."""
+    nodes, inits = _pointwise_preamble()
+    model = image_model(nodes, inits, in_shape=SHAPE, extra_inputs=[_scalar_input("r")])
+    x = _depth_like(9, 14, 7)
+    feeds = {"x": x, "r": np.full((1, 1, 1, 1), 0.4, np.float32)}
+    ref = run_onnxruntime(model.SerializeToString(), feeds)[0]
+    run = lambda program: run_compute_all(program, x, scalars={"r": 0.4})["y"]  # noqa: E731
+    cpu = both_presets(model, ref, run, TOL.glsl_op_fp32, relative=True).manifest
+    gpu = generate_compute(model, preset="gpu").manifest
+    assert _kinds(gpu) == ["pad", "uniform", "pointwise", "pointwise", "conv"] and len(cpu["passes"]) == 15
+    assert len(gpu["memory"]["textures"]) == len(cpu["memory"]["textures"]) - 10
+    grouped = [op for p in gpu["passes"] if p["kind"] == "pointwise" for op in p["ops"]]
+    assert {"Mul", "Conv", "Clip", "Sub", "Neg", "Exp", "Div", "Add", "Tanh"} <= set(grouped)
+    for dialect in ("wgsl", "vulkan"):  # every dialect writes the group
+        assert generate_compute(model, preset="gpu", dialect=dialect).manifest["preset"]["dispatches"] == len(
+            gpu["passes"]
+        )
+    try:
+        import wgpu
+
+        adapter = wgpu.gpu.request_adapter_sync()
+    except (ImportError, RuntimeError):
+        adapter = None
+    if adapter is not None:
+        from neuralao.runtime.wgsl_runner import run_wgsl_all
+
+        got = run_wgsl_all(generate_compute(model, preset="gpu", dialect="wgsl"), x, scalars={"r": 0.4})["y"]
+        assert float((np.abs(got - ref) / np.maximum(1.0, np.abs(ref))).max()) <= TOL.glsl_op_fp32
+
+
+@pytest.mark.parametrize("flip_y", [False, True])
+def test_pointwise_chain_ending_at_the_output(flip_y):
+    """A per-pixel chain whose last op is the graph's output: one pass that also crops (row-flipped for a
+    bottom-up engine texture)."""
+    back = seeded_weights((C, C, 1, 1), 12) * 0.4
+    nodes = [
+        named_node("Conv", ("x", "back"), "b"),
+        named_node("Add", ("b", "x"), "s"),
+        named_node("Mul", ("s", "b"), "y"),
+    ]
+    model = image_model(nodes, [("back", back)], in_shape=SHAPE)
+    x = _x(7, 11, 8)
+    ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
+    gpu = generate_compute(model, preset="gpu")
+    assert _kinds(gpu.manifest) == ["pad", "pointwise"]
+    stored = np.ascontiguousarray(x[:, :, ::-1]) if flip_y else x
+    got = run_compute_all(gpu, stored, flip_y=flip_y)["y"]
+    got = got[:, :, ::-1] if flip_y else got
+    assert got.shape == ref.shape and float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+
+
+def test_a_wide_1x1_conv_keeps_its_pass():
+    """Recomputing a 16-channel 1x1 conv in each layer of its reader would cost more than its pass: it
+    stays a pass, its cheap reader does not."""
+    wide = 16
+    nodes = [
+        named_node("Conv", ("x", "w1"), "a"),
+        named_node("Mul", ("a", "a"), "b"),
+        named_node("Relu", ("b",), "y"),
+    ]
+    model = image_model(nodes, [("w1", seeded_weights((wide, wide, 1, 1), 13) * 0.3)], in_shape=(1, wide, "H", "W"))
+    x = np.random.default_rng(9).normal(size=(1, wide, 6, 10)).astype(np.float32)
+    ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
+    gpu = generate_compute(model, preset="gpu")
+    assert [p["ops"] for p in gpu.manifest["passes"] if p["kind"] == "conv"] == [["Pad", "Conv"]]
+    got = run_compute_all(gpu, x)["y"]
+    assert float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32 * max(1.0, float(np.abs(ref).max()))

@@ -216,6 +216,17 @@ CASES = {
         [("s", seeded_weights((6,), 4)), ("b", seeded_weights((6,), 5))],
     ),
     "scalar_input": ([named_node("Mul", ("x", "k"))], []),
+    # per-pixel ops computed inside their reader (the gpu preset's pointwise group)
+    "pointwise_chain": (
+        [
+            named_node("Conv", ("x", "w"), "a"),
+            named_node("Mul", ("a", "x"), "b"),
+            named_node("Neg", ("b",), "n"),
+            named_node("Sigmoid", ("n",), "s"),
+            named_node("Add", ("s", "a")),
+        ],
+        [("w", seeded_weights((6, 6, 1, 1), 6) * 0.4)],
+    ),
 }
 
 
@@ -231,6 +242,8 @@ def test_single_ops_spirv_vs_onnxruntime(name, via):
     feeds = {"x": x, **({"k": np.full((1, 1, 1, 1), 0.7, np.float32)} if scalar else {})}
     ref = run_onnxruntime(model.SerializeToString(), feeds)[0]
     program = generate_compute(model, dialect="vulkan")
+    if name == "pointwise_chain":
+        assert [p["kind"] for p in program.manifest["passes"]] == ["pad", "pointwise"]
     got = _run_spirv(program, x, via, scalars={"k": feeds["k"]} if scalar else None)["y"]
     assert got.shape == ref.shape, (got.shape, ref.shape)
     assert got.dtype == ref.dtype == np.float32

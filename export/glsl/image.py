@@ -2234,6 +2234,52 @@ def _binary_body(p: Pass, d: Dialect) -> str:
     )
 
 
+def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
+    """A pointwise group (:func:`_inline_pointwise`): each member, in graph order, computes every layer
+    of its output at this texel into a local array ``v<k>``, reading the pass's inputs (src<i>) or an
+    earlier member's array; the pass stores layer gid.z of the last. 1x1 convs accumulate in fp32."""
+    members, inputs = p.fields["members"], [t.ident for t in p.inputs]
+    made: dict[str, int] = {}
+    lines = []
+
+    def operand(t: Texture, how: str, layer: int) -> str:
+        if t.ident in made:
+            k = made[t.ident]
+            return f"v{k}[0].xxxx" if how == "channel" else f"v{k}[{layer}]"
+        at = {"full": {"xy": "gid.xy", "z": layer}, "pixel": {"z": layer}, "channel": {"xy": "gid.xy"}}
+        return d.fill(f"side_{how}", src=f"src{inputs.index(t.ident)}", **at.get(how, {}))
+
+    for k, m in enumerate(members):
+        own = {name: offs[f"m{k}_{name}"] for name in m.params}
+        lines.append(d.fill("pointwise_array", name=f"v{k}", n=m.output.layers))
+        for layer in range(m.output.layers):
+            if m.kind == "conv":
+                tap = own["weight"] + layer * 4 * m.fields["in_layers"]
+                terms = [
+                    d.fill("pointwise_conv_term", o=tap + 4 * (off + j), x=operand(t, "full", j))
+                    for t, off in zip(_conv_parts(m), m.fields["layer_offsets"], strict=True)
+                    for j in range(t.layers)
+                ]
+                body = d.fill("pointwise_conv", bias=own["bias"] + layer, terms="\n".join(terms))
+            elif m.kind == "binary":
+                a, b = (operand(t, how, layer) for t, how in zip(m.inputs, m.fields["fetch"], strict=True))
+                guard = (
+                    d.fill("epilogue_guard_div", channels=m.output.channels, z=layer)
+                    if m.fields["op"] == "Div"
+                    else d.fill("binary_guard_none")
+                )
+                body = d.fill("binary_body", fetch_a=a, fetch_b=b, guard=guard, expr=d.fill(f"binop_{m.fields['op']}"))
+            else:
+                body = d.fill("pointwise_copy", x=operand(m.inputs[0], "full", layer))
+            epi = _epilogue(
+                m, own, "gid.xy", str(layer), d, side=lambda e, m=m, layer=layer: operand(m.inputs[e.side[0]], e.side[1], layer)
+            )
+            lines.append(d.fill("pointwise_layer", body=body, epilogue=epi, name=f"v{k}", layer=layer))
+        made[m.output.ident] = k
+    lines.append(d.fill("pointwise_result", name=f"v{len(members) - 1}"))
+    return "\n".join(lines)
+
+
 def _gather_body(p: Pass, d: Dialect) -> str:
     digits = []
     for run in p.fields["digits"]:
@@ -2405,6 +2451,8 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
         body = d.fill("elementwise_body")
     elif p.kind == "binary":
         body = _binary_body(p, d)
+    elif p.kind == "pointwise":
+        body = _pointwise_body(p, offs, d)
     elif p.kind == "spatial_pad":
         body = _spatial_pad_body(p, d)
     elif p.kind == "pad":
@@ -2432,7 +2480,7 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
         prelude.append(d.fill("prelude_div"))
     if p.kind == "resize_filter" and p.fields["kernel"] == "cubic":
         prelude.append(d.fill("prelude_cubic"))
-    if p.fields.get("erf"):
+    if any(m.fields.get("erf") for m in _members(p)):
         prelude.append(d.fill("prelude_erf"))
     epi = _epilogue(p, offs, "gid.xy", "gid.z", d)
     if _blocked(p):
@@ -2502,14 +2550,15 @@ def _side_operand(e: Epilogue, xy: str, z: str, d: Dialect) -> str:
     return d.fill(f"side_{how}", src=f"src{index}", **at)
 
 
-def _epilogue(p: Pass, offs: dict[str, int], xy: str, z: str, d: Dialect) -> str:
+def _epilogue(p: Pass, offs: dict[str, int], xy: str, z: str, d: Dialect, side=None) -> str:
     """The pass's per-texel epilogue on ``r``; ``xy`` and ``z`` are the expressions of the output texel
-    and layer."""
+    and layer; ``side(e)``, where given, spells a fused two-image op's other operand (a pointwise
+    group's member reads it from an earlier member)."""
     epi = []
     for e in p.epilogue:
         if e.form == "binary":
             _, _, op, r_is = e.side
-            other = _side_operand(e, xy, z, d)
+            other = side(e) if side else _side_operand(e, xy, z, d)
             a, b = ("r", other) if r_is == 0 else (other, "r")
             guard = (
                 d.fill("epilogue_guard_div", channels=p.output.channels, z=z)
@@ -2594,7 +2643,7 @@ def _conv_block(block: tuple[int, int, int], layers: int) -> tuple[int, int, int
 # Two-image ops an epilogue can apply (templates binop_<op>) and the pass kinds a crop folds into: those
 # whose body reads no out_size (the crop makes the output the raw size).
 _FUSED_BINOPS = ("Add", "Sub", "Mul", "Div", "Max", "Min")
-_CROP_INTO = (*CONV_KINDS, "binary", "elementwise")
+_CROP_INTO = (*CONV_KINDS, "binary", "elementwise", "pointwise")
 
 
 # How a dense conv reads an input part (fields["reads"], one per part; absent: all "texel"): mode ->
@@ -2721,27 +2770,114 @@ def _fuse_crop(table: ImageOps, c: Pass) -> str | None:
     return f"Crop into the {p.kind} pass producing {t.ident}"
 
 
+# A pass inlined into its readers may add at most this many vec4 operations (a 1x1 conv's mat4 tap
+# counting 4) to each texel a reader computes (all its layers): the producers of a network's input
+# assembly (masks, depth ratios, the radius channel) qualify, a wide 1x1 conv does not. A 3x3 conv from
+# 8 to 8 channels is 144 per texel.
+POINTWISE_INLINE_COST = 64
+
+
+def _pointwise(p: Pass) -> bool:
+    """Each output texel of ``p`` depends only on its inputs' texels at the same position (or on 1x1
+    inputs): an elementwise or two-image pass, a 1x1 stride-1 conv reading texels in place, or a
+    pointwise group (kind "pointwise") of them."""
+    f = p.fields
+    if p.output.base != "padded" and not f.get("flip_store"):  # raw: only as the crop fused into p
+        return False
+    if p.kind in ("pointwise", "elementwise", "binary"):
+        return True
+    return (
+        p.kind == "conv"
+        and f["kernel"] == (1, 1)
+        and f["strides"] == (1, 1)
+        and not any(f["pads"])
+        and not _blocked(p)
+        and set(f.get("reads", ["texel"])) == {"texel"}
+    )
+
+
+def _members(p: Pass) -> list[Pass]:
+    return p.fields["members"] if p.kind == "pointwise" else [p]
+
+
+def _reads(m: Pass, t: Texture) -> list[str]:
+    """How member ``m`` reads texture ``t``: full | channel | pixel | scalar, one entry per read."""
+    if m.kind == "binary":
+        how = [h for u, h in zip(m.inputs, m.fields["fetch"], strict=True) if u.ident == t.ident]
+    else:
+        how = ["full" for u in (m.inputs[:1] if m.kind == "elementwise" else _conv_parts(m)) if u.ident == t.ident]
+    return how + [e.side[1] for e in m.epilogue if e.form == "binary" and m.inputs[e.side[0]].ident == t.ident]
+
+
+def _cost(p: Pass) -> int:
+    """vec4 operations per texel of all of ``p``'s output layers (see :data:`POINTWISE_INLINE_COST`)."""
+    return sum(m.output.layers * (4 * m.fields["in_layers"] if m.kind == "conv" else 1) for m in _members(p))
+
+
+def _inline_pointwise(table: ImageOps, p: Pass, order: dict[int, int]) -> str | None:
+    """Compute pointwise pass ``p`` inside each of its readers when all of them are pointwise passes of
+    its size that read it texel by texel: every reader becomes a pointwise group holding p's members
+    (recomputed per reader, so no texture, dispatch or barrier is left for p). ``order``: id(pass) ->
+    position in the graph, which orders a group's members."""
+    t = p.output
+    readers = _readers(table, t)
+    if not _pointwise(p) or p.fields.get("flip_store") or not readers:
+        return None
+    for r in readers:  # a full or channel fetch reads t at the reader's texel (t is its size)
+        if not _pointwise(r) or any(h not in ("full", "channel") for m in _members(r) for h in _reads(m, t)):
+            return None
+        if _cost(p) * r.output.layers > POINTWISE_INLINE_COST:
+            return None
+    for r in readers:
+        members = {id(m): m for m in _members(p) + _members(r)}
+        kept = sorted(members.values(), key=lambda m: order[id(m)])
+        made = {m.output.ident for m in kept}
+        inputs = list({u.ident: u for m in kept for u in m.inputs if u.ident not in made}.values())
+        group = Pass(r.index, "pointwise", [op for m in kept for op in m.ops], inputs, r.output)
+        group.nodes = [n for m in kept for n in m.nodes]
+        group.fields = {"members": kept, "flip_store": r.fields.get("flip_store", False)}
+        if r.kind != "pointwise":
+            r.fields.pop("flip_store", None)
+        table.passes[table.passes.index(r)] = group
+        table.producer[r.output.ident] = group
+    _drop(table, p, t)
+    return f"{' + '.join(p.ops)} computed in the pass(es) reading {t.ident}"
+
+
+def _group_params(p: Pass) -> None:
+    """A pointwise group's parameters: each member's arrays, renamed m<k>_<name>."""
+    p.params = {f"m{k}_{n}": a for k, m in enumerate(p.fields["members"]) for n, a in m.params.items()}
+
+
+def _fuse_into_conv(table: ImageOps, q: Pass, multiple: int) -> str | None:
+    """One of the fusions that fold pass ``q`` into a conv's reads or a pass's epilogue or store."""
+    if q.kind == "binary":
+        return _fuse_binary(table, q)
+    if q.kind == "crop":
+        return _fuse_crop(table, q)
+    if q.kind in ("pool_avg", "resize_linear", "pad"):
+        return _fuse_read(table, q, multiple)
+    return None
+
+
 def _fuse(table: ImageOps, multiple: int) -> list[str]:
-    """The gpu preset's fusions, until none applies; passes renumbered. Returns what was fused."""
+    """The gpu preset's fusions, until none applies; passes renumbered. Returns what was fused. The
+    fusions into a conv's reads and epilogue come first; then pointwise passes are computed in their
+    readers (where one is left, the others again)."""
     made: list[str] = []
-    while True:
-        for q in table.passes:
-            step = (
-                _fuse_binary(table, q)
-                if q.kind == "binary"
-                else _fuse_crop(table, q)
-                if q.kind == "crop"
-                else _fuse_read(table, q, multiple)
-                if q.kind in ("pool_avg", "resize_linear", "pad")
-                else None
-            )
-            if step:
-                made.append(step)
+    order = {id(q): k for k, q in enumerate(table.passes)}
+    for inline in (False, True):
+        while True:
+            step = next((s for q in list(table.passes) if (s := _fuse_into_conv(table, q, multiple))), None)
+            if step is None and inline:
+                step = next((s for q in list(table.passes) if (s := _inline_pointwise(table, q, order))), None)
+            if step is None:
                 break
-        else:
-            break
+            made.append(step)
     for k, q in enumerate(table.passes):
         q.index = k
+        if q.kind == "pointwise":
+            _group_params(q)
     return made
 
 

@@ -694,6 +694,20 @@ _T["binop_Div"] = "a / b"
 _T["binop_Max"] = "max(a, b)"
 _T["binop_Min"] = "min(a, b)"
 
+# A pointwise group (passes computed inside their reader): member k's layers at this texel in a local
+# array v<k>, each from the group's inputs or an earlier member's array; the pass stores v<last>[gid.z].
+_T["pointwise_array"] = "    vec4 ${name}[${n}];"
+_T["pointwise_layer"] = """    {
+${body}
+${epilogue}
+        ${name}[${layer}] = r;
+    }"""
+_T["pointwise_copy"] = "    ${var_vec4} r = ${x};"
+_T["pointwise_conv"] = """    ${var_vec4} r = prm[${bias}];
+${terms}"""
+_T["pointwise_conv_term"] = "    r += ${mat4}(prm[${o}], prm[${o} + 1], prm[${o} + 2], prm[${o} + 3]) * ${x};"
+_T["pointwise_result"] = "    ${var_vec4} r = ${name}[gid.z];"
+
 # ONNX Pad on H, W (negative pads crop): output texel (x, y) reads input (x - left, y - top).
 _T["spatial_pad_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
     ${var_int} x = gid.x - ${left};
@@ -1136,6 +1150,7 @@ _W["epilogue_rdiv"] = (
     "    r = prm[${offset} + ${z}] / select(vec4<f32>(1.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < "
     "vec4<i32>(${channels}));"
 )
+_W["pointwise_array"] = "    var ${name}: array<vec4<f32>, ${n}>;"
 _W["epilogue_guard_div"] = (
     "        b = select(vec4<f32>(1.0), b, "
     "vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}));"
