@@ -408,12 +408,14 @@ def _write_pass(p: FramePass, textures: dict[str, str], settings: FrameSettings,
     prelude = fill("prelude") if dialect == "wgsl" else fill("prelude", sampler=fill("sampler"))
     functions = _noise_table(settings, fill) if p.body == "gtao_body" else ""
     lx, ly = p.local_size
-    skeleton = {"local_x": lx, "local_y": ly}
+    skeleton = {"local_x": lx, "local_y": ly, "load": ""}
+    if dialect == "wgsl":
+        skeleton["builtins"] = ""
     if p.body == "upsample_body":  # its workgroup shares the low texels (see the template)
         tile = max(lx, ly) + 4
         decls.append(fill("upsample_shared", entries=tile * tile))
         functions = fill("upsample_functions")
-        skeleton["load"] = fill(
+        tile_load = fill(
             "upsample_load",
             last_x=lx - 1,
             last_y=ly - 1,
@@ -421,8 +423,11 @@ def _write_pass(p: FramePass, textures: dict[str, str], settings: FrameSettings,
             threads=lx * ly,
             low_value=fields["low_value"],
         )
+        skeleton["load"] = fill("frame_pass_load", local_x=lx, local_y=ly, tile_load=tile_load)
+        if dialect == "wgsl":
+            skeleton["builtins"] = fill("frame_pass_builtins")
     return fill(
-        "frame_pass_tiled" if "load" in skeleton else "frame_pass",
+        "frame_pass",
         header=fill("header"),
         name=p.name,
         summary=p.summary,
