@@ -67,11 +67,7 @@ fn nao_up_base(p: vec2<i32>, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
 }
 
 @compute @workgroup_size(8, 8, 1)
-fn main(
-    @builtin(global_invocation_id) gid_u: vec3<u32>,
-    @builtin(local_invocation_index) lid_u: u32,
-    @builtin(workgroup_id) group_u: vec3<u32>,
-) {
+fn main(@builtin(global_invocation_id) gid_u: vec3<u32>, @builtin(local_invocation_index) lid_u: u32, @builtin(workgroup_id) group_u: vec3<u32>) {
     let gid = vec2<i32>(gid_u.xy);
     let out_size = vec2<i32>(textureDimensions(dst));
     let lid = i32(lid_u);
