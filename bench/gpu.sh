@@ -124,9 +124,23 @@ PYEOF
 vulkan_runs() {
   [[ -x $VK ]] || return 1
   local first=${MODELS%% *}-${PRESETS%% *}-${PRECISIONS%% *} err
-  if ! err=$("$VK" "$BUILD/exports/$first" synthetic 64 48 0.5 60 "$BUILD/ao-vk.f32" 2>&1 >/dev/null); then
+  if ! err=$("$VK" "$BUILD/exports/$first" synthetic 64 48 0.5 60 "$BUILD/ao-vulkan.f32" 2>&1 >/dev/null); then
     echo "bench/gpu.sh: the Vulkan runner does not run here (${err##*neuralao_vk: }): GL only" >&2
     return 1
+  fi
+}
+
+# time_case API RUNNER EXPORT SIZE CASE: one case's timed frames, its JSON line (CASE's fields and the api)
+# appended to $lines; a case that fails is reported and left out, the others still run (errors: $errors).
+time_case() {
+  local api=$1 runner=$2 export=$3 size=$4 case=$5 json
+  if json=$(NEURALAO_HOST_REPEATS=$REPEATS "$runner" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
+    "$BUILD/ao-$api.f32" 2>>"$errors"); then
+    json=${json#\{}
+    [[ $json == *'"api"'* ]] || json="\"api\": \"$api\", $json"  # the Vulkan runner names its own
+    echo "{$case, $json" >>"$lines"
+  else
+    echo "bench/gpu.sh: $api failed: $export $size (see $errors)" >&2
   fi
 }
 
@@ -142,22 +156,9 @@ run() {
         for precision in $PRECISIONS; do
           local export=$BUILD/exports/$model-$preset-$precision
           [[ -d $export ]] || { echo "bench/gpu.sh: no $export: run 'bench/gpu.sh prepare'" >&2; exit 1; }
-          local json case="\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\""
-          # a case that fails is reported and left out; the others still run (the errors in $errors)
-          if json=$(NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
-            "$BUILD/ao.f32" 2>>"$errors"); then
-            echo "{$case, \"api\": \"gl\", ${json#\{}" >>"$lines"
-          else
-            echo "bench/gpu.sh: GL failed: $model $preset $precision $size (see $errors)" >&2
-          fi
-          if ((vulkan)); then  # its line names its api
-            if json=$(NEURALAO_HOST_REPEATS=$REPEATS "$VK" "$export" synthetic "${size%x*}" "${size#*x}" 0.5 60 \
-              "$BUILD/ao-vk.f32" 2>>"$errors"); then
-              echo "{$case, ${json#\{}" >>"$lines"
-            else
-              echo "bench/gpu.sh: Vulkan failed: $model $preset $precision $size (see $errors)" >&2
-            fi
-          fi
+          local case="\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\""
+          time_case gl "$HOST" "$export" "$size" "$case"
+          if ((vulkan)); then time_case vulkan "$VK" "$export" "$size" "$case"; fi
         done
       done
     done
@@ -169,7 +170,7 @@ run() {
     for model in $MODELS; do
       echo "== $model $first $size (GL)" >>"$profile"
       NEURALAO_HOST_PROFILE=1 NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$BUILD/exports/$model-$first" synthetic \
-        "${size%x*}" "${size#*x}" 0.5 60 "$BUILD/ao.f32" 2>&1 >/dev/null | grep "step" >>"$profile" || true
+        "${size%x*}" "${size#*x}" 0.5 60 "$BUILD/ao-gl.f32" 2>&1 >/dev/null | grep "step" >>"$profile" || true
     done
   done
   echo "bench/gpu.sh: per-step times in $profile" >&2

@@ -46,16 +46,10 @@ from neuralao.runtime.baselines import GTAOSettings, gtao_pass_description, proj
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
+from neuralao.runtime.wgsl_runner import WGPU_FORMATS
 
 _GL_FORMATS = {"RGBA32F": "GL_RGBA32F", "R32F": "GL_R32F", "RGBA16F": "GL_RGBA16F", "R16F": "GL_R16F"}
-# format -> (WebGPU format, bytes a texel, numpy type of a channel)
-_WGPU_FORMATS = {
-    "RGBA32F": ("rgba32float", 16, np.float32),
-    "R32F": ("r32float", 4, np.float32),
-    "RGBA16F": ("rgba16float", 8, np.float16),
-    "R16F": ("r16float", 2, np.float16),
-}
-_CHANNEL_TYPES = {name: dtype for name, _, dtype in _WGPU_FORMATS.values()}
+_CHANNEL_TYPES = {name: dtype for name, _, dtype in WGPU_FORMATS.values()}
 
 
 def frame_settings(
@@ -284,7 +278,7 @@ class _WgpuBackend:
         tu = wgpu.TextureUsage
         self.textures = {}
         for ident, (tw, th, layers, fmt) in runner.sizes.items():
-            name, texel, _ = _WGPU_FORMATS[fmt]
+            name, texel, _ = WGPU_FORMATS[fmt]
             tex = dev.create_texture(
                 size=(tw, th, layers),
                 format=name,

@@ -46,14 +46,15 @@ from neuralao.runtime.glsl_runner import compute_input, compute_outputs, scalar_
 
 log = logging.getLogger(__name__)
 
-_FORMATS = {"RGBA32F": ("rgba32float", 16), "RGBA16F": ("rgba16float", 8)}
-# Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
-_STORAGE_FORMATS = {
-    "rgba32f": "rgba32float",
-    "rgba16f": "rgba16float",
-    "r32f": "r32float",
-    "r16f": "r16float",
+# A manifest's texture format -> (WebGPU format, bytes a texel, numpy type of a channel)
+WGPU_FORMATS = {
+    "RGBA32F": ("rgba32float", 16, np.float32),
+    "R32F": ("r32float", 4, np.float32),
+    "RGBA16F": ("rgba16float", 8, np.float16),
+    "R16F": ("r16float", 2, np.float16),
 }
+# Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
+_STORAGE_FORMATS = {fmt.lower(): name for fmt, (name, _, _) in WGPU_FORMATS.items()}
 WGSL_FORMAT = "neuralao-wgsl-compute"
 VULKAN_FORMAT = "neuralao-vulkan-compute"
 GLSL_FORMAT = "neuralao-glsl-compute"
@@ -160,7 +161,7 @@ class _WgslRun:
         tu = wgpu.TextureUsage
         self.textures = {}
         for ident, (tw, th, layers, _) in texture_sizes(self.m, height, width).items():
-            fmt, texel = _FORMATS[self.m["textures"][ident]["format"]]
+            fmt, texel, _ = WGPU_FORMATS[self.m["textures"][ident]["format"]]
             tex = dev.create_texture(
                 size=(tw, th, layers),
                 format=fmt,

@@ -712,38 +712,42 @@ static void dispatch_steps(const FrameRun *fr, int kind) {
     glActiveTexture(GL_TEXTURE0);
 }
 
-/* NEURALAO_HOST_PROFILE set (with NEURALAO_HOST_REPEATS): each step timed alone, N times, after the frame
- * has run once (its inputs hold the frame's values); one line per step on stderr, medians in ms. */
-static void profile_steps(const FrameRun *fr) {
-    if (!getenv("NEURALAO_HOST_PROFILE") || g_repeats < 1) return;
-    double *runs = xmalloc(sizeof(double) * (size_t)g_repeats * 2), *walls = runs + g_repeats;
-    for (int i = 0; i < fr->n_steps; i++) {
-        const Step *s = &fr->steps[i];
-        for (int run = 0; run < g_repeats; run++) {
-            time_begin();
-            dispatch_step(fr, s);
-            runs[run] = time_end_ms(&walls[run]);
-        }
-        fprintf(stderr, "neuralao_host: step %2d %-22s %8.4f ms (wall %.4f), groups %u x %u x %u\n", i, s->name,
-                median(runs, g_repeats), median(walls, g_repeats), s->groups[0], s->groups[1], s->groups[2]);
-    }
-    glActiveTexture(GL_TEXTURE0);
-    free(runs);
-}
-
-/* Medians of N timed dispatches of the steps of one kind (all: kind < 0); -1 when the frame has none. */
-static void time_steps(const FrameRun *fr, int kind, double *ms, double *wall) {
-    int any = kind < 0;
-    for (int i = 0; i < fr->n_steps; i++) any |= fr->steps[i].kind == kind;
-    if (!any || g_repeats < 1) return;
+/* Medians of N timed runs (NEURALAO_HOST_REPEATS) of the steps of one kind (all: kind < 0), or of step
+ * ``only`` alone (only >= 0). */
+static void time_runs(const FrameRun *fr, int kind, int only, double *ms, double *wall) {
     double *runs = xmalloc(sizeof(double) * (size_t)g_repeats * 2), *walls = runs + g_repeats;
     for (int run = 0; run < g_repeats; run++) {
         time_begin();
-        dispatch_steps(fr, kind);
+        if (only >= 0)
+            dispatch_step(fr, &fr->steps[only]);
+        else
+            dispatch_steps(fr, kind);
         runs[run] = time_end_ms(&walls[run]);
     }
     *ms = median(runs, g_repeats), *wall = median(walls, g_repeats);
     free(runs);
+}
+
+/* NEURALAO_HOST_PROFILE set (with NEURALAO_HOST_REPEATS): each step timed alone, N times, after the frame
+ * has run once (its inputs hold the frame's values); one line per step on stderr, medians in ms. */
+static void profile_steps(const FrameRun *fr) {
+    if (!getenv("NEURALAO_HOST_PROFILE") || g_repeats < 1) return;
+    for (int i = 0; i < fr->n_steps; i++) {
+        const Step *s = &fr->steps[i];
+        double ms, wall;
+        time_runs(fr, -1, i, &ms, &wall);
+        fprintf(stderr, "neuralao_host: step %2d %-22s %8.4f ms (wall %.4f), groups %u x %u x %u\n", i, s->name, ms,
+                wall, s->groups[0], s->groups[1], s->groups[2]);
+    }
+    glActiveTexture(GL_TEXTURE0);
+}
+
+/* Medians of N timed dispatches of the steps of one kind (all: kind < 0); left as they are when the frame
+ * has none. */
+static void time_steps(const FrameRun *fr, int kind, double *ms, double *wall) {
+    int any = kind < 0;
+    for (int i = 0; i < fr->n_steps; i++) any |= fr->steps[i].kind == kind;
+    if (any && g_repeats >= 1) time_runs(fr, kind, -1, ms, wall);
 }
 
 /* The whole frame from the manifest's "frame" section (see the header, steps 1-5). gb: H x W x 5 floats,
