@@ -12,10 +12,14 @@
 #                          each case through Vulkan too where the runner was built and finds a Vulkan device
 #   bench/gpu.sh           both
 #
-# Environment: SIZES ("1920x1080 3840x2160"), REPEATS (timed runs per case, 20), MODELS ("unet-gtao
-# unet-fast"), PRESETS ("gpu cpu"), PRECISIONS ("fp32 fp16"), OUT (build/bench-gpu/gpu.json),
-# BENCH_GPU_SMALL=1 (one 128x96 frame, 1 run: what the test runs on llvmpipe). Each model's steps are also
-# timed one by one (GL, the first preset and precision) into build/bench-gpu/profile.txt.
+# Environment (prepare): MODELS ("unet-gtao unet-fast"), PRESETS ("gpu cpu"), PRECISIONS ("fp32 fp16"),
+# ARCHS (architectures to time before training them, seeded untrained networks made by
+# bench/gpu_candidates.py, the first preset and precision only; default: the frame-local default at
+# 4/8/16/32 and pure fast models at 4/8/16/32, 6/12/24/48 and 8/16/32/64); (run) SIZES ("1920x1080
+# 3840x2160"), REPEATS (timed runs per case, 20), OUT (build/bench-gpu/gpu.json). BENCH_GPU_SMALL=1: one
+# 128x96 frame, 1 run (what the test runs on llvmpipe). `run` times every export `prepare` made; each
+# model's steps are also timed one by one (GL, the first preset and precision) into
+# build/bench-gpu/profile.txt.
 #
 # On an NVIDIA GPU (the device machine, which fetches nothing): `bench/gpu.sh prepare` here, then one call
 # carrying .gl (the GL/EGL and Vulkan loader debs, libvulkan1 among them, /work/.library/device/README.md) and
@@ -43,6 +47,7 @@ REPEATS=${REPEATS:-20}
 MODELS=${MODELS:-unet-gtao unet-fast}
 PRESETS=${PRESETS:-gpu cpu}
 PRECISIONS=${PRECISIONS:-fp32 fp16}
+ARCHS=${ARCHS-v3-default=4,8,16,32+gtao v3-fast-w4=4,8,16,32 v3-fast-w6=6,12,24,48 v3-fast-w8=8,16,32,64}
 OUT=${OUT:-$BUILD/gpu.json}
 if [[ ${BENCH_GPU_SMALL:-0} == 1 ]]; then SIZES=128x96 REPEATS=1; fi
 
@@ -57,7 +62,18 @@ prepare() {
   else
     echo "bench/gpu.sh: no vulkan/vulkan.h (Debian: libvulkan-dev): GL only" >&2
   fi
-  "$PY" - "$BUILD" "$MODELS" "$PRESETS" "$PRECISIONS" "$vulkan" <<'PYEOF'
+  rm -rf "$BUILD/exports" "$BUILD/candidates"
+  echo "-${PRESETS%% *}-${PRECISIONS%% *}" >"$BUILD/profiled"  # the exports run times step by step
+  # each job: name, source folder, presets, precisions
+  local jobs=() name
+  for name in $MODELS; do jobs+=("$name|runtime/models/$name|$PRESETS|$PRECISIONS"); done
+  if [[ -n $ARCHS ]]; then
+    "$PY" bench/gpu_candidates.py "$BUILD/candidates" $ARCHS >/dev/null
+    for name in $ARCHS; do
+      jobs+=("${name%%=*}|$BUILD/candidates/${name%%=*}|${PRESETS%% *}|${PRECISIONS%% *}")
+    done
+  fi
+  "$PY" - "$BUILD" "$vulkan" "${jobs[@]}" <<'PYEOF'
 import dataclasses, json, shutil, sys
 from pathlib import Path
 
@@ -98,15 +114,15 @@ def ssao_entry(out: Path) -> dict:
     }
 
 
-build, vulkan = Path(sys.argv[1]), sys.argv[5] == "1"
-models, presets, precisions = (a.split() for a in sys.argv[2:5])
-for model in models:
-    src = Path("runtime/models") / model
-    for preset in presets:
-        for precision in precisions:
+build, vulkan = Path(sys.argv[1]), sys.argv[2] == "1"
+for job in sys.argv[3:]:
+    model, folder, presets, precisions = job.split("|")
+    src = Path(folder)
+    for preset in presets.split():
+        for precision in precisions.split():
             out = build / "exports" / f"{model}-{preset}-{precision}"
             shutil.rmtree(out, ignore_errors=True)
-            out.mkdir(parents=True)
+            out.mkdir(parents=True)  # exports/<model>-<preset>-<precision>: `run` reads the three back
             manifest = json.loads((src / "manifest.json").read_text())
             manifest.pop("internal_resolution", None)  # its fragment passes: the frame section replaces them
             manifest["ssao"] = ssao_entry(out)
@@ -123,8 +139,9 @@ PYEOF
 # Whether the Vulkan runner was built and runs here (a Vulkan device): one small frame of the first export.
 vulkan_runs() {
   [[ -x $VK ]] || return 1
-  local first=${MODELS%% *}-${PRESETS%% *}-${PRECISIONS%% *} err
-  if ! err=$("$VK" "$BUILD/exports/$first" synthetic 64 48 0.5 60 "$BUILD/ao-vulkan.f32" 2>&1 >/dev/null); then
+  local first err
+  first=$(exports | head -n 1)
+  if ! err=$("$VK" "$first" synthetic 64 48 0.5 60 "$BUILD/ao-vulkan.f32" 2>&1 >/dev/null); then
     echo "bench/gpu.sh: the Vulkan runner does not run here (${err##*neuralao_vk: }): GL only" >&2
     return 1
   fi
@@ -144,32 +161,38 @@ time_case() {
   fi
 }
 
+# The exports `prepare` made, one folder a line.
+exports() {
+  local e
+  for e in "$BUILD"/exports/*/; do [[ -d $e ]] && echo "${e%/}"; done
+}
+
 run() {
   [[ -x $HOST ]] || { echo "bench/gpu.sh: no $HOST: run 'bench/gpu.sh prepare' first" >&2; exit 1; }
   local lines=$BUILD/runs.jsonl errors=$BUILD/errors.log vulkan=0
   : >"$lines"
   : >"$errors"
+  [[ -n $(exports) ]] || { echo "bench/gpu.sh: no exports in $BUILD: run 'bench/gpu.sh prepare'" >&2; exit 1; }
   if vulkan_runs; then vulkan=1; fi
+  local size export tag
   for size in $SIZES; do
-    for model in $MODELS; do
-      for preset in $PRESETS; do
-        for precision in $PRECISIONS; do
-          local export=$BUILD/exports/$model-$preset-$precision
-          [[ -d $export ]] || { echo "bench/gpu.sh: no $export: run 'bench/gpu.sh prepare'" >&2; exit 1; }
-          local case="\"model\": \"$model\", \"preset\": \"$preset\", \"precision\": \"$precision\""
-          time_case gl "$HOST" "$export" "$size" "$case"
-          if ((vulkan)); then time_case vulkan "$VK" "$export" "$size" "$case"; fi
-        done
-      done
+    for export in $(exports); do
+      tag=${export##*/}  # <model>-<preset>-<precision>; the model's name may hold dashes
+      local precision=${tag##*-} rest=${tag%-*}
+      local case="\"model\": \"${rest%-*}\", \"preset\": \"${rest##*-}\", \"precision\": \"$precision\""
+      time_case gl "$HOST" "$export" "$size" "$case"
+      if ((vulkan)); then time_case vulkan "$VK" "$export" "$size" "$case"; fi
     done
   done
   # where each model's frame goes: every step timed alone (GL, the first preset and precision)
-  local profile=$BUILD/profile.txt first=${PRESETS%% *}-${PRECISIONS%% *}
+  local profile=$BUILD/profile.txt profiled
+  profiled=$(cat "$BUILD/profiled")  # -<preset>-<precision>, written by prepare
   : >"$profile"
   for size in $SIZES; do
-    for model in $MODELS; do
-      echo "== $model $first $size (GL)" >>"$profile"
-      NEURALAO_HOST_PROFILE=1 NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$BUILD/exports/$model-$first" synthetic \
+    for export in $(exports); do
+      [[ $export == *"$profiled" ]] || continue
+      echo "== ${export##*/} $size (GL)" >>"$profile"
+      NEURALAO_HOST_PROFILE=1 NEURALAO_HOST_REPEATS=$REPEATS "$HOST" "$export" synthetic \
         "${size%x*}" "${size#*x}" 0.5 60 "$BUILD/ao-gl.f32" 2>&1 >/dev/null | grep "step" >>"$profile" || true
     done
   done

@@ -1,5 +1,5 @@
 """bench/gpu.sh runs unchanged on llvmpipe: one small frame, one timed run, both shipped models, both
-presets; its table has GTAO's and SSAO's rows and each model's ratio to GTAO, for the GL host and, where
+presets, and an untrained architecture (the gpu preset); its table has GTAO's and SSAO's rows and each model's ratio to GTAO, for the GL host and, where
 the Vulkan runner was built (vulkan/vulkan.h), for Vulkan on lavapipe too. The SSAO the host times is the
 project's SSAO: its output on a frame matches ``neuralao.runtime.baselines.run_ssao``."""
 
@@ -34,6 +34,7 @@ def bench(tmp_path_factory) -> tuple[str, dict, Path]:
         "BENCH_GPU_SMALL": "1",
         "MODELS": "unet-gtao unet-fast",
         "PRECISIONS": "fp32",
+        "ARCHS": "v3-small=4,8+gtao",  # an untrained architecture timed beside the shipped models
         "OUT": str(out),
     }
     r = subprocess.run(["bench/gpu.sh"], cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
@@ -47,6 +48,7 @@ def test_gpu_bench_runs_small(bench):
         "| 128x96 | gl | GTAO | - | fp32 |",
         "| 128x96 | gl | SSAO | - | fp32 |",
         "| 128x96 | gl | unet-fast | gpu | fp32 |",
+        "| 128x96 | gl | v3-small | gpu | fp32 |",
     ):
         assert row in stdout, stdout
     # the Vulkan runner is built where its headers are (the Makefile's system-deps install them) and runs
@@ -61,9 +63,9 @@ def test_gpu_bench_runs_small(bench):
         assert result["gtao_ms"]["vulkan"]["128x96"] > 0 and "vulkan" not in result["ssao_ms"]
     for api in apis:
         rows = [row for row in result["rows"] if row["api"] == api]
-        assert len(rows) == 4  # 2 models x 2 presets x fp32
+        assert len(rows) == 5  # 2 models x 2 presets x fp32, the architecture with the first preset only
         assert {row["preset"] for row in rows} == {"gpu", "cpu"}
-        assert {row["model"] for row in rows} == {"unet-gtao", "unet-fast"}
+        assert {row["model"] for row in rows} == {"unet-gtao", "unet-fast", "v3-small"}
     assert all(
         row["path"] == "frame" and row["frame_ms"] > 0 and row["network_ms"] > 0 for row in result["rows"]
     )
@@ -73,7 +75,7 @@ def test_gpu_bench_runs_small(bench):
     # compared here: one run on a shared machine orders them by chance)
     for row in result["rows"]:
         timed = max(row["gtao_ms"], row["gtao_wall_ms"]) > 0
-        assert timed == (row["model"] == "unet-gtao"), row
+        assert timed == (row["model"] in ("unet-gtao", "v3-small")), row
 
 
 def test_host_ssao_is_the_projects_ssao(bench, tmp_path):
@@ -109,6 +111,6 @@ def test_gpu_bench_profiles_every_step(bench):
     for row in result["rows"]:
         if row["api"] != "gl" or row["preset"] != "gpu":
             continue
-        block = text.split(f"== {row['model']} gpu-fp32 128x96 (GL)\n", 1)[1].split("==", 1)[0]
+        block = text.split(f"== {row['model']}-gpu-fp32 128x96 (GL)\n", 1)[1].split("==", 1)[0]
         steps = [ln for ln in block.splitlines() if " step " in ln]
         assert len(steps) == row["passes"] and all("ms (wall" in ln for ln in steps), block
