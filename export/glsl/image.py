@@ -2074,14 +2074,82 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     parts = _conv_parts(p)
     reads = f.get("reads", ["texel"] * len(parts))
     sizes = "\n".join(_conv_size(i, read, f.get("pad_multiple", 1), d) for i, read in enumerate(reads))
+    gathered = p.kind == "conv" and (f["kernel"], f["strides"], f["dilations"], tuple(f["pads"])) == (
+        (3, 3),
+        (1, 1),
+        (1, 1),
+        (1, 1, 1, 1),
+    )
     loops = "\n".join(
         _conv_input_loop(i, t, read, f["layer_offsets"][i], d)
         for i, (t, read) in enumerate(zip(parts, reads, strict=True))
+        if not (gathered and read == "up2")
     )
     if _blocked(p):
         return _conv_block_body(p, window, d)
-    tpl = "conv_transpose_body" if p.kind == "conv_transpose" else "conv_body"
-    return d.fill(tpl, sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+    if p.kind == "conv_transpose":
+        return d.fill("conv_transpose_body", sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+    loop_fields = {k: v for k, v in window.items() if k != "bias_offset"}
+    taps = [d.fill("conv_tap_loops", tap_stride=4 * f["in_layers"], input_loops=loops, **loop_fields)] if loops else []
+    taps += [
+        _conv_up2_taps(i, t, f["layer_offsets"][i], window["weight_offset"], 4 * f["in_layers"], d)
+        for i, (t, read) in enumerate(zip(parts, reads, strict=True))
+        if gathered and read == "up2"
+    ]
+    return d.fill("conv_body", sizes=sizes, taps="\n".join(taps), bias_offset=window["bias_offset"])
+
+
+def _conv_up2_taps(i: int, t: Texture, layer_offset: int, weight_offset: int, tap_stride: int, d: Dialect) -> str:
+    """Input part i of a 3x3 conv (stride 1, pads 1) read upsampled x2: its 9 taps from the 3x3 low texels
+    (template conv_up2_taps); the blends in the tap read's order (low column 0 before 1)."""
+    fetches = [d.fill("conv_up2_fetch", i=r, j=c, src=f"src{i}") for r in range(3) for c in range(3)]
+    # tap k's pair of low columns / rows and weight on the second, even (ox / oy false) and odd
+    pairs = {0: ((0, 0), "w0"), 1: ((0, 1), "w1"), 2: ((1, 1), "w0")}
+    blends = []
+
+    def pair(first: tuple[int, int], name: str, odd: str, k: int) -> tuple[str, str]:
+        even, oddj = first
+        if even == oddj:
+            return name.format(even), name.format(even + 1)
+        pick = lambda a, b: d.fill("pick", cond=odd, a=b, b=a)  # noqa: E731  (odd: the second)
+        return pick(name.format(even), name.format(oddj)), pick(name.format(even + 1), name.format(oddj + 1))
+
+    for r in range(3):  # rows of low texels, blended across: h<r><k>
+        for k, (cols, w) in pairs.items():
+            a, b = pair(cols, f"c{r}{{}}", "ox", k)
+            blends.append(d.fill("conv_up2_blend", name=f"h{r}{k}", a=a, b=b, w="wx" if w == "w0" else "(1.0 - wx)"))
+    for ky, (rows, w) in pairs.items():  # tap rows, blended down: u<ky><kx>
+        for kx in range(3):
+            a, b = pair(rows, f"h{{}}{kx}", "oy", ky)
+            blends.append(d.fill("conv_up2_blend", name=f"u{ky}{kx}", a=a, b=b, w="wy" if w == "w0" else "(1.0 - wy)"))
+    valid = {0: ["vy0"], 1: [], 2: ["vy2"]}, {0: ["vx0"], 1: [], 2: ["vx2"]}
+    taps = [
+        d.fill(
+            "conv_up2_tap",
+            k=3 * ky + kx,
+            tap_stride=tap_stride,
+            valid=" && ".join(valid[0][ky] + valid[1][kx]) or "true",
+            u=f"u{ky}{kx}",
+        )
+        for ky in range(3)
+        for kx in range(3)
+    ]
+    return d.fill(
+        "conv_up2_taps",
+        part=i,
+        src=f"src{i}",
+        src_size=f"src_size{i}",
+        size=f"size{i}",
+        wx=d.fill("pick", cond="ox", a="0.75", b="0.25"),
+        wy=d.fill("pick", cond="oy", a="0.75", b="0.25"),
+        layers=t.layers,
+        fetches="\n".join(fetches),
+        blends="\n".join(blends),
+        weight_offset=weight_offset,
+        layer_offset=layer_offset,
+        tap_stride=tap_stride,
+        taps="\n".join(taps),
+    )
 
 
 def _conv_size(i: int, read: str, multiple: int, d: Dialect) -> str:

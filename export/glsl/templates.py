@@ -288,15 +288,57 @@ _T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
 # Conv: one invocation = one output texel (4 output channels of layer gid.z).
 _T["conv_body"] = """${sizes}
     ${var_hvec4} acc = ${hvec4}(prm[${bias_offset} + gid.z]);
-    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
+${taps}
+    ${var_vec4} r = ${vec4}(acc);"""
+# The taps of a conv's input parts read tap by tap (conv_input_loop and conv_input_loop_fused).
+_T["conv_tap_loops"] = """    for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
         ${let_int} iy = gid.y * ${sy} - ${pad_top} + ky * ${dy};
         for (${var_int:kx} = 0; kx < ${kw}; ${inc:kx}) {
             ${let_int} ix = gid.x * ${sx} - ${pad_left} + kx * ${dx};
             ${let_int} tap = ${weight_offset} + ((gid.z * ${kh} + ky) * ${kw} + kx) * ${tap_stride};
 ${input_loops}
         }
-    }
-    ${var_vec4} r = ${vec4}(acc);"""
+    }"""
+
+# A 3x3 conv (stride 1, pads 1) reading ${src} upsampled x2 (bilinear, half_pixel): the upsampled texels
+# of its 9 taps blend the 3x3 low texels around gid / 2, fetched once per input layer (a tap read alone
+# fetches 4: conv_read_up2). Tap column k of an even x blends low columns (0, 1), (0, 1), (1, 2) with
+# weights 1/4, 3/4, 1/4 on the second; of an odd x (0, 1), (1, 2), (1, 2) with 3/4, 1/4, 3/4; rows alike.
+# The edge clamp of the resize is the clamp of the low coordinates; taps outside the upsampled image
+# (vx0, vx2, vy0, vy2) contribute nothing, as the zero padding.
+_T["conv_up2_taps"] = """    {
+        // input part ${part}: ${src} upsampled x2, its 3x3 taps from 3x3 low texels
+        ${let_ivec2} lo = ${src_size} - 1;
+        ${let_ivec2} m = gid.xy / 2;
+        ${let_bool} ox = (gid.x & 1) == 1;
+        ${let_bool} oy = (gid.y & 1) == 1;
+        ${let_int} x0 = clamp(m.x - 1, 0, lo.x);
+        ${let_int} x1 = clamp(m.x, 0, lo.x);
+        ${let_int} x2 = clamp(m.x + 1, 0, lo.x);
+        ${let_int} y0 = clamp(m.y - 1, 0, lo.y);
+        ${let_int} y1 = clamp(m.y, 0, lo.y);
+        ${let_int} y2 = clamp(m.y + 1, 0, lo.y);
+        ${let_float} wx = ${wx};
+        ${let_float} wy = ${wy};
+        ${let_bool} vx0 = gid.x >= 1;
+        ${let_bool} vx2 = gid.x + 1 < ${size}.x;
+        ${let_bool} vy0 = gid.y >= 1;
+        ${let_bool} vy2 = gid.y + 1 < ${size}.y;
+        for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
+${fetches}
+${blends}
+            ${let_int} o = ${weight_offset} + gid.z * 9 * ${tap_stride} + (${layer_offset} + l) * 4;
+${taps}
+        }
+    }"""
+_T["conv_up2_fetch"] = "            ${let_vec4} c${i}${j} = ${fetch}(${src}, ${ivec3}(x${j}, y${i}, l)${lod});"
+_T["conv_up2_blend"] = "            ${let_vec4} ${name} = mix(${a}, ${b}, ${w});"
+_T["conv_up2_tap"] = """            if (${valid}) {
+                ${let_int} t${k} = o + ${k} * ${tap_stride};
+                acc += ${hmat4}(${mat4}(prm[t${k}], prm[t${k} + 1], prm[t${k} + 2], prm[t${k} + 3])) * ${hvec4}(${u});
+            }"""
+# cond ? a : b, for any type
+_T["pick"] = "(${cond} ? ${a} : ${b})"
 
 # Zero padding: taps outside the input contribute nothing (texelFetch outside is undefined).
 _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 && ix < ${size}.x) {
@@ -1150,6 +1192,7 @@ _W["epilogue_rdiv"] = (
     "    r = prm[${offset} + ${z}] / select(vec4<f32>(1.0), r, vec4<i32>(4 * ${z}) + vec4<i32>(0, 1, 2, 3) < "
     "vec4<i32>(${channels}));"
 )
+_W["pick"] = "select(${b}, ${a}, ${cond})"
 _W["pointwise_array"] = "    var ${name}: array<vec4<f32>, ${n}>;"
 _W["epilogue_guard_div"] = (
     "        b = select(vec4<f32>(1.0), b, "
