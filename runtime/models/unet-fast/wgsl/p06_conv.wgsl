@@ -42,29 +42,88 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     let src_size0 = nao_size(src0);
     let size0 = src_size0 * 2;
     var acc = hvec4(prm[4608 + gid.z]);
-    for (var ky: i32 = 0; ky < 3; ky++) {
-        let iy = gid.y * 1 - 1 + ky * 1;
-        for (var kx: i32 = 0; kx < 3; kx++) {
-            let ix = gid.x * 1 - 1 + kx * 1;
-            let tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 64;
-            if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
-                // input texel (ix, iy): src0 upsampled x2 (bilinear, half_pixel)
-                let fy = clamp(f32(iy) * 0.5 - 0.25, 0.0, f32(src_size0.y - 1));
-                let fx = clamp(f32(ix) * 0.5 - 0.25, 0.0, f32(src_size0.x - 1));
-                let y0 = i32(fy);
-                let x0 = i32(fx);
-                let y1 = min(y0 + 1, src_size0.y - 1);
-                let x1 = min(x0 + 1, src_size0.x - 1);
-                let wy = fy - f32(y0);
-                let wx = fx - f32(x0);
-                for (var l: i32 = 0; l < 16; l++) {
-                    let v = (nao_fetch(src0, vec3<i32>(x0, y0, l)) * (1.0 - wx)
-                        + nao_fetch(src0, vec3<i32>(x1, y0, l)) * wx) * (1.0 - wy)
-                        + (nao_fetch(src0, vec3<i32>(x0, y1, l)) * (1.0 - wx)
-                        + nao_fetch(src0, vec3<i32>(x1, y1, l)) * wx) * wy;
-                    let o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4x4<f32>(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
-                }
+    {
+        // input part 0: src0 upsampled x2, its 3x3 taps from 3x3 low texels
+        let lo = src_size0 - 1;
+        let m = gid.xy / 2;
+        let ox = (gid.x & 1) == 1;
+        let oy = (gid.y & 1) == 1;
+        let x0 = clamp(m.x - 1, 0, lo.x);
+        let x1 = clamp(m.x, 0, lo.x);
+        let x2 = clamp(m.x + 1, 0, lo.x);
+        let y0 = clamp(m.y - 1, 0, lo.y);
+        let y1 = clamp(m.y, 0, lo.y);
+        let y2 = clamp(m.y + 1, 0, lo.y);
+        let wx = select(0.25, 0.75, ox);
+        let wy = select(0.25, 0.75, oy);
+        let vx0 = gid.x >= 1;
+        let vx2 = gid.x + 1 < size0.x;
+        let vy0 = gid.y >= 1;
+        let vy2 = gid.y + 1 < size0.y;
+        for (var l: i32 = 0; l < 16; l++) {
+            let c00 = nao_fetch(src0, vec3<i32>(x0, y0, l));
+            let c01 = nao_fetch(src0, vec3<i32>(x1, y0, l));
+            let c02 = nao_fetch(src0, vec3<i32>(x2, y0, l));
+            let c10 = nao_fetch(src0, vec3<i32>(x0, y1, l));
+            let c11 = nao_fetch(src0, vec3<i32>(x1, y1, l));
+            let c12 = nao_fetch(src0, vec3<i32>(x2, y1, l));
+            let c20 = nao_fetch(src0, vec3<i32>(x0, y2, l));
+            let c21 = nao_fetch(src0, vec3<i32>(x1, y2, l));
+            let c22 = nao_fetch(src0, vec3<i32>(x2, y2, l));
+            let h00 = mix(c00, c01, wx);
+            let h01 = mix(select(c00, c01, ox), select(c01, c02, ox), (1.0 - wx));
+            let h02 = mix(c01, c02, wx);
+            let h10 = mix(c10, c11, wx);
+            let h11 = mix(select(c10, c11, ox), select(c11, c12, ox), (1.0 - wx));
+            let h12 = mix(c11, c12, wx);
+            let h20 = mix(c20, c21, wx);
+            let h21 = mix(select(c20, c21, ox), select(c21, c22, ox), (1.0 - wx));
+            let h22 = mix(c21, c22, wx);
+            let u00 = mix(h00, h10, wy);
+            let u01 = mix(h01, h11, wy);
+            let u02 = mix(h02, h12, wy);
+            let u10 = mix(select(h00, h10, oy), select(h10, h20, oy), (1.0 - wy));
+            let u11 = mix(select(h01, h11, oy), select(h11, h21, oy), (1.0 - wy));
+            let u12 = mix(select(h02, h12, oy), select(h12, h22, oy), (1.0 - wy));
+            let u20 = mix(h10, h20, wy);
+            let u21 = mix(h11, h21, wy);
+            let u22 = mix(h12, h22, wy);
+            let o = 0 + gid.z * 9 * 64 + (0 + l) * 4;
+            if (vy0 && vx0) {
+                let t0 = o + 0 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t0], prm[t0 + 1], prm[t0 + 2], prm[t0 + 3])) * hvec4(u00);
+            }
+            if (vy0) {
+                let t1 = o + 1 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t1], prm[t1 + 1], prm[t1 + 2], prm[t1 + 3])) * hvec4(u01);
+            }
+            if (vy0 && vx2) {
+                let t2 = o + 2 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t2], prm[t2 + 1], prm[t2 + 2], prm[t2 + 3])) * hvec4(u02);
+            }
+            if (vx0) {
+                let t3 = o + 3 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t3], prm[t3 + 1], prm[t3 + 2], prm[t3 + 3])) * hvec4(u10);
+            }
+            if (true) {
+                let t4 = o + 4 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t4], prm[t4 + 1], prm[t4 + 2], prm[t4 + 3])) * hvec4(u11);
+            }
+            if (vx2) {
+                let t5 = o + 5 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t5], prm[t5 + 1], prm[t5 + 2], prm[t5 + 3])) * hvec4(u12);
+            }
+            if (vy2 && vx0) {
+                let t6 = o + 6 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t6], prm[t6 + 1], prm[t6 + 2], prm[t6 + 3])) * hvec4(u20);
+            }
+            if (vy2) {
+                let t7 = o + 7 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t7], prm[t7 + 1], prm[t7 + 2], prm[t7 + 3])) * hvec4(u21);
+            }
+            if (vy2 && vx2) {
+                let t8 = o + 8 * 64;
+                acc += hmat4(mat4x4<f32>(prm[t8], prm[t8 + 1], prm[t8 + 2], prm[t8 + 3])) * hvec4(u22);
             }
         }
     }
