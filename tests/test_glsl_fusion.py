@@ -250,7 +250,8 @@ def _depth_like(h: int, w: int, seed: int) -> np.ndarray:
 
 def test_pointwise_chain_computed_in_its_readers():
     """The gpu preset computes a chain of per-pixel passes inside the passes that read it (each texel
-    recomputes its inputs' chain): 10 passes and textures fewer, the same output as
+    recomputes its inputs' chain, reading the input reflect-padded in place of the pad pass): 11 passes
+    fewer, the same output as
     onnxruntime in GLSL (and WGSL where a WebGPU adapter exists); the cpu preset keeps a pass per op."""
     nodes, inits = _pointwise_preamble()
     model = image_model(nodes, inits, in_shape=SHAPE, extra_inputs=[_scalar_input("r")])
@@ -260,8 +261,10 @@ def test_pointwise_chain_computed_in_its_readers():
     run = lambda program: run_compute_all(program, x, scalars={"r": 0.4})["y"]  # noqa: E731
     cpu = both_presets(model, ref, run, TOL.glsl_op_fp32, relative=True).manifest
     gpu = generate_compute(model, preset="gpu").manifest
-    assert _kinds(gpu) == ["pad", "uniform", "pointwise", "pointwise", "conv"] and len(cpu["passes"]) == 15
-    assert len(gpu["memory"]["textures"]) == len(cpu["memory"]["textures"]) - 10
+    # the groups read the input reflect-padded, as the convs do: no pad pass either
+    assert _kinds(gpu) == ["uniform", "pointwise", "pointwise", "conv"] and len(cpu["passes"]) == 15
+    assert len(gpu["memory"]["textures"]) == len(cpu["memory"]["textures"]) - 11
+    assert gpu["pad"]["read_by"] == ["p01_pointwise", "p02_pointwise"]
     grouped = [op for p in gpu["passes"] if p["kind"] == "pointwise" for op in p["ops"]]
     assert {"Mul", "Conv", "Clip", "Sub", "Neg", "Exp", "Div", "Add", "Tanh"} <= set(grouped)
     for dialect in ("wgsl", "vulkan"):  # every dialect writes the group
@@ -295,7 +298,7 @@ def test_pointwise_chain_ending_at_the_output(flip_y):
     x = _x(7, 11, 8)
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
     gpu = generate_compute(model, preset="gpu")
-    assert _kinds(gpu.manifest) == ["pad", "pointwise"]
+    assert _kinds(gpu.manifest) == ["pointwise"]  # the pad read by reflection, the crop its store
     stored = np.ascontiguousarray(x[:, :, ::-1]) if flip_y else x
     got = run_compute_all(gpu, stored, flip_y=flip_y)["y"]
     got = got[:, :, ::-1] if flip_y else got

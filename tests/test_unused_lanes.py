@@ -4,7 +4,8 @@ last layer) change nothing: the generated pad pass, the only reader of the input
 
 NaN, inf or finite garbage there gives the same output, bit for bit, as zeros, in GLSL on Mesa llvmpipe
 and, on Mesa lavapipe through wgpu, in WGSL and in the Vulkan passes' SPIR-V: the shipped hybrid U-Net
-(5 channels: 3 unused lanes) and a static-size 6-channel conv graph (2 unused lanes).
+(5 channels: 3 unused lanes), a static-size 6-channel conv graph (2 unused lanes) and per-pixel ops on a
+5-channel input computed in one pointwise pass.
 """
 
 from __future__ import annotations
@@ -31,9 +32,16 @@ def _programs(dialect: str) -> dict[str, tuple]:
         [("w", seeded_weights((3, 6, 3, 3)))],
         (1, 6, 9, 11),
     )
+    # per-pixel ops on a 5-channel input: one pointwise pass that reads the input reflect-padded
+    pointwise = image_model(
+        [named_node("Mul", ("x", "x"), "a"), named_node("Conv", ("a", "w"))],
+        [("w", seeded_weights((3, 5, 1, 1)))],
+        (1, 5, 9, 11),
+    )
     return {
         "unet-gtao": (generate_compute(hybrid, dialect=dialect), {"radius": np.float32(0.2)}),
         "conv6": (generate_compute(conv, dialect=dialect), {}),
+        "pointwise5": (generate_compute(pointwise, dialect=dialect), {}),
     }
 
 
@@ -83,7 +91,7 @@ def test_garbage_in_unused_lanes_changes_nothing(dialect):
     for case, (program, scalars) in _programs(dialect).items():
         m = program.manifest
         zeroed_by = (
-            "the convs reading the input zero them"
+            "the passes reading the input zero them"
             if m["pad"]["pass"] is None
             else "the pad pass zeroes them"
         )

@@ -2309,11 +2309,25 @@ def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     members, inputs = p.fields["members"], [t.ident for t in p.inputs]
     made: dict[str, int] = {}
     lines = []
+    reflected = p.fields.get("reflected")  # the padded input, read from the raw one (src<k>) by reflection
+    if reflected:
+        k = p.fields["reads"].index("reflect")
+        lines += [
+            d.fill("size_decl", size=f"src_size{k}", src=f"src{k}"),
+            d.fill(CONV_READS["reflect"][1], size=f"size{k}", src_size=f"src_size{k}", below=p.fields["pad_multiple"] - 1, multiple=p.fields["pad_multiple"]),
+            d.fill("pointwise_reflect_setup", src=f"src{k}", src_size=f"src_size{k}", size=f"size{k}"),
+        ]
 
     def operand(t: Texture, how: str, layer: int) -> str:
         if t.ident in made:
             k = made[t.ident]
             return f"v{k}[0].xxxx" if how == "channel" else f"v{k}[{layer}]"
+        if t.ident == reflected:
+            k, layer = p.fields["reads"].index("reflect"), 0 if how == "channel" else layer
+            raw = p.inputs[k]
+            guard = "_guard" if raw.channels % 4 else ""
+            texel = d.fill(f"pointwise_reflect{guard}", src=f"src{k}", layer=layer, channels=raw.channels)
+            return texel + (".xxxx" if how == "channel" else "")
         at = {"full": {"xy": "gid.xy", "z": layer}, "pixel": {"z": layer}, "channel": {"xy": "gid.xy"}}
         return d.fill(f"side_{how}", src=f"src{inputs.index(t.ident)}", **at.get(how, {}))
 
@@ -2799,18 +2813,39 @@ def _reads_in_place(r: Pass, t: Texture) -> bool:
     return bool(here) and all(reads[k] == "texel" for k in here) and all(u.ident != t.ident for u in others)
 
 
-def _fuse_read(table: ImageOps, q: Pass, multiple: int) -> str | None:
+def _group_reads_at_texel(r: Pass, t: Texture) -> bool:
+    """Pointwise group ``r`` reads texture ``t`` only at its own texel (full or channel fetches)."""
+    if r.kind != "pointwise" or "reflected" in r.fields or t.ident not in [u.ident for u in r.inputs]:
+        return False
+    return all(h in ("full", "channel") for m in _members(r) for h in _reads(m, t))
+
+
+def _fuse_read(table: ImageOps, q: Pass, multiple: int, groups: bool = False) -> str | None:
     """Fold pass ``q`` (a pool, a resize, the pad pass) into the convs that read its output (all of its
     readers must be): each reads q's input through the average, the bilinear sample or the reflection
-    (fields["reads"]; the pad's ``multiple`` in fields["pad_multiple"])."""
+    (fields["reads"]; the pad's ``multiple`` in fields["pad_multiple"]). ``groups``: the pad's readers
+    may also be pointwise groups (once no group changes any more: a group's members name the padded
+    texture)."""
     # the pad's guard (lanes past the last channel zeroed) the reflect read repeats; nothing else
     pad_plain = q.kind == "pad" and all(e.form == "guard" for e in q.epilogue)
     mode = ("reflect" if pad_plain else None) if q.kind == "pad" else _conv_read(q)
     t = q.output
     readers = _readers(table, t)
-    if mode is None or not readers or not all(_reads_in_place(r, t) for r in readers):
+    if mode is None or not readers:
+        return None
+    if not all(_reads_in_place(r, t) or (groups and mode == "reflect" and _group_reads_at_texel(r, t)) for r in readers):
         return None
     for r in readers:
+        if r.kind == "pointwise":  # its members' texel of t, read reflected from q's input
+            k = [u.ident for u in r.inputs].index(t.ident)
+            r.inputs[k] = q.inputs[0]
+            r.fields["reads"] = ["texel"] * len(r.inputs)
+            r.fields["reads"][k] = "reflect"
+            r.fields["reflected"] = t.ident
+            r.fields["pad_multiple"] = multiple
+            r.ops[:0] = q.ops
+            r.nodes[:0] = q.nodes
+            continue
         reads = r.fields.setdefault("reads", ["texel"] * len(_conv_parts(r)))
         for k, u in enumerate(_conv_parts(r)):
             if u.ident == t.ident:
@@ -2931,7 +2966,7 @@ def _fuse_into_conv(table: ImageOps, q: Pass, multiple: int) -> str | None:
 def _fuse(table: ImageOps, multiple: int) -> list[str]:
     """The gpu preset's fusions, until none applies; passes renumbered. Returns what was fused. The
     fusions into a conv's reads and epilogue come first; then pointwise passes are computed in their
-    readers (where one is left, the others again)."""
+    readers (where one is left, the others again); last, the pad into the groups and convs reading it."""
     made: list[str] = []
     order = {id(q): k for k, q in enumerate(table.passes)}
     for inline in (False, True):
@@ -2942,6 +2977,10 @@ def _fuse(table: ImageOps, multiple: int) -> list[str]:
             if step is None:
                 break
             made.append(step)
+    pad = next((q for q in table.passes if q.kind == "pad"), None)
+    step = pad and _fuse_read(table, pad, multiple, groups=True)
+    if step:
+        made.append(step)
     for k, q in enumerate(table.passes):
         q.index = k
         if q.kind == "pointwise":
@@ -3058,7 +3097,7 @@ def generate_compute(
     read_by = [p.name for p in table.passes if "reflect" in p.fields.get("reads", ())]
     if read_by:  # the convs that read the input reflect-padded, in place of the pad pass
         manifest["pad"]["read_by"] = read_by
-        zeroed_by = "the convs reading the input zero them"
+        zeroed_by = "the passes reading the input zero them"
         manifest["input"]["unused_lanes"] = _unused_lanes(table.input_texture.channels, zeroed_by)
     for entry in manifest["outputs"]:
         if entry["onnx_name"] in shapes:

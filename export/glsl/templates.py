@@ -749,6 +749,17 @@ _T["pointwise_conv"] = """    ${var_vec4} r = prm[${bias}];
 ${terms}"""
 _T["pointwise_conv_term"] = "    r += ${mat4}(prm[${o}], prm[${o} + 1], prm[${o} + 2], prm[${o} + 3]) * ${x};"
 _T["pointwise_result"] = "    ${var_vec4} r = ${name}[gid.z];"
+# A group reading the network's input in place of the pad pass: its texel (rx, ry), as conv_setup_reflect
+# maps it (the reflection at the bottom/right, rows flipped by u_flip_y); the guard zeroes the lanes past
+# the last channel, as the pad pass's guard does.
+_T["pointwise_reflect_setup"] = """    ${let_int} ix = gid.x;
+    ${let_int} iy = gid.y;
+""" + _T["conv_setup_reflect"].replace("\n            ", "\n").replace("                ", "    ", 1)
+_T["pointwise_reflect"] = "${fetch}(${src}, ${ivec3}(rx, ry, ${layer})${lod})"
+_T["pointwise_reflect_guard"] = (
+    "mix(vec4(0.0), ${fetch}(${src}, ${ivec3}(rx, ry, ${layer})${lod}), "
+    "lessThan(ivec4(4 * ${layer}) + ivec4(0, 1, 2, 3), ivec4(${channels})))"
+)
 
 # ONNX Pad on H, W (negative pads crop): output texel (x, y) reads input (x - left, y - top).
 _T["spatial_pad_body"] = """    ${let_ivec2} in_size = ${size_of:src0};
@@ -1193,6 +1204,10 @@ _W["epilogue_rdiv"] = (
     "vec4<i32>(${channels}));"
 )
 _W["pick"] = "select(${b}, ${a}, ${cond})"
+_W["pointwise_reflect_guard"] = (
+    "select(vec4<f32>(0.0), nao_fetch(${src}, vec3<i32>(rx, ry, ${layer})), "
+    "vec4<i32>(4 * ${layer}) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(${channels}))"
+)
 _W["pointwise_array"] = "    var ${name}: array<vec4<f32>, ${n}>;"
 _W["epilogue_guard_div"] = (
     "        b = select(vec4<f32>(1.0), b, "
