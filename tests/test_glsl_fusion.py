@@ -285,17 +285,18 @@ def test_pointwise_chain_computed_in_its_readers():
 
 
 @pytest.mark.parametrize("flip_y", [False, True])
-def test_pointwise_chain_ending_at_the_output(flip_y):
-    """A per-pixel chain whose last op is the graph's output: one pass that also crops (row-flipped for a
-    bottom-up engine texture)."""
-    back = seeded_weights((C, C, 1, 1), 12) * 0.4
+@pytest.mark.parametrize("channels", [4, C])
+def test_pointwise_chain_ending_at_the_output(flip_y, channels):
+    """A per-pixel chain whose last op is the graph's output: one pass that reads the input reflect-padded
+    and crops (row-flipped for a bottom-up engine texture), with and without unused input lanes."""
+    back = seeded_weights((channels, channels, 1, 1), 12) * 0.4
     nodes = [
         named_node("Conv", ("x", "back"), "b"),
         named_node("Add", ("b", "x"), "s"),
         named_node("Mul", ("s", "b"), "y"),
     ]
-    model = image_model(nodes, [("back", back)], in_shape=SHAPE)
-    x = _x(7, 11, 8)
+    model = image_model(nodes, [("back", back)], in_shape=(1, channels, "H", "W"))
+    x = _x(7, 11, 8)[:, :channels].copy()
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
     gpu = generate_compute(model, preset="gpu")
     assert _kinds(gpu.manifest) == ["pointwise"]  # the pad read by reflection, the crop its store

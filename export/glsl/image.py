@@ -2325,8 +2325,8 @@ def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
         if t.ident == reflected:
             k, layer = p.fields["reads"].index("reflect"), 0 if how == "channel" else layer
             raw = p.inputs[k]
-            guard = "_guard" if raw.channels % 4 else ""
-            texel = d.fill(f"pointwise_reflect{guard}", src=f"src{k}", layer=layer, channels=raw.channels)
+            guard = {"channels": raw.channels} if raw.channels % 4 else {}
+            texel = d.fill("pointwise_reflect_guard" if guard else "pointwise_reflect", src=f"src{k}", layer=layer, **guard)
             return texel + (".xxxx" if how == "channel" else "")
         at = {"full": {"xy": "gid.xy", "z": layer}, "pixel": {"z": layer}, "channel": {"xy": "gid.xy"}}
         return d.fill(f"side_{how}", src=f"src{inputs.index(t.ident)}", **at.get(how, {}))
