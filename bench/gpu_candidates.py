@@ -32,14 +32,23 @@ def parse(spec: str) -> tuple[str, list[int], bool]:
         numbers = [int(w) for w in widths.split(",")]
     except ValueError:
         numbers = []
-    if not sep or not name or "/" in name or len(numbers) < 2 or min(numbers) < 1 or extra not in ("", "gtao"):
+    if (
+        not sep
+        or not name
+        or "/" in name
+        or len(numbers) < 2
+        or min(numbers) < 1
+        or extra not in ("", "gtao")
+    ):
         raise NeuralaoError(f"candidate {spec!r}: expected NAME=W1,W2,...[+gtao], e.g. v3-fast-w6=6,12,24,48")
     return name, numbers, bool(plus)
 
 
 def write_candidate(out: Path, name: str, widths: list[int], gtao: bool, seed: int = 0) -> Path:
     torch.manual_seed(seed)
-    args = UNetArgs(in_channels=5 if gtao else 4, widths=widths, gtao_input=gtao, preprocess_version=PREPROCESS_VERSION)
+    args = UNetArgs(
+        in_channels=5 if gtao else 4, widths=widths, gtao_input=gtao, preprocess_version=PREPROCESS_VERSION
+    )
     model = UNet(args).eval()
     folder = out / name
     folder.mkdir(parents=True, exist_ok=True)

@@ -315,7 +315,9 @@ def test_a_wide_1x1_conv_keeps_its_pass():
         named_node("Mul", ("a", "a"), "b"),
         named_node("Relu", ("b",), "y"),
     ]
-    model = image_model(nodes, [("w1", seeded_weights((wide, wide, 1, 1), 13) * 0.3)], in_shape=(1, wide, "H", "W"))
+    model = image_model(
+        nodes, [("w1", seeded_weights((wide, wide, 1, 1), 13) * 0.3)], in_shape=(1, wide, "H", "W")
+    )
     x = np.random.default_rng(9).normal(size=(1, wide, 6, 10)).astype(np.float32)
     ref = run_onnxruntime(model.SerializeToString(), {"x": x})[0]
     gpu = generate_compute(model, preset="gpu")

@@ -1,6 +1,7 @@
 """bench/gpu.sh runs unchanged on llvmpipe: one small frame, one timed run, both shipped models, both
-presets, and an untrained architecture (the gpu preset); its table has GTAO's and SSAO's rows and each model's ratio to GTAO, for the GL host and, where
-the Vulkan runner was built (vulkan/vulkan.h), for Vulkan on lavapipe too. The SSAO the host times is the
+presets, and an untrained architecture (the gpu preset); its table has GTAO's and SSAO's rows and each
+model's ratio to GTAO, for the GL host and, where the Vulkan runner was built (vulkan/vulkan.h), for
+Vulkan on lavapipe too. The SSAO the host times is the
 project's SSAO: its output on a frame matches ``neuralao.runtime.baselines.run_ssao``."""
 
 from __future__ import annotations

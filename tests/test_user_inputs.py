@@ -551,7 +551,9 @@ def work(parser, args, command):
     return 0
 
 cli = importlib.import_module("neuralao.pipeline.cli.main")
-cli.build_parser = lambda load=None: types.SimpleNamespace(parse_args=lambda argv: types.SimpleNamespace(command=None))
+cli.build_parser = lambda load=None: types.SimpleNamespace(
+    parse_args=lambda argv: types.SimpleNamespace(command=None)
+)
 cli._run = work
 sys.exit(cli.main([]))
 """
@@ -563,7 +565,12 @@ def test_a_signal_a_library_swallows_still_stops_the_output(tmp_path, writer, si
     """A library catching BaseException eats the interrupt, the work goes on and finishes: the rename
     is where it must stop, so nothing is published and the command ends as interrupted."""
     script = SWALLOWED.format(sig=sig, writer=writer)
-    proc = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-    assert proc.returncode == code and len(lines) == 1 and "Traceback" not in lines[0], (proc.returncode, lines)
+    assert proc.returncode == code and len(lines) == 1 and "Traceback" not in lines[0], (
+        proc.returncode,
+        lines,
+    )
     assert not (tmp_path / "out").exists() and not temporaries(tmp_path)

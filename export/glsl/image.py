@@ -2088,9 +2088,15 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     if _blocked(p):
         return _conv_block_body(p, window, d)
     if p.kind == "conv_transpose":
-        return d.fill("conv_transpose_body", sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window)
+        return d.fill(
+            "conv_transpose_body", sizes=sizes, tap_stride=4 * f["in_layers"], input_loops=loops, **window
+        )
     loop_fields = {k: v for k, v in window.items() if k != "bias_offset"}
-    taps = [d.fill("conv_tap_loops", tap_stride=4 * f["in_layers"], input_loops=loops, **loop_fields)] if loops else []
+    taps = (
+        [d.fill("conv_tap_loops", tap_stride=4 * f["in_layers"], input_loops=loops, **loop_fields)]
+        if loops
+        else []
+    )
     taps += [
         _conv_up2_taps(i, t, f["layer_offsets"][i], window["weight_offset"], 4 * f["in_layers"], d)
         for i, (t, read) in enumerate(zip(parts, reads, strict=True))
@@ -2099,7 +2105,9 @@ def _conv_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
     return d.fill("conv_body", sizes=sizes, taps="\n".join(taps), bias_offset=window["bias_offset"])
 
 
-def _conv_up2_taps(i: int, t: Texture, layer_offset: int, weight_offset: int, tap_stride: int, d: Dialect) -> str:
+def _conv_up2_taps(
+    i: int, t: Texture, layer_offset: int, weight_offset: int, tap_stride: int, d: Dialect
+) -> str:
     """Input part i of a 3x3 conv (stride 1, pads 1) read upsampled x2: its 9 taps from the 3x3 low texels
     (template conv_up2_taps); the blends in the tap read's order (low column 0 before 1)."""
     fetches = [d.fill("conv_up2_fetch", i=r, j=c, src=f"src{i}") for r in range(3) for c in range(3)]
@@ -2117,11 +2125,15 @@ def _conv_up2_taps(i: int, t: Texture, layer_offset: int, weight_offset: int, ta
     for r in range(3):  # rows of low texels, blended across: h<r><k>
         for k, (cols, w) in pairs.items():
             a, b = pair(cols, f"c{r}{{}}", "ox", k)
-            blends.append(d.fill("conv_up2_blend", name=f"h{r}{k}", a=a, b=b, w="wx" if w == "w0" else "(1.0 - wx)"))
+            blends.append(
+                d.fill("conv_up2_blend", name=f"h{r}{k}", a=a, b=b, w="wx" if w == "w0" else "(1.0 - wx)")
+            )
     for ky, (rows, w) in pairs.items():  # tap rows, blended down: u<ky><kx>
         for kx in range(3):
             a, b = pair(rows, f"h{{}}{kx}", "oy", ky)
-            blends.append(d.fill("conv_up2_blend", name=f"u{ky}{kx}", a=a, b=b, w="wy" if w == "w0" else "(1.0 - wy)"))
+            blends.append(
+                d.fill("conv_up2_blend", name=f"u{ky}{kx}", a=a, b=b, w="wy" if w == "w0" else "(1.0 - wy)")
+            )
     valid = {0: ["vy0"], 1: [], 2: ["vy2"]}, {0: ["vx0"], 1: [], 2: ["vx2"]}
     taps = [
         d.fill(
@@ -2314,7 +2326,13 @@ def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
         k = p.fields["reads"].index("reflect")
         lines += [
             d.fill("size_decl", size=f"src_size{k}", src=f"src{k}"),
-            d.fill(CONV_READS["reflect"][1], size=f"size{k}", src_size=f"src_size{k}", below=p.fields["pad_multiple"] - 1, multiple=p.fields["pad_multiple"]),
+            d.fill(
+                CONV_READS["reflect"][1],
+                size=f"size{k}",
+                src_size=f"src_size{k}",
+                below=p.fields["pad_multiple"] - 1,
+                multiple=p.fields["pad_multiple"],
+            ),
             d.fill("pointwise_reflect_setup", src=f"src{k}", src_size=f"src_size{k}", size=f"size{k}"),
         ]
 
@@ -2326,7 +2344,12 @@ def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
             k, layer = p.fields["reads"].index("reflect"), 0 if how == "channel" else layer
             raw = p.inputs[k]
             guard = {"channels": raw.channels} if raw.channels % 4 else {}
-            texel = d.fill("pointwise_reflect_guard" if guard else "pointwise_reflect", src=f"src{k}", layer=layer, **guard)
+            texel = d.fill(
+                "pointwise_reflect_guard" if guard else "pointwise_reflect",
+                src=f"src{k}",
+                layer=layer,
+                **guard,
+            )
             return texel + (".xxxx" if how == "channel" else "")
         at = {"full": {"xy": "gid.xy", "z": layer}, "pixel": {"z": layer}, "channel": {"xy": "gid.xy"}}
         return d.fill(f"side_{how}", src=f"src{inputs.index(t.ident)}", **at.get(how, {}))
@@ -2350,11 +2373,18 @@ def _pointwise_body(p: Pass, offs: dict[str, int], d: Dialect) -> str:
                     if m.fields["op"] == "Div"
                     else d.fill("binary_guard_none")
                 )
-                body = d.fill("binary_body", fetch_a=a, fetch_b=b, guard=guard, expr=d.fill(f"binop_{m.fields['op']}"))
+                body = d.fill(
+                    "binary_body", fetch_a=a, fetch_b=b, guard=guard, expr=d.fill(f"binop_{m.fields['op']}")
+                )
             else:
                 body = d.fill("pointwise_copy", x=operand(m.inputs[0], "full", layer))
             epi = _epilogue(
-                m, own, "gid.xy", str(layer), d, side=lambda e, m=m, layer=layer: operand(m.inputs[e.side[0]], e.side[1], layer)
+                m,
+                own,
+                "gid.xy",
+                str(layer),
+                d,
+                side=lambda e, m=m, layer=layer: operand(m.inputs[e.side[0]], e.side[1], layer),
             )
             lines.append(d.fill("pointwise_layer", body=body, epilogue=epi, name=f"v{k}", layer=layer))
         made[m.output.ident] = k
@@ -2833,7 +2863,10 @@ def _fuse_read(table: ImageOps, q: Pass, multiple: int, groups: bool = False) ->
     readers = _readers(table, t)
     if mode is None or not readers:
         return None
-    if not all(_reads_in_place(r, t) or (groups and mode == "reflect" and _group_reads_at_texel(r, t)) for r in readers):
+    if not all(
+        _reads_in_place(r, t) or (groups and mode == "reflect" and _group_reads_at_texel(r, t))
+        for r in readers
+    ):
         return None
     for r in readers:
         if r.kind == "pointwise":  # its members' texel of t, read reflected from q's input
@@ -2908,8 +2941,14 @@ def _reads(m: Pass, t: Texture) -> list[str]:
     if m.kind == "binary":
         how = [h for u, h in zip(m.inputs, m.fields["fetch"], strict=True) if u.ident == t.ident]
     else:
-        how = ["full" for u in (m.inputs[:1] if m.kind == "elementwise" else _conv_parts(m)) if u.ident == t.ident]
-    return how + [e.side[1] for e in m.epilogue if e.form == "binary" and m.inputs[e.side[0]].ident == t.ident]
+        how = [
+            "full"
+            for u in (m.inputs[:1] if m.kind == "elementwise" else _conv_parts(m))
+            if u.ident == t.ident
+        ]
+    return how + [
+        e.side[1] for e in m.epilogue if e.form == "binary" and m.inputs[e.side[0]].ident == t.ident
+    ]
 
 
 def _cost(p: Pass) -> int:
@@ -2973,7 +3012,9 @@ def _fuse(table: ImageOps, multiple: int) -> list[str]:
         while True:
             step = next((s for q in list(table.passes) if (s := _fuse_into_conv(table, q, multiple))), None)
             if step is None and inline:
-                step = next((s for q in list(table.passes) if (s := _inline_pointwise(table, q, order))), None)
+                step = next(
+                    (s for q in list(table.passes) if (s := _inline_pointwise(table, q, order))), None
+                )
             if step is None:
                 break
             made.append(step)

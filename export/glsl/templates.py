@@ -331,11 +331,14 @@ ${blends}
 ${taps}
         }
     }"""
-_T["conv_up2_fetch"] = "            ${let_vec4} c${i}${j} = ${fetch}(${src}, ${ivec3}(x${j}, y${i}, l)${lod});"
+_T["conv_up2_fetch"] = (
+    "            ${let_vec4} c${i}${j} = ${fetch}(${src}, ${ivec3}(x${j}, y${i}, l)${lod});"
+)
 _T["conv_up2_blend"] = "            ${let_vec4} ${name} = mix(${a}, ${b}, ${w});"
 _T["conv_up2_tap"] = """            if (${valid}) {
                 ${let_int} t${k} = o + ${k} * ${tap_stride};
-                acc += ${hmat4}(${mat4}(prm[t${k}], prm[t${k} + 1], prm[t${k} + 2], prm[t${k} + 3])) * ${hvec4}(${u});
+                ${let_mat4} w${k} = ${mat4}(prm[t${k}], prm[t${k} + 1], prm[t${k} + 2], prm[t${k} + 3]);
+                acc += ${hmat4}(w${k}) * ${hvec4}(${u});
             }"""
 # cond ? a : b, for any type
 _T["pick"] = "(${cond} ? ${a} : ${b})"
