@@ -126,56 +126,56 @@ void p06_conv_inner()
         if (vy0 && vx0)
         {
             int t0 = o + 0;
-            float4x4 _501 = float4x4(float4(asfloat(params.Load4(t0 * 16 + 0))), float4(asfloat(params.Load4((t0 + 1) * 16 + 0))), float4(asfloat(params.Load4((t0 + 2) * 16 + 0))), float4(asfloat(params.Load4((t0 + 3) * 16 + 0))));
-            acc += mul(float4(u00), float4x4(_501[0], _501[1], _501[2], _501[3]));
+            float4x4 w0 = float4x4(float4(asfloat(params.Load4(t0 * 16 + 0))), float4(asfloat(params.Load4((t0 + 1) * 16 + 0))), float4(asfloat(params.Load4((t0 + 2) * 16 + 0))), float4(asfloat(params.Load4((t0 + 3) * 16 + 0))));
+            acc += mul(float4(u00), float4x4(w0[0], w0[1], w0[2], w0[3]));
         }
         if (vy0)
         {
             int t1 = o + 64;
-            float4x4 _557 = float4x4(float4(asfloat(params.Load4(t1 * 16 + 0))), float4(asfloat(params.Load4((t1 + 1) * 16 + 0))), float4(asfloat(params.Load4((t1 + 2) * 16 + 0))), float4(asfloat(params.Load4((t1 + 3) * 16 + 0))));
-            acc += mul(float4(u01), float4x4(_557[0], _557[1], _557[2], _557[3]));
+            float4x4 w1 = float4x4(float4(asfloat(params.Load4(t1 * 16 + 0))), float4(asfloat(params.Load4((t1 + 1) * 16 + 0))), float4(asfloat(params.Load4((t1 + 2) * 16 + 0))), float4(asfloat(params.Load4((t1 + 3) * 16 + 0))));
+            acc += mul(float4(u01), float4x4(w1[0], w1[1], w1[2], w1[3]));
         }
         if (vy0 && vx2)
         {
             int t2 = o + 128;
-            float4x4 _616 = float4x4(float4(asfloat(params.Load4(t2 * 16 + 0))), float4(asfloat(params.Load4((t2 + 1) * 16 + 0))), float4(asfloat(params.Load4((t2 + 2) * 16 + 0))), float4(asfloat(params.Load4((t2 + 3) * 16 + 0))));
-            acc += mul(float4(u02), float4x4(_616[0], _616[1], _616[2], _616[3]));
+            float4x4 w2 = float4x4(float4(asfloat(params.Load4(t2 * 16 + 0))), float4(asfloat(params.Load4((t2 + 1) * 16 + 0))), float4(asfloat(params.Load4((t2 + 2) * 16 + 0))), float4(asfloat(params.Load4((t2 + 3) * 16 + 0))));
+            acc += mul(float4(u02), float4x4(w2[0], w2[1], w2[2], w2[3]));
         }
         if (vx0)
         {
             int t3 = o + 192;
-            float4x4 _673 = float4x4(float4(asfloat(params.Load4(t3 * 16 + 0))), float4(asfloat(params.Load4((t3 + 1) * 16 + 0))), float4(asfloat(params.Load4((t3 + 2) * 16 + 0))), float4(asfloat(params.Load4((t3 + 3) * 16 + 0))));
-            acc += mul(float4(u10), float4x4(_673[0], _673[1], _673[2], _673[3]));
+            float4x4 w3 = float4x4(float4(asfloat(params.Load4(t3 * 16 + 0))), float4(asfloat(params.Load4((t3 + 1) * 16 + 0))), float4(asfloat(params.Load4((t3 + 2) * 16 + 0))), float4(asfloat(params.Load4((t3 + 3) * 16 + 0))));
+            acc += mul(float4(u10), float4x4(w3[0], w3[1], w3[2], w3[3]));
         }
         if (true)
         {
             int t4 = o + 256;
-            float4x4 _730 = float4x4(float4(asfloat(params.Load4(t4 * 16 + 0))), float4(asfloat(params.Load4((t4 + 1) * 16 + 0))), float4(asfloat(params.Load4((t4 + 2) * 16 + 0))), float4(asfloat(params.Load4((t4 + 3) * 16 + 0))));
-            acc += mul(float4(u11), float4x4(_730[0], _730[1], _730[2], _730[3]));
+            float4x4 w4 = float4x4(float4(asfloat(params.Load4(t4 * 16 + 0))), float4(asfloat(params.Load4((t4 + 1) * 16 + 0))), float4(asfloat(params.Load4((t4 + 2) * 16 + 0))), float4(asfloat(params.Load4((t4 + 3) * 16 + 0))));
+            acc += mul(float4(u11), float4x4(w4[0], w4[1], w4[2], w4[3]));
         }
         if (vx2)
         {
             int t5 = o + 320;
-            float4x4 _787 = float4x4(float4(asfloat(params.Load4(t5 * 16 + 0))), float4(asfloat(params.Load4((t5 + 1) * 16 + 0))), float4(asfloat(params.Load4((t5 + 2) * 16 + 0))), float4(asfloat(params.Load4((t5 + 3) * 16 + 0))));
-            acc += mul(float4(u12), float4x4(_787[0], _787[1], _787[2], _787[3]));
+            float4x4 w5 = float4x4(float4(asfloat(params.Load4(t5 * 16 + 0))), float4(asfloat(params.Load4((t5 + 1) * 16 + 0))), float4(asfloat(params.Load4((t5 + 2) * 16 + 0))), float4(asfloat(params.Load4((t5 + 3) * 16 + 0))));
+            acc += mul(float4(u12), float4x4(w5[0], w5[1], w5[2], w5[3]));
         }
         if (vy2 && vx0)
         {
             int t6 = o + 384;
-            float4x4 _846 = float4x4(float4(asfloat(params.Load4(t6 * 16 + 0))), float4(asfloat(params.Load4((t6 + 1) * 16 + 0))), float4(asfloat(params.Load4((t6 + 2) * 16 + 0))), float4(asfloat(params.Load4((t6 + 3) * 16 + 0))));
-            acc += mul(float4(u20), float4x4(_846[0], _846[1], _846[2], _846[3]));
+            float4x4 w6 = float4x4(float4(asfloat(params.Load4(t6 * 16 + 0))), float4(asfloat(params.Load4((t6 + 1) * 16 + 0))), float4(asfloat(params.Load4((t6 + 2) * 16 + 0))), float4(asfloat(params.Load4((t6 + 3) * 16 + 0))));
+            acc += mul(float4(u20), float4x4(w6[0], w6[1], w6[2], w6[3]));
         }
         if (vy2)
         {
             int t7 = o + 448;
-            float4x4 _903 = float4x4(float4(asfloat(params.Load4(t7 * 16 + 0))), float4(asfloat(params.Load4((t7 + 1) * 16 + 0))), float4(asfloat(params.Load4((t7 + 2) * 16 + 0))), float4(asfloat(params.Load4((t7 + 3) * 16 + 0))));
-            acc += mul(float4(u21), float4x4(_903[0], _903[1], _903[2], _903[3]));
+            float4x4 w7 = float4x4(float4(asfloat(params.Load4(t7 * 16 + 0))), float4(asfloat(params.Load4((t7 + 1) * 16 + 0))), float4(asfloat(params.Load4((t7 + 2) * 16 + 0))), float4(asfloat(params.Load4((t7 + 3) * 16 + 0))));
+            acc += mul(float4(u21), float4x4(w7[0], w7[1], w7[2], w7[3]));
         }
         if (vy2 && vx2)
         {
             int t8 = o + 512;
-            float4x4 _962 = float4x4(float4(asfloat(params.Load4(t8 * 16 + 0))), float4(asfloat(params.Load4((t8 + 1) * 16 + 0))), float4(asfloat(params.Load4((t8 + 2) * 16 + 0))), float4(asfloat(params.Load4((t8 + 3) * 16 + 0))));
-            acc += mul(float4(u22), float4x4(_962[0], _962[1], _962[2], _962[3]));
+            float4x4 w8 = float4x4(float4(asfloat(params.Load4(t8 * 16 + 0))), float4(asfloat(params.Load4((t8 + 1) * 16 + 0))), float4(asfloat(params.Load4((t8 + 2) * 16 + 0))), float4(asfloat(params.Load4((t8 + 3) * 16 + 0))));
+            acc += mul(float4(u22), float4x4(w8[0], w8[1], w8[2], w8[3]));
         }
     }
     float4 r = float4(acc);

@@ -91,39 +91,48 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
             let o = 0 + gid.z * 9 * 16 + (0 + l) * 4;
             if (vy0 && vx0) {
                 let t0 = o + 0 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t0], prm[t0 + 1], prm[t0 + 2], prm[t0 + 3])) * hvec4(u00);
+                let w0 = mat4x4<f32>(prm[t0], prm[t0 + 1], prm[t0 + 2], prm[t0 + 3]);
+                acc += hmat4(w0) * hvec4(u00);
             }
             if (vy0) {
                 let t1 = o + 1 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t1], prm[t1 + 1], prm[t1 + 2], prm[t1 + 3])) * hvec4(u01);
+                let w1 = mat4x4<f32>(prm[t1], prm[t1 + 1], prm[t1 + 2], prm[t1 + 3]);
+                acc += hmat4(w1) * hvec4(u01);
             }
             if (vy0 && vx2) {
                 let t2 = o + 2 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t2], prm[t2 + 1], prm[t2 + 2], prm[t2 + 3])) * hvec4(u02);
+                let w2 = mat4x4<f32>(prm[t2], prm[t2 + 1], prm[t2 + 2], prm[t2 + 3]);
+                acc += hmat4(w2) * hvec4(u02);
             }
             if (vx0) {
                 let t3 = o + 3 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t3], prm[t3 + 1], prm[t3 + 2], prm[t3 + 3])) * hvec4(u10);
+                let w3 = mat4x4<f32>(prm[t3], prm[t3 + 1], prm[t3 + 2], prm[t3 + 3]);
+                acc += hmat4(w3) * hvec4(u10);
             }
             if (true) {
                 let t4 = o + 4 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t4], prm[t4 + 1], prm[t4 + 2], prm[t4 + 3])) * hvec4(u11);
+                let w4 = mat4x4<f32>(prm[t4], prm[t4 + 1], prm[t4 + 2], prm[t4 + 3]);
+                acc += hmat4(w4) * hvec4(u11);
             }
             if (vx2) {
                 let t5 = o + 5 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t5], prm[t5 + 1], prm[t5 + 2], prm[t5 + 3])) * hvec4(u12);
+                let w5 = mat4x4<f32>(prm[t5], prm[t5 + 1], prm[t5 + 2], prm[t5 + 3]);
+                acc += hmat4(w5) * hvec4(u12);
             }
             if (vy2 && vx0) {
                 let t6 = o + 6 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t6], prm[t6 + 1], prm[t6 + 2], prm[t6 + 3])) * hvec4(u20);
+                let w6 = mat4x4<f32>(prm[t6], prm[t6 + 1], prm[t6 + 2], prm[t6 + 3]);
+                acc += hmat4(w6) * hvec4(u20);
             }
             if (vy2) {
                 let t7 = o + 7 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t7], prm[t7 + 1], prm[t7 + 2], prm[t7 + 3])) * hvec4(u21);
+                let w7 = mat4x4<f32>(prm[t7], prm[t7 + 1], prm[t7 + 2], prm[t7 + 3]);
+                acc += hmat4(w7) * hvec4(u21);
             }
             if (vy2 && vx2) {
                 let t8 = o + 8 * 16;
-                acc += hmat4(mat4x4<f32>(prm[t8], prm[t8 + 1], prm[t8 + 2], prm[t8 + 3])) * hvec4(u22);
+                let w8 = mat4x4<f32>(prm[t8], prm[t8 + 1], prm[t8 + 2], prm[t8 + 3]);
+                acc += hmat4(w8) * hvec4(u22);
             }
         }
     }
