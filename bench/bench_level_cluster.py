@@ -233,8 +233,15 @@ def main() -> int:
         result = {"preset": args.preset, "overrides": args.set, "load_before": list(os.getloadavg())}
         runs = []
         for n in args.nodes:
-            run = run_cluster(level, settings, n, args.cpus_per_node, out / f"bake_{n}")
-            run["projected_s"] = project(run["bake"], n, args.cpus_per_node)["total_s"]
+            # each run kept as it ends, so a rerun of the same command resumes after the last finished one
+            saved = out / f"run_{n}x{args.cpus_per_node}.json"
+            key = {"preset": args.preset, "seed": args.seed, "overrides": args.set}
+            if saved.exists() and json.loads(saved.read_text()).get("key") == key:
+                run = json.loads(saved.read_text())["run"]
+            else:
+                run = run_cluster(level, settings, n, args.cpus_per_node, out / f"bake_{n}")
+                run["projected_s"] = project(run["bake"], n, args.cpus_per_node)["total_s"]
+                write_json(saved, {"key": key, "run": run})
             runs.append(run)
             print(f"{n} node(s): {run['wall_s']:.1f} s, projected {run['projected_s']:.1f} s", flush=True)
         for run in runs:
