@@ -8,6 +8,7 @@ from embreex.mesh_construction import TriangleMesh
 from helpers import soup_scene
 
 from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.pipeline.tracing import embree_buffers
 from neuralao.pipeline.tracing.embree_buffers import attach_triangles, scene_handle
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 
@@ -43,7 +44,7 @@ def test_same_hits_as_the_binding_on_a_mesh_and_on_soup():
         np.testing.assert_array_equal(*occluded)
 
 
-def test_labels_unchanged_and_the_fallback():
+def test_labels_unchanged_and_the_fallback(monkeypatch):
     scene = load_scene("bunny")
     rng = np.random.default_rng(0)
     idx = rng.choice(len(scene.faces), 300, replace=False)
@@ -52,14 +53,9 @@ def test_labels_unchanged_and_the_fallback():
     settings = LabelSettings(rays=64, workers=1)
     fast = Labeller(scene, settings).ao_at_points(points, normals)
     # The binding's path, as taken where the scene's layout is not the one checked for.
-    import neuralao.pipeline.tracing.labeller as labeller_module
-
-    original = labeller_module.attach_triangles
-    labeller_module.attach_triangles = lambda *args: False
-    try:
-        slow = Labeller(scene, settings).ao_at_points(points, normals)
-    finally:
-        labeller_module.attach_triangles = original
+    monkeypatch.setattr(embree_buffers, "attach_triangles", lambda *args: False)
+    slow = Labeller(scene, settings).ao_at_points(points, normals)
+    monkeypatch.undo()
     assert fast[1].all() and 0.05 < float(fast[0].mean()) < 0.99
     np.testing.assert_array_equal(fast[0], slow[0])
     np.testing.assert_array_equal(fast[1], slow[1])

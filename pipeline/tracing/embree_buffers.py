@@ -11,7 +11,8 @@ builds and every ray's answer are the ones the binding's path gives (tests/test_
 The scene's handle is a private field of embreex's ``EmbreeScene``. Its place is found, not assumed: the
 public ``is_committed`` is set to a marker and looked for right after the handle, and the handle must give,
 through ``rtcGetSceneDevice``, the device that the scene's ``EmbreeDevice`` holds. When anything does not
-match (another embreex build), :func:`attach_triangles` returns False and the caller uses ``TriangleMesh``.
+match (another embreex build), :func:`attach_triangles` returns False and :func:`add_triangles` uses
+``TriangleMesh``.
 """
 
 from __future__ import annotations
@@ -112,3 +113,14 @@ def attach_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> bool:
     finally:
         lib.rtcReleaseGeometry(geom)
     return True
+
+
+def add_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Add the triangles to the uncommitted embreex ``scene``: as whole buffers where the scene's layout is
+    the checked one, else through embreex's ``TriangleMesh`` (the same geometry, element by element)."""
+    vertices = np.asarray(vertices, np.float32)
+    faces = np.asarray(faces, np.int32)
+    if not attach_triangles(scene, vertices, faces):
+        from embreex.mesh_construction import TriangleMesh
+
+        TriangleMesh(scene, vertices, faces)

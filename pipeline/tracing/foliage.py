@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from neuralao.pipeline.tracing.embree_buffers import add_triangles
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Box candidates per point tested vectorised in origin_density (more take the exact slow path).
@@ -107,7 +108,6 @@ class Foliage:
         max_hits: int = 32,
     ):
         from embreex import rtcore_scene  # measured: ~0.2 s to import; only the ray queries need it
-        from embreex.mesh_construction import TriangleMesh
 
         # Kept for pickling (see __reduce__): the Embree scene is rebuilt where a copy is unpickled.
         self._args = (
@@ -154,7 +154,7 @@ class Foliage:
             self._box_reach = float(np.linalg.norm(self._hi - self._lo, axis=1).max()) / 2 * (1 + 1e-9)
         if not self.empty:
             self._embree = rtcore_scene.EmbreeScene()
-            TriangleMesh(self._embree, local.astype(np.float32), faces.astype(np.int32))
+            add_triangles(self._embree, local.astype(np.float32), faces)
             self._embree.run(
                 np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED", dists=1.0
             )

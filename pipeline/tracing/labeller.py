@@ -83,7 +83,7 @@ from tqdm import tqdm
 from neuralao.pipeline.geometry.camera import Camera
 from neuralao.pipeline.geometry.scene import Scene
 from neuralao.pipeline.geometry.sequences import hammersley, sample_shifts
-from neuralao.pipeline.tracing.embree_buffers import attach_triangles
+from neuralao.pipeline.tracing.embree_buffers import add_triangles
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import (
     RAY_BYTES,
@@ -158,7 +158,6 @@ class Labeller:
 
     def __init__(self, scene: Scene, settings: LabelSettings | None = None):
         from embreex import rtcore_scene  # measured: ~0.2 s to import; only the ray queries need it
-        from embreex.mesh_construction import TriangleMesh
 
         diag = float(scene.diagonal)
         if not (math.isfinite(diag) and diag > 0):
@@ -174,10 +173,7 @@ class Labeller:
             self._face_normals32 = np.nan_to_num(scene.unit_face_normals()).astype(np.float32)
         # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
-        verts, faces = self._verts_local.astype(np.float32), np.asarray(scene.faces, np.int32)
-        if not attach_triangles(self.embree, verts, faces):  # one memory copy per buffer, where it can
-            TriangleMesh(self.embree, verts, faces)
-        del verts, faces
+        add_triangles(self.embree, self._verts_local.astype(np.float32), scene.faces)
         del self.__dict__["_verts_local"]  # only frames need it again: a level's labeller keeps no copy
         # EmbreeScene.run commits lazily on the first call; do it now, before threads share it.
         self.embree.run(
