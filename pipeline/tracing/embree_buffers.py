@@ -48,6 +48,7 @@ def _library() -> ctypes.CDLL | None:
     vp, u32, sz = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
     for name, res, args in (
         ("rtcGetSceneDevice", vp, [vp]),
+        ("rtcReleaseDevice", None, [vp]),
         ("rtcNewGeometry", vp, [vp, ctypes.c_int]),
         ("rtcSetNewGeometryBuffer", vp, [vp, ctypes.c_int, u32, ctypes.c_int, sz, sz]),
         ("rtcCommitGeometry", None, [vp]),
@@ -63,9 +64,9 @@ def _read_pointer(address: int) -> int:
     return ctypes.c_void_p.from_address(address).value or 0
 
 
-def scene_handle(scene) -> tuple[ctypes.CDLL, int] | None:
-    """(Embree, the RTCScene) of an uncommitted embreex ``EmbreeScene``, or None where the layout is not
-    the one checked for."""
+def scene_handle(scene) -> tuple[ctypes.CDLL, int, int] | None:
+    """(Embree, the RTCScene, its RTCDevice) of an uncommitted embreex ``EmbreeScene``, or None where the
+    layout is not the one checked for. The handles are the scene's own (no reference is taken)."""
     lib = _library()
     if lib is None or type(scene).__name__ != "EmbreeScene" or scene.is_committed:
         return None
@@ -82,9 +83,13 @@ def scene_handle(scene) -> tuple[ctypes.CDLL, int] | None:
         return None
     if ctypes.cast(device_object, ctypes.py_object).value.__class__.__name__ != "EmbreeDevice":
         return None
-    if lib.rtcGetSceneDevice(handle) != _read_pointer(device_object + _HEAD):
+    device = _read_pointer(device_object + _HEAD)
+    held = lib.rtcGetSceneDevice(handle)  # takes a reference to the device: given back at once
+    if held:
+        lib.rtcReleaseDevice(held)
+    if not device or held != device:
         return None
-    return lib, handle
+    return lib, handle, device
 
 
 def attach_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> bool:
@@ -93,11 +98,10 @@ def attach_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> bool:
     found = scene_handle(scene)
     if found is None:
         return False
-    lib, handle = found
+    lib, handle, device = found
     verts = np.zeros((len(vertices), 4), np.float32)  # Embree reads 16 bytes past the last vertex's x
     verts[:, :3] = vertices
     tris = np.ascontiguousarray(faces, dtype=np.uint32)
-    device = lib.rtcGetSceneDevice(handle)
     geom = lib.rtcNewGeometry(device, _GEOMETRY_TYPE_TRIANGLE)
     if not geom:
         return False
