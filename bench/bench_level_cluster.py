@@ -236,8 +236,9 @@ def main() -> int:
             # each run kept as it ends, so a rerun of the same command resumes after the last finished one
             saved = out / f"run_{n}x{args.cpus_per_node}.json"
             key = {"preset": args.preset, "seed": args.seed, "overrides": args.set}
-            if saved.exists() and json.loads(saved.read_text()).get("key") == key:
-                run = json.loads(saved.read_text())["run"]
+            kept = json.loads(saved.read_text()) if saved.exists() else {}
+            if kept.get("key") == key:
+                run = kept["run"]
             else:
                 run = run_cluster(level, settings, n, args.cpus_per_node, out / f"bake_{n}")
                 run["projected_s"] = project(run["bake"], n, args.cpus_per_node)["total_s"]

@@ -4,7 +4,7 @@ embreex's ``TriangleMesh`` copies the vertices and indices into Embree's buffers
 through numpy's Python-level indexing: 43 s for the 18.2M triangles of a ten-times-Table-1 level, against
 17 s for Embree's own BVH build (docs/results.md, "The 10x world on the loopback cluster"). Here the same
 geometry is made through Embree's C API (the library embreex ships): ``rtcNewGeometry``, one
-``rtcSetNewGeometryBuffer`` per buffer filled by a single memory copy, ``rtcCommitGeometry``,
+``rtcSetNewGeometryBuffer`` per buffer written in one numpy assignment, ``rtcCommitGeometry``,
 ``rtcAttachGeometry``. Embree then sees the same buffers in the same geometry slot (id 0), so the scene it
 builds and every ray's answer are the ones the binding's path gives (tests/test_embree_buffers.py).
 
@@ -93,25 +93,29 @@ def scene_handle(scene) -> tuple[ctypes.CDLL, int, int] | None:
 
 
 def attach_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> bool:
-    """Add the triangles ``faces`` (m, 3) over ``vertices`` (n, 3) float32 to the uncommitted embreex
-    ``scene`` as its next geometry; False (nothing added) where the scene's layout is not the checked one."""
+    """Add the triangles ``faces`` (m, 3) over ``vertices`` (n, 3) to the uncommitted embreex ``scene`` as
+    its next geometry, cast to float32 and uint32 as they are written into Embree's buffers; False (nothing
+    added) where the scene's layout is not the checked one."""
     found = scene_handle(scene)
     if found is None:
         return False
     lib, handle, device = found
-    verts = np.zeros((len(vertices), 4), np.float32)  # Embree reads 16 bytes past the last vertex's x
-    verts[:, :3] = vertices
-    tris = np.ascontiguousarray(faces, dtype=np.uint32)
+    n, m = len(vertices), len(faces)
     geom = lib.rtcNewGeometry(device, _GEOMETRY_TYPE_TRIANGLE)
     if not geom:
         return False
     try:
-        vbuf = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0, _FORMAT_FLOAT3, 16, len(verts))
-        ibuf = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3, 12, len(tris))
-        if (len(verts) and not vbuf) or (len(tris) and not ibuf):
+        # 16-byte vertices, as the binding lays them out (x, y, z and an unused fourth float, zeroed here)
+        vbuf = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_VERTEX, 0, _FORMAT_FLOAT3, 16, n)
+        ibuf = lib.rtcSetNewGeometryBuffer(geom, _BUFFER_TYPE_INDEX, 0, _FORMAT_UINT3, 12, m)
+        if (n and not vbuf) or (m and not ibuf):
             return False
-        ctypes.memmove(vbuf, verts.ctypes.data, verts.nbytes)
-        ctypes.memmove(ibuf, tris.ctypes.data, tris.nbytes)
+        if n:
+            dst = np.ctypeslib.as_array((ctypes.c_float * (4 * n)).from_address(vbuf)).reshape(n, 4)
+            dst[:, :3] = vertices
+            dst[:, 3] = 0.0
+        if m:
+            np.ctypeslib.as_array((ctypes.c_uint32 * (3 * m)).from_address(ibuf)).reshape(m, 3)[:] = faces
         lib.rtcCommitGeometry(geom)
         lib.rtcAttachGeometry(handle, geom)
     finally:
@@ -120,11 +124,10 @@ def attach_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> bool:
 
 
 def add_triangles(scene, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Add the triangles to the uncommitted embreex ``scene``: as whole buffers where the scene's layout is
-    the checked one, else through embreex's ``TriangleMesh`` (the same geometry, element by element)."""
-    vertices = np.asarray(vertices, np.float32)
-    faces = np.asarray(faces, np.int32)
+    """Add the triangles to the uncommitted embreex ``scene``: written straight into Embree's buffers where
+    the scene's layout is the checked one, else through embreex's ``TriangleMesh`` (the same geometry,
+    element by element)."""
     if not attach_triangles(scene, vertices, faces):
         from embreex.mesh_construction import TriangleMesh
 
-        TriangleMesh(scene, vertices, faces)
+        TriangleMesh(scene, np.asarray(vertices, np.float32), np.asarray(faces, np.int32))

@@ -154,7 +154,7 @@ class Foliage:
             self._box_reach = float(np.linalg.norm(self._hi - self._lo, axis=1).max()) / 2 * (1 + 1e-9)
         if not self.empty:
             self._embree = rtcore_scene.EmbreeScene()
-            add_triangles(self._embree, local.astype(np.float32), faces)
+            add_triangles(self._embree, local, faces)
             self._embree.run(
                 np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED", dists=1.0
             )

@@ -173,7 +173,7 @@ class Labeller:
             self._face_normals32 = np.nan_to_num(scene.unit_face_normals()).astype(np.float32)
         # The committed Embree scene of the local-frame triangles (shared by every tracing thread).
         self.embree = rtcore_scene.EmbreeScene()
-        add_triangles(self.embree, self._verts_local.astype(np.float32), scene.faces)
+        add_triangles(self.embree, self._verts_local, scene.faces)
         del self.__dict__["_verts_local"]  # only frames need it again: a level's labeller keeps no copy
         # EmbreeScene.run commits lazily on the first call; do it now, before threads share it.
         self.embree.run(
