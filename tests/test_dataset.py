@@ -331,3 +331,49 @@ def test_corpus_config_isolates_every_mesh_and_splits_by_mesh():
     data["composed"][0]["compose"]["pool"] = 1
     ok = from_dict(DatasetSettings, data)
     _validate(ok, expand_scenes(ok), root)
+
+
+def test_the_disk_check_counts_the_sizes_drawn_and_the_shards_a_rerun_keeps(tmp_path, monkeypatch):
+    """A corpus drawing its frame sizes per shard needs the expected bytes of those sizes, not every
+    view at the largest; and a rerun needs room only for the shards it has still to write."""
+    from neuralao.pipeline.datasets import dataset
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, check_counts
+    from neuralao.runtime.foundation.limits import PIXEL_DISK_BYTES
+    from neuralao.runtime.foundation.settings import from_dict
+
+    scene = {"name": "tet", "mesh": "tetrahedron", "cameras": "orbit", "views": 100, "split": "train"}
+    config = {"size": [64, 64], "sizes": [[64, 64], [64, 64], [64, 64], [256, 256]], "scenes": [scene]}
+    settings = from_dict(DatasetSettings, config)
+    expected = 100 * (3 * 64 * 64 + 256 * 256) / 4 * PIXEL_DISK_BYTES  # 100 views at the mean draw
+    out = tmp_path / "d"
+    calls: list[float] = []
+    monkeypatch.setattr(dataset, "check_disk", _recording_disk_check(expected, calls))
+    check_counts(settings, out)  # fits: the largest size for every view would not (4.0x the bytes)
+    assert calls == [pytest.approx(expected)]
+    (out / "shards").mkdir(parents=True)
+    (out / "shards" / "tet-0000.npz").write_bytes(b"\0" * 1000)
+    check_counts(settings, out)
+    assert calls[-1] == pytest.approx(expected - 1000)  # what is written stays; only the rest is new
+
+
+def _recording_disk_check(free: float, calls: list):
+    from neuralao.runtime.foundation.limits import check_disk
+
+    def check(name, nbytes, folder, shown):
+        calls.append(nbytes)
+        if nbytes > free:  # the real check's message, against a fixed free size
+            check_disk(name, float("inf"), folder, shown)
+
+    return check
+
+
+def test_a_corpus_past_the_free_disk_is_refused_in_one_line(tmp_path, capsys):
+    from neuralao.pipeline.cli.main import main
+
+    scene = {"name": "tet", "mesh": "bunny", "cameras": "orbit", "views": 100000, "split": "train"}
+    config = {"size": [4096, 4096], "frames_per_shard": 1, "labels": {"rays": 1}, "scenes": [scene]}
+    (tmp_path / "c.json").write_text(json.dumps(config))  # 100,000 views of 4096x4096: about 100 TiB
+    rc = main(["dataset", str(tmp_path / "c.json"), "--out", str(tmp_path / "d")])
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert rc == 2 and len(err) == 1 and "free on the disk" in err[0], (rc, err)
+    assert not (tmp_path / "d").exists()

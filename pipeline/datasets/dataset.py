@@ -67,6 +67,7 @@ from neuralao.runtime.foundation.limits import (
     check_int_range,
     check_pixels,
     check_seed,
+    format_bytes,
 )
 from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
@@ -660,12 +661,15 @@ def check_counts(settings: DatasetSettings, out: Path) -> None:
         each="a scene entry",
     )
     sizes = [tuple(settings.size), *(settings.sizes or [])]
-    views = 0
+    views, pixels = 0, 0.0
     for item in [*settings.scenes, *settings.composed]:
         where = f"scene {item.name}" if isinstance(item, SceneSpec) else f"composed {item.prefix!r}"
         check_count(f"{where}: views", item.views, low=0, bytes_each=scene_bytes, each="a camera")
         sizes += list(item.sizes or [])
-        views += item.views * (item.count if isinstance(item, ComposedScenes) else 1)
+        n = item.views * (item.count if isinstance(item, ComposedScenes) else 1)
+        # each shard draws its size from the list (an entry repeated weighs more): the expected pixels
+        drawn = item.sizes if item.sizes is not None else settings.sizes or [settings.size]
+        views, pixels = views + n, pixels + n * sum(a * b for a, b in drawn) / max(len(drawn), 1)
     for w, h in sizes:
         check_pixels("size", w, h)
     w, h = max(w for w, _ in sizes), max(h for _, h in sizes)
@@ -676,4 +680,12 @@ def check_counts(settings: DatasetSettings, out: Path) -> None:
         bytes_each=PIXEL_BYTES * w * h,
         each=f"a frame of up to {w}x{h} pixels",
     )
-    check_disk("views", views * w * h * PIXEL_DISK_BYTES, out, f"{views} at up to {w} {h}")
+    # a rerun keeps (or replaces) the shards already written: only the rest needs free space
+    written = sum(f.stat().st_size for f in (Path(out) / "shards").glob("*.npz")) if Path(out).is_dir() else 0
+    check_disk(
+        "views",
+        max(pixels * PIXEL_DISK_BYTES - written, 0),
+        out,
+        f"{views} at up to {w} {h}"
+        + (f", beyond the {format_bytes(written)} already written" if written else ""),
+    )
