@@ -29,18 +29,26 @@ from neuralao.pipeline.bakes.level_pieces import (
     SampleRule,
     cached_piece,
     instance_vertices,
-    piece_samples,
     piece_scene,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
-from neuralao.pipeline.geometry.least_squares import Whole, fit_least_squares, normal_equations, solve_amg
+from neuralao.pipeline.geometry.least_squares import (
+    Whole,
+    equation_share,
+    fit_least_squares,
+    normal_equations,
+    solve_amg,
+    sum_shares,
+)
 from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import SolveInfo, solve_partitioned
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
+    SurfaceSamples,
     face_areas,
     interpolate,
+    largest_component,
     samples_per_face,
     surface_samples,
     vertex_colours,
@@ -260,16 +268,23 @@ def _trace_block(state: PieceState, args) -> dict[str, np.ndarray]:
     }
 
 
-def piece_trace(files: TaskFiles, piece: Piece, block: int) -> tuple[np.ndarray, np.ndarray]:
-    """The traced (ns, 2) float32 obscurance and (ns,) valid flags of a piece, from its block files."""
-    ao, valid = np.zeros((piece.ns, 2), np.float32), np.zeros(piece.ns, bool)
+def trace_blocks(files: TaskFiles, piece: Piece, block: int) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """(first sample, (m, 2) float32 obscurance, (m,) valid flags) of each traced block of a piece, from its
+    block files, in sample order."""
     for lo in range(0, piece.ns, block):
         data = files.get(f"{piece_stem(piece)}_{lo // block:05d}")
         if data is None:
             raise NeuralaoError(
                 f"trace block {lo // block} of piece {piece.index} is missing from {files.folder}"
             )
-        ao[lo : lo + len(data["valid"])], valid[lo : lo + len(data["valid"])] = data["ao"], data["valid"]
+        yield lo, data["ao"], data["valid"]
+
+
+def piece_trace(files: TaskFiles, piece: Piece, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """The traced (ns, 2) float32 obscurance and (ns,) valid flags of a piece, from its block files."""
+    ao, valid = np.zeros((piece.ns, 2), np.float32), np.zeros(piece.ns, bool)
+    for lo, a, v in trace_blocks(files, piece, block):
+        ao[lo : lo + len(v)], valid[lo : lo + len(v)] = a, v
     return ao, valid
 
 
@@ -301,16 +316,21 @@ def solve_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, 
 def solve_stage(
     files: TaskFiles, runner, ctx: Context, pieces, rule, trace_files: TaskFiles, s, whole, progress: bool
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
-    """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece of at
-    least ``trace.component_vertices`` vertices (it may hold a component that big) is solved here: its big
-    components' subdomain solves are tasks of ``runner`` under ``ctx`` (its workers hold it already) and the
-    iteration runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`). Every other piece is one task.
-    The results are the same bytes either way: each subdomain solve is a pure function of its block and
-    residual, and the driver adds them in subdomain order."""
+    """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece with a
+    connected component of at least ``trace.component_vertices`` vertices is solved from here: its equations
+    are assembled by tasks, a share per trace block, and added here; its big components' subdomain solves are
+    tasks of ``runner`` under ``ctx`` (its workers hold it already) and the iteration runs here
+    (:mod:`neuralao.pipeline.geometry.partitioned_solve`). Every other piece is one task. The results are the
+    same bytes with any engine: each task is a pure function of its arguments, and the driver adds the
+    results in a fixed order."""
     t = s.trace
-    here = [
+    big = [
         p for p in pieces if t.solver == "components" and t.subdomains > 1 and p.nv >= t.component_vertices
     ]
+    # a piece whose result is stored is read back wherever it was solved: only the others are looked at
+    todo = [p for p in big if not files.has(piece_stem(p))]
+    found = {p.index for p in big_components(runner, ctx, todo, t.component_vertices)} if todo else set()
+    here = [p for p in big if p.index in found or files.has(piece_stem(p))]
     stems = frozenset(piece_stem(p) for p in here)
     files.keep_only({piece_stem(p) for p in pieces})
     fresh = set()
@@ -326,14 +346,67 @@ def solve_stage(
         yield stem, files.get(stem), stem not in fresh
 
 
-def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole):
-    """:func:`_solve_piece` on the driver, its subdomain solves tasks of ``runner``; the piece's geometry and
-    samples are made here and dropped with the result (the driver keeps no piece)."""
+def big_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> list[Piece]:
+    """The ``pieces`` with a connected component of at least ``at_least`` vertices. A piece's instances
+    share no vertex, so that is one of its meshes' components; each mesh that has so many vertices is
+    counted once, by a task of ``runner`` (workers hold the level)."""
     level, index, _ = ctx.payload
+
+    def meshes(p: Piece) -> set[int]:
+        return {index.nodes[k].mesh for k in index.table[p.first : p.stop, 0]}
+
+    todo = sorted({m for p in pieces for m in meshes(p) if len(level.meshes[m].vertices) >= at_least})
+    largest = {
+        todo[i]: int(r["vertices"]) for i, r in runner.map(Task(ctx, _mesh_component, m) for m in todo)
+    }
+    return [p for p in pieces if any(largest.get(m, 0) >= at_least for m in meshes(p))]
+
+
+def _mesh_component(state: PieceState, mesh: int) -> dict[str, np.ndarray]:
+    m = state.level.meshes[mesh]
+    return {"vertices": np.array(largest_component(m.faces, len(m.vertices)))}
+
+
+def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole):
+    """:func:`_solve_piece` with the driver as the coordinator: the piece's normal equations are assembled by
+    tasks of ``runner``, one share per trace block (each from its worker's copy of the piece), and added
+    here; :func:`solve_equations` then solves them, its subdomain solves tasks too. The driver makes the
+    piece's vertices, not its samples, and drops everything with the result."""
+    level, index, _ = ctx.payload
+    t0 = time.perf_counter()
     scene = piece_scene(level, index, piece)
-    samples = piece_samples(scene, piece, rule)
-    ao, valid = piece_trace(trace_files, piece, s.trace.block_samples)
-    return _piece_values(scene, samples, ao, valid, s.trace, whole, runner, ctx)
+    blocks = list(trace_blocks(trace_files, piece, s.trace.block_samples))
+    blocks = blocks or [(0, np.zeros((0, 2), np.float32), np.zeros(0, bool))]  # no sample: the regulariser
+    args = [(piece, rule, lo, ao, valid, s.trace.alpha, whole) for lo, ao, valid in blocks]
+    shares: list = [None] * len(args)
+    timing = {"assembly": 0.0, "blocks": 0.0, "largest_block": 0.0, "driver": 0.0}
+    t1 = time.perf_counter()
+    for i, r in runner.map(Task(ctx, _equation_share, a) for a in args):
+        shares[i] = r
+        timing["blocks"] += float(r["seconds"])
+        timing["largest_block"] = max(timing["largest_block"], float(r["seconds"]))
+    waited = time.perf_counter() - t1
+    a, rhs = sum_shares(len(scene.vertices), shares, whole.prior)
+    del shares
+    timing["assembly"] = time.perf_counter() - t0 - waited
+    v = solve_equations(a, rhs, scene.vertices, s.trace, runner, None, "", timing, ctx)
+    return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
+
+
+def _equation_share(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: the normal equations' share of one trace block of a piece (its samples' data term, and
+    the regulariser of the faces from its first sample's to the next block's first sample's)."""
+    piece, rule, lo, ao, valid, alpha, whole = args
+    t0 = time.perf_counter()
+    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    hi = lo + len(valid)
+    first = 0 if lo == 0 else int(samples.face[lo])
+    stop = len(scene.faces) if hi >= len(samples) else int(samples.face[hi])
+    block = SurfaceSamples(
+        *(getattr(samples, k)[lo:hi] for k in ("face", "bary", "points", "normals", "weights"))
+    )
+    share = equation_share(scene, block, ao, valid, alpha, whole, (first, stop))
+    return {**share, "seconds": np.array(time.perf_counter() - t0)}
 
 
 def fit_level(
@@ -372,10 +445,21 @@ def fit_level(
         return v
     t0 = time.perf_counter()
     a, rhs = normal_equations(scene, samples, values, valid, t.alpha, whole)
-    blocks = component_blocks(a, t.component_vertices, t.subdomains)
-    a = a.tocsr()
     timing = {} if timing is None else timing
     timing.update(assembly=time.perf_counter() - t0, blocks=0.0, largest_block=0.0, driver=0.0)
+    return solve_equations(a, rhs, scene.vertices, t, engine, store, tag, timing, context)
+
+
+def solve_equations(
+    a, rhs: np.ndarray, points: np.ndarray, t: TraceSettings, engine, store, tag: str, timing: dict, context
+) -> np.ndarray:
+    """The "components" solve of :func:`fit_level` of the normal equations ``a`` (n, n) sparse, ``rhs``,
+    their unknowns at ``points`` (n, 3); ``timing`` (keys as there) is added to (finding the components
+    counts as assembly). Returns (n,) or (n, c) float32 in [0, 1]."""
+    t0 = time.perf_counter()
+    blocks = component_blocks(a, t.component_vertices, t.subdomains)
+    a = a.tocsr()
+    timing["assembly"] += time.perf_counter() - t0
     ctx = context or Context("level-solve", _no_state, None)
     tasked = [b for b in blocks if b[1] != "partitioned"]
 
@@ -401,7 +485,7 @@ def fit_level(
             out[idx] = solve_partitioned(
                 a[idx][:, idx],
                 rhs[idx],
-                scene.vertices[idx],
+                points[idx],
                 t.subdomains,
                 engine=engine,
                 context=ctx,

@@ -48,7 +48,7 @@ from neuralao.pipeline.geometry.surface import (
     SurfaceSamples,
     edge_laplacian,
     edge_weights,
-    interpolation_matrix,
+    face_areas,
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 
@@ -89,32 +89,114 @@ def normal_equations(
     shares no vertex with the rest) by the whole's: the piece's equations are then the whole's block.
 
     A couples only vertices that share a face, so it is block diagonal over the mesh's connected
-    components (the level baker solves each block on its own)."""
+    components (the level baker solves each block on its own). Made as one :func:`equation_share` of
+    every sample and face, summed by :func:`sum_shares`."""
     if not (math.isfinite(alpha) and alpha >= 0):
         raise NeuralaoError(f"alpha must be a finite number >= 0, got {alpha}")
     values = np.asarray(values, dtype=np.float64)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(values).reshape(len(values), -1).all(axis=1)
-    n = len(scene.vertices)
-    b = interpolation_matrix(scene, samples)[valid]
-    w = samples.weights[valid]
-    total = w.sum() if whole is None else whole.weight
-    w = w / total if total > 0 else w
-    f = values[valid]
-    bw = b.T.multiply(w).tocsr()  # (n, k) B^T W
-    a = (bw @ b).tocsc()
-    rhs = bw @ f
-    if alpha > 0:
-        edges, ew = edge_weights(scene, None if whole is None else whole.area)
-        a = a + (alpha * REG_SCALE) * edge_laplacian(n, edges, ew)
-    if whole is not None and whole.prior is not None:
-        prior = np.asarray(whole.prior, np.float64)
-    else:
-        prior = np.average(f, weights=w, axis=0) if len(f) and w.sum() > 0 else np.ones(f.shape[1:])
+    valid = usable(values, valid)
+    prior = None if whole is None else whole.prior
+    if prior is None:  # the samples' own weighted mean
+        w, f = samples.weights[valid], values.reshape(len(values), -1)[valid]
+        prior = np.average(f, axis=0, weights=w) if len(f) and w.sum() > 0 else np.ones(f.shape[1:])
+        prior = prior.reshape(values.shape[1:])
+    if whole is None:
+        whole = Whole(float(samples.weights[valid].sum()), float(face_areas(scene).sum()))
+    share = equation_share(scene, samples, values, valid, alpha, whole, (0, len(scene.faces)))
+    return sum_shares(len(scene.vertices), [share], prior)
+
+
+def usable(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(k,) bool: the samples of the data term, valid and with every value finite."""
+    values = np.asarray(values)
+    return np.asarray(valid, dtype=bool) & np.isfinite(values).reshape(len(values), -1).all(axis=1)
+
+
+def equation_share(
+    scene: Scene,
+    samples: SurfaceSamples,
+    values: np.ndarray,
+    valid: np.ndarray,
+    alpha: float,
+    whole: Whole,
+    faces: tuple[int, int],
+) -> dict[str, np.ndarray]:
+    """A share of the normal equations of ``scene``: the data term of ``samples`` (any subset of its
+    samples) and the regulariser of its faces ``faces`` = [first, stop). Shares of disjoint samples and
+    face ranges covering them all add up (:func:`sum_shares`) to :func:`normal_equations`' A and rhs
+    without the ridge, so a big surface's equations are made in parts, each a task. The weights are the
+    ``whole``'s: valid samples' ``weight``, faces' ``area``.
+
+    Per face, the samples' products w b_a b_b and w b_a f are summed first (one pass over the samples),
+    then the face's nine entries go to its corners: A's entries are then as many as the faces, not the
+    samples. Returns {"rows", "cols", "data"}: A's entries (duplicates to be added), {"rhs_rows",
+    "rhs"}: (m,) vertices and their (m, c) right-hand sides."""
+    values = np.asarray(values, np.float64)
+    keep = usable(values, valid)
+    face, bary = samples.face[keep], samples.bary[keep]
+    w = samples.weights[keep] / whole.weight if whole.weight > 0 else samples.weights[keep]
+    f = values.reshape(len(values), -1)[keep]
+    lo, hi = int(faces[0]), int(faces[1]) if alpha > 0 else int(faces[0])
+    if len(face):  # the faces of the samples and of the range, as one span [lo, hi)
+        first, last = int(face.min()), int(face.max()) + 1
+        lo, hi = (min(lo, first), max(hi, last)) if hi > lo else (first, last)
+    m = max(hi - lo, 0)
+    local = face - lo
+
+    def per_face(x: np.ndarray) -> np.ndarray:
+        return np.bincount(local, weights=x, minlength=m).astype(np.float64, copy=False)
+
+    # per face: the symmetric 3x3 block's aa, bb, cc, ab, bc, ca, and each corner's right-hand side
+    k = np.stack([per_face(w * bary[:, a] * bary[:, b]) for a, b in _PAIRS], 1)
+    r = np.stack([[per_face(w * bary[:, a] * col) for col in f.T] for a in range(3)])
+    used = np.bincount(local, minlength=m) > 0
+    if alpha > 0 and faces[1] > faces[0]:
+        # every edge of a face gets a third of its area: +e twice on each corner's diagonal, -e off it
+        tri = scene.faces[faces[0] : faces[1]]
+        e = (alpha * REG_SCALE / 3.0) * (0.5 * np.linalg.norm(_cross(scene.vertices, tri), axis=1))
+        e = e / whole.area if whole.area > 0 else e
+        span = slice(int(faces[0]) - lo, int(faces[1]) - lo)
+        k[span, :3] += 2.0 * e[:, None]
+        k[span, 3:] -= e[:, None]
+        used[span] = True
+    hit = np.flatnonzero(used)
+    corners = scene.faces[lo + hit].astype(np.int64)
+    return {
+        "rows": corners[:, [0, 1, 2, 0, 1, 1, 2, 2, 0]].reshape(-1),
+        "cols": corners[:, [0, 1, 2, 1, 0, 2, 1, 0, 2]].reshape(-1),
+        "data": k[hit][:, [0, 1, 2, 3, 3, 4, 4, 5, 5]].reshape(-1),
+        "rhs_rows": corners.reshape(-1),
+        "rhs": r[:, :, hit].transpose(2, 0, 1).reshape(-1, r.shape[1]),
+    }
+
+
+# The six entries of a face's symmetric 3x3 block: its diagonal, then (0, 1), (1, 2), (2, 0).
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
+
+
+def _cross(vertices: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    v = vertices[tri]
+    return np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+
+
+def sum_shares(n: int, shares: list[dict[str, np.ndarray]], prior) -> tuple:
+    """A (n, n) csc and rhs (n,) or (n, c) of the normal equations from the :func:`equation_share` results
+    (added in list order: the same shares give the same bytes), with the ridge toward ``prior`` (the
+    whole surface's weighted mean value: a scalar or (c,))."""
+    prior = np.asarray(prior, np.float64)
+    rows = np.concatenate([s["rows"] for s in shares])
+    cols = np.concatenate([s["cols"] for s in shares])
+    data = np.concatenate([s["data"] for s in shares])
+    a = sp.csc_matrix((data, (rows, cols)), shape=(n, n))
+    a.sum_duplicates()
+    rr = np.concatenate([s["rhs_rows"] for s in shares])
+    rv = np.concatenate([s["rhs"].reshape(len(s["rhs"]), -1) for s in shares])
+    rhs = np.stack([np.bincount(rr, weights=rv[:, j], minlength=n) for j in range(rv.shape[1])], 1)
     diag = a.diagonal()
     ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
     a = (a + ridge * sp.identity(n, format="csc")).tocsc()
-    rhs = rhs + ridge * prior
-    return a, rhs
+    rhs = rhs + ridge * prior.reshape(1, -1)
+    return a, rhs.reshape((n,) + prior.shape)
 
 
 def fit_least_squares(

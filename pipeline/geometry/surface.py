@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from neuralao.pipeline.geometry.scene import Scene
 from neuralao.pipeline.geometry.sequences import hammersley, sample_shifts
@@ -170,3 +171,14 @@ def vertex_colours(ao: np.ndarray) -> np.ndarray:
     """(n, 4) uint8 grey RGBA: round(255 ao), alpha 255."""
     g = np.rint(np.clip(np.asarray(ao, np.float64), 0.0, 1.0) * 255.0).astype(np.uint8)
     return np.stack([g, g, g, np.full_like(g, 255)], axis=1)
+
+
+def largest_component(faces: np.ndarray, n: int) -> int:
+    """Vertices in the largest connected component of a mesh of ``n`` vertices and ``faces`` (f, 3) (vertices
+    joined by a face are connected; a vertex in no face is a component of its own); 0 without vertices."""
+    if n == 0:
+        return 0
+    e = np.asarray(faces, np.int64)[:, [0, 1, 1, 2]].reshape(-1, 2)
+    graph = sp.coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return int(np.bincount(label).max())
