@@ -13,6 +13,8 @@ from scipy.special import expn
 
 from neuralao.pipeline.bakes.level_decorators import FoliageSettings, build_foliage, fit_global, linear_basis
 from neuralao.pipeline.bakes.level_pieces import (
+    block_samples,
+    face_counts,
     index_level,
     piece_samples,
     piece_scene,
@@ -25,7 +27,7 @@ from neuralao.pipeline.geometry.least_squares import fit_least_squares
 from neuralao.pipeline.geometry.level_files import flatten, read_level
 from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 from neuralao.pipeline.geometry.scene import scene_from_arrays
-from neuralao.pipeline.geometry.surface import surface_samples
+from neuralao.pipeline.geometry.surface import face_areas, surface_samples
 from neuralao.pipeline.tracing.foliage import Foliage, overlap_reduced
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
@@ -64,6 +66,33 @@ def test_pieces_make_the_samples_of_the_whole_level(tiny_geometry, piece_faces):
         np.concatenate([s.face + p.f0 for s, p in zip(parts, pieces, strict=True)]), whole.face
     )
     np.testing.assert_allclose(np.concatenate([s.weights for s in parts]), whole.weights, rtol=1e-12)
+
+
+def test_a_block_s_samples_are_the_piece_s_made_from_its_faces_alone(tiny_geometry):
+    """A trace block's samples (a task makes them from the faces under them, not the piece's all) are the
+    piece's samples lo..hi, bit for bit, wherever the block starts and ends (inside a face's run too)."""
+    g = tiny_geometry
+    index = index_level(g.level, 10**9)
+    rule, pieces = sample_rule(g.level, index, 2.0, 0, 4, seed=7)
+    piece = pieces[0]
+    scene = piece_scene(g.level, index, piece)
+    whole = piece_samples(scene, piece, rule)
+    ends = np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
+    assert (np.diff(ends, prepend=0) == 0).any() and (np.diff(ends, prepend=0) > 1).any()  # empty, multi
+    rng = np.random.default_rng(0)
+    for lo, hi in [
+        (0, piece.ns),
+        (0, 1),
+        (piece.ns - 1, piece.ns),
+        (5, 5),
+        *rng.integers(0, piece.ns, (20, 2)),
+    ]:
+        lo, hi = int(min(lo, hi)), int(max(lo, hi))
+        block = block_samples(scene, ends, piece, rule, lo, hi)
+        for k in ("face", "bary", "points", "normals", "weights"):
+            np.testing.assert_array_equal(
+                getattr(block, k), getattr(whole, k)[lo:hi], err_msg=f"{k} {lo}:{hi}"
+            )
 
 
 def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):

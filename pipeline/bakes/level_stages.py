@@ -27,6 +27,7 @@ from neuralao.pipeline.bakes.level_pieces import (
     Piece,
     PieceIndex,
     SampleRule,
+    cached_block,
     cached_piece,
     instance_vertices,
     piece_scene,
@@ -253,13 +254,11 @@ def trace_jobs(ctx: Context, pieces: list[Piece], rule: SampleRule, s: LevelBake
 
 def _trace_block(state: PieceState, args) -> dict[str, np.ndarray]:
     piece, rule, lo, hi, half = args
-    _, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+    _, samples = cached_block(state.key, state.level, state.index, piece, rule, lo, hi)
     ids = np.arange(piece.s0 + lo, piece.s0 + hi, dtype=np.int64)
-    ao, valid = state.labeller.obscurance(
-        samples.points[lo:hi], samples.normals[lo:hi], half, state.foliage, ids=ids
-    )
+    ao, valid = state.labeller.obscurance(samples.points, samples.normals, half, state.foliage, ids=ids)
     # The valid samples' weight and weighted values: every piece's least squares takes the level's.
-    w = samples.weights[lo:hi][valid]
+    w = samples.weights[valid]
     return {
         "ao": ao,
         "valid": valid,
@@ -398,12 +397,12 @@ def _equation_share(state: PieceState, args) -> dict[str, np.ndarray]:
     the regulariser of the faces from its first sample's to the next block's first sample's)."""
     piece, rule, lo, ao, valid, alpha, whole = args
     t0 = time.perf_counter()
-    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
     hi = lo + len(valid)
-    first = 0 if lo == 0 else int(samples.face[lo])
-    stop = len(scene.faces) if hi >= len(samples) else int(samples.face[hi])
+    scene, block = cached_block(state.key, state.level, state.index, piece, rule, lo, min(hi + 1, piece.ns))
+    first = 0 if lo == 0 else int(block.face[0])
+    stop = len(scene.faces) if hi >= piece.ns else int(block.face[-1])  # the next block's first sample's
     block = SurfaceSamples(
-        *(getattr(samples, k)[lo:hi] for k in ("face", "bary", "points", "normals", "weights"))
+        *(getattr(block, k)[: hi - lo] for k in ("face", "bary", "points", "normals", "weights"))
     )
     share = equation_share(scene, block, ao, valid, alpha, whole, (first, stop))
     return {**share, "seconds": np.array(time.perf_counter() - t0)}
