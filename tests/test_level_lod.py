@@ -100,3 +100,32 @@ def test_the_simplified_lod_keeps_the_unsimplified_error(tiny):
     for k in ("rmse_vertex", "rmse_least_squares"):
         assert b[k] <= 1.15 * a[k], (k, a[k], b[k])
         assert b[k] < 0.8 * b["rmse_constant"]
+
+
+def test_a_resampling_block_makes_the_piece_s_points(tmp_path):
+    """A resampling task's points (made from the faces under them) are the piece's LOD vertices then its
+    samples, lo..hi of them, bit for bit, wherever the block starts and ends."""
+    from neuralao.pipeline.bakes.level_stages import lod_block_points, lod_points
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.0)
+    mesh = {"vertices": np.asarray(sphere.vertices), "faces": sphere.faces.astype(np.int64)}
+    level, cfg = write_level(tmp_path, settings_for("tiny", seed=1), "tiny")
+    s = load_level_settings(cfg, [])
+    piece = index_level(read_level(level), 10**9).pieces[0]
+    lod, samples = lod_points(mesh["vertices"], mesh["faces"], piece, s)
+    every = np.r_[lod.vertices, samples.points]
+    nv = len(lod.vertices)
+    rng = np.random.default_rng(2)
+    cuts = [
+        (0, len(every)),
+        (0, nv),
+        (nv, nv + 1),
+        (nv - 3, nv + 5),
+        (7, 7),
+        *rng.integers(0, len(every), (12, 2)),
+    ]
+    for lo, hi in cuts:
+        lo, hi = int(min(lo, hi)), int(max(lo, hi))
+        np.testing.assert_array_equal(
+            lod_block_points("k", mesh, piece, lo, hi, s), every[lo:hi], err_msg=f"{lo}:{hi}"
+        )

@@ -24,7 +24,7 @@ import numpy as np
 
 from neuralao.pipeline.geometry.level_files import Level, LevelNode
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
-from neuralao.pipeline.geometry.surface import SurfaceSamples, face_areas, surface_samples
+from neuralao.pipeline.geometry.surface import SurfaceSamples, face_areas, samples_in_range, surface_samples
 
 # Area histogram: bins per octave of face area and the octaves covered (areas outside are clamped in).
 _BINS_PER_OCTAVE = 64
@@ -252,23 +252,7 @@ def block_samples(
 ) -> SurfaceSamples:
     """Samples ``lo`` .. ``hi`` of the piece, the same as ``piece_samples(scene, piece, rule)[lo:hi]``, made
     from the faces they lie on alone; ``ends`` (m,) int64: the running sum of the piece's face counts."""
-    first = int(np.searchsorted(ends, lo, side="right"))  # the face of sample lo
-    last = int(np.searchsorted(ends, max(hi - 1, lo), side="right")) + 1 if hi > lo else first
-    counts = np.diff(ends[first:last], prepend=ends[first - 1] if first else 0)
-    part = surface_samples(
-        Scene(scene.vertices, scene.faces[first:last], scene.name, scene.source),
-        0,
-        rule.cap,
-        rule.seed,
-        counts=counts,
-        face_offset=piece.f0 + first,
-        area_total=rule.area_total,
-    )
-    skip = lo - (int(ends[first - 1]) if first else 0)
-    cut = slice(skip, skip + hi - lo)
-    return SurfaceSamples(
-        part.face[cut] + first, part.bary[cut], part.points[cut], part.normals[cut], part.weights[cut]
-    )
+    return samples_in_range(scene, ends, lo, hi, rule.seed, piece.f0, rule.area_total)
 
 
 def cached_block(

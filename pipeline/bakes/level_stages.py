@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -33,7 +34,7 @@ from neuralao.pipeline.bakes.level_pieces import (
     piece_scene,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
-from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
+from neuralao.pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key
 from neuralao.pipeline.geometry.least_squares import (
     Whole,
     equation_share,
@@ -50,6 +51,7 @@ from neuralao.pipeline.geometry.surface import (
     face_areas,
     interpolate,
     largest_component,
+    samples_in_range,
     samples_per_face,
     surface_samples,
     vertex_colours,
@@ -697,43 +699,69 @@ def lod_points(vertices: np.ndarray, faces: np.ndarray, piece: Piece, s: LevelBa
 
 def lod_resample_jobs(ctx, pieces, values, lod_meshes: TaskFiles, radius: float, s: LevelBakeSettings):
     """(stem, task maker) per block of ``task_rays`` rays of each piece's resampling points (its LOD's
-    vertices and samples), made here one piece at a time; and per piece its point count."""
+    vertices, then its samples), and per piece its point count. A block's task makes its own points from
+    the piece's LOD mesh, which travels to each worker once."""
     per_block = max(1, s.task_rays // s.lod.rays)
     jobs, counts, last = [], {}, {}
 
-    def points(p: Piece) -> np.ndarray:
+    def mesh(p: Piece) -> Shared:
         if last.get("piece") != p.index:
-            mesh = lod_meshes.get(piece_stem(p))
-            lod, samples = lod_points(mesh["vertices"], mesh["faces"], p, s)
-            last.update(piece=p.index, points=np.r_[lod.vertices, samples.points])
-        return last["points"]
+            key = content_key(lod_meshes.key, piece_stem(p))
+            last.update(piece=p.index, mesh=Shared(key, (key, lod_meshes.get(piece_stem(p)))))
+        return last["mesh"]
 
     for p in pieces:
-        mesh = lod_meshes.get(piece_stem(p))
-        if len(mesh["faces"]) == 0:
+        m = lod_meshes.get(piece_stem(p))
+        if len(m["faces"]) == 0:
             counts[p.index] = 0
             continue
-        # The count only (the points are made when the piece's first block is sent): the LOD's vertices
-        # and its samples, as surface_samples spreads them.
-        lod = scene_from_arrays(mesh["vertices"], mesh["faces"], f"lod{p.index}", drop_degenerate=False)
+        # The count only: the LOD's vertices and its samples, as surface_samples spreads them.
+        lod = scene_from_arrays(m["vertices"], m["faces"], f"lod{p.index}", drop_degenerate=False)
         n_samples = samples_per_face(face_areas(lod), s.lod.samples_per_vertex * len(lod.vertices), 16).sum()
         counts[p.index] = n = len(lod.vertices) + int(n_samples)
-        del lod
+        del lod, m
         for b, lo in enumerate(range(0, n, per_block)):
+            hi = min(lo + per_block, n)
 
-            def make(p=p, lo=lo) -> Task:
-                return Task(
-                    ctx, _resample_points, (values, points(p)[lo : lo + per_block], radius, s.lod.rays)
-                )
+            def make(p=p, lo=lo, hi=hi) -> Task:
+                return Task(ctx, _resample_points, (values, mesh(p), p, lo, hi, radius, s))
 
             jobs.append((f"{piece_stem(p)}_{b:05d}", make))
     return jobs, counts
 
 
+def lod_block_points(key: str, mesh: dict[str, np.ndarray], piece: Piece, lo: int, hi: int, s) -> np.ndarray:
+    """Resampling points ``lo`` .. ``hi`` of a piece's LOD (its vertices, then :func:`lod_points`'
+    samples), the same bits, made from the faces under them alone; the LOD scene and its face counts come
+    from this process's small cache (by ``key``, the mesh's) when a block of the same piece ran here last."""
+    if key not in _LOD_CACHE:
+        lod = scene_from_arrays(mesh["vertices"], mesh["faces"], f"lod{piece.index}", drop_degenerate=False)
+        areas = face_areas(lod)
+        counts = samples_per_face(areas, s.lod.samples_per_vertex * len(lod.vertices), 16)
+        _LOD_CACHE[key] = (lod, np.cumsum(counts), float(areas[counts > 0].sum()))
+        while len(_LOD_CACHE) > 2:
+            _LOD_CACHE.popitem(last=False)
+    _LOD_CACHE.move_to_end(key)
+    lod, ends, area = _LOD_CACHE[key]
+    nv = len(lod.vertices)
+    points = [lod.vertices[lo : min(hi, nv)]]
+    if hi > nv:
+        points.append(
+            samples_in_range(lod, ends, max(lo - nv, 0), hi - nv, s.seed + 3, piece.f0, area).points
+        )
+    return np.concatenate(points)
+
+
+# A worker's latest LOD pieces (scene, running face counts, sampled area), by their mesh's content key.
+_LOD_CACHE: OrderedDict[str, tuple] = OrderedDict()
+
+
 def _resample_points(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: :func:`resample_in_spheres` of one block of points on the opaque labeller."""
-    values, points, radius, rays = args
-    v, _ = resample_in_spheres(state.labeller, values, points, radius, rays)
+    """Engine task: :func:`resample_in_spheres` of one block of a piece's LOD points on the opaque
+    labeller."""
+    values, (key, mesh), piece, lo, hi, radius, s = args
+    points = lod_block_points(key, mesh, piece, lo, hi, s)
+    v, _ = resample_in_spheres(state.labeller, values, points, radius, s.lod.rays)
     return {"values": v}
 
 

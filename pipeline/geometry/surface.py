@@ -100,6 +100,39 @@ def surface_samples(
     return SurfaceSamples(face, bary, points, scene.face_normals[face], weights)
 
 
+def samples_in_range(
+    scene: Scene,
+    ends: np.ndarray,
+    lo: int,
+    hi: int,
+    seed: int,
+    face_offset: int = 0,
+    area_total: float | None = None,
+) -> SurfaceSamples:
+    """Samples ``lo`` .. ``hi`` of ``surface_samples(scene, counts=counts, seed=seed, ...)``, bit for bit,
+    made from the faces they lie on alone (a task's block of a big surface's samples). ``ends`` (m,) int:
+    the running sum of the per-face ``counts``; ``area_total`` as there (default: the area of the faces
+    with samples, computed here over every face)."""
+    if area_total is None:
+        counts = np.diff(ends, prepend=0)
+        area_total = float(face_areas(scene)[counts > 0].sum())
+    first = int(np.searchsorted(ends, lo, side="right"))  # the face of sample lo
+    last = int(np.searchsorted(ends, hi - 1, side="right")) + 1 if hi > lo else first
+    before = int(ends[first - 1]) if first else 0
+    part = surface_samples(
+        Scene(scene.vertices, scene.faces[first:last], scene.name, scene.source),
+        0,
+        seed=seed,
+        counts=np.diff(ends[first:last], prepend=before),
+        face_offset=face_offset + first,
+        area_total=area_total,
+    )
+    cut = slice(lo - before, hi - before)
+    return SurfaceSamples(
+        part.face[cut] + first, part.bary[cut], part.points[cut], part.normals[cut], part.weights[cut]
+    )
+
+
 def interpolation_matrix(scene: Scene, samples: SurfaceSamples):
     """B (k, n_vertices) scipy.sparse.csr_matrix: row s = barycentric weights of sample s."""
     k = len(samples)
