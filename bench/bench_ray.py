@@ -222,19 +222,20 @@ TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check
 CHECK_STAGES = ("blend_check",)
 
 
-def stage_costs(info: dict) -> list[dict]:
+def stage_costs(info: dict, checks: bool = False) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
     seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake:
     the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with;
     the LOD stage's first tasks are its simplifications, single-threaded), the states workers build
-    (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators)."""
+    (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators). The
+    stages that only make error tables are left out unless ``checks`` (a run's own wall clock has them)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
     tasks = info.get("task_seconds", {})
     local = info.get("engine", "local") == "local"
     rows = []
     for st in info["stages"]:
         name = st["stage"]
-        if name in CHECK_STAGES:
+        if name in CHECK_STAGES and not checks:
             continue
         t = list(tasks.get(name, []))
         cores = [x * (threads if name in TRACING_STAGES else 1) for x in t]
