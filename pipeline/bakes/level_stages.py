@@ -483,10 +483,11 @@ def solve_equations(
     for idx, method in blocks:
         if method == "partitioned":
             info = SolveInfo()
+            single = len(idx) == a.shape[0]  # one component (a terrain's piece): no copy of its block
             out[idx] = solve_partitioned(
-                a[idx][:, idx],
-                rhs[idx],
-                points[idx],
+                a if single else a[idx][:, idx],
+                rhs if single else rhs[idx],
+                points if single else points[idx],
                 t.subdomains,
                 engine=engine,
                 context=ctx,
