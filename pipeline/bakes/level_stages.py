@@ -688,13 +688,16 @@ def holdout_counts(scene: Scene, total: int, seed: int) -> np.ndarray:
     return counts
 
 
+def lod_sample_counts(lod: Scene, s: LevelBakeSettings) -> np.ndarray:
+    """(m,) int64 least-squares samples per face of a piece's LOD scene (at most 16 a face)."""
+    return samples_per_face(face_areas(lod), s.lod.samples_per_vertex * len(lod.vertices), 16)
+
+
 def lod_points(vertices: np.ndarray, faces: np.ndarray, piece: Piece, s: LevelBakeSettings):
     """A piece's LOD scene and its least-squares surface samples (seeded, numbered from the piece's first
     face); the resampling points are the LOD's vertices, then these samples."""
     lod = scene_from_arrays(vertices, faces, f"lod{piece.index}", drop_degenerate=False)
-    samples = surface_samples(
-        lod, s.lod.samples_per_vertex * len(lod.vertices), 16, s.seed + 3, face_offset=piece.f0
-    )
+    samples = surface_samples(lod, 0, seed=s.seed + 3, counts=lod_sample_counts(lod, s), face_offset=piece.f0)
     return lod, samples
 
 
@@ -718,8 +721,7 @@ def lod_resample_jobs(ctx, pieces, values, lod_meshes: TaskFiles, radius: float,
             continue
         # The count only: the LOD's vertices and its samples, as surface_samples spreads them.
         lod = scene_from_arrays(m["vertices"], m["faces"], f"lod{p.index}", drop_degenerate=False)
-        n_samples = samples_per_face(face_areas(lod), s.lod.samples_per_vertex * len(lod.vertices), 16).sum()
-        counts[p.index] = n = len(lod.vertices) + int(n_samples)
+        counts[p.index] = n = len(lod.vertices) + int(lod_sample_counts(lod, s).sum())
         del lod, m
         for b, lo in enumerate(range(0, n, per_block)):
             hi = min(lo + per_block, n)
@@ -737,9 +739,8 @@ def lod_block_points(key: str, mesh: dict[str, np.ndarray], piece: Piece, lo: in
     from this process's small cache (by ``key``, the mesh's) when a block of the same piece ran here last."""
     if key not in _LOD_CACHE:
         lod = scene_from_arrays(mesh["vertices"], mesh["faces"], f"lod{piece.index}", drop_degenerate=False)
-        areas = face_areas(lod)
-        counts = samples_per_face(areas, s.lod.samples_per_vertex * len(lod.vertices), 16)
-        _LOD_CACHE[key] = (lod, np.cumsum(counts), float(areas[counts > 0].sum()))
+        counts = lod_sample_counts(lod, s)
+        _LOD_CACHE[key] = (lod, np.cumsum(counts), float(face_areas(lod)[counts > 0].sum()))
         while len(_LOD_CACHE) > 2:
             _LOD_CACHE.popitem(last=False)
     _LOD_CACHE.move_to_end(key)

@@ -136,11 +136,13 @@ def equation_share(
     face, bary = samples.face[keep], samples.bary[keep]
     w = samples.weights[keep] / whole.weight if whole.weight > 0 else samples.weights[keep]
     f = values.reshape(len(values), -1)[keep]
-    lo, hi = int(faces[0]), int(faces[1]) if alpha > 0 else int(faces[0])
-    if len(face):  # the faces of the samples and of the range, as one span [lo, hi)
-        first, last = int(face.min()), int(face.max()) + 1
-        lo, hi = (min(lo, first), max(hi, last)) if hi > lo else (first, last)
-    m = max(hi - lo, 0)
+    regularised = alpha > 0 and faces[1] > faces[0]
+    # the faces of the samples and of the regularised range, as one span [lo, hi)
+    spans = ([(int(faces[0]), int(faces[1]))] if regularised else []) + (
+        [(int(face.min()), int(face.max()) + 1)] if len(face) else []
+    )
+    lo, hi = (min(a for a, _ in spans), max(b for _, b in spans)) if spans else (0, 0)
+    m = hi - lo
     local = face - lo
 
     def per_face(x: np.ndarray) -> np.ndarray:
@@ -150,10 +152,10 @@ def equation_share(
     k = np.stack([per_face(w * bary[:, a] * bary[:, b]) for a, b in _PAIRS], 1)
     r = np.stack([[per_face(w * bary[:, a] * col) for col in f.T] for a in range(3)])
     used = np.bincount(local, minlength=m) > 0
-    if alpha > 0 and faces[1] > faces[0]:
+    if regularised:
         # every edge of a face gets a third of its area: +e twice on each corner's diagonal, -e off it
-        tri = scene.faces[faces[0] : faces[1]]
-        e = (alpha * REG_SCALE / 3.0) * (0.5 * np.linalg.norm(_cross(scene.vertices, tri), axis=1))
+        tri = Scene(scene.vertices, scene.faces[faces[0] : faces[1]])
+        e = (alpha * REG_SCALE / 3.0) * face_areas(tri)
         e = e / whole.area if whole.area > 0 else e
         span = slice(int(faces[0]) - lo, int(faces[1]) - lo)
         k[span, :3] += 2.0 * e[:, None]
@@ -172,11 +174,6 @@ def equation_share(
 
 # The six entries of a face's symmetric 3x3 block: its diagonal, then (0, 1), (1, 2), (2, 0).
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
-
-
-def _cross(vertices: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    v = vertices[tri]
-    return np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
 
 
 def sum_shares(n: int, shares: list[dict[str, np.ndarray]], prior) -> tuple:
