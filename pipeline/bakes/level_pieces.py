@@ -230,21 +230,29 @@ _CACHE: OrderedDict[tuple, tuple[Scene, Any]] = OrderedDict()
 _CACHE_SIZE = 2
 
 
+def remembered(cache: OrderedDict, key, make: Callable[[], Any], size: int = _CACHE_SIZE) -> Any:
+    """``cache[key]``, made by ``make()`` when absent; the ``size`` latest keys are kept (a worker's next
+    task is most often another block of the same piece)."""
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key]
+    cache[key] = value = make()
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
 def cached_piece(
     key: str, level: Level, index: PieceIndex, piece: Piece, rule: SampleRule | None
 ) -> tuple[Scene, SurfaceSamples | None]:
     """(scene, samples or None) of ``piece``, from this process's small cache when a task of the same
     bake and piece ran here last (trace blocks of one big piece, then its solve)."""
-    k = (key, piece.index, rule)
-    if k in _CACHE:
-        _CACHE.move_to_end(k)
-        return _CACHE[k]
-    scene = piece_scene(level, index, piece)
-    value = (scene, None if rule is None else piece_samples(scene, piece, rule))
-    _CACHE[k] = value
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return value
+
+    def make():
+        scene = piece_scene(level, index, piece)
+        return scene, None if rule is None else piece_samples(scene, piece, rule)
+
+    return remembered(_CACHE, (key, piece.index, rule), make)
 
 
 def block_samples(
@@ -261,16 +269,12 @@ def cached_block(
     """(scene, samples ``lo`` .. ``hi``) of ``piece`` (:func:`block_samples`); the piece's geometry and face
     counts come from this process's small cache when a block of the same piece ran here last. A block task
     makes its own samples, not the piece's (8 s for the 10x world's terrain)."""
-    k = (key, piece.index, rule, "ends")
-    if k in _CACHE:
-        _CACHE.move_to_end(k)
-        scene, ends = _CACHE[k]
-    else:
+
+    def make():
         scene = piece_scene(level, index, piece)
-        ends = np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
-        _CACHE[k] = (scene, ends)
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
+        return scene, np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
+
+    scene, ends = remembered(_CACHE, (key, piece.index, rule, "ends"), make)
     return scene, block_samples(scene, ends, piece, rule, lo, hi)
 
 

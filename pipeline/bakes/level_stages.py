@@ -32,6 +32,7 @@ from neuralao.pipeline.bakes.level_pieces import (
     cached_piece,
     instance_vertices,
     piece_scene,
+    remembered,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key
@@ -737,14 +738,13 @@ def lod_block_points(key: str, mesh: dict[str, np.ndarray], piece: Piece, lo: in
     """Resampling points ``lo`` .. ``hi`` of a piece's LOD (its vertices, then :func:`lod_points`'
     samples), the same bits, made from the faces under them alone; the LOD scene and its face counts come
     from this process's small cache (by ``key``, the mesh's) when a block of the same piece ran here last."""
-    if key not in _LOD_CACHE:
+
+    def make():
         lod = scene_from_arrays(mesh["vertices"], mesh["faces"], f"lod{piece.index}", drop_degenerate=False)
         counts = lod_sample_counts(lod, s)
-        _LOD_CACHE[key] = (lod, np.cumsum(counts), float(face_areas(lod)[counts > 0].sum()))
-        while len(_LOD_CACHE) > 2:
-            _LOD_CACHE.popitem(last=False)
-    _LOD_CACHE.move_to_end(key)
-    lod, ends, area = _LOD_CACHE[key]
+        return lod, np.cumsum(counts), float(face_areas(lod)[counts > 0].sum())
+
+    lod, ends, area = remembered(_LOD_CACHE, key, make)
     nv = len(lod.vertices)
     points = [lod.vertices[lo : min(hi, nv)]]
     if hi > nv:
