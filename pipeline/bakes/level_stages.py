@@ -48,7 +48,6 @@ from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import SolveInfo, solve_partitioned
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
-    SurfaceSamples,
     face_areas,
     interpolate,
     largest_component,
@@ -404,10 +403,7 @@ def _equation_share(state: PieceState, args) -> dict[str, np.ndarray]:
     scene, block = cached_block(state.key, state.level, state.index, piece, rule, lo, min(hi + 1, piece.ns))
     first = 0 if lo == 0 else int(block.face[0])
     stop = len(scene.faces) if hi >= piece.ns else int(block.face[-1])  # the next block's first sample's
-    block = SurfaceSamples(
-        *(getattr(block, k)[: hi - lo] for k in ("face", "bary", "points", "normals", "weights"))
-    )
-    share = equation_share(scene, block, ao, valid, alpha, whole, (first, stop))
+    share = equation_share(scene, block[: hi - lo], ao, valid, alpha, whole, (first, stop))
     return {**share, "seconds": np.array(time.perf_counter() - t0)}
 
 

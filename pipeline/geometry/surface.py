@@ -48,6 +48,12 @@ class SurfaceSamples:
     def __len__(self) -> int:
         return len(self.face)
 
+    def __getitem__(self, index: slice | np.ndarray) -> SurfaceSamples:
+        """The samples at ``index`` (a slice or indices), with their face numbers as they are."""
+        return SurfaceSamples(
+            self.face[index], self.bary[index], self.points[index], self.normals[index], self.weights[index]
+        )
+
 
 def face_areas(scene: Scene) -> np.ndarray:
     """(m,) float64 triangle areas."""
@@ -127,10 +133,9 @@ def samples_in_range(
         face_offset=face_offset + first,
         area_total=area_total,
     )
-    cut = slice(lo - before, hi - before)
-    return SurfaceSamples(
-        part.face[cut] + first, part.bary[cut], part.points[cut], part.normals[cut], part.weights[cut]
-    )
+    block = part[lo - before : hi - before]
+    block.face = block.face + first  # numbered in ``scene``
+    return block
 
 
 def interpolation_matrix(scene: Scene, samples: SurfaceSamples):
