@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import threading
 import time
+import zipfile
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -192,18 +193,19 @@ class TaskFiles:
                 if str(z["_key"]) != self.key:
                     return None
                 return {k: z[k] for k in z.files if k != "_key"}
-        except (OSError, ValueError, KeyError, EOFError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return None
 
     def has(self, stem: str) -> bool:
         try:
             with np.load(self.path(stem), allow_pickle=False) as z:
                 return str(z["_key"]) == self.key
-        except (OSError, ValueError, KeyError, EOFError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return False
 
     def put(self, stem: str, data: dict[str, np.ndarray]) -> None:
-        write_npz(self.path(stem), _key=np.array(self.key), **data)
+        # not flushed to the disk: a file a power cut leaves unreadable is redone, like a missing one
+        write_npz(self.path(stem), sync=False, _key=np.array(self.key), **data)
 
     def keep_only(self, stems: set[str]) -> None:
         """Remove the files of tasks this bake does not have (an earlier bake's pieces)."""

@@ -520,7 +520,7 @@ class ResultStore:
             return None  # unreadable: recompute
 
     def put(self, key: str, result: dict[str, np.ndarray]) -> None:
-        write_npz(self._path(key), **result)
+        write_npz(self._path(key), sync=False, **result)  # an unreadable one is recomputed
 
     def clear(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)

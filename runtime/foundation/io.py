@@ -86,12 +86,14 @@ def _signals_held() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, suffix: str | None = None, sync: bool = True) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
 
     ``suffix`` defaults to the target's suffix so libraries that infer a format from the file name
     (numpy, PIL, trimesh) still do the right thing. The file gets :func:`new_file_mode`'s permissions.
-    Whatever ends the block (an error, Ctrl-C, SIGTERM), the temporary is removed.
+    Whatever ends the block (an error, Ctrl-C, SIGTERM), the temporary is removed. ``sync``: flush the
+    file to the disk before the rename (a power cut then leaves the old file or the new one, whole); a
+    cache whose reader redoes an unreadable file can skip it.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -109,8 +111,9 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
             finally:
                 os.close(fd)
         yield tmp_path
-        with open(tmp_path, "rb+") as f:
-            os.fsync(f.fileno())
+        if sync:
+            with open(tmp_path, "rb+") as f:
+                os.fsync(f.fileno())
         raise_received()  # a signal a library swallowed meanwhile: the output is not published
         os.replace(tmp_path, path)
     finally:
@@ -183,22 +186,44 @@ def _json_default(o: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def write_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
+def write_npz(path: str | os.PathLike, *, sync: bool = True, **arrays: np.ndarray) -> None:
     """Uncompressed npz written atomically, byte-for-byte deterministic for identical arrays.
 
     ``np.savez`` stamps each member with the current time, so two identical datasets would hash
-    differently; here every member gets a fixed timestamp and members are sorted by name.
+    differently; here every member gets a fixed timestamp and members are sorted by name. Each array's
+    bytes go from its memory to the file (no copy of the whole member), and the member's declared size is
+    set first, so the bytes are those of ``ZipFile.writestr``. ``sync``: see :func:`atomic_path`.
     """
-    with atomic_path(path) as tmp:
+    with atomic_path(path, sync=sync) as tmp:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
             for name in sorted(arrays):
-                buf = _io.BytesIO()
-                np.lib.format.write_array(
-                    buf, np.asarray(arrays[name], order="C"), allow_pickle=False
-                )  # keeps 0-d scalars 0-d
-                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                info.external_attr = 0o644 << 16
-                zf.writestr(info, buf.getvalue())
+                _write_member(zf, f"{name}.npy", np.asarray(arrays[name], order="C"))
+
+
+# Bytes handed to the zip member per write: large enough to stream at memory speed, small enough not to
+# copy an array whole when its buffer cannot be passed as it is.
+_WRITE_CHUNK = 1 << 24
+
+
+def _write_member(zf: zipfile.ZipFile, name: str, array: np.ndarray) -> None:
+    """One .npy member of ``zf``: the header numpy writes (format 1.0, or 2.0 for a header too long for it),
+    then the array's bytes in C order, straight from its buffer."""
+    if array.dtype.hasobject:
+        raise ValueError(f"{name}: object arrays are not written (no pickles)")
+    head = _io.BytesIO()
+    header = np.lib.format.header_data_from_array_1_0(array)
+    try:
+        np.lib.format.write_array_header_1_0(head, header)
+    except ValueError:  # a header over 64 KiB (a shape of very many dimensions)
+        np.lib.format.write_array_header_2_0(head, header)
+    info = zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0))
+    info.external_attr = 0o644 << 16
+    flat = np.ascontiguousarray(array).reshape(-1).view(np.uint8)
+    info.file_size = head.tell() + len(flat)  # what writestr sets: its zip64 choice follows from it
+    with zf.open(info, "w") as f:
+        f.write(head.getvalue())
+        for lo in range(0, len(flat), _WRITE_CHUNK):
+            f.write(flat[lo : lo + _WRITE_CHUNK])
 
 
 def read_npz(path: str | os.PathLike, keys: Iterable[str] | None = None) -> dict[str, np.ndarray]:
