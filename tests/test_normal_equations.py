@@ -81,10 +81,12 @@ def test_normal_equations_are_the_energy_s(soup):
     _close(a, ref, rhs, ref_rhs)
 
 
+@pytest.mark.parametrize("compact", [False, True])
 @pytest.mark.parametrize("cuts", [[0.5], [0.1, 0.37, 0.8], list(np.linspace(0.01, 0.99, 17))])
-def test_shares_of_blocks_add_up_to_the_whole_equations(soup, cuts):
+def test_shares_of_blocks_add_up_to_the_whole_equations(soup, cuts, compact):
     """Blocks of samples cut anywhere (a face's samples may straddle two blocks), each with the faces from
-    its first sample's onward: their shares add up to the equations of a piece of a bigger surface."""
+    its first sample's onward: their shares add up to the equations of a piece of a bigger surface. Compact
+    shares (each entry once) add up the same."""
     scene, samples, values, valid = soup
     whole = Whole(weight=3.0, area=900.0, prior=np.array([0.4, 0.6]))
     ref, ref_rhs = dense_reference(
@@ -98,7 +100,13 @@ def test_shares_of_blocks_add_up_to_the_whole_equations(soup, cuts):
         )
         first = 0 if lo == 0 else int(samples.face[lo])
         stop = len(scene.faces) if hi == len(samples) else int(samples.face[hi])
-        shares.append(equation_share(scene, block, values[lo:hi], valid[lo:hi], 1.0, whole, (first, stop)))
+        shares.append(
+            equation_share(scene, block, values[lo:hi], valid[lo:hi], 1.0, whole, (first, stop), compact)
+        )
+    if compact:  # each (row, column) and each right-hand side's vertex once per share
+        for share in shares:
+            assert len(np.unique(share["rows"] * len(scene.vertices) + share["cols"])) == len(share["rows"])
+            assert len(np.unique(share["rhs_rows"])) == len(share["rhs_rows"])
     a, rhs = sum_shares(len(scene.vertices), shares, whole.prior)
     _close(a, ref, rhs, ref_rhs)
     whole_a, whole_rhs = normal_equations(scene, samples, values, valid, 1.0, whole)
@@ -111,9 +119,12 @@ def test_faces_without_samples_still_get_the_regulariser(soup):
     whole = Whole(weight=1.0, area=50.0, prior=np.array([0.5, 0.5]))
     none = np.zeros(len(samples), bool)
     ref, ref_rhs = dense_reference(scene, samples, values, none, 2.0, 1.0, 50.0, whole.prior)
-    share = equation_share(scene, samples, values, none, 2.0, whole, (0, len(scene.faces)))
-    a, rhs = sum_shares(len(scene.vertices), [share], whole.prior)
-    _close(a, ref, rhs, ref_rhs)
+    for compact in (False, True):
+        share = equation_share(scene, samples, values, none, 2.0, whole, (0, len(scene.faces)), compact)
+        a, rhs = sum_shares(len(scene.vertices), [share], whole.prior)
+        _close(a, ref, rhs, ref_rhs)
+    empty = equation_share(scene, samples, values, none, 0.0, whole, (0, 0), compact=True)
+    assert all(len(v) == 0 for v in empty.values())  # no sample, no face: nothing
 
 
 def test_largest_component_counts_vertices_joined_by_faces():

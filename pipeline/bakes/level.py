@@ -397,7 +397,8 @@ def bake_level(
     )
     if "seconds_gold_state" in deco:
         blog.note("decorators", seconds_gold_state=float(deco["seconds_gold_state"]))
-    output_files = TaskFiles(blog.dir / "output", key)
+    # A kept output folder of an older bake (whose parts went through files) is not read.
+    shutil.rmtree(blog.dir / "output", ignore_errors=True)
     blog.timed(
         "output",
         "Write glTF, shader, log",
@@ -407,16 +408,13 @@ def bake_level(
             level,
             index,
             s,
-            run_to_files(
-                output_files, runner, output_jobs(light, pieces, solve_files, s), "output", progress
-            ),
+            runner.ordered(output_jobs(light, pieces, solve_files, s)),
             deco,
             small,
             lod_files,
             pieces,
         ),
     )
-    shutil.rmtree(output_files.folder, ignore_errors=True)  # written into the glTF
     # ru_maxrss is the whole run's peak (the stages' own peaks are in their rows: VmHWM is reset per stage).
     peak = max(
         [resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024]

@@ -42,7 +42,7 @@ def write_outputs(
     pieces,
 ) -> None:
     """Write the baked glTF, streamed: ``static_results`` yields each piece's glTF part (the output tasks'
-    results, in piece order, one at a time: its instances' meshes and nodes, made by the task) and the LOD
+    results, in piece order, as they arrive: its instances' meshes and nodes, made by the task) and the LOD
     comes from ``lod_files`` piece by piece; the binary data goes to a file beside ``path`` as it is made,
     so memory holds one piece."""
     # Named as atomic_path names its temporaries, so a killed bake's rerun sweeps a stale one away.
@@ -56,7 +56,7 @@ def write_outputs(
                 "rays": s.trace.rays,
             }
         }
-        for _, r, _ in static_results:  # each piece's instances, written by its task
+        for r in static_results:  # each piece's instances, written by its task
             w.append(str(r["part"]), r["blob"])
         trees = level.nodes_with("tree")
         rows = _coefficient_rows(trees, deco)

@@ -405,7 +405,7 @@ def _equation_share(state: PieceState, args) -> dict[str, np.ndarray]:
     scene, block = cached_block(state.key, state.level, state.index, piece, rule, lo, min(hi + 1, piece.ns))
     first = 0 if lo == 0 else int(block.face[0])
     stop = len(scene.faces) if hi >= piece.ns else int(block.face[-1])  # the next block's first sample's
-    share = equation_share(scene, block[: hi - lo], ao, valid, alpha, whole, (first, stop))
+    share = equation_share(scene, block[: hi - lo], ao, valid, alpha, whole, (first, stop), compact=True)
     return {**share, "seconds": np.array(time.perf_counter() - t0)}
 
 
@@ -924,14 +924,12 @@ def blended_kernel_trace(
 # --------------------------------------------------------------------------- output
 
 
-def output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings):
-    """(stem, task maker) per piece: its instances' glTF arrays from its solved vertex AO."""
-
-    def make(p: Piece) -> Task:
+def output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings) -> Iterator[Task]:
+    """A task per piece, in piece order: its instances' glTF part from its solved vertex AO (each piece's
+    values read when its task is made)."""
+    for p in pieces:
         r = solve_files.get(piece_stem(p))
-        return Task(ctx, _output_piece, (p, r["short"], r["long"], s.blend))
-
-    return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
+        yield Task(ctx, _output_piece, (p, r["short"], r["long"], s.blend))
 
 
 def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:

@@ -197,6 +197,17 @@ class Engine:
         if self.reused:
             log.info("%d of %d tasks done by an earlier run (%s)", self.reused, self.completed, store.folder)
 
+    def ordered(self, tasks: Iterable[Task]) -> Iterator[Any]:
+        """Every task's result in task order, each as soon as it and those before it are done (a result
+        that comes early waits, the only one held)."""
+        early: dict[int, Any] = {}
+        following = 0
+        for index, result in self.map(tasks):
+            early[index] = result
+            while following in early:
+                yield early.pop(following)
+                following += 1
+
     def _skip_stored(self, tasks: Iterable[Task], store: ResultStore | None):
         """(index, task) of the tasks a store lacks; stored ones come back through ``self._stored``."""
         self._stored: collections.deque[tuple[int, Any]] = collections.deque()

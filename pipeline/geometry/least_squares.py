@@ -120,6 +120,7 @@ def equation_share(
     alpha: float,
     whole: Whole,
     faces: tuple[int, int],
+    compact: bool = False,
 ) -> dict[str, np.ndarray]:
     """A share of the normal equations of ``scene``: the data term of ``samples`` (any subset of its
     samples) and the regulariser of its faces ``faces`` = [first, stop). Shares of disjoint samples and
@@ -130,7 +131,8 @@ def equation_share(
     Per face, the samples' products w b_a b_b and w b_a f are summed first (one pass over the samples),
     then the face's nine entries go to its corners: A's entries are then as many as the faces, not the
     samples. Returns {"rows", "cols", "data"}: A's entries (duplicates to be added), {"rhs_rows",
-    "rhs"}: (m,) vertices and their (m, c) right-hand sides."""
+    "rhs"}: (m,) vertices and their (m, c) right-hand sides. ``compact``: each entry and each vertex's
+    right-hand side once (a share that travels: about a third of the entries of a mesh's faces)."""
     values = np.asarray(values, np.float64)
     keep = usable(values, valid)
     face, bary = samples.face[keep], samples.bary[keep]
@@ -163,12 +165,32 @@ def equation_share(
         used[span] = True
     hit = np.flatnonzero(used)
     corners = scene.faces[lo + hit].astype(np.int64)
-    return {
+    share = {
         "rows": corners[:, [0, 1, 2, 0, 1, 1, 2, 2, 0]].reshape(-1),
         "cols": corners[:, [0, 1, 2, 1, 0, 2, 1, 0, 2]].reshape(-1),
         "data": k[hit][:, [0, 1, 2, 3, 3, 4, 4, 5, 5]].reshape(-1),
         "rhs_rows": corners.reshape(-1),
         "rhs": r[:, :, hit].transpose(2, 0, 1).reshape(-1, r.shape[1]),
+    }
+    return _compacted(share) if compact else share
+
+
+def _compacted(share: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``share`` with its duplicate entries and right-hand sides added (in their order), over the vertices
+    it touches only; indices int32 where they fit."""
+    vertices, local = np.unique(share["rhs_rows"], return_inverse=True)
+    n = len(vertices)
+    index = np.int32 if n == 0 or vertices[-1] < np.iinfo(np.int32).max else np.int64
+    where = np.searchsorted(vertices, np.stack([share["rows"], share["cols"]]))
+    a = sp.csr_matrix((share["data"], (where[0], where[1])), shape=(n, n))
+    a.sum_duplicates()
+    rhs = share["rhs"]
+    return {
+        "rows": vertices[np.repeat(np.arange(n), np.diff(a.indptr))].astype(index),
+        "cols": vertices[a.indices].astype(index),
+        "data": a.data,
+        "rhs_rows": vertices.astype(index),
+        "rhs": np.stack([np.bincount(local, weights=rhs[:, j], minlength=n) for j in range(rhs.shape[1])], 1),
     }
 
 

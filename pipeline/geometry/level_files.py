@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import struct
 from dataclasses import dataclass, field
@@ -437,8 +438,22 @@ class _SpillBuffer:
         self._size += len(data)
 
     def copy_to(self, out) -> None:
+        """Append the buffer's bytes to the open file ``out``: by the kernel where it can
+        (``copy_file_range``: no pass through this process), else through memory."""
         self._file.flush()
+        out.flush()
         with open(self.path, "rb") as f:
+            left = self._size
+            try:
+                while left > 0:
+                    copied = os.copy_file_range(f.fileno(), out.fileno(), min(left, 1 << 30))
+                    if copied == 0:
+                        break
+                    left -= copied
+            except (AttributeError, OSError):  # no such call here, or not between these files
+                pass
+            out.seek(0, os.SEEK_END)  # the buffered file takes up where the kernel left it
+            f.seek(self._size - left)
             shutil.copyfileobj(f, out, 1 << 22)
 
     def close(self) -> None:
@@ -603,7 +618,7 @@ class GltfWriter:
         for ext in part.get("extensionsUsed", []):
             if ext not in d.setdefault("extensionsUsed", []):
                 d["extensionsUsed"].append(ext)
-        self._blob.extend(np.ascontiguousarray(blob, np.uint8).tobytes())
+        self._blob.extend(memoryview(np.ascontiguousarray(blob, np.uint8).reshape(-1)))
 
     def _json(self, uri: str | None) -> bytes:
         while len(self._blob) % 4:

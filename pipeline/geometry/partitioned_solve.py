@@ -101,7 +101,9 @@ class SolveInfo:
 
 def bisect(points: np.ndarray, count: int) -> np.ndarray:
     """Recursive coordinate bisection: (n,) int64 part of each of ``points`` (n, 3) float, in 0..count-1;
-    parts of equal size (to one point), each cut across the longest side of its points' bounding box."""
+    parts of equal size (to one point), each cut across the longest side of its points' bounding box. A
+    cut takes the points below the cut's value (numpy's selection finds it in linear time: the value is the
+    same whichever algorithm finds it) and, of the points at that value, the lowest-numbered."""
     xyz = np.ascontiguousarray(np.asarray(points, np.float64).T)  # (3, n): contiguous rows reduce fast
     part = np.zeros(xyz.shape[1], np.int64)
     stack = [(np.arange(xyz.shape[1]), count, 0)]
@@ -112,11 +114,16 @@ def bisect(points: np.ndarray, count: int) -> np.ndarray:
             continue
         p = xyz[:, idx]
         axis = int(np.argmax(p.max(axis=1) - p.min(axis=1)))
-        order = idx[np.argsort(p[axis], kind="stable")]
         low = k // 2
         cut = (len(idx) * low) // k
-        stack.append((order[cut:], k - low, first + low))
-        stack.append((order[:cut], low, first))
+        take = np.zeros(len(idx), bool)
+        if cut > 0:
+            value = np.partition(p[axis], cut - 1)[cut - 1]  # the cut-th smallest
+            take = p[axis] < value
+            ties = np.flatnonzero(p[axis] == value)
+            take[ties[: cut - int(take.sum())]] = True
+        stack.append((idx[~take], k - low, first + low))
+        stack.append((idx[take], low, first))
     return part
 
 
