@@ -308,7 +308,14 @@ def bake_level(
         "trace",
         "Ray trace samples (2 distances, foliage)",
         lambda: _summary(
-            run_to_files(trace_files, runner, trace_jobs(ctx, pieces, rule, s), "trace blocks", progress),
+            run_to_files(
+                trace_files,
+                runner,
+                trace_jobs(ctx, pieces, rule, s),
+                "trace blocks",
+                progress,
+                keys=("valid", "weight", "weighted"),
+            ),
             invalid=lambda r: int((~r["valid"]).sum()),
             valid_weight=lambda r: float(r["weight"]),
             valid_weighted=lambda r: r["weighted"],
@@ -325,11 +332,10 @@ def bake_level(
         "solve",
         "Least squares solve (both distances)",
         lambda: _summary(
-            solve_stage(solve_files, runner, light, pieces, rule, trace_files, s, whole, progress),
-            seconds_assembly=lambda r: float(r["seconds_assembly"]),
-            seconds_blocks=lambda r: float(r["seconds_blocks"]),
-            seconds_largest_block=lambda r: float(r["seconds_largest_block"]),
-            seconds_driver=lambda r: float(r["seconds_driver"]),
+            solve_stage(
+                solve_files, runner, light, pieces, rule, trace_files, s, whole, progress, SOLVE_TIMES
+            ),
+            **{k: lambda r, k=k: float(r[k]) for k in SOLVE_TIMES},
         ),
         vertices=index.vertices,
     )
@@ -479,6 +485,10 @@ def _summary(results, **fields) -> dict[str, np.ndarray]:
     }
 
 
+# The solve's seconds each piece's result carries (what the stage's row sums; its values are not read).
+SOLVE_TIMES = ("seconds_assembly", "seconds_blocks", "seconds_largest_block", "seconds_driver")
+
+
 def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSettings) -> np.ndarray:
     """(opaque vertices,) float32: the blended AO of every static vertex, NaN on blockers."""
     blockers = level.counts().get("blocker_vertices", 0)
@@ -538,8 +548,8 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     t1 = time.perf_counter()
     resample_files = TaskFiles(lod_files.folder.parent / "lod_resample", lod_files.key)
     jobs, counts = lod_resample_jobs(ctx, pieces, values, mesh_files, radius, s)
-    for _ in run_to_files(resample_files, runner, jobs, "lod resampling", progress):
-        pass
+    for _ in run_to_files(resample_files, runner, jobs, "lod resampling", progress, keys=()):
+        pass  # every block's values are there (read by the pieces' tasks below)
     t2 = time.perf_counter()
     per_block = max(1, s.task_rays // s.lod.rays)
 
@@ -547,7 +557,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
         return piece_resampled(resample_files, p, counts[p.index], per_block)
 
     jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, trace_files, s)
-    out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress))
+    out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress, keys=LOD_SUMMED))
     out["seconds_simplify"] = np.array(t1 - t0)
     # The stage's first tasks: its simplifications (one of the whole level, or one per piece).
     per_piece = s.lod.max_error is not None
@@ -557,14 +567,18 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     return out
 
 
+# What the LOD stage's summary reads of each piece's result (not its meshes and values).
+LOD_SUMMED = ("sizes", "resample_points", "error_sums", "seconds_solve", "seconds_reference")
+
+
 def _lod_summary(results) -> dict[str, np.ndarray]:
     """The LOD pieces' counts, times and error table (from their weighted error sums)."""
     sums = np.zeros(6)
     times = ("seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
     for _, r, _ in results:
-        out["lod_vertices"] += len(r["vertices"])
-        out["lod_faces"] += len(r["faces"])
+        out["lod_vertices"] += int(r["sizes"][0])
+        out["lod_faces"] += int(r["sizes"][1])
         out["resample_points"] += float(r["resample_points"])
         for k in times:
             out[k] += float(r[k])

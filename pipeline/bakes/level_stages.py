@@ -15,7 +15,7 @@ import threading
 import time
 import zipfile
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -187,19 +187,23 @@ class TaskFiles:
     def path(self, stem: str) -> Path:
         return self.folder / f"{stem}.npz"
 
-    def get(self, stem: str) -> dict[str, np.ndarray] | None:
+    def get(self, stem: str, keys: Iterable[str] | None = None) -> dict[str, np.ndarray] | None:
+        """The result of task ``stem``: every array, or those of ``keys`` (the others are not read); None
+        if it is missing, unreadable, of another bake or without one of ``keys``."""
         try:
             with np.load(self.path(stem), allow_pickle=False) as z:
-                if str(z["_key"]) != self.key:
+                names = [k for k in z.files if k != "_key"] if keys is None else list(keys)
+                if str(z["_key"]) != self.key or not set(names) <= set(z.files):
                     return None
-                return {k: z[k] for k in z.files if k != "_key"}
+                return {k: z[k] for k in names}
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return None
 
-    def has(self, stem: str) -> bool:
+    def has(self, stem: str, keys: Iterable[str] = ()) -> bool:
+        """Whether task ``stem``'s result of this bake is here, with ``keys`` among its arrays."""
         try:
             with np.load(self.path(stem), allow_pickle=False) as z:
-                return str(z["_key"]) == self.key
+                return str(z["_key"]) == self.key and set(keys) <= set(z.files)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return False
 
@@ -221,19 +225,21 @@ def run_to_files(
     desc: str,
     progress: bool,
     keep: frozenset[str] = frozenset(),
+    keys: tuple[str, ...] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """Run the jobs (file stem, task maker) a file does not hold yet on ``runner``, writing each result as it
     arrives; then yield (stem, result, reused) for every job in order, one file read at a time. ``keep``:
-    stems of files the stage writes otherwise (left in place)."""
+    stems of files the stage writes otherwise (left in place). ``keys``: the arrays of each result to read
+    back (None: all; a file without one of them is redone)."""
     files.keep_only({stem for stem, _ in jobs} | keep)
-    pending = [(stem, make) for stem, make in jobs if not files.has(stem)]
+    pending = [(stem, make) for stem, make in jobs if not files.has(stem, keys or ())]
     with tqdm(total=len(pending), desc=desc, disable=not progress, leave=False) as bar:
         for i, r in runner.map(make() for _, make in pending):
             files.put(pending[i][0], r)
             bar.update(1)
     fresh = {stem for stem, _ in pending}
     for stem, _ in jobs:
-        data = files.get(stem)
+        data = files.get(stem, keys)
         if data is None:
             raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
         yield stem, data, stem not in fresh
@@ -317,7 +323,16 @@ def solve_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, 
 
 
 def solve_stage(
-    files: TaskFiles, runner, ctx: Context, pieces, rule, trace_files: TaskFiles, s, whole, progress: bool
+    files: TaskFiles,
+    runner,
+    ctx: Context,
+    pieces,
+    rule,
+    trace_files: TaskFiles,
+    s,
+    whole,
+    progress: bool,
+    keys: tuple[str, ...] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece with a
     connected component of at least ``trace.component_vertices`` vertices is solved from here: its equations
@@ -325,7 +340,7 @@ def solve_stage(
     tasks of ``runner`` under ``ctx`` (its workers hold it already) and the iteration runs here
     (:mod:`neuralao.pipeline.geometry.partitioned_solve`). Every other piece is one task. The results are the
     same bytes with any engine: each task is a pure function of its arguments, and the driver adds the
-    results in a fixed order."""
+    results in a fixed order. ``keys``: the arrays of each result read back (None: all)."""
     t = s.trace
     big = [
         p for p in pieces if t.solver == "components" and t.subdomains > 1 and p.nv >= t.component_vertices
@@ -342,11 +357,10 @@ def solve_stage(
             files.put(piece_stem(p), _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole))
             fresh.add(piece_stem(p))
     rest = [p for p in pieces if piece_stem(p) not in stems]
-    yield from run_to_files(
-        files, runner, solve_jobs(ctx, rest, rule, trace_files, s, whole), "solve", progress, stems
-    )
+    jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
+    yield from run_to_files(files, runner, jobs, "solve", progress, stems, keys)
     for stem in sorted(stems):
-        yield stem, files.get(stem), stem not in fresh
+        yield stem, files.get(stem, keys), stem not in fresh
 
 
 def big_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> list[Piece]:
@@ -798,7 +812,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     if len(lod_faces) == 0:  # the simplification left nothing of this piece
         out = {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
         out.update(ao_vertex=np.zeros(0, np.float32), ao_least_squares=np.zeros(0, np.float32))
-        out.update(resample_points=np.array(0), error_sums=np.zeros(6))
+        out.update(resample_points=np.array(0), error_sums=np.zeros(6), sizes=np.zeros(2, np.int64))
         return out | {k: np.array(0.0) for k in ("seconds_solve", "seconds_reference")}
     scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
     t2 = time.perf_counter()
@@ -869,6 +883,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         "ao_least_squares": lsq,
         "radius": np.array(radius),
         "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
+        "sizes": np.array([len(lod.vertices), len(lod.faces)], np.int64),
         "error_sums": sums,
         "seconds_solve": np.array(t3 - t2),
         "seconds_reference": np.array(time.perf_counter() - t3),

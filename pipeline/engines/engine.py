@@ -57,6 +57,8 @@ log = logging.getLogger(__name__)
 
 # Tasks queued per actor: one running, one waiting, so an actor never idles while a result travels.
 TASKS_PER_WORKER = 2
+# Context payloads the Ray engine keeps in the object store when no task in flight needs them.
+KEPT_CONTEXTS = 2
 # States an actor keeps (least recently used goes first): a level bake alternates few meshes.
 STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
@@ -381,18 +383,29 @@ class RayEngine(Engine):
         env.setdefault("OMP_NUM_THREADS", "1")  # tracing threads are Python threads, not OpenMP's
         actor = ray.remote(num_cpus=threads, max_restarts=-1, max_task_retries=-1)(_Worker)
         self._actors = [actor.remote(env) for _ in range(self.workers)]
-        self._payloads: dict[str, Any] = {}  # context key -> ObjectRef of its payload
+        # context key (or "shared/" + a Shared value's key) -> ObjectRef, latest used last
+        self._payloads: collections.OrderedDict[str, Any] = collections.OrderedDict()
 
     def worker_info(self) -> list[tuple[int, str]]:
         """(process id, node id) of every actor (tests check placement and kill one mid-run)."""
         return self._ray.get([a.where.remote() for a in self._actors])
 
     def _put(self, key: str, value: Any, live: set[str]):
-        """The object-store ref of ``value`` (put once per key; refs no task in flight needs are dropped)."""
-        if key not in self._payloads:
-            for old in [k for k in self._payloads if k not in live]:
-                del self._payloads[old]  # no task in flight needs it any more
-            self._payloads[key] = self._ray.put(value)
+        """The object-store ref of ``value``, put once per key. Refs no task in flight needs are dropped,
+        but for the latest :data:`KEPT_CONTEXTS` contexts' payloads: a level bake's stages take turns
+        between two contexts of the same level, which would otherwise be pickled and put again at every
+        turn."""
+        if key in self._payloads:
+            self._payloads.move_to_end(key)
+            return self._payloads[key]
+        contexts = [k for k in self._payloads if not k.startswith("shared/")]
+        if key.startswith("shared/"):
+            keep = set(contexts)  # bounded when each is put
+        else:  # with this one, the latest KEPT_CONTEXTS
+            keep = set(contexts[len(contexts) - (KEPT_CONTEXTS - 1) :]) if KEPT_CONTEXTS > 1 else set()
+        for old in [k for k in self._payloads if k not in live and k not in keep]:
+            del self._payloads[old]  # no task in flight needs it any more
+        self._payloads[key] = self._ray.put(value)
         return self._payloads[key]
 
     def _payload_ref(self, ctx: Context, live: set[str]):
