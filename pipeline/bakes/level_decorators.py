@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from neuralao.pipeline.bakes.level_pieces import level_bounds
+from neuralao.pipeline.bakes.level_pieces import instance_batches, level_bounds
 from neuralao.pipeline.bakes.level_settings import (
     FoliageSettings,
     LevelBakeSettings,
@@ -36,11 +36,11 @@ def instance_boxes(level: Level, nodes: list[LevelNode]) -> tuple[np.ndarray, np
     """World AABBs lo (b, 3), hi (b, 3) of every instance of ``nodes`` and each one's density (b,)."""
     lo, hi, dens = [], [], []
     for node in nodes:
-        v = level.meshes[node.mesh].vertices
-        homo = np.c_[v, np.ones(len(v))]
-        world = np.einsum("vc,krc->kvr", homo, node.transforms[:, :3])
-        lo.append(world.min(axis=1))
-        hi.append(world.max(axis=1))
+        if len(level.meshes[node.mesh].vertices) == 0:
+            continue  # no box
+        for world in instance_batches(level.meshes[node.mesh].vertices, node.transforms):
+            lo.append(world.min(axis=1))
+            hi.append(world.max(axis=1))
         dens.append(np.full(len(node.transforms), node.params.get("density", 1.0)))
     if not lo:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)

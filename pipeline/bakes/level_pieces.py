@@ -16,7 +16,7 @@ stream indexed by global face number (each piece skips ahead to its first face).
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -106,14 +106,32 @@ def instance_vertices(level: Level, node: LevelNode, j: int) -> np.ndarray:
     return np.c_[v, np.ones(len(v))] @ node.transforms[j][:3].T
 
 
+# World vertices made at once when a node's instances are bounded (a batch of its instances: 48 MiB).
+_BOUNDS_BATCH = 1 << 21
+
+
+def instance_batches(vertices: np.ndarray, transforms: np.ndarray) -> Iterator[np.ndarray]:
+    """World-space vertices (k, n, 3) float64 of a mesh's ``vertices`` (n, 3) under its instances'
+    ``transforms`` (m, 4, 4), a batch of k instances at a time (each as :func:`instance_vertices` makes
+    it)."""
+    if len(vertices) == 0:
+        return
+    homo = np.c_[vertices, np.ones(len(vertices))]
+    step = max(1, _BOUNDS_BATCH // len(vertices))
+    for a in range(0, len(transforms), step):
+        yield np.matmul(homo, transforms[a : a + step, :3].transpose(0, 2, 1))
+
+
 def level_bounds(level: Level, nodes: list[LevelNode]) -> np.ndarray:
-    """(2, 3) min and max corner of every instance of ``nodes``, one instance at a time."""
+    """(2, 3) min and max corner of every instance of ``nodes``, a batch of instances of one mesh at a time
+    (the nodes of a mesh together: a level's houses are thousands of nodes of a few meshes)."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    by_mesh: dict[int, list[np.ndarray]] = {}
     for node in nodes:
-        for j in range(len(node.transforms)):
-            v = instance_vertices(level, node, j)
-            if len(v):
-                lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+        by_mesh.setdefault(node.mesh, []).append(node.transforms)
+    for mesh, transforms in sorted(by_mesh.items()):
+        for world in instance_batches(level.meshes[mesh].vertices, np.concatenate(transforms)):
+            lo, hi = np.minimum(lo, world.min(axis=(0, 1))), np.maximum(hi, world.max(axis=(0, 1)))
     return np.stack([lo, hi])
 
 
