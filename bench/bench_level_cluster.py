@@ -23,6 +23,7 @@ transfers, not speed.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -123,8 +124,10 @@ def output_hash(bake: Path) -> str:
     return hashlib.sha256((bake / "level_baked.glb").read_bytes()).hexdigest()[:16]
 
 
-def run_cluster(level: Path, settings, nodes: int, cpus: int, out: Path) -> dict:
-    """Bake on a fresh loopback cluster of ``nodes`` x ``cpus``; the bake log, wall seconds and hash."""
+@contextlib.contextmanager
+def loopback_cluster(nodes: int, cpus: int):
+    """A fresh Ray cluster of ``nodes`` x ``cpus`` on 127.0.0.1 (its own raylets and object store per node),
+    this process its driver: yields (engine, alive nodes, nodes with actors)."""
     import ray
     from ray.cluster_utils import Cluster
 
@@ -139,19 +142,24 @@ def run_cluster(level: Path, settings, nodes: int, cpus: int, out: Path) -> dict
         engine_mod._connect(c.address)
         c.wait_for_nodes()
         alive = [n for n in ray.nodes() if n["Alive"]]
-        shutil.rmtree(out, ignore_errors=True)
         with RayEngine(c.address) as engine:
-            placed = len({node_id for _, node_id in engine.worker_info()})
-            t0 = time.perf_counter()
-            info = bake_level(level, settings, out, engine=engine)
-            wall = time.perf_counter() - t0
+            yield engine, len(alive), len({node_id for _, node_id in engine.worker_info()})
     finally:
         ray.shutdown()
         c.shutdown()
+
+
+def run_cluster(level: Path, settings, nodes: int, cpus: int, out: Path) -> dict:
+    """Bake on a fresh loopback cluster of ``nodes`` x ``cpus``; the bake log, wall seconds and hash."""
+    with loopback_cluster(nodes, cpus) as (engine, alive, placed):
+        shutil.rmtree(out, ignore_errors=True)
+        t0 = time.perf_counter()
+        info = bake_level(level, settings, out, engine=engine)
+        wall = time.perf_counter() - t0
     return {
         "nodes": nodes,
         "cpus_per_node": cpus,
-        "alive_nodes": len(alive),
+        "alive_nodes": alive,
         "nodes_with_actors": placed,
         "wall_s": wall,
         "glb_sha256": output_hash(out),

@@ -1,12 +1,13 @@
-"""One stage of a kept level bake run again from its stored inputs, in this process, then the projection of
-the bake with that stage's fresh costs in place of the kept ones.
+"""One stage of a kept level bake run again from its stored inputs, here or on a loopback Ray cluster, then
+the projection of the bake with that stage's fresh costs in place of the kept ones.
 
     .venv/bin/python bench/bench_level_stage.py --bake build/bench/level_cluster/world10x/bake_1 \
         --level build/bench/level_cluster/world10x/level/level.gltf --stage solve --keep trace
 
 The kept bake's settings (its bake_log.json) are used as they are, so the stored stages named by ``--keep``
 (their files under stages/) are reused and the bake runs up to ``--stage``, which is made fresh and timed
-(local engine: its driver seconds are its wall time less its tasks'), and stops there. What a change to a
+(local engine: its driver seconds are its wall time less its tasks'; with ``--nodes`` on a loopback Ray
+cluster: the driver's CPU seconds), and stops there. What a change to a
 stage's code does to a bake too big to rerun whole (the 10x world's trace is 11 CPU-minutes) is measured
 this way, the stage's code before and after run on the same stored inputs. The projection onto 1, 4, 32 and
 128 machines of 16 cores (``bench_level_cluster.project``) then takes the kept bake's log with this stage's
@@ -28,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_level_cluster import TRACING, project  # noqa: E402
+from bench_level_cluster import TRACING, loopback_cluster, project  # noqa: E402
 
 from neuralao.pipeline.bakes import level as level_bake  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings  # noqa: E402
@@ -40,8 +41,9 @@ class _Stop(Exception):
     pass
 
 
-def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path) -> dict:
-    """The bake ``bake``'s stage ``stage`` made fresh in ``out`` (the kept stages copied there first)."""
+def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, engine=None) -> dict:
+    """The bake ``bake``'s stage ``stage`` made fresh in ``out`` (the kept stages copied there first), here
+    or on ``engine``."""
     (out / "stages").mkdir(parents=True, exist_ok=True)
     for name in keep:
         for src in (bake / "stages").glob(f"{name}*"):
@@ -65,7 +67,7 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path) -
 
     level_bake.BakeLog._record = stop_after
     try:
-        level_bake.bake_level(level, settings, out)
+        level_bake.bake_level(level, settings, out, engine=engine)
     except _Stop:
         pass
     finally:
@@ -76,9 +78,9 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path) -
 
 
 def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
-    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds from ``fresh`` (a local run: its
-    driver seconds stand for the Ray driver's CPU seconds) and the BVH states' seconds (the stages that
-    trace) times ``bvh_scale``."""
+    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds from ``fresh`` (a local run's driver
+    seconds stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH states' seconds
+    (the stages that trace) times ``bvh_scale``."""
     out = copy.deepcopy(log)
     for row in out["stages"]:
         if row["stage"] == stage:
@@ -100,9 +102,20 @@ def main() -> int:
     p.add_argument("--bvh-scale", type=float, default=1.0)
     p.add_argument("--bvh-speedup", type=float, default=7.9, help="BVH build, 16 threads vs 1")
     p.add_argument("--out", default="build/bench/level_stage")
+    p.add_argument(
+        "--nodes",
+        type=int,
+        default=0,
+        help="run on a loopback Ray cluster of N 1-CPU nodes (0: here)",
+    )
     args = p.parse_args()
     out = Path(args.out)
-    fresh = run_stage(Path(args.bake), Path(args.level), args.stage, args.keep, out / "bake")
+    where = (Path(args.bake), Path(args.level), args.stage, args.keep, out / "bake")
+    if args.nodes:
+        with loopback_cluster(args.nodes, 1) as (engine, _, _):
+            fresh = run_stage(*where, engine=engine)
+    else:
+        fresh = run_stage(*where)
     log = patched(fresh.pop("kept_log"), args.stage, fresh, args.bvh_scale)
     result = {
         "stage": args.stage,

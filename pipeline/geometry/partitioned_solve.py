@@ -219,12 +219,16 @@ class _Preconditioner:
         self.part, self.engine, self.context, self.info = part, engine, context, info
         self.seconds_local = 0.0  # wall seconds of the local solves (tasks, sending, gathering)
         n, m = a.shape[0], int(part.coarse.max(initial=-1)) + 1
-        self.z = sp.csr_matrix((np.ones(n), (np.arange(n), part.coarse)), shape=(n, m))
-        self.zt = self.z.T.tocsr()
+        self.m = m
+        z = sp.csr_matrix((np.ones(n), (np.arange(n), part.coarse)), shape=(n, m))
         # A Z and (A Z)^T: the coarse terms' products with A cost a sparse (n, m) product, not a matvec of A.
-        self.az = (a @ self.z).tocsr()
+        self.az = (a @ z).tocsr()
         self.azt = self.az.T.tocsr()
-        self.coarse = factorise(self.zt @ self.az)
+        self.coarse = factorise(z.T.tocsr() @ self.az)
+        # Every subdomain's vertices end to end: one gather restricts a vector to them all, one bincount
+        # adds the subdomains' results back (each vertex's terms in subdomain order, as one by one).
+        self.joined = np.concatenate(part.parts) if part.parts else np.zeros(0, np.int64)
+        self.splits = np.cumsum([len(p) for p in part.parts])[:-1]
         self.subdomains: Subdomains | Shared = Subdomains([a[idx][:, idx].tocsc() for idx in part.parts])
         if engine is not None:  # sent once per worker; the key covers everything the blocks are cut from
             key = content_key("schwarz", a.indptr, a.indices, a.data, *part.parts)
@@ -235,27 +239,27 @@ class _Preconditioner:
     def local(self, rs: list[np.ndarray]) -> list[np.ndarray]:
         """S r of each vector of ``rs`` (n,): every subdomain's Dirichlet solve, added in subdomain order."""
         t0 = time.perf_counter()
-        parts = self.part.parts
-        args = ((self.subdomains, i, np.stack([r[idx] for r in rs], axis=1)) for i, idx in enumerate(parts))
+        n = len(rs[0])
+        restricted = np.split(np.stack(rs, axis=1)[self.joined], self.splits)
+        args = ((self.subdomains, i, r) for i, r in enumerate(restricted))
         if self.engine is None:
             results = [local_solve(None, a) for a in args]
         else:
-            results = [None] * len(parts)
+            results = [None] * len(restricted)
             for i, res in self.engine.map(Task(self.context, local_solve, a) for a in args):
                 results[i] = res
-        out = [np.zeros_like(r) for r in rs]
-        for idx, res in zip(parts, results, strict=True):
-            for j, o in enumerate(out):
-                o[idx] += res["v"][:, j]
-            self.info.seconds_tasks.append(float(res["seconds"]))
+        v = np.concatenate([res["v"] for res in results]) if results else np.zeros((0, len(rs)))
+        out = [np.bincount(self.joined, weights=v[:, j], minlength=n) for j in range(len(rs))]
+        self.info.seconds_tasks.extend(float(res["seconds"]) for res in results)
         self.seconds_local += time.perf_counter() - t0
         return out
 
     def __call__(self, rs: list[np.ndarray]) -> list[np.ndarray]:
         """M^-1 r of each vector of ``rs`` (n,)."""
-        cs = [self.coarse.solve(self.zt @ r) for r in rs]  # Q r = Z c
+        coarse = self.part.coarse  # Z x is x[coarse]; Z^T r is r summed per aggregate
+        cs = [self.coarse.solve(np.bincount(coarse, weights=r, minlength=self.m)) for r in rs]  # Q r = Z c
         ys = self.local([r - self.az @ c for r, c in zip(rs, cs, strict=True)])
-        return [self.z @ (c - self.coarse.solve(self.azt @ y)) + y for c, y in zip(cs, ys, strict=True)]
+        return [(c - self.coarse.solve(self.azt @ y))[coarse] + y for c, y in zip(cs, ys, strict=True)]
 
 
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
