@@ -43,9 +43,6 @@ from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: 
 from neuralao.pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
-# Stages whose tasks trace: with one actor per machine they use the machine's threads.
-TRACING = ("trace", "decorators", "small_decorators", "lod", "blend_check")
-
 
 def project(
     info: dict,
@@ -65,16 +62,13 @@ def project(
     checks : include the stages that only make error tables (the blend check): what a run's own wall clock
         is checked against; a production bake leaves them out."""
     out = {}
-    simplify = {s["stage"]: int(s.get("simplify_tasks", 1)) for s in info["stages"] if s["stage"] == "lod"}
     for c in stage_costs(info, checks):
         name, work = c["stage"], c["task_core_s"]
         if threads_per_actor == 1:
             slots = machines * cores
         else:  # one actor per machine: tracing tasks spread over its threads, the others use one
             slots = machines
-            if name in TRACING:
-                whole = simplify.get(name, 0)  # the LOD's simplifications trace nothing
-                work = [w if i < whole else w / threads_per_actor for i, w in enumerate(work)]
+            work = [w / threads_per_actor if t else w for w, t in zip(work, c["traces"], strict=True)]
         span = sum(work) / slots if name == "trace" and work else makespan(work, slots)
         state = c["state_s"] / (bvh_speedup if threads_per_actor > 1 else 1.0)
         out[name] = c["driver_s"] + state + span

@@ -29,7 +29,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_level_cluster import TRACING, loopback_cluster, project  # noqa: E402
+from bench_level_cluster import loopback_cluster, project  # noqa: E402
+from bench_ray import TRACING_STAGES  # noqa: E402
 
 from neuralao.pipeline.bakes import level as level_bake  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings  # noqa: E402
@@ -87,7 +88,7 @@ def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
             row["cpu_seconds"] = fresh["row"]["driver_seconds"]
     out["task_seconds"][stage] = list(fresh["task_seconds"])
     out["state_seconds"] = {
-        k: [x * (bvh_scale if k in TRACING else 1.0) for x in v]
+        k: [x * (bvh_scale if k in TRACING_STAGES else 1.0) for x in v]
         for k, v in out.get("state_seconds", {}).items()
     }
     return out

@@ -216,17 +216,32 @@ def measure(args) -> dict:
 
 
 # Stages whose tasks trace (their seconds were taken with the bake's tracing threads); the others' tasks
-# (the solve, the output, the LOD's one simplification) run on one thread.
+# (the solve, the output) run on one thread, and so do the LOD's tasks but its resampling (:func:`traces`).
 TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check")
 # Stages that only produce the error tables (not part of a production bake).
 CHECK_STAGES = ("blend_check",)
 
 
+def traces(info: dict, stage: dict, count: int) -> list[bool]:
+    """Which of a stage's ``count`` tasks (in the bake log's order) trace. The LOD's run in three rounds:
+    its simplifications, then its resampling (the rays), then per piece its least squares and error sums
+    (the log's ``simplify_tasks`` and ``resample_tasks``; a log without the latter: all but the pieces')."""
+    name = stage["stage"]
+    if name not in TRACING_STAGES:
+        return [False] * count
+    if name != "lod":
+        return [True] * count
+    first = int(stage.get("simplify_tasks", 1))
+    pieces = int(info.get("counts", {}).get("pieces", 0))
+    resample = int(stage.get("resample_tasks", max(0, count - first - pieces)))
+    return [first <= i < first + resample for i in range(count)]
+
+
 def stage_costs(info: dict, checks: bool = False) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
     seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake:
-    the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with;
-    the LOD stage's first tasks are its simplifications, single-threaded), the states workers build
+    the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with, for
+    the tasks that trace: :func:`traces`), and whether it traces ("traces"), the states workers build
     (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators). The
     stages that only make error tables are left out unless ``checks`` (a run's own wall clock has them)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
@@ -238,10 +253,8 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
         if name in CHECK_STAGES and not checks:
             continue
         t = list(tasks.get(name, []))
-        cores = [x * (threads if name in TRACING_STAGES else 1) for x in t]
-        if name == "lod" and cores:  # its simplifications: one of the whole level or one per piece
-            n = int(st.get("simplify_tasks", 1))
-            cores[:n] = t[:n]
+        traced = traces(info, st, len(t))
+        cores = [x * (threads if tr else 1) for x, tr in zip(t, traced, strict=True)]
         state = 0.0
         if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
             state, driver = st["seconds"], 0.0
@@ -251,7 +264,15 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
         else:  # on an engine the driver waits for the tasks: its own work is its CPU time
             driver = st["cpu_seconds"]
             state = max(info.get("state_seconds", {}).get(name, [0.0]))
-        rows.append({"stage": name, "driver_s": driver, "task_core_s": cores, "state_s": state})
+        rows.append(
+            {
+                "stage": name,
+                "driver_s": driver,
+                "task_core_s": cores,
+                "traces": traced,
+                "state_s": state,
+            }
+        )
     return rows
 
 

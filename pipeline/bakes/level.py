@@ -58,12 +58,15 @@ from neuralao.pipeline.bakes.level_settings import (
     label_settings,
 )
 from neuralao.pipeline.bakes.level_stages import (
+    LOD_HELD_OUT,
     LabellerFrame,
     TaskFiles,
     blend_piece,
     engine_each,
     join_tiles,
+    lod_error_sums,
     lod_jobs,
+    lod_reference_jobs,
     lod_resample_jobs,
     lod_tiles,
     opaque_context,
@@ -366,6 +369,7 @@ def bake_level(
             lod_faces=int(lod["lod_faces"]),
             resample_points=int(lod["resample_points"]),
             simplify_tasks=int(lod.get("simplify_tasks", 1)),
+            **({"resample_tasks": int(lod["resample_tasks"])} if "resample_tasks" in lod else {}),
             **{
                 k: float(lod[k])
                 for k in ("seconds_simplify", "seconds_resample", "seconds_solve", "seconds_reference")
@@ -548,6 +552,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     t1 = time.perf_counter()
     resample_files = TaskFiles(lod_files.folder.parent / "lod_resample", lod_files.key)
     jobs, counts = lod_resample_jobs(ctx, pieces, values, mesh_files, radius, s)
+    resample_tasks = len(jobs)
     for _ in run_to_files(resample_files, runner, jobs, "lod resampling", progress, keys=()):
         pass  # every block's values are there (read by the pieces' tasks below)
     t2 = time.perf_counter()
@@ -556,33 +561,50 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     def resampled(p):
         return piece_resampled(resample_files, p, counts[p.index], per_block)
 
-    jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, trace_files, s)
-    out = _lod_summary(run_to_files(lod_files, runner, jobs, "lod", progress, keys=LOD_SUMMED))
+    jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, s)
+    for _ in run_to_files(lod_files, runner, jobs, "lod", progress, keys=LOD_SUMMED):
+        pass  # read again, piece by piece, by the summary
+    # The gold standard at the held-out points, from the traced samples: a task per trace block.
+    reference_files = TaskFiles(lod_files.folder.parent / "lod_reference", lod_files.key)
+    jobs = lod_reference_jobs(light, pieces, rule, lod_files, trace_files, radius, s)
+    reference = {
+        stem: r["sums"]
+        for stem, r, _ in run_to_files(reference_files, runner, jobs, "lod reference", progress)
+    }
+    out = _lod_summary(lod_files, pieces, reference)
     out["seconds_simplify"] = np.array(t1 - t0)
-    # The stage's first tasks: its simplifications (one of the whole level, or one per piece).
+    # The stage's tasks in order: its simplifications (one of the whole level, or one per piece), its
+    # resampling, then a task per piece and one per trace block of a piece with held-out points.
     per_piece = s.lod.max_error is not None
     out["simplify_tasks"] = np.array(sum(lod_tiles(p, s.lod.tile_faces) for p in pieces) if per_piece else 1)
+    out["resample_tasks"] = np.array(resample_tasks)
     out["seconds_resample"] = np.array(t2 - t1)
     out["radius"] = np.array(radius)
     return out
 
 
 # What the LOD stage's summary reads of each piece's result (not its meshes and values).
-LOD_SUMMED = ("sizes", "resample_points", "error_sums", "seconds_solve", "seconds_reference")
+LOD_SUMMED = ("sizes", "resample_points", "seconds_solve", "seconds_reference", *LOD_HELD_OUT)
 
 
-def _lod_summary(results) -> dict[str, np.ndarray]:
-    """The LOD pieces' counts, times and error table (from their weighted error sums)."""
+def _lod_summary(lod_files: TaskFiles, pieces, reference: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The LOD pieces' counts, times and error table: each piece's error sums from its held-out points and
+    the gold standard's sums there (``reference``: per trace block stem, added in block order)."""
     sums = np.zeros(6)
     times = ("seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
-    for _, r, _ in results:
+    for p in pieces:
+        r = lod_files.get(piece_stem(p), LOD_SUMMED)
+        if r is None:
+            raise NeuralaoError(f"{lod_files.path(piece_stem(p))} could not be read back: is the disk full?")
         out["lod_vertices"] += int(r["sizes"][0])
         out["lod_faces"] += int(r["sizes"][1])
         out["resample_points"] += float(r["resample_points"])
         for k in times:
             out[k] += float(r[k])
-        sums += r["error_sums"]
+        blocks = sorted(k for k in reference if k.startswith(piece_stem(p) + "_"))
+        if blocks:
+            sums += lod_error_sums(r, np.sum([reference[k] for k in blocks], axis=0))
     sw = max(sums[0], 1e-300)
     mean = sums[3] / sw
     return {

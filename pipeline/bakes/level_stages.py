@@ -787,40 +787,46 @@ def piece_resampled(files: TaskFiles, piece: Piece, count: int, per_block: int) 
     return out
 
 
-def lod_jobs(
-    ctx, pieces, rule, lod_meshes: TaskFiles, resampled, radius: float, trace_files, s: LevelBakeSettings
-):
+def lod_jobs(ctx, pieces, rule, lod_meshes: TaskFiles, resampled, radius: float, s: LevelBakeSettings):
     """One task per piece: the LOD's least squares over its resampled samples, its AO at the vertices, and
-    the error sums against the gold standard at held-out LOD points (``lod.holdout_samples`` spread by
-    area). ``resampled(piece)``: the piece's resampled values (vertices, then samples)."""
+    its held-out points (``lod.holdout_samples`` spread by area over the level) with both AOs there.
+    ``resampled(piece)``: the piece's resampled values (vertices, then samples)."""
 
     def make(p: Piece) -> Task:
-        ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
         mesh = lod_meshes.get(piece_stem(p))
-        args = (p, rule, mesh["vertices"], mesh["faces"], resampled(p), radius, ao, valid, s)
-        return Task(ctx, _lod_piece, args)
+        return Task(ctx, _lod_piece, (p, rule, mesh["vertices"], mesh["faces"], resampled(p), radius, s))
 
     return [(piece_stem(p), lambda p=p: make(p)) for p in pieces]
 
 
+# What the error sums read of each LOD piece's result (its held-out points and both AOs there).
+LOD_HELD_OUT = ("share", "hold_points", "hold_normals", "hold_weights", "hold_ao")
+
+
 def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     """Engine task: LOD 1 of one piece and its AO by (a) resampling at its vertices, (b) least squares over
-    resampled surface samples; both against the gold standard at held-out LOD samples."""
-    from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
-
-    piece, rule, lod_vertices, lod_faces, resampled, radius, traced, traced_valid, s = args
+    resampled surface samples; and its held-out points with (a) and (b) there, which
+    :func:`lod_reference_jobs` compare with the gold standard."""
+    piece, rule, lod_vertices, lod_faces, resampled, radius, s = args
+    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
+    area = float(face_areas(scene).sum())
+    share = area / rule.area_all if rule.area_all > 0 else 0.0
+    empty = np.zeros((0, 3))
+    held = {
+        "hold_points": empty,
+        "hold_normals": empty,
+        "hold_weights": np.zeros(0),
+        "hold_ao": np.zeros((0, 2)),
+    }
     if len(lod_faces) == 0:  # the simplification left nothing of this piece
-        out = {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
+        out = {"vertices": empty, "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
         out.update(ao_vertex=np.zeros(0, np.float32), ao_least_squares=np.zeros(0, np.float32))
-        out.update(resample_points=np.array(0), error_sums=np.zeros(6), sizes=np.zeros(2, np.int64))
-        return out | {k: np.array(0.0) for k in ("seconds_solve", "seconds_reference")}
-    scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
+        out.update(resample_points=np.array(0), sizes=np.zeros(2, np.int64), share=np.array(share))
+        return out | held | {k: np.array(0.0) for k in ("seconds_solve", "seconds_reference")}
     t2 = time.perf_counter()
     lod, lod_samples = lod_points(lod_vertices, lod_faces, piece, s)
     at_vertices, at_samples = resampled[: len(lod.vertices)], resampled[len(lod.vertices) :]
     ok = np.isfinite(at_samples)
-    area = float(face_areas(scene).sum())
-    share = area / rule.area_all if rule.area_all > 0 else 0.0
     # The piece's block of the whole LOD's least squares: its sample weights (shares of the piece's area)
     # and edge weights scaled by the piece's share of the level's area.
     lsq = fit_level(
@@ -834,10 +840,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     fill = float(np.nanmean(at_vertices)) if np.isfinite(at_vertices).any() else 1.0
     vert = np.where(np.isfinite(at_vertices), at_vertices, fill).astype(np.float32)
     t3 = time.perf_counter()
-    # Gold standard at held-out LOD points: the piece's traced samples within the sphere and facing the same
-    # way, weighted by area and by distance to the boundary (no vertex bake, no resampling rays).
     count = int(round(s.lod.holdout_samples * share))
-    sums = np.zeros(6)  # sum w, w e_vertex^2, w e_lsq^2, w ref, w ref^2, held-out points
     if count > 0:
         hold = surface_samples(
             lod,
@@ -847,35 +850,13 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
             counts=holdout_counts(lod, count, s.seed + piece.f0),
             face_offset=piece.f0,
         )
-        f = blend(traced[:, 0], traced[:, 1], s.blend).astype(np.float64)
-        pts, nrm = samples.points[traced_valid], samples.normals[traced_valid]
-        fw, sw = f[traced_valid], samples.weights[traced_valid]
-        ref = np.full(len(hold), np.nan)
-        if len(pts):
-            tree = cKDTree(pts)
-            for i, nb in enumerate(tree.query_ball_point(hold.points, radius)):
-                if nb:
-                    nb = np.asarray(nb)
-                    # The same surface only: samples facing within 60 degrees of the LOD point's normal.
-                    w = sw[nb] * np.maximum(radius - np.linalg.norm(pts[nb] - hold.points[i], axis=1), 0)
-                    w = w * (nrm[nb] @ hold.normals[i] > 0.5)
-                    if w.sum() > 0:
-                        ref[i] = np.sum(w * fw[nb]) / w.sum()
-        m = np.isfinite(ref)
-        if m.any():
-            w = hold.weights[m] / hold.weights[m].sum() * share
-            ev = interpolate(lod, vert, hold.face, hold.bary)[m] - ref[m]
-            el = interpolate(lod, lsq, hold.face, hold.bary)[m] - ref[m]
-            sums = np.array(
-                [
-                    w.sum(),
-                    (w * ev**2).sum(),
-                    (w * el**2).sum(),
-                    (w * ref[m]).sum(),
-                    (w * ref[m] ** 2).sum(),
-                    m.sum(),
-                ]
-            )
+        ao = [interpolate(lod, x, hold.face, hold.bary) for x in (vert, lsq)]
+        held = {
+            "hold_points": hold.points,
+            "hold_normals": hold.normals,
+            "hold_weights": hold.weights,
+            "hold_ao": np.stack(ao, axis=1).astype(np.float64),
+        }
     return {
         "vertices": lod.vertices,
         "faces": lod.faces,
@@ -884,10 +865,74 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         "radius": np.array(radius),
         "resample_points": np.array(len(lod.vertices) + len(lod_samples)),
         "sizes": np.array([len(lod.vertices), len(lod.faces)], np.int64),
-        "error_sums": sums,
+        "share": np.array(share),
+        **held,
         "seconds_solve": np.array(t3 - t2),
         "seconds_reference": np.array(time.perf_counter() - t3),
     }
+
+
+def lod_reference_jobs(ctx, pieces, rule, lod_files: TaskFiles, trace_files: TaskFiles, radius, s):
+    """(stem, task maker) per trace block of each piece with held-out LOD points: the gold standard's sums
+    there from the block's traced samples (:func:`_lod_reference_block`)."""
+    jobs = []
+    block = s.trace.block_samples
+    for p in pieces:
+        held = lod_files.get(piece_stem(p), ("hold_points", "hold_normals"))
+        if held is None or len(held["hold_points"]) == 0:
+            continue
+        for lo in range(0, p.ns, block):
+
+            def make(p=p, lo=lo, held=held) -> Task:
+                data = trace_files.get(f"{piece_stem(p)}_{lo // block:05d}")
+                if data is None:
+                    raise NeuralaoError(f"trace block {lo // block} of piece {p.index} is missing")
+                args = (p, rule, lo, data["ao"], data["valid"], held["hold_points"], held["hold_normals"])
+                return Task(ctx, _lod_reference_block, (*args, radius, s.blend))
+
+            jobs.append((f"{piece_stem(p)}_{lo // block:05d}", make))
+    return jobs
+
+
+def _lod_reference_block(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: the gold standard's sums at a piece's held-out LOD points from one trace block of its
+    samples: per point, over the block's valid samples within the resampling sphere and facing within 60
+    degrees of the point's normal, the sum of the weights w (the sample's area weight times its distance to
+    the sphere's boundary) and of w times the sample's blended AO. Added over the piece's blocks and
+    divided, they are the traced AO near each point (no vertex bake, no resampling rays)."""
+    from scipy.spatial import cKDTree  # measured: ~0.8 s to import; only this step needs it
+
+    piece, rule, lo, ao, valid, points, normals, radius, blend_settings = args
+    _, samples = cached_block(state.key, state.level, state.index, piece, rule, lo, lo + len(valid))
+    f = blend(ao[:, 0], ao[:, 1], blend_settings).astype(np.float64)[valid]
+    pts, nrm, sw = samples.points[valid], samples.normals[valid], samples.weights[valid]
+    sums = np.zeros((len(points), 2))
+    if len(pts):
+        for i, nb in enumerate(cKDTree(pts).query_ball_point(points, radius)):
+            if nb:
+                nb = np.asarray(nb)
+                w = sw[nb] * np.maximum(radius - np.linalg.norm(pts[nb] - points[i], axis=1), 0)
+                w = w * (nrm[nb] @ normals[i] > 0.5)
+                sums[i] = w.sum(), np.sum(w * f[nb])
+    return {"sums": sums}
+
+
+def lod_error_sums(piece_result: dict[str, np.ndarray], sums: np.ndarray) -> np.ndarray:
+    """(6,) a piece's weighted error sums (sum w, w e_vertex^2, w e_lsq^2, w ref, w ref^2, held-out points)
+    from its held-out points (:data:`LOD_HELD_OUT`) and the gold standard's sums there, added over its
+    blocks ((h, 2): sum w, sum w f)."""
+    ref = np.full(len(sums), np.nan)
+    hit = sums[:, 0] > 0
+    ref[hit] = sums[hit, 1] / sums[hit, 0]
+    m = np.isfinite(ref)
+    if not m.any():
+        return np.zeros(6)
+    weights = piece_result["hold_weights"][m]
+    w = weights / weights.sum() * float(piece_result["share"])
+    ev, el = (piece_result["hold_ao"][m, k] - ref[m] for k in (0, 1))
+    return np.array(
+        [w.sum(), (w * ev**2).sum(), (w * el**2).sum(), (w * ref[m]).sum(), (w * ref[m] ** 2).sum(), m.sum()]
+    )
 
 
 # --------------------------------------------------------------------------- blend check

