@@ -505,6 +505,7 @@ def solve_equations(
                 engine=engine,
                 context=ctx,
                 info=info,
+                connected=True,  # each block is a connected component
             )
             timing["blocks"] += sum(info.seconds_tasks)
             timing["largest_block"] = max(timing["largest_block"], info.largest_task)

@@ -141,10 +141,12 @@ def grow(graph: sp.csr_matrix, vertices: np.ndarray, rings: int) -> np.ndarray:
     return np.flatnonzero(inside)
 
 
-def partition(a, points: np.ndarray, count: int, overlap: int = OVERLAP) -> Partition:
+def partition(
+    a, points: np.ndarray, count: int, overlap: int = OVERLAP, connected: bool = False
+) -> Partition:
     """Subdomains of the system ``a`` (n, n) sparse, its unknowns at ``points`` (n, 3): ``count`` cores by
     :func:`bisect` (at most one per unknown), grown by ``overlap`` rings of ``a``'s graph, and the coarse
-    aggregates."""
+    aggregates. ``connected``: ``a`` is known to be one connected component."""
     a = sp.csr_matrix(a)
     n = a.shape[0]
     if len(points) != n:
@@ -153,7 +155,10 @@ def partition(a, points: np.ndarray, count: int, overlap: int = OVERLAP) -> Part
         raise NeuralaoError(f"need subdomains >= 1 and overlap >= 0, got {count} and {overlap}")
     core = bisect(points, max(1, min(count, n)))
     parts = [grow(a, np.flatnonzero(core == i), overlap) for i in range(int(core.max(initial=0)) + 1)]
-    ncomp, component = connected_components(a, directed=False)
+    if connected:  # the caller's system is one connected component: no need to find them
+        ncomp, component = 1, np.zeros(n, np.int64)
+    else:
+        ncomp, component = connected_components(a, directed=False)
     _, coarse = np.unique(core * ncomp + component, return_inverse=True)
     return Partition(core, parts, coarse.reshape(-1).astype(np.int64))
 
@@ -282,6 +287,7 @@ def solve_partitioned(
     max_iterations: int = MAX_ITERATIONS,
     info: SolveInfo | None = None,
     subdivision: Partition | None = None,
+    connected: bool = False,
 ) -> np.ndarray:
     """Solve ``a v = rhs`` by CG preconditioned by two-level Schwarz over ``subdomains`` spatial subdomains
     (module doc). Returns v like ``rhs``, float64, not clipped.
@@ -291,14 +297,15 @@ def solve_partitioned(
     subdomain and iteration, under ``context`` (None: a stateless one; a caller whose workers already hold
     a context passes it, so no state is built or evicted for the solve). ``info`` (filled in): iterations,
     residuals, seconds of the driver and of every task. ``subdivision``: subdomains and coarse aggregates to
-    use instead of :func:`partition`'s (``subdomains`` and ``overlap`` are then ignored)."""
+    use instead of :func:`partition`'s (``subdomains`` and ``overlap`` are then ignored). ``connected``: the
+    caller knows ``a`` is one connected component (its coarse aggregates are then the subdomains' cores)."""
     info = SolveInfo() if info is None else info
     t0 = time.perf_counter()
     a = sp.csr_matrix(a, dtype=np.float64)
     b = np.asarray(rhs, np.float64).reshape(a.shape[0], -1)
     if a.shape[0] == 0:
         return np.zeros(np.shape(rhs))
-    part = subdivision or partition(a, points, subdomains, overlap)
+    part = subdivision or partition(a, points, subdomains, overlap, connected)
     precond = _Preconditioner(a, part, engine, context or STATELESS, info)
     info.seconds_setup = time.perf_counter() - t0
     t1 = time.perf_counter()
