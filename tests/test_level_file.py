@@ -108,6 +108,60 @@ def test_spilled_writer_writes_the_same_bytes(tmp_path, suffix):
         assert (tmp_path / "memory" / f).read_bytes() == (tmp_path / "spill" / f).read_bytes()
 
 
+def _piece(w: GltfWriter, rng, k: int) -> None:
+    """A piece's meshes and nodes as a level bake writes them (odd sizes: padding between views)."""
+    for m in range(1 + k % 3):
+        v = rng.uniform(-1, 1, (5 + 2 * k + m, 3))
+        attrs = {
+            "COLOR_0": rng.integers(0, 255, (len(v), 4), dtype=np.uint8),
+            "_AO": rng.uniform(size=len(v)),
+        }
+        mesh = w.mesh(f"m{k}_{m}", v, np.array([[0, 1, 2], [2, 3, 4]]), attrs)
+        w.node(f"n{k}_{m}", mesh, extras={"role": "static", "instance": m})
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_parts_made_elsewhere_splice_into_the_bytes_of_one_writer(tmp_path, suffix):
+    """Pieces written by other writers for their place (as a level bake's workers do), spliced in order as
+    JSON text, then the driver's own meshes and instanced nodes: the bytes of one writer making it all."""
+
+    def driver_items(w: GltfWriter) -> None:
+        tree = w.mesh("tree", np.eye(3), np.array([[0, 1, 2]]))
+        w.node("trees", tree, instances={"TRANSLATION": np.zeros((4, 3)), "_AO_GLOBAL": np.ones((4, 4))})
+
+    one = GltfWriter(spill=tmp_path / "one.spill")
+    rng = np.random.default_rng(5)
+    for k in range(4):
+        _piece(one, rng, k)
+    driver_items(one)
+    one.write(tmp_path / "one" / f"level{suffix}")
+
+    spliced, place = GltfWriter(spill=tmp_path / "two.spill"), np.zeros(5, np.int64)
+    rng = np.random.default_rng(5)
+    for k in range(4):
+        part = GltfWriter.positioned(place)
+        _piece(part, rng, k)
+        fragments = part.fragments()
+        spliced.splice(fragments)
+        place = place + [*fragments["counts"], 0]
+        place[4] += -(-len(fragments["blob"]) // 4) * 4  # the next part starts 4-byte aligned
+    driver_items(spliced)
+    spliced.write(tmp_path / "two" / f"level{suffix}")
+    for f in [f"level{suffix}"] + (["level.bin"] if suffix == ".gltf" else []):
+        assert (tmp_path / "one" / f).read_bytes() == (tmp_path / "two" / f).read_bytes()
+
+
+def test_a_part_made_for_another_place_is_refused():
+    w = GltfWriter()
+    _piece(w, np.random.default_rng(1), 0)
+    part = GltfWriter.positioned(np.zeros(5, np.int64))  # made for the start, which is taken
+    _piece(part, np.random.default_rng(2), 1)
+    with pytest.raises(NeuralaoError, match="made for place"):
+        w.splice(part.fragments())
+    with pytest.raises(NeuralaoError, match="4-byte aligned"):
+        GltfWriter.positioned([0, 0, 0, 0, 6])
+
+
 def _edit(path, fn):
     doc = json.loads(path.read_text())
     fn(doc)

@@ -301,7 +301,7 @@ def bake_level(
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:
-        state = blog.timed("bvh", "Embree BVH build (opaque)", lambda: ctx.build(ctx.payload))
+        state = blog.timed("bvh", "Embree BVH build (opaque)", lambda: ctx.build(ctx.value()))
         runner = LocalEngine(states={ctx.key: state})
     else:
         runner = engine
@@ -418,7 +418,7 @@ def bake_level(
             level,
             index,
             s,
-            runner.ordered(output_jobs(light, pieces, solve_files, s)),
+            runner.ordered(output_jobs(light, pieces, index, solve_files, s)),
             deco,
             small,
             lod_files,

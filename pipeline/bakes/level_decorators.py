@@ -188,7 +188,7 @@ def bake_decorators(
     ctx = gold_context(key, level, settings, gold_foliage)
     t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
-        runner.hold(ctx.key, ctx.build(ctx.payload))
+        runner.hold(ctx.key, ctx.build(ctx.value()))
     gold_s = time.perf_counter() - t0
     ctx_key = ctx.key
     models = sorted({n.mesh for n in trees})

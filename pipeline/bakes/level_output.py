@@ -56,8 +56,8 @@ def write_outputs(
                 "rays": s.trace.rays,
             }
         }
-        for r in static_results:  # each piece's instances, written by its task
-            w.append(str(r["part"]), r["blob"])
+        for r in static_results:  # each piece's instances, written by its task for their place
+            w.splice(r)
         trees = level.nodes_with("tree")
         rows = _coefficient_rows(trees, deco)
         written: dict[int, int] = {}

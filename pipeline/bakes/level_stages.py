@@ -131,14 +131,19 @@ def worker_settings(settings: LabelSettings, engine) -> LabelSettings:
 def opaque_context(key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage) -> Context:
     """The engine context of the opaque labeller: workers build it from the level's meshes and transforms
     (heavy: a worker holds no other big state beside it)."""
-    payload = (level, index, settings, foliage, key)
+    payload = (*shared_level(key, level, index), settings, foliage, key)
     return Context(f"level-trace/{key}/{settings.workers}", _opaque_state, payload, heavy=True)
 
 
 def gold_context(key: str, level: Level, settings: LabelSettings, foliage) -> Context:
-    return Context(
-        f"level-gold/{key}/{settings.workers}", _gold_state, (level, settings, foliage), heavy=True
-    )
+    payload = (shared_level(key, level, None)[0], settings, foliage)
+    return Context(f"level-gold/{key}/{settings.workers}", _gold_state, payload, heavy=True)
+
+
+def shared_level(key: str, level: Level, index: PieceIndex | None) -> tuple[Shared, Shared]:
+    """The level and its pieces as items of the level's contexts' payloads: each travels to a worker once
+    and is held once there, whichever of the contexts it builds (``key``: the bake's)."""
+    return Shared(f"level/{key}", level), Shared(f"pieces/{key}", index)
 
 
 def _pieces_state(payload) -> PieceState:
@@ -151,7 +156,7 @@ def pieces_context(key: str, level: Level, index: PieceIndex, heavy: bool = Fals
     ``heavy``: for the LOD's one simplification of the flattened level (gigabytes on its worker for a big
     world), which has its worker drop the opaque BVH first."""
     name = "level-simplify" if heavy else "level-pieces"
-    return Context(f"{name}/{key}", _pieces_state, (level, index, key), heavy=heavy)
+    return Context(f"{name}/{key}", _pieces_state, (*shared_level(key, level, index), key), heavy=heavy)
 
 
 def _piece_fn(state: PieceState, args) -> dict[str, np.ndarray]:
@@ -367,7 +372,7 @@ def big_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> 
     """The ``pieces`` with a connected component of at least ``at_least`` vertices. A piece's instances
     share no vertex, so that is one of its meshes' components; each mesh that has so many vertices is
     counted once, by a task of ``runner`` (workers hold the level)."""
-    level, index, _ = ctx.payload
+    level, index, _ = ctx.value()
 
     def meshes(p: Piece) -> set[int]:
         return {index.nodes[k].mesh for k in index.table[p.first : p.stop, 0]}
@@ -389,7 +394,7 @@ def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: Tas
     tasks of ``runner``, one share per trace block (each from its worker's copy of the piece), and added
     here; :func:`solve_equations` then solves them, its subdomain solves tasks too. The driver makes the
     piece's vertices, not its samples, and drops everything with the result."""
-    level, index, _ = ctx.payload
+    level, index, _ = ctx.value()
     t0 = time.perf_counter()
     scene = piece_scene(level, index, piece)
     blocks = list(trace_blocks(trace_files, piece, s.trace.block_samples))
@@ -985,24 +990,50 @@ def blended_kernel_trace(
 # --------------------------------------------------------------------------- output
 
 
-def output_jobs(ctx, pieces, solve_files: TaskFiles, s: LevelBakeSettings) -> Iterator[Task]:
+def output_jobs(
+    ctx, pieces, index: PieceIndex, solve_files: TaskFiles, s: LevelBakeSettings
+) -> Iterator[Task]:
     """A task per piece, in piece order: its instances' glTF part from its solved vertex AO (each piece's
-    values read when its task is made)."""
-    for p in pieces:
+    values read when its task is made), made for its place in the glTF (:func:`part_places`)."""
+    for p, base in zip(pieces, part_places(pieces, index.table), strict=True):
         r = solve_files.get(piece_stem(p))
-        yield Task(ctx, _output_piece, (p, r["short"], r["long"], s.blend))
+        yield Task(ctx, _output_piece, (p, base, r["short"], r["long"], s.blend))
+
+
+# What each static instance adds to the glTF (:func:`_output_piece`): a node, a mesh, and a view and an
+# accessor for each of POSITION (float32 x 3), COLOR_0 (uint8 x 4), _AO, _AO_SHORT, _AO_LONG (float32)
+# and the indices (uint32 x 3 per face), none of which needs padding.
+_INSTANCE_ACCESSORS = 6
+_VERTEX_BYTES = 12 + 4 + 3 * 4
+_FACE_BYTES = 12
+
+
+def part_places(pieces, table: np.ndarray) -> list[np.ndarray]:
+    """Where each piece's glTF part goes in the baked glTF, the pieces' parts first and in piece order:
+    the bufferViews, accessors, meshes and nodes before it, then its first byte (what
+    :meth:`GltfWriter.positioned` takes). A part that is not the size counted here is refused where it is
+    spliced, so the glTF is right or not written."""
+    base, places = np.zeros(5, np.int64), []
+    for p in pieces:
+        rows = table[p.first : p.stop]
+        places.append(base.copy())
+        k = len(rows)
+        base += [_INSTANCE_ACCESSORS * k, _INSTANCE_ACCESSORS * k, k, k, 0]
+        base[4] += int(rows[:, 4].sum()) * _VERTEX_BYTES + int(rows[:, 5].sum()) * _FACE_BYTES
+    return places
 
 
 def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: one piece's static instances as a glTF part (:meth:`GltfWriter.part`): a mesh and a
-    node per instance in instance order (world positions, faces, COLOR_0 and the three AO attributes); the
-    driver appends the parts in piece order, so the glTF's bytes are those of one writer."""
-    piece, short, long_, blend_settings = args
+    """Engine task: one piece's static instances as a glTF part made for its place (:meth:`GltfWriter.
+    positioned`, :meth:`GltfWriter.fragments`): a mesh and a node per instance in instance order (world
+    positions, faces, COLOR_0 and the three AO attributes); the driver splices the parts in piece order, so
+    the glTF's bytes are those of one writer."""
+    piece, base, short, long_, blend_settings = args
     final = blend(short, long_, blend_settings)
     colour = vertex_colours(final)
     short, long_ = np.asarray(short, np.float32), np.asarray(long_, np.float32)
     level, index = state.level, state.index
-    w = GltfWriter()
+    w = GltfWriter.positioned(base)
     for k, j, v0, _, nv, _ in index.table[piece.first : piece.stop]:
         node = index.nodes[k]
         sl = slice(v0 - piece.v0, v0 - piece.v0 + nv)
@@ -1014,5 +1045,4 @@ def _output_piece(state: PieceState, args) -> dict[str, np.ndarray]:
             mi,
             extras={"role": "static", "source_node": node.index, "instance": int(j)},
         )
-    doc, blob = w.part()
-    return {"part": np.array(doc), "blob": blob}
+    return w.fragments()

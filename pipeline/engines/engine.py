@@ -57,8 +57,16 @@ log = logging.getLogger(__name__)
 
 # Tasks queued per actor: one running, one waiting, so an actor never idles while a result travels.
 TASKS_PER_WORKER = 2
-# Context payloads the Ray engine keeps in the object store when no task in flight needs them.
-KEPT_CONTEXTS = 2
+# Object-store refs the Ray engine keeps when no task in flight needs them, per kind (:func:`_kind`).
+KEPT = {"context": 2, "payload": 4, "shared": 0}
+
+
+def _kind(key: str) -> str:
+    """The kind of an object-store key of the Ray engine: a Shared item of a task's args ("shared/...") or
+    of a context's payload ("payload/..."), or a context's payload (its context's key)."""
+    return key.split("/", 1)[0] if key.startswith(("shared/", "payload/")) else "context"
+
+
 # States an actor keeps (least recently used goes first): a level bake alternates few meshes.
 STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
@@ -77,10 +85,17 @@ class Context:
 
     key: str  # content hash of everything ``build`` reads: equal keys must build equal states
     build: Callable[[Any], Any]  # module-level function: payload -> state (may have a close())
-    payload: Any  # picklable input of ``build`` (numpy arrays, dataclasses), not a path
+    # picklable input of ``build`` (numpy arrays, dataclasses), not a path; a tuple's top-level
+    # :class:`Shared` items (a level that several contexts build from) travel once to each worker, which
+    # keeps one copy for every context that holds them: ``build`` receives their values (:meth:`value`)
+    payload: Any
     # A state of gigabytes (a level's BVH): a worker drops every other state before building it, so
     # two never share its memory.
     heavy: bool = False
+
+    def value(self) -> Any:
+        """The payload ``build`` receives (every top-level :class:`Shared` replaced by its value)."""
+        return _unshare(self.payload)
 
 
 @dataclass(frozen=True)
@@ -95,8 +110,9 @@ class Task:
 
 @dataclass(frozen=True)
 class Shared:
-    """A top-level item of a task's ``args`` tuple that many tasks read (module doc): the function
-    receives ``value``; ``key`` is a content hash of it (equal keys must mean equal values)."""
+    """A top-level item of a task's ``args`` tuple that many tasks read (module doc), or of a context's
+    payload that several contexts build from: the function receives ``value``; ``key`` is a content hash of
+    it (equal keys must mean equal values)."""
 
     key: str
     value: Any
@@ -106,6 +122,15 @@ class Shared:
 class _SharedRef:
     key: str
     boxed: list  # [ObjectRef]: boxed so Ray does not fetch it for every task
+
+
+def _resolved(ray, args: Any, cache) -> Any:
+    """``args`` with every top-level :class:`_SharedRef` replaced by its value, fetched once per ``cache``."""
+    if not isinstance(args, tuple):
+        return args
+    return tuple(
+        cache.get(a.key, lambda a=a: ray.get(a.boxed[0])) if isinstance(a, _SharedRef) else a for a in args
+    )
 
 
 def _unshare(args: Any) -> Any:
@@ -268,7 +293,7 @@ class LocalEngine(Engine):
             else:
                 state = self._cache.get(
                     ctx.key,
-                    lambda ctx=ctx, built=built: _timed_build(ctx.build, lambda: ctx.payload, built),
+                    lambda ctx=ctx, built=built: _timed_build(ctx.build, ctx.value, built),
                     ctx.heavy,
                 )
             yield index, task, self._timing(_timed_call(task.fn, state, _unshare(task.args), built[0]))
@@ -309,7 +334,8 @@ class _Worker:
     def __init__(self, env: dict[str, str]):
         os.environ.update(env)  # before anything imports PyOpenGL
         self._cache = _StateCache(STATES_PER_WORKER)
-        self._shared = _StateCache(STATES_PER_WORKER)  # Shared values by key
+        self._shared = _StateCache(STATES_PER_WORKER)  # Shared values of tasks' args by key
+        self._payload_shared = _StateCache(STATES_PER_WORKER)  # Shared values of payloads by key
 
     def run(self, key: str, boxed_payload: list, build, fn, args, heavy: bool = False):
         import ray  # optional dependency: only --engine ray imports it
@@ -318,16 +344,12 @@ class _Worker:
         # task of a context on this actor pulls it from the object store. Shared args likewise.
         try:
             built = [0.0]
-            state = self._cache.get(
-                key, lambda: _timed_build(build, lambda: ray.get(boxed_payload[0]), built), heavy
-            )
-            if isinstance(args, tuple):
-                args = tuple(
-                    self._shared.get(a.key, lambda a=a: ray.get(a.boxed[0]))
-                    if isinstance(a, _SharedRef)
-                    else a
-                    for a in args
-                )
+
+            def payload():
+                return _resolved(ray, ray.get(boxed_payload[0]), self._payload_shared)
+
+            state = self._cache.get(key, lambda: _timed_build(build, payload, built), heavy)
+            args = _resolved(ray, args, self._shared)
             result = _timed_call(fn, state, args, built[0])
             release_free_memory()  # the task's temporaries, so the actor's memory is the states it holds
             return result
@@ -392,30 +414,34 @@ class RayEngine(Engine):
 
     def _put(self, key: str, value: Any, live: set[str]):
         """The object-store ref of ``value``, put once per key. Refs no task in flight needs are dropped,
-        but for the latest :data:`KEPT_CONTEXTS` contexts' payloads: a level bake's stages take turns
-        between two contexts of the same level, which would otherwise be pickled and put again at every
-        turn."""
+        but for the latest :data:`KEPT` of each kind (contexts' payloads, the Shared items of payloads): a
+        level bake's stages take turns between contexts of the same level, which would otherwise be pickled
+        and put again at every turn. The Shared values of tasks' args go as soon as no task needs them."""
         if key in self._payloads:
             self._payloads.move_to_end(key)
             return self._payloads[key]
-        contexts = [k for k in self._payloads if not k.startswith("shared/")]
-        if key.startswith("shared/"):
-            keep = set(contexts)  # bounded when each is put
-        else:  # with this one, the latest KEPT_CONTEXTS
-            keep = set(contexts[len(contexts) - (KEPT_CONTEXTS - 1) :]) if KEPT_CONTEXTS > 1 else set()
+        keep = set()
+        for kind, count in KEPT.items():
+            same = [k for k in self._payloads if _kind(k) == kind]
+            count -= _kind(key) == kind  # room for this one
+            keep.update(same[len(same) - count :] if count > 0 else [])
         for old in [k for k in self._payloads if k not in live and k not in keep]:
             del self._payloads[old]  # no task in flight needs it any more
         self._payloads[key] = self._ray.put(value)
         return self._payloads[key]
 
     def _payload_ref(self, ctx: Context, live: set[str]):
-        return self._put(ctx.key, ctx.payload, live)
+        if ctx.key in self._payloads:
+            self._payloads.move_to_end(ctx.key)
+            return self._payloads[ctx.key]
+        # its Shared items go once each, under their own keys (and live as long as a payload holds them)
+        return self._put(ctx.key, self._remote_args(ctx.payload, live, "payload/"), live)
 
-    def _remote_args(self, args: Any, live: set[str]) -> Any:
+    def _remote_args(self, args: Any, live: set[str], prefix: str = "shared/") -> Any:
         if not isinstance(args, tuple):
             return args
         return tuple(
-            _SharedRef(a.key, [self._put("shared/" + a.key, a.value, live)]) if isinstance(a, Shared) else a
+            _SharedRef(a.key, [self._put(prefix + a.key, a.value, live)]) if isinstance(a, Shared) else a
             for a in args
         )
 

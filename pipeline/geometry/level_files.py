@@ -461,6 +461,30 @@ class _SpillBuffer:
         self.path.unlink(missing_ok=True)
 
 
+# The lists of a glTF document a part adds to, in the order of a part's counts and place.
+PART_LISTS = ("bufferViews", "accessors", "meshes", "nodes")
+
+
+@dataclass(frozen=True)
+class _Raw:
+    """Items of a document's list spliced in as JSON text (``count`` of them, comma-separated)."""
+
+    text: str
+    count: int
+
+
+def _dumps(value: Any) -> str:
+    """The writer's JSON of one value (sorted keys, no spaces)."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"))
+
+
+def _dumps_list(value: Any) -> str:
+    """:func:`_dumps`, with any :class:`_Raw` items of a list as their text."""
+    if not isinstance(value, list) or not any(isinstance(x, _Raw) for x in value):
+        return _dumps(value)
+    return "[" + ",".join(x.text if isinstance(x, _Raw) else _dumps(x) for x in value) + "]"
+
+
 class GltfWriter:
     """Accumulates meshes, nodes and binary data; writes .glb or .gltf + .bin atomically.
 
@@ -480,6 +504,27 @@ class GltfWriter:
             "bufferViews": [],
         }
         self._blob: bytearray | _SpillBuffer = bytearray() if spill is None else _SpillBuffer(Path(spill))
+        self._n = dict.fromkeys(PART_LISTS, 0)  # items in each list (spliced parts' items counted)
+        self._byte0 = 0  # bytes of the whole buffer before this writer's (a part's place in it)
+
+    @classmethod
+    def positioned(cls, base) -> GltfWriter:
+        """A writer of a part of another writer's document, made elsewhere (a worker writes its piece of a
+        level): ``base`` = the bufferViews, accessors, meshes and nodes, then the (4-byte aligned) bytes,
+        that come before it there. Its indices and offsets are the final ones; :meth:`fragments` hands
+        the part over, and the document's writer adds it with :meth:`splice`."""
+        w = cls()
+        *counts, w._byte0 = (int(x) for x in base)
+        if w._byte0 % 4:
+            raise NeuralaoError(f"a glTF part must start 4-byte aligned, not at byte {w._byte0}")
+        w._n = dict(zip(PART_LISTS, counts, strict=True))
+        return w
+
+    def _add(self, key: str, item: dict[str, Any]) -> int:
+        """Append ``item`` to the document's list ``key``; its index there."""
+        self.doc.setdefault(key, []).append(item)
+        self._n[key] += 1
+        return self._n[key] - 1
 
     @classmethod
     def from_document(cls, doc: dict[str, Any], blob: bytes) -> GltfWriter:
@@ -487,8 +532,9 @@ class GltfWriter:
         buffer 0) and ``blob`` (buffer 0's bytes); new data is appended after ``blob``."""
         w = cls()
         w.doc = doc
-        for key in ("accessors", "bufferViews"):
+        for key in PART_LISTS:
             doc.setdefault(key, [])
+        w._n = {key: len(doc[key]) for key in PART_LISTS}
         w._blob = bytearray(blob)
         return w
 
@@ -496,11 +542,9 @@ class GltfWriter:
         """A bufferView holding ``data`` as is (an image), 4-byte aligned; returns its index."""
         while len(self._blob) % 4:
             self._blob.append(0)
-        self.doc.setdefault("bufferViews", []).append(
-            {"buffer": 0, "byteOffset": len(self._blob), "byteLength": len(data)}
-        )
+        view = {"buffer": 0, "byteOffset": self._byte0 + len(self._blob), "byteLength": len(data)}
         self._blob.extend(data)
-        return len(self.doc["bufferViews"]) - 1
+        return self._add("bufferViews", view)
 
     def accessor(
         self, array: np.ndarray, kind: str | None = None, normalized: bool = False, target: int | None = None
@@ -515,13 +559,16 @@ class GltfWriter:
         kind = kind or {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4", 16: "MAT4"}[width]
         while len(self._blob) % 4:
             self._blob.append(0)
-        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self._blob), "byteLength": arr.nbytes}
+        view: dict[str, Any] = {
+            "buffer": 0,
+            "byteOffset": self._byte0 + len(self._blob),
+            "byteLength": arr.nbytes,
+        }
         if target is not None:
             view["target"] = target
         self._blob.extend(arr.astype(arr.dtype.newbyteorder("<"), copy=False).tobytes())
-        self.doc["bufferViews"].append(view)
         acc: dict[str, Any] = {
-            "bufferView": len(self.doc["bufferViews"]) - 1,
+            "bufferView": self._add("bufferViews", view),
             "componentType": code,
             "count": int(arr.shape[0]),
             "type": kind,
@@ -531,8 +578,7 @@ class GltfWriter:
         if kind == "VEC3" and code == 5126 and len(arr):  # POSITION needs min / max
             acc["min"] = [float(x) for x in arr.min(axis=0)]
             acc["max"] = [float(x) for x in arr.max(axis=0)]
-        self.doc["accessors"].append(acc)
-        return len(self.doc["accessors"]) - 1
+        return self._add("accessors", acc)
 
     def mesh(
         self,
@@ -548,10 +594,9 @@ class GltfWriter:
             arr = np.asarray(arr)
             attrs[key] = self.accessor(arr, normalized=arr.dtype == np.uint8, target=34962)
         idx = self.accessor(np.asarray(faces, np.uint32).reshape(-1), target=34963)
-        self.doc["meshes"].append(
-            {"name": name, "primitives": [{"attributes": attrs, "indices": idx, "mode": 4}]}
+        return self._add(
+            "meshes", {"name": name, "primitives": [{"attributes": attrs, "indices": idx, "mode": 4}]}
         )
-        return len(self.doc["meshes"]) - 1
 
     def node(
         self,
@@ -576,58 +621,58 @@ class GltfWriter:
             used = self.doc.setdefault("extensionsUsed", [])
             if INSTANCING not in used:
                 used.append(INSTANCING)
-        self.doc["nodes"].append(node)
-        self.doc["scenes"][0]["nodes"].append(len(self.doc["nodes"]) - 1)
-        return len(self.doc["nodes"]) - 1
+        index = self._add("nodes", node)
+        self.doc["scenes"][0]["nodes"].append(index)
+        return index
 
-    def part(self) -> tuple[str, np.ndarray]:
-        """This writer's nodes, meshes, accessors and views (JSON) and its bytes ((n,) uint8): a part that
-        another writer adds with :meth:`append`, made elsewhere (a worker writes its piece of a level)."""
-        keys = ("nodes", "meshes", "accessors", "bufferViews", "extensionsUsed")
-        doc = {k: self.doc[k] for k in keys if k in self.doc}
-        return json.dumps(doc, separators=(",", ":")), np.frombuffer(bytes(self._blob), np.uint8)
+    def fragments(self) -> dict[str, np.ndarray]:
+        """This part's JSON and bytes (a :meth:`positioned` writer's): each of its lists as the text of its
+        items (UTF-8), as they stand in the document's JSON, their counts, its place ("base"), the
+        extensions it uses, and its bytes ("blob")."""
+        out = {
+            key: np.frombuffer(_dumps(self.doc.get(key, []))[1:-1].encode(), np.uint8) for key in PART_LISTS
+        }
+        return out | {
+            "counts": np.array([len(self.doc.get(key, [])) for key in PART_LISTS], np.int64),
+            "base": np.array(
+                [self._n[key] - len(self.doc.get(key, [])) for key in PART_LISTS] + [self._byte0]
+            ),
+            "extensions": np.frombuffer(_dumps(self.doc.get("extensionsUsed", [])).encode(), np.uint8),
+            "blob": np.frombuffer(bytes(self._blob), np.uint8),
+        }
 
-    def append(self, part_json: str, blob: np.ndarray) -> None:
-        """Add a :meth:`part`: its views move to the end of this buffer (4-byte aligned, as its own start
-        was) and its indices past this writer's, so the bytes are those of the same calls made here."""
-        part = json.loads(part_json)
+    def splice(self, part: dict[str, np.ndarray]) -> None:
+        """Add a part's :meth:`fragments` at the end of the document: its JSON text as it is (no parsing),
+        its bytes after this writer's. It must have been made for this place (its base: this writer's
+        counts and bytes so far), so the document is the one the same calls made here would give."""
         while len(self._blob) % 4:
             self._blob.append(0)
-        base = len(self._blob)
-        d = self.doc
-        n_views, n_acc, n_mesh = (len(d[k]) for k in ("bufferViews", "accessors", "meshes"))
-        for v in part.get("bufferViews", []):
-            v["byteOffset"] += base
-            d["bufferViews"].append(v)
-        for a in part.get("accessors", []):
-            a["bufferView"] += n_views
-            d["accessors"].append(a)
-        for m in part.get("meshes", []):
-            for prim in m["primitives"]:
-                prim["attributes"] = {k: i + n_acc for k, i in prim["attributes"].items()}
-                prim["indices"] += n_acc
-            d["meshes"].append(m)
-        for node in part.get("nodes", []):
-            if "mesh" in node:
-                node["mesh"] += n_mesh
-            inst = node.get("extensions", {}).get(INSTANCING)
-            if inst:
-                inst["attributes"] = {k: i + n_acc for k, i in inst["attributes"].items()}
-            d["nodes"].append(node)
-            d["scenes"][0]["nodes"].append(len(d["nodes"]) - 1)
-        for ext in part.get("extensionsUsed", []):
-            if ext not in d.setdefault("extensionsUsed", []):
-                d["extensionsUsed"].append(ext)
-        self._blob.extend(memoryview(np.ascontiguousarray(blob, np.uint8).reshape(-1)))
+        here = [self._n[key] for key in PART_LISTS] + [self._byte0 + len(self._blob)]
+        if [int(x) for x in part["base"]] != here:
+            raise NeuralaoError(f"a glTF part made for place {list(part['base'])} comes at {here}")
+        for key, count in zip(PART_LISTS, part["counts"], strict=True):
+            if count:
+                self.doc.setdefault(key, []).append(_Raw(part[key].tobytes().decode(), int(count)))
+                self._n[key] += int(count)
+        first = here[PART_LISTS.index("nodes")]
+        self.doc["scenes"][0]["nodes"].extend(
+            range(first, first + int(part["counts"][PART_LISTS.index("nodes")]))
+        )
+        for ext in json.loads(part["extensions"].tobytes().decode()):
+            if ext not in self.doc.setdefault("extensionsUsed", []):
+                self.doc["extensionsUsed"].append(ext)
+        self._blob.extend(memoryview(np.ascontiguousarray(part["blob"], np.uint8).reshape(-1)))
 
     def _json(self, uri: str | None) -> bytes:
         while len(self._blob) % 4:
             self._blob.append(0)
-        buf: dict[str, Any] = {"byteLength": len(self._blob)}
+        buf: dict[str, Any] = {"byteLength": self._byte0 + len(self._blob)}
         if uri is not None:
             buf["uri"] = uri
         doc = dict(self.doc, buffers=[buf])
-        return json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()
+        # json.dumps(doc, sort_keys=True) but for the spliced parts' text, which goes in as it is
+        fields = (f"{_dumps(key)}:{_dumps_list(doc[key])}" for key in sorted(doc))
+        return ("{" + ",".join(fields) + "}").encode()
 
     def write(self, path: str | Path) -> Path:
         """Write ``path`` (.glb: one file; .gltf: the .bin next to it first, then the .gltf)."""
