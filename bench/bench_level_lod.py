@@ -7,7 +7,8 @@ Generates the seeded level (pipeline/geometry/level_gen.py) and bakes it once pe
 pass with ``lod.target_reduction``, then ``lod.max_error`` = each of ``--errors``), each bake fresh, one after
 the other in this process. Per bake: the LOD stage's seconds, its simplification tasks (count, largest),
 faces kept per kind of piece, and the LOD error table per kind of piece (terrain, Sponzas, houses), from
-each piece's weighted error sums (``OUT/stages/lod/PIECE.npz``). Writes OUT/level_lod/PRESET/bench_lod.json
+each piece's held-out points (``OUT/stages/lod/PIECE.npz``) and the gold standard there
+(``OUT/stages/lod_reference/``). Writes OUT/level_lod/PRESET/bench_lod.json
 and .md.
 """
 
@@ -27,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from neuralao.pipeline.bakes.level import bake_level  # noqa: E402
 from neuralao.pipeline.bakes.level_pieces import index_level  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: E402
+from neuralao.pipeline.bakes.level_stages import LOD_HELD_OUT, TaskFiles, lod_piece_errors  # noqa: E402
 from neuralao.pipeline.geometry.level_files import read_level  # noqa: E402
 from neuralao.pipeline.geometry.level_gen import settings_for, write_level  # noqa: E402
 from neuralao.runtime.foundation.io import read_npz, write_json, write_text  # noqa: E402
@@ -44,14 +46,17 @@ def piece_kinds(level_path: Path, piece_faces: int) -> dict[int, str]:
     return kinds
 
 
-def per_kind(bake: Path, kinds: dict[int, str], source_faces: dict[int, int]) -> dict[str, dict]:
+def per_kind(bake: Path, key: str, kinds: dict[int, str], source_faces: dict[int, int]) -> dict[str, dict]:
     """LOD faces kept and the RMSE table per kind, from the pieces' weighted error sums."""
     out: dict[str, dict] = {}
+    lod_files = TaskFiles(bake / "stages" / "lod", key)
+    reference = TaskFiles(bake / "stages" / "lod_reference", key)
     for i, kind in kinds.items():
-        r = read_npz(bake / "stages" / "lod" / f"p{i:05d}.npz")
+        r = lod_files.get(f"p{i:05d}", LOD_HELD_OUT)
+        stems = sorted(f.stem for f in reference.folder.glob(f"p{i:05d}_*.npz"))  # its trace blocks
         row = out.setdefault(kind, {"sums": np.zeros(6), "faces": 0, "source_faces": 0})
-        row["sums"] += r["error_sums"]
-        row["faces"] += len(r["faces"])
+        row["sums"] += lod_piece_errors(r, reference, stems)
+        row["faces"] += len(read_npz(bake / "stages" / "lod_meshes" / f"p{i:05d}.npz")["faces"])
         row["source_faces"] += source_faces[i]
     for row in out.values():
         s = row.pop("sums")
@@ -146,7 +151,7 @@ def main() -> int:
                 "simplify_tasks": n_simplify,
                 "simplify_largest_s": max(tasks[:n_simplify], default=0.0),
                 "errors": info["errors"]["lod"],
-                "per_kind": per_kind(bake, kinds, source_faces),
+                "per_kind": per_kind(bake, info["key"], kinds, source_faces),
             }
         )
         print(json.dumps(runs[-1], indent=1), flush=True)

@@ -277,7 +277,8 @@ def test_lod_least_squares_interpolates_the_fit(baked):
     from neuralao.runtime.foundation.io import read_npz
 
     lod = read_npz(root / "out" / "stages" / "lod" / "p00000.npz")
-    scene = scene_from_arrays(lod["vertices"], lod["faces"], "lod", drop_degenerate=False)
+    mesh = read_npz(root / "out" / "stages" / "lod_meshes" / "p00000.npz")
+    scene = scene_from_arrays(mesh["vertices"], mesh["faces"], "lod", drop_degenerate=False)
     assert len(scene.faces) < 0.6 * 1260 + 10
     vals = interpolate(
         scene, lod["ao_least_squares"], np.arange(len(scene.faces)), np.full((len(scene.faces), 3), 1 / 3)

@@ -83,7 +83,7 @@ def test_an_error_below_every_collapse_keeps_each_piece_whole(tiny):
     index = index_level(lv, unsimplified["settings"]["piece_faces"])
     for p in index.pieces:
         source = piece_scene(lv, index, p)
-        lod = read_npz(root / "unsimplified" / "stages" / "lod" / f"p{p.index:05d}.npz")
+        lod = read_npz(root / "unsimplified" / "stages" / "lod_meshes" / f"p{p.index:05d}.npz")
         assert len(lod["faces"]) == len(source.faces)
         np.testing.assert_allclose(np.sort(lod["vertices"], axis=0), np.sort(source.vertices, axis=0))
 

@@ -64,9 +64,11 @@ from neuralao.pipeline.bakes.level_stages import (
     blend_piece,
     engine_each,
     join_tiles,
-    lod_error_sums,
     lod_jobs,
+    lod_mesh_files,
+    lod_piece_errors,
     lod_reference_jobs,
+    lod_reference_stems,
     lod_resample_jobs,
     lod_tiles,
     opaque_context,
@@ -421,7 +423,7 @@ def bake_level(
             runner.ordered(output_jobs(light, pieces, index, solve_files, s)),
             deco,
             small,
-            lod_files,
+            None if lod_files is None else (lod_files, lod_mesh_files(lod_files)),
             pieces,
         ),
     )
@@ -510,7 +512,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     the LOD's median edge unless ``lod.radius`` sets it."""
     ctx, light = contexts
     t0 = time.perf_counter()
-    mesh_files = TaskFiles(lod_files.folder.parent / "lod_meshes", lod_files.key)
+    mesh_files = lod_mesh_files(lod_files)
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
     have_meshes = all(mesh_files.has(stem) for stem in stems)
@@ -567,11 +569,9 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     # The gold standard at the held-out points, from the traced samples: a task per trace block.
     reference_files = TaskFiles(lod_files.folder.parent / "lod_reference", lod_files.key)
     jobs = lod_reference_jobs(light, pieces, rule, lod_files, trace_files, radius, s)
-    reference = {
-        stem: r["sums"]
-        for stem, r, _ in run_to_files(reference_files, runner, jobs, "lod reference", progress)
-    }
-    out = _lod_summary(lod_files, pieces, reference)
+    for _ in run_to_files(reference_files, runner, jobs, "lod reference", progress, keys=()):
+        pass  # read piece by piece by the summary
+    out = _lod_summary(lod_files, reference_files, pieces, s.trace.block_samples)
     out["seconds_simplify"] = np.array(t1 - t0)
     # The stage's tasks in order: its simplifications (one of the whole level, or one per piece), its
     # resampling, then a task per piece and one per trace block of a piece with held-out points.
@@ -587,9 +587,10 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
 LOD_SUMMED = ("sizes", "resample_points", "seconds_solve", "seconds_reference", *LOD_HELD_OUT)
 
 
-def _lod_summary(lod_files: TaskFiles, pieces, reference: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The LOD pieces' counts, times and error table: each piece's error sums from its held-out points and
-    the gold standard's sums there (``reference``: per trace block stem, added in block order)."""
+def _lod_summary(
+    lod_files: TaskFiles, reference_files: TaskFiles, pieces, block: int
+) -> dict[str, np.ndarray]:
+    """The LOD pieces' counts, times and error table (each piece's error sums: :func:`lod_piece_errors`)."""
     sums = np.zeros(6)
     times = ("seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
@@ -597,14 +598,12 @@ def _lod_summary(lod_files: TaskFiles, pieces, reference: dict[str, np.ndarray])
         r = lod_files.get(piece_stem(p), LOD_SUMMED)
         if r is None:
             raise NeuralaoError(f"{lod_files.path(piece_stem(p))} could not be read back: is the disk full?")
+        sums += lod_piece_errors(r, reference_files, lod_reference_stems(p, block))
         out["lod_vertices"] += int(r["sizes"][0])
         out["lod_faces"] += int(r["sizes"][1])
         out["resample_points"] += float(r["resample_points"])
         for k in times:
             out[k] += float(r[k])
-        blocks = sorted(k for k in reference if k.startswith(piece_stem(p) + "_"))
-        if blocks:
-            sums += lod_error_sums(r, np.sum([reference[k] for k in blocks], axis=0))
     sw = max(sums[0], 1e-300)
     mean = sums[3] / sw
     return {

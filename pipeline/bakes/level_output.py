@@ -43,8 +43,8 @@ def write_outputs(
 ) -> None:
     """Write the baked glTF, streamed: ``static_results`` yields each piece's glTF part (the output tasks'
     results, in piece order, as they arrive: its instances' meshes and nodes, made by the task) and the LOD
-    comes from ``lod_files`` piece by piece; the binary data goes to a file beside ``path`` as it is made,
-    so memory holds one piece."""
+    comes piece by piece from ``lod_files`` (a pair: the LOD's results and its meshes, or None); the binary
+    data goes to a file beside ``path`` as it is made, so memory holds one piece."""
     # Named as atomic_path names its temporaries, so a killed bake's rerun sweeps a stale one away.
     spill = path.with_name(f".{path.name}.spill.tmp")
     w = GltfWriter("neuralao level bake", spill=spill)
@@ -86,9 +86,11 @@ def write_outputs(
                     instances={"TRANSLATION": t, "ROTATION": q, "SCALE": sc, "_AO": small[f"{role}_{kk}"]},
                 )
         if lod_files is not None:
+            results, meshes = lod_files
             for piece in pieces:
-                lod = lod_files.get(f"p{piece.index:05d}")
-                if len(lod["faces"]) == 0:
+                lod = results.get(f"p{piece.index:05d}")
+                mesh = meshes.get(f"p{piece.index:05d}")
+                if len(mesh["faces"]) == 0:
                     continue
                 ao = np.asarray(lod["ao_least_squares"], np.float32)
                 attrs = {
@@ -97,7 +99,7 @@ def write_outputs(
                     "_AO_RESAMPLED": np.asarray(lod["ao_vertex"], np.float32),
                 }
                 name = "lod1" if len(pieces) == 1 else f"lod1_{piece.index}"
-                mi = w.mesh(name, lod["vertices"], lod["faces"], attrs)
+                mi = w.mesh(name, mesh["vertices"], mesh["faces"], attrs)
                 w.node(name, mi, extras={"role": "static", "lod": 1, "piece": piece.index})
         w.write(path)
     finally:

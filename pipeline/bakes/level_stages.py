@@ -793,6 +793,11 @@ def piece_resampled(files: TaskFiles, piece: Piece, count: int, per_block: int) 
     return out
 
 
+def lod_mesh_files(lod_files: TaskFiles) -> TaskFiles:
+    """The LOD's meshes, a file per piece beside the LOD's results (which do not repeat them)."""
+    return TaskFiles(lod_files.folder.parent / "lod_meshes", lod_files.key)
+
+
 def lod_jobs(ctx, pieces, rule, lod_meshes: TaskFiles, resampled, radius: float, s: LevelBakeSettings):
     """One task per piece: the LOD's least squares over its resampled samples, its AO at the vertices, and
     its held-out points (``lod.holdout_samples`` spread by area over the level) with both AOs there.
@@ -825,7 +830,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         "hold_ao": np.zeros((0, 2)),
     }
     if len(lod_faces) == 0:  # the simplification left nothing of this piece
-        out = {"vertices": empty, "faces": np.zeros((0, 3), np.int64), "radius": np.array(radius)}
+        out = {"radius": np.array(radius)}
         out.update(ao_vertex=np.zeros(0, np.float32), ao_least_squares=np.zeros(0, np.float32))
         out.update(resample_points=np.array(0), sizes=np.zeros(2, np.int64), share=np.array(share))
         return out | held | {k: np.array(0.0) for k in ("seconds_solve", "seconds_reference")}
@@ -863,9 +868,9 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
             "hold_weights": hold.weights,
             "hold_ao": np.stack(ao, axis=1).astype(np.float64),
         }
+    if len(lod.vertices) != len(lod_vertices) or len(lod.faces) != len(lod_faces):
+        raise NeuralaoError(f"piece {piece.index}'s LOD mesh changed when it was read back")
     return {
-        "vertices": lod.vertices,
-        "faces": lod.faces,
         "ao_vertex": vert,
         "ao_least_squares": lsq,
         "radius": np.array(radius),
@@ -887,16 +892,16 @@ def lod_reference_jobs(ctx, pieces, rule, lod_files: TaskFiles, trace_files: Tas
         held = lod_files.get(piece_stem(p), ("hold_points", "hold_normals"))
         if held is None or len(held["hold_points"]) == 0:
             continue
-        for lo in range(0, p.ns, block):
+        for lo, stem in zip(range(0, p.ns, block), lod_reference_stems(p, block), strict=True):
 
-            def make(p=p, lo=lo, held=held) -> Task:
-                data = trace_files.get(f"{piece_stem(p)}_{lo // block:05d}")
+            def make(p=p, lo=lo, stem=stem, held=held) -> Task:
+                data = trace_files.get(stem)  # the trace block's file has the same stem
                 if data is None:
                     raise NeuralaoError(f"trace block {lo // block} of piece {p.index} is missing")
                 args = (p, rule, lo, data["ao"], data["valid"], held["hold_points"], held["hold_normals"])
                 return Task(ctx, _lod_reference_block, (*args, radius, s.blend))
 
-            jobs.append((f"{piece_stem(p)}_{lo // block:05d}", make))
+            jobs.append((stem, make))
     return jobs
 
 
@@ -921,6 +926,26 @@ def _lod_reference_block(state: PieceState, args) -> dict[str, np.ndarray]:
                 w = w * (nrm[nb] @ normals[i] > 0.5)
                 sums[i] = w.sum(), np.sum(w * f[nb])
     return {"sums": sums}
+
+
+def lod_reference_stems(piece: Piece, block: int) -> list[str]:
+    """The stems of a piece's gold-standard sums (:func:`lod_reference_jobs`), one per trace block."""
+    return [f"{piece_stem(piece)}_{lo // block:05d}" for lo in range(0, piece.ns, block)]
+
+
+def lod_piece_errors(piece_result: dict[str, np.ndarray], reference_files: TaskFiles, stems: list[str]):
+    """(6,) a piece's LOD error sums (:func:`lod_error_sums`) from its result (:data:`LOD_HELD_OUT`) and the
+    gold-standard sums of its trace blocks (``stems``: :func:`lod_reference_stems`), added in block order;
+    zeros for a piece without held-out points."""
+    if len(piece_result["hold_points"]) == 0:
+        return np.zeros(6)
+    total = np.zeros((len(piece_result["hold_points"]), 2))
+    for stem in stems:
+        r = reference_files.get(stem, ("sums",))
+        if r is None:
+            raise NeuralaoError(f"{reference_files.path(stem)} could not be read back: is the disk full?")
+        total += r["sums"]
+    return lod_error_sums(piece_result, total)
 
 
 def lod_error_sums(piece_result: dict[str, np.ndarray], sums: np.ndarray) -> np.ndarray:
