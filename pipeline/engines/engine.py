@@ -59,14 +59,6 @@ log = logging.getLogger(__name__)
 TASKS_PER_WORKER = 2
 # Object-store refs the Ray engine keeps when no task in flight needs them, per kind (:func:`_kind`).
 KEPT = {"context": 2, "payload": 4, "shared": 0}
-
-
-def _kind(key: str) -> str:
-    """The kind of an object-store key of the Ray engine: a Shared item of a task's args ("shared/...") or
-    of a context's payload ("payload/..."), or a context's payload (its context's key)."""
-    return key.split("/", 1)[0] if key.startswith(("shared/", "payload/")) else "context"
-
-
 # States an actor keeps (least recently used goes first): a level bake alternates few meshes.
 STATES_PER_WORKER = 2
 # Seconds to wait for a TCP connection to the cluster address before calling it unreachable
@@ -122,6 +114,12 @@ class Shared:
 class _SharedRef:
     key: str
     boxed: list  # [ObjectRef]: boxed so Ray does not fetch it for every task
+
+
+def _kind(key: str) -> str:
+    """The kind of an object-store key of the Ray engine: a Shared item of a task's args ("shared/...") or
+    of a context's payload ("payload/..."), or a context's payload (its context's key)."""
+    return key.split("/", 1)[0] if key.startswith(("shared/", "payload/")) else "context"
 
 
 def _resolved(ray, args: Any, cache) -> Any:
@@ -405,7 +403,8 @@ class RayEngine(Engine):
         env.setdefault("OMP_NUM_THREADS", "1")  # tracing threads are Python threads, not OpenMP's
         actor = ray.remote(num_cpus=threads, max_restarts=-1, max_task_retries=-1)(_Worker)
         self._actors = [actor.remote(env) for _ in range(self.workers)]
-        # context key (or "shared/" + a Shared value's key) -> ObjectRef, latest used last
+        # context key, "shared/" + a task's Shared item's key or "payload/" + a payload's -> ObjectRef,
+        # latest used last
         self._payloads: collections.OrderedDict[str, Any] = collections.OrderedDict()
 
     def worker_info(self) -> list[tuple[int, str]]:
