@@ -129,3 +129,57 @@ def test_a_resampling_block_makes_the_piece_s_points(tmp_path):
         np.testing.assert_array_equal(
             lod_block_points("k", mesh, piece, lo, hi, s), every[lo:hi], err_msg=f"{lo}:{hi}"
         )
+
+
+def test_the_lod_error_sums_are_the_whole_pieces_gold_standard(tiny):
+    """The gold standard at a piece's held-out LOD points, summed a trace block at a time by its tasks, is
+    the one computed from all of the piece's traced samples at once (the sphere, the normal test and the
+    distance weights, here written out directly), and so are the piece's error sums."""
+    from scipy.spatial import cKDTree
+
+    from neuralao.pipeline.bakes.level_pieces import cached_piece, sample_rule
+    from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, blend
+    from neuralao.pipeline.bakes.level_stages import (
+        LOD_HELD_OUT,
+        TaskFiles,
+        lod_error_sums,
+        lod_piece_errors,
+        lod_reference_stems,
+        piece_trace,
+    )
+    from neuralao.runtime.foundation.settings import from_dict
+
+    root, level_path, _, info = tiny
+    s = from_dict(LevelBakeSettings, info["settings"])
+    level = read_level(level_path)
+    index = index_level(level, s.piece_faces)
+    t = s.trace
+    rule, pieces = sample_rule(
+        level, index, t.samples_per_vertex, t.min_samples_per_face, t.samples_per_face_cap, s.seed
+    )
+    stages = root / "simplified" / "stages"
+    lod_files, reference = (
+        TaskFiles(stages / "lod", info["key"]),
+        TaskFiles(stages / "lod_reference", info["key"]),
+    )
+    radius, checked = float(info["errors"]["lod"]["radius"]), 0
+    for p in pieces:
+        r = lod_files.get(f"p{p.index:05d}", LOD_HELD_OUT)
+        if len(r["hold_points"]) == 0:
+            continue
+        _, samples = cached_piece(info["key"], level, index, p, rule)
+        ao, valid = piece_trace(TaskFiles(stages / "trace", info["key"]), p, t.block_samples)
+        f = blend(ao[:, 0], ao[:, 1], s.blend).astype(np.float64)[valid]
+        pts, nrm, sw = samples.points[valid], samples.normals[valid], samples.weights[valid]
+        sums = np.zeros((len(r["hold_points"]), 2))
+        for i, nb in enumerate(cKDTree(pts).query_ball_point(r["hold_points"], radius)):
+            nb = np.asarray(nb, np.int64)
+            w = sw[nb] * np.maximum(radius - np.linalg.norm(pts[nb] - r["hold_points"][i], axis=1), 0)
+            w = w * (nrm[nb] @ r["hold_normals"][i] > 0.5)
+            sums[i] = w.sum(), np.sum(w * f[nb])
+        expected = lod_error_sums(r, sums)
+        got = lod_piece_errors(r, reference, lod_reference_stems(p, t.block_samples))
+        assert expected[5] > 0
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-15)
+        checked += 1
+    assert checked > 0
