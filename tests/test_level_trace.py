@@ -31,6 +31,7 @@ from neuralao.pipeline.geometry.surface import face_areas, surface_samples
 from neuralao.pipeline.tracing.foliage import Foliage, overlap_reduced
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres, sphere_directions
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 
 @pytest.fixture(scope="module")
@@ -99,14 +100,43 @@ def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
     st = LabelSettings(rays=32, kernel="obscurance", max_distance=g.opaque.diagonal, seed=5, workers=2)
-    ao, valid = LevelLabeller(g.opaque, st).obscurance(samples.points, samples.normals, [2.0, 300.0])
-    for j, h in enumerate((2.0, 300.0)):
-        a, v = Labeller(g.opaque, replace(st, half_distance=h)).ao_at_points(samples.points, samples.normals)
-        np.testing.assert_array_equal(valid, v)
-        # valid samples: bit for bit (rejected ones stop tracing early, their AO is not used)
-        np.testing.assert_array_equal(ao[valid, j], a[valid])
-    assert (ao[:, 0] >= ao[:, 1]).all()  # a longer half distance only darkens
-    assert (~valid).any()  # the tiny level's soup (houses, sunk buildings) has invalid samples
+    for bvh in ("fast", "robust"):  # the level's BVH and the labels' one
+        lab = LevelLabeller(g.opaque, st, bvh=bvh)
+        ao, valid = lab.obscurance(samples.points, samples.normals, [2.0, 300.0])
+        for j, h in enumerate((2.0, 300.0)):
+            one = Labeller(g.opaque, replace(st, half_distance=h), bvh=bvh)
+            a, v = one.ao_at_points(samples.points, samples.normals)
+            np.testing.assert_array_equal(valid, v)
+            # valid samples: bit for bit (rejected ones stop tracing early, their AO is not used)
+            np.testing.assert_array_equal(ao[valid, j], a[valid])
+        assert (ao[:, 0] >= ao[:, 1]).all()  # a longer half distance only darkens
+        assert (~valid).any()  # the tiny level's soup (houses, sunk buildings) has invalid samples
+
+
+def test_fast_bvh_finds_the_robust_bvhs_hits(tiny_geometry):
+    """The level's BVH (Embree's high-quality build, no robust flag) against the watertight default on the
+    same rays over the tiny level's soup: the same rays hit (at most one in 10^5 may differ, grazing an
+    edge), at the same distances within float32 rounding of the local frame but for rare near-coincident
+    faces (within the ray offset); ties between coincident faces may name either face."""
+    g = tiny_geometry
+    samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=2.0), seed=1)
+    st = LabelSettings(rays=64, kernel="obscurance", max_distance=g.opaque.diagonal, seed=3)
+    fast, robust = Labeller(g.opaque, st, bvh="fast"), Labeller(g.opaque, st, bvh="robust")
+    o, d = robust.rays(samples.points, samples.normals)
+    tmax = np.full(len(o), robust.r_local, np.float32)
+    a = fast.embree.run(o, d, query="INTERSECT", dists=tmax.copy(), output=1)
+    b = robust.embree.run(o, d, query="INTERSECT", dists=tmax.copy(), output=1)
+    hit_a, hit_b = a["primID"] >= 0, b["primID"] >= 0
+    assert len(o) > 100_000 and hit_b.mean() > 0.3
+    assert np.count_nonzero(hit_a != hit_b) <= len(o) * 1e-5
+    both = hit_a & hit_b
+    dt = np.abs(a["tfar"][both] - b["tfar"][both])
+    # float32 rounding (local units: the level's diagonal is 1) but for rare near-coincident faces of the
+    # soup, whose gap is within the ray offset (1e-5)
+    assert np.count_nonzero(dt > 4 * np.finfo(np.float32).eps) <= len(o) * 1e-4
+    assert dt.max() < 1e-5
+    with pytest.raises(NeuralaoError, match="bvh"):
+        Labeller(g.opaque, st, bvh="quick")
 
 
 @pytest.mark.parametrize("rays, threshold", [(32, 0.25), (64, 0.1), (48, 0.5)])

@@ -168,14 +168,16 @@ class Foliage:
         """Every crossing within (0, end): yields (ray index (h,), t (h,) float64, prim (h,))."""
         active = np.arange(len(orig))
         t = np.zeros(len(orig), np.float64)
-        for _ in range(self.max_hits):
+        for i in range(self.max_hits):
             if not len(active):
                 break
-            o = (orig[active] + dirs[active] * t[active, None].astype(np.float32)).astype(np.float32)
-            rem = (end[active] - t[active]).astype(np.float32)
-            out = self._embree.run(
-                o, np.ascontiguousarray(dirs[active]), query="INTERSECT", dists=rem, output=1
-            )
+            if i == 0:  # every ray from its origin (t = 0): the arrays as they are, no gather
+                o, d, rem = orig, dirs, end.astype(np.float32)
+            else:
+                o = (orig[active] + dirs[active] * t[active, None].astype(np.float32)).astype(np.float32)
+                d = np.ascontiguousarray(dirs[active])
+                rem = (end[active] - t[active]).astype(np.float32)
+            out = self._embree.run(o, d, query="INTERSECT", dists=rem, output=1)
             prim = out["primID"]
             hit = prim >= 0
             a, p = active[hit], prim[hit]

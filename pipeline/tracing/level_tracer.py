@@ -30,6 +30,8 @@ _RESAMPLE_RAYS = 1 << 20
 
 
 class LevelLabeller(Labeller):
+    bvh = "fast"  # Embree's high-quality BVH without the robust flag (Labeller.bvh)
+
     def obscurance(
         self,
         points: np.ndarray,
@@ -83,42 +85,47 @@ class LevelLabeller(Labeller):
         """One INTERSECT per ray; rho at each half distance (the arithmetic of ``Labeller._trace``).
 
         Rays go in rounds (:meth:`_checkpoints`): a sample the back-face rule has already rejected traces
-        no more rounds, and its AO (unused: it is invalid) is the mean over the rays it traced."""
+        no more rounds, and its AO (unused: it is invalid) is the mean over the rays it traced. Each round
+        makes only its own rays (the directions are elementwise, so they are the bits a whole trace makes)
+        and walks them through the foliage at once."""
         m, n_rays = len(origins), self._rays
         dirs_p, orig_p, tmp, dists = self._buffers(m * n_rays)
-        self._directions(frames, jitter, dirs_p.reshape(3, m, n_rays), tmp.reshape(m, n_rays))
-        for c in range(3):
-            orig_p[c].reshape(m, n_rays)[:] = origins[:, c, None]
-        dirs, orig = dirs_p.T, orig_p.T
         r = self.r_local
-        tfar = np.full(m * n_rays, r, np.float32)  # untraced rays read as misses
+        tfar = np.full((m, n_rays), r, np.float32)  # untraced rays read as misses
+        vis = None if foliage is None or foliage.empty else np.ones((m, n_rays), np.float32)
+        start = None if vis is None else foliage.origin_density(origins)
         back = np.zeros(m, np.int64)
         done = np.full(m, n_rays)  # rays traced per sample
         active, lo = np.arange(m), 0
         for hi in self._checkpoints(n_rays):
             if not len(active):
                 break
-            if lo == 0 and hi == n_rays:  # one round: every ray of every sample, no gather
-                ids, o, d = None, orig, dirs
-                dists.fill(r)
-                t_in = dists
-            else:
-                ids = (active[:, None] * n_rays + np.arange(lo, hi)).ravel()
-                o, d, t_in = orig[ids], dirs[ids], np.full(len(ids), r, np.float32)
-            out = self.embree.run(o, d, query="INTERSECT", dists=t_in, output=1)
+            k, w = len(active), hi - lo
+            every = k == m
+            count = k * w
+            d_p, o_p = dirs_p[:, :count], orig_p[:, :count]
+            fr = frames if every else frames[:, :, active]
+            scratch = tmp[:count].reshape(k, w)
+            self._directions(fr, jitter[active], d_p.reshape(3, k, w), scratch, slice(lo, hi))
+            for c in range(3):
+                o_p[c].reshape(k, w)[:] = origins[active, c, None]
+            t_in = dists[:count]
+            t_in.fill(r)
+            out = self.embree.run(o_p.T, d_p.T, query="INTERSECT", dists=t_in, output=1)
             prim = out["primID"]
-            if ids is None:
-                tfar[:] = out["tfar"]
-            else:
-                tfar[ids] = out["tfar"]
+            rows = slice(None) if every else active
+            tfar[rows, lo:hi] = out["tfar"].reshape(k, w)
+            if vis is not None:
+                vis[rows, lo:hi] = foliage.transmittance(
+                    o_p.T, d_p.T, np.minimum(out["tfar"], r), np.repeat(start[active], w)
+                ).reshape(k, w)
             if self.backface_rule:
                 hit_idx = np.flatnonzero(prim >= 0)
-                ray = hit_idx if ids is None else ids[hit_idx]
                 fn = self._face_normals32[prim[hit_idx]]
-                facing = dirs_p[0, ray] * fn[:, 0]
-                facing += dirs_p[1, ray] * fn[:, 1]
-                facing += dirs_p[2, ray] * fn[:, 2]
-                back += np.bincount(ray[facing > 0] // n_rays, minlength=m)
+                facing = d_p[0, hit_idx] * fn[:, 0]
+                facing += d_p[1, hit_idx] * fn[:, 1]
+                facing += d_p[2, hit_idx] * fn[:, 2]
+                back[active] += np.bincount(hit_idx[facing > 0] // w, minlength=k)
             if hi < n_rays:
                 stop = back[active] / n_rays > self._threshold
                 done[active[stop]] = hi
@@ -126,31 +133,23 @@ class LevelLabeller(Labeller):
             lo = hi
         back_ok = back / n_rays <= self._threshold if self.backface_rule else np.ones(m, dtype=bool)
         partial = np.flatnonzero(done < n_rays)
-        vis = None
-        if foliage is not None and not foliage.empty:
-            start = np.repeat(foliage.origin_density(origins), n_rays)
-            if not len(partial):
-                vis = foliage.transmittance(
-                    np.ascontiguousarray(orig), np.ascontiguousarray(dirs), np.minimum(tfar, r), start
-                )
-            else:
-                traced = np.flatnonzero((np.arange(n_rays)[None, :] < done[:, None]).ravel())
-                vis = np.ones(m * n_rays, np.float32)
-                vis[traced] = foliage.transmittance(
-                    orig[traced], dirs[traced], np.minimum(tfar[traced], r), start[traced]
-                )
         ao = np.empty((m, len(h_local)), np.float32)
+        miss = ~(tfar < r)
+        rho = tmp[: m * n_rays].reshape(m, n_rays)
         for j, h in enumerate(h_local):
-            rho = np.where(tfar < r, 1.0 - np.exp2(-tfar / np.float32(h)), np.float32(1.0))
+            # 1 - 2^(-t / h) on a hit, 1 on a miss, times the foliage's transmittance: in place, the same
+            # float32 operations as Labeller._trace's expression
+            np.negative(tfar, out=rho)
+            np.divide(rho, np.float32(h), out=rho)
+            np.exp2(rho, out=rho)
+            np.subtract(np.float32(1.0), rho, out=rho)
+            np.copyto(rho, np.float32(1.0), where=miss)
             if vis is not None:
-                rho = rho * vis
-            rho = rho.reshape(m, n_rays)
+                rho *= vis
             ao[:, j] = np.clip(rho.mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0)
-            for k in np.unique(done[partial]):  # rejected samples: the mean over the rays they traced
-                rows = partial[done[partial] == k]
-                ao[rows, j] = np.clip(
-                    rho[rows, :k].mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0
-                )
+            for n in np.unique(done[partial]):  # rejected samples: the mean over the rays they traced
+                rej = partial[done[partial] == n]
+                ao[rej, j] = np.clip(rho[rej, :n].mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0)
         return ao, back_ok
 
     def closest_hits(
