@@ -57,6 +57,18 @@ def test_a_bake_in_pieces_is_the_bake_of_the_whole_level(baked, tmp_path):
     assert all(t >= 0 for ts in pieces["task_seconds"].values() for t in ts)
 
 
+def test_two_tasks_at_a_time_bake_the_bytes_of_one_at_a_time(baked, tmp_path):
+    """A local bake runs ``workers`` tasks at once on threads (three pieces: several tasks per stage); one
+    worker, one task at a time and one tracing thread, writes the same glTF bytes."""
+    root, level, cfg, info = baked
+    two = bake_level(level, load_level_settings(cfg, ["piece_faces=100"]), tmp_path / "two")
+    one = bake_level(level, load_level_settings(cfg, ["piece_faces=100", "workers=1"]), tmp_path / "one")
+    assert two["counts"]["pieces"] == 3 and two["task_threads"] == 2 and one["task_threads"] == 1
+    assert (tmp_path / "two" / "level_baked.glb").read_bytes() == (
+        tmp_path / "one" / "level_baked.glb"
+    ).read_bytes()
+
+
 def _glb(root):
     doc, get = read_gltf_json(root / "out" / "level_baked.glb")
     return doc, get

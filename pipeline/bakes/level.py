@@ -272,7 +272,8 @@ def bake_level(
     t = s.trace
     light = pieces_context(key, level, index)
     # The samples' two passes over the pieces are a task per piece each (here: in this process).
-    blog.runner = engine or LocalEngine()
+    # Locally, s.workers tasks at a time on threads (each traces with s.workers threads of its own).
+    blog.runner = engine or LocalEngine(workers=s.workers)
     rule, pieces = blog.timed(
         "samples",
         "Sample mesh",
@@ -304,7 +305,7 @@ def bake_level(
     # world of tens of millions of faces).
     if engine is None:
         state = blog.timed("bvh", "Embree BVH build (opaque)", lambda: ctx.build(ctx.value()))
-        runner = LocalEngine(states={ctx.key: state})
+        runner = LocalEngine(states={ctx.key: state}, workers=s.workers)
     else:
         runner = engine
     blog.runner = runner  # each stage's row counts its tasks' seconds

@@ -15,6 +15,7 @@ stream indexed by global face number (each piece skips ahead to its first face).
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
@@ -246,17 +247,22 @@ def piece_samples(scene: Scene, piece: Piece, rule: SampleRule) -> SurfaceSample
 # A worker's latest pieces (geometry and samples), reused by the next task of the same piece.
 _CACHE: OrderedDict[tuple, tuple[Scene, Any]] = OrderedDict()
 _CACHE_SIZE = 2
+_CACHE_LOCK = threading.Lock()
 
 
 def remembered(cache: OrderedDict, key, make: Callable[[], Any], size: int = _CACHE_SIZE) -> Any:
     """``cache[key]``, made by ``make()`` when absent; the ``size`` latest keys are kept (a worker's next
-    task is most often another block of the same piece)."""
-    if key in cache:
-        cache.move_to_end(key)
-        return cache[key]
-    cache[key] = value = make()
-    while len(cache) > size:
-        cache.popitem(last=False)
+    task is most often another block of the same piece). Thread-safe: tasks of a local engine with several
+    workers share it (two may make the same value at once; it is the same value)."""
+    with _CACHE_LOCK:
+        if key in cache:
+            cache.move_to_end(key)
+            return cache[key]
+    value = make()
+    with _CACHE_LOCK:
+        cache[key] = value
+        while len(cache) > size:
+            cache.popitem(last=False)
     return value
 
 

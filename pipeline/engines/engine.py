@@ -12,8 +12,8 @@ The whole interface is :meth:`Engine.map` over :class:`Task` objects. A task nam
 completion order; callers that write files do so themselves, on the driver, atomically, as results
 arrive. Engines:
 
-* :class:`LocalEngine` (the default): runs each task in this process, in order, keeping the state of
-  the latest context. No Ray import.
+* :class:`LocalEngine` (the default): runs each task in this process, in order (or ``workers`` at once
+  on threads), keeping the state of the latest context. No Ray import.
 * :class:`RayEngine`: one actor per worker (``num_cpus=1``), each caching the states of its latest
   contexts. Payloads travel through the object store (put once, fetched once per actor that needs
   them): workers need no shared filesystem, only the installed package. Results return through the
@@ -41,8 +41,10 @@ import logging
 import os
 import shutil
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, as_completed, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -261,17 +263,25 @@ class Engine:
 
 
 class LocalEngine(Engine):
-    """Every task in this process, in input order (the state of the latest context is kept).
+    """Every task in this process (the state of the latest context is kept).
 
-    states : context key -> a state this process already holds (the level baker's own labeller), used
-             for tasks of that context instead of building one; never closed here."""
+    states  : context key -> a state this process already holds (the level baker's own labeller), used
+              for tasks of that context instead of building one; never closed here.
+    workers : tasks running at once, on threads of this process (their numpy, SciPy and Embree calls
+              release the GIL): 1 runs them in input order. Tasks of one context share its state; a task
+              of another context starts when those before it have finished (its state may replace theirs).
+              Each task keeps the threads its own settings give it."""
 
     name = "local"
 
-    def __init__(self, states: dict[str, Any] | None = None) -> None:
+    def __init__(self, states: dict[str, Any] | None = None, workers: int = 1) -> None:
         super().__init__()
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise NeuralaoError(f"local workers must be a positive integer, got {workers!r}")
+        self.workers = workers
         self._cache = _StateCache(1)
         self._states = dict(states or {})
+        self._lock = threading.Lock()  # one state built at a time; tasks wait for the one they need
 
     def hold(self, key: str, state: Any) -> None:
         """Use ``state`` (held by the caller) for the tasks of context ``key`` from now on."""
@@ -281,11 +291,10 @@ class LocalEngine(Engine):
         """Forget the state :meth:`hold` was given for ``key`` (the caller frees it)."""
         self._states.pop(key, None)
 
-    def _run(self, pending):
-        for index, task in pending:
-            yield from self._drain_stored()
-            ctx = task.context
-            built = [0.0]
+    def _call(self, task: Task) -> _Timed:
+        ctx = task.context
+        built = [0.0]
+        with self._lock:
             if ctx.key in self._states:
                 state = self._states[ctx.key]
             else:
@@ -294,7 +303,33 @@ class LocalEngine(Engine):
                     lambda ctx=ctx, built=built: _timed_build(ctx.build, ctx.value, built),
                     ctx.heavy,
                 )
-            yield index, task, self._timing(_timed_call(task.fn, state, _unshare(task.args), built[0]))
+        return _timed_call(task.fn, state, _unshare(task.args), built[0])
+
+    def _run(self, pending):
+        if self.workers == 1:
+            for index, task in pending:
+                yield from self._drain_stored()
+                yield index, task, self._timing(self._call(task))
+            yield from self._drain_stored()
+            return
+        with ThreadPoolExecutor(self.workers, thread_name_prefix="neuralao-task") as pool:
+            running: dict[Future, tuple[int, Task]] = {}
+
+            def finished(block: bool):
+                done, _ = wait(running, return_when=FIRST_COMPLETED) if block else (list(running), None)
+                for future in done if block else as_completed(done):
+                    index, task = running.pop(future)
+                    yield index, task, self._timing(future.result())
+
+            for index, task in pending:
+                yield from self._drain_stored()
+                key = task.context.key
+                while running and (
+                    len(running) >= self.workers or any(t.context.key != key for _, t in running.values())
+                ):
+                    yield from finished(True)
+                running[pool.submit(self._call, task)] = (index, task)
+            yield from finished(False)
         yield from self._drain_stored()
 
     def close(self) -> None:
