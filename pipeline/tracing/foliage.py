@@ -229,6 +229,8 @@ class Foliage:
             box = self._is_box[p]
             ab, pb = a[box], p[box]
             entering = np.einsum("ij,ij->i", dirs[ab], self._normals[pb]) < 0
-            np.add.at(optical, ab, np.where(entering, 1.0, -1.0) * self._sigma[pb] * (end[ab] - th[box]))
-            np.multiply.at(trans, a[~box], self._trans[p[~box]])
+            # a ray crosses at most once per step of the walk: its indices are distinct, so plain fancy
+            # updates add and multiply exactly as ufunc.at would, without its unbuffered loop
+            optical[ab] += np.where(entering, 1.0, -1.0) * self._sigma[pb] * (end[ab] - th[box])
+            trans[a[~box]] *= self._trans[p[~box]]
         return (np.exp(-np.maximum(optical, 0.0)) * trans).astype(np.float32)
