@@ -224,8 +224,9 @@ class Foliage:
             return np.ones(len(orig), np.float32)
         optical = np.asarray(start_density, np.float64) * end
         trans = np.ones(len(orig), np.float32)
-        dirs = np.ascontiguousarray(dirs, dtype=np.float32)
-        for a, th, p in self._walk(np.ascontiguousarray(orig, dtype=np.float32), dirs, end):
+        # float32 views as given (Embree reads strided rays; a planar buffer's transpose is not copied)
+        dirs = np.asarray(dirs, dtype=np.float32)
+        for a, th, p in self._walk(np.asarray(orig, dtype=np.float32), dirs, end):
             box = self._is_box[p]
             ab, pb = a[box], p[box]
             entering = np.einsum("ij,ij->i", dirs[ab], self._normals[pb]) < 0
@@ -233,4 +234,7 @@ class Foliage:
             # updates add and multiply exactly as ufunc.at would, without its unbuffered loop
             optical[ab] += np.where(entering, 1.0, -1.0) * self._sigma[pb] * (end[ab] - th[box])
             trans[a[~box]] *= self._trans[p[~box]]
-        return (np.exp(-np.maximum(optical, 0.0)) * trans).astype(np.float32)
+        # exp(-0) * trans is trans exactly: only rays through a medium take the exponential
+        inside = np.flatnonzero(optical > 0.0)
+        trans[inside] = np.exp(-optical[inside]) * trans[inside]
+        return trans

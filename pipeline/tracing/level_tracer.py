@@ -134,16 +134,17 @@ class LevelLabeller(Labeller):
         back_ok = back / n_rays <= self._threshold if self.backface_rule else np.ones(m, dtype=bool)
         partial = np.flatnonzero(done < n_rays)
         ao = np.empty((m, len(h_local)), np.float32)
-        miss = ~(tfar < r)
+        # 1 - 2^(-t / h) on a hit, 1 on a miss, times the foliage's transmittance: in place, the same
+        # float32 operations as Labeller._trace's expression; a miss reads t = inf, so 2^(-inf) = 0 gives it
+        # exactly 1
+        neg_t = tfar
+        np.copyto(neg_t, np.float32(np.inf), where=~(tfar < r))
+        np.negative(neg_t, out=neg_t)
         rho = tmp[: m * n_rays].reshape(m, n_rays)
         for j, h in enumerate(h_local):
-            # 1 - 2^(-t / h) on a hit, 1 on a miss, times the foliage's transmittance: in place, the same
-            # float32 operations as Labeller._trace's expression
-            np.negative(tfar, out=rho)
-            np.divide(rho, np.float32(h), out=rho)
+            np.divide(neg_t, np.float32(h), out=rho)
             np.exp2(rho, out=rho)
             np.subtract(np.float32(1.0), rho, out=rho)
-            np.copyto(rho, np.float32(1.0), where=miss)
             if vis is not None:
                 rho *= vis
             ao[:, j] = np.clip(rho.mean(axis=1, dtype=np.float64).astype(np.float32), 0.0, 1.0)
