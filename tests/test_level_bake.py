@@ -58,12 +58,13 @@ def test_a_bake_in_pieces_is_the_bake_of_the_whole_level(baked, tmp_path):
 
 
 def test_two_tasks_at_a_time_bake_the_bytes_of_one_at_a_time(baked, tmp_path):
-    """A local bake runs ``workers`` tasks at once on threads (three pieces: several tasks per stage); one
-    worker, one task at a time and one tracing thread, writes the same glTF bytes."""
+    """A local bake runs ``workers`` tasks at once on threads, each tracing on one (three pieces: several
+    tasks per stage); one worker, one task at a time, writes the same glTF bytes."""
     root, level, cfg, info = baked
     two = bake_level(level, load_level_settings(cfg, ["piece_faces=100"]), tmp_path / "two")
     one = bake_level(level, load_level_settings(cfg, ["piece_faces=100", "workers=1"]), tmp_path / "one")
-    assert two["counts"]["pieces"] == 3 and two["task_threads"] == 2 and one["task_threads"] == 1
+    assert two["counts"]["pieces"] == 3 and two["tasks_at_once"] == 2 and one["tasks_at_once"] == 1
+    assert two["task_threads"] == one["task_threads"] == 1
     assert (tmp_path / "two" / "level_baked.glb").read_bytes() == (
         tmp_path / "one" / "level_baked.glb"
     ).read_bytes()

@@ -60,7 +60,8 @@ def test_a_new_context_waits_for_the_tasks_before_it_and_results_match_one_worke
     assert list(two.ordered(tasks)) == [one[i] for i in range(10)]
 
 
-@pytest.mark.parametrize("workers", [0, -1, 1.5, True])
-def test_bad_worker_counts_are_errors(workers):
-    with pytest.raises(NeuralaoError, match="workers"):
-        LocalEngine(workers=workers)
+@pytest.mark.parametrize("field", ["workers", "threads"])
+@pytest.mark.parametrize("value", [0, -1, 1.5, True])
+def test_bad_worker_and_thread_counts_are_errors(field, value):
+    with pytest.raises(NeuralaoError, match=field):
+        LocalEngine(**{field: value})

@@ -121,6 +121,7 @@ class BakeLog:
         self.task_seconds: dict[str, list[float]] = {}
         self.state_seconds: dict[str, list[float]] = {}
         self.dir = out / "stages"
+        self._thread0 = 0.0  # this thread's CPU seconds when the current stage began
         self.dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.dir)
         remove_stale_temporaries(out)
@@ -128,6 +129,7 @@ class BakeLog:
     def timed(self, name: str, description: str, fn, **counts):
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
+        self._thread0 = time.thread_time()
         result = fn()
         self._record(name, description, t0, c0, False, counts)
         return result
@@ -137,6 +139,7 @@ class BakeLog:
         path = self.dir / f"{name}.npz"
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
+        self._thread0 = time.thread_time()
         if path.is_file():
             data = read_npz(path)
             if str(data.pop("_key", "")) == self.key:
@@ -180,11 +183,14 @@ class BakeLog:
             built, self.runner.state_seconds = self.runner.state_seconds, []
             self.state_seconds[name] = built
             self.stages[-1].update(states_built=len(built))
-        # The driver's own seconds: what no task did. Here (no engine, or the local one) the tasks ran in
-        # this process, so the stage's wall time less theirs; on a cluster the driver waits for them, so
-        # its CPU time (Ray's client work included).
+        # The driver's own seconds: what no task did. Here, one task at a time, the tasks ran in this thread,
+        # so the stage's wall time less theirs; with several at once they ran on other threads, so this
+        # thread's CPU time; on a cluster the driver waits for them, so its CPU time (Ray's client work
+        # included).
         row = self.stages[-1]
-        if self.runner is None or self.runner.name == "local":
+        if self.runner is not None and self.runner.name == "local" and self.runner.workers > 1:
+            row["driver_seconds"] = time.thread_time() - self._thread0
+        elif self.runner is None or self.runner.name == "local":
             row["driver_seconds"] = max(0.0, row["seconds"] - sum(done) - sum(built))
         else:
             row["driver_seconds"] = row["cpu_seconds"]
@@ -272,8 +278,10 @@ def bake_level(
     t = s.trace
     light = pieces_context(key, level, index)
     # The samples' two passes over the pieces are a task per piece each (here: in this process).
-    # Locally, s.workers tasks at a time on threads (each traces with s.workers threads of its own).
-    blog.runner = engine or LocalEngine(workers=s.workers)
+    # Locally, s.workers tasks at a time on threads, each tracing on one (as Ray's single-CPU actors): no
+    # task's numpy waits for its own tracing threads, and the stages' tasks fill the cores.
+    local = None if engine is not None else LocalEngine(workers=s.workers, threads=1)
+    blog.runner = engine or local
     rule, pieces = blog.timed(
         "samples",
         "Sample mesh",
@@ -290,7 +298,7 @@ def bake_level(
     blog.runner = None
     total_samples = sum(p.ns for p in pieces)
     blog.note("samples", samples=total_samples)
-    settings_here = worker_settings(label_settings(s, index.diagonal), engine)
+    settings_here = worker_settings(label_settings(s, index.diagonal), engine or local)
     frame = LabellerFrame(index.center, index.diagonal, settings_here)
     foliage = None
     if s.foliage.enabled:
@@ -305,7 +313,8 @@ def bake_level(
     # world of tens of millions of faces).
     if engine is None:
         state = blog.timed("bvh", "Embree BVH build (opaque)", lambda: ctx.build(ctx.value()))
-        runner = LocalEngine(states={ctx.key: state}, workers=s.workers)
+        local.hold(ctx.key, state)
+        runner = local
     else:
         runner = engine
     blog.runner = runner  # each stage's row counts its tasks' seconds
@@ -457,7 +466,8 @@ def bake_level(
         "state_seconds": blog.state_seconds,
         "engine": runner.name,
         # Threads each task traced with (this process's for a local bake; an actor's on Ray).
-        "task_threads": s.workers if engine is None else (engine.threads or s.workers),
+        "task_threads": runner.threads or s.workers,
+        "tasks_at_once": runner.workers,
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),

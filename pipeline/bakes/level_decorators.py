@@ -179,7 +179,7 @@ def bake_decorators(
     trees = level.nodes_with("tree")
     if not trees:
         return {"models": np.zeros(0, np.int64)}
-    settings = worker_settings(label_settings(s, diagonal), None if local else runner)
+    settings = worker_settings(label_settings(s, diagonal), runner)
     # Foliage lives in the gold labeller's local frame (its scene's centre and diagonal), found here
     # one instance at a time, without flattening the level.
     bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))

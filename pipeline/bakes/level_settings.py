@@ -43,8 +43,9 @@ class TraceSettings:
     alpha: float = 1.0
     # Back-face rule threshold (the paper: 25%); None disables it.
     backface_threshold: float | None = 0.25
-    # Samples per resumable trace block (one npz under OUT/stages/trace/ each).
-    block_samples: int = 262144
+    # Samples per resumable trace block (one npz under OUT/stages/trace/ each), a task each: 16.8M rays at
+    # 256 rays a sample, a few seconds on one core, so the last blocks of a stage keep every core busy.
+    block_samples: int = 65536
     # Sparse solver of the least-squares systems: "components" (exact: the system is block diagonal over
     # connected components; each block a task, SuperLU below component_vertices and multigrid CG above);
     # or one solve of the whole system: "direct" (SuperLU), "cg" (Jacobi CG), "amg" (multigrid CG).

@@ -270,15 +270,18 @@ class LocalEngine(Engine):
     workers : tasks running at once, on threads of this process (their numpy, SciPy and Embree calls
               release the GIL): 1 runs them in input order. Tasks of one context share its state; a task
               of another context starts when those before it have finished (its state may replace theirs).
-              Each task keeps the threads its own settings give it."""
+    threads : tracing threads per task, as ``RayEngine.threads`` (None: what the task's settings say)."""
 
     name = "local"
 
-    def __init__(self, states: dict[str, Any] | None = None, workers: int = 1) -> None:
+    def __init__(
+        self, states: dict[str, Any] | None = None, workers: int = 1, threads: int | None = None
+    ) -> None:
         super().__init__()
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise NeuralaoError(f"local workers must be a positive integer, got {workers!r}")
-        self.workers = workers
+        for name, value in (("workers", workers), ("threads", 1 if threads is None else threads)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise NeuralaoError(f"local {name} must be a positive integer, got {value!r}")
+        self.workers, self.threads = workers, threads
         self._cache = _StateCache(1)
         self._states = dict(states or {})
         self._lock = threading.Lock()  # one state built at a time; tasks wait for the one they need
