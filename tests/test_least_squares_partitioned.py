@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from helpers import smooth_values, soup_scene, under_footprints
 from scipy.sparse.linalg import splu
 
@@ -18,7 +19,7 @@ from neuralao.pipeline.bakes.level_pieces import scene_samples
 from neuralao.pipeline.bakes.level_settings import TraceSettings, halves, label_settings, load_level_settings
 from neuralao.pipeline.bakes.level_stages import fit_level, opaque_scene
 from neuralao.pipeline.engines.engine import Context, LocalEngine
-from neuralao.pipeline.geometry.least_squares import fit_least_squares, normal_equations
+from neuralao.pipeline.geometry.least_squares import fit_least_squares, normal_equations, solve_amg
 from neuralao.pipeline.geometry.level_files import flatten, read_level
 from neuralao.pipeline.geometry.level_gen import LevelGenSettings, settings_for, terrain
 from neuralao.pipeline.geometry.level_gen import write_level as write_generated_level
@@ -237,3 +238,23 @@ def test_ray_level_bake_with_subdomains_is_the_local_bake(tmp_path, ray_engine):
     assert (tmp_path / "local" / "level_baked.glb").read_bytes() == (
         tmp_path / "ray" / "level_baked.glb"
     ).read_bytes()
+
+
+def test_amg_solve_is_the_same_bytes_whatever_numpys_global_stream():
+    """pyamg draws its spectral-radius start vectors from numpy's global random stream: the solve seeds it
+    for the hierarchy (the same bytes after any earlier draws) and gives the caller's stream back."""
+    n = 60
+    idx = np.arange(n * n).reshape(n, n)
+    i, j = np.r_[idx[:-1].ravel(), idx[:, :-1].ravel()], np.r_[idx[1:].ravel(), idx[:, 1:].ravel()]
+    w = np.random.default_rng(0).uniform(0.5, 2.0, len(i))
+    lap = sp.coo_matrix((np.r_[-w, -w], (np.r_[i, j], np.r_[j, i])), shape=(n * n, n * n)).tocsr()
+    a = (sp.diags(-np.asarray(lap.sum(axis=1)).ravel() + 1e-3) + lap).tocsr()
+    rhs = np.random.default_rng(1).normal(size=(n * n, 2))
+    results = []
+    for seed in (1, 2):
+        np.random.seed(seed)
+        x = solve_amg(a, rhs)
+        assert np.random.rand() == np.random.RandomState(seed).rand()  # the caller's stream, untouched
+        results.append(x)
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_allclose(a @ results[0], rhs, atol=1e-8 * np.abs(rhs).max())

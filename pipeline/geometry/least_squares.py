@@ -36,6 +36,7 @@ graph Laplace equation with the valid ones fixed.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -261,12 +262,26 @@ def solve_cg(a, rhs: np.ndarray) -> np.ndarray:
     return out.reshape(rhs.shape)
 
 
+# pyamg's hierarchy estimates spectral radii from numpy's global random stream (an unseeded start vector):
+# one hierarchy is built at a time, from a fixed seed, and the stream is given back as it was.
+_AMG_LOCK = threading.Lock()
+_AMG_SEED = 0
+
+
 def solve_amg(a, rhs: np.ndarray) -> np.ndarray:
     """CG on the SPD normal equations with a smoothed-aggregation AMG preconditioner (one hierarchy for
-    every column of ``rhs``)."""
+    every column of ``rhs``). The same system gives the same bytes: the hierarchy's random start vectors
+    come from a fixed seed."""
     import pyamg  # imported here: ~1 s to import (measured), and only this solver needs it
 
-    precond = pyamg.smoothed_aggregation_solver(a.tocsr(), symmetry="symmetric").aspreconditioner(cycle="V")
+    with _AMG_LOCK:
+        state = np.random.get_state()
+        np.random.seed(_AMG_SEED)
+        try:
+            hierarchy = pyamg.smoothed_aggregation_solver(a.tocsr(), symmetry="symmetric")
+        finally:
+            np.random.set_state(state)
+    precond = hierarchy.aspreconditioner(cycle="V")
     cols = rhs.reshape(len(rhs), -1)
     out = np.empty_like(cols)
     for j in range(cols.shape[1]):
