@@ -229,8 +229,8 @@ def main() -> int:
         "--project-from",
         default=None,
         help="project this bake log (bench_level.json, bench_world.json, bake_log.json) instead of the "
-        "1-node run; written to OUT/bench_cluster_projected.{json,md} (a local bake with workers > 1 ran "
-        "tasks side by side: its task seconds share cores, bake with --set workers=1 to project one)",
+        "1-node run; written to OUT/bench_cluster_projected.{json,md} (a local bake's tasks run one per "
+        "core, as single-CPU actors' do)",
     )
     args = p.parse_args()
     out = Path(args.out) / "level_cluster" / args.preset
