@@ -132,7 +132,7 @@ class LevelBakeSettings:
     lod: LodSettings = field(default_factory=LodSettings)
     # Seed of every sample position and ray direction.
     seed: int = 0
-    # Tasks a local bake runs at once, on threads, each tracing on one (on Ray, --ray-threads sets an actor's).
+    # Tasks a local bake runs at once, on threads, each tracing on one (on Ray: an actor's --ray-threads).
     workers: int = 2
     # Rays per resampling task (grass, shrubs) on an engine: scheduling only, never the result.
     task_rays: int = 1 << 20
