@@ -239,9 +239,10 @@ def traces(info: dict, stage: dict, count: int) -> list[bool]:
 
 def stage_costs(info: dict, checks: bool = False) -> list[dict]:
     """Per stage of a level bake log (bake_log.json; ``bench_level.json``'s ``bake``): the driver's own
-    seconds (a local bake: the stage's wall time less its tasks', which ran in the driver; a Ray bake:
-    the driver's CPU seconds) and each task's core-seconds (its seconds x the threads it traced with, for
-    the tasks that trace: :func:`traces`), and whether it traces ("traces"), the states workers build
+    seconds (a local bake: the stage's wall time less its tasks', which ran in the driver, or, with several
+    tasks at once beside it, less the time it waited for them; a Ray bake: the driver's CPU seconds) and
+    each task's core-seconds (its seconds x the threads it traced with, for the tasks that trace:
+    :func:`traces`), and whether it traces ("traces"), the states workers build
     (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators). The
     stages that only make error tables are left out unless ``checks`` (a run's own wall clock has them)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
@@ -258,6 +259,9 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
         state = 0.0
         if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
             state, driver = st["seconds"], 0.0
+        elif local and int(info.get("tasks_at_once", 1)) > 1:  # the tasks ran beside the driver
+            state = float(st.get("seconds_gold_state", 0.0))
+            driver = max(0.0, float(st["driver_seconds"]) - state)
         elif local:  # the tasks ran in the driver, one after the other
             state = float(st.get("seconds_gold_state", 0.0))
             driver = max(0.0, st["seconds"] - sum(t) - state)

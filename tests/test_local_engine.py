@@ -55,6 +55,8 @@ def test_a_new_context_waits_for_the_tasks_before_it_and_results_match_one_worke
     first_b = min(t for kind, name, t in log if kind == "start" and name == "b")
     assert first_b >= last_a
     assert len(two.task_seconds) == 10 and two.completed == 10
+    # ten tasks of 50 ms, two at a time: the caller waited for them at least 250 ms, and not much more
+    assert 0.25 <= two.waited <= sum(two.task_seconds) + 0.5
     one = dict(LocalEngine(workers=1).map(tasks))
     assert got.keys() == one.keys() and all(got[k][0] == one[k][0] and got[k][1] == one[k][1] for k in got)
     assert list(two.ordered(tasks)) == [one[i] for i in range(10)]

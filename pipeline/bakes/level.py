@@ -121,7 +121,7 @@ class BakeLog:
         self.task_seconds: dict[str, list[float]] = {}
         self.state_seconds: dict[str, list[float]] = {}
         self.dir = out / "stages"
-        self._thread0 = 0.0  # this thread's CPU seconds when the current stage began
+        self._waited0 = 0.0  # the local runner's waiting seconds when the current stage began
         self.dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.dir)
         remove_stale_temporaries(out)
@@ -129,7 +129,7 @@ class BakeLog:
     def timed(self, name: str, description: str, fn, **counts):
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
-        self._thread0 = time.thread_time()
+        self._waited0 = getattr(self.runner, "waited", 0.0)
         result = fn()
         self._record(name, description, t0, c0, False, counts)
         return result
@@ -139,7 +139,7 @@ class BakeLog:
         path = self.dir / f"{name}.npz"
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
-        self._thread0 = time.thread_time()
+        self._waited0 = getattr(self.runner, "waited", 0.0)
         if path.is_file():
             data = read_npz(path)
             if str(data.pop("_key", "")) == self.key:
@@ -184,12 +184,13 @@ class BakeLog:
             self.state_seconds[name] = built
             self.stages[-1].update(states_built=len(built))
         # The driver's own seconds: what no task did. Here, one task at a time, the tasks ran in this thread,
-        # so the stage's wall time less theirs; with several at once they ran on other threads, so this
-        # thread's CPU time; on a cluster the driver waits for them, so its CPU time (Ray's client work
-        # included).
+        # so the stage's wall time less theirs; with several at once they ran on other threads, so the
+        # stage's wall time less the time this thread waited for them; on a cluster the driver waits for
+        # them, so its CPU time (Ray's client work included).
         row = self.stages[-1]
         if self.runner is not None and self.runner.name == "local" and self.runner.workers > 1:
-            row["driver_seconds"] = time.thread_time() - self._thread0
+            waited = self.runner.waited - self._waited0
+            row["driver_seconds"] = max(0.0, row["seconds"] - waited)  # states are built by the tasks
         elif self.runner is None or self.runner.name == "local":
             row["driver_seconds"] = max(0.0, row["seconds"] - sum(done) - sum(built))
         else:

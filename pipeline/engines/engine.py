@@ -282,6 +282,9 @@ class LocalEngine(Engine):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise NeuralaoError(f"local {name} must be a positive integer, got {value!r}")
         self.workers, self.threads = workers, threads
+        # Seconds the caller's thread has spent waiting for tasks running beside it (workers > 1): what
+        # a stage's wall time less its driver's own work is.
+        self.waited = 0.0
         self._cache = _StateCache(1)
         self._states = dict(states or {})
         self._lock = threading.Lock()  # one state built at a time; tasks wait for the one they need
@@ -319,10 +322,18 @@ class LocalEngine(Engine):
             running: dict[Future, tuple[int, Task]] = {}
 
             def finished(block: bool):
-                done, _ = wait(running, return_when=FIRST_COMPLETED) if block else (list(running), None)
-                for future in done if block else as_completed(done):
+                """The next finished task (block) or every running one, in completion order; the time
+                spent waiting for them is added to ``waited``."""
+                t0 = time.perf_counter()
+                futures = iter(
+                    wait(running, return_when=FIRST_COMPLETED)[0] if block else as_completed(running)
+                )
+                while (future := next(futures, None)) is not None:
+                    self.waited += time.perf_counter() - t0
                     index, task = running.pop(future)
                     yield index, task, self._timing(future.result())
+                    t0 = time.perf_counter()
+                self.waited += time.perf_counter() - t0
 
             for index, task in pending:
                 yield from self._drain_stored()
