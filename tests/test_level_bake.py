@@ -70,6 +70,21 @@ def test_two_tasks_at_a_time_bake_the_bytes_of_one_at_a_time(baked, tmp_path):
     ).read_bytes()
 
 
+def test_robust_bvh_bakes_the_fast_ones_ao(baked, tmp_path):
+    """``trace.bvh=robust`` (the watertight scene, for farms whose machines trace little each) bakes what the
+    default fast scene bakes: every static vertex's AO within 1e-3 (the same hits but for rare grazing rays
+    and ties between coincident faces)."""
+    root, level, cfg, info = baked
+    bake_level(level, load_level_settings(cfg, ["trace.bvh=robust"]), tmp_path / "robust")
+    fast, robust = (
+        _static_ao(root / "out" / "level_baked.glb"),
+        _static_ao(tmp_path / "robust" / "level_baked.glb"),
+    )
+    assert fast.keys() == robust.keys()
+    for name, ao in fast.items():
+        np.testing.assert_allclose(robust[name], ao, atol=1e-3, err_msg=name)
+
+
 def _glb(root):
     doc, get = read_gltf_json(root / "out" / "level_baked.glb")
     return doc, get
@@ -264,6 +279,7 @@ def test_remap_curve_is_applied_after_the_blend(baked, tmp_path):
         ("blend.remap=[[0.2, 0], [1, 1]]", "cover [0, 1]"),
         ("output=../x.glb", "output must be a file name"),
         ("trace.solver=lu", "is not one of"),
+        ("trace.bvh=quick", "is not one of"),
     ],
 )
 def test_bad_settings_are_one_line_errors(baked, override, message, capsys):

@@ -309,7 +309,7 @@ def bake_level(
             lambda: build_foliage(level, frame, s.foliage),
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
-    ctx = opaque_context(key, level, index, settings_here, foliage)
+    ctx = opaque_context(key, level, index, settings_here, foliage, t.bvh)
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:

@@ -113,6 +113,7 @@ def _tree_model(level: Level, diagonal: float, mi: int, s: LevelBakeSettings) ->
             label_settings(s, diagonal, d.local_rays),
             max_distance=s.trace.max_distance or diagonal,
         ),
+        s.trace.bvh,
     )
     loc_samples = surface_samples(model, d.local_samples_per_vertex * len(model.vertices), 32, s.seed)
     a, v = loc_lab.obscurance(loc_samples.points, loc_samples.normals, halves(s))
@@ -185,7 +186,7 @@ def bake_decorators(
     bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))
     frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
     gold_foliage = build_foliage(level, frame, s.foliage, include_trees=False) if s.foliage.enabled else None
-    ctx = gold_context(key, level, settings, gold_foliage)
+    ctx = gold_context(key, level, settings, gold_foliage, s.trace.bvh)
     t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
         runner.hold(ctx.key, ctx.build(ctx.value()))

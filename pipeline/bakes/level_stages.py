@@ -102,13 +102,13 @@ class PieceState:
 
 
 def _opaque_state(payload) -> PieceState:
-    level, index, settings, foliage, key = payload
-    return PieceState(LevelLabeller(opaque_scene(level), settings), foliage, level, index, key)
+    level, index, settings, bvh, foliage, key = payload
+    return PieceState(LevelLabeller(opaque_scene(level), settings, bvh), foliage, level, index, key)
 
 
 def _gold_state(payload) -> tuple[LevelLabeller, Any]:
-    level, settings, foliage = payload
-    return LevelLabeller(gold_scene(level), settings), foliage
+    level, settings, bvh, foliage = payload
+    return LevelLabeller(gold_scene(level), settings, bvh), foliage
 
 
 class LabellerFrame:
@@ -128,15 +128,17 @@ def worker_settings(settings: LabelSettings, engine) -> LabelSettings:
     return settings
 
 
-def opaque_context(key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage) -> Context:
+def opaque_context(
+    key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage, bvh: str = "fast"
+) -> Context:
     """The engine context of the opaque labeller: workers build it from the level's meshes and transforms
-    (heavy: a worker holds no other big state beside it)."""
-    payload = (*shared_level(key, level, index), settings, foliage, key)
+    (heavy: a worker holds no other big state beside it); ``bvh``: its Embree scene (``Labeller.bvh``)."""
+    payload = (*shared_level(key, level, index), settings, bvh, foliage, key)
     return Context(f"level-trace/{key}/{settings.workers}", _opaque_state, payload, heavy=True)
 
 
-def gold_context(key: str, level: Level, settings: LabelSettings, foliage) -> Context:
-    payload = (shared_level(key, level, None)[0], settings, foliage)
+def gold_context(key: str, level: Level, settings: LabelSettings, foliage, bvh: str = "fast") -> Context:
+    payload = (shared_level(key, level, None)[0], settings, bvh, foliage)
     return Context(f"level-gold/{key}/{settings.workers}", _gold_state, payload, heavy=True)
 
 
