@@ -44,9 +44,9 @@ class TraceSettings:
     # Back-face rule threshold (the paper: 25%); None disables it.
     backface_threshold: float | None = 0.25
     # Embree's scene for the level's rays: "fast" (its high-quality BVH without the robust flag: 1.4x the
-    # rays per second, a build 2-3x longer) or "robust" (watertight, the labels' own; the quicker build pays
-    # where each machine traces little, on a farm of many). The two find the same hits but for about one ray
-    # in ten million grazing an edge.
+    # rays per second, a build 2-3x longer) or "robust" (watertight, the labels' own; its quicker build pays
+    # where every single-CPU actor of a large farm builds its own and traces little). The two find the same
+    # hits but for about one ray in ten million grazing an edge.
     bvh: Literal["fast", "robust"] = "fast"
     # Samples per resumable trace block (one npz under OUT/stages/trace/ each), a task each: 16.8M rays at
     # 256 rays a sample, a few seconds on one core, so the last blocks of a stage keep every core busy.
