@@ -35,6 +35,14 @@ def _static_ao(path) -> dict[str, np.ndarray]:
     }
 
 
+def _assert_same_static_ao(one, other, atol: float) -> None:
+    """Every static node of the bakes in folders ``one`` and ``other`` has the same AO within ``atol``."""
+    a, b = _static_ao(one / "level_baked.glb"), _static_ao(other / "level_baked.glb")
+    assert a.keys() == b.keys()
+    for name, ao in a.items():
+        np.testing.assert_allclose(b[name], ao, atol=atol, err_msg=name)
+
+
 def test_a_bake_in_pieces_is_the_bake_of_the_whole_level(baked, tmp_path):
     """Cut into three pieces (the terrain, then the buildings), every task runs per piece, yet each static
     vertex gets the AO of the one-piece bake: the samples and rays are the same, and each piece's least
@@ -44,13 +52,7 @@ def test_a_bake_in_pieces_is_the_bake_of_the_whole_level(baked, tmp_path):
     pieces = bake_level(level, load_level_settings(cfg, ["piece_faces=100"]), tmp_path / "pieces")
     assert info["counts"]["pieces"] == 1 and pieces["counts"]["pieces"] == 3
     assert pieces["counts"]["samples"] == info["counts"]["samples"]
-    whole, cut = (
-        _static_ao(root / "out" / "level_baked.glb"),
-        _static_ao(tmp_path / "pieces" / "level_baked.glb"),
-    )
-    assert whole.keys() == cut.keys()
-    for name, ao in whole.items():
-        np.testing.assert_allclose(cut[name], ao, atol=1e-5, err_msg=name)
+    _assert_same_static_ao(root / "out", tmp_path / "pieces", atol=1e-5)
     blocks = {s["stage"]: s.get("tasks", 0) for s in pieces["stages"]}
     assert blocks["solve"] == 3 and blocks["output"] == 3 and blocks["trace"] >= 3
     assert len(pieces["task_seconds"]["trace"]) == blocks["trace"]
@@ -76,13 +78,7 @@ def test_robust_bvh_bakes_the_fast_ones_ao(baked, tmp_path):
     and ties between coincident faces)."""
     root, level, cfg, info = baked
     bake_level(level, load_level_settings(cfg, ["trace.bvh=robust"]), tmp_path / "robust")
-    fast, robust = (
-        _static_ao(root / "out" / "level_baked.glb"),
-        _static_ao(tmp_path / "robust" / "level_baked.glb"),
-    )
-    assert fast.keys() == robust.keys()
-    for name, ao in fast.items():
-        np.testing.assert_allclose(robust[name], ao, atol=1e-3, err_msg=name)
+    _assert_same_static_ao(root / "out", tmp_path / "robust", atol=1e-3)
 
 
 def _glb(root):
