@@ -36,7 +36,7 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # keep 127.0.0.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_ray import makespan, stage_costs  # noqa: E402
+from bench_ray import stage_costs, wave_span  # noqa: E402
 
 from neuralao.pipeline.bakes.level import bake_level  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: E402
@@ -53,8 +53,10 @@ def project(
     checks: bool = False,
 ) -> dict:
     """Seconds per stage of the bake ``info`` (a bake log) on ``machines`` x ``cores``: the driver's own
-    seconds, plus the stage's tasks scheduled longest first (the trace's blocks divide to the cores; no
-    other stage's tasks split), plus its states (BVHs) built once per machine, in parallel.
+    seconds (with a local bake's, what Ray's driver would spend submitting its tasks), plus the stage's
+    tasks wave after wave, each wave's scheduled longest first (``bench_ray.wave_span``: the trace's
+    blocks divide to the cores; no other stage's tasks split), plus its states (BVHs) built once per
+    machine, in parallel.
 
     threads_per_actor : 1, one actor per core (each builds its own BVH on its core); ``cores``: one actor
         per machine, whose tracing tasks use all its threads and whose BVH build is ``bvh_speedup`` times
@@ -69,7 +71,7 @@ def project(
         else:  # one actor per machine: tracing tasks spread over its threads, the others use one
             slots = machines
             work = [w / threads_per_actor if t else w for w, t in zip(work, c["traces"], strict=True)]
-        span = sum(work) / slots if name == "trace" and work else makespan(work, slots)
+        span = wave_span(work, c["waves"], slots, name == "trace")
         state = c["state_s"] / (bvh_speedup if threads_per_actor > 1 else 1.0)
         out[name] = c["driver_s"] + state + span
     return {"stages": out, "total_s": sum(out.values())}

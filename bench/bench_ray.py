@@ -15,11 +15,12 @@ Per-task costs measured on the same instance: the round trip of an empty task, t
 new context (payload through the object store + Embree build on the worker) and the trace cost per
 ray on one core. The projection of a level bake on N machines of C cores reads a level bake's log
 (``--level-json``: bench/bench_level.py's bench_level.json, or any bake_log.json), whose every stage
-records its wall time and each of its tasks' seconds: per stage, the driver's own seconds plus the
-makespan of its tasks scheduled longest first on N C cores (one task per core, at the measured Ray /
-local efficiency and per-task round trip); the trace's blocks divide (``trace.block_samples`` is
-sized to the cores), the other stages' tasks do not (the largest piece's solve and LOD, the one LOD
-simplification, bound them); every machine builds its BVHs once, in parallel.
+records its wall time and each of its tasks' seconds and waves (the engine's map calls, one after the
+other): per stage, the driver's own seconds plus, wave after wave, the makespan of the wave's tasks
+scheduled longest first on N C cores (one task per core, at the measured Ray / local efficiency and
+per-task round trip); the trace's blocks divide (``trace.block_samples`` is sized to the cores), the
+other stages' tasks do not (the largest piece's solve and LOD bound them); every machine builds its
+BVHs once, in parallel.
 
 Writes OUT/bench_ray.json and OUT/bench_ray.md. The machine's load average is recorded before and
 after: on a shared machine absolute numbers move, ratios within one run still compare.
@@ -49,6 +50,12 @@ from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 # Tasks per core in the projection: enough that the last round of tasks balances (block size follows).
 TASKS_PER_CORE = 4
+# Measured on a private Ray instance on this machine (2 single-CPU actors, no-op tasks): a wave's round
+# trip (a one-task map, 1.9 ms of wall clock, a network round trip across machines is of the same order)
+# and the driver's CPU seconds per task it submits (0.8 ms in maps of 2,000; a Ray bake's log has them in
+# its driver's CPU seconds, a local bake's does not).
+WAVE_S = 1.9e-3
+SUBMIT_S = 0.8e-3
 
 
 def _noop_state(payload):
@@ -268,16 +275,34 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
         else:  # on an engine the driver waits for the tasks: its own work is its CPU time
             driver = st["cpu_seconds"]
             state = max(info.get("state_seconds", {}).get(name, [0.0]))
+        if local:  # on Ray the driver would also submit every task
+            driver += SUBMIT_S * len(t)
+        waves = list(info.get("task_waves", {}).get(name, [0] * len(t)))  # a log without them: one wave
         rows.append(
             {
                 "stage": name,
                 "driver_s": driver,
                 "task_core_s": cores,
+                "waves": waves,
                 "traces": traced,
                 "state_s": state,
             }
         )
     return rows
+
+
+def wave_span(work: list[float], waves: list[int], slots: int, divides: bool) -> float:
+    """Seconds of a stage's tasks ``work`` (seconds each) on ``slots`` task slots, wave after wave: a wave
+    is one of the engine's map calls, and the driver starts the next once it has this one's results (the
+    partitioned solve's CG: one wave per iteration). Each wave takes the makespan of its tasks scheduled
+    longest first, or, if its work ``divides`` (the trace's blocks, sized to the cores), its work over the
+    slots; and a round trip (:data:`WAVE_S`)."""
+    groups: dict[int, list[float]] = {}
+    for w, x in zip(waves, work, strict=True):
+        groups.setdefault(w, []).append(x)
+    return sum(
+        (sum(g) / slots if divides else makespan(g, slots)) + WAVE_S for _, g in sorted(groups.items())
+    )
 
 
 def makespan(durations: list[float], cores: int) -> float:
@@ -315,10 +340,9 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
         per_stage = {}
         for c in costs:
             work = [x / efficiency for x in c["task_core_s"]]
-            if c["stage"] == "trace":
-                span = sum(work) / p + t_task * TASKS_PER_CORE if work else 0.0
-            else:
-                span = makespan(work, p) + (t_task * len(work) / p if work else 0.0)
+            span = wave_span(work, c["waves"], p, c["stage"] == "trace")
+            if work:  # each core's share of the tasks' round trips (the trace's blocks: a few per core)
+                span += t_task * (TASKS_PER_CORE if c["stage"] == "trace" else len(work) / p)
             per_stage[c["stage"]] = c["driver_s"] + c["state_s"] + span
         rows.append({"machines": n, "cores": p, "stages": per_stage, "total_s": sum(per_stage.values())})
     base = rows[0]["total_s"]

@@ -219,18 +219,23 @@ def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
 
 def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     """``trace.subdomains``: the terrain's component (625 vertices, over ``component_vertices``) is solved
-    on the driver in 4 subdomains, a task each per CG iteration, and every static vertex gets the default
-    bake's AO; a rerun reuses the driver-solved piece's file and writes the same bytes."""
+    on the driver in 4 subdomains, a task each per CG iteration, the other pieces' solves beside its
+    equation shares, and every static vertex gets the default bake's AO; a rerun reuses the driver-solved
+    piece's file and writes the same bytes. The bake log gives each task's wave (map call)."""
     root, level, cfg, info = baked
-    s = load_level_settings(cfg, ["trace.subdomains=4", "trace.component_vertices=200", "lod.enabled=false"])
+    overrides = ["trace.subdomains=4", "trace.component_vertices=200", "lod.enabled=false", "piece_faces=100"]
+    s = load_level_settings(cfg, overrides)
     out = tmp_path / "sub"
     sub = bake_level(level, s, out)
-    whole, split = _static_ao(root / "out" / "level_baked.glb"), _static_ao(out / "level_baked.glb")
-    assert whole.keys() == split.keys()
-    for name, ao in whole.items():
-        np.testing.assert_allclose(split[name], ao, atol=1e-6, err_msg=name)
+    bake_level(level, load_level_settings(cfg, overrides[2:]), tmp_path / "components")
+    _assert_same_static_ao(tmp_path / "components", out, atol=1e-6)
     solve = next(st for st in sub["stages"] if st["stage"] == "solve")
     assert solve["tasks"] > 4 * 5 and solve["seconds_driver"] > 0  # subdomain tasks, >= 5 iterations
+    waves = sub["task_waves"]["solve"]
+    assert len(waves) == solve["tasks"] and waves == sorted(waves) and waves[0] == 0
+    per_wave = np.bincount(waves)
+    # the component check, the shares with the other two pieces' solves, then 4 tasks per CG iteration
+    assert sub["counts"]["pieces"] == 3 and per_wave[1] > 2 and set(per_wave[2:]) == {4}
     first = (out / "level_baked.glb").read_bytes()
     (out / "stages" / "solve.npz").unlink()
     (out / "level_baked.glb").unlink()

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from neuralao.pipeline.engines.engine import Context, LocalEngine, Task
+from neuralao.pipeline.engines.engine import Context, LocalEngine, ResultStore, Task
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 
@@ -22,6 +22,10 @@ def _together(state, args):
     barrier, value, timeout = args
     barrier.wait(timeout=timeout)
     return state["name"], value * 2
+
+
+def _square(state, value):
+    return {"v": np.array(value * value)}
 
 
 def _logged(state, args):
@@ -67,3 +71,17 @@ def test_a_new_context_waits_for_the_tasks_before_it_and_results_match_one_worke
 def test_bad_worker_and_thread_counts_are_errors(field, value):
     with pytest.raises(NeuralaoError, match=field):
         LocalEngine(**{field: value})
+
+
+def test_each_task_is_noted_with_its_map_call(tmp_path):
+    """An engine notes beside every task's seconds the map call (wave) it ran in, counted from 0; a task
+    whose result a store held runs in none."""
+    ctx = Context("a", _state, "a")
+    for workers in (1, 2):
+        engine = LocalEngine(workers=workers)
+        store = ResultStore(tmp_path / f"store{workers}")
+        list(engine.map([Task(ctx, _square, v) for v in range(3)]))
+        list(engine.map([Task(ctx, _square, v, key=f"k{v}") for v in range(2)], store))
+        list(engine.map([Task(ctx, _square, v, key=f"k{v}") for v in range(4)], store))  # two stored
+        assert engine.task_batches == [0, 0, 0, 1, 1, 2, 2]
+        assert len(engine.task_seconds) == len(engine.task_batches)

@@ -238,7 +238,13 @@ def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, t
     p = _cli(*args)
     _, err = p.communicate(timeout=180)
     assert p.returncode == 0, err
-    assert json.loads((out / "bake_log.json").read_text())["task_threads"] == 2
+    log = json.loads((out / "bake_log.json").read_text())
+    assert log["task_threads"] == 2
+    # each stage's tasks noted with their waves (map calls), the same count as the local bake's
+    assert {k: len(v) for k, v in log["task_waves"].items()} == {
+        k: len(v) for k, v in log["task_seconds"].items()
+    }
+    assert max(log["task_waves"]["samples"]) == max(info["task_waves"]["samples"]) == 1  # its two passes
     _assert_same_level_bake(out, local, info)
 
 

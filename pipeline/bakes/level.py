@@ -119,17 +119,24 @@ class BakeLog:
         self.stages: list[dict[str, Any]] = []
         self.runner = None  # the engine whose task seconds each stage's row takes (Engine.task_seconds)
         self.task_seconds: dict[str, list[float]] = {}
+        # per stage, the wave (0, 1, ...: the engine's map calls in order) each of its tasks ran in
+        self.task_waves: dict[str, list[int]] = {}
         self.state_seconds: dict[str, list[float]] = {}
         self.dir = out / "stages"
         self._waited0 = 0.0  # the local runner's waiting seconds when the current stage began
+        self._thread0 = 0.0  # this thread's CPU seconds then
         self.dir.mkdir(parents=True, exist_ok=True)
         remove_stale_temporaries(self.dir)
         remove_stale_temporaries(out)
 
+    def _begin(self) -> None:
+        self._waited0 = getattr(self.runner, "waited", 0.0)
+        self._thread0 = time.thread_time()
+
     def timed(self, name: str, description: str, fn, **counts):
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
-        self._waited0 = getattr(self.runner, "waited", 0.0)
+        self._begin()
         result = fn()
         self._record(name, description, t0, c0, False, counts)
         return result
@@ -139,7 +146,7 @@ class BakeLog:
         path = self.dir / f"{name}.npz"
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
-        self._waited0 = getattr(self.runner, "waited", 0.0)
+        self._begin()
         if path.is_file():
             data = read_npz(path)
             if str(data.pop("_key", "")) == self.key:
@@ -177,20 +184,25 @@ class BakeLog:
         built: list[float] = []
         if self.runner is not None and self.runner.task_seconds:
             done, self.runner.task_seconds = self.runner.task_seconds, []
+            batches, self.runner.task_batches = self.runner.task_batches, []
             self.task_seconds[name] = done
+            _, waves = np.unique(batches, return_inverse=True)
+            self.task_waves[name] = waves.reshape(-1).tolist()
             self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
         if self.runner is not None and self.runner.state_seconds:
             built, self.runner.state_seconds = self.runner.state_seconds, []
             self.state_seconds[name] = built
             self.stages[-1].update(states_built=len(built))
         # The driver's own seconds: what no task did. Here, one task at a time, the tasks ran in this thread,
-        # so the stage's wall time less theirs; with several at once they ran on other threads, so the
-        # stage's wall time less the time this thread waited for them; on a cluster the driver waits for
-        # them, so its CPU time (Ray's client work included).
+        # so the stage's wall time less theirs; with several at once they ran on other threads, so this
+        # thread's CPU seconds (not the stage's wall time less the time it waited for them: that counts
+        # the time it waited for the interpreter lock the tasks held, which a driver in its own process
+        # does not); on a cluster the driver waits for them, so its CPU time (Ray's client work included).
         row = self.stages[-1]
         if self.runner is not None and self.runner.name == "local" and self.runner.workers > 1:
             waited = self.runner.waited - self._waited0
-            row["driver_seconds"] = max(0.0, row["seconds"] - waited)  # states are built by the tasks
+            row["driver_seconds"] = time.thread_time() - self._thread0  # states are built by the tasks
+            row["driver_wall_seconds"] = max(0.0, row["seconds"] - waited)
         elif self.runner is None or self.runner.name == "local":
             row["driver_seconds"] = max(0.0, row["seconds"] - sum(done) - sum(built))
         else:
@@ -464,6 +476,7 @@ def bake_level(
         # Every task's own seconds per stage (as it ran, on whichever worker): what bench/bench_level.py
         # projects onto N machines.
         "task_seconds": blog.task_seconds,
+        "task_waves": blog.task_waves,
         "state_seconds": blog.state_seconds,
         "engine": runner.name,
         # Threads each task traced with (this process's for a local bake; an actor's on Ray).

@@ -11,6 +11,7 @@ skips the files it finds, and the driver's memory is one piece's, not the level'
 from __future__ import annotations
 
 import copy
+import itertools
 import threading
 import time
 import zipfile
@@ -358,13 +359,18 @@ def solve_stage(
     here = [p for p in big if p.index in found or files.has(piece_stem(p))]
     stems = frozenset(piece_stem(p) for p in here)
     files.keep_only({piece_stem(p) for p in pieces})
+    rest = [p for p in pieces if piece_stem(p) not in stems]
+    jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
+    # The other pieces' solves run beside the first big piece's equation shares, in one wave: on many
+    # machines they then take no wave of their own after the big pieces' iterations.
+    beside = [(stem, make) for stem, make in jobs if not files.has(stem, keys or ())]
     fresh = set()
     for p in here:
         if not files.has(piece_stem(p)):
-            files.put(piece_stem(p), _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole))
+            result = _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole, beside, files)
+            files.put(piece_stem(p), result)
             fresh.add(piece_stem(p))
-    rest = [p for p in pieces if piece_stem(p) not in stems]
-    jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
+            beside = []
     yield from run_to_files(files, runner, jobs, "solve", progress, stems, keys)
     for stem in sorted(stems):
         yield stem, files.get(stem, keys), stem not in fresh
@@ -391,11 +397,14 @@ def _mesh_component(state: PieceState, mesh: int) -> dict[str, np.ndarray]:
     return {"vertices": np.array(largest_component(m.faces, len(m.vertices)))}
 
 
-def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole):
+def _solve_piece_here(
+    runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole, beside=(), files=None
+):
     """:func:`_solve_piece` with the driver as the coordinator: the piece's normal equations are assembled by
     tasks of ``runner``, one share per trace block (each from its worker's copy of the piece), and added
     here; :func:`solve_equations` then solves them, its subdomain solves tasks too. The driver makes the
-    piece's vertices, not its samples, and drops everything with the result."""
+    piece's vertices, not its samples, and drops everything with the result. ``beside``: jobs (stem, task
+    maker) of other pieces run with the shares, each result put in ``files`` as it arrives."""
     level, index, _ = ctx.value()
     t0 = time.perf_counter()
     scene = piece_scene(level, index, piece)
@@ -405,7 +414,11 @@ def _solve_piece_here(runner, ctx: Context, piece: Piece, rule, trace_files: Tas
     shares: list = [None] * len(args)
     timing = {"assembly": 0.0, "blocks": 0.0, "largest_block": 0.0, "driver": 0.0}
     t1 = time.perf_counter()
-    for i, r in runner.map(Task(ctx, _equation_share, a) for a in args):
+    tasks = itertools.chain((Task(ctx, _equation_share, a) for a in args), (make() for _, make in beside))
+    for i, r in runner.map(tasks):
+        if i >= len(args):
+            files.put(beside[i - len(args)][0], r)
+            continue
         shares[i] = r
         timing["blocks"] += float(r["seconds"])
         timing["largest_block"] = max(timing["largest_block"], float(r["seconds"]))

@@ -196,6 +196,11 @@ class Engine:
         # clears them.
         self.task_seconds: list[float] = []
         self.state_seconds: list[float] = []
+        # The map call (numbered from 0 for this engine) each task of ``task_seconds`` ran in: a caller's
+        # next map starts once it has read this one's results, so a map's tasks are a wave that the next
+        # waits for (what a projection onto more machines adds up, wave by wave).
+        self.task_batches: list[int] = []
+        self._batches = 0
 
     def _timing(self, timed: _Timed) -> Any:
         """The result inside ``timed``, its seconds noted."""
@@ -213,12 +218,15 @@ class Engine:
         """Yield ``(index, result)`` for every task, in completion order. ``tasks`` is consumed lazily
         (a few ahead of the workers), so a generator may load one scene at a time."""
         self.completed = self.reused = 0
+        batch, self._batches = self._batches, self._batches + 1
         pending = self._skip_stored(tasks, store)
         for index, task, result in self._run(pending):
             if task is None:
                 self.reused += 1
-            elif store is not None and task.key is not None:
-                store.put(task.key, result)
+            else:  # _run timed it (_timing) just before yielding it
+                self.task_batches.append(batch)
+                if store is not None and task.key is not None:
+                    store.put(task.key, result)
             self.completed += 1
             yield index, result
         if self.reused:
