@@ -446,3 +446,18 @@ def test_ordered_gives_task_order_whatever_finishes_first(ray_engine):
         assert len(got) == len(blocks)
         for b, r, v in zip(blocks, rhs, got, strict=True):
             np.testing.assert_allclose(b @ v, r, rtol=1e-9, atol=1e-9)
+
+
+def test_tasks_of_one_affinity_run_on_one_actor(ray_engine):
+    """``Task.affinity``: the first six tasks on one actor, the next six on the other (the least-loaded
+    choice without it would spread each six over both), so a cache their worker keeps (a subdomain's
+    factor) is made once."""
+    from neuralao.pipeline.engines.engine import Task
+    from neuralao.pipeline.geometry.partitioned_solve import STATELESS
+
+    def pid(state, args):
+        return os.getpid()
+
+    got = dict(ray_engine.map(Task(STATELESS, pid, i, affinity=i // 6) for i in range(12)))
+    first, second = {got[i] for i in range(6)}, {got[i] for i in range(6, 12)}
+    assert len(first) == len(second) == 1 and first != second

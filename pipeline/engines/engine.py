@@ -100,6 +100,9 @@ class Task:
     fn: Callable[[Any, Any], Any]  # module-level function: (state, args) -> picklable result
     args: Any  # picklable, small (points, cameras); big shared data belongs in the context
     key: str | None = None  # result key in a ResultStore (None: never stored)
+    # Tasks of the same affinity go to the same worker where an engine has several (RayEngine): a cache
+    # they share there (a subdomain's factor, made by its first task) is then made once. None: any worker.
+    affinity: int | None = None
 
 
 @dataclass(frozen=True)
@@ -521,11 +524,15 @@ class RayEngine(Engine):
                     live = {k for _, t, _ in inflight.values() for k in _ref_keys(t)} | set(_ref_keys(task))
                     ref = self._payload_ref(ctx, live)
                     args = self._remote_args(task.args, live)
-                    # Prefer an actor that already holds this context's state, then the least loaded.
-                    a = min(
-                        range(len(load)),
-                        key=lambda i: (load[i] >= TASKS_PER_WORKER, ctx.key not in holds[i], load[i]),
-                    )
+                    # The task's own actor if it names one (it queues there), else one that already
+                    # holds this context's state, then the least loaded.
+                    if task.affinity is not None:
+                        a = task.affinity % len(load)
+                    else:
+                        a = min(
+                            range(len(load)),
+                            key=lambda i: (load[i] >= TASKS_PER_WORKER, ctx.key not in holds[i], load[i]),
+                        )
                     holds[a].add(ctx.key)
                     out = self._actors[a].run.remote(ctx.key, [ref], ctx.build, task.fn, args, ctx.heavy)
                     inflight[out] = (index, task, a)

@@ -32,8 +32,9 @@ preconditioner). Multigrid CG (the level's default for a big component) is one t
 every vertex each iteration.
 
 CG stops at a relative residual of ``rtol`` per column (default 1e-10, the level's multigrid CG's). In each
-iteration the driver sends subdomain ``i`` only its residual restricted to the subdomain and adds the
-results in subdomain order, and every reduction is numpy's pairwise sum (no threaded BLAS): the same inputs
+iteration the driver sends subdomain ``i`` only its residual restricted to the subdomain (to the same
+worker each iteration where the engine can: its factor is made once) and adds the results in subdomain
+order, and every reduction is numpy's pairwise sum (no threaded BLAS): the same inputs
 give the same bytes whichever engine, worker, thread count or completion order.
 """
 
@@ -254,7 +255,8 @@ class _Preconditioner:
             results = [local_solve(None, a) for a in args]
         else:
             results = [None] * len(restricted)
-            for i, res in self.engine.map(Task(self.context, local_solve, a) for a in args):
+            tasks = (Task(self.context, local_solve, a, affinity=a[1]) for a in args)  # same worker each time
+            for i, res in self.engine.map(tasks):
                 results[i] = res
         v = np.concatenate([res["v"] for res in results]) if results else np.zeros((0, len(rs)))
         out = [np.bincount(self.joined, weights=v[:, j], minlength=n) for j in range(len(rs))]
