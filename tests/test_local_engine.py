@@ -85,3 +85,21 @@ def test_each_task_is_noted_with_its_map_call(tmp_path):
         list(engine.map([Task(ctx, _square, v, key=f"k{v}") for v in range(4)], store))  # two stored
         assert engine.task_batches == [0, 0, 0, 1, 1, 2, 2]
         assert len(engine.task_seconds) == len(engine.task_batches)
+
+
+def _sleep(state, seconds):
+    time.sleep(seconds)
+    return {"slept": np.array(seconds)}
+
+
+def test_tasks_beside_each_other_are_timed_by_their_threads_cpu():
+    """Several tasks at once on one thread each: a task's seconds are its thread's CPU time (time spent
+    waiting, for the interpreter lock the others hold or here asleep, is not its work); one at a time, the
+    wall clock's."""
+    ctx = Context("a", _state, "a")
+    tasks = [Task(ctx, _sleep, 0.2) for _ in range(2)]
+    beside = LocalEngine(workers=2, threads=1)
+    list(beside.map(tasks))
+    alone = LocalEngine(workers=1)
+    list(alone.map(tasks))
+    assert max(beside.task_seconds) < 0.05 and min(alone.task_seconds) >= 0.2

@@ -482,6 +482,11 @@ def bake_level(
         # Threads each task traced with (this process's for a local bake; an actor's on Ray).
         "task_threads": runner.threads or s.workers,
         "tasks_at_once": runner.workers,
+        # How task seconds were taken: the wall clock, or (several tasks at once on threads of this
+        # process, each on one) each task's thread CPU seconds.
+        "task_clock": "thread_cpu"
+        if runner.name == "local" and runner.workers > 1 and runner.threads == 1
+        else "wall",
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),

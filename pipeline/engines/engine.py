@@ -320,7 +320,9 @@ class LocalEngine(Engine):
                     lambda ctx=ctx, built=built: _timed_build(ctx.build, ctx.value, built),
                     ctx.heavy,
                 )
-        return _timed_call(task.fn, state, _unshare(task.args), built[0])
+        # Several tasks at once, each on one thread (threads=1): a task's own seconds are its thread's CPU.
+        cpu = self.workers > 1 and self.threads == 1
+        return _timed_call(task.fn, state, _unshare(task.args), built[0], cpu)
 
     def _run(self, pending):
         if self.workers == 1:
@@ -378,11 +380,14 @@ class _Timed:
     state_seconds: float
 
 
-def _timed_call(fn, state, args, state_seconds: float = 0.0) -> _Timed:
-    """``fn(state, args)`` and its seconds: what a projection of a run's stages reads."""
-    t0 = time.perf_counter()
+def _timed_call(fn, state, args, state_seconds: float = 0.0, cpu: bool = False) -> _Timed:
+    """``fn(state, args)`` and its seconds: what a projection of a run's stages reads. ``cpu``: the
+    seconds are this thread's CPU time, not the wall clock's (a task beside others on threads of one
+    process, which waits for the interpreter lock they hold: on a worker of its own it would not)."""
+    clock = time.thread_time if cpu else time.perf_counter
+    t0 = clock()
     result = fn(state, args)
-    return _Timed(result, time.perf_counter() - t0, state_seconds)
+    return _Timed(result, clock() - t0, state_seconds)
 
 
 class _Worker:
