@@ -63,7 +63,11 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, e
         record(self, name, *args, **kwargs)
         print(json.dumps(self.stages[-1]), flush=True)
         if name == stage:
-            found.update(row=self.stages[-1], task_seconds=self.task_seconds.get(name, []))
+            found.update(
+                row=self.stages[-1],
+                task_seconds=self.task_seconds.get(name, []),
+                task_waves=self.task_waves.get(name, []),
+            )
             raise _Stop
 
     level_bake.BakeLog._record = stop_after
@@ -79,7 +83,7 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, e
 
 
 def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
-    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds from ``fresh`` (a local run's driver
+    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds and waves from ``fresh`` (a local run's driver
     seconds stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH states' seconds
     (the stages that trace) times ``bvh_scale``."""
     out = copy.deepcopy(log)
@@ -87,6 +91,7 @@ def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
         if row["stage"] == stage:
             row["cpu_seconds"] = fresh["row"]["driver_seconds"]
     out["task_seconds"][stage] = list(fresh["task_seconds"])
+    out.setdefault("task_waves", {})[stage] = list(fresh["task_waves"])
     out["state_seconds"] = {
         k: [x * (bvh_scale if k in TRACING_STAGES else 1.0) for x in v]
         for k, v in out.get("state_seconds", {}).items()
