@@ -96,6 +96,41 @@ def test_a_block_s_samples_are_the_piece_s_made_from_its_faces_alone(tiny_geomet
             )
 
 
+@pytest.mark.parametrize("run", [3, 10, 10**6])
+def test_a_block_counts_only_its_sample_ranges_and_makes_the_piece_s_samples(tiny_geometry, monkeypatch, run):
+    """With the piece's sample ranges (the samples' second pass notes the first sample of every ``run``
+    faces), a block task counts the samples of its ranges' faces alone; its samples are still the piece's
+    lo..hi, bit for bit, across ranges, inside a face's run and over ranges of faces without samples."""
+    import neuralao.pipeline.bakes.level_pieces as level_pieces
+
+    monkeypatch.setattr(level_pieces, "SAMPLE_RANGE_FACES", run)
+    g = tiny_geometry
+    index = index_level(g.level, 10**9)
+    rule, pieces = sample_rule(g.level, index, 2.0, 0, 4, seed=7)
+    piece = pieces[0]
+    assert len(piece.ranges) == -(-piece.nf // run) and piece.ranges[0] == (0, 0)
+    whole = piece_samples(piece_scene(g.level, index, piece), piece, rule)
+    rng = np.random.default_rng(1)
+    for lo, hi in [
+        (0, piece.ns),
+        (0, 1),
+        (piece.ns - 1, piece.ns),
+        (5, 5),
+        *rng.integers(0, piece.ns, (20, 2)),
+    ]:
+        lo, hi = int(min(lo, hi)), int(max(lo, hi))
+        _, block = level_pieces.cached_block(f"ranges{run}", g.level, index, piece, rule, lo, hi)
+        for k in ("face", "bary", "points", "normals", "weights"):
+            np.testing.assert_array_equal(
+                getattr(block, k), getattr(whole, k)[lo:hi], err_msg=f"{k} {lo}:{hi}"
+            )
+    # ranges that disagree with the faces (a stale piece table) are an error, not other samples
+    bad = replace(piece, ranges=tuple((f, s + 1) for f, s in piece.ranges[:1]) + piece.ranges[1:])
+    if len(piece.ranges) > 1:
+        with pytest.raises(NeuralaoError, match="sample ranges"):
+            level_pieces.cached_block(f"bad{run}", g.level, index, bad, rule, 0, 1)
+
+
 def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):
     g = tiny_geometry
     samples = receiver_samples(g.receivers, TraceSettings(samples_per_vertex=1.0), seed=0)
