@@ -83,9 +83,9 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, e
 
 
 def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
-    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds and waves from ``fresh`` (a local run's driver
-    seconds stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH states' seconds
-    (the stages that trace) times ``bvh_scale``."""
+    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds and waves from ``fresh`` (a local
+    run's driver seconds stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH
+    states' seconds (the stages that trace) times ``bvh_scale``."""
     out = copy.deepcopy(log)
     for row in out["stages"]:
         if row["stage"] == stage:

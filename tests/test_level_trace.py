@@ -80,20 +80,19 @@ def test_a_block_s_samples_are_the_piece_s_made_from_its_faces_alone(tiny_geomet
     whole = piece_samples(scene, piece, rule)
     ends = np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
     assert (np.diff(ends, prepend=0) == 0).any() and (np.diff(ends, prepend=0) > 1).any()  # empty, multi
-    rng = np.random.default_rng(0)
-    for lo, hi in [
-        (0, piece.ns),
-        (0, 1),
-        (piece.ns - 1, piece.ns),
-        (5, 5),
-        *rng.integers(0, piece.ns, (20, 2)),
-    ]:
+    _assert_blocks_are_slices(whole, lambda lo, hi: block_samples(scene, ends, piece, rule, lo, hi), seed=0)
+
+
+def _assert_blocks_are_slices(whole, block, seed: int) -> None:
+    """``block(lo, hi)`` is ``whole[lo:hi]`` bit for bit: the whole, one sample at each end, an empty block
+    and 20 random ones."""
+    ns = len(whole)
+    rng = np.random.default_rng(seed)
+    for lo, hi in [(0, ns), (0, 1), (ns - 1, ns), (5, 5), *rng.integers(0, ns, (20, 2))]:
         lo, hi = int(min(lo, hi)), int(max(lo, hi))
-        block = block_samples(scene, ends, piece, rule, lo, hi)
+        got = block(lo, hi)
         for k in ("face", "bary", "points", "normals", "weights"):
-            np.testing.assert_array_equal(
-                getattr(block, k), getattr(whole, k)[lo:hi], err_msg=f"{k} {lo}:{hi}"
-            )
+            np.testing.assert_array_equal(getattr(got, k), getattr(whole, k)[lo:hi], err_msg=f"{k} {lo}:{hi}")
 
 
 @pytest.mark.parametrize("run", [3, 10, 10**6])
@@ -110,20 +109,11 @@ def test_a_block_counts_only_its_sample_ranges_and_makes_the_piece_s_samples(tin
     piece = pieces[0]
     assert len(piece.ranges) == -(-piece.nf // run) and piece.ranges[0] == (0, 0)
     whole = piece_samples(piece_scene(g.level, index, piece), piece, rule)
-    rng = np.random.default_rng(1)
-    for lo, hi in [
-        (0, piece.ns),
-        (0, 1),
-        (piece.ns - 1, piece.ns),
-        (5, 5),
-        *rng.integers(0, piece.ns, (20, 2)),
-    ]:
-        lo, hi = int(min(lo, hi)), int(max(lo, hi))
-        _, block = level_pieces.cached_block(f"ranges{run}", g.level, index, piece, rule, lo, hi)
-        for k in ("face", "bary", "points", "normals", "weights"):
-            np.testing.assert_array_equal(
-                getattr(block, k), getattr(whole, k)[lo:hi], err_msg=f"{k} {lo}:{hi}"
-            )
+    _assert_blocks_are_slices(
+        whole,
+        lambda lo, hi: level_pieces.cached_block(f"r{run}", g.level, index, piece, rule, lo, hi)[1],
+        seed=1,
+    )
     # ranges that disagree with the faces (a stale piece table) are an error, not other samples
     bad = replace(piece, ranges=tuple((f, s + 1) for f, s in piece.ranges[:1]) + piece.ranges[1:])
     if len(piece.ranges) > 1:
