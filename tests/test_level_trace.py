@@ -13,7 +13,7 @@ from scipy.special import expn
 
 from neuralao.pipeline.bakes.level_decorators import FoliageSettings, build_foliage, fit_global, linear_basis
 from neuralao.pipeline.bakes.level_pieces import (
-    block_samples,
+    cached_block,
     face_counts,
     index_level,
     piece_samples,
@@ -71,7 +71,8 @@ def test_pieces_make_the_samples_of_the_whole_level(tiny_geometry, piece_faces):
 
 def test_a_block_s_samples_are_the_piece_s_made_from_its_faces_alone(tiny_geometry):
     """A trace block's samples (a task makes them from the faces under them, not the piece's all) are the
-    piece's samples lo..hi, bit for bit, wherever the block starts and ends (inside a face's run too)."""
+    piece's samples lo..hi, bit for bit, wherever the block starts and ends (inside a face's run too); a
+    piece whose sample ranges are not known counts the samples of all its faces."""
     g = tiny_geometry
     index = index_level(g.level, 10**9)
     rule, pieces = sample_rule(g.level, index, 2.0, 0, 4, seed=7)
@@ -80,7 +81,10 @@ def test_a_block_s_samples_are_the_piece_s_made_from_its_faces_alone(tiny_geomet
     whole = piece_samples(scene, piece, rule)
     ends = np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
     assert (np.diff(ends, prepend=0) == 0).any() and (np.diff(ends, prepend=0) > 1).any()  # empty, multi
-    _assert_blocks_are_slices(whole, lambda lo, hi: block_samples(scene, ends, piece, rule, lo, hi), seed=0)
+    unranged = replace(piece, ranges=())
+    _assert_blocks_are_slices(
+        whole, lambda lo, hi: cached_block("unranged", g.level, index, unranged, rule, lo, hi)[1], seed=0
+    )
 
 
 def _assert_blocks_are_slices(whole, block, seed: int) -> None:

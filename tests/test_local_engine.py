@@ -83,8 +83,8 @@ def test_each_task_is_noted_with_its_map_call(tmp_path):
         list(engine.map([Task(ctx, _square, v) for v in range(3)]))
         list(engine.map([Task(ctx, _square, v, key=f"k{v}") for v in range(2)], store))
         list(engine.map([Task(ctx, _square, v, key=f"k{v}") for v in range(4)], store))  # two stored
-        assert engine.task_batches == [0, 0, 0, 1, 1, 2, 2]
-        assert len(engine.task_seconds) == len(engine.task_batches)
+        assert engine.task_waves == [0, 0, 0, 1, 1, 2, 2]
+        assert len(engine.task_seconds) == len(engine.task_waves)
 
 
 def _sleep(state, seconds):

@@ -184,9 +184,9 @@ class BakeLog:
         built: list[float] = []
         if self.runner is not None and self.runner.task_seconds:
             done, self.runner.task_seconds = self.runner.task_seconds, []
-            batches, self.runner.task_batches = self.runner.task_batches, []
+            waves, self.runner.task_waves = self.runner.task_waves, []
             self.task_seconds[name] = done
-            _, waves = np.unique(batches, return_inverse=True)
+            _, waves = np.unique(waves, return_inverse=True)  # numbered from 0 in the stage
             self.task_waves[name] = waves.reshape(-1).tolist()
             self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
         if self.runner is not None and self.runner.state_seconds:
@@ -482,11 +482,8 @@ def bake_level(
         # Threads each task traced with (this process's for a local bake; an actor's on Ray).
         "task_threads": runner.threads or s.workers,
         "tasks_at_once": runner.workers,
-        # How task seconds were taken: the wall clock, or (several tasks at once on threads of this
-        # process, each on one) each task's thread CPU seconds.
-        "task_clock": "thread_cpu"
-        if runner.name == "local" and runner.workers > 1 and runner.threads == 1
-        else "wall",
+        # How task seconds were taken: the wall clock, or each task's thread CPU seconds
+        "task_clock": runner.task_clock,
         "output_bytes": _bytes_written(out / s.output),
         "load_average": list(os.getloadavg()),
         "cpu_count": os.cpu_count(),

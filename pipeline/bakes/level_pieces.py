@@ -286,33 +286,18 @@ def cached_piece(
     return remembered(_CACHE, (key, piece.index, rule), make)
 
 
-def block_samples(
-    scene: Scene, ends: np.ndarray, piece: Piece, rule: SampleRule, lo: int, hi: int
-) -> SurfaceSamples:
-    """Samples ``lo`` .. ``hi`` of the piece, the same as ``piece_samples(scene, piece, rule)[lo:hi]``, made
-    from the faces they lie on alone; ``ends`` (m,) int64: the running sum of the piece's face counts."""
-    return samples_in_range(scene, ends, lo, hi, rule.seed, piece.f0, rule.area_total)
-
-
 def cached_block(
     key: str, level: Level, index: PieceIndex, piece: Piece, rule: SampleRule, lo: int, hi: int
 ) -> tuple[Scene, SurfaceSamples]:
-    """(scene, samples ``lo`` .. ``hi``) of ``piece`` (:func:`block_samples`); the piece's geometry comes
-    from this process's small cache when a block of the same piece ran here last. A block task makes its
-    own samples, not the piece's (8 s for the 10x world's terrain), and with the piece's sample ranges
-    (``Piece.ranges``) counts the samples of the faces of its ranges only (3.5 s for every face of that
-    terrain, on each worker's first block of it)."""
-    if not piece.ranges:
-
-        def make():
-            scene = piece_scene(level, index, piece)
-            return scene, np.cumsum(face_counts(face_areas(scene), piece.f0, rule))
-
-        scene, ends = remembered(_CACHE, (key, piece.index, rule, "ends"), make)
-        return scene, block_samples(scene, ends, piece, rule, lo, hi)
+    """(scene, samples ``lo`` .. ``hi``) of ``piece``: ``piece_samples(scene, piece, rule)[lo:hi]``; the
+    piece's geometry comes from this process's small cache when a block of the same piece ran here
+    last. A block task makes its own samples, not the piece's (8 s for the 10x world's terrain), from the
+    faces of the piece's sample ranges (``Piece.ranges``) it lies in: it counts the samples of those faces
+    only (3.5 s for every face of that terrain, on each worker's first block of it)."""
     scene = remembered(_CACHE, (key, piece.index, "scene"), lambda: piece_scene(level, index, piece))
-    faces = np.array([f for f, _ in piece.ranges] + [len(scene.faces)], np.int64)
-    firsts = np.array([s for _, s in piece.ranges] + [piece.ns], np.int64)
+    ranges = piece.ranges or ((0, 0),)  # not known: one range, every face of the piece
+    faces = np.array([f for f, _ in ranges] + [len(scene.faces)], np.int64)
+    firsts = np.array([s for _, s in ranges] + [piece.ns], np.int64)
     a = int(np.searchsorted(firsts, lo, side="right")) - 1  # the range of sample lo
     b = max(a + 1, int(np.searchsorted(firsts, hi, side="left")))  # ranges a .. b - 1 hold lo .. hi - 1
     fa, fb = int(faces[a]), int(faces[b])
@@ -377,10 +362,9 @@ def sample_rule(
         area_total += float(r["area_sampled"])
         area_all += float(r["area"])
         ns = int(r["samples"])
-        ranges = np.concatenate([[0], np.cumsum(r["range_samples"])[:-1]]).astype(np.int64)
-        ranges = tuple(
-            (i * SAMPLE_RANGE_FACES, int(first)) for i, first in enumerate(ranges[: len(r["range_samples"])])
-        )
+        counts = np.asarray(r["range_samples"], np.int64)
+        firsts = np.cumsum(counts) - counts  # each range's first sample
+        ranges = tuple((i * SAMPLE_RANGE_FACES, int(first)) for i, first in enumerate(firsts))
         pieces.append(replace(piece, s0=s0, ns=ns, ranges=ranges))
         s0 += ns
     return SampleRule(rho, floor, cap, seed, area_total, area_all), pieces

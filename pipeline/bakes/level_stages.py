@@ -240,7 +240,7 @@ def run_to_files(
     stems of files the stage writes otherwise (left in place). ``keys``: the arrays of each result to read
     back (None: all; a file without one of them is redone)."""
     files.keep_only({stem for stem, _ in jobs} | keep)
-    pending = [(stem, make) for stem, make in jobs if not files.has(stem, keys or ())]
+    pending = unfinished(files, jobs, keys)
     with tqdm(total=len(pending), desc=desc, disable=not progress, leave=False) as bar:
         for i, r in runner.map(make() for _, make in pending):
             files.put(pending[i][0], r)
@@ -251,6 +251,11 @@ def run_to_files(
         if data is None:
             raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
         yield stem, data, stem not in fresh
+
+
+def unfinished(files: TaskFiles, jobs, keys: tuple[str, ...] | None = None) -> list:
+    """The jobs (file stem, task maker) whose file ``files`` does not hold with ``keys`` (None: any)."""
+    return [(stem, make) for stem, make in jobs if not files.has(stem, keys or ())]
 
 
 def piece_stem(piece: Piece) -> str:
@@ -363,7 +368,7 @@ def solve_stage(
     jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
     # The other pieces' solves run beside the first big piece's equation shares, in one wave: on many
     # machines they then take no wave of their own after the big pieces' iterations.
-    beside = [(stem, make) for stem, make in jobs if not files.has(stem, keys or ())]
+    beside = unfinished(files, jobs, keys)
     fresh = set()
     for p in here:
         if not files.has(piece_stem(p)):

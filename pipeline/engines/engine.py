@@ -190,6 +190,10 @@ class Engine:
     name = "engine"
     workers = 1  # tasks running at once
     threads: int | None = None  # threads per task (labelling); None: what the task's settings say
+    # How ``task_seconds`` are taken: "wall" (the wall clock), or "thread_cpu" (each task's thread's CPU
+    # seconds: a task beside others on threads of one process waits for the interpreter lock they hold,
+    # which on a worker of its own it would not)
+    task_clock = "wall"
     chunk_rays: int | None = None  # rays per bake task (EngineLabeller); None: CHUNK_RAYS
 
     def __init__(self) -> None:
@@ -202,8 +206,8 @@ class Engine:
         # The map call (numbered from 0 for this engine) each task of ``task_seconds`` ran in: a caller's
         # next map starts once it has read this one's results, so a map's tasks are a wave that the next
         # waits for (what a projection onto more machines adds up, wave by wave).
-        self.task_batches: list[int] = []
-        self._batches = 0
+        self.task_waves: list[int] = []
+        self._waves = 0
 
     def _timing(self, timed: _Timed) -> Any:
         """The result inside ``timed``, its seconds noted."""
@@ -221,13 +225,13 @@ class Engine:
         """Yield ``(index, result)`` for every task, in completion order. ``tasks`` is consumed lazily
         (a few ahead of the workers), so a generator may load one scene at a time."""
         self.completed = self.reused = 0
-        batch, self._batches = self._batches, self._batches + 1
+        wave, self._waves = self._waves, self._waves + 1
         pending = self._skip_stored(tasks, store)
         for index, task, result in self._run(pending):
             if task is None:
                 self.reused += 1
             else:  # _run timed it (_timing) just before yielding it
-                self.task_batches.append(batch)
+                self.task_waves.append(wave)
                 if store is not None and task.key is not None:
                     store.put(task.key, result)
             self.completed += 1
@@ -300,6 +304,11 @@ class LocalEngine(Engine):
         self._states = dict(states or {})
         self._lock = threading.Lock()  # one state built at a time; tasks wait for the one they need
 
+    @property
+    def task_clock(self) -> str:
+        """Several tasks at once, each on one thread: "thread_cpu" (:attr:`Engine.task_clock`)."""
+        return "thread_cpu" if self.workers > 1 and self.threads == 1 else "wall"
+
     def hold(self, key: str, state: Any) -> None:
         """Use ``state`` (held by the caller) for the tasks of context ``key`` from now on."""
         self._states[key] = state
@@ -320,9 +329,7 @@ class LocalEngine(Engine):
                     lambda ctx=ctx, built=built: _timed_build(ctx.build, ctx.value, built),
                     ctx.heavy,
                 )
-        # Several tasks at once, each on one thread (threads=1): a task's own seconds are its thread's CPU.
-        cpu = self.workers > 1 and self.threads == 1
-        return _timed_call(task.fn, state, _unshare(task.args), built[0], cpu)
+        return _timed_call(task.fn, state, _unshare(task.args), built[0], self.task_clock == "thread_cpu")
 
     def _run(self, pending):
         if self.workers == 1:
@@ -382,8 +389,7 @@ class _Timed:
 
 def _timed_call(fn, state, args, state_seconds: float = 0.0, cpu: bool = False) -> _Timed:
     """``fn(state, args)`` and its seconds: what a projection of a run's stages reads. ``cpu``: the
-    seconds are this thread's CPU time, not the wall clock's (a task beside others on threads of one
-    process, which waits for the interpreter lock they hold: on a worker of its own it would not)."""
+    seconds are this thread's CPU time, not the wall clock's (:attr:`Engine.task_clock`)."""
     clock = time.thread_time if cpu else time.perf_counter
     t0 = clock()
     result = fn(state, args)
