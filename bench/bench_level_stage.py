@@ -1,20 +1,20 @@
-"""One stage of a kept level bake run again from its stored inputs, here or on a loopback Ray cluster, then
-the projection of the bake with that stage's fresh costs in place of the kept ones.
+"""Stages of a kept level bake run again from its stored inputs, here or on a loopback Ray cluster, then
+the projection of the bake with those stages' fresh costs in place of the kept ones.
 
     .venv/bin/python bench/bench_level_stage.py --bake build/bench/level_cluster/world10x/bake_1 \
         --level build/bench/level_cluster/world10x/level/level.gltf --stage solve --keep trace
 
-The kept bake's settings (its bake_log.json) are used as they are, so the stored stages named by ``--keep``
-(their files under stages/) are reused and the bake runs up to ``--stage``, which is made fresh and timed
-(local engine: its driver seconds are its wall time less its tasks'; with ``--nodes`` on a loopback Ray
-cluster: the driver's CPU seconds), and stops there. What a change to a
-stage's code does to a bake too big to rerun whole (the 10x world's trace is 11 CPU-minutes) is measured
-this way, the stage's code before and after run on the same stored inputs. The projection onto 1, 4, 32 and
-128 machines of 16 cores (``bench_level_cluster.project``) then takes the kept bake's log with this stage's
-row and task seconds replaced; ``--bvh-scale`` multiplies the states' (BVH builds') seconds, for a kept log
-measured before a change of the BVH build.
+The kept bake's settings (its bake_log.json, with any ``--set`` overrides) are used, so the stored stages
+named by ``--keep`` (their files under stages/) are reused and the bake runs up to the last of ``--stage``,
+whose stages are made fresh and timed (local engine: its driver thread's CPU seconds, with Ray's cost to
+submit each task added; with ``--nodes`` on a loopback Ray cluster: the driver's CPU seconds), and stops
+there. What a change to a stage's code does to a bake too big to rerun whole (the 10x world's trace is 11
+CPU-minutes) is measured this way, the stage's code before and after run on the same stored inputs. The
+projection onto 1, 4, 32 and 128 machines of 16 cores (``bench_level_cluster.project``) then takes the kept
+bake's log with these stages' rows and task seconds replaced; ``--bvh-scale`` multiplies the states' (BVH
+builds') seconds, for a kept log measured before a change of the BVH build.
 
-Writes OUT/STAGE.json (the stage's row, its task seconds, the projection).
+Writes OUT/STAGE[_STAGE...].json (each stage's row and task seconds, the projection).
 """
 
 from __future__ import annotations
@@ -30,45 +30,49 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_level_cluster import loopback_cluster, project  # noqa: E402
-from bench_ray import TRACING_STAGES  # noqa: E402
+from bench_ray import SUBMIT_S, TRACING_STAGES  # noqa: E402
 
 from neuralao.pipeline.bakes import level as level_bake  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings  # noqa: E402
 from neuralao.runtime.foundation.io import write_json  # noqa: E402
-from neuralao.runtime.foundation.settings import from_dict  # noqa: E402
+from neuralao.runtime.foundation.settings import apply_overrides, from_dict  # noqa: E402
 
 
 class _Stop(Exception):
     pass
 
 
-def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, engine=None) -> dict:
-    """The bake ``bake``'s stage ``stage`` made fresh in ``out`` (the kept stages copied there first), here
-    or on ``engine``."""
+def run_stage(
+    bake: Path, level: Path, stages: list[str], keep: list[str], out: Path, engine=None, overrides=()
+) -> dict:
+    """The bake ``bake``'s ``stages`` made fresh in ``out`` (the kept stages copied there first), here or
+    on ``engine``, with the settings ``overrides`` (``key=value``) applied to the kept bake's; the bake stops
+    after the last of them. Returns {stage: {row, task_seconds, task_waves}, "kept_log": the kept log}."""
     (out / "stages").mkdir(parents=True, exist_ok=True)
     for name in keep:
         for src in (bake / "stages").glob(f"{name}*"):
             dst = out / "stages" / src.name
             if not dst.exists():
                 (shutil.copytree if src.is_dir() else shutil.copy)(src, dst)
-    fresh = out / "stages" / f"{stage}.npz"
-    fresh.unlink(missing_ok=True)
-    shutil.rmtree(out / "stages" / stage, ignore_errors=True)
+    for stage in stages:
+        (out / "stages" / f"{stage}.npz").unlink(missing_ok=True)
+        shutil.rmtree(out / "stages" / stage, ignore_errors=True)
     log = json.loads((bake / "bake_log.json").read_text())
-    settings = from_dict(LevelBakeSettings, log["settings"])
+    settings = from_dict(LevelBakeSettings, apply_overrides(copy.deepcopy(log["settings"]), list(overrides)))
     found: dict = {}
     record = level_bake.BakeLog._record
 
     def stop_after(self, name, *args, **kwargs):
         record(self, name, *args, **kwargs)
         print(json.dumps(self.stages[-1]), flush=True)
-        if name == stage:
-            found.update(
-                row=self.stages[-1],
-                task_seconds=self.task_seconds.get(name, []),
-                task_waves=self.task_waves.get(name, []),
-            )
-            raise _Stop
+        if name in stages:
+            found[name] = {
+                "row": self.stages[-1],
+                "task_seconds": self.task_seconds.get(name, []),
+                "task_waves": self.task_waves.get(name, []),
+            }
+            if len(found) == len(stages):
+                raise _Stop
 
     level_bake.BakeLog._record = stop_after
     try:
@@ -77,21 +81,25 @@ def run_stage(bake: Path, level: Path, stage: str, keep: list[str], out: Path, e
         pass
     finally:
         level_bake.BakeLog._record = record
-    if not found:
-        raise SystemExit(f"the bake has no stage {stage!r}")
+    missing = [s for s in stages if s not in found]
+    if missing:
+        raise SystemExit(f"the bake has no stage {missing[0]!r}")
     return found | {"kept_log": log}
 
 
-def patched(log: dict, stage: str, fresh: dict, bvh_scale: float) -> dict:
-    """``log`` (a Ray bake's) with ``stage``'s driver and task seconds and waves from ``fresh`` (a local
-    run's driver seconds stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH
-    states' seconds (the stages that trace) times ``bvh_scale``."""
+def patched(log: dict, fresh: dict, bvh_scale: float, local: bool) -> dict:
+    """``log`` (a Ray bake's) with each stage of ``fresh`` ({stage: run}) taking its driver and task
+    seconds and waves from the run (a ``local`` run's driver seconds, with Ray's cost to submit each task
+    added, stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH states' seconds
+    (the stages that trace) times ``bvh_scale``."""
     out = copy.deepcopy(log)
-    for row in out["stages"]:
-        if row["stage"] == stage:
-            row["cpu_seconds"] = fresh["row"]["driver_seconds"]
-    out["task_seconds"][stage] = list(fresh["task_seconds"])
-    out.setdefault("task_waves", {})[stage] = list(fresh["task_waves"])
+    for stage, run in fresh.items():
+        for row in out["stages"]:
+            if row["stage"] == stage:
+                submit = SUBMIT_S * len(run["task_seconds"]) if local else 0.0
+                row["cpu_seconds"] = run["row"]["driver_seconds"] + submit
+        out["task_seconds"][stage] = list(run["task_seconds"])
+        out.setdefault("task_waves", {})[stage] = list(run["task_waves"])
     out["state_seconds"] = {
         k: [x * (bvh_scale if k in TRACING_STAGES else 1.0) for x in v]
         for k, v in out.get("state_seconds", {}).items()
@@ -103,7 +111,8 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--bake", required=True, help="a kept bake folder (bake_log.json and stages/)")
     p.add_argument("--level", required=True, help="the level it baked")
-    p.add_argument("--stage", default="solve")
+    p.add_argument("--stage", nargs="+", default=["solve"], help="the stages to make fresh")
+    p.add_argument("--set", action="append", default=[], help="setting override, e.g. lod.tile_faces=65536")
     p.add_argument("--keep", nargs="+", default=["trace"], help="stored stages to reuse")
     p.add_argument("--bvh-scale", type=float, default=1.0)
     p.add_argument("--bvh-speedup", type=float, default=7.9, help="BVH build, 16 threads vs 1")
@@ -119,12 +128,13 @@ def main() -> int:
     where = (Path(args.bake), Path(args.level), args.stage, args.keep, out / "bake")
     if args.nodes:
         with loopback_cluster(args.nodes, 1) as (engine, _, _):
-            fresh = run_stage(*where, engine=engine)
+            fresh = run_stage(*where, engine=engine, overrides=args.set)
     else:
-        fresh = run_stage(*where)
-    log = patched(fresh.pop("kept_log"), args.stage, fresh, args.bvh_scale)
+        fresh = run_stage(*where, overrides=args.set)
+    log = patched(fresh.pop("kept_log"), fresh, args.bvh_scale, local=not args.nodes)
     result = {
-        "stage": args.stage,
+        "stages": args.stage,
+        "overrides": args.set,
         "fresh": fresh,
         "bvh_scale": args.bvh_scale,
         "bvh_speedup": args.bvh_speedup,
@@ -133,12 +143,13 @@ def main() -> int:
         "single": [{"machines": m, **project(log, m, 16)} for m in (1, 4, 32, 128)],
         "threads": [{"machines": m, **project(log, m, 16, 16, args.bvh_speedup)} for m in (1, 4, 32, 128)],
     }
-    write_json(out / f"{args.stage}.json", result)
-    row = fresh["row"]
-    print(
-        f"{args.stage}: {row['seconds']:.1f} s, driver {row['driver_seconds']:.1f} s, "
-        f"{len(fresh['task_seconds'])} tasks, largest {max(fresh['task_seconds'], default=0.0):.2f} s"
-    )
+    write_json(out / f"{'_'.join(args.stage)}.json", result)
+    for stage, run in fresh.items():
+        row = run["row"]
+        print(
+            f"{stage}: {row['seconds']:.1f} s, driver {row['driver_seconds']:.1f} s, "
+            f"{len(run['task_seconds'])} tasks, largest {max(run['task_seconds'], default=0.0):.2f} s"
+        )
     for kind, rows in result["projection"].items():
         totals = " / ".join(f"{r['total_s']:.1f}" for r in rows)
         print(

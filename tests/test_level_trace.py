@@ -476,3 +476,26 @@ def test_small_faces_keep_their_share_of_samples():
     on_grid = (s.face >= 2).sum()
     expected = 800 * 1.0 / total_area  # 0.05 per grid face, 160 in all
     assert abs(on_grid - expected) < 5 * np.sqrt(expected)
+
+
+@pytest.mark.parametrize("run", [3, 10, 10**6])
+def test_a_sample_range_s_areas_are_the_piece_s(tiny_geometry, monkeypatch, run):
+    """The samples' passes take a range's face areas from its own faces' vertices (an instance cut by the
+    range transforms only the vertices it uses): the piece's areas, bit for bit, for pieces of one and of
+    several instances; and each piece's area is their sum."""
+    import neuralao.pipeline.bakes.level_pieces as level_pieces
+
+    monkeypatch.setattr(level_pieces, "SAMPLE_RANGE_FACES", run)
+    g = tiny_geometry
+    for piece_faces in (100, 10**9):
+        index = index_level(g.level, piece_faces)
+        for piece in index.pieces:
+            ranges = level_pieces.piece_ranges(piece)
+            assert ranges[0][0] == 0 and ranges[-1][1] == piece.nf and len(ranges) == -(-piece.nf // run)
+            got = np.concatenate([level_pieces.range_areas(g.level, index, piece, a, b) for a, b in ranges])
+            np.testing.assert_array_equal(got, face_areas(piece_scene(g.level, index, piece)))
+        # each piece's area (what the LOD weighs it by) is its faces' areas added
+        _, pieces = sample_rule(g.level, index, 2.0, 0, 4, seed=7)
+        for piece in pieces:
+            areas = face_areas(piece_scene(g.level, index, piece))
+            assert piece.area == pytest.approx(float(areas.sum()), rel=1e-12) and piece.area > 0

@@ -290,7 +290,7 @@ def bake_level(
     )
     t = s.trace
     light = pieces_context(key, level, index)
-    # The samples' two passes over the pieces are a task per piece each (here: in this process).
+    # The samples' two passes over the pieces' sample ranges are a task per range each.
     # Locally, s.workers tasks at a time on threads, each tracing on one (as Ray's single-CPU actors): no
     # task's numpy waits for its own tracing threads, and the stages' tasks fill the cores.
     local = None if engine is not None else LocalEngine(workers=s.workers, threads=1)
@@ -305,7 +305,7 @@ def bake_level(
             t.min_samples_per_face,
             t.samples_per_face_cap,
             s.seed,
-            engine_each(blog.runner, light, index.pieces),
+            engine_each(blog.runner, light),
         ),
     )
     blog.runner = None

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from neuralao.pipeline.geometry.level_files import Level, LevelNode
+from neuralao.pipeline.geometry.level_files import Level, LevelNode, transform_points
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import SurfaceSamples, face_areas, samples_in_range, surface_samples
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -53,6 +53,7 @@ class Piece:
     # (first face, first sample) of each run of SAMPLE_RANGE_FACES of the piece's faces, from the samples'
     # second pass; empty: not known (a block task then counts the samples of every face of the piece)
     ranges: tuple[tuple[int, int], ...] = ()
+    area: float = 0.0  # of its faces, from the samples' second pass (its ranges' sums added in order)
 
 
 @dataclass
@@ -110,8 +111,7 @@ def cut_pieces(table: np.ndarray, piece_faces: int) -> list[Piece]:
 
 def instance_vertices(level: Level, node: LevelNode, j: int) -> np.ndarray:
     """World-space vertices (n, 3) float64 of instance ``j`` of ``node`` (as :func:`flatten` makes them)."""
-    v = level.meshes[node.mesh].vertices
-    return np.c_[v, np.ones(len(v))] @ node.transforms[j][:3].T
+    return transform_points(level.meshes[node.mesh].vertices, node.transforms[j])
 
 
 # World vertices made at once when a node's instances are bounded (a batch of its instances: 48 MiB).
@@ -124,10 +124,9 @@ def instance_batches(vertices: np.ndarray, transforms: np.ndarray) -> Iterator[n
     it)."""
     if len(vertices) == 0:
         return
-    homo = np.c_[vertices, np.ones(len(vertices))]
     step = max(1, _BOUNDS_BATCH // len(vertices))
     for a in range(0, len(transforms), step):
-        yield np.matmul(homo, transforms[a : a + step, :3].transpose(0, 2, 1))
+        yield transform_points(vertices, transforms[a : a + step])
 
 
 def level_bounds(level: Level, nodes: list[LevelNode]) -> np.ndarray:
@@ -151,15 +150,17 @@ def index_level(level: Level, piece_faces: int) -> PieceIndex:
 
 
 def piece_scene(level: Level, index: PieceIndex, piece: Piece) -> Scene:
-    """The piece's instances flattened (vertex and face numbers local to the piece)."""
+    """The piece's instances flattened (vertex and face numbers local to the piece). A piece of one
+    instance (a terrain) shares its mesh's faces: no copy of them."""
     verts, faces = [], []
     for k, j, v0, _, _, _ in index.table[piece.first : piece.stop]:
         node = index.nodes[k]
         verts.append(instance_vertices(level, node, int(j)))
-        faces.append(level.meshes[node.mesh].faces + (v0 - piece.v0))
+        f = level.meshes[node.mesh].faces
+        faces.append(f + (v0 - piece.v0) if v0 != piece.v0 else f)
     return scene_from_arrays(
-        np.concatenate(verts),
-        np.concatenate(faces),
+        verts[0] if len(verts) == 1 else np.concatenate(verts),
+        faces[0] if len(faces) == 1 else np.concatenate(faces),
         f"piece{piece.index}",
         level.source,
         drop_degenerate=False,
@@ -312,23 +313,62 @@ def cached_block(
     return scene, block
 
 
-def piece_area_bins(level: Level, index: PieceIndex, piece: Piece) -> dict[str, np.ndarray]:
-    """The area histogram's bins of one piece's faces (the samples' first pass)."""
-    return AreaHistogram().bins(face_areas(piece_scene(level, index, piece)))
+def piece_ranges(piece: Piece) -> list[tuple[int, int]]:
+    """Faces [a, b) of each of ``piece``'s sample ranges: runs of SAMPLE_RANGE_FACES faces (one, maybe
+    empty, for a piece of no face)."""
+    return [
+        (a, min(a + SAMPLE_RANGE_FACES, piece.nf)) for a in range(0, max(piece.nf, 1), SAMPLE_RANGE_FACES)
+    ]
+
+
+def range_areas(level: Level, index: PieceIndex, piece: Piece, fa: int, fb: int) -> np.ndarray:
+    """(fb - fa,) float64 areas of the piece's faces fa .. fb: those of ``face_areas(piece_scene(...))``
+    bit for bit, from the world positions of these faces' vertices only (a 65,536-face run of the 10x
+    world's terrain, not its 4.4M vertices)."""
+    verts, faces, nv = [], [], 0
+    for k, j, _, f0, _, nf in index.table[piece.first : piece.stop]:
+        lo, hi = max(fa, f0 - piece.f0), min(fb, f0 - piece.f0 + nf)
+        if lo >= hi:
+            continue
+        node = index.nodes[k]
+        mesh = level.meshes[node.mesh]
+        sub = mesh.faces[lo - (f0 - piece.f0) : hi - (f0 - piece.f0)]
+        if hi - lo < nf:  # part of an instance: its faces' vertices only
+            used, sub = np.unique(sub, return_inverse=True)
+            world = transform_points(mesh.vertices[used], node.transforms[j])
+        else:
+            world = transform_points(mesh.vertices, node.transforms[j])
+        verts.append(world)
+        faces.append(sub.reshape(-1, 3) + nv)
+        nv += len(world)
+    if not faces:
+        return np.zeros(0)
+    scene = scene_from_arrays(
+        np.concatenate(verts),
+        np.concatenate(faces),
+        f"piece{piece.index}",
+        level.source,
+        drop_degenerate=False,
+    )
+    return face_areas(scene)
+
+
+def piece_area_bins(level: Level, index: PieceIndex, piece: Piece, fa: int, fb: int) -> dict[str, np.ndarray]:
+    """The area histogram's bins of a piece's faces fa .. fb (the samples' first pass)."""
+    return AreaHistogram().bins(range_areas(level, index, piece, fa, fb))
 
 
 def piece_sample_count(
-    level: Level, index: PieceIndex, piece: Piece, rule: SampleRule
+    level: Level, index: PieceIndex, piece: Piece, fa: int, fb: int, rule: SampleRule
 ) -> dict[str, np.ndarray]:
-    """One piece's sample count and the areas of its faces with samples and of all (the second pass)."""
-    areas = face_areas(piece_scene(level, index, piece))
-    counts = face_counts(areas, piece.f0, rule)
-    starts = np.arange(0, len(counts), SAMPLE_RANGE_FACES)
+    """The sample count of a piece's faces fa .. fb and the areas of those with samples and of all (the
+    second pass)."""
+    areas = range_areas(level, index, piece, fa, fb)
+    counts = face_counts(areas, piece.f0 + fa, rule)
     return {
         "samples": np.array(int(counts.sum())),
         "area_sampled": np.array(float(areas[counts > 0].sum())),
         "area": np.array(float(areas.sum())),
-        "range_samples": np.add.reduceat(counts, starts) if len(counts) else np.zeros(0, np.int64),
     }
 
 
@@ -341,32 +381,39 @@ def sample_rule(
     seed: int,
     each: Callable | None = None,
 ):
-    """The :class:`SampleRule` of the level and the pieces with their sample offsets and counts: two passes
-    over the pieces (areas into the histogram; then counts), one piece in memory at a time.
+    """The :class:`SampleRule` of the level and the pieces with their sample offsets, counts and ranges:
+    two passes over the pieces' sample ranges (:func:`piece_ranges`: areas into the histogram; then
+    counts), one range's faces in memory at a time.
 
-    each : ``each(fn, *args)`` -> ``fn(level, index, piece, *args)`` of every piece, in piece order (a
-    bake's engine runs them as tasks); None: here, one after the other. The driver adds the pieces' sums in
-    piece order either way, so the rule is the same to the last bit."""
+    each : ``each(fn, jobs, *args)`` -> ``fn(level, index, piece, a, b, *args)`` of every job (piece, a,
+    b), in job order (a bake's engine runs them as tasks); None: here, one after the other. The driver adds
+    the ranges' sums in order either way, so the rule is the same to the last bit however they ran."""
     if each is None:
 
-        def each(fn, *args):
-            return (fn(level, index, piece, *args) for piece in index.pieces)
+        def each(fn, jobs, *args):
+            return (fn(level, index, *job, *args) for job in jobs)
 
+    jobs = [(piece, a, b) for piece in index.pieces for a, b in piece_ranges(piece)]
     hist = AreaHistogram()
-    for bins in each(piece_area_bins):
+    for bins in each(piece_area_bins, jobs):
         hist.add_bins(bins)
     rho = water_fill(hist, samples_per_vertex * index.vertices, floor, cap)
     rule = SampleRule(rho, floor, cap, seed)
-    pieces, s0, area_total, area_all = [], 0, 0.0, 0.0
-    for piece, r in zip(index.pieces, each(piece_sample_count, rule), strict=True):
+    counts: dict[int, list[int]] = {}
+    areas = dict.fromkeys(range(len(index.pieces)), 0.0)
+    area_total, area_all = 0.0, 0.0
+    for (piece, _, _), r in zip(jobs, each(piece_sample_count, jobs, rule), strict=True):
         area_total += float(r["area_sampled"])
         area_all += float(r["area"])
-        ns = int(r["samples"])
-        counts = np.asarray(r["range_samples"], np.int64)
-        firsts = np.cumsum(counts) - counts  # each range's first sample
-        ranges = tuple((i * SAMPLE_RANGE_FACES, int(first)) for i, first in enumerate(firsts))
-        pieces.append(replace(piece, s0=s0, ns=ns, ranges=ranges))
-        s0 += ns
+        areas[piece.index] += float(r["area"])
+        counts.setdefault(piece.index, []).append(int(r["samples"]))
+    pieces, s0 = [], 0
+    for piece in index.pieces:
+        ns = np.asarray(counts[piece.index], np.int64)
+        firsts = np.cumsum(ns) - ns  # each range's first sample
+        ranges = tuple((a, int(first)) for (a, _), first in zip(piece_ranges(piece), firsts, strict=True))
+        pieces.append(replace(piece, s0=s0, ns=int(ns.sum()), ranges=ranges, area=areas[piece.index]))
+        s0 += int(ns.sum())
     return SampleRule(rho, floor, cap, seed, area_total, area_all), pieces
 
 

