@@ -121,8 +121,9 @@ def output_hash(bake: Path) -> str:
 
 
 @contextlib.contextmanager
-def loopback_cluster(nodes: int, cpus: int):
-    """A fresh Ray cluster of ``nodes`` x ``cpus`` on 127.0.0.1 (its own raylets and object store per node),
+def loopback_cluster(nodes: int, cpus: int, object_store_gib: float = 1.0):
+    """A fresh Ray cluster of ``nodes`` x ``cpus`` on 127.0.0.1 (its own raylets and an object store of
+    ``object_store_gib`` per node; what does not fit spills to the disk, which Ray refuses past 95% full),
     this process its driver: yields (engine, alive nodes, nodes with actors)."""
     import ray
     from ray.cluster_utils import Cluster
@@ -130,7 +131,7 @@ def loopback_cluster(nodes: int, cpus: int):
     from neuralao.pipeline.engines import engine as engine_mod
     from neuralao.pipeline.engines.engine import RayEngine
 
-    node = {"num_cpus": cpus, "object_store_memory": 1 << 30}
+    node = {"num_cpus": cpus, "object_store_memory": int(object_store_gib * (1 << 30))}
     c = Cluster(initialize_head=True, head_node_args=node | {"include_dashboard": False})
     try:
         for _ in range(nodes - 1):

@@ -123,11 +123,12 @@ def main() -> int:
         default=0,
         help="run on a loopback Ray cluster of N 1-CPU nodes (0: here)",
     )
+    p.add_argument("--object-store-gib", type=float, default=1.0, help="each node's object store")
     args = p.parse_args()
     out = Path(args.out)
     where = (Path(args.bake), Path(args.level), args.stage, args.keep, out / "bake")
     if args.nodes:
-        with loopback_cluster(args.nodes, 1) as (engine, _, _):
+        with loopback_cluster(args.nodes, 1, args.object_store_gib) as (engine, _, _):
             fresh = run_stage(*where, engine=engine, overrides=args.set)
     else:
         fresh = run_stage(*where, overrides=args.set)
