@@ -345,3 +345,20 @@ def load_level_settings_dict(data):
     s = from_dict(LevelBakeSettings, data)
     check_settings(s)
     return s
+
+
+def test_workers_of_several_threads_take_bigger_resampling_tasks_and_bake_the_same_bytes(baked, tmp_path):
+    """Workers of 3 tracing threads get 3x the rays in each LOD resampling and grass task (a third of the
+    tasks) and write the same glTF bytes: a point's value depends on its own rays alone."""
+    from neuralao.pipeline.engines.engine import LocalEngine
+
+    root, level, cfg, info = baked
+    settings = load_level_settings(cfg, ["task_rays=2048"])
+    one = bake_level(level, settings, tmp_path / "one")
+    three = bake_level(level, settings, tmp_path / "three", engine=LocalEngine(threads=3))
+    assert three["task_threads"] == 3 and one["task_threads"] == 1
+    lod = {r["stage"]: r for r in one["stages"]}["lod"], {r["stage"]: r for r in three["stages"]}["lod"]
+    assert lod[0]["resample_tasks"] > 2 and lod[1]["resample_tasks"] == -(-lod[0]["resample_tasks"] // 3)
+    assert (tmp_path / "one" / "level_baked.glb").read_bytes() == (
+        tmp_path / "three" / "level_baked.glb"
+    ).read_bytes()

@@ -167,13 +167,17 @@ def local_level(tmp_path_factory):
 
 
 def _stage_arrays(out: Path) -> dict[str, np.ndarray]:
-    """Every array of every stored stage but the timings (seconds_*) and the trace's reuse count."""
+    """Every array of every stored stage but the timings (seconds_*), the trace's reuse count and the LOD's
+    resampling blocks and their count, which are sized by the workers' threads (their values reach the
+    LOD's arrays, compared here)."""
     from neuralao.runtime.foundation.io import read_npz
 
     arrays = {}
     for f in sorted((out / "stages").rglob("*.npz")):
+        if f.parent.name == "lod_resample":
+            continue
         for k, v in read_npz(f).items():
-            if not k.startswith("seconds_") and k != "reused_tasks":
+            if not k.startswith("seconds_") and k not in ("reused_tasks", "resample_tasks"):
                 arrays[f"{f.relative_to(out / 'stages').with_suffix('')}/{k}"] = v
     return arrays
 

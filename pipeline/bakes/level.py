@@ -82,10 +82,11 @@ from neuralao.pipeline.bakes.level_stages import (
     simplify_piece,
     solve_stage,
     split_lod,
+    task_rays,
     trace_jobs,
     worker_settings,
 )
-from neuralao.pipeline.engines.engine import LocalEngine, ResultStore, Task
+from neuralao.pipeline.engines.engine import LocalEngine, ResultStore, Task, content_key
 from neuralao.pipeline.geometry.least_squares import Whole
 from neuralao.pipeline.geometry.level_files import read_level
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -375,7 +376,7 @@ def bake_level(
         "small_decorators",
         "Resample grass clumps and shrubs",
         lambda: small_decorators(
-            level, Resampler(runner, ctx, blog.parts("small_decorators"), s.task_rays), values, s
+            level, Resampler(runner, ctx, blog.parts("small_decorators"), task_rays(s, runner)), values, s
         ),
     )
     lod_files = TaskFiles(blog.dir / "lod", key) if s.lod.enabled else None
@@ -579,13 +580,16 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
         del result
     radius = s.lod.radius or 1.5 * float(mesh_files.get("radius")["median_edge"])
     t1 = time.perf_counter()
-    resample_files = TaskFiles(lod_files.folder.parent / "lod_resample", lod_files.key)
-    jobs, counts = lod_resample_jobs(ctx, pieces, values, mesh_files, radius, s)
+    per_block = max(1, task_rays(s, runner) // s.lod.rays)
+    # the blocks' files are numbered by this size: a rerun with another (another engine) redoes them
+    resample_files = TaskFiles(
+        lod_files.folder.parent / "lod_resample", content_key(lod_files.key, per_block)
+    )
+    jobs, counts = lod_resample_jobs(ctx, pieces, values, mesh_files, radius, s, per_block)
     resample_tasks = len(jobs)
     for _ in run_to_files(resample_files, runner, jobs, "lod resampling", progress, keys=()):
         pass  # every block's values are there (read by the pieces' tasks below)
     t2 = time.perf_counter()
-    per_block = max(1, s.task_rays // s.lod.rays)
 
     def resampled(p):
         return piece_resampled(resample_files, p, counts[p.index], per_block)
