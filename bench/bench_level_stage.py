@@ -60,27 +60,30 @@ def run_stage(
     log = json.loads((bake / "bake_log.json").read_text())
     settings = from_dict(LevelBakeSettings, apply_overrides(copy.deepcopy(log["settings"]), list(overrides)))
     found: dict = {}
-    record = level_bake.BakeLog._record
+    record, begin = level_bake.BakeLog._record, level_bake.BakeLog._begin
 
-    def stop_after(self, name, *args, **kwargs):
+    def keep(self, name, *args, **kwargs):
         record(self, name, *args, **kwargs)
         print(json.dumps(self.stages[-1]), flush=True)
-        if name in stages:
+        if name in stages:  # the row itself: the counts the bake notes after it (the LOD's rounds) reach it
             found[name] = {
                 "row": self.stages[-1],
                 "task_seconds": self.task_seconds.get(name, []),
                 "task_waves": self.task_waves.get(name, []),
             }
-            if len(found) == len(stages):
-                raise _Stop
 
-    level_bake.BakeLog._record = stop_after
+    def stop_before_next(self):
+        if len(found) == len(stages):
+            raise _Stop
+        begin(self)
+
+    level_bake.BakeLog._record, level_bake.BakeLog._begin = keep, stop_before_next
     try:
         level_bake.bake_level(level, settings, out, engine=engine)
     except _Stop:
         pass
     finally:
-        level_bake.BakeLog._record = record
+        level_bake.BakeLog._record, level_bake.BakeLog._begin = record, begin
     missing = [s for s in stages if s not in found]
     if missing:
         raise SystemExit(f"the bake has no stage {missing[0]!r}")
@@ -98,6 +101,9 @@ def patched(log: dict, fresh: dict, bvh_scale: float, local: bool) -> dict:
             if row["stage"] == stage:
                 submit = SUBMIT_S * len(run["task_seconds"]) if local else 0.0
                 row["cpu_seconds"] = run["row"]["driver_seconds"] + submit
+                for k in ("simplify_tasks", "resample_tasks"):  # the LOD's rounds (bench_ray.traces)
+                    if k in run["row"]:
+                        row[k] = run["row"][k]
         out["task_seconds"][stage] = list(run["task_seconds"])
         out.setdefault("task_waves", {})[stage] = list(run["task_waves"])
     out["state_seconds"] = {

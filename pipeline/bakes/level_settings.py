@@ -139,7 +139,8 @@ class LevelBakeSettings:
     seed: int = 0
     # Tasks a local bake runs at once, on threads, each tracing on one (on Ray: an actor's --ray-threads).
     workers: int = 2
-    # Rays per resampling task (grass, shrubs) on an engine: scheduling only, never the result.
+    # Rays per resampling task (grass, shrubs, the LOD) and tracing thread of the engine's workers:
+    # scheduling only, never the result.
     task_rays: int = 1 << 20
     # Faces per piece: the static instances are cut into runs of whole instances of about this many
     # faces (a bigger instance is a piece of its own); the solve, the LOD and the output are one task
