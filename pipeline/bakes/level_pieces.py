@@ -157,6 +157,9 @@ def piece_scene(level: Level, index: PieceIndex, piece: Piece) -> Scene:
         node = index.nodes[k]
         verts.append(instance_vertices(level, node, int(j)))
         f = level.meshes[node.mesh].faces
+        if v0 == piece.v0:  # the mesh's own array, read-only: a write to the scene's faces is an error
+            f = f.view()
+            f.flags.writeable = False
         faces.append(f + (v0 - piece.v0) if v0 != piece.v0 else f)
     return scene_from_arrays(
         verts[0] if len(verts) == 1 else np.concatenate(verts),
