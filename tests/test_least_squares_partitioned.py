@@ -7,6 +7,10 @@ bytes on every run and engine."""
 from __future__ import annotations
 
 import math
+import os
+import signal
+import threading
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -135,7 +139,9 @@ def test_partitioned_solve_is_the_global_solve(name, request):
         assert err <= MAX_ABS, f"{name}, {k} subdomains: max abs {err:.2e}"
         assert max(info.iterations) <= MAX_ITERATIONS, f"{name}, {k} subdomains: {info.iterations} iterations"
         assert max(info.residuals) <= RTOL
-        assert len(info.subdomain_vertices) == k and len(info.seconds_tasks) == k * max(info.iterations)
+        # a wave of k tasks for each of an iteration's three steps, the first local solves and the collection
+        waves = 3 * max(info.iterations) + 2
+        assert len(info.subdomain_vertices) == k and len(info.seconds_tasks) == k * waves
 
 
 @pytest.mark.parametrize("name", ["terrain_case", "soup_case"])
@@ -175,7 +181,8 @@ def test_same_inputs_same_bytes_on_every_engine(terrain_case):
     again = solve_partitioned(c.a, c.rhs, c.scene.vertices, 8)
     ctx = Context("test-held", lambda payload: "held", None)
     tasks = solve_partitioned(c.a, c.rhs, c.scene.vertices, 8, engine=LocalEngine(), context=ctx)
-    assert first.tobytes() == again.tobytes() == tasks.tobytes()
+    threads = solve_partitioned(c.a, c.rhs, c.scene.vertices, 8, engine=LocalEngine(workers=2))
+    assert first.tobytes() == again.tobytes() == tasks.tobytes() == threads.tobytes()
 
 
 def test_a_stalled_solve_is_a_one_line_error(bunny_case):
@@ -223,6 +230,32 @@ def test_ray_subdomain_tasks_give_the_local_bytes(level_case, ray_engine):
     remote = fit_level(c.scene, c.samples, c.values, c.valid, t, engine=ray_engine)
     assert ray_engine.completed == 4  # the last iteration's map: one task per subdomain
     assert here.tobytes() == remote.tobytes()
+
+
+def test_a_worker_killed_mid_solve_restarts_it_to_the_same_bytes(bunny_case, ray_engine):
+    """The subdomains' vectors live on the workers between the CG's steps: an actor SIGKILLed mid-solve is
+    restarted without them, the solve starts again, and its bytes are those of this process."""
+    c = bunny_case
+    here = solve_partitioned(c.a, c.rhs, c.scene.vertices, 8)
+    pid = ray_engine.worker_info()[1][0]
+    info, result = SolveInfo(), {}
+    run = threading.Thread(
+        target=lambda: result.update(
+            v=solve_partitioned(c.a, c.rhs, c.scene.vertices, 8, engine=ray_engine, info=info)
+        )
+    )
+    run.start()
+    deadline = time.time() + 60
+    while len(info.seconds_tasks) < 8 * 6 and run.is_alive():  # a few steps in
+        assert time.time() < deadline, "the solve made no progress"
+        time.sleep(0.002)
+    assert run.is_alive(), "the solve finished before a worker could be killed"
+    os.kill(pid, signal.SIGKILL)
+    run.join(180)
+    assert not run.is_alive() and "v" in result
+    assert ray_engine.worker_info()[1][0] != pid, "the killed actor was restarted"
+    assert info.restarts == 1
+    assert here.tobytes() == result["v"].tobytes()
 
 
 def test_ray_level_bake_with_subdomains_is_the_local_bake(tmp_path, ray_engine):

@@ -432,18 +432,21 @@ def test_ordered_gives_task_order_whatever_finishes_first(ray_engine):
     import scipy.sparse as sp
 
     from neuralao.pipeline.engines.engine import Task
-    from neuralao.pipeline.geometry.partitioned_solve import STATELESS, Subdomains, local_solve
+    from neuralao.pipeline.geometry.partitioned_solve import STATELESS, factorise
 
     def laplacian(n: int) -> sp.csc_matrix:
         return sp.diags([-np.ones(n - 1), 2.01 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csc")
 
+    def solve(state, args):
+        block, r = args
+        return {"v": factorise(block).solve(r)}
+
     blocks = [laplacian(n) for n in (400_000, 5, 6, 7, 8, 9, 10)]
     rng = np.random.default_rng(3)
     rhs = [rng.uniform(size=(b.shape[0], 1)) for b in blocks]
-    sub = Subdomains(blocks)
 
     def tasks():
-        return (Task(STATELESS, local_solve, (sub, i, r)) for i, r in enumerate(rhs))
+        return (Task(STATELESS, solve, (b, r)) for b, r in zip(blocks, rhs, strict=True))
 
     for engine in (ray_engine, LocalEngine()):
         got = [r["v"] for r in engine.ordered(tasks())]

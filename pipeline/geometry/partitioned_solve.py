@@ -31,11 +31,20 @@ Restricted additive Schwarz converges faster per iteration but is not symmetric 
 preconditioner). Multigrid CG (the level's default for a big component) is one task: its V-cycle touches
 every vertex each iteration.
 
-CG stops at a relative residual of ``rtol`` per column (default 1e-10, the level's multigrid CG's). In each
-iteration the driver sends subdomain ``i`` only its residual restricted to the subdomain (to the same
-worker each iteration where the engine can: its factor is made once) and adds the results in subdomain
-order, and every reduction is numpy's pairwise sum (no threaded BLAS): the same inputs
-give the same bytes whichever engine, worker, thread count or completion order.
+The vectors stay with the subdomains. The CG runs in Chronopoulos and Gear's form (r.u and A u.u summed
+together, one reduction an iteration) and each subdomain's worker (the same one every step where the
+engine can: :class:`Subdomains`) keeps its core's part of x and of the search direction, and r and A p on
+its whole subdomain. An iteration is three waves of one task per subdomain: the update and the local solve
+(each task returns the parts of its solution that its neighbours' subdomains hold), the sum of those parts
+at each subdomain (returning its share of the second coarse right-hand side), and the preconditioned
+residual and its product with A (returning its shares of r.u, A u.u and Z^T A u). The driver keeps only
+the coarse vectors: it adds the tasks' shares, solves the coarse system and routes the neighbours' parts.
+A vertex in several subdomains has its r computed alike by each of them (the same row, the same sums in the
+same order), so the copies are the same bits and no step needs a neighbour's r.
+
+CG stops at a relative residual of ``rtol`` per column (default 1e-10, the level's multigrid CG's). Every
+sum runs in a fixed order (subdomains in order, numpy's pairwise sums within one, no threaded BLAS): the
+same inputs give the same bytes whichever engine, worker, thread count or completion order.
 """
 
 from __future__ import annotations
@@ -64,6 +73,8 @@ RTOL = 1e-10
 OVERLAP = 2
 # Iterations after which the solve gives up (measured: at most 36; a stalled CG is a bug, not slowness).
 MAX_ITERATIONS = 500
+# Times a solve starts again when a worker lost its subdomains' vectors (an actor restarted after a crash).
+RESTARTS = 2
 
 
 @dataclass(frozen=True)
@@ -90,7 +101,8 @@ class SolveInfo:
     coarse_size: int = 0  # coarse aggregates
     seconds_setup: float = 0.0  # driver: partition, subdomain blocks, coarse factor
     seconds_tasks: list[float] = field(default_factory=list)  # each local task (a subdomain's first: +factor)
-    seconds_driver: float = 0.0  # driver: the iterations' own work (matvecs, coarse solves), not the local
+    seconds_driver: float = 0.0  # driver: the iterations' own work (coarse solves, sums), not the tasks'
+    restarts: int = 0  # times the solve started again because a worker lost its subdomains' vectors
 
     @property
     def largest_task(self) -> float:
@@ -164,7 +176,7 @@ def partition(
     return Partition(core, parts, coarse.reshape(-1).astype(np.int64))
 
 
-# --------------------------------------------------------------------------- local solves (tasks)
+# --------------------------------------------------------------------------- the subdomains' systems
 
 
 def factorise(block) -> Any:
@@ -179,97 +191,306 @@ def factorise(block) -> Any:
     )
 
 
-class Subdomains:
-    """The subdomain blocks of one partitioned system (k csc matrices (n_i, n_i)) and, where tasks ran, their
-    factors: each made by the first task that needs it and kept for the later iterations. Travels to the
-    workers once (:class:`neuralao.pipeline.engines.engine.Shared`), without its factors."""
+@dataclass
+class Subdomain:
+    """What subdomain i's tasks read (:func:`subdomain_systems`). Its vertex lists, each ascending: ``C``
+    its core, ``P`` its subdomain (the core and its overlap), ``E`` P and P's graph neighbours (every
+    column of P's rows). Positions index those lists."""
 
-    def __init__(self, blocks: list[sp.csc_matrix]):
-        self.blocks = blocks
+    rows: sp.csr_matrix  # (|P|, |E|): A's rows of P, columns local to E (each row's order kept)
+    az: sp.csr_matrix  # (|P|, m): (A Z)'s rows of P
+    az_core: sp.csr_matrix  # (|C|, m): (A Z)'s rows of the core
+    p_in_e: np.ndarray  # (|P|,) position in E of each vertex of P
+    core_in_p: np.ndarray  # (|C|,) position in P of each core vertex
+    core_in_e: np.ndarray  # (|C|,) position in E of each core vertex
+    coarse_core: np.ndarray  # (|C|,) aggregate of each core vertex
+    coarse_e: np.ndarray  # (|E|,) aggregate of each vertex of E
+    rhs: np.ndarray  # (|P|, c): b on P
+    # (subdomain j, positions in E): the vertices of E that j's P holds, ascending j (its own P too)
+    receives: list[tuple[int, np.ndarray]]
+    # (subdomain j, positions in P): the part of this subdomain's local solution j receives, ascending j
+    sends: list[tuple[int, np.ndarray]]
+
+
+def subdomain_systems(a: sp.csr_matrix, part: Partition, az: sp.csr_matrix, b: np.ndarray) -> list[Subdomain]:
+    """Each subdomain's :class:`Subdomain` of the system ``a`` (n, n) csr, its coarse products ``az`` (n, m)
+    csr and right-hand side ``b`` (n, c)."""
+    n, k = a.shape[0], len(part.parts)
+    sizes = np.array([len(p) for p in part.parts], np.int64)
+    # holder[u, j]: 1 + the position of vertex u in subdomain j's P (each row's subdomains ascending)
+    holder = sp.csr_matrix(
+        (
+            np.concatenate([np.arange(1, s + 1) for s in sizes]),
+            (np.concatenate(part.parts), np.repeat(np.arange(k), sizes)),
+        ),
+        shape=(n, k),
+    )
+    order = np.argsort(part.core, kind="stable")
+    cores = np.split(order, np.cumsum(np.bincount(part.core, minlength=k))[:-1])
+    where = np.full(n, -1, np.int64)  # a position lookup, reset after each use
+    out, sends = [], [[] for _ in range(k)]
+    for i, (p, core) in enumerate(zip(part.parts, cores, strict=True)):
+        e = grow(a, p, 1)
+        where[e] = np.arange(len(e))
+        r = a[p]
+        rows = sp.csr_matrix((r.data, where[r.indices], r.indptr), shape=(len(p), len(e)))
+        p_in_e, core_in_e = where[p], where[core]
+        where[e] = -1
+        where[p] = np.arange(len(p))
+        core_in_p = where[core]
+        where[p] = -1
+        h = holder[e].tocoo()
+        by = np.lexsort((h.row, h.col))  # by subdomain, then by position in E
+        j, at, pos = h.col[by], h.row[by].astype(np.int64), h.data[by] - 1
+        starts = np.flatnonzero(np.r_[True, j[1:] != j[:-1]])
+        ends = np.r_[starts[1:], len(j)]
+        receives = [(int(j[s]), at[s:t]) for s, t in zip(starts, ends, strict=True)]
+        for s, t in zip(starts, ends, strict=True):
+            if j[s] != i:
+                sends[j[s]].append((i, pos[s:t]))
+        out.append(
+            Subdomain(
+                rows=rows,
+                az=az[p],
+                az_core=az[core],
+                p_in_e=p_in_e,
+                core_in_p=core_in_p,
+                core_in_e=core_in_e,
+                coarse_core=part.coarse[core],
+                coarse_e=part.coarse[e],
+                rhs=np.ascontiguousarray(b[p]),
+                receives=receives,
+                sends=[],
+            )
+        )
+    for s, lst in zip(out, sends, strict=True):
+        s.sends = lst
+    return out
+
+
+def _dots(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(c,) column dot products of x, y (n, c), each by numpy's pairwise sum (no threaded BLAS)."""
+    return np.array([np.add.reduce(x[:, j] * y[:, j]) for j in range(x.shape[1])])
+
+
+def _per_aggregate(coarse: np.ndarray, x: np.ndarray, m: int) -> np.ndarray:
+    """(m, c): Z^T x of x (n, c) whose vertices lie in aggregates ``coarse`` (n,)."""
+    return np.stack([np.bincount(coarse, weights=x[:, j], minlength=m) for j in range(x.shape[1])], axis=1)
+
+
+class Subdomains:
+    """Every subdomain's :class:`Subdomain` and, where their tasks run, what those tasks keep between the
+    CG's steps: each subdomain's factor (made by its first task) and its part of the CG's vectors. Travels
+    to the workers once (:class:`neuralao.pipeline.engines.engine.Shared`), without what they keep; a worker
+    that lost them (restarted, or evicted the object) answers "lost" and the driver starts the solve again.
+
+    The vectors a subdomain keeps: x and the search direction p on its core, the residual r and the CG's
+    A p (s) on P, kept on every subdomain that holds a vertex, each copy computed alike (the same rows, the
+    same sums in the same order: the same bits as the owner's), so a step needs no neighbour's r."""
+
+    def __init__(self, systems: list[Subdomain], m: int):
+        self.systems, self.m = systems, m
         self.factors: dict[int, Any] = {}
+        self.vectors: dict[int, dict[str, Any]] = {}
 
     def __getstate__(self) -> dict:
-        return {"blocks": self.blocks, "factors": {}}  # a factor is remade where it is needed
+        return {"systems": self.systems, "m": self.m, "factors": {}, "vectors": {}}
 
-    def solve(self, i: int, r: np.ndarray) -> np.ndarray:
-        """A_i^-1 r for r (n_i, c) float64: a pure function of block i and r (the factor is a cache)."""
+    def factor(self, i: int) -> Any:
+        """The factor of subdomain i's block A_i (its rows' columns of P), made once here."""
         if i not in self.factors:
-            self.factors[i] = factorise(self.blocks[i])
-        return self.factors[i].solve(np.ascontiguousarray(r, np.float64))
+            s = self.systems[i]
+            self.factors[i] = factorise(s.rows[:, s.p_in_e])
+        return self.factors[i]
+
+    def step(self, i: int, token: str, phase: str, step: int, data) -> dict[str, Any]:
+        """Subdomain i's part of the CG's ``phase`` at ``step`` (:func:`solve_partitioned`)."""
+        s = self.systems[i]
+        vec = self.vectors.get(i)
+        if phase == "solve" and step == 0:
+            vec = self.vectors[i] = {"token": token, "x": np.zeros((len(s.core_in_p), s.rhs.shape[1]))}
+            vec["r"] = s.rhs.copy()
+        elif vec is None or vec["token"] != token or (phase != "collect" and vec["next"] != (phase, step)):
+            return {"lost": np.array(True)}
+        vec["next"] = {"solve": ("gather", step), "gather": ("direction", step)}.get(
+            phase, ("solve", step + 1)
+        )
+        if phase == "solve":
+            return self._solve(i, s, vec, *data)
+        if phase == "gather":
+            return self._gather(i, s, vec, data)
+        if phase == "direction":
+            return self._direction(s, vec, data)
+        del self.vectors[i]
+        return {"x": vec["x"]}
+
+    def _solve(self, i, s: Subdomain, vec, alpha, beta, c) -> dict[str, Any]:
+        """The previous step's update (x += alpha p, r -= alpha s after p = u + beta p, s = w + beta s), then
+        the local solve of the coarse-corrected residual: v = A_i^-1 (r - A Z c) on P."""
+        if alpha is not None:
+            u, w = vec.pop("u"), vec.pop("w")
+            vec["p"] = u if "p" not in vec else u + beta * vec["p"]
+            vec["s"] = w if "s" not in vec else w + beta * vec["s"]
+            vec["x"] += alpha * vec["p"]
+            vec["r"] -= alpha * vec["s"]
+        r = vec["r"]
+        v = vec["v"] = self.factor(i).solve(np.ascontiguousarray(r - s.az @ c))
+        rc = r[s.core_in_p]
+        return {"rr": _dots(rc, rc), "pieces": [v[pos] for _, pos in s.sends]}
+
+    def _gather(self, i, s: Subdomain, vec, pieces) -> dict[str, Any]:
+        """y = S r' on E: every subdomain's local solution at E's vertices, added in subdomain order;
+        returns the core's share of (A Z)^T y."""
+        v = vec.pop("v")
+        y = np.zeros((len(s.coarse_e), v.shape[1]))
+        for (j, pos), piece in zip(s.receives, pieces, strict=True):
+            y[pos] += v if j == i else piece
+        vec["y"] = y
+        return {"azy": s.az_core.T @ y[s.core_in_e]}
+
+    def _direction(self, s: Subdomain, vec, cd) -> dict[str, Any]:
+        """u = M^-1 r = Z (c - d) + y on E and w = A u on P; returns the core's shares of r.u, w.u, Z^T w."""
+        u = cd[s.coarse_e] + vec.pop("y")
+        w = s.rows @ u
+        uc, wc = u[s.core_in_e], w[s.core_in_p]
+        vec["u"], vec["w"] = uc, w
+        return {
+            "gamma": _dots(vec["r"][s.core_in_p], uc),
+            "delta": _dots(wc, uc),
+            "ztw": _per_aggregate(s.coarse_core, wc, self.m),
+        }
 
 
-def local_solve(state, args) -> dict[str, np.ndarray]:
-    """Engine task (reads no state): {"v": A_i^-1 r_i (n_i, c), "seconds"}; args (subdomains, i, r_i)."""
-    subdomains, i, r = args
+def subdomain_step(state, args) -> dict[str, Any]:
+    """Engine task (reads no state): one step of one subdomain; args (subdomains, i, token, phase, step,
+    data) -> :meth:`Subdomains.step`'s result and its "seconds"."""
+    subdomains, i, token, phase, step, data = args
     t0 = time.perf_counter()
-    v = subdomains.solve(i, r)
-    return {"v": v, "seconds": np.array(time.perf_counter() - t0)}
+    out = subdomains.step(i, token, phase, step, data)
+    out["seconds"] = np.array(time.perf_counter() - t0)
+    return out
 
 
 def _no_state(payload) -> None:
     return None
 
 
-# A stateless context for the local solves of callers that pass none.
+# A stateless context for the subdomain tasks of callers that pass none.
 STATELESS = Context("schwarz", _no_state, None)
 
 
 # --------------------------------------------------------------------------- the solve
 
 
-class _Preconditioner:
-    """The balancing two-level Schwarz preconditioner (module doc) over a partition of ``a``; its local
-    solves run as tasks of ``engine`` (None: in this process)."""
+class _Lost(Exception):
+    """A subdomain's worker no longer holds the solve's vectors."""
 
-    def __init__(self, a: sp.csr_matrix, part: Partition, engine, context: Context, info: SolveInfo):
-        self.part, self.engine, self.context, self.info = part, engine, context, info
-        self.seconds_local = 0.0  # wall seconds of the local solves (tasks, sending, gathering)
+
+class _Solve:
+    """One partitioned solve's setup (the coarse factor, the subdomains' systems, the routes of the local
+    solutions between them) and its CG, each step a wave of one task per subdomain (module doc)."""
+
+    def __init__(self, a: sp.csr_matrix, b: np.ndarray, part: Partition, engine, context: Context, info):
+        self.part, self.engine, self.context, self.info, self.b = part, engine, context, info, b
         n, m = a.shape[0], int(part.coarse.max(initial=-1)) + 1
         self.m = m
         z = sp.csr_matrix((np.ones(n), (np.arange(n), part.coarse)), shape=(n, m))
-        # A Z and (A Z)^T: the coarse terms' products with A cost a sparse (n, m) product, not a matvec of A.
-        self.az = (a @ z).tocsr()
-        self.azt = self.az.T.tocsr()
-        self.coarse = factorise(z.T.tocsr() @ self.az)
-        # Every subdomain's vertices end to end: one gather restricts a vector to them all, one bincount
-        # adds the subdomains' results back (each vertex's terms in subdomain order, as one by one).
-        self.joined = np.concatenate(part.parts) if part.parts else np.zeros(0, np.int64)
-        self.splits = np.cumsum([len(p) for p in part.parts])[:-1]
-        self.subdomains: Subdomains | Shared = Subdomains([a[idx][:, idx].tocsc() for idx in part.parts])
-        if engine is not None:  # sent once per worker; the key covers everything the blocks are cut from
-            key = content_key("schwarz", a.indptr, a.indices, a.data, *part.parts)
+        az = (a @ z).tocsr()
+        self.coarse = factorise(z.T.tocsr() @ az)
+        systems = subdomain_systems(a, part, az, b)
+        self.k = len(systems)
+        order = np.argsort(part.core, kind="stable")
+        self.cores = np.split(order, np.cumsum(np.bincount(part.core, minlength=self.k))[:-1])
+        # for each subdomain's receives: (source, index in the source's sends), None for its own
+        slot = [{j: q for q, (j, _) in enumerate(s.sends)} for s in systems]
+        self.routes = [
+            [None if j == i else (j, slot[j][i]) for j, _ in s.receives] for i, s in enumerate(systems)
+        ]
+        self.subdomains: Subdomains | Shared = Subdomains(systems, m)
+        if engine is not None:  # sent once per worker; the key covers everything the systems are cut from
+            key = content_key("schwarz", a.indptr, a.indices, a.data, b, *part.parts, part.coarse)
             self.subdomains = Shared(key, self.subdomains)
+        self.waited = 0.0  # wall seconds of the waves (tasks, sending, gathering)
         info.coarse_size = m
         info.subdomain_vertices = [len(p) for p in part.parts]
 
-    def local(self, rs: list[np.ndarray]) -> list[np.ndarray]:
-        """S r of each vector of ``rs`` (n,): every subdomain's Dirichlet solve, added in subdomain order."""
+    def wave(self, token: str, phase: str, step: int, data: list) -> list[dict[str, Any]]:
+        """Every subdomain's ``phase`` at ``step``, subdomain i given data[i]; results in subdomain order."""
         t0 = time.perf_counter()
-        n = len(rs[0])
-        gathered = np.empty((len(self.joined), len(rs)))
-        for j, r in enumerate(rs):  # a column at a time: 4x faster than rows of a stacked array
-            np.take(r, self.joined, out=gathered[:, j])
-        restricted = np.split(gathered, self.splits)
-        args = ((self.subdomains, i, r) for i, r in enumerate(restricted))
+        args = [(self.subdomains, i, token, phase, step, d) for i, d in enumerate(data)]
         if self.engine is None:
-            results = [local_solve(None, a) for a in args]
+            results = [subdomain_step(None, x) for x in args]
         else:
-            results = [None] * len(restricted)
-            tasks = (Task(self.context, local_solve, a, affinity=a[1]) for a in args)  # same worker each time
+            results = [None] * self.k
+            tasks = (
+                Task(self.context, subdomain_step, x, affinity=x[1]) for x in args
+            )  # same worker each step
             for i, res in self.engine.map(tasks):
                 results[i] = res
-        v = np.concatenate([res["v"] for res in results]) if results else np.zeros((0, len(rs)))
-        out = [np.bincount(self.joined, weights=v[:, j], minlength=n) for j in range(len(rs))]
-        self.info.seconds_tasks.extend(float(res["seconds"]) for res in results)
-        self.seconds_local += time.perf_counter() - t0
+        self.info.seconds_tasks.extend(float(r["seconds"]) for r in results)
+        self.waited += time.perf_counter() - t0
+        if any("lost" in r for r in results):
+            raise _Lost
+        return results
+
+    def total(self, results: list[dict[str, Any]], key: str) -> np.ndarray:
+        """The subdomains' ``key`` shares added in subdomain order."""
+        out = np.array(results[0][key], np.float64)
+        for r in results[1:]:
+            out = out + r[key]
         return out
 
-    def __call__(self, rs: list[np.ndarray]) -> list[np.ndarray]:
-        """M^-1 r of each vector of ``rs`` (n,)."""
-        coarse = self.part.coarse  # Z x is x[coarse]; Z^T r is r summed per aggregate
-        cs = [self.coarse.solve(np.bincount(coarse, weights=r, minlength=self.m)) for r in rs]  # Q r = Z c
-        ys = self.local([r - self.az @ c for r, c in zip(rs, cs, strict=True)])
-        return [(c - self.coarse.solve(self.azt @ y))[coarse] + y for c, y in zip(cs, ys, strict=True)]
+    def run(self, token: str, rtol: float, max_iterations: int):
+        """Preconditioned CG, Chronopoulos and Gear's form (one reduction of r.u and A u.u a step), on every
+        column of b in lockstep; a converged column stops (its updates are zero). Returns (x (n, c),
+        iterations, relative residuals)."""
+        b, k = self.b, self.k
+        cols = b.shape[1]
+        scale = np.array([max(np.sqrt(_dot(b[:, j], b[:, j])), 1e-300) for j in range(cols)])
+        residual = np.array([np.sqrt(_dot(b[:, j], b[:, j])) for j in range(cols)]) / scale
+        active = residual > rtol
+        iterations = np.zeros(cols, np.int64)
+        x = np.zeros(b.shape)
+        if not active.any():
+            return x, iterations.tolist(), residual.tolist()
+        ztr = _per_aggregate(self.part.coarse, b, self.m)  # Z^T r, kept here by its recurrence
+        c = self.coarse.solve(ztr)
+        alpha = beta = gamma_old = alpha_old = zts = None
+        step = 0
+        while True:
+            res = self.wave(token, "solve", step, [(alpha, beta, c)] * k)
+            if alpha is not None:
+                iterations += active
+            residual = np.where(active, np.sqrt(self.total(res, "rr")) / scale, residual)
+            active &= residual > rtol
+            if not active.any():
+                break
+            if iterations.max() >= max_iterations:
+                raise NeuralaoError(
+                    f"the partitioned least-squares CG did not converge in {max_iterations} iterations "
+                    f"(relative residuals {', '.join(f'{v:.1e}' for v in residual)}; tolerance {rtol:.0e})"
+                )
+            pieces = [
+                [None if q is None else res[q[0]]["pieces"][q[1]] for q in route] for route in self.routes
+            ]
+            d = self.coarse.solve(self.total(self.wave(token, "gather", step, pieces), "azy"))
+            res = self.wave(token, "direction", step, [c - d] * k)
+            gamma, delta, ztw = (self.total(res, key) for key in ("gamma", "delta", "ztw"))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                if step == 0:
+                    beta, alpha = np.zeros(cols), gamma / delta
+                else:
+                    beta = gamma / gamma_old
+                    alpha = gamma / (delta - beta * gamma / alpha_old)
+            beta, alpha = np.where(active, beta, 0.0), np.where(active, alpha, 0.0)  # a stopped column: 0
+            zts = ztw if zts is None else ztw + beta * zts  # Z^T s, s = A p
+            ztr = ztr - alpha * zts
+            c = self.coarse.solve(ztr)
+            gamma_old, alpha_old = gamma, alpha
+            step += 1
+        for core, r in zip(self.cores, self.wave(token, "collect", step, [None] * k), strict=True):
+            x[core] = r["x"]
+        return x, iterations.tolist(), residual.tolist()
 
 
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
@@ -295,9 +516,9 @@ def solve_partitioned(
     (module doc). Returns v like ``rhs``, float64, not clipped.
 
     a : (n, n) scipy.sparse, symmetric positive definite; rhs : (n,) or (n, c) float; points : (n, 3) float,
-    the position of each unknown. ``engine`` (None: this process) runs the local solves, one task per
-    subdomain and iteration, under ``context`` (None: a stateless one; a caller whose workers already hold
-    a context passes it, so no state is built or evicted for the solve). ``info`` (filled in): iterations,
+    the position of each unknown. ``engine`` (None: this process) runs the subdomains' steps, one task per
+    subdomain and step, under ``context`` (None: a stateless one; a caller whose workers already hold a
+    context passes it, so no state is built or evicted for the solve). ``info`` (filled in): iterations,
     residuals, seconds of the driver and of every task. ``subdivision``: subdomains and coarse aggregates to
     use instead of :func:`partition`'s (``subdomains`` and ``overlap`` are then ignored). ``connected``: the
     caller knows ``a`` is one connected component (its coarse aggregates are then the subdomains' cores)."""
@@ -308,43 +529,20 @@ def solve_partitioned(
     if a.shape[0] == 0:
         return np.zeros(np.shape(rhs))
     part = subdivision or partition(a, points, subdomains, overlap, connected)
-    precond = _Preconditioner(a, part, engine, context or STATELESS, info)
+    solve = _Solve(a, b, part, engine, context or STATELESS, info)
     info.seconds_setup = time.perf_counter() - t0
     t1 = time.perf_counter()
-    x, info.iterations, info.residuals = _pcg(a, b, precond, rtol, max_iterations)
-    info.seconds_driver = time.perf_counter() - t1 - precond.seconds_local
+    base = content_key("solve", time.time_ns(), id(solve))  # a fresh token: no worker holds its vectors
+    for attempt in range(RESTARTS + 1):
+        try:
+            x, info.iterations, info.residuals = solve.run(f"{base}/{attempt}", rtol, max_iterations)
+            break
+        except _Lost:
+            info.restarts += 1
+    else:
+        raise NeuralaoError(
+            f"the partitioned least-squares solve lost its subdomains' vectors {RESTARTS + 1} times "
+            "(its workers were restarted or evicted them)"
+        )
+    info.seconds_driver = time.perf_counter() - t1 - solve.waited
     return x.reshape(np.shape(rhs))
-
-
-def _pcg(a, b: np.ndarray, precond, rtol: float, max_iterations: int):
-    """Preconditioned CG on every column of ``b`` (n, c) in lockstep, so each iteration's local solves serve
-    every column still running; a converged column stops. Returns (x (n, c), iterations, relative
-    residuals)."""
-    c = b.shape[1]
-    x = [np.zeros(b.shape[0]) for _ in range(c)]
-    r = [np.ascontiguousarray(b[:, j]) for j in range(c)]
-    scale = [max(np.sqrt(_dot(v, v)), 1e-300) for v in r]
-    residual = [np.sqrt(_dot(v, v)) / s for v, s in zip(r, scale, strict=True)]
-    active = [j for j in range(c) if residual[j] > rtol]
-    p: list[np.ndarray | None] = [None] * c
-    rz = [0.0] * c
-    iterations = [0] * c
-    while active:
-        if max(iterations) >= max_iterations:
-            raise NeuralaoError(
-                f"the partitioned least-squares CG did not converge in {max_iterations} iterations "
-                f"(relative residuals {', '.join(f'{v:.1e}' for v in residual)}; tolerance {rtol:.0e})"
-            )
-        z = dict(zip(active, precond([r[j] for j in active]), strict=True))
-        for j in active:
-            rz_new = _dot(r[j], z[j])
-            p[j] = z[j] if p[j] is None else z[j] + (rz_new / rz[j]) * p[j]
-            rz[j] = rz_new
-            q = a @ p[j]
-            alpha = rz[j] / _dot(p[j], q)
-            x[j] += alpha * p[j]
-            r[j] -= alpha * q
-            iterations[j] += 1
-            residual[j] = np.sqrt(_dot(r[j], r[j])) / scale[j]
-        active = [j for j in active if residual[j] > rtol]
-    return np.stack(x, axis=1), iterations, [float(v) for v in residual]
