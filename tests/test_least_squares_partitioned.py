@@ -139,8 +139,8 @@ def test_partitioned_solve_is_the_global_solve(name, request):
         assert err <= MAX_ABS, f"{name}, {k} subdomains: max abs {err:.2e}"
         assert max(info.iterations) <= MAX_ITERATIONS, f"{name}, {k} subdomains: {info.iterations} iterations"
         assert max(info.residuals) <= RTOL
-        # a wave of k tasks for each of an iteration's three steps, the first local solves and the collection
-        waves = 3 * max(info.iterations) + 2
+        # a wave of k tasks for each of an iteration's two steps, the first local solves and the collection
+        waves = 2 * max(info.iterations) + 2
         assert len(info.subdomain_vertices) == k and len(info.seconds_tasks) == k * waves
 
 

@@ -219,7 +219,7 @@ def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
 
 def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     """``trace.subdomains``: the terrain's component (625 vertices, over ``component_vertices``) is solved
-    in 4 subdomains, a task each per step of the CG (three an iteration), the other pieces' solves beside its
+    in 4 subdomains, a task each per step of the CG (two an iteration), the other pieces' solves beside its
     equation shares, and every static vertex gets the default bake's AO; a rerun reuses the driver-solved
     piece's file and writes the same bytes. The bake log gives each task's wave (map call)."""
     root, level, cfg, info = baked

@@ -59,10 +59,10 @@ class TraceSettings:
     # faster than linearly on a terrain grid), and smaller components are packed into tasks of this size.
     component_vertices: int = 100_000
     # "components": a block of at least component_vertices is cut into this many spatial subdomains, solved
-    # as separate tasks (per iteration) by Schwarz-preconditioned CG, the iteration on the driver
-    # (neuralao.pipeline.geometry.partitioned_solve; 3e-7 from SuperLU on Table 1's terrain). 1: the block is
-    # one multigrid-CG task. The Ray engine gives each actor two subdomains in turn (its two task slots), so
-    # 2 x its actors uses them all and keeps each subdomain's factor on one actor.
+    # as separate tasks (two waves an iteration) by Schwarz-preconditioned CG, each subdomain's factor and
+    # vectors kept by its worker (neuralao.pipeline.geometry.partitioned_solve; 3e-7 from SuperLU on Table
+    # 1's terrain). 1: the block is one multigrid-CG task. The Ray engine gives each actor two subdomains in
+    # turn (its two task slots), so 2 x its actors uses them all.
     subdomains: int = 1
 
 

@@ -34,13 +34,14 @@ every vertex each iteration.
 The vectors stay with the subdomains. The CG runs in Chronopoulos and Gear's form (r.u and A u.u summed
 together, one reduction an iteration) and each subdomain's worker (the same one every step where the
 engine can: :class:`Subdomains`) keeps its core's part of x and of the search direction, and r and A p on
-its whole subdomain. An iteration is three waves of one task per subdomain: the update and the local solve
-(each task returns the parts of its solution that its neighbours' subdomains hold), the sum of those parts
-at each subdomain (returning its share of the second coarse right-hand side), and the preconditioned
-residual and its product with A (returning its shares of r.u, A u.u and Z^T A u). The driver keeps only
-the coarse vectors: it adds the tasks' shares, solves the coarse system and routes the neighbours' parts.
-A vertex in several subdomains has its r computed alike by each of them (the same row, the same sums in the
-same order), so the copies are the same bits and no step needs a neighbour's r.
+its whole subdomain. An iteration is two waves of one task per subdomain: the update and the local solve
+(each task returns the parts of its solution that its neighbours' subdomains hold, and its shares of r.r
+and of the second coarse right-hand side, (A Z)^T y = sum_i (A Z)_i^T v_i), then the sum of those parts at
+each subdomain, the preconditioned residual u and its product with A (returning its shares of r.u, A u.u
+and Z^T A u). The driver keeps only the coarse vectors: it adds the tasks' shares, solves the coarse
+system (Z^T r by its recurrence, so the next local solves need no wave of their own) and routes the
+neighbours' parts. A vertex in several subdomains has its r computed alike by each of them (the same row,
+the same sums in the same order), so the copies are the same bits and no step needs a neighbour's r.
 
 CG stops at a relative residual of ``rtol`` per column (default 1e-10, the level's multigrid CG's). Every
 sum runs in a fixed order (subdomains in order, numpy's pairwise sums within one, no threaded BLAS): the
@@ -49,8 +50,11 @@ same inputs give the same bytes whichever engine, worker, thread count or comple
 
 from __future__ import annotations
 
+import itertools
+import os
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -58,7 +62,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
-from neuralao.pipeline.engines.engine import Context, Shared, Task, content_key
+from neuralao.pipeline.engines.engine import Context, Shared, Task
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Relative residual (2-norm, per column) at which CG stops: the level's multigrid CG's. Measured max abs
@@ -90,6 +94,12 @@ class Partition:
     parts: list[np.ndarray]
     coarse: np.ndarray
 
+    @cached_property
+    def cores(self) -> list[np.ndarray]:
+        """Each subdomain's core vertices, ascending."""
+        order = np.argsort(self.core, kind="stable")
+        return np.split(order, np.cumsum(np.bincount(self.core, minlength=len(self.parts)))[:-1])
+
 
 @dataclass
 class SolveInfo:
@@ -119,39 +129,49 @@ def bisect(points: np.ndarray, count: int) -> np.ndarray:
     same whichever algorithm finds it) and, of the points at that value, the lowest-numbered."""
     xyz = np.ascontiguousarray(np.asarray(points, np.float64).T)  # (3, n): contiguous rows reduce fast
     part = np.zeros(xyz.shape[1], np.int64)
-    stack = [(np.arange(xyz.shape[1]), count, 0)]
+    # (points' indices, their x, y and z: 1-D arrays, cut by masks, never gathered by index), parts, first
+    stack = [(np.arange(xyz.shape[1]), tuple(xyz), count, 0)]
     while stack:
-        idx, k, first = stack.pop()
+        idx, rows, k, first = stack.pop()
         if k == 1 or len(idx) == 0:
             part[idx] = first
             continue
-        p = xyz[:, idx]
-        axis = int(np.argmax(p.max(axis=1) - p.min(axis=1)))
+        axis = int(np.argmax([r.max() - r.min() for r in rows]))
         low = k // 2
         cut = (len(idx) * low) // k
         take = np.zeros(len(idx), bool)
         if cut > 0:
-            value = np.partition(p[axis], cut - 1)[cut - 1]  # the cut-th smallest
-            take = p[axis] < value
-            ties = np.flatnonzero(p[axis] == value)
-            take[ties[: cut - int(take.sum())]] = True
-        stack.append((idx[~take], k - low, first + low))
-        stack.append((idx[take], low, first))
+            q = rows[axis]
+            value = np.partition(q, cut - 1)[cut - 1]  # the cut-th smallest
+            take = q < value
+            ties = np.flatnonzero(q == value)
+            take[ties[: cut - int(np.count_nonzero(take))]] = True
+        rest = ~take
+        stack.append((idx[rest], tuple(r[rest] for r in rows), k - low, first + low))
+        stack.append((idx[take], tuple(r[take] for r in rows), low, first))
     return part
 
 
-def grow(graph: sp.csr_matrix, vertices: np.ndarray, rings: int) -> np.ndarray:
-    """(ascending int64) ``vertices`` and every vertex within ``rings`` edges of them in ``graph`` (n, n)."""
-    inside = np.zeros(graph.shape[0], bool)
-    inside[vertices] = True
-    frontier = vertices
+def grow(
+    graph: sp.csr_matrix, vertices: np.ndarray, rings: int, scratch: np.ndarray | None = None
+) -> np.ndarray:
+    """(ascending int64) ``vertices`` (distinct) and every vertex within ``rings`` edges of them in ``graph``
+    (n, n). ``scratch``: an (n,) bool array of False to use (and leave False) instead of making one."""
+    inside = np.zeros(graph.shape[0], bool) if scratch is None else scratch
+    frontier = np.asarray(vertices, np.int64)
+    inside[frontier] = True
+    found = [frontier]
     for _ in range(rings):
         reach = graph[frontier].indices
-        frontier = np.unique(reach[~inside[reach]])
+        frontier = np.unique(reach[~inside[reach]])  # a ring: small
         if len(frontier) == 0:
             break
         inside[frontier] = True
-    return np.flatnonzero(inside)
+        found.append(frontier)
+    have = np.sort(np.concatenate(found))
+    if scratch is not None:
+        inside[have] = False
+    return have
 
 
 def partition(
@@ -167,13 +187,18 @@ def partition(
     if count < 1 or overlap < 0:
         raise NeuralaoError(f"need subdomains >= 1 and overlap >= 0, got {count} and {overlap}")
     core = bisect(points, max(1, min(count, n)))
-    parts = [grow(a, np.flatnonzero(core == i), overlap) for i in range(int(core.max(initial=0)) + 1)]
+    order = np.argsort(core, kind="stable")
+    cores = np.split(order, np.cumsum(np.bincount(core))[:-1])
+    scratch = np.zeros(n, bool)
+    parts = [grow(a, c, overlap, scratch) for c in cores]
     if connected:  # the caller's system is one connected component: no need to find them
         ncomp, component = 1, np.zeros(n, np.int64)
     else:
         ncomp, component = connected_components(a, directed=False)
     _, coarse = np.unique(core * ncomp + component, return_inverse=True)
-    return Partition(core, parts, coarse.reshape(-1).astype(np.int64))
+    out = Partition(core, parts, coarse.reshape(-1).astype(np.int64))
+    out.__dict__["cores"] = cores  # made above: the cached property's value
+    return out
 
 
 # --------------------------------------------------------------------------- the subdomains' systems
@@ -199,7 +224,6 @@ class Subdomain:
 
     rows: sp.csr_matrix  # (|P|, |E|): A's rows of P, columns local to E (each row's order kept)
     az: sp.csr_matrix  # (|P|, m): (A Z)'s rows of P
-    az_core: sp.csr_matrix  # (|C|, m): (A Z)'s rows of the core
     p_in_e: np.ndarray  # (|P|,) position in E of each vertex of P
     core_in_p: np.ndarray  # (|C|,) position in P of each core vertex
     core_in_e: np.ndarray  # (|C|,) position in E of each core vertex
@@ -225,12 +249,12 @@ def subdomain_systems(a: sp.csr_matrix, part: Partition, az: sp.csr_matrix, b: n
         ),
         shape=(n, k),
     )
-    order = np.argsort(part.core, kind="stable")
-    cores = np.split(order, np.cumsum(np.bincount(part.core, minlength=k))[:-1])
+    cores = part.cores
     where = np.full(n, -1, np.int64)  # a position lookup, reset after each use
+    scratch = np.zeros(n, bool)
     out, sends = [], [[] for _ in range(k)]
     for i, (p, core) in enumerate(zip(part.parts, cores, strict=True)):
-        e = grow(a, p, 1)
+        e = grow(a, p, 1, scratch)
         where[e] = np.arange(len(e))
         r = a[p]
         rows = sp.csr_matrix((r.data, where[r.indices], r.indptr), shape=(len(p), len(e)))
@@ -252,7 +276,6 @@ def subdomain_systems(a: sp.csr_matrix, part: Partition, az: sp.csr_matrix, b: n
             Subdomain(
                 rows=rows,
                 az=az[p],
-                az_core=az[core],
                 p_in_e=p_in_e,
                 core_in_p=core_in_p,
                 core_in_e=core_in_e,
@@ -312,21 +335,19 @@ class Subdomains:
             vec["r"] = s.rhs.copy()
         elif vec is None or vec["token"] != token or (phase != "collect" and vec["next"] != (phase, step)):
             return {"lost": np.array(True)}
-        vec["next"] = {"solve": ("gather", step), "gather": ("direction", step)}.get(
-            phase, ("solve", step + 1)
-        )
+        vec["next"] = ("direction", step) if phase == "solve" else ("solve", step + 1)
         if phase == "solve":
             return self._solve(i, s, vec, *data)
-        if phase == "gather":
-            return self._gather(i, s, vec, data)
         if phase == "direction":
-            return self._direction(s, vec, data)
+            return self._direction(i, s, vec, *data)
         del self.vectors[i]
         return {"x": vec["x"]}
 
     def _solve(self, i, s: Subdomain, vec, alpha, beta, c) -> dict[str, Any]:
         """The previous step's update (x += alpha p, r -= alpha s after p = u + beta p, s = w + beta s), then
-        the local solve of the coarse-corrected residual: v = A_i^-1 (r - A Z c) on P."""
+        the local solve of the coarse-corrected residual: v = A_i^-1 (r - A Z c) on P. Returns the parts of v
+        the neighbours hold and this subdomain's shares of r.r (its core) and of (A Z)^T y (its v: y is the
+        subdomains' v added)."""
         if alpha is not None:
             u, w = vec.pop("u"), vec.pop("w")
             vec["p"] = u if "p" not in vec else u + beta * vec["p"]
@@ -336,21 +357,16 @@ class Subdomains:
         r = vec["r"]
         v = vec["v"] = self.factor(i).solve(np.ascontiguousarray(r - s.az @ c))
         rc = r[s.core_in_p]
-        return {"rr": _dots(rc, rc), "pieces": [v[pos] for _, pos in s.sends]}
+        return {"rr": _dots(rc, rc), "azy": s.az.T @ v, "pieces": [v[pos] for _, pos in s.sends]}
 
-    def _gather(self, i, s: Subdomain, vec, pieces) -> dict[str, Any]:
-        """y = S r' on E: every subdomain's local solution at E's vertices, added in subdomain order;
-        returns the core's share of (A Z)^T y."""
+    def _direction(self, i, s: Subdomain, vec, cd, pieces) -> dict[str, Any]:
+        """y = S r' on E (every subdomain's local solution at E's vertices, added in subdomain order), then
+        u = M^-1 r = Z (c - d) + y on E and w = A u on P; returns the core's shares of r.u, w.u, Z^T w."""
         v = vec.pop("v")
         y = np.zeros((len(s.coarse_e), v.shape[1]))
         for (j, pos), piece in zip(s.receives, pieces, strict=True):
             y[pos] += v if j == i else piece
-        vec["y"] = y
-        return {"azy": s.az_core.T @ y[s.core_in_e]}
-
-    def _direction(self, s: Subdomain, vec, cd) -> dict[str, Any]:
-        """u = M^-1 r = Z (c - d) + y on E and w = A u on P; returns the core's shares of r.u, w.u, Z^T w."""
-        u = cd[s.coarse_e] + vec.pop("y")
+        u = cd[s.coarse_e] + y
         w = s.rows @ u
         uc, wc = u[s.core_in_e], w[s.core_in_p]
         vec["u"], vec["w"] = uc, w
@@ -382,6 +398,10 @@ STATELESS = Context("schwarz", _no_state, None)
 # --------------------------------------------------------------------------- the solve
 
 
+# Solves started by this process: with its id and the clock, each solve's name (:func:`solve_partitioned`).
+_SOLVES = itertools.count()
+
+
 class _Lost(Exception):
     """A subdomain's worker no longer holds the solve's vectors."""
 
@@ -390,7 +410,9 @@ class _Solve:
     """One partitioned solve's setup (the coarse factor, the subdomains' systems, the routes of the local
     solutions between them) and its CG, each step a wave of one task per subdomain (module doc)."""
 
-    def __init__(self, a: sp.csr_matrix, b: np.ndarray, part: Partition, engine, context: Context, info):
+    def __init__(
+        self, a: sp.csr_matrix, b: np.ndarray, part: Partition, engine, context: Context, info, name
+    ):
         self.part, self.engine, self.context, self.info, self.b = part, engine, context, info, b
         n, m = a.shape[0], int(part.coarse.max(initial=-1)) + 1
         self.m = m
@@ -399,16 +421,15 @@ class _Solve:
         self.coarse = factorise(z.T.tocsr() @ az)
         systems = subdomain_systems(a, part, az, b)
         self.k = len(systems)
-        order = np.argsort(part.core, kind="stable")
-        self.cores = np.split(order, np.cumsum(np.bincount(part.core, minlength=self.k))[:-1])
+        self.cores = part.cores
         # for each subdomain's receives: (source, index in the source's sends), None for its own
         slot = [{j: q for q, (j, _) in enumerate(s.sends)} for s in systems]
         self.routes = [
             [None if j == i else (j, slot[j][i]) for j, _ in s.receives] for i, s in enumerate(systems)
         ]
         self.subdomains: Subdomains | Shared = Subdomains(systems, m)
-        if engine is not None:  # sent once per worker; the key covers everything the systems are cut from
-            key = content_key("schwarz", a.indptr, a.indices, a.data, b, *part.parts, part.coarse)
+        if engine is not None:  # sent once per worker, under the solve's own name
+            key = f"schwarz/{name}"
             self.subdomains = Shared(key, self.subdomains)
         self.waited = 0.0  # wall seconds of the waves (tasks, sending, gathering)
         info.coarse_size = m
@@ -473,8 +494,8 @@ class _Solve:
             pieces = [
                 [None if q is None else res[q[0]]["pieces"][q[1]] for q in route] for route in self.routes
             ]
-            d = self.coarse.solve(self.total(self.wave(token, "gather", step, pieces), "azy"))
-            res = self.wave(token, "direction", step, [c - d] * k)
+            cd = c - self.coarse.solve(self.total(res, "azy"))
+            res = self.wave(token, "direction", step, [(cd, p) for p in pieces])
             gamma, delta, ztw = (self.total(res, key) for key in ("gamma", "delta", "ztw"))
             with np.errstate(divide="ignore", invalid="ignore"):
                 if step == 0:
@@ -529,13 +550,15 @@ def solve_partitioned(
     if a.shape[0] == 0:
         return np.zeros(np.shape(rhs))
     part = subdivision or partition(a, points, subdomains, overlap, connected)
-    solve = _Solve(a, b, part, engine, context or STATELESS, info)
+    # This solve's name: its subdomains' key on the workers and, with the attempt, its vectors' token.
+    # Unique to the solve (no two solves share it), it need not hash the gigabytes its systems are cut from.
+    name = f"{os.getpid()}-{time.time_ns()}-{next(_SOLVES)}"
+    solve = _Solve(a, b, part, engine, context or STATELESS, info, name)
     info.seconds_setup = time.perf_counter() - t0
     t1 = time.perf_counter()
-    base = content_key("solve", time.time_ns(), id(solve))  # a fresh token: no worker holds its vectors
     for attempt in range(RESTARTS + 1):
         try:
-            x, info.iterations, info.residuals = solve.run(f"{base}/{attempt}", rtol, max_iterations)
+            x, info.iterations, info.residuals = solve.run(f"{name}/{attempt}", rtol, max_iterations)
             break
         except _Lost:
             info.restarts += 1
