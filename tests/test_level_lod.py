@@ -10,7 +10,7 @@ import trimesh
 from neuralao.pipeline.bakes.level import bake_level
 from neuralao.pipeline.bakes.level_pieces import index_level, piece_scene
 from neuralao.pipeline.bakes.level_settings import load_level_settings
-from neuralao.pipeline.bakes.level_stages import simplify_to_error, tile_faces_of
+from neuralao.pipeline.bakes.level_stages import simplify_to_error, tile_cells
 from neuralao.pipeline.geometry.level_files import read_level
 from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 from neuralao.pipeline.geometry.scene import scene_from_arrays
@@ -48,7 +48,8 @@ def test_tiles_cover_a_piece_once_and_keep_their_cuts():
     q = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
     f = np.r_[np.c_[q, q + 1, q + n + 1], np.c_[q + 1, q + n + 2, q + n + 1]]
     scene = scene_from_arrays(v, f, "grid")
-    tiles = [tile_faces_of(scene, 4, t) for t in range(4)]
+    cells = tile_cells(scene, 4)
+    tiles = [np.flatnonzero(cells == t) for t in range(4)]
     np.testing.assert_array_equal(np.sort(np.concatenate(tiles)), np.arange(len(f)))
     assert min(map(len, tiles)) == max(map(len, tiles))  # 2 x 2 equal cells
     whole_v, whole_f = simplify_to_error(v, f, 1e-6)

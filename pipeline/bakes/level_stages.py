@@ -648,13 +648,8 @@ def tile_cells(scene: Scene, tiles: int) -> np.ndarray:
     return np.minimum(cells[0] * nz + cells[1], tiles - 1)
 
 
-def tile_faces_of(scene: Scene, tiles: int, tile: int) -> np.ndarray:
-    """The faces (indices into ``scene.faces``) of tile ``tile`` of ``tiles`` (:func:`tile_cells`)."""
-    return np.flatnonzero(tile_cells(scene, tiles) == tile)
-
-
 def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: LOD 1 of one piece, or of one spatial tile of a big one (:func:`tile_faces_of`),
+    """Engine task: LOD 1 of one piece, or of one spatial tile of a big one (:func:`tile_cells`),
     simplified alone to the level's shared quadric error (:func:`simplify_to_error`; a tile's cut is an
     open border, kept). Returns vertices, faces and every face's first-edge length (float32: the driver
     takes the level's median for the resampling radius)."""
