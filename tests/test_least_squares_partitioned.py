@@ -185,6 +185,19 @@ def test_same_inputs_same_bytes_on_every_engine(terrain_case):
     assert first.tobytes() == again.tobytes() == tasks.tobytes() == threads.tobytes()
 
 
+@pytest.mark.parametrize("where", ["rhs", "matrix"])
+def test_a_non_finite_equation_is_a_one_line_error(bunny_case, where):
+    """A NaN in the right-hand side or the matrix is an error, not a column taken as converged (zeros)."""
+    c = bunny_case
+    a, rhs = c.a.tocsr(copy=True), c.rhs.copy()
+    if where == "rhs":
+        rhs[7] = np.nan
+    else:
+        a.data[a.indptr[5]] = np.inf
+    with pytest.raises(NeuralaoError, match="non-finite value"):
+        solve_partitioned(a, rhs, c.scene.vertices, 4)
+
+
 def test_a_stalled_solve_is_a_one_line_error(bunny_case):
     c = bunny_case
     with pytest.raises(NeuralaoError, match="did not converge in 3 iterations"):

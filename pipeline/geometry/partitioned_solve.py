@@ -469,6 +469,7 @@ class _Solve:
         cols = b.shape[1]
         scale = np.array([max(np.sqrt(_dot(b[:, j], b[:, j])), 1e-300) for j in range(cols)])
         residual = np.array([np.sqrt(_dot(b[:, j], b[:, j])) for j in range(cols)]) / scale
+        _check_finite(residual)
         active = residual > rtol
         iterations = np.zeros(cols, np.int64)
         x = np.zeros(b.shape)
@@ -483,6 +484,7 @@ class _Solve:
             if alpha is not None:
                 iterations += active
             residual = np.where(active, np.sqrt(self.total(res, "rr")) / scale, residual)
+            _check_finite(residual)
             active &= residual > rtol
             if not active.any():
                 break
@@ -512,6 +514,12 @@ class _Solve:
         for core, r in zip(self.cores, self.wave(token, "collect", step, [None] * k), strict=True):
             x[core] = r["x"]
         return x, iterations.tolist(), residual.tolist()
+
+
+def _check_finite(residual: np.ndarray) -> None:
+    """A NaN or infinite residual (from the equations): an error, not a column taken as converged."""
+    if not np.isfinite(residual).all():
+        raise NeuralaoError("the partitioned least-squares solve met a non-finite value in its equations")
 
 
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
