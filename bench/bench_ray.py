@@ -225,14 +225,15 @@ def measure(args) -> dict:
 # Stages whose tasks trace (their seconds were taken with the bake's tracing threads); the others' tasks
 # (the solve, the output) run on one thread, and so do the LOD's tasks but its resampling (:func:`traces`).
 TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check")
-# Stages that only produce the error tables (not part of a production bake).
-CHECK_STAGES = ("blend_check",)
+# Stages that only produce the error tables (a production bake leaves them out: ``error_tables`` false).
+CHECK_STAGES = ("blend_check", "lod_check")
 
 
 def traces(info: dict, stage: dict, count: int) -> list[bool]:
     """Which of a stage's ``count`` tasks (in the bake log's order) trace. The LOD's run in three rounds:
-    its simplifications, then its resampling (the rays), then per piece its least squares and error sums
-    (the log's ``simplify_tasks`` and ``resample_tasks``; a log without the latter: all but the pieces')."""
+    its simplifications, then its resampling (the rays), then per piece its least squares and held-out
+    points (the log's ``simplify_tasks`` and ``resample_tasks``; a log without the latter: all but the
+    pieces')."""
     name = stage["stage"]
     if name not in TRACING_STAGES:
         return [False] * count

@@ -195,13 +195,33 @@ def test_error_tables_point_the_right_way(baked):
     assert e["blend"]["same_rays_max_abs"] < 1e-6  # the mean is linear: blend == blended kernel
 
 
+def test_a_bake_without_error_tables_writes_the_same_level(baked, tmp_path):
+    """``error_tables=false`` (a production bake): no check stage runs and the baked level is the default
+    bake's, byte for byte; a rerun that asks for them reuses every stage and makes only the checks."""
+    root, level, cfg, info = baked
+    lean = bake_level(level, load_level_settings(cfg, ["error_tables=false"]), tmp_path / "lean")
+    stages = [st["stage"] for st in lean["stages"]]
+    assert "lod" in stages and not {"lod_check", "blend_check"} & set(stages)
+    assert set(lean["errors"]) == {"decorators"}  # the trees' fits are the bake's, not a check
+    assert (tmp_path / "lean" / "level_baked.glb").read_bytes() == (
+        root / "out" / "level_baked.glb"
+    ).read_bytes()
+    full = bake_level(level, load_level_settings(cfg), tmp_path / "lean")
+    fresh = {st["stage"] for st in full["stages"] if not st["reused"]}
+    assert {"lod_check", "blend_check"} <= fresh
+    assert not fresh & {"trace", "solve", "small_decorators", "lod", "decorators"}  # stored: reused
+    assert (
+        full["errors"]["lod"] == info["errors"]["lod"] and full["errors"]["blend"] == info["errors"]["blend"]
+    )
+
+
 def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
     root, level, cfg, info = baked
     out = tmp_path / "out"
     shutil.copytree(root / "out", out)
     again = bake_level(level, load_level_settings(cfg), out)
     reused = {s["stage"] for s in again["stages"] if s["reused"]}
-    assert reused == {"trace", "decorators", "solve", "small_decorators", "lod", "blend_check"}
+    assert reused == {"trace", "decorators", "solve", "small_decorators", "lod", "lod_check", "blend_check"}
     assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
     # A run killed mid-way: a trace block, the solve and the output gone, a temporary left behind.
     (out / "stages" / "solve.npz").unlink()

@@ -257,7 +257,9 @@ def level_key(path: Path, settings: LevelBakeSettings) -> str:
                     files.append(sha256_file(path.parent / uri))
         except (NeuralaoError, AttributeError, TypeError):
             pass  # read_level reports it
-    return sha256_json({"files": files, "settings": settings_to_dict(settings), "version": 1})
+    # Whether the error tables are made changes nothing a stage stores: a rerun with them reuses the stages.
+    keyed = {k: v for k, v in settings_to_dict(settings).items() if k != "error_tables"}
+    return sha256_json({"files": files, "settings": keyed, "version": 1})
 
 
 # --------------------------------------------------------------------------- the bake
@@ -402,22 +404,23 @@ def bake_level(
             },
         )
     values = None  # the driver keeps no per-vertex array past the resampling stages
-    blend_err = blog.stored(
-        "blend_check",
-        "Two-distance blend vs blended-kernel traces (error table)",
-        lambda: _blend_check(
-            runner,
-            ctx,
-            pieces,
-            rule,
-            trace_files,
-            solve_files,
-            index,
-            s,
-            total_samples,
-            whole,
-        ),
-    )
+    lod_err = blend_err = None
+    if lod is not None and s.error_tables:
+        lod_err = blog.stored(
+            "lod_check",
+            "LOD vs traced samples at held-out points (error table)",
+            lambda: _lod_check(
+                runner, light, pieces, rule, lod_files, trace_files, float(lod["radius"]), s, progress
+            ),
+        )
+    if s.error_tables:
+        blend_err = blog.stored(
+            "blend_check",
+            "Two-distance blend vs blended-kernel traces (error table)",
+            lambda: _blend_check(
+                runner, ctx, pieces, rule, trace_files, solve_files, index, s, total_samples, whole
+            ),
+        )
     # The trees last: their gold BVH (the level with every tree opaque) replaces the opaque one on the
     # workers (and here), which need it no more.
     if engine is None:
@@ -473,7 +476,7 @@ def bake_level(
             "samples": total_samples,
             "invalid_samples": int(traced["invalid"]),
         },
-        "errors": _error_tables(deco, lod, blend_err),
+        "errors": _error_tables(deco, lod_err, blend_err),
         # Every task's own seconds per stage (as it ran, on whichever worker): what bench/bench_level.py
         # projects onto N machines.
         "task_seconds": blog.task_seconds,
@@ -536,8 +539,8 @@ def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSett
 def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
     """LOD 1 of the level's static instances: one task, one simplification of them all, split by piece as
     it arrives; or with ``lod.max_error`` a task per piece, each simplified alone to that shared error.
-    Then per piece its LOD resampled, solved and measured (a task each). The resampling radius is 1.5 x
-    the LOD's median edge unless ``lod.radius`` sets it."""
+    Then per piece its LOD resampled and solved, and its held-out points for the error table (a task
+    each). The resampling radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it."""
     ctx, light = contexts
     t0 = time.perf_counter()
     mesh_files = lod_mesh_files(lod_files)
@@ -597,15 +600,10 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
     jobs = lod_jobs(light, pieces, rule, mesh_files, resampled, radius, s)
     for _ in run_to_files(lod_files, runner, jobs, "lod", progress, keys=LOD_SUMMED):
         pass  # read again, piece by piece, by the summary
-    # The gold standard at the held-out points, from the traced samples: a task per trace block.
-    reference_files = TaskFiles(lod_files.folder.parent / "lod_reference", lod_files.key)
-    jobs = lod_reference_jobs(light, pieces, rule, lod_files, trace_files, radius, s)
-    for _ in run_to_files(reference_files, runner, jobs, "lod reference", progress, keys=()):
-        pass  # read piece by piece by the summary
-    out = _lod_summary(lod_files, reference_files, pieces, s.trace.block_samples)
+    out = _lod_summary(lod_files, pieces)
     out["seconds_simplify"] = np.array(t1 - t0)
     # The stage's tasks in order: its simplifications (one of the whole level, or one per piece), its
-    # resampling, then a task per piece and one per trace block of a piece with held-out points.
+    # resampling, then a task per piece.
     per_piece = s.lod.max_error is not None
     out["simplify_tasks"] = np.array(sum(lod_tiles(p, s.lod.tile_faces) for p in pieces) if per_piece else 1)
     out["resample_tasks"] = np.array(resample_tasks)
@@ -618,27 +616,46 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
 LOD_SUMMED = ("sizes", "resample_points", "seconds_solve", "seconds_reference", *LOD_HELD_OUT)
 
 
-def _lod_summary(
-    lod_files: TaskFiles, reference_files: TaskFiles, pieces, block: int
-) -> dict[str, np.ndarray]:
-    """The LOD pieces' counts, times and error table (each piece's error sums: :func:`lod_piece_errors`)."""
-    sums = np.zeros(6)
+def _lod_summary(lod_files: TaskFiles, pieces) -> dict[str, np.ndarray]:
+    """The LOD pieces' counts and times."""
     times = ("seconds_solve", "seconds_reference")
     out = dict.fromkeys(("lod_vertices", "lod_faces", "resample_points", *times), 0.0)
     for p in pieces:
-        r = lod_files.get(piece_stem(p), LOD_SUMMED)
-        if r is None:
-            raise NeuralaoError(f"{lod_files.path(piece_stem(p))} could not be read back: is the disk full?")
-        sums += lod_piece_errors(r, reference_files, lod_reference_stems(p, block))
+        r = _lod_result(lod_files, p, LOD_SUMMED)
         out["lod_vertices"] += int(r["sizes"][0])
         out["lod_faces"] += int(r["sizes"][1])
         out["resample_points"] += float(r["resample_points"])
         for k in times:
             out[k] += float(r[k])
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _lod_result(lod_files: TaskFiles, piece, keys) -> dict[str, np.ndarray]:
+    r = lod_files.get(piece_stem(piece), keys)
+    if r is None:
+        raise NeuralaoError(f"{lod_files.path(piece_stem(piece))} could not be read back: is the disk full?")
+    return r
+
+
+def _lod_check(
+    runner, light, pieces, rule, lod_files: TaskFiles, trace_files: TaskFiles, radius: float, s, progress
+) -> dict[str, np.ndarray]:
+    """The LOD's error table: at each piece's held-out LOD points, its two AOs (resampled at the LOD's
+    vertices, least squares over resampled samples) against the gold standard there, the traced samples
+    within the resampling sphere (a task per trace block of a piece with held-out points); each piece's
+    error sums (:func:`lod_piece_errors`) added in piece order. Writes nothing into the baked level."""
+    reference_files = TaskFiles(lod_files.folder.parent / "lod_reference", lod_files.key)
+    jobs = lod_reference_jobs(light, pieces, rule, lod_files, trace_files, radius, s)
+    for _ in run_to_files(reference_files, runner, jobs, "lod reference", progress, keys=()):
+        pass  # read piece by piece below
+    sums = np.zeros(6)
+    for p in pieces:
+        r = _lod_result(lod_files, p, LOD_HELD_OUT)
+        sums += lod_piece_errors(r, reference_files, lod_reference_stems(p, s.trace.block_samples))
     sw = max(sums[0], 1e-300)
     mean = sums[3] / sw
     return {
-        **{k: np.array(v) for k, v in out.items()},
+        "radius": np.array(radius),
         "rmse_vertex": np.array(np.sqrt(sums[1] / sw)),
         "rmse_least_squares": np.array(np.sqrt(sums[2] / sw)),
         "rmse_constant": np.array(np.sqrt(max(sums[4] / sw - mean**2, 0.0))),
@@ -729,8 +746,11 @@ def _blend_check(
     }
 
 
-def _error_tables(deco: dict, lod: dict | None, blend_err: dict) -> dict:
-    out: dict[str, Any] = {"blend": {k: float(v) for k, v in blend_err.items()}}
+def _error_tables(deco: dict, lod: dict | None, blend_err: dict | None) -> dict:
+    """The bake's error tables: the trees' fits always, the LOD's and the blend's where they were made."""
+    out: dict[str, Any] = {}
+    if blend_err is not None:
+        out["blend"] = {k: float(v) for k, v in blend_err.items()}
     if len(deco.get("models", [])):
         out["decorators"] = {
             k[5:]: {"mean": float(np.mean(v)), "max": float(np.max(v))}
@@ -796,6 +816,8 @@ def bake_log_markdown(info: dict) -> str:
             f"| (baseline: one constant) | {e['lod']['rmse_constant']:.4f} |",
             "",
         ]
+    if "blend" not in e:
+        return "\n".join(lines)
     b = e["blend"]
     lines += [
         "| two-distance blend | value |",

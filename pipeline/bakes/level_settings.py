@@ -148,6 +148,10 @@ class LevelBakeSettings:
     piece_faces: int = 262144
     # File name of the baked level inside --out (.glb or .gltf).
     output: str = "level_baked.glb"
+    # Make the error tables (the LOD's at held-out points, the two-distance blend's against a 4x-ray
+    # reference): checks of the bake that write nothing into the baked level. A production bake on a farm
+    # can leave them out (false); a rerun with them reuses every stage already made.
+    error_tables: bool = True
 
 
 def check_settings(s: LevelBakeSettings) -> None:
