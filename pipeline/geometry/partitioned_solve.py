@@ -443,9 +443,8 @@ class _Solve:
             results = [subdomain_step(None, x) for x in args]
         else:
             results = [None] * self.k
-            tasks = (
-                Task(self.context, subdomain_step, x, affinity=x[1]) for x in args
-            )  # same worker each step
+            # the same worker every step: it keeps the subdomain's factor and vectors
+            tasks = (Task(self.context, subdomain_step, x, affinity=x[1]) for x in args)
             for i, res in self.engine.map(tasks):
                 results[i] = res
         self.info.seconds_tasks.extend(float(r["seconds"]) for r in results)
