@@ -6,6 +6,10 @@ Add helpers at the end; keep each one small, documented with shapes, and free of
 from __future__ import annotations
 
 import math
+import os
+import signal
+import threading
+import time
 
 import numpy as np
 import onnx
@@ -293,3 +297,23 @@ def both_presets(model: onnx.ModelProto, ref: np.ndarray, run, tol: float, relat
         err = float(diff.max())
         assert err <= tol, f"{preset} preset: max abs err {err:.3g} > {tol}"
     return programs["cpu"]
+
+
+def kill_a_worker_mid_run(engine, run, ready, what: str, worker: int = 1, timeout: float = 90):
+    """``run()`` on a thread; once ``ready()`` (polled) the Ray ``engine``'s actor ``worker`` is SIGKILLed.
+    Returns what ``run`` returned, after checking that it finished and that the actor was restarted (a new
+    process)."""
+    pid = engine.worker_info()[worker][0]
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(value=run()))
+    thread.start()
+    deadline = time.time() + timeout
+    while not ready() and thread.is_alive():
+        assert time.time() < deadline, f"no {what} within {timeout} s"
+        time.sleep(0.002)
+    assert thread.is_alive(), f"the run finished before a worker could be killed ({what})"
+    os.kill(pid, signal.SIGKILL)
+    thread.join(180)
+    assert not thread.is_alive() and "value" in result
+    assert engine.worker_info()[worker][0] != pid, "the killed actor was restarted"
+    return result["value"]

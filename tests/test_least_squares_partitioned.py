@@ -7,16 +7,12 @@ bytes on every run and engine."""
 from __future__ import annotations
 
 import math
-import os
-import signal
-import threading
-import time
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from helpers import smooth_values, soup_scene, under_footprints
+from helpers import kill_a_worker_mid_run, smooth_values, soup_scene, under_footprints
 from scipy.sparse.linalg import splu
 
 from neuralao.pipeline.bakes.level_pieces import scene_samples
@@ -250,25 +246,15 @@ def test_a_worker_killed_mid_solve_restarts_it_to_the_same_bytes(bunny_case, ray
     restarted without them, the solve starts again, and its bytes are those of this process."""
     c = bunny_case
     here = solve_partitioned(c.a, c.rhs, c.scene.vertices, 8)
-    pid = ray_engine.worker_info()[1][0]
-    info, result = SolveInfo(), {}
-    run = threading.Thread(
-        target=lambda: result.update(
-            v=solve_partitioned(c.a, c.rhs, c.scene.vertices, 8, engine=ray_engine, info=info)
-        )
+    info = SolveInfo()
+    v = kill_a_worker_mid_run(
+        ray_engine,
+        lambda: solve_partitioned(c.a, c.rhs, c.scene.vertices, 8, engine=ray_engine, info=info),
+        lambda: len(info.seconds_tasks) >= 8 * 6,  # a few steps in
+        "solve steps",
     )
-    run.start()
-    deadline = time.time() + 60
-    while len(info.seconds_tasks) < 8 * 6 and run.is_alive():  # a few steps in
-        assert time.time() < deadline, "the solve made no progress"
-        time.sleep(0.002)
-    assert run.is_alive(), "the solve finished before a worker could be killed"
-    os.kill(pid, signal.SIGKILL)
-    run.join(180)
-    assert not run.is_alive() and "v" in result
-    assert ray_engine.worker_info()[1][0] != pid, "the killed actor was restarted"
     assert info.restarts == 1
-    assert here.tobytes() == result["v"].tobytes()
+    assert here.tobytes() == v.tobytes()
 
 
 def test_ray_level_bake_with_subdomains_is_the_local_bake(tmp_path, ray_engine):

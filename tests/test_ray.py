@@ -14,7 +14,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -26,6 +25,8 @@ import pytest
 # laptops): set before ray is imported, here and in every `ray start` and CLI driver this module runs.
 os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
 ray = pytest.importorskip("ray")
+
+from helpers import kill_a_worker_mid_run  # noqa: E402
 
 from neuralao.pipeline.bakes.vertex import BakeSettings, bake, write_baked_mesh  # noqa: E402
 from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset  # noqa: E402
@@ -260,23 +261,12 @@ def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, 
 
     level, cfg, local, info = local_level
     out = tmp_path / "ray"
-    pid = ray_engine.worker_info()[1][0]
-    result: dict = {}
-    run = threading.Thread(
-        target=lambda: result.update(
-            info=bake_level(level, load_level_settings(cfg, LEVEL_TASKS), out, engine=ray_engine)
-        )
+    kill_a_worker_mid_run(
+        ray_engine,
+        lambda: bake_level(level, load_level_settings(cfg, LEVEL_TASKS), out, engine=ray_engine),
+        lambda: any((out / "stages" / "decorators.parts").glob("[!.]*.npz")),
+        "tree task",
     )
-    run.start()
-    deadline = time.time() + 90
-    while not list((out / "stages" / "decorators.parts").glob("[!.]*.npz")) and run.is_alive():
-        assert time.time() < deadline, "no tree task finished"
-        time.sleep(0.005)
-    assert run.is_alive(), "the bake finished before a worker could be killed"
-    os.kill(pid, signal.SIGKILL)
-    run.join(180)
-    assert not run.is_alive() and "info" in result
-    assert ray_engine.worker_info()[1][0] != pid, "the killed actor was restarted"
     _assert_same_level_bake(out, local, info)
 
 
@@ -299,19 +289,17 @@ def test_worker_killed_mid_run_changes_nothing(ray_engine, local_bake, monkeypat
     monkeypatch.setattr(engine_mod, "CHUNK_RAYS", 1 << 14)  # ~100 tasks, a few ms each
     scene, ao, _ = local_bake
     before = ray_engine.worker_info()
-    result: dict = {}
-    run = threading.Thread(target=lambda: result.update(r=bake(scene, BAKE, engine=ray_engine)))
-    run.start()
-    deadline = time.time() + 60
-    while ray_engine.completed < 3 and run.is_alive() and time.time() < deadline:
-        time.sleep(0.005)
-    assert run.is_alive(), "the bake finished before a worker could be killed"
-    os.kill(before[1][0], signal.SIGKILL)  # one actor's process, by its pid
-    run.join(120)
-    assert not run.is_alive()
-    np.testing.assert_array_equal(result["r"].ao, ao)
+    r = kill_a_worker_mid_run(
+        ray_engine,
+        lambda: bake(scene, BAKE, engine=ray_engine),
+        lambda: ray_engine.completed >= 3,
+        "task",
+        1,
+        60,
+    )
+    np.testing.assert_array_equal(r.ao, ao)
     after = ray_engine.worker_info()
-    assert after[0] == before[0] and after[1][0] != before[1][0], "the killed actor was restarted"
+    assert after[0] == before[0], "the other actor kept running"
 
 
 def _kill_when(p: subprocess.Popen, ready, timeout: float = 90) -> None:
