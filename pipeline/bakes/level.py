@@ -47,6 +47,7 @@ from neuralao.pipeline.bakes.level_decorators import (
     Resampler,
     bake_decorators,
     build_foliage,
+    shrub_boxes,
     small_decorators,
 )
 from neuralao.pipeline.bakes.level_output import write_outputs
@@ -316,12 +317,13 @@ def bake_level(
     blog.note("samples", samples=total_samples)
     settings_here = worker_settings(label_settings(s, index.diagonal), engine or local)
     frame = LabellerFrame(index.center, index.diagonal, settings_here)
-    foliage = None
+    foliage = shrubs = None
     if s.foliage.enabled:
-        foliage = blog.timed(
+        # the shrubs' boxes made once: the trees' gold foliage has the same
+        shrubs, foliage = blog.timed(
             "foliage",
             "Flatten trees, shrub 'fog' boxes + foliage BVH",
-            lambda: build_foliage(level, frame, s.foliage),
+            lambda: _shrubs_and_foliage(level, frame, s),
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
     ctx = opaque_context(key, level, index, settings_here, foliage, t.bvh)
@@ -430,7 +432,7 @@ def bake_level(
         "decorators",
         "Trees: local AO, in-place gold standard, eq. 3 fits",
         lambda: bake_decorators(
-            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key
+            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key, shrubs
         ),
         instances=level.counts().get("tree_instances", 0),
     )
@@ -495,6 +497,12 @@ def bake_level(
     write_json(out / "bake_log.json", info)
     write_text(out / "bake_log.md", bake_log_markdown(info))
     return info
+
+
+def _shrubs_and_foliage(level, frame, s: LevelBakeSettings) -> tuple:
+    """The shrubs' boxes (:func:`shrub_boxes`) and the opaque labeller's foliage made from them."""
+    shrubs = shrub_boxes(level, s.foliage)
+    return shrubs, build_foliage(level, frame, s.foliage, shrubs=shrubs)
 
 
 def _bytes_written(path: Path) -> int:

@@ -47,13 +47,23 @@ def instance_boxes(level: Level, nodes: list[LevelNode]) -> tuple[np.ndarray, np
     return np.concatenate(lo), np.concatenate(hi), np.concatenate(dens)
 
 
-def build_foliage(level: Level, frame, s: FoliageSettings, include_trees: bool = True) -> Foliage:
-    """Shrub instances as media boxes and tree instances as semi-transparent triangles, in the local frame
-    (``frame.center``, ``frame.scale``) of the opaque labeller."""
-    trees = level.nodes_with("tree")
+def shrub_boxes(level: Level, s: FoliageSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The shrubs' media boxes: every shrub instance's world AABB lo (b, 3), hi (b, 3) and density (b,),
+    overlaps reduced where ``s.reduce_overlaps`` (the 10x world's 78,560 shrubs: 1.4 s, made once a bake)."""
     lo, hi, dens = instance_boxes(level, level.nodes_with("shrub"))
     if s.reduce_overlaps:
         dens = overlap_reduced(lo, hi, dens)
+    return lo, hi, dens
+
+
+def build_foliage(
+    level: Level, frame, s: FoliageSettings, include_trees: bool = True, shrubs: tuple | None = None
+) -> Foliage:
+    """Shrub instances as media boxes and tree instances as semi-transparent triangles, in the local frame
+    (``frame.center``, ``frame.scale``) of the opaque labeller. ``shrubs``: :func:`shrub_boxes` of the
+    level, if made already."""
+    trees = level.nodes_with("tree")
+    lo, hi, dens = shrub_boxes(level, s) if shrubs is None else shrubs
     tv, tf, trans = np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0)
     if include_trees and trees:
         tv, tf, spans = flatten(level, trees)
@@ -168,6 +178,7 @@ def bake_decorators(
     local: bool,
     store=None,
     key: str = "",
+    shrubs: tuple | None = None,
 ) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
 
@@ -175,7 +186,7 @@ def bake_decorators(
     ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
     ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
     (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
-    ``diagonal``: the opaque level's (the rays' length)."""
+    ``diagonal``: the opaque level's (the rays' length). ``shrubs``: :func:`shrub_boxes`, if made already."""
 
     trees = level.nodes_with("tree")
     if not trees:
@@ -185,7 +196,11 @@ def bake_decorators(
     # one instance at a time, without flattening the level.
     bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))
     frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
-    gold_foliage = build_foliage(level, frame, s.foliage, include_trees=False) if s.foliage.enabled else None
+    gold_foliage = (
+        build_foliage(level, frame, s.foliage, include_trees=False, shrubs=shrubs)
+        if s.foliage.enabled
+        else None
+    )
     ctx = gold_context(key, level, settings, gold_foliage, s.trace.bvh)
     t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
