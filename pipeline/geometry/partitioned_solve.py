@@ -97,8 +97,7 @@ class Partition:
     @cached_property
     def cores(self) -> list[np.ndarray]:
         """Each subdomain's core vertices, ascending."""
-        order = np.argsort(self.core, kind="stable")
-        return np.split(order, np.cumsum(np.bincount(self.core, minlength=len(self.parts)))[:-1])
+        return _members(self.core, len(self.parts))
 
 
 @dataclass
@@ -120,6 +119,12 @@ class SolveInfo:
 
 
 # --------------------------------------------------------------------------- partition
+
+
+def _members(part: np.ndarray, count: int) -> list[np.ndarray]:
+    """The indices of ``part`` (n,) int64 equal to each of 0..count-1, each list ascending."""
+    order = np.argsort(part, kind="stable")
+    return np.split(order, np.cumsum(np.bincount(part, minlength=count))[:-1])
 
 
 def bisect(points: np.ndarray, count: int) -> np.ndarray:
@@ -187,8 +192,7 @@ def partition(
     if count < 1 or overlap < 0:
         raise NeuralaoError(f"need subdomains >= 1 and overlap >= 0, got {count} and {overlap}")
     core = bisect(points, max(1, min(count, n)))
-    order = np.argsort(core, kind="stable")
-    cores = np.split(order, np.cumsum(np.bincount(core))[:-1])
+    cores = _members(core, int(core.max(initial=0)) + 1)
     scratch = np.zeros(n, bool)
     parts = [grow(a, c, overlap, scratch) for c in cores]
     if connected:  # the caller's system is one connected component: no need to find them
