@@ -61,6 +61,13 @@ _NORMALS = ("normal_cam", "normal_obj")
 # The longest normal a frame may hold. Models normalise in float32, where the square of a length past
 # 1.8e19 is inf (the AO then comes out NaN): such a normal is a broken exporter, named where it enters.
 MAX_NORMAL_LENGTH = 1e18
+# The foreground depths, and the AO radii compared with them, whose AO is computed exactly (scene units).
+# Screen-space passes (GTAO, a hybrid U-Net's input) work in float32, where the squared distance between
+# neighbouring pixels overflows past 1.8e19 and underflows (to denormals, then 0) below about 1e-19: a frame
+# scaled by 1e-17 .. 1e18, its radius alike, gives the same AO, one scaled by 1e-20 or 1e19 an AO of 0.05
+# for 0.97, and 1e-42 (a float32 denormal) overflows a cast. Taller and narrower frames put neighbours
+# closer (at 192 rows and 10 degrees, 1e-16 already differs); the bounds keep a margin of 1e4 and more.
+DEPTH_RANGE = (1e-12, 1e12)
 
 
 @dataclass(frozen=True, eq=False)  # eq=False: arrays have no truth value to compare by
@@ -213,8 +220,29 @@ class Frame(Mapping):
                 raise NeuralaoError(
                     f"{where}: 'mask' is true on {n} pixel(s) where 'depth' is 0 (background)"
                 )
+            fg = depth[np.asarray(self.mask, bool) if self.mask is not None else depth > 0]
+            outside = (fg < DEPTH_RANGE[0]) | (fg > DEPTH_RANGE[1])
+            if outside.any():
+                raise NeuralaoError(
+                    f"{where}: 'depth' has {int(outside.sum())} foreground value(s) from "
+                    f"{float(fg[outside].min()):.3g} to {float(fg[outside].max()):.3g}; {_IN_RANGE}"
+                )
         if self.yfov is not None and not 0 < self.yfov < math.pi:
             raise NeuralaoError(f"{where}: 'yfov' is {self.yfov!r} radians; a field of view lies in (0, pi)")
+
+
+_IN_RANGE = (
+    f"AO is computed exactly for depths and radii in [{DEPTH_RANGE[0]:g}, {DEPTH_RANGE[1]:g}] scene units: "
+    "scale the scene (and the radius alike) into that range"
+)
+
+
+def check_scene_length(name: str, value: float) -> float:
+    """A length compared with the frame's depths (the AO radius) within :data:`DEPTH_RANGE`: one line
+    naming ``name`` otherwise (NaN, inf, 0 and what float32 rounds to 0 included)."""
+    if not DEPTH_RANGE[0] <= value <= DEPTH_RANGE[1]:
+        raise NeuralaoError(f"{name} {value:.6g} is out of range; {_IN_RANGE}")
+    return float(value)
 
 
 def _value(key: str, value: Any, where: str) -> Any:

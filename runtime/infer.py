@@ -32,8 +32,10 @@ import numpy as np
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_path, write_exr, write_png
-from neuralao.runtime.frame import Frame, FrameLike
+from neuralao.runtime.frame import Frame, FrameLike, check_scene_length
 from neuralao.runtime.onnx_io import get_metadata, load_onnx
+from neuralao.runtime.predict import check_unet_frame
+from neuralao.runtime.shipped import export_model
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +44,13 @@ BACKGROUND = np.array([0.93, 0.94, 0.96], dtype=np.float32)
 LIGHT_CAM = np.array([-0.3, 0.4, 1.0]) / np.linalg.norm(
     [-0.3, 0.4, 1.0]
 )  # headlight, slightly up-left (camera space)
+
+
+def model_file(path: str | Path) -> Path:
+    """The ONNX file a model argument names: the file itself, or an export folder's model (the file its
+    manifest names, see :func:`neuralao.runtime.shipped.export_model`)."""
+    path = Path(path)
+    return export_model(path) if path.is_dir() else path
 
 
 def model_kind(onnx_path: str | Path) -> str:
@@ -75,7 +84,40 @@ def complete_frame(frame: Frame, kind: str, yfov: float | None, path: str | Path
         raise NeuralaoError(
             f"{path} has no yfov: give the vertical field of view with --yfov DEG (or --yfov-rad RAD)"
         )
-    return frame.replace(**changes) if changes else frame
+    frame = frame.replace(**changes) if changes else frame
+    if kind == "unet":
+        check_unet_frame(frame, path)
+    return frame
+
+
+# The most pixels an AO radius may span on screen (at the nearest foreground pixel). Screen-space passes
+# (a hybrid U-Net's GTAO) step along the screen in float32 up to the radius in pixels; once it spans
+# about 1e5 screen heights every step but the first lies off screen and the AO stops changing, and past
+# 1e11 .. 1e13 pixels (measured at 48 to 768 rows) the steps lose their precision and the AO changes
+# again. The bound lies between, 100 times below the loss: a larger radius could change nothing but precision.
+MAX_RADIUS_PIXELS = 1e9
+
+
+def check_radius(name: str, radius: float, frame: FrameLike) -> float:
+    """``radius`` (scene units) within the depths' range (:func:`check_scene_length`) and spanning at most
+    :data:`MAX_RADIUS_PIXELS` pixels at the frame's nearest foreground pixel (when the frame has depth,
+    mask and yfov); one line naming ``name`` otherwise."""
+    check_scene_length(name, radius)
+    if not all(k in frame for k in ("depth", "mask", "yfov")):
+        return radius
+    depth = np.asarray(frame["depth"], np.float64)[np.asarray(frame["mask"], bool)]
+    if depth.size == 0:
+        return radius
+    nearest = float(depth.min())
+    per_unit = 0.5 * np.shape(frame["depth"])[0] / math.tan(0.5 * float(frame["yfov"]))  # as GTAO's
+    pixels = radius * per_unit / nearest
+    if pixels > MAX_RADIUS_PIXELS:
+        raise NeuralaoError(
+            f"{name} {radius:.6g} spans {pixels:.3g} pixels at the nearest foreground depth {nearest:.3g}, "
+            f"past the {MAX_RADIUS_PIXELS:g} up to which screen-space AO is exact; give at most "
+            f"{MAX_RADIUS_PIXELS * nearest / per_unit:.3g} for this frame (already far past its screen)"
+        )
+    return radius
 
 
 def infer(onnx_path: str | Path, frame: FrameLike, radius: float | None = None) -> np.ndarray:
@@ -86,6 +128,11 @@ def infer(onnx_path: str | Path, frame: FrameLike, radius: float | None = None) 
         raise NeuralaoError(
             f"--radius applies to U-Net models; {onnx_path} is a {kind} model (its radius is baked in)"
         )
+    if kinds.KINDS[kind].radius_input:
+        if radius is not None:
+            check_radius("--radius", float(radius), frame)
+        elif "radii" in frame and np.size(frame["radii"]):
+            check_radius("the frame's label radius ('radii')", float(np.max(frame["radii"])), frame)
     ao = kinds.role(kind, "predictor")(Path(onnx_path))(frame, radius)
     ao = np.asarray(ao, dtype=np.float32)
     if ao.ndim != 2:

@@ -28,6 +28,8 @@ def get_metadata(model: onnx.ModelProto) -> dict[str, Any]:
             if "not valid JSON" not in str(e):
                 raise  # too deep or too big: not a plain string either
             out[p.key] = p.value
+        except ValueError:  # a number of more digits than Python converts: its text, for the reader to judge
+            out[p.key] = p.value
     return out
 
 

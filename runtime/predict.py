@@ -25,11 +25,14 @@ import onnx
 
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import PIXEL_BYTES, available_memory, format_bytes
 from neuralao.runtime.foundation.manifest import read_manifest
+from neuralao.runtime.foundation.metadata import metadata_internal_height, metadata_pad_multiple
 from neuralao.runtime.frame import FrameLike
-from neuralao.runtime.internal_resolution import at_internal_resolution
+from neuralao.runtime.internal_resolution import at_internal_resolution, internal_size
 from neuralao.runtime.onnx_io import get_metadata, load_onnx, ort_session
 from neuralao.runtime.unet_input import (
+    PAD_MODE,
     RADIUS_INPUT,
     check_version,
     frame_radius,
@@ -91,33 +94,39 @@ def composite(y: np.ndarray, frame: FrameLike) -> np.ndarray:
 
 
 def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
-    """Metadata of a U-Net ONNX file; another kind or another preprocessing version is a one-line error."""
+    """Metadata of a U-Net ONNX file, its padding contract checked (``pad_multiple`` an int, the ONE check
+    `neuralao glsl` makes too, and ``pad_mode`` the padding this consumer does); another kind, another
+    preprocessing version or a broken contract is a one-line error naming the file and the key."""
     meta = get_metadata(proto)
     if meta.get("neuralao_kind") != "unet":
         raise NeuralaoError(
             f"{where} is not a neuralao U-Net ONNX file (neuralao_kind {meta.get('neuralao_kind')!r})"
         )
     check_version(meta.get("preprocess_version"), str(where))
+    text = raw_metadata(proto)  # numbers as the file spells them (JSON would show "1e3" as 1000.0)
+    meta["pad_multiple"] = metadata_pad_multiple(text, str(where), needed="says how to pad the input")
+    if meta.get("pad_mode") != PAD_MODE:
+        raise NeuralaoError(
+            f"{where}: metadata pad_mode {meta.get('pad_mode')!r} is not {PAD_MODE!r}, "
+            f"the only padding this consumer does"
+            if "pad_mode" in meta
+            else f"{where}: metadata has no pad_mode (the U-Net's input is padded {PAD_MODE!r})"
+        )
     return meta
+
+
+def raw_metadata(proto: onnx.ModelProto) -> dict[str, str]:
+    """``metadata_props`` as the file stores them (text, nothing decoded)."""
+    return {p.key: p.value for p in proto.metadata_props}
 
 
 def declared_internal_height(onnx_path: str | Path, proto: onnx.ModelProto | None = None) -> int | None:
     """The internal height a U-Net export declares: ONNX metadata ``internal_height``, else the
     ``internal_height`` of the manifest.json beside it; None (run at the frame's size) when neither."""
-    meta = get_metadata(proto if proto is not None else load_onnx(onnx_path))
-    value = meta.get("internal_height")
-    if value in (None, "", "None"):
-        folder = Path(onnx_path).parent
-        if (folder / "manifest.json").is_file():
-            value = read_manifest(folder).get("internal_height")
-    if value in (None, "", "None"):
-        return None
-    try:
-        height = int(value)
-    except (TypeError, ValueError):
-        raise NeuralaoError(f"{onnx_path}: internal_height must be an integer, got {value!r}") from None
-    if height < 16:
-        raise NeuralaoError(f"{onnx_path}: internal_height must be >= 16, got {height}")
+    height = metadata_internal_height(raw_metadata(proto or load_onnx(onnx_path)), str(onnx_path))
+    folder = Path(onnx_path).parent
+    if height is None and (folder / "manifest.json").is_file():
+        height = metadata_internal_height(read_manifest(folder), str(folder / "manifest.json"))
     return height
 
 
@@ -141,7 +150,7 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     if internal_height == "model":
         internal_height = declared_internal_height(onnx_path, proto)
     run = ort_runner(proto.SerializeToString())
-    multiple = int(meta["pad_multiple"])
+    multiple = meta["pad_multiple"]
     hybrid = is_hybrid(meta)
     version = int(meta["preprocess_version"])
 
@@ -150,13 +159,43 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         return composite(run_padded(run, x, multiple, frame_radius_param(f, r, version)), f)
 
     scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
-    if not hybrid:
-        return scaled
 
-    def predict_hybrid(frame: FrameLike, radius: float | None) -> np.ndarray:
+    def predict_frame(frame: FrameLike, radius: float | None = None) -> np.ndarray:
+        check_unet_frame(frame)
+        check_network_size(np.shape(frame["depth"]), internal_height, onnx_path)
+        if not hybrid:
+            return scaled(frame, radius)
         return scaled(dict(frame) | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
 
-    return predict_hybrid
+    return predict_frame
+
+
+# The G-buffer channels a U-Net reads (``yfov`` too, checked where the radius is made).
+UNET_CHANNELS = ("depth", "normal_cam", "mask")
+
+
+def check_unet_frame(frame: FrameLike, where: str | Path = "frame") -> None:
+    """Refuse a frame that lacks a channel the U-Net reads: one line naming ``where`` and the channel."""
+    for key in UNET_CHANNELS:
+        if key not in frame:
+            raise NeuralaoError(
+                f"{where} has no {key!r} channel, which the U-Net reads ({', '.join(UNET_CHANNELS)})"
+            )
+
+
+def check_network_size(shape: tuple[int, ...], internal_height: int | None, where: str | Path) -> None:
+    """Refuse a frame of ``shape`` (H, W) whose network input (at the model's ``internal_height`` rows,
+    the frame's aspect kept: a strip one row tall becomes as wide as it is scaled tall) this machine
+    cannot hold, before anything is allocated."""
+    h, w = shape[:2]
+    lw, lh = internal_size(w, h, internal_height)
+    need, avail = lw * lh * PIXEL_BYTES, available_memory()
+    if need > avail:
+        at = f"internal_height {internal_height}, the frame's aspect kept" if internal_height else "its size"
+        raise NeuralaoError(
+            f"a {w}x{h} frame runs {Path(where).name} at {lw}x{lh} pixels ({at}): about "
+            f"{format_bytes(need)}, more than the {format_bytes(avail)} of memory available"
+        )
 
 
 def unet_infer_frame(

@@ -51,8 +51,24 @@ def default_export(kind: str, models_dir: Path | None = None) -> Path:
 
 def default_model(kind: str, models_dir: Path | None = None) -> Path:
     """model.onnx of the default shipped model of ``kind``."""
-    folder = default_export(kind, models_dir)
-    return folder / read_manifest(folder).get("onnx", "model.onnx")
+    return export_model(default_export(kind, models_dir))
+
+
+def export_model(folder: str | Path) -> Path:
+    """The ONNX model of an export folder: the file its manifest names (``onnx``, by default model.onnx),
+    which must be a file inside the folder; one line naming the folder otherwise."""
+    folder = Path(folder)
+    if not (folder / "manifest.json").is_file():
+        raise NeuralaoError(
+            f"{folder} is a folder but not an export (no manifest.json); give an export folder as "
+            "`neuralao export` writes it, or an .onnx file"
+        )
+    name = read_manifest(folder).get("onnx", "model.onnx")
+    if not isinstance(name, str) or Path(name).name != name or name in ("", ".", ".."):
+        raise NeuralaoError(f"{folder}/manifest.json: 'onnx' must name a file in the folder, got {name!r}")
+    if not (folder / name).is_file():
+        raise NeuralaoError(f"export folder {folder} has no {name} (its manifest's model)")
+    return folder / name
 
 
 def pure_unet_export(models_dir: Path | None = None) -> Path:

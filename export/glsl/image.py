@@ -45,6 +45,7 @@ from neuralao.export.glsl.views import (
     transpose,
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metadata import metadata_pad_multiple
 
 # Portable GL 4.5 minimums: GL_MAX_TEXTURE_SIZE, GL_MAX_ARRAY_TEXTURE_LAYERS,
 # GL_MAX_SHADER_STORAGE_BLOCK_SIZE.
@@ -3072,15 +3073,7 @@ def generate_compute(
         raise NeuralaoError(f"compute dialect must be one of {sorted(COMPUTE_DIALECTS)}, got {dialect!r}")
     d = COMPUTE_DIALECTS[dialect]
     graph = read_graph(model, max_inputs=1 + MAX_SCALAR_INPUTS)
-    meta = graph.metadata.get("pad_multiple")
-    try:
-        # an integer's digits only: json.loads of hostile metadata recurses or overflows
-        meta_multiple = None if meta is None else int(str(meta).strip())
-    except (ValueError, TypeError):
-        raise NeuralaoError(f"metadata pad_multiple {meta!r} is not an integer") from None
-    if meta_multiple is not None and meta_multiple < 1:
-        raise NeuralaoError(f"metadata pad_multiple {meta_multiple} must be positive")
-    table = ImageOps(graph, meta_multiple)
+    table = ImageOps(graph, metadata_pad_multiple(graph.metadata))
     table.run()
     outputs, shapes = [], {}
     for name in graph.outputs:

@@ -1,5 +1,6 @@
 """`neuralao infer [MODEL.onnx] FRAME.npz --out AO.png [--radius R] [--composite OUT.png]`: apply an exported
-model to a G-buffer. Without MODEL.onnx the shipped U-Net (``runtime/models``) is used.
+model (an .onnx file or an export folder) to a G-buffer. Without MODEL.onnx the shipped U-Net
+(``runtime/models``) is used.
 
 FRAME.npz is one frame as ``neuralao render`` writes it (``depth``, ``normal_cam``, ``normal_obj``,
 ``mask``, ``yfov`` in radians, ...) or as a user's exporter writes it from the keys docs/formats.md
@@ -12,22 +13,24 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.limits import check_finite_number
 from neuralao.runtime.foundation.paths import FILE
-from neuralao.runtime.frame import read_frame
+from neuralao.runtime.frame import check_scene_length, read_frame
 from neuralao.runtime.infer import (
     check_output,
     complete_frame,
     composite,
     foreground,
     infer,
+    model_file,
     model_kind,
     write_image,
 )
+from neuralao.runtime.onnx_io import load_onnx
 from neuralao.runtime.shipped import default_model
 
 log = logging.getLogger(__name__)
@@ -53,12 +56,28 @@ def field_of_view(args: argparse.Namespace) -> float | None:
     return None
 
 
+def model_argument(path: str) -> Path:
+    """The ONNX file of the first of two paths (MODEL FRAME.npz): an .onnx file or an export folder. A file
+    of another suffix that is no ONNX model (a frame given first, say) is named as the model it was taken for.
+    """
+    model = model_file(path)
+    if model.is_file() and model.suffix.lower() != ".onnx":
+        try:
+            load_onnx(model)
+        except NeuralaoError:
+            raise NeuralaoError(
+                f"{path} was taken as the model, and it is not an ONNX model: given two paths, infer reads "
+                "MODEL FRAME.npz (MODEL an .onnx file or an export folder); give one frame at a time"
+            ) from None
+    return model
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "inputs",
         nargs="+",
         metavar="[MODEL.onnx] FRAME.npz",
-        help="exported ONNX model (model.onnx of an export folder; default: the shipped U-Net) and a "
+        help="exported ONNX model (an export folder or its model.onnx; default: the shipped U-Net) and a "
         "G-buffer frame .npz (as `neuralao render` writes), or a dataset shard with --index",
     )
     p.add_argument(
@@ -84,7 +103,9 @@ def run(args: argparse.Namespace) -> int:
     if len(args.inputs) > 2:
         raise NeuralaoError(f"expected [MODEL.onnx] FRAME.npz, got {len(args.inputs)} paths")
     if len(args.inputs) == 2:
-        model, frame_path = args.inputs
+        model, frame_path = model_argument(args.inputs[0]), args.inputs[1]
+    elif Path(args.inputs[0]).suffix.lower() == ".onnx" or (Path(args.inputs[0]) / "manifest.json").is_file():
+        raise NeuralaoError(f"{args.inputs[0]} is a model; give the frame after it: MODEL FRAME.npz")
     else:
         model, frame_path = default_model("unet"), args.inputs[0]
         log.info("model: %s (shipped default)", model)
@@ -92,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     if args.composite:
         check_output("--composite", args.composite)
     if args.radius is not None:
-        check_finite_number("--radius", args.radius, low=0.0)
+        check_scene_length("--radius", args.radius)
     yfov = field_of_view(args)
     frame = complete_frame(read_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
     ao = infer(model, frame, args.radius)
