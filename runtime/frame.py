@@ -227,8 +227,25 @@ class Frame(Mapping):
                     f"{where}: 'depth' has {int(outside.sum())} foreground value(s) from "
                     f"{float(fg[outside].min()):.3g} to {float(fg[outside].max()):.3g}; {_IN_RANGE}"
                 )
-        if self.yfov is not None and not 0 < self.yfov < math.pi:
-            raise NeuralaoError(f"{where}: 'yfov' is {self.yfov!r} radians; a field of view lies in (0, pi)")
+        if self.yfov is not None:
+            check_yfov(f"{where}: 'yfov'", self.yfov, radians=True)
+
+
+# The vertical fields of view a camera may have, degrees: a pinhole camera's useful range. Narrower, the
+# camera stands so far back that float32 depth cannot tell the scene's front from its back (at 1e-5 degrees
+# the AO of most pixels comes out 0); wider, the scene shrinks to a few pixels and the image's edges
+# stretch without bound (at 178 degrees a fitted object leaves no pixel).
+YFOV_RANGE_DEG = (0.1, 170.0)
+
+
+def check_yfov(name: str, value: float, radians: bool = False) -> float:
+    """The field of view ``value`` (degrees, or radians) in degrees if it lies within
+    :data:`YFOV_RANGE_DEG`, else a one-line error naming ``name`` and the range in its unit."""
+    low, high = (math.radians(v) for v in YFOV_RANGE_DEG) if radians else YFOV_RANGE_DEG
+    if not (math.isfinite(value) and low <= value <= high):
+        unit = "radians" if radians else "degrees"
+        raise NeuralaoError(f"{name} must be within [{low:.4g}, {high:.4g}] {unit}, got {value:g}")
+    return math.degrees(value) if radians else float(value)
 
 
 _IN_RANGE = (

@@ -45,6 +45,12 @@ def load_onnx(path: str | os.PathLike) -> onnx.ModelProto:
         raise NeuralaoError(
             f"cannot load ONNX file {p}: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
         ) from None
+    newest = onnx.defs.onnx_opset_version()
+    for o in model.opset_import:
+        if o.domain in ("", "ai.onnx") and o.version > newest:
+            raise NeuralaoError(
+                f"{p} declares ONNX opset {o.version}; this installation's ONNX knows opsets up to {newest}"
+            )
     return model
 
 

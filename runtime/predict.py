@@ -27,12 +27,15 @@ from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import PIXEL_BYTES, available_memory, format_bytes
 from neuralao.runtime.foundation.manifest import read_manifest
-from neuralao.runtime.foundation.metadata import metadata_internal_height, metadata_pad_multiple
+from neuralao.runtime.foundation.metadata import (
+    metadata_internal_height,
+    metadata_pad_mode,
+    metadata_pad_multiple,
+)
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import at_internal_resolution, internal_size
 from neuralao.runtime.onnx_io import get_metadata, load_onnx, ort_session
 from neuralao.runtime.unet_input import (
-    PAD_MODE,
     RADIUS_INPUT,
     check_version,
     frame_radius,
@@ -105,13 +108,7 @@ def check_unet_onnx(proto: onnx.ModelProto, where: str | Path) -> dict:
     check_version(meta.get("preprocess_version"), str(where))
     text = raw_metadata(proto)  # numbers as the file spells them (JSON would show "1e3" as 1000.0)
     meta["pad_multiple"] = metadata_pad_multiple(text, str(where), needed="says how to pad the input")
-    if meta.get("pad_mode") != PAD_MODE:
-        raise NeuralaoError(
-            f"{where}: metadata pad_mode {meta.get('pad_mode')!r} is not {PAD_MODE!r}, "
-            f"the only padding this consumer does"
-            if "pad_mode" in meta
-            else f"{where}: metadata has no pad_mode (the U-Net's input is padded {PAD_MODE!r})"
-        )
+    metadata_pad_mode(meta, str(where))
     return meta
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metadata import PAD_MODE
 from neuralao.runtime.frame import FrameLike
 
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and consumers follow it.
@@ -49,7 +50,7 @@ INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
 # The hybrid's input: the G-buffer channels and GTAO's AO at the same radius (1 on background).
 HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
 BACKGROUND_DEPTH = 0.0
-PAD_MODE = "reflect"
+
 
 _COMMON_DESCRIPTION = {
     "input_name": "gbuffer",

@@ -17,6 +17,7 @@ import pytest
 
 from neuralao.pipeline.cli.main import main
 from neuralao.runtime.foundation import sh
+from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import read_npz
 
 TET = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
@@ -318,8 +319,13 @@ def test_probe_far_from_the_level_uses_the_nearest_region(distance):
 
 def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
     from neuralao.runtime.foundation.io import write_json
+    from neuralao.runtime.probe import VolumeProbe
     from neuralao.runtime.volumes import to_json
 
+    # The runtime (an engine's own points, float64): the point whose model overflows is named.
+    with pytest.raises(NeuralaoError, match=r"point 1 .*'right'"):
+        VolumeProbe(_two_regions(slope=3.0)).ao(np.array([[1.0, 0, 0], [1.7e308, 0, 0]]), np.eye(3)[[2, 2]])
+    # The command: points past float32 (the models' precision) are refused before any model is evaluated.
     write_json(tmp_path / "v.json", to_json(_two_regions(slope=3.0)))
     np.save(tmp_path / "p.npy", np.array([[1.0, 0, 0], [1.7e308, 0, 0]]))
     np.save(tmp_path / "n.npy", np.array([[0, 0, 1.0]] * 2))
@@ -337,7 +343,7 @@ def test_probe_refuses_points_where_the_model_overflows(tmp_path, capsys):
             str(out),
         ],
     )
-    assert "point 1" in msg and "'right'" in msg and not out.exists()
+    assert "--points" in msg and "1 row(s)" in msg and "float32" in msg and not out.exists()
 
 
 # --------------------------------------------------------------------------- 5. help defaults

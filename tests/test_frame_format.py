@@ -161,7 +161,7 @@ def test_a_mask_over_background_depth_is_refused(tmp_path, capsys):
         ("depth", np.zeros((H, W), dtype=[("a", "f4"), ("b", "f4")]), "'depth' holds"),
         ("depth", np.ones((H, W), np.complex64), "'depth' holds complex64"),
         ("yfov", np.array([0.8, 0.9]), "'yfov' must be one number"),
-        ("yfov", np.float64(4.0), "(0, pi)"),
+        ("yfov", np.float64(4.0), "must be within [0.001745, 2.967] radians"),
         ("depth", np.ones((H, W, 1), np.float32), "'depth' has shape"),
         ("normal_cam", np.zeros((H, W + 1, 3), np.float32), "'normal_cam' has shape"),
         ("fov", np.float64(0.8), "unknown frame key 'fov'"),

@@ -88,11 +88,31 @@ def test_tampered_unet_metadata_is_named(tmp_path, capsys, changes, words):
     assert words in msg and "u.onnx" in msg
 
 
-def test_glsl_and_infer_refuse_a_pad_multiple_with_one_check(tmp_path, capsys):
-    model = _tampered(tmp_path / "u.onnx", pad_multiple="0")
+@pytest.mark.parametrize(
+    "changes, words",
+    [
+        ({"pad_multiple": "0"}, "metadata pad_multiple 0 must be positive"),
+        ({"internal_height": "100000000"}, "metadata internal_height 100000000 is more than 16384"),
+        (
+            {"pad_mode": "bogus"},
+            "metadata pad_mode 'bogus' is not 'reflect', the only padding its consumers do",
+        ),
+    ],
+)
+def test_glsl_and_infer_refuse_a_padding_contract_with_one_check(tmp_path, capsys, changes, words):
+    model = _tampered(tmp_path / "u.onnx", **changes)
     glsl = refusal(capsys, ["glsl", str(model), "--target", "image", "--out", str(tmp_path / "g")])
     infer = refusal(capsys, _infer(tmp_path, model, _frame(tmp_path / "f.npz")))
-    assert glsl.endswith("metadata pad_multiple 0 must be positive") and infer.endswith(glsl.split(": ")[-1])
+    assert glsl.endswith(words) and infer.endswith(words) and not (tmp_path / "g").exists()
+
+
+def test_an_opset_newer_than_onnx_knows_is_refused(tmp_path, capsys):
+    model = onnx.load(str(MODELS / "unet-fast" / "model.onnx"))
+    model.opset_import[0].version = 99
+    onnx.save(model, str(tmp_path / "u.onnx"))
+    argv = ["glsl", str(tmp_path / "u.onnx"), "--target", "image", "--out", str(tmp_path / "g")]
+    msg = refusal(capsys, argv)
+    assert "u.onnx" in msg and "opset 99" in msg and not (tmp_path / "g").exists()
 
 
 def test_a_frame_whose_network_input_cannot_fit_is_refused_before_allocating(tmp_path, capsys):

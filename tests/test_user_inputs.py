@@ -268,9 +268,13 @@ def test_generator_parameters_are_bounded_before_allocation(tmp_path, capsys, se
 
 
 def test_float_flags_past_float32_are_refused_naming_the_flag(files, tmp_path, capsys):
-    for value in ("1e300", "nan", "-inf"):
+    for value in ("1e300", "nan", "-inf", "1e-300"):
         argv = ["bake", str(files / "tet.obj"), "--max-distance", value, "--out", str(tmp_path / "b.ply")]
         assert "--max-distance" in refusal(capsys, argv)
+    # a distance float32 holds as 0 (or without its digits) is no distance: refused, not a bake of AO 1
+    obscurance = ["--kernel", "obscurance", "--half-distance", "1e-40"]
+    msg = refusal(capsys, ["bake", str(files / "tet.obj"), *obscurance, "--out", str(tmp_path / "b.ply")])
+    assert "--half-distance" in msg and "too small" in msg and not (tmp_path / "b.ply").exists()
     msg = refusal(
         capsys, ["volumes", str(files / "tet.obj"), "--set", "beta=1e39", "--out", str(tmp_path / "v.json")]
     )
@@ -291,6 +295,9 @@ def test_float_flags_past_float32_are_refused_naming_the_flag(files, tmp_path, c
         ({"eye": [2, 1, 2], "target": [0, 0, 0], "yfov_deg": 180}, "'yfov_deg'"),
         ({"eye": [2, 1, 2], "target": [0, 0, 0], "znear": 5, "zfar": 1}, "znear"),
         ({"eye": [2, 1e300, 2], "target": [0, 0, 0]}, "'eye'"),
+        ({"eye": [2, 1, "2"], "target": [0, 0, 0]}, "'eye'"),  # numpy would read the string as 2
+        ({"eye": [2, 1, 2], "target": [0, 0, True]}, "'target'"),  # and true as 1
+        ({"eye": [2, 1, 2], "target": [0, 0, 0], "yfov_deg": 1e-5}, "'yfov_deg'"),
     ],
 )
 def test_camera_files_are_checked_key_by_key(files, tmp_path, capsys, camera, words):
@@ -298,6 +305,54 @@ def test_camera_files_are_checked_key_by_key(files, tmp_path, capsys, camera, wo
     argv = ["render", str(files / "tet.obj"), "--cameras", str(tmp_path / "cams.json"), "--size", "8", "8"]
     msg = refusal(capsys, [*argv, "--rays", "1", "--out", str(tmp_path / "r")])
     assert "cams.json" in msg and "camera 0" in msg and words in msg
+
+
+@pytest.mark.parametrize("flag,value", [("--yfov", "178"), ("--yfov", "1e-5"), ("--yfov-rad", "3.1")])
+def test_a_field_of_view_no_pinhole_camera_has_is_refused(files, tmp_path, capsys, flag, value):
+    # 178 degrees leaves a fitted object no pixel, 1e-5 puts the camera where float32 depth cannot resolve it
+    argv = ["render", str(files / "tet.obj"), "--views", "1", "--size", "8", "8", "--rays", "1", flag, value]
+    msg = refusal(capsys, [*argv, "--out", str(tmp_path / "r")])
+    assert flag in msg and "must be within" in msg and not (tmp_path / "r").exists()
+
+
+def test_a_mesh_smaller_than_float32_positions_resolve_is_refused(tmp_path, capsys):
+    (tmp_path / "small.obj").write_text(
+        "".join(f"v {x * 1e-35} {y * 1e-35} {z * 1e-35}\n" for x, y, z in [(0, 0, 0), (1, 0, 0), (0, 1, 0)])
+        + "f 1 2 3\n"
+    )
+    msg = refusal(capsys, ["bake", str(tmp_path / "small.obj"), "--out", str(tmp_path / "b.ply")])
+    assert "small.obj" in msg and "spans" in msg and not (tmp_path / "b.ply").exists()
+
+
+def test_flags_that_do_not_apply_are_refused_not_ignored(files, tmp_path, capsys):
+    bake = ["bake", str(files / "tet.obj"), "--method", "vertex", "--rays", "2"]
+    assert "--alpha" in refusal(capsys, [*bake, "--alpha", "5", "--out", str(tmp_path / "b.ply")])
+    assert main([*bake, "--out", str(tmp_path / "b.ply")]) == 0
+    view = ["view", str(tmp_path / "b.ply"), "--out", str(tmp_path / "v")]
+    assert "--screen-space-radius" in refusal(capsys, [*view, "--screen-space-radius", "0.1"])
+    assert "--mesh" in refusal(capsys, [*view, "--mesh", str(files / "tet.obj")])
+    assert not (tmp_path / "v").exists()
+
+
+def test_a_full_disk_is_one_line_naming_the_file_and_leaves_no_output(files, tmp_path):
+    """The kernel refuses the write (a file-size limit: EFBIG, as a full disk's ENOSPC would) on the second
+    of a texture bake's two files: one line naming it, exit 2, and neither file left."""
+    import resource
+
+    argv = [*NEURALAO, "bake", str(files / "tet.obj"), "--to", "texture", "--resolution", "64", "--rays", "2"]
+    assert subprocess.run([*argv, "--out", str(tmp_path / "ok.glb")], capture_output=True).returncode == 0
+    png, glb = (tmp_path / "ok.ao.png").stat().st_size, (tmp_path / "ok.glb").stat().st_size
+    assert png < glb
+
+    def limit() -> None:  # Python ignores SIGXFSZ, so the write fails with EFBIG instead of killing it
+        resource.setrlimit(resource.RLIMIT_FSIZE, ((png + glb) // 2, resource.RLIM_INFINITY))
+
+    out = tmp_path / "full" / "t.glb"
+    proc = subprocess.run([*argv, "--out", str(out)], capture_output=True, text=True, preexec_fn=limit)
+    err = [ln for ln in proc.stderr.replace("\r", "\n").splitlines() if ln.strip() and "%|" not in ln]
+    err = [ln for ln in err if not ln.startswith(("INFO ", "WARNING "))]
+    assert proc.returncode == 2 and len(err) == 1 and str(out) in err[0], (proc.returncode, err)
+    assert sorted(p.name for p in out.parent.iterdir()) == []  # neither file, no temporary
 
 
 def test_a_rigid_pose_typed_to_six_digits_is_accepted(files, tmp_path, capsys):

@@ -46,6 +46,7 @@ from neuralao.export.glsl.graph import glsl_float
 from neuralao.export.glsl.image import ComputeProgram
 from neuralao.export.glsl.memory import memory_section
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.metadata import metadata_internal_height, metadata_pad_mode
 
 FRAME_FORMAT_VERSION = 1
 # Workgroup of every frame pass but the reductions (which run one invocation per column / one in all).
@@ -166,8 +167,8 @@ def _model_facts(manifest: dict) -> tuple[bool, int, int | None]:
         raise NeuralaoError(f"unknown preprocess_version {meta.get('preprocess_version')!r}") from None
     if version not in (2, 3):
         raise NeuralaoError(f"frame passes know preprocess versions 2 and 3, the model has {version}")
-    ih = meta.get("internal_height")
-    internal = None if ih in (None, "", "None") else int(str(ih))
+    internal = metadata_internal_height(meta, "the U-Net")
+    metadata_pad_mode(meta, "the U-Net")
     hybrid = str(meta.get("input_channels", "")).split(",")[-1] == "gtao"
     return hybrid, version, internal
 

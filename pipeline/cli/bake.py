@@ -40,7 +40,7 @@ from neuralao.pipeline.engines.engine import ResultStore
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.pipeline.tracing.labeller import check_label_args, label_fields
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import write_bytes, write_png
+from neuralao.runtime.foundation.io import publish_together, write_bytes, write_png
 from neuralao.runtime.foundation.paths import FILE, FOLDER
 
 log = logging.getLogger(__name__)
@@ -74,6 +74,8 @@ _MESH_ONLY_FLAGS = (
 # Flags of the vertex bake only, and of the texture bake only (refused with the other --to).
 _VERTEX_ONLY_FLAGS = ("method", "alpha", "samples_per_vertex", "samples_per_face_cap")
 _TEXTURE_ONLY_FLAGS = ("resolution", "margin", "uv")
+# Flags of the least-squares fit (refused with --method vertex, which samples at the vertices).
+_LEAST_SQUARES_FLAGS = ("alpha", "samples_per_vertex", "samples_per_face_cap")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -248,6 +250,8 @@ def run(args: argparse.Namespace) -> int:
     refused = _given(args, _VERTEX_ONLY_FLAGS if to == "texture" else _TEXTURE_ONLY_FLAGS)
     if refused:
         raise NeuralaoError(f"{_flag(refused[0])} does not apply to --to {to}")
+    if args.method == "vertex" and (fitted := _given(args, _LEAST_SQUARES_FLAGS)):
+        raise NeuralaoError(f"{_flag(fitted[0])} applies to --method least-squares only")
     _fill_defaults(args)
     if args.to == "texture":
         if getattr(args, "engine", "local") != "local":
@@ -305,9 +309,10 @@ def run_texture(args: argparse.Namespace) -> int:
         return run_texture_scene(args.mesh, out, settings)
     mesh = load_uv_mesh(args.mesh, settings)
     result = bake_texture(mesh, settings, progress=True)
-    data = texture_glb_bytes(mesh, result.ao)  # built before anything is written: both files or neither
-    write_png(png_path_for(out), quantise(result.ao))
-    write_bytes(out, data)
+    data = texture_glb_bytes(mesh, result.ao)
+    with publish_together():  # both files or neither (a full disk on the second)
+        write_png(png_path_for(out), quantise(result.ao))
+        write_bytes(out, data)
     i = result.info
     log.info(
         "baked %s (%d faces, %s UVs, %dx%d, %d texels, %d invalid) in %.1f s -> %s + %s",

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.io import publish_together
 from neuralao.runtime.foundation.paths import FILE
-from neuralao.runtime.frame import check_scene_length, read_frame
+from neuralao.runtime.frame import check_scene_length, check_yfov, read_frame
 from neuralao.runtime.infer import (
     check_output,
     complete_frame,
@@ -42,16 +43,14 @@ INPUTS = ("inputs",)
 
 
 def field_of_view(args: argparse.Namespace) -> float | None:
-    """``--yfov`` (degrees) or ``--yfov-rad`` as radians in (0, pi); None when neither is given."""
+    """``--yfov`` (degrees) or ``--yfov-rad`` as radians, within a camera's range (:func:`check_yfov`);
+    None when neither is given."""
     if args.yfov is not None and args.yfov_rad is not None:
         raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
     if args.yfov is not None:
-        if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
-            raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
-        return math.radians(args.yfov)
+        return math.radians(check_yfov("--yfov", args.yfov))
     if args.yfov_rad is not None:
-        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
-            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
+        check_yfov("--yfov-rad", args.yfov_rad, radians=True)
         return float(args.yfov_rad)
     return None
 
@@ -117,9 +116,10 @@ def run(args: argparse.Namespace) -> int:
     yfov = field_of_view(args)
     frame = complete_frame(read_frame(frame_path, args.index), model_kind(model), yfov, frame_path)
     ao = infer(model, frame, args.radius)
-    write_image(args.out, ao)
-    if args.composite:
-        write_image(args.composite, composite(frame, ao))
+    with publish_together():  # the AO and the composite, both or neither
+        write_image(args.out, ao)
+        if args.composite:
+            write_image(args.composite, composite(frame, ao))
     fg = foreground(frame) if ao.shape == foreground(frame).shape else np.ones(ao.shape, bool)
     log.info(
         "wrote %s (%dx%d, mean foreground AO %.3f)%s",

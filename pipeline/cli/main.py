@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
 import signal
@@ -15,6 +16,10 @@ from typing import NoReturn
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.signals import RECEIVED as _RECEIVED
 from neuralao.runtime.foundation.signals import raise_received
+
+# What the system answers when it refuses to store a file (a full disk or quota, a read-only or failing
+# disk, a permission): bad circumstances, not a bug, even where the write names no file.
+_REFUSALS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS, errno.EACCES, errno.EPERM}
 
 # subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -224,9 +229,10 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, command: str
         sys.stderr.write(f"{command}: error: {e}\n")
         return 2
     except OSError as e:  # the system refused a file (no space left, permissions): named, in one line
-        if args.verbose or _RECEIVED or e.filename is None:
+        if args.verbose or _RECEIVED or (e.filename is None and e.errno not in _REFUSALS):
             raise
-        sys.stderr.write(f"{command}: error: {str(e.filename)[:200]}: {e.strerror or type(e).__name__}\n")
+        where = f"{str(e.filename)[:200]}: " if e.filename is not None else ""
+        sys.stderr.write(f"{command}: error: {where}{e.strerror or type(e).__name__}\n")
         return 2
     except Exception as e:  # a bug, not bad input: still one line (the traceback with -v), exit 1
         if args.verbose or _RECEIVED:  # with -v the traceback; after a signal, main reports the signal

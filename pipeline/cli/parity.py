@@ -74,6 +74,11 @@ def check_exports(
                 f"{d} is a {kind} export, checked on rendered or --data frames: "
                 "--size and --inputs apply to `neuralao glsl` exports only"
             )
+        if kinds.KINDS[kind].parity_on_inputs and data is not None:
+            raise NeuralaoError(
+                f"{d} is a `neuralao glsl` export, checked on --inputs or seeded inputs: "
+                "--data applies to the exports of trained models only"
+            )
     results = {}
     for d, manifest in manifests.items():
         kind = manifest["kind"]

@@ -11,7 +11,7 @@ import numpy as np
 
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_path, read_npy
-from neuralao.runtime.foundation.limits import check_count
+from neuralao.runtime.foundation.limits import FLOAT32_MAX, check_count
 from neuralao.runtime.foundation.normals import normalize_normals
 from neuralao.runtime.foundation.paths import FILE
 from neuralao.runtime.probe import ORDERS, POINT_BYTES, VolumeProbe
@@ -40,8 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _load_rows(path: str, what: str, flag: str) -> np.ndarray:
-    """(n, 3) float64 rows of an .npy of real numbers, every value finite (NaN or inf refused, naming
-    ``flag``)."""
+    """(n, 3) float64 rows of an .npy of real numbers, every value finite and within float32's range (NaN,
+    inf or a larger value refused, naming ``flag``: the probe's models are float32)."""
     a = read_npy(path, what)
     if a.ndim != 2 or a.shape[1] != 3:
         raise NeuralaoError(f"{what} {path} must be an (n, 3) numeric array, got {a.shape}")
@@ -49,6 +49,11 @@ def _load_rows(path: str, what: str, flag: str) -> np.ndarray:
     bad = int((~np.isfinite(a).all(axis=1)).sum())
     if bad:
         raise NeuralaoError(f"{flag} {path} has {bad} row(s) with NaN or inf")
+    far = int((np.abs(a) > FLOAT32_MAX).any(axis=1).sum())
+    if far:
+        raise NeuralaoError(
+            f"{flag} {path} has {far} row(s) with values past float32's largest, {FLOAT32_MAX:.4g}"
+        )
     return a
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -42,7 +41,7 @@ from neuralao.runtime.foundation.limits import (
 )
 from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import settings_to_dict
-from neuralao.runtime.frame import Frame, FrameLike, write_frame
+from neuralao.runtime.frame import Frame, FrameLike, check_yfov, write_frame
 from neuralao.runtime.gl import context
 
 log = logging.getLogger(__name__)
@@ -129,13 +128,10 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.yfov is not None and args.yfov_rad is not None:
         raise NeuralaoError("give the field of view once: --yfov DEG or --yfov-rad RAD")
     if args.yfov_rad is not None:
-        if not (math.isfinite(args.yfov_rad) and 0 < args.yfov_rad < math.pi):
-            raise NeuralaoError(f"--yfov-rad must be in (0, pi) radians, got {args.yfov_rad}")
-        args.yfov = math.degrees(args.yfov_rad)
+        args.yfov = check_yfov("--yfov-rad", args.yfov_rad, radians=True)
     if args.yfov is None:
         args.yfov = DEFAULT_YFOV_DEG
-    if not (math.isfinite(args.yfov) and 0 < args.yfov < 180):
-        raise NeuralaoError(f"--yfov must be in (0, 180) degrees, got {args.yfov}")
+    check_yfov("--yfov", args.yfov)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} exists and is not a folder")

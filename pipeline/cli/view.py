@@ -51,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--screen-space-radius",
         type=float,
-        default=SCREEN_SPACE_RADIUS_REL,
+        default=None,
         metavar="FRACTION",
         help=f"the U-Net's AO radius as a fraction of the mesh's bounding-box diagonal "
         f"(default {SCREEN_SPACE_RADIUS_REL})",
@@ -82,10 +82,16 @@ def run(args: argparse.Namespace) -> int:
         raise NeuralaoError(f"--out {out} is a file")
     if not args.inputs and args.screen_space is None:
         raise NeuralaoError("nothing to view: give bakes or exports, or --screen-space with --mesh")
+    if args.screen_space is None and args.screen_space_radius is not None:
+        raise NeuralaoError("--screen-space-radius applies with --screen-space only")
+    exports = any(Path(i).is_dir() for i in args.inputs)
+    if args.mesh is not None and args.screen_space is None and not exports:
+        raise NeuralaoError("--mesh applies to export folders and --screen-space (a bake carries its mesh)")
+    radius = SCREEN_SPACE_RADIUS_REL if args.screen_space_radius is None else args.screen_space_radius
     methods = [load_method(i, args.mesh) for i in args.inputs]
     if args.screen_space is not None:
         pos, nrm = screen_space_mesh(methods, args.mesh)
-        methods.append(method_from_unet(args.screen_space or None, pos, nrm, args.screen_space_radius))
+        methods.append(method_from_unet(args.screen_space or None, pos, nrm, radius))
     page = write_page(methods, out, (w, h))
     log.info("viewer: %d method(s) -> %s", len(methods), page)
     if args.serve:

@@ -11,7 +11,7 @@ from pathlib import Path
 from neuralao.export.glsl.volume import write_volume_glsl
 from neuralao.pipeline.bakes.volumes import bake_volumes, check_settings, load_level_scene, read_regions
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.io import write_json
+from neuralao.runtime.foundation.io import publish_together, write_json
 from neuralao.runtime.foundation.paths import FILE, FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 from neuralao.runtime.volumes import VolumeSettings, to_json
@@ -60,9 +60,10 @@ def run(args: argparse.Namespace) -> int:
     regions, pairs = read_regions(args.regions) if args.regions else (None, None)
     scene = load_level_scene(args.level)
     vol, _ = bake_volumes(scene, settings, regions, pairs, progress=True)
-    write_json(out, to_json(vol))
-    if args.glsl:
-        write_volume_glsl(vol, args.glsl, args.order)
+    with publish_together():  # the JSON and the shader folder, both or neither
+        write_json(out, to_json(vol))
+        if args.glsl:
+            write_volume_glsl(vol, args.glsl, args.order)
     st = vol.stats
     log.info(
         "%d regions (%d edges, %d fallback), %d rays in %.1f s; boundary jump %.4f -> %.4f -> %s",

@@ -20,6 +20,7 @@ from neuralao.pipeline.geometry.scene import MAX_COORDINATE, Scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.tolerances import TOL
+from neuralao.runtime.frame import check_yfov
 
 
 @dataclass(frozen=True)
@@ -311,8 +312,8 @@ def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -
 
     Every camera is checked (:func:`camera_from_json`): known keys only, finite numbers, a rigid pose
     (rotation and translation: no scale, shear or mirror, within ``TOL.rigid_pose``), ``eye`` apart
-    from ``target``, a field of view in (0, 180) degrees, 0 < znear < zfar. Each refusal is one line
-    naming the file, the camera and the key.
+    from ``target``, a field of view a camera has (:func:`~neuralao.runtime.frame.check_yfov`),
+    0 < znear < zfar. Each refusal is one line naming the file, the camera and the key.
     """
     p = Path(path)
     data = read_json(p, "camera file")
@@ -332,13 +333,21 @@ def load_poses(path: str | os.PathLike, scene: Scene, width: int, height: int) -
     ]
 
 
+def _numbers_only(value: object) -> bool:
+    """``value`` is a JSON number or a (nested) list of numbers: no string, no true/false (numpy would
+    read "5" and true as numbers)."""
+    if isinstance(value, list):
+        return all(_numbers_only(v) for v in value)
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
 def _vector(c: dict, key: str, n: int, where: str) -> np.ndarray:
     value = c[key]
     try:
-        a = np.asarray(value, dtype=np.float64)
+        a = np.asarray(value, dtype=np.float64) if _numbers_only(value) else np.zeros(0)
     except (TypeError, ValueError):
         a = np.zeros(0)
-    if a.shape != ((n,) if n != 16 else (4, 4)) or isinstance(value, str):
+    if a.shape != ((n,) if n != 16 else (4, 4)):
         want = "a 4x4 matrix (4 rows of 4 numbers)" if n == 16 else f"a list of {n} numbers"
         raise NeuralaoError(f"{where}: {key!r} must be {want}, got {value!r}"[:300])
     if not np.isfinite(a).all():
@@ -406,8 +415,8 @@ def camera_from_json(c: object, scene: Scene, width: int, height: int, where: st
             raise NeuralaoError(f"{where}: 'up' is the zero vector")
         pose = look_at(eye, target, up)
     yfov_deg = _number(c, "yfov_deg", where)
-    if yfov_deg is not None and not 0 < yfov_deg < 180:
-        raise NeuralaoError(f"{where}: 'yfov_deg' must be in (0, 180) degrees, got {yfov_deg}")
+    if yfov_deg is not None:
+        check_yfov(f"{where}: 'yfov_deg'", yfov_deg)
     yfov = math.radians(45.0 if yfov_deg is None else yfov_deg)
     znear, zfar = _clip_planes(scene, pose[:3, 3])
     if np.all(np.abs(pose[:3, 3] - scene.center) <= (scene.bounds[1] - scene.bounds[0]) / 2):

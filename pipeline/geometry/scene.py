@@ -171,6 +171,10 @@ def load_scene(path: str | os.PathLike, name: str | None = None, drop_degenerate
 # Largest |coordinate| of a mesh: the G-buffer's float32 transforms render meshes up to 1e30 across at
 # any offset within it and draw nothing at 1e38; ray distances in scene units are float32 too (measured).
 MAX_COORDINATE = 1e30
+# Smallest extent (bounding-box diagonal) of a mesh: float32 positions below about 1e-38 are subnormal and
+# lose their digits (a mesh 1e-44 across comes out of a bake with a quarter of its faces collapsed), so the
+# scale a mesh may have is bounded below as it is above.
+MIN_EXTENT = 1e-30
 
 
 def scene_from_arrays(
@@ -196,6 +200,12 @@ def scene_from_arrays(
         raise NeuralaoError(
             f"mesh {what} has coordinates up to {reach:.3g}: meshes must lie within +-{MAX_COORDINATE:g} "
             "(float32 G-buffers and ray distances overflow past it); rescale the mesh"
+        )
+    extent = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    if 0 < extent < MIN_EXTENT:
+        raise NeuralaoError(
+            f"mesh {what} spans {extent:.3g}: meshes must span at least {MIN_EXTENT:g} (float32 positions "
+            "lose their digits below it); rescale the mesh"
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise NeuralaoError(f"mesh {what} has face indices outside [0, {len(vertices)})")

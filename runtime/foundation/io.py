@@ -19,7 +19,7 @@ import struct
 import tempfile
 import threading
 import zipfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +85,48 @@ def _signals_held() -> Iterator[None]:
                 signal.raise_signal(signum)
 
 
+# This thread's open publish_together blocks, innermost last: each a list of (publish, discard) of the
+# outputs finished inside it, held back until the block ends (other threads' files, a bake's task files,
+# are not held).
+_LOCAL = threading.local()
+
+
+def _held() -> list[list[tuple[Callable[[], None], Callable[[], None]]]]:
+    if not hasattr(_LOCAL, "held"):
+        _LOCAL.held = []
+    return _LOCAL.held
+
+
+@contextlib.contextmanager
+def publish_together() -> Iterator[None]:
+    """Outputs that :func:`atomic_path` and :func:`atomic_folder` finish inside the block take their places
+    only when the block ends without an error, all of them (in the order they were finished); if anything
+    fails (a full disk on the second file, Ctrl-C), none does and their temporaries are removed. For a
+    command that writes several outputs: the user finds all of them or none, never the first alone."""
+    held: list[tuple[Callable[[], None], Callable[[], None]]] = []
+    _held().append(held)
+    published = 0
+    try:
+        yield
+        raise_received()
+        with _signals_held():
+            for publish, _ in held:
+                publish()
+                published += 1
+    finally:
+        _held().remove(held)
+        for _, discard in held[published:]:
+            discard()
+
+
+def _named(e: OSError, path: Path, tmp: Path | None) -> OSError:
+    """``e`` naming ``path``: a failed write (a full disk) names no file, and a temporary's name means
+    nothing to the user."""
+    if e.filename is None or (tmp is not None and str(e.filename) == str(tmp)):
+        return OSError(e.errno, e.strerror or str(e), str(path))
+    return e
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str | None = None, sync: bool = True) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
@@ -110,12 +152,19 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None, sync: bool =
                 os.fchmod(fd, new_file_mode(path))
             finally:
                 os.close(fd)
-        yield tmp_path
-        if sync:
-            with open(tmp_path, "rb+") as f:
-                os.fsync(f.fileno())
+        try:
+            yield tmp_path
+            if sync:
+                with open(tmp_path, "rb+") as f:
+                    os.fsync(f.fileno())
+        except OSError as e:
+            raise _named(e, path, tmp_path) from e
         raise_received()  # a signal a library swallowed meanwhile: the output is not published
-        os.replace(tmp_path, path)
+        if _held():  # published with the block's other outputs, or discarded with them
+            done, tmp_path = tmp_path, None
+            _held()[-1].append((lambda: os.replace(done, path), lambda: done.unlink(missing_ok=True)))
+        else:
+            os.replace(tmp_path, path)
     finally:
         if tmp_path is not None and tmp_path.exists():
             tmp_path.unlink()
@@ -135,18 +184,31 @@ def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
             tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
             old = tmp.with_name(tmp.name.removesuffix(".tmp") + ".old.tmp")
         os.chmod(tmp, 0o777 & ~_umask())
-        yield tmp
+        try:
+            yield tmp
+        except OSError as e:
+            raise _named(e, path, None) from e
         raise_received()
-        with _signals_held():  # both renames or neither: an interrupt never leaves the old folder aside
-            moved = path.is_dir() and not path.is_symlink()
-            if moved:
-                os.rename(path, old)
-            try:
-                os.replace(tmp, path)
-            except OSError:
+
+        def swap(tmp: Path = tmp, old: Path = old) -> None:
+            with _signals_held():  # both renames or neither: an interrupt never leaves the old folder aside
+                moved = path.is_dir() and not path.is_symlink()
                 if moved:
-                    os.rename(old, path)
-                raise
+                    os.rename(path, old)
+                try:
+                    os.replace(tmp, path)
+                except OSError:
+                    if moved:
+                        os.rename(old, path)
+                    raise
+                if moved:
+                    shutil.rmtree(old, ignore_errors=True)
+
+        if _held():  # published with the block's other outputs, or discarded with them
+            done, tmp, old = tmp, None, None
+            _held()[-1].append((swap, lambda: shutil.rmtree(done, ignore_errors=True)))
+        else:
+            swap()
     finally:
         for leftover in (tmp, old):
             if leftover is not None and leftover.is_dir():

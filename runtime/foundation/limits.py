@@ -43,6 +43,9 @@ MAX_CAP = 1 << 62
 # The largest float32. Distances, sizes and weights end up in float32 buffers (rays, G-buffers, shader
 # uniforms), where a larger float64 turns into inf: such a value is refused where it is typed.
 FLOAT32_MAX = 3.4028234663852886e38
+# The smallest normal float32: a non-zero value below it is 0 or a subnormal there (a distance of 1e-300
+# would be a zero distance, a divisor of 1e-40 an overflow), so it is refused like a value past the largest.
+FLOAT32_TINY = 1.1754943508222875e-38
 # The largest seed: numpy's SeedSequence and torch.manual_seed both take any value in [0, 2^63).
 MAX_SEED = (1 << 63) - 1
 
@@ -192,12 +195,17 @@ def check_finite_number(name: str, value: object, low: float | None = None, stri
 
 
 def check_float32(name: str, value: object) -> float:
-    """A finite number that float32 holds (|value| <= FLOAT32_MAX): what every float flag and setting must
-    be, whatever it means, before any command uses it."""
+    """A finite number that float32 holds as it is (0, or FLOAT32_TINY <= |value| <= FLOAT32_MAX): what every
+    float flag and setting must be, whatever it means, before any command uses it."""
     number = check_finite_number(name, value)
     if abs(number) > FLOAT32_MAX:
         raise NeuralaoError(
             f"{name} {value!r} is out of range: it is used in float32, whose largest is {FLOAT32_MAX:.4g}"
+        )
+    if 0 < abs(number) < FLOAT32_TINY:
+        raise NeuralaoError(
+            f"{name} {value!r} is too small: it is used in float32, where it would be 0 or lose its "
+            f"digits (the smallest is {FLOAT32_TINY:.4g})"
         )
     return number
 

@@ -20,6 +20,9 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 # 16384 rows are already gigabytes of activations, past them no buffer is sane.
 MAX_PAD_MULTIPLE = 4096
 MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT = 16, 16384
+# How a U-Net's input is padded to its multiple: the only padding its consumers (the runtime's and the
+# generated frame passes) do.
+PAD_MODE = "reflect"
 
 
 def metadata_integer(
@@ -61,3 +64,16 @@ def metadata_internal_height(meta: Mapping[str, object], where: str = "") -> int
     if str(meta.get("internal_height")).strip() in ("", "None"):  # what an export without one writes
         return None
     return metadata_integer(meta, "internal_height", MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT, where)
+
+
+def metadata_pad_mode(meta: Mapping[str, object], where: str = "") -> str:
+    """Metadata ``pad_mode``, which must be :data:`PAD_MODE`: anything else, or none, is a one-line error."""
+    prefix = f"{where}: " if where else ""
+    if meta.get("pad_mode") != PAD_MODE:
+        raise NeuralaoError(
+            f"{prefix}metadata pad_mode {meta.get('pad_mode')!r} is not {PAD_MODE!r}, "
+            "the only padding its consumers do"
+            if "pad_mode" in meta
+            else f"{prefix}metadata has no pad_mode (the U-Net's input is padded {PAD_MODE!r})"
+        )
+    return PAD_MODE

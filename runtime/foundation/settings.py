@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.limits import FLOAT32_MAX
+from neuralao.runtime.foundation.limits import FLOAT32_MAX, FLOAT32_TINY
 from neuralao.runtime.foundation.manifest import parse_json, read_json
 
 T = TypeVar("T")
@@ -76,12 +76,12 @@ def _coerce(name: str, value: Any, tp: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise NeuralaoError(f"setting {name!r}: expected a number, got {value!r}")
-        # NaN or inf is no setting's meaning, and a value past float32 becomes inf where it is used:
-        # refused here, before any work, naming the setting
-        if not math.isfinite(value) or abs(value) > FLOAT32_MAX:
+        # NaN or inf is no setting's meaning, and a value past float32 becomes inf where it is used (one
+        # below its smallest normal, 0 or a subnormal): refused here, before any work, naming the setting
+        if not math.isfinite(value) or abs(value) > FLOAT32_MAX or 0 < abs(value) < FLOAT32_TINY:
             raise NeuralaoError(
-                f"setting {name!r}: {value!r} is not a finite number within float32's range "
-                f"(|x| <= {FLOAT32_MAX:.4g})"
+                f"setting {name!r}: {value!r} is not a finite number float32 holds "
+                f"(0, or {FLOAT32_TINY:.4g} <= |x| <= {FLOAT32_MAX:.4g})"
             )
         return float(value)
     if tp is str:
