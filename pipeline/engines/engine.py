@@ -40,7 +40,9 @@ import hashlib
 import logging
 import os
 import shutil
+import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -63,9 +65,15 @@ TASKS_PER_WORKER = 2
 KEPT = {"context": 2, "payload": 4, "shared": 0}
 # States an actor keeps (least recently used goes first): a level bake alternates few meshes.
 STATES_PER_WORKER = 2
-# Seconds to wait for a TCP connection to the cluster address before calling it unreachable
-# (ray.init itself retries for minutes).
+# Seconds to wait for each step of checking a cluster address (resolving its name, connecting, the GCS's
+# answer) before calling it unreachable: ray.init itself retries for minutes, whatever answers there.
 CONNECT_TIMEOUT_S = 5.0
+# Ray's own limits on joining a cluster, read once when ray is imported (its defaults: 20 tries of up to
+# 30 s each): set for that import only, when this process joins a cluster by address and had not imported
+# ray yet (never for a private instance, whose processes inherit the environment).
+RAY_JOIN_LIMITS = {"RAY_py_gcs_connect_timeout_s": "5", "RAY_NUM_REDIS_GET_RETRIES": "2"}
+# What a wrong --address most often is: another port of the head node (its dashboard, a client server).
+GCS_HINT = "is it the GCS port of `ray start --head`, 6379 by default?"
 # Rays per point-tracing task (neuralao.pipeline.tracing.engine_labeller): ~0.1-0.2 s of tracing on one
 # core, so Ray's ~3 ms per task is noise, and enough tasks that the last ones balance across workers.
 CHUNK_RAYS = 1 << 20
@@ -595,31 +603,186 @@ def _get(ray, ref):
 
 
 def _connect(address: str | None):
-    """``ray`` after ray.init (an existing connection is reused); unreachable -> NeuralaoError."""
-    try:
-        import ray  # optional dependency: only --engine ray imports it
-    except ImportError:
-        raise NeuralaoError("--engine ray needs the 'ray' package (pip install -e .)") from None
-    if ray.is_initialized():
+    """``ray`` after ray.init (an existing connection is reused). An address where no Ray cluster answers is a
+    NeuralaoError within seconds (:func:`_check_gcs`), before ray is imported, rather than Ray's minutes of
+    retries; ray.init then runs under :data:`RAY_JOIN_LIMITS`. ray.init installs a SIGTERM handler of its
+    own (``sys.exit(15)``): the caller's is put back, and a SIGTERM that came during ray.init is handed to
+    it."""
+    import importlib.util
+
+    ray = sys.modules.get("ray")
+    if ray is not None and ray.is_initialized():
         return ray
+    if importlib.util.find_spec("ray") is None:  # optional dependency: only --engine ray imports it
+        raise NeuralaoError("--engine ray needs the 'ray' package (pip install -e .)")
     kwargs: dict[str, Any] = {"logging_level": "ERROR", "log_to_driver": False}
+    limits: dict[str, str] = {}
     if address not in (None, "auto"):
         host, _, port = address.rpartition(":")
         if not host or not port.isdigit():
             raise NeuralaoError(f"--address must be HOST:PORT, got {address!r}")
-        try:
-            with socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S):
-                pass
-        except OSError as e:
-            raise NeuralaoError(f"cannot reach a Ray cluster at {address}: {e.strerror or e}") from None
+        _check_gcs(address, host.strip("[]"), int(port))
+        if ray is None:
+            limits = {k: v for k, v in RAY_JOIN_LIMITS.items() if k not in os.environ}
     elif address is None:  # a private instance on loopback ("local": never join a stale cluster file)
         address = "local"
         kwargs.update(include_dashboard=False, _node_ip_address="127.0.0.1")
+    os.environ.update(limits)
+    try:
+        import ray
+    finally:
+        for k in limits:
+            del os.environ[k]
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.getsignal(signal.SIGTERM) if main else None
     try:
         ray.init(address=address, **kwargs)
+    except SystemExit as e:  # from Ray's handler: a SIGTERM came during ray.init
+        if handler is None or e.code != signal.SIGTERM:
+            raise
+        signal.signal(signal.SIGTERM, handler)
+        signal.raise_signal(signal.SIGTERM)  # the caller's handler acts on it (the CLI's raises)
+        raise
     except (ConnectionError, RuntimeError, ValueError) as e:
-        raise NeuralaoError(f"cannot connect to Ray at {address or 'a new local instance'}: {e}") from None
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        reason = reason or "its GCS answers, but ray.init could not join the cluster (see Ray's lines above)"
+        raise NeuralaoError(f"cannot connect to Ray at {address}: {reason}") from None
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGTERM, handler)
     return ray
+
+
+def _check_gcs(address: str, host: str, port: int) -> None:
+    """NeuralaoError unless Ray's GCS answers at host:port, each step within CONNECT_TIMEOUT_S: the name
+    resolves, a TCP connection opens, and the call every Ray client makes first (GetClusterId, sent as
+    HTTP/2 by hand: grpcio is not one of Ray's requirements) is answered with a gRPC message. Whatever else
+    is there (a web server such as Ray's dashboard, another HTTP/2 or gRPC server, one that stays silent)
+    is named in the message."""
+    found: list = []
+    resolver = threading.Thread(target=_resolve, args=(host, port, found), daemon=True)
+    resolver.start()
+    resolver.join(CONNECT_TIMEOUT_S)  # a daemon thread: a resolver that hangs never holds up the exit
+    unreachable = f"cannot reach a Ray cluster at {address}"
+    if not found:
+        raise NeuralaoError(f"{unreachable}: {host} did not resolve within {CONNECT_TIMEOUT_S:g} s")
+    if isinstance(found[0], OSError):
+        raise NeuralaoError(f"{unreachable}: cannot resolve {host} ({found[0].strerror or found[0]})")
+    try:
+        sock = _open(found[0])
+    except ConnectionRefusedError:
+        raise NeuralaoError(
+            f"{unreachable}: nothing listens there (connection refused; {GCS_HINT})"
+        ) from None
+    except TimeoutError:
+        raise NeuralaoError(
+            f"{unreachable}: no answer within {CONNECT_TIMEOUT_S:g} s (no machine there, or a firewall drops "
+            "the connection)"
+        ) from None
+    except OSError as e:
+        raise NeuralaoError(f"{unreachable}: {e.strerror or e}") from None
+    with sock:
+        found_instead = _gcs_answer(sock, f"{host}:{port}")
+    if found_instead:
+        raise NeuralaoError(
+            f"cannot connect to Ray at {address}: no Ray cluster answered there; {found_instead} ({GCS_HINT})"
+        )
+
+
+def _resolve(host: str, port: int, found: list) -> None:
+    try:
+        found.append(socket.getaddrinfo(host, port, type=socket.SOCK_STREAM))
+    except OSError as e:
+        found.append(e)
+
+
+def _open(addresses: list) -> socket.socket:
+    """A TCP connection to the first of getaddrinfo's addresses that takes one (else the last one's error)."""
+    error = OSError("no address")
+    for family, kind, proto, _, sockaddr in addresses:
+        sock = socket.socket(family, kind, proto)
+        sock.settimeout(CONNECT_TIMEOUT_S)
+        try:
+            sock.connect(sockaddr)
+            return sock
+        except OSError as e:
+            sock.close()
+            error = e
+    raise error
+
+
+def _h2_frame(kind: int, flags: int, stream: int, payload: bytes = b"") -> bytes:
+    return len(payload).to_bytes(3, "big") + bytes([kind, flags]) + stream.to_bytes(4, "big") + payload
+
+
+def _hpack_literal(name: str, value: str) -> bytes:
+    """One header in HPACK's "literal, new name, not indexed" form without Huffman coding: a 0 byte, then
+    each string after its length (a 7-bit-prefix integer)."""
+    out = bytearray([0])
+    for text in (name.encode(), value.encode()):
+        n = len(text)
+        if n < 127:
+            out.append(n)
+        else:
+            out.append(127)
+            n -= 127
+            while n >= 128:
+                out.append(n & 127 | 128)
+                n >>= 7
+            out.append(n)
+        out += text
+    return bytes(out)
+
+
+def _gcs_answer(sock: socket.socket, authority: str) -> str | None:
+    """None if what listens on sock answers GetClusterId of Ray's GCS with a gRPC message, within
+    CONNECT_TIMEOUT_S; else what answered instead."""
+    call = (
+        (":method", "POST"),
+        (":scheme", "http"),
+        (":path", "/ray.rpc.NodeInfoGcsService/GetClusterId"),
+        (":authority", authority),
+        ("content-type", "application/grpc"),
+        ("te", "trailers"),
+    )
+    # HTTP/2: the client preface, empty SETTINGS, the call's headers on stream 1, then the request message
+    # that ends the stream (a gRPC message is a 0 byte, the protobuf's length in 4 bytes, the protobuf: none)
+    request = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + _h2_frame(4, 0, 0)
+    request += _h2_frame(1, 4, 1, b"".join(_hpack_literal(*h) for h in call)) + _h2_frame(0, 1, 1, bytes(5))
+    deadline = time.monotonic() + CONNECT_TIMEOUT_S
+    buf, framed = b"", False
+    try:
+        sock.sendall(request)
+        while len(buf) < 1 << 20:
+            sock.settimeout(max(deadline - time.monotonic(), 1e-3))
+            data = sock.recv(65536)
+            if not data:
+                return "the server there closed the connection without answering"
+            buf += data
+            if not framed and len(buf) >= 9:  # an HTTP/2 server's first frame is its SETTINGS
+                if buf[3] != 4 or buf[5:9] != bytes(4):
+                    text = buf[:4096].lower()
+                    if text.startswith(b"http/") or b"<html" in text or b"<!doctype" in text:
+                        return "a web server (HTTP/1) answered instead, such as Ray's dashboard"
+                    return "what answered does not speak HTTP/2, so not gRPC"
+                framed = True
+            while len(buf) >= 9 and len(buf) >= 9 + int.from_bytes(buf[:3], "big"):
+                size, kind, flags = int.from_bytes(buf[:3], "big"), buf[3], buf[4]
+                stream = int.from_bytes(buf[5:9], "big") & 0x7FFFFFFF
+                payload, buf = buf[9 : 9 + size], buf[9 + size :]
+                if kind == 4 and not flags & 1:  # the server's SETTINGS, acknowledged
+                    sock.sendall(_h2_frame(4, 1, 0))
+                elif kind == 0 and stream == 1:  # DATA: the reply, if it is a gRPC message
+                    if size >= 5 and payload[0] == 0 and 5 + int.from_bytes(payload[1:5], "big") >= size:
+                        return None
+                    return "an HTTP/2 server answered instead, but not with a gRPC message"
+                elif kind == 7 or (kind == 3 and stream == 1) or (kind == 1 and stream == 1 and flags & 1):
+                    return "an HTTP/2 or gRPC server answered instead, which does not know Ray's calls"
+        return "an HTTP/2 server answered instead, but not with a gRPC message"
+    except TimeoutError:
+        return f"the server there accepted the connection but gave no answer within {CONNECT_TIMEOUT_S:g} s"
+    except OSError as e:
+        return f"the server there broke the connection ({e.strerror or e})"
 
 
 class ResultStore:
