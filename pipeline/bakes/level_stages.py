@@ -37,7 +37,7 @@ from neuralao.pipeline.bakes.level_pieces import (
     remembered,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
-from neuralao.pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key
+from neuralao.pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key, no_state
 from neuralao.pipeline.geometry.least_squares import (
     Whole,
     equation_share,
@@ -500,7 +500,7 @@ def solve_equations(
     blocks = component_blocks(a, t.component_vertices, t.subdomains)
     a = a.tocsr()
     timing["assembly"] += time.perf_counter() - t0
-    ctx = context or Context("level-solve", _no_state, None)
+    ctx = context or Context("level-solve", no_state, None)
     tasked = [b for b in blocks if b[1] != "partitioned"]
 
     def tasks():
@@ -560,10 +560,6 @@ def component_blocks(a, big: int, subdomains: int = 1) -> list[tuple[np.ndarray,
     if pack:
         blocks.append((np.sort(np.concatenate(pack)), "direct"))
     return blocks
-
-
-def _no_state(payload) -> None:
-    return None
 
 
 def _solve_block(state, args) -> dict[str, np.ndarray]:

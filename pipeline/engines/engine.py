@@ -100,6 +100,11 @@ class Context:
         return _unshare(self.payload)
 
 
+def no_state(payload) -> None:
+    """The ``build`` of a context whose tasks read no state (a solve's blocks, their arguments all)."""
+    return None
+
+
 @dataclass(frozen=True)
 class Task:
     """One unit of work: ``fn(state of context, args)``."""

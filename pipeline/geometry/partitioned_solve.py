@@ -62,7 +62,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
-from neuralao.pipeline.engines.engine import Context, Shared, Task
+from neuralao.pipeline.engines.engine import Context, Shared, Task, no_state
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Relative residual (2-norm, per column) at which CG stops: the level's multigrid CG's. Measured max abs
@@ -391,12 +391,8 @@ def subdomain_step(state, args) -> dict[str, Any]:
     return out
 
 
-def _no_state(payload) -> None:
-    return None
-
-
 # A stateless context for the subdomain tasks of callers that pass none.
-STATELESS = Context("schwarz", _no_state, None)
+STATELESS = Context("schwarz", no_state, None)
 
 
 # --------------------------------------------------------------------------- the solve
