@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
 from collections.abc import Collection, Iterable, Mapping
 from pathlib import Path
@@ -186,3 +187,21 @@ def check_replaceable_folder(
             f"{f' and {len(entries) - 1} more' if len(entries) > 1 else ''}); an export replaces its folder "
             "whole: choose an empty or new folder, or give --force to replace this one"
         )
+
+
+# A name the project makes a file or folder name of (a shipped model's, a dataset scene's, an evaluation
+# category's): letters, digits, '.', '_', '-' and '+', starting with a letter or digit, so it is one path
+# component under the folder it is written in, never '..', a subfolder, an absolute path or a NUL.
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]{0,127}")
+
+
+def check_plain_name(what: str, name: object) -> str:
+    """``name`` if it is a plain name (:data:`_PLAIN_NAME`), else a one-line error naming ``what``: it
+    becomes a file or folder name, and a '/' or '..' in it would write outside the output folder."""
+    if not isinstance(name, str) or not _PLAIN_NAME.fullmatch(name):
+        shown = repr(name) if not isinstance(name, str) or len(name) <= 60 else repr(name[:60] + "...")
+        raise NeuralaoError(
+            f"{what} {shown} is not a plain name: it names files, so it takes letters, digits, '.', '_', "
+            "'-' and '+' (at most 128, starting with a letter or digit)"
+        )
+    return name
