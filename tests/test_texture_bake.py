@@ -142,6 +142,22 @@ def test_rasterise_maps_texel_centres_into_their_triangles():
     assert twice.overlap > 0.8  # all but the texels on the diagonal edge
 
 
+def test_a_map_too_small_for_the_mesh_says_so(caplog):
+    # a 32 x 32 grid of quads (2,048 faces) on the unit square: an 8 x 8 map centres a texel in 64 of them
+    g = np.linspace(0.0, 1.0, 33)
+    uv = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    k = (np.arange(32)[:, None] * 33 + np.arange(32)).ravel()
+    faces = np.r_[np.c_[k, k + 1, k + 33], np.c_[k + 1, k + 34, k + 33]]
+    mesh = UVMesh(np.c_[uv, np.zeros(len(uv))], faces, uv)
+    with caplog.at_level("WARNING"):
+        bake_texture(mesh, TextureBakeSettings(resolution=8, margin=1, rays=2))
+    assert "only 64 of the 2048 faces hold a texel centre" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        bake_texture(mesh, TextureBakeSettings(resolution=64, rays=2))
+    assert "hold a texel centre" not in caplog.text
+
+
 def test_dilation_fills_gutters_and_holes_from_valid_texels():
     n = 12
     values = np.zeros((n, n))

@@ -415,6 +415,16 @@ def bake_texture(
         raise NeuralaoError(
             f"no texel centre falls inside a UV triangle at resolution {n}; raise --resolution"
         )
+    textured = len(np.unique(texels.face))
+    if textured < len(mesh.faces) // 4:  # the map holds the AO of few of the faces
+        log.warning(
+            "at %dx%d only %d of the %d faces hold a texel centre; the others take their neighbours' AO "
+            "(raise --resolution)",
+            n,
+            n,
+            textured,
+            len(mesh.faces),
+        )
     t1 = time.perf_counter()
     tri = scene.triangles[texels.face]
     points = np.einsum("kc,kcd->kd", texels.bary, tri)
