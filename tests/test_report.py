@@ -380,6 +380,7 @@ def test_choose_handles_no_candidate_meeting_the_target():
 def test_report_without_exports_and_bad_input(tmp_path, workspace, capsys):
     _, data, _ = workspace
     out = tmp_path / "r"
+    (tmp_path / "none").mkdir()  # an empty export folder: every expected export is "not available"
     assert (
         cli.main(
             [

@@ -170,6 +170,27 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
     )
 
 
+def _close_progress_bars() -> None:
+    """End the line a progress bar left open, so the signal's message starts a line of its own.
+
+    tqdm draws a bar as a line it never ends (each redraw starts with '\\r') until the bar is closed: then a
+    bar that stays is drawn once more and ended, one that goes is cleared. A bar whose loop the signal cut
+    short is closed on the way out where the command closes it itself; otherwise it is still open here (the
+    exception holds its frame) and would be closed, and drawn again after the message, when collected. So
+    the bars still open are closed now, innermost first; with none open (none shown, as with
+    --no-progress or before any work, or all closed already) nothing is written and the message is the one
+    line on stderr."""
+    std = sys.modules.get("tqdm.std")  # not imported yet: no bar was ever drawn
+    if std is None:
+        return
+    bars = [b for b in list(std.tqdm._instances) if not getattr(b, "disable", True)]
+    try:
+        for bar in sorted(bars, key=lambda b: -abs(getattr(b, "pos", 0))):
+            bar.close()
+    except Exception:  # a bar that cannot be drawn (its file closed): end its line by hand
+        sys.stderr.write("\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Bad input ends in one line and exit 2; Ctrl-C (SIGINT) in one line and 130, SIGTERM
     in one line and 143, whenever it comes (an import, the parse, the work): never a traceback."""
@@ -189,10 +210,12 @@ def main(argv: list[str] | None = None) -> int:
         return _run(parser, args, f"neuralao {args.command}" if args.command else command)
     except (KeyboardInterrupt, Terminated, Exception) as e:
         if isinstance(e, KeyboardInterrupt) or _RECEIVED[:1] == [signal.SIGINT]:
-            sys.stderr.write(f"\n{command}: interrupted (Ctrl-C)\n")
+            _close_progress_bars()
+            sys.stderr.write(f"{command}: interrupted (Ctrl-C)\n")
             return 130
         if isinstance(e, Terminated) or _RECEIVED:
-            sys.stderr.write(f"\n{command}: terminated (SIGTERM)\n")
+            _close_progress_bars()
+            sys.stderr.write(f"{command}: terminated (SIGTERM)\n")
             return 143
         if {"-v", "--verbose"} & set(argv or []):
             raise

@@ -149,6 +149,8 @@ def evaluate(
     for m in methods:
         if m.available and m.family in model_families:
             prepare_model(m)
+    if out is not None:  # made only now that the inputs are read: a refused run leaves no folder behind
+        out.mkdir(parents=True, exist_ok=True)
     gt_cache = out / "gt" if out is not None else None
     bake_cache = out / "bake" if out is not None else None
     per_frame: list[dict] = []

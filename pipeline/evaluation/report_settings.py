@@ -5,12 +5,23 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from neuralao.pipeline.tracing.labeller import check_rays
 from neuralao.runtime.baselines import GTAOSettings, SSAOSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
+    MAX_CAP,
+    SAMPLE_BYTES,
+    THREAD_BYTES,
+    check_count,
+    check_int_range,
+    check_pixels,
+    check_seed,
+)
 from neuralao.runtime.predict import Predictor
 
 EXPECTED_EXPORTS = ("mlp-16x8", "mlp-32x16", "mlp-64x32", "unet")
@@ -18,6 +29,16 @@ SHIPPED_PREFIX = "shipped:"  # row-name prefix of the release models of runtime/
 # Shipped rows a report shows unless told otherwise: the default model and the fast one
 # (neuralao.pipeline.evaluation.report_rows.pick_shipped).
 SHIPPED_PICKS = ("default", "fast")
+
+# Bounds of the screen-space baselines' counts, which are compiled into their shaders. An SSAO kernel of 128
+# points (8x Crytek's 16) fits the 1024 fragment uniform components every GL 4.3 implementation holds, a
+# vec4 slot a point, with room for the other uniforms; GTAO reads 2 x slices x steps texels a pixel, and the
+# blur pass noise_size^2: at these bounds already thousands, where the defaults read 64 and 16.
+MAX_SSAO_SAMPLES = 128
+MAX_GTAO_COUNT = 64
+MAX_NOISE_SIZE = 32
+# Bytes of one timed repetition's record (its time, kept for the median).
+REPEAT_BYTES = 64
 
 
 @dataclass
@@ -78,18 +99,66 @@ class ReportSettings:
     radii_rel: list[float] | None = None
 
 
-def check_settings(s: ReportSettings) -> None:
-    if s.gt_rays < 1 or s.frames_per_scene < 1 or s.repeats < 1 or s.bake_rays < 1:
-        raise NeuralaoError("gt_rays, frames_per_scene, repeats and bake_rays must be >= 1")
-    if len(s.time_size) != 2 or min(s.time_size) < 1:
-        raise NeuralaoError(f"time_size must be two positive integers, got {s.time_size}")
-    if any(r < 1 for r in s.trace_rays):
-        raise NeuralaoError(f"trace_rays must be positive, got {s.trace_rays}")
-    for t in [s.target_ssim, *s.select_targets]:
-        if not (0.0 < t <= 1.0):
-            raise NeuralaoError(f"target SSIM must be in (0, 1], got {t}")
+def check_settings(s: ReportSettings, name: Callable[[str], str] | None = None) -> None:
+    """Every setting in its range and every count within the memory, before any work: a refusal is one
+    line naming the setting as ``name(key)`` gives it (the command's flag where one set it; default the
+    key, as ``--set`` writes it)."""
+    n = name or str
+    check_count(n("workers"), s.workers, bytes_each=THREAD_BYTES, each="per tracing thread")
+    check_rays(n("gt_rays"), s.gt_rays, s.workers)
+    for rays in s.trace_rays:
+        check_rays(n("trace_rays"), rays, s.workers)
+    if len(set(s.trace_rays)) != len(s.trace_rays):
+        raise NeuralaoError(
+            f"{n('trace_rays')} must not repeat a ray count (one row each), got {s.trace_rays}"
+        )
+    check_rays(n("bake_rays"), s.bake_rays, s.workers)
+    spv = s.bake_samples_per_vertex
+    if not (math.isfinite(spv) and spv > 0):
+        raise NeuralaoError(f"{n('bake_samples_per_vertex')} must be > 0, got {spv}")
+    # one vertex's samples at least must fit; the bake checks them times each scene's vertices
+    check_count(
+        n("bake_samples_per_vertex"),
+        math.ceil(spv),
+        bytes_each=SAMPLE_BYTES,
+        each="per surface sample",
+        shown=f"{spv:g}",
+    )
+    check_int_range(n("frames_per_scene"), s.frames_per_scene, 1, MAX_CAP)
+    check_count(n("repeats"), s.repeats, bytes_each=REPEAT_BYTES, each="a timed repetition's record")
+    if len(s.time_size) != 2:
+        raise NeuralaoError(f"{n('time_size')} must be a width and a height, got {list(s.time_size)}")
+    check_pixels(n("time_size"), *s.time_size)
+    check_seed(n("seed"), s.seed)
+    for key, targets in (("target_ssim", [s.target_ssim]), ("select_targets", s.select_targets)):
+        for t in targets:
+            if not (0.0 < t <= 1.0):
+                raise NeuralaoError(f"{n(key)}: a masked SSIM target must be in (0, 1], got {t}")
     if s.radii_rel is not None and any(not (math.isfinite(r) and r > 0) for r in s.radii_rel):
-        raise NeuralaoError(f"radii_rel must be positive fractions of the scene diagonal, got {s.radii_rel}")
+        raise NeuralaoError(
+            f"{n('radii_rel')} must be positive fractions of the scene diagonal, got {s.radii_rel}"
+        )
+    check_screen_space(s.ssao, "ssao", n)
+    check_screen_space(s.gtao, "gtao", n)
+
+
+def check_screen_space(s: SSAOSettings | GTAOSettings, method: str, n: Callable[[str], str]) -> None:
+    """The SSAO or GTAO settings (``method``): the counts compiled into the shaders within their bounds,
+    the fractions of the radius within [0, 1], the seed one numpy takes."""
+    counts = (
+        {"samples": MAX_SSAO_SAMPLES}
+        if method == "ssao"
+        else {"slices": MAX_GTAO_COUNT, "steps": MAX_GTAO_COUNT}
+    )
+    for key, high in {**counts, "noise_size": MAX_NOISE_SIZE}.items():
+        check_int_range(n(f"{method}.{key}"), getattr(s, key), 1, high)
+    fraction = "bias_rel" if method == "ssao" else "falloff"
+    value = getattr(s, fraction)
+    if not 0.0 <= value <= 1.0:
+        raise NeuralaoError(
+            f"{n(f'{method}.{fraction}')} must be a fraction of the radius in [0, 1], got {value}"
+        )
+    check_seed(n(f"{method}.seed"), s.seed)
 
 
 @dataclass
