@@ -7,9 +7,15 @@ import logging
 from pathlib import Path
 
 from neuralao.pipeline.cli.engine_options import add_engine_arguments, engine_from_args
-from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset, check_counts
+from neuralao.pipeline.datasets.dataset import (
+    build_dataset,
+    check_config,
+    check_counts,
+    load_dataset_settings,
+)
+from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.paths import FOLDER
-from neuralao.runtime.foundation.settings import add_set_option, load_settings
+from neuralao.runtime.foundation.settings import add_set_option
 
 log = logging.getLogger(__name__)
 
@@ -28,12 +34,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    settings = load_settings(DatasetSettings, args.config, args.set)
+    settings = load_dataset_settings(args.config, args.set)
+    config_dir = Path(args.config).resolve().parent
+    try:  # every check of the config before anything is made; the refusal names the file
+        check_config(settings, config_dir)
+    except NeuralaoError as e:
+        raise NeuralaoError(f"config file {args.config}{' with --set' if args.set else ''}: {e}") from None
     check_counts(settings, Path(args.out))
     with engine_from_args(args) as engine:
-        manifest = build_dataset(
-            settings, Path(args.out), Path(args.config).resolve().parent, not args.no_progress, engine
-        )
+        manifest = build_dataset(settings, Path(args.out), config_dir, not args.no_progress, engine)
     log.info(
         "dataset %s: %d frames, %d shards, hash %s",
         args.out,

@@ -20,7 +20,7 @@ INPUTS = ()
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=sorted(PRESETS), default="tiny", help="level size (default tiny)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=int, help="seed of every random choice (default 0)")
     add_set_option(p, "houses=10")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for level.gltf, level.bin, bake.json")
 

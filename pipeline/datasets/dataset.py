@@ -7,8 +7,10 @@ Layout of a dataset folder::
     shards/<scene>-<k>.npz  stacked frames: every G-buffer channel (N, H, W[, 3]) + ao + valid + camera
 
 Every shard is written atomically, and its hash recorded in ``progress.json`` (also atomic) before
-the next one starts; a rerun skips shards whose file still matches its recorded hash, so an
-interrupted run resumes and ends with exactly the files an uninterrupted run writes. Every random
+the next one starts; a rerun skips shards whose file still matches its recorded hash (in
+``progress.json``, or in the manifest of a finished dataset of the same config), so an interrupted run
+resumes and ends with exactly the files an uninterrupted run writes. A folder another config made starts
+over: its shards go. Every check of a config that needs no scene runs before anything is made. Every random
 choice (orbit phase, interior cameras, labeller directions) is derived from ``seed``, the scene's
 index and the view index, so the same config gives the same dataset hash.
 
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import logging
 import math
 from collections.abc import Callable, Iterator
@@ -47,7 +50,13 @@ from tqdm import tqdm
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Task, content_key
 from neuralao.pipeline.geometry.camera import Camera, closeup, interior, load_poses, orbit
 from neuralao.pipeline.geometry.compose import ComposeSettings, compose
-from neuralao.pipeline.geometry.scene import Scene, load_scene, resolve_mesh_path, slim_scene
+from neuralao.pipeline.geometry.scene import (
+    Scene,
+    load_scene,
+    resolve_mesh_path,
+    scene_from_arrays,
+    slim_scene,
+)
 from neuralao.pipeline.geometry.splits import object_meshes
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -70,8 +79,9 @@ from neuralao.runtime.foundation.limits import (
     format_bytes,
 )
 from neuralao.runtime.foundation.manifest import read_json
-from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
-from neuralao.runtime.frame import Frame, FrameLike
+from neuralao.runtime.foundation.paths import check_plain_name
+from neuralao.runtime.foundation.settings import apply_overrides, from_dict, load_settings, settings_to_dict
+from neuralao.runtime.frame import Frame, FrameLike, check_yfov
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +201,7 @@ def view_look(settings: DatasetSettings, spec: SceneSpec, scene_index: int) -> V
     """
     sizes = spec.sizes if spec.sizes is not None else settings.sizes
     fovs = spec.yfov_range_deg
-    if fovs is None and not spec.yfov_deg and spec.cameras != "file":
+    if fovs is None and spec.yfov_deg is None and spec.cameras != "file":
         fovs = settings.yfov_range_deg
     if sizes is None and fovs is None:
         return None
@@ -221,22 +231,26 @@ def scene_cameras(
     w, h = size
     if spec.cameras == "orbit":
         elevation = COMPOSED_MIN_ELEVATION_DEG if spec.compose is not None else None
-        yfov = spec.yfov_deg or 40.0
+        yfov = _yfov(spec, 40.0)
         frames = None if look is None else [(w_, h_, f or yfov) for w_, h_, f in map(look, range(spec.views))]
         return orbit(scene, spec.views, w, h, yfov, seed=seed, min_elevation_deg=elevation, frames=frames)
     if spec.cameras == "interior":
-        cams = interior(scene, spec.views, w, h, spec.yfov_deg or 60.0, seed=seed)
+        cams = interior(scene, spec.views, w, h, _yfov(spec, 60.0), seed=seed)
     elif spec.cameras == "closeup":
-        cams = closeup(scene, spec.views, w, h, spec.yfov_deg or 50.0, seed=seed)
+        cams = closeup(scene, spec.views, w, h, _yfov(spec, 50.0), seed=seed)
     else:
         if not spec.poses:
             raise NeuralaoError(f"scene {spec.name}: cameras='file' needs 'poses'")
-        path = Path(spec.poses)
-        cams = load_poses(path if path.is_absolute() else config_dir / path, scene, w, h)
+        cams = load_poses(_poses_path(spec, config_dir), scene, w, h)
     if look is None:
         return cams
     # Interior, close-up and file poses do not depend on the frame, so only the frame changes.
     return [_framed(cam, *look(v)) for v, cam in enumerate(cams)]
+
+
+def _yfov(spec: SceneSpec, default: float) -> float:
+    """The scene's field of view in degrees, or its camera kind's ``default`` when it sets none."""
+    return default if spec.yfov_deg is None else spec.yfov_deg
 
 
 def _framed(cam: Camera, width: int, height: int, yfov_deg: float | None) -> Camera:
@@ -306,18 +320,30 @@ def scene_of(manifest: dict, name: str) -> Scene:
 
 
 def _check_looks(where: str, sizes: list[Size] | None, fovs: FovRange | None) -> None:
+    """``where`` (``""`` or a key with its dot, ``scenes[0].``): sizes >= 1, fields of view a camera has."""
     if sizes is not None and (not sizes or any(w < 1 or h < 1 for w, h in sizes)):
-        raise NeuralaoError(f"{where}: sizes must be a non-empty list of [width, height] >= 1, got {sizes}")
-    if fovs is not None and not 0.0 < fovs[0] <= fovs[1] < 180.0:
-        raise NeuralaoError(
-            f"{where}: yfov_range_deg must be [lo, hi] with 0 < lo <= hi < 180, got {list(fovs)}"
-        )
+        raise NeuralaoError(f"{where}sizes must be a non-empty list of [width, height] >= 1, got {sizes}")
+    if fovs is not None:
+        lo, hi = (check_yfov(f"{where}yfov_range_deg[{i}]", v) for i, v in enumerate(fovs))
+        if lo > hi:
+            raise NeuralaoError(f"{where}yfov_range_deg must be [lo, hi] with lo <= hi, got {list(fovs)}")
 
 
 def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Path) -> None:
-    _check_looks("dataset", settings.sizes, settings.yfov_range_deg)
+    """Every rule of the config that needs no scene loaded, so a refused config has made nothing; each
+    refusal names its key (``scenes[0].yfov_deg``, ``labels.radii_rel``)."""
+    _check_looks("", settings.sizes, settings.yfov_range_deg)
+    for j, gen in enumerate(settings.composed):
+        check_plain_name(f"composed[{j}].prefix", gen.prefix)
+        if gen.yfov_deg is not None:
+            check_yfov(f"composed[{j}].yfov_deg", gen.yfov_deg)
+        _check_looks(f"composed[{j}].", gen.sizes, gen.yfov_range_deg)
     names = set()
-    for spec in specs:
+    for k, spec in enumerate(specs):
+        listed = k < len(settings.scenes)  # the listed scenes come first; then the generated ones
+        key = f"scenes[{k}]" if listed else f"composed scene {spec.name!r}"
+        # a scene's name names its shard files: a '/' or '..' in it would write outside --out
+        check_plain_name(f"{key}.name" if listed else "composed scene name", spec.name)
         if spec.name in names:
             raise NeuralaoError(f"scene name {spec.name!r} appears twice in the dataset config")
         names.add(spec.name)
@@ -325,9 +351,21 @@ def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Pat
             raise NeuralaoError(f"scene {spec.name}: views must be >= 1")
         if bool(spec.mesh) == (spec.compose is not None):
             raise NeuralaoError(f"scene {spec.name}: give exactly one of 'mesh' and 'compose'")
-        _check_looks(f"scene {spec.name}", spec.sizes, spec.yfov_range_deg)
-        if spec.cameras == "file" and spec.yfov_range_deg is not None:
-            raise NeuralaoError(f"scene {spec.name}: cameras='file' takes its fields of view from the poses")
+        if listed:
+            if spec.yfov_deg is not None:
+                check_yfov(f"{key}.yfov_deg", spec.yfov_deg)
+            _check_looks(f"{key}.", spec.sizes, spec.yfov_range_deg)
+        if spec.cameras == "file":
+            if spec.yfov_range_deg is not None:
+                raise NeuralaoError(
+                    f"scene {spec.name}: cameras='file' takes its fields of view from the poses"
+                )
+            if not spec.poses:
+                raise NeuralaoError(f"scene {spec.name}: cameras='file' needs 'poses'")
+            poses = _poses_path(spec, config_dir)
+            if not poses.is_file():
+                raise NeuralaoError(f"{key}.poses: camera file not found: {poses}")
+    _check_labels(settings.labels)
     train: set[str] = set()
     held: dict[str, str] = {}
     for spec in specs:
@@ -342,6 +380,89 @@ def _validate(settings: DatasetSettings, specs: list[SceneSpec], config_dir: Pat
             f"mesh {Path(shared[0]).name} is in a train scene and in {held[shared[0]]!r} "
             f"({len(shared)} shared mesh(es)): val and test are split by mesh"
         )
+
+
+def _poses_path(spec: SceneSpec, config_dir: Path) -> Path:
+    """A scene's camera file (``poses``, relative to the config file unless absolute)."""
+    path = Path(spec.poses or "")
+    return path if path.is_absolute() else config_dir / path
+
+
+# A tetrahedron the labeller checks the label settings on before any scene is loaded (see _check_labels).
+_PROBE_VERTICES = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float64)
+_PROBE_FACES = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+
+
+def _check_labels(labels: LabelSettings) -> None:
+    """``labels`` as the labeller will take them in every scene, before anything is made: the distances as
+    given (the relative ones are fractions of each scene's diagonal), every radius within the max distance
+    (the longest label ray), and the labeller's own rules (:attr:`Labeller.settings`, run on a tetrahedron,
+    so whatever it would refuse in a scene is refused here)."""
+    for key in ("max_distance", "max_distance_rel", "half_distance", "half_distance_rel"):
+        v = getattr(labels, key)
+        if v is None and not key.endswith("_rel"):
+            continue
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and v > 0):
+            raise NeuralaoError(f"labels.{key} must be a positive finite number, got {v!r}")
+    radii = labels.radii_rel
+    if radii is not None:
+        if not isinstance(radii, list | tuple) or not radii:
+            raise NeuralaoError(
+                f"labels.radii_rel must be a non-empty list of positive numbers, got {radii!r}"
+            )
+        for r in radii:
+            if isinstance(r, bool) or not isinstance(r, int | float) or not (math.isfinite(r) and r > 0):
+                raise NeuralaoError(f"labels.radii_rel must hold positive finite numbers, got {r!r}")
+        if labels.max_distance is None and max(radii) > labels.max_distance_rel:
+            raise NeuralaoError(
+                f"labels.radii_rel holds {max(radii):g}, beyond labels.max_distance_rel "
+                f"{labels.max_distance_rel:g}: the longest label ray must reach every radius; raise "
+                "max_distance_rel to the largest radius or drop the radius"
+            )
+    try:
+        Labeller(scene_from_arrays(_PROBE_VERTICES, _PROBE_FACES, "labels"), labels)
+    except NeuralaoError as e:
+        raise NeuralaoError(f"labels: {e}") from None
+
+
+def _check_radii_reach(spec: SceneSpec, labels: LabelSettings, radii: list[float]) -> None:
+    """With ``labels.max_distance`` in scene units, a scene's radii (scene units) within it (the rule
+    :func:`_check_labels` applies to the relative distances)."""
+    if labels.max_distance is not None and max(radii) > labels.max_distance:
+        raise NeuralaoError(
+            f"scene {spec.name}: labels.radii_rel reach {max(radii):.6g} scene units, beyond "
+            f"labels.max_distance {labels.max_distance:g}: the longest label ray must reach every radius"
+        )
+
+
+# Label distances a config gives either in scene units or relative to the diagonal, never both (the
+# relative one would be silently ignored).
+_DISTANCE_PAIRS = (("max_distance", "max_distance_rel"), ("half_distance", "half_distance_rel"))
+
+
+def load_dataset_settings(config: str | Path, overrides: list[str] | None = None) -> DatasetSettings:
+    """The settings of a dataset config file with ``key=value`` overrides (``--set``), refusing a label
+    distance given both in scene units and relative to the diagonal."""
+    settings = load_settings(DatasetSettings, config, overrides)
+    given = apply_overrides(read_json(config, "config file"), overrides).get("labels")
+    for absolute, relative in _DISTANCE_PAIRS:
+        if isinstance(given, dict) and given.get(absolute) is not None and relative in given:
+            raise NeuralaoError(
+                f"config file {config}: labels gives both {absolute} (scene units) and {relative} "
+                "(a fraction of the diagonal); give one"
+            )
+    return settings
+
+
+def check_config(settings: DatasetSettings, config_dir: Path = Path(".")) -> list[SceneSpec]:
+    """Every check of a dataset config that needs no scene loaded (:func:`_validate`); its scenes."""
+    specs = expand_scenes(settings)
+    if not specs:
+        raise NeuralaoError("the dataset config lists no scenes")
+    if settings.frames_per_shard < 1 or settings.holdout_every < 0:
+        raise NeuralaoError("frames_per_shard must be >= 1 and holdout_every >= 0")
+    _validate(settings, specs, config_dir)
+    return specs
 
 
 def _config_dict(settings: DatasetSettings) -> dict:
@@ -384,29 +505,17 @@ def build_dataset(
     task each; this process writes every shard (and ``progress.json``) as results arrive, so the files and
     the dataset hash are the same on any engine.
     """
-    own_engine = engine is None
-    engine = engine or LocalEngine()
-    specs = expand_scenes(settings)
-    if not specs:
-        raise NeuralaoError("the dataset config lists no scenes")
-    if settings.frames_per_shard < 1 or settings.holdout_every < 0:
-        raise NeuralaoError("frames_per_shard must be >= 1 and holdout_every >= 0")
-    _validate(settings, specs, config_dir)
+    specs = check_config(settings, config_dir)
     out = Path(out)
-    (out / "shards").mkdir(parents=True, exist_ok=True)
+    config = _config_dict(settings)
+    config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
+    done = _reusable_shards(out, config, config_hash)  # the last check; from here on the run works
     for folder in (out, out / "shards"):  # a killed run (SIGKILL) leaves its half-written shard behind
         for stale in remove_stale_temporaries(folder):
             log.info("removed %s left by an interrupted run", stale.name)
-    config = _config_dict(settings)
-    config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
+    own_engine = engine is None
+    engine = engine or LocalEngine()
     progress_path = out / "progress.json"
-    done: dict[str, str] = {}
-    if progress_path.exists():
-        state = read_json(progress_path, "dataset progress file")
-        if isinstance(state, dict) and state.get("config_hash") == config_hash:
-            done = state.get("shards", {})
-        else:
-            log.warning("%s: config changed since the interrupted run; starting over", out)
     shards: list[dict] = []
     pending: list[dict] = []  # entries of the shards the engine renders, in task order
     frame_keys = FRAME_KEYS + (RADII_KEYS if settings.labels.radii_rel is not None else ())
@@ -429,6 +538,7 @@ def build_dataset(
             bar.refresh()
             if settings.labels.radii_rel is not None:
                 radii_of[spec.name] = [r * scene.diagonal for r in settings.labels.radii_rel]
+                _check_radii_reach(spec, settings.labels, radii_of[spec.name])
             context = None
             views = list(range(len(cams)))
             chunks = [
@@ -470,6 +580,8 @@ def build_dataset(
             arrays["view"] = np.asarray(entry["views"], dtype=np.int32)
             arrays["holdout"] = np.asarray(entry["holdout"], dtype=bool)
             path = out / entry["file"]
+            # the folder comes with the first shard: a run refused before it makes nothing
+            path.parent.mkdir(parents=True, exist_ok=True)
             write_npz(path, **arrays)
             entry["sha256"] = done[entry["file"]] = sha256_file(path)
             write_json(progress_path, {"config_hash": config_hash, "shards": done})
@@ -498,9 +610,48 @@ def build_dataset(
             "rows": "row 0 at the top",
         },
     }
+    out.mkdir(parents=True, exist_ok=True)
     write_json(out / "manifest.json", manifest)
     progress_path.unlink(missing_ok=True)
     return manifest
+
+
+def _reusable_shards(out: Path, config: dict, config_hash: str) -> dict[str, str]:
+    """The shards (file -> sha256) a run of ``config`` in ``out`` keeps: those of a finished dataset of
+    this config (its manifest) and of an interrupted run of it (``progress.json``). A folder that holds a
+    dataset of another config starts over: its shards, manifest and progress file go, so it never ends
+    with another config's shards beside the new manifest. A ``manifest.json`` that is not a dataset's
+    is refused (it is not this command's to replace)."""
+    manifest_path, progress_path = out / "manifest.json", out / "progress.json"
+    done: dict[str, str] = {}
+    same = True
+    if manifest_path.is_file():
+        made = read_json(manifest_path, "dataset manifest")
+        if not isinstance(made, dict) or made.get("format") != "neuralao-dataset":
+            raise NeuralaoError(
+                f"--out {out} holds a manifest.json that is not a dataset's; give another folder"
+            )
+        same = made.get("config") == json.loads(json.dumps(config, default=str))
+        if same and isinstance(made.get("shards"), list):
+            done = {
+                e["file"]: e["sha256"]
+                for e in made["shards"]
+                if isinstance(e, dict) and isinstance(e.get("file"), str) and isinstance(e.get("sha256"), str)
+            }
+    if progress_path.is_file():
+        state = read_json(progress_path, "dataset progress file")
+        if isinstance(state, dict) and state.get("config_hash") == config_hash:
+            shards = state.get("shards")
+            done |= shards if isinstance(shards, dict) else {}
+        else:
+            same = False
+    if not same:
+        old = sorted((out / "shards").glob("*.npz"))
+        log.warning("%s: holds a dataset of another config; starting over (%d shards removed)", out, len(old))
+        for path in [*old, manifest_path, progress_path]:
+            path.unlink(missing_ok=True)
+        return {}
+    return done
 
 
 class _ShardWorker:

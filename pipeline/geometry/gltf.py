@@ -17,13 +17,18 @@ is one line naming the file, the item and the rule):
 * accessors: a known ``componentType`` and ``type``, ``count`` an integer >= 0, ``byteOffset`` >= 0 and a
   multiple of the component size, a ``byteStride`` no smaller than the element, every element inside its
   bufferView;
-* meshes, nodes, scenes: every index they hold (attributes, indices, mesh, children, scene nodes) inside
-  the file.
+* meshes, nodes, scenes: every index they hold (attributes, indices, mesh, children, scene nodes, the
+  default ``scene``) inside the file; ``indices`` accessors SCALAR unsigned integers, ``POSITION`` accessors
+  VEC3 floats (integers only with ``KHR_mesh_quantization`` in ``extensionsUsed``);
+* node transforms: ``matrix`` 16 numbers whose last row is [0 0 0 1] (a glTF matrix decomposes into TRS),
+  or ``translation`` / ``rotation`` / ``scale`` of 3 / 4 / 3 numbers (rotation components in [-1, 1]), never
+  both; numbers are JSON numbers, finite (no strings, no true / false).
 """
 
 from __future__ import annotations
 
 import base64
+import math
 import os
 import struct
 from pathlib import Path
@@ -46,6 +51,7 @@ COMPONENT = {
 WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 INSTANCING = "EXT_mesh_gpu_instancing"
+QUANTIZATION = "KHR_mesh_quantization"
 # Geometry compression: the primitives' accessors hold no readable data without a decoder.
 COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
 # Extensions that change only how a file shades (materials, textures, lights): AO is geometry, and a bake
@@ -53,10 +59,17 @@ COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
 SHADING_EXTENSION_PREFIXES = ("KHR_materials_", "KHR_texture_", "KHR_lights_", "EXT_texture_", "EXT_lights_")
 # What the bakers' reader implements besides those: instancing and quantised attributes (integer
 # positions, normalised or not, dequantised by the node transforms it applies).
-BAKER_EXTENSIONS = frozenset({INSTANCING, "KHR_mesh_quantization"})
+BAKER_EXTENSIONS = frozenset({INSTANCING, QUANTIZATION})
 # What the trimesh-based readers implement besides those: nothing of geometry (trimesh ignores instancing
 # and does not dequantise normalised positions).
 TRIMESH_EXTENSIONS: frozenset[str] = frozenset()
+# Component types of a primitive's indices (unsigned integers) and of its positions: floats, and with
+# KHR_mesh_quantization also (normalised or not) 8- and 16-bit integers (glTF 2.0, 3.7.2.1 and the extension).
+INDEX_COMPONENTS = (5121, 5123, 5125)
+POSITION_COMPONENTS = (5126,)
+QUANTIZED_POSITION_COMPONENTS = (5120, 5121, 5122, 5123, 5126)
+# A node's TRS properties: their lengths (a matrix holds 16 numbers).
+TRS = {"translation": 3, "rotation": 4, "scale": 3}
 
 
 def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
@@ -87,6 +100,26 @@ def gltf_label(kind: str, index: int, item: Any) -> str:
 
 def _integer(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
+
+
+def json_number(value: Any) -> float | None:
+    """``value`` as a finite float if it is a JSON number that one holds, else None (a string, true / false,
+    NaN or inf, an integer past float64 such as 10**400)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _numbers(value: Any, count: int) -> list[float] | None:
+    """A list of ``count`` finite JSON numbers as floats, else None."""
+    if not isinstance(value, list) or len(value) != count:
+        return None
+    numbers = [json_number(v) for v in value]
+    return None if any(v is None for v in numbers) else numbers
 
 
 class GltfFile:
@@ -270,6 +303,23 @@ class GltfFile:
             if not _integer(value) or not 0 <= value < n_acc:
                 raise self._fail(item, f"{value!r} is not an accessor of the file ({n_acc} accessors)")
 
+        accessors = self._items("accessors")
+        used = self.doc.get("extensionsUsed", [])
+        if not isinstance(used, list) or not all(isinstance(e, str) for e in used):
+            raise self._fail("extensionsUsed", "must be a list of extension names")
+        positions = QUANTIZED_POSITION_COMPONENTS if QUANTIZATION in used else POSITION_COMPONENTS
+        position_rule = (
+            f"FLOAT (5126), or 8- / 16-bit integers with {QUANTIZATION}"
+            if QUANTIZATION in used
+            else f"FLOAT (5126) (integer positions need {QUANTIZATION} in extensionsUsed)"
+        )
+
+        def typed(value: int, item: str, kind: str, components: tuple[int, ...], rule: str) -> None:
+            a = accessors[value]
+            if a["type"] != kind or a["componentType"] not in components:
+                got = f"{a['type']} of componentType {a['componentType']}"
+                raise self._fail(item, f"names accessor {value}, {got}; it must be {kind} of {rule}")
+
         for m, mesh in enumerate(meshes):
             prims = mesh.get("primitives", [])
             if not isinstance(prims, list) or not all(isinstance(p, dict) for p in prims):
@@ -280,8 +330,14 @@ class GltfFile:
                     raise self._fail(f"meshes[{m}].primitives[{k}].attributes", "must be a JSON object")
                 for name, value in attrs.items():
                     accessor(value, f"meshes[{m}].primitives[{k}].attributes.{name}")
+                if "POSITION" in attrs:
+                    item = f"meshes[{m}].primitives[{k}].attributes.POSITION"
+                    typed(attrs["POSITION"], item, "VEC3", positions, position_rule)
                 if "indices" in prim:
-                    accessor(prim["indices"], f"meshes[{m}].primitives[{k}].indices")
+                    item = f"meshes[{m}].primitives[{k}].indices"
+                    accessor(prim["indices"], item)
+                    rule = "an unsigned integer componentType (5121, 5123 or 5125)"
+                    typed(prim["indices"], item, "SCALAR", INDEX_COMPONENTS, rule)
                 mode = prim.get("mode", 4)
                 if not _integer(mode) or not 0 <= mode <= 6:
                     raise self._fail(
@@ -306,10 +362,40 @@ class GltfFile:
             inside = isinstance(children, list) and all(_integer(c) and 0 <= c < len(nodes) for c in children)
             if not inside:
                 raise NeuralaoError(f"{where}: children {children!r} are not all nodes of the file"[:300])
-        for s, scene in enumerate(self._items("scenes")):
+            self._check_transform(node, f"nodes[{i}]")
+        scenes = self._items("scenes")
+        for s, scene in enumerate(scenes):
             roots = scene.get("nodes", [])
             if not isinstance(roots, list) or not all(_integer(r) and 0 <= r < len(nodes) for r in roots):
                 raise self._fail(f"scenes[{s}].nodes", f"are not all nodes of the file ({len(nodes)} nodes)")
+        if "scene" in self.doc:
+            default = self.doc["scene"]
+            if not _integer(default) or not 0 <= default < len(scenes):
+                raise self._fail("scene", f"{default!r} is not a scene of the file ({len(scenes)} scenes)")
+
+    def _check_transform(self, node: dict, item: str) -> None:
+        """A node's ``matrix`` (16 numbers, last row [0 0 0 1]) or TRS (3 / 4 / 3 numbers), not both."""
+        if "matrix" in node:
+            values = _numbers(node["matrix"], 16)
+            if values is None:
+                raise self._fail(f"{item}.matrix", "must be a list of 16 finite numbers (column-major)")
+            if values[3::4] != [0.0, 0.0, 0.0, 1.0]:  # column-major: every 4th from the 4th is the last row
+                raise self._fail(
+                    f"{item}.matrix",
+                    f"has the last row {values[3::4]}; it must be [0, 0, 0, 1] (decomposable to translation, "
+                    "rotation and scale)",
+                )
+            given = sorted(set(TRS) & set(node))
+            if given:
+                raise self._fail(item, f"has a matrix and {', '.join(given)}; give one or the other")
+        for key, count in TRS.items():
+            if key in node and _numbers(node[key], count) is None:
+                raise self._fail(f"{item}.{key}", f"must be a list of {count} finite numbers")
+        if "rotation" in node and any(abs(q) > 1 for q in node["rotation"]):
+            rotation = node["rotation"]
+            raise self._fail(
+                f"{item}.rotation", f"{rotation} is not a unit quaternion (components in [-1, 1])"
+            )
 
     # ------------------------------------------------------------------ data
     def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:

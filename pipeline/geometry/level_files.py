@@ -19,13 +19,13 @@ grass       small decorator: not an occluder; one AO scalar per clump resampled 
 
 Everything the reader rejects is a one-line :class:`NeuralaoError` naming the node, mesh or
 accessor: a missing or truncated buffer, a mesh index outside the file, a non-triangle primitive,
-unknown roles or parameters in ``extras``, a non-finite or zero-scale (singular) transform.
+unknown roles or parameters in ``extras``, a non-finite or zero-scale (singular) transform, an instance
+reaching past ``MAX_COORDINATE``, or one too small next to the level for float64 coordinates to resolve.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import struct
@@ -43,7 +43,9 @@ from neuralao.pipeline.geometry.gltf import (
     JSON_CHUNK,
     GltfFile,
     gltf_label,
+    json_number,
 )
+from neuralao.pipeline.geometry.scene import MAX_COORDINATE
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_path
 
@@ -62,6 +64,10 @@ _EXTRAS_KEYS = {"role", "transmission", "density", "name"}
 # An instance whose |det| of the 3x3 part is below this fraction of (its largest axis scale)^3 is
 # singular (a zero scale on some axis): its normals and its box would be undefined.
 _SINGULAR_REL = 1e-9
+# The smallest an instance may span next to the level's reach (its largest |world coordinate|): at 2^-36 a
+# float64 coordinate still has 2^16 steps across the instance; far below it (a 1 m shrub beside a terrain
+# scaled to 1e21 m) its triangles collapse in the bake's float64 arithmetic and their normals are 0 / 0.
+MIN_INSTANCE_REL = 2.0**-36
 
 
 @dataclass
@@ -201,23 +207,29 @@ def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def node_matrix(node: dict, where: str) -> np.ndarray:
-    """The local 4x4 of a glTF node (``matrix`` column-major, or TRS)."""
-    if "matrix" in node:
-        try:
-            vals = np.asarray(node["matrix"], np.float64)
-        except (TypeError, ValueError):
-            vals = np.zeros(0)
-        if vals.shape != (16,):
-            raise NeuralaoError(f"{where}: matrix must have 16 numbers")
-        return vals.reshape(4, 4).T
-    t = node.get("translation")
-    r = node.get("rotation")
-    s = node.get("scale")
-    for key, v, n in (("translation", t, 3), ("rotation", r, 4), ("scale", s, 3)):
-        if v is not None and (not isinstance(v, list) or len(v) != n):
-            raise NeuralaoError(f"{where}: {key} must be a list of {n} numbers")
+    """The local 4x4 of a glTF node (``matrix`` column-major, or TRS): finite JSON numbers (the glTF
+    reader's rules, :class:`GltfFile`), each within +-``MAX_COORDINATE`` (no coordinate lies past it, so no
+    factor of one may)."""
+    counts = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
+    values = {}
+    for key in counts:
+        if key not in node:
+            continue
+        raw = node[key]
+        numbers = [json_number(v) for v in raw] if isinstance(raw, list) else []
+        if len(numbers) != counts[key] or any(v is None for v in numbers):
+            raise NeuralaoError(f"{where}: {key} must be a list of {counts[key]} finite numbers")
+        if any(abs(v) > MAX_COORDINATE for v in numbers):
+            raise NeuralaoError(
+                f"{where}: {key} holds {max(numbers, key=abs):g}; a node's transform numbers lie within "
+                f"+-{MAX_COORDINATE:g}, as every coordinate of a level does (float32 G-buffers and ray "
+                "distances overflow past it)"
+            )
+        values[key] = numbers
+    if "matrix" in values:
+        return np.asarray(values["matrix"], np.float64).reshape(4, 4).T
     try:
-        return trs_matrices(t, r, s)[0]
+        return trs_matrices(values.get("translation"), values.get("rotation"), values.get("scale"))[0]
     except NeuralaoError as e:
         raise NeuralaoError(f"{where}: {e}") from None
 
@@ -228,6 +240,9 @@ def check_transforms(m: np.ndarray, where: str) -> None:
         bad = int(np.flatnonzero(~np.isfinite(m).reshape(len(m), -1).all(axis=1))[0])
         raise NeuralaoError(f"{where}: instance {bad} has a non-finite transform")
     a = m[:, :3, :3]
+    # The rule is scale-free: judged on each matrix over its largest entry, so no product overflows.
+    top = np.abs(a).max(axis=(1, 2))
+    a = a / np.where(top > 0, top, 1.0)[:, None, None]
     det = np.abs(np.linalg.det(a))
     big = np.linalg.norm(a, axis=1).max(axis=1)
     singular = ~(det > _SINGULAR_REL * big**3) | (big == 0)
@@ -235,6 +250,45 @@ def check_transforms(m: np.ndarray, where: str) -> None:
         raise NeuralaoError(
             f"{where}: instance {int(np.flatnonzero(singular)[0])} has a zero scale (singular transform)"
         )
+
+
+def instance_reach(m: np.ndarray, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The largest |world coordinate| (k,) and the world extent (k,) (bounding-box diagonal, an upper bound)
+    of a mesh of ``vertices`` (n, 3) under each of ``m`` (k, 4, 4), without transforming its vertices;
+    inf where a product passes float64."""
+    a = np.abs(m[:, :3, :3])
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        reach = (a @ np.maximum(np.abs(lo), np.abs(hi)) + np.abs(m[:, :3, 3])).max(axis=1)
+        extent = np.sqrt(((a @ (hi - lo)) ** 2).sum(axis=1))
+    return np.nan_to_num(reach, nan=np.inf), np.nan_to_num(extent, nan=np.inf)
+
+
+def check_reach(reach: np.ndarray, where: str) -> None:
+    """Every instance of a node within +-``MAX_COORDINATE`` (``reach`` from :func:`instance_reach`)."""
+    far = np.flatnonzero(~(reach <= MAX_COORDINATE))
+    if len(far):
+        raise NeuralaoError(
+            f"{where}: instance {int(far[0])} reaches {reach[far[0]]:.3g}; a level's coordinates lie within "
+            f"+-{MAX_COORDINATE:g} (float32 G-buffers and ray distances overflow past it): scale it down"
+        )
+
+
+def check_resolution(placed: list[tuple[str, str, np.ndarray, np.ndarray]]) -> None:
+    """Every instance spans at least ``MIN_INSTANCE_REL`` of the level's reach; ``placed`` holds each node's
+    message prefix and label, its instances' reaches and extents (:func:`instance_reach`)."""
+    if not placed:
+        return
+    _, widest, reaches, _ = max(placed, key=lambda p: p[2].max())
+    reach = float(reaches.max())
+    for where, _, _, extent in placed:
+        small = np.flatnonzero(extent < MIN_INSTANCE_REL * reach)
+        if len(small):
+            raise NeuralaoError(
+                f"{where}: instance {int(small[0])} spans {extent[small[0]]:.3g}, less than 2^-36 of the "
+                f"level's reach {reach:.3g} (at {widest}): float64 coordinates cannot resolve it next to the "
+                "rest; scale the level's nodes alike"
+            )
 
 
 # --------------------------------------------------------------------------- reading
@@ -264,14 +318,16 @@ def _role_and_params(node: dict, inherited: tuple[str, dict] | None, where: str)
             continue
         if key not in params:
             raise NeuralaoError(f"{where}: role {role!r} takes no {key!r}")
-        v = extras[key]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise NeuralaoError(f"{where}: {key} must be a finite number, got {v!r}")
+        v = json_number(extras[key])
+        if v is None:
+            shown = repr(extras[key])
+            shown = shown if len(shown) <= 40 else f"{shown[:24]}... ({len(shown)} characters)"
+            raise NeuralaoError(f"{where}: {key} must be a finite number float64 holds, got {shown}")
         if key == "transmission" and not 0.0 <= v <= 1.0:
             raise NeuralaoError(f"{where}: transmission must be in [0, 1], got {v}")
         if key == "density" and v < 0:
             raise NeuralaoError(f"{where}: density must be >= 0, got {v}")
-        params[key] = float(v)
+        params[key] = v
     return role, params
 
 
@@ -345,7 +401,7 @@ def read_level(path: str | Path) -> Level:
     scenes = doc.get("scenes", [])
     if scenes:
         si = doc.get("scene", 0)
-        if not isinstance(si, int) or not 0 <= si < len(scenes):
+        if isinstance(si, bool) or not isinstance(si, int) or not 0 <= si < len(scenes):
             raise NeuralaoError(f"level {path}: scene {si!r} is not in the file")
         roots = scenes[si].get("nodes", [])
     else:
@@ -353,6 +409,7 @@ def read_level(path: str | Path) -> Level:
         roots = [i for i in range(len(nodes)) if i not in children]
     meshes: dict[int, LevelMesh] = {}
     out: list[LevelNode] = []
+    placed: list[tuple[str, str, np.ndarray, np.ndarray]] = []  # per node: where, label, reaches, extents
     seen: set[int] = set()
     stack = [(r, np.eye(4), None) for r in reversed(roots)]
     while stack:
@@ -365,7 +422,8 @@ def read_level(path: str | Path) -> Level:
         node = nodes[i]
         name = str(node.get("name", f"node{i}"))
         where = f"level {path.name} {gltf_label('node', i, node)}"
-        world = parent @ node_matrix(node, where)
+        with np.errstate(over="ignore", invalid="ignore"):  # past float64: refused by check_reach
+            world = parent @ node_matrix(node, where)
         role, params = _role_and_params(node, inherited, where)
         if "mesh" in node:
             mi = node["mesh"]
@@ -374,8 +432,13 @@ def read_level(path: str | Path) -> Level:
             if mi not in meshes:
                 meshes[mi] = _mesh(g, mi, where)
             inst = _instances(g, node, where)
-            transforms = world[None] if inst is None else world[None] @ inst
+            with np.errstate(over="ignore", invalid="ignore"):
+                transforms = world[None] if inst is None else world[None] @ inst
+            reach, extent = instance_reach(transforms, meshes[mi].vertices)
+            if np.isfinite(transforms).all():  # a NaN or inf is named as such by check_transforms
+                check_reach(reach, where)
             check_transforms(transforms, where)
+            placed.append((where, gltf_label("node", i, node), reach, extent))
             out.append(LevelNode(i, name, role, mi, transforms, params))
         elif node.get("extensions", {}).get(INSTANCING) is not None:
             raise NeuralaoError(f"{where}: {INSTANCING} on a node without a mesh")
@@ -383,6 +446,7 @@ def read_level(path: str | Path) -> Level:
             stack.append((c, world, (role, params)))
     if not out:
         raise NeuralaoError(f"level {path} has no node with a mesh")
+    check_resolution(placed)
     # Re-index meshes densely in first-use order.
     order = {mi: k for k, mi in enumerate(dict.fromkeys(n.mesh for n in out))}
     for n in out:

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.pipeline.geometry.level_files import GltfWriter, quat_to_matrix
-from neuralao.pipeline.geometry.scene import MAX_COORDINATE, load_scene
+from neuralao.pipeline.geometry.level_files import MIN_INSTANCE_REL, GltfWriter, quat_to_matrix
+from neuralao.pipeline.geometry.scene import Scene, load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json
 from neuralao.runtime.foundation.limits import (
@@ -31,7 +31,7 @@ from neuralao.runtime.foundation.limits import (
     check_seed,
     format_bytes,
 )
-from neuralao.runtime.foundation.settings import apply_overrides, from_dict, settings_to_dict
+from neuralao.runtime.foundation.settings import apply_overrides, from_dict, parse_override, settings_to_dict
 
 
 @dataclass
@@ -65,7 +65,7 @@ class LevelGenSettings:
     tree_transmission: float = 0.5
     # Sphere subdivisions of tree crowns and shrubs (1: 80 faces, 2: 320).
     crown_subdivisions: int = 1
-    # Blocker walls around the terrain (height, m; 0 = none).
+    # Blocker walls around the terrain (height, m, >= 0; 0 = none).
     blocker_height: float = 6.0
     # Seed of every random choice.
     seed: int = 0
@@ -288,6 +288,7 @@ def _scatter(
 def generate(s: LevelGenSettings) -> GltfWriter:
     """The glTF of a synthetic level for settings ``s`` (deterministic for ``s.seed``)."""
     check(s)
+    buildings = _building_meshes(s)  # checked before anything else is made
     rng = np.random.default_rng(s.seed)
     phases = rng.uniform(0, 2 * math.pi, (4, 2))
     g = GltfWriter("neuralao level generator")
@@ -295,9 +296,7 @@ def generate(s: LevelGenSettings) -> GltfWriter:
     tv, tf = terrain(s, phases)
     g.node("terrain", g.mesh("terrain", tv, tf), extras={"role": "static"})
     for k, b in enumerate(s.buildings):
-        sc = load_scene(b.mesh)
-        # Base on y = 0, centred in x / z (Y up), so a placement sits on the terrain.
-        v = (sc.vertices - [sc.center[0], sc.bounds[0, 1], sc.center[2]]) * b.scale
+        sc, v = buildings[k]
         mesh = g.mesh(f"building_{b.mesh}", v, sc.faces)
         half = np.abs(v).max(axis=0)[[0, 2]].max()
         pos = _scatter(rng, b.count, s, phases, min(half, s.terrain_size / 3), 0.5)
@@ -353,6 +352,14 @@ INSTANCE_BYTES = 512  # a tree, shrub or grass instance: TRS arrays, float32 cop
 CROWN_FACE_BYTES = 6 * 256  # an icosphere face in each of the tree's 5 crown clusters and the shrub
 # Icosphere subdivisions: 20 x 4^k faces; past 10 (21M faces a sphere) no level needs them.
 MAX_CROWN_SUBDIVISIONS = 10
+# Largest terrain_size, |terrain_height|, blocker_height and building size (m). A bake refuses an instance
+# spanning less than MIN_INSTANCE_REL (2^-36) of the level's reach (its float64 coordinates could not
+# resolve it): the smallest instance placed here, a 0.45 m grass clump, allows a reach of 3e10 m, 10x what
+# these bounds let a level reach (the terrain reaches 25/12 terrain_height, a building on it its own size).
+MAX_LEVEL_SIZE = 1e9
+# Above the terrain (and beyond its edge), what the generator places reaches at most this far (m): trees
+# 7.7 m at scale 1.25, houses 9.1 m, the 2 m walls.
+DECORATION_REACH = 10.0
 
 
 def _memory(s: LevelGenSettings) -> dict[str, float]:
@@ -377,19 +384,26 @@ def check(s: LevelGenSettings) -> None:
         low = 1 if name in ("terrain_cells", "house_boxes") else 0
         check_count(name, getattr(s, name), low=low, bytes_each=1)  # an integer >= low; memory below
     check_int_range("crown_subdivisions", s.crown_subdivisions, 0, MAX_CROWN_SUBDIVISIONS)
-    if not 0 < s.terrain_size <= MAX_COORDINATE:
-        raise NeuralaoError(f"terrain_size must be in (0, {MAX_COORDINATE:g}] m, got {s.terrain_size}")
-    for name in ("terrain_height", "blocker_height"):
-        if not abs(getattr(s, name)) <= MAX_COORDINATE:
-            raise NeuralaoError(f"{name} must be within +-{MAX_COORDINATE:g} m, got {getattr(s, name)}")
+    # past MAX_LEVEL_SIZE the level's small decorators fall below what its bake resolves, and is refused
+    past = "; a level's grass clumps (0.45 m) would be below what its bake resolves"
+    if not 0 < s.terrain_size <= MAX_LEVEL_SIZE:
+        raise NeuralaoError(f"terrain_size must be in (0, {MAX_LEVEL_SIZE:g}] m, got {s.terrain_size}{past}")
+    if not abs(s.terrain_height) <= MAX_LEVEL_SIZE:
+        raise NeuralaoError(
+            f"terrain_height must be within +-{MAX_LEVEL_SIZE:g} m, got {s.terrain_height}{past}"
+        )
+    if not 0 <= s.blocker_height <= MAX_LEVEL_SIZE:
+        raise NeuralaoError(
+            f"blocker_height must be in [0, {MAX_LEVEL_SIZE:g}] m (0: no walls), got {s.blocker_height}"
+        )
     if not s.shrub_density >= 0:
         raise NeuralaoError(f"shrub_density must be >= 0, got {s.shrub_density}")
     if not 0 <= s.tree_transmission <= 1:
         raise NeuralaoError(f"tree_transmission must be in [0, 1], got {s.tree_transmission}")
     for b in s.buildings:
-        if b.count < 0 or not 0 < b.scale <= MAX_COORDINATE:
+        if b.count < 0 or not 0 < b.scale <= MAX_LEVEL_SIZE:
             raise NeuralaoError(
-                f"building {b.mesh!r}: count must be >= 0 and scale in (0, {MAX_COORDINATE:g}], "
+                f"building {b.mesh!r}: count must be >= 0 and scale in (0, {MAX_LEVEL_SIZE:g}], "
                 f"got count {b.count}, scale {b.scale}"
             )
     need = _memory(s)
@@ -406,6 +420,37 @@ def check(s: LevelGenSettings) -> None:
             f"the level's counts together need about {format_bytes(sum(need.values()))} of memory, "
             f"{format_bytes(avail)} available (most: {', '.join(f'{n} {_shown(s, n)}' for n in top)})"
         )
+
+
+def _building_meshes(s: LevelGenSettings) -> list[tuple[Scene, np.ndarray]]:
+    """Each building's scene and its vertices (n, 3) float64 as placed (based on y = 0, centred in x / z,
+    scaled), checked so that the bake takes the level: at most ``MAX_LEVEL_SIZE`` from its base, and
+    spanning at least ``MIN_INSTANCE_REL`` of the level's reach (bounded from the settings: a building
+    stands on the terrain, within ``terrain_size / 2`` across and 25/12 ``terrain_height`` up or down)."""
+    ground = max(s.terrain_size / 2, 25 / 12 * abs(s.terrain_height))
+    reach = max(
+        ground + DECORATION_REACH, 2 * abs(s.terrain_height), s.blocker_height
+    )  # what the terrain, the walls and the decorators reach
+    out = []
+    for b in s.buildings:
+        sc = load_scene(b.mesh)
+        # Base on y = 0, centred in x / z (Y up), so a placement sits on the terrain.
+        v = (sc.vertices - [sc.center[0], sc.bounds[0, 1], sc.center[2]]) * b.scale
+        out.append((sc, v))
+        if b.count and not np.abs(v).max() <= MAX_LEVEL_SIZE:
+            raise NeuralaoError(
+                f"building {b.mesh!r}: scale {b.scale:g} makes it reach {np.abs(v).max():.3g} m from its "
+                f"base; a building reaches at most {MAX_LEVEL_SIZE:g} m (lower the scale)"
+            )
+        reach = max(reach, ground + np.abs(v).max()) if b.count else reach
+    for b, (_, v) in zip(s.buildings, out, strict=True):
+        extent = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+        if b.count and extent < MIN_INSTANCE_REL * reach:
+            raise NeuralaoError(
+                f"building {b.mesh!r}: scale {b.scale:g} makes it {extent:.3g} m across, less than 2^-36 of "
+                f"the level's reach ({reach:.3g} m): its bake could not resolve it (raise the scale)"
+            )
+    return out
 
 
 def _shown(s: LevelGenSettings, name: str) -> str:
@@ -446,9 +491,14 @@ def write_level(out: str | Path, s: LevelGenSettings, preset: str = "tiny") -> t
     return writer.write(out / "level.gltf"), cfg
 
 
-def settings_for(preset: str, seed: int = 0, overrides: list[str] | None = None) -> LevelGenSettings:
-    """A preset's settings with ``seed`` and ``key=value`` overrides (unknown keys rejected)."""
+def settings_for(
+    preset: str, seed: int | None = None, overrides: list[str] | None = None
+) -> LevelGenSettings:
+    """A preset's settings with ``seed`` (None: 0) and ``key=value`` overrides (unknown keys rejected); a
+    seed given both ways is refused (neither would silently win)."""
     if preset not in PRESETS:
         raise NeuralaoError(f"unknown preset {preset!r} (one of {', '.join(sorted(PRESETS))})")
-    data = json.loads(json.dumps({**PRESETS[preset], "seed": seed}))
+    if seed is not None and any(parse_override(o)[0] == "seed" for o in overrides or []):
+        raise NeuralaoError("the seed is given twice, by --seed and by --set seed=...; give one")
+    data = json.loads(json.dumps({**PRESETS[preset], "seed": 0 if seed is None else seed}))
     return from_dict(LevelGenSettings, apply_overrides(data, overrides))
