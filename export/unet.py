@@ -14,13 +14,15 @@ generator knows.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import logging
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+import cv2
 import numpy as np
 import onnx
 import torch
@@ -243,8 +245,29 @@ def export_onnx_dynamo(
 # ----------------------------------------------------------------------------------------------- runners
 
 
+@contextlib.contextmanager
+def quiet_opencv() -> Iterator[None]:
+    """OpenCV's logging at errors only, restored after: its dnn module writes a ``[ WARN:0@...]
+    setPreferableTarget`` line to stderr for every network it runs (its graph engine ignores the target),
+    which is no news to a user; errors still raise."""
+    logs = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logs is None:  # a build without the logging utilities
+        yield
+        return
+    previous = logs.getLogLevel()
+    logs.setLogLevel(logs.LOG_LEVEL_ERROR)
+    try:
+        yield
+    finally:
+        logs.setLogLevel(previous)
+
+
 def opencv_runner(path: str | Path) -> Runner:
-    return lambda xp, rho: run_opencv(path, {INPUT: xp, RADIUS: radius_array(rho)})
+    def run(xp: np.ndarray, rho: float) -> np.ndarray:
+        with quiet_opencv():
+            return run_opencv(path, {INPUT: xp, RADIUS: radius_array(rho)})
+
+    return run
 
 
 def glsl_runner(glsl_dir: str | Path) -> Runner:

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 from pathlib import Path
 
-from neuralao.pipeline.models.checkpoint import read_checkpoint
+from neuralao.pipeline.models.checkpoint import check_finished, read_checkpoint
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_folder
@@ -18,13 +19,20 @@ INPUTS = ("model",)
 
 
 def checkpoint_kind(path: str | Path) -> str:
-    """Read a checkpoint safely (weights_only=True) and return its 'kind'."""
-    kind = read_checkpoint(path).get("kind")
+    """Read a checkpoint safely (weights_only=True) and return its 'kind', once its kind's trainer has
+    checked it whole (format version, keys, the model its model_args build and its weights, within the
+    memory) and it is the checkpoint of a finished training: all before the export folder is made."""
+    ckpt = read_checkpoint(path)
+    kind = ckpt.get("kind")
     trained = kinds.trained()
     if kind not in trained or trained[kind].exporter is None:
         raise NeuralaoError(
             f"{path} is not a neuralao checkpoint (kind {kind!r}; expected one of {sorted(trained)})"
         )
+    check_finished(ckpt, path)
+    trainer = importlib.import_module(trained[kind].trainer) if trained[kind].trainer else None
+    if hasattr(trainer, "model_from_checkpoint"):  # the kind's own loader: version, keys, model, weights
+        trainer.model_from_checkpoint(trainer.load_checkpoint(path))
     return kind
 
 

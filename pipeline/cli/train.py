@@ -52,12 +52,15 @@ def check_mesh_or_dataset(args: argparse.Namespace, neither: str) -> None:
         raise NeuralaoError(neither)
 
 
+def figure(value: float | None) -> str:
+    """A metric as the training line prints it: 4 decimals, or "-" where there was nothing to measure (no
+    held-back view, an empty validation or test split)."""
+    return f"{value:.4f}" if value is not None else "-"
+
+
 def holdout_figures(metrics: dict) -> tuple[str, str]:
-    """(SSIM, RMSE) on the held-back views as the training line prints them: 4 decimals, or "-" where
-    there were none."""
-    return tuple(
-        f"{metrics[k]:.4f}" if metrics[k] is not None else "-" for k in ("holdout_ssim", "holdout_rmse")
-    )
+    """(SSIM, RMSE) on the held-back views as the training line prints them."""
+    return figure(metrics["holdout_ssim"]), figure(metrics["holdout_rmse"])
 
 
 # ----------------------------------------------------------------------------------------------- mlp
@@ -122,13 +125,13 @@ def run_mlp(args: argparse.Namespace) -> int:
     )
     m = ckpt["metrics"]
     _log("mlp").info(
-        "wrote %s: %s, %d parameters, %.1f s, test RMSE %.4f (constant %.4f), held-back SSIM %s RMSE %s",
+        "wrote %s: %s, %d parameters, %.1f s, test RMSE %s (constant %s), held-back SSIM %s RMSE %s",
         args.out,
         mlp.size_name(ckpt["model_args"]["hidden"]),
         ckpt["parameters"],
         ckpt["training_time_s"],
-        m["test_rmse"],
-        m["constant_test_rmse"],
+        figure(m["test_rmse"]),
+        figure(m["constant_test_rmse"]),
         *holdout_figures(m),
     )
     return 0
@@ -172,15 +175,15 @@ def run_field(args: argparse.Namespace) -> int:
     )
     m = ckpt["metrics"]
     _log("field").info(
-        "wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %.4f (constant %.4f), "
+        "wrote %s: field %s (%d octaves), %d bytes, %.1f s, val RMSE %s (constant %s), "
         "held-back SSIM %s RMSE %s",
         args.out,
         mlp.size_name(ckpt["model_args"]["hidden"]),
         ckpt["model_args"]["octaves"],
         ckpt["parameter_bytes"],
         ckpt["training_time_s"],
-        m["val_rmse"],
-        m["constant_val_rmse"],
+        figure(m["val_rmse"]),
+        figure(m["constant_val_rmse"]),
         *holdout_figures(m),
     )
     return 0
@@ -215,6 +218,7 @@ def add_unet_arguments(p: argparse.ArgumentParser) -> None:
 def run_unet(args: argparse.Namespace) -> int:
     overrides = list(args.set) + ([f"budget_minutes={args.budget}"] if args.budget is not None else [])
     settings = load_settings(unet_train.UNetTrainSettings, args.config, overrides)
+    unet_train.check_run(settings, Path(args.out), args.restart)  # before any frame is read or prepared
     train_set, val_set, info = unet_frames.load_dataset_frames(
         Path(args.data),
         settings.train_fraction,

@@ -56,8 +56,15 @@ from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
 from neuralao.pipeline.geometry.camera import interior, orbit
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.pipeline.geometry.surface import surface_samples
+from neuralao.pipeline.models.checkpoint import (
+    check_interval,
+    check_lr,
+    check_threads,
+    per_mesh_checkpoint,
+    restore_model,
+    save_checkpoint,
+)
 from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from neuralao.pipeline.models.checkpoint import per_mesh_checkpoint, restore_model, save_checkpoint
 from neuralao.pipeline.models.mlp import (  # count_parameters: trainable weights only
     count_parameters,
     size_name,
@@ -67,7 +74,6 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import (
     MAX_CAP,
     SAMPLE_BYTES,
-    THREAD_BYTES,
     check_count,
     check_int_range,
     check_pixels,
@@ -75,7 +81,7 @@ from neuralao.runtime.foundation.limits import (
 )
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
-from neuralao.runtime.frame import FrameLike
+from neuralao.runtime.frame import FrameLike, check_yfov
 
 log = logging.getLogger(__name__)
 
@@ -305,7 +311,7 @@ def check_settings(s: FieldSettings) -> None:
         raise NeuralaoError(f"hidden widths must be positive, got {s.hidden}")
     for name in ("steps", "batch", "check_every", "samples", "samples_per_face_cap", "holdout_views"):
         check_int_range(name, getattr(s, name), 0 if name == "holdout_views" else 1, MAX_CAP)
-    check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
+    check_threads("threads", s.threads)
     # Every check_every-th step keeps a validation record in the history (and the checkpoint).
     check_count(
         "steps",
@@ -336,14 +342,13 @@ def check_settings(s: FieldSettings) -> None:
         shown=str(list(s.hidden)),
     )
     check_seed("seed", s.seed)
-    if not (
-        math.isfinite(s.lr) and s.lr > 0 and math.isfinite(s.lr_final_fraction) and s.lr_final_fraction >= 0
-    ):
-        raise NeuralaoError(
-            f"lr must be a finite number > 0 and lr_final_fraction >= 0, got {s.lr}, {s.lr_final_fraction}"
-        )
-    if s.samples < 16 or s.samples_per_face_cap < 1 or not 0.0 <= s.val_fraction < 1.0:
-        raise NeuralaoError("samples must be >= 16, samples_per_face_cap >= 1 and val_fraction in [0, 1)")
+    check_lr("lr", s.lr)
+    check_interval("lr_final_fraction", s.lr_final_fraction, 0.0, 1.0)
+    # 0: every sample trains, and the best weights are those of the lowest training-batch error.
+    check_interval("val_fraction", s.val_fraction, 0.0, 1.0, open_high=True)
+    check_yfov("yfov_deg", s.yfov_deg)
+    if s.samples < 16:
+        raise NeuralaoError(f"samples must be >= 16, got {s.samples}")
 
 
 def collect_samples(scene, settings: FieldSettings, progress: bool = False) -> FieldSamples:
@@ -432,7 +437,7 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
         loss = torch.mean((pred - ty[idx]) ** 2)
         if not torch.isfinite(loss):
             raise NeuralaoError(
-                f"training diverged at step {step} (loss {float(loss)}); "
+                f"training diverged at step {step} (loss {float(loss.detach())}); "
                 f"try a smaller lr than {settings.lr:g}"
             )
         opt.zero_grad(set_to_none=True)
@@ -443,7 +448,7 @@ def train_model(samples: FieldSamples, scene, settings: FieldSettings, progress:
                 val = (
                     float(torch.sqrt(torch.mean((model(vp, vn).reshape(-1) - vy) ** 2)))
                     if len(vy)
-                    else float(loss)
+                    else math.sqrt(float(loss.detach()))  # no validation split: the batch's RMSE
                 )
             history.append({"step": step, "val_rmse": val, "seconds": time.perf_counter() - t0})
             if not math.isfinite(val):  # the weights are gone (NaN or inf): no best model to keep
@@ -532,7 +537,7 @@ def make_checkpoint(
 
 
 def load_checkpoint(path: str | Path) -> dict:
-    return _load_checkpoint(path, KIND, "a field")
+    return _load_checkpoint(path, KIND, "a field", FORMAT_VERSION)
 
 
 def model_from_checkpoint(ckpt: dict) -> FieldNet:
@@ -561,6 +566,7 @@ def train(
     settings: FieldSettings, out, data=None, scene=None, mesh=None, progress=False, samples=None
 ) -> dict:
     """Mesh (or dataset scene) -> two-sided surface samples -> field -> metrics -> checkpoint at ``out``."""
+    check_settings(settings)  # before the mesh or dataset is read
     scene_obj, settings, frames = resolve_source(data, scene, mesh, settings)
     if samples is None:
         samples = collect_samples(scene_obj, settings, progress)

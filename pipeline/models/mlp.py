@@ -79,6 +79,9 @@ from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
 from neuralao.pipeline.geometry.camera import orbit
 from neuralao.pipeline.geometry.scene import load_scene
 from neuralao.pipeline.models.checkpoint import (
+    check_interval,
+    check_lr,
+    check_threads,
     count_parameters,
     per_mesh_checkpoint,
     restore_model,
@@ -88,15 +91,16 @@ from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpo
 from neuralao.pipeline.tracing.labeller import Labeller, LabelSettings
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import (
+    MAX_CAP,
     SAMPLE_BYTES,
-    THREAD_BYTES,
     check_count,
+    check_int_range,
     check_pixels,
     check_seed,
 )
 from neuralao.runtime.foundation.metrics import image_ssim, masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
-from neuralao.runtime.frame import FrameLike
+from neuralao.runtime.frame import FrameLike, check_yfov
 
 # The deployed input layout is the consumer runtime's (CIRCLE_SAMPLES normals, radius-zero input).
 from neuralao.runtime.predict import CIRCLE_SAMPLES, radius_zero_inputs
@@ -107,6 +111,9 @@ log = logging.getLogger(__name__)
 KIND = "mlp"
 FORMAT_VERSION = 1
 SPLIT_NAMES = ("train", "val", "test")
+# The largest circle radius in pixels: the largest view side (check_pixels), past which every circle point
+# is off-screen (the input is the centre normal repeated, as at radius 0).
+MAX_RADIUS_PX = 8192.0
 
 
 @dataclass
@@ -300,13 +307,19 @@ def draw_pixels(candidates: np.ndarray, count: int, rng: np.random.Generator) ->
     return np.sort(rng.choice(candidates, size=count, replace=False)) if count else candidates[:0]
 
 
-def split_samples(n: int, fractions: list[float], seed: int) -> np.ndarray:
-    """(n,) int8 split labels (0/1/2) from a seeded permutation, sizes floor(f * n) (test gets the rest)."""
+def check_split(fractions: list[float]) -> np.ndarray:
+    """The train / validation / test fractions as a (3,) float64 array: they sum to 1, train and val > 0."""
     f = np.asarray(fractions, dtype=np.float64)
     if f.shape != (3,) or (f < 0).any() or abs(f.sum() - 1.0) > 1e-6 or f[0] <= 0 or f[1] <= 0:
         raise NeuralaoError(
             f"split must be three fractions summing to 1 with train, val > 0; got {fractions}"
         )
+    return f
+
+
+def split_samples(n: int, fractions: list[float], seed: int) -> np.ndarray:
+    """(n,) int8 split labels (0/1/2) from a seeded permutation, sizes floor(f * n) (test gets the rest)."""
+    f = check_split(fractions)
     perm = np.random.default_rng([int(seed), 0x53504C]).permutation(n)
     n_train, n_val = int(f[0] * n), int(f[1] * n)
     out = np.full(n, 2, dtype=np.int8)
@@ -727,7 +740,7 @@ def make_checkpoint(
 def load_checkpoint(path: str | Path) -> dict:
     """Load an MLP checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line
     error."""
-    return _load_checkpoint(path, KIND, "an MLP")
+    return _load_checkpoint(path, KIND, "an MLP", FORMAT_VERSION)
 
 
 def model_from_checkpoint(ckpt: dict) -> BakedMLP:
@@ -738,10 +751,20 @@ def model_from_checkpoint(ckpt: dict) -> BakedMLP:
 
 
 def check_counts(s: MLPSettings) -> None:
-    """Every count of the settings within what the machine can hold, before anything is rendered or
-    allocated (neuralao.runtime.foundation.limits): the orbit's views and their samples, the view and
-    held-back sizes,
-    the batch, the network and the validation history; seed and threads."""
+    """Every setting in its range and every count within what the machine can hold, before anything is
+    rendered or allocated (neuralao.runtime.foundation.limits): the orbit's views and their samples, the
+    view and held-back sizes, the batch, the network and the validation history; the circle, the field of
+    view, the split, the optimiser's settings, seed and threads."""
+    if not s.hidden or min(s.hidden) < 1:
+        raise NeuralaoError(f"hidden must list positive widths, got {list(s.hidden)}")
+    check_int_range("lbfgs_history", s.lbfgs_history, 1, MAX_CAP)
+    for name in ("max_iterations", "check_every", "patience"):
+        check_int_range(name, getattr(s, name), 1, MAX_CAP)
+    check_int_range("holdout_views", s.holdout_views, 0, MAX_CAP)
+    check_interval("radius_px", s.radius_px, 0.0, MAX_RADIUS_PX)
+    check_yfov("yfov_deg", s.yfov_deg)
+    check_lr("adam_lr", s.adam_lr)
+    check_split(s.split)
     check_count(
         "views", s.views, bytes_each=4096 + SAMPLE_BYTES * max(s.samples_per_view, 1), each="a view's samples"
     )
@@ -772,7 +795,7 @@ def check_counts(s: MLPSettings) -> None:
         each="a validation record of the history",
         shown=str(s.max_iterations),
     )
-    check_count("threads", s.threads, low=0, bytes_each=THREAD_BYTES, each="per torch thread")
+    check_threads("threads", s.threads)
     check_seed("seed", s.seed)
 
 

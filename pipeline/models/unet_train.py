@@ -35,11 +35,25 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
+from neuralao.pipeline.models.checkpoint import (
+    check_interval,
+    check_parameters,
+    check_threads,
+    restore_model,
+    save_checkpoint,
+)
 from neuralao.pipeline.models.checkpoint import load_checkpoint as _load_checkpoint
-from neuralao.pipeline.models.checkpoint import restore_model, save_checkpoint
 from neuralao.pipeline.models.unet import PaddedUNet, UNet, UNetArgs, build_model, flip_input, model_args_dict
 from neuralao.pipeline.models.unet_frames import FrameSet, foreground, network_input
 from neuralao.runtime.foundation.errors import NeuralaoError
+from neuralao.runtime.foundation.limits import (
+    MAX_CAP,
+    check_count,
+    check_finite_number,
+    check_int_range,
+    check_seed,
+)
+from neuralao.runtime.foundation.metadata import MAX_INTERNAL_HEIGHT, MIN_INTERNAL_HEIGHT
 from neuralao.runtime.foundation.metrics import masked_rmse, masked_ssim
 from neuralao.runtime.foundation.settings import settings_to_dict
 from neuralao.runtime.unet_input import (
@@ -52,6 +66,20 @@ log = logging.getLogger(__name__)
 
 KIND = "unet"
 FORMAT_VERSION = 1
+# Bytes per pixel of a training crop per channel of the U-Net, a level at 2^-i of the resolution counting
+# 4^-i: the float32 activations autograd keeps (conv, batch norm, LeakyReLU, concatenation: about ten per
+# channel) and their gradients, generously.
+ACTIVATION_BYTES = 96
+# The same without gradients (validation runs whole frames under no_grad, a few layers alive at a time).
+EVAL_ACTIVATION_BYTES = 16
+# Bytes per pixel of a frame or crop outside the network: the prepared channels (input, labels and masks
+# at every radius), the point-sampling temporaries, the SSIM statistics and their gradients.
+FRAME_PIXEL_BYTES = 512
+# Per crop of an epoch's plan: 8 candidate positions (int64 tops, lefts, float64 foreground fractions)
+# and the chosen crop's frame, position, flips and radius.
+PLAN_BYTES = 512
+# Per epoch: one record of the history the checkpoint keeps.
+HISTORY_BYTES = 512
 
 
 @dataclass
@@ -370,7 +398,7 @@ def partial_path(out: Path) -> Path:
 def load_checkpoint(path: str | Path) -> dict:
     """Load a U-Net checkpoint with ``weights_only=True``; another kind or a corrupt file is a one-line
     error."""
-    return _load_checkpoint(path, KIND, "a U-Net")
+    return _load_checkpoint(path, KIND, "a U-Net", FORMAT_VERSION)
 
 
 def model_from_checkpoint(ckpt: dict) -> UNet:
@@ -505,6 +533,123 @@ def plan_budget(settings: UNetTrainSettings, steps_per_epoch: int, cal: dict) ->
     return int(max(1, min(settings.epochs, math.floor(settings.budget_minutes * 60.0 / per_epoch))))
 
 
+def _pixel_bytes(args: UNetArgs, training: bool) -> float:
+    """Bytes one pixel of a crop (``training``) or of a validation frame takes through the network."""
+    channels = sum(int(w) / 4.0**i for i, w in enumerate(args.widths))
+    return (ACTIVATION_BYTES if training else EVAL_ACTIVATION_BYTES) * channels + FRAME_PIXEL_BYTES
+
+
+def check_crops(settings: UNetTrainSettings, args: UNetArgs, height: int, width: int, what: str) -> None:
+    """The SSIM window within crops of ``height`` x ``width`` pixels (``what`` says what sets the size) and a
+    batch of them within the memory."""
+    side = min(height, width)
+    if side < 3:
+        raise NeuralaoError(f"{what} ({width}x{height}) is smaller than the smallest SSIM window, 3 pixels")
+    window = settings.ssim_window
+    if isinstance(window, bool) or not isinstance(window, int) or not 3 <= window <= side or window % 2 == 0:
+        raise NeuralaoError(
+            f"ssim_window must be an odd number of pixels in [3, {side}] ({what}: {width}x{height}), got "
+            f"{window!r}"
+        )
+    check_count(
+        "batch_size",
+        settings.batch_size * height * width,
+        bytes_each=_pixel_bytes(args, training=True),
+        each=f"per pixel of a {width}x{height} crop through widths {list(args.widths)}",
+        shown=f"{settings.batch_size} (crops of {width}x{height})",
+    )
+
+
+def check_settings(settings: UNetTrainSettings) -> None:
+    """Every setting in its range, and the model, a batch and a frame at the internal height within the
+    memory, before any frame is read or prepared: one line naming the setting otherwise."""
+    s = settings
+    check_count("epochs", s.epochs, bytes_each=HISTORY_BYTES, each="a record of the history")
+    check_int_range("batch_size", s.batch_size, 1, MAX_CAP)
+    check_count("crops_per_frame", s.crops_per_frame, bytes_each=PLAN_BYTES, each="per crop of the plan")
+    # Any rate > 0: one that makes the run diverge ends it at the first non-finite loss, naming the epoch,
+    # batch and frames (the guard's test trains at 1e20), so only its sign is refused here.
+    check_finite_number("lr", s.lr, low=0.0)
+    check_interval("weight_decay", s.weight_decay, 0.0, 1.0)
+    check_interval("min_foreground", s.min_foreground, 0.0, 1.0)
+    check_interval("negative_slope", s.negative_slope, 0.0, 1.0, open_high=True)
+    check_finite_number("ssim_sigma", s.ssim_sigma, low=0.0)
+    check_interval("ssim_c1", s.ssim_c1, 0.0, 1.0, open_low=True)
+    check_interval("ssim_c2", s.ssim_c2, 0.0, 1.0, open_low=True)
+    check_seed("seed", s.seed)
+    check_threads("threads", s.threads)
+    lr_at(s, 0, 1)  # validates the schedule name
+    check_int_range("warmup_steps", s.warmup_steps, 0, MAX_CAP)
+    check_interval("min_lr_ratio", s.min_lr_ratio, 0.0, 1.0)
+    check_interval("budget_minutes", s.budget_minutes, 0.0, 1e9)
+    check_interval("train_fraction", s.train_fraction, 0.0, 1.0, open_low=True)
+    check_int_range("val_frames", s.val_frames, 0, MAX_CAP)
+    check_version(s.preprocess_version, "preprocess_version")
+    args = model_args_of(s)
+    with torch.device("meta"):  # the architecture checked and counted, nothing allocated
+        check_parameters("widths", UNet(args), str(list(s.widths)))
+    height = s.internal_height
+    if isinstance(height, bool) or not isinstance(height, int):
+        height = -1  # refused below, as any other height outside the range
+    if height and not MIN_INTERNAL_HEIGHT <= height <= MAX_INTERNAL_HEIGHT:
+        raise NeuralaoError(
+            f"internal_height must be 0 (every frame at its own size) or an integer in "
+            f"[{MIN_INTERNAL_HEIGHT}, {MAX_INTERNAL_HEIGHT}], got {s.internal_height!r}"
+        )
+    if height:
+        check_count(
+            "internal_height",
+            height * height,
+            bytes_each=_pixel_bytes(args, training=False),
+            each="per pixel of a frame at that height, at least as wide",
+            shown=str(height),
+        )
+    crop = check_int_range("crop", s.crop, 0, MAX_INTERNAL_HEIGHT)
+    if crop % args.pad_multiple:
+        raise NeuralaoError(f"crop {crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)")
+    if crop:
+        check_crops(s, args, crop, crop, "the crop")
+    elif height:
+        check_crops(s, args, height, height, "whole frames at internal_height, at least")
+    pick_device(s.device)
+
+
+def check_frames(settings: UNetTrainSettings, args: UNetArgs, train_set: FrameSet) -> None:
+    """What the loaded frames decide: whole frames (crop 0) all of one size, the SSIM window and a batch
+    within them, and an epoch's plan within the memory."""
+    sizes = sorted(set(train_set.sizes))
+    if not settings.crop and sizes:
+        if len(sizes) > 1:
+            raise NeuralaoError(
+                f"crop 0 (whole frames) needs frames of one size, not {len(sizes)}: set a crop"
+            )
+        check_crops(settings, args, *sizes[0], "whole frames")
+    elif sizes:
+        small_h, small_w = min(sizes, key=min)  # the frame with the shortest side
+        if settings.crop > min(small_h, small_w):
+            raise NeuralaoError(
+                f"crop {settings.crop} is larger than the frames ({small_w}x{small_h}); "
+                f"set crop<= {min(small_h, small_w)} or 0"
+            )
+    check_count(
+        "crops_per_frame",
+        len(train_set) * settings.crops_per_frame,
+        bytes_each=PLAN_BYTES,
+        each="per crop of an epoch's plan",
+        shown=f"{settings.crops_per_frame} (of {len(train_set)} frames)",
+    )
+
+
+def check_run(settings: UNetTrainSettings, out: Path, restart: bool) -> None:
+    """:func:`check_settings`, the checkpoint to start from, and ``out`` (never overwrite a checkpoint of
+    another kind): what `neuralao train unet` checks before it reads the dataset."""
+    check_settings(settings)
+    if settings.init:
+        load_checkpoint(settings.init)
+    if Path(out).exists() and not restart:
+        load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
+
+
 def train(
     settings: UNetTrainSettings,
     train_set: FrameSet,
@@ -521,20 +666,9 @@ def train(
     simulate an interruption).
     """
     out = Path(out)
-    if settings.epochs < 1 or settings.batch_size < 1 or settings.crops_per_frame < 1:
-        raise NeuralaoError("epochs, batch_size and crops_per_frame must be >= 1")
-    if settings.budget_minutes < 0 or not math.isfinite(settings.budget_minutes):
-        raise NeuralaoError(f"budget_minutes must be >= 0, got {settings.budget_minutes}")
-    check_version(settings.preprocess_version, "preprocess_version")
-    lr_at(settings, 0, 1)  # validates the schedule name
+    check_run(settings, out, restart)
     args = model_args_of(settings)
-    model = UNet(args)  # validates widths / scale
-    if settings.crop and settings.crop % args.pad_multiple:
-        raise NeuralaoError(
-            f"crop {settings.crop} must be a multiple of {args.pad_multiple} (scale * 2**depth)"
-        )
-    if out.exists() and not restart:
-        load_checkpoint(out)  # refuse to overwrite a checkpoint of another kind (raises)
+    check_frames(settings, args, train_set)
     device = pick_device(settings.device)
     info = dict(dataset_info or {})
     loaded_for = info.get("preprocess_version", settings.preprocess_version)
