@@ -151,8 +151,11 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
     """What holds for every command, checked before it runs: each float flag is a finite number within
     float32's range (every value here ends up in float32 somewhere, where a larger one is inf), and the
     paths the command writes (its module's ``OUTPUTS``: dest -> FILE or FOLDER, or a function of the
-    arguments giving them) can be written and are distinct from each other and from its ``INPUTS``."""
+    arguments giving them) can be written and are distinct from each other and from its ``INPUTS``, and
+    none lies inside a folder of its ``READ_FOLDERS`` (inputs it reads whole, such as a dataset)."""
     # here, not at the top: the module stays light, so Ctrl-C meets main's handler as early as possible
+    import os
+
     from neuralao.runtime.foundation.limits import check_float32
     from neuralao.runtime.foundation.paths import check_outputs
 
@@ -168,6 +171,18 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
         {_name(actions.get(d), d): (getattr(args, d, None), kind) for d, kind in outputs.items()},
         {_name(actions.get(d), d): getattr(args, d, None) for d in getattr(module, "INPUTS", ())},
     )
+    for d in getattr(module, "READ_FOLDERS", ()):
+        folder = getattr(args, d, None)
+        if not folder or not os.path.isdir(folder):
+            continue
+        for o in outputs:
+            path = getattr(args, o, None)
+            if path and os.path.realpath(path).startswith(os.path.join(os.path.realpath(folder), "")):
+                flag, source = _name(actions.get(o), o), _name(actions.get(d), d)
+                raise NeuralaoError(
+                    f"{flag} {path} is inside {source} {folder}, a folder the command reads: writing there "
+                    "could replace what it reads; choose a path outside it"
+                )
 
 
 def _close_progress_bars() -> None:

@@ -24,9 +24,11 @@ from neuralao.runtime.foundation.settings import add_set_option, load_settings
 log = logging.getLogger(__name__)
 
 # What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
-# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other, and not inside the
+# dataset or the exports folder, which are read whole: --out DATA/manifest.json would replace the manifest).
 OUTPUTS = {"out": FILE, "gt_cache": FOLDER}
-INPUTS = ("data", "exports")
+INPUTS = ("data", "exports", "report")
+READ_FOLDERS = ("data", "exports")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -9,7 +9,8 @@ import argparse
 import logging
 from pathlib import Path
 
-from neuralao.pipeline.release.ship import ShipSettings, refresh_shipped, ship
+from neuralao.pipeline.release.ship import ShipSettings, check_settings, refresh_shipped, ship
+from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import load_settings
 
 log = logging.getLogger(__name__)
@@ -30,6 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     settings = load_settings(ShipSettings, args.config, [])
+    try:  # the whole config before any model trains or any shader is written; a refusal names the file
+        check_settings(settings, args.only, corpus=not args.shaders_only)
+    except NeuralaoError as e:
+        raise NeuralaoError(f"config file {args.config}: {e}") from None
     if args.shaders_only:
         for name, par in refresh_shipped(settings, args.only).items():
             log.info("%-14s shaders regenerated, GLSL vs onnxruntime %.2g", name, par["max_abs_err"])

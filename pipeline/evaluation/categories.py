@@ -34,20 +34,27 @@ from neuralao.pipeline.datasets.dataset import (
     SceneSpec,
     _config_dict,
     build_dataset,
+    check_counts,
     open_dataset,
 )
 from neuralao.pipeline.evaluation.test_split import score_frame, screen_space_predictor, unet_predictor
 from neuralao.pipeline.geometry.splits import HELD_ASIDE, split_of
-from neuralao.pipeline.tracing.labeller import LabelSettings
+from neuralao.pipeline.tracing.labeller import LabelSettings, check_rays
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json, write_text
+from neuralao.runtime.foundation.limits import MAX_CAP, MAX_SEED, check_count, check_int_range, check_seed
 from neuralao.runtime.foundation.manifest import read_json, read_manifest
+from neuralao.runtime.foundation.paths import check_plain_name
 from neuralao.runtime.foundation.settings import settings_to_dict
 
 log = logging.getLogger(__name__)
 
 Predictor = Callable[[dict, float], np.ndarray]  # (frame, radius in scene units) -> AO (H, W)
 METRICS = ("ssim", "rmse", "flip")
+# The camera kinds of a category (a category has no poses file: "file" is the dataset's alone).
+CAMERA_KINDS = ("orbit", "interior", "closeup")
+# What one camera or scene entry takes before anything is rendered (as the dataset stage counts it).
+SCENE_BYTES = 4096
 
 
 @dataclass
@@ -105,7 +112,7 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
             )
         count = min(cat.composed, res.scenes_per_category) if res.scenes_per_category > 0 else cat.composed
         if count > 0:
-            cameras = [cat.cameras] if cat.cameras in ("orbit", "interior", "closeup") else ["interior"]
+            cameras = [cat.cameras] if cat.cameras in CAMERA_KINDS else ["interior"]
             composed.append(
                 ComposedScenes(
                     count=count,
@@ -145,8 +152,11 @@ def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress:
 
 
 def check_settings(settings: EvalSettings) -> None:
+    """Every setting before any work: names that become file names, camera kinds, radii, and every count
+    within what the machine can hold (neuralao.runtime.foundation.limits)."""
     if not settings.categories or not settings.resolutions:
         raise NeuralaoError("the evaluation config needs at least one category and one resolution")
+    check_seed("seed", settings.seed)
     if not settings.radii_rel or any(not (0 < r <= settings.max_distance_rel) for r in settings.radii_rel):
         raise NeuralaoError(
             f"radii_rel must be in (0, max_distance_rel={settings.max_distance_rel}], "
@@ -156,6 +166,15 @@ def check_settings(settings: EvalSettings) -> None:
     if len(set(names)) != len(names):
         raise NeuralaoError(f"category names must be unique, got {names}")
     for cat in settings.categories:
+        check_plain_name("category name", cat.name)  # it prefixes the scene and shard names
+        where = f"category {cat.name!r}"
+        if cat.cameras not in CAMERA_KINDS:
+            raise NeuralaoError(
+                f"{where}: cameras {cat.cameras!r} is not a camera kind; a category's is one of "
+                f"{', '.join(CAMERA_KINDS)}"
+            )
+        check_count(f"{where}: composed", cat.composed, low=0, bytes_each=SCENE_BYTES, each="a scene entry")
+        check_int_range(f"{where}: composed_seed", cat.composed_seed, 0, MAX_SEED - cat.composed)
         if not cat.meshes and cat.composed < 1:
             raise NeuralaoError(f"category {cat.name!r} has no meshes and no composed rooms")
         for mesh in cat.meshes:
@@ -169,10 +188,23 @@ def check_settings(settings: EvalSettings) -> None:
                 raise NeuralaoError(
                     f"category {cat.name!r}: mesh {mesh!r} is in the {split} split; evaluate on test meshes"
                 )
+    workers = LabelSettings().workers  # the labeller's, which the frames are traced with
     for res in settings.resolutions:
         w, h = res.size
-        if not (16 <= w <= 8192 and 16 <= h <= 8192) or res.rays < 1 or res.views < 1:
-            raise NeuralaoError(f"resolution {w}x{h}: sizes must be 16..8192, rays and views >= 1")
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise NeuralaoError(f"resolution {w}x{h}: sizes must be 16..8192")
+        check_rays(f"resolution {w}x{h}: rays", res.rays, workers)
+        check_count(f"resolution {w}x{h}: views", res.views, bytes_each=SCENE_BYTES, each="a camera")
+        check_int_range(f"resolution {w}x{h}: scenes_per_category", res.scenes_per_category, 0, MAX_CAP)
+
+
+def check_frames(settings: EvalSettings, out: Path) -> None:
+    """:func:`check_settings`, then each resolution's dataset as the dataset stage counts it (scenes
+    and views together, frames in memory, the disk under ``out``): all before any model is read."""
+    check_settings(settings)
+    for res in settings.resolutions:
+        w, h = (int(v) for v in res.size)
+        check_counts(dataset_settings(settings, res), out / "frames" / f"{w}x{h}")
 
 
 # ------------------------------------------------------------------------------------------ methods
@@ -304,7 +336,7 @@ def evaluate(
     progress: bool = True,
 ) -> dict:
     """Build (or resume) the frames of every resolution, score every method, write the tables."""
-    check_settings(settings)
+    check_frames(settings, out)
     methods: dict[str, Predictor] = {}
     saw_held_aside: set[str] = set()  # methods whose model trained on the held-aside meshes
     for folder in models:

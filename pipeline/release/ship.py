@@ -13,6 +13,8 @@ training settings (budget, widths, resolution, which model initialises it). For 
    the manifest AND the ONNX metadata; the folder must stay under ``max_bytes``;
 6. installed atomically: written to a temporary folder beside the target, then renamed onto it.
 
+Everything the config holds is checked before the first model trains (:func:`check_settings`).
+
 ``runtime/models/index.json`` lists the models, the defaults per kind (``neuralao infer`` and
 ``neuralao report`` use them when given no export) and the baselines' figures of the same run.
 """
@@ -20,6 +22,7 @@ training settings (budget, widths, resolution, which model initialises it). For 
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import subprocess
 import time
@@ -43,10 +46,13 @@ from neuralao.pipeline.evaluation.report_settings import ReportSettings
 from neuralao.pipeline.evaluation.test_split import evaluate_split, screen_space_predictor, unet_predictor
 from neuralao.pipeline.models.unet_frames import load_dataset_frames
 from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
+from neuralao.pipeline.models.unet_train import check_settings as check_train_settings
 from neuralao.runtime.baselines import time_screen_space
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_folder, sha256_file, write_json
+from neuralao.runtime.foundation.limits import MAX_CAP, check_int_range, check_pixels
 from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.paths import FOLDER, check_output, check_plain_name
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.glsl_runner import time_compute
@@ -112,6 +118,117 @@ def git_commit() -> str:
 def _path(p: str) -> Path:
     q = Path(p)
     return q if q.is_absolute() else REPO / q
+
+
+SHIPPED_KINDS = ("unet",)  # the model kinds `neuralao ship` trains and installs
+
+
+def _within(inner: Path, outer: Path) -> bool:
+    """Whether ``inner`` is ``outer`` or a path below it (links resolved)."""
+    a, b = os.path.realpath(inner), os.path.realpath(outer)
+    return a == b or a.startswith(b.rstrip(os.sep) + os.sep)
+
+
+def _check_folders(settings: ShipSettings) -> None:
+    """``out`` and ``checkpoints`` can be written as folders, and the three folders are apart: each model
+    replaces ``out/NAME`` whole and writes ``checkpoints/NAME.pt``, so one inside another would write
+    into (or replace) the corpus or the checkpoints."""
+    folders = {key: _path(getattr(settings, key)) for key in ("dataset", "checkpoints", "out")}
+    for key in ("out", "checkpoints"):
+        check_output(key, folders[key], FOLDER)
+    for a, b in (("out", "dataset"), ("checkpoints", "dataset"), ("checkpoints", "out")):
+        for x, y in ((a, b), (b, a)):
+            if _within(folders[x], folders[y]):
+                where = "is the same folder as" if _within(folders[y], folders[x]) else "is inside"
+                raise NeuralaoError(
+                    f"{x} {folders[x]} {where} {y} {folders[y]}: give each of dataset, checkpoints and out "
+                    "a folder of its own (a model replaces out/NAME whole)"
+                )
+
+
+def _check_model(i: int, entry: object, earlier: list[str]) -> ShippedModel:
+    """One entry of ``models``: its fields, a plain name (it becomes ``out/NAME`` and ``NAME.pt``), a kind
+    ship installs, an ``init`` that is an earlier model, and training settings that train would accept."""
+    if not isinstance(entry, dict):
+        raise NeuralaoError(f"models[{i}] must be an object of ShippedModel fields, got {entry!r}")
+    spec = from_dict(ShippedModel, entry, prefix=f"models[{i}].")
+    check_plain_name(f"models[{i}].name", spec.name)
+    if spec.name == "index.json":
+        raise NeuralaoError(f"models[{i}].name 'index.json' is the index's file name under out; rename it")
+    if spec.kind not in SHIPPED_KINDS:
+        raise NeuralaoError(
+            f"model {spec.name}: kind {spec.kind!r} cannot be shipped (only {', '.join(SHIPPED_KINDS)})"
+        )
+    if spec.init and spec.init not in earlier:
+        raise NeuralaoError(f"model {spec.name}: init {spec.init!r} is not an earlier model of this config")
+    if spec.init_checkpoint and not _path(spec.init_checkpoint).is_file():
+        raise NeuralaoError(
+            f"model {spec.name}: init_checkpoint {_path(spec.init_checkpoint)} does not exist"
+        )
+    if not isinstance(spec.train, dict):
+        raise NeuralaoError(
+            f"model {spec.name}: train must be an object of training settings, got {spec.train!r}"
+        )
+    ts = from_dict(UNetTrainSettings, dict(spec.train), prefix=f"models.{spec.name}.train.")
+    try:
+        check_train_settings(ts)  # train's own check: ranges, the model and a batch within the memory
+    except NeuralaoError as e:
+        raise NeuralaoError(f"model {spec.name}: train: {e}") from None
+    return spec
+
+
+def _check_split(settings: ShipSettings, data: Path) -> None:
+    """The corpus is a dataset whose ``test_split`` has frames (parity and the test figures read them)."""
+    if not (data / "manifest.json").is_file():
+        raise NeuralaoError(f"no corpus at {data} (run `make corpus` first)")
+    counts: dict[str, int] = {}
+    for entry in open_dataset(data).manifest.get("shards", []):
+        counts[entry["split"]] = counts.get(entry["split"], 0) + len(entry["views"])
+    if not counts.get(settings.test_split):
+        held = ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none"
+        raise NeuralaoError(
+            f"test_split {settings.test_split!r} has no frames in the corpus {data} (frames by split: {held})"
+        )
+
+
+def check_settings(
+    settings: ShipSettings, only: list[str] | None = None, corpus: bool = True
+) -> list[ShippedModel]:
+    """Everything of a ship config that can be checked before any model trains (each refusal names the
+    key and its value): the models and their training settings, the defaults, the counts and sizes, the
+    folders, ``only``, and with ``corpus`` the corpus and its test split. Returns the models."""
+    if not isinstance(settings.models, list) or not settings.models:
+        raise NeuralaoError("the config lists no models")
+    specs: list[ShippedModel] = []
+    for i, entry in enumerate(settings.models):
+        names = [s.name for s in specs]
+        spec = _check_model(i, entry, names)
+        if spec.name in names:
+            raise NeuralaoError(f"model names must be unique, got {spec.name!r} twice")
+        specs.append(spec)
+    names = [s.name for s in specs]
+    for kind, name in settings.default.items():
+        if kind not in SHIPPED_KINDS:
+            raise NeuralaoError(
+                f"default names kind {kind!r}; ship installs {', '.join(SHIPPED_KINDS)} models only"
+            )
+        if name not in names:
+            raise NeuralaoError(f"default {kind} model {name!r} is not one of {names}")
+    unknown = [n for n in only or [] if n not in names]
+    if unknown:
+        raise NeuralaoError(f"--only {', '.join(unknown)}: not a model of this config (its models: {names})")
+    check_int_range("test_frames", settings.test_frames, 0, MAX_CAP)
+    check_int_range("parity_frames", settings.parity_frames, 1, MAX_CAP)
+    check_int_range("time_repeats", settings.time_repeats, 1, MAX_CAP)
+    check_int_range("max_bytes", settings.max_bytes, 1, MAX_CAP)
+    for i, size in enumerate(settings.time_sizes):
+        if len(size) != 2:
+            raise NeuralaoError(f"time_sizes[{i}] must be [width, height], got {size}")
+        check_pixels(f"time_sizes[{i}]", *size)
+    _check_folders(settings)
+    if corpus:
+        _check_split(settings, _path(settings.dataset))
+    return specs
 
 
 def folder_bytes(folder: Path) -> int:
@@ -329,18 +446,8 @@ def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dic
 
 def ship(settings: ShipSettings, only: list[str] | None = None) -> dict:
     """Ship every model of ``settings`` (or those named in ``only``, which must keep their ``init`` order)."""
+    specs = check_settings(settings, only)  # before anything trains
     data = _path(settings.dataset)
-    if not (data / "manifest.json").is_file():
-        raise NeuralaoError(f"no corpus at {data} (run `make corpus` first)")
-    specs = [from_dict(ShippedModel, m, prefix="models.") for m in settings.models]
-    if not specs:
-        raise NeuralaoError("the config lists no models")
-    names = [s.name for s in specs]
-    if len(set(names)) != len(names) or not all(names):
-        raise NeuralaoError(f"model names must be unique and non-empty, got {names}")
-    for kind, name in settings.default.items():
-        if name not in names:
-            raise NeuralaoError(f"default {kind} model {name!r} is not one of {names}")
     commit = git_commit()
     out = _path(settings.out)
     index_path = out / "index.json"
