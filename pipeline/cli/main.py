@@ -186,7 +186,7 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
 
 
 def _close_progress_bars() -> None:
-    """End the line a progress bar left open, so the signal's message starts a line of its own.
+    """End the line a progress bar left open, so the message of a signal or an error starts a line of its own.
 
     tqdm draws a bar as a line it never ends (each redraw starts with '\\r') until the bar is closed: then a
     bar that stays is drawn once more and ended, one that goes is cleared. A bar whose loop the signal cut
@@ -264,18 +264,21 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace, command: str
         raise_received()
         return code
     except NeuralaoError as e:
+        _close_progress_bars()  # a refusal mid-run: the bar's line ends before the message, never after
         sys.stderr.write(f"{command}: error: {e}\n")
         return 2
     except OSError as e:  # the system refused a file (no space left, permissions): named, in one line
         if args.verbose or _RECEIVED or (e.filename is None and e.errno not in _REFUSALS):
             raise
         where = f"{str(e.filename)[:200]}: " if e.filename is not None else ""
+        _close_progress_bars()
         sys.stderr.write(f"{command}: error: {where}{e.strerror or type(e).__name__}\n")
         return 2
     except Exception as e:  # a bug, not bad input: still one line (the traceback with -v), exit 1
         if args.verbose or _RECEIVED:  # with -v the traceback; after a signal, main reports the signal
             raise
         first = str(e).splitlines()[0][:300] if str(e) else ""
+        _close_progress_bars()
         sys.stderr.write(f"{command}: internal error: {type(e).__name__}: {first} (-v shows the traceback)\n")
         return 1
 
