@@ -317,3 +317,15 @@ def kill_a_worker_mid_run(engine, run, ready, what: str, worker: int = 1, timeou
     assert not thread.is_alive() and "value" in result
     assert engine.worker_info()[worker][0] != pid, "the killed actor was restarted"
     return result["value"]
+
+
+def with_changes(doc: dict, changes: dict) -> dict:
+    """``doc`` (nested dicts and lists) with each ``"a.0.b": value`` of ``changes`` set at its dotted path
+    (list indices as digits), in place; returns ``doc``."""
+    for path, value in changes.items():
+        node = doc
+        *parents, last = path.split(".")
+        for key in parents:
+            node = node[int(key)] if isinstance(node, list) else node[key]
+        node[int(last) if isinstance(node, list) else last] = value
+    return doc

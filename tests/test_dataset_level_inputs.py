@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 import pytest
+from helpers import with_changes
 from test_user_inputs import TET, refusal, run, tet_gltf
 
 from neuralao.pipeline.cli.main import main
@@ -24,13 +25,7 @@ def _config(tmp_path: Path, **changes) -> dict:
     (tmp_path / "tet.obj").write_text(TET)
     scene = {"name": "tet", "mesh": "tet.obj", "views": 2, "split": "train"}
     config = {"name": "t", "size": [8, 8], "frames_per_shard": 1, "labels": {"rays": 2}, "scenes": [scene]}
-    for path, value in changes.items():
-        node = config
-        *parents, last = path.split(".")
-        for key in parents:
-            node = node[int(key)] if isinstance(node, list) else node[key]
-        node[int(last) if isinstance(node, list) else last] = value
-    return config
+    return with_changes(config, changes)
 
 
 def _argv(tmp_path: Path, config: dict, out: Path) -> list[str]:

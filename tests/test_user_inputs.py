@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import with_changes
 
 from neuralao.pipeline.cli.main import main
 from neuralao.runtime.foundation.io import read_npz
@@ -79,13 +80,7 @@ def tet_gltf(**changes) -> dict:
         "bufferViews": [{"buffer": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
         "buffers": [{"uri": "data:;base64," + base64.b64encode(blob).decode(), "byteLength": len(blob)}],
     }
-    for path, value in changes.items():
-        node = doc
-        *parents, last = path.split(".")
-        for key in parents:
-            node = node[int(key)] if isinstance(node, list) else node[key]
-        node[int(last) if isinstance(node, list) else last] = value
-    return doc
+    return with_changes(doc, changes)
 
 
 @pytest.fixture(scope="module")
