@@ -10,7 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from neuralao.pipeline.evaluation.categories import EvalSettings, evaluate, write_to_manifests
+from neuralao.pipeline.evaluation.categories import EvalSettings, check_settings, evaluate, write_to_manifests
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.paths import FOLDER
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
@@ -46,6 +46,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     settings = load_settings(EvalSettings, args.config, args.set)
+    try:  # every rule that needs no frame, before any work: a refusal names the config file
+        check_settings(settings)
+    except NeuralaoError as e:
+        raise NeuralaoError(f"config file {args.config}: {e}") from None
     if args.models is None:
         models = [default_export("unet")]
     else:
