@@ -46,11 +46,14 @@ def piece_kinds(level_path: Path, piece_faces: int) -> dict[int, str]:
     return kinds
 
 
-def per_kind(bake: Path, key: str, kinds: dict[int, str], source_faces: dict[int, int]) -> dict[str, dict]:
-    """LOD faces kept and the RMSE table per kind, from the pieces' weighted error sums."""
+def per_kind(
+    bake: Path, keys: dict[str, str], kinds: dict[int, str], source_faces: dict[int, int]
+) -> dict[str, dict]:
+    """LOD faces kept and the RMSE table per kind, from the pieces' weighted error sums (``keys``: the bake
+    log's stage keys)."""
     out: dict[str, dict] = {}
-    lod_files = TaskFiles(bake / "stages" / "lod", key)
-    reference = TaskFiles(bake / "stages" / "lod_reference", key)
+    lod_files = TaskFiles(bake / "stages" / "lod", keys["lod"])
+    reference = TaskFiles(bake / "stages" / "lod_reference", keys["lod_check"])
     for i, kind in kinds.items():
         r = lod_files.get(f"p{i:05d}", LOD_HELD_OUT)
         stems = sorted(f.stem for f in reference.folder.glob(f"p{i:05d}_*.npz"))  # its trace blocks
@@ -151,7 +154,7 @@ def main() -> int:
                 "simplify_tasks": n_simplify,
                 "simplify_largest_s": max(tasks[:n_simplify], default=0.0),
                 "errors": info["errors"]["lod"],
-                "per_kind": per_kind(bake, info["key"], kinds, source_faces),
+                "per_kind": per_kind(bake, info["keys"], kinds, source_faces),
             }
         )
         print(json.dumps(runs[-1], indent=1), flush=True)

@@ -265,13 +265,132 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     assert (out / "level_baked.glb").read_bytes() == first
 
 
-def test_changed_settings_invalidate_stored_stages(baked, tmp_path):
+# The stages a bake stores under OUT/stages/ (each with its own key).
+STORED = {"trace", "solve", "small_decorators", "lod", "lod_check", "blend_check", "decorators"}
+
+
+def _reused(info) -> set[str]:
+    return {st["stage"] for st in info["stages"] if st["reused"]}
+
+
+def _row(info, stage: str) -> dict:
+    return next(st for st in info["stages"] if st["stage"] == stage)
+
+
+def _rerun_and_fresh(baked, tmp_path, overrides: list[str], engine=None) -> tuple[dict, dict]:
+    """The module's bake copied to ``rerun/`` and baked again there with ``overrides``, and a bake with them
+    into the empty ``fresh/``: their logs, the two glTFs checked to be the same bytes."""
+    root, level, cfg, _ = baked
+    shutil.copytree(root / "out", tmp_path / "rerun")
+    s = load_level_settings(cfg, overrides)
+    again = bake_level(level, s, tmp_path / "rerun", engine=engine)
+    fresh = bake_level(level, s, tmp_path / "fresh")
+    assert (tmp_path / "rerun" / "level_baked.glb").read_bytes() == (
+        tmp_path / "fresh" / "level_baked.glb"
+    ).read_bytes()
+    assert again["errors"] == fresh["errors"]
+    return again, fresh
+
+
+def _stage_arrays(out) -> dict[str, np.ndarray]:
+    """Every array of every stored stage and task file but the timings, the tasks counted as done by an
+    earlier run and the LOD's resampling blocks (sized by ``task_rays``; their values reach the LOD's)."""
+    from neuralao.runtime.foundation.io import read_npz
+
+    arrays = {}
+    for f in sorted((out / "stages").rglob("*.npz")):
+        if f.parent.name != "lod_resample":
+            for k, v in read_npz(f).items():
+                if not k.startswith("seconds_") and k not in ("reused_tasks", "resample_tasks"):
+                    arrays[f"{f.relative_to(out / 'stages').with_suffix('')}/{k}"] = v
+    return arrays
+
+
+def test_every_setting_keys_the_stages_that_read_it_or_none():
+    """Each setting is read by a stage's key (a section's name covers its keys) or named as changing no
+    result; every name the keys read is a setting, and each stage's key reads only stages before it."""
+    from neuralao.pipeline.bakes.level import STAGE_INPUTS, UNKEYED, setting_value
+    from neuralao.pipeline.bakes.level_settings import LevelBakeSettings
+    from neuralao.runtime.foundation.settings import settings_to_dict
+
+    def leaves(d, prefix=""):
+        for k, v in d.items():
+            yield from leaves(v, f"{prefix}{k}.") if isinstance(v, dict) else [f"{prefix}{k}"]
+
+    values = settings_to_dict(LevelBakeSettings())
+    keyed = {name for reads, _ in STAGE_INPUTS.values() for name in reads}
+    for name in keyed | set(UNKEYED):
+        setting_value(values, name)  # a KeyError names one that is not a setting
+    for name in leaves(values):
+        hits = [k for k in keyed if name == k or name.startswith(k + ".")] + [u for u in UNKEYED if u == name]
+        assert hits, f"{name} is in no stage's key and not named as unkeyed"
+        assert name not in UNKEYED or len(hits) == 1, name
+    stages = list(STAGE_INPUTS)
+    for i, (_, after) in enumerate(STAGE_INPUTS.values()):
+        assert set(after) <= set(stages[:i]), stages[i]
+
+
+def test_a_changed_lod_setting_redoes_only_the_lod(baked, tmp_path):
+    """A rerun with another LOD reduction reuses the trace, the solve and every other stage that does not
+    read the LOD (no task of theirs runs), redoes the LOD and its check, and writes the bytes of a fresh bake
+    with that setting."""
+    again, _ = _rerun_and_fresh(baked, tmp_path, ["lod.target_reduction=0.4"])
+    assert _reused(again) == STORED - {"lod", "lod_check"}
+    assert "tasks" not in _row(again, "trace") and "tasks" not in _row(again, "solve")
+    assert _row(again, "lod")["tasks"] > 0
+
+
+def test_changed_subdomains_redo_the_solve_on_the_same_trace(baked, tmp_path):
+    """``trace.subdomains`` is read by the solve, not the trace: a rerun with the terrain's component solved
+    in 4 subdomains reuses the trace blocks, redoes the solve and the stages that read its values, and
+    writes the bytes of a fresh bake with those settings."""
+    again, _ = _rerun_and_fresh(baked, tmp_path, ["trace.subdomains=4", "trace.component_vertices=200"])
+    assert _reused(again) == {"trace", "decorators"}
+    assert _row(again, "solve")["tasks"] > 4 * 5  # subdomain tasks, >= 5 iterations
+
+
+def test_changed_rays_redo_the_trace_and_every_stage_after_it(baked, tmp_path):
+    """``trace.rays`` is read by the trace (and the trees' gold standard): a rerun redoes every stored stage
+    and writes the bytes of a fresh bake."""
+    again, _ = _rerun_and_fresh(baked, tmp_path, ["trace.rays=48"])
+    assert not _reused(again) & STORED
+    assert _row(again, "trace")["tasks"] > 0 and _row(again, "solve")["tasks"] > 0
+
+
+def test_scheduling_settings_change_no_result_and_a_rerun_reuses_every_stage(baked, tmp_path):
+    """``workers``, ``task_rays`` and the engine's threads schedule the tasks and change no result: a bake
+    with other values (smaller resampling tasks, three at once, the trees' and the blend check's traces on
+    three threads) stores the same arrays in every stage and task file, the same error tables and glTF
+    bytes; and a rerun with them, on an engine of two-thread tasks, reuses every stage."""
+    from neuralao.pipeline.engines.engine import LocalEngine
+
+    root, level, cfg, info = baked
+    overrides = ["workers=3", "task_rays=4096"]
+    again, fresh = _rerun_and_fresh(baked, tmp_path, overrides, engine=LocalEngine(workers=3, threads=2))
+    assert _reused(again) == STORED and again["keys"] == info["keys"]
+    assert (tmp_path / "fresh" / "level_baked.glb").read_bytes() == (
+        root / "out" / "level_baked.glb"
+    ).read_bytes()
+    assert fresh["errors"] == info["errors"]
+    assert (
+        fresh["tasks_at_once"] == 3
+        and _row(fresh, "lod")["resample_tasks"] > _row(info, "lod")["resample_tasks"]
+    )
+    mine, theirs = _stage_arrays(tmp_path / "fresh"), _stage_arrays(root / "out")
+    assert mine.keys() == theirs.keys() and "decorators/coefficients" in mine
+    for k, v in theirs.items():
+        np.testing.assert_array_equal(mine[k], v, err_msg=k)
+
+
+def test_a_changed_blend_redoes_the_stages_that_read_it(baked, tmp_path):
+    """Another blend weight reuses the trace and the solve (they store both distances) and redoes the
+    stages that blend them; the baked AO is the new blend."""
     root, level, cfg, _ = baked
     out = tmp_path / "out"
     shutil.copytree(root / "out", out)
     s = load_level_settings(cfg, ["blend.long_weight=0.5", "lod.enabled=false"])
     info = bake_level(level, s, out)
-    assert not any(st["reused"] for st in info["stages"])
+    assert _reused(info) == {"trace", "solve"}
     doc, get = read_gltf_json(out / "level_baked.glb")
     terrain = next(n for n in doc["nodes"] if n["name"] == "terrain")
     a = doc["meshes"][terrain["mesh"]]["primitives"][0]["attributes"]
@@ -279,6 +398,32 @@ def test_changed_settings_invalidate_stored_stages(baked, tmp_path):
         get(a["_AO"]), np.clip(0.5 * get(a["_AO_LONG"]) + 0.5 * get(a["_AO_SHORT"]), 0, 1), atol=1e-6
     )
     assert not any(n.get("extras", {}).get("lod") for n in doc["nodes"])
+
+
+def test_a_rerun_killed_in_a_redone_stage_never_reuses_its_stale_result(baked, tmp_path, monkeypatch):
+    """A rerun with another solve killed after it rewrote the solve's first piece: the folder keeps no stored
+    solve that would vouch for its files, so a bake with the first settings solves again and writes the
+    first bake's bytes."""
+    from neuralao.pipeline.bakes import level as level_bake
+
+    class Killed(Exception):
+        pass
+
+    def killed(*args, **kwargs):
+        for _ in solve_stage(*args, **kwargs):
+            raise Killed  # after the piece's file is written
+
+    root, level, cfg, _ = baked
+    out = tmp_path / "out"
+    shutil.copytree(root / "out", out)
+    solve_stage = level_bake.solve_stage
+    monkeypatch.setattr(level_bake, "solve_stage", killed)
+    with pytest.raises(Killed):
+        bake_level(level, load_level_settings(cfg, ["trace.alpha=2.0"]), out)
+    monkeypatch.undo()
+    again = bake_level(level, load_level_settings(cfg), out)
+    assert "solve" not in _reused(again) and _row(again, "solve")["tasks"] == 1
+    assert (out / "level_baked.glb").read_bytes() == (root / "out" / "level_baked.glb").read_bytes()
 
 
 def test_remap_curve_is_applied_after_the_blend(baked, tmp_path):

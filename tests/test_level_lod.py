@@ -160,16 +160,16 @@ def test_the_lod_error_sums_are_the_whole_pieces_gold_standard(tiny):
     )
     stages = root / "simplified" / "stages"
     lod_files, reference = (
-        TaskFiles(stages / "lod", info["key"]),
-        TaskFiles(stages / "lod_reference", info["key"]),
+        TaskFiles(stages / "lod", info["keys"]["lod"]),
+        TaskFiles(stages / "lod_reference", info["keys"]["lod_check"]),
     )
     radius, checked = float(info["errors"]["lod"]["radius"]), 0
     for p in pieces:
         r = lod_files.get(f"p{p.index:05d}", LOD_HELD_OUT)
         if len(r["hold_points"]) == 0:
             continue
-        _, samples = cached_piece(info["key"], level, index, p, rule)
-        ao, valid = piece_trace(TaskFiles(stages / "trace", info["key"]), p, t.block_samples)
+        _, samples = cached_piece(info["keys"]["geometry"], level, index, p, rule)
+        ao, valid = piece_trace(TaskFiles(stages / "trace", info["keys"]["trace"]), p, t.block_samples)
         f = blend(ao[:, 0], ao[:, 1], s.blend).astype(np.float64)[valid]
         pts, nrm, sw = samples.points[valid], samples.normals[valid], samples.weights[valid]
         sums = np.zeros((len(r["hold_points"]), 2))

@@ -26,8 +26,9 @@ Embree, stage by stage (the rows of their Table 1; the bake log times each one):
 Every heavy stage is tasks of an engine (``engine``: None runs them here); the driver holds the level's
 meshes and instance transforms, one piece's arrays at a time and one float per opaque vertex (the baked AO
 the resampling reads), never the flattened level. Each task's result is written under ``OUT/stages/`` as it
-arrives, stamped with a hash of the level's bytes and the settings: a killed bake resumes where it stopped
-and ends with the same bytes; changed settings recompute.
+arrives, stamped with its stage's key (:data:`STAGE_INPUTS`: the level's bytes, the settings the stage
+reads and the keys of the stages it reads): a killed bake resumes where it stopped and ends with the same
+bytes; a changed setting redoes the stages that read it and those after them, and reuses the others.
 """
 
 from __future__ import annotations
@@ -110,14 +111,11 @@ log = logging.getLogger(__name__)
 # --------------------------------------------------------------------------- bake log and stages
 
 
-# --------------------------------------------------------------------------- bake log and stages
-
-
 class BakeLog:
-    """Timed stages, each stored (or not) under OUT/stages/ with the bake's key."""
+    """Timed stages, each stored (or not) under OUT/stages/ with its own key (:func:`stage_keys`)."""
 
-    def __init__(self, out: Path, key: str):
-        self.out, self.key = out, key
+    def __init__(self, out: Path, keys: dict[str, str]):
+        self.out, self.keys = out, keys
         self.stages: list[dict[str, Any]] = []
         self.runner = None  # the engine whose task seconds each stage's row takes (Engine.task_seconds)
         self.task_seconds: dict[str, list[float]] = {}
@@ -144,18 +142,24 @@ class BakeLog:
         return result
 
     def stored(self, name: str, description: str, fn, **counts) -> dict[str, np.ndarray]:
-        """``fn() -> dict of arrays``, stored as stages/NAME.npz; reused when its key matches."""
-        path = self.dir / f"{name}.npz"
+        """``fn() -> dict of arrays``, stored as stages/NAME.npz with the stage's key; reused when the key
+        matches. One of another key goes before ``fn`` runs: the stage's task files change from then on,
+        and a run killed midway must leave no stored stage that would vouch for them."""
+        path, key = self.dir / f"{name}.npz", self.keys[name]
         _reset_peak_rss()
         t0, c0 = time.perf_counter(), _cpu_seconds()
         self._begin()
         if path.is_file():
-            data = read_npz(path)
-            if str(data.pop("_key", "")) == self.key:
+            try:
+                data = read_npz(path)
+            except NeuralaoError:
+                data = {}  # unreadable: made again
+            if str(data.pop("_key", "")) == key:
                 self._record(name, description, t0, c0, True, counts)
                 return data
+            path.unlink()
         data = fn()
-        write_npz(path, _key=np.array(self.key), **data)
+        write_npz(path, _key=np.array(key), **data)
         self._record(name, description, t0, c0, False, counts)
 
         shutil.rmtree(self.dir / f"{name}.parts", ignore_errors=True)  # its task results (parts)
@@ -245,8 +249,51 @@ def _cpu_seconds() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def level_key(path: Path, settings: LevelBakeSettings) -> str:
-    """Hash of the level's bytes (the .gltf / .glb and every external buffer) and the settings."""
+# The stage keys' version: a folder baked with keys of another version is baked again, never misread.
+KEY_VERSION = 2
+
+# The settings of the trace's rays (the opaque level's and the trees' gold standard's).
+_RAYS = (
+    "trace.rays",
+    "trace.half_distance_short",
+    "trace.half_distance_long",
+    "trace.max_distance",
+    "trace.backface_threshold",
+    "trace.bvh",
+)
+
+# What each stage's result is made from besides the level's bytes: the settings it reads that the stages
+# it reads have not keyed already (dotted names; a section's name stands for all of its keys), and those
+# stages. A stage's key hashes the level's bytes, these settings and those stages' keys, so a changed
+# setting redoes the stages that read it and every stage after them, and a stored stage whose key is
+# unchanged is reused. The geometry, samples and foliage are made again by every run: their keys only chain.
+STAGE_INPUTS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "geometry": (("piece_faces",), ()),
+    "samples": (
+        ("trace.samples_per_vertex", "trace.min_samples_per_face", "trace.samples_per_face_cap", "seed"),
+        ("geometry",),
+    ),
+    "foliage": (("foliage",), ()),
+    "trace": ((*_RAYS, "trace.block_samples"), ("samples", "foliage")),
+    "solve": (("trace.alpha", "trace.solver", "trace.component_vertices", "trace.subdomains"), ("trace",)),
+    "small_decorators": (("blend", "grass"), ("solve",)),
+    "lod": (("blend", "lod"), ("samples", "solve")),
+    "lod_check": ((), ("trace", "lod")),
+    # the blend's remap is not checked: the check compares the blend before it
+    "blend_check": (("blend.long_weight",), ("trace", "solve")),
+    # the trees are traced on their own (their gold scene, their samples), the level's stages unread
+    "decorators": ((*_RAYS, "trace.alpha", "seed", "blend", "decorators"), ("foliage",)),
+}
+
+# Settings no stage's result depends on (each tested: two values bake the same bytes): tasks at once and
+# rays per resampling task (scheduling), the baked level's file name (the output is written by every run)
+# and whether the checks run (each check is a stage of its own).
+UNKEYED = ("workers", "task_rays", "output", "error_tables")
+
+
+def stage_keys(path: Path, settings: LevelBakeSettings) -> dict[str, str]:
+    """Each stage's key (:data:`STAGE_INPUTS`): a hash of the level's bytes (the .gltf / .glb and every
+    external buffer), the settings the stage reads and the keys of the stages whose results it reads."""
 
     files = [sha256_file(path)]
     if path.suffix.lower() == ".gltf":
@@ -258,9 +305,27 @@ def level_key(path: Path, settings: LevelBakeSettings) -> str:
                     files.append(sha256_file(path.parent / uri))
         except (NeuralaoError, AttributeError, TypeError):
             pass  # read_level reports it
-    # Whether the error tables are made changes nothing a stage stores: a rerun with them reuses the stages.
-    keyed = {k: v for k, v in settings_to_dict(settings).items() if k != "error_tables"}
-    return sha256_json({"files": files, "settings": keyed, "version": 1})
+    values = settings_to_dict(settings)
+    keys: dict[str, str] = {}
+    for stage, (reads, after) in STAGE_INPUTS.items():
+        keyed = {name: setting_value(values, name) for name in reads}
+        keys[stage] = sha256_json(
+            {
+                "stage": stage,
+                "files": files,
+                "settings": keyed,
+                "after": [keys[a] for a in after],
+                "version": KEY_VERSION,
+            }
+        )
+    return keys
+
+
+def setting_value(values: dict[str, Any], name: str) -> Any:
+    """The value of the dotted setting ``name`` (a section: all of it) in ``values`` (settings_to_dict's)."""
+    for part in name.split("."):
+        values = values[part]
+    return values
 
 
 # --------------------------------------------------------------------------- the bake
@@ -279,10 +344,10 @@ def bake_level(
     if out.exists() and not out.is_dir():
         raise NeuralaoError(f"--out {out} is a file; a level bake writes a folder")
     t_start, c_start = time.perf_counter(), _cpu_seconds()
-    key = level_key(path, settings) if path.is_file() else ""
+    keys = stage_keys(path, settings) if path.is_file() else dict.fromkeys(STAGE_INPUTS, "")
     level = read_level(path)
     out.mkdir(parents=True, exist_ok=True)
-    blog = BakeLog(out, key)
+    blog = BakeLog(out, keys)
     s = settings
     index = blog.timed("geometry", "Process geometry", lambda: index_level(level, s.piece_faces))
     blog.note(
@@ -293,7 +358,7 @@ def bake_level(
         pieces=len(index.pieces),
     )
     t = s.trace
-    light = pieces_context(key, level, index)
+    light = pieces_context(keys["geometry"], level, index)
     # The samples' two passes over the pieces' sample ranges are a task per range each.
     # Locally, s.workers tasks at a time on threads, each tracing on one (as Ray's single-CPU actors): no
     # task's numpy waits for its own tracing threads, and the stages' tasks fill the cores.
@@ -326,7 +391,7 @@ def bake_level(
             lambda: _shrubs_and_foliage(level, frame, s),
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
-    ctx = opaque_context(key, level, index, settings_here, foliage, t.bvh)
+    ctx = opaque_context(keys["geometry"], level, index, settings_here, foliage, t.bvh, keys["foliage"])
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:
@@ -336,7 +401,7 @@ def bake_level(
     else:
         runner = engine
     blog.runner = runner  # each stage's row counts its tasks' seconds
-    trace_files = TaskFiles(blog.dir / "trace", key)
+    trace_files = TaskFiles(blog.dir / "trace", keys["trace"])
     traced = blog.stored(
         "trace",
         "Ray trace samples (2 distances, foliage)",
@@ -356,7 +421,7 @@ def bake_level(
         samples=total_samples,
         rays=total_samples * s.trace.rays,
     )
-    solve_files = TaskFiles(blog.dir / "solve", key)
+    solve_files = TaskFiles(blog.dir / "solve", keys["solve"])
     # What every piece's least squares takes from the whole level (it is one block of the level's).
     weight = float(traced["valid_weight"])
     prior = traced["valid_weighted"] / weight if weight > 0 else np.ones(2)
@@ -383,14 +448,23 @@ def bake_level(
             level, Resampler(runner, ctx, blog.parts("small_decorators"), task_rays(s, runner)), values, s
         ),
     )
-    lod_files = TaskFiles(blog.dir / "lod", key) if s.lod.enabled else None
+    lod_files = TaskFiles(blog.dir / "lod", keys["lod"]) if s.lod.enabled else None
     lod = None
     if lod_files is not None:
         lod = blog.stored(
             "lod",
             "LOD: simplify, resample, least squares solve",
             lambda: _lod_stage(
-                runner, (ctx, light), level, index, pieces, rule, values, trace_files, lod_files, s, progress
+                runner,
+                (ctx, light, pieces_context(keys["geometry"], level, index, heavy=True)),
+                level,
+                index,
+                pieces,
+                rule,
+                values,
+                lod_files,
+                s,
+                progress,
             ),
         )
         blog.note(
@@ -412,7 +486,14 @@ def bake_level(
             "lod_check",
             "LOD vs traced samples at held-out points (error table)",
             lambda: _lod_check(
-                runner, light, pieces, rule, lod_files, trace_files, float(lod["radius"]), s, progress
+                runner,
+                light,
+                pieces,
+                rule,
+                (lod_files, trace_files, TaskFiles(blog.dir / "lod_reference", keys["lod_check"])),
+                float(lod["radius"]),
+                s,
+                progress,
             ),
         )
     if s.error_tables:
@@ -432,7 +513,7 @@ def bake_level(
         "decorators",
         "Trees: local AO, in-place gold standard, eq. 3 fits",
         lambda: bake_decorators(
-            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), key, shrubs
+            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), keys, shrubs
         ),
         instances=level.counts().get("tree_instances", 0),
     )
@@ -464,7 +545,7 @@ def bake_level(
     counts = level.counts()
     info = {
         "level": str(path),
-        "key": key,
+        "keys": keys,
         "settings": settings_to_dict(s),
         "stages": blog.stages,
         "seconds_total": time.perf_counter() - t_start,
@@ -544,12 +625,13 @@ def _final_values(solve_files: TaskFiles, pieces, index, level, s: LevelBakeSett
     return values
 
 
-def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files, lod_files, s, progress):
+def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, s, progress):
     """LOD 1 of the level's static instances: one task, one simplification of them all, split by piece as
     it arrives; or with ``lod.max_error`` a task per piece, each simplified alone to that shared error.
     Then per piece its LOD resampled and solved, and its held-out points for the error table (a task
-    each). The resampling radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it."""
-    ctx, light = contexts
+    each). The resampling radius is 1.5 x the LOD's median edge unless ``lod.radius`` sets it.
+    ``contexts``: the opaque labeller's, the level's pieces' and the one simplification's."""
+    ctx, light, simplify_ctx = contexts
     t0 = time.perf_counter()
     mesh_files = lod_mesh_files(lod_files)
     stems = {piece_stem(p) for p in pieces} | {"radius"}
@@ -583,7 +665,6 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, trace_files
         shutil.rmtree(tile_files.folder, ignore_errors=True)  # joined into the pieces' meshes
     elif not have_meshes:
         # A heavy context: its worker drops the opaque BVH while it simplifies the flattened level.
-        simplify_ctx = pieces_context(lod_files.key, level, index, heavy=True)
         ((_, result),) = list(runner.map([Task(simplify_ctx, simplify_level, (s.lod.target_reduction,))]))
         for stem, part in split_lod(result, pieces):
             mesh_files.put(stem, part)
@@ -645,14 +726,13 @@ def _lod_result(lod_files: TaskFiles, piece, keys) -> dict[str, np.ndarray]:
     return r
 
 
-def _lod_check(
-    runner, light, pieces, rule, lod_files: TaskFiles, trace_files: TaskFiles, radius: float, s, progress
-) -> dict[str, np.ndarray]:
+def _lod_check(runner, light, pieces, rule, files, radius: float, s, progress) -> dict[str, np.ndarray]:
     """The LOD's error table: at each piece's held-out LOD points, its two AOs (resampled at the LOD's
     vertices, least squares over resampled samples) against the gold standard there, the traced samples
     within the resampling sphere (a task per trace block of a piece with held-out points); each piece's
-    error sums (:func:`lod_piece_errors`) added in piece order. Writes nothing into the baked level."""
-    reference_files = TaskFiles(lod_files.folder.parent / "lod_reference", lod_files.key)
+    error sums (:func:`lod_piece_errors`) added in piece order. Writes nothing into the baked level.
+    ``files``: the LOD's results, the trace's blocks and this stage's own (the gold standard's sums)."""
+    lod_files, trace_files, reference_files = files
     jobs = lod_reference_jobs(light, pieces, rule, lod_files, trace_files, radius, s)
     for _ in run_to_files(reference_files, runner, jobs, "lod reference", progress, keys=()):
         pass  # read piece by piece below

@@ -177,7 +177,7 @@ def bake_decorators(
     runner,
     local: bool,
     store=None,
-    key: str = "",
+    keys: dict[str, str] | None = None,
     shrubs: tuple | None = None,
 ) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
@@ -186,7 +186,9 @@ def bake_decorators(
     ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
     ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
     (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
-    ``diagonal``: the opaque level's (the rays' length). ``shrubs``: :func:`shrub_boxes`, if made already."""
+    ``diagonal``: the opaque level's (the rays' length). ``keys``: the bake's stage keys
+    (:func:`neuralao.pipeline.bakes.level.stage_keys`: the stage's own names its results, the geometry's
+    the level its workers hold). ``shrubs``: :func:`shrub_boxes`, if made already."""
 
     trees = level.nodes_with("tree")
     if not trees:
@@ -201,7 +203,11 @@ def bake_decorators(
         if s.foliage.enabled
         else None
     )
-    ctx = gold_context(key, level, settings, gold_foliage, s.trace.bvh)
+    keys = keys or {}
+    key = keys.get("decorators", "")
+    ctx = gold_context(
+        keys.get("geometry", ""), level, settings, gold_foliage, s.trace.bvh, keys.get("foliage", "")
+    )
     t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
         runner.hold(ctx.key, ctx.build(ctx.value()))

@@ -137,16 +137,17 @@ class LevelBakeSettings:
     lod: LodSettings = field(default_factory=LodSettings)
     # Seed of every sample position and ray direction.
     seed: int = 0
-    # Tasks a local bake runs at once, on threads, each tracing on one (on Ray: an actor's --ray-threads).
+    # Tasks a local bake runs at once, on threads, each tracing on one (on Ray: an actor's --ray-threads):
+    # scheduling only, never the result (a rerun with another value reuses every stage).
     workers: int = 2
     # Rays per resampling task (grass, shrubs, the LOD) and tracing thread of the engine's workers:
-    # scheduling only, never the result.
+    # scheduling only, never the result (a rerun with another value reuses every stage).
     task_rays: int = 1 << 20
     # Faces per piece: the static instances are cut into runs of whole instances of about this many
     # faces (a bigger instance is a piece of its own); the solve, the LOD and the output are one task
     # per piece, and the driver holds one piece at a time.
     piece_faces: int = 262144
-    # File name of the baked level inside --out (.glb or .gltf).
+    # File name of the baked level inside --out (.glb or .gltf; written by every run, in no stage's key).
     output: str = "level_baked.glb"
     # Make the error tables (the LOD's at held-out points, the two-distance blend's against a 4x-ray
     # reference): checks of the bake that write nothing into the baked level. A production bake on a farm

@@ -130,22 +130,39 @@ def worker_settings(settings: LabelSettings, engine) -> LabelSettings:
 
 
 def opaque_context(
-    key: str, level: Level, index: PieceIndex, settings: LabelSettings, foliage, bvh: str = "fast"
+    key: str,
+    level: Level,
+    index: PieceIndex,
+    settings: LabelSettings,
+    foliage,
+    bvh: str = "fast",
+    foliage_key: str = "",
 ) -> Context:
     """The engine context of the opaque labeller: workers build it from the level's meshes and transforms
-    (heavy: a worker holds no other big state beside it); ``bvh``: its Embree scene (``Labeller.bvh``)."""
+    (heavy: a worker holds no other big state beside it); ``bvh``: its Embree scene (``Labeller.bvh``).
+    ``key``: the level's and its pieces' (:func:`shared_level`); ``foliage_key``: a hash of what made
+    ``foliage``."""
     payload = (*shared_level(key, level, index), settings, bvh, foliage, key)
-    return Context(f"level-trace/{key}/{settings.workers}", _opaque_state, payload, heavy=True)
+    return Context(
+        f"level-trace/{content_key(key, settings, bvh, foliage_key)}", _opaque_state, payload, heavy=True
+    )
 
 
-def gold_context(key: str, level: Level, settings: LabelSettings, foliage, bvh: str = "fast") -> Context:
+def gold_context(
+    key: str, level: Level, settings: LabelSettings, foliage, bvh: str = "fast", foliage_key: str = ""
+) -> Context:
+    """The engine context of the trees' gold standard: the opaque level with every tree opaque (keys as
+    :func:`opaque_context`'s)."""
     payload = (shared_level(key, level, None)[0], settings, bvh, foliage)
-    return Context(f"level-gold/{key}/{settings.workers}", _gold_state, payload, heavy=True)
+    return Context(
+        f"level-gold/{content_key(key, settings, bvh, foliage_key)}", _gold_state, payload, heavy=True
+    )
 
 
 def shared_level(key: str, level: Level, index: PieceIndex | None) -> tuple[Shared, Shared]:
     """The level and its pieces as items of the level's contexts' payloads: each travels to a worker once
-    and is held once there, whichever of the contexts it builds (``key``: the bake's)."""
+    and is held once there, whichever of the contexts it builds (``key``: a hash of the level's bytes and
+    its cut into pieces, the bake's geometry key)."""
     return Shared(f"level/{key}", level), Shared(f"pieces/{key}", index)
 
 
