@@ -51,7 +51,8 @@ Public API (stable; ``export/mlp.py`` and ``export/unet.py`` call it):
     generate_compute(model, precision="fp32", kind="unet", local_size=None, conv_block=None,
                      dialect="glsl430"|"wgsl"|"vulkan", preset="gpu"|"cpu", fuse=None) -> ComputeProgram
         (PRESETS: gpu = 1 texel x 1 layer per invocation, 8x8 groups, cheap passes fused; cpu = llvmpipe's
-        8x4x2 blocks, no fusion; fp16 = RGBA16F storage + fp16 conv accumulation where the compiler has it)
+        8x4x2 blocks, no fusion; fp16 = RGBA16F storage but for the input and what is computed from it
+        pixel by pixel, fp16 conv products summed in fp32 where the compiler has a half type)
     write_compute_export(program, out_dir, validate=True, cross=False) -> Path
         (cross: + HLSL, MSL, each pass's names and registers in its "hlsl" / "msl" entry; a Vulkan
         program: + <pass>.spv)

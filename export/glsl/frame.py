@@ -17,7 +17,8 @@ A frame of a U-Net export that declares ``internal_height`` (the shipped ones), 
 
 No pass reads a full-resolution copy of the G-buffer: the passes read the engine's linear depth and
 normal and reconstruct camera-space positions from depth, the pixel and the projection (as XeGTAO does).
-At fp16 the full-resolution AO targets are R16F (WGSL: r32float, see :data:`AO_FORMATS`).
+At fp16 the AO target is R16F (WGSL: r32float, see :data:`AO_FORMATS`); a hybrid's GTAO targets, the
+network's input, stay R32F.
 
 Each pass is a :class:`FramePass` (template, fields, textures); :func:`_write_pass` is the one writer,
 filling :mod:`.frame_templates`. The maths are those of the Python references the shipped models were
@@ -71,7 +72,9 @@ FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f", "R16F": "r16f"}
 # program and dialect. AO lies in [0, 1], where half floats step by at most 2^-11, so fp16 stores them
 # R16F: GL's r16f and Vulkan's r16f (a storage image with shaderStorageImageExtendedFormats) are storage
 # formats; core WebGPU has no r16float storage texture, so WGSL keeps r32float. Depth-derived data (the
-# point-sampled position, the mean depth) stays 32-bit at either precision.
+# point-sampled position) stays 32-bit at either precision, and so does a hybrid's GTAO (gtao_raw and
+# gtao), the network's input: a trained correction moves by up to 20x a change of its GTAO input, and
+# R16F's rounding of GTAO moved the default's AO by 0.01 (0.001 with R32F GTAO).
 AO_FORMATS = {"fp32": "R32F", "fp16": "R16F"}
 WGSL_AO_FORMAT_NOTE = (
     "WGSL: r16float is not a storage texture format in core WebGPU, so the AO targets stay r32float at fp16"
@@ -201,8 +204,8 @@ def frame_passes(
     }
     passes = []
     if hybrid:
-        tex["gtao_raw"] = _ao_texture("gtao_raw", precision, dialect, "GTAO before its blur")
-        tex["gtao"] = _ao_texture("gtao", precision, dialect, "GTAO, 1 on background")
+        tex["gtao_raw"] = FrameTexture("gtao_raw", "W", "H", 1, "R32F", "GTAO before its blur")
+        tex["gtao"] = FrameTexture("gtao", "W", "H", 1, "R32F", "GTAO, 1 on background")
         passes.append(
             FramePass(
                 "f_gtao",

@@ -2640,8 +2640,27 @@ def _write_compute_pass(p: Pass, precision: str, local_size: tuple[int, int], d:
 
 
 def _fp32_output(p: Pass) -> bool:
-    """The pass writes an RGBA32F texture whatever the precision: a cropped output, a scalar input."""
-    return p.kind in FP32_KINDS or p.output.base == "raw"
+    """The pass writes an RGBA32F texture whatever the precision: a cropped output, a scalar input, a
+    texture computed from the input pixel by pixel (:func:`_mark_input_derived`)."""
+    return p.kind in FP32_KINDS or p.output.base == "raw" or bool(p.fields.get("input_derived"))
+
+
+# Passes that combine values of one pixel only (a 1x1 conv too): what they compute from the input is
+# still the input, at its precision.
+PER_PIXEL_KINDS = ("pad", "spatial_pad", "crop", "uniform", "elementwise", "binary", "pointwise", "concat")
+
+
+def _mark_input_derived(table) -> None:
+    """Mark (``fields["input_derived"]``) each pass that computes its output from the graph's inputs pixel
+    by pixel, through such passes only: the padded input, log depth, the radius channel. At fp16 they
+    keep RGBA32F, as the input does: neighbours' depths differ by far less than half a float's rounding
+    of the depth itself (2^-11 relative), and the first spatial conv reads exactly those differences."""
+    derived = {t.ident for p in table.passes for t in p.inputs if t.base == "raw"}
+    for p in table.passes:
+        per_pixel = p.kind in PER_PIXEL_KINDS or (p.kind == "conv" and tuple(p.fields["kernel"]) == (1, 1))
+        if per_pixel and all(t.ident in derived for t in p.inputs):
+            p.fields["input_derived"] = True
+            derived.add(p.output.ident)
 
 
 def _flips(p: Pass) -> bool:
@@ -3099,6 +3118,7 @@ def generate_compute(
             p.fields["block"] = _conv_block(conv_block, p.output.layers)
     multiple = _pad_multiple(table)
     fused = _fuse(table, multiple) if fuse else []
+    _mark_input_derived(table)
     if multiple > 1 and table.global_reads:
         raise NeuralaoError(
             f"{table.global_reads[0]}: a global pool over a dynamic size needs pad_multiple 1 (the padding "
@@ -3368,7 +3388,7 @@ def _uniform_entry(vi: onnx.ValueInfoProto, p: Pass, metadata: dict[str, str]) -
 def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, multiple, local_size) -> dict:
     internal = "RGBA16F" if precision == "fp16" else "RGBA32F"
     textures = {}
-    fp32 = {p.output.ident for p in table.passes if p.kind in FP32_KINDS}
+    fp32 = {p.output.ident for p in table.passes if _fp32_output(p)}
     for t in table.textures:
         raw = t.base == "raw"
         fmt = "RGBA32F" if raw or t.ident in fp32 else internal
@@ -3402,6 +3422,7 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
                 "binding": 0,
                 "as": "image2DArray writeonly, layered",
                 "format": textures[p.output.ident]["format"].lower(),
+                "fp16_format": "rgba32f" if _fp32_output(p) else "rgba16f",
             },
             "local_size": [local_size[0], local_size[1], 1],
             "block": list(block),
@@ -3487,10 +3508,10 @@ def _compute_manifest(table, graph, outputs, ranges, blob, precision, kind, mult
             "rows": "texel (x, y) = tensor[..., y, x]: row 0 is the tensor's first (top) row",
             "arithmetic": "fp32"
             if precision == "fp32"
-            else "dense conv accumulation in fp16 where the compiler has a half type (GL, Vulkan: "
-            "GL_EXT_shader_explicit_arithmetic_types_float16 or GL_AMD_gpu_shader_half_float, chosen by "
-            "the preprocessor, else fp32; WGSL: enable f16, the device feature shader-f16); epilogues "
-            "and other passes in fp32",
+            else "dense conv products in fp16 where the compiler has a half type, summed in fp32 (GL, "
+            "Vulkan: GL_EXT_shader_explicit_arithmetic_types_float16 or GL_AMD_gpu_shader_half_float, "
+            "chosen by the preprocessor, else fp32; WGSL: enable f16, the device feature shader-f16); "
+            "epilogues and other passes in fp32",
         },
         "input": {
             "onnx_name": table.image_input.name,

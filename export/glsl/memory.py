@@ -39,7 +39,8 @@ from fractions import Fraction
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Pass kinds whose output stays RGBA32F when the program stores textures as fp16: the cropped outputs
-# and the scalar inputs (an engine's radius keeps its float32 value). The raw input is RGBA32F too.
+# and the scalar inputs (an engine's radius keeps its float32 value). The raw input is RGBA32F too, and so
+# is what a program computes from it pixel by pixel (a pass's ``output.fp16_format`` says which).
 FP32_KINDS = ("crop", "uniform")
 
 # The frame's textures that are the engine's G-buffer (the frame section's inputs the engine writes each
@@ -50,9 +51,10 @@ ENGINE_TEXTURES = ("depth", "normal")
 TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2}
 # Programs without frame passes (the fragment steps of internal/): at fp16 the one-channel AO targets
 # around the network (full resolution and the network's AO) are R16F: AO lies in [0, 1], where half floats
-# step by at most 2^-11. The point-sampled G-buffer stays RGBA32F (camera-space positions need float32's
-# range and precision). The frame passes (frame.py) give each of their own targets' format at each
-# precision in the frame section (``formats``; at fp16 the full-resolution AO targets are R16F but in WGSL).
+# step by at most 2^-11. The point-sampled G-buffer stays
+# RGBA32F (camera-space positions need float32's range and precision). The frame passes (frame.py) give
+# each of their own targets' format at each precision in the frame section (``formats``; at fp16 the AO
+# target is R16F but in WGSL, a hybrid's GTAO, the network's input, R32F).
 FP16_FRAME_FORMATS = {"R32F": "R16F"}
 
 # The frame whose texture sizes order the slot planner, and the frames the manifest gives figures for.
@@ -350,7 +352,12 @@ def _frame_steps(hybrid: bool, net_in: str, net_out: str) -> tuple[list[Step], l
 
 def _network_textures(manifest: Mapping) -> dict[str, dict]:
     """The program's textures with their sizes in the network's symbols and formats at each precision."""
-    fp32_outputs = {p["output"]["texture"] for p in manifest["passes"] if p["kind"] in FP32_KINDS}
+    fp32_outputs = {
+        p["output"]["texture"]
+        for p in manifest["passes"]
+        if p["output"].get("fp16_format", "rgba16f" if p["kind"] not in FP32_KINDS else "rgba32f")
+        == "rgba32f"
+    }
     out = {}
     for ident, t in manifest["textures"].items():
         raw = t["width"]["of"] == "W"
@@ -484,12 +491,13 @@ def memory_plan(manifest: Mapping, width: int, height: int, precision: str = "fp
     """Texture memory of a compute manifest's frame at width x height pixels (the engine's G-buffer).
 
     precision : "fp32" (every texture as the manifest gives it at fp32) or "fp16" (the network's
-    textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, outputs and
-    scalar textures RGBA32F; a program with frame passes: the frame's own targets as its fp16 passes
-    write them, the frame section's ``formats``: full-resolution AO targets R16F (WGSL: R32F), the
-    depth-derived ones RGBA32F; else the fragment steps' AO targets R16F, their
-    point-sampled G-buffer RGBA32F). Whatever the manifest's own precision. Raises NeuralaoError where
-    the program cannot run at that size (a fixed size, below the pad multiple, a fractional size).
+    textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, what is
+    computed from it pixel by pixel, outputs and scalar textures RGBA32F; a program with frame passes:
+    the frame's own targets as its fp16 passes write them, the frame section's ``formats``: the AO target
+    R16F (WGSL: R32F), a hybrid's GTAO R32F, the depth-derived ones RGBA32F; else the fragment steps' AO
+    targets R16F, their point-sampled G-buffer RGBA32F). Whatever the manifest's own precision. Raises
+    NeuralaoError where the program cannot run at that size (a fixed size, below the pad multiple, a
+    fractional size).
     """
     return _plan(memory_schedule(manifest), width, height, precision)
 
@@ -575,17 +583,17 @@ def _counted(schedule: MemorySchedule, manifest: Mapping) -> str:
 
 def _fp16_text(schedule: MemorySchedule) -> str:
     network = (
-        "fp16: the network's textures as --precision fp16 stores them (RGBA16F; its input, scalar and "
-        "output textures RGBA32F)"
+        "fp16: the network's textures as --precision fp16 stores them (RGBA16F; its input, what is "
+        "computed from it pixel by pixel, scalar and output textures RGBA32F)"
     )
     if schedule.frame_passes:
-        half = any(t.formats["fp16"] == "R16F" for t in schedule.textures.values() if not t.network)
-        ao = (
-            "the full-resolution AO targets R16F"
-            if half
-            else "the full-resolution AO targets R32F (WGSL: core WebGPU has no r16float storage texture)"
+        one = {k: t.formats["fp16"] for k, t in schedule.textures.items() if not t.network and t.layers == 1}
+        ao = ", ".join(f"{k} {f}" for k, f in sorted(one.items()) if f in ("R16F", "R32F"))
+        if "R16F" not in one.values():
+            ao += " (WGSL: core WebGPU has no r16float storage texture)"
+        return (
+            f"{network}; of the frame passes' own one-channel targets {ao}, the depth-derived ones RGBA32F."
         )
-        return f"{network}; of the frame passes' own targets {ao}, the depth-derived ones RGBA32F."
     if schedule.internal_height is None:
         return network + "."
     return (

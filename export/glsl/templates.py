@@ -58,7 +58,7 @@ _WORDS: dict[str, str] = {
     "float": "float",
     "int": "int",
     "bool": "bool",
-    # the conv accumulation's types: defined per precision by the pass's arithmetic_* block
+    # the conv products' types: defined per precision by the pass's arithmetic_* block
     "hvec4": "hvec4",
     "hmat4": "hmat4",
     "declare": "${type}",
@@ -257,14 +257,16 @@ ${epilogue}
 }
 """
 
-# The types of a dense conv's accumulation (hvec4, hmat4): fp32, or fp16 where the compiler has a half
+# The types of a dense conv's products (hvec4, hmat4): fp32, or fp16 where the compiler has a half
 # type (GL: GL_EXT_shader_explicit_arithmetic_types_float16 or GL_AMD_gpu_shader_half_float; Vulkan:
 # the first, with the device feature shaderFloat16), else fp32 (the preprocessor picks; no driver
-# refuses the shader). Weights and texels are converted as they are read; epilogues run in fp32.
-_T["arithmetic_fp32"] = """// conv accumulation: fp32
+# refuses the shader). Weights and texels are converted as they are read; each weight matrix times
+# texel is summed into an fp32 accumulator (a sum of hundreds of terms in fp16 drifts by several 8-bit
+# AO steps in a trained U-Net); epilogues run in fp32.
+_T["arithmetic_fp32"] = """// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4"""
-_T["arithmetic_fp16"] = """// conv accumulation: fp16 where the compiler has a half type, else fp32
+_T["arithmetic_fp16"] = """// conv products: fp16 where the compiler has a half type, else fp32 (sums in fp32)
 #extension GL_EXT_shader_explicit_arithmetic_types_float16 : enable
 #extension GL_AMD_gpu_shader_half_float : enable
 #if defined(GL_EXT_shader_explicit_arithmetic_types_float16) || defined(GL_AMD_gpu_shader_half_float)
@@ -287,7 +289,7 @@ _T["size_decl"] = "    ivec2 ${size} = textureSize(${src}, 0).xy;"
 
 # Conv: one invocation = one output texel (4 output channels of layer gid.z).
 _T["conv_body"] = """${sizes}
-    ${var_hvec4} acc = ${hvec4}(prm[${bias_offset} + gid.z]);
+    ${var_vec4} acc = prm[${bias_offset} + gid.z];
 ${taps}
     ${var_vec4} r = ${vec4}(acc);"""
 # The taps of a conv's input parts read tap by tap (conv_input_loop and conv_input_loop_fused).
@@ -338,7 +340,7 @@ _T["conv_up2_blend"] = "            ${let_vec4} ${name} = mix(${a}, ${b}, ${w});
 _T["conv_up2_tap"] = """            if (${valid}) {
                 ${let_int} t${k} = o + ${k} * ${tap_stride};
                 ${let_mat4} w${k} = ${mat4}(prm[t${k}], prm[t${k} + 1], prm[t${k} + 2], prm[t${k} + 3]);
-                acc += ${hmat4}(w${k}) * ${hvec4}(${u});
+                acc += ${vec4}(${hmat4}(w${k}) * ${hvec4}(${u}));
             }"""
 # cond ? a : b, for any type
 _T["pick"] = "(${cond} ? ${a} : ${b})"
@@ -348,7 +350,8 @@ _T["conv_input_loop"] = """            if (iy >= 0 && iy < ${size}.y && ix >= 0 
                 for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
                     ${let_vec4} v = ${fetch}(${src}, ${ivec3}(ix, iy, l)${lod});
                     ${let_int} o = tap + (${layer_offset} + l) * 4;
-                    acc += ${hmat4}(${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * ${hvec4}(v);
+                    ${let_mat4} w = ${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += ${vec4}(${hmat4}(w) * ${hvec4}(v));
                 }
             }"""
 
@@ -364,7 +367,8 @@ ${setup}
                 for (${var_int:l} = 0; l < ${layers}; ${inc:l}) {
                     ${let_vec4} v = ${read};
                     ${let_int} o = tap + (${layer_offset} + l) * 4;
-                    acc += ${hmat4}(${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * ${hvec4}(v);
+                    ${let_mat4} w = ${mat4}(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += ${vec4}(${hmat4}(w) * ${hvec4}(v));
                 }
             }"""
 _T["conv_setup_pool2"] = (
@@ -464,8 +468,8 @@ ${coords}
 ${input_loops}
         }
     }"""
-_T["conv_block_bias"] = "    ${let_hvec4} b${o} = ${hvec4}(prm[${bias_offset} + z0 + ${o}]);"
-_T["conv_block_acc"] = "    ${var_hvec4} ${names};"
+_T["conv_block_bias"] = "    ${let_vec4} b${o} = prm[${bias_offset} + z0 + ${o}];"
+_T["conv_block_acc"] = "    ${var_vec4} ${names};"
 _T["conv_block_acc_name"] = "a${o}_${p} = b${o}"
 _T["conv_block_acc_sep"] = ", "
 _T["conv_block_coord"] = (
@@ -480,13 +484,13 @@ _T["conv_block_fetch"] = (
     "                ${let_hvec4} v${p} = ${hvec4}(${fetch}(${src}, ${ivec3}(q${p}, l)${lod}) * k${p});"
 )
 _T["conv_block_weight"] = "                ${let_hmat4} m${o} = ${hmat4}(nao_tap(o + ${off}));"
-_T["conv_block_fma"] = "a${o}_${p} += m${o} * v${p};"
+_T["conv_block_fma"] = "a${o}_${p} += ${vec4}(m${o} * v${p});"
 _T["conv_block_fmas"] = "                ${fmas}"
 _T["conv_block_store"] = "    nao_store(base + ${ivec2}(${px}, ${py}), z0 + ${o}, ${vec4}(a${o}_${p}));"
 
 # ConvTranspose as a gather: output y takes input iy where y = iy * stride - pad + ky * dilation.
 _T["conv_transpose_body"] = """${sizes}
-    ${var_hvec4} acc = ${hvec4}(prm[${bias_offset} + gid.z]);
+    ${var_vec4} acc = prm[${bias_offset} + gid.z];
     for (${var_int:ky} = 0; ky < ${kh}; ${inc:ky}) {
         ${let_int} ty = gid.y + ${pad_top} - ky * ${dy};
         if (ty < 0 || ty % ${sy} != 0) {
@@ -1023,12 +1027,12 @@ _WGSL_WORDS: dict[str, str] = {
 _W: dict[str, str] = {}
 
 _W["header"] = "// WGSL (WebGPU compute), generated by neuralao from the same templates as the GLSL"
-# WGSL: the accumulation types as aliases; fp16 needs the device feature shader-f16 (a runner without it
+# WGSL: the product types as aliases; fp16 needs the device feature shader-f16 (a runner without it
 # puts arithmetic_fp32 in place of arithmetic_fp16: the manifest's "arithmetic" gives both texts).
-_W["arithmetic_fp32"] = """// conv accumulation: fp32
+_W["arithmetic_fp32"] = """// conv products: fp32
 alias hvec4 = vec4<f32>;
 alias hmat4 = mat4x4<f32>;"""
-_W["arithmetic_fp16"] = """// conv accumulation: fp16 (device feature shader-f16)
+_W["arithmetic_fp16"] = """// conv products: fp16 (device feature shader-f16), sums in fp32
 enable f16;
 alias hvec4 = vec4<f16>;
 alias hmat4 = mat4x4<f16>;"""

@@ -286,10 +286,10 @@ def baseline_figures(settings: ShipSettings, data: Path) -> dict:
 _LOADED: dict = {}  # the training / validation frames (train_fraction 1) of the last dataset loaded
 
 
-def _fp16_figures(name: str, onnx_path: Path, frames: list | None = None) -> dict:
+def _fp16_figures(name: str, onnx_path: Path) -> dict:
     """What the export's fp16 option costs this model (:func:`parity_fp16`, without the per-check rows): the
     bound its manifest states, which the tests and a user's fp16 build are held to."""
-    fig = parity_fp16(onnx_path, frames)
+    fig = parity_fp16(onnx_path)
     if fig["visible_in_8_bit"]:
         log.warning("%s: fp16 moves the AO by %.3g, more than half an 8-bit step", name, fig["max_abs_err"])
     return {k: v for k, v in fig.items() if k != "checks"} | {"checks": len(fig["checks"])}
@@ -413,7 +413,7 @@ def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dic
     }
     save_onnx(proto, onnx_path, meta)
     manifest.update(name=spec.name, onnx_sha256=sha256_file(onnx_path), metadata=meta, provenance=provenance)
-    manifest["fp16"] = _fp16_figures(spec.name, onnx_path, frames)
+    manifest["fp16"] = _fp16_figures(spec.name, onnx_path)  # the rendered check set, as a refresh
     manifest["checkpoint"] = {
         "file": ckpt_path.name,
         "sha256": sha256_file(ckpt_path),
