@@ -157,14 +157,19 @@ def test_frame_section_lists_the_whole_frame_in_order():
         steps = frame["steps"]
         frame_names = [s.get("frame_pass") for s in steps if "frame_pass" in s]
         hybrid = name == "unet-gtao"
-        assert frame["hybrid"] is hybrid and frame["preprocess_version"] == 2
+        assert frame["hybrid"] is hybrid and frame["preprocess_version"] == 3
         assert frame_names[0] == ("f_gtao" if hybrid else "f_downsample")
         assert frame_names[-2:] == ["f_upsample", "f_composite"]
         # no full-resolution copy of the G-buffer: the passes read the engine's depth and normal
         assert "f_position" not in frame_names and "gbuffer" not in frame["textures"]
         full = [k for k, t in frame["textures"].items() if (t["width"], t["height"]) == ("W", "H")]
         assert sorted(full) == sorted(["depth", "normal", "ao", *(["gtao_raw", "gtao"] if hybrid else [])])
-        assert ("f_gtao" in frame_names) is hybrid and "f_depth_mean" in frame_names
+        assert ("f_gtao" in frame_names) is hybrid and "f_network_input" in frame_names
+        # frame-local input: no reduction over the frame (nothing an engine would read back)
+        assert (
+            not {"f_depth_columns", "f_depth_mean"} & set(frame_names)
+            and "depth_mean" not in frame["textures"]
+        )
         network = [s["network_pass"] for s in steps if "network_pass" in s]
         skipped = [s["skip"] for s in steps if "skip" in s]
         assert network + skipped == [p["name"] for p in m["passes"] if p["name"] not in skipped] + skipped
@@ -222,17 +227,25 @@ def test_network_at_the_frame_size_is_composited_not_upsampled(tmp_path):
     assert "f_composite" in names and "f_upsample" not in names
 
 
-def test_fp16_stores_the_ao_targets_as_half_floats():
-    """At fp16 the full-resolution AO targets are R16F (GL, Vulkan) and stay r32float in WGSL (no r16float
-    storage texture in core WebGPU); the network's textures are RGBA16F, depth-derived ones RGBA32F."""
-    for dialect, half in (("glsl430", "R16F"), ("vulkan", "R16F"), ("wgsl", "R32F")):
-        frame = frame_program(_with_internal_height("unet-gtao", INTERNAL_HEIGHT), dialect, precision="fp16")
-        textures = frame.manifest["frame"]["textures"]
-        assert {textures[k]["format"] for k in ("gtao_raw", "gtao", "ao")} == {half}
-        assert (
-            textures["low_gbuffer"]["format"] == "RGBA32F" and textures["depth_mean"]["format"] == "RGBA32F"
-        )
-        assert "RGBA16F" in {t["format"] for t in frame.manifest["textures"].values()}
+def test_fp16_stores_the_ao_target_as_half_floats_and_the_networks_inputs_as_floats():
+    """At fp16 the AO target is R16F (GL, Vulkan) and stays r32float in WGSL (no r16float storage texture
+    in core WebGPU); the hybrid's GTAO targets, the network's input, stay R32F. The network's textures are
+    RGBA16F but its input and what the passes compute from it pixel by pixel (log depth, the radius
+    channel: every pass before the first 3x3 conv), which stay RGBA32F with the depth-derived ones."""
+    for preset in ("gpu", "cpu"):
+        for dialect, half in (("glsl430", "R16F"), ("vulkan", "R16F"), ("wgsl", "R32F")):
+            proto = _with_internal_height("unet-gtao", INTERNAL_HEIGHT)
+            frame = frame_program(proto, dialect, precision="fp16", preset=preset).manifest
+            textures = frame["frame"]["textures"]
+            assert textures["ao"]["format"] == half
+            assert {textures[k]["format"] for k in ("gtao_raw", "gtao", "low_gbuffer")} <= {"R32F", "RGBA32F"}
+            formats = [frame["textures"][p["output"]["texture"]]["format"] for p in frame["passes"]]
+            spatial = [i for i, p in enumerate(frame["passes"]) if "LeakyRelu" in p["ops"]]
+            assert set(formats[: spatial[0]]) == {"RGBA32F"}
+            assert set(formats[spatial[0] : -1]) == {"RGBA16F"}  # the last pass writes the output
+            assert all(
+                p["output"]["fp16_format"] == f.lower() for p, f in zip(frame["passes"], formats, strict=True)
+            )
 
 
 @pytest.mark.parametrize("api", DIALECTS)

@@ -5,7 +5,7 @@ using System.Collections.Generic;
 using UnityEngine;
 using UnityEngine.Rendering;
 
-/// <summary>The whole unet-fast frame: 19 steps in the order of the manifest's frame.steps,
+/// <summary>The whole unet-fast frame: 18 steps in the order of the manifest's frame.steps,
 /// from the textures the engine writes to the AO texture "ao".
 /// Each frame: Resize(W, H) when the size changes, write the inputs, Run(camera, radius), read AO.
 /// The inputs (Texture(id), W x H):
@@ -29,18 +29,19 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         this.shader = shader;
         weights = new float[weightsBin.Length / 4];
         System.Buffer.BlockCopy(weightsBin, 0, weights, 0, weightsBin.Length);
-        Weights(1, 0, 80);
-        Weights(2, 256, 2336);
-        Weights(3, 2816, 4672);
-        Weights(4, 7680, 18560);
-        Weights(5, 26368, 73984);
-        Weights(6, 100352, 73856);
-        Weights(7, 174336, 73856);
-        Weights(8, 248320, 18496);
-        Weights(9, 267008, 18496);
-        Weights(10, 285696, 4640);
-        Weights(11, 290560, 4640);
-        Weights(12, 295424, 144);
+        Weights(1, 0, 160);
+        Weights(2, 256, 240);
+        Weights(3, 512, 2336);
+        Weights(4, 3072, 4672);
+        Weights(5, 7936, 18560);
+        Weights(6, 26624, 73984);
+        Weights(7, 100608, 73856);
+        Weights(8, 174592, 73856);
+        Weights(9, 248576, 18496);
+        Weights(10, 267264, 18496);
+        Weights(11, 285952, 4640);
+        Weights(12, 290816, 4640);
+        Weights(13, 295680, 144);
     }
 
     /// <summary>A buffer of the pass's own: its range of weights.bin (the HLSL reads from byte 0).</summary>
@@ -77,24 +78,23 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         int wp = CeilDiv(w, PadMultiple) * PadMultiple, hp = CeilDiv(h, PadMultiple) * PadMultiple;
         tex["ao"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
         tex["depth"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
-        tex["depth_columns"] = Array2D(w, 1, 1, RenderTextureFormat.ARGBFloat);
-        tex["depth_mean"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
         tex["low_gbuffer"] = Array2D(w, h, 2, RenderTextureFormat.ARGBFloat);
         tex["normal"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
         tex["t0"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
-        tex["t11"] = Array2D(wp * 1 / 8, hp * 1 / 8, 16, RenderTextureFormat.ARGBFloat);
-        tex["t13"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
-        tex["t14"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
-        tex["t16"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t17"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t19"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t12"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t13"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t15"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
+        tex["t17"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
+        tex["t19"] = Array2D(wp * 1 / 8, hp * 1 / 8, 16, RenderTextureFormat.ARGBFloat);
         tex["t2"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
-        tex["t20"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
-        tex["t22"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
-        tex["t4"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t5"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
-        tex["t7"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
-        tex["t9"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
+        tex["t21"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
+        tex["t22"] = Array2D(wp * 1 / 4, hp * 1 / 4, 8, RenderTextureFormat.ARGBFloat);
+        tex["t24"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
+        tex["t25"] = Array2D(wp * 1 / 2, hp * 1 / 2, 4, RenderTextureFormat.ARGBFloat);
+        tex["t27"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t28"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t30"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
+        tex["t9"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         sameSize = tex["t0"].width == W && tex["t0"].height == H;
     }
 
@@ -127,119 +127,112 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         shader.SetTexture(k, "dst", tex["low_gbuffer"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["low_gbuffer"].width, 8), CeilDiv(tex["low_gbuffer"].height, 8), 1);
-        // step 1: f_depth_columns: foreground depth summed per column
-        k = shader.FindKernel("f_depth_columns");
-        shader.SetTexture(k, "src0", tex["low_gbuffer"]);
-        shader.SetTexture(k, "dst", tex["depth_columns"]);
-        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
-        shader.Dispatch(k, CeilDiv(tex["depth_columns"].width, 64), CeilDiv(tex["depth_columns"].height, 1), 1);
-        // step 2: f_depth_mean: the mean foreground depth
-        k = shader.FindKernel("f_depth_mean");
-        shader.SetTexture(k, "src0", tex["depth_columns"]);
-        shader.SetTexture(k, "dst", tex["depth_mean"]);
-        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
-        shader.Dispatch(k, CeilDiv(tex["depth_mean"].width, 1), CeilDiv(tex["depth_mean"].height, 1), 1);
-        // step 3: f_network_input: the network's input: depth / m, normal
+        // step 1: f_network_input: the network's input: log depth, normal
         k = shader.FindKernel("f_network_input");
         shader.SetTexture(k, "src0", tex["low_gbuffer"]);
-        shader.SetTexture(k, "src1", tex["depth_mean"]);
         shader.SetTexture(k, "dst", tex["t0"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t0"].width, 8), CeilDiv(tex["t0"].height, 8), 1);
-        // step 4: f_network_radius: the network's radius input R P11 / m
+        // step 2: f_network_radius: the network's radius input log(R P11)
         k = shader.FindKernel("f_network_radius");
-        shader.SetTexture(k, "src0", tex["depth_mean"]);
         shader.SetTexture(k, "dst", tex["t2"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t2"].width, 1), CeilDiv(tex["t2"].height, 1), 1);
-        // step 5: p00_uniform skipped: f_network_radius writes its texture
-        // step 6: p01_conv: Pad + Conv + Clip + Div + Clip
-        k = shader.FindKernel("p01_conv");
+        // step 3: p00_uniform skipped: f_network_radius writes its texture
+        // step 4: p01_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Neg + Exp + Clip + Mul
+        k = shader.FindKernel("p01_pointwise");
         shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "src1", tex["t2"]);
-        shader.SetTexture(k, "dst", tex["t4"]);
+        shader.SetTexture(k, "dst", tex["t9"]);
         shader.SetBuffer(k, "params", passWeights[1]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t4"].width, 8), CeilDiv(tex["t4"].height, 8), 1);
-        // step 7: p02_conv: Pad + Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p02_conv");
+        shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 1);
+        // step 5: p02_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Sub + Conv + Add
+        k = shader.FindKernel("p02_pointwise");
         shader.SetTexture(k, "src0", tex["t0"]);
-        shader.SetTexture(k, "src1", tex["t4"]);
-        shader.SetTexture(k, "dst", tex["t5"]);
+        shader.SetTexture(k, "src1", tex["t2"]);
+        shader.SetTexture(k, "dst", tex["t12"]);
         shader.SetBuffer(k, "params", passWeights[2]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t5"].width, 8), CeilDiv(tex["t5"].height, 8), 2);
-        // step 8: p03_conv: AveragePool + Conv + LeakyRelu
+        shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 1);
+        // step 6: p03_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p03_conv");
-        shader.SetTexture(k, "src0", tex["t5"]);
-        shader.SetTexture(k, "dst", tex["t7"]);
-        shader.SetBuffer(k, "params", passWeights[3]);
-        shader.Dispatch(k, CeilDiv(tex["t7"].width, 8), CeilDiv(tex["t7"].height, 8), 4);
-        // step 9: p04_conv: AveragePool + Conv + LeakyRelu
-        k = shader.FindKernel("p04_conv");
-        shader.SetTexture(k, "src0", tex["t7"]);
-        shader.SetTexture(k, "dst", tex["t9"]);
-        shader.SetBuffer(k, "params", passWeights[4]);
-        shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 8);
-        // step 10: p05_conv: AveragePool + Conv + LeakyRelu
-        k = shader.FindKernel("p05_conv");
-        shader.SetTexture(k, "src0", tex["t9"]);
-        shader.SetTexture(k, "dst", tex["t11"]);
-        shader.SetBuffer(k, "params", passWeights[5]);
-        shader.Dispatch(k, CeilDiv(tex["t11"].width, 8), CeilDiv(tex["t11"].height, 8), 16);
-        // step 11: p06_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p06_conv");
-        shader.SetTexture(k, "src0", tex["t11"]);
-        shader.SetTexture(k, "dst", tex["t13"]);
-        shader.SetBuffer(k, "params", passWeights[6]);
-        shader.Dispatch(k, CeilDiv(tex["t13"].width, 8), CeilDiv(tex["t13"].height, 8), 8);
-        // step 12: p07_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p07_conv");
-        shader.SetTexture(k, "src0", tex["t13"]);
+        shader.SetTexture(k, "src0", tex["t12"]);
         shader.SetTexture(k, "src1", tex["t9"]);
-        shader.SetTexture(k, "dst", tex["t14"]);
-        shader.SetBuffer(k, "params", passWeights[7]);
-        shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 8);
-        // step 13: p08_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p08_conv");
-        shader.SetTexture(k, "src0", tex["t14"]);
-        shader.SetTexture(k, "dst", tex["t16"]);
-        shader.SetBuffer(k, "params", passWeights[8]);
-        shader.Dispatch(k, CeilDiv(tex["t16"].width, 8), CeilDiv(tex["t16"].height, 8), 4);
-        // step 14: p09_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p09_conv");
-        shader.SetTexture(k, "src0", tex["t16"]);
-        shader.SetTexture(k, "src1", tex["t7"]);
+        shader.SetTexture(k, "dst", tex["t13"]);
+        shader.SetBuffer(k, "params", passWeights[3]);
+        shader.Dispatch(k, CeilDiv(tex["t13"].width, 8), CeilDiv(tex["t13"].height, 8), 2);
+        // step 7: p04_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p04_conv");
+        shader.SetTexture(k, "src0", tex["t13"]);
+        shader.SetTexture(k, "dst", tex["t15"]);
+        shader.SetBuffer(k, "params", passWeights[4]);
+        shader.Dispatch(k, CeilDiv(tex["t15"].width, 8), CeilDiv(tex["t15"].height, 8), 4);
+        // step 8: p05_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p05_conv");
+        shader.SetTexture(k, "src0", tex["t15"]);
         shader.SetTexture(k, "dst", tex["t17"]);
-        shader.SetBuffer(k, "params", passWeights[9]);
-        shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 4);
-        // step 15: p10_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p10_conv");
+        shader.SetBuffer(k, "params", passWeights[5]);
+        shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 8);
+        // step 9: p06_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p06_conv");
         shader.SetTexture(k, "src0", tex["t17"]);
         shader.SetTexture(k, "dst", tex["t19"]);
-        shader.SetBuffer(k, "params", passWeights[10]);
-        shader.Dispatch(k, CeilDiv(tex["t19"].width, 8), CeilDiv(tex["t19"].height, 8), 2);
-        // step 16: p11_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p11_conv");
+        shader.SetBuffer(k, "params", passWeights[6]);
+        shader.Dispatch(k, CeilDiv(tex["t19"].width, 8), CeilDiv(tex["t19"].height, 8), 16);
+        // step 10: p07_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p07_conv");
         shader.SetTexture(k, "src0", tex["t19"]);
-        shader.SetTexture(k, "src1", tex["t5"]);
-        shader.SetTexture(k, "dst", tex["t20"]);
-        shader.SetBuffer(k, "params", passWeights[11]);
-        shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 2);
-        // step 17: p12_conv: Conv + Sigmoid + Crop
-        k = shader.FindKernel("p12_conv");
-        shader.SetTexture(k, "src0", tex["t20"]);
+        shader.SetTexture(k, "dst", tex["t21"]);
+        shader.SetBuffer(k, "params", passWeights[7]);
+        shader.Dispatch(k, CeilDiv(tex["t21"].width, 8), CeilDiv(tex["t21"].height, 8), 8);
+        // step 11: p08_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p08_conv");
+        shader.SetTexture(k, "src0", tex["t21"]);
+        shader.SetTexture(k, "src1", tex["t17"]);
         shader.SetTexture(k, "dst", tex["t22"]);
+        shader.SetBuffer(k, "params", passWeights[8]);
+        shader.Dispatch(k, CeilDiv(tex["t22"].width, 8), CeilDiv(tex["t22"].height, 8), 8);
+        // step 12: p09_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p09_conv");
+        shader.SetTexture(k, "src0", tex["t22"]);
+        shader.SetTexture(k, "dst", tex["t24"]);
+        shader.SetBuffer(k, "params", passWeights[9]);
+        shader.Dispatch(k, CeilDiv(tex["t24"].width, 8), CeilDiv(tex["t24"].height, 8), 4);
+        // step 13: p10_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p10_conv");
+        shader.SetTexture(k, "src0", tex["t24"]);
+        shader.SetTexture(k, "src1", tex["t15"]);
+        shader.SetTexture(k, "dst", tex["t25"]);
+        shader.SetBuffer(k, "params", passWeights[10]);
+        shader.Dispatch(k, CeilDiv(tex["t25"].width, 8), CeilDiv(tex["t25"].height, 8), 4);
+        // step 14: p11_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p11_conv");
+        shader.SetTexture(k, "src0", tex["t25"]);
+        shader.SetTexture(k, "dst", tex["t27"]);
+        shader.SetBuffer(k, "params", passWeights[11]);
+        shader.Dispatch(k, CeilDiv(tex["t27"].width, 8), CeilDiv(tex["t27"].height, 8), 2);
+        // step 15: p12_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p12_conv");
+        shader.SetTexture(k, "src0", tex["t27"]);
+        shader.SetTexture(k, "src1", tex["t13"]);
+        shader.SetTexture(k, "dst", tex["t28"]);
         shader.SetBuffer(k, "params", passWeights[12]);
+        shader.Dispatch(k, CeilDiv(tex["t28"].width, 8), CeilDiv(tex["t28"].height, 8), 2);
+        // step 16: p13_conv: Conv + Sigmoid + Crop
+        k = shader.FindKernel("p13_conv");
+        shader.SetTexture(k, "src0", tex["t28"]);
+        shader.SetTexture(k, "dst", tex["t30"]);
+        shader.SetBuffer(k, "params", passWeights[13]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t22"].width, 8), CeilDiv(tex["t22"].height, 8), 1);
+        shader.Dispatch(k, CeilDiv(tex["t30"].width, 8), CeilDiv(tex["t30"].height, 8), 1);
         if (!sameSize)  // (w, h) != (W, H)
         {
-            // step 18: f_upsample: joint bilateral upsampling of the AO
+            // step 17: f_upsample: joint bilateral upsampling of the AO
             k = shader.FindKernel("f_upsample");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["normal"]);
-            shader.SetTexture(k, "src2", tex["t22"]);
+            shader.SetTexture(k, "src2", tex["t30"]);
             shader.SetTexture(k, "src3", tex["low_gbuffer"]);
             shader.SetTexture(k, "dst", tex["ao"]);
             shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
@@ -247,10 +240,10 @@ public sealed class NeuralAOUnetFast : System.IDisposable
         }
         if (sameSize)  // (w, h) == (W, H)
         {
-            // step 19: f_composite: the network's AO, 1 on background
+            // step 18: f_composite: the network's AO, 1 on background
             k = shader.FindKernel("f_composite");
             shader.SetTexture(k, "src0", tex["depth"]);
-            shader.SetTexture(k, "src1", tex["t22"]);
+            shader.SetTexture(k, "src1", tex["t30"]);
             shader.SetTexture(k, "dst", tex["ao"]);
             shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
             shader.Dispatch(k, CeilDiv(tex["ao"].width, 8), CeilDiv(tex["ao"].height, 8), 1);

@@ -7,12 +7,10 @@ namespace NeuralAOUnetFast
 {
 IMPLEMENT_GLOBAL_SHADER_PARAMETER_STRUCT(FFrameUniforms, "FrameUniforms");
 IMPLEMENT_GLOBAL_SHADER(Ff_downsample, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_downsample", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Ff_depth_columns, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_depth_columns", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Ff_depth_mean, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_depth_mean", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_network_input, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_network_input", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_network_radius, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_network_radius", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp01_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p01_conv", SF_Compute);
-IMPLEMENT_GLOBAL_SHADER(Fp02_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p02_conv", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp01_pointwise, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p01_pointwise", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp02_pointwise, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p02_pointwise", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp03_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p03_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp04_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p04_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp05_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p05_conv", SF_Compute);
@@ -23,6 +21,7 @@ IMPLEMENT_GLOBAL_SHADER(Fp09_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p09
 IMPLEMENT_GLOBAL_SHADER(Fp10_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p10_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp11_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p11_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Fp12_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p12_conv", SF_Compute);
+IMPLEMENT_GLOBAL_SHADER(Fp13_conv, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "p13_conv", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_upsample, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_upsample", SF_Compute);
 IMPLEMENT_GLOBAL_SHADER(Ff_composite, "/Plugin/NeuralAO/NeuralAOUnetFast.usf", "f_composite", SF_Compute);
 
@@ -39,24 +38,23 @@ TMap<FString, FRDGTextureRef> CreateTextures(FRDGBuilder& GraphBuilder, FIntPoin
     };
     Make(TEXT("ao"), W, H, 1, PF_R32_FLOAT);
     Make(TEXT("depth"), W, H, 1, PF_R32_FLOAT);
-    Make(TEXT("depth_columns"), w, 1, 1, PF_A32B32G32R32F);
-    Make(TEXT("depth_mean"), 1, 1, 1, PF_A32B32G32R32F);
     Make(TEXT("low_gbuffer"), w, h, 2, PF_A32B32G32R32F);
     Make(TEXT("normal"), W, H, 1, PF_A32B32G32R32F);
     Make(TEXT("t0"), w, h, 1, PF_A32B32G32R32F);
-    Make(TEXT("t11"), wp * 1 / 8, hp * 1 / 8, 16, PF_A32B32G32R32F);
-    Make(TEXT("t13"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
-    Make(TEXT("t14"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
-    Make(TEXT("t16"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
-    Make(TEXT("t17"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
-    Make(TEXT("t19"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t12"), wp, hp, 1, PF_A32B32G32R32F);
+    Make(TEXT("t13"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t15"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t17"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t19"), wp * 1 / 8, hp * 1 / 8, 16, PF_A32B32G32R32F);
     Make(TEXT("t2"), 1, 1, 1, PF_A32B32G32R32F);
-    Make(TEXT("t20"), wp, hp, 2, PF_A32B32G32R32F);
-    Make(TEXT("t22"), w, h, 1, PF_A32B32G32R32F);
-    Make(TEXT("t4"), wp, hp, 1, PF_A32B32G32R32F);
-    Make(TEXT("t5"), wp, hp, 2, PF_A32B32G32R32F);
-    Make(TEXT("t7"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
-    Make(TEXT("t9"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t21"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t22"), wp * 1 / 4, hp * 1 / 4, 8, PF_A32B32G32R32F);
+    Make(TEXT("t24"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t25"), wp * 1 / 2, hp * 1 / 2, 4, PF_A32B32G32R32F);
+    Make(TEXT("t27"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t28"), wp, hp, 2, PF_A32B32G32R32F);
+    Make(TEXT("t30"), w, h, 1, PF_A32B32G32R32F);
+    Make(TEXT("t9"), wp, hp, 1, PF_A32B32G32R32F);
     return T;
 }
 
@@ -87,150 +85,141 @@ FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoi
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_downsample"), TShaderMapRef<Ff_downsample>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("low_gbuffer")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("low_gbuffer")).Y, 8), 1));
     }
-    {  // step 1: f_depth_columns: foreground depth summed per column
-        auto* P = GraphBuilder.AllocParameters<Ff_depth_columns::FParameters>();
-        P->src0 = Srv(TEXT("low_gbuffer"));
-        P->dst = Uav(TEXT("depth_columns"));
-        P->FrameUniforms = FrameUniformBuffer;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_depth_columns"), TShaderMapRef<Ff_depth_columns>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("depth_columns")).X, 64), FMath::DivideAndRoundUp(Size(TEXT("depth_columns")).Y, 1), 1));
-    }
-    {  // step 2: f_depth_mean: the mean foreground depth
-        auto* P = GraphBuilder.AllocParameters<Ff_depth_mean::FParameters>();
-        P->src0 = Srv(TEXT("depth_columns"));
-        P->dst = Uav(TEXT("depth_mean"));
-        P->FrameUniforms = FrameUniformBuffer;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_depth_mean"), TShaderMapRef<Ff_depth_mean>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("depth_mean")).X, 1), FMath::DivideAndRoundUp(Size(TEXT("depth_mean")).Y, 1), 1));
-    }
-    {  // step 3: f_network_input: the network's input: depth / m, normal
+    {  // step 1: f_network_input: the network's input: log depth, normal
         auto* P = GraphBuilder.AllocParameters<Ff_network_input::FParameters>();
         P->src0 = Srv(TEXT("low_gbuffer"));
-        P->src1 = Srv(TEXT("depth_mean"));
         P->dst = Uav(TEXT("t0"));
         P->FrameUniforms = FrameUniformBuffer;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_network_input"), TShaderMapRef<Ff_network_input>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t0")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t0")).Y, 8), 1));
     }
-    {  // step 4: f_network_radius: the network's radius input R P11 / m
+    {  // step 2: f_network_radius: the network's radius input log(R P11)
         auto* P = GraphBuilder.AllocParameters<Ff_network_radius::FParameters>();
-        P->src0 = Srv(TEXT("depth_mean"));
         P->dst = Uav(TEXT("t2"));
         P->FrameUniforms = FrameUniformBuffer;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_network_radius"), TShaderMapRef<Ff_network_radius>(ShaderMap), P,
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t2")).X, 1), FMath::DivideAndRoundUp(Size(TEXT("t2")).Y, 1), 1));
     }
-    // step 5: p00_uniform skipped: f_network_radius writes its texture
-    {  // step 6: p01_conv: Pad + Conv + Clip + Div + Clip
-        auto* P = GraphBuilder.AllocParameters<Fp01_conv::FParameters>();
+    // step 3: p00_uniform skipped: f_network_radius writes its texture
+    {  // step 4: p01_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Neg + Exp + Clip + Mul
+        auto* P = GraphBuilder.AllocParameters<Fp01_pointwise::FParameters>();
         P->src0 = Srv(TEXT("t0"));
         P->src1 = Srv(TEXT("t2"));
-        P->dst = Uav(TEXT("t4"));
+        P->dst = Uav(TEXT("t9"));
         P->params = Raw(1);
         P->u_flip_y = flip;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p01_conv"), TShaderMapRef<Fp01_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t4")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t4")).Y, 8), 1));
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p01_pointwise"), TShaderMapRef<Fp01_pointwise>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t9")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t9")).Y, 8), 1));
     }
-    {  // step 7: p02_conv: Pad + Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp02_conv::FParameters>();
+    {  // step 5: p02_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Sub + Conv + Add
+        auto* P = GraphBuilder.AllocParameters<Fp02_pointwise::FParameters>();
         P->src0 = Srv(TEXT("t0"));
-        P->src1 = Srv(TEXT("t4"));
-        P->dst = Uav(TEXT("t5"));
+        P->src1 = Srv(TEXT("t2"));
+        P->dst = Uav(TEXT("t12"));
         P->params = Raw(2);
         P->u_flip_y = flip;
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p02_conv"), TShaderMapRef<Fp02_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t5")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t5")).Y, 8), 2));
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p02_pointwise"), TShaderMapRef<Fp02_pointwise>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t12")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t12")).Y, 8), 1));
     }
-    {  // step 8: p03_conv: AveragePool + Conv + LeakyRelu
+    {  // step 6: p03_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp03_conv::FParameters>();
-        P->src0 = Srv(TEXT("t5"));
-        P->dst = Uav(TEXT("t7"));
+        P->src0 = Srv(TEXT("t12"));
+        P->src1 = Srv(TEXT("t9"));
+        P->dst = Uav(TEXT("t13"));
         P->params = Raw(3);
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p03_conv"), TShaderMapRef<Fp03_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t7")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t7")).Y, 8), 4));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t13")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t13")).Y, 8), 2));
     }
-    {  // step 9: p04_conv: AveragePool + Conv + LeakyRelu
+    {  // step 7: p04_conv: AveragePool + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp04_conv::FParameters>();
-        P->src0 = Srv(TEXT("t7"));
-        P->dst = Uav(TEXT("t9"));
+        P->src0 = Srv(TEXT("t13"));
+        P->dst = Uav(TEXT("t15"));
         P->params = Raw(4);
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p04_conv"), TShaderMapRef<Fp04_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t9")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t9")).Y, 8), 8));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t15")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t15")).Y, 8), 4));
     }
-    {  // step 10: p05_conv: AveragePool + Conv + LeakyRelu
+    {  // step 8: p05_conv: AveragePool + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp05_conv::FParameters>();
-        P->src0 = Srv(TEXT("t9"));
-        P->dst = Uav(TEXT("t11"));
+        P->src0 = Srv(TEXT("t15"));
+        P->dst = Uav(TEXT("t17"));
         P->params = Raw(5);
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p05_conv"), TShaderMapRef<Fp05_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t11")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t11")).Y, 8), 16));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t17")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t17")).Y, 8), 8));
     }
-    {  // step 11: p06_conv: Resize + Conv + LeakyRelu
+    {  // step 9: p06_conv: AveragePool + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp06_conv::FParameters>();
-        P->src0 = Srv(TEXT("t11"));
-        P->dst = Uav(TEXT("t13"));
-        P->params = Raw(6);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p06_conv"), TShaderMapRef<Fp06_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t13")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t13")).Y, 8), 8));
-    }
-    {  // step 12: p07_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp07_conv::FParameters>();
-        P->src0 = Srv(TEXT("t13"));
-        P->src1 = Srv(TEXT("t9"));
-        P->dst = Uav(TEXT("t14"));
-        P->params = Raw(7);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p07_conv"), TShaderMapRef<Fp07_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t14")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t14")).Y, 8), 8));
-    }
-    {  // step 13: p08_conv: Resize + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp08_conv::FParameters>();
-        P->src0 = Srv(TEXT("t14"));
-        P->dst = Uav(TEXT("t16"));
-        P->params = Raw(8);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p08_conv"), TShaderMapRef<Fp08_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t16")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t16")).Y, 8), 4));
-    }
-    {  // step 14: p09_conv: Concat + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp09_conv::FParameters>();
-        P->src0 = Srv(TEXT("t16"));
-        P->src1 = Srv(TEXT("t7"));
-        P->dst = Uav(TEXT("t17"));
-        P->params = Raw(9);
-        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p09_conv"), TShaderMapRef<Fp09_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t17")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t17")).Y, 8), 4));
-    }
-    {  // step 15: p10_conv: Resize + Conv + LeakyRelu
-        auto* P = GraphBuilder.AllocParameters<Fp10_conv::FParameters>();
         P->src0 = Srv(TEXT("t17"));
         P->dst = Uav(TEXT("t19"));
+        P->params = Raw(6);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p06_conv"), TShaderMapRef<Fp06_conv>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t19")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t19")).Y, 8), 16));
+    }
+    {  // step 10: p07_conv: Resize + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp07_conv::FParameters>();
+        P->src0 = Srv(TEXT("t19"));
+        P->dst = Uav(TEXT("t21"));
+        P->params = Raw(7);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p07_conv"), TShaderMapRef<Fp07_conv>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t21")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t21")).Y, 8), 8));
+    }
+    {  // step 11: p08_conv: Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp08_conv::FParameters>();
+        P->src0 = Srv(TEXT("t21"));
+        P->src1 = Srv(TEXT("t17"));
+        P->dst = Uav(TEXT("t22"));
+        P->params = Raw(8);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p08_conv"), TShaderMapRef<Fp08_conv>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t22")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t22")).Y, 8), 8));
+    }
+    {  // step 12: p09_conv: Resize + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp09_conv::FParameters>();
+        P->src0 = Srv(TEXT("t22"));
+        P->dst = Uav(TEXT("t24"));
+        P->params = Raw(9);
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p09_conv"), TShaderMapRef<Fp09_conv>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t24")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t24")).Y, 8), 4));
+    }
+    {  // step 13: p10_conv: Concat + Conv + LeakyRelu
+        auto* P = GraphBuilder.AllocParameters<Fp10_conv::FParameters>();
+        P->src0 = Srv(TEXT("t24"));
+        P->src1 = Srv(TEXT("t15"));
+        P->dst = Uav(TEXT("t25"));
         P->params = Raw(10);
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p10_conv"), TShaderMapRef<Fp10_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t19")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t19")).Y, 8), 2));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t25")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t25")).Y, 8), 4));
     }
-    {  // step 16: p11_conv: Concat + Conv + LeakyRelu
+    {  // step 14: p11_conv: Resize + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp11_conv::FParameters>();
-        P->src0 = Srv(TEXT("t19"));
-        P->src1 = Srv(TEXT("t5"));
-        P->dst = Uav(TEXT("t20"));
+        P->src0 = Srv(TEXT("t25"));
+        P->dst = Uav(TEXT("t27"));
         P->params = Raw(11);
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p11_conv"), TShaderMapRef<Fp11_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t20")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t20")).Y, 8), 2));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t27")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t27")).Y, 8), 2));
     }
-    {  // step 17: p12_conv: Conv + Sigmoid + Crop
+    {  // step 15: p12_conv: Concat + Conv + LeakyRelu
         auto* P = GraphBuilder.AllocParameters<Fp12_conv::FParameters>();
-        P->src0 = Srv(TEXT("t20"));
-        P->dst = Uav(TEXT("t22"));
+        P->src0 = Srv(TEXT("t27"));
+        P->src1 = Srv(TEXT("t13"));
+        P->dst = Uav(TEXT("t28"));
         P->params = Raw(12);
-        P->u_flip_y = flip;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p12_conv"), TShaderMapRef<Fp12_conv>(ShaderMap), P,
-            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t22")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t22")).Y, 8), 1));
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t28")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t28")).Y, 8), 2));
+    }
+    {  // step 16: p13_conv: Conv + Sigmoid + Crop
+        auto* P = GraphBuilder.AllocParameters<Fp13_conv::FParameters>();
+        P->src0 = Srv(TEXT("t28"));
+        P->dst = Uav(TEXT("t30"));
+        P->params = Raw(13);
+        P->u_flip_y = flip;
+        FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("p13_conv"), TShaderMapRef<Fp13_conv>(ShaderMap), P,
+            FIntVector(FMath::DivideAndRoundUp(Size(TEXT("t30")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("t30")).Y, 8), 1));
     }
     if (!bSameSize)  // (w, h) != (W, H)
-    {  // step 18: f_upsample: joint bilateral upsampling of the AO
+    {  // step 17: f_upsample: joint bilateral upsampling of the AO
         auto* P = GraphBuilder.AllocParameters<Ff_upsample::FParameters>();
         P->src0 = Srv(TEXT("depth"));
         P->src1 = Srv(TEXT("normal"));
-        P->src2 = Srv(TEXT("t22"));
+        P->src2 = Srv(TEXT("t30"));
         P->src3 = Srv(TEXT("low_gbuffer"));
         P->dst = Uav(TEXT("ao"));
         P->FrameUniforms = FrameUniformBuffer;
@@ -238,10 +227,10 @@ FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoi
             FIntVector(FMath::DivideAndRoundUp(Size(TEXT("ao")).X, 8), FMath::DivideAndRoundUp(Size(TEXT("ao")).Y, 8), 1));
     }
     if (bSameSize)  // (w, h) == (W, H)
-    {  // step 19: f_composite: the network's AO, 1 on background
+    {  // step 18: f_composite: the network's AO, 1 on background
         auto* P = GraphBuilder.AllocParameters<Ff_composite::FParameters>();
         P->src0 = Srv(TEXT("depth"));
-        P->src1 = Srv(TEXT("t22"));
+        P->src1 = Srv(TEXT("t30"));
         P->dst = Uav(TEXT("ao"));
         P->FrameUniforms = FrameUniformBuffer;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_composite"), TShaderMapRef<Ff_composite>(ShaderMap), P,

@@ -39,11 +39,11 @@ public:
     }
 };
 
-class Ff_depth_columns : public FGlobalShader
+class Ff_network_input : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_depth_columns);
-    SHADER_USE_PARAMETER_STRUCT(Ff_depth_columns, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Ff_network_input);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
@@ -57,13 +57,12 @@ public:
     }
 };
 
-class Ff_depth_mean : public FGlobalShader
+class Ff_network_radius : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_depth_mean);
-    SHADER_USE_PARAMETER_STRUCT(Ff_depth_mean, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Ff_network_radius);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
     END_SHADER_PARAMETER_STRUCT()
@@ -75,16 +74,17 @@ public:
     }
 };
 
-class Ff_network_input : public FGlobalShader
+class Fp01_pointwise : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_network_input);
-    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp01_pointwise);
+    SHADER_USE_PARAMETER_STRUCT(Fp01_pointwise, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -94,61 +94,23 @@ public:
     }
 };
 
-class Ff_network_radius : public FGlobalShader
+class Fp02_pointwise : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_network_radius);
-    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp02_pointwise);
+    SHADER_USE_PARAMETER_STRUCT(Fp02_pointwise, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
         OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 4);
-    }
-};
-
-class Fp01_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp01_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp01_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
-    }
-};
-
-class Fp02_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp02_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp02_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
     }
 };
 
@@ -159,6 +121,7 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp03_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -166,7 +129,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 5);
     }
 };
 
@@ -184,7 +147,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
     }
 };
 
@@ -202,7 +165,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
     }
 };
 
@@ -220,7 +183,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
     }
 };
 
@@ -231,7 +194,43 @@ public:
     SHADER_USE_PARAMETER_STRUCT(Fp07_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
+    }
+};
+
+class Fp08_conv : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Fp08_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp08_conv, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+    END_SHADER_PARAMETER_STRUCT()
+    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
+                                             FShaderCompilerEnvironment& OutEnvironment)
+    {
+        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
+    }
+};
+
+class Fp09_conv : public FGlobalShader
+{
+public:
+    DECLARE_GLOBAL_SHADER(Fp09_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp09_conv, FGlobalShader);
+    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -243,13 +242,14 @@ public:
     }
 };
 
-class Fp08_conv : public FGlobalShader
+class Fp10_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp08_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp08_conv, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp10_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp10_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -261,14 +261,13 @@ public:
     }
 };
 
-class Fp09_conv : public FGlobalShader
+class Fp11_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp09_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp09_conv, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp11_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp11_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -280,13 +279,14 @@ public:
     }
 };
 
-class Fp10_conv : public FGlobalShader
+class Fp12_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp10_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp10_conv, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp12_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp12_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
     END_SHADER_PARAMETER_STRUCT()
@@ -298,30 +298,11 @@ public:
     }
 };
 
-class Fp11_conv : public FGlobalShader
+class Fp13_conv : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp11_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp11_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
-    }
-};
-
-class Fp12_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp12_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp12_conv, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp13_conv);
+    SHADER_USE_PARAMETER_STRUCT(Fp13_conv, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
@@ -332,7 +313,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
     }
 };
 
@@ -353,7 +334,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
     }
 };
 
@@ -372,7 +353,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
     }
 };
 

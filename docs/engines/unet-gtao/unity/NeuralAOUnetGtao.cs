@@ -5,7 +5,7 @@ using System.Collections.Generic;
 using UnityEngine;
 using UnityEngine.Rendering;
 
-/// <summary>The whole unet-gtao frame: 22 steps in the order of the manifest's frame.steps,
+/// <summary>The whole unet-gtao frame: 20 steps in the order of the manifest's frame.steps,
 /// from the textures the engine writes to the AO texture "ao".
 /// Each frame: Resize(W, H) when the size changes, write the inputs, Run(camera, radius), read AO.
 /// The inputs (Texture(id), W x H):
@@ -29,19 +29,19 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         this.shader = shader;
         weights = new float[weightsBin.Length / 4];
         System.Buffer.BlockCopy(weightsBin, 0, weights, 0, weightsBin.Length);
-        Weights(1, 0, 144);
-        Weights(2, 256, 208);
-        Weights(3, 512, 1744);
-        Weights(4, 2304, 1184);
-        Weights(5, 3584, 4672);
-        Weights(6, 8448, 18560);
-        Weights(7, 27136, 18496);
-        Weights(8, 45824, 18496);
-        Weights(9, 64512, 4640);
-        Weights(10, 69376, 4640);
-        Weights(11, 74240, 1168);
-        Weights(12, 75520, 1168);
-        Weights(13, 76800, 80);
+        Weights(1, 0, 288);
+        Weights(2, 512, 448);
+        Weights(3, 1024, 1744);
+        Weights(4, 2816, 1184);
+        Weights(5, 4096, 4672);
+        Weights(6, 8960, 18560);
+        Weights(7, 27648, 18496);
+        Weights(8, 46336, 18496);
+        Weights(9, 65024, 4640);
+        Weights(10, 69888, 4640);
+        Weights(11, 74752, 1168);
+        Weights(12, 76032, 1168);
+        Weights(13, 77312, 288);
     }
 
     /// <summary>A buffer of the pass's own: its range of weights.bin (the HLSL reads from byte 0).</summary>
@@ -78,27 +78,25 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         int wp = CeilDiv(w, PadMultiple) * PadMultiple, hp = CeilDiv(h, PadMultiple) * PadMultiple;
         tex["ao"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
         tex["depth"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
-        tex["depth_columns"] = Array2D(w, 1, 1, RenderTextureFormat.ARGBFloat);
-        tex["depth_mean"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
         tex["gtao"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
         tex["gtao_raw"] = Array2D(W, H, 1, RenderTextureFormat.RFloat);
         tex["low_gbuffer"] = Array2D(w, h, 3, RenderTextureFormat.ARGBFloat);
         tex["normal"] = Array2D(W, H, 1, RenderTextureFormat.ARGBFloat);
         tex["t0"] = Array2D(w, h, 2, RenderTextureFormat.ARGBFloat);
-        tex["t10"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t12"] = Array2D(wp * 1 / 8, hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
-        tex["t14"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t15"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
-        tex["t17"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
-        tex["t18"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t12"] = Array2D(wp, hp, 2, RenderTextureFormat.ARGBFloat);
+        tex["t14"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t16"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t18"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
         tex["t2"] = Array2D(1, 1, 1, RenderTextureFormat.ARGBFloat);
-        tex["t20"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t21"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t24"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
-        tex["t4"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t5"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t6"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
-        tex["t8"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t20"] = Array2D(wp * 1 / 8, hp * 1 / 8, 8, RenderTextureFormat.ARGBFloat);
+        tex["t22"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
+        tex["t23"] = Array2D(wp * 1 / 4, hp * 1 / 4, 4, RenderTextureFormat.ARGBFloat);
+        tex["t25"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t26"] = Array2D(wp * 1 / 2, hp * 1 / 2, 2, RenderTextureFormat.ARGBFloat);
+        tex["t28"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t29"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
+        tex["t32"] = Array2D(w, h, 1, RenderTextureFormat.ARGBFloat);
+        tex["t9"] = Array2D(wp, hp, 1, RenderTextureFormat.ARGBFloat);
         sameSize = tex["t0"].width == W && tex["t0"].height == H;
     }
 
@@ -146,128 +144,114 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         shader.SetTexture(k, "dst", tex["low_gbuffer"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["low_gbuffer"].width, 8), CeilDiv(tex["low_gbuffer"].height, 8), 1);
-        // step 3: f_depth_columns: foreground depth summed per column
-        k = shader.FindKernel("f_depth_columns");
-        shader.SetTexture(k, "src0", tex["low_gbuffer"]);
-        shader.SetTexture(k, "dst", tex["depth_columns"]);
-        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
-        shader.Dispatch(k, CeilDiv(tex["depth_columns"].width, 64), CeilDiv(tex["depth_columns"].height, 1), 1);
-        // step 4: f_depth_mean: the mean foreground depth
-        k = shader.FindKernel("f_depth_mean");
-        shader.SetTexture(k, "src0", tex["depth_columns"]);
-        shader.SetTexture(k, "dst", tex["depth_mean"]);
-        shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
-        shader.Dispatch(k, CeilDiv(tex["depth_mean"].width, 1), CeilDiv(tex["depth_mean"].height, 1), 1);
-        // step 5: f_network_input: the network's input: depth / m, normal, GTAO
+        // step 3: f_network_input: the network's input: log depth, normal, GTAO
         k = shader.FindKernel("f_network_input");
         shader.SetTexture(k, "src0", tex["low_gbuffer"]);
-        shader.SetTexture(k, "src1", tex["depth_mean"]);
         shader.SetTexture(k, "dst", tex["t0"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t0"].width, 8), CeilDiv(tex["t0"].height, 8), 1);
-        // step 6: f_network_radius: the network's radius input R P11 / m
+        // step 4: f_network_radius: the network's radius input log(R P11)
         k = shader.FindKernel("f_network_radius");
-        shader.SetTexture(k, "src0", tex["depth_mean"]);
         shader.SetTexture(k, "dst", tex["t2"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["t2"].width, 1), CeilDiv(tex["t2"].height, 1), 1);
-        // step 7: p00_uniform skipped: f_network_radius writes its texture
-        // step 8: p01_conv: Pad + Conv + Clip + Div + Clip
-        k = shader.FindKernel("p01_conv");
+        // step 5: p00_uniform skipped: f_network_radius writes its texture
+        // step 6: p01_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Neg + Exp + Clip + Mul
+        k = shader.FindKernel("p01_pointwise");
         shader.SetTexture(k, "src0", tex["t0"]);
         shader.SetTexture(k, "src1", tex["t2"]);
-        shader.SetTexture(k, "dst", tex["t4"]);
+        shader.SetTexture(k, "dst", tex["t9"]);
         shader.SetBuffer(k, "params", passWeights[1]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t4"].width, 8), CeilDiv(tex["t4"].height, 8), 1);
-        // step 9: p02_conv: Pad + Concat + Conv
-        k = shader.FindKernel("p02_conv");
+        shader.Dispatch(k, CeilDiv(tex["t9"].width, 8), CeilDiv(tex["t9"].height, 8), 1);
+        // step 7: p02_pointwise: Pad + Mul + Conv + Mul + Clip + Conv + Sub + Mul + Sub + Conv + Add
+        k = shader.FindKernel("p02_pointwise");
         shader.SetTexture(k, "src0", tex["t0"]);
-        shader.SetTexture(k, "src1", tex["t4"]);
-        shader.SetTexture(k, "dst", tex["t5"]);
+        shader.SetTexture(k, "src1", tex["t2"]);
+        shader.SetTexture(k, "dst", tex["t12"]);
         shader.SetBuffer(k, "params", passWeights[2]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t5"].width, 8), CeilDiv(tex["t5"].height, 8), 1);
-        // step 10: p03_conv: Pad + Concat + Conv + LeakyRelu
+        shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 2);
+        // step 8: p03_conv: Concat + Conv + LeakyRelu
         k = shader.FindKernel("p03_conv");
-        shader.SetTexture(k, "src0", tex["t0"]);
-        shader.SetTexture(k, "src1", tex["t4"]);
-        shader.SetTexture(k, "dst", tex["t6"]);
-        shader.SetBuffer(k, "params", passWeights[3]);
-        shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t6"].width, 8), CeilDiv(tex["t6"].height, 8), 1);
-        // step 11: p04_conv: AveragePool + Conv + LeakyRelu
-        k = shader.FindKernel("p04_conv");
-        shader.SetTexture(k, "src0", tex["t6"]);
-        shader.SetTexture(k, "dst", tex["t8"]);
-        shader.SetBuffer(k, "params", passWeights[4]);
-        shader.Dispatch(k, CeilDiv(tex["t8"].width, 8), CeilDiv(tex["t8"].height, 8), 2);
-        // step 12: p05_conv: AveragePool + Conv + LeakyRelu
-        k = shader.FindKernel("p05_conv");
-        shader.SetTexture(k, "src0", tex["t8"]);
-        shader.SetTexture(k, "dst", tex["t10"]);
-        shader.SetBuffer(k, "params", passWeights[5]);
-        shader.Dispatch(k, CeilDiv(tex["t10"].width, 8), CeilDiv(tex["t10"].height, 8), 4);
-        // step 13: p06_conv: AveragePool + Conv + LeakyRelu
-        k = shader.FindKernel("p06_conv");
-        shader.SetTexture(k, "src0", tex["t10"]);
-        shader.SetTexture(k, "dst", tex["t12"]);
-        shader.SetBuffer(k, "params", passWeights[6]);
-        shader.Dispatch(k, CeilDiv(tex["t12"].width, 8), CeilDiv(tex["t12"].height, 8), 8);
-        // step 14: p07_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p07_conv");
         shader.SetTexture(k, "src0", tex["t12"]);
+        shader.SetTexture(k, "src1", tex["t9"]);
         shader.SetTexture(k, "dst", tex["t14"]);
-        shader.SetBuffer(k, "params", passWeights[7]);
-        shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 4);
-        // step 15: p08_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p08_conv");
+        shader.SetBuffer(k, "params", passWeights[3]);
+        shader.Dispatch(k, CeilDiv(tex["t14"].width, 8), CeilDiv(tex["t14"].height, 8), 1);
+        // step 9: p04_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p04_conv");
         shader.SetTexture(k, "src0", tex["t14"]);
-        shader.SetTexture(k, "src1", tex["t10"]);
-        shader.SetTexture(k, "dst", tex["t15"]);
-        shader.SetBuffer(k, "params", passWeights[8]);
-        shader.Dispatch(k, CeilDiv(tex["t15"].width, 8), CeilDiv(tex["t15"].height, 8), 4);
-        // step 16: p09_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p09_conv");
-        shader.SetTexture(k, "src0", tex["t15"]);
-        shader.SetTexture(k, "dst", tex["t17"]);
-        shader.SetBuffer(k, "params", passWeights[9]);
-        shader.Dispatch(k, CeilDiv(tex["t17"].width, 8), CeilDiv(tex["t17"].height, 8), 2);
-        // step 17: p10_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p10_conv");
-        shader.SetTexture(k, "src0", tex["t17"]);
-        shader.SetTexture(k, "src1", tex["t8"]);
+        shader.SetTexture(k, "dst", tex["t16"]);
+        shader.SetBuffer(k, "params", passWeights[4]);
+        shader.Dispatch(k, CeilDiv(tex["t16"].width, 8), CeilDiv(tex["t16"].height, 8), 2);
+        // step 10: p05_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p05_conv");
+        shader.SetTexture(k, "src0", tex["t16"]);
         shader.SetTexture(k, "dst", tex["t18"]);
-        shader.SetBuffer(k, "params", passWeights[10]);
-        shader.Dispatch(k, CeilDiv(tex["t18"].width, 8), CeilDiv(tex["t18"].height, 8), 2);
-        // step 18: p11_conv: Resize + Conv + LeakyRelu
-        k = shader.FindKernel("p11_conv");
+        shader.SetBuffer(k, "params", passWeights[5]);
+        shader.Dispatch(k, CeilDiv(tex["t18"].width, 8), CeilDiv(tex["t18"].height, 8), 4);
+        // step 11: p06_conv: AveragePool + Conv + LeakyRelu
+        k = shader.FindKernel("p06_conv");
         shader.SetTexture(k, "src0", tex["t18"]);
         shader.SetTexture(k, "dst", tex["t20"]);
-        shader.SetBuffer(k, "params", passWeights[11]);
-        shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 1);
-        // step 19: p12_conv: Concat + Conv + LeakyRelu
-        k = shader.FindKernel("p12_conv");
+        shader.SetBuffer(k, "params", passWeights[6]);
+        shader.Dispatch(k, CeilDiv(tex["t20"].width, 8), CeilDiv(tex["t20"].height, 8), 8);
+        // step 12: p07_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p07_conv");
         shader.SetTexture(k, "src0", tex["t20"]);
-        shader.SetTexture(k, "src1", tex["t6"]);
-        shader.SetTexture(k, "dst", tex["t21"]);
+        shader.SetTexture(k, "dst", tex["t22"]);
+        shader.SetBuffer(k, "params", passWeights[7]);
+        shader.Dispatch(k, CeilDiv(tex["t22"].width, 8), CeilDiv(tex["t22"].height, 8), 4);
+        // step 13: p08_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p08_conv");
+        shader.SetTexture(k, "src0", tex["t22"]);
+        shader.SetTexture(k, "src1", tex["t18"]);
+        shader.SetTexture(k, "dst", tex["t23"]);
+        shader.SetBuffer(k, "params", passWeights[8]);
+        shader.Dispatch(k, CeilDiv(tex["t23"].width, 8), CeilDiv(tex["t23"].height, 8), 4);
+        // step 14: p09_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p09_conv");
+        shader.SetTexture(k, "src0", tex["t23"]);
+        shader.SetTexture(k, "dst", tex["t25"]);
+        shader.SetBuffer(k, "params", passWeights[9]);
+        shader.Dispatch(k, CeilDiv(tex["t25"].width, 8), CeilDiv(tex["t25"].height, 8), 2);
+        // step 15: p10_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p10_conv");
+        shader.SetTexture(k, "src0", tex["t25"]);
+        shader.SetTexture(k, "src1", tex["t16"]);
+        shader.SetTexture(k, "dst", tex["t26"]);
+        shader.SetBuffer(k, "params", passWeights[10]);
+        shader.Dispatch(k, CeilDiv(tex["t26"].width, 8), CeilDiv(tex["t26"].height, 8), 2);
+        // step 16: p11_conv: Resize + Conv + LeakyRelu
+        k = shader.FindKernel("p11_conv");
+        shader.SetTexture(k, "src0", tex["t26"]);
+        shader.SetTexture(k, "dst", tex["t28"]);
+        shader.SetBuffer(k, "params", passWeights[11]);
+        shader.Dispatch(k, CeilDiv(tex["t28"].width, 8), CeilDiv(tex["t28"].height, 8), 1);
+        // step 17: p12_conv: Concat + Conv + LeakyRelu
+        k = shader.FindKernel("p12_conv");
+        shader.SetTexture(k, "src0", tex["t28"]);
+        shader.SetTexture(k, "src1", tex["t14"]);
+        shader.SetTexture(k, "dst", tex["t29"]);
         shader.SetBuffer(k, "params", passWeights[12]);
-        shader.Dispatch(k, CeilDiv(tex["t21"].width, 8), CeilDiv(tex["t21"].height, 8), 1);
-        // step 20: p13_conv: Conv + Add + Clip + Crop
-        k = shader.FindKernel("p13_conv");
-        shader.SetTexture(k, "src0", tex["t21"]);
-        shader.SetTexture(k, "src1", tex["t5"]);
-        shader.SetTexture(k, "dst", tex["t24"]);
+        shader.Dispatch(k, CeilDiv(tex["t29"].width, 8), CeilDiv(tex["t29"].height, 8), 1);
+        // step 18: p13_pointwise: Concat + Conv + Conv + Add + Clip + Crop
+        k = shader.FindKernel("p13_pointwise");
+        shader.SetTexture(k, "src0", tex["t12"]);
+        shader.SetTexture(k, "src1", tex["t9"]);
+        shader.SetTexture(k, "src2", tex["t29"]);
+        shader.SetTexture(k, "dst", tex["t32"]);
         shader.SetBuffer(k, "params", passWeights[13]);
         shader.SetInt("u_flip_y", flip);
-        shader.Dispatch(k, CeilDiv(tex["t24"].width, 8), CeilDiv(tex["t24"].height, 8), 1);
+        shader.Dispatch(k, CeilDiv(tex["t32"].width, 8), CeilDiv(tex["t32"].height, 8), 1);
         if (!sameSize)  // (w, h) != (W, H)
         {
-            // step 21: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
+            // step 19: f_upsample: joint bilateral upsampling of the correction to GTAO, added to GTAO and clamped
             k = shader.FindKernel("f_upsample");
             shader.SetTexture(k, "src0", tex["depth"]);
             shader.SetTexture(k, "src1", tex["normal"]);
-            shader.SetTexture(k, "src2", tex["t24"]);
+            shader.SetTexture(k, "src2", tex["t32"]);
             shader.SetTexture(k, "src3", tex["low_gbuffer"]);
             shader.SetTexture(k, "src4", tex["gtao"]);
             shader.SetTexture(k, "dst", tex["ao"]);
@@ -276,10 +260,10 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         }
         if (sameSize)  // (w, h) == (W, H)
         {
-            // step 22: f_composite: the network's AO, 1 on background
+            // step 20: f_composite: the network's AO, 1 on background
             k = shader.FindKernel("f_composite");
             shader.SetTexture(k, "src0", tex["depth"]);
-            shader.SetTexture(k, "src1", tex["t24"]);
+            shader.SetTexture(k, "src1", tex["t32"]);
             shader.SetTexture(k, "dst", tex["ao"]);
             shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
             shader.Dispatch(k, CeilDiv(tex["ao"].width, 8), CeilDiv(tex["ao"].height, 8), 1);

@@ -78,11 +78,11 @@ public:
     }
 };
 
-class Ff_depth_columns : public FGlobalShader
+class Ff_network_input : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_depth_columns);
-    SHADER_USE_PARAMETER_STRUCT(Ff_depth_columns, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Ff_network_input);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
@@ -96,13 +96,12 @@ public:
     }
 };
 
-class Ff_depth_mean : public FGlobalShader
+class Ff_network_radius : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_depth_mean);
-    SHADER_USE_PARAMETER_STRUCT(Ff_depth_mean, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Ff_network_radius);
+    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
     END_SHADER_PARAMETER_STRUCT()
@@ -114,16 +113,17 @@ public:
     }
 };
 
-class Ff_network_input : public FGlobalShader
+class Fp01_pointwise : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_network_input);
-    SHADER_USE_PARAMETER_STRUCT(Ff_network_input, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp01_pointwise);
+    SHADER_USE_PARAMETER_STRUCT(Fp01_pointwise, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
@@ -133,61 +133,23 @@ public:
     }
 };
 
-class Ff_network_radius : public FGlobalShader
+class Fp02_pointwise : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Ff_network_radius);
-    SHADER_USE_PARAMETER_STRUCT(Ff_network_radius, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp02_pointwise);
+    SHADER_USE_PARAMETER_STRUCT(Fp02_pointwise, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
+        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
+        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
         OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 6);
-    }
-};
-
-class Fp01_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp01_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp01_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
-    }
-};
-
-class Fp02_conv : public FGlobalShader
-{
-public:
-    DECLARE_GLOBAL_SHADER(Fp02_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp02_conv, FGlobalShader);
-    BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
-        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
-        SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
-        SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
-    END_SHADER_PARAMETER_STRUCT()
-    static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
-                                             FShaderCompilerEnvironment& OutEnvironment)
-    {
-        FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
     }
 };
 
@@ -201,13 +163,12 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
-        SHADER_PARAMETER(int32, u_flip_y)  // $Globals
     END_SHADER_PARAMETER_STRUCT()
     static void ModifyCompilationEnvironment(const FGlobalShaderPermutationParameters& Parameters,
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 7);
     }
 };
 
@@ -225,7 +186,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 8);
     }
 };
 
@@ -243,7 +204,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 9);
     }
 };
 
@@ -261,7 +222,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 10);
     }
 };
 
@@ -279,7 +240,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 11);
     }
 };
 
@@ -298,7 +259,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 12);
     }
 };
 
@@ -316,7 +277,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 13);
     }
 };
 
@@ -335,7 +296,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 14);
     }
 };
 
@@ -353,7 +314,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 15);
     }
 };
 
@@ -372,18 +333,19 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 16);
     }
 };
 
-class Fp13_conv : public FGlobalShader
+class Fp13_pointwise : public FGlobalShader
 {
 public:
-    DECLARE_GLOBAL_SHADER(Fp13_conv);
-    SHADER_USE_PARAMETER_STRUCT(Fp13_conv, FGlobalShader);
+    DECLARE_GLOBAL_SHADER(Fp13_pointwise);
+    SHADER_USE_PARAMETER_STRUCT(Fp13_pointwise, FGlobalShader);
     BEGIN_SHADER_PARAMETER_STRUCT(FParameters, )
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src2)  // t2
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_BUFFER_SRV(ByteAddressBuffer, params)  // t16
         SHADER_PARAMETER(int32, u_flip_y)  // $Globals
@@ -392,7 +354,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 17);
     }
 };
 
@@ -414,7 +376,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 20);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 18);
     }
 };
 
@@ -433,7 +395,7 @@ public:
                                              FShaderCompilerEnvironment& OutEnvironment)
     {
         FGlobalShader::ModifyCompilationEnvironment(Parameters, OutEnvironment);
-        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 21);
+        OutEnvironment.SetDefine(TEXT("NEURALAO_PASS"), 19);
     }
 };
 

@@ -11,8 +11,6 @@ cbuffer FrameUniforms : register(b0)
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
-Texture2DArray<float4> src1 : register(t1);
-SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -96,18 +94,26 @@ void f_network_input_inner()
     int param_3 = 0;
     float4 pw = nao_load(src0, _src0_sampler, param_2, param_3);
     float4 x = 0.0f.xxxx;
-    if (pw.w >= 0.5f)
+    bool _155 = pw.w >= 0.5f;
+    bool _163;
+    if (_155)
     {
-        int2 param_4 = int2(0, 0);
-        int param_5 = 0;
-        int2 param_6 = px;
-        int param_7 = 1;
-        x = float4((-pw.z) / nao_load(src1, _src1_sampler, param_4, param_5).x, nao_load(src0, _src0_sampler, param_6, param_7).xyz);
+        _163 = (-pw.z) > 0.0f;
     }
-    int2 param_8 = px;
-    int param_9 = 0;
-    float4 param_10 = x;
-    nao_store(param_8, param_9, param_10);
+    else
+    {
+        _163 = _155;
+    }
+    if (_163)
+    {
+        int2 param_4 = px;
+        int param_5 = 1;
+        x = float4(log(-pw.z), nao_load(src0, _src0_sampler, param_4, param_5).xyz);
+    }
+    int2 param_6 = px;
+    int param_7 = 0;
+    float4 param_8 = x;
+    nao_store(param_6, param_7, param_8);
 }
 
 [numthreads(8, 8, 1)]

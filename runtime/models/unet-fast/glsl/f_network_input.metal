@@ -54,7 +54,7 @@ void nao_store(thread const int2& p, thread const int& layer, thread const float
     dst.write(v, uint2(_104.xy), uint(_104.z));
 }
 
-kernel void f_network_input(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_network_input(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -79,17 +79,25 @@ kernel void f_network_input(constant FrameUniforms& frame [[buffer(0)]], texture
     int param_3 = 0;
     float4 pw = nao_load(src0, src0Smplr, param_2, param_3, frame);
     float4 x = float4(0.0);
-    if (pw.w >= 0.5)
+    bool _155 = pw.w >= 0.5;
+    bool _163;
+    if (_155)
     {
-        int2 param_4 = int2(0);
-        int param_5 = 0;
-        int2 param_6 = px;
-        int param_7 = 1;
-        x = float4((-pw.z) / nao_load(src1, src1Smplr, param_4, param_5, frame).x, nao_load(src0, src0Smplr, param_6, param_7, frame).xyz);
+        _163 = (-pw.z) > 0.0;
     }
-    int2 param_8 = px;
-    int param_9 = 0;
-    float4 param_10 = x;
-    nao_store(param_8, param_9, param_10, frame, dst);
+    else
+    {
+        _163 = _155;
+    }
+    if (_163)
+    {
+        int2 param_4 = px;
+        int param_5 = 1;
+        x = float4(log(-pw.z), nao_load(src0, src0Smplr, param_4, param_5, frame).xyz);
+    }
+    int2 param_6 = px;
+    int param_7 = 0;
+    float4 param_8 = x;
+    nao_store(param_6, param_7, param_8, frame, dst);
 }
 

@@ -9,21 +9,12 @@ cbuffer FrameUniforms : register(b0)
 };
 
 RWTexture2DArray<float4> dst : register(u0);
-Texture2DArray<float4> src0 : register(t0);
-SamplerState _src0_sampler : register(s0);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
 {
     uint3 gl_GlobalInvocationID : SV_DispatchThreadID;
 };
-
-uint3 spvTextureSize(Texture2DArray<float4> Tex, uint Level, out uint Param)
-{
-    uint3 ret;
-    Tex.GetDimensions(Level, ret.x, ret.y, ret.z, Param);
-    return ret;
-}
 
 uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
 {
@@ -35,67 +26,52 @@ uint3 spvImageSize(RWTexture2DArray<float4> Tex, out uint Param)
 
 int2 nao_texel(int2 p, int2 size)
 {
-    int2 _48;
+    int2 _35;
     if (frame_u_flip_y != 0)
     {
-        _48 = p;
+        _35 = p;
     }
     else
     {
-        _48 = int2(p.x, (size.y - 1) - p.y);
+        _35 = int2(p.x, (size.y - 1) - p.y);
     }
-    return _48;
-}
-
-int2 nao_size(Texture2DArray<float4> t, SamplerState _t_sampler)
-{
-    uint _72_dummy_parameter;
-    return int3(spvTextureSize(t, uint(0), _72_dummy_parameter)).xy;
-}
-
-float4 nao_load(Texture2DArray<float4> t, SamplerState _t_sampler, int2 p, int layer)
-{
-    int2 param = p;
-    int2 param_1 = nao_size(t, _t_sampler);
-    return t.Load(int4(int3(nao_texel(param, param_1), layer), 0));
+    return _35;
 }
 
 void nao_store(int2 p, int layer, float4 v)
 {
-    uint _95_dummy_parameter;
+    uint _62_dummy_parameter;
     int2 param = p;
-    int2 param_1 = int3(spvImageSize(dst, _95_dummy_parameter)).xy;
+    int2 param_1 = int3(spvImageSize(dst, _62_dummy_parameter)).xy;
     dst[int3(nao_texel(param, param_1), layer)] = v;
 }
 
 void f_network_radius_inner()
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
-    uint _116_dummy_parameter;
-    int2 out_size = int3(spvImageSize(dst, _116_dummy_parameter)).xy;
-    bool _122 = gid.x >= out_size.x;
-    bool _131;
-    if (!_122)
+    uint _83_dummy_parameter;
+    int2 out_size = int3(spvImageSize(dst, _83_dummy_parameter)).xy;
+    bool _89 = gid.x >= out_size.x;
+    bool _98;
+    if (!_89)
     {
-        _131 = gid.y >= out_size.y;
+        _98 = gid.y >= out_size.y;
     }
     else
     {
-        _131 = _122;
+        _98 = _89;
     }
-    if (_131)
+    if (_98)
     {
         return;
     }
     int2 param = gid;
     int2 param_1 = out_size;
     int2 px = nao_texel(param, param_1);
-    int2 param_2 = int2(0, 0);
+    int2 param_2 = px;
     int param_3 = 0;
-    int2 param_4 = px;
-    int param_5 = 0;
-    float4 param_6 = float4((frame_u_radius * frame_u_proj.y) / nao_load(src0, _src0_sampler, param_2, param_3).x, 0.0f, 0.0f, 0.0f);
-    nao_store(param_4, param_5, param_6);
+    float4 param_4 = float4(log(frame_u_radius * frame_u_proj.y), 0.0f, 0.0f, 0.0f);
+    nao_store(param_2, param_3, param_4);
 }
 
 [numthreads(1, 1, 1)]

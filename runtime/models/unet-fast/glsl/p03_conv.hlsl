@@ -4,6 +4,8 @@ ByteAddressBuffer params : register(t16);
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -51,7 +53,7 @@ void p03_conv_inner()
     bool _72;
     if (!_63)
     {
-        _72 = gid.z >= 4;
+        _72 = gid.z >= 2;
     }
     else
     {
@@ -62,9 +64,10 @@ void p03_conv_inner()
         return;
     }
     uint _84_dummy_parameter;
-    int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    int2 size0 = src_size0 / int2(2, 2);
-    float4 acc = float4(asfloat(params.Load4((288 + gid.z) * 16 + 0)));
+    int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
+    uint _90_dummy_parameter;
+    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
+    float4 acc = asfloat(params.Load4((144 + gid.z) * 16 + 0));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -72,34 +75,64 @@ void p03_conv_inner()
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 8);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            bool _151 = iy >= 0;
+            bool _158;
+            if (_151)
             {
-                _162 = iy < size0.y;
+                _158 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _158 = _151;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _161 = _158 && (ix >= 0);
+            bool _168;
+            if (_161)
             {
-                _172 = ix < size0.x;
+                _168 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _168 = _161;
             }
-            if (_172)
+            if (_168)
             {
-                for (int l = 0; l < 2; l++)
+                for (int l = 0; l < 1; l++)
                 {
-                    float4 v = (((src0.Load(int4(int3(2 * ix, 2 * iy, l), 0)) + src0.Load(int4(int3((2 * ix) + 1, 2 * iy, l), 0))) + src0.Load(int4(int3(2 * ix, (2 * iy) + 1, l), 0))) + src0.Load(int4(int3((2 * ix) + 1, (2 * iy) + 1, l), 0))) / 4.0f.xxxx;
+                    float4 v = src0.Load(int4(int3(ix, iy, l), 0));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _273 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_273[0], _273[1], _273[2], _273[3]));
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
+                }
+            }
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
+            {
+                _264 = iy < size1.y;
+            }
+            else
+            {
+                _264 = _257;
+            }
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
+            {
+                _274 = ix < size1.x;
+            }
+            else
+            {
+                _274 = _267;
+            }
+            if (_274)
+            {
+                for (int l_1 = 0; l_1 < 1; l_1++)
+                {
+                    float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
+                    int o_1 = tap + ((1 + l_1) * 4);
+                    float4x4 w_1 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v_1), float4x4(w_1[0], w_1[1], w_1[2], w_1[3])));
                 }
             }
         }

@@ -18,7 +18,7 @@ float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
     return select(x * alpha, x, x >= float4(0.0));
 }
 
-kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -35,7 +35,7 @@ kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<
     bool _72;
     if (!_63)
     {
-        _72 = gid.z >= 4;
+        _72 = gid.z >= 2;
     }
     else
     {
@@ -45,9 +45,9 @@ kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<
     {
         return;
     }
-    int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    int2 size0 = src_size0 / int2(2);
-    float4 acc = float4(params.prm[288 + gid.z]);
+    int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
+    int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
+    float4 acc = params.prm[144 + gid.z];
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -55,38 +55,66 @@ kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 8);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            bool _151 = iy >= 0;
+            bool _158;
+            if (_151)
             {
-                _162 = iy < size0.y;
+                _158 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _158 = _151;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _161 = _158 && (ix >= 0);
+            bool _168;
+            if (_161)
             {
-                _172 = ix < size0.x;
+                _168 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _168 = _161;
             }
-            if (_172)
+            if (_168)
             {
-                for (int l = 0; l < 2; l++)
+                for (int l = 0; l < 1; l++)
                 {
-                    int3 _190 = int3(2 * ix, 2 * iy, l);
-                    int3 _200 = int3((2 * ix) + 1, 2 * iy, l);
-                    int3 _211 = int3(2 * ix, (2 * iy) + 1, l);
-                    int3 _223 = int3((2 * ix) + 1, (2 * iy) + 1, l);
-                    float4 v = (((src0.read(uint2(_190.xy), uint(_190.z), 0) + src0.read(uint2(_200.xy), uint(_200.z), 0)) + src0.read(uint2(_211.xy), uint(_211.z), 0)) + src0.read(uint2(_223.xy), uint(_223.z), 0)) / float4(4.0);
+                    int3 _184 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_184.xy), uint(_184.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _273 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_273[0], _273[1], _273[2], _273[3]) * float4(v));
+                    float4x4 w = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += float4(float4x4(w[0], w[1], w[2], w[3]) * float4(v));
+                }
+            }
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
+            {
+                _264 = iy < size1.y;
+            }
+            else
+            {
+                _264 = _257;
+            }
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
+            {
+                _274 = ix < size1.x;
+            }
+            else
+            {
+                _274 = _267;
+            }
+            if (_274)
+            {
+                for (int l_1 = 0; l_1 < 1; l_1++)
+                {
+                    int3 _290 = int3(ix, iy, l_1);
+                    float4 v_1 = src1.read(uint2(_290.xy), uint(_290.z), 0);
+                    int o_1 = tap + ((1 + l_1) * 4);
+                    float4x4 w_1 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
+                    acc += float4(float4x4(w_1[0], w_1[1], w_1[2], w_1[3]) * float4(v_1));
                 }
             }
         }
@@ -95,7 +123,7 @@ kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _313 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_313.xy), uint(_313.z));
+    int3 _381 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_381.xy), uint(_381.z));
 }
 

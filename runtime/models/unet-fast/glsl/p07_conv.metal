@@ -18,7 +18,7 @@ float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
     return select(x * alpha, x, x >= float4(0.0));
 }
 
-kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -45,85 +45,124 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
     {
         return;
     }
-    int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[4608 + gid.z]);
-    for (int ky = 0; ky < 3; ky++)
+    int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
+    int2 size0 = src_size0 * int2(2);
+    float4 acc = params.prm[4608 + gid.z];
+    int2 lo = src_size0 - int2(1);
+    int2 m = gid.xy / int2(2);
+    bool ox = (gid.x & 1) == 1;
+    bool oy = (gid.y & 1) == 1;
+    int x0 = clamp(m.x - 1, 0, lo.x);
+    int x1 = clamp(m.x, 0, lo.x);
+    int x2 = clamp(m.x + 1, 0, lo.x);
+    int y0 = clamp(m.y - 1, 0, lo.y);
+    int y1 = clamp(m.y, 0, lo.y);
+    int y2 = clamp(m.y + 1, 0, lo.y);
+    float wx = ox ? 0.75 : 0.25;
+    float wy = oy ? 0.75 : 0.25;
+    bool vx0 = gid.x >= 1;
+    bool vx2 = (gid.x + 1) < size0.x;
+    bool vy0 = gid.y >= 1;
+    bool vy2 = (gid.y + 1) < size0.y;
+    for (int l = 0; l < 16; l++)
     {
-        int iy = ((gid.y * 1) - 1) + (ky * 1);
-        for (int kx = 0; kx < 3; kx++)
+        int3 _208 = int3(x0, y0, l);
+        float4 c00 = src0.read(uint2(_208.xy), uint(_208.z), 0);
+        int3 _216 = int3(x1, y0, l);
+        float4 c01 = src0.read(uint2(_216.xy), uint(_216.z), 0);
+        int3 _224 = int3(x2, y0, l);
+        float4 c02 = src0.read(uint2(_224.xy), uint(_224.z), 0);
+        int3 _232 = int3(x0, y1, l);
+        float4 c10 = src0.read(uint2(_232.xy), uint(_232.z), 0);
+        int3 _240 = int3(x1, y1, l);
+        float4 c11 = src0.read(uint2(_240.xy), uint(_240.z), 0);
+        int3 _248 = int3(x2, y1, l);
+        float4 c12 = src0.read(uint2(_248.xy), uint(_248.z), 0);
+        int3 _256 = int3(x0, y2, l);
+        float4 c20 = src0.read(uint2(_256.xy), uint(_256.z), 0);
+        int3 _264 = int3(x1, y2, l);
+        float4 c21 = src0.read(uint2(_264.xy), uint(_264.z), 0);
+        int3 _272 = int3(x2, y2, l);
+        float4 c22 = src0.read(uint2(_272.xy), uint(_272.z), 0);
+        float4 h00 = mix(c00, c01, float4(wx));
+        float4 h01 = mix(select(c00, c01, bool4(ox)), select(c01, c02, bool4(ox)), float4(1.0 - wx));
+        float4 h02 = mix(c01, c02, float4(wx));
+        float4 h10 = mix(c10, c11, float4(wx));
+        float4 h11 = mix(select(c10, c11, bool4(ox)), select(c11, c12, bool4(ox)), float4(1.0 - wx));
+        float4 h12 = mix(c11, c12, float4(wx));
+        float4 h20 = mix(c20, c21, float4(wx));
+        float4 h21 = mix(select(c20, c21, bool4(ox)), select(c21, c22, bool4(ox)), float4(1.0 - wx));
+        float4 h22 = mix(c21, c22, float4(wx));
+        float4 u00 = mix(h00, h10, float4(wy));
+        float4 u01 = mix(h01, h11, float4(wy));
+        float4 u02 = mix(h02, h12, float4(wy));
+        float4 u10 = mix(select(h00, h10, bool4(oy)), select(h10, h20, bool4(oy)), float4(1.0 - wy));
+        float4 u11 = mix(select(h01, h11, bool4(oy)), select(h11, h21, bool4(oy)), float4(1.0 - wy));
+        float4 u12 = mix(select(h02, h12, bool4(oy)), select(h12, h22, bool4(oy)), float4(1.0 - wy));
+        float4 u20 = mix(h10, h20, float4(wy));
+        float4 u21 = mix(h11, h21, float4(wy));
+        float4 u22 = mix(h12, h22, float4(wy));
+        int o = (0 + ((gid.z * 9) * 64)) + ((0 + l) * 4);
+        if (vy0 && vx0)
         {
-            int ix = ((gid.x * 1) - 1) + (kx * 1);
-            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 64);
-            bool _156 = iy >= 0;
-            bool _163;
-            if (_156)
-            {
-                _163 = iy < size0.y;
-            }
-            else
-            {
-                _163 = _156;
-            }
-            bool _166 = _163 && (ix >= 0);
-            bool _173;
-            if (_166)
-            {
-                _173 = ix < size0.x;
-            }
-            else
-            {
-                _173 = _166;
-            }
-            if (_173)
-            {
-                for (int l = 0; l < 8; l++)
-                {
-                    int3 _189 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_189.xy), uint(_189.z), 0);
-                    int o = tap + ((0 + l) * 4);
-                    float4x4 _237 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_237[0], _237[1], _237[2], _237[3]) * float4(v));
-                }
-            }
-            bool _255 = iy >= 0;
-            bool _262;
-            if (_255)
-            {
-                _262 = iy < size1.y;
-            }
-            else
-            {
-                _262 = _255;
-            }
-            bool _265 = _262 && (ix >= 0);
-            bool _272;
-            if (_265)
-            {
-                _272 = ix < size1.x;
-            }
-            else
-            {
-                _272 = _265;
-            }
-            if (_272)
-            {
-                for (int l_1 = 0; l_1 < 8; l_1++)
-                {
-                    int3 _288 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_288.xy), uint(_288.z), 0);
-                    int o_1 = tap + ((8 + l_1) * 4);
-                    float4x4 _332 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_332[0], _332[1], _332[2], _332[3]) * float4(v_1));
-                }
-            }
+            int t0 = o + 0;
+            float4x4 w0 = float4x4(float4(params.prm[t0]), float4(params.prm[t0 + 1]), float4(params.prm[t0 + 2]), float4(params.prm[t0 + 3]));
+            acc += float4(float4x4(w0[0], w0[1], w0[2], w0[3]) * float4(u00));
+        }
+        if (vy0)
+        {
+            int t1 = o + 64;
+            float4x4 w1 = float4x4(float4(params.prm[t1]), float4(params.prm[t1 + 1]), float4(params.prm[t1 + 2]), float4(params.prm[t1 + 3]));
+            acc += float4(float4x4(w1[0], w1[1], w1[2], w1[3]) * float4(u01));
+        }
+        if (vy0 && vx2)
+        {
+            int t2 = o + 128;
+            float4x4 w2 = float4x4(float4(params.prm[t2]), float4(params.prm[t2 + 1]), float4(params.prm[t2 + 2]), float4(params.prm[t2 + 3]));
+            acc += float4(float4x4(w2[0], w2[1], w2[2], w2[3]) * float4(u02));
+        }
+        if (vx0)
+        {
+            int t3 = o + 192;
+            float4x4 w3 = float4x4(float4(params.prm[t3]), float4(params.prm[t3 + 1]), float4(params.prm[t3 + 2]), float4(params.prm[t3 + 3]));
+            acc += float4(float4x4(w3[0], w3[1], w3[2], w3[3]) * float4(u10));
+        }
+        if (true)
+        {
+            int t4 = o + 256;
+            float4x4 w4 = float4x4(float4(params.prm[t4]), float4(params.prm[t4 + 1]), float4(params.prm[t4 + 2]), float4(params.prm[t4 + 3]));
+            acc += float4(float4x4(w4[0], w4[1], w4[2], w4[3]) * float4(u11));
+        }
+        if (vx2)
+        {
+            int t5 = o + 320;
+            float4x4 w5 = float4x4(float4(params.prm[t5]), float4(params.prm[t5 + 1]), float4(params.prm[t5 + 2]), float4(params.prm[t5 + 3]));
+            acc += float4(float4x4(w5[0], w5[1], w5[2], w5[3]) * float4(u12));
+        }
+        if (vy2 && vx0)
+        {
+            int t6 = o + 384;
+            float4x4 w6 = float4x4(float4(params.prm[t6]), float4(params.prm[t6 + 1]), float4(params.prm[t6 + 2]), float4(params.prm[t6 + 3]));
+            acc += float4(float4x4(w6[0], w6[1], w6[2], w6[3]) * float4(u20));
+        }
+        if (vy2)
+        {
+            int t7 = o + 448;
+            float4x4 w7 = float4x4(float4(params.prm[t7]), float4(params.prm[t7 + 1]), float4(params.prm[t7 + 2]), float4(params.prm[t7 + 3]));
+            acc += float4(float4x4(w7[0], w7[1], w7[2], w7[3]) * float4(u21));
+        }
+        if (vy2 && vx2)
+        {
+            int t8 = o + 512;
+            float4x4 w8 = float4x4(float4(params.prm[t8]), float4(params.prm[t8 + 1]), float4(params.prm[t8 + 2]), float4(params.prm[t8 + 3]));
+            acc += float4(float4x4(w8[0], w8[1], w8[2], w8[3]) * float4(u22));
         }
     }
     float4 r = float4(acc);
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _372 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_372.xy), uint(_372.z));
+    int3 _1057 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_1057.xy), uint(_1057.z));
 }
 

@@ -4,6 +4,8 @@ ByteAddressBuffer params : register(t16);
 RWTexture2DArray<float4> dst : register(u0);
 Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
+Texture2DArray<float4> src1 : register(t1);
+SamplerState _src1_sampler : register(s1);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -51,7 +53,7 @@ void p10_conv_inner()
     bool _72;
     if (!_63)
     {
-        _72 = gid.z >= 2;
+        _72 = gid.z >= 4;
     }
     else
     {
@@ -62,120 +64,77 @@ void p10_conv_inner()
         return;
     }
     uint _84_dummy_parameter;
-    int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    int2 size0 = src_size0 * int2(2, 2);
-    float4 acc = float4(asfloat(params.Load4((288 + gid.z) * 16 + 0)));
-    int2 lo = src_size0 - int2(1, 1);
-    int2 m = gid.xy / int2(2, 2);
-    bool ox = (gid.x & 1) == 1;
-    bool oy = (gid.y & 1) == 1;
-    int x0 = clamp(m.x - 1, 0, lo.x);
-    int x1 = clamp(m.x, 0, lo.x);
-    int x2 = clamp(m.x + 1, 0, lo.x);
-    int y0 = clamp(m.y - 1, 0, lo.y);
-    int y1 = clamp(m.y, 0, lo.y);
-    int y2 = clamp(m.y + 1, 0, lo.y);
-    float wx = ox ? 0.75f : 0.25f;
-    float wy = oy ? 0.75f : 0.25f;
-    bool vx0 = gid.x >= 1;
-    bool vx2 = (gid.x + 1) < size0.x;
-    bool vy0 = gid.y >= 1;
-    bool vy2 = (gid.y + 1) < size0.y;
-    for (int l = 0; l < 4; l++)
+    int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
+    uint _90_dummy_parameter;
+    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
+    float4 acc = asfloat(params.Load4((1152 + gid.z) * 16 + 0));
+    for (int ky = 0; ky < 3; ky++)
     {
-        float4 c00 = src0.Load(int4(int3(x0, y0, l), 0));
-        float4 c01 = src0.Load(int4(int3(x1, y0, l), 0));
-        float4 c02 = src0.Load(int4(int3(x2, y0, l), 0));
-        float4 c10 = src0.Load(int4(int3(x0, y1, l), 0));
-        float4 c11 = src0.Load(int4(int3(x1, y1, l), 0));
-        float4 c12 = src0.Load(int4(int3(x2, y1, l), 0));
-        float4 c20 = src0.Load(int4(int3(x0, y2, l), 0));
-        float4 c21 = src0.Load(int4(int3(x1, y2, l), 0));
-        float4 c22 = src0.Load(int4(int3(x2, y2, l), 0));
-        float4 h00 = lerp(c00, c01, wx.xxxx);
-        bool4 _289 = ox.xxxx;
-        bool4 _294 = ox.xxxx;
-        float4 h01 = lerp(float4(_289.x ? c01.x : c00.x, _289.y ? c01.y : c00.y, _289.z ? c01.z : c00.z, _289.w ? c01.w : c00.w), float4(_294.x ? c02.x : c01.x, _294.y ? c02.y : c01.y, _294.z ? c02.z : c01.z, _294.w ? c02.w : c01.w), (1.0f - wx).xxxx);
-        float4 h02 = lerp(c01, c02, wx.xxxx);
-        float4 h10 = lerp(c10, c11, wx.xxxx);
-        bool4 _317 = ox.xxxx;
-        bool4 _322 = ox.xxxx;
-        float4 h11 = lerp(float4(_317.x ? c11.x : c10.x, _317.y ? c11.y : c10.y, _317.z ? c11.z : c10.z, _317.w ? c11.w : c10.w), float4(_322.x ? c12.x : c11.x, _322.y ? c12.y : c11.y, _322.z ? c12.z : c11.z, _322.w ? c12.w : c11.w), (1.0f - wx).xxxx);
-        float4 h12 = lerp(c11, c12, wx.xxxx);
-        float4 h20 = lerp(c20, c21, wx.xxxx);
-        bool4 _344 = ox.xxxx;
-        bool4 _349 = ox.xxxx;
-        float4 h21 = lerp(float4(_344.x ? c21.x : c20.x, _344.y ? c21.y : c20.y, _344.z ? c21.z : c20.z, _344.w ? c21.w : c20.w), float4(_349.x ? c22.x : c21.x, _349.y ? c22.y : c21.y, _349.z ? c22.z : c21.z, _349.w ? c22.w : c21.w), (1.0f - wx).xxxx);
-        float4 h22 = lerp(c21, c22, wx.xxxx);
-        float4 u00 = lerp(h00, h10, wy.xxxx);
-        float4 u01 = lerp(h01, h11, wy.xxxx);
-        float4 u02 = lerp(h02, h12, wy.xxxx);
-        bool4 _383 = oy.xxxx;
-        bool4 _388 = oy.xxxx;
-        float4 u10 = lerp(float4(_383.x ? h10.x : h00.x, _383.y ? h10.y : h00.y, _383.z ? h10.z : h00.z, _383.w ? h10.w : h00.w), float4(_388.x ? h20.x : h10.x, _388.y ? h20.y : h10.y, _388.z ? h20.z : h10.z, _388.w ? h20.w : h10.w), (1.0f - wy).xxxx);
-        bool4 _398 = oy.xxxx;
-        bool4 _403 = oy.xxxx;
-        float4 u11 = lerp(float4(_398.x ? h11.x : h01.x, _398.y ? h11.y : h01.y, _398.z ? h11.z : h01.z, _398.w ? h11.w : h01.w), float4(_403.x ? h21.x : h11.x, _403.y ? h21.y : h11.y, _403.z ? h21.z : h11.z, _403.w ? h21.w : h11.w), (1.0f - wy).xxxx);
-        bool4 _413 = oy.xxxx;
-        bool4 _418 = oy.xxxx;
-        float4 u12 = lerp(float4(_413.x ? h12.x : h02.x, _413.y ? h12.y : h02.y, _413.z ? h12.z : h02.z, _413.w ? h12.w : h02.w), float4(_418.x ? h22.x : h12.x, _418.y ? h22.y : h12.y, _418.z ? h22.z : h12.z, _418.w ? h22.w : h12.w), (1.0f - wy).xxxx);
-        float4 u20 = lerp(h10, h20, wy.xxxx);
-        float4 u21 = lerp(h11, h21, wy.xxxx);
-        float4 u22 = lerp(h12, h22, wy.xxxx);
-        int o = (0 + ((gid.z * 9) * 16)) + ((0 + l) * 4);
-        if (vy0 && vx0)
+        int iy = ((gid.y * 1) - 1) + (ky * 1);
+        for (int kx = 0; kx < 3; kx++)
         {
-            int t0 = o + 0;
-            float4x4 w0 = float4x4(float4(asfloat(params.Load4(t0 * 16 + 0))), float4(asfloat(params.Load4((t0 + 1) * 16 + 0))), float4(asfloat(params.Load4((t0 + 2) * 16 + 0))), float4(asfloat(params.Load4((t0 + 3) * 16 + 0))));
-            acc += mul(float4(u00), float4x4(w0[0], w0[1], w0[2], w0[3]));
-        }
-        if (vy0)
-        {
-            int t1 = o + 16;
-            float4x4 w1 = float4x4(float4(asfloat(params.Load4(t1 * 16 + 0))), float4(asfloat(params.Load4((t1 + 1) * 16 + 0))), float4(asfloat(params.Load4((t1 + 2) * 16 + 0))), float4(asfloat(params.Load4((t1 + 3) * 16 + 0))));
-            acc += mul(float4(u01), float4x4(w1[0], w1[1], w1[2], w1[3]));
-        }
-        if (vy0 && vx2)
-        {
-            int t2 = o + 32;
-            float4x4 w2 = float4x4(float4(asfloat(params.Load4(t2 * 16 + 0))), float4(asfloat(params.Load4((t2 + 1) * 16 + 0))), float4(asfloat(params.Load4((t2 + 2) * 16 + 0))), float4(asfloat(params.Load4((t2 + 3) * 16 + 0))));
-            acc += mul(float4(u02), float4x4(w2[0], w2[1], w2[2], w2[3]));
-        }
-        if (vx0)
-        {
-            int t3 = o + 48;
-            float4x4 w3 = float4x4(float4(asfloat(params.Load4(t3 * 16 + 0))), float4(asfloat(params.Load4((t3 + 1) * 16 + 0))), float4(asfloat(params.Load4((t3 + 2) * 16 + 0))), float4(asfloat(params.Load4((t3 + 3) * 16 + 0))));
-            acc += mul(float4(u10), float4x4(w3[0], w3[1], w3[2], w3[3]));
-        }
-        if (true)
-        {
-            int t4 = o + 64;
-            float4x4 w4 = float4x4(float4(asfloat(params.Load4(t4 * 16 + 0))), float4(asfloat(params.Load4((t4 + 1) * 16 + 0))), float4(asfloat(params.Load4((t4 + 2) * 16 + 0))), float4(asfloat(params.Load4((t4 + 3) * 16 + 0))));
-            acc += mul(float4(u11), float4x4(w4[0], w4[1], w4[2], w4[3]));
-        }
-        if (vx2)
-        {
-            int t5 = o + 80;
-            float4x4 w5 = float4x4(float4(asfloat(params.Load4(t5 * 16 + 0))), float4(asfloat(params.Load4((t5 + 1) * 16 + 0))), float4(asfloat(params.Load4((t5 + 2) * 16 + 0))), float4(asfloat(params.Load4((t5 + 3) * 16 + 0))));
-            acc += mul(float4(u12), float4x4(w5[0], w5[1], w5[2], w5[3]));
-        }
-        if (vy2 && vx0)
-        {
-            int t6 = o + 96;
-            float4x4 w6 = float4x4(float4(asfloat(params.Load4(t6 * 16 + 0))), float4(asfloat(params.Load4((t6 + 1) * 16 + 0))), float4(asfloat(params.Load4((t6 + 2) * 16 + 0))), float4(asfloat(params.Load4((t6 + 3) * 16 + 0))));
-            acc += mul(float4(u20), float4x4(w6[0], w6[1], w6[2], w6[3]));
-        }
-        if (vy2)
-        {
-            int t7 = o + 112;
-            float4x4 w7 = float4x4(float4(asfloat(params.Load4(t7 * 16 + 0))), float4(asfloat(params.Load4((t7 + 1) * 16 + 0))), float4(asfloat(params.Load4((t7 + 2) * 16 + 0))), float4(asfloat(params.Load4((t7 + 3) * 16 + 0))));
-            acc += mul(float4(u21), float4x4(w7[0], w7[1], w7[2], w7[3]));
-        }
-        if (vy2 && vx2)
-        {
-            int t8 = o + 128;
-            float4x4 w8 = float4x4(float4(asfloat(params.Load4(t8 * 16 + 0))), float4(asfloat(params.Load4((t8 + 1) * 16 + 0))), float4(asfloat(params.Load4((t8 + 2) * 16 + 0))), float4(asfloat(params.Load4((t8 + 3) * 16 + 0))));
-            acc += mul(float4(u22), float4x4(w8[0], w8[1], w8[2], w8[3]));
+            int ix = ((gid.x * 1) - 1) + (kx * 1);
+            int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 32);
+            bool _151 = iy >= 0;
+            bool _158;
+            if (_151)
+            {
+                _158 = iy < size0.y;
+            }
+            else
+            {
+                _158 = _151;
+            }
+            bool _161 = _158 && (ix >= 0);
+            bool _168;
+            if (_161)
+            {
+                _168 = ix < size0.x;
+            }
+            else
+            {
+                _168 = _161;
+            }
+            if (_168)
+            {
+                for (int l = 0; l < 4; l++)
+                {
+                    float4 v = src0.Load(int4(int3(ix, iy, l), 0));
+                    int o = tap + ((0 + l) * 4);
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
+                }
+            }
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
+            {
+                _264 = iy < size1.y;
+            }
+            else
+            {
+                _264 = _257;
+            }
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
+            {
+                _274 = ix < size1.x;
+            }
+            else
+            {
+                _274 = _267;
+            }
+            if (_274)
+            {
+                for (int l_1 = 0; l_1 < 4; l_1++)
+                {
+                    float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
+                    int o_1 = tap + ((4 + l_1) * 4);
+                    float4x4 w_1 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v_1), float4x4(w_1[0], w_1[1], w_1[2], w_1[3])));
+                }
+            }
         }
     }
     float4 r = float4(acc);

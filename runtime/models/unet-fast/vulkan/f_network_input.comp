@@ -1,12 +1,11 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// neuralao frame pass f_network_input: the network's input: depth / m, normal
+// neuralao frame pass f_network_input: the network's input: log depth, normal
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 layout(set = 0, binding = 0) uniform highp texture2DArray src0;
-layout(set = 0, binding = 1) uniform highp texture2DArray src1;
-layout(set = 0, binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std140, set = 0, binding = 3) uniform FrameUniforms {
+layout(set = 0, binding = 1, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std140, set = 0, binding = 2) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -60,8 +59,8 @@ void main() {
     ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
     vec4 pw = nao_load(src0, px, 0);
     vec4 x = vec4(0.0);
-    if (pw.w >= 0.5) {
-        x = vec4(-pw.z / nao_load(src1, ivec2(0, 0), 0).x, nao_load(src0, px, 1).xyz);
+    if (pw.w >= 0.5 && -pw.z > 0.0) {
+        x = vec4(log(-pw.z), nao_load(src0, px, 1).xyz);
     }
     nao_store(px, 0, x);
 }

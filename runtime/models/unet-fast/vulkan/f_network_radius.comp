@@ -1,11 +1,10 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// neuralao frame pass f_network_radius: the network's radius input R P11 / m
+// neuralao frame pass f_network_radius: the network's radius input log(R P11)
 layout(local_size_x = 1, local_size_y = 1, local_size_z = 1) in;
 
-layout(set = 0, binding = 0) uniform highp texture2DArray src0;
-layout(set = 0, binding = 1, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std140, set = 0, binding = 2) uniform FrameUniforms {
+layout(set = 0, binding = 0, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std140, set = 0, binding = 1) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -57,5 +56,5 @@ void main() {
         return;
     }
     ivec2 px = nao_texel(gid, out_size);  // this invocation's pixel, GL order
-    nao_store(px, 0, vec4(u_radius * u_proj.y / nao_load(src0, ivec2(0, 0), 0).x, 0.0, 0.0, 0.0));
+    nao_store(px, 0, vec4(log(u_radius * u_proj.y), 0.0, 0.0, 0.0));
 }

@@ -1,6 +1,6 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
 // neuralao compute pass 0: Uniform

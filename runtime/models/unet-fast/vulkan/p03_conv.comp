@@ -1,9 +1,9 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
-// neuralao compute pass 3: AveragePool + Conv + LeakyRelu
+// neuralao compute pass 3: Concat + Conv + LeakyRelu
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
@@ -23,34 +23,40 @@ vec4 nao_leaky_relu(vec4 x, float alpha) {
 }
 
 layout(set = 0, binding = 0) uniform highp texture2DArray src0;
-layout(set = 0, binding = 1, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std430, set = 0, binding = 2) readonly buffer Params {
+layout(set = 0, binding = 1) uniform highp texture2DArray src1;
+layout(set = 0, binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std430, set = 0, binding = 3) readonly buffer Params {
     vec4 prm[];
 };
 
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
     ivec2 out_size = imageSize(dst).xy;
-    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 4) {
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 2) {
         return;
     }
-    ivec2 src_size0 = textureSize(src0, 0).xy;
-    ivec2 size0 = src_size0 / 2;
-    hvec4 acc = hvec4(prm[288 + gid.z]);
+    ivec2 size0 = textureSize(src0, 0).xy;
+    ivec2 size1 = textureSize(src1, 0).xy;
+    vec4 acc = prm[144 + gid.z];
     for (int ky = 0; ky < 3; ++ky) {
         int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
             int ix = gid.x * 1 - 1 + kx * 1;
             int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 8;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
-                // input texel (ix, iy): the mean of src0's 2x2 texels from (2 ix, 2 iy)
-                for (int l = 0; l < 2; ++l) {
-                    vec4 v = (texelFetch(src0, ivec3(2 * ix, 2 * iy, l), 0)
-                        + texelFetch(src0, ivec3(2 * ix + 1, 2 * iy, l), 0)
-                        + texelFetch(src0, ivec3(2 * ix, 2 * iy + 1, l), 0)
-                        + texelFetch(src0, ivec3(2 * ix + 1, 2 * iy + 1, l), 0)) / 4.0;
+                for (int l = 0; l < 1; ++l) {
+                    vec4 v = texelFetch(src0, ivec3(ix, iy, l), 0);
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
+                }
+            }
+            if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
+                for (int l = 0; l < 1; ++l) {
+                    vec4 v = texelFetch(src1, ivec3(ix, iy, l), 0);
+                    int o = tap + (1 + l) * 4;
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }

@@ -1,6 +1,6 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
 // neuralao compute pass 5: AveragePool + Conv + LeakyRelu
@@ -31,26 +31,27 @@ layout(std430, set = 0, binding = 2) readonly buffer Params {
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
     ivec2 out_size = imageSize(dst).xy;
-    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 16) {
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 8) {
         return;
     }
     ivec2 src_size0 = textureSize(src0, 0).xy;
     ivec2 size0 = src_size0 / 2;
-    hvec4 acc = hvec4(prm[4608 + gid.z]);
+    vec4 acc = prm[1152 + gid.z];
     for (int ky = 0; ky < 3; ++ky) {
         int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
             int ix = gid.x * 1 - 1 + kx * 1;
-            int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 32;
+            int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 16;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
                 // input texel (ix, iy): the mean of src0's 2x2 texels from (2 ix, 2 iy)
-                for (int l = 0; l < 8; ++l) {
+                for (int l = 0; l < 4; ++l) {
                     vec4 v = (texelFetch(src0, ivec3(2 * ix, 2 * iy, l), 0)
                         + texelFetch(src0, ivec3(2 * ix + 1, 2 * iy, l), 0)
                         + texelFetch(src0, ivec3(2 * ix, 2 * iy + 1, l), 0)
                         + texelFetch(src0, ivec3(2 * ix + 1, 2 * iy + 1, l), 0)) / 4.0;
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }

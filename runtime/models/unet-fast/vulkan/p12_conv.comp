@@ -1,9 +1,9 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
-// neuralao compute pass 12: Conv + Sigmoid + Crop
+// neuralao compute pass 12: Concat + Conv + LeakyRelu
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
@@ -23,37 +23,45 @@ vec4 nao_leaky_relu(vec4 x, float alpha) {
 }
 
 layout(set = 0, binding = 0) uniform highp texture2DArray src0;
-layout(set = 0, binding = 1, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std430, set = 0, binding = 2) readonly buffer Params {
+layout(set = 0, binding = 1) uniform highp texture2DArray src1;
+layout(set = 0, binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std430, set = 0, binding = 3) readonly buffer Params {
     vec4 prm[];
-};
-layout(std140, set = 0, binding = 3) uniform PassUniforms {
-    int u_flip_y;
 };
 
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
     ivec2 out_size = imageSize(dst).xy;
-    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 1) {
+    if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 2) {
         return;
     }
     ivec2 size0 = textureSize(src0, 0).xy;
-    hvec4 acc = hvec4(prm[8 + gid.z]);
-    for (int ky = 0; ky < 1; ++ky) {
-        int iy = gid.y * 1 - 0 + ky * 1;
-        for (int kx = 0; kx < 1; ++kx) {
-            int ix = gid.x * 1 - 0 + kx * 1;
-            int tap = 0 + ((gid.z * 1 + ky) * 1 + kx) * 8;
+    ivec2 size1 = textureSize(src1, 0).xy;
+    vec4 acc = prm[288 + gid.z];
+    for (int ky = 0; ky < 3; ++ky) {
+        int iy = gid.y * 1 - 1 + ky * 1;
+        for (int kx = 0; kx < 3; ++kx) {
+            int ix = gid.x * 1 - 1 + kx * 1;
+            int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 16;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
                 for (int l = 0; l < 2; ++l) {
                     vec4 v = texelFetch(src0, ivec3(ix, iy, l), 0);
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
+                }
+            }
+            if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
+                for (int l = 0; l < 2; ++l) {
+                    vec4 v = texelFetch(src1, ivec3(ix, iy, l), 0);
+                    int o = tap + (2 + l) * 4;
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }
     }
     vec4 r = vec4(acc);
-    r = nao_sigmoid(r);
-    imageStore(dst, ivec3(ivec2(gid.xy.x, u_flip_y != 0 ? out_size.y - 1 - gid.xy.y : gid.xy.y), gid.z), r);
+    r = nao_leaky_relu(r, 0.01);
+    imageStore(dst, ivec3(gid.xy, gid.z), r);
 }

@@ -18,31 +18,16 @@ constant uint3 gl_WorkGroupSize [[maybe_unused]] = uint3(1u);
 static inline __attribute__((always_inline))
 int2 nao_texel(thread const int2& p, thread const int2& size, constant FrameUniforms& frame)
 {
-    int2 _48;
+    int2 _35;
     if (frame.u_flip_y != 0)
     {
-        _48 = p;
+        _35 = p;
     }
     else
     {
-        _48 = int2(p.x, (size.y - 1) - p.y);
+        _35 = int2(p.x, (size.y - 1) - p.y);
     }
-    return _48;
-}
-
-static inline __attribute__((always_inline))
-int2 nao_size(texture2d_array<float> t, sampler tSmplr)
-{
-    return int3(t.get_width(), t.get_height(), t.get_array_size()).xy;
-}
-
-static inline __attribute__((always_inline))
-float4 nao_load(texture2d_array<float> t, sampler tSmplr, thread const int2& p, thread const int& layer, constant FrameUniforms& frame)
-{
-    int2 param = p;
-    int2 param_1 = nao_size(t, tSmplr);
-    int3 _85 = int3(nao_texel(param, param_1, frame), layer);
-    return t.read(uint2(_85.xy), uint(_85.z), 0);
+    return _35;
 }
 
 static inline __attribute__((always_inline))
@@ -50,36 +35,34 @@ void nao_store(thread const int2& p, thread const int& layer, thread const float
 {
     int2 param = p;
     int2 param_1 = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    int3 _104 = int3(nao_texel(param, param_1, frame), layer);
-    dst.write(v, uint2(_104.xy), uint(_104.z));
+    int3 _71 = int3(nao_texel(param, param_1, frame), layer);
+    dst.write(v, uint2(_71.xy), uint(_71.z));
 }
 
-kernel void f_network_radius(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], sampler src0Smplr [[sampler(1)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_network_radius(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
-    bool _122 = gid.x >= out_size.x;
-    bool _131;
-    if (!_122)
+    bool _89 = gid.x >= out_size.x;
+    bool _98;
+    if (!_89)
     {
-        _131 = gid.y >= out_size.y;
+        _98 = gid.y >= out_size.y;
     }
     else
     {
-        _131 = _122;
+        _98 = _89;
     }
-    if (_131)
+    if (_98)
     {
         return;
     }
     int2 param = gid;
     int2 param_1 = out_size;
     int2 px = nao_texel(param, param_1, frame);
-    int2 param_2 = int2(0);
+    int2 param_2 = px;
     int param_3 = 0;
-    int2 param_4 = px;
-    int param_5 = 0;
-    float4 param_6 = float4((frame.u_radius * frame.u_proj.y) / nao_load(src0, src0Smplr, param_2, param_3, frame).x, 0.0, 0.0, 0.0);
-    nao_store(param_4, param_5, param_6, frame, dst);
+    float4 param_4 = float4(log(frame.u_radius * frame.u_proj.y), 0.0, 0.0, 0.0);
+    nao_store(param_2, param_3, param_4, frame, dst);
 }
 

@@ -6,7 +6,6 @@ Texture2DArray<float4> src0 : register(t0);
 SamplerState _src0_sampler : register(s0);
 Texture2DArray<float4> src1 : register(t1);
 SamplerState _src1_sampler : register(s1);
-uniform int u_flip_y;
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -65,11 +64,10 @@ void p03_conv_inner()
         return;
     }
     uint _84_dummy_parameter;
-    int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
-    int2 size0 = ((src_size0 + int2(7, 7)) / int2(8, 8)) * int2(8, 8);
-    uint _100_dummy_parameter;
-    int2 size1 = int3(spvTextureSize(src1, uint(0), _100_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((108 + gid.z) * 16 + 0)));
+    int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
+    uint _90_dummy_parameter;
+    int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
+    float4 acc = asfloat(params.Load4((108 + gid.z) * 16 + 0));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -77,73 +75,64 @@ void p03_conv_inner()
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 12);
-            bool _165 = iy >= 0;
-            bool _172;
-            if (_165)
+            bool _150 = iy >= 0;
+            bool _157;
+            if (_150)
             {
-                _172 = iy < size0.y;
+                _157 = iy < size0.y;
             }
             else
             {
-                _172 = _165;
+                _157 = _150;
             }
-            bool _175 = _172 && (ix >= 0);
-            bool _182;
-            if (_175)
+            bool _160 = _157 && (ix >= 0);
+            bool _167;
+            if (_160)
             {
-                _182 = ix < size0.x;
+                _167 = ix < size0.x;
             }
             else
             {
-                _182 = _175;
+                _167 = _160;
             }
-            if (_182)
+            if (_167)
             {
-                int rx = clamp((src_size0.x - 1) - abs((src_size0.x - 1) - ix), 0, src_size0.x - 1);
-                int ry = clamp((src_size0.y - 1) - abs((src_size0.y - 1) - iy), 0, src_size0.y - 1);
-                if (u_flip_y != 0)
-                {
-                    ry = (src_size0.y - 1) - ry;
-                }
                 for (int l = 0; l < 2; l++)
                 {
-                    float4 _242 = src0.Load(int4(int3(rx, ry, l), 0));
-                    int4 _249 = (4 * l).xxxx + int4(0, 1, 2, 3);
-                    bool4 _252 = bool4(_249.x < int4(5, 5, 5, 5).x, _249.y < int4(5, 5, 5, 5).y, _249.z < int4(5, 5, 5, 5).z, _249.w < int4(5, 5, 5, 5).w);
-                    float4 v = float4(_252.x ? _242.x : 0.0f.xxxx.x, _252.y ? _242.y : 0.0f.xxxx.y, _252.z ? _242.z : 0.0f.xxxx.z, _252.w ? _242.w : 0.0f.xxxx.w);
+                    float4 v = src0.Load(int4(int3(ix, iy, l), 0));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _297 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_297[0], _297[1], _297[2], _297[3]));
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
                 }
             }
-            bool _315 = iy >= 0;
-            bool _322;
-            if (_315)
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
             {
-                _322 = iy < size1.y;
+                _264 = iy < size1.y;
             }
             else
             {
-                _322 = _315;
+                _264 = _257;
             }
-            bool _325 = _322 && (ix >= 0);
-            bool _332;
-            if (_325)
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
             {
-                _332 = ix < size1.x;
+                _274 = ix < size1.x;
             }
             else
             {
-                _332 = _325;
+                _274 = _267;
             }
-            if (_332)
+            if (_274)
             {
                 for (int l_1 = 0; l_1 < 1; l_1++)
                 {
                     float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
                     int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _392 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
-                    acc += mul(float4(v_1), float4x4(_392[0], _392[1], _392[2], _392[3]));
+                    float4x4 w_1 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v_1), float4x4(w_1[0], w_1[1], w_1[2], w_1[3])));
                 }
             }
         }

@@ -18,7 +18,7 @@ float4 nao_leaky_relu(thread const float4& x, thread const float& alpha)
     return select(x * alpha, x, x >= float4(0.0));
 }
 
-kernel void p03_conv(constant int& u_flip_y [[buffer(0)]], const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void p03_conv(const device Params& params [[buffer(1)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int3 gid = int3(gl_GlobalInvocationID);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -45,10 +45,9 @@ kernel void p03_conv(constant int& u_flip_y [[buffer(0)]], const device Params& 
     {
         return;
     }
-    int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
-    int2 size0 = ((src_size0 + int2(7)) / int2(8)) * int2(8);
+    int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[108 + gid.z]);
+    float4 acc = params.prm[108 + gid.z];
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -56,72 +55,66 @@ kernel void p03_conv(constant int& u_flip_y [[buffer(0)]], const device Params& 
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 12);
-            bool _165 = iy >= 0;
-            bool _172;
-            if (_165)
+            bool _150 = iy >= 0;
+            bool _157;
+            if (_150)
             {
-                _172 = iy < size0.y;
+                _157 = iy < size0.y;
             }
             else
             {
-                _172 = _165;
+                _157 = _150;
             }
-            bool _175 = _172 && (ix >= 0);
-            bool _182;
-            if (_175)
+            bool _160 = _157 && (ix >= 0);
+            bool _167;
+            if (_160)
             {
-                _182 = ix < size0.x;
+                _167 = ix < size0.x;
             }
             else
             {
-                _182 = _175;
+                _167 = _160;
             }
-            if (_182)
+            if (_167)
             {
-                int rx = clamp((src_size0.x - 1) - abs((src_size0.x - 1) - ix), 0, src_size0.x - 1);
-                int ry = clamp((src_size0.y - 1) - abs((src_size0.y - 1) - iy), 0, src_size0.y - 1);
-                if (u_flip_y != 0)
-                {
-                    ry = (src_size0.y - 1) - ry;
-                }
                 for (int l = 0; l < 2; l++)
                 {
-                    int3 _240 = int3(rx, ry, l);
-                    float4 v = select(float4(0.0), src0.read(uint2(_240.xy), uint(_240.z), 0), (int4(4 * l) + int4(0, 1, 2, 3)) < int4(5));
+                    int3 _184 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_184.xy), uint(_184.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _297 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_297[0], _297[1], _297[2], _297[3]) * float4(v));
+                    float4x4 w = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += float4(float4x4(w[0], w[1], w[2], w[3]) * float4(v));
                 }
             }
-            bool _315 = iy >= 0;
-            bool _322;
-            if (_315)
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
             {
-                _322 = iy < size1.y;
+                _264 = iy < size1.y;
             }
             else
             {
-                _322 = _315;
+                _264 = _257;
             }
-            bool _325 = _322 && (ix >= 0);
-            bool _332;
-            if (_325)
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
             {
-                _332 = ix < size1.x;
+                _274 = ix < size1.x;
             }
             else
             {
-                _332 = _325;
+                _274 = _267;
             }
-            if (_332)
+            if (_274)
             {
                 for (int l_1 = 0; l_1 < 1; l_1++)
                 {
-                    int3 _348 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_348.xy), uint(_348.z), 0);
+                    int3 _290 = int3(ix, iy, l_1);
+                    float4 v_1 = src1.read(uint2(_290.xy), uint(_290.z), 0);
                     int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _392 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_392[0], _392[1], _392[2], _392[3]) * float4(v_1));
+                    float4x4 w_1 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
+                    acc += float4(float4x4(w_1[0], w_1[1], w_1[2], w_1[3]) * float4(v_1));
                 }
             }
         }
@@ -130,7 +123,7 @@ kernel void p03_conv(constant int& u_flip_y [[buffer(0)]], const device Params& 
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _432 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_432.xy), uint(_432.z));
+    int3 _381 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_381.xy), uint(_381.z));
 }
 

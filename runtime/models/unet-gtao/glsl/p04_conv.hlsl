@@ -64,7 +64,7 @@ void p04_conv_inner()
     uint _84_dummy_parameter;
     int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
     int2 size0 = src_size0 / int2(2, 2);
-    float4 acc = float4(asfloat(params.Load4((72 + gid.z) * 16 + 0)));
+    float4 acc = asfloat(params.Load4((72 + gid.z) * 16 + 0));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -72,34 +72,34 @@ void p04_conv_inner()
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 4);
-            bool _154 = iy >= 0;
-            bool _161;
-            if (_154)
+            bool _149 = iy >= 0;
+            bool _156;
+            if (_149)
             {
-                _161 = iy < size0.y;
+                _156 = iy < size0.y;
             }
             else
             {
-                _161 = _154;
+                _156 = _149;
             }
-            bool _164 = _161 && (ix >= 0);
-            bool _171;
-            if (_164)
+            bool _159 = _156 && (ix >= 0);
+            bool _166;
+            if (_159)
             {
-                _171 = ix < size0.x;
+                _166 = ix < size0.x;
             }
             else
             {
-                _171 = _164;
+                _166 = _159;
             }
-            if (_171)
+            if (_166)
             {
                 for (int l = 0; l < 1; l++)
                 {
                     float4 v = (((src0.Load(int4(int3(2 * ix, 2 * iy, l), 0)) + src0.Load(int4(int3((2 * ix) + 1, 2 * iy, l), 0))) + src0.Load(int4(int3(2 * ix, (2 * iy) + 1, l), 0))) + src0.Load(int4(int3((2 * ix) + 1, (2 * iy) + 1, l), 0))) / 4.0f.xxxx;
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _272 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_272[0], _272[1], _272[2], _272[3]));
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
                 }
             }
         }

@@ -47,7 +47,7 @@ kernel void p04_conv(const device Params& params [[buffer(1)]], texture2d_array<
     }
     int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size0 = src_size0 / int2(2);
-    float4 acc = float4(params.prm[72 + gid.z]);
+    float4 acc = params.prm[72 + gid.z];
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -55,38 +55,38 @@ kernel void p04_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 4);
-            bool _154 = iy >= 0;
-            bool _161;
-            if (_154)
+            bool _149 = iy >= 0;
+            bool _156;
+            if (_149)
             {
-                _161 = iy < size0.y;
+                _156 = iy < size0.y;
             }
             else
             {
-                _161 = _154;
+                _156 = _149;
             }
-            bool _164 = _161 && (ix >= 0);
-            bool _171;
-            if (_164)
+            bool _159 = _156 && (ix >= 0);
+            bool _166;
+            if (_159)
             {
-                _171 = ix < size0.x;
+                _166 = ix < size0.x;
             }
             else
             {
-                _171 = _164;
+                _166 = _159;
             }
-            if (_171)
+            if (_166)
             {
                 for (int l = 0; l < 1; l++)
                 {
-                    int3 _189 = int3(2 * ix, 2 * iy, l);
-                    int3 _199 = int3((2 * ix) + 1, 2 * iy, l);
-                    int3 _210 = int3(2 * ix, (2 * iy) + 1, l);
-                    int3 _222 = int3((2 * ix) + 1, (2 * iy) + 1, l);
-                    float4 v = (((src0.read(uint2(_189.xy), uint(_189.z), 0) + src0.read(uint2(_199.xy), uint(_199.z), 0)) + src0.read(uint2(_210.xy), uint(_210.z), 0)) + src0.read(uint2(_222.xy), uint(_222.z), 0)) / float4(4.0);
+                    int3 _184 = int3(2 * ix, 2 * iy, l);
+                    int3 _194 = int3((2 * ix) + 1, 2 * iy, l);
+                    int3 _205 = int3(2 * ix, (2 * iy) + 1, l);
+                    int3 _217 = int3((2 * ix) + 1, (2 * iy) + 1, l);
+                    float4 v = (((src0.read(uint2(_184.xy), uint(_184.z), 0) + src0.read(uint2(_194.xy), uint(_194.z), 0)) + src0.read(uint2(_205.xy), uint(_205.z), 0)) + src0.read(uint2(_217.xy), uint(_217.z), 0)) / float4(4.0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _272 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_272[0], _272[1], _272[2], _272[3]) * float4(v));
+                    float4x4 w = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += float4(float4x4(w[0], w[1], w[2], w[3]) * float4(v));
                 }
             }
         }
@@ -95,7 +95,7 @@ kernel void p04_conv(const device Params& params [[buffer(1)]], texture2d_array<
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _312 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_312.xy), uint(_312.z));
+    int3 _315 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_315.xy), uint(_315.z));
 }
 

@@ -64,7 +64,7 @@ void p06_conv_inner()
     uint _84_dummy_parameter;
     int2 src_size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
     int2 size0 = src_size0 / int2(2, 2);
-    float4 acc = float4(asfloat(params.Load4((1152 + gid.z) * 16 + 0)));
+    float4 acc = asfloat(params.Load4((1152 + gid.z) * 16 + 0));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -72,34 +72,34 @@ void p06_conv_inner()
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 16);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            bool _150 = iy >= 0;
+            bool _157;
+            if (_150)
             {
-                _162 = iy < size0.y;
+                _157 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _157 = _150;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _160 = _157 && (ix >= 0);
+            bool _167;
+            if (_160)
             {
-                _172 = ix < size0.x;
+                _167 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _167 = _160;
             }
-            if (_172)
+            if (_167)
             {
                 for (int l = 0; l < 4; l++)
                 {
                     float4 v = (((src0.Load(int4(int3(2 * ix, 2 * iy, l), 0)) + src0.Load(int4(int3((2 * ix) + 1, 2 * iy, l), 0))) + src0.Load(int4(int3(2 * ix, (2 * iy) + 1, l), 0))) + src0.Load(int4(int3((2 * ix) + 1, (2 * iy) + 1, l), 0))) / 4.0f.xxxx;
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _274 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_274[0], _274[1], _274[2], _274[3]));
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
                 }
             }
         }

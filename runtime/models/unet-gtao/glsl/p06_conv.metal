@@ -47,7 +47,7 @@ kernel void p06_conv(const device Params& params [[buffer(1)]], texture2d_array<
     }
     int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size0 = src_size0 / int2(2);
-    float4 acc = float4(params.prm[1152 + gid.z]);
+    float4 acc = params.prm[1152 + gid.z];
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -55,38 +55,38 @@ kernel void p06_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 16);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            bool _150 = iy >= 0;
+            bool _157;
+            if (_150)
             {
-                _162 = iy < size0.y;
+                _157 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _157 = _150;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _160 = _157 && (ix >= 0);
+            bool _167;
+            if (_160)
             {
-                _172 = ix < size0.x;
+                _167 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _167 = _160;
             }
-            if (_172)
+            if (_167)
             {
                 for (int l = 0; l < 4; l++)
                 {
-                    int3 _191 = int3(2 * ix, 2 * iy, l);
-                    int3 _201 = int3((2 * ix) + 1, 2 * iy, l);
-                    int3 _212 = int3(2 * ix, (2 * iy) + 1, l);
-                    int3 _224 = int3((2 * ix) + 1, (2 * iy) + 1, l);
-                    float4 v = (((src0.read(uint2(_191.xy), uint(_191.z), 0) + src0.read(uint2(_201.xy), uint(_201.z), 0)) + src0.read(uint2(_212.xy), uint(_212.z), 0)) + src0.read(uint2(_224.xy), uint(_224.z), 0)) / float4(4.0);
+                    int3 _186 = int3(2 * ix, 2 * iy, l);
+                    int3 _196 = int3((2 * ix) + 1, 2 * iy, l);
+                    int3 _207 = int3(2 * ix, (2 * iy) + 1, l);
+                    int3 _219 = int3((2 * ix) + 1, (2 * iy) + 1, l);
+                    float4 v = (((src0.read(uint2(_186.xy), uint(_186.z), 0) + src0.read(uint2(_196.xy), uint(_196.z), 0)) + src0.read(uint2(_207.xy), uint(_207.z), 0)) + src0.read(uint2(_219.xy), uint(_219.z), 0)) / float4(4.0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _274 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_274[0], _274[1], _274[2], _274[3]) * float4(v));
+                    float4x4 w = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += float4(float4x4(w[0], w[1], w[2], w[3]) * float4(v));
                 }
             }
         }
@@ -95,7 +95,7 @@ kernel void p06_conv(const device Params& params [[buffer(1)]], texture2d_array<
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _314 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_314.xy), uint(_314.z));
+    int3 _317 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_317.xy), uint(_317.z));
 }
 

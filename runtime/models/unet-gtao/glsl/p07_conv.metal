@@ -47,7 +47,7 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
     }
     int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size0 = src_size0 * int2(2);
-    float4 acc = float4(params.prm[1152 + gid.z]);
+    float4 acc = params.prm[1152 + gid.z];
     int2 lo = src_size0 - int2(1);
     int2 m = gid.xy / int2(2);
     bool ox = (gid.x & 1) == 1;
@@ -66,24 +66,24 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
     bool vy2 = (gid.y + 1) < size0.y;
     for (int l = 0; l < 8; l++)
     {
-        int3 _213 = int3(x0, y0, l);
-        float4 c00 = src0.read(uint2(_213.xy), uint(_213.z), 0);
-        int3 _221 = int3(x1, y0, l);
-        float4 c01 = src0.read(uint2(_221.xy), uint(_221.z), 0);
-        int3 _229 = int3(x2, y0, l);
-        float4 c02 = src0.read(uint2(_229.xy), uint(_229.z), 0);
-        int3 _237 = int3(x0, y1, l);
-        float4 c10 = src0.read(uint2(_237.xy), uint(_237.z), 0);
-        int3 _245 = int3(x1, y1, l);
-        float4 c11 = src0.read(uint2(_245.xy), uint(_245.z), 0);
-        int3 _253 = int3(x2, y1, l);
-        float4 c12 = src0.read(uint2(_253.xy), uint(_253.z), 0);
-        int3 _261 = int3(x0, y2, l);
-        float4 c20 = src0.read(uint2(_261.xy), uint(_261.z), 0);
-        int3 _269 = int3(x1, y2, l);
-        float4 c21 = src0.read(uint2(_269.xy), uint(_269.z), 0);
-        int3 _277 = int3(x2, y2, l);
-        float4 c22 = src0.read(uint2(_277.xy), uint(_277.z), 0);
+        int3 _208 = int3(x0, y0, l);
+        float4 c00 = src0.read(uint2(_208.xy), uint(_208.z), 0);
+        int3 _216 = int3(x1, y0, l);
+        float4 c01 = src0.read(uint2(_216.xy), uint(_216.z), 0);
+        int3 _224 = int3(x2, y0, l);
+        float4 c02 = src0.read(uint2(_224.xy), uint(_224.z), 0);
+        int3 _232 = int3(x0, y1, l);
+        float4 c10 = src0.read(uint2(_232.xy), uint(_232.z), 0);
+        int3 _240 = int3(x1, y1, l);
+        float4 c11 = src0.read(uint2(_240.xy), uint(_240.z), 0);
+        int3 _248 = int3(x2, y1, l);
+        float4 c12 = src0.read(uint2(_248.xy), uint(_248.z), 0);
+        int3 _256 = int3(x0, y2, l);
+        float4 c20 = src0.read(uint2(_256.xy), uint(_256.z), 0);
+        int3 _264 = int3(x1, y2, l);
+        float4 c21 = src0.read(uint2(_264.xy), uint(_264.z), 0);
+        int3 _272 = int3(x2, y2, l);
+        float4 c22 = src0.read(uint2(_272.xy), uint(_272.z), 0);
         float4 h00 = mix(c00, c01, float4(wx));
         float4 h01 = mix(select(c00, c01, bool4(ox)), select(c01, c02, bool4(ox)), float4(1.0 - wx));
         float4 h02 = mix(c01, c02, float4(wx));
@@ -107,62 +107,62 @@ kernel void p07_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int t0 = o + 0;
             float4x4 w0 = float4x4(float4(params.prm[t0]), float4(params.prm[t0 + 1]), float4(params.prm[t0 + 2]), float4(params.prm[t0 + 3]));
-            acc += (float4x4(w0[0], w0[1], w0[2], w0[3]) * float4(u00));
+            acc += float4(float4x4(w0[0], w0[1], w0[2], w0[3]) * float4(u00));
         }
         if (vy0)
         {
             int t1 = o + 32;
             float4x4 w1 = float4x4(float4(params.prm[t1]), float4(params.prm[t1 + 1]), float4(params.prm[t1 + 2]), float4(params.prm[t1 + 3]));
-            acc += (float4x4(w1[0], w1[1], w1[2], w1[3]) * float4(u01));
+            acc += float4(float4x4(w1[0], w1[1], w1[2], w1[3]) * float4(u01));
         }
         if (vy0 && vx2)
         {
             int t2 = o + 64;
             float4x4 w2 = float4x4(float4(params.prm[t2]), float4(params.prm[t2 + 1]), float4(params.prm[t2 + 2]), float4(params.prm[t2 + 3]));
-            acc += (float4x4(w2[0], w2[1], w2[2], w2[3]) * float4(u02));
+            acc += float4(float4x4(w2[0], w2[1], w2[2], w2[3]) * float4(u02));
         }
         if (vx0)
         {
             int t3 = o + 96;
             float4x4 w3 = float4x4(float4(params.prm[t3]), float4(params.prm[t3 + 1]), float4(params.prm[t3 + 2]), float4(params.prm[t3 + 3]));
-            acc += (float4x4(w3[0], w3[1], w3[2], w3[3]) * float4(u10));
+            acc += float4(float4x4(w3[0], w3[1], w3[2], w3[3]) * float4(u10));
         }
         if (true)
         {
             int t4 = o + 128;
             float4x4 w4 = float4x4(float4(params.prm[t4]), float4(params.prm[t4 + 1]), float4(params.prm[t4 + 2]), float4(params.prm[t4 + 3]));
-            acc += (float4x4(w4[0], w4[1], w4[2], w4[3]) * float4(u11));
+            acc += float4(float4x4(w4[0], w4[1], w4[2], w4[3]) * float4(u11));
         }
         if (vx2)
         {
             int t5 = o + 160;
             float4x4 w5 = float4x4(float4(params.prm[t5]), float4(params.prm[t5 + 1]), float4(params.prm[t5 + 2]), float4(params.prm[t5 + 3]));
-            acc += (float4x4(w5[0], w5[1], w5[2], w5[3]) * float4(u12));
+            acc += float4(float4x4(w5[0], w5[1], w5[2], w5[3]) * float4(u12));
         }
         if (vy2 && vx0)
         {
             int t6 = o + 192;
             float4x4 w6 = float4x4(float4(params.prm[t6]), float4(params.prm[t6 + 1]), float4(params.prm[t6 + 2]), float4(params.prm[t6 + 3]));
-            acc += (float4x4(w6[0], w6[1], w6[2], w6[3]) * float4(u20));
+            acc += float4(float4x4(w6[0], w6[1], w6[2], w6[3]) * float4(u20));
         }
         if (vy2)
         {
             int t7 = o + 224;
             float4x4 w7 = float4x4(float4(params.prm[t7]), float4(params.prm[t7 + 1]), float4(params.prm[t7 + 2]), float4(params.prm[t7 + 3]));
-            acc += (float4x4(w7[0], w7[1], w7[2], w7[3]) * float4(u21));
+            acc += float4(float4x4(w7[0], w7[1], w7[2], w7[3]) * float4(u21));
         }
         if (vy2 && vx2)
         {
             int t8 = o + 256;
             float4x4 w8 = float4x4(float4(params.prm[t8]), float4(params.prm[t8 + 1]), float4(params.prm[t8 + 2]), float4(params.prm[t8 + 3]));
-            acc += (float4x4(w8[0], w8[1], w8[2], w8[3]) * float4(u22));
+            acc += float4(float4x4(w8[0], w8[1], w8[2], w8[3]) * float4(u22));
         }
     }
     float4 r = float4(acc);
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _1016 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_1016.xy), uint(_1016.z));
+    int3 _1056 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_1056.xy), uint(_1056.z));
 }
 

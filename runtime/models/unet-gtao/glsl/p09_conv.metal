@@ -47,7 +47,7 @@ kernel void p09_conv(const device Params& params [[buffer(1)]], texture2d_array<
     }
     int2 src_size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size0 = src_size0 * int2(2);
-    float4 acc = float4(params.prm[288 + gid.z]);
+    float4 acc = params.prm[288 + gid.z];
     int2 lo = src_size0 - int2(1);
     int2 m = gid.xy / int2(2);
     bool ox = (gid.x & 1) == 1;
@@ -66,24 +66,24 @@ kernel void p09_conv(const device Params& params [[buffer(1)]], texture2d_array<
     bool vy2 = (gid.y + 1) < size0.y;
     for (int l = 0; l < 4; l++)
     {
-        int3 _212 = int3(x0, y0, l);
-        float4 c00 = src0.read(uint2(_212.xy), uint(_212.z), 0);
-        int3 _220 = int3(x1, y0, l);
-        float4 c01 = src0.read(uint2(_220.xy), uint(_220.z), 0);
-        int3 _228 = int3(x2, y0, l);
-        float4 c02 = src0.read(uint2(_228.xy), uint(_228.z), 0);
-        int3 _236 = int3(x0, y1, l);
-        float4 c10 = src0.read(uint2(_236.xy), uint(_236.z), 0);
-        int3 _244 = int3(x1, y1, l);
-        float4 c11 = src0.read(uint2(_244.xy), uint(_244.z), 0);
-        int3 _252 = int3(x2, y1, l);
-        float4 c12 = src0.read(uint2(_252.xy), uint(_252.z), 0);
-        int3 _260 = int3(x0, y2, l);
-        float4 c20 = src0.read(uint2(_260.xy), uint(_260.z), 0);
-        int3 _268 = int3(x1, y2, l);
-        float4 c21 = src0.read(uint2(_268.xy), uint(_268.z), 0);
-        int3 _276 = int3(x2, y2, l);
-        float4 c22 = src0.read(uint2(_276.xy), uint(_276.z), 0);
+        int3 _207 = int3(x0, y0, l);
+        float4 c00 = src0.read(uint2(_207.xy), uint(_207.z), 0);
+        int3 _215 = int3(x1, y0, l);
+        float4 c01 = src0.read(uint2(_215.xy), uint(_215.z), 0);
+        int3 _223 = int3(x2, y0, l);
+        float4 c02 = src0.read(uint2(_223.xy), uint(_223.z), 0);
+        int3 _231 = int3(x0, y1, l);
+        float4 c10 = src0.read(uint2(_231.xy), uint(_231.z), 0);
+        int3 _239 = int3(x1, y1, l);
+        float4 c11 = src0.read(uint2(_239.xy), uint(_239.z), 0);
+        int3 _247 = int3(x2, y1, l);
+        float4 c12 = src0.read(uint2(_247.xy), uint(_247.z), 0);
+        int3 _255 = int3(x0, y2, l);
+        float4 c20 = src0.read(uint2(_255.xy), uint(_255.z), 0);
+        int3 _263 = int3(x1, y2, l);
+        float4 c21 = src0.read(uint2(_263.xy), uint(_263.z), 0);
+        int3 _271 = int3(x2, y2, l);
+        float4 c22 = src0.read(uint2(_271.xy), uint(_271.z), 0);
         float4 h00 = mix(c00, c01, float4(wx));
         float4 h01 = mix(select(c00, c01, bool4(ox)), select(c01, c02, bool4(ox)), float4(1.0 - wx));
         float4 h02 = mix(c01, c02, float4(wx));
@@ -107,62 +107,62 @@ kernel void p09_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int t0 = o + 0;
             float4x4 w0 = float4x4(float4(params.prm[t0]), float4(params.prm[t0 + 1]), float4(params.prm[t0 + 2]), float4(params.prm[t0 + 3]));
-            acc += (float4x4(w0[0], w0[1], w0[2], w0[3]) * float4(u00));
+            acc += float4(float4x4(w0[0], w0[1], w0[2], w0[3]) * float4(u00));
         }
         if (vy0)
         {
             int t1 = o + 16;
             float4x4 w1 = float4x4(float4(params.prm[t1]), float4(params.prm[t1 + 1]), float4(params.prm[t1 + 2]), float4(params.prm[t1 + 3]));
-            acc += (float4x4(w1[0], w1[1], w1[2], w1[3]) * float4(u01));
+            acc += float4(float4x4(w1[0], w1[1], w1[2], w1[3]) * float4(u01));
         }
         if (vy0 && vx2)
         {
             int t2 = o + 32;
             float4x4 w2 = float4x4(float4(params.prm[t2]), float4(params.prm[t2 + 1]), float4(params.prm[t2 + 2]), float4(params.prm[t2 + 3]));
-            acc += (float4x4(w2[0], w2[1], w2[2], w2[3]) * float4(u02));
+            acc += float4(float4x4(w2[0], w2[1], w2[2], w2[3]) * float4(u02));
         }
         if (vx0)
         {
             int t3 = o + 48;
             float4x4 w3 = float4x4(float4(params.prm[t3]), float4(params.prm[t3 + 1]), float4(params.prm[t3 + 2]), float4(params.prm[t3 + 3]));
-            acc += (float4x4(w3[0], w3[1], w3[2], w3[3]) * float4(u10));
+            acc += float4(float4x4(w3[0], w3[1], w3[2], w3[3]) * float4(u10));
         }
         if (true)
         {
             int t4 = o + 64;
             float4x4 w4 = float4x4(float4(params.prm[t4]), float4(params.prm[t4 + 1]), float4(params.prm[t4 + 2]), float4(params.prm[t4 + 3]));
-            acc += (float4x4(w4[0], w4[1], w4[2], w4[3]) * float4(u11));
+            acc += float4(float4x4(w4[0], w4[1], w4[2], w4[3]) * float4(u11));
         }
         if (vx2)
         {
             int t5 = o + 80;
             float4x4 w5 = float4x4(float4(params.prm[t5]), float4(params.prm[t5 + 1]), float4(params.prm[t5 + 2]), float4(params.prm[t5 + 3]));
-            acc += (float4x4(w5[0], w5[1], w5[2], w5[3]) * float4(u12));
+            acc += float4(float4x4(w5[0], w5[1], w5[2], w5[3]) * float4(u12));
         }
         if (vy2 && vx0)
         {
             int t6 = o + 96;
             float4x4 w6 = float4x4(float4(params.prm[t6]), float4(params.prm[t6 + 1]), float4(params.prm[t6 + 2]), float4(params.prm[t6 + 3]));
-            acc += (float4x4(w6[0], w6[1], w6[2], w6[3]) * float4(u20));
+            acc += float4(float4x4(w6[0], w6[1], w6[2], w6[3]) * float4(u20));
         }
         if (vy2)
         {
             int t7 = o + 112;
             float4x4 w7 = float4x4(float4(params.prm[t7]), float4(params.prm[t7 + 1]), float4(params.prm[t7 + 2]), float4(params.prm[t7 + 3]));
-            acc += (float4x4(w7[0], w7[1], w7[2], w7[3]) * float4(u21));
+            acc += float4(float4x4(w7[0], w7[1], w7[2], w7[3]) * float4(u21));
         }
         if (vy2 && vx2)
         {
             int t8 = o + 128;
             float4x4 w8 = float4x4(float4(params.prm[t8]), float4(params.prm[t8 + 1]), float4(params.prm[t8 + 2]), float4(params.prm[t8 + 3]));
-            acc += (float4x4(w8[0], w8[1], w8[2], w8[3]) * float4(u22));
+            acc += float4(float4x4(w8[0], w8[1], w8[2], w8[3]) * float4(u22));
         }
     }
     float4 r = float4(acc);
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _1015 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_1015.xy), uint(_1015.z));
+    int3 _1055 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_1055.xy), uint(_1055.z));
 }
 

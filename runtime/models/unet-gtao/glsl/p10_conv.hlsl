@@ -67,7 +67,7 @@ void p10_conv_inner()
     int2 size0 = int3(spvTextureSize(src0, uint(0), _84_dummy_parameter)).xy;
     uint _90_dummy_parameter;
     int2 size1 = int3(spvTextureSize(src1, uint(0), _90_dummy_parameter)).xy;
-    float4 acc = float4(asfloat(params.Load4((288 + gid.z) * 16 + 0)));
+    float4 acc = asfloat(params.Load4((288 + gid.z) * 16 + 0));
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -75,64 +75,64 @@ void p10_conv_inner()
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 16);
-            bool _156 = iy >= 0;
-            bool _163;
-            if (_156)
+            bool _151 = iy >= 0;
+            bool _158;
+            if (_151)
             {
-                _163 = iy < size0.y;
+                _158 = iy < size0.y;
             }
             else
             {
-                _163 = _156;
+                _158 = _151;
             }
-            bool _166 = _163 && (ix >= 0);
-            bool _173;
-            if (_166)
+            bool _161 = _158 && (ix >= 0);
+            bool _168;
+            if (_161)
             {
-                _173 = ix < size0.x;
+                _168 = ix < size0.x;
             }
             else
             {
-                _173 = _166;
+                _168 = _161;
             }
-            if (_173)
+            if (_168)
             {
                 for (int l = 0; l < 2; l++)
                 {
                     float4 v = src0.Load(int4(int3(ix, iy, l), 0));
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _236 = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
-                    acc += mul(float4(v), float4x4(_236[0], _236[1], _236[2], _236[3]));
+                    float4x4 w = float4x4(float4(asfloat(params.Load4(o * 16 + 0))), float4(asfloat(params.Load4((o + 1) * 16 + 0))), float4(asfloat(params.Load4((o + 2) * 16 + 0))), float4(asfloat(params.Load4((o + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v), float4x4(w[0], w[1], w[2], w[3])));
                 }
             }
-            bool _254 = iy >= 0;
-            bool _261;
-            if (_254)
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
             {
-                _261 = iy < size1.y;
+                _264 = iy < size1.y;
             }
             else
             {
-                _261 = _254;
+                _264 = _257;
             }
-            bool _264 = _261 && (ix >= 0);
-            bool _271;
-            if (_264)
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
             {
-                _271 = ix < size1.x;
+                _274 = ix < size1.x;
             }
             else
             {
-                _271 = _264;
+                _274 = _267;
             }
-            if (_271)
+            if (_274)
             {
                 for (int l_1 = 0; l_1 < 2; l_1++)
                 {
                     float4 v_1 = src1.Load(int4(int3(ix, iy, l_1), 0));
                     int o_1 = tap + ((2 + l_1) * 4);
-                    float4x4 _331 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
-                    acc += mul(float4(v_1), float4x4(_331[0], _331[1], _331[2], _331[3]));
+                    float4x4 w_1 = float4x4(float4(asfloat(params.Load4(o_1 * 16 + 0))), float4(asfloat(params.Load4((o_1 + 1) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 2) * 16 + 0))), float4(asfloat(params.Load4((o_1 + 3) * 16 + 0))));
+                    acc += float4(mul(float4(v_1), float4x4(w_1[0], w_1[1], w_1[2], w_1[3])));
                 }
             }
         }

@@ -1,6 +1,6 @@
 #version 430 core
 
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
 // neuralao compute pass 12: Concat + Conv + LeakyRelu
@@ -37,7 +37,7 @@ void main() {
     }
     ivec2 size0 = textureSize(src0, 0).xy;
     ivec2 size1 = textureSize(src1, 0).xy;
-    hvec4 acc = hvec4(prm[72 + gid.z]);
+    vec4 acc = prm[72 + gid.z];
     for (int ky = 0; ky < 3; ++ky) {
         int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
@@ -47,14 +47,16 @@ void main() {
                 for (int l = 0; l < 1; ++l) {
                     vec4 v = texelFetch(src0, ivec3(ix, iy, l), 0);
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
             if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
                 for (int l = 0; l < 1; ++l) {
                     vec4 v = texelFetch(src1, ivec3(ix, iy, l), 0);
                     int o = tap + (1 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }

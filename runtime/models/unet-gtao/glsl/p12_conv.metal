@@ -47,7 +47,7 @@ kernel void p12_conv(const device Params& params [[buffer(1)]], texture2d_array<
     }
     int2 size0 = int3(src0.get_width(), src0.get_height(), src0.get_array_size()).xy;
     int2 size1 = int3(src1.get_width(), src1.get_height(), src1.get_array_size()).xy;
-    float4 acc = float4(params.prm[72 + gid.z]);
+    float4 acc = params.prm[72 + gid.z];
     for (int ky = 0; ky < 3; ky++)
     {
         int iy = ((gid.y * 1) - 1) + (ky * 1);
@@ -55,66 +55,66 @@ kernel void p12_conv(const device Params& params [[buffer(1)]], texture2d_array<
         {
             int ix = ((gid.x * 1) - 1) + (kx * 1);
             int tap = 0 + (((((gid.z * 3) + ky) * 3) + kx) * 8);
-            bool _155 = iy >= 0;
-            bool _162;
-            if (_155)
+            bool _150 = iy >= 0;
+            bool _157;
+            if (_150)
             {
-                _162 = iy < size0.y;
+                _157 = iy < size0.y;
             }
             else
             {
-                _162 = _155;
+                _157 = _150;
             }
-            bool _165 = _162 && (ix >= 0);
-            bool _172;
-            if (_165)
+            bool _160 = _157 && (ix >= 0);
+            bool _167;
+            if (_160)
             {
-                _172 = ix < size0.x;
+                _167 = ix < size0.x;
             }
             else
             {
-                _172 = _165;
+                _167 = _160;
             }
-            if (_172)
+            if (_167)
             {
                 for (int l = 0; l < 1; l++)
                 {
-                    int3 _188 = int3(ix, iy, l);
-                    float4 v = src0.read(uint2(_188.xy), uint(_188.z), 0);
+                    int3 _183 = int3(ix, iy, l);
+                    float4 v = src0.read(uint2(_183.xy), uint(_183.z), 0);
                     int o = tap + ((0 + l) * 4);
-                    float4x4 _236 = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
-                    acc += (float4x4(_236[0], _236[1], _236[2], _236[3]) * float4(v));
+                    float4x4 w = float4x4(float4(params.prm[o]), float4(params.prm[o + 1]), float4(params.prm[o + 2]), float4(params.prm[o + 3]));
+                    acc += float4(float4x4(w[0], w[1], w[2], w[3]) * float4(v));
                 }
             }
-            bool _254 = iy >= 0;
-            bool _261;
-            if (_254)
+            bool _257 = iy >= 0;
+            bool _264;
+            if (_257)
             {
-                _261 = iy < size1.y;
+                _264 = iy < size1.y;
             }
             else
             {
-                _261 = _254;
+                _264 = _257;
             }
-            bool _264 = _261 && (ix >= 0);
-            bool _271;
-            if (_264)
+            bool _267 = _264 && (ix >= 0);
+            bool _274;
+            if (_267)
             {
-                _271 = ix < size1.x;
+                _274 = ix < size1.x;
             }
             else
             {
-                _271 = _264;
+                _274 = _267;
             }
-            if (_271)
+            if (_274)
             {
                 for (int l_1 = 0; l_1 < 1; l_1++)
                 {
-                    int3 _287 = int3(ix, iy, l_1);
-                    float4 v_1 = src1.read(uint2(_287.xy), uint(_287.z), 0);
+                    int3 _290 = int3(ix, iy, l_1);
+                    float4 v_1 = src1.read(uint2(_290.xy), uint(_290.z), 0);
                     int o_1 = tap + ((1 + l_1) * 4);
-                    float4x4 _331 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
-                    acc += (float4x4(_331[0], _331[1], _331[2], _331[3]) * float4(v_1));
+                    float4x4 w_1 = float4x4(float4(params.prm[o_1]), float4(params.prm[o_1 + 1]), float4(params.prm[o_1 + 2]), float4(params.prm[o_1 + 3]));
+                    acc += float4(float4x4(w_1[0], w_1[1], w_1[2], w_1[3]) * float4(v_1));
                 }
             }
         }
@@ -123,7 +123,7 @@ kernel void p12_conv(const device Params& params [[buffer(1)]], texture2d_array<
     float4 param = r;
     float param_1 = 0.00999999977648258209228515625;
     r = nao_leaky_relu(param, param_1);
-    int3 _371 = int3(gid.xy, gid.z);
-    dst.write(r, uint2(_371.xy), uint(_371.z));
+    int3 _381 = int3(gid.xy, gid.z);
+    dst.write(r, uint2(_381.xy), uint(_381.z));
 }
 

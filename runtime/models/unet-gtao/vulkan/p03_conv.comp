@@ -1,9 +1,9 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
-// neuralao compute pass 3: Pad + Concat + Conv + LeakyRelu
+// neuralao compute pass 3: Concat + Conv + LeakyRelu
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 
 // Overflow-safe activations (exp() only sees arguments <= 0).
@@ -28,9 +28,6 @@ layout(set = 0, binding = 2, rgba32f) writeonly uniform highp image2DArray dst;
 layout(std430, set = 0, binding = 3) readonly buffer Params {
     vec4 prm[];
 };
-layout(std140, set = 0, binding = 4) uniform PassUniforms {
-    int u_flip_y;
-};
 
 void main() {
     ivec3 gid = ivec3(gl_GlobalInvocationID);
@@ -38,33 +35,28 @@ void main() {
     if (gid.x >= out_size.x || gid.y >= out_size.y || gid.z >= 1) {
         return;
     }
-    ivec2 src_size0 = textureSize(src0, 0).xy;
-    ivec2 size0 = (src_size0 + 7) / 8 * 8;
+    ivec2 size0 = textureSize(src0, 0).xy;
     ivec2 size1 = textureSize(src1, 0).xy;
-    hvec4 acc = hvec4(prm[108 + gid.z]);
+    vec4 acc = prm[108 + gid.z];
     for (int ky = 0; ky < 3; ++ky) {
         int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
             int ix = gid.x * 1 - 1 + kx * 1;
             int tap = 0 + ((gid.z * 3 + ky) * 3 + kx) * 12;
             if (iy >= 0 && iy < size0.y && ix >= 0 && ix < size0.x) {
-                // input texel (ix, iy): src0 reflect-padded at the bottom/right to size0
-                int rx = clamp(src_size0.x - 1 - abs(src_size0.x - 1 - ix), 0, src_size0.x - 1);
-                int ry = clamp(src_size0.y - 1 - abs(src_size0.y - 1 - iy), 0, src_size0.y - 1);
-                if (u_flip_y != 0) {
-                    ry = src_size0.y - 1 - ry;  // the input is stored bottom-up (a GL render target)
-                }
                 for (int l = 0; l < 2; ++l) {
-                    vec4 v = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, l), 0), lessThan(ivec4(4 * l) + ivec4(0, 1, 2, 3), ivec4(5)));
+                    vec4 v = texelFetch(src0, ivec3(ix, iy, l), 0);
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
             if (iy >= 0 && iy < size1.y && ix >= 0 && ix < size1.x) {
                 for (int l = 0; l < 1; ++l) {
                     vec4 v = texelFetch(src1, ivec3(ix, iy, l), 0);
                     int o = tap + (2 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }

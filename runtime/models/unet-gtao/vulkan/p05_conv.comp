@@ -1,6 +1,6 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
 // neuralao compute pass 5: AveragePool + Conv + LeakyRelu
@@ -36,7 +36,7 @@ void main() {
     }
     ivec2 src_size0 = textureSize(src0, 0).xy;
     ivec2 size0 = src_size0 / 2;
-    hvec4 acc = hvec4(prm[288 + gid.z]);
+    vec4 acc = prm[288 + gid.z];
     for (int ky = 0; ky < 3; ++ky) {
         int iy = gid.y * 1 - 1 + ky * 1;
         for (int kx = 0; kx < 3; ++kx) {
@@ -50,7 +50,8 @@ void main() {
                         + texelFetch(src0, ivec3(2 * ix, 2 * iy + 1, l), 0)
                         + texelFetch(src0, ivec3(2 * ix + 1, 2 * iy + 1, l), 0)) / 4.0;
                     int o = tap + (0 + l) * 4;
-                    acc += hmat4(mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3])) * hvec4(v);
+                    mat4 w = mat4(prm[o], prm[o + 1], prm[o + 2], prm[o + 3]);
+                    acc += vec4(hmat4(w) * hvec4(v));
                 }
             }
         }

@@ -1,6 +1,6 @@
 #version 450
 #extension GL_EXT_samplerless_texture_functions : require
-// conv accumulation: fp32
+// conv products: fp32
 #define hvec4 vec4
 #define hmat4 mat4
 // neuralao compute pass 7: Resize + Conv + LeakyRelu
@@ -36,7 +36,7 @@ void main() {
     }
     ivec2 src_size0 = textureSize(src0, 0).xy;
     ivec2 size0 = src_size0 * 2;
-    hvec4 acc = hvec4(prm[1152 + gid.z]);
+    vec4 acc = prm[1152 + gid.z];
     {
         // input part 0: src0 upsampled x2, its 3x3 taps from 3x3 low texels
         ivec2 lo = src_size0 - 1;
@@ -87,47 +87,47 @@ void main() {
             if (vy0 && vx0) {
                 int t0 = o + 0 * 32;
                 mat4 w0 = mat4(prm[t0], prm[t0 + 1], prm[t0 + 2], prm[t0 + 3]);
-                acc += hmat4(w0) * hvec4(u00);
+                acc += vec4(hmat4(w0) * hvec4(u00));
             }
             if (vy0) {
                 int t1 = o + 1 * 32;
                 mat4 w1 = mat4(prm[t1], prm[t1 + 1], prm[t1 + 2], prm[t1 + 3]);
-                acc += hmat4(w1) * hvec4(u01);
+                acc += vec4(hmat4(w1) * hvec4(u01));
             }
             if (vy0 && vx2) {
                 int t2 = o + 2 * 32;
                 mat4 w2 = mat4(prm[t2], prm[t2 + 1], prm[t2 + 2], prm[t2 + 3]);
-                acc += hmat4(w2) * hvec4(u02);
+                acc += vec4(hmat4(w2) * hvec4(u02));
             }
             if (vx0) {
                 int t3 = o + 3 * 32;
                 mat4 w3 = mat4(prm[t3], prm[t3 + 1], prm[t3 + 2], prm[t3 + 3]);
-                acc += hmat4(w3) * hvec4(u10);
+                acc += vec4(hmat4(w3) * hvec4(u10));
             }
             if (true) {
                 int t4 = o + 4 * 32;
                 mat4 w4 = mat4(prm[t4], prm[t4 + 1], prm[t4 + 2], prm[t4 + 3]);
-                acc += hmat4(w4) * hvec4(u11);
+                acc += vec4(hmat4(w4) * hvec4(u11));
             }
             if (vx2) {
                 int t5 = o + 5 * 32;
                 mat4 w5 = mat4(prm[t5], prm[t5 + 1], prm[t5 + 2], prm[t5 + 3]);
-                acc += hmat4(w5) * hvec4(u12);
+                acc += vec4(hmat4(w5) * hvec4(u12));
             }
             if (vy2 && vx0) {
                 int t6 = o + 6 * 32;
                 mat4 w6 = mat4(prm[t6], prm[t6 + 1], prm[t6 + 2], prm[t6 + 3]);
-                acc += hmat4(w6) * hvec4(u20);
+                acc += vec4(hmat4(w6) * hvec4(u20));
             }
             if (vy2) {
                 int t7 = o + 7 * 32;
                 mat4 w7 = mat4(prm[t7], prm[t7 + 1], prm[t7 + 2], prm[t7 + 3]);
-                acc += hmat4(w7) * hvec4(u21);
+                acc += vec4(hmat4(w7) * hvec4(u21));
             }
             if (vy2 && vx2) {
                 int t8 = o + 8 * 32;
                 mat4 w8 = mat4(prm[t8], prm[t8 + 1], prm[t8 + 2], prm[t8 + 3]);
-                acc += hmat4(w8) * hvec4(u22);
+                acc += vec4(hmat4(w8) * hvec4(u22));
             }
         }
     }
