@@ -46,9 +46,17 @@ from neuralao.runtime.baselines import GTAOSettings, gtao_pass_description, proj
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
-from neuralao.runtime.wgsl_runner import WGPU_FORMATS
+from neuralao.runtime.wgsl_runner import WGPU_FORMATS, from_texels, gpu_format, to_texels
 
-_GL_FORMATS = {"RGBA32F": "GL_RGBA32F", "R32F": "GL_R32F", "RGBA16F": "GL_RGBA16F", "R16F": "GL_R16F"}
+# A manifest's texture format -> GL internal format (R16: 16-bit unsigned normalised, read back as floats)
+_GL_FORMATS = {
+    "RGBA32F": "GL_RGBA32F",
+    "R32F": "GL_R32F",
+    "RGBA16F": "GL_RGBA16F",
+    "R16F": "GL_R16F",
+    "R16": "GL_R16",
+}
+_GL_ONE_LANE = ("R32F", "R16F", "R16")  # uploaded from one float a texel
 _CHANNEL_TYPES = {name: dtype for name, _, dtype in WGPU_FORMATS.values()}
 
 
@@ -216,7 +224,7 @@ class _GLBackend:
         GL = self.GL
         self.context()
         tex, w, h, _, internal = self.textures[ident]
-        fmt = GL.GL_RED if internal == GL.GL_R32F else GL.GL_RGBA
+        fmt = GL.GL_RED if internal in {getattr(GL, _GL_FORMATS[f]) for f in _GL_ONE_LANE} else GL.GL_RGBA
         GL.glPixelStorei(GL.GL_UNPACK_ALIGNMENT, 1)
         GL.glBindTexture(GL.GL_TEXTURE_2D_ARRAY, tex)
         GL.glTexSubImage3D(GL.GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, w, h, 1, fmt, GL.GL_FLOAT, data)
@@ -281,7 +289,7 @@ class _WgpuBackend:
             name, texel, _ = WGPU_FORMATS[fmt]
             tex = dev.create_texture(
                 size=(tw, th, layers),
-                format=name,
+                format=gpu_format(name),
                 usage=tu.TEXTURE_BINDING | tu.STORAGE_BINDING | tu.COPY_DST | tu.COPY_SRC,
             )
             self.textures[ident] = (tex, tex.create_view(dimension="2d-array"), tw, th, layers, texel, name)
@@ -337,7 +345,7 @@ class _WgpuBackend:
             )
             group.append({"binding": inp["binding"], "resource": self.textures[inp["texture"]][1]})
         out = p["output"]
-        fmt = self.textures[out["texture"]][6]
+        fmt = gpu_format(self.textures[out["texture"]][6])
         layout.append(
             {
                 "binding": out["binding"],
@@ -375,7 +383,7 @@ class _WgpuBackend:
         data = np.asarray(data, np.float32).reshape(h, w, -1)[..., : texel // np.dtype(dtype).itemsize]
         self.dev.queue.write_texture(
             {"texture": tex},
-            np.ascontiguousarray(data, dtype).tobytes(),
+            to_texels(data, dtype),
             {"bytes_per_row": w * texel, "rows_per_image": h},
             (w, h, 1),
         )
@@ -396,7 +404,7 @@ class _WgpuBackend:
         raw = self.dev.queue.read_texture(
             {"texture": tex}, {"bytes_per_row": w * texel, "rows_per_image": h}, (w, h, layers)
         )
-        data = np.frombuffer(raw, _CHANNEL_TYPES[name]).reshape(layers, h, w, -1)
+        data = from_texels(raw, _CHANNEL_TYPES[name]).reshape(layers, h, w, -1)
         out = np.zeros((layers, h, w, 4), np.float32)
         out[..., : data.shape[-1]] = data
         return out

@@ -256,6 +256,7 @@ _FORMATS = {
     GL.GL_RGBA32F: (GL.GL_RGBA, GL.GL_FLOAT, 4, np.float32),
     GL.GL_RGBA16F: (GL.GL_RGBA, GL.GL_FLOAT, 4, np.float32),
     GL.GL_R16F: (GL.GL_RED, GL.GL_FLOAT, 1, np.float32),
+    GL.GL_R16: (GL.GL_RED, GL.GL_FLOAT, 1, np.float32),  # 16-bit unsigned normalised: GL converts [0, 1]
     GL.GL_R32I: (GL.GL_RED_INTEGER, GL.GL_INT, 1, np.int32),
     GL.GL_RGBA8: (GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, 4, np.uint8),
 }

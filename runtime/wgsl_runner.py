@@ -46,12 +46,14 @@ from neuralao.runtime.glsl_runner import compute_input, compute_outputs, scalar_
 
 log = logging.getLogger(__name__)
 
-# A manifest's texture format -> (WebGPU format, bytes a texel, numpy type of a channel)
+# A manifest's texture format -> (WebGPU format, bytes a texel, numpy type of a channel: an unsigned
+# integer type is a normalised format, a channel holding value * the type's maximum)
 WGPU_FORMATS = {
     "RGBA32F": ("rgba32float", 16, np.float32),
     "R32F": ("r32float", 4, np.float32),
     "RGBA16F": ("rgba16float", 8, np.float16),
     "R16F": ("r16float", 2, np.float16),
+    "R16": ("r16unorm", 2, np.uint16),
 }
 # Storage formats as the GLSL manifests spell them (a WGSL manifest spells WebGPU's already).
 _STORAGE_FORMATS = {fmt.lower(): name for fmt, (name, _, _) in WGPU_FORMATS.items()}
@@ -62,8 +64,13 @@ _PASSTHROUGH = "spirv-shader-passthrough"
 # WGSL f16 arithmetic (enable f16): requested where the adapter has it; else the fp32 types run
 _SHADER_F16 = "shader-f16"
 # Storage use of the formats core WebGPU leaves out (r16float: the fp16 AO targets of Vulkan SPIR-V and
-# HLSL run through passthrough), where the adapter has them
+# HLSL run through passthrough; r16unorm: their hybrid's GTAO), where the adapter has them
 _ADAPTER_FORMATS = "texture-adapter-specific-format-features"
+# wgpu-native's 16-bit normalised formats (r16unorm), where the adapter has them
+_NORM16 = "texture-format16bit-norm"
+# Formats wgpu-native has beyond webgpu.h: wgpu's Python API takes them as wgpu-native's enum values
+# (named in its wgpu.h), under the feature that allows them.
+_NATIVE_FORMATS = {"r16unorm": ("WGPUNativeTextureFormat_R16Unorm", _NORM16)}
 
 
 @functools.cache
@@ -77,8 +84,38 @@ def _device():
     if adapter is None:
         raise NeuralaoError("no WebGPU adapter (install a Vulkan driver, e.g. Debian's mesa-vulkan-drivers)")
     # SPIR-V passthrough (Vulkan adapters) is only used by run_spirv_all(via="passthrough")
-    features = [f for f in (_PASSTHROUGH, _SHADER_F16, _ADAPTER_FORMATS) if f in adapter.features]
+    features = [f for f in (_PASSTHROUGH, _SHADER_F16, _ADAPTER_FORMATS, _NORM16) if f in adapter.features]
     return wgpu, adapter, adapter.request_device_sync(required_features=features, required_limits={})
+
+
+def gpu_format(name: str) -> str | int:
+    """WebGPU format ``name`` as wgpu's API takes it: the name, or wgpu-native's enum value of a format
+    webgpu.h leaves out (:data:`_NATIVE_FORMATS`); NeuralaoError where the device lacks its feature."""
+    if name not in _NATIVE_FORMATS:
+        return name
+    enum, feature = _NATIVE_FORMATS[name]
+    if feature not in _device()[2].features:
+        raise NeuralaoError(f"this WebGPU adapter has no {feature}: it cannot allocate {name} textures")
+    from wgpu.backends.wgpu_native._ffi import lib
+
+    return getattr(lib, enum)
+
+
+def to_texels(data: np.ndarray, dtype: type) -> bytes:
+    """float32 ``data`` as texels whose channels are ``dtype`` (an unsigned integer type: normalised,
+    clamped to [0, 1] and rounded to the nearest step, as a GPU stores it)."""
+    if np.issubdtype(dtype, np.unsignedinteger):
+        top = np.iinfo(dtype).max
+        data = np.rint(np.clip(np.asarray(data, np.float64), 0.0, 1.0) * top)
+    return np.ascontiguousarray(data, dtype).tobytes()
+
+
+def from_texels(raw, dtype: type) -> np.ndarray:
+    """Texel bytes whose channels are ``dtype`` as float32 (normalised integers divided by their maximum)."""
+    data = np.frombuffer(raw, dtype)
+    if np.issubdtype(dtype, np.unsignedinteger):
+        return (data / np.float64(np.iinfo(dtype).max)).astype(np.float32)
+    return data.astype(np.float32)
 
 
 def adapter_info() -> dict[str, str]:
@@ -164,7 +201,7 @@ class _WgslRun:
             fmt, texel, _ = WGPU_FORMATS[self.m["textures"][ident]["format"]]
             tex = dev.create_texture(
                 size=(tw, th, layers),
-                format=fmt,
+                format=gpu_format(fmt),
                 dimension="2d",
                 usage=tu.TEXTURE_BINDING | tu.STORAGE_BINDING | tu.COPY_DST | tu.COPY_SRC,
             )
@@ -202,7 +239,7 @@ class _WgslRun:
                 "visibility": stage,
                 "storage_texture": {
                     "access": "write-only",
-                    "format": _STORAGE_FORMATS.get(out["format"], out["format"]),
+                    "format": gpu_format(_STORAGE_FORMATS.get(out["format"], out["format"])),
                     "view_dimension": "2d-array",
                 },
             }
@@ -275,7 +312,7 @@ def hlsl_bindings(p: dict, resource: Callable[[dict], object]) -> tuple[list, li
         if r["type"].startswith("Texture2DArray"):
             entry["texture"] = {"sample_type": "unfilterable-float", "view_dimension": "2d-array"}
         elif r["type"].startswith("RWTexture2DArray"):
-            fmt = _STORAGE_FORMATS[p["output"]["format"]]
+            fmt = gpu_format(_STORAGE_FORMATS[p["output"]["format"]])
             entry["storage_texture"] = {"access": "write-only", "format": fmt, "view_dimension": "2d-array"}
         elif r["type"] == "ByteAddressBuffer":
             entry["buffer"] = {"type": "read-only-storage"}

@@ -31,23 +31,32 @@ from test_hlsl_target import _cbuffer_members, _hlsl_declarations
 
 from neuralao.export.glsl.engines import class_name, engine_wrappers, export_manifests, godot_file
 from neuralao.export.glsl.frame import frame_sizes
+from neuralao.runtime.frame_runner import frame_program
 from neuralao.runtime.shipped import shipped_models
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "engines"
 REGENERATE = "python -m neuralao.export.glsl.engines runtime/models/{0}/model.onnx {0} docs/engines"
 SIZES = ((64, 48), (1920, 1080), (333, 256), (256, 256))  # (W, H): scaled, odd, the network's own size
-UNITY_FORMATS = {"RGBA32F": "ARGBFloat", "RGBA16F": "ARGBHalf", "R32F": "RFloat", "R16F": "RHalf"}
+UNITY_FORMATS = {
+    "RGBA32F": "ARGBFloat",
+    "RGBA16F": "ARGBHalf",
+    "R32F": "RFloat",
+    "R16F": "RHalf",
+    "R16": "R16",
+}
 UNREAL_FORMATS = {
     "RGBA32F": "PF_A32B32G32R32F",
     "RGBA16F": "PF_FloatRGBA",
     "R32F": "PF_R32_FLOAT",
     "R16F": "PF_R16F",
+    "R16": "PF_G16",
 }
 GODOT_FORMATS = {
     "RGBA32F": "DATA_FORMAT_R32G32B32A32_SFLOAT",
     "RGBA16F": "DATA_FORMAT_R16G16B16A16_SFLOAT",
     "R32F": "DATA_FORMAT_R32_SFLOAT",
     "R16F": "DATA_FORMAT_R16_SFLOAT",
+    "R16": "DATA_FORMAT_R16_UNORM",
 }
 
 
@@ -374,3 +383,26 @@ def test_godot_tables_are_the_vulkan_manifest(wrapped):
         (u["name"], u["offset"], lanes[u["type"]]) for u in block["members"]
     ]
     assert f"uniform_buffer_create({block['bytes']}, _frame_uniforms(" in gd
+
+
+def test_fp16_wrappers_allocate_the_formats_the_fp16_passes_write():
+    """The wrappers of an export written with --precision fp16 allocate each frame texture as its fp16
+    passes write it: the hybrid's GTAO R16, 16-bit unsigned normalised (Unity R16, Unreal PF_G16, Godot
+    DATA_FORMAT_R16_UNORM), the AO R16F; the Unreal GTAO passes' UAV is the HLSL's unorm float."""
+    model = "unet-gtao"
+    onnx_path = shipped_models()[model] / "model.onnx"
+    glsl, vulkan = (frame_program(onnx_path, d, precision="fp16").manifest for d in ("glsl430", "vulkan"))
+    docs = engine_wrappers(glsl, vulkan, model)
+    cls = class_name(model)
+    cs, cpp, gd = docs[f"unity/{cls}.cs"], docs[f"unreal/{cls}.cpp"], docs[godot_file(model)]
+    for ident, fmt in (("gtao_raw", "R16"), ("gtao", "R16"), ("ao", "R16F")):
+        assert (
+            glsl["frame"]["textures"][ident]["format"] == vulkan["frame"]["textures"][ident]["format"] == fmt
+        )
+        assert re.search(rf'tex\["{ident}"\] = Array2D\(.+, RenderTextureFormat\.{UNITY_FORMATS[fmt]}\);', cs)
+        assert re.search(rf'Make\(TEXT\("{ident}"\), .+, {UNREAL_FORMATS[fmt]}\);', cpp)
+        assert re.search(rf'^    "{ident}": \[.+, RenderingDevice\.{GODOT_FORMATS[fmt]}\],$', gd, re.M)
+    header = docs[f"unreal/{cls}.h"]
+    for name in ("f_gtao", "f_gtao_blur"):
+        (body,) = re.findall(rf"^class F{name} : public FGlobalShader\n(.*?)^\}};", header, re.M | re.S)
+        assert "SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<unorm float>, dst)" in body, name

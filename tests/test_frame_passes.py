@@ -29,7 +29,7 @@ import pytest
 from helpers import analytic_gbuffer
 
 from neuralao.export.glsl import load_compute_export, load_cross_sources
-from neuralao.export.glsl.frame import active_steps, dispatch_counts, frame_sizes, shader_entries
+from neuralao.export.glsl.frame import FORMATS, active_steps, dispatch_counts, frame_sizes, shader_entries
 from neuralao.runtime.baselines import run_gtao
 from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.foundation.tolerances import TOL
@@ -228,17 +228,31 @@ def test_network_at_the_frame_size_is_composited_not_upsampled(tmp_path):
 
 
 def test_fp16_stores_the_ao_target_as_half_floats_and_the_networks_inputs_as_floats():
-    """At fp16 the AO target is R16F (GL, Vulkan) and stays r32float in WGSL (no r16float storage texture
-    in core WebGPU); the hybrid's GTAO targets, the network's input, stay R32F. The network's textures are
-    RGBA16F but its input and what the passes compute from it pixel by pixel (log depth, the radius
-    channel: every pass before the first 3x3 conv), which stay RGBA32F with the depth-derived ones."""
+    """At fp16 the AO target is R16F (GL, Vulkan) and the hybrid's GTAO targets, the network's input, R16
+    (16-bit unsigned normalised: the GLSL's r16); both stay r32float in WGSL (no r16float or r16unorm
+    storage texture in core WebGPU). The network's textures are RGBA16F but its input and what the passes
+    compute from it pixel by pixel (log depth, the radius channel: every pass before the first 3x3 conv),
+    which stay RGBA32F with the depth-derived ones."""
     for preset in ("gpu", "cpu"):
-        for dialect, half in (("glsl430", "R16F"), ("vulkan", "R16F"), ("wgsl", "R32F")):
+        for dialect, half, gtao in (
+            ("glsl430", "R16F", "R16"),
+            ("vulkan", "R16F", "R16"),
+            ("wgsl", "R32F", "R32F"),
+        ):
             proto = _with_internal_height("unet-gtao", INTERNAL_HEIGHT)
-            frame = frame_program(proto, dialect, precision="fp16", preset=preset).manifest
+            program = frame_program(proto, dialect, precision="fp16", preset=preset)
+            frame = program.manifest
             textures = frame["frame"]["textures"]
             assert textures["ao"]["format"] == half
-            assert {textures[k]["format"] for k in ("gtao_raw", "gtao", "low_gbuffer")} <= {"R32F", "RGBA32F"}
+            assert textures["gtao_raw"]["format"] == textures["gtao"]["format"] == gtao
+            assert textures["low_gbuffer"]["format"] == "RGBA32F"
+            ext = ".wgsl" if dialect == "wgsl" else ".comp"
+            for name, target in (("f_gtao", "gtao_raw"), ("f_gtao_blur", "gtao")):
+                (entry,) = [p for p in frame["frame"]["passes"] if p["name"] == name]
+                assert entry["output"] == {"texture": target, "binding": 2, "format": FORMATS[gtao]}
+                declared = "<r32float, write>" if dialect == "wgsl" else f"binding = 2, {FORMATS[gtao]})"
+                assert declared in program.sources[name + ext], (dialect, name)
+            assert frame["frame"]["gtao_formats"]["this_program"] == gtao
             formats = [frame["textures"][p["output"]["texture"]]["format"] for p in frame["passes"]]
             spatial = [i for i, p in enumerate(frame["passes"]) if "LeakyRelu" in p["ops"]]
             assert set(formats[: spatial[0]]) == {"RGBA32F"}

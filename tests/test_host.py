@@ -19,14 +19,15 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import onnx
 import pytest
 from helpers import analytic_gbuffer
 
-from neuralao.export.glsl import load_compute_export
+from neuralao.export.glsl import load_compute_export, write_compute_export
 from neuralao.export.onnx_io import run_onnxruntime
 from neuralao.export.unet import glsl_runner, render_parity_frames
 from neuralao.runtime.foundation.tolerances import TOL
-from neuralao.runtime.frame_runner import FrameRunner
+from neuralao.runtime.frame_runner import FrameRunner, frame_program
 from neuralao.runtime.predict import composite, radius_array, run_padded
 from neuralao.runtime.shipped import pure_unet_export, shipped_models
 from neuralao.runtime.unet_input import pad_to_multiple, preprocess, radius_param
@@ -82,6 +83,29 @@ def test_c_host_runs_the_frame_steps_as_the_python_runner(name, tmp_path):
     assert max(errors) <= TOL.frame_passes_vs_reference, (name, errors)
     # the test can fail: the radius moves the AO far more than the tolerance
     assert float(np.abs(aos[0] - aos[1]).max()) > 100 * TOL.frame_passes_vs_reference
+
+
+def test_c_host_runs_an_fp16_export_as_the_python_runner(tmp_path):
+    """An export written with --precision fp16 (RGBA16F network textures, the AO R16F, the hybrid's GTAO
+    R16: 16-bit unsigned normalised) in the C host against FrameRunner on the same program (same shaders,
+    same driver), and within the model's fp16 bound of the shipped fp32 export."""
+    host = _build_host()
+    shipped = shipped_models()["unet-gtao"]
+    program = frame_program(onnx.load(shipped / "model.onnx"), precision="fp16")
+    write_compute_export(program, tmp_path / "fp16" / "glsl", validate=False)
+    textures = program.manifest["frame"]["textures"]
+    assert (textures["gtao_raw"]["format"], textures["gtao"]["format"], textures["ao"]["format"]) == (
+        "R16",
+        "R16",
+        "R16F",
+    )
+    frame, radius = analytic_gbuffer(*FRAME_SIZE), FRAME_RADII[0]
+    half = _run_host(host, tmp_path / "fp16", frame, radius, tmp_path)
+    with FrameRunner(program, *FRAME_SIZE) as runner:
+        assert float(np.abs(half - runner.run(frame, radius)).max()) <= TOL.frame_passes_vs_reference
+    full = _run_host(host, shipped, frame, radius, tmp_path)
+    bound = json.loads((shipped / "manifest.json").read_text())["fp16"]["bound"]
+    assert 0 < float(np.abs(half - full).max()) <= bound  # 0 would mean the fp16 passes did not run
 
 
 def test_c_host_matches_python_runner(tmp_path):

@@ -6,7 +6,8 @@ from vulkan/ (the same passes as Vulkan GLSL, compiled to SPIR-V), on Mesa's llv
 
 * both shipped models on a rendered frame, at a size that is a multiple of 8 and one that is not, at two
   radii: the runner's AO within TOL.frame_passes_vs_reference of the GL host's;
-* an fp16 export (R16F AO targets, fp16 arithmetic) within the manifest's fp16 bound of the fp32 export;
+* an fp16 export (the AO R16F, the hybrid's GTAO R16, fp16 arithmetic) within the manifest's fp16 bound of
+  the fp32 export;
 * weight ranges at offsets the device cannot bind are repacked: the same AO bit for bit;
 * the timing line (NEURALAO_HOST_REPEATS) and one-line errors on bad input.
 """
@@ -95,10 +96,10 @@ def test_vulkan_runner_matches_the_gl_host(name, size, runner, frames, tmp_path)
 
 
 def test_fp16_export_runs_within_the_fp16_bound(runner, frames, tmp_path):
-    """An export written at fp16 (RGBA16F network textures, R16F AO targets, fp16 arithmetic where the
-    device has shaderFloat16) against the shipped fp32 export: within the fp16 bound the model's manifest
-    states (measured 1.8e-3 on lavapipe here; 1.0e-3 to 1.8e-3 over both models, both sizes and three
-    radii)."""
+    """An export written at fp16 (RGBA16F network textures, the AO R16F, the hybrid's GTAO R16: 16-bit
+    unsigned normalised, fp16 arithmetic where the device has shaderFloat16) against the shipped fp32
+    export: within the fp16 bound the model's manifest states (measured 1.2e-3 on lavapipe here; 1.0e-3 to
+    1.8e-3 over both models, both sizes and three radii)."""
     export = tmp_path / "fp16"
     program = frame_program(
         onnx.load(shipped_models()["unet-gtao"] / "model.onnx"), dialect="vulkan", precision="fp16"
@@ -106,6 +107,7 @@ def test_fp16_export_runs_within_the_fp16_bound(runner, frames, tmp_path):
     write_compute_export(program, export / "vulkan", validate=False)
     manifest = json.loads((export / "vulkan" / "manifest.json").read_text())
     assert manifest["frame"]["textures"]["ao"]["format"] == "R16F"  # the half-float read-back is exercised
+    assert manifest["frame"]["textures"]["gtao"]["format"] == "R16"  # VK_FORMAT_R16_UNORM storage images
     frame = frames[SIZES[1]]
     half, _ = _run(runner, export, frame, 0.3, tmp_path)
     full, _ = _run(runner, shipped_models()["unet-gtao"], frame, 0.3, tmp_path)

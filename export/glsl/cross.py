@@ -251,9 +251,14 @@ def _uniform_type(name: str, u: dict) -> str:
     return "int" if name == "u_flip_y" else u.get("type", "float")
 
 
+# The HLSL element type SPIRV-Cross gives a pass's output, by its GLSL format: one lane for a one-channel
+# texture (``unorm`` for a 16-bit unsigned normalised one), four otherwise.
+_HLSL_OUTPUT_TYPES = {"r32f": "float", "r16f": "float", "r16": "unorm float"}
+
+
 def _output_lanes(p: dict) -> str:
-    """The HLSL element type of a pass's output: one lane for an R32F texture, four otherwise."""
-    return "float" if p["output"].get("format") == "r32f" else "float4"
+    """The HLSL element type of a pass's output (:data:`_HLSL_OUTPUT_TYPES`)."""
+    return _HLSL_OUTPUT_TYPES.get(p["output"].get("format"), "float4")
 
 
 def _frame_cbuffer() -> dict:

@@ -33,18 +33,27 @@ from neuralao.runtime.foundation.io import write_bytes
 
 log = logging.getLogger(__name__)
 
-_UNITY_FORMATS = {"RGBA32F": "ARGBFloat", "RGBA16F": "ARGBHalf", "R32F": "RFloat", "R16F": "RHalf"}
+# A manifest's texture format in each engine (R16: 16-bit unsigned normalised, one channel).
+_UNITY_FORMATS = {
+    "RGBA32F": "ARGBFloat",
+    "RGBA16F": "ARGBHalf",
+    "R32F": "RFloat",
+    "R16F": "RHalf",
+    "R16": "R16",
+}
 _UNREAL_FORMATS = {
     "RGBA32F": "PF_A32B32G32R32F",
     "RGBA16F": "PF_FloatRGBA",
     "R32F": "PF_R32_FLOAT",
     "R16F": "PF_R16F",
+    "R16": "PF_G16",
 }
 _GODOT_FORMATS = {
     "RGBA32F": "DATA_FORMAT_R32G32B32A32_SFLOAT",
     "RGBA16F": "DATA_FORMAT_R16G16B16A16_SFLOAT",
     "R32F": "DATA_FORMAT_R32_SFLOAT",
     "R16F": "DATA_FORMAT_R16_SFLOAT",
+    "R16": "DATA_FORMAT_R16_UNORM",
 }
 _GODOT_KINDS = {"sampled_image": "texture", "storage_image": "image"}
 # What each FrameUniforms member holds, lane by lane, as names every wrapper defines: p00, p11 the

@@ -17,8 +17,8 @@ A frame of a U-Net export that declares ``internal_height`` (the shipped ones), 
 
 No pass reads a full-resolution copy of the G-buffer: the passes read the engine's linear depth and
 normal and reconstruct camera-space positions from depth, the pixel and the projection (as XeGTAO does).
-At fp16 the AO target is R16F (WGSL: r32float, see :data:`AO_FORMATS`); a hybrid's GTAO targets, the
-network's input, stay R32F.
+At fp16 the AO target is R16F and a hybrid's GTAO targets, the network's input, R16 (16-bit unsigned
+normalised); WGSL keeps both r32float (see :data:`AO_FORMATS`, :data:`GTAO_FORMATS`).
 
 Each pass is a :class:`FramePass` (template, fields, textures); :func:`_write_pass` is the one writer,
 filling :mod:`.frame_templates`. The maths are those of the Python references the shipped models were
@@ -67,17 +67,25 @@ UNIFORM_MEMBERS = (
         "(pad and crop, or the convs they were fused into) the same",
     ),
 )
-FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f", "R16F": "r16f"}
-# The frame's one-channel AO targets at full resolution (GTAO, its blur, the AO) at each precision of the
-# program and dialect. AO lies in [0, 1], where half floats step by at most 2^-11, so fp16 stores them
-# R16F: GL's r16f and Vulkan's r16f (a storage image with shaderStorageImageExtendedFormats) are storage
-# formats; core WebGPU has no r16float storage texture, so WGSL keeps r32float. Depth-derived data (the
-# point-sampled position) stays 32-bit at either precision, and so does a hybrid's GTAO (gtao_raw and
-# gtao), the network's input: a trained correction moves by up to 20x a change of its GTAO input, and
-# R16F's rounding of GTAO moved the default's AO by 0.01 (0.001 with R32F GTAO).
+FORMATS = {"RGBA32F": "rgba32f", "R32F": "r32f", "R16F": "r16f", "R16": "r16"}
+# The frame's full-resolution AO target at each precision of the program and dialect. AO lies in [0, 1],
+# where half floats step by at most 2^-11, so fp16 stores it R16F: GL's r16f and Vulkan's r16f (a storage
+# image with shaderStorageImageExtendedFormats) are storage formats; core WebGPU has no r16float storage
+# texture, so WGSL keeps r32float. Depth-derived data (the point-sampled position) stays 32-bit at either
+# precision.
 AO_FORMATS = {"fp32": "R32F", "fp16": "R16F"}
+# A hybrid's GTAO targets (gtao_raw, gtao), the network's input, at each precision: a trained correction
+# moves by up to 20x a change of its GTAO input, and R16F's rounding of GTAO near 1 (up to 2.4e-4) moved
+# the default's AO by 0.01. GTAO lies in [0, 1] (the GTAO pass clamps it, its blur averages it), so fp16
+# stores it R16: 16-bit unsigned normalised, steps of 1/65535 (32x finer than R16F near 1) in R16F's 2
+# bytes; GL's r16 and Vulkan's r16 (shaderStorageImageExtendedFormats) are storage formats. Core WebGPU
+# has no 16-bit normalised storage texture, so WGSL keeps r32float.
+GTAO_FORMATS = {"fp32": "R32F", "fp16": "R16"}
 WGSL_AO_FORMAT_NOTE = (
     "WGSL: r16float is not a storage texture format in core WebGPU, so the AO targets stay r32float at fp16"
+)
+WGSL_GTAO_FORMAT_NOTE = (
+    "WGSL: core WebGPU has no 16-bit normalised storage texture (r16unorm), so GTAO stays r32float at fp16"
 )
 
 
@@ -123,7 +131,7 @@ class FrameSettings:
 @dataclass(frozen=True)
 class FrameTexture:
     """A texture of the frame: size formulas over the frame's symbols (W, H: the frame; w, h: the
-    network's input; wp, hp: that padded), layers of 4 channels (one lane for R32F / R16F), format."""
+    network's input; wp, hp: that padded), layers of 4 channels (one lane for R32F / R16F / R16), format."""
 
     ident: str
     width: str
@@ -134,14 +142,17 @@ class FrameTexture:
     fp16_format: str = ""  # the format at fp16 where it differs from format at fp32 ("": the same)
 
 
-def _ao_format(precision: str, dialect: str) -> str:
-    """The format of the frame's full-resolution AO targets for a program at ``precision`` in ``dialect``."""
-    return "R32F" if dialect == "wgsl" else AO_FORMATS[precision]
+def _ao_format(precision: str, dialect: str, formats: dict[str, str] = AO_FORMATS) -> str:
+    """The format of a frame's full-resolution one-channel target (``formats``: :data:`AO_FORMATS`, the AO,
+    or :data:`GTAO_FORMATS`) for a program at ``precision`` in ``dialect``."""
+    return "R32F" if dialect == "wgsl" else formats[precision]
 
 
-def _ao_texture(ident: str, precision: str, dialect: str, meaning: str) -> FrameTexture:
-    fp16 = _ao_format("fp16", dialect)
-    return FrameTexture(ident, "W", "H", 1, _ao_format(precision, dialect), meaning, fp16)
+def _ao_texture(
+    ident: str, precision: str, dialect: str, meaning: str, formats: dict[str, str] = AO_FORMATS
+) -> FrameTexture:
+    fp16 = _ao_format("fp16", dialect, formats)
+    return FrameTexture(ident, "W", "H", 1, _ao_format(precision, dialect, formats), meaning, fp16)
 
 
 @dataclass(frozen=True)
@@ -204,8 +215,8 @@ def frame_passes(
     }
     passes = []
     if hybrid:
-        tex["gtao_raw"] = FrameTexture("gtao_raw", "W", "H", 1, "R32F", "GTAO before its blur")
-        tex["gtao"] = FrameTexture("gtao", "W", "H", 1, "R32F", "GTAO, 1 on background")
+        tex["gtao_raw"] = _ao_texture("gtao_raw", precision, dialect, "GTAO before its blur", GTAO_FORMATS)
+        tex["gtao"] = _ao_texture("gtao", precision, dialect, "GTAO, 1 on background", GTAO_FORMATS)
         passes.append(
             FramePass(
                 "f_gtao",
@@ -530,6 +541,24 @@ def _order(manifest: dict, passes: list[FramePass]) -> list[dict]:
     return steps
 
 
+def _formats_entry(formats: dict[str, str], precision: str, dialect: str, why: str, wgsl_note: str) -> dict:
+    """The frame section's formats of one kind of full-resolution target (the AO, a hybrid's GTAO) at each
+    precision and in this program, and why."""
+    fp16 = _ao_format("fp16", dialect, formats)
+    return {
+        "fp32": _ao_format("fp32", dialect, formats),
+        "fp16": fp16,
+        "this_program": _ao_format(precision, dialect, formats),
+        "why": why
+        + (
+            "; " + wgsl_note
+            if dialect == "wgsl"
+            else f"; Vulkan: {FORMATS[fp16]} is a storage image format under "
+            "shaderStorageImageExtendedFormats"
+        ),
+    }
+
+
 def _section(
     manifest: dict, passes: list[FramePass], tex: dict[str, FrameTexture], settings, dialect
 ) -> dict:
@@ -548,18 +577,23 @@ def _section(
     textures = {t.ident: _texture_entry(t) for t in tex.values()} | network
     entries = [_pass_entry(p, dialect, tex | network) for p in passes]
     precision = str(manifest.get("precision", "fp32"))
-    ao_formats = {
-        "fp32": _ao_format("fp32", dialect),
-        "fp16": _ao_format("fp16", dialect),
-        "this_program": _ao_format(precision, dialect),
-        "why": "AO lies in [0, 1], where half floats step by at most 2^-11; depth-derived textures stay "
-        "32-bit at either precision"
-        + (
-            "; " + WGSL_AO_FORMAT_NOTE
-            if dialect == "wgsl"
-            else "; Vulkan: r16f is a storage image format under shaderStorageImageExtendedFormats"
-        ),
-    }
+    ao_formats = _formats_entry(
+        AO_FORMATS,
+        precision,
+        dialect,
+        "AO lies in [0, 1], where half floats step by at most 2^-11; depth-derived textures stay 32-bit at "
+        "either precision",
+        WGSL_AO_FORMAT_NOTE,
+    )
+    gtao_formats = _formats_entry(
+        GTAO_FORMATS,
+        precision,
+        dialect,
+        "gtao_raw and gtao, the network's input: GTAO lies in [0, 1], where R16 (16-bit unsigned normalised) "
+        "steps by 1/65535, 32x finer than half floats near 1, in the same 2 bytes; the trained correction "
+        "moves by up to 20x a change of its GTAO input",
+        WGSL_GTAO_FORMAT_NOTE,
+    )
     size = f"max(1, round(W * {internal} / H)) x {internal} (round halves to even)" if internal else "W x H"
     multiple = int(manifest["pad"]["multiple"])
     return {
@@ -582,6 +616,7 @@ def _section(
         },
         "output": "ao",
         "ao_formats": ao_formats,
+        **({"gtao_formats": gtao_formats} if hybrid else {}),
         "origin": {
             "uniform": "u_flip_y",
             "values": {

@@ -19,7 +19,8 @@ Conventions every body relies on:
   AO image, stored the same way. ``nao_load(src, p, layer)`` and ``nao_store(p, layer, v)`` take GL-order
   pixels; ``nao_size(src)`` is a texture's width and height.
 * every texture is a 2-D array texture (layers of 4 channels, fetched without a sampler); a pass writes
-  one output ``dst``, ``rgba32f``, ``r32f`` or ``r16f``.
+  one output ``dst``, ``rgba32f``, ``r32f``, ``r16f`` or ``r16`` (16-bit unsigned normalised: the store
+  clamps to [0, 1]).
 * no pass reads a full-resolution position texture: ``nao_position(p, size, z)`` reconstructs the
   camera-space position of pixel ``p`` of a ``size`` frame from the engine's linear depth ``z`` and
   ``u_proj`` (as XeGTAO does from its depth); a pixel is foreground where ``z > 0``.
@@ -99,6 +100,7 @@ _FG["output_decl"] = "layout(binding = ${binding}, ${format}) writeonly uniform 
 _FG["format_rgba32f"] = "rgba32f"
 _FG["format_r32f"] = "r32f"
 _FG["format_r16f"] = "r16f"
+_FG["format_r16"] = "r16"
 # One per-frame uniform block, the same bytes for every frame pass (std140: offsets 0, 8, 12, 16).
 _FG["uniforms_decl"] = """layout(std140, binding = ${binding}) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix

@@ -48,13 +48,14 @@ FP32_KINDS = ("crop", "uniform")
 ENGINE_TEXTURES = ("depth", "normal")
 
 # Bytes per texel of every format a frame allocates.
-TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2}
+TEXEL_BYTES = {"RGBA32F": 16, "RGBA16F": 8, "R32F": 4, "R16F": 2, "R16": 2}
 # Programs without frame passes (the fragment steps of internal/): at fp16 the one-channel AO targets
 # around the network (full resolution and the network's AO) are R16F: AO lies in [0, 1], where half floats
 # step by at most 2^-11. The point-sampled G-buffer stays
 # RGBA32F (camera-space positions need float32's range and precision). The frame passes (frame.py) give
 # each of their own targets' format at each precision in the frame section (``formats``; at fp16 the AO
-# target is R16F but in WGSL, a hybrid's GTAO, the network's input, R32F).
+# target is R16F and a hybrid's GTAO, the network's input, R16 (16-bit unsigned normalised), but in WGSL:
+# R32F).
 FP16_FRAME_FORMATS = {"R32F": "R16F"}
 
 # The frame whose texture sizes order the slot planner, and the frames the manifest gives figures for.
@@ -89,7 +90,8 @@ class TextureLife:
     first, last : indices into the schedule's steps, both included. width, height : size formulas,
     dicts ``{"of": symbol, "num", "den", "offset", "formula"}`` = symbol * num / den + offset, symbol
     one of W, H (the frame), w, h (the network's input), wp, hp (that input padded); num 0 is a fixed
-    size. formats : {precision: GL internal format} (at fp16 a frame's one-channel AO target is R16F).
+    size. formats : {precision: GL internal format} (at fp16 a frame's one-channel AO target is R16F, a
+    hybrid's GTAO R16).
     """
 
     ident: str
@@ -494,10 +496,10 @@ def memory_plan(manifest: Mapping, width: int, height: int, precision: str = "fp
     textures as ``generate_compute(precision="fp16")`` stores them: RGBA16F, the input, what is
     computed from it pixel by pixel, outputs and scalar textures RGBA32F; a program with frame passes:
     the frame's own targets as its fp16 passes write them, the frame section's ``formats``: the AO target
-    R16F (WGSL: R32F), a hybrid's GTAO R32F, the depth-derived ones RGBA32F; else the fragment steps' AO
-    targets R16F, their point-sampled G-buffer RGBA32F). Whatever the manifest's own precision. Raises
-    NeuralaoError where the program cannot run at that size (a fixed size, below the pad multiple, a
-    fractional size).
+    R16F and a hybrid's GTAO R16 (WGSL: both R32F), the depth-derived ones RGBA32F; else the fragment
+    steps' AO targets R16F, their point-sampled G-buffer RGBA32F). Whatever the manifest's own precision.
+    Raises NeuralaoError where the program cannot run at that size (a fixed size, below the pad multiple,
+    a fractional size).
     """
     return _plan(memory_schedule(manifest), width, height, precision)
 
@@ -588,9 +590,12 @@ def _fp16_text(schedule: MemorySchedule) -> str:
     )
     if schedule.frame_passes:
         one = {k: t.formats["fp16"] for k, t in schedule.textures.items() if not t.network and t.layers == 1}
-        ao = ", ".join(f"{k} {f}" for k, f in sorted(one.items()) if f in ("R16F", "R32F"))
+        ao = ", ".join(f"{k} {f}" for k, f in sorted(one.items()) if f in ("R16F", "R16", "R32F"))
+        if "R16" in one.values():
+            ao += " (R16: 16-bit unsigned normalised, steps of 1/65535 over [0, 1])"
         if "R16F" not in one.values():
-            ao += " (WGSL: core WebGPU has no r16float storage texture)"
+            unorm = " or r16unorm" if "gtao" in one else ""
+            ao += f" (WGSL: core WebGPU has no r16float{unorm} storage texture)"
         return (
             f"{network}; of the frame passes' own one-channel targets {ao}, the depth-derived ones RGBA32F."
         )

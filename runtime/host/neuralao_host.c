@@ -617,10 +617,11 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
 
 /* ------------------------------------------------------------------ the whole frame (manifest "frame") */
 
+/* A manifest's texture format (R16: 16-bit unsigned normalised, a hybrid's GTAO at fp16) -> GL's. */
 static GLenum internal_format(const char *name) {
-    static const char *names[] = {"RGBA32F", "RGBA16F", "R32F", "R16F"};
-    static const GLenum formats[] = {GL_RGBA32F, GL_RGBA16F, GL_R32F, GL_R16F};
-    for (int i = 0; i < 4; i++) if (!strcmp(name, names[i])) return formats[i];
+    static const char *names[] = {"RGBA32F", "RGBA16F", "R32F", "R16F", "R16"};
+    static const GLenum formats[] = {GL_RGBA32F, GL_RGBA16F, GL_R32F, GL_R16F, GL_R16};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) if (!strcmp(name, names[i])) return formats[i];
     die("manifest: texture format %s is not one this host allocates", name);
     return 0;
 }
@@ -784,7 +785,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     for (int k = 0; k < 2; k++) {
         Texture *t = find_texture(fr.tex, fr.n_tex, input_ids[k]);
         if (t->w != W || t->h != H) die("input texture %s is %dx%d, the frame %dx%d", t->id, t->w, t->h, W, H);
-        const int lanes = t->internal == GL_R32F || t->internal == GL_R16F ? 1 : 4;
+        const int lanes = t->internal == GL_R32F || t->internal == GL_R16F || t->internal == GL_R16 ? 1 : 4;
         float *data = input_texels(gb, px, k, lanes);
         glBindTexture(GL_TEXTURE_2D_ARRAY, t->tex);
         glPixelStorei(GL_UNPACK_ALIGNMENT, 1);

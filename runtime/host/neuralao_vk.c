@@ -16,7 +16,8 @@
  * runner follows its "steps" as the GL host does (docs/engine-integration.md), with no CPU work between
  * passes, from the export's precompiled SPIR-V (each pass's spirv.file):
  *   1. every texture of frame.textures created at its size formula (W x H the frame, w x h the network's
- *      input, wp x hp those padded) as a 2-D array image in its format (RGBA32F, RGBA16F, R32F, R16F), usage
+ *      input, wp x hp those padded) as a 2-D array image in its format (RGBA32F, RGBA16F, R32F, R16F, R16:
+ *      16-bit unsigned normalised, a hybrid's GTAO at fp16), usage
  *      SAMPLED | STORAGE, layout GENERAL throughout (the manifest's "vulkan" section);
  *   2. the engine's two inputs, "depth" and "normal" (row 0 = the top row, zero on background), copied in
  *      from a staging buffer (vkCmdCopyBufferToImage);
@@ -43,7 +44,7 @@
  *
  * Device: the first physical device with a compute queue, or with NEURALAO_VK_DEVICE=TEXT the first whose
  * name contains TEXT. Features are enabled as the passes' SPIR-V declares them (shaderFloat16 for fp16
- * arithmetic, shaderStorageImageExtendedFormats for the R16F storage images of fp16); a device without one, or
+ * arithmetic, shaderStorageImageExtendedFormats for the R16F and R16 storage images of fp16); a device without one, or
  * without a format's storage support, is an error naming it.
  */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
@@ -202,7 +203,7 @@ static void create_device(Gpu *g, const Needs *need) {
         {need->int64, have.shaderInt64, &on.shaderInt64, "shaderInt64"},
         {need->int16, have.shaderInt16, &on.shaderInt16, "shaderInt16"},
         {need->extended_formats, have.shaderStorageImageExtendedFormats, &on.shaderStorageImageExtendedFormats,
-         "shaderStorageImageExtendedFormats (R16F storage images)"},
+         "shaderStorageImageExtendedFormats (R16F and R16 storage images)"},
         {need->read_without_format, have.shaderStorageImageReadWithoutFormat,
          &on.shaderStorageImageReadWithoutFormat, "shaderStorageImageReadWithoutFormat"},
         {need->write_without_format, have.shaderStorageImageWriteWithoutFormat,
@@ -285,22 +286,46 @@ typedef struct {
     VkDeviceMemory mem;
     VkImageView view;
     VkFormat format;
-    int w, h, layers, lanes, half; /* lanes: 1 (R) or 4 (RGBA); half: 16-bit floats */
+    int w, h, layers, lanes, channel; /* lanes: 1 (R) or 4 (RGBA); channel: CH_* */
 } Texture;
 
+/* How a texture's channels are stored: float32, float16, 16-bit unsigned normalised ([0, 1] in 65535 steps). */
+enum { CH_FLOAT, CH_HALF, CH_UNORM16 };
+
 static void texture_format(const char *name, Texture *t) {
-    static const char *names[] = {"RGBA32F", "RGBA16F", "R32F", "R16F"};
-    static const VkFormat formats[] = {VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R16G16B16A16_SFLOAT,
-                                       VK_FORMAT_R32_SFLOAT, VK_FORMAT_R16_SFLOAT};
-    for (int i = 0; i < 4; i++)
-        if (!strcmp(name, names[i])) {
-            t->format = formats[i], t->lanes = i < 2 ? 4 : 1, t->half = i % 2;
+    static const struct { const char *name; VkFormat format; int lanes, channel; } formats[] = {
+        {"RGBA32F", VK_FORMAT_R32G32B32A32_SFLOAT, 4, CH_FLOAT}, {"RGBA16F", VK_FORMAT_R16G16B16A16_SFLOAT, 4, CH_HALF},
+        {"R32F", VK_FORMAT_R32_SFLOAT, 1, CH_FLOAT},             {"R16F", VK_FORMAT_R16_SFLOAT, 1, CH_HALF},
+        {"R16", VK_FORMAT_R16_UNORM, 1, CH_UNORM16},
+    };
+    for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++)
+        if (!strcmp(name, formats[i].name)) {
+            t->format = formats[i].format, t->lanes = formats[i].lanes, t->channel = formats[i].channel;
             return;
         }
     die("manifest: texture format %s is not one this runner allocates", name);
 }
 
-static size_t texel_bytes(const Texture *t) { return (size_t)t->lanes * (t->half ? 2 : 4); }
+static size_t texel_bytes(const Texture *t) { return (size_t)t->lanes * (t->channel == CH_FLOAT ? 4 : 2); }
+
+/* n floats into channels stored as `channel` (a normalised one clamped to [0, 1], rounded to the nearest step). */
+static void store_channels(int channel, const float *src, size_t n, void *dst) {
+    if (channel == CH_FLOAT) memcpy(dst, src, n * sizeof(float));
+    else if (channel == CH_HALF)
+        for (size_t i = 0; i < n; i++) ((uint16_t *)dst)[i] = float_to_half(src[i]);
+    else
+        for (size_t i = 0; i < n; i++) {
+            const float v = src[i] > 0.0f ? (src[i] < 1.0f ? src[i] : 1.0f) : 0.0f; /* NaN: 0 */
+            ((uint16_t *)dst)[i] = (uint16_t)(v * 65535.0f + 0.5f);
+        }
+}
+
+/* Channel i of data stored as `channel`, as a float. */
+static float load_channel(int channel, const void *data, size_t i) {
+    if (channel == CH_FLOAT) return ((const float *)data)[i];
+    const uint16_t v = ((const uint16_t *)data)[i];
+    return channel == CH_HALF ? half_to_float(v) : (float)v / 65535.0f;
+}
 
 static Texture *find_texture(Texture *t, int n, const char *id) {
     for (int i = 0; i < n; i++) if (!strcmp(t[i].id, id)) return &t[i];
@@ -782,10 +807,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     for (int k = 0; k < 2; k++) {
         float *data = input_texels(gb, px, k, inputs[k]->lanes);
         unsigned char *dst = (unsigned char *)upload.map + input_at[k];
-        const size_t n = px * (size_t)inputs[k]->lanes;
-        if (inputs[k]->half)
-            for (size_t i = 0; i < n; i++) ((uint16_t *)dst)[i] = float_to_half(data[i]);
-        else memcpy(dst, data, n * sizeof(float));
+        store_channels(inputs[k]->channel, data, px * (size_t)inputs[k]->lanes, dst);
         free(data);
     }
     VkCommandBuffer cmd = begin_commands(g);
@@ -826,9 +848,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     /* 5. the AO, lane 0 of the output texture */
     float *ao = xmalloc(sizeof(float) * px);
     const size_t lanes = (size_t)res->lanes;
-    for (size_t i = 0; i < px; i++)
-        ao[i] = res->half ? half_to_float(((const uint16_t *)readback.map)[i * lanes])
-                          : ((const float *)readback.map)[i * lanes];
+    for (size_t i = 0; i < px; i++) ao[i] = load_channel(res->channel, readback.map, i * lanes);
 
     /* the timed runs */
     if (repeats > 0 && g->timestamp_bits > 0 && g->props.limits.timestampPeriod > 0) {
