@@ -415,12 +415,12 @@ def test_unnamed_gltf_nodes_are_named_one_way_in_every_message(tmp_path, capsys)
     nodes = [
         {"mesh": 0, "extras": {"role": "static"}},
         {"mesh": 0, "extras": {"role": "bogus"}},
-        {"mesh": 0, "name": "Chair", "scale": [0, 0, 0]},
+        {"mesh": 0, "name": "Chair", "scale": [1e31, 1e31, 1e31]},  # past the coordinates' range
     ]
     (tmp_path / "level.gltf").write_text(json.dumps(_gltf("", nodes)))
     level = refusal(capsys, ["volumes", str(tmp_path / "level.gltf"), "--out", str(tmp_path / "v.json")])
     assert "node 1 (unnamed)" in level, level  # was "node 1 ('node1')"
-    nodes[1] = {"mesh": 0, "scale": [0, 0, 0]}
+    nodes[1] = {"mesh": 0, "scale": [1e31, 1e31, 1e31]}
     (tmp_path / "scene.gltf").write_text(json.dumps(_gltf("", nodes)))
     scene = refusal(
         capsys, ["bake", str(tmp_path / "scene.gltf"), "--rays", "1", "--out", str(tmp_path / "b.glb")]

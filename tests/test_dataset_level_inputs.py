@@ -6,9 +6,11 @@ whose level its own bake takes. Every command runs for real, in-process, with wa
 
 from __future__ import annotations
 
+import base64
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import with_changes
 from test_user_inputs import TET, refusal, run, tet_gltf
@@ -16,6 +18,8 @@ from test_user_inputs import TET, refusal, run, tet_gltf
 from neuralao.pipeline.cli.main import main
 from neuralao.pipeline.geometry.gltf import GltfFile
 from neuralao.pipeline.geometry.level_files import read_level
+from neuralao.pipeline.geometry.scene import load_scene
+from neuralao.runtime.foundation.errors import NeuralaoError
 
 # --------------------------------------------------------------------------- dataset configs
 
@@ -187,6 +191,9 @@ def test_quantized_positions_are_read_when_the_file_declares_the_extension(level
         ({"nodes.0.rotation": [0, 0, 2, 1]}, "unit quaternion"),
         ({"nodes.0.matrix": [1, 0, 0, 0] * 3 + [0, 0, 0, 1], "nodes.0.scale": [1, 1, 1]}, "give one"),
         ({"scene": True}, "scene True"),
+        ({"nodes.0.rotation": [0, 0, 0, 0]}, "unit quaternion"),
+        ({"nodes.0.matrix": [float("nan")] + [0] * 14 + [1]}, "matrix must be a list of 16 finite numbers"),
+        ({"nodes.0.scale": [float("inf"), 1, 1]}, "scale must be a list of 3 finite numbers"),
     ],
 )
 def test_every_reader_holds_node_transforms_to_the_specification(tmp_path, capsys, changes, words):
@@ -197,6 +204,65 @@ def test_every_reader_holds_node_transforms_to_the_specification(tmp_path, capsy
     msg = refusal(capsys, [*argv, "--out", str(out)])
     assert "bad.gltf" in msg and words in msg, msg
     assert not out.exists()
+
+
+def nested_tet(scales: list[float], size: float = 1.0) -> dict:
+    """The tetrahedron ``size`` across under a chain of nodes, each scaling its child by the next of
+    ``scales``."""
+    chain = [{"name": f"n{i}", "scale": [s] * 3, "children": [i + 1]} for i, s in enumerate(scales)]
+    doc = tet_gltf(nodes=[*chain, {"name": "Box", "mesh": 0}])
+    blob = bytearray(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
+    blob[:48] = (np.frombuffer(blob[:48], np.float32) * np.float32(size)).tobytes()  # the 4 positions
+    doc["buffers"][0]["uri"] = "data:;base64," + base64.b64encode(bytes(blob)).decode()
+    doc["accessors"][0]["max"] = [size] * 3
+    return doc
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["bake", "--rays", "4", "--out", "out.glb"],  # the scene bake's own reader
+        ["bake", "--rays", "4", "--out", "out.ply"],  # flattened by trimesh (load_scene)
+        ["render", "--views", "1", "--size", "8", "8", "--rays", "1", "--out", "out"],
+    ],
+)
+def test_nested_scales_that_overflow_are_refused_naming_the_node(tmp_path, capsys, command):
+    # each 1e30 is a legal scale; eleven of them multiply past float64 (1.8e308) into inf and NaN vertices
+    (tmp_path / "bad.gltf").write_text(json.dumps(nested_tet([1e30] * 11)))
+    out = tmp_path / command[-1]
+    msg = refusal(capsys, [command[0], str(tmp_path / "bad.gltf"), *command[1:-1], str(out)])
+    assert "bad.gltf node 11 'Box'" in msg and "world transform is not finite" in msg, msg
+    assert not out.exists()
+    with pytest.raises(NeuralaoError, match="node 11 'Box': its world transform is not finite"):
+        read_level(tmp_path / "bad.gltf")
+
+
+@pytest.mark.parametrize(
+    "scales,size,words",
+    [([1e30] * 2, 1.0, "coordinates up to 1e+60"), ([1e30] * 10, 1e10, "coordinates past float64's range")],
+)
+def test_a_world_transform_that_places_a_mesh_too_far_is_refused_naming_the_node(
+    tmp_path, capsys, scales, size, words
+):
+    # every factor legal and their product finite: the positions under it pass the G-buffers' range or float64
+    (tmp_path / "bad.gltf").write_text(json.dumps(nested_tet(scales, size)))
+    out = tmp_path / "out.glb"
+    msg = refusal(capsys, ["bake", str(tmp_path / "bad.gltf"), "--rays", "4", "--out", str(out)])
+    assert f"bad.gltf node {len(scales)} 'Box': its world transform places mesh 0" in msg and words in msg, (
+        msg
+    )
+    # flattened by trimesh, which names no node: the mesh is refused in one line, with no numpy warning
+    flat = tmp_path / "out.ply"
+    msg = refusal(capsys, ["bake", str(tmp_path / "bad.gltf"), "--rays", "4", "--out", str(flat)])
+    assert "mesh " in msg and "bad.gltf has" in msg, msg
+    assert not out.exists() and not flat.exists()
+
+
+def test_nested_scales_that_cancel_are_read(tmp_path):
+    # 1e30 and 1e-30 in turn: their running product stays near 1, however deep the chain
+    (tmp_path / "ok.gltf").write_text(json.dumps(nested_tet([1e30, 1e-30] * 12)))
+    scene = load_scene(tmp_path / "ok.gltf")
+    np.testing.assert_allclose(np.sort(scene.vertices, axis=0), [[0, 0, 0]] * 3 + [[1, 1, 1]], atol=1e-12)
 
 
 # --------------------------------------------------------------------------- the level generator

@@ -472,6 +472,44 @@ def test_scene_bake_reads_the_same_world_as_the_flattened_loader(tmp_path):
     assert len(world.faces) == len(flat.faces)
 
 
+@pytest.mark.parametrize("to", ["vertex", "texture"])
+def test_a_zero_scale_keeps_the_node_and_drops_the_faces_it_collapses(tmp_path, caplog, to):
+    """glTF hides a node by scaling it to zero: the scene bake keeps it, as the flattened reader does, and
+    drops the faces a zero scale collapses as degenerate (a box flattened along y keeps its top and
+    bottom)."""
+    v, f, uv = cube(0.5)
+    nodes = [
+        {"name": "hidden", "mesh": 0, "scale": [0.0, 0.0, 0.0]},
+        {"name": "flat", "mesh": 0, "scale": [1.0, 0.0, 1.0], "translation": [3.0, 0.0, 0.0]},
+        {"name": "shown", "mesh": 0, "translation": [0.0, 0.0, 3.0]},
+    ]
+    src = write_gltf(
+        tmp_path / "hide.gltf",
+        [{"name": "box", "primitives": [{"v": v, "f": f, "uv": uv}]}],
+        nodes,
+        [0, 1, 2],
+    )
+    with caplog.at_level("WARNING"):
+        world = read_gltf_scene(src).world
+    assert "node 0 'hidden': a zero scale collapses it" in caplog.text and "node 1 'flat'" in caplog.text
+    assert len(world.faces) == 12 + 4 and np.isfinite(world.face_normals).all()
+    out = tmp_path / "baked.glb"
+    extra = ["--method", "vertex"] if to == "vertex" else ["--to", "texture", "--resolution", "16"]
+    assert cli.main(["bake", str(src), "--rays", "8", *extra, "--out", str(out)]) == 0
+    doc, get = read_gltf_json(out)
+    assert [n["name"] for n in doc["nodes"]] == ["hidden", "flat", "shown"]
+    assert doc["nodes"][0]["scale"] == [0.0, 0.0, 0.0]
+    _, binary = glb_parts(out)
+    for mesh in doc["meshes"]:
+        prim = mesh["primitives"][0]
+        if to == "vertex":
+            ao = get(prim["attributes"]["_AO"])
+            assert np.isfinite(ao).all() and 0 <= ao.min() and ao.max() <= 1
+        else:  # a map of texels no face covers in the world is open (1), never NaN's 0
+            texture = doc["materials"][prim["material"]]["occlusionTexture"]["index"]
+            assert image_of(doc, binary, texture).max() == 255
+
+
 # --------------------------------------------------------------------------- in the viewer
 
 

@@ -13,7 +13,8 @@ import trimesh
 from neuralao.pipeline import cli
 from neuralao.pipeline.bakes.level import bake_level
 from neuralao.pipeline.bakes.level_settings import load_level_settings
-from neuralao.pipeline.geometry.level_files import quat_to_matrix, read_gltf_json
+from neuralao.pipeline.geometry.gltf import quat_to_matrix
+from neuralao.pipeline.geometry.level_files import read_gltf_json
 from neuralao.pipeline.geometry.level_gen import settings_for, write_level
 from neuralao.pipeline.geometry.surface import interpolate, vertex_colours
 

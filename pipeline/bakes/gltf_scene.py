@@ -6,7 +6,8 @@ several nodes may share, primitives with their own materials and textures. It is
 1. **Read.** The default scene's nodes are walked depth first; every triangle primitive (mode 4, 5
    or 6) of every node with a mesh is a *piece*: the primitive's positions under the node's world
    matrix (a mirroring matrix reverses the winding, as glTF specifies; a skinned mesh is taken in
-   its bind pose, with a warning). A node with
+   its bind pose, with a warning; a zero scale, glTF's way to hide a node, keeps the node and drops the
+   faces it collapses as degenerate, with a warning, as the flattened reader does). A node with
    ``EXT_mesh_gpu_instancing`` adds each instance as an occluder but is not written (per-instance AO
    of instanced decorations is the level bake's job, ``--config``). Points and lines are skipped.
 2. **Trace.** The pieces form one world-space :class:`~neuralao.pipeline.geometry.scene.Scene` in one Embree
@@ -48,6 +49,7 @@ import base64
 import copy
 import io
 import logging
+import math
 import mimetypes
 import time
 import urllib.parse
@@ -68,8 +70,14 @@ from neuralao.pipeline.bakes.texture import (
 )
 from neuralao.pipeline.bakes.vertex import GLB_AO_ATTRIBUTE
 from neuralao.pipeline.geometry.gltf import GltfFile, gltf_label
-from neuralao.pipeline.geometry.level_files import GltfWriter, _instances, check_transforms, node_matrix
-from neuralao.pipeline.geometry.scene import Scene, resolve_mesh_path, scene_from_arrays
+from neuralao.pipeline.geometry.level_files import (
+    GltfWriter,
+    _instances,
+    check_finite_transforms,
+    node_matrix,
+    singular_transforms,
+)
+from neuralao.pipeline.geometry.scene import MAX_COORDINATE, Scene, resolve_mesh_path, scene_from_arrays
 from neuralao.pipeline.geometry.surface import vertex_colours
 from neuralao.pipeline.tracing.labeller import Labeller
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -108,7 +116,7 @@ class Piece:
 
     @property
     def mirrored(self) -> bool:
-        return bool(np.linalg.det(self.matrix[:3, :3]) < 0)
+        return bool(np.linalg.slogdet(self.matrix[:3, :3])[0] < 0)  # its sign: a det may pass float64
 
     def world_vertices(self) -> np.ndarray:
         """(n, 3) float64 every vertex of the primitive in world space."""
@@ -213,14 +221,18 @@ def read_gltf_scene(path: str | Path) -> GltfScene:
         seen.add(i)
         node = nodes[i]
         where = f"{path.name} {gltf_label('node', i, node)}"
-        world = parent @ node_matrix(node, where)
+        # GltfFile refuses a node with a mesh whose world transform is not finite; one without is harmless
+        with np.errstate(over="ignore", invalid="ignore"):
+            world = parent @ node_matrix(node, where)
         if "mesh" in node:
             mi = node["mesh"]
             if not isinstance(mi, int) or not 0 <= mi < len(meshes):
                 raise NeuralaoError(f"{where}: references mesh {mi!r}, the file has {len(meshes)}")
             inst = _instances(g, node, where)
-            transforms = world[None] if inst is None else world[None] @ inst
-            check_transforms(transforms, where)
+            with np.errstate(over="ignore", invalid="ignore"):  # instances past float64: refused next
+                transforms = world[None] if inst is None else world[None] @ inst
+            check_finite_transforms(transforms, where)
+            _warn_collapsed(transforms, inst is not None, where)
             if inst is not None:
                 skipped["instanced nodes (occluders only)"] = (
                     skipped.get("instanced nodes (occluders only)", 0) + 1
@@ -234,17 +246,50 @@ def read_gltf_scene(path: str | Path) -> GltfScene:
         raise NeuralaoError(f"{path.name} has no node with a triangle mesh in its scene")
     for what, count in skipped.items():
         log.warning("%s: %d %s not baked", path.name, count, what)
-    return GltfScene(path, g, pieces, _world_scene(pieces, path), skipped)
+    return GltfScene(path, g, pieces, _world_scene(pieces, path, doc), skipped)
 
 
-def _world_scene(pieces: list[Piece], path: Path) -> Scene:
+def _warn_collapsed(transforms: np.ndarray, instanced: bool, where: str) -> None:
+    """Say so where a zero scale (glTF's way to hide a node) collapses a node or some of its instances
+    (``transforms`` (k, 4, 4) float64): they are kept, and the faces they collapse are dropped as degenerate,
+    as the flattened reader (:func:`~neuralao.pipeline.geometry.scene.load_scene`) drops them."""
+    collapsed = int(singular_transforms(transforms).sum())
+    if collapsed:
+        what = f"{collapsed} of its {len(transforms)} instances" if instanced else "it"
+        log.warning(
+            "%s: a zero scale collapses %s; its collapsed faces are dropped as degenerate", where, what
+        )
+
+
+def _check_placed(world: np.ndarray, p: Piece, path: Path, doc: dict) -> None:
+    """A piece's world vertices ``world`` (u, 3) float64 finite and within +-``MAX_COORDINATE`` (the rule
+    :func:`~neuralao.pipeline.geometry.scene.scene_from_arrays` holds the whole scene to), else a one-line
+    error naming its node: a world transform each of whose factors is legal may still place the positions
+    past float64 or past what the G-buffers hold."""
+    reach = float(np.abs(world).max()) if np.isfinite(world).all() else math.inf
+    if reach > MAX_COORDINATE:
+        where = f"{path.name} {gltf_label('node', p.node, doc['nodes'][p.node])}"
+        where += "" if p.written else f" instance {p.instance}"
+        what = f"{gltf_label('mesh', p.mesh, doc['meshes'][p.mesh])} primitive {p.primitive}"
+        up_to = f"up to {reach:.3g}" if math.isfinite(reach) else "past float64's range"
+        raise NeuralaoError(
+            f"{where}: its world transform places {what} at coordinates {up_to}; a scene's coordinates lie "
+            f"within +-{MAX_COORDINATE:g} (float32 G-buffers and ray distances overflow past it): scale it "
+            "down"
+        )
+
+
+def _world_scene(pieces: list[Piece], path: Path, doc: dict) -> Scene:
     """Every piece's used vertices in world space, one :class:`Scene` (sets ``Piece.v0``)."""
     verts, faces, nv = [], [], 0
     for p in pieces:
         remap = np.full(len(p.vertices), -1, np.int64)
         remap[p.used] = np.arange(len(p.used))
         f = remap[p.faces] + nv
-        verts.append(p.world_vertices()[p.used])
+        with np.errstate(over="ignore", invalid="ignore"):  # past float64: refused next, naming the node
+            world = p.world_vertices()[p.used]
+        _check_placed(world, p, path, doc)
+        verts.append(world)
         faces.append(f[:, ::-1] if p.mirrored else f)  # glTF: a negative determinant flips the front face
         p.v0 = nv
         nv += len(p.used)

@@ -21,8 +21,9 @@ is one line naming the file, the item and the rule):
   default ``scene``) inside the file; ``indices`` accessors SCALAR unsigned integers, ``POSITION`` accessors
   VEC3 floats (integers only with ``KHR_mesh_quantization`` in ``extensionsUsed``);
 * node transforms: ``matrix`` 16 numbers whose last row is [0 0 0 1] (a glTF matrix decomposes into TRS),
-  or ``translation`` / ``rotation`` / ``scale`` of 3 / 4 / 3 numbers (rotation components in [-1, 1]), never
-  both; numbers are JSON numbers, finite (no strings, no true / false).
+  or ``translation`` / ``rotation`` / ``scale`` of 3 / 4 / 3 numbers (rotation components in [-1, 1], not
+  all 0), never both; numbers are JSON numbers, finite (no strings, no true / false); and every node with a
+  mesh has a finite world transform (its parents' transforms times its own: nested scales overflow).
 """
 
 from __future__ import annotations
@@ -70,6 +71,9 @@ POSITION_COMPONENTS = (5126,)
 QUANTIZED_POSITION_COMPONENTS = (5120, 5121, 5122, 5123, 5126)
 # A node's TRS properties: their lengths (a matrix holds 16 numbers).
 TRS = {"translation": 3, "rotation": 4, "scale": 3}
+# A node whose world matrix entries may pass 1e300 by a bound on the product of its own and its
+# parents' numbers has its world matrix composed to be sure it is finite (float64 ends near 1.8e308).
+WORLD_BOUND_LOG10 = 300.0
 
 
 def outside_folder_message(gltf: str | os.PathLike, uri: str) -> str:
@@ -122,6 +126,52 @@ def _numbers(value: Any, count: int) -> list[float] | None:
     return None if any(v is None for v in numbers) else numbers
 
 
+# --------------------------------------------------------------------------- node transforms
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """glTF quaternions (k, 4) [x, y, z, w] -> rotation matrices (k, 3, 3) float64 (normalised first)."""
+    q = np.asarray(q, np.float64).reshape(-1, 4)
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    if not (np.isfinite(q).all() and (norm > 0).all()):
+        raise NeuralaoError("rotation quaternion is zero or not finite")
+    x, y, z, w = (q / norm).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
+
+
+def trs_matrices(t=None, r=None, s=None, count: int = 1) -> np.ndarray:
+    """(k, 4, 4) float64 = T @ R @ S from translations (k, 3), quaternions (k, 4), scales (k, 3)."""
+    m = np.tile(np.eye(4), (count, 1, 1))
+    rot = quat_to_matrix(r) if r is not None else np.tile(np.eye(3), (count, 1, 1))
+    scale = np.ones((count, 3)) if s is None else np.asarray(s, np.float64).reshape(count, 3)
+    m[:, :3, :3] = rot * scale[:, None, :]
+    if t is not None:
+        m[:, :3, 3] = np.asarray(t, np.float64).reshape(count, 3)
+    return m
+
+
+def local_matrix(node: dict) -> np.ndarray:
+    """(4, 4) float64 local transform of a node whose numbers :class:`GltfFile` has checked: its ``matrix``
+    (column-major), else T @ R @ S of its ``translation`` / ``rotation`` / ``scale``."""
+    if "matrix" in node:
+        return np.asarray(node["matrix"], np.float64).reshape(4, 4).T
+    return trs_matrices(node.get("translation"), node.get("rotation"), node.get("scale"))[0]
+
+
+def _magnitude(node: dict) -> float:
+    """log10 of an upper bound on a checked node's local matrix entries (rotations add nothing: their
+    entries lie in [-1, 1]), at least 0."""
+    numbers = node["matrix"] if "matrix" in node else [*node.get("translation", ()), *node.get("scale", ())]
+    return math.log10(max([1.0, *(abs(float(v)) for v in numbers)]))
+
+
 class GltfFile:
     """The checked document of a .gltf / .glb (module doc) and, with ``buffers``, its buffers' bytes.
 
@@ -145,6 +195,7 @@ class GltfFile:
         self._check_views([b["byteLength"] for b in specs])
         self._check_accessors()
         self._check_indices()
+        self._check_world_transforms()
         self.buffers: list[bytes] = data if buffers else []
 
     # ------------------------------------------------------------------ the document
@@ -391,11 +442,61 @@ class GltfFile:
         for key, count in TRS.items():
             if key in node and _numbers(node[key], count) is None:
                 raise self._fail(f"{item}.{key}", f"must be a list of {count} finite numbers")
-        if "rotation" in node and any(abs(q) > 1 for q in node["rotation"]):
-            rotation = node["rotation"]
+        rotation = node.get("rotation")
+        # a length of 0 (all zeros, or squares that underflow) leaves no rotation to normalise to
+        if rotation is not None and (any(abs(q) > 1 for q in rotation) or sum(q * q for q in rotation) == 0):
             raise self._fail(
-                f"{item}.rotation", f"{rotation} is not a unit quaternion (components in [-1, 1])"
+                f"{item}.rotation",
+                f"{rotation} is not a unit quaternion (components in [-1, 1], length above 0)",
             )
+
+    def _check_world_transforms(self) -> None:
+        """Every node with a mesh has a finite world transform. Each node's own numbers are finite, but their
+        product down the hierarchy may pass float64 (eleven nested scales of 1e30 make inf and NaN
+        vertices). A bound on the product (pure Python, no matrix per node: a level holds thousands of
+        nodes) picks the few nodes whose world matrix is composed to be sure; a composed one starts the
+        bound of its children afresh, so however deep a hierarchy, each node is composed at most once."""
+        nodes = self._items("nodes")
+        above: dict[int, int] = {}  # node -> the parent it is first reached from (a tree: each once)
+        bound: dict[int, float] = {}  # node -> log10 of a bound on its world matrix entries
+        worlds: dict[int, np.ndarray] = {}  # node -> its world matrix, where it was composed
+        children = {c for n in nodes for c in n.get("children", [])}
+        stack = [(i, -1) for i in reversed(range(len(nodes))) if i not in children]
+        while stack:
+            i, parent = stack.pop()
+            if i in bound:
+                continue  # a shared child or a cycle: the readers refuse the file, naming the node
+            above[i] = parent
+            # each entry of a product of 4x4 matrices sums 4 products of entries
+            bound[i] = _magnitude(nodes[i]) + (bound[parent] + math.log10(4.0) if parent >= 0 else 0.0)
+            if bound[i] > WORLD_BOUND_LOG10:
+                world = self._world(nodes, i, above, worlds)
+                finite = bool(np.isfinite(world).all())
+                if not finite and "mesh" in nodes[i]:
+                    depth, k = 0, i
+                    while above[k] >= 0:
+                        depth, k = depth + 1, above[k]
+                    raise NeuralaoError(
+                        f"{self.path.name} {gltf_label('node', i, nodes[i])}: its world transform is not "
+                        f"finite (the transforms of the {depth} nodes above it multiply past float64's "
+                        "range); scale the hierarchy down"
+                    )
+                bound[i] = math.log10(max(1.0, float(np.abs(world).max()))) if finite else math.inf
+            stack += [(c, i) for c in reversed(nodes[i].get("children", []))]
+
+    @staticmethod
+    def _world(nodes: list[dict], i: int, above: dict[int, int], worlds: dict[int, np.ndarray]) -> np.ndarray:
+        """Node ``i``'s world matrix (4, 4) float64, composed down from its nearest composed ancestor or its
+        root (``above``: each node's parent, -1 at a root); every matrix composed on the way is kept in
+        ``worlds``."""
+        chain = [i]
+        while above[chain[-1]] >= 0 and chain[-1] not in worlds:
+            chain.append(above[chain[-1]])
+        world = worlds.get(chain[-1], np.eye(4))
+        with np.errstate(over="ignore", invalid="ignore"):  # inf and NaN are what is looked for
+            for k in reversed(chain if chain[-1] not in worlds else chain[:-1]):
+                world = worlds[k] = world @ local_matrix(nodes[k])
+        return world
 
     # ------------------------------------------------------------------ data
     def accessor(self, index: Any, where: str, normalize: bool = True) -> np.ndarray:

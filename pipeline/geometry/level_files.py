@@ -44,6 +44,7 @@ from neuralao.pipeline.geometry.gltf import (
     GltfFile,
     gltf_label,
     json_number,
+    trs_matrices,
 )
 from neuralao.pipeline.geometry.scene import MAX_COORDINATE
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -117,23 +118,6 @@ class Level:
 # --------------------------------------------------------------------------- transforms
 
 
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """glTF quaternions (k, 4) [x, y, z, w] -> rotation matrices (k, 3, 3) float64 (normalised first)."""
-    q = np.asarray(q, np.float64).reshape(-1, 4)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    if not (np.isfinite(q).all() and (norm > 0).all()):
-        raise NeuralaoError("rotation quaternion is zero or not finite")
-    x, y, z, w = (q / norm).T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )
-
-
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     """Rotation matrices (k, 3, 3) -> unit quaternions (k, 4) [x, y, z, w] with w >= 0 (Shepperd)."""
     r = np.asarray(r, np.float64).reshape(-1, 3, 3)
@@ -175,17 +159,6 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     q = cand[np.arange(len(r)), np.argmax(diag, axis=1)]
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     return np.where(q[:, 3:] < 0, -q, q)
-
-
-def trs_matrices(t=None, r=None, s=None, count: int = 1) -> np.ndarray:
-    """(k, 4, 4) float64 = T @ R @ S from translations (k, 3), quaternions (k, 4), scales (k, 3)."""
-    m = np.tile(np.eye(4), (count, 1, 1))
-    rot = quat_to_matrix(r) if r is not None else np.tile(np.eye(3), (count, 1, 1))
-    scale = np.ones((count, 3)) if s is None else np.asarray(s, np.float64).reshape(count, 3)
-    m[:, :3, :3] = rot * scale[:, None, :]
-    if t is not None:
-        m[:, :3, 3] = np.asarray(t, np.float64).reshape(count, 3)
-    return m
 
 
 def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -234,18 +207,28 @@ def node_matrix(node: dict, where: str) -> np.ndarray:
         raise NeuralaoError(f"{where}: {e}") from None
 
 
-def check_transforms(m: np.ndarray, where: str) -> None:
-    """Finite and non-singular (no zero-scale axis) 4x4 matrices (k, 4, 4)."""
+def check_finite_transforms(m: np.ndarray, where: str) -> None:
+    """Finite 4x4 matrices (k, 4, 4)."""
     if not np.isfinite(m).all():
         bad = int(np.flatnonzero(~np.isfinite(m).reshape(len(m), -1).all(axis=1))[0])
         raise NeuralaoError(f"{where}: instance {bad} has a non-finite transform")
+
+
+def singular_transforms(m: np.ndarray) -> np.ndarray:
+    """(k,) bool: which of the finite matrices ``m`` (k, 4, 4) are singular (a zero scale on some axis)."""
     a = m[:, :3, :3]
     # The rule is scale-free: judged on each matrix over its largest entry, so no product overflows.
     top = np.abs(a).max(axis=(1, 2))
     a = a / np.where(top > 0, top, 1.0)[:, None, None]
     det = np.abs(np.linalg.det(a))
     big = np.linalg.norm(a, axis=1).max(axis=1)
-    singular = ~(det > _SINGULAR_REL * big**3) | (big == 0)
+    return ~(det > _SINGULAR_REL * big**3) | (big == 0)
+
+
+def check_transforms(m: np.ndarray, where: str) -> None:
+    """Finite and non-singular (no zero-scale axis) 4x4 matrices (k, 4, 4)."""
+    check_finite_transforms(m, where)
+    singular = singular_transforms(m)
     if singular.any():
         raise NeuralaoError(
             f"{where}: instance {int(np.flatnonzero(singular)[0])} has a zero scale (singular transform)"

@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from neuralao.pipeline.geometry.level_files import MIN_INSTANCE_REL, GltfWriter, quat_to_matrix
+from neuralao.pipeline.geometry.gltf import quat_to_matrix
+from neuralao.pipeline.geometry.level_files import MIN_INSTANCE_REL, GltfWriter
 from neuralao.pipeline.geometry.scene import Scene, load_scene
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_json

@@ -130,8 +130,10 @@ def _read_geometries(path: Path) -> list:
     if path.suffix.lower() in (".gltf", ".glb"):
         check_gltf(path)  # the specification's rules first: trimesh reads some broken files as nonsense
     try:
-        loaded = trimesh.load(str(path), force="scene", process=False)
-        return list(loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded])
+        # positions a transform takes past float64 come back inf or NaN, refused by scene_from_arrays
+        with np.errstate(over="ignore", invalid="ignore"):
+            loaded = trimesh.load(str(path), force="scene", process=False)
+            return list(loaded.dump(concatenate=False) if hasattr(loaded, "dump") else [loaded])
     except Exception as e:  # trimesh raises many types for corrupt files
         # trimesh's resolver refused a file outside the glTF's folder (its text names its own Python API)
         escaped = _ESCAPED.match(str(e))
