@@ -148,6 +148,31 @@ def test_a_field_without_a_validation_split_trains_and_says_so(tet, tmp_path, ca
     assert metrics["val_samples"] == 0 and metrics["val_rmse"] is None
 
 
+def tree(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative path -> bytes)."""
+    return {str(f.relative_to(folder)): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
+
+
+@pytest.mark.parametrize("model", ["unet", "mlp", "field"])
+@pytest.mark.parametrize("name", ["manifest.json", "shards/box-0000.npz", "model.pt"])
+def test_a_checkpoint_is_never_written_inside_the_dataset(data, tmp_path, capsys, model, name):
+    """The dataset is read whole: a checkpoint written over its manifest or a shard destroys it (mlp and field
+    wrote theirs there), and one beside them mixes into it; refused before any work, on a copy."""
+    copy = shutil.copytree(data, tmp_path / "dataset")
+    before = tree(copy)
+    out = copy / name
+    steps = {
+        "unet": UNET,
+        "mlp": ["--set", "max_iterations=2"],
+        "field": ["--size", "4x2", "--set", "steps=4"],
+    }
+    flags = steps[model] if model == "unet" else ["--scene", "box", "--no-progress", *steps[model]]
+    line = refusal(capsys, ["train", model, "--data", str(copy), *flags, "--out", str(out)])
+    assert f"--out {out} is inside --data {copy}, a folder the command reads" in line, line
+    assert tree(copy) == before and not Path(f"{out}.partial").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dataset"]  # no prepared frames beside it
+
+
 # ----------------------------------------------------------------------------------------------- export
 
 

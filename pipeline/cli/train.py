@@ -20,9 +20,12 @@ from neuralao.runtime.foundation.paths import FILE
 from neuralao.runtime.foundation.settings import add_set_option, load_settings
 
 # What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
-# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
+# neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other, and not inside the
+# dataset, which is read whole: --out DATA/manifest.json or a shard's name would replace it with the
+# checkpoint).
 OUTPUTS = {"out": FILE}
 INPUTS = ("mesh", "data", "config")
+READ_FOLDERS = ("data",)
 
 
 def _log(kind: str) -> logging.Logger:
