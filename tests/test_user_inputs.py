@@ -471,6 +471,87 @@ def test_outputs_that_cannot_be_written_are_refused_before_any_work(files, tmp_p
     assert "--out and --composite" in msg and not Path(same).exists()
 
 
+def _gltf_with_files_beside(folder: Path, buffer: str, image: str) -> dict[Path, bytes]:
+    """A tetrahedron glTF in ``folder`` whose buffer and image are the files ``buffer`` and ``image`` beside
+    it (named by percent-encoded uris, as the specification has them); its files -> their bytes."""
+    import urllib.parse
+
+    folder.mkdir(parents=True, exist_ok=True)
+    blob = base64.b64decode(tet_gltf()["buffers"][0]["uri"].split(",", 1)[1])
+    doc = tet_gltf(**{"buffers.0.uri": urllib.parse.quote(buffer)})
+    doc["images"] = [{"uri": urllib.parse.quote(image)}]
+    (folder / "scene.gltf").write_text(json.dumps(doc))
+    (folder / buffer).write_bytes(blob)
+    (folder / image).write_bytes(b"\x89PNG not decoded by a bake")
+    return {p: p.read_bytes() for p in folder.iterdir()}
+
+
+# Settings that keep a run short where a command is not refused (as before these refusals).
+_QUICK_MLP = [
+    "train",
+    "mlp",
+    "--views",
+    "1",
+    "--resolution",
+    "8",
+    "8",
+    "--rays",
+    "2",
+    "--set",
+    "max_iterations=1",
+]
+_QUICK_VOLUMES = [
+    "volumes",
+    *(a for s in ("samples=2", "directions=16", "grid=2", "cell_rays=4") for a in ("--set", s)),
+]
+# (command before the mesh, the mesh as given: a file, a glTF folder or a bare name, what --out hits, words)
+BESIDE_GLTF = [
+    (["bake", "--rays", "2"], "scene.gltf", "geometry.glb", "buffer 0 of MESH"),
+    (["bake", "--to", "texture", "--rays", "2"], "folder", "tex ao.glb", "image 0 of MESH"),
+    ([*_QUICK_MLP, "--mesh"], "scene.gltf", "geometry.bin", "buffer 0 of --mesh"),
+    ([*_QUICK_MLP, "--mesh"], "folder", "tex ao.png", "image 0 of --mesh"),
+    (_QUICK_VOLUMES, "bare name", "geometry.json", "buffer 0 of LEVEL"),
+]
+
+
+@pytest.mark.parametrize("command,given,hit,words", BESIDE_GLTF)
+def test_an_output_on_a_file_a_gltf_reads_beside_it_is_refused(
+    tmp_path, capsys, monkeypatch, command, given, hit, words
+):
+    """A glTF's buffers and images are inputs as much as the .gltf: an output on one (or a link to one) is
+    refused before any work, naming both, and every file of the mesh is left as it was."""
+    folder = tmp_path / "scene"
+    names = {"buffer": "geometry.bin", "image": "tex ao.png"}
+    names["image" if "image" in words else "buffer"] = hit
+    before = _gltf_with_files_beside(folder, names["buffer"], names["image"])
+    monkeypatch.setenv("NEURALAO_MESHES", str(tmp_path))
+    mesh = {"scene.gltf": str(folder / "scene.gltf"), "folder": str(folder), "bare name": "scene"}[given]
+    (tmp_path / "link").symlink_to(folder / hit)
+    for out in (folder / hit, tmp_path / "link"):
+        argv = [*command, mesh, "--out", str(out)]
+        if command[0] == "volumes":
+            argv = [*command, "--out", str(out), mesh]
+        msg = refusal(capsys, argv)
+        assert f"--out {out} is also an input ({words} " in msg and "scene.gltf" in msg, msg
+    assert {p: p.read_bytes() for p in folder.iterdir()} == before
+
+
+def test_the_texture_maps_file_beside_the_glb_is_checked_before_any_work(files, tmp_path, capsys):
+    """A texture bake writes OUT.ao.png beside OUT.glb: a folder there, or a link to the mesh, is refused
+    before any bake as --out itself would be."""
+    (tmp_path / "a.ao.png").mkdir()
+    (tmp_path / "b.ao.png").symlink_to(files / "tet.obj")
+    bake = ["bake", str(files / "tet.obj"), "--to", "texture", "--rays", "2", "--out"]
+    msg = refusal(capsys, [*bake, str(tmp_path / "a.glb")])
+    assert msg.endswith(f"the map beside --out {tmp_path / 'a.ao.png'} is a folder; a file is wanted here"), (
+        msg
+    )
+    msg = refusal(capsys, [*bake, str(tmp_path / "b.glb")])
+    assert f"the map beside --out {tmp_path / 'b.ao.png'} is also an input (MESH)" in msg, msg
+    assert (files / "tet.obj").read_text() == TET
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.ao.png", "b.ao.png"]
+
+
 def test_outputs_get_the_umasks_permissions(files, tmp_path, capsys):
     old = os.umask(0o027)
     try:

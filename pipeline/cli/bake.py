@@ -47,11 +47,20 @@ log = logging.getLogger(__name__)
 
 # What the command reads, checked with its outputs before it runs (cli.main.check_arguments).
 INPUTS = ("mesh", "config")
+MESH_INPUTS = ("mesh",)  # mesh names: a file, a glTF folder or a bare name
 
 
-def OUTPUTS(args: argparse.Namespace) -> dict[str, str]:  # noqa: N802 (the name every command module uses)
-    """--out is a mesh file, or with --config a level bake's folder (what is checked before any work)."""
-    return {"out": FOLDER if args.config is not None else FILE}
+def OUTPUTS(args: argparse.Namespace) -> dict:  # noqa: N802 (the name every command module uses)
+    """--out is a mesh file, or with --config a level bake's folder (what is checked before any work); a
+    texture bake of a mesh that is not a glTF scene also writes its map beside it, OUT.ao.png."""
+    if args.config is not None:
+        return {"out": FOLDER}
+    try:
+        glb = args.to == "texture" and Path(args.out).suffix.lower() == ".glb"
+        map_beside = glb and not bakes_as_scene(args.mesh, args.out)
+    except (NeuralaoError, OSError):  # no mesh there: run refuses it, in its own words
+        map_beside = False
+    return {"out": FILE, **({"the map beside --out": (png_path_for(args.out), FILE)} if map_beside else {})}
 
 
 # Single-mesh flags that have no meaning for a level (its settings come from --config and --set).

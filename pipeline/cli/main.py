@@ -147,12 +147,26 @@ def _name(action: argparse.Action | None, dest: str) -> str:
     return str(action.metavar or dest.upper())
 
 
+def _mesh_file(name: object) -> list:
+    """The file a mesh argument names (a glTF folder's or a bare name's), as the command's reader finds it;
+    none where it finds none (the reader refuses that later, in its own words)."""
+    from neuralao.pipeline.geometry.scene import resolve_mesh_path
+
+    try:
+        return [resolve_mesh_path(name)] if isinstance(name, str) and name else []
+    except (NeuralaoError, OSError):
+        return []
+
+
 def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Namespace) -> None:
     """What holds for every command, checked before it runs: each float flag is a finite number within
     float32's range (every value here ends up in float32 somewhere, where a larger one is inf), and the
     paths the command writes (its module's ``OUTPUTS``: dest -> FILE or FOLDER, or a function of the
-    arguments giving them) can be written and are distinct from each other and from its ``INPUTS``, and
-    none lies inside a folder of its ``READ_FOLDERS`` (inputs it reads whole, such as a dataset)."""
+    arguments giving them, where a file no flag names, such as a secondary output, is name -> (path, kind))
+    can be written and are distinct from each other and from its ``INPUTS`` (a glTF's
+    buffers and images beside it included; those of its ``MESH_INPUTS`` are first resolved as a mesh name
+    is, a glTF folder or a bare name to its file), and none lies inside a folder of its ``READ_FOLDERS``
+    (inputs it reads whole, such as a dataset)."""
     # here, not at the top: the module stays light, so Ctrl-C meets main's handler as early as possible
     import os
 
@@ -167,16 +181,21 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
                 check_float32(_name(action, dest), v)
     outputs = getattr(module, "OUTPUTS", {})
     outputs = outputs(args) if callable(outputs) else outputs
+    outputs = {
+        d: spec if isinstance(spec, tuple) else (getattr(args, d, None), spec) for d, spec in outputs.items()
+    }
+    inputs = {d: getattr(args, d, None) for d in getattr(module, "INPUTS", ())}
+    for d in getattr(module, "MESH_INPUTS", ()):
+        inputs[d] = [inputs[d], *_mesh_file(inputs[d])]
     check_outputs(
-        {_name(actions.get(d), d): (getattr(args, d, None), kind) for d, kind in outputs.items()},
-        {_name(actions.get(d), d): getattr(args, d, None) for d in getattr(module, "INPUTS", ())},
+        {_name(actions.get(d), d): spec for d, spec in outputs.items()},
+        {_name(actions.get(d), d): value for d, value in inputs.items()},
     )
     for d in getattr(module, "READ_FOLDERS", ()):
         folder = getattr(args, d, None)
         if not folder or not os.path.isdir(folder):
             continue
-        for o in outputs:
-            path = getattr(args, o, None)
+        for o, (path, _) in outputs.items():
             if path and os.path.realpath(path).startswith(os.path.join(os.path.realpath(folder), "")):
                 flag, source = _name(actions.get(o), o), _name(actions.get(d), d)
                 raise NeuralaoError(

@@ -50,6 +50,7 @@ log = logging.getLogger(__name__)
 # neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
 OUTPUTS = {"out": FOLDER}
 INPUTS = ("mesh", "cameras")
+MESH_INPUTS = ("mesh",)  # mesh names: a file, a glTF folder or a bare name
 # PyOpenGL logs "No OpenGL_accelerate module loaded" at INFO on import; it is expected and not news.
 logging.getLogger("OpenGL.acceleratesupport").setLevel(logging.WARNING)
 

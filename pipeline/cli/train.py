@@ -25,6 +25,7 @@ from neuralao.runtime.foundation.settings import add_set_option, load_settings
 # checkpoint).
 OUTPUTS = {"out": FILE}
 INPUTS = ("mesh", "data", "config")
+MESH_INPUTS = ("mesh",)  # mesh names: a file, a glTF folder or a bare name
 READ_FOLDERS = ("data",)
 
 

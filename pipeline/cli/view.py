@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 # neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
 OUTPUTS = {"out": FOLDER}
 INPUTS = ("inputs", "mesh")
+MESH_INPUTS = ("mesh",)  # mesh names: a file, a glTF folder or a bare name
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

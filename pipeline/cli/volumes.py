@@ -22,6 +22,7 @@ log = logging.getLogger(__name__)
 # neuralao.pipeline.cli.main.check_arguments (writable, not an input, not each other).
 OUTPUTS = {"out": FILE, "glsl": FOLDER}
 INPUTS = ("level", "regions", "config")
+MESH_INPUTS = ("level",)  # mesh names: a file, a glTF folder or a bare name
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -8,8 +8,8 @@ An output must be a path that can be created as the kind it is (a file, or a fol
 folder where a file is wanted nor an existing file where a folder is wanted, not below a file, on a file
 system this process can write to (a probe file is created and removed in the nearest existing folder: this
 refuses /proc, /sys, read-only mounts and folders without write permission alike), with a name the file
-system can hold. Outputs must differ from each other and from every input. Each refusal is one line that
-names the flag.
+system can hold. Outputs must differ from each other and from every input, a glTF input's files beside it
+included (its buffers and images: :func:`gltf_references`). Each refusal is one line that names the flag.
 """
 
 from __future__ import annotations
@@ -17,12 +17,14 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import struct
 import tempfile
 from collections.abc import Collection, Iterable, Mapping
 from pathlib import Path
+from urllib.parse import unquote
 
 from neuralao.runtime.foundation.errors import NeuralaoError
-from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.manifest import MAX_JSON_BYTES, parse_json, read_json
 
 FILE, FOLDER = "file", "folder"
 # Room a name needs beside itself for the temporaries of atomic writes (".NAME.xxxxxxxx.tmp" + suffix).
@@ -125,11 +127,46 @@ def _paths(value: object) -> list[Path]:
     return []
 
 
+def _gltf_json(path: Path) -> object:
+    """The JSON document of a .gltf, or of a .glb's first chunk (nothing past it is read), bounded as every
+    JSON a user hands in; None when it is not one (its reader refuses it later, in its own words)."""
+    try:
+        with open(path, "rb") as f:
+            if path.suffix.lower() == ".gltf":
+                return parse_json(f.read(MAX_JSON_BYTES + 1), path, "glTF JSON")
+            head = f.read(20)
+            if len(head) < 20 or head[:4] != b"glTF" or head[16:20] != b"JSON":
+                return None
+            size = min(struct.unpack_from("<I", head, 12)[0], MAX_JSON_BYTES + 1)
+            return parse_json(f.read(size), path, "glTF JSON")
+    except (OSError, NeuralaoError):
+        return None
+
+
+def gltf_references(path: str | os.PathLike) -> list[tuple[Path, str]]:
+    """The files a .gltf or .glb at ``path`` reads beside itself: (file, what it is, e.g. "buffer 0") for
+    every relative uri of its buffers and images (data: URIs hold their bytes), percent-decoded and
+    resolved against its folder as the glTF reader does. Only the JSON is read; none for any other file."""
+    p = Path(path)
+    if p.suffix.lower() not in (".gltf", ".glb") or not p.is_file():
+        return []
+    doc = _gltf_json(p)
+    found = []
+    for key in ("buffers", "images"):
+        items = doc.get(key) if isinstance(doc, dict) else None
+        for i, item in enumerate(items if isinstance(items, list) else []):
+            uri = item.get("uri") if isinstance(item, dict) else None
+            if isinstance(uri, str) and uri and not uri.lower().startswith("data:"):
+                found.append((p.parent / unquote(uri), f"{key[:-1]} {i}"))
+    return found
+
+
 def check_outputs(
     outputs: Mapping[str, tuple[object, str]], inputs: Mapping[str, object] | None = None
 ) -> None:
     """Check every output (flag -> (path or None, kind)) with :func:`check_output`, then that no two
-    outputs and no output and input (name -> path, list of paths or None) are the same file."""
+    outputs and no output and input (name -> path, list of paths or None) are the same file, nor an
+    output and a file a glTF input reads beside itself (:func:`gltf_references`)."""
     given = {flag: (Path(os.fspath(p)), kind) for flag, (p, kind) in outputs.items() if p is not None}
     for flag, (p, kind) in given.items():
         check_output(flag, p, kind)
@@ -149,6 +186,13 @@ def check_outputs(
                         f"{flag} {p} is also an input ({name}): writing it would destroy what is read; "
                         "choose another path"
                     )
+            for ref, what in gltf_references(src):
+                for flag, (p, _) in given.items():
+                    if _same(p, ref):
+                        raise NeuralaoError(
+                            f"{flag} {p} is also an input ({what} of {name} {src}): writing it would destroy "
+                            "what is read; choose another path"
+                        )
 
 
 def check_replaceable_folder(
