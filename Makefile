@@ -139,11 +139,13 @@ model-shaders: $(MODELS_CONFIG) | $(STAMP) ## Regenerate the shipped models' sha
 
 # Learning curves of the screen-space U-Net on the larger corpus (configs/curve.json): one run per line of
 # the config, snapshots at 0.25-4 hours scored on the validation split and the test categories against
-# GTAO; the table and plot replace the learning-curve section of docs/results.md. Hours of training:
-# resumable, rerun to continue.
+# GTAO; the table and plot replace the learning-curve section of docs/results.md, and every point's figures
+# are kept in docs/learning_curve.json. Hours of training: resumable, rerun to continue. `make curve
+# CURVE_RUNS="wide crop-128"` trains and scores only those runs; the others keep their recorded points.
 CURVE_CONFIG := configs/curve.json
 curve: $(CORPUS_LARGE) $(CURVE_CONFIG) | $(STAMP) ## Learning curves of the U-Net (hours, resumable) into docs/results.md
-	$(PY) bench/learning_curve.py --config $(CURVE_CONFIG) --out build/curve --results docs/results.md
+	$(PY) bench/learning_curve.py --config $(CURVE_CONFIG) --out build/curve --results docs/results.md \
+		$(if $(CURVE_RUNS),--only $(CURVE_RUNS))
 
 # The budget and corpus-size experiments (configs/experiments.json) on the composed-room corpus;
 # exports go to build/experiments/models (not shipped); their figures are in docs/results.md.

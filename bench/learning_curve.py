@@ -17,7 +17,9 @@ radius. The held-aside meshes are not in it: they stay out of every choice until
 
 Writes BUILD/<run>/ (checkpoints, snapshots, light exports), BUILD/curve.json (every figure) and
 BUILD/curve.md, the plot BUILD/learning_curve.png, and with ``--results`` replaces the section between
-the learning-curve markers of that markdown file (copying the plot beside it).
+the learning-curve markers of that markdown file (copying the plot beside it, and every point's figures
+as learning_curve.json: points measured earlier and not trained again, ``--only``, or another machine's,
+are kept from that file).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from neuralao.runtime.foundation.settings import from_dict  # noqa: E402
 log = logging.getLogger("learning_curve")
 
 BEGIN, END = "<!-- learning-curve:begin -->", "<!-- learning-curve:end -->"
+KEPT = "learning_curve.json"  # every point's figures, beside the results file the report rewrites
 
 
 def point_name(hours: float) -> str:
@@ -146,8 +149,11 @@ def score_point(cfg: dict, run: dict, folder: Path, hours: float, out: Path) -> 
 
 
 def ratio_to_gtao(record: dict, metric: str) -> dict[str, float]:
-    """category -> the model's mean ``metric`` over resolutions divided by GTAO's."""
-    cats = record["categories"]
+    """category -> the model's mean ``metric`` over resolutions divided by GTAO's (a kept record whose
+    cells were not kept carries the ratios themselves, ``<metric>_to_gtao``)."""
+    if f"{metric}_to_gtao" in record:
+        return dict(record[f"{metric}_to_gtao"])
+    cats = record.get("categories", {})
     out = {}
     for cat, cells in cats.get("model", {}).items():
         ref = cats.get("gtao", {}).get(cat, {})
@@ -159,7 +165,7 @@ def ratio_to_gtao(record: dict, metric: str) -> dict[str, float]:
 
 
 def markdown(records: list[dict], cfg: dict, machine: str) -> str:
-    cats = sorted({c for r in records for c in r["categories"].get("model", {})})
+    cats = sorted({c for r in records for c in ratio_to_gtao(r, "rmse")})
     head = (
         "| run | CPU-hours | steps | val SSIM | val RMSE | "
         + " | ".join(f"{c} RMSE / GTAO" for c in cats)
@@ -179,7 +185,8 @@ def markdown(records: list[dict], cfg: dict, machine: str) -> str:
         cells = " | ".join(f"{ratios[c]:.3f}" if c in ratios else "-" for c in cats)
         ssim = "-" if r["val_ssim"] is None else f"{r['val_ssim']:.4f}"
         rmse = "-" if r["val_rmse"] is None else f"{r['val_rmse']:.4f}"
-        lines.append(f"| {r['run']} | {r['hours']:g} | {r['steps']} | {ssim} | {rmse} | {cells} |")
+        steps = "-" if r.get("steps") is None else str(r["steps"])
+        lines.append(f"| {r['run']} | {r['hours']:g} | {steps} | {ssim} | {rmse} | {cells} |")
     return "\n".join(lines) + "\n"
 
 
@@ -190,17 +197,18 @@ def plot(records: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    common = set.intersection(*(set(ratio_to_gtao(r, "rmse")) for r in records))  # every point has them
     for run in sorted({r["run"] for r in records}):
-        pts = sorted(
-            (r for r in records if r["run"] == run and r["val_rmse"] is not None), key=lambda r: r["hours"]
-        )
+        pts = sorted((r for r in records if r["run"] == run), key=lambda r: r["hours"])
         if not pts:
             continue
         hours = [p["hours"] for p in pts]
-        axes[0].plot(hours, [p["val_rmse"] for p in pts], marker="o", label=run)
-        mean_ratio = [sum(v := list(ratio_to_gtao(p, "rmse").values())) / max(1, len(v)) for p in pts]
-        axes[1].plot(hours, mean_ratio, marker="o", label=run)
-    for ax, title in zip(axes, ("validation RMSE", "test categories: RMSE / GTAO's (mean)"), strict=True):
+        val = [p for p in pts if p["val_rmse"] is not None]
+        axes[0].plot([p["hours"] for p in val], [p["val_rmse"] for p in val], marker="o", label=run)
+        means = [sum(ratio_to_gtao(p, "rmse")[c] for c in common) / max(1, len(common)) for p in pts]
+        axes[1].plot(hours, means, marker="o", label=run)
+    right = f"RMSE / GTAO's, mean of {', '.join(sorted(common))}"
+    for ax, title in zip(axes, ("validation RMSE", right), strict=True):
         ax.set_xscale("log", base=2)
         ax.set_xlabel("training CPU-hours (wall clock x threads)")
         ax.set_title(title)
@@ -212,6 +220,15 @@ def plot(records: list[dict], path: Path) -> None:
     fig.savefig(tmp, dpi=110)
     plt.close(fig)
     tmp.replace(path)
+
+
+def merge_kept(records: list[dict], kept_path: Path) -> list[dict]:
+    """The records measured now, and every point of ``kept_path`` (the records a report committed beside
+    the results) that was not measured now: a run trained on another machine, or whose folder is gone,
+    stays in the curve until it is trained again."""
+    now = {(r["run"], float(r["hours"])) for r in records}
+    kept = read_json(kept_path, "kept learning-curve records")["records"] if kept_path.exists() else []
+    return records + [r for r in kept if (r["run"], float(r["hours"])) not in now]
 
 
 def write_results(md: str, png: Path, results: Path) -> None:
@@ -248,15 +265,19 @@ def main() -> int:
             for hours in cfg["points_hours"]:
                 if hours <= run["hours"] and (folder / f"{point_name(hours)}.pt").exists():
                     records.append(score_point(cfg, run, folder, float(hours), out))
-        if not records:
+        kept = Path(args.results).parent / KEPT if args.results else None
+        shown = merge_kept(records, kept) if kept is not None else records
+        if not shown:
             raise NeuralaoError(f"no point of any run has finished under {out}")
         machine = cpu_name()
-        md = markdown(records, cfg, machine)
+        md = markdown(shown, cfg, machine)
+        out.mkdir(parents=True, exist_ok=True)
         write_json(out / "curve.json", {"config": cfg, "machine": machine, "records": records})
         write_text(out / "curve.md", md)
-        plot(records, out / "learning_curve.png")
+        plot(shown, out / "learning_curve.png")
         if args.results:
             write_results(md, out / "learning_curve.png", Path(args.results))
+            write_json(kept, {"config": cfg, "records": shown})
         print(md)
         return 0
     except NeuralaoError as e:

@@ -1,6 +1,8 @@
 """bench/learning_curve.py on a tiny dataset: one run passes through its points, each point is scored on
 the validation split and the evaluation categories against GTAO, the table and plot are written, and a
-rerun finds everything done (the snapshots are kept, nothing is trained or scored again)."""
+rerun finds everything done (the snapshots are kept, nothing is trained or scored again); every point's
+figures are kept beside the results, so a run measured elsewhere, or whose folder is gone, stays in the
+table."""
 
 from __future__ import annotations
 
@@ -60,6 +62,9 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
     results.write_text(
         "# Results\n\n<!-- learning-curve:begin -->\nold\n<!-- learning-curve:end -->\n\nafter\n"
     )
+    elsewhere = {"run": "elsewhere", "hours": 1.0, "steps": None, "val_ssim": None, "val_rmse": 0.5}
+    elsewhere["rmse_to_gtao"] = {"scans": 0.75}
+    (tmp_path / "learning_curve.json").write_text(json.dumps({"records": [elsewhere]}))
     argv = [
         sys.executable,
         str(ROOT / "bench" / "learning_curve.py"),
@@ -84,3 +89,16 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
     assert second.returncode == 0, second.stderr[-3000:]
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # nothing trained again
     assert json.loads((tmp_path / "out" / "curve.json").read_text())["records"] == records
+    assert "| elsewhere | 1 | - | - | 0.5000 | 0.750 |" in results.read_text()
+    kept = json.loads((tmp_path / "learning_curve.json").read_text())["records"]
+    assert sorted((r["run"], r["hours"]) for r in kept) == [
+        ("elsewhere", 1.0),
+        ("main", 0.0005),
+        ("main", 0.001),
+    ]
+    # The run's folder gone: its points come from the kept figures, the table unchanged.
+    table = results.read_text()
+    gone = argv[:-4] + ["--out", str(tmp_path / "gone"), "--results", str(results), "--report-only"]
+    third = subprocess.run(gone, capture_output=True, text=True, timeout=600, env=env)
+    assert third.returncode == 0, third.stderr[-3000:]
+    assert results.read_text() == table
