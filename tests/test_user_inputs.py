@@ -536,6 +536,25 @@ def test_an_output_on_a_file_a_gltf_reads_beside_it_is_refused(
     assert {p: p.read_bytes() for p in folder.iterdir()} == before
 
 
+@pytest.mark.parametrize(
+    "hit,words", [("tet lib.mtl", "material library"), ("wood.png", "texture of tet lib.mtl")]
+)
+def test_an_output_on_an_objs_material_library_or_texture_is_refused(tmp_path, capsys, hit, words):
+    """An OBJ's material library (its ``mtllib``) and that library's textures are read with it: an output on
+    one, or on a link to one, is refused before any work, naming both, and the files are left as they were."""
+    folder = tmp_path / "obj"
+    folder.mkdir()
+    (folder / "tet.obj").write_text("mtllib tet lib.mtl\nusemtl wood\n" + TET)
+    (folder / "tet lib.mtl").write_text("newmtl wood\nKd 0.8 0.6 0.4\nmap_Kd wood.png\n")
+    (folder / "wood.png").write_bytes(b"\x89PNG not decoded by a bake")
+    before = {p: p.read_bytes() for p in folder.iterdir()}
+    (tmp_path / "link").symlink_to(folder / hit)
+    for out in (folder / hit, tmp_path / "link"):
+        msg = refusal(capsys, ["bake", str(folder / "tet.obj"), "--rays", "2", "--out", str(out)])
+        assert f"--out {out} is also an input ({words} of MESH " in msg and "tet.obj" in msg, msg
+    assert {p: p.read_bytes() for p in folder.iterdir()} == before
+
+
 def test_the_texture_maps_file_beside_the_glb_is_checked_before_any_work(files, tmp_path, capsys):
     """A texture bake writes OUT.ao.png beside OUT.glb: a folder there, or a link to the mesh, is refused
     before any bake as --out itself would be."""

@@ -163,10 +163,10 @@ def check_arguments(parser: argparse.ArgumentParser, module, args: argparse.Name
     float32's range (every value here ends up in float32 somewhere, where a larger one is inf), and the
     paths the command writes (its module's ``OUTPUTS``: dest -> FILE or FOLDER, or a function of the
     arguments giving them, where a file no flag names, such as a secondary output, is name -> (path, kind))
-    can be written and are distinct from each other and from its ``INPUTS`` (a glTF's
-    buffers and images beside it included; those of its ``MESH_INPUTS`` are first resolved as a mesh name
-    is, a glTF folder or a bare name to its file), and none lies inside a folder of its ``READ_FOLDERS``
-    (inputs it reads whole, such as a dataset)."""
+    can be written and are distinct from each other and from its ``INPUTS`` (a glTF's buffers and images
+    beside it included, an OBJ's material library and textures; those of its ``MESH_INPUTS`` are first
+    resolved as a mesh name is, a glTF folder or a bare name to its file), and none lies inside a folder of
+    its ``READ_FOLDERS`` (inputs it reads whole, such as a dataset)."""
     # here, not at the top: the module stays light, so Ctrl-C meets main's handler as early as possible
     import os
 

@@ -9,12 +9,14 @@ folder where a file is wanted nor an existing file where a folder is wanted, not
 system this process can write to (a probe file is created and removed in the nearest existing folder: this
 refuses /proc, /sys, read-only mounts and folders without write permission alike), with a name the file
 system can hold. Outputs must differ from each other and from every input, a glTF input's files beside it
-included (its buffers and images: :func:`gltf_references`). Each refusal is one line that names the flag.
+included (its buffers and images), and an OBJ input's material library and its textures
+(:func:`mesh_references`). Each refusal is one line that names the flag.
 """
 
 from __future__ import annotations
 
 import contextlib
+import mmap
 import os
 import re
 import struct
@@ -29,6 +31,7 @@ from neuralao.runtime.foundation.manifest import MAX_JSON_BYTES, parse_json, rea
 FILE, FOLDER = "file", "folder"
 # Room a name needs beside itself for the temporaries of atomic writes (".NAME.xxxxxxxx.tmp" + suffix).
 _TEMP_AFFIXES = 24
+_MAX_MTL_BYTES = 16 << 20  # an OBJ material library read for its texture names (its reader reads it whole)
 
 
 def _name_max(folder: Path) -> int:
@@ -161,12 +164,52 @@ def gltf_references(path: str | os.PathLike) -> list[tuple[Path, str]]:
     return found
 
 
+def obj_references(path: str | os.PathLike) -> list[tuple[Path, str]]:
+    """The files an .obj at ``path`` reads beside itself, as its reader (trimesh) finds them: the material
+    library named after the file's first ``mtllib`` and, in that library, every ``map_Kd`` texture (each
+    the rest of its line, resolved against the OBJ's folder). The OBJ is searched, not parsed."""
+    p = Path(path)
+    if p.suffix.lower() != ".obj" or not p.is_file():
+        return []
+    try:
+        with open(p, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
+            at = m.find(b"mtllib")
+            if at < 0:
+                return []
+            end = m.find(b"\n", at)
+            name = m[at + 6 : end if end >= 0 else len(m)].decode("utf-8", "replace").strip()
+    except (OSError, ValueError):  # unreadable, or empty (mmap refuses 0 bytes)
+        return []
+    if not name:
+        return []
+    library = p.parent / name
+    found = [(library, "material library")]
+    try:
+        with open(library, "rb") as f:
+            text = f.read(_MAX_MTL_BYTES).decode("utf-8", "replace")
+    except OSError:
+        return found
+    for line in text.splitlines():
+        words = line.split()
+        if words and words[0].lower() == "map_kd":
+            texture = line[line.lower().index("map_kd") + 6 :].strip()
+            if texture:
+                found.append((p.parent / texture, f"texture of {name}"))
+    return found
+
+
+def mesh_references(path: str | os.PathLike) -> list[tuple[Path, str]]:
+    """The files a mesh file reads beside itself: a glTF's buffers and images, an OBJ's material library
+    and textures; none for any other file."""
+    return gltf_references(path) + obj_references(path)
+
+
 def check_outputs(
     outputs: Mapping[str, tuple[object, str]], inputs: Mapping[str, object] | None = None
 ) -> None:
     """Check every output (flag -> (path or None, kind)) with :func:`check_output`, then that no two
     outputs and no output and input (name -> path, list of paths or None) are the same file, nor an
-    output and a file a glTF input reads beside itself (:func:`gltf_references`)."""
+    output and a file a mesh input reads beside itself (:func:`mesh_references`)."""
     given = {flag: (Path(os.fspath(p)), kind) for flag, (p, kind) in outputs.items() if p is not None}
     for flag, (p, kind) in given.items():
         check_output(flag, p, kind)
@@ -186,7 +229,7 @@ def check_outputs(
                         f"{flag} {p} is also an input ({name}): writing it would destroy what is read; "
                         "choose another path"
                     )
-            for ref, what in gltf_references(src):
+            for ref, what in mesh_references(src):
                 for flag, (p, _) in given.items():
                     if _same(p, ref):
                         raise NeuralaoError(
