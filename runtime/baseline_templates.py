@@ -153,7 +153,7 @@ ${surface}
                     vec3 d = sw.xyz - p;
                     float dist = length(d);
                     if (dist > 1e-30) {
-                        float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);
+                        float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);${thin0}
                         hc0 = max(hc0, mix(low0, dot(d / dist, view_v), w));
                     }
                 }
@@ -164,7 +164,7 @@ ${surface}
                     vec3 d = sw.xyz - p;
                     float dist = length(d);
                     if (dist > 1e-30) {
-                        float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);
+                        float w = clamp(dist * falloff_mul + falloff_add, 0.0, 1.0);${thin1}
                         hc1 = max(hc1, mix(low1, dot(d / dist, view_v), w));
                     }
                 }

@@ -31,6 +31,7 @@ from typing import Literal
 
 import numpy as np
 
+from neuralao.export.glsl.graph import glsl_float
 from neuralao.runtime import gl
 from neuralao.runtime.baseline_templates import fill
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -69,6 +70,19 @@ class GTAOSettings:
     blur: bool = True
     # Seed of the noise tile.
     seed: int = 0
+    # Thickness heuristic of Jimenez et al. 2016 (sec. 4.3), the blend beta in [0, 1): walking a slice
+    # side's samples from near to far, a sample below the current horizon pulls the horizon toward it,
+    # h = mix(h, h_sample, beta) (a sample above still raises it to h_sample), on the assumption that an
+    # occluder that rose above is thin; h_sample is the falloff-weighted horizon cosine the max takes
+    # (background and off-screen samples are still skipped). 0: off, plain GTAO's exact shader.
+    # Against the evaluation's ray-traced labels it raised RMSE at every beta tried, most on isolated
+    # objects (bench/gtao_thickness.py): GTAO here under-occludes on average, and the heuristic cannot
+    # tell a thin occluder from a bump.
+    thickness_blend: float = 0.0
+    # XeGTAO's thin occluder compensation c >= 0: an occluder's falloff distance is measured with its
+    # depth offset (camera-space z) stretched by 1 + c, so samples far in front of or behind the pixel
+    # fade out sooner (XeGTAO suggests 0 to 0.7). 0: off. Also raised RMSE (bench/gtao_thickness.py).
+    thin_occluder_compensation: float = 0.0
 
 
 # --------------------------------------------------------------------------- inputs
@@ -170,8 +184,30 @@ def fragment_source(method: Method, settings: SSAOSettings | GTAOSettings) -> st
             noise_size=settings.noise_size,
             inputs=inputs,
             surface=surface,
+            **_gtao_thickness_fields(settings),
         )
     raise NeuralaoError(f"unknown screen-space AO method {method!r} (ssao or gtao)")
+
+
+def _gtao_thickness_fields(s: GTAOSettings) -> dict[str, str]:
+    """The GTAO template's ``thin0`` / ``thin1`` (slice sides 0, 1): GLSL run after an occluder sample's
+    falloff weight ``w`` and before the horizon update ``hc = max(hc, mix(low, shc, w))``. Empty with both
+    heuristics off, so the shader is plain GTAO's text exactly."""
+    out = {}
+    for side in "01":
+        hc, low, pad = f"hc{side}", f"low{side}", "\n" + " " * 24
+        thin = ""
+        if s.thin_occluder_compensation > 0:  # XeGTAO: the falloff distance with z stretched by 1 + c
+            stretched = f"length(vec3(d.xy, d.z * {glsl_float(1.0 + s.thin_occluder_compensation)}))"
+            thin += f"{pad}w = clamp({stretched} * falloff_mul + falloff_add, 0.0, 1.0);"
+        if s.thickness_blend > 0:
+            # Jimenez et al.: h = shc > h ? shc : mix(h, shc, beta), shc the weighted sample as the max
+            # takes it. Pulled toward a lower sample here, the max that follows keeps the pull (mix(h,
+            # shc, beta) >= shc) or raises h to a higher sample (the pull then a no-op).
+            shc = f"mix({low}, dot(d / dist, view_v), w)"
+            thin += f"{pad}{hc} = mix({hc}, min({hc}, {shc}), {glsl_float(s.thickness_blend)});"
+        out[f"thin{side}"] = thin
+    return out
 
 
 def blur_source(size: int) -> str:
@@ -195,6 +231,12 @@ def _check(method: Method, settings: SSAOSettings | GTAOSettings, radius: float)
     for name in counts:
         if getattr(settings, name) < 1:
             raise NeuralaoError(f"{method} {name} must be >= 1, got {getattr(settings, name)}")
+    if method == "gtao":
+        beta, c = settings.thickness_blend, settings.thin_occluder_compensation
+        if not (math.isfinite(beta) and 0.0 <= beta < 1.0):
+            raise NeuralaoError(f"gtao thickness_blend must be a finite blend in [0, 1), got {beta}")
+        if not (math.isfinite(c) and c >= 0.0):
+            raise NeuralaoError(f"gtao thin_occluder_compensation must be finite and >= 0, got {c}")
 
 
 class ScreenSpaceAO:
@@ -296,6 +338,24 @@ class ScreenSpaceAO:
         self.release()
 
 
+def gtao_settings_entry(settings: GTAOSettings) -> dict:
+    """``settings`` as JSON-ready data, a thickness heuristic only when it is on (so plain GTAO's entry,
+    and every key or manifest made from it, is what it was before the heuristics existed)."""
+    s = settings
+    entry = {
+        "slices": s.slices,
+        "steps": s.steps,
+        "falloff": s.falloff,
+        "noise_size": s.noise_size,
+        "blur": s.blur,
+        "seed": s.seed,
+    }
+    for name in ("thickness_blend", "thin_occluder_compensation"):
+        if getattr(s, name) != 0:
+            entry[name] = float(getattr(s, name))
+    return entry
+
+
 def gtao_pass_description(settings: GTAOSettings | None = None) -> dict:
     """How an engine runs :class:`ScreenSpaceAO`'s GTAO exactly as it runs here (an export's manifest
     entry beside the shaders of :func:`fragment_source` and :func:`blur_source`): texture bindings,
@@ -306,14 +366,7 @@ def gtao_pass_description(settings: GTAOSettings | None = None) -> dict:
     # GL rows bottom up, the order glTexImage2D takes (gl.upload_texture flips the top-down tile)
     tile = noise_tile(s.noise_size, s.seed, "gtao")[::-1]
     return {
-        "settings": {
-            "slices": s.slices,
-            "steps": s.steps,
-            "falloff": s.falloff,
-            "noise_size": s.noise_size,
-            "blur": s.blur,
-            "seed": s.seed,
-        },
+        "settings": gtao_settings_entry(s),
         "textures": {"u_position": 0, "u_normal": 1, "u_noise": 2},
         "noise": {
             "binding": 2,

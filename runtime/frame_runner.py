@@ -66,6 +66,8 @@ def frame_settings(
     """The :class:`FrameSettings` of the runtime references: ``GTAOSettings`` (defaults: what the shipped
     hybrid was trained on) with its noise tile, and ``UpsampleSettings``."""
     g = gtao if gtao is not None else GTAOSettings()
+    if g.thickness_blend or g.thin_occluder_compensation:
+        raise NeuralaoError("the frame passes run plain GTAO: no thickness heuristic (both must be 0)")
     u = upsample if upsample is not None else UpsampleSettings()
     desc = gtao_pass_description(g)
     return FrameSettings(

@@ -158,6 +158,12 @@ def check_screen_space(s: SSAOSettings | GTAOSettings, method: str, n: Callable[
         raise NeuralaoError(
             f"{n(f'{method}.{fraction}')} must be a fraction of the radius in [0, 1], got {value}"
         )
+    if method == "gtao":
+        beta, c = s.thickness_blend, s.thin_occluder_compensation
+        if not (math.isfinite(beta) and 0.0 <= beta < 1.0):
+            raise NeuralaoError(f"{n('gtao.thickness_blend')} must be a finite blend in [0, 1), got {beta}")
+        if not (math.isfinite(c) and c >= 0.0):
+            raise NeuralaoError(f"{n('gtao.thin_occluder_compensation')} must be finite and >= 0, got {c}")
     check_seed(n(f"{method}.seed"), s.seed)
 
 

@@ -29,11 +29,10 @@ import numpy as np
 import torch
 
 from neuralao.pipeline.datasets.dataset import Dataset, open_dataset
-from neuralao.runtime.baselines import GTAOSettings, run_gtao
+from neuralao.runtime.baselines import GTAOSettings, gtao_settings_entry, run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_json
 from neuralao.runtime.foundation.manifest import read_json
-from neuralao.runtime.foundation.settings import settings_to_dict
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
 from neuralao.runtime.unet_input import (
@@ -238,7 +237,7 @@ def prepared_folder(data: Path, ds: Dataset, internal_height: int, gtao: bool, v
         "version": PREPARED_VERSION,
         "dataset_hash": ds.manifest.get("dataset_hash"),
         "internal_height": internal_height,
-        "gtao": settings_to_dict(GTAOSettings()) if gtao else None,
+        "gtao": gtao_settings_entry(GTAOSettings()) if gtao else None,
         "preprocess_version": version,
     }
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
