@@ -29,6 +29,7 @@ from neuralao.pipeline.models.unet_train import (
     partial_path,
     ssim_map,
     train,
+    training_loss,
 )
 from neuralao.runtime.foundation import metrics
 from neuralao.runtime.foundation.errors import NeuralaoError
@@ -255,6 +256,24 @@ def test_ssim_loss_ignores_the_prediction_outside_the_mask():
     loss = masked_ssim_loss(p, _t(ref), _t(np.zeros((h, w))))
     loss.backward()
     assert float(loss.detach()) == 0.0 and (p.grad == 0).all()
+
+
+def test_the_squared_error_term_adds_the_weighted_masked_mse_and_sees_a_bias_ssim_hardly_sees():
+    rng = np.random.default_rng(3)
+    h, w = 20, 24
+    ref = rng.uniform(0.4, 0.9, (h, w)).astype(np.float32)
+    mask = rng.uniform(size=(h, w)) < 0.7
+    pred = np.where(mask, ref - 0.05, np.float32(np.nan)).astype(np.float32)  # biased, junk outside
+    p = _t(pred).requires_grad_(True)
+    plain = training_loss(p, _t(ref), _t(mask))
+    assert float(plain.detach()) == _loss(np.where(mask, pred, 0), ref, mask)  # weight 0: SSIM alone
+    assert float(plain.detach()) < 0.01  # a bias of 0.05 costs SSIM almost nothing
+    loss = training_loss(p, _t(ref), _t(mask), mse_weight=10.0)
+    mse = float(np.mean((pred[mask].astype(np.float64) - ref[mask]) ** 2))
+    assert abs(float(loss.detach()) - (float(plain.detach()) + 10.0 * mse)) <= 1e-6
+    loss.backward()
+    assert torch.isfinite(p.grad).all() and (p.grad[0, 0][torch.from_numpy(~mask)] == 0).all()
+    assert float(training_loss(p, _t(ref), _t(np.zeros((h, w))), mse_weight=10.0).detach()) == 0.0
 
 
 # ----------------------------------------------------------------------------------------------- training
