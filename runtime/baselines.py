@@ -31,7 +31,7 @@ from typing import Literal
 
 import numpy as np
 
-from neuralao.export.glsl.graph import glsl_float
+from neuralao.export.glsl import glsl_float
 from neuralao.runtime import gl
 from neuralao.runtime.baseline_templates import fill
 from neuralao.runtime.foundation.errors import NeuralaoError

@@ -98,7 +98,8 @@ def test_interrupted_run_resumes_to_identical_output(reference, tmp_path):
     if p.poll() is None:
         os.killpg(p.pid, signal.SIGKILL)
     p.wait()
-    assert not (out / "manifest.json").exists() or p.returncode == 0
+    if (out / "manifest.json").exists():  # it finished before the kill landed (a loaded machine): whole
+        assert json.loads((out / "manifest.json").read_text())["dataset_hash"] == manifest["dataset_hash"]
     with pytest.raises(NeuralaoError, match="interrupted"):
         if not (out / "manifest.json").exists():
             open_dataset(out)

@@ -262,18 +262,21 @@ def test_the_squared_error_term_adds_the_weighted_masked_mse_and_sees_a_bias_ssi
     rng = np.random.default_rng(3)
     h, w = 20, 24
     ref = rng.uniform(0.4, 0.9, (h, w)).astype(np.float32)
+    full = np.ones((h, w), bool)
+    assert _loss(ref - 0.05, ref, full) < 0.005  # a bias of 0.05 costs SSIM almost nothing
+    assert abs(float(training_loss(_t(ref - 0.05), _t(ref), _t(full), mse_weight=10.0)) - 0.025) < 0.005
     mask = rng.uniform(size=(h, w)) < 0.7
     pred = np.where(mask, ref - 0.05, np.float32(np.nan)).astype(np.float32)  # biased, junk outside
     p = _t(pred).requires_grad_(True)
     plain = training_loss(p, _t(ref), _t(mask))
     assert float(plain.detach()) == _loss(np.where(mask, pred, 0), ref, mask)  # weight 0: SSIM alone
-    assert float(plain.detach()) < 0.01  # a bias of 0.05 costs SSIM almost nothing
     loss = training_loss(p, _t(ref), _t(mask), mse_weight=10.0)
     mse = float(np.mean((pred[mask].astype(np.float64) - ref[mask]) ** 2))
     assert abs(float(loss.detach()) - (float(plain.detach()) + 10.0 * mse)) <= 1e-6
     loss.backward()
     assert torch.isfinite(p.grad).all() and (p.grad[0, 0][torch.from_numpy(~mask)] == 0).all()
-    assert float(training_loss(p, _t(ref), _t(np.zeros((h, w))), mse_weight=10.0).detach()) == 0.0
+    empty = training_loss(_t(ref - 0.05), _t(ref), _t(np.zeros((h, w))), mse_weight=10.0)
+    assert float(empty) == 0.0  # no valid pixel: no loss, as SSIM alone
 
 
 # ----------------------------------------------------------------------------------------------- training
