@@ -49,6 +49,7 @@ from scipy.ndimage import distance_transform_edt
 
 from neuralao.pipeline.datasets.dataset import open_dataset
 from neuralao.pipeline.evaluation.categories import (
+    EvalResolution,
     EvalSettings,
     baseline_predictors,
     category_of,
@@ -256,6 +257,31 @@ def select_categories(
     return replace(settings, categories=chosen)
 
 
+def at_size(
+    settings: EvalSettings, size: list[int], rays: int | None, views: int | None, config: str
+) -> tuple[EvalSettings, EvalResolution]:
+    """``settings`` reduced to its resolution of ``size`` (W, H), with ``rays`` / ``views`` when given."""
+    w, h = size
+    matching = [r for r in settings.resolutions if tuple(int(v) for v in r.size) == (w, h)]
+    if not matching:
+        sizes = ", ".join(f"{r.size[0]}x{r.size[1]}" for r in settings.resolutions)
+        raise NeuralaoError(f"--size {w} {h}: not a resolution of {config} ({sizes})")
+    res = replace(
+        matching[0],
+        rays=matching[0].rays if rays is None else rays,
+        views=matching[0].views if views is None else views,
+    )
+    return replace(settings, resolutions=[res]), res
+
+
+def camera_groups(settings: EvalSettings) -> dict[str, list[str]]:
+    """The isolated objects and the interiors together: category names by the cameras they are seen with."""
+    return {
+        f"{kind} cameras": [c.name for c in settings.categories if c.cameras == kind]
+        for kind in sorted({c.cameras for c in settings.categories})
+    }
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--config", default="configs/eval.json", help="evaluation config (as neuralao evaluate)")
@@ -291,17 +317,7 @@ def run(args: argparse.Namespace) -> int:
         load_settings(EvalSettings, args.config), args.categories, args.include_held_aside
     )
     w, h = args.size
-    matching = [r for r in settings.resolutions if tuple(int(v) for v in r.size) == (w, h)]
-    if not matching:
-        sizes = ", ".join(f"{r.size[0]}x{r.size[1]}" for r in settings.resolutions)
-        raise NeuralaoError(f"--size {w} {h}: not a resolution of {args.config} ({sizes})")
-    res = matching[0]
-    res = replace(
-        res,
-        rays=res.rays if args.rays is None else args.rays,
-        views=res.views if args.views is None else args.views,
-    )
-    settings = replace(settings, resolutions=[res])
+    settings, res = at_size(settings, args.size, args.rays, args.views, args.config)
     check_frames(settings, args.out)  # every setting, and the frames' memory and disk, before any work
 
     methods = {}
@@ -351,10 +367,7 @@ def run(args: argparse.Namespace) -> int:
     if not rows:
         raise NeuralaoError("no (frame, radius) pair with valid foreground pixels")
 
-    groups = {  # the isolated objects and the interiors together (the cameras a category is seen with)
-        f"{kind} cameras": [c.name for c in settings.categories if c.cameras == kind]
-        for kind in sorted({c.cameras for c in settings.categories})
-    }
+    groups = camera_groups(settings)
     summary = summarise(rows, list(methods), groups)
     per_radius = {
         f"{settings.radii_rel[j]:g}": summarise([r for r in rows if r["radius"] == j], list(methods), groups)

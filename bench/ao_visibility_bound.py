@@ -134,7 +134,8 @@ def _sibling(name: str):
     return module
 
 
-select_categories = _sibling("ao_error_bands").select_categories
+_bands = _sibling("ao_error_bands")
+select_categories = _bands.select_categories
 
 log = logging.getLogger(__name__)
 
@@ -693,17 +694,7 @@ def run(args: argparse.Namespace) -> int:
         load_settings(EvalSettings, args.config), args.categories, args.include_held_aside
     )
     w, h = args.size
-    matching = [r for r in settings.resolutions if tuple(int(v) for v in r.size) == (w, h)]
-    if not matching:
-        sizes = ", ".join(f"{r.size[0]}x{r.size[1]}" for r in settings.resolutions)
-        raise NeuralaoError(f"--size {w} {h}: not a resolution of {args.config} ({sizes})")
-    res = matching[0]
-    res = replace(
-        res,
-        rays=res.rays if args.rays is None else args.rays,
-        views=res.views if args.views is None else args.views,
-    )
-    settings = replace(settings, resolutions=[res])
+    settings, res = _bands.at_size(settings, args.size, args.rays, args.views, args.config)
     ds = dataset_settings(settings, res)
     chosen = {c.name for c in settings.categories}
     if args.frames is None:
@@ -864,10 +855,7 @@ def run(args: argparse.Namespace) -> int:
         raise NeuralaoError("no (frame, radius) pair with valid foreground pixels")
 
     scored = [c for c in settings.categories if c.name in chosen]
-    groups = {
-        f"{kind} cameras": [c.name for c in scored if c.cameras == kind]
-        for kind in sorted({c.cameras for c in scored})
-    }
+    groups = _bands.camera_groups(replace(settings, categories=scored))
     order = [*(m for m in methods if m != "gtao"), *VARIANTS, mesh]
     table_methods = ["gtao", *order, *(f"{v}{ORACLE}" for v in VARIANTS)]
     summary = summarise(rows, table_methods, groups, "gtao")

@@ -57,7 +57,8 @@ def _sibling(name: str):
     return module
 
 
-select_categories = _sibling("ao_error_bands").select_categories
+_bands = _sibling("ao_error_bands")
+select_categories = _bands.select_categories
 
 
 def variants(blends: list[float], compensation: list[float]) -> dict[str, GTAOSettings]:
@@ -208,10 +209,7 @@ def run(args: argparse.Namespace) -> int:
                 rows.append(row | {"category": category, "scene": frame["scene"], "view": frame["view"]})
         if not rows:
             raise NeuralaoError("no (frame, radius) pair with valid foreground pixels")
-        groups = {
-            f"{kind} cameras": [c.name for c in settings.categories if c.cameras == kind]
-            for kind in sorted({c.cameras for c in settings.categories})
-        }
+        groups = _bands.camera_groups(settings)
         summary = summarise(rows, list(gtao), groups)
     times = None
     if all(v > 0 for v in args.time_size):
