@@ -11,7 +11,9 @@ per pixel ``rays`` cosine-weighted directions about the normal (a Hammersley set
 the 4x4 noise tile), ``steps`` jittered samples along each up to the label radius, starting 1.3 pixels
 out; a sample is occluded where it lies behind the depth buffer's surface at its pixel by more than
 2% and less than ``thickness`` of the radius; off screen or behind the camera is open; background is
-passed through. AO = the share of open rays, then the baselines' 4x4 foreground-only blur.
+passed through. AO = the share of open rays, then the baselines' 4x4 foreground-only blur. With
+``--facets`` also each variant about the normal of the facet the depth buffer shows at the pixel (the
+labels' rays leave the triangle's geometric normal; the G-buffer's normals are smooth).
 
 Scored as `neuralao evaluate` scores (valid foreground pixels per (frame, radius), mean over pairs),
 held-aside categories left out; RMSE and SSIM as ratios to GTAO's; and the GL time at ``--time-size``
@@ -55,6 +57,21 @@ ${inputs}
 
 void main() {
 ${surface}
+    if (FACETS) {  // the facet seen at this pixel, from the depth buffer (the labels' rays leave it)
+        vec4 xr = texelFetch(u_position, min(px + ivec2(1, 0), size - 1), 0);
+        vec4 xl = texelFetch(u_position, max(px - ivec2(1, 0), ivec2(0)), 0);
+        vec4 yu = texelFetch(u_position, min(px + ivec2(0, 1), size - 1), 0);
+        vec4 yd = texelFetch(u_position, max(px - ivec2(0, 1), ivec2(0)), 0);
+        bool use_r = xr.w > 0.5 && (xl.w < 0.5 || abs(xr.z - p.z) < abs(xl.z - p.z));
+        bool use_u = yu.w > 0.5 && (yd.w < 0.5 || abs(yu.z - p.z) < abs(yd.z - p.z));
+        vec3 dx = use_r ? xr.xyz - p : p - xl.xyz;
+        vec3 dy = use_u ? yu.xyz - p : p - yd.xyz;
+        vec3 f = cross(dx, dy);
+        if ((xr.w > 0.5 || xl.w > 0.5) && (yu.w > 0.5 || yd.w > 0.5) && dot(f, f) > 0.0) {
+            f = normalize(f);
+            n = dot(f, -p) >= 0.0 ? f : -f;
+        }
+    }
     vec4 r = texelFetch(u_noise, px % 4, 0);
     vec3 t = vec3(r.xy, 0.0) - n * dot(vec3(r.xy, 0.0), n);
     if (dot(t, t) < 1e-8) t = abs(n.x) < 0.9 ? cross(n, vec3(1.0, 0.0, 0.0)) : cross(n, vec3(0.0, 1.0, 0.0));
@@ -105,7 +122,9 @@ def directions(rays: int) -> np.ndarray:
 class ScreenSpaceTrace(ScreenSpaceAO):
     """The trace above in the baselines' pipeline (their G-buffer upload, noise texture and blur)."""
 
-    def __init__(self, width: int, height: int, radius: float, rays: int, steps: int, thickness: float):
+    def __init__(
+        self, width: int, height: int, radius: float, rays: int, steps: int, thickness: float, facets: bool
+    ):
         super().__init__("ssao", width, height, radius, SSAOSettings(noise_size=4))
         rng = np.random.default_rng(11)
         a = rng.uniform(0.0, 2.0 * np.pi, (4, 4))
@@ -113,6 +132,7 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         gl.upload_texture(self.noise, tile.astype(np.float32), GL.GL_RGBA32F)
         source = fill("gbuffer_inputs"), fill("surface_at_pixel")
         text = FRAGMENT.replace("RAYS", str(rays)).replace("STEPS", str(steps))
+        text = text.replace("FACETS", "true" if facets else "false")
         text = text.replace("${inputs}", source[0]).replace("${surface}", source[1])
         self.prog = gl.compile_program(vertex=fill("fullscreen_vertex"), fragment=text)
         self.dirs, self.thickness = directions(rays), float(thickness)
@@ -132,10 +152,10 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         super().release()
 
 
-def trace_predictor(rays: int, steps: int, thickness: float):
+def trace_predictor(rays: int, steps: int, thickness: float, facets: bool):
     def run(frame, radius: float) -> np.ndarray:
         h, w = np.shape(frame["mask"])
-        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness) as p:
+        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness, facets) as p:
             p.upload(frame)
             p.draw()
             out = p.read()
@@ -167,6 +187,7 @@ def main() -> int:
     p.add_argument("--rays", nargs="+", type=int, default=[8, 16])
     p.add_argument("--steps", type=int, default=8)
     p.add_argument("--thickness", nargs="+", type=float, default=[1.0, 0.25], help="x the radius")
+    p.add_argument("--facets", action="store_true", help="also with normals of the facets the depth shows")
     p.add_argument("--time-size", nargs=2, type=int, default=[1920, 1080], metavar=("W", "H"))
     p.add_argument("--mesh", default="sponza_partial", help="scene of the timed frame")
     p.add_argument("--repeats", type=int, default=5)
@@ -191,7 +212,9 @@ def run(args: argparse.Namespace) -> int:
     methods = {"gtao": screen_space_predictor("gtao")}
     for rays in args.rays:
         for t in args.thickness:
-            methods[f"trace-{rays}x{args.steps}-T{t:g}"] = trace_predictor(rays, args.steps, t)
+            for facets in (False, True) if args.facets else (False,):
+                name = f"trace-{rays}x{args.steps}-T{t:g}{'-facets' if facets else ''}"
+                methods[name] = trace_predictor(rays, args.steps, t, facets)
     rows = []
     for frame in open_dataset(args.frames).frames(split="test"):
         category = category_of(frame["scene"], full)
@@ -226,7 +249,7 @@ def run(args: argparse.Namespace) -> int:
         times["gtao"] = time_pass(lambda: ScreenSpaceAO("gtao", *args.time_size, radius), frame, args.repeats)
         for rays in args.rays:
             times[f"trace-{rays}x{args.steps}"] = time_pass(
-                lambda rays=rays: ScreenSpaceTrace(*args.time_size, radius, rays, args.steps, 1.0),
+                lambda rays=rays: ScreenSpaceTrace(*args.time_size, radius, rays, args.steps, 1.0, False),
                 frame,
                 args.repeats,
             )
