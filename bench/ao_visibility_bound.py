@@ -675,6 +675,12 @@ def main() -> int:
         default=DEFAULT_NEAR_PX,
         help="pixel footprints around the origin not looked up",
     )
+    p.add_argument(
+        "--seed-offset",
+        type=int,
+        default=0,
+        help="> 0: rays independent of the labels' (their seed shifted), so the marcher's noise is its own",
+    )
     p.add_argument("--max-frames", type=int, default=0, help="> 0: only the first k frames of each category")
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args()
@@ -752,7 +758,7 @@ def run(args: argparse.Namespace) -> int:
             cache[name] = (labeller, normals)
         labeller, face_normals = cache[name]
         labeller.settings = replace(
-            march_settings, seed=frame_seed(ds.seed, scene_index[name], frame["view"])
+            march_settings, seed=frame_seed(ds.seed, scene_index[name], frame["view"]) + args.seed_offset
         )
         radii = np.asarray(manifest["scenes"][name].get("radii", frame["radii"]), np.float64)
         if not np.allclose(radii, np.asarray(frame["radii"], np.float64), rtol=1e-6):
