@@ -74,9 +74,9 @@ from neuralao.runtime.predict import (
 )
 from neuralao.runtime.unet_input import (
     DESCRIPTIONS,
-    HYBRID_DESCRIPTION,
     PAD_MODE,
     check_version,
+    hybrid_description,
     preprocess_frame,
     radius_of_param,
 )
@@ -87,7 +87,7 @@ INPUT, RADIUS, OUTPUT = UNET_INPUT, UNET_RADIUS, "ao"
 # Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
 # Radius parameters the backend and GLSL checks run at, per preprocessing version (version 3's reach the
 # radius channel's cap on the check inputs' depths around 1, and its small end).
-CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4), 3: (-1.5, 0.5, 2.5)}
+CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4), 3: (-1.5, 0.5, 2.5), 4: (-1.5, 0.5, 2.5)}
 # The composed room of the fp16 check: primitives only (no mesh to load), two walls, objects on the floor.
 PARITY_ROOM = ComposeSettings(seed=3, objects=(6, 6), mesh_fraction=0.0, walls=(2, 2), ceiling=0.0)
 # The fp16 bound's radii: wider, to the small radii (a few pixels) where fp16's rounding of the network's
@@ -127,7 +127,7 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
     meta = {
         "neuralao_kind": "unet",
         **DESCRIPTIONS[int(model.args.preprocess_version)],
-        **(HYBRID_DESCRIPTION if model.args.gtao_input else {}),
+        **(hybrid_description(int(model.args.preprocess_version)) if model.args.gtao_input else {}),
         "pad_multiple": str(model.pad_multiple),
         "pad_mode": PAD_MODE,
         "model_args": {"widths": list(model.args.widths), "negative_slope": model.args.negative_slope},

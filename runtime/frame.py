@@ -41,6 +41,8 @@ CHANNELS: dict[str, Channel] = {
     "depth": Channel((), "fiu", "float32"),  # linear camera-space depth -z_cam, scene units; 0 on background
     "normal_cam": Channel((3,), "fiu", "float32"),  # unit camera-space normal, facing the viewer
     "mask": Channel((), "biu", "bool"),  # foreground; absent: depth > 0
+    # the back layer: depth where the pixel's camera ray leaves the solid it entered, 0 where thin
+    "depth_back": Channel((), "fiu", "float32"),
     "yfov": Channel(None, "fiu", "float64"),  # vertical field of view, radians, ()
     "radii": Channel(None, "fiu", "float32"),  # (k,) AO radii of the labels, scene units
     "normal_obj": Channel((3,), "fiu", "float32"),  # unit object-space normal, facing the viewer
@@ -78,6 +80,8 @@ class Frame(Mapping):
     depth : (H, W) float32, linear camera-space depth ``-z_cam`` in scene units, 0 on background
     normal_cam : (H, W, 3) float32, unit normal in camera space (OpenGL: z towards the viewer)
     mask : (H, W) bool, foreground (something was hit)
+    depth_back : (H, W) float32, the back layer (where the camera ray leaves the solid it entered; 0 where
+        the visible surface is thin, and on background): what a version-4 U-Net reads beside depth
     yfov : float, vertical field of view in radians
     radii : (k,) float32, the AO radii the labels were traced at, scene units
     normal_obj : (H, W, 3) float32, unit normal in object space
@@ -95,6 +99,7 @@ class Frame(Mapping):
     depth: np.ndarray | None = None
     normal_cam: np.ndarray | None = None
     mask: np.ndarray | None = None
+    depth_back: np.ndarray | None = None
     yfov: float | None = None
     radii: np.ndarray | None = None
     normal_obj: np.ndarray | None = None
@@ -227,6 +232,12 @@ class Frame(Mapping):
                     f"{where}: 'depth' has {int(outside.sum())} foreground value(s) from "
                     f"{float(fg[outside].min()):.3g} to {float(fg[outside].max()):.3g}; {_IN_RANGE}"
                 )
+        negative = 0 if self.depth_back is None else int((np.asarray(self.depth_back) < 0).sum())
+        if negative:
+            raise NeuralaoError(
+                f"{where}: 'depth_back' has {negative} negative value(s): it is linear -z_cam like depth "
+                "(0 where the visible surface is thin)"
+            )
         if self.yfov is not None:
             check_yfov(f"{where}: 'yfov'", self.yfov, radians=True)
 

@@ -16,6 +16,14 @@ scene (depth and R together) changes nothing:
     Inside the graph the depth channel becomes log(z tan(yfov / 2) / R) = depth - rho (0 on background)
     and the radius channel R / (z tan(yfov / 2)) its exp(-.), clipped to [0, RADIUS_CAP].
 
+Version 4, frame-local with the back layer: version 3's channels and a fifth, before GTAO's in a hybrid:
+
+        thickness   log(depth_back / depth), clipped to [0, THICKNESS_CAP], where the G-buffer's back layer
+                    (``depth_back``: the depth where the pixel's camera ray leaves the solid it entered,
+                    0 where the visible surface is thin) lies behind the visible surface; 0 elsewhere and
+                    on background. An engine renders the back layer with one more pass of the opaque
+                    geometry (pipeline/gbuffers/rasterizer.py's second pass says how).
+
 Version 2, whole-frame (the models shipped before): depth divided by the frame's MEAN foreground depth,
 rho = R / (mean foreground depth * tan(yfov / 2)); the graph's radius channel is
 clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP). The mean couples every pixel of a frame and
@@ -38,7 +46,12 @@ from neuralao.runtime.frame import FrameLike
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and consumers follow it.
 # New models are trained with PREPROCESS_VERSION; every version of VERSIONS still runs.
 PREPROCESS_VERSION = 3
-VERSIONS = (2, 3)
+VERSIONS = (2, 3, 4)
+# The first version whose input has the back layer's thickness channel.
+BACK_LAYER_VERSION = 4
+# Version 4's thickness channel: log(depth_back / depth) clipped to [0, THICKNESS_CAP] (a slab 55 times
+# the visible depth deep reads as one that deep).
+THICKNESS_CAP = 4.0
 # The radius channel (see the module docstring): a floor on normalised depth and a cap on the value.
 RADIUS_DEPTH_FLOOR = 1e-3
 RADIUS_CAP = 8.0
@@ -49,6 +62,14 @@ RADIUS_INPUT = "radius"
 INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
 # The hybrid's input: the G-buffer channels and GTAO's AO at the same radius (1 on background).
 HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
+
+
+def input_channels(version: int = PREPROCESS_VERSION, gtao: bool = False) -> tuple[str, ...]:
+    """The network input's channels for a contract version (with GTAO's last for a hybrid)."""
+    base = (*INPUT_CHANNELS, "thickness") if int(version) >= BACK_LAYER_VERSION else INPUT_CHANNELS
+    return (*base, "gtao") if gtao else base
+
+
 BACKGROUND_DEPTH = 0.0
 
 
@@ -93,9 +114,18 @@ DESCRIPTIONS: dict[int, dict[str, str]] = {
         f"clip(exp(rho - depth), 0, {RADIUS_CAP:g}) (the radius on screen) as a fifth channel",
     },
 }
+DESCRIPTIONS[4] = DESCRIPTIONS[3] | {
+    "preprocess_version": "4",
+    "input_layout": "NCHW float32, N=1, C=5, H and W multiples of pad_multiple (pad, run, crop)",
+    "input_channels": ",".join(input_channels(4)),
+    "thickness": f"channel 4: clip(log(depth_back / depth), 0, {THICKNESS_CAP:g}) where the back layer lies "
+    "behind the visible surface, else 0 (and on background); depth_back is the depth of the first surface "
+    "behind the visible one (its own triangle excluded) when that surface faces the camera ray the other "
+    "way, i.e. where the ray leaves the solid it entered: one more depth pass of the opaque geometry",
+}
 PREPROCESS_DESCRIPTION = DESCRIPTIONS[PREPROCESS_VERSION]
 
-# Added to the metadata of a hybrid (GTAO-input) U-Net.
+# Added to the metadata of a hybrid (GTAO-input) U-Net (:func:`hybrid_description`: by version).
 HYBRID_DESCRIPTION = {
     "input_layout": "NCHW float32, N=1, C=5, H and W multiples of pad_multiple (pad, run, crop)",
     "input_channels": ",".join(HYBRID_CHANNELS),
@@ -103,6 +133,20 @@ HYBRID_DESCRIPTION = {
     "background; the network outputs clip(gtao + correction, 0, 1)",
     "output": "(1,1,H,W) accessibility in [0,1], 1 = open (GTAO + a learned correction, clipped)",
 }
+
+
+def hybrid_description(version: int) -> dict[str, str]:
+    """The metadata a hybrid U-Net of contract ``version`` adds: its channels, GTAO's last."""
+    channels = input_channels(version, gtao=True)
+    if channels == HYBRID_CHANNELS:
+        return HYBRID_DESCRIPTION
+    layout = f"NCHW float32, N=1, C={len(channels)}, H and W multiples of pad_multiple (pad, run, crop)"
+    gtao = HYBRID_DESCRIPTION["gtao_channel"].replace("channel 4", f"channel {len(channels) - 1}")
+    return HYBRID_DESCRIPTION | {
+        "input_layout": layout,
+        "input_channels": ",".join(channels),
+        "gtao_channel": gtao,
+    }
 
 
 def depth_scale(depth: np.ndarray, mask: np.ndarray) -> float:
@@ -127,12 +171,17 @@ def check_version(version: object, where: str = "the model") -> int:
 
 
 def preprocess(
-    depth: np.ndarray, normal_cam: np.ndarray, mask: np.ndarray, version: int = PREPROCESS_VERSION
+    depth: np.ndarray,
+    normal_cam: np.ndarray,
+    mask: np.ndarray,
+    version: int = PREPROCESS_VERSION,
+    depth_back: np.ndarray | None = None,
 ) -> np.ndarray:
     """G-buffer channels -> network input.
 
     depth : (H, W) float32 linear depth, 0 on background; normal_cam : (H, W, 3) float32;
-    mask : (H, W) bool foreground. Returns x : (4, H, W) float32 (see the module docstring).
+    mask : (H, W) bool foreground; depth_back : (H, W) float32 back layer (version 4 needs it).
+    Returns x : (4, H, W) float32, (5, H, W) for version 4 (see the module docstring).
     Non-finite G-buffer values pass through (training then stops on them naming the batch).
     """
     depth = np.asarray(depth, dtype=np.float32)
@@ -143,16 +192,43 @@ def preprocess(
             f"G-buffer shapes do not match: depth {depth.shape}, normal_cam {normal_cam.shape}, "
             f"mask {mask.shape}"
         )
-    x = np.empty((4,) + depth.shape, dtype=np.float32)
-    if check_version(version) == 2:
+    version = check_version(version)
+    if version >= BACK_LAYER_VERSION:
+        if depth_back is None:
+            raise NeuralaoError(
+                "this model reads the G-buffer's back layer (depth_back); render the frames with it "
+                "(`neuralao render --back-layer`, or a dataset built with gbuffer.back_layer)"
+            )
+        depth_back = np.asarray(depth_back, dtype=np.float32)
+        if depth_back.shape != depth.shape:
+            raise NeuralaoError(
+                f"G-buffer shapes do not match: depth {depth.shape}, depth_back {depth_back.shape}"
+            )
+    x = np.empty((len(input_channels(version)),) + depth.shape, dtype=np.float32)
+    if version == 2:
         x[0] = np.where(mask, depth / np.float32(depth_scale(depth, mask)), np.float32(BACKGROUND_DEPTH))
     else:
         fg = mask & (depth > 0)  # a foreground pixel at depth 0 has no logarithm: it reads as background
         with np.errstate(divide="ignore", invalid="ignore"):
             x[0] = np.where(fg, np.log(np.where(fg, depth, np.float32(1.0))), np.float32(BACKGROUND_DEPTH))
         mask = fg
-    x[1:] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
+    x[1:4] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
+    if version >= BACK_LAYER_VERSION:
+        x[4] = thickness_channel(depth, depth_back, mask)
     return x
+
+
+def thickness_channel(depth: np.ndarray, depth_back: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Version 4's thickness channel (H, W) float32: clip(log(depth_back / depth), 0, THICKNESS_CAP) where
+    the back layer lies behind a foreground pixel, else 0."""
+    depth = np.asarray(depth, np.float32)
+    depth_back = np.asarray(depth_back, np.float32)
+    slab = np.asarray(mask, bool) & (depth > 0) & (depth_back > depth)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = np.log(np.where(slab, depth_back, np.float32(1.0)) / np.where(slab, depth, np.float32(1.0)))
+    return np.where(slab, np.clip(t, np.float32(0.0), np.float32(THICKNESS_CAP)), np.float32(0.0)).astype(
+        np.float32
+    )
 
 
 def radius_param(
@@ -200,12 +276,12 @@ def frame_radius_param(
 def preprocess_frame(
     frame: FrameLike, gtao: np.ndarray | None = None, version: int = PREPROCESS_VERSION
 ) -> np.ndarray:
-    """``preprocess`` on a frame (keys depth, normal_cam, mask). Returns (4, H, W) float32, or
-    (5, H, W) with ``gtao`` (H, W) as the hybrid's fifth channel (1 on background)."""
+    """``preprocess`` on a frame (keys depth, normal_cam, mask; depth_back for version 4). Returns
+    (C, H, W) float32, with ``gtao`` (H, W) as the hybrid's last channel (1 on background)."""
     missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]
     if missing:
         raise NeuralaoError(f"frame lacks G-buffer channel(s) {', '.join(missing)}")
-    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"], version)
+    x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"], version, frame.get("depth_back"))
     if gtao is None:
         return x
     gtao = np.asarray(gtao, np.float32)

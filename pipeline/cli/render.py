@@ -110,6 +110,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--seed", type=int, default=0, help="seed of the orbit rotation and the AO ray directions (default 0)"
     )
+    p.add_argument(
+        "--back-layer",
+        action="store_true",
+        help="also write depth_back, the G-buffer's back layer (what a U-Net of input version 4 reads)",
+    )
     p.add_argument("--workers", type=int, default=2, help="labelling threads (default 2)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
 
@@ -148,7 +153,9 @@ def run(args: argparse.Namespace) -> int:
         cameras = orbit(scene, args.views, w, h, yfov_deg=args.yfov, seed=args.seed)
     settings = LabelSettings(**label_fields(args))
     start = time.perf_counter()
-    summary = render_views(scene, cameras, settings, args.out, progress=True, normals=args.normals)
+    summary = render_views(
+        scene, cameras, settings, args.out, progress=True, normals=args.normals, back_layer=args.back_layer
+    )
     log.info(
         "%s: %d view(s) in %.1f s -> %s", scene.name, len(cameras), time.perf_counter() - start, args.out
     )
@@ -219,6 +226,7 @@ def render_views(
     progress: bool = True,
     normals: str = "smooth",
     prefix: str = "view_",
+    back_layer: bool = False,
 ) -> dict:
     """Render, label and write every camera's view: ``<prefix>NNNN.npz`` + three PNG previews each.
 
@@ -230,7 +238,7 @@ def render_views(
     if not cameras:
         raise NeuralaoError("no cameras to render")
     labeller = Labeller(scene, label_settings)
-    renderer = GBufferRenderer(scene, normals=normals)
+    renderer = GBufferRenderer(scene, normals=normals, back_layer=back_layer)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     views = []

@@ -103,6 +103,11 @@ FRAME_KEYS = (
 )
 # Extra per-frame keys when labels.radii_rel is set: AO and validity at each radius, the radii.
 RADII_KEYS = ("ao_radii", "valid_radii", "radii")
+# Per-frame keys of the back layer (``back_layer``), stored beside each shard as layers/<shard>.npz.
+LAYER_KEYS = ("depth_back",)
+# Pixels whose re-rendered visible triangle may differ from a shard's (another GL build rasterising an
+# edge the other way) when the back layer is added to a built dataset; such pixels' layer reads thin.
+LAYER_TRI_MISMATCH = 1e-3
 # Composed scenes stand on a floor: their orbits stay this far above the horizon.
 COMPOSED_MIN_ELEVATION_DEG = 10.0
 CameraKind = Literal["orbit", "interior", "closeup", "file"]
@@ -176,6 +181,10 @@ class DatasetSettings:
     # Vertical fields of view (degrees) drawn uniformly per view for scenes without yfov_deg or their own
     # range (cameras="file" keeps its poses' own); None: every scene's yfov_deg or its camera default.
     yfov_range_deg: FovRange | None = None
+    # Also render the G-buffer's back layer (``depth_back``, what a version-4 U-Net reads) into
+    # layers/<shard>.npz beside each shard. Turned on for a built dataset, it renders only the layer: the
+    # shards, their labels and the dataset hash stay as they are.
+    back_layer: bool = False
 
 
 def frame_seed(seed: int, scene_index: int, view: int) -> int:
@@ -469,6 +478,7 @@ def _config_dict(settings: DatasetSettings) -> dict:
     """The resolved config, without the options added since format 1 while they are unused, so a
     config that does not use them has the config hash (and manifest) it always had."""
     config = settings_to_dict(settings)
+    del config["back_layer"]  # an add-on beside the shards (the manifest's "back_layer"), not their config
     if not config["composed"]:
         del config["composed"]
     if config["labels"]["radii_rel"] is None:
@@ -509,8 +519,13 @@ def build_dataset(
     out = Path(out)
     config = _config_dict(settings)
     config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
-    done = _reusable_shards(out, config, config_hash)  # the last check; from here on the run works
-    for folder in (out, out / "shards"):  # a killed run (SIGKILL) leaves its half-written shard behind
+    done, done_layers = _reusable_shards(out, config, config_hash)  # the last check; then the run works
+    layers = bool(settings.back_layer)
+    for folder in (
+        out,
+        out / "shards",
+        out / "layers",
+    ):  # a killed run (SIGKILL) leaves its half-written file
         for stale in remove_stale_temporaries(folder):
             log.info("removed %s left by an interrupted run", stale.name)
     own_engine = engine is None
@@ -567,24 +582,43 @@ def build_dataset(
                 shards.append(entry)
                 if rel in done and path.exists() and sha256_file(path) == done[rel]:
                     entry["sha256"] = done[rel]
-                    bar.update(len(chunk))
+                    if not layers or _layer_kept(out, entry, done_layers):
+                        bar.update(len(chunk))
+                        continue
+                context = context or _shard_context(scene, settings.labels, engine.threads, layers)
+                if "sha256" in entry:
+                    # a shard of the dataset built before its back layer: only the layer is rendered
+                    tri = read_npz(path, ["tri_id"])["tri_id"]
+                    pending.append(entry)
+                    yield Task(context, _render_layer, ([cams[v] for v in chunk], tri, rel))
                     continue
-                context = context or _shard_context(scene, settings.labels, engine.threads)
                 seeds = [frame_seed(settings.seed, si, v) for v in chunk]
                 pending.append(entry)
-                yield Task(context, _render_shard, ([cams[v] for v in chunk], seeds, frame_keys))
+                keys = frame_keys + (LAYER_KEYS if layers else ())
+                yield Task(context, _render_shard, ([cams[v] for v in chunk], seeds, keys))
 
     try:
         for i, arrays in engine.map(shard_tasks()):
             entry = pending[i]
-            arrays["view"] = np.asarray(entry["views"], dtype=np.int32)
-            arrays["holdout"] = np.asarray(entry["holdout"], dtype=bool)
-            path = out / entry["file"]
-            # the folder comes with the first shard: a run refused before it makes nothing
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write_npz(path, **arrays)
-            entry["sha256"] = done[entry["file"]] = sha256_file(path)
-            write_json(progress_path, {"config_hash": config_hash, "shards": done})
+            layer = {k: arrays.pop(k) for k in LAYER_KEYS if k in arrays}
+            if "sha256" not in entry:  # a shard rendered and labelled (else only its layer was rendered)
+                arrays["view"] = np.asarray(entry["views"], dtype=np.int32)
+                arrays["holdout"] = np.asarray(entry["holdout"], dtype=bool)
+                path = out / entry["file"]
+                # the folder comes with the first shard: a run refused before it makes nothing
+                path.parent.mkdir(parents=True, exist_ok=True)
+                write_npz(path, **arrays)
+                entry["sha256"] = done[entry["file"]] = sha256_file(path)
+            if layer:
+                rel = _layer_name(entry["file"])
+                (out / rel).parent.mkdir(parents=True, exist_ok=True)
+                write_npz(out / rel, **layer)
+                entry["layer_file"], entry["layer_sha256"] = rel, sha256_file(out / rel)
+                done_layers[rel] = entry["layer_sha256"]
+            write_json(
+                progress_path,
+                {"config_hash": config_hash, "shards": done, **({"layers": done_layers} if layers else {})},
+            )
             bar.update(len(entry["views"]))
     finally:
         bar.close()
@@ -603,6 +637,16 @@ def build_dataset(
         "scenes": {s.name: _scene_entry(s, radii_of.get(s.name)) for s in specs},
         "shards": shards,
         "frame_keys": list(frame_keys),
+        **(
+            {
+                "back_layer": {
+                    "keys": list(LAYER_KEYS),
+                    "hash": hashlib.sha256("".join(s["layer_sha256"] for s in shards).encode()).hexdigest(),
+                }
+            }
+            if layers
+            else {}
+        ),
         "conventions": {
             "ao": "accessibility in [0,1], 1 = open; 1 on background",
             "depth": "linear camera-space depth (-z_cam), 0 on background",
@@ -616,14 +660,29 @@ def build_dataset(
     return manifest
 
 
-def _reusable_shards(out: Path, config: dict, config_hash: str) -> dict[str, str]:
-    """The shards (file -> sha256) a run of ``config`` in ``out`` keeps: those of a finished dataset of
-    this config (its manifest) and of an interrupted run of it (``progress.json``). A folder that holds a
-    dataset of another config starts over: its shards, manifest and progress file go, so it never ends
-    with another config's shards beside the new manifest. A ``manifest.json`` that is not a dataset's
-    is refused (it is not this command's to replace)."""
+def _layer_name(shard: str) -> str:
+    """The back layer's file of shard ``shards/NAME.npz``: ``layers/NAME.npz``."""
+    return "layers/" + Path(shard).name
+
+
+def _layer_kept(out: Path, entry: dict, done_layers: dict[str, str]) -> bool:
+    """Whether shard ``entry``'s back layer is on disk as a run recorded it (then the entry names it)."""
+    rel = _layer_name(entry["file"])
+    if rel in done_layers and (out / rel).is_file() and sha256_file(out / rel) == done_layers[rel]:
+        entry["layer_file"], entry["layer_sha256"] = rel, done_layers[rel]
+        return True
+    return False
+
+
+def _reusable_shards(out: Path, config: dict, config_hash: str) -> tuple[dict[str, str], dict[str, str]]:
+    """The shards (file -> sha256) a run of ``config`` in ``out`` keeps, and their back layers' files (file
+    -> sha256): those of a finished dataset of this config (its manifest) and of an interrupted run of it
+    (``progress.json``). A folder that holds a dataset of another config starts over: its shards, layers,
+    manifest and progress file go, so it never ends with another config's shards beside the new manifest.
+    A ``manifest.json`` that is not a dataset's is refused (it is not this command's to replace)."""
     manifest_path, progress_path = out / "manifest.json", out / "progress.json"
     done: dict[str, str] = {}
+    layers: dict[str, str] = {}
     same = True
     if manifest_path.is_file():
         made = read_json(manifest_path, "dataset manifest")
@@ -633,49 +692,61 @@ def _reusable_shards(out: Path, config: dict, config_hash: str) -> dict[str, str
             )
         same = made.get("config") == json.loads(json.dumps(config, default=str))
         if same and isinstance(made.get("shards"), list):
-            done = {
-                e["file"]: e["sha256"]
-                for e in made["shards"]
-                if isinstance(e, dict) and isinstance(e.get("file"), str) and isinstance(e.get("sha256"), str)
-            }
+            entries = [e for e in made["shards"] if isinstance(e, dict)]
+            for files, name, sha in ((done, "file", "sha256"), (layers, "layer_file", "layer_sha256")):
+                files.update(
+                    (e[name], e[sha])
+                    for e in entries
+                    if isinstance(e.get(name), str) and isinstance(e.get(sha), str)
+                )
     if progress_path.is_file():
         state = read_json(progress_path, "dataset progress file")
         if isinstance(state, dict) and state.get("config_hash") == config_hash:
-            shards = state.get("shards")
+            shards, kept = state.get("shards"), state.get("layers")
             done |= shards if isinstance(shards, dict) else {}
+            layers |= kept if isinstance(kept, dict) else {}
         else:
             same = False
     if not same:
         old = sorted((out / "shards").glob("*.npz"))
         log.warning("%s: holds a dataset of another config; starting over (%d shards removed)", out, len(old))
-        for path in [*old, manifest_path, progress_path]:
+        for path in [*old, *sorted((out / "layers").glob("*.npz")), manifest_path, progress_path]:
             path.unlink(missing_ok=True)
-        return {}
-    return done
+        return {}, {}
+    return done, layers
 
 
 class _ShardWorker:
     """A worker's state for one scene: its G-buffer renderer and labeller (built where it runs)."""
 
-    def __init__(self, payload: tuple[Scene, LabelSettings]):
+    def __init__(self, payload: tuple[Scene, LabelSettings, bool]):
         # Lazy: PyOpenGL (0.16 s measured, and a GL library) is needed only where a shard renders; a
         # Ray driver and U-Net training read datasets without it.
         from neuralao.pipeline.gbuffers.rasterizer import GBufferRenderer
 
-        scene, labels = payload
-        self.labels = labels
-        self.renderer = GBufferRenderer(scene)
-        self.labeller = Labeller(scene, labels)
+        scene, labels, back_layer = payload
+        self.scene, self.labels = scene, labels
+        self.renderer = GBufferRenderer(scene, back_layer=back_layer)
+        self._labeller: Labeller | None = None
+
+    @property
+    def labeller(self) -> Labeller:
+        """Built by the first shard that labels (a run that adds only back layers builds no BVH)."""
+        if self._labeller is None:
+            self._labeller = Labeller(self.scene, self.labels)
+        return self._labeller
 
     def close(self) -> None:
         self.renderer.close()
 
 
-def _shard_context(scene: Scene, labels: LabelSettings, threads: int | None):
-    """Scene + label settings (``threads`` labelling threads per task; None: the settings' own)."""
+def _shard_context(scene: Scene, labels: LabelSettings, threads: int | None, back_layer: bool = False):
+    """Scene + label settings (``threads`` labelling threads per task; None: the settings' own), and
+    whether the renderer draws the back layer."""
     labels = labels if threads is None else replace(labels, workers=threads)
     slim = slim_scene(scene)
-    return Context(content_key("shard", slim.vertices, slim.faces, labels), _ShardWorker, (slim, labels))
+    key = content_key("shard", slim.vertices, slim.faces, labels, *(("back_layer",) if back_layer else ()))
+    return Context(key, _ShardWorker, (slim, labels, back_layer))
 
 
 def _render_shard(state: _ShardWorker, args: tuple) -> dict[str, np.ndarray]:
@@ -691,6 +762,25 @@ def _render_shard(state: _ShardWorker, args: tuple) -> dict[str, np.ndarray]:
             _label_with_radii(state.labeller, frame)
         frames.append(frame)
     return {key: np.stack([np.asarray(f[key]) for f in frames]) for key in frame_keys}
+
+
+def _render_layer(state: _ShardWorker, args: tuple) -> dict[str, np.ndarray]:
+    """The back layer of a built shard's frames: its cameras rendered again, their visible triangles
+    checked against the shard's (``tri``); where another GL rasterised an edge the other way the layer
+    reads thin (0), beyond :data:`LAYER_TRI_MISMATCH` of the pixels the shard is not this GL's."""
+    cams, tri, name = args
+    out = []
+    for cam, stored in zip(cams, tri, strict=True):
+        frame = state.renderer.render(cam)
+        moved = frame["tri_id"] != stored
+        if moved.mean() > LAYER_TRI_MISMATCH:
+            raise NeuralaoError(
+                f"{name}: rendered again, {int(moved.sum())} of {moved.size} pixels show another triangle "
+                "than the shard holds; this GL does not reproduce the dataset's G-buffers: build it again "
+                "(remove its folder) to add the back layer"
+            )
+        out.append(np.where(moved, np.float32(0.0), frame["depth_back"]))
+    return {"depth_back": np.stack(out)}
 
 
 def _label_with_radii(labeller: Labeller, frame: FrameLike) -> None:
@@ -746,17 +836,29 @@ class Dataset:
     def label_settings(self) -> dict:
         return self.manifest["config"]["labels"]
 
+    @property
+    def back_layer(self) -> dict | None:
+        """The manifest's back layer (``keys`` and ``hash`` of its files), None without one."""
+        return self.manifest.get("back_layer")
+
     def load_shard(self, entry: dict) -> dict[str, np.ndarray]:
-        path = self.root / entry["file"]
+        """A shard's arrays, with its back layer's where the dataset has one."""
+        arrays = self._read(entry["file"], entry["sha256"])
+        if self.back_layer is not None and "layer_file" in entry:
+            arrays |= self._read(entry["layer_file"], entry["layer_sha256"])
+        return arrays
+
+    def _read(self, rel: str, sha: str) -> dict[str, np.ndarray]:
+        path = self.root / rel
         if not path.is_file():
             raise NeuralaoError(f"dataset shard missing: {path}")
-        if self.verify and entry["file"] not in self._verified:
-            if sha256_file(path) != entry["sha256"]:
+        if self.verify and rel not in self._verified:
+            if sha256_file(path) != sha:
                 raise NeuralaoError(
                     f"dataset shard {path} is corrupt (sha256 differs from the manifest); "
                     "rerun `neuralao dataset`"
                 )
-            self._verified.add(entry["file"])
+            self._verified.add(rel)
         return read_npz(path)
 
     def frames(
@@ -778,7 +880,7 @@ class Dataset:
     def shard_frames(self, entry: dict) -> Iterator[Frame]:
         """Every frame of one shard (an entry of the manifest's ``shards``), in order."""
         arrays = self.load_shard(entry)
-        keys = [k for k in self.manifest.get("frame_keys", FRAME_KEYS) if k in arrays]
+        keys = [k for k in (*self.manifest.get("frame_keys", FRAME_KEYS), *LAYER_KEYS) if k in arrays]
         for i in range(len(arrays["view"])):
             yield Frame.from_arrays(
                 {k: arrays[k][i] for k in keys}

@@ -46,6 +46,7 @@ from neuralao.runtime.foundation.limits import MAX_CAP, MAX_SEED, check_count, c
 from neuralao.runtime.foundation.manifest import read_json, read_manifest
 from neuralao.runtime.foundation.paths import check_plain_name
 from neuralao.runtime.foundation.settings import settings_to_dict
+from neuralao.runtime.unet_input import BACK_LAYER_VERSION
 
 log = logging.getLogger(__name__)
 
@@ -96,8 +97,11 @@ class EvalSettings:
     allow_trained_meshes: bool = False  # True: accept train/val meshes (an evaluation of memory, not use)
 
 
-def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSettings:
-    """The dataset of one resolution: every category's scenes, all in the test split."""
+def dataset_settings(
+    settings: EvalSettings, res: EvalResolution, back_layer: bool = False
+) -> DatasetSettings:
+    """The dataset of one resolution: every category's scenes, all in the test split (with the G-buffer's
+    back layer where a model reads it)."""
     w, h = (int(v) for v in res.size)
     scenes: list[SceneSpec] = []
     composed: list[ComposedScenes] = []
@@ -135,6 +139,7 @@ def dataset_settings(settings: EvalSettings, res: EvalResolution) -> DatasetSett
         seed=settings.seed,
         holdout_every=0,
         frames_per_shard=1 if w * h > 1 << 20 else 4,
+        back_layer=back_layer,
     )
 
 
@@ -143,10 +148,11 @@ def ensure_frames(ds: DatasetSettings, folder: Path, config_dir: Path, progress:
     this config (its manifest's config), else built or resumed by the dataset stage."""
     if (folder / "manifest.json").is_file():
         try:
-            done = read_json(folder / "manifest.json", "dataset manifest").get("config")
+            made = read_json(folder / "manifest.json", "dataset manifest")
+            done, layered = made.get("config"), made.get("back_layer") is not None
         except (NeuralaoError, AttributeError):
-            done = None
-        if done == json.loads(json.dumps(_config_dict(ds), default=str)):
+            done = layered = None
+        if done == json.loads(json.dumps(_config_dict(ds), default=str)) and (layered or not ds.back_layer):
             return
     build_dataset(ds, folder, config_dir, progress)
 
@@ -225,6 +231,12 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
         label = folder.name if policy == "model" else f"{folder.name}@{policy}"
         out[label] = unet_predictor(onnx_path, internal_height_of(policy, manifest))
     return out
+
+
+def reads_back_layer(manifest: dict) -> bool:
+    """Whether an export's input has the G-buffer's back layer (its input contract's version)."""
+    version = (manifest.get("metadata") or {}).get("preprocess_version", 0)
+    return str(version).isdigit() and int(version) >= BACK_LAYER_VERSION
 
 
 def trained_on_held_aside(manifest: dict) -> bool:
@@ -345,6 +357,7 @@ def evaluate(
             log.info("%s trained on held-aside meshes: its held-aside rows are left out", Path(folder).name)
             saw_held_aside.update(mine)
         methods.update(mine)
+    back_layer = any(reads_back_layer(read_manifest(Path(folder))) for folder in models)
     held_aside = {c.name for c in settings.categories if c.held_aside}
     methods.update(baseline_predictors())
     rows: list[dict] = []
@@ -353,7 +366,7 @@ def evaluate(
         w, h = (int(v) for v in res.size)
         key = f"{w}x{h}"
         t0 = time.perf_counter()
-        ensure_frames(dataset_settings(settings, res), out / "frames" / key, config_dir, progress)
+        ensure_frames(dataset_settings(settings, res, back_layer), out / "frames" / key, config_dir, progress)
         build_times[key] = time.perf_counter() - t0
         t0 = time.perf_counter()
         for frame in open_dataset(out / "frames" / key).frames(split="test"):

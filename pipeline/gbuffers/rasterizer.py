@@ -99,11 +99,37 @@ void main() {
     precise vec3 world = (v_local + u_center_hi) + u_center_lo;
     o_depth = -v_cam.z;
     o_position = vec4(world, 1.0);
-    o_normal_obj = vec4(n, 0.0);
+    o_normal_obj = vec4(n, gl_FrontFacing ? 1.0 : -1.0);  // w: the facing the back layer compares
     o_normal_cam = vec4(normalize(u_rotation * n), 0.0);
     o_tri_id = gl_PrimitiveID;
 }
 """
+
+# The back layer (``back_layer=True``): every face drawn again, keeping the nearest fragment behind the
+# visible one (not its own triangle, more than BACK_LAYER_GAP relative depth behind). Where that next
+# surface faces the camera ray the other way from the visible one, the ray leaves the solid it entered
+# there: its depth is the back layer. Where it faces the same way (a sheet in front of another part) or
+# nothing lies behind, the visible surface is thin: 0, as on background.
+BACK_LAYER_GAP = 1e-5
+_BACK_FRAGMENT = """#version 450 core
+in vec3 v_local;
+in vec3 v_cam;
+in vec3 v_normal;
+flat in vec3 v_face;
+uniform sampler2D u_front_depth;   // the first pass's linear depth
+uniform sampler2D u_front_normal;  // its object-space normal, w = its facing (+1 front, -1 back)
+uniform isampler2D u_front_tri;    // its triangle, -1 on background
+layout(location = 0) out float o_depth_back;
+void main() {
+    ivec2 p = ivec2(gl_FragCoord.xy);
+    float front = texelFetch(u_front_depth, p, 0).r;
+    int tri = texelFetch(u_front_tri, p, 0).r;
+    float z = -v_cam.z;
+    if (tri < 0 || gl_PrimitiveID == tri || z <= front * (1.0 + GAP)) discard;
+    float facing = gl_FrontFacing ? 1.0 : -1.0;
+    o_depth_back = facing != texelFetch(u_front_normal, p, 0).w ? z : 0.0;
+}
+""".replace("GAP", f"{BACK_LAYER_GAP:.1e}")
 
 # Colour attachments: depth, position, normal_obj, normal_cam, tri_id (same order as the outputs).
 _TARGETS = (
@@ -131,9 +157,10 @@ class GBufferRenderer:
     """Uploads one scene once; :meth:`render` draws any number of cameras at any resolution.
 
     normals : "smooth" (interpolated vertex normals) or "flat" (geometric face normals).
+    back_layer : also render ``depth_back`` (a second pass; see :data:`BACK_LAYER_GAP`).
     """
 
-    def __init__(self, scene: Scene, normals: Literal["smooth", "flat"] = "smooth"):
+    def __init__(self, scene: Scene, normals: Literal["smooth", "flat"] = "smooth", back_layer: bool = False):
         if normals not in ("smooth", "flat"):
             raise NeuralaoError(f"normals must be 'smooth' or 'flat', got {normals!r}")
         faces = np.asarray(scene.faces, dtype=np.int64)
@@ -154,11 +181,22 @@ class GBufferRenderer:
             name: GL.glGetUniformLocation(self._program, name)
             for name in ("u_modelview", "u_projection", "u_rotation", "u_center_hi", "u_center_lo", "u_flat")
         }
+        self.back_layer = bool(back_layer)
+        self._back_program = None
+        if self.back_layer:
+            self._back_program = rgl.compile_program(vertex=_VERTEX, fragment=_BACK_FRAGMENT)
+            self._back_uniforms = {
+                name: GL.glGetUniformLocation(self._back_program, name)
+                for name in ("u_modelview", "u_projection", "u_front_depth", "u_front_normal", "u_front_tri")
+            }
         self._count = 3 * len(faces)
         self._vao, self._vbo = self._upload(scene, faces)
         self._fbo: int | None = None
         self._targets: list[int] = []
         self._depth_rb: int | None = None
+        self._back_fbo: int | None = None  # the back layer's target and depth buffer
+        self._back_target: int | None = None
+        self._back_rb: int | None = None
         self._size: tuple[int, int] | None = None
         self._raw: dict[int, np.ndarray] = {}  # reused readback buffers per attachment
 
@@ -202,6 +240,14 @@ class GBufferRenderer:
                 GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_FRAMEBUFFER_ATTACHMENT_OBJECT_NAME
             )
         )
+        if self.back_layer:
+            self._back_target = rgl.create_texture(width, height, GL.GL_R32F)
+            self._back_fbo = rgl.create_framebuffer([self._back_target], width, height, depth=True)
+            self._back_rb = int(
+                GL.glGetFramebufferAttachmentParameteriv(
+                    GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_FRAMEBUFFER_ATTACHMENT_OBJECT_NAME
+                )
+            )
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
         self._size = (width, height)
 
@@ -211,6 +257,12 @@ class GBufferRenderer:
             GL.glDeleteTextures(len(self._targets), self._targets)
             if self._depth_rb:
                 GL.glDeleteRenderbuffers(1, [self._depth_rb])
+        if self._back_fbo is not None:
+            GL.glDeleteFramebuffers(1, [self._back_fbo])
+            GL.glDeleteTextures(1, [self._back_target])
+            if self._back_rb:
+                GL.glDeleteRenderbuffers(1, [self._back_rb])
+        self._back_fbo = self._back_target = self._back_rb = None
         self._fbo, self._targets, self._depth_rb, self._size = None, [], None, None
         self._raw = {}
 
@@ -223,6 +275,8 @@ class GBufferRenderer:
         GL.glDeleteBuffers(1, [self._vbo])
         GL.glDeleteVertexArrays(1, [self._vao])
         GL.glDeleteProgram(self._program)
+        if self._back_program is not None:
+            GL.glDeleteProgram(self._back_program)
         self._vao = self._vbo = None
 
     def __del__(self) -> None:
@@ -261,7 +315,8 @@ class GBufferRenderer:
         """The G-buffer frame of ``camera`` (see the module docstring), row 0 at the top.
 
         Returns depth (H, W) f32, normal_cam / normal_obj / position (H, W, 3) f32, mask (H, W) bool,
-        tri_id (H, W) i32, pose (4, 4) f64, yfov / znear / zfar float.
+        tri_id (H, W) i32, pose (4, 4) f64, yfov / znear / zfar float; with ``back_layer`` also
+        depth_back (H, W) f32 (0 where the visible surface is thin, and on background).
         """
         if self._vao is None:
             raise NeuralaoError("this GBufferRenderer has been closed")
@@ -273,8 +328,17 @@ class GBufferRenderer:
         to_world = np.eye(4)
         to_world[:3, 3] = self.center
         modelview = view @ to_world  # float64: large offsets cancel here, not on the GPU
-        self._draw(modelview, reversed_z_projection(camera), view[:3, :3], w, h)
-        return self._read_back(camera, pose, w, h)
+        projection = reversed_z_projection(camera)
+        self._draw(modelview, projection, view[:3, :3], w, h)
+        frame = self._read_back(camera, pose, w, h)
+        if self.back_layer:
+            self._draw_back(modelview, projection, view[:3, :3], w, h)
+            raw = self._read_raw(
+                len(_TARGETS), GL.GL_RED, GL.GL_FLOAT, 1, np.float32, w, h, self._back_target
+            )
+            frame["depth_back"] = raw[..., 0][::-1].copy()
+            GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
+        return frame
 
     def _draw(
         self, modelview: np.ndarray, projection: np.ndarray, rotation: np.ndarray, w: int, h: int
@@ -318,7 +382,50 @@ class GBufferRenderer:
         GL.glFrontFace(GL.GL_CCW)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
-    def _read_raw(self, k: int, fmt: int, typ: int, ch: int, dtype, w: int, h: int) -> np.ndarray:
+    def _draw_back(
+        self, modelview: np.ndarray, projection: np.ndarray, rotation: np.ndarray, w: int, h: int
+    ) -> None:
+        """The back layer's pass (module docstring of :data:`BACK_LAYER_GAP`), reading the first pass's
+        depth, normal and triangle targets; the same state as :meth:`_draw` but one colour target."""
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._back_fbo)
+        GL.glDrawBuffers(1, [GL.GL_COLOR_ATTACHMENT0])
+        GL.glViewport(0, 0, w, h)
+        for cap in (GL.GL_CULL_FACE, GL.GL_BLEND, GL.GL_SCISSOR_TEST, GL.GL_MULTISAMPLE, GL.GL_STENCIL_TEST):
+            GL.glDisable(cap)
+        GL.glEnable(GL.GL_DEPTH_TEST)
+        GL.glDepthMask(GL.GL_TRUE)
+        GL.glColorMask(GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE)
+        GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
+        GL.glFrontFace(GL.GL_CCW if np.linalg.det(rotation) > 0 else GL.GL_CW)
+        glClipControl(GL.GL_LOWER_LEFT, GL.GL_ZERO_TO_ONE)
+        GL.glDepthFunc(GL.GL_GREATER)
+        GL.glClearBufferfv(GL.GL_COLOR, 0, np.zeros(4, dtype=np.float32))
+        GL.glClearBufferfv(GL.GL_DEPTH, 0, np.zeros(1, dtype=np.float32))
+        GL.glUseProgram(self._back_program)
+        u = self._back_uniforms
+        GL.glUniformMatrix4fv(u["u_modelview"], 1, GL.GL_TRUE, modelview.astype(np.float32))
+        GL.glUniformMatrix4fv(u["u_projection"], 1, GL.GL_TRUE, projection.astype(np.float32))
+        for unit, (name, k) in enumerate(
+            (("u_front_depth", 0), ("u_front_normal", 2), ("u_front_tri", _TRI))
+        ):
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, self._targets[k])
+            GL.glUniform1i(u[name], unit)
+        GL.glBindVertexArray(self._vao)
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, self._count)
+        GL.glBindVertexArray(0)
+        GL.glUseProgram(0)
+        for unit in (2, 1, 0):
+            GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
+            GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
+        glClipControl(GL.GL_LOWER_LEFT, GL.GL_NEGATIVE_ONE_TO_ONE)
+        GL.glDepthFunc(GL.GL_LESS)
+        GL.glFrontFace(GL.GL_CCW)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def _read_raw(
+        self, k: int, fmt: int, typ: int, ch: int, dtype, w: int, h: int, tex: int | None = None
+    ) -> np.ndarray:
         """Attachment k as (H, W, ch) into a reused buffer, GL row order (row 0 at the bottom).
 
         RGBA targets are read as RGB (GL drops the unused channel while packing, far cheaper than a
@@ -328,7 +435,7 @@ class GBufferRenderer:
         buf = self._raw.get(k)
         if buf is None or buf.shape != (h, w, ch):
             buf = self._raw[k] = np.empty((h, w, ch), dtype=dtype)
-        GL.glBindTexture(GL.GL_TEXTURE_2D, self._targets[k])
+        GL.glBindTexture(GL.GL_TEXTURE_2D, self._targets[k] if tex is None else tex)
         GL.glGetTexImage(GL.GL_TEXTURE_2D, 0, fmt, typ, buf)
         return buf
 
@@ -352,8 +459,8 @@ class GBufferRenderer:
 
 
 def render_gbuffer(
-    scene: Scene, camera: Camera, normals: Literal["smooth", "flat"] = "smooth"
+    scene: Scene, camera: Camera, normals: Literal["smooth", "flat"] = "smooth", back_layer: bool = False
 ) -> dict[str, np.ndarray]:
     """One frame of one camera (uploads the scene each call: use :class:`GBufferRenderer` for many)."""
-    with GBufferRenderer(scene, normals=normals) as renderer:
+    with GBufferRenderer(scene, normals=normals, back_layer=back_layer) as renderer:
         return renderer.render(camera)

@@ -39,13 +39,12 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.settings import from_dict
 from neuralao.runtime.unet_input import (
     FOREGROUND_GAIN,
-    HYBRID_CHANNELS,
-    INPUT_CHANNELS,
     PREPROCESS_VERSION,
     RADIUS_CAP,
     RADIUS_DEPTH_FLOOR,
     check_padable,
     check_version,
+    input_channels,
     pad_amount,
 )
 
@@ -118,10 +117,18 @@ class UNet(nn.Module):
             raise NeuralaoError(
                 f"U-Net widths must list at least two positive channel counts, got {args.widths}"
             )
-        if args.gtao_input and (int(args.scale) != 1 or int(args.in_channels) != len(HYBRID_CHANNELS)):
+        check_version(args.preprocess_version, "this U-Net")
+        hybrid = input_channels(args.preprocess_version, gtao=True)
+        if args.gtao_input and (int(args.scale) != 1 or int(args.in_channels) != len(hybrid)):
             raise NeuralaoError(
-                f"a GTAO-input U-Net takes {len(HYBRID_CHANNELS)} channels ({', '.join(HYBRID_CHANNELS)}) at "
+                f"a GTAO-input U-Net takes {len(hybrid)} channels ({', '.join(hybrid)}) at "
                 f"scale 1, got in_channels {args.in_channels} and scale {args.scale}"
+            )
+        plain = input_channels(args.preprocess_version)
+        if not args.gtao_input and int(args.preprocess_version) >= 4 and int(args.in_channels) != len(plain):
+            raise NeuralaoError(
+                f"a version-{args.preprocess_version} U-Net takes {len(plain)} channels "
+                f"({', '.join(plain)}), got in_channels {args.in_channels}"
             )
         if int(args.scale) not in (1, 2, 4) or int(args.refine_width) < 1:
             raise NeuralaoError(
@@ -131,7 +138,6 @@ class UNet(nn.Module):
         w = [int(v) for v in args.widths]
         slope = args.negative_slope
         cin = args.in_channels + (1 if args.radius_input else 0)
-        check_version(args.preprocess_version, "this U-Net")
         select = torch.zeros(1, args.in_channels, 1, 1)
         select[0, 0] = 1.0  # channel 0 = normalised depth
         self.register_buffer("select", select, persistent=False)
@@ -143,7 +149,7 @@ class UNet(nn.Module):
         self.register_buffer("first", select.clone().view(-1, 1, 1, 1), persistent=False)
         if args.gtao_input:
             guide = torch.zeros(1, cin, 1, 1)  # _unet sees the radius channel appended after GTAO
-            guide[0, len(INPUT_CHANNELS)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
+            guide[0, len(plain)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
             self.register_buffer("guide", guide, persistent=False)
         self.down = nn.ModuleList(
             nn.Sequential(_conv3x3(cin if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))

@@ -36,6 +36,7 @@ from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
 from neuralao.runtime.unet_input import (
+    BACK_LAYER_VERSION,
     FOREGROUND_GAIN,
     PREPROCESS_VERSION,
     frame_radius_param,
@@ -239,6 +240,8 @@ def prepared_folder(data: Path, ds: Dataset, internal_height: int, gtao: bool, v
         "internal_height": internal_height,
         "gtao": gtao_settings_entry(GTAOSettings()) if gtao else None,
         "preprocess_version": version,
+        # the back layer's files (a version-4 input reads them); absent before, so older keys stay
+        **({"back_layer": (ds.back_layer or {}).get("hash")} if version >= BACK_LAYER_VERSION else {}),
     }
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     return data.parent / f"{data.name}.prepared" / digest
@@ -362,6 +365,11 @@ def load_dataset_frames(
     """
     data = Path(data)
     ds = open_dataset(data)
+    if version >= BACK_LAYER_VERSION and ds.back_layer is None:
+        raise NeuralaoError(
+            f"dataset {data} has no back layer (depth_back), which a version-{version} U-Net reads: set "
+            '"back_layer": true in its config and run `neuralao dataset` again (it renders only the layer)'
+        )
     train_scenes = sorted({e["scene"] for e in ds.manifest["shards"] if e["split"] == "train"})
     if not train_scenes:
         raise NeuralaoError(f"dataset {data} has no training frames (no scene with split 'train')")

@@ -61,6 +61,7 @@ from neuralao.runtime.unet_input import (
     DESCRIPTIONS,
     PREPROCESS_VERSION,
     check_version,
+    input_channels,
 )
 
 log = logging.getLogger(__name__)
@@ -468,7 +469,7 @@ def pick_device(name: str) -> torch.device:
 
 def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
     return UNetArgs(
-        in_channels=5 if settings.gtao_input else 4,
+        in_channels=len(input_channels(int(settings.preprocess_version), bool(settings.gtao_input))),
         widths=list(settings.widths),
         negative_slope=settings.negative_slope,
         radius_input=True,
