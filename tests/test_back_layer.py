@@ -194,3 +194,70 @@ def test_back_layer_added_to_a_built_dataset_renders_only_the_layer(tmp_path):
     assert all("depth_back" not in f for f in build_and_read(plain, tmp_path / "plain"))
     manifest = json.loads((tmp_path / "fresh" / "manifest.json").read_text())
     assert manifest["back_layer"]["keys"] == ["depth_back"]
+
+
+@pytest.fixture(scope="module")
+def layered(tmp_path_factory):
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset
+    from neuralao.runtime.foundation.settings import from_dict
+
+    out = tmp_path_factory.mktemp("layered") / "data"
+    build_dataset(replace(from_dict(DatasetSettings, TINY), back_layer=True), out, progress=False)
+    return out
+
+
+def test_training_frames_of_version_4_carry_the_thickness(layered, tmp_path):
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+
+    train, val, info = load_dataset_frames(layered, version=4, gtao=True)
+    frames = {f"{f['scene']}/{f['view']}": f for f in open_dataset(layered).frames()}
+    for k, name in enumerate(train.names):
+        f = frames[name]
+        x = train.x[k].numpy() if hasattr(train.x[k], "numpy") else np.asarray(train.x[k])
+        assert x.shape[0] == 5
+        np.testing.assert_array_equal(x[4], thickness_channel(f["depth"], f["depth_back"], f["mask"]))
+    assert info["preprocess_version"] == 4
+    # the same dataset without its layer is refused by name for version 4, kept for version 3
+    manifest = json.loads((layered / "manifest.json").read_text())
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    (plain / "shards").symlink_to(layered / "shards")
+    (plain / "manifest.json").write_text(json.dumps({k: v for k, v in manifest.items() if k != "back_layer"}))
+    with pytest.raises(NeuralaoError, match="no back layer"):
+        load_dataset_frames(plain, version=4)
+    assert load_dataset_frames(plain, version=3)[0].x[0].shape[0] == 4
+
+
+def test_a_version_4_hybrid_with_no_correction_is_gtao_through_the_runtime(tmp_path):
+    import torch
+
+    from neuralao.export.onnx_io import get_metadata, load_onnx
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
+    from neuralao.pipeline.geometry.camera import orbit
+    from neuralao.pipeline.geometry.scene import load_scene
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+    from neuralao.runtime.baselines import run_gtao
+    from neuralao.runtime.frame import Frame
+    from neuralao.runtime.predict import unet_predictor
+
+    model = UNet(UNetArgs(in_channels=6, widths=[4, 8], gtao_input=True, preprocess_version=4)).eval()
+    with torch.no_grad():
+        model.out.weight.zero_()
+        model.out.bias.zero_()
+    export_onnx(model, tmp_path / "model.onnx", onnx_metadata(model))
+    meta = get_metadata(load_onnx(tmp_path / "model.onnx"))
+    assert meta["input_channels"].split(",") == ["depth", "normal_cam_x", "normal_cam_y", "normal_cam_z"] + [
+        "thickness",
+        "gtao",
+    ]
+    scene = load_scene("spot")
+    f = Frame.from_arrays(render_gbuffer(scene, orbit(scene, 2, 64, 48, seed=2)[0], back_layer=True))
+    radius = 0.125 * scene.diagonal
+    predict = unet_predictor(tmp_path / "model.onnx", internal_height=None)
+    got = predict(f, radius)
+    want = run_gtao(f, radius)
+    np.testing.assert_array_equal(got[f.mask], want[f.mask])
+    with pytest.raises(NeuralaoError, match="back layer"):
+        predict(f.replace(depth_back=None), radius)

@@ -65,11 +65,12 @@ def foreground(x: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
 class FrameSet:
     """Preprocessed frames in memory, with labels at K radii.
 
-    x : (N, 4, H, W) float32 network input; y : (N, K, H, W) float16 AO labels (exact: binary-kernel
-    labels are multiples of 1/rays); m : (N, K, H, W) bool valid & foreground; rho : (N, K) float32
-    radius parameters (:func:`neuralao.pipeline.models.unet.radius_param`); radii : (N, K) float32 radii in
-    scene units; names : N strings "scene/view"; scenes : N scene names. About (16 + 3 K) bytes a pixel.
-    Frames of several sizes: x, y and m are lists of N tensors (4 | K, H_i, W_i) instead; code that indexes
+    x : (N, C, H, W) float32 network input (C = 4, or 5 with the back layer); y : (N, K, H, W) float16 AO
+    labels (exact: binary-kernel labels are multiples of 1/rays); m : (N, K, H, W) bool valid &
+    foreground; rho : (N, K) float32 radius parameters (:func:`neuralao.pipeline.models.unet.radius_param`);
+    radii : (N, K) float32 radii in scene units; names : N strings "scene/view"; scenes : N scene names.
+    About (16 + 3 K) bytes a pixel.
+    Frames of several sizes: x, y and m are lists of N tensors (C | K, H_i, W_i) instead; code that indexes
     them by frame (``x[i]``) takes both. Hybrid sets add g, GTAO at every radius like y; the network's input
     for radius j is then ``cat(x[i], g[i][j])`` (:func:`network_input`).
     """
