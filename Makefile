@@ -103,8 +103,8 @@ corpus: $(CORPUS) ## Render and label the training corpus: isolated objects, roo
 # The larger corpus (configs/corpus-large.json), 8,608 frames: every train mesh on a 48-view orbit and in
 # 24 close-ups at 30-90 degree fields of view, the interiors, 480 composed rooms (objects on floors, against
 # walls and in corners, the thin-part props), val/test split by mesh; four meshes (beetle, Spaceship,
-# Corset, ClearcoatWicker) appear in none of its frames, for a held-aside evaluation. Sharded and
-# resumable: rerun to continue an interrupted build.
+# Corset, ClearcoatWicker) appear in none of its frames, for a held-aside evaluation; the G-buffer's back
+# layer beside every shard. Sharded and resumable: rerun to continue an interrupted build.
 CORPUS_LARGE_CONFIG := configs/corpus-large.json
 CORPUS_LARGE := build/corpus-large/dataset/manifest.json
 $(CORPUS_LARGE): $(CORPUS_LARGE_CONFIG) | $(STAMP)
