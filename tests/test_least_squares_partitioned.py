@@ -19,7 +19,15 @@ from neuralao.pipeline.bakes.level_pieces import scene_samples
 from neuralao.pipeline.bakes.level_settings import TraceSettings, halves, label_settings, load_level_settings
 from neuralao.pipeline.bakes.level_stages import fit_level, opaque_scene
 from neuralao.pipeline.engines.engine import Context, LocalEngine
-from neuralao.pipeline.geometry.least_squares import fit_least_squares, normal_equations, solve_amg
+from neuralao.pipeline.geometry.least_squares import (
+    Whole,
+    fit_least_squares,
+    normal_equations,
+    solve_amg,
+    touching_faces,
+    usable,
+    vertex_equations,
+)
 from neuralao.pipeline.geometry.level_files import flatten, read_level
 from neuralao.pipeline.geometry.level_gen import LevelGenSettings, settings_for, terrain
 from neuralao.pipeline.geometry.level_gen import write_level as write_generated_level
@@ -27,11 +35,13 @@ from neuralao.pipeline.geometry.partitioned_solve import (
     RTOL,
     SolveInfo,
     factorise,
+    mesh_partition,
     partition,
     solve_partitioned,
+    solve_subdomains,
 )
 from neuralao.pipeline.geometry.scene import load_scene, scene_from_arrays
-from neuralao.pipeline.geometry.surface import surface_samples
+from neuralao.pipeline.geometry.surface import face_areas, surface_samples
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Largest allowed |partitioned - SuperLU| (float64, before clipping). Measured: at most 7.8e-7 here (the
@@ -135,9 +145,64 @@ def test_partitioned_solve_is_the_global_solve(name, request):
         assert err <= MAX_ABS, f"{name}, {k} subdomains: max abs {err:.2e}"
         assert max(info.iterations) <= MAX_ITERATIONS, f"{name}, {k} subdomains: {info.iterations} iterations"
         assert max(info.residuals) <= RTOL
-        # a wave of k tasks for each of an iteration's two steps, the first local solves and the collection
-        waves = 2 * max(info.iterations) + 2
+        # a wave of k tasks for each of an iteration's two steps, the subdomains' assembly, the first local
+        # solves and the collection
+        waves = 2 * max(info.iterations) + 3
         assert len(info.subdomain_vertices) == k and len(info.seconds_tasks) == k * waves
+
+
+class SampleRows:
+    """The rows of a case's normal equations made per subdomain, from the faces that touch it and their
+    samples alone (what a level's piece makes on its workers), the whole surface's weights and prior those
+    :func:`normal_equations` takes."""
+
+    def __init__(self, case):
+        self.case = case
+        ok = usable(case.values, case.valid)
+        w, f = case.samples.weights[ok], case.values.reshape(len(case.values), -1)[ok]
+        self.whole = Whole(float(w.sum()), float(face_areas(case.scene).sum()), np.average(f, 0, weights=w))
+
+    def rows(self, state, vertices):
+        c = self.case
+        faces = touching_faces(c.scene.faces, vertices, len(c.scene.vertices))
+        on = np.isin(c.samples.face, faces)
+        return vertex_equations(
+            c.scene, faces, c.samples[on], c.values[on], c.valid[on], 1.0, self.whole, vertices
+        )
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_subdomains_that_make_their_own_rows_solve_the_global_system(name, request):
+    """Cut from the mesh before any equation is made (:func:`mesh_partition`: the same subdomains and
+    aggregates as cut from the matrix), each subdomain's rows made where its tasks run and the ridge added
+    from their largest diagonal entry: the CG converges to SuperLU's solution of :func:`normal_equations`
+    within MAX_ABS in at most MAX_ITERATIONS iterations, soup included."""
+    case = request.getfixturevalue(name)
+    direct = _direct(case)
+    source = SampleRows(case)
+    for k in (1, 4, 16):
+        part = mesh_partition(case.scene.vertices, case.scene.faces, k)
+        ref = partition(case.a, case.scene.vertices, k)
+        assert np.array_equal(part.core, ref.core) and np.array_equal(part.coarse, ref.coarse)
+        assert all(np.array_equal(x, y) for x, y in zip(part.parts, ref.parts, strict=True))
+        info = SolveInfo()
+        v = solve_subdomains(source, part, info=info, ridge=source.whole.prior)
+        err = float(np.abs(v - direct).max())
+        assert err <= MAX_ABS, f"{name}, {k} subdomains: max abs {err:.2e}"
+        assert max(info.iterations) <= MAX_ITERATIONS and max(info.residuals) <= RTOL
+        assert len(info.seconds_tasks) == k * (2 * max(info.iterations) + 3)
+
+
+def test_subdomains_that_make_their_own_rows_are_the_same_bytes_on_every_engine(terrain_case):
+    """In this process, as tasks, and as tasks on two threads: the same bytes."""
+    c = terrain_case
+    source = SampleRows(c)
+    part = mesh_partition(c.scene.vertices, c.scene.faces, 8, connected=True)
+    runs = [
+        solve_subdomains(source, part, engine, ridge=source.whole.prior)
+        for engine in (None, LocalEngine(), LocalEngine(workers=2))
+    ]
+    assert runs[0].tobytes() == runs[1].tobytes() == runs[2].tobytes()
 
 
 @pytest.mark.parametrize("name", ["terrain_case", "soup_case"])

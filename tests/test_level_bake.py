@@ -241,7 +241,7 @@ def test_rerun_reuses_stages_and_resumes_to_identical_bytes(baked, tmp_path):
 def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     """``trace.subdomains``: the terrain's component (625 vertices, over ``component_vertices``) is solved
     in 4 subdomains, a task each per step of the CG (two an iteration), the other pieces' solves beside its
-    equation shares, and every static vertex gets the default bake's AO; a rerun reuses the driver-solved
+    subdomains' assembly, and every static vertex gets the default bake's AO; a rerun reuses the driver-solved
     piece's file and writes the same bytes. The bake log gives each task's wave (map call)."""
     root, level, cfg, info = baked
     overrides = ["trace.subdomains=4", "trace.component_vertices=200", "lod.enabled=false", "piece_faces=100"]
@@ -255,7 +255,7 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     waves = sub["task_waves"]["solve"]
     assert len(waves) == solve["tasks"] and waves == sorted(waves) and waves[0] == 0
     per_wave = np.bincount(waves)
-    # the component check, the shares with the other two pieces' solves, then 4 tasks per CG iteration
+    # the component check, the subdomains' assembly with the other two pieces' solves, then 4 tasks a step
     assert sub["counts"]["pieces"] == 3 and per_wave[1] > 2 and set(per_wave[2:]) == {4}
     first = (out / "level_baked.glb").read_bytes()
     (out / "stages" / "solve.npz").unlink()

@@ -15,6 +15,7 @@ from neuralao.pipeline.bakes.level_decorators import FoliageSettings, build_foli
 from neuralao.pipeline.bakes.level_pieces import (
     cached_block,
     face_counts,
+    face_samples,
     index_level,
     piece_samples,
     piece_scene,
@@ -123,6 +124,39 @@ def test_a_block_counts_only_its_sample_ranges_and_makes_the_piece_s_samples(tin
     if len(piece.ranges) > 1:
         with pytest.raises(NeuralaoError, match="sample ranges"):
             level_pieces.cached_block(f"bad{run}", g.level, index, bad, rule, 0, 1)
+
+
+@pytest.mark.parametrize("run", [3, 10, 10**6, None])
+def test_the_samples_of_any_faces_are_the_piece_s_on_them(tiny_geometry, monkeypatch, run):
+    """A subdomain's worker makes the samples of the faces that touch its vertices (scattered over the piece)
+    from its sample ranges' counts: they are the piece's samples on those faces, bit for bit, and their
+    numbers are the piece's (``run`` None: the ranges not known, every face counted)."""
+    import neuralao.pipeline.bakes.level_pieces as level_pieces
+
+    if run is not None:
+        monkeypatch.setattr(level_pieces, "SAMPLE_RANGE_FACES", run)
+    g = tiny_geometry
+    index = index_level(g.level, 10**9)
+    rule, pieces = sample_rule(g.level, index, 2.0, 0, 4, seed=7)
+    piece = pieces[0] if run is not None else replace(pieces[0], ranges=())
+    scene = piece_scene(g.level, index, piece)
+    whole = piece_samples(scene, piece, rule)
+    rng = np.random.default_rng(2)
+    nf = len(scene.faces)
+    picks = [np.arange(nf), np.arange(0), np.array([nf - 1]), np.arange(nf // 3, nf // 2)]
+    picks += [np.flatnonzero(rng.uniform(size=nf) < share) for share in (0.02, 0.3, 0.9)]
+    for faces in picks:
+        got, numbers = face_samples(scene, piece, rule, faces)
+        on = np.flatnonzero(np.isin(whole.face, faces))
+        np.testing.assert_array_equal(numbers, on)
+        for k in ("face", "bary", "points", "normals", "weights"):
+            np.testing.assert_array_equal(
+                getattr(got, k), getattr(whole, k)[on], err_msg=f"{k}, {len(faces)}"
+            )
+    if len(piece.ranges) > 1:  # ranges that disagree with the faces they count: an error, not other samples
+        bad = replace(piece, ranges=((0, 1), *piece.ranges[1:]))
+        with pytest.raises(NeuralaoError, match="sample ranges"):
+            face_samples(scene, bad, rule, np.arange(nf))
 
 
 def test_two_distances_from_one_trace_equal_two_separate_traces(tiny_geometry):

@@ -16,7 +16,10 @@ from neuralao.pipeline.geometry.least_squares import (
     equation_share,
     normal_equations,
     sum_shares,
+    touching_faces,
+    vertex_equations,
 )
+from neuralao.pipeline.geometry.scene import Scene
 from neuralao.pipeline.geometry.surface import SurfaceSamples, largest_component, surface_samples
 
 # Entries are sums of a few hundred float64 products of one sign per term: a relative 1e-12 of the largest
@@ -24,8 +27,9 @@ from neuralao.pipeline.geometry.surface import SurfaceSamples, largest_component
 REL = 1e-12
 
 
-def dense_reference(scene, samples, values, valid, alpha, weight, area, prior):
-    """A and rhs from the energy sample by sample and edge by edge (module doc of least_squares), dense."""
+def dense_reference(scene, samples, values, valid, alpha, weight, area, prior, ridge=True):
+    """A and rhs from the energy sample by sample and edge by edge (module doc of least_squares), dense;
+    without the ridge when not ``ridge``."""
     n = len(scene.vertices)
     a, rhs = np.zeros((n, n)), np.zeros((n,) + values.shape[1:])
     for s in np.flatnonzero(valid):
@@ -49,6 +53,8 @@ def dense_reference(scene, samples, values, valid, alpha, weight, area, prior):
         a[j, j] += k
         a[i, j] -= k
         a[j, i] -= k
+    if not ridge:
+        return a, rhs
     ridge = RIDGE_REL * a.diagonal().max()
     return a + ridge * np.eye(n), rhs + ridge * prior
 
@@ -127,6 +133,57 @@ def test_faces_without_samples_still_get_the_regulariser(soup):
     assert all(len(v) == 0 for v in empty.values())  # no sample, no face: nothing
 
 
+def _rows_of(soup, vertices, alpha, whole):
+    """vertex_equations of ``vertices`` from the faces touching them and their samples alone."""
+    scene, samples, values, valid = soup
+    faces = touching_faces(scene.faces, vertices, len(scene.vertices))
+    on = np.isin(samples.face, faces)
+    return vertex_equations(scene, faces, samples[on], values[on], valid[on], alpha, whole, vertices)
+
+
+@pytest.mark.parametrize("share", [0.03, 0.4, 1.0])
+def test_rows_made_from_the_faces_that_touch_them_are_the_energy_s(soup, share):
+    """The rows of any vertices, made from the faces that touch them and those faces' samples alone (what a
+    subdomain's worker makes), are the dense reference's rows (without the ridge), with every neighbour among
+    their columns and every diagonal entry stored (a vertex in no face: a zero, where the ridge goes)."""
+    scene, samples, values, valid = soup
+    whole = Whole(weight=3.0, area=900.0, prior=np.array([0.4, 0.6]))
+    ok = valid & np.isfinite(values).all(1)
+    ref, ref_rhs = dense_reference(scene, samples, values, ok, 0.7, 3.0, 900.0, whole.prior, ridge=False)
+    n = len(scene.vertices)
+    vertices = np.flatnonzero(np.random.default_rng(5).uniform(size=n) < share)
+    columns, rows, rhs = _rows_of(soup, vertices, 0.7, whole)
+    assert rows.shape == (len(vertices), len(columns)) and np.array_equal(columns, np.unique(columns))
+    dense = np.zeros((len(vertices), n))
+    dense[:, columns] = rows.toarray()
+    assert np.abs(dense - ref[vertices]).max() <= REL * np.abs(ref).max()
+    assert np.abs(rhs - ref_rhs[vertices]).max() <= REL * np.abs(ref_rhs).max()
+    assert np.isin(np.flatnonzero(ref[vertices].any(0)), columns).all()
+    at = np.searchsorted(columns, vertices)
+    assert all(at[r] in rows.indices[rows.indptr[r] : rows.indptr[r + 1]] for r in range(len(vertices)))
+    lone = Scene(np.vstack([scene.vertices, [[0.0, 99.0, 0.0]]]), scene.faces)  # a vertex in no face
+    columns, rows, rhs = _rows_of((lone, samples, values, valid), np.array([n]), 0.7, whole)
+    assert columns.tolist() == [n] and rows.toarray().tolist() == [[0.0]] and not rhs.any()
+
+
+def test_a_vertex_s_row_is_the_same_bits_whatever_is_asked_with_it(soup):
+    """Two subdomains that both hold a vertex make its row and right-hand side alike, bit for bit: the
+    copies of a partitioned solve's residual are the same bits only then."""
+    scene = soup[0]
+    whole = Whole(weight=3.0, area=900.0, prior=np.array([0.4, 0.6]))
+    n = len(scene.vertices)
+    first, second = np.arange(0, 2 * n // 3), np.arange(n // 3, n)
+    a = _rows_of(soup, first, 1.0, whole)
+    b = _rows_of(soup, second, 1.0, whole)
+    for u in range(n // 3, 2 * n // 3):
+        rows = []
+        for (columns, m, rhs), vertices in ((a, first), (b, second)):
+            r = int(np.searchsorted(vertices, u))
+            span = slice(m.indptr[r], m.indptr[r + 1])
+            rows.append((columns[m.indices[span]].tobytes(), m.data[span].tobytes(), rhs[r].tobytes()))
+        assert rows[0] == rows[1], u
+
+
 def test_largest_component_counts_vertices_joined_by_faces():
     faces = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 8, 9]])
     assert largest_component(faces, 12) == 5  # 0-4; then 5-7, 8-9, and 10, 11 in no face
@@ -136,8 +193,8 @@ def test_largest_component_counts_vertices_joined_by_faces():
 
 def test_the_driver_coordinates_only_pieces_with_a_big_component(tmp_path):
     """With ``trace.subdomains``, a piece of many vertices made of small meshes (houses) is one task like any
-    other; the terrain's piece is coordinated by the driver, its equations assembled by a task per trace
-    block; both bakes write the vertex AO of the default solve."""
+    other; the terrain's piece is coordinated by the driver, its equations made by its subdomains' tasks;
+    both bakes write the vertex AO of the default solve."""
     from neuralao.pipeline.bakes.level import bake_level
     from neuralao.pipeline.bakes.level_pieces import index_level
     from neuralao.pipeline.bakes.level_settings import load_level_settings

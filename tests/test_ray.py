@@ -234,6 +234,35 @@ def test_two_node_level_bake_driver_killed_mid_stage_resumes_to_same_bytes(clust
     _assert_same_level_bake(out, local, info)
 
 
+def test_two_node_level_bake_in_subdomains_driver_killed_mid_solve_resumes_to_same_bytes(
+    cluster, local_level, tmp_path
+):
+    """The terrain's piece solved in subdomains, each subdomain's rows of the equations made by its worker
+    (on either node) from the piece's samples there: the driver is killed once the pieces solved beside the
+    subdomains' assembly are written, and the rerun ends with the bytes of a local bake of the same
+    settings."""
+    from neuralao.pipeline.bakes.level import bake_level
+    from neuralao.pipeline.bakes.level_settings import load_level_settings
+
+    level, cfg, *_ = local_level
+    split = ["trace.subdomains=4", "trace.component_vertices=200"]
+    local = tmp_path / "local"
+    info = bake_level(level, load_level_settings(cfg, [*LEVEL_TASKS, *split]), local)
+    assert next(st for st in info["stages"] if st["stage"] == "solve")["seconds_driver"] > 0
+    out = tmp_path / "ray"
+    args = _level_bake_args(level, cfg, out, "--address", cluster, "--set", split[0], "--set", split[1])
+    p = _cli(*args, start_new_session=True)
+    _kill_when(p, lambda: any((out / "stages" / "solve").glob("[!.]*.npz")), timeout=120)
+    assert p.returncode == -signal.SIGKILL and not (out / "level_baked.glb").exists()
+    # killed in the subdomains' solve: the coordinated piece's result is not there yet
+    here = [f.name for f in (local / "stages" / "solve").glob("*.npz") if np.load(f)["seconds_driver"] > 0]
+    assert len(here) == 1 and not (out / "stages" / "solve" / here[0]).exists()
+    p = _cli(*args)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 0, err
+    _assert_same_level_bake(out, local, info)
+
+
 def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, tmp_path):
     """`--ray-threads 2`: one actor holding both CPUs of a private Ray instance (one BVH per machine)
     traces with two threads and writes the local bake's bytes."""

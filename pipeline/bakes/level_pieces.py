@@ -316,6 +316,58 @@ def cached_block(
     return scene, block
 
 
+def face_samples(
+    scene: Scene, piece: Piece, rule: SampleRule, faces: np.ndarray, key: str | None = None
+) -> tuple[SurfaceSamples, np.ndarray]:
+    """The samples of ``piece`` on its faces ``faces`` ((m,) int64 ascending, faces of its ``scene``):
+    ``piece_samples(scene, piece, rule)`` restricted to them bit for bit, their ``face`` numbered in the
+    scene, and (k,) int64 their numbers among the piece's samples. Only the piece's sample ranges
+    (``Piece.ranges``) that hold one of ``faces`` are counted (a subdomain of the 10x world's terrain: an
+    eighth of its faces, not all of them); with ``key`` (the bake's) each range's counts are kept for the
+    next call in this process (:data:`RANGES_KEPT`: a worker's other subdomains of the piece)."""
+    faces = np.asarray(faces, np.int64)
+    ranges = piece.ranges or ((0, 0),)  # not known: one range, every face of the piece
+    starts = np.array([f for f, _ in ranges] + [len(scene.faces)], np.int64)
+    firsts = np.array([s for _, s in ranges] + [piece.ns], np.int64)
+    run = np.searchsorted(starts, faces, side="right") - 1
+    counts, first = np.zeros(len(faces), np.int64), np.zeros(len(faces), np.int64)
+    cuts = np.flatnonzero(np.r_[True, run[1:] != run[:-1], True]) if len(faces) else np.zeros(1, np.int64)
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        r = int(run[a])
+        fa, fb = int(starts[r]), int(starts[r + 1])
+
+        def count(r=r, fa=fa, fb=fb):
+            c = face_counts(face_areas(Scene(scene.vertices, scene.faces[fa:fb])), piece.f0 + fa, rule)
+            if int(c.sum()) != firsts[r + 1] - firsts[r]:
+                raise NeuralaoError(
+                    f"piece {piece.index}: its sample ranges do not match its faces' sample counts"
+                )
+            return c, np.cumsum(c) - c
+
+        c, before = (
+            count() if key is None else remembered(_RANGES, (key, piece.index, rule, r), count, RANGES_KEPT)
+        )
+        local = faces[a:b] - fa
+        counts[a:b], first[a:b] = c[local], firsts[r] + before[local]
+    samples = surface_samples(
+        Scene(scene.vertices, scene.faces[faces], scene.name, scene.source),
+        0,
+        seed=rule.seed,
+        counts=counts,
+        face_offset=piece.f0 + faces,
+        area_total=rule.area_total,
+    )
+    samples.face = faces[samples.face]
+    within = np.arange(len(samples), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+    return samples, np.repeat(first, counts) + within
+
+
+# A process's latest sample ranges' per-face counts and first samples (:func:`face_samples`): 64 ranges of
+# SAMPLE_RANGE_FACES faces are 64 MB, the ranges a few subdomains of the 10x world's terrain touch.
+_RANGES: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+RANGES_KEPT = 64
+
+
 def piece_ranges(piece: Piece) -> list[tuple[int, int]]:
     """Faces [a, b) of each of ``piece``'s sample ranges: runs of SAMPLE_RANGE_FACES faces (one, maybe
     empty, for a piece of no face)."""

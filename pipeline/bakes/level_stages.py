@@ -11,7 +11,6 @@ skips the files it finds, and the driver's memory is one piece's, not the level'
 from __future__ import annotations
 
 import copy
-import itertools
 import threading
 import time
 import zipfile
@@ -32,6 +31,7 @@ from neuralao.pipeline.bakes.level_pieces import (
     SampleRule,
     cached_block,
     cached_piece,
+    face_samples,
     instance_vertices,
     piece_scene,
     remembered,
@@ -40,14 +40,19 @@ from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSetti
 from neuralao.pipeline.engines.engine import Context, LocalEngine, Shared, Task, content_key, no_state
 from neuralao.pipeline.geometry.least_squares import (
     Whole,
-    equation_share,
     fit_least_squares,
     normal_equations,
     solve_amg,
-    sum_shares,
+    touching_faces,
+    vertex_equations,
 )
 from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
-from neuralao.pipeline.geometry.partitioned_solve import SolveInfo, solve_partitioned
+from neuralao.pipeline.geometry.partitioned_solve import (
+    SolveInfo,
+    mesh_partition,
+    solve_partitioned,
+    solve_subdomains,
+)
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
     face_areas,
@@ -366,31 +371,42 @@ def solve_stage(
     keys: tuple[str, ...] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece with a
-    connected component of at least ``trace.component_vertices`` vertices is solved from here: its equations
-    are assembled by tasks, a share per trace block, and added here; its big components' subdomain solves are
-    tasks of ``runner`` under ``ctx`` (its workers hold it already) and the iteration runs here
-    (:mod:`neuralao.pipeline.geometry.partitioned_solve`). Every other piece is one task. The results are the
-    same bytes with any engine: each task is a pure function of its arguments, and the driver adds the
-    results in a fixed order. ``keys``: the arrays of each result read back (None: all)."""
+    connected component of at least ``trace.component_vertices`` vertices is solved from here in subdomains
+    (:func:`_solve_piece_here`): each subdomain's worker makes its rows of the equations, and the iteration
+    runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`), its steps tasks of ``runner`` under
+    ``ctx`` (its workers hold it already). Every other piece is one task. The results are the same bytes with
+    any engine: each task is a pure function of its arguments, and the driver adds the results in a fixed
+    order. ``keys``: the arrays of each result read back (None: all)."""
     t = s.trace
+    # The subdomains are cut from the mesh before the equations exist: their graph is the faces' when the
+    # regulariser couples every face. Without one (alpha 0) a big piece is one task, in subdomains there.
     big = [
-        p for p in pieces if t.solver == "components" and t.subdomains > 1 and p.nv >= t.component_vertices
+        p
+        for p in pieces
+        if t.solver == "components" and t.subdomains > 1 and t.alpha > 0 and p.nv >= t.component_vertices
     ]
     # a piece whose result is stored is read back wherever it was solved: only the others are looked at
     todo = [p for p in big if not files.has(piece_stem(p))]
-    found = {p.index for p in big_components(runner, ctx, todo, t.component_vertices)} if todo else set()
+    _, index, _ = ctx.value()
+    largest = largest_components(runner, ctx, todo, t.component_vertices) if todo else {}
+    found = {
+        p.index for p in todo if any(largest.get(m, 0) >= t.component_vertices for m in meshes(index, p))
+    }
     here = [p for p in big if p.index in found or files.has(piece_stem(p))]
     stems = frozenset(piece_stem(p) for p in here)
     files.keep_only({piece_stem(p) for p in pieces})
     rest = [p for p in pieces if piece_stem(p) not in stems]
     jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
-    # The other pieces' solves run beside the first big piece's equation shares, in one wave: on many
-    # machines they then take no wave of their own after the big pieces' iterations.
+    # The other pieces' solves run beside the first big piece's assembly, in one wave: on many machines they
+    # then take no wave of their own after the big pieces' iterations.
     beside = unfinished(files, jobs, keys)
     fresh = set()
     for p in here:
         if not files.has(piece_stem(p)):
-            result = _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole, beside, files)
+            # one mesh's instance whose largest component is all of it: one component, the cores' aggregates
+            (mesh,) = meshes(index, p) if p.stop - p.first == 1 else (None,)
+            connected = mesh is not None and largest.get(mesh) == p.nv
+            result = _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole, beside, files, connected)
             files.put(piece_stem(p), result)
             fresh.add(piece_stem(p))
             beside = []
@@ -399,20 +415,25 @@ def solve_stage(
         yield stem, files.get(stem, keys), stem not in fresh
 
 
+def meshes(index: PieceIndex, piece: Piece) -> set[int]:
+    """The meshes of a piece's instances."""
+    return {index.nodes[k].mesh for k in index.table[piece.first : piece.stop, 0]}
+
+
+def largest_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> dict[int, int]:
+    """{mesh: vertices of its largest connected component} of the ``pieces``' meshes of at least
+    ``at_least`` vertices, each counted once, by a task of ``runner`` (workers hold the level)."""
+    level, index, _ = ctx.value()
+    todo = sorted({m for p in pieces for m in meshes(index, p) if len(level.meshes[m].vertices) >= at_least})
+    return {todo[i]: int(r["vertices"]) for i, r in runner.map(Task(ctx, _mesh_component, m) for m in todo)}
+
+
 def big_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> list[Piece]:
     """The ``pieces`` with a connected component of at least ``at_least`` vertices. A piece's instances
-    share no vertex, so that is one of its meshes' components; each mesh that has so many vertices is
-    counted once, by a task of ``runner`` (workers hold the level)."""
-    level, index, _ = ctx.value()
-
-    def meshes(p: Piece) -> set[int]:
-        return {index.nodes[k].mesh for k in index.table[p.first : p.stop, 0]}
-
-    todo = sorted({m for p in pieces for m in meshes(p) if len(level.meshes[m].vertices) >= at_least})
-    largest = {
-        todo[i]: int(r["vertices"]) for i, r in runner.map(Task(ctx, _mesh_component, m) for m in todo)
-    }
-    return [p for p in pieces if any(largest.get(m, 0) >= at_least for m in meshes(p))]
+    share no vertex, so that is one of its meshes' components (:func:`largest_components`)."""
+    _, index, _ = ctx.value()
+    largest = largest_components(runner, ctx, pieces, at_least)
+    return [p for p in pieces if any(largest.get(m, 0) >= at_least for m in meshes(index, p))]
 
 
 def _mesh_component(state: PieceState, mesh: int) -> dict[str, np.ndarray]:
@@ -421,49 +442,75 @@ def _mesh_component(state: PieceState, mesh: int) -> dict[str, np.ndarray]:
 
 
 def _solve_piece_here(
-    runner, ctx: Context, piece: Piece, rule, trace_files: TaskFiles, s, whole, beside=(), files=None
+    runner,
+    ctx: Context,
+    piece: Piece,
+    rule,
+    trace_files: TaskFiles,
+    s,
+    whole,
+    beside=(),
+    files=None,
+    connected: bool = False,
 ):
-    """:func:`_solve_piece` with the driver as the coordinator: the piece's normal equations are assembled by
-    tasks of ``runner``, one share per trace block (each from its worker's copy of the piece), and added
-    here; :func:`solve_equations` then solves them, its subdomain solves tasks too. The driver makes the
-    piece's vertices, not its samples, and drops everything with the result. ``beside``: jobs (stem, task
-    maker) of other pieces run with the shares, each result put in ``files`` as it arrives."""
+    """:func:`_solve_piece` with the driver as the coordinator, its equations never whole anywhere: the
+    subdomains are cut from the piece's mesh here (:func:`neuralao.pipeline.geometry.partitioned_solve.
+    mesh_partition`; ``connected``: the piece is one connected component), each subdomain's worker makes its
+    rows from the piece's samples on the faces that touch it (:class:`PieceRows`, the first wave) and keeps
+    them for the CG's steps, and the coarse system is added up here from their shares. The driver reads the
+    piece's traces and makes its vertices, not its samples, and drops everything with the result.
+    ``beside``: jobs (stem, task maker) of other pieces run in the first wave, each result put in ``files``
+    as it arrives."""
     level, index, _ = ctx.value()
     t0 = time.perf_counter()
     scene = piece_scene(level, index, piece)
-    blocks = list(trace_blocks(trace_files, piece, s.trace.block_samples))
-    blocks = blocks or [(0, np.zeros((0, 2), np.float32), np.zeros(0, bool))]  # no sample: the regulariser
-    args = [(piece, rule, lo, ao, valid, s.trace.alpha, whole) for lo, ao, valid in blocks]
-    shares: list = [None] * len(args)
-    timing = {"assembly": 0.0, "blocks": 0.0, "largest_block": 0.0, "driver": 0.0}
-    t1 = time.perf_counter()
-    tasks = itertools.chain((Task(ctx, _equation_share, a) for a in args), (make() for _, make in beside))
-    for i, r in runner.map(tasks):
-        if i >= len(args):
-            files.put(beside[i - len(args)][0], r)
-            continue
-        shares[i] = r
-        timing["blocks"] += float(r["seconds"])
-        timing["largest_block"] = max(timing["largest_block"], float(r["seconds"]))
-    waited = time.perf_counter() - t1
-    a, rhs = sum_shares(len(scene.vertices), shares, whole.prior)
-    del shares
-    timing["assembly"] = time.perf_counter() - t0 - waited
-    v = solve_equations(a, rhs, scene.vertices, s.trace, runner, None, "", timing, ctx)
+    ao, valid = piece_trace(trace_files, piece, s.trace.block_samples)
+    part = mesh_partition(scene.vertices, scene.faces, s.trace.subdomains, connected=connected)
+    source = PieceRows(piece, rule, ao, valid, s.trace.alpha, whole)
+    del scene
+    assembly = time.perf_counter() - t0
+    info = SolveInfo()
+    x = solve_subdomains(
+        source,
+        part,
+        runner,
+        ctx,
+        info=info,
+        ridge=whole.prior,
+        beside=(make() for _, make in beside),
+        aside=lambda i, r: files.put(beside[i][0], r),
+    )
+    v = np.clip(x, 0.0, 1.0).astype(np.float32)
+    timing = {
+        "assembly": assembly,
+        "blocks": sum(info.seconds_tasks),
+        "largest_block": info.largest_task,
+        "driver": info.seconds_setup + info.seconds_driver,
+    }
     return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in timing.items()}}
 
 
-def _equation_share(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: the normal equations' share of one trace block of a piece (its samples' data term, and
-    the regulariser of the faces from its first sample's to the next block's first sample's)."""
-    piece, rule, lo, ao, valid, alpha, whole = args
-    t0 = time.perf_counter()
-    hi = lo + len(valid)
-    scene, block = cached_block(state.key, state.level, state.index, piece, rule, lo, min(hi + 1, piece.ns))
-    first = 0 if lo == 0 else int(block.face[0])
-    stop = len(scene.faces) if hi >= piece.ns else int(block.face[-1])  # the next block's first sample's
-    share = equation_share(scene, block[: hi - lo], ao, valid, alpha, whole, (first, stop), compact=True)
-    return {**share, "seconds": np.array(time.perf_counter() - t0)}
+@dataclass(frozen=True)
+class PieceRows:
+    """The rows of a piece's normal equations, made where a subdomain's tasks run (the source of
+    :func:`neuralao.pipeline.geometry.partitioned_solve.solve_subdomains`): from the worker's copy of the
+    piece, the piece's samples on the faces that touch the subdomain (made there, bit for bit those the
+    trace made: :func:`neuralao.pipeline.bakes.level_pieces.face_samples`) and their traced values."""
+
+    piece: Piece
+    rule: SampleRule
+    ao: np.ndarray  # (ns, 2) float32: the piece's traced obscurance, both distances
+    valid: np.ndarray  # (ns,) bool
+    alpha: float
+    whole: Whole
+
+    def rows(self, state: PieceState, vertices: np.ndarray) -> tuple[np.ndarray, Any, np.ndarray]:
+        """:func:`neuralao.pipeline.geometry.least_squares.vertex_equations` of the piece's ``vertices``."""
+        scene, _ = cached_piece(state.key, state.level, state.index, self.piece, None)
+        faces = touching_faces(scene.faces, vertices, len(scene.vertices))
+        samples, numbers = face_samples(scene, self.piece, self.rule, faces, state.key)
+        ao, valid = self.ao[numbers], self.valid[numbers]
+        return vertex_equations(scene, faces, samples, ao, valid, self.alpha, self.whole, vertices)
 
 
 def fit_level(

@@ -98,7 +98,7 @@ def normal_equations(
     valid = usable(values, valid)
     prior = None if whole is None else whole.prior
     if prior is None:  # the samples' own weighted mean
-        w, f = samples.weights[valid], values.reshape(len(values), -1)[valid]
+        w, f = samples.weights[valid], _columns(values)[valid]
         prior = np.average(f, axis=0, weights=w) if len(f) and w.sum() > 0 else np.ones(f.shape[1:])
         prior = prior.reshape(values.shape[1:])
     if whole is None:
@@ -107,10 +107,15 @@ def normal_equations(
     return sum_shares(len(scene.vertices), [share], prior)
 
 
+def _columns(values: np.ndarray) -> np.ndarray:
+    """(k, c) view of values (k,) or (k, c...), also for k = 0 (where reshape cannot infer c)."""
+    return values.reshape(len(values), int(np.prod(values.shape[1:])))
+
+
 def usable(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(k,) bool: the samples of the data term, valid and with every value finite."""
     values = np.asarray(values)
-    return np.asarray(valid, dtype=bool) & np.isfinite(values).reshape(len(values), -1).all(axis=1)
+    return np.asarray(valid, dtype=bool) & np.isfinite(_columns(values)).all(axis=1)
 
 
 def equation_share(
@@ -136,40 +141,26 @@ def equation_share(
     right-hand side once (a share that travels: about a third of the entries of a mesh's faces)."""
     values = np.asarray(values, np.float64)
     keep = usable(values, valid)
-    face, bary = samples.face[keep], samples.bary[keep]
-    w = samples.weights[keep] / whole.weight if whole.weight > 0 else samples.weights[keep]
-    f = values.reshape(len(values), -1)[keep]
+    face = samples.face[keep]
     regularised = alpha > 0 and faces[1] > faces[0]
     # the faces of the samples and of the regularised range, as one span [lo, hi)
     spans = ([(int(faces[0]), int(faces[1]))] if regularised else []) + (
         [(int(face.min()), int(face.max()) + 1)] if len(face) else []
     )
     lo, hi = (min(a for a, _ in spans), max(b for _, b in spans)) if spans else (0, 0)
-    m = hi - lo
-    local = face - lo
-
-    def per_face(x: np.ndarray) -> np.ndarray:
-        return np.bincount(local, weights=x, minlength=m).astype(np.float64, copy=False)
-
-    # per face: the symmetric 3x3 block's aa, bb, cc, ab, bc, ca, and each corner's right-hand side
-    k = np.stack([per_face(w * bary[:, a] * bary[:, b]) for a, b in _PAIRS], 1)
-    r = np.stack([[per_face(w * bary[:, a] * col) for col in f.T] for a in range(3)])
-    used = np.bincount(local, minlength=m) > 0
+    k, r = _data_terms(samples, values, keep, face - lo, hi - lo, whole)
+    used = np.bincount(face - lo, minlength=hi - lo) > 0
     if regularised:
-        # every edge of a face gets a third of its area: +e twice on each corner's diagonal, -e off it
-        tri = Scene(scene.vertices, scene.faces[faces[0] : faces[1]])
-        e = (alpha * REG_SCALE / 3.0) * face_areas(tri)
-        e = e / whole.area if whole.area > 0 else e
         span = slice(int(faces[0]) - lo, int(faces[1]) - lo)
-        k[span, :3] += 2.0 * e[:, None]
-        k[span, 3:] -= e[:, None]
+        _regularise(k, span, scene, slice(int(faces[0]), int(faces[1])), alpha, whole)
         used[span] = True
     hit = np.flatnonzero(used)
     corners = scene.faces[lo + hit].astype(np.int64)
+    rows, cols, data = _entries(corners, k[hit])
     share = {
-        "rows": corners[:, [0, 1, 2, 0, 1, 1, 2, 2, 0]].reshape(-1),
-        "cols": corners[:, [0, 1, 2, 1, 0, 2, 1, 0, 2]].reshape(-1),
-        "data": k[hit][:, [0, 1, 2, 3, 3, 4, 4, 5, 5]].reshape(-1),
+        "rows": rows,
+        "cols": cols,
+        "data": data,
         "rhs_rows": corners.reshape(-1),
         "rhs": r[:, :, hit].transpose(2, 0, 1).reshape(-1, r.shape[1]),
     }
@@ -197,6 +188,134 @@ def _compacted(share: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 # The six entries of a face's symmetric 3x3 block: its diagonal, then (0, 1), (1, 2), (2, 0).
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
+
+
+def _data_terms(
+    samples: SurfaceSamples, values: np.ndarray, keep: np.ndarray, local: np.ndarray, m: int, whole
+):
+    """Per face of m, the data term of the ``keep`` samples (their faces ``local`` (k,) in 0..m-1): the
+    symmetric 3x3 block's six entries (m, 6) float64 in :data:`_PAIRS` order, and each corner's right-hand
+    sides (3, c, m). Each face's sums run over its samples in their order (one ``np.bincount`` pass), so a
+    face's terms are the same bits whichever other faces are summed with it."""
+    bary = samples.bary[keep]
+    w = samples.weights[keep] / whole.weight if whole.weight > 0 else samples.weights[keep]
+    f = _columns(values)[keep]
+
+    def per_face(x: np.ndarray) -> np.ndarray:
+        return np.bincount(local, weights=x, minlength=m).astype(np.float64, copy=False)
+
+    k = np.stack([per_face(w * bary[:, a] * bary[:, b]) for a, b in _PAIRS], 1)
+    r = np.stack([[per_face(w * bary[:, a] * col) for col in f.T] for a in range(3)]).reshape(
+        3, f.shape[1], m
+    )
+    return k, r
+
+
+def _regularise(k: np.ndarray, rows, scene: Scene, faces, alpha: float, whole) -> None:
+    """Add to ``k[rows]`` (the six entries of each of ``faces``: face numbers of ``scene``, an array or a
+    slice) the edge regulariser: every edge of a face gets a third of its area, +e twice on each corner's
+    diagonal, -e off it."""
+    e = (alpha * REG_SCALE / 3.0) * face_areas(Scene(scene.vertices, scene.faces[faces]))
+    e = e / whole.area if whole.area > 0 else e
+    k[rows, :3] += 2.0 * e[:, None]
+    k[rows, 3:] -= e[:, None]
+
+
+def _entries(corners: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nine matrix entries (rows, cols, data) of each face (corners (m, 3), blocks k (m, 6)), face by
+    face."""
+    return (
+        corners[:, [0, 1, 2, 0, 1, 1, 2, 2, 0]].reshape(-1),
+        corners[:, [0, 1, 2, 1, 0, 2, 1, 0, 2]].reshape(-1),
+        k[:, [0, 1, 2, 3, 3, 4, 4, 5, 5]].reshape(-1),
+    )
+
+
+def touching_faces(faces: np.ndarray, vertices: np.ndarray, n: int) -> np.ndarray:
+    """(m,) int64 ascending: the faces of ``faces`` (f, 3) into n vertices with a corner in ``vertices``."""
+    inside = np.zeros(n, bool)
+    inside[vertices] = True
+    return np.flatnonzero(inside[faces[:, 0]] | inside[faces[:, 1]] | inside[faces[:, 2]])
+
+
+def vertex_equations(
+    scene: Scene,
+    faces: np.ndarray,
+    samples: SurfaceSamples,
+    values: np.ndarray,
+    valid: np.ndarray,
+    alpha: float,
+    whole: Whole,
+    vertices: np.ndarray,
+) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+    """The rows of ``vertices`` ((p,) int64 ascending) of the normal equations of ``scene`` (a piece of a
+    surface of weights ``whole``: :func:`normal_equations`' A and rhs without the ridge), made from the faces
+    touching them alone: ``faces`` (m,) ascending, every face with a corner among ``vertices``
+    (:func:`touching_faces`); ``samples`` every sample on those faces, in the surface's sample order (their
+    ``face`` numbered in ``scene``), with their ``values`` (k,) or (k, c) and ``valid``.
+
+    Returns (columns (e,) int64 ascending: ``vertices`` and every vertex sharing a face with one, rows
+    (p, e) csr over those columns with every diagonal entry stored, rhs (p, c) float64). A row is the same
+    bits whichever vertices it is asked with: each face's terms are summed over its own samples
+    (:func:`_data_terms`), a diagonal entry adds its faces' terms in face order, and an entry off it the
+    terms of the faces of its pair of vertices in face order (the same value in both of their rows: the
+    rows are exactly symmetric). What a subdomain of a partitioned solve assembles where it runs, instead of
+    cutting rows from the whole matrix."""
+    values = np.asarray(values, np.float64)
+    faces = np.asarray(faces, np.int64)
+    vertices = np.asarray(vertices, np.int64)
+    keep = usable(values, valid)
+    local = np.searchsorted(faces, samples.face[keep])
+    if len(local) and (local.max() >= len(faces) or (faces[local] != samples.face[keep]).any()):
+        raise NeuralaoError("vertex_equations: a sample lies on a face that touches none of the vertices")
+    k, r = _data_terms(samples, values, keep, local, len(faces), whole)
+    if alpha > 0:
+        _regularise(k, slice(None), scene, faces, alpha, whole)
+    corners = scene.faces[faces].astype(np.int64)
+    n = len(scene.vertices)
+    # positions of the vertices among the rows and among the columns, by lookup (no sort of the entries)
+    row_of = np.full(n, -1, np.int64)
+    row_of[vertices] = np.arange(len(vertices))
+    used = np.zeros(n, bool)
+    used[vertices] = True
+    used[corners.reshape(-1)] = True
+    columns = np.flatnonzero(used)
+    col_of = np.full(n, -1, np.int64)
+    col_of[columns] = np.arange(len(columns))
+    # each face's three pairs of corners (0-1, 1-2, 2-0) and their term; a pair on one vertex (a degenerate
+    # face) is that vertex's twice, like the block's two entries off its diagonal
+    first, second, term = corners.reshape(-1), corners[:, [1, 2, 0]].reshape(-1), k[:, 3:].reshape(-1)
+    same = first == second
+    # the diagonal: the corners' own terms in face order, then those of the pairs on one vertex
+    mine = np.concatenate([first, first[same], first[same]])
+    terms = np.concatenate([k[:, :3].reshape(-1), term[same], term[same]])
+    held = row_of[mine] >= 0
+    diagonal = np.bincount(row_of[mine[held]], weights=terms[held], minlength=len(vertices))
+    # off it: each pair of vertices summed once, over its faces in face order, then entered in both rows
+    lo, hi = np.minimum(first, second), np.maximum(first, second)
+    off = ~same & ((row_of[lo] >= 0) | (row_of[hi] >= 0))
+    e = max(len(columns), 1)
+    pair, inverse = np.unique(col_of[lo[off]] * e + col_of[hi[off]], return_inverse=True)
+    summed = np.bincount(inverse, weights=term[off], minlength=len(pair))
+    lo, hi = pair // e, pair % e  # positions in columns, lo < hi
+    r_lo, r_hi = row_of[columns[lo]], row_of[columns[hi]]
+    a = sp.coo_matrix(
+        (
+            np.concatenate([summed[r_lo >= 0], summed[r_hi >= 0], diagonal]),
+            (
+                np.concatenate([r_lo[r_lo >= 0], r_hi[r_hi >= 0], np.arange(len(vertices))]),
+                np.concatenate([hi[r_lo >= 0], lo[r_hi >= 0], col_of[vertices]]),
+            ),
+        ),
+        shape=(len(vertices), len(columns)),
+    ).tocsr()  # each (row, column) once: nothing added
+    at = row_of[corners.reshape(-1)]
+    on = at >= 0
+    rv = r.transpose(2, 0, 1).reshape(-1, r.shape[1])[on]
+    rhs = np.stack(
+        [np.bincount(at[on], weights=rv[:, j], minlength=len(vertices)) for j in range(rv.shape[1])], 1
+    )
+    return columns, a, rhs.astype(np.float64, copy=False)
 
 
 def sum_shares(n: int, shares: list[dict[str, np.ndarray]], prior) -> tuple:

@@ -74,15 +74,16 @@ def surface_samples(
     cap: int = 32,
     seed: int = 0,
     counts: np.ndarray | None = None,
-    face_offset: int = 0,
+    face_offset: int | np.ndarray = 0,
     area_total: float | None = None,
 ) -> SurfaceSamples:
     """Stratified area-proportional samples: ``total`` overall (about), 1..``cap`` per face.
 
     ``counts`` (m,) int overrides the per-face numbers (0 allowed). Deterministic for ``seed``.
-    ``scene`` may be a piece of a bigger one: its faces are numbered from ``face_offset`` there (each
-    face's random shifts follow its number) and ``area_total`` is the area of the bigger scene's faces
-    with samples (what the weights are shares of; default: this scene's).
+    ``scene`` may be a piece of a bigger one: its faces are numbered from ``face_offset`` there, or
+    ``face_offset`` (m,) int gives each face's number (faces picked anywhere in it); each face's random
+    shifts follow its number. ``area_total`` is the area of the bigger scene's faces with samples (what
+    the weights are shares of; default: this scene's).
     """
     areas = face_areas(scene)
     if counts is None:
@@ -91,7 +92,8 @@ def surface_samples(
     face = np.repeat(np.arange(len(scene.faces), dtype=np.int64), counts)
     start = np.cumsum(counts) - counts
     index = np.arange(len(face), dtype=np.int64) - np.repeat(start, counts)  # index within the face
-    s1, s2 = sample_shifts(seed, face + face_offset)  # one shift pair per face (for all its samples)
+    numbers = np.asarray(face_offset)[face] if np.ndim(face_offset) else face + face_offset
+    s1, s2 = sample_shifts(seed, numbers)  # one shift pair per face (for all its samples)
     k = counts[face].astype(np.float64)
     # radical inverse of the in-face index (Hammersley's second coordinate)
     _, radinv = hammersley(int(index.max()) + 1 if len(index) else 1)
