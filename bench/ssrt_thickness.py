@@ -28,6 +28,7 @@ import importlib.util
 import logging
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,7 @@ uniform float u_thickness;
 uniform float u_bias;
 uniform float u_pixels_per_unit;
 uniform vec3 u_dirs[RAYS];
+layout(binding = 4) uniform sampler2D u_back;  // the back layer's linear depth (BACK), 0 where thin
 ${inputs}
 
 void main() {
@@ -92,7 +94,11 @@ ${surface}
             vec4 sw = texelFetch(u_position, q, 0);
             if (sw.w < 0.5) continue;                  // background: nothing there
             float behind = sw.z - q3.z;                // > 0: the sample is behind the surface seen there
-            if (behind > u_bias && behind < u_thickness) { hits += 1.0; break; }
+            float back = BACK ? texelFetch(u_back, q, 0).r : 0.0;
+            // with the back layer: inside the solid from its front to where the pixel's ray leaves it;
+            // where the layer says thin (or without it), the thickness prior
+            float deep = back > 0.0 ? back + sw.z : u_thickness;
+            if (behind > u_bias && behind < deep) { hits += 1.0; break; }
         }
     }
     o_ao = 1.0 - hits / float(RAYS);
@@ -123,7 +129,15 @@ class ScreenSpaceTrace(ScreenSpaceAO):
     """The trace above in the baselines' pipeline (their G-buffer upload, noise texture and blur)."""
 
     def __init__(
-        self, width: int, height: int, radius: float, rays: int, steps: int, thickness: float, facets: bool
+        self,
+        width: int,
+        height: int,
+        radius: float,
+        rays: int,
+        steps: int,
+        thickness: float,
+        facets: bool,
+        back_layer: bool = False,
     ):
         super().__init__("ssao", width, height, radius, SSAOSettings(noise_size=4))
         rng = np.random.default_rng(11)
@@ -133,6 +147,9 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         source = fill("gbuffer_inputs"), fill("surface_at_pixel")
         text = FRAGMENT.replace("RAYS", str(rays)).replace("STEPS", str(steps))
         text = text.replace("FACETS", "true" if facets else "false")
+        text = text.replace("BACK ?", "true ?" if back_layer else "false ?")
+        self.back_layer = back_layer
+        self.back = gl.create_texture(self.w, self.h, GL.GL_R32F)
         text = text.replace("${inputs}", source[0]).replace("${surface}", source[1])
         self.prog = gl.compile_program(vertex=fill("fullscreen_vertex"), fragment=text)
         self.dirs, self.thickness = directions(rays), float(thickness)
@@ -147,21 +164,43 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         GL.glUniform1f(GL.glGetUniformLocation(prog, "u_pixels_per_unit"), 0.5 * self.h * p11)
         GL.glUniform3fv(GL.glGetUniformLocation(prog, "u_dirs"), len(self.dirs), self.dirs)
 
+    def upload(self, frame) -> None:
+        super().upload(frame)
+        if self.back_layer:
+            gl.upload_texture(self.back, np.asarray(frame["depth_back"], np.float32), GL.GL_R32F)
+
+    def draw(self) -> None:
+        GL.glActiveTexture(GL.GL_TEXTURE4)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, self.back)
+        super().draw()
+
     def release(self) -> None:
         GL.glDeleteProgram(self.prog)
+        GL.glDeleteTextures(1, [self.back])
         super().release()
 
 
-def trace_predictor(rays: int, steps: int, thickness: float, facets: bool):
+def trace_predictor(rays: int, steps: int, thickness: float, facets: bool, back_layer: bool = False):
     def run(frame, radius: float) -> np.ndarray:
         h, w = np.shape(frame["mask"])
-        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness, facets) as p:
+        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness, facets, back_layer) as p:
             p.upload(frame)
             p.draw()
             out = p.read()
         return np.where(np.asarray(frame["mask"], bool), out, np.float32(1.0)).astype(np.float32)
 
     return run
+
+
+def _add_back_layer(frames: Path) -> None:
+    """The frames' dataset with its back layer (rendered beside its shards if it lacks one)."""
+    from neuralao.pipeline.datasets.dataset import DatasetSettings, build_dataset
+    from neuralao.runtime.foundation.settings import from_dict
+
+    ds = open_dataset(frames)
+    if ds.back_layer is None:
+        settings = from_dict(DatasetSettings, ds.manifest["config"])
+        build_dataset(replace(settings, back_layer=True), frames, Path("."), progress=False)
 
 
 def time_pass(make, frame, repeats: int) -> float:
@@ -188,6 +227,12 @@ def main() -> int:
     p.add_argument("--steps", type=int, default=8)
     p.add_argument("--thickness", nargs="+", type=float, default=[1.0, 0.25], help="x the radius")
     p.add_argument("--facets", action="store_true", help="also with normals of the facets the depth shows")
+    p.add_argument(
+        "--back-layer",
+        action="store_true",
+        help="also with the G-buffer's back layer as each pixel's thickness (the prior where it is thin); "
+        "adds the layer to the frames if they lack it",
+    )
     p.add_argument("--time-size", nargs=2, type=int, default=[1920, 1080], metavar=("W", "H"))
     p.add_argument("--mesh", default="sponza_partial", help="scene of the timed frame")
     p.add_argument("--repeats", type=int, default=5)
@@ -209,12 +254,16 @@ def run(args: argparse.Namespace) -> int:
     kept = {c.name for c in settings.categories}
     if not (args.frames / "manifest.json").is_file():
         raise NeuralaoError(f"no frames at {args.frames}: build them with bench/ao_error_bands.py first")
+    if args.back_layer:
+        _add_back_layer(args.frames)
     methods = {"gtao": screen_space_predictor("gtao")}
     for rays in args.rays:
         for t in args.thickness:
             for facets in (False, True) if args.facets else (False,):
-                name = f"trace-{rays}x{args.steps}-T{t:g}{'-facets' if facets else ''}"
-                methods[name] = trace_predictor(rays, args.steps, t, facets)
+                for back in (False, True) if args.back_layer else (False,):
+                    tags = ("-facets" if facets else "") + ("-2L" if back else "")
+                    name = f"trace-{rays}x{args.steps}-T{t:g}{tags}"
+                    methods[name] = trace_predictor(rays, args.steps, t, facets, back)
     rows = []
     for frame in open_dataset(args.frames).frames(split="test"):
         category = category_of(frame["scene"], full)
