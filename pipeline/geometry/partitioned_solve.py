@@ -179,6 +179,13 @@ class _MatrixGraph:
     def __call__(self, vertices: np.ndarray) -> np.ndarray:
         return self.a[vertices].indices
 
+    def border(self, part: np.ndarray) -> np.ndarray:
+        """(n,) bool: the vertices with a neighbour in another part of ``part`` (n,)."""
+        rows = np.repeat(np.arange(self.n), np.diff(self.a.indptr))
+        out = np.zeros(self.n, bool)
+        out[rows[part[rows] != part[self.a.indices]]] = True
+        return out
+
 
 class _FaceGraph:
     """The neighbours of vertices in a mesh's graph, the corners of their faces (with repeats): the graph of
@@ -196,6 +203,14 @@ class _FaceGraph:
     def __call__(self, vertices: np.ndarray) -> np.ndarray:
         return self.faces[self.faces_of[vertices].indices].reshape(-1)
 
+    def border(self, part: np.ndarray) -> np.ndarray:
+        """(n,) bool: the vertices with a neighbour in another part of ``part`` (n,): the corners of the faces
+        whose corners lie in different parts."""
+        label = part[self.faces]
+        out = np.zeros(self.n, bool)
+        out[self.faces[(label[:, 0] != label[:, 1]) | (label[:, 1] != label[:, 2])].reshape(-1)] = True
+        return out
+
     def components(self) -> np.ndarray:
         """(n,) int64 connected component of each vertex (a vertex in no face: one of its own)."""
         e = self.faces[:, [0, 1, 1, 2]].reshape(-1, 2)
@@ -203,14 +218,22 @@ class _FaceGraph:
         return connected_components(graph, directed=False)[1].astype(np.int64)
 
 
-def grow(graph, vertices: np.ndarray, rings: int, scratch: np.ndarray | None = None) -> np.ndarray:
+def grow(
+    graph,
+    vertices: np.ndarray,
+    rings: int,
+    scratch: np.ndarray | None = None,
+    border: np.ndarray | None = None,
+) -> np.ndarray:
     """(ascending int64) ``vertices`` (distinct) and every vertex within ``rings`` edges of them in ``graph``
     (:class:`_MatrixGraph` or :class:`_FaceGraph`). ``scratch``: an (n,) bool array of False to use (and
-    leave False) instead of making one."""
+    leave False) instead of making one. ``border``: those of ``vertices`` that may have a neighbour outside
+    them (None: any), the only ones the first ring grows from (of a subdomain's core: its edge)."""
     inside = np.zeros(graph.n, bool) if scratch is None else scratch
     frontier = np.asarray(vertices, np.int64)
     inside[frontier] = True
     found = [frontier]
+    frontier = frontier if border is None else np.asarray(border, np.int64)
     for _ in range(rings):
         reach = graph(frontier)
         frontier = np.unique(reach[~inside[reach]])  # a ring: small
@@ -258,7 +281,8 @@ def _partition(
     core = bisect(points, max(1, min(count, n)))
     cores = _members(core, int(core.max(initial=0)) + 1)
     scratch = np.zeros(n, bool)
-    parts = [grow(graph, c, overlap, scratch) for c in cores]
+    edge = graph.border(core)  # a core's first ring grows from its vertices on this border alone
+    parts = [grow(graph, c, overlap, scratch, c[edge[c]]) for c in cores]
     if component is None:  # one connected component: no need to find them
         ncomp, component = 1, np.zeros(n, np.int64)
     else:
