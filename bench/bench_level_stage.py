@@ -93,14 +93,21 @@ def run_stage(
 def patched(log: dict, fresh: dict, bvh_scale: float, local: bool) -> dict:
     """``log`` (a Ray bake's) with each stage of ``fresh`` ({stage: run}) taking its driver and task
     seconds and waves from the run (a ``local`` run's driver seconds, with Ray's cost to submit each task
-    added, stand for the Ray driver's CPU seconds; a cluster run's are them) and the BVH states' seconds
-    (the stages that trace) times ``bvh_scale``."""
+    added, stand for the Ray driver's CPU seconds; a cluster run's are them; a local bake's log and a local
+    run: the stage's seconds and driver seconds, from which the projection takes the driver's) and the BVH
+    states' seconds (the stages that trace) times ``bvh_scale``."""
     out = copy.deepcopy(log)
+    kept_local = out.get("engine", "local") == "local"
     for stage, run in fresh.items():
         for row in out["stages"]:
             if row["stage"] == stage:
                 submit = SUBMIT_S * len(run["task_seconds"]) if local else 0.0
                 row["cpu_seconds"] = run["row"]["driver_seconds"] + submit
+                if kept_local and local:  # a local log's driver is its stage's seconds less its tasks'
+                    row["seconds"], row["driver_seconds"] = (
+                        run["row"]["seconds"],
+                        run["row"]["driver_seconds"],
+                    )
                 for k in ("simplify_tasks", "resample_tasks"):  # the LOD's rounds (bench_ray.traces)
                     if k in run["row"]:
                         row[k] = run["row"][k]
