@@ -46,6 +46,7 @@ from neuralao.runtime.baselines import GTAOSettings, gtao_pass_description, proj
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
+from neuralao.runtime.unet_input import THICKNESS_CAP
 from neuralao.runtime.wgsl_runner import WGPU_FORMATS, from_texels, gpu_format, to_texels
 
 # A manifest's texture format -> GL internal format (R16: 16-bit unsigned normalised, read back as floats)
@@ -81,6 +82,7 @@ def frame_settings(
         plane_sigma=u.plane_sigma,
         normal_power=u.normal_power,
         floor=u.floor,
+        thickness_cap=THICKNESS_CAP,
     )
 
 
@@ -102,21 +104,30 @@ def uniform_bytes(yfov: float, radius: float, width: int, height: int, flip_y: b
     return bytes(data)
 
 
-def _inputs(frame: FrameLike, flip_y: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The engine's two input textures, depth (H, W, 1) and normal (H, W, 4), in texture row order."""
+def _inputs(frame: FrameLike, flip_y: bool, back: bool = False) -> dict[str, np.ndarray]:
+    """The engine's input textures in texture row order: depth (H, W, 1) and normal (H, W, 4), and with
+    ``back`` (input version 4) depth_back (H, W, 1)."""
     mask = np.asarray(frame["mask"], bool)
-    depth = np.where(mask, np.asarray(frame["depth"], np.float32), np.float32(0.0))[..., None]
+    out = {"depth": np.where(mask, np.asarray(frame["depth"], np.float32), np.float32(0.0))[..., None]}
     normal = np.zeros((*mask.shape, 4), np.float32)
     normal[..., :3] = np.where(mask[..., None], np.nan_to_num(np.asarray(frame["normal_cam"], np.float32)), 0)
-    if flip_y:
-        depth, normal = depth[::-1], normal[::-1]
-    return np.ascontiguousarray(depth), np.ascontiguousarray(normal)
+    out["normal"] = normal
+    if back:
+        if "depth_back" not in frame:
+            raise NeuralaoError(
+                "this model reads the G-buffer's back layer (depth_back); render the frames with it "
+                "(`neuralao render --back-layer`)"
+            )
+        out["depth_back"] = np.where(mask, np.asarray(frame["depth_back"], np.float32), np.float32(0.0))[
+            ..., None
+        ]
+    return {k: np.ascontiguousarray(v[::-1] if flip_y else v) for k, v in out.items()}
 
 
 class FrameRunner:
     """One frame size of a program with frame passes: every texture of the frame allocated, every pass
-    compiled. ``run(frame, radius)`` uploads the engine's depth and normal, runs the steps in order and
-    returns the AO (H, W) float32, top row first."""
+    compiled. ``run(frame, radius)`` uploads the engine's depth and normal (and back layer), runs the steps
+    in order and returns the AO (H, W) float32, top row first."""
 
     def __init__(
         self,
@@ -147,10 +158,10 @@ class FrameRunner:
             raise NeuralaoError(
                 f"frame is {np.shape(frame['depth'])[::-1]}, the runner {self.width}x{self.height}"
             )
-        depth, normal = _inputs(frame, self.flip_y)
+        inputs = _inputs(frame, self.flip_y, "depth_back" in self.m["frame"]["inputs"])
         ub = uniform_bytes(float(frame["yfov"]), float(radius), self.width, self.height, self.flip_y)
-        self.backend.upload("depth", depth)
-        self.backend.upload("normal", normal)
+        for ident, data in inputs.items():
+            self.backend.upload(ident, data)
         self.backend.dispatch(ub)
         return self.read(self.m["frame"]["output"])[..., 0].copy()
 

@@ -304,3 +304,47 @@ def test_shipped_internal_height(dialect, frames):
         err = float(np.abs(got - want).max())
         print(f"{name} {dialect} (shipped internal height): max abs error {err:.3g}")
         assert err <= TOL.frame_passes_vs_reference, name
+
+
+def _with_back_layer(frame: dict) -> dict:
+    """The analytic frame with a back layer: the sphere and the box 0.5 deep (depth under 5.5), the floor
+    and the wall thin (0)."""
+    depth = frame["depth"]
+    return dict(frame) | {
+        "depth_back": np.where((depth > 0) & (depth < 5.5), depth + 0.5, 0.0).astype(np.float32)
+    }
+
+
+@pytest.mark.parametrize("hybrid", [True, False])
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_input_version_4_frame_reads_the_back_layer_like_the_reference(tmp_path, frames, dialect, hybrid):
+    """A seeded U-Net of input version 4 (the back layer's thickness as a fifth channel): the generated
+    frame (the engine's depth_back point-sampled beside depth, the thickness in the network's input)
+    against onnxruntime on numpy's preprocessing; the layer moves the AO, so ignoring it would fail."""
+    import torch
+
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+
+    _needs(dialect)
+    torch.manual_seed(5)
+    args = UNetArgs(in_channels=6 if hybrid else 5, widths=[4, 8], gtao_input=hybrid, preprocess_version=4)
+    model = UNet(args).eval()
+    with torch.no_grad():
+        model.out.weight.mul_(4.0)
+    meta = onnx_metadata(model) | {"internal_height": str(INTERNAL_HEIGHT)}
+    proto = export_onnx(model, tmp_path / "model.onnx", meta)
+    predict = unet_predictor(tmp_path / "model.onnx")
+    program = frame_program(proto, APIS[dialect][0])
+    assert "depth_back" in program.manifest["frame"]["inputs"]
+    errors, moved = [], []
+    for size in SIZES[1:]:
+        f = _with_back_layer(frames[size])
+        with _runner(program, size, dialect) as runner:
+            for r in RADII[:2]:
+                want = predict(f, r)
+                errors.append(float(np.abs(runner.run(f, r) - want).max()))
+                thin = dict(f) | {"depth_back": np.zeros_like(f["depth_back"])}
+                moved.append(float(np.abs(predict(thin, r) - want).max()))
+    assert max(errors) <= TOL.frame_passes_vs_reference, errors
+    assert max(moved) > 20 * TOL.frame_passes_vs_reference, moved

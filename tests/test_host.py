@@ -215,3 +215,31 @@ def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, tmp_path)
     low = downsample_frame(frame, 60, internal)
     shortcut = upsample_ao(unet_predictor(tmp_path / "export" / "model.onnx", None)(low, radius), frame)
     assert float(np.abs(shortcut - ref).max()) > 10 * tol
+
+
+def test_c_host_refuses_a_model_that_reads_an_input_it_does_not_feed(tmp_path):
+    """An export of input version 4 reads the engine's back layer (depth_back) beside depth and normal:
+    the host, which feeds those two, refuses it in one line instead of running it with a zero texture."""
+    import torch
+
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+
+    host = _build_host()
+    model = UNet(UNetArgs(in_channels=6, widths=[4, 8], gtao_input=True, preprocess_version=4)).eval()
+    with torch.no_grad():
+        proto = export_onnx(model, tmp_path / "model.onnx", onnx_metadata(model) | {"internal_height": "32"})
+    write_compute_export(frame_program(proto), tmp_path / "v4" / "glsl", validate=False)
+    frame = analytic_gbuffer(*FRAME_SIZE)
+    h, w = frame["depth"].shape
+    gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
+    gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
+    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), "0.5", repr(math.degrees(frame["yfov"]))]
+    r = subprocess.run(
+        [str(host), str(tmp_path / "v4"), *args, str(tmp_path / "ao.f32")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode != 0 and not (tmp_path / "ao.f32").exists()
+    assert "depth_back" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

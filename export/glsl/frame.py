@@ -107,6 +107,7 @@ class FrameSettings:
     plane_sigma: float = 0.03  # upsampling: tangent-plane distance / depth at which weight drops by 1/e
     normal_power: float = 8.0  # upsampling: exponent of the normals' cosine
     floor: float = 1e-3  # upsampling: share of the spatial weight kept where geometry disagrees
+    thickness_cap: float = 4.0  # input version 4: the thickness channel's clamp (unet_input.THICKNESS_CAP)
 
     def as_json(self) -> dict:
         return {
@@ -179,8 +180,8 @@ def _model_facts(manifest: dict) -> tuple[bool, int, int | None]:
         version = int(str(meta.get("preprocess_version")))
     except ValueError:
         raise NeuralaoError(f"unknown preprocess_version {meta.get('preprocess_version')!r}") from None
-    if version not in (2, 3):
-        raise NeuralaoError(f"frame passes know preprocess versions 2 and 3, the model has {version}")
+    if version not in (2, 3, 4):
+        raise NeuralaoError(f"frame passes know preprocess versions 2, 3 and 4, the model has {version}")
     internal = metadata_internal_height(meta, "the U-Net")
     metadata_pad_mode(meta, "the U-Net")
     hybrid = str(meta.get("input_channels", "")).split(",")[-1] == "gtao"
@@ -204,6 +205,7 @@ def frame_passes(
     hybrid, version, internal = _model_facts(manifest)
     net_in, net_radius, net_out = _network_io(manifest)
     scaled = internal is not None
+    back = version >= 4  # the back layer: one more engine input, a thickness channel
     s = settings
     tex = {
         "depth": FrameTexture(
@@ -213,6 +215,16 @@ def frame_passes(
             "normal", "W", "H", 1, "RGBA32F", "the engine's camera-space unit normal (xyz), facing the viewer"
         ),
     }
+    if back:
+        tex["depth_back"] = FrameTexture(
+            "depth_back",
+            "W",
+            "H",
+            1,
+            "R32F",
+            "the engine's back layer: linear depth where the pixel's camera ray leaves the solid it entered, "
+            "0 where the visible surface is thin and on background",
+        )
     passes = []
     if hybrid:
         tex["gtao_raw"] = _ao_texture("gtao_raw", precision, dialect, "GTAO before its blur", GTAO_FORMATS)
@@ -248,17 +260,25 @@ def frame_passes(
         3 if hybrid else 2,
         "RGBA32F",
         "the engine's depth and normal point-sampled to the network's size: layer 0 camera-space position "
-        "+ mask (w), layer 1 normal" + ("; layer 2: GTAO point-sampled" if hybrid else ""),
+        "+ mask (w), layer 1 normal"
+        + (" + the back layer's depth (w)" if back else "")
+        + ("; layer 2: GTAO point-sampled" if hybrid else ""),
     )
+    sampled = ("depth", "normal") + (("gtao",) if hybrid else ()) + (("depth_back",) if back else ())
     passes.append(
         FramePass(
             "f_downsample",
             "downsample_body",
-            ("depth", "normal", "gtao") if hybrid else ("depth", "normal"),
+            sampled,
             low,
-            "point sampling to the network's size, position from depth" + (", GTAO" if hybrid else ""),
+            "point sampling to the network's size, position from depth"
+            + (", the back layer" if back else "")
+            + (", GTAO" if hybrid else ""),
             "before",
-            {"gtao": ("downsample_gtao", {}) if hybrid else ""},
+            {
+                "gtao": ("downsample_gtao", {}) if hybrid else "",
+                "back": ("downsample_back", {"src": f"src{len(sampled) - 1}"}) if back else "0.0",
+            },
         )
     )
     if version == 2:
@@ -298,12 +318,13 @@ def frame_passes(
             "the network's input: "
             + ("depth / m" if version == 2 else "log depth")
             + ", normal"
+            + (", thickness" if back else "")
             + (", GTAO" if hybrid else ""),
             "before",
             {
                 "foreground": ("foreground_mask" if version == 2 else "foreground_positive", {}),
                 "depth": depth,
-                "gtao": ("network_input_gtao", {}) if hybrid else "",
+                "gtao": _network_input_rest(hybrid, back, s.thickness_cap),
             },
         )
     )
@@ -355,6 +376,20 @@ def frame_passes(
     return passes, tex
 
 
+def _network_input_rest(hybrid: bool, back: bool, cap: float) -> tuple[str, dict] | str:
+    """The network input's layer 1: GTAO (a hybrid), the thickness (version 4) and GTAO, or nothing."""
+    if back:
+        return (
+            "network_input_back",
+            {
+                "gtao_empty": "1.0" if hybrid else "0.0",
+                "gtao_load": ("network_input_back_gtao", {}) if hybrid else "",
+                "cap": glsl_float(cap),
+            },
+        )
+    return ("network_input_gtao", {}) if hybrid else ""
+
+
 # --------------------------------------------------------------------------- the writer
 
 
@@ -395,10 +430,10 @@ def _noise_table(settings: FrameSettings, fill: Callable[..., str]) -> str:
 
 
 def _field(value: object, fill: Callable[..., str]) -> str:
-    """A body field: text as it is, or (template, fields) filled in the pass's dialect."""
+    """A body field: text as it is, or (template, fields) filled in the pass's dialect (fields likewise)."""
     if isinstance(value, tuple):
         name, sub = value
-        return fill(name, **sub)
+        return fill(name, **{k: _field(v, fill) for k, v in sub.items()})
     return str(value)
 
 
@@ -613,6 +648,16 @@ def _section(
             "depth": "write each frame: linear depth -z_cam in scene units (lane 0), 0 on background; the "
             "passes reconstruct camera-space positions from it, the pixel and u_proj",
             "normal": "write each frame: camera-space unit normal (xyz), OpenGL axes, facing the viewer",
+            **(
+                {
+                    "depth_back": "write each frame: the back layer, linear depth (lane 0) of the first "
+                    "surface more than 1e-5 relative depth behind the visible one where it faces the camera "
+                    "ray the other way (where the ray leaves the solid), else 0; one more depth pass of the "
+                    "opaque geometry"
+                }
+                if version >= 4
+                else {}
+            ),
         },
         "output": "ao",
         "ao_formats": ao_formats,

@@ -407,17 +407,19 @@ _FT["gtao_blur_body"] = """    if (!(nao_load(src0, px, 0).x > 0.0)) {
 # Point sampling to the network's size: low texel t of an axis of n texels copies pixel
 # floor((t + 0.5) * N / n) (GL order) of N, exactly, never a blend across an edge. src0: the depth, src1:
 # the normal, into layer 0 = (camera-space position, mask) and layer 1 = (normal, 0), zeros on
-# background; a hybrid's src2: GTAO, into layer 2.
+# background; a hybrid's src2: GTAO, into layer 2; with the back layer (input version 4) its depth goes
+# into layer 1's last lane.
 _FT["downsample_body"] = """    ${let_ivec2} hi = nao_size(src0);
     ${let_ivec2} q = min(((2 * px + 1) * hi) / (2 * out_size), hi - 1);
     ${let_float} z = nao_load(src0, q, 0).x;
     if (z > 0.0) {
         nao_store(px, 0, ${vec4}(nao_position(q, hi, z), 1.0));
-        nao_store(px, 1, ${vec4}(nao_load(src1, q, 0).xyz, 0.0));
+        nao_store(px, 1, ${vec4}(nao_load(src1, q, 0).xyz, ${back}));
     } else {
         nao_store(px, 0, ${vec4}(0.0));
         nao_store(px, 1, ${vec4}(0.0));
     }${gtao}"""
+_FT["downsample_back"] = "nao_load(${src}, q, 0).x"
 _FT["downsample_gtao"] = """
     nao_store(px, 2, ${vec4}(nao_load(src2, q, 0).x, 0.0, 0.0, 0.0));"""
 
@@ -468,6 +470,20 @@ _FT["network_input_gtao"] = """
         g = nao_load(src0, px, 2).x;
     }
     nao_store(px, 1, ${vec4}(g, 0.0, 0.0, 0.0));"""
+# version 4: layer 1 = (thickness, GTAO or 0, 0, 0): the thickness clamp(log(back / depth), 0, cap) where
+# the back layer lies behind a foreground pixel, else 0
+_FT["network_input_back"] = """
+    ${var_float:t} = 0.0;
+    ${var_float:g} = ${gtao_empty};
+    if (pw.w >= 0.5) {
+        ${let_float} back = nao_load(src0, px, 1).w;
+        if (-pw.z > 0.0 && back > -pw.z) {
+            t = clamp(log(back / -pw.z), 0.0, ${cap});
+        }${gtao_load}
+    }
+    nao_store(px, 1, ${vec4}(t, g, 0.0, 0.0));"""
+_FT["network_input_back_gtao"] = """
+        g = nao_load(src0, px, 2).x;"""
 
 # The network's radius input rho, into the texture its uniform pass would write (1 x 1, lane 0).
 _FT["network_radius_body"] = """    nao_store(px, 0, ${vec4}(${rho}, 0.0, 0.0, 0.0));"""

@@ -355,6 +355,16 @@ static const Json *step_pass(const Json *m, const Json *step) {
     return NULL;
 }
 
+/* The engine inputs this host feeds are depth and normal: a model that reads another (the back layer,
+ * depth_back, of input version 4) is refused, never run with that texture left at zero. */
+static void check_frame_inputs(const Json *frame) {
+    const Json *inputs = jreq(frame, "inputs");
+    for (int i = 0; i < inputs->n; i++)
+        if (strcmp(inputs->keys[i], "depth") != 0 && strcmp(inputs->keys[i], "normal") != 0)
+            die("the model reads the engine input \"%s\", which this host does not feed (it feeds depth and "
+                "normal)", inputs->keys[i]);
+}
+
 /* The texels of the engine's input k (0: "depth", 1: "normal") with `lanes` floats a texel, px = W x H
  * pixels of gb (row 0 on top): depth in lane 0, or the unit normal in lanes 0-2 (non-finite values 0),
  * zero on background. */

@@ -756,6 +756,7 @@ static void time_steps(const FrameRun *fr, int kind, double *ms, double *wall) {
 static float *run_frame(const Json *m, const char *dir, const float *gb, int W, int H, double radius, double yfov,
                         int *n_passes) {
     const Json *frame = jreq(m, "frame");
+    check_frame_inputs(frame);
     int sym[6];
     frame_symbols(m, W, H, sym);
 

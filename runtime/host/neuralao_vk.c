@@ -606,6 +606,7 @@ static float *run_frame(const Json *m, const char *dir, const float *gb, int W, 
     Frame f = {0};
     Gpu *g = &f.g;
     const Json *frame = jreq(m, "frame");
+    check_frame_inputs(frame);
     int sym[6];
     frame_symbols(m, W, H, sym);
 
