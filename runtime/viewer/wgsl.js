@@ -283,6 +283,10 @@
   }
 
   async function runFrame(device, program, depth, normal, width, height, camera, flipY) {
+    // the inputs this runner feeds: a model that reads another (the back layer of input version 4) is
+    // refused, never run with that texture left at zero
+    const unfed = Object.keys(program.manifest.frame.inputs).filter((k) => k !== "depth" && k !== "normal");
+    if (unfed.length) throw new Error(`the model reads the engine input ${unfed[0]}, which is not fed here`);
     const prep = prepareFrame(device, program);
     const { tex, steps, rb, internal } = sizedFrame(device, program, prep, width, height);
     if (depth.length !== width * height || normal.length !== 4 * width * height) {
