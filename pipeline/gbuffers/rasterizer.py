@@ -340,14 +340,13 @@ class GBufferRenderer:
             GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
         return frame
 
-    def _draw(
-        self, modelview: np.ndarray, projection: np.ndarray, rotation: np.ndarray, w: int, h: int
-    ) -> None:
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo)
-        GL.glDrawBuffers(len(_TARGETS), [GL.GL_COLOR_ATTACHMENT0 + k for k in range(len(_TARGETS))])
+    def _begin(self, fbo: int, targets: int, rotation: np.ndarray, w: int, h: int) -> None:
+        """Bind ``fbo`` with ``targets`` colour attachments and set every piece of state a pass depends on:
+        pyrender shares this context and leaves culling, blending, polygon mode and its own depth convention
+        behind."""
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fbo)
+        GL.glDrawBuffers(targets, [GL.GL_COLOR_ATTACHMENT0 + k for k in range(targets)])
         GL.glViewport(0, 0, w, h)
-        # Every piece of state the pass depends on is set here: pyrender shares this context and
-        # leaves culling, blending, polygon mode and its own depth convention behind.
         for cap in (GL.GL_CULL_FACE, GL.GL_BLEND, GL.GL_SCISSOR_TEST, GL.GL_MULTISAMPLE, GL.GL_STENCIL_TEST):
             GL.glDisable(cap)
         GL.glEnable(GL.GL_DEPTH_TEST)
@@ -358,6 +357,26 @@ class GBufferRenderer:
         GL.glFrontFace(GL.GL_CCW if np.linalg.det(rotation) > 0 else GL.GL_CW)
         glClipControl(GL.GL_LOWER_LEFT, GL.GL_ZERO_TO_ONE)
         GL.glDepthFunc(GL.GL_GREATER)
+
+    def _draw_all(self, modelview: np.ndarray, projection: np.ndarray, uniforms: dict) -> None:
+        """Every face with the program in use (its matrices set; GL matrices are column-major: row-major
+        float32 with transpose = GL_TRUE), then the defaults pyrender relies on restored (its projection
+        maps depth to [-1, 1], test LESS)."""
+        GL.glUniformMatrix4fv(uniforms["u_modelview"], 1, GL.GL_TRUE, modelview.astype(np.float32))
+        GL.glUniformMatrix4fv(uniforms["u_projection"], 1, GL.GL_TRUE, projection.astype(np.float32))
+        GL.glBindVertexArray(self._vao)
+        GL.glDrawArrays(GL.GL_TRIANGLES, 0, self._count)
+        GL.glBindVertexArray(0)
+        GL.glUseProgram(0)
+        glClipControl(GL.GL_LOWER_LEFT, GL.GL_NEGATIVE_ONE_TO_ONE)
+        GL.glDepthFunc(GL.GL_LESS)
+        GL.glFrontFace(GL.GL_CCW)
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def _draw(
+        self, modelview: np.ndarray, projection: np.ndarray, rotation: np.ndarray, w: int, h: int
+    ) -> None:
+        self._begin(self._fbo, len(_TARGETS), rotation, w, h)
         zero = np.zeros(4, dtype=np.float32)
         for k in range(_TRI):
             GL.glClearBufferfv(GL.GL_COLOR, k, zero)
@@ -365,63 +384,31 @@ class GBufferRenderer:
         GL.glClearBufferfv(GL.GL_DEPTH, 0, np.zeros(1, dtype=np.float32))  # reversed Z: far = 0
         GL.glUseProgram(self._program)
         u = self._uniforms
-        # GL matrices are column-major: pass row-major float32 with transpose = GL_TRUE.
-        GL.glUniformMatrix4fv(u["u_modelview"], 1, GL.GL_TRUE, modelview.astype(np.float32))
-        GL.glUniformMatrix4fv(u["u_projection"], 1, GL.GL_TRUE, projection.astype(np.float32))
         GL.glUniformMatrix3fv(u["u_rotation"], 1, GL.GL_TRUE, rotation.astype(np.float32))
         GL.glUniform3fv(u["u_center_hi"], 1, self._center_hi)
         GL.glUniform3fv(u["u_center_lo"], 1, self._center_lo)
         GL.glUniform1i(u["u_flat"], 1 if self.normals == "flat" else 0)
-        GL.glBindVertexArray(self._vao)
-        GL.glDrawArrays(GL.GL_TRIANGLES, 0, self._count)
-        GL.glBindVertexArray(0)
-        GL.glUseProgram(0)
-        # Restore the defaults pyrender relies on (its projection maps depth to [-1, 1], test LESS).
-        glClipControl(GL.GL_LOWER_LEFT, GL.GL_NEGATIVE_ONE_TO_ONE)
-        GL.glDepthFunc(GL.GL_LESS)
-        GL.glFrontFace(GL.GL_CCW)
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+        self._draw_all(modelview, projection, u)
 
     def _draw_back(
         self, modelview: np.ndarray, projection: np.ndarray, rotation: np.ndarray, w: int, h: int
     ) -> None:
-        """The back layer's pass (module docstring of :data:`BACK_LAYER_GAP`), reading the first pass's
-        depth, normal and triangle targets; the same state as :meth:`_draw` but one colour target."""
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._back_fbo)
-        GL.glDrawBuffers(1, [GL.GL_COLOR_ATTACHMENT0])
-        GL.glViewport(0, 0, w, h)
-        for cap in (GL.GL_CULL_FACE, GL.GL_BLEND, GL.GL_SCISSOR_TEST, GL.GL_MULTISAMPLE, GL.GL_STENCIL_TEST):
-            GL.glDisable(cap)
-        GL.glEnable(GL.GL_DEPTH_TEST)
-        GL.glDepthMask(GL.GL_TRUE)
-        GL.glColorMask(GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE)
-        GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
-        GL.glFrontFace(GL.GL_CCW if np.linalg.det(rotation) > 0 else GL.GL_CW)
-        glClipControl(GL.GL_LOWER_LEFT, GL.GL_ZERO_TO_ONE)
-        GL.glDepthFunc(GL.GL_GREATER)
+        """The back layer's pass (:data:`BACK_LAYER_GAP`), reading the first pass's depth, normal and
+        triangle targets into one colour target."""
+        self._begin(self._back_fbo, 1, rotation, w, h)
         GL.glClearBufferfv(GL.GL_COLOR, 0, np.zeros(4, dtype=np.float32))
         GL.glClearBufferfv(GL.GL_DEPTH, 0, np.zeros(1, dtype=np.float32))
         GL.glUseProgram(self._back_program)
         u = self._back_uniforms
-        GL.glUniformMatrix4fv(u["u_modelview"], 1, GL.GL_TRUE, modelview.astype(np.float32))
-        GL.glUniformMatrix4fv(u["u_projection"], 1, GL.GL_TRUE, projection.astype(np.float32))
-        for unit, (name, k) in enumerate(
-            (("u_front_depth", 0), ("u_front_normal", 2), ("u_front_tri", _TRI))
-        ):
+        sources = (("u_front_depth", 0), ("u_front_normal", 2), ("u_front_tri", _TRI))
+        for unit, (name, k) in enumerate(sources):
             GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
             GL.glBindTexture(GL.GL_TEXTURE_2D, self._targets[k])
             GL.glUniform1i(u[name], unit)
-        GL.glBindVertexArray(self._vao)
-        GL.glDrawArrays(GL.GL_TRIANGLES, 0, self._count)
-        GL.glBindVertexArray(0)
-        GL.glUseProgram(0)
-        for unit in (2, 1, 0):
+        self._draw_all(modelview, projection, u)
+        for unit in reversed(range(len(sources))):
             GL.glActiveTexture(GL.GL_TEXTURE0 + unit)
             GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
-        glClipControl(GL.GL_LOWER_LEFT, GL.GL_NEGATIVE_ONE_TO_ONE)
-        GL.glDepthFunc(GL.GL_LESS)
-        GL.glFrontFace(GL.GL_CCW)
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
 
     def _read_raw(
         self, k: int, fmt: int, typ: int, ch: int, dtype, w: int, h: int, tex: int | None = None
