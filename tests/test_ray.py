@@ -135,6 +135,16 @@ def test_two_node_dataset_is_byte_identical(ray_engine, local_dataset, config_fi
     assert remote["dataset_hash"] == manifest["dataset_hash"]
     assert _shard_bytes(out, remote) == _shard_bytes(root, manifest)
     assert (out / "manifest.json").read_bytes() == (root / "manifest.json").read_bytes()
+    # the back layer added on the cluster: only the layers rendered there, the bytes of a local build's
+    layered = replace(load_settings(DatasetSettings, config_file, []), back_layer=True)
+    remote = build_dataset(layered, out, progress=False, engine=ray_engine)
+    local = build_dataset(layered, tmp_path / "local", progress=False)
+    assert ray_engine.completed == 6 and remote == local
+    assert remote["dataset_hash"] == manifest["dataset_hash"]
+    for entry in remote["shards"]:
+        assert (out / entry["layer_file"]).read_bytes() == (
+            tmp_path / "local" / entry["layer_file"]
+        ).read_bytes()
 
 
 def test_two_node_bake_is_byte_identical(ray_engine, local_bake, tmp_path, monkeypatch):
