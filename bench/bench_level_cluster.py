@@ -13,7 +13,9 @@ machines of the same CPUs (:func:`project`), so the measured wall clock checks t
 checked byte-identical to each other. Then the model's projection of the 1-node run onto 1, 4, 32 and 128
 machines of 16 cores, per stage, for two deployments: single-CPU actors (16 per machine: every actor builds
 its own BVH, on its one core) and ``--ray-threads 16`` (one actor per machine: one BVH, built with the
-machine's threads, but the tasks that do not trace run one at a time per machine).
+machine's threads, but the tasks that do not trace run one at a time per machine), the second also with
+each BVH built by its stage's first task, as without ``Engine.prepare`` (:func:`project` says what a BVH
+built ahead costs).
 
 Writes OUT/level_cluster/PRESET/bench_cluster.json and .md. On a machine with fewer cores than the cluster
 has CPUs, the nodes share them (the table says so): the wall clock then measures Ray's scheduling and
@@ -36,7 +38,7 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # keep 127.0.0.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_ray import stage_costs, wave_span  # noqa: E402
+from bench_ray import stage_costs, wave_spans  # noqa: E402
 
 from neuralao.pipeline.bakes.level import bake_level  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: E402
@@ -51,10 +53,12 @@ def project(
     threads_per_actor: int = 1,
     bvh_speedup: float = 1.0,
     checks: bool = False,
+    same_run: bool = False,
+    ahead: bool = True,
 ) -> dict:
     """Seconds per stage of the bake ``info`` (a bake log) on ``machines`` x ``cores``: the driver's own
     seconds (with a local bake's, what Ray's driver would spend submitting its tasks), plus the stage's
-    tasks wave after wave, each wave's scheduled longest first (``bench_ray.wave_span``: the trace's
+    tasks wave after wave, each wave's scheduled longest first (``bench_ray.wave_spans``: the trace's
     blocks divide to the cores; no other stage's tasks split), plus its states (BVHs) built once per
     machine, in parallel.
 
@@ -62,18 +66,41 @@ def project(
         per machine, whose tracing tasks use all its threads and whose BVH build is ``bvh_speedup`` times
         faster, while tasks that do not trace run one at a time per machine.
     checks : include the stages that only make error tables (the blend check): what a run's own wall clock
-        is checked against; a production bake leaves them out."""
-    out = {}
-    for c in stage_costs(info, checks):
+        is checked against; a production bake leaves them out.
+    same_run : the run that made ``info`` itself: a state built ahead (``Engine.prepare``) costs what its
+        stage's first tasks waited for it, as measured.
+    ahead : False: every state costs its whole build, as if its stage's first task built it.
+
+    A state built ahead on machines of one actor costs max(0, its build at the machine's threads - the
+    seconds its machine's cores are free between the prepare call and the stage that needs it), the free
+    seconds being those stages' driver seconds and their waves of tasks that do not trace (one task of one
+    thread at a time per machine: the build is taken to get the other cores), not their tracing waves
+    (which use every core). On single-CPU actors it costs its whole build (it shares the actor's core)."""
+    out, free = {}, {}
+    costs = stage_costs(info, checks)
+    for c in costs:
         name, work = c["stage"], c["task_core_s"]
         if threads_per_actor == 1:
             slots = machines * cores
         else:  # one actor per machine: tracing tasks spread over its threads, the others use one
             slots = machines
             work = [w / threads_per_actor if t else w for w, t in zip(work, c["traces"], strict=True)]
-        span = wave_span(work, c["waves"], slots, name == "trace")
-        state = c["state_s"] / (bvh_speedup if threads_per_actor > 1 else 1.0)
-        out[name] = c["driver_s"] + state + span
+        spans = wave_spans(work, c["waves"], slots, name == "trace", c["traces"])
+        free[c["position"]] = c["driver_s"] + sum(span for span, tracing in spans if not tracing)
+        speedup = bvh_speedup if threads_per_actor > 1 else 1.0
+        state = c["state_s"] / speedup
+        if c["prepared_s"]:
+            if not ahead:
+                ahead_s = c["prepared_s"] / speedup
+            elif same_run:
+                ahead_s = c["waited_s"]
+            elif threads_per_actor > 1:
+                hidden = sum(f for at, f in free.items() if c["prepared_at"] < at < c["position"])
+                ahead_s = max(0.0, c["prepared_s"] / speedup - hidden)
+            else:
+                ahead_s = c["prepared_s"]
+            state = max(state, ahead_s)
+        out[name] = c["driver_s"] + state + sum(span for span, _ in spans)
     return {"stages": out, "total_s": sum(out.values())}
 
 
@@ -121,10 +148,11 @@ def output_hash(bake: Path) -> str:
 
 
 @contextlib.contextmanager
-def loopback_cluster(nodes: int, cpus: int, object_store_gib: float = 1.0):
+def loopback_cluster(nodes: int, cpus: int, object_store_gib: float = 1.0, heavy_states: int | None = None):
     """A fresh Ray cluster of ``nodes`` x ``cpus`` on 127.0.0.1 (its own raylets and an object store of
     ``object_store_gib`` per node; what does not fit spills to the disk, which Ray refuses past 95% full),
-    this process its driver: yields (engine, alive nodes, nodes with actors)."""
+    this process its driver: yields (engine, alive nodes, nodes with actors). ``heavy_states``: the BVHs
+    an actor may hold at once (``RayEngine``'s; None: its rule)."""
     import ray
     from ray.cluster_utils import Cluster
 
@@ -139,16 +167,18 @@ def loopback_cluster(nodes: int, cpus: int, object_store_gib: float = 1.0):
         engine_mod._connect(c.address)
         c.wait_for_nodes()
         alive = [n for n in ray.nodes() if n["Alive"]]
-        with RayEngine(c.address) as engine:
+        with RayEngine(c.address, heavy_states=heavy_states) as engine:
             yield engine, len(alive), len({node_id for _, node_id in engine.worker_info()})
     finally:
         ray.shutdown()
         c.shutdown()
 
 
-def run_cluster(level: Path, settings, nodes: int, cpus: int, out: Path) -> dict:
+def run_cluster(
+    level: Path, settings, nodes: int, cpus: int, out: Path, heavy_states: int | None = None
+) -> dict:
     """Bake on a fresh loopback cluster of ``nodes`` x ``cpus``; the bake log, wall seconds and hash."""
-    with loopback_cluster(nodes, cpus) as (engine, alive, placed):
+    with loopback_cluster(nodes, cpus, heavy_states=heavy_states) as (engine, alive, placed):
         shutil.rmtree(out, ignore_errors=True)
         t0 = time.perf_counter()
         info = bake_level(level, settings, out, engine=engine)
@@ -170,7 +200,34 @@ def markdown(r: dict) -> str:
         "",
         f"{r['cpu_count']} cores on this machine; load average before {r['load_before']}, "
         f"after {r['load_after']}",
-        "",
+    ]
+    if r["runs"]:
+        lines += ["", *_runs_markdown(r)]
+    labels = (
+        ("single-CPU actors", "single"),
+        ("one actor of 16 threads per machine", "threads"),
+        ("one actor of 16 threads per machine, each BVH built by its stage's first task", "threads_in_line"),
+    )
+    for label, key in labels:
+        proj = r["projection"][key]
+        names = list(proj[0]["stages"])
+        source = r.get("projected_from", "the 1-node run")
+        lines += ["", f"Projection of {source}, machines of 16 cores, {label}:", ""]
+        lines += ["| machines | " + " | ".join(names) + " | total s | vs 1 machine | bound by |"]
+        lines += ["|---:|" + "---:|" * (len(names) + 2) + "---|"]
+        for row in proj:
+            bound = max(row["stages"], key=row["stages"].get)
+            cells = " | ".join(f"{row['stages'][n]:.1f}" for n in names)
+            lines.append(
+                f"| {row['machines']} | {cells} | **{row['total_s']:.1f}** "
+                f"| {proj[0]['total_s'] / row['total_s']:.1f}x | {bound} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def _runs_markdown(r: dict) -> list[str]:
+    """The cluster runs' table and their driver seconds per stage."""
+    lines = [
         "| nodes x CPUs | wall s | projected s (same run) | measured / projected "
         "| speed-up vs 1 node, measured | projected from the 1-node run | bytes |",
         "|---|---:|---:|---:|---:|---:|---|",
@@ -198,21 +255,7 @@ def markdown(r: dict) -> str:
             f"| {name} | {' | '.join(row)} | {st0.get('tasks', '-')} "
             f"| {st0.get('task_seconds_max', 0.0):.2f} |"
         )
-    for label, key in (("single-CPU actors", "single"), ("one actor of 16 threads per machine", "threads")):
-        proj = r["projection"][key]
-        names = list(proj[0]["stages"])
-        source = r.get("projected_from", "the 1-node run")
-        lines += ["", f"Projection of {source}, machines of 16 cores, {label}:", ""]
-        lines += ["| machines | " + " | ".join(names) + " | total s | vs 1 machine | bound by |"]
-        lines += ["|---:|" + "---:|" * (len(names) + 2) + "---|"]
-        for row in proj:
-            bound = max(row["stages"], key=row["stages"].get)
-            cells = " | ".join(f"{row['stages'][n]:.1f}" for n in names)
-            lines.append(
-                f"| {row['machines']} | {cells} | **{row['total_s']:.1f}** "
-                f"| {proj[0]['total_s'] / row['total_s']:.1f}x | {bound} |"
-            )
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main() -> int:
@@ -226,6 +269,12 @@ def main() -> int:
     p.add_argument(
         "--bvh-speedup", type=float, default=None, help="BVH build, 16 threads vs 1 (default: measured)"
     )
+    p.add_argument(
+        "--heavy-states",
+        type=int,
+        default=None,
+        help="BVHs an actor may hold at once (default: the engine's rule, 1 for single-CPU actors)",
+    )
     p.add_argument("--out", default="build/bench")
     p.add_argument("--project-only", action="store_true", help="recompute from OUT's bench_cluster.json")
     p.add_argument(
@@ -238,7 +287,11 @@ def main() -> int:
     args = p.parse_args()
     out = Path(args.out) / "level_cluster" / args.preset
     if args.project_only:
-        result = json.loads((out / "bench_cluster.json").read_text())
+        kept = out / "bench_cluster.json"
+        if not kept.exists() and not args.project_from:
+            raise SystemExit(f"--project-only: no {kept} (run the clusters first, or give --project-from)")
+        # a projection of another bake log needs no cluster run of its own
+        result = json.loads(kept.read_text()) if kept.exists() else {"preset": args.preset, "runs": []}
     else:
         level, cfg = write_level(out / "level", settings_for(args.preset, args.seed), args.preset)
         settings = load_level_settings(cfg, args.set)
@@ -251,14 +304,19 @@ def main() -> int:
             # each run kept as it ends, so a rerun of the same command resumes after the last finished one
             saved = out / f"run_{n}x{args.cpus_per_node}.json"
             key = {"preset": args.preset, "seed": args.seed, "overrides": args.set}
+            if args.heavy_states is not None:
+                key["heavy_states"] = args.heavy_states
             kept = json.loads(saved.read_text()) if saved.exists() else {}
             if kept.get("key") == key:
                 run = kept["run"]
             else:
-                run = run_cluster(level, settings, n, args.cpus_per_node, out / f"bake_{n}")
+                bake = out / f"bake_{n}"
+                run = run_cluster(level, settings, n, args.cpus_per_node, bake, args.heavy_states)
                 write_json(saved, {"key": key, "run": run})
                 fresh = True
-            run["projected_s"] = project(run["bake"], n, args.cpus_per_node, checks=True)["total_s"]
+            run["projected_s"] = project(run["bake"], n, args.cpus_per_node, checks=True, same_run=True)[
+                "total_s"
+            ]
             runs.append(run)
             print(f"{n} node(s): {run['wall_s']:.1f} s, projected {run['projected_s']:.1f} s", flush=True)
         for run in runs:
@@ -275,7 +333,7 @@ def main() -> int:
         result["bvh"] = bvh_speedup(out / "level" / "level.gltf")
         result["bvh_speedup_16"] = result["bvh"]["s16"]
     speedup = result.get("bvh_speedup_16", 1.0)
-    base = result["runs"][0]["bake"]
+    base = result["runs"][0]["bake"] if result["runs"] else None
     if args.project_from:
         data = json.loads(Path(args.project_from).read_text())
         base = data.get("bake", data.get("bake_log", data))
@@ -283,13 +341,16 @@ def main() -> int:
     result["projection"] = {
         "single": [{"machines": m, **project(base, m, 16)} for m in args.machines],
         "threads": [{"machines": m, **project(base, m, 16, 16, speedup)} for m in args.machines],
+        "threads_in_line": [
+            {"machines": m, **project(base, m, 16, 16, speedup, ahead=False)} for m in args.machines
+        ],
     }
     name = "bench_cluster_projected" if args.project_from else "bench_cluster"
     write_json(out / f"{name}.json", result)
     write_text(out / f"{name}.md", markdown(result))
     print(markdown(result))
     hashes = {r["glb_sha256"] for r in result["runs"]}
-    if len(hashes) != 1:
+    if len(hashes) > 1:
         print(f"the runs' glTFs differ: {hashes}", file=sys.stderr)
         return 1
     return 0

@@ -250,21 +250,29 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
     seconds (a local bake: the stage's wall time less its tasks', which ran in the driver, or, with several
     tasks at once beside it, less the time it waited for them; a Ray bake: the driver's CPU seconds) and
     each task's core-seconds (its seconds x the threads it traced with, for the tasks that trace:
-    :func:`traces`), and whether it traces ("traces"), the states workers build
-    (the opaque BVH: the ``bvh`` stage; the gold BVH: ``seconds_gold_state`` of the decorators). The
-    stages that only make error tables are left out unless ``checks`` (a run's own wall clock has them)."""
+    :func:`traces`), and whether it traces ("traces"), and the states workers build (the opaque BVH: the
+    ``bvh`` stage of a local bake, the trace's first tasks' on Ray; the gold BVH: ``seconds_gold_state`` of
+    the decorators, their first tasks' on Ray): "state_s", the slowest built by the stage's tasks, and
+    "prepared_s", the slowest built ahead (``Engine.prepare``: a ``prepare_*`` row of the log names the
+    stage it prepares for, "prepared_at" its place), with "waited_s", what the stage's tasks still waited
+    for it (a local bake builds its BVHs itself, so its log's prepared states are where a cluster's would
+    be: what they waited for is not measured). "position" is each stage's place in the log. The stages
+    that only make error tables are left out unless ``checks`` (a run's own wall clock has them)."""
     threads = int(info.get("task_threads", info["settings"].get("workers", 1)))
     tasks = info.get("task_seconds", {})
     local = info.get("engine", "local") == "local"
+    stages = info["stages"]
+    ahead = {st["prepares"]: i for i, st in enumerate(stages) if "prepares" in st}
     rows = []
-    for st in info["stages"]:
+    for position, st in enumerate(stages):
         name = st["stage"]
         if name in CHECK_STAGES and not checks:
             continue
         t = list(tasks.get(name, []))
         traced = traces(info, st, len(t))
         cores = [x * (threads if tr else 1) for x, tr in zip(t, traced, strict=True)]
-        state = 0.0
+        state = prepared = waited = 0.0
+        at = ahead.get("trace" if name == "bvh" else name)
         if name == "bvh":  # a local bake builds the opaque BVH here; every worker builds its own
             state, driver = st["seconds"], 0.0
         elif local and int(info.get("tasks_at_once", 1)) > 1:  # the tasks ran beside the driver
@@ -275,35 +283,58 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
             driver = max(0.0, st["seconds"] - sum(t) - state)
         else:  # on an engine the driver waits for the tasks: its own work is its CPU time
             driver = st["cpu_seconds"]
-            state = max(info.get("state_seconds", {}).get(name, [0.0]))
+            built = info.get("state_seconds", {}).get(name, [])
+            flags = info.get("state_prepared", {}).get(name, [False] * len(built))
+            waits = info.get("state_waits", {}).get(name, built)
+            state = max([x for x, p in zip(built, flags, strict=True) if not p], default=0.0)
+            prepared = max([x for x, p in zip(built, flags, strict=True) if p], default=0.0)
+            waited = max([w for w, p in zip(waits, flags, strict=True) if p], default=0.0)
+            at = at if prepared else None
+        if local and at is not None:  # built here, prepared on a cluster's workers
+            state, prepared = 0.0, state
         if local:  # on Ray the driver would also submit every task
             driver += SUBMIT_S * len(t)
         waves = list(info.get("task_waves", {}).get(name, [0] * len(t)))  # a log without them: one wave
         rows.append(
             {
                 "stage": name,
+                "position": position,
                 "driver_s": driver,
                 "task_core_s": cores,
                 "waves": waves,
                 "traces": traced,
                 "state_s": state,
+                "prepared_s": prepared,
+                "prepared_at": at if prepared else None,
+                "waited_s": waited,
             }
         )
     return rows
 
 
-def wave_span(work: list[float], waves: list[int], slots: int, divides: bool) -> float:
-    """Seconds of a stage's tasks ``work`` (seconds each) on ``slots`` task slots, wave after wave: a wave
-    is one of the engine's map calls, and the driver starts the next once it has this one's results (the
-    partitioned solve's CG: one wave per iteration). Each wave takes the makespan of its tasks scheduled
-    longest first, or, if its work ``divides`` (the trace's blocks, sized to the cores), its work over the
-    slots; and a round trip (:data:`WAVE_S`)."""
+def wave_spans(
+    work: list[float], waves: list[int], slots: int, divides: bool, traced: list[bool] | None = None
+) -> list[tuple[float, bool]]:
+    """Seconds of each wave of a stage's tasks ``work`` (seconds each) on ``slots`` task slots, and whether
+    any of its tasks ``traced``: a wave is one of the engine's map calls, and the driver starts the next
+    once it has this one's results (the partitioned solve's CG: one wave per iteration). Each wave takes
+    the makespan of its tasks scheduled longest first, or, if its work ``divides`` (the trace's blocks,
+    sized to the cores), its work over the slots; and a round trip (:data:`WAVE_S`)."""
+    traced = traced or [False] * len(work)
     groups: dict[int, list[float]] = {}
-    for w, x in zip(waves, work, strict=True):
+    tracing: dict[int, bool] = {}
+    for w, x, tr in zip(waves, work, traced, strict=True):
         groups.setdefault(w, []).append(x)
-    return sum(
-        (sum(g) / slots if divides else makespan(g, slots)) + WAVE_S for _, g in sorted(groups.items())
-    )
+        tracing[w] = tracing.get(w, False) or tr
+    return [
+        ((sum(g) / slots if divides else makespan(g, slots)) + WAVE_S, tracing[w])
+        for w, g in sorted(groups.items())
+    ]
+
+
+def wave_span(work: list[float], waves: list[int], slots: int, divides: bool) -> float:
+    """The seconds of a stage's tasks, wave after wave (:func:`wave_spans`)."""
+    return sum(span for span, _ in wave_spans(work, waves, slots, divides))
 
 
 def makespan(durations: list[float], cores: int) -> float:
@@ -344,7 +375,8 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
             span = wave_span(work, c["waves"], p, c["stage"] == "trace")
             if work:  # each core's share of the tasks' round trips (the trace's blocks: a few per core)
                 span += t_task * (TASKS_PER_CORE if c["stage"] == "trace" else len(work) / p)
-            per_stage[c["stage"]] = c["driver_s"] + c["state_s"] + span
+            # single-CPU actors: a state built ahead shares its actor's one core, so all of it is counted
+            per_stage[c["stage"]] = c["driver_s"] + max(c["state_s"], c["prepared_s"]) + span
         rows.append({"machines": n, "cores": p, "stages": per_stage, "total_s": sum(per_stage.values())})
     base = rows[0]["total_s"]
     for r in rows:
@@ -358,7 +390,7 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
         "t_task_s": t_task,
         "cores_per_machine": cores,
         "driver_s": sum(c["driver_s"] for c in costs),
-        "state_s": sum(c["state_s"] for c in costs),
+        "state_s": sum(max(c["state_s"], c["prepared_s"]) for c in costs),
         "largest_task_s": largest,
         "rows": rows,
     }

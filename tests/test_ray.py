@@ -289,7 +289,25 @@ def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, t
         k: len(v) for k, v in log["task_seconds"].items()
     }
     assert max(log["task_waves"]["samples"]) == max(info["task_waves"]["samples"]) == 1  # its two passes
+    # Both BVHs built ahead by the actor (two heavy states: the gold one from the solve on), each once
+    _assert_prepared(log, gold_after="trace", actors=1)
     _assert_same_level_bake(out, local, info)
+
+
+def _assert_prepared(log: dict, gold_after: str, actors: int) -> None:
+    """The bake ``log`` prepared the opaque BVH before the samples and the gold one after the stage
+    ``gold_after``; each of the ``actors`` built each once, ahead, for the trace and the trees."""
+    order = [st["stage"] for st in log["stages"]]
+    assert order[order.index("prepare_opaque") + 1] == "samples"
+    assert order[order.index("prepare_gold") - 1] == gold_after
+    rows = {st["stage"]: st for st in log["stages"]}
+    for stage in ("trace", "decorators"):
+        assert rows[stage]["states_prepared"] == actors, rows[stage]
+        assert rows[stage]["state_wait_seconds_max"] <= max(log["state_seconds"][stage])
+    # the stages after the trace that read only the opaque BVH found it there (its gold neighbour took
+    # nothing from it)
+    for stage in ("small_decorators", "blend_check"):
+        assert "states_built" not in rows[stage], rows[stage]
 
 
 def test_level_worker_killed_mid_stage_changes_nothing(ray_engine, local_level, tmp_path):
@@ -320,7 +338,9 @@ def test_level_lod_per_piece_in_tiles_is_byte_identical(ray_engine, local_level,
     info = bake_level(level, settings, tmp_path / "local")
     lod = next(st for st in info["stages"] if st["stage"] == "lod")
     assert lod["simplify_tasks"] > info["counts"]["pieces"]  # the terrain piece in tiles
-    bake_level(level, settings, tmp_path / "ray", engine=ray_engine)
+    log = bake_level(level, settings, tmp_path / "ray", engine=ray_engine)
+    # single-CPU actors hold one BVH at a time: the gold one is prepared once the opaque one is done with
+    _assert_prepared(log, gold_after="blend_check", actors=2)
     _assert_same_level_bake(tmp_path / "ray", tmp_path / "local", info)
 
 
@@ -422,6 +442,8 @@ def test_local_engine_never_imports_ray(tmp_path, config_file):
         (["--engine", "ray", "--address", "nonsense"], "--address must be HOST:PORT"),
         (["--address", "127.0.0.1:6379"], "need --engine ray"),
         (["--ray-threads", "2"], "need --engine ray"),
+        (["--ray-heavy-states", "2"], "need --engine ray"),
+        (["--engine", "ray", "--ray-heavy-states", "0"], "--ray-heavy-states must be >= 1"),
         (["--engine", "ray", "--ray-threads", "0"], "--ray-threads must be >= 1"),
         (
             ["--engine", "ray", "--ray-workers", "0", "--address", "127.0.0.1:{port}"],
@@ -495,3 +517,45 @@ def test_tasks_of_one_affinity_run_on_one_actor(ray_engine):
     got = dict(ray_engine.map(Task(STATELESS, pid, i, affinity=i // 6) for i in range(12)))
     first, second = {got[i] for i in range(6)}, {got[i] for i in range(6, 12)}
     assert len(first) == len(second) == 1 and first != second
+
+
+def test_a_prepared_state_is_built_once_per_actor_and_used(cluster, tmp_path):
+    """``RayEngine.prepare``: each actor builds the context's state on a thread of its own while its other
+    tasks run; the context's tasks that arrive before the build ends wait for it and get that state (one
+    build per actor, noted as prepared, its first task's wait no longer than the build)."""
+    import uuid
+
+    from neuralao.pipeline.engines.engine import Context, Task
+    from neuralao.pipeline.geometry.partitioned_solve import STATELESS
+
+    builds = tmp_path / "builds"
+    builds.mkdir()
+
+    def build(payload):
+        token = uuid.uuid4().hex
+        (builds / f"{os.getpid()}_{token}").touch()
+        time.sleep(3.0)
+        return token
+
+    def token(state, args):
+        return os.getpid(), state
+
+    def pid(state, args):
+        time.sleep(0.05)
+        return os.getpid()
+
+    ctx = Context("prepared-bvh", build, None, heavy=True)
+    with RayEngine(cluster, heavy_states=2) as engine:
+        actors = {p for p, _ in engine.worker_info()}
+        list(engine.map(Task(STATELESS, pid, i) for i in range(4)))  # the function on both actors
+        engine.prepare(ctx)
+        t0 = time.perf_counter()
+        assert set(dict(engine.map(Task(STATELESS, pid, i) for i in range(8))).values()) == actors
+        assert time.perf_counter() - t0 < 2.5  # beside the builds (about 0.2 s of their 3 s)
+        got = dict(engine.map(Task(ctx, token, i) for i in range(8)))  # they arrive mid-build
+        made = sorted(f.name.split("_") for f in builds.iterdir())
+        assert {int(p) for p, _ in made} == actors and len(made) == len(actors)  # once per actor
+        assert {(p, t) for p, t in got.values()} == {(int(p), t) for p, t in made}  # and used
+        states = list(zip(engine.state_seconds, engine.state_waits, engine.state_prepared, strict=True))
+        ahead = [(s, w) for s, w, prepared in states if prepared]
+        assert len(ahead) == len(actors) and all(s >= 3.0 and 0.5 < w < s for s, w in ahead)

@@ -8,7 +8,8 @@ Embree, stage by stage (the rows of their Table 1; the bake log times each one):
    level's bounds, one instance at a time;
 2. **samples**: stratified surface samples under a per-face cap, water-filled (two passes over the pieces:
    the density, then each piece's count);
-3. **bvh**: the opaque Embree scene (here for a local bake; on every worker with an engine);
+3. **bvh**: the opaque Embree scene (here for a local bake; on every worker with an engine, started there
+   before the samples, after the foliage its state holds);
 4. **foliage**: shrub instances -> world boxes with overlap-reduced densities, tree instances ->
    triangles with their transmission (:mod:`neuralao.pipeline.tracing.foliage`);
 5. **trace**: obscurance at the short and the long half distance from one trace, attenuated by the
@@ -29,15 +30,23 @@ the resampling reads), never the flattened level. Each task's result is written 
 arrives, stamped with its stage's key (:data:`STAGE_INPUTS`: the level's bytes, the settings the stage
 reads and the keys of the stages it reads): a killed bake resumes where it stopped and ends with the same
 bytes; a changed setting redoes the stages that read it and those after them, and reuses the others.
+
+The workers build both BVHs in the background (``Engine.prepare``), each ahead of the stage that needs it:
+the opaque one while the samples' passes run, the trees' gold one while the solve, the LOD and the checks
+run (where a worker may hold it beside the opaque one: ``Engine.heavy_states``; else from the trees' stage
+on). The log's rows ``prepare_opaque`` and ``prepare_gold`` mark where, and each stage's row the states
+its tasks found prepared and the seconds they still waited for them.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import resource
 import shutil
 import time
+import zipfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -48,6 +57,7 @@ from neuralao.pipeline.bakes.level_decorators import (
     Resampler,
     bake_decorators,
     build_foliage,
+    gold_stage_context,
     shrub_boxes,
     small_decorators,
 )
@@ -121,7 +131,11 @@ class BakeLog:
         self.task_seconds: dict[str, list[float]] = {}
         # per stage, the wave (0, 1, ...: the engine's map calls in order) each of its tasks ran in
         self.task_waves: dict[str, list[int]] = {}
+        # per stage, the seconds of each state its tasks were the first to use (built there or prepared
+        # ahead), the seconds the first task waited for it and whether it was prepared (Engine.prepare)
         self.state_seconds: dict[str, list[float]] = {}
+        self.state_waits: dict[str, list[float]] = {}
+        self.state_prepared: dict[str, list[bool]] = {}
         self.dir = out / "stages"
         self._waited0 = 0.0  # the local runner's waiting seconds when the current stage began
         self._thread0 = 0.0  # this thread's CPU seconds then
@@ -165,6 +179,29 @@ class BakeLog:
         shutil.rmtree(self.dir / f"{name}.parts", ignore_errors=True)  # its task results (parts)
         return data
 
+    def will_make(self, name: str) -> bool:
+        """Whether this run makes stage ``name`` (no stored result of its key is there)."""
+        try:
+            with np.load(self.dir / f"{name}.npz", allow_pickle=False) as z:
+                return str(z["_key"]) != self.keys[name]
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            return True
+
+    def prepare(self, name: str, stage: str, make, users: tuple[str, ...] = ()) -> None:
+        """Have the runner's workers start building the state of the context ``make()`` returns (None:
+        none) ahead of ``stage`` (:meth:`neuralao.pipeline.engines.engine.Engine.prepare`), unless this run
+        makes none of the stages ``users`` (default: ``stage``) that read it. A row ``name`` of its own:
+        the driver's seconds to make the context and send it, and ``prepares``, the stage it is for, so a
+        projection knows which stages' work runs beside the build."""
+        if not any(self.will_make(u) for u in users or (stage,)):
+            return
+
+        def start() -> None:
+            if (ctx := make()) is not None:
+                self.runner.prepare(ctx)
+
+        self.timed(name, f"State of the {stage} stage started on the workers", start, prepares=stage)
+
     def parts(self, name: str):
         """The :class:`neuralao.pipeline.engines.engine.ResultStore` of stage ``name``'s task results: each
         is written
@@ -197,8 +234,14 @@ class BakeLog:
             self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
         if self.runner is not None and self.runner.state_seconds:
             built, self.runner.state_seconds = self.runner.state_seconds, []
-            self.state_seconds[name] = built
+            waits, self.runner.state_waits = self.runner.state_waits, []
+            prepared, self.runner.state_prepared = self.runner.state_prepared, []
+            self.state_seconds[name], self.state_waits[name] = built, waits
+            self.state_prepared[name] = prepared
             self.stages[-1].update(states_built=len(built))
+            if any(prepared):  # built ahead: what their first tasks still waited for them
+                ahead = [w for w, p in zip(waits, prepared, strict=True) if p]
+                self.stages[-1].update(states_prepared=len(ahead), state_wait_seconds_max=max(ahead))
         # The driver's own seconds: what no task did. Here, one task at a time, the tasks ran in this thread,
         # so the stage's wall time less theirs; with several at once they ran on other threads, so this
         # thread's CPU seconds (not the stage's wall time less the time it waited for them: that counts
@@ -209,7 +252,7 @@ class BakeLog:
             waited = self.runner.waited - self._waited0
             row["driver_seconds"] = time.thread_time() - self._thread0  # states are built by the tasks
             row["driver_wall_seconds"] = max(0.0, row["seconds"] - waited)
-        elif self.runner is None or self.runner.name == "local":
+        elif self.runner is None or self.runner.name == "local":  # (a local engine prepares nothing)
             row["driver_seconds"] = max(0.0, row["seconds"] - sum(done) - sum(built))
         else:
             row["driver_seconds"] = row["cpu_seconds"]
@@ -359,11 +402,26 @@ def bake_level(
     )
     t = s.trace
     light = pieces_context(keys["geometry"], level, index)
-    # The samples' two passes over the pieces' sample ranges are a task per range each.
     # Locally, s.workers tasks at a time on threads, each tracing on one (as Ray's single-CPU actors): no
     # task's numpy waits for its own tracing threads, and the stages' tasks fill the cores.
     local = None if engine is not None else LocalEngine(workers=s.workers, threads=1)
+    settings_here = worker_settings(label_settings(s, index.diagonal), engine or local)
+    frame = LabellerFrame(index.center, index.diagonal, settings_here)
+    foliage = shrubs = None
+    if s.foliage.enabled:
+        # the shrubs' boxes made once: the trees' gold foliage has the same
+        shrubs, foliage = blog.timed(
+            "foliage",
+            "Flatten trees, shrub 'fog' boxes + foliage BVH",
+            lambda: _shrubs_and_foliage(level, frame, s),
+        )
+        blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
+    ctx = opaque_context(keys["geometry"], level, index, settings_here, foliage, t.bvh, keys["foliage"])
     blog.runner = engine or local
+    # The opaque BVH built on the workers while the samples' passes run (the foliage is in its payload,
+    # so it comes first); the trace, the resampling and the blend check read it.
+    blog.prepare("prepare_opaque", "trace", lambda: ctx, ("trace", "small_decorators", "lod", "blend_check"))
+    # The samples' two passes over the pieces' sample ranges are a task per range each.
     rule, pieces = blog.timed(
         "samples",
         "Sample mesh",
@@ -380,18 +438,6 @@ def bake_level(
     blog.runner = None
     total_samples = sum(p.ns for p in pieces)
     blog.note("samples", samples=total_samples)
-    settings_here = worker_settings(label_settings(s, index.diagonal), engine or local)
-    frame = LabellerFrame(index.center, index.diagonal, settings_here)
-    foliage = shrubs = None
-    if s.foliage.enabled:
-        # the shrubs' boxes made once: the trees' gold foliage has the same
-        shrubs, foliage = blog.timed(
-            "foliage",
-            "Flatten trees, shrub 'fog' boxes + foliage BVH",
-            lambda: _shrubs_and_foliage(level, frame, s),
-        )
-        blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
-    ctx = opaque_context(keys["geometry"], level, index, settings_here, foliage, t.bvh, keys["foliage"])
     # With an engine every trace runs on the workers: the driver builds no Embree scene (a few GiB for a
     # world of tens of millions of faces).
     if engine is None:
@@ -421,6 +467,17 @@ def bake_level(
         samples=total_samples,
         rays=total_samples * s.trace.rays,
     )
+    # The trees' gold BVH built on the workers from here on, while the solve's and the LOD's drivers leave
+    # them mostly idle, where a worker may hold it beside the opaque one the resampling still reads (a
+    # local bake holds its own: its log places the call as on such machines); else once the opaque is done.
+    gold = functools.cache(lambda: gold_stage_context(level, index.diagonal, s, runner, keys, shrubs))
+
+    def prepare_gold() -> None:
+        blog.prepare("prepare_gold", "decorators", gold)
+
+    ahead = engine is None or engine.heavy_states >= 2
+    if ahead:
+        prepare_gold()
     solve_files = TaskFiles(blog.dir / "solve", keys["solve"])
     # What every piece's least squares takes from the whole level (it is one block of the level's).
     weight = float(traced["valid_weight"])
@@ -509,11 +566,21 @@ def bake_level(
     if engine is None:
         runner.release(ctx.key)
         state = None
+    if not ahead:
+        prepare_gold()
     deco = blog.stored(
         "decorators",
         "Trees: local AO, in-place gold standard, eq. 3 fits",
         lambda: bake_decorators(
-            level, index.diagonal, s, runner, engine is None, blog.parts("decorators"), keys, shrubs
+            level,
+            index.diagonal,
+            s,
+            runner,
+            engine is None,
+            blog.parts("decorators"),
+            keys,
+            shrubs,
+            gold(),
         ),
         instances=level.counts().get("tree_instances", 0),
     )
@@ -565,6 +632,8 @@ def bake_level(
         "task_seconds": blog.task_seconds,
         "task_waves": blog.task_waves,
         "state_seconds": blog.state_seconds,
+        "state_waits": blog.state_waits,
+        "state_prepared": blog.state_prepared,
         "engine": runner.name,
         # Threads each task traced with (this process's for a local bake; an actor's on Ray).
         "task_threads": runner.threads or s.workers,

@@ -23,7 +23,7 @@ from neuralao.pipeline.bakes.level_settings import (
     label_settings,
 )
 from neuralao.pipeline.bakes.level_stages import LabellerFrame, PieceState, gold_context, worker_settings
-from neuralao.pipeline.engines.engine import Shared, Task, content_key
+from neuralao.pipeline.engines.engine import Context, Shared, Task, content_key
 from neuralao.pipeline.geometry.least_squares import fit_least_squares
 from neuralao.pipeline.geometry.level_files import Level, LevelNode, flatten
 from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays, slim_scene
@@ -170,29 +170,19 @@ def _tree_instance(state, args) -> dict[str, np.ndarray]:
     return {"y": y, "y1": y1, "errors": np.array([err[k] for k in _DECORATOR_ERRORS])}
 
 
-def bake_decorators(
+def gold_stage_context(
     level: Level,
     diagonal: float,
     s: LevelBakeSettings,
     runner,
-    local: bool,
-    store=None,
     keys: dict[str, str] | None = None,
     shrubs: tuple | None = None,
-) -> dict[str, np.ndarray]:
-    """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
-
-    The local AO of each model is baked here; every instance's in-place trace and fits is a task of
-    ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
-    ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
-    (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
-    ``diagonal``: the opaque level's (the rays' length). ``keys``: the bake's stage keys
-    (:func:`neuralao.pipeline.bakes.level.stage_keys`: the stage's own names its results, the geometry's
-    the level its workers hold). ``shrubs``: :func:`shrub_boxes`, if made already."""
-
-    trees = level.nodes_with("tree")
-    if not trees:
-        return {"models": np.zeros(0, np.int64)}
+) -> Context | None:
+    """The engine context of the trees' gold standard (the level with every tree opaque, and the foliage
+    without the trees in its frame), or None for a level without trees. Arguments as
+    :func:`bake_decorators`'."""
+    if not level.nodes_with("tree"):
+        return None
     settings = worker_settings(label_settings(s, diagonal), runner)
     # Foliage lives in the gold labeller's local frame (its scene's centre and diagonal), found here
     # one instance at a time, without flattening the level.
@@ -204,10 +194,39 @@ def bake_decorators(
         else None
     )
     keys = keys or {}
-    key = keys.get("decorators", "")
-    ctx = gold_context(
+    return gold_context(
         keys.get("geometry", ""), level, settings, gold_foliage, s.trace.bvh, keys.get("foliage", "")
     )
+
+
+def bake_decorators(
+    level: Level,
+    diagonal: float,
+    s: LevelBakeSettings,
+    runner,
+    local: bool,
+    store=None,
+    keys: dict[str, str] | None = None,
+    shrubs: tuple | None = None,
+    ctx: Context | None = None,
+) -> dict[str, np.ndarray]:
+    """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
+
+    The local AO of each model is baked here; every instance's in-place trace and fits is a task of
+    ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
+    ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
+    (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
+    ``diagonal``: the opaque level's (the rays' length). ``keys``: the bake's stage keys
+    (:func:`neuralao.pipeline.bakes.level.stage_keys`: the stage's own names its results, the geometry's
+    the level its workers hold). ``shrubs``: :func:`shrub_boxes`, if made already. ``ctx``: the gold
+    context (:func:`gold_stage_context`), if made already (its state prepared on the workers)."""
+
+    trees = level.nodes_with("tree")
+    if not trees:
+        return {"models": np.zeros(0, np.int64)}
+    ctx = ctx or gold_stage_context(level, diagonal, s, runner, keys, shrubs)
+    keys = keys or {}
+    key = keys.get("decorators", "")
     t0 = time.perf_counter()
     if local:  # the gold standard sees the trees as opaque geometry (every instance baked in place)
         runner.hold(ctx.key, ctx.build(ctx.value()))

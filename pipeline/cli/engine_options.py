@@ -1,6 +1,6 @@
 """The flags that choose where a command's work runs (``--engine``, ``--address``, ``--ray-workers``,
-``--ray-threads``, ``--chunk-rays``) and the :class:`~neuralao.pipeline.engines.engine.Engine` they
-describe."""
+``--ray-threads``, ``--ray-heavy-states``, ``--chunk-rays``) and the
+:class:`~neuralao.pipeline.engines.engine.Engine` they describe."""
 
 from __future__ import annotations
 
@@ -40,6 +40,14 @@ def add_engine_arguments(p: argparse.ArgumentParser, chunks: bool = False) -> No
         help="CPUs and tracing threads per Ray actor (default 1; a machine's cores: one actor, one copy "
         "of a level's BVH per machine)",
     )
+    p.add_argument(
+        "--ray-heavy-states",
+        type=int,
+        default=None,
+        metavar="H",
+        help="BVHs a Ray actor may hold at once, so the next one is built while the current one is in use "
+        "(default 2 with --ray-threads above 1, else 1)",
+    )
     if chunks:
         p.add_argument(
             "--chunk-rays",
@@ -55,10 +63,19 @@ def engine_from_args(args: argparse.Namespace) -> Engine:
     if chunk_rays is not None and chunk_rays < 1:
         raise NeuralaoError(f"--chunk-rays must be >= 1, got {chunk_rays}")
     if args.engine == "local":
-        ray_flags = (args.address, args.ray_workers, getattr(args, "ray_threads", None), chunk_rays)
+        heavy = getattr(args, "ray_heavy_states", None)
+        ray_flags = (args.address, args.ray_workers, getattr(args, "ray_threads", None), heavy, chunk_rays)
         if any(f is not None for f in ray_flags):
-            raise NeuralaoError("--address, --ray-workers, --ray-threads and --chunk-rays need --engine ray")
+            raise NeuralaoError(
+                "--address, --ray-workers, --ray-threads, --ray-heavy-states and --chunk-rays need "
+                "--engine ray"
+            )
         return LocalEngine()
-    engine = RayEngine(args.address, args.ray_workers, 1 if args.ray_threads is None else args.ray_threads)
+    engine = RayEngine(
+        args.address,
+        args.ray_workers,
+        1 if args.ray_threads is None else args.ray_threads,
+        getattr(args, "ray_heavy_states", None),
+    )
     engine.chunk_rays = chunk_rays
     return engine

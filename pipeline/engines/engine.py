@@ -10,16 +10,18 @@ The whole interface is :meth:`Engine.map` over :class:`Task` objects. A task nam
 
 ``map`` yields ``(index, result)`` pairs, ``index`` being the task's position in the input, in
 completion order; callers that write files do so themselves, on the driver, atomically, as results
-arrive. Engines:
+arrive. ``prepare(context)`` has every worker start building a context's state in the background, ahead
+of the tasks that need it (a level's BVH while the stages before its own run). Engines:
 
 * :class:`LocalEngine` (the default): runs each task in this process, in order (or ``workers`` at once
-  on threads), keeping the state of the latest context. No Ray import.
+  on threads), keeping the state of the latest context; ``prepare`` builds nothing (its tasks fill the
+  cores). No Ray import.
 * :class:`RayEngine`: one actor per worker (``num_cpus=1``), each caching the states of its latest
-  contexts. Payloads travel through the object store (put once, fetched once per actor that needs
-  them): workers need no shared filesystem, only the installed package. Results return through the
-  object store. An actor whose process dies is restarted and its pending tasks are retried
-  (``max_restarts=-1``, ``max_task_retries=-1``); a task raising :class:`NeuralaoError` fails the
-  run with that message.
+  contexts and building prepared ones on a thread of its own. Payloads travel through the object store
+  (put once, fetched once per actor that needs them): workers need no shared filesystem, only the
+  installed package. Results return through the object store. An actor whose process dies is restarted
+  and its pending tasks are retried (``max_restarts=-1``, ``max_task_retries=-1``); a task raising
+  :class:`NeuralaoError` fails the run with that message.
 
 Big data that many tasks of one context read but the context does not own (the level's baked vertex
 values, read by every resampling task) travels as :class:`Shared` inside a task's ``args`` tuple: Ray
@@ -170,31 +172,122 @@ def content_key(*parts: Any) -> str:
     return h.hexdigest()
 
 
-class _StateCache:
-    """The states of the latest ``size`` contexts, least recently used evicted (and closed)."""
+@dataclass(frozen=True)
+class _Built:
+    """How a task came by its context's state, the first time it was used on its worker."""
 
-    def __init__(self, size: int):
-        self.size = size
-        self._states: collections.OrderedDict[str, Any] = collections.OrderedDict()
+    seconds: float  # building it (fetching the payload included), wherever it was built
+    waited: float  # the task's own wait for it: ``seconds`` if the task built it, less if it was prepared
+    prepared: bool  # built ahead on a thread of its own (:meth:`Engine.prepare`)
+
+
+@dataclass
+class _Entry:
+    """A state of :class:`_StateCache`: done once ``future`` is; ``fresh`` until a task has used it."""
+
+    future: Future
+    heavy: bool
+    prepared: bool
+    fresh: bool = True
+    seconds: float = 0.0
+
+
+class _StateCache:
+    """The states of the latest ``size`` light contexts and of at most ``heavy`` heavy ones (least recently
+    used evicted and closed). Building a heavy state drops every light one, and heavy ones until
+    ``heavy - 1`` remain, those no task has used yet (prepared ahead) last: with ``heavy`` 1 a heavy state
+    never shares its worker's memory with another state.
+
+    Thread-safe: a state is built once, by the first caller (or by :meth:`prepare`'s thread), and every
+    other caller that wants it waits for that build."""
+
+    def __init__(self, size: int, heavy: int = 1):
+        self.size, self.heavy = size, heavy
+        self._states: collections.OrderedDict[str, _Entry] = collections.OrderedDict()
+        self._lock = threading.Lock()
 
     def get(self, key: str, build: Callable[[], Any], heavy: bool = False) -> Any:
-        if key in self._states:
-            self._states.move_to_end(key)
-            return self._states[key]
-        while len(self._states) >= (1 if heavy else self.size):
-            _, old = self._states.popitem(last=False)
-            if (close := getattr(old, "close", None)) is not None:
-                close()
-            del old
-            release_free_memory()
-        state = self._states[key] = build()
-        return state
+        """The state of ``key``, built by ``build()`` unless it is here or being built."""
+        return self.obtain(key, build, heavy)[0]
+
+    def obtain(self, key: str, build: Callable[[], Any], heavy: bool = False) -> tuple[Any, _Built | None]:
+        """:meth:`get`, and how the state was come by the first time a task uses it (None after)."""
+        t0 = time.perf_counter()
+        with self._lock:
+            entry = self._states.get(key)
+            mine = entry is None
+            if mine:
+                entry = self._add(key, heavy, prepared=False)
+            else:
+                self._states.move_to_end(key)
+        if mine:
+            _build_into(entry, build)
+        try:
+            state = entry.future.result()  # waits for a build under way elsewhere
+        except BaseException:
+            with self._lock:  # a failed build is not kept: the next task of the context tries again
+                if self._states.get(key) is entry:
+                    del self._states[key]
+            raise
+        waited = entry.seconds if mine else time.perf_counter() - t0  # building it is all it waited for
+        with self._lock:
+            first, entry.fresh = entry.fresh, False
+        return state, (_Built(entry.seconds, waited, entry.prepared) if first else None)
+
+    def prepare(self, key: str, build: Callable[[], Any], heavy: bool = False) -> bool:
+        """Start building the state of ``key`` on a thread of its own (False: it is here or being built).
+        A task that wants it meanwhile waits for this build; until a task has used it, it is evicted last."""
+        with self._lock:
+            if key in self._states:
+                return False
+            entry = self._add(key, heavy, prepared=True)
+        builder = threading.Thread(target=_build_into, args=(entry, build), daemon=True)
+        builder.start()
+        return True
+
+    def _add(self, key: str, heavy: bool, prepared: bool) -> _Entry:
+        """A new entry for ``key``, after evicting what its kind of state leaves no room for (lock held)."""
+        if heavy:
+            light = [k for k, e in self._states.items() if not e.heavy]
+            heavies = [k for k, e in self._states.items() if e.heavy]
+            used = [k for k in heavies if not self._states[k].fresh]
+            order = used + [k for k in heavies if k not in used]  # least recently used first
+            victims = light + order[: max(0, len(heavies) - (self.heavy - 1))]
+        else:
+            light = [k for k, e in self._states.items() if not e.heavy]
+            victims = light[: max(0, len(light) - (self.size - 1))]
+        for old in victims:
+            self._close(self._states.pop(old))
+        entry = self._states[key] = _Entry(Future(), heavy, prepared)
+        return entry
+
+    @staticmethod
+    def _close(entry: _Entry) -> None:
+        try:
+            state = entry.future.result()  # one still being built is waited for, then closed
+        except Exception:  # noqa: BLE001 - its build failed: nothing to close
+            return
+        if (close := getattr(state, "close", None)) is not None:
+            close()
+        del state
+        release_free_memory()
 
     def clear(self) -> None:
-        while self._states:
-            _, old = self._states.popitem(last=False)
-            if (close := getattr(old, "close", None)) is not None:
-                close()
+        with self._lock:
+            while self._states:
+                self._close(self._states.popitem(last=False)[1])
+
+
+def _build_into(entry: _Entry, build: Callable[[], Any]) -> None:
+    """``build()`` into ``entry``'s future, its seconds noted (an error goes to whoever waits for it)."""
+    t0 = time.perf_counter()
+    try:
+        state = build()
+    except BaseException as e:  # noqa: BLE001 - handed to the waiting task, which raises it
+        entry.future.set_exception(e)
+        return
+    entry.seconds = time.perf_counter() - t0
+    entry.future.set_result(state)
 
 
 class Engine:
@@ -208,14 +301,20 @@ class Engine:
     # which on a worker of its own it would not)
     task_clock = "wall"
     chunk_rays: int | None = None  # rays per bake task (EngineLabeller); None: CHUNK_RAYS
+    # Heavy states (:attr:`Context.heavy`) a worker may hold at once: 2 lets a state prepared ahead
+    # (:meth:`prepare`) be built beside the one the tasks still use; 1 drops every other state first.
+    heavy_states = 1
 
     def __init__(self) -> None:
         self.completed = 0  # tasks finished (or loaded from a store) by the latest map
         # Seconds of every task this engine ran (the call on its worker, without building the context's
         # state) and of every state it built, in completion order; a caller timing its stages reads and
-        # clears them.
+        # clears them. Beside each state's seconds: the seconds the first task that used it waited for it
+        # (its build's, or less where it was prepared ahead) and whether it was prepared.
         self.task_seconds: list[float] = []
         self.state_seconds: list[float] = []
+        self.state_waits: list[float] = []
+        self.state_prepared: list[bool] = []
         # The map call (numbered from 0 for this engine) each task of ``task_seconds`` ran in: a caller's
         # next map starts once it has read this one's results, so a map's tasks are a wave that the next
         # waits for (what a projection onto more machines adds up, wave by wave).
@@ -225,9 +324,16 @@ class Engine:
     def _timing(self, timed: _Timed) -> Any:
         """The result inside ``timed``, its seconds noted."""
         self.task_seconds.append(timed.seconds)
-        if timed.state_seconds:
-            self.state_seconds.append(timed.state_seconds)
+        if (built := timed.built) is not None:
+            self.state_seconds.append(built.seconds)
+            self.state_waits.append(built.waited)
+            self.state_prepared.append(built.prepared)
         return timed.result
+
+    def prepare(self, context: Context) -> None:
+        """Start building ``context``'s state on every worker in the background, while this process and
+        tasks of other contexts go on; the first task of ``context`` on a worker waits for that build
+        instead of making its own. Results never depend on it. The base engine does nothing."""
 
     @property
     def task_rays(self) -> int:
@@ -332,17 +438,13 @@ class LocalEngine(Engine):
 
     def _call(self, task: Task) -> _Timed:
         ctx = task.context
-        built = [0.0]
+        built = None
         with self._lock:
             if ctx.key in self._states:
                 state = self._states[ctx.key]
             else:
-                state = self._cache.get(
-                    ctx.key,
-                    lambda ctx=ctx, built=built: _timed_build(ctx.build, ctx.value, built),
-                    ctx.heavy,
-                )
-        return _timed_call(task.fn, state, _unshare(task.args), built[0], self.task_clock == "thread_cpu")
+                state, built = self._cache.obtain(ctx.key, lambda: ctx.build(ctx.value()), ctx.heavy)
+        return _timed_call(task.fn, state, _unshare(task.args), built, self.task_clock == "thread_cpu")
 
     def _run(self, pending):
         if self.workers == 1:
@@ -383,60 +485,63 @@ class LocalEngine(Engine):
         self._cache.clear()  # e.g. a dataset's GL renderer
 
 
-def _timed_build(build, payload, seconds: list[float]):
-    """``build(payload())``, its seconds (fetch and build) in ``seconds[0]``."""
-    t0 = time.perf_counter()
-    state = build(payload())
-    seconds[0] = time.perf_counter() - t0
-    return state
-
-
 @dataclass(frozen=True)
 class _Timed:
-    """A task's result, the seconds of its call and of building its context's state (0: already built)."""
+    """A task's result, the seconds of its call and how its context's state was come by, if this task was
+    the first to use it on its worker (None: already in use)."""
 
     result: Any
     seconds: float
-    state_seconds: float
+    built: _Built | None
 
 
-def _timed_call(fn, state, args, state_seconds: float = 0.0, cpu: bool = False) -> _Timed:
+def _timed_call(fn, state, args, built: _Built | None = None, cpu: bool = False) -> _Timed:
     """``fn(state, args)`` and its seconds: what a projection of a run's stages reads. ``cpu``: the
     seconds are this thread's CPU time, not the wall clock's (:attr:`Engine.task_clock`)."""
     clock = time.thread_time if cpu else time.perf_counter
     t0 = clock()
     result = fn(state, args)
-    return _Timed(result, clock() - t0, state_seconds)
+    return _Timed(result, clock() - t0, built)
 
 
 class _Worker:
     """Body of the Ray actor (wrapped by ``ray.remote`` in :class:`RayEngine`, so importing this
     module never imports Ray): caches states by context key, runs tasks."""
 
-    def __init__(self, env: dict[str, str]):
+    def __init__(self, env: dict[str, str], heavy_states: int = 1):
         os.environ.update(env)  # before anything imports PyOpenGL
-        self._cache = _StateCache(STATES_PER_WORKER)
+        self._cache = _StateCache(STATES_PER_WORKER, heavy_states)
         self._shared = _StateCache(STATES_PER_WORKER)  # Shared values of tasks' args by key
         self._payload_shared = _StateCache(STATES_PER_WORKER)  # Shared values of payloads by key
+
+    def _builder(self, boxed_payload: list, build) -> Callable[[], Any]:
+        """``build`` of the payload, fetched from the object store when the state is built. The payload
+        comes boxed in a list so Ray does not fetch it for every task: only the first task of a context
+        on this actor (or its prepared build) pulls it; its Shared items once for every context."""
+
+        def built():
+            import ray  # optional dependency: only --engine ray imports it
+
+            return build(_resolved(ray, ray.get(boxed_payload[0]), self._payload_shared))
+
+        return built
 
     def run(self, key: str, boxed_payload: list, build, fn, args, heavy: bool = False):
         import ray  # optional dependency: only --engine ray imports it
 
-        # The payload comes boxed in a list so Ray does not fetch it for every task: only the first
-        # task of a context on this actor pulls it from the object store. Shared args likewise.
         try:
-            built = [0.0]
-
-            def payload():
-                return _resolved(ray, ray.get(boxed_payload[0]), self._payload_shared)
-
-            state = self._cache.get(key, lambda: _timed_build(build, payload, built), heavy)
+            state, built = self._cache.obtain(key, self._builder(boxed_payload, build), heavy)
             args = _resolved(ray, args, self._shared)
-            result = _timed_call(fn, state, args, built[0])
+            result = _timed_call(fn, state, args, built)
             release_free_memory()  # the task's temporaries, so the actor's memory is the states it holds
             return result
         except NeuralaoError as e:  # travels as a plain message: the driver re-raises it
             return _Failure(str(e))
+
+    def prepare(self, key: str, boxed_payload: list, build, heavy: bool = False) -> bool:
+        """Start building the state of ``key`` on a thread of this actor (:meth:`Engine.prepare`); the
+        tasks after this call run meanwhile (Ray runs an actor's calls one at a time, in order)."""
+        return self._cache.prepare(key, self._builder(boxed_payload, build), heavy)
 
     def where(self) -> tuple[int, str]:
         import ray  # optional dependency: only --engine ray imports it
@@ -458,17 +563,30 @@ class RayEngine(Engine):
     threads : CPUs (and tracing threads) per actor. 1: one actor per CPU; a machine's cores: one actor per
               machine, which builds a level's BVH once for all of them and holds one copy (a 10x world's
               BVH is gigabytes), while single-threaded tasks (a solve, an output piece) leave cores idle.
+    heavy_states : heavy states (a level's BVHs) an actor may hold at once (:attr:`Engine.heavy_states`);
+              None: 2 for an actor of several threads (alone on its machine, it holds a prepared BVH beside
+              the one in use: for a 10x world's two, about 4 GiB of a 16-core machine), 1 for single-CPU
+              actors (a machine's cores each holding a second BVH would double its BVH memory).
     """
 
     name = "ray"
 
-    def __init__(self, address: str | None = None, workers: int | None = None, threads: int = 1):
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int | None = None,
+        threads: int = 1,
+        heavy_states: int | None = None,
+    ):
         super().__init__()
         if workers is not None and workers < 1:
             raise NeuralaoError(f"--ray-workers must be >= 1, got {workers}")
         if threads < 1:
             raise NeuralaoError(f"--ray-threads must be >= 1, got {threads}")
+        if heavy_states is not None and heavy_states < 1:
+            raise NeuralaoError(f"--ray-heavy-states must be >= 1, got {heavy_states}")
         self.threads = threads
+        self.heavy_states = heavy_states or (2 if threads > 1 else 1)
         self.address = address
         self._ray = _connect(address)
         ray = self._ray
@@ -486,7 +604,7 @@ class RayEngine(Engine):
         env = {k: os.environ[k] for k in FORWARDED_ENV if k in os.environ}
         env.setdefault("OMP_NUM_THREADS", "1")  # tracing threads are Python threads, not OpenMP's
         actor = ray.remote(num_cpus=threads, max_restarts=-1, max_task_retries=-1)(_Worker)
-        self._actors = [actor.remote(env) for _ in range(self.workers)]
+        self._actors = [actor.remote(env, self.heavy_states) for _ in range(self.workers)]
         # context key, "shared/" + a task's Shared item's key or "payload/" + a payload's -> ObjectRef,
         # latest used last
         self._payloads: collections.OrderedDict[str, Any] = collections.OrderedDict()
@@ -519,6 +637,13 @@ class RayEngine(Engine):
             return self._payloads[ctx.key]
         # its Shared items go once each, under their own keys (and live as long as a payload holds them)
         return self._put(ctx.key, self._remote_args(ctx.payload, live, "payload/"), live)
+
+    def prepare(self, context: Context) -> None:
+        """Every actor starts building ``context``'s state on a thread of its own (:meth:`Engine.prepare`);
+        its tasks queued after this call run meanwhile, and the first of ``context`` waits for the build."""
+        ref = self._payload_ref(context, set(_ref_keys(Task(context, no_state, None))))
+        for a in self._actors:  # not waited for: a lost actor's restart simply builds it for its first task
+            a.prepare.remote(context.key, [ref], context.build, context.heavy)
 
     def _remote_args(self, args: Any, live: set[str], prefix: str = "shared/") -> Any:
         if not isinstance(args, tuple):
