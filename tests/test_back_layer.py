@@ -261,3 +261,16 @@ def test_a_version_4_hybrid_with_no_correction_is_gtao_through_the_runtime(tmp_p
     np.testing.assert_array_equal(got[f.mask], want[f.mask])
     with pytest.raises(NeuralaoError, match="back layer"):
         predict(f.replace(depth_back=None), radius)
+
+
+def test_a_negative_back_layer_is_refused_where_the_frame_is_read():
+    from neuralao.runtime.frame import Frame
+
+    depth = np.full((4, 5), 2.0, np.float32)
+    normal = np.zeros((4, 5, 3), np.float32)
+    normal[..., 2] = 1.0
+    back = depth + 1.0
+    Frame.from_arrays({"depth": depth, "normal_cam": normal, "depth_back": back})
+    back[1, 2] = -3.0  # z_cam instead of -z_cam
+    with pytest.raises(NeuralaoError, match="'depth_back' has 1 negative value"):
+        Frame.from_arrays({"depth": depth, "normal_cam": normal, "depth_back": back}, "f.npz")
