@@ -195,14 +195,17 @@ def run_cluster(
 
 
 def markdown(r: dict) -> str:
-    lines = [
-        f"# Level bake on a loopback Ray cluster ({r['preset']}, overrides {r['overrides']})",
-        "",
-        f"{r['cpu_count']} cores on this machine; load average before {r['load_before']}, "
-        f"after {r['load_after']}",
-    ]
     if r["runs"]:
-        lines += ["", *_runs_markdown(r)]
+        lines = [
+            f"# Level bake on a loopback Ray cluster ({r['preset']}, overrides {r['overrides']})",
+            "",
+            f"{r['cpu_count']} cores on this machine; load average before {r['load_before']}, "
+            f"after {r['load_after']}",
+            "",
+            *_runs_markdown(r),
+        ]
+    else:
+        lines = [f"# Projection of a level bake ({r['preset']})"]
     labels = (
         ("single-CPU actors", "single"),
         ("one actor of 16 threads per machine", "threads"),
