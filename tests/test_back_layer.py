@@ -274,3 +274,29 @@ def test_a_negative_back_layer_is_refused_where_the_frame_is_read():
     back[1, 2] = -3.0  # z_cam instead of -z_cam
     with pytest.raises(NeuralaoError, match="'depth_back' has 1 negative value"):
         Frame.from_arrays({"depth": depth, "normal_cam": normal, "depth_back": back}, "f.npz")
+
+
+@pytest.mark.parametrize("version", [3, 4])
+def test_prepared_frames_are_counted_before_they_are_written(layered, tmp_path, monkeypatch, version):
+    """The disk the prepared frames take is known before any is written (within 10% of what is written),
+    and a disk without room for them is refused in one line naming the other prepared sets."""
+    import shutil
+
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames, prepared_bytes, prepared_folder
+    from neuralao.runtime.foundation import limits
+
+    data = tmp_path / "data"
+    shutil.copytree(layered, data)
+    ds = open_dataset(data)
+    entries = [e for e in ds.manifest["shards"] if e["split"] in ("train", "val")]
+    want = prepared_bytes(ds, entries, 32, True, version)
+    load_dataset_frames(data, internal_height=32, gtao=True, version=version)
+    folder = prepared_folder(data, ds, 32, True, version)
+    written = sum(p.stat().st_size for p in folder.glob("*.bin"))
+    assert 0.9 * written <= want <= 1.1 * written, (want, written)
+    (folder.parent / "an-older-set").mkdir()
+    monkeypatch.setattr(limits, "free_disk", lambda folder: want // 2)
+    with pytest.raises(NeuralaoError, match="the prepared frames .* an-older-set"):
+        load_dataset_frames(data, internal_height=24, gtao=True, version=version)
+    assert not list(prepared_folder(data, ds, 24, True, version).glob("*.bin"))

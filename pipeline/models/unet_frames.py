@@ -32,6 +32,7 @@ from neuralao.pipeline.datasets.dataset import Dataset, open_dataset
 from neuralao.runtime.baselines import GTAOSettings, gtao_settings_entry, run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_json
+from neuralao.runtime.foundation.limits import check_disk
 from neuralao.runtime.foundation.manifest import read_json
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import downsample_frame, internal_size
@@ -40,6 +41,7 @@ from neuralao.runtime.unet_input import (
     FOREGROUND_GAIN,
     PREPROCESS_VERSION,
     frame_radius_param,
+    input_channels,
     preprocess_frame,
 )
 
@@ -321,6 +323,7 @@ def prepared_shards(
     folder.mkdir(parents=True, exist_ok=True)
     todo = [e for e in entries if not (folder / f"{e['sha256'][:32]}.json").exists()]
     if todo:
+        _check_room(ds, todo, folder, internal_height, gtao, version)
         log.info(
             "preparing %d of %d shards into %s (once; later runs read them)", len(todo), len(entries), folder
         )
@@ -337,6 +340,35 @@ def prepared_shards(
             if done % 50 == 0 or done == len(todo):
                 log.info("prepared %d of %d shards (%.0f s)", done, len(todo), time.perf_counter() - t0)
         yield from _read_shard(bin_path, json_path)
+
+
+def prepared_bytes(ds: Dataset, entries: list[dict], internal_height: int, gtao: bool, version: int) -> int:
+    """The bytes the prepared frames of ``entries`` take on disk: per pixel at the size training reads,
+    the input's channels (float32), the labels and GTAO at each radius (float16) and the masks (bool)."""
+    radii = len(ds.manifest.get("config", {}).get("labels", {}).get("radii_rel") or [1])
+    per_pixel = 4 * len(input_channels(version)) + radii * (2 + 1 + (2 if gtao else 0))
+    total = 0
+    for e in entries:
+        w, h = e.get("size") or ds.manifest.get("size") or (0, 0)
+        lw, lh = internal_size(int(w), int(h), internal_height or None)
+        total += len(e["views"]) * lw * lh * per_pixel
+    return total
+
+
+def _check_room(ds: Dataset, todo: list[dict], folder: Path, internal_height: int, gtao: bool, version: int):
+    """Refuse, before any is written, prepared frames the disk cannot hold (naming the other prepared sets
+    beside them, which can be removed: each is made again when a run needs it)."""
+    others = sorted(p.name for p in folder.parent.iterdir() if p.is_dir() and p != folder)
+    hint = f" (other prepared sets in {folder.parent}: {', '.join(others)}; remove those no run needs)"
+    try:
+        check_disk(
+            "the prepared frames",
+            prepared_bytes(ds, todo, internal_height, gtao, version),
+            folder,
+            f"of {len(todo)} shards in {folder}",
+        )
+    except NeuralaoError as e:
+        raise NeuralaoError(f"{e}{hint if others else ''}") from None
 
 
 def kept_training_scenes(train_scenes: list[str], train_fraction: float) -> list[str]:
