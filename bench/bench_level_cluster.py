@@ -75,7 +75,10 @@ def project(
     seconds its machine's cores are free between the prepare call and the stage that needs it), the free
     seconds being those stages' driver seconds and their waves of tasks that do not trace (one task of one
     thread at a time per machine: the build is taken to get the other cores), not their tracing waves
-    (which use every core). On single-CPU actors it costs its whole build (it shares the actor's core)."""
+    (which use every core). For a level bake's opaque BVH, prepared right after the geometry, those are the
+    foliage's stage (the driver's alone: the workers' cores are taken to be free) and the samples' passes;
+    the gold BVH's, from the solve to the trees. On single-CPU actors it costs its whole build (it shares
+    the actor's core)."""
     out, free = {}, {}
     costs = stage_costs(info, checks)
     for c in costs:

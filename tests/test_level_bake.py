@@ -528,3 +528,38 @@ def test_workers_of_several_threads_take_bigger_resampling_tasks_and_bake_the_sa
     assert (tmp_path / "one" / "level_baked.glb").read_bytes() == (
         tmp_path / "three" / "level_baked.glb"
     ).read_bytes()
+
+
+def test_the_opaque_bvh_is_prepared_once_before_the_foliage_is_made(baked, tmp_path, monkeypatch):
+    """The opaque BVH's state holds no foliage, so the workers start building it once the level is cut into
+    pieces: its one prepare call comes before the foliage stage begins, the foliage travels with the tasks
+    that trace it, and the bytes are the local bake's."""
+    from neuralao.pipeline.bakes import level as level_module
+    from neuralao.pipeline.engines.engine import LocalEngine
+
+    class Recording(LocalEngine):
+        def __init__(self):
+            super().__init__()
+            self.prepared: list[str] = []
+
+        def prepare(self, context):
+            self.prepared.append(context.key)
+            super().prepare(context)
+
+    engine, seen = Recording(), []
+    make_foliage = level_module._shrubs_and_foliage
+
+    def foliage_after_prepares(*args):
+        seen.append(list(engine.prepared))  # what was prepared when the foliage stage began
+        return make_foliage(*args)
+
+    monkeypatch.setattr(level_module, "_shrubs_and_foliage", foliage_after_prepares)
+    root, level, cfg, info = baked
+    log = bake_level(level, load_level_settings(cfg), tmp_path / "engine", engine=engine)
+    opaque = [k for k in engine.prepared if k.startswith("level-trace/")]
+    assert len(opaque) == 1 and seen == [opaque]
+    order = [st["stage"] for st in log["stages"]]
+    assert order.index("geometry") + 1 == order.index("prepare_opaque") < order.index("foliage")
+    assert (tmp_path / "engine" / "level_baked.glb").read_bytes() == (
+        root / "out" / "level_baked.glb"
+    ).read_bytes()

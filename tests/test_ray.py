@@ -295,10 +295,11 @@ def test_level_bake_on_one_actor_of_two_threads_is_byte_identical(local_level, t
 
 
 def _assert_prepared(log: dict, gold_after: str, actors: int) -> None:
-    """The bake ``log`` prepared the opaque BVH before the samples and the gold one after the stage
+    """The bake ``log`` prepared the opaque BVH before the foliage and the gold one after the stage
     ``gold_after``; each of the ``actors`` built each once, ahead, for the trace and the trees."""
     order = [st["stage"] for st in log["stages"]]
-    assert order[order.index("prepare_opaque") + 1] == "samples"
+    # the opaque BVH prepared as soon as the level is cut into pieces, before the foliage and the samples
+    assert order.index("geometry") + 1 == order.index("prepare_opaque") < order.index("foliage")
     assert order[order.index("prepare_gold") - 1] == gold_after
     rows = {st["stage"]: st for st in log["stages"]}
     for stage in ("trace", "decorators"):

@@ -9,7 +9,8 @@ Embree, stage by stage (the rows of their Table 1; the bake log times each one):
 2. **samples**: stratified surface samples under a per-face cap, water-filled (two passes over the pieces:
    the density, then each piece's count);
 3. **bvh**: the opaque Embree scene (here for a local bake; on every worker with an engine, started there
-   before the samples, after the foliage its state holds);
+   as soon as the level is cut into pieces, before the foliage and the samples: the foliage is not in it,
+   the tasks that trace it carry it);
 4. **foliage**: shrub instances -> world boxes with overlap-reduced densities, tree instances ->
    triangles with their transmission (:mod:`neuralao.pipeline.tracing.foliage`);
 5. **trace**: obscurance at the short and the long half distance from one trace, attenuated by the
@@ -32,10 +33,10 @@ reads and the keys of the stages it reads): a killed bake resumes where it stopp
 bytes; a changed setting redoes the stages that read it and those after them, and reuses the others.
 
 The workers build both BVHs in the background (``Engine.prepare``), each ahead of the stage that needs it:
-the opaque one while the samples' passes run, the trees' gold one while the solve, the LOD and the checks
-run (where a worker may hold it beside the opaque one: ``Engine.heavy_states``; else from the trees' stage
-on). The log's rows ``prepare_opaque`` and ``prepare_gold`` mark where, and each stage's row the states
-its tasks found prepared and the seconds they still waited for them.
+the opaque one while the foliage and the samples' passes are made, the trees' gold one while the solve, the
+LOD and the checks run (where a worker may hold it beside the opaque one: ``Engine.heavy_states``; else
+from the trees' stage on). The log's rows ``prepare_opaque`` and ``prepare_gold`` mark where, and each
+stage's row the states its tasks found prepared and the seconds they still waited for them.
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ from neuralao.pipeline.bakes.level_stages import (
     piece_trace,
     pieces_context,
     run_to_files,
+    shared_foliage,
     simplify_level,
     simplify_piece,
     solve_stage,
@@ -407,6 +409,13 @@ def bake_level(
     local = None if engine is not None else LocalEngine(workers=s.workers, threads=1)
     settings_here = worker_settings(label_settings(s, index.diagonal), engine or local)
     frame = LabellerFrame(index.center, index.diagonal, settings_here)
+    ctx = opaque_context(keys["geometry"], level, index, settings_here, t.bvh)
+    blog.runner = engine or local
+    # The opaque BVH built on the workers while the foliage and the samples' passes are made (the foliage
+    # is not in its state: the tasks that trace it carry it); the trace, the resampling and the blend
+    # check read it.
+    blog.prepare("prepare_opaque", "trace", lambda: ctx, ("trace", "small_decorators", "lod", "blend_check"))
+    blog.runner = None
     foliage = shrubs = None
     if s.foliage.enabled:
         # the shrubs' boxes made once: the trees' gold foliage has the same
@@ -416,11 +425,8 @@ def bake_level(
             lambda: _shrubs_and_foliage(level, frame, s),
         )
         blog.note("foliage", trees=level.counts().get("tree_instances", 0), shrub_boxes=foliage.n_boxes)
-    ctx = opaque_context(keys["geometry"], level, index, settings_here, foliage, t.bvh, keys["foliage"])
+    shared = shared_foliage(foliage, settings_here, keys["foliage"])
     blog.runner = engine or local
-    # The opaque BVH built on the workers while the samples' passes run (the foliage is in its payload,
-    # so it comes first); the trace, the resampling and the blend check read it.
-    blog.prepare("prepare_opaque", "trace", lambda: ctx, ("trace", "small_decorators", "lod", "blend_check"))
     # The samples' two passes over the pieces' sample ranges are a task per range each.
     rule, pieces = blog.timed(
         "samples",
@@ -455,7 +461,7 @@ def bake_level(
             run_to_files(
                 trace_files,
                 runner,
-                trace_jobs(ctx, pieces, rule, s),
+                trace_jobs(ctx, pieces, rule, s, shared),
                 "trace blocks",
                 progress,
                 keys=("valid", "weight", "weighted"),
@@ -558,7 +564,7 @@ def bake_level(
             "blend_check",
             "Two-distance blend vs blended-kernel traces (error table)",
             lambda: _blend_check(
-                runner, ctx, pieces, rule, trace_files, solve_files, index, s, total_samples, whole
+                runner, ctx, pieces, rule, trace_files, solve_files, index, s, total_samples, whole, shared
             ),
         )
     # The trees last: their gold BVH (the level with every tree opaque) replaces the opaque one on the
@@ -835,6 +841,7 @@ def _blend_check(
     s: LevelBakeSettings,
     total: int,
     whole: Whole,
+    foliage=None,
     count: int = 2000,
 ) -> dict:
     """The error table of the two-distance blend: (a) same rays (valid samples): blend of the two columns vs
@@ -866,9 +873,9 @@ def _blend_check(
             parts.append((mine, two_ao, two_valid))
             args = (p, rule, local, mine.astype(np.int64), r["short"], r["long"])
             if gap:
-                args += (ao, valid, s, ref_settings, True, blended)
+                args += (ao, valid, s, ref_settings, True, blended, foliage)
             else:
-                args += (None, None, s, ref_settings, False, blended)
+                args += (None, None, s, ref_settings, False, blended, foliage)
             return Task(ctx, blend_piece, args)
 
         jobs.append(make)

@@ -98,18 +98,18 @@ def gold_scene(level: Level) -> Scene:
 
 @dataclass
 class PieceState:
-    """What a worker holds for a bake: the opaque labeller and foliage, and the level it cuts pieces from."""
+    """What a worker holds for a bake: the opaque labeller and the level it cuts pieces from (the foliage
+    travels with the tasks that trace it: :func:`shared_foliage`)."""
 
     labeller: LevelLabeller | None  # None: a state for tasks that trace nothing
-    foliage: Any
     level: Level
     index: PieceIndex
     key: str
 
 
 def _opaque_state(payload) -> PieceState:
-    level, index, settings, bvh, foliage, key = payload
-    return PieceState(LevelLabeller(opaque_scene(level), settings, bvh), foliage, level, index, key)
+    level, index, settings, bvh, key = payload
+    return PieceState(LevelLabeller(opaque_scene(level), settings, bvh), level, index, key)
 
 
 def _gold_state(payload) -> tuple[LevelLabeller, Any]:
@@ -139,18 +139,24 @@ def opaque_context(
     level: Level,
     index: PieceIndex,
     settings: LabelSettings,
-    foliage,
     bvh: str = "fast",
-    foliage_key: str = "",
 ) -> Context:
     """The engine context of the opaque labeller: workers build it from the level's meshes and transforms
     (heavy: a worker holds no other big state beside it); ``bvh``: its Embree scene (``Labeller.bvh``).
-    ``key``: the level's and its pieces' (:func:`shared_level`); ``foliage_key``: a hash of what made
-    ``foliage``."""
-    payload = (*shared_level(key, level, index), settings, bvh, foliage, key)
-    return Context(
-        f"level-trace/{content_key(key, settings, bvh, foliage_key)}", _opaque_state, payload, heavy=True
-    )
+    ``key``: the level's and its pieces' (:func:`shared_level`). The foliage is not in it, so its build can
+    start as soon as the level is cut into pieces: the tasks that trace the foliage carry it
+    (:func:`shared_foliage`)."""
+    payload = (*shared_level(key, level, index), settings, bvh, key)
+    return Context(f"level-trace/{content_key(key, settings, bvh)}", _opaque_state, payload, heavy=True)
+
+
+def shared_foliage(foliage, settings: LabelSettings, foliage_key: str) -> Shared | None:
+    """The foliage as an item of the opaque trace's tasks' args: it travels to a worker once and is held
+    there beside the opaque BVH, for every task that traces it (None: no foliage). ``foliage_key``: a hash
+    of what made it; ``settings``: the labeller's, whose frame it was built in."""
+    if foliage is None:
+        return None
+    return Shared(f"foliage/{content_key(foliage_key, settings)}", foliage)
 
 
 def gold_context(
@@ -173,7 +179,7 @@ def shared_level(key: str, level: Level, index: PieceIndex | None) -> tuple[Shar
 
 def _pieces_state(payload) -> PieceState:
     level, index, key = payload
-    return PieceState(None, None, level, index, key)
+    return PieceState(None, level, index, key)
 
 
 def pieces_context(key: str, level: Level, index: PieceIndex, heavy: bool = False) -> Context:
@@ -288,21 +294,22 @@ def piece_stem(piece: Piece) -> str:
 # --------------------------------------------------------------------------- trace
 
 
-def trace_jobs(ctx: Context, pieces: list[Piece], rule: SampleRule, s: LevelBakeSettings):
-    """(stem, task maker) per block of ``trace.block_samples`` samples of each piece."""
+def trace_jobs(ctx: Context, pieces: list[Piece], rule: SampleRule, s: LevelBakeSettings, foliage=None):
+    """(stem, task maker) per block of ``trace.block_samples`` samples of each piece; ``foliage``: the
+    :func:`shared_foliage` its rays cross (None: none)."""
     block, jobs = s.trace.block_samples, []
     for p in pieces:
         for lo in range(0, p.ns, block):
-            args = (p, rule, lo, min(lo + block, p.ns), halves(s))
+            args = (p, rule, lo, min(lo + block, p.ns), halves(s), foliage)
             jobs.append((f"{piece_stem(p)}_{lo // block:05d}", lambda a=args: Task(ctx, _trace_block, a)))
     return jobs
 
 
 def _trace_block(state: PieceState, args) -> dict[str, np.ndarray]:
-    piece, rule, lo, hi, half = args
+    piece, rule, lo, hi, half, foliage = args
     _, samples = cached_block(state.key, state.level, state.index, piece, rule, lo, hi)
     ids = np.arange(piece.s0 + lo, piece.s0 + hi, dtype=np.int64)
-    ao, valid = state.labeller.obscurance(samples.points, samples.normals, half, state.foliage, ids=ids)
+    ao, valid = state.labeller.obscurance(samples.points, samples.normals, half, foliage, ids=ids)
     # The valid samples' weight and weighted values: every piece's least squares takes the level's.
     w = samples.weights[valid]
     return {
@@ -1075,13 +1082,13 @@ def blend_piece(state: PieceState, args) -> dict[str, np.ndarray]:
     (b) a 4x-ray blended reference (its own seed; the labeller's BVH is shared), the per-vertex blend
     interpolated; with ``gap``, (c) the largest gap between the per-vertex blend and least squares of the
     blended samples over the piece."""
-    piece, rule, picks, order, short, long_, ao, valid, s, ref_settings, gap, whole = args
+    piece, rule, picks, order, short, long_, ao, valid, s, ref_settings, gap, whole, foliage = args
     scene, samples = cached_piece(state.key, state.level, state.index, piece, rule)
     pts, nrm = samples.points[picks], samples.normals[picks]
-    kern = blended_kernel_trace(state.labeller, state.foliage, pts, nrm, s, ids=piece.s0 + picks)
+    kern = blended_kernel_trace(state.labeller, foliage, pts, nrm, s, ids=piece.s0 + picks)
     reference = copy.copy(state.labeller)
     reference.settings = ref_settings
-    ref_two, ref_valid = reference.obscurance(pts, nrm, halves(s), state.foliage, ids=order)
+    ref_two, ref_valid = reference.obscurance(pts, nrm, halves(s), foliage, ids=order)
     plain = replace(s.blend, remap=None)
     per_vertex = blend(short, long_, plain)
     pred = interpolate(scene, per_vertex, samples.face[picks], samples.bary[picks])
