@@ -521,11 +521,8 @@ def build_dataset(
     config_hash = hashlib.sha256(repr(sorted(config.items())).encode()).hexdigest()
     done, done_layers = _reusable_shards(out, config, config_hash)  # the last check; then the run works
     layers = bool(settings.back_layer)
-    for folder in (
-        out,
-        out / "shards",
-        out / "layers",
-    ):  # a killed run (SIGKILL) leaves its half-written file
+    # a killed run (SIGKILL) leaves its half-written shard or layer behind
+    for folder in (out, out / "shards", out / "layers"):
         for stale in remove_stale_temporaries(folder):
             log.info("removed %s left by an interrupted run", stale.name)
     own_engine = engine is None
