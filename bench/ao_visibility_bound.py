@@ -262,8 +262,57 @@ def _cast(labeller: Labeller, origins: np.ndarray, dirs: np.ndarray) -> tuple[np
     return np.asarray(out["primID"]).astype(np.int64), np.asarray(out["tfar"], np.float64)
 
 
+def depth_planes(depth: np.ndarray, yfov: float, pix: np.ndarray, mode: str) -> np.ndarray:
+    """(k, 4) camera-space front planes of the foreground pixels ``pix`` rebuilt from the depth buffer alone
+    (``depth`` (H, W) local units, NaN on background), as a pass that reads only the depth could rebuild them.
+
+    ``depth``: through the pixel-centre point, with the normal of the facet its neighbours show (in x and in
+    y the neighbour whose depth is nearer the pixel's, the other one where that is background; a pixel with
+    no foreground neighbour on an axis takes the camera-facing plane's axis); ``center``: the plane of
+    constant depth through it (the depth test of a depth buffer, with a crossing test)."""
+    h, w = depth.shape
+    row, col = np.divmod(np.asarray(pix, np.int64), w)
+    rays = pixel_rays_cam(w, h, yfov, np.arange(h * w)).reshape(h, w, 3)
+    pos = rays * depth[..., None]  # camera space; NaN on background
+    p = pos[row, col]
+    if mode == "center":
+        normals = np.broadcast_to(np.array([0.0, 0.0, 1.0]), p.shape).copy()
+        return camera_planes(normals, p)
+
+    def side(dr: int, dc: int) -> tuple[np.ndarray, np.ndarray]:
+        r = np.clip(row + dr, 0, h - 1)
+        c = np.clip(col + dc, 0, w - 1)
+        inside = (row + dr >= 0) & (row + dr < h) & (col + dc >= 0) & (col + dc < w)
+        q = pos[r, c]
+        ok = inside & np.isfinite(q).all(axis=1)
+        return q, ok
+
+    def axis(plus, minus, sign):
+        (qp, okp), (qm, okm) = plus, minus
+        dp = np.where(okp, np.abs(qp[:, 2] - p[:, 2]), np.inf)
+        dm = np.where(okm, np.abs(qm[:, 2] - p[:, 2]), np.inf)
+        use_p = dp <= dm
+        d = np.where(use_p[:, None], qp - p, p - qm)
+        none = ~(okp | okm)
+        return np.where(none[:, None], sign, d)
+
+    dx = axis(side(0, 1), side(0, -1), np.array([1.0, 0.0, 0.0]))
+    dy = axis(side(-1, 0), side(1, 0), np.array([0.0, 1.0, 0.0]))  # row - 1 is up (+y)
+    n = np.cross(dx, dy)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(length > 0, n / np.where(length > 0, length, 1.0), np.array([0.0, 0.0, 1.0]))
+    return camera_planes(n, p)
+
+
+FRONTS = ("exact", "depth", "center")
+
+
 def frame_layers(
-    labeller: Labeller, face_normals: np.ndarray, frame, open_eps: float = DEFAULT_OPEN_EPS
+    labeller: Labeller,
+    face_normals: np.ndarray,
+    frame,
+    open_eps: float = DEFAULT_OPEN_EPS,
+    front_mode: str = "exact",
 ) -> FrameLayers:
     """The front layer of a frame from its G-buffer (``tri_id``: the labels' surface, the plane of the
     visible triangle; ``depth``: the pixel-centre depths), the back layers from Embree (camera rays through
@@ -338,6 +387,10 @@ def frame_layers(
     next_planes = np.full((len(pix), 4), np.nan)
     next_planes[next_prim >= 0] = planes(next_prim[next_prim >= 0])
 
+    if front_mode != "exact":
+        image = np.full(h * w, np.nan)
+        image[pix] = depth_gbuffer
+        front = depth_planes(image.reshape(h, w), yfov, pix, front_mode)
     screen = screen_table(w, h, yfov, pix, front, depth_gbuffer, back_planes, open_eps, next_planes)
     fg = exact & hit0
     checks = {
@@ -681,6 +734,20 @@ def main() -> int:
         default=0,
         help="> 0: rays independent of the labels' (their seed shifted), so the marcher's noise is its own",
     )
+    p.add_argument(
+        "--front",
+        choices=FRONTS,
+        default="exact",
+        help="each pixel's front plane: its facet's (exact), rebuilt from the depth buffer (depth), or the "
+        "plane of constant depth through its centre (center)",
+    )
+    p.add_argument(
+        "--ray-normals",
+        choices=("facet", "gbuffer"),
+        default="facet",
+        help="the hemisphere the rays leave: the facet's (the labels') or the G-buffer's smooth normal "
+        "(mesh@N is then the mesh's answer about that normal)",
+    )
     p.add_argument("--max-frames", type=int, default=0, help="> 0: only the first k frames of each category")
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args()
@@ -763,7 +830,12 @@ def run(args: argparse.Namespace) -> int:
         radii = np.asarray(manifest["scenes"][name].get("radii", frame["radii"]), np.float64)
         if not np.allclose(radii, np.asarray(frame["radii"], np.float64), rtol=1e-6):
             raise NeuralaoError(f"{name}: the manifest's radii differ from the frame's")
-        layers = frame_layers(labeller, face_normals, frame, args.open_eps)
+        layers = frame_layers(labeller, face_normals, frame, args.open_eps, args.front)
+        if args.ray_normals == "gbuffer":  # the G-buffer's (smooth) normals, camera-facing, in world space
+            smooth = np.asarray(frame["normal_cam"], np.float64).reshape(-1, 3)[layers.pix] @ layers.to_cam.T
+            smooth /= np.maximum(np.linalg.norm(smooth, axis=1, keepdims=True), 1e-30)
+            toward = np.sum(smooth * layers.normals, axis=1) < 0
+            layers = replace(layers, normals=np.where(toward[:, None], -smooth, smooth))
         t_layers = time.perf_counter() - t0
 
         fg = np.asarray(frame["mask"], bool)
@@ -879,7 +951,7 @@ def run(args: argparse.Namespace) -> int:
         f"## Screen-space ray-traced AO from one and two depth layers, {w}x{h}, labels {res.rays} rays, "
         f"{res.views} views\n\nMarcher: {args.march_rays} rays per pixel (the labeller's directions), "
         f"{args.steps} jittered samples per ray and radius, none within {args.near_px:g} pixel footprints of "
-        "the origin, nearest pixel, per-pixel planes; open surfaces "
+        f"the origin, nearest pixel, per-pixel front planes ({args.front}); open surfaces "
         f"{args.open_eps:g} x diagonal thick in 2L-thin. Categories: "
         f"{', '.join(c.name for c in scored)}. {len(timings)} frames in {seconds:.0f} s.\n\n"
     )
@@ -896,6 +968,8 @@ def run(args: argparse.Namespace) -> int:
             "steps": args.steps,
             "open_eps": args.open_eps,
             "near_px": args.near_px,
+            "front": args.front,
+            "ray_normals": args.ray_normals,
         },
         "summary": summary,
         "per_radius": per_radius,

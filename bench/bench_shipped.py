@@ -63,10 +63,11 @@ def measure(args) -> dict:
     from neuralao.pipeline.geometry.camera import interior
     from neuralao.pipeline.geometry.scene import load_scene
     from neuralao.runtime import gl
-    from neuralao.runtime.baselines import time_screen_space
+    from neuralao.runtime.baselines import GTAOSettings, time_screen_space
     from neuralao.runtime.glsl_runner import time_compute
     from neuralao.runtime.internal_resolution import internal_size, time_scaling_passes
     from neuralao.runtime.shipped import read_index
+    from neuralao.runtime.unet_input import hybrid_gtao_blur
 
     models_dir = Path(args.models)
     index = read_index(models_dir)
@@ -97,8 +98,14 @@ def measure(args) -> dict:
         if m in ("ssao", "gtao"):  # a pass is ~10x cheaper than a U-Net: 4x the repeats
             return time_screen_space(frames[(w, h)], m, radius, repeats=4 * repeats, warmup=max(warmup, 1))
         if internal.get(m, (m,))[0] in hybrid:
-            gtao = time_screen_space(
-                frames[(w, h)], "gtao", radius, repeats=2 * repeats, warmup=max(warmup, 1)
+            meta = _manifest(models_dir / internal.get(m, (m,))[0]).get("metadata", {})
+            gtao = time_screen_space(  # the GTAO the hybrid reads: with its blur, or the pass alone
+                frames[(w, h)],
+                "gtao",
+                radius,
+                GTAOSettings(blur=hybrid_gtao_blur(meta)),
+                repeats=2 * repeats,
+                warmup=max(warmup, 1),
             )
             return gtao + network_seconds(m, w, h, repeats, warmup)
         return network_seconds(m, w, h, repeats, warmup)

@@ -72,7 +72,7 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
     done = folder / "model.pt"
     if done.exists() and all((folder / f"{point_name(p)}.pt").exists() for p in points if p <= run["hours"]):
         return folder
-    key = (settings.internal_height, settings.gtao_input, settings.preprocess_version)
+    key = (settings.internal_height, settings.gtao_input, settings.preprocess_version, settings.gtao_blur)
     if cache.get("key") != key:
         cache.clear()
         cache.update(
@@ -82,6 +82,7 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
                 internal_height=key[0],
                 gtao=key[1],
                 version=key[2],
+                gtao_blur=key[3],
             ),
         )
     sets = cache["sets"]
@@ -93,6 +94,7 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
             internal_height=key[0],
             gtao=key[1],
             version=key[2],
+            gtao_blur=key[3],
         )
     train_set, val_set, info = sets
 

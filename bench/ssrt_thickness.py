@@ -81,10 +81,11 @@ ${surface}
     mat3 tbn = mat3(t, cross(n, t), n);
     float radius_px = u_radius * u_pixels_per_unit / max(-p.z, 1e-30);
     if (!(radius_px > 1.0)) { o_ao = 1.0; return; }
-    float min_s = min(1.3 / radius_px, 0.5);
+    float min_s = min(START_PX / radius_px, 0.5);
     float hits = 0.0;
     for (int i = 0; i < RAYS; ++i) {
         vec3 d = tbn * u_dirs[i];
+        float prev_z = p.z;                            // the last sample looked up (the origin first)
         for (int k = 0; k < STEPS; ++k) {
             float s = min_s + (1.0 - min_s) * (float(k) + r.z) / float(STEPS);
             vec3 q3 = p + d * (s * u_radius);
@@ -98,7 +99,11 @@ ${surface}
             // with the back layer: inside the solid from its front to where the pixel's ray leaves it;
             // where the layer says thin (or without it), the thickness prior
             float deep = back > 0.0 ? back + sw.z : u_thickness;
-            if (behind > u_bias && behind < deep) { hits += 1.0; break; }
+            // crossing: the previous sample was in front of the surface seen here, so the ray passed
+            // through it between the two samples, however deep behind it the sample now lies
+            bool crossed = CROSSING && prev_z > sw.z;
+            if (behind > u_bias && (behind < deep || crossed)) { hits += 1.0; break; }
+            prev_z = q3.z;
         }
     }
     o_ao = 1.0 - hits / float(RAYS);
@@ -138,21 +143,26 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         thickness: float,
         facets: bool,
         back_layer: bool = False,
+        crossing: bool = False,
+        bias: float = 0.02,
+        blur: bool = True,
+        start_px: float = 1.3,
     ):
-        super().__init__("ssao", width, height, radius, SSAOSettings(noise_size=4))
+        super().__init__("ssao", width, height, radius, SSAOSettings(noise_size=4, blur=blur))
         rng = np.random.default_rng(11)
         a = rng.uniform(0.0, 2.0 * np.pi, (4, 4))
         tile = np.stack([np.cos(a), np.sin(a), rng.uniform(0.0, 1.0, (4, 4)), np.zeros((4, 4))], -1)
         gl.upload_texture(self.noise, tile.astype(np.float32), GL.GL_RGBA32F)
         source = fill("gbuffer_inputs"), fill("surface_at_pixel")
         text = FRAGMENT.replace("RAYS", str(rays)).replace("STEPS", str(steps))
-        text = text.replace("FACETS", "true" if facets else "false")
+        text = text.replace("FACETS", "true" if facets else "false").replace("START_PX", f"{start_px:.6f}")
+        text = text.replace("CROSSING &&", "true &&" if crossing else "false &&")
         text = text.replace("BACK ?", "true ?" if back_layer else "false ?")
         self.back_layer = back_layer
         self.back = gl.create_texture(self.w, self.h, GL.GL_R32F)
         text = text.replace("${inputs}", source[0]).replace("${surface}", source[1])
         self.prog = gl.compile_program(vertex=fill("fullscreen_vertex"), fragment=text)
-        self.dirs, self.thickness = directions(rays), float(thickness)
+        self.dirs, self.thickness, self.bias = directions(rays), float(thickness), float(bias)
 
     def _uniforms(self) -> None:
         prog = self.prog
@@ -160,7 +170,7 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         GL.glUniform2f(GL.glGetUniformLocation(prog, "u_proj"), p00, p11)
         GL.glUniform1f(GL.glGetUniformLocation(prog, "u_radius"), self.radius)
         GL.glUniform1f(GL.glGetUniformLocation(prog, "u_thickness"), self.thickness * self.radius)
-        GL.glUniform1f(GL.glGetUniformLocation(prog, "u_bias"), 0.02 * self.radius)
+        GL.glUniform1f(GL.glGetUniformLocation(prog, "u_bias"), self.bias * self.radius)
         GL.glUniform1f(GL.glGetUniformLocation(prog, "u_pixels_per_unit"), 0.5 * self.h * p11)
         GL.glUniform3fv(GL.glGetUniformLocation(prog, "u_dirs"), len(self.dirs), self.dirs)
 
@@ -180,10 +190,22 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         super().release()
 
 
-def trace_predictor(rays: int, steps: int, thickness: float, facets: bool, back_layer: bool = False):
+def trace_predictor(
+    rays: int,
+    steps: int,
+    thickness: float,
+    facets: bool,
+    back_layer: bool = False,
+    crossing: bool = False,
+    bias: float = 0.02,
+    blur: bool = True,
+    start_px: float = 1.3,
+):
     def run(frame, radius: float) -> np.ndarray:
         h, w = np.shape(frame["mask"])
-        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness, facets, back_layer) as p:
+        with ScreenSpaceTrace(
+            w, h, radius, rays, steps, thickness, facets, back_layer, crossing, bias, blur, start_px
+        ) as p:
             p.upload(frame)
             p.draw()
             out = p.read()
@@ -233,6 +255,20 @@ def main() -> int:
         help="also with the G-buffer's back layer as each pixel's thickness (the prior where it is thin); "
         "adds the layer to the frames if they lack it",
     )
+    p.add_argument(
+        "--crossing",
+        action="store_true",
+        help="also with the crossing test (a sample behind the surface seen at its pixel counts however deep "
+        "when the previous sample was in front of it)",
+    )
+    p.add_argument(
+        "--bias",
+        type=float,
+        default=0.02,
+        help="x the radius: depth behind a surface that is not yet occlusion",
+    )
+    p.add_argument("--no-blur", action="store_true", help="also without the 4x4 blur")
+    p.add_argument("--start-px", type=float, default=1.3, help="pixels from the origin to the first sample")
     p.add_argument("--time-size", nargs=2, type=int, default=[1920, 1080], metavar=("W", "H"))
     p.add_argument("--mesh", default="sponza_partial", help="scene of the timed frame")
     p.add_argument("--repeats", type=int, default=5)
@@ -261,9 +297,14 @@ def run(args: argparse.Namespace) -> int:
         for t in args.thickness:
             for facets in (False, True) if args.facets else (False,):
                 for back in (False, True) if args.back_layer else (False,):
-                    tags = ("-facets" if facets else "") + ("-2L" if back else "")
-                    name = f"trace-{rays}x{args.steps}-T{t:g}{tags}"
-                    methods[name] = trace_predictor(rays, args.steps, t, facets, back)
+                    for cross in (False, True) if args.crossing else (False,):
+                        for blur in (True, False) if args.no_blur else (True,):
+                            tags = ("-facets" if facets else "") + ("-2L" if back else "")
+                            tags += ("-x" if cross else "") + ("" if blur else "-noblur")
+                            name = f"trace-{rays}x{args.steps}-T{t:g}{tags}"
+                            methods[name] = trace_predictor(
+                                rays, args.steps, t, facets, back, cross, args.bias, blur, args.start_px
+                            )
     rows = []
     for frame in open_dataset(args.frames).frames(split="test"):
         category = category_of(frame["scene"], full)
@@ -298,7 +339,9 @@ def run(args: argparse.Namespace) -> int:
         times["gtao"] = time_pass(lambda: ScreenSpaceAO("gtao", *args.time_size, radius), frame, args.repeats)
         for rays in args.rays:
             times[f"trace-{rays}x{args.steps}"] = time_pass(
-                lambda rays=rays: ScreenSpaceTrace(*args.time_size, radius, rays, args.steps, 1.0, False),
+                lambda rays=rays: ScreenSpaceTrace(
+                    *args.time_size, radius, rays, args.steps, 1.0, False, crossing=args.crossing
+                ),
                 frame,
                 args.repeats,
             )

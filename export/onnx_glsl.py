@@ -67,7 +67,7 @@ from neuralao.runtime.foundation.io import read_npz, sha256_file, write_bytes, w
 from neuralao.runtime.foundation.limits import FLOAT32_MAX, check_finite_arrays
 from neuralao.runtime.foundation.manifest import read_manifest as read_export_manifest
 from neuralao.runtime.foundation.tolerances import TOL
-from neuralao.runtime.frame_runner import frame_settings
+from neuralao.runtime.frame_runner import model_frame_settings
 
 log = logging.getLogger(__name__)
 
@@ -223,7 +223,7 @@ def export_model(
             extra["dialect"] = dialect
         program = generate_compute(proto, precision=precision, kind="onnx", dialect=dialect, preset=preset)
         if is_neuralao_unet(proto):  # a neuralao U-Net: its frame passes around the network
-            program = generate_frame(program, frame_settings())
+            program = generate_frame(program, model_frame_settings(proto))
             extra["frame_passes"] = len(program.manifest["frame"]["passes"])
         out_dir.mkdir(parents=True, exist_ok=True)
         write_compute_export(program, glsl_dir, cross=hlsl_msl)

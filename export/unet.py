@@ -56,7 +56,7 @@ from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
 from neuralao.runtime.foundation.manifest import read_manifest
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.frame import FrameLike
-from neuralao.runtime.frame_runner import FrameRunner, frame_program, frame_settings
+from neuralao.runtime.frame_runner import FrameRunner, frame_program, model_frame_settings
 from neuralao.runtime.glsl_runner import load_compute_export, run_compute
 from neuralao.runtime.internal_resolution import downsample_source, upsample_source, vertex_source
 
@@ -77,6 +77,7 @@ from neuralao.runtime.unet_input import (
     PAD_MODE,
     check_version,
     hybrid_description,
+    hybrid_gtao_blur,
     preprocess_frame,
     radius_of_param,
 )
@@ -127,7 +128,11 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
     meta = {
         "neuralao_kind": "unet",
         **DESCRIPTIONS[int(model.args.preprocess_version)],
-        **(hybrid_description(int(model.args.preprocess_version)) if model.args.gtao_input else {}),
+        **(
+            hybrid_description(int(model.args.preprocess_version), bool(model.args.gtao_blur))
+            if model.args.gtao_input
+            else {}
+        ),
         "pad_multiple": str(model.pad_multiple),
         "pad_mode": PAD_MODE,
         "model_args": {"widths": list(model.args.widths), "negative_slope": model.args.negative_slope},
@@ -340,12 +345,12 @@ def check_backends(
 # ----------------------------------------------------------------------------------------------- export
 
 
-def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
+def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool, gtao_blur: bool = True) -> dict:
     """The fragment passes around the network at its internal height (neuralao.runtime.internal_resolution) as
     files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them. A
-    hybrid also gets the GTAO pass it refines (neuralao.runtime.baselines' shaders, default settings: the
-    ones :func:`neuralao.runtime.predict.unet_predictor` runs) and an upsampling pass that leaves GTAO alone
-    where no foreground texel is in reach."""
+    hybrid also gets the GTAO pass it refines (neuralao.runtime.baselines' shaders, default settings but
+    for ``gtao_blur``: the ones :func:`neuralao.runtime.predict.unet_predictor` runs) and an upsampling
+    pass that leaves GTAO alone where no foreground texel is in reach."""
     folder = glsl_dir / "internal"
     sources = {"vertex": "fullscreen.vert", "downsample": "downsample.frag", "upsample": "upsample.frag"}
     texts = {
@@ -353,10 +358,13 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
         "downsample": downsample_source(),
         "upsample": upsample_source(empty=0.0 if hybrid else 1.0),
     }
-    gtao = GTAOSettings()
+    gtao = GTAOSettings(blur=gtao_blur)
     if hybrid:
-        sources.update(gtao="gtao.frag", gtao_blur="gtao_blur.frag")
-        texts.update(gtao=fragment_source("gtao", gtao), gtao_blur=blur_source(gtao.noise_size))
+        sources.update(gtao="gtao.frag")
+        texts.update(gtao=fragment_source("gtao", gtao))
+        if gtao.blur:
+            sources.update(gtao_blur="gtao_blur.frag")
+            texts.update(gtao_blur=blur_source(gtao.noise_size))
     for key, name in sources.items():
         write_text(folder / name, texts[key])
     steps = [
@@ -374,8 +382,12 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool) -> dict:
     if hybrid:
         steps = [
             "gtao.frag at W x H (the frame's own resolution) with the full-resolution G-buffer textures, "
-            'the noise tile and the uniforms of "gtao" (u_radius = the AO radius R in scene units), '
-            "then gtao_blur.frag at W x H on its output (u_raw): the GTAO image, 1 on background",
+            'the noise tile and the uniforms of "gtao" (u_radius = the AO radius R in scene units)'
+            + (
+                ", then gtao_blur.frag at W x H on its output (u_raw): the GTAO image, 1 on background"
+                if gtao.blur
+                else ": the GTAO image before any blur (the network denoises it), 1 on background"
+            ),
             *steps[:1],
             "GTAO point-sampled to the same size with the same texels (low texel t of an axis of n reads "
             "full-resolution pixel floor((t + 0.5) * N / n), GL order)",
@@ -401,7 +413,7 @@ def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32", p
     with HLSL and MSL beside each pass where SPIRV-Cross is installed; the same passes in Vulkan GLSL +
     SPIR-V and in WGSL go to the folders of :data:`FRAME_TARGETS` beside ``out_dir``
     (``preset``: a name of :data:`neuralao.export.glsl.image.PRESETS`)."""
-    settings = frame_settings()
+    settings = model_frame_settings(proto)
     program = generate_frame(generate_compute(proto, precision=precision, preset=preset), settings)
     write_compute_export(program, out_dir, cross=spirv_cross_available())
     for folder, dialect in FRAME_TARGETS:
@@ -422,7 +434,11 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     checks = check_backends(model, onnx_path)
     glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
     height = (ckpt.get("dataset") or {}).get("internal_height") or None
-    internal = write_internal_passes(glsl_dir, int(height), model.args.gtao_input) if height else None
+    internal = (
+        write_internal_passes(glsl_dir, int(height), model.args.gtao_input, model.args.gtao_blur)
+        if height
+        else None
+    )
     n_params = count_parameters(model)
     manifest = {
         "kind": "unet",
@@ -493,10 +509,11 @@ def render_parity_frames(size: tuple[int, int] = (128, 128), room: bool = False)
     return frames
 
 
-def _gtao_at_rho(frame: FrameLike, rho: float, version: int) -> np.ndarray:
-    """GTAO (neuralao.runtime.baselines) of ``frame`` at the radius whose parameter is ``rho``."""
+def _gtao_at_rho(frame: FrameLike, rho: float, version: int, blur: bool = True) -> np.ndarray:
+    """GTAO (neuralao.runtime.baselines, with or without its blur) of ``frame`` at the radius whose
+    parameter is ``rho``."""
     radius = radius_of_param(rho, frame["depth"], frame["mask"], float(frame["yfov"]), version)
-    return run_gtao(frame, radius)
+    return run_gtao(frame, radius, GTAOSettings(blur=blur))
 
 
 def parity(
@@ -522,6 +539,7 @@ def parity(
     sizes = list(PARITY_SIZES if sizes is None else sizes)
     ort, gl = ort_runner(proto.SerializeToString()), glsl_runner(glsl_dir)
     hybrid = is_hybrid(meta)
+    blur = hybrid_gtao_blur(meta, str(onnx_path))
     version = check_version(meta.get("preprocess_version"), str(onnx_path))
     rows = []
     for i, frame in enumerate(frames):
@@ -533,7 +551,7 @@ def parity(
             f = crop_frame(frame, w, h)
             rho = CHECK_RHOS[version][len(rows) % len(CHECK_RHOS[version])]
             # a hybrid's fifth channel: GTAO on the same frame at the radius rho stands for
-            x = preprocess_frame(f, _gtao_at_rho(f, rho, version) if hybrid else None, version)
+            x = preprocess_frame(f, _gtao_at_rho(f, rho, version, blur) if hybrid else None, version)
             y_ort = run_padded(ort, x, m, rho)
             t0 = time.perf_counter()
             y_gl = run_padded(gl, x, m, rho)

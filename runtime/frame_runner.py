@@ -5,6 +5,7 @@ depth and normal directly) and the
 network's passes, in the order of the manifest's ``frame.steps``, as an engine follows it.
 
     frame_settings() -> FrameSettings                the runtime references' settings (GTAO, upsampling)
+    model_frame_settings(proto) -> FrameSettings     the same for one U-Net (GTAO blurred or not)
     frame_program(model_onnx, dialect) -> ComputeProgram     the network's passes + the frame's
     FrameRunner(program, width, height, flip_y=False, via=None, hlsl=None)  textures and pipelines of one
                                                      frame size
@@ -46,7 +47,8 @@ from neuralao.runtime.baselines import GTAOSettings, gtao_pass_description, proj
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.internal_resolution import UpsampleSettings
-from neuralao.runtime.unet_input import THICKNESS_CAP
+from neuralao.runtime.onnx_io import get_metadata
+from neuralao.runtime.unet_input import THICKNESS_CAP, hybrid_gtao_blur
 from neuralao.runtime.wgsl_runner import WGPU_FORMATS, from_texels, gpu_format, to_texels
 
 # A manifest's texture format -> GL internal format (R16: 16-bit unsigned normalised, read back as floats)
@@ -86,10 +88,16 @@ def frame_settings(
     )
 
 
+def model_frame_settings(proto: onnx.ModelProto) -> FrameSettings:
+    """:func:`frame_settings` for one U-Net: GTAO with or without its blur, as the model was trained
+    (its metadata's ``gtao_blur``)."""
+    return frame_settings(GTAOSettings(blur=hybrid_gtao_blur(get_metadata(proto), "the ONNX model")))
+
+
 def frame_program(model: str | Path | onnx.ModelProto, dialect: str = "glsl430", **kw) -> ComputeProgram:
-    """A U-Net's compute program in ``dialect`` with its frame passes (:func:`frame_settings`)."""
+    """A U-Net's compute program in ``dialect`` with its frame passes (:func:`model_frame_settings`)."""
     proto = model if isinstance(model, onnx.ModelProto) else onnx.load(str(model))
-    return generate_frame(generate_compute(proto, dialect=dialect, **kw), frame_settings())
+    return generate_frame(generate_compute(proto, dialect=dialect, **kw), model_frame_settings(proto))
 
 
 def uniform_bytes(yfov: float, radius: float, width: int, height: int, flip_y: bool) -> bytes:

@@ -23,7 +23,7 @@ from typing import Protocol
 import numpy as np
 import onnx
 
-from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.baselines import GTAOSettings, run_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import PIXEL_BYTES, available_memory, format_bytes
 from neuralao.runtime.foundation.manifest import read_manifest
@@ -40,6 +40,7 @@ from neuralao.runtime.unet_input import (
     check_version,
     frame_radius,
     frame_radius_param,
+    hybrid_gtao_blur,
     pad_to_multiple,
     preprocess_frame,
 )
@@ -149,6 +150,7 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     run = ort_runner(proto.SerializeToString())
     multiple = meta["pad_multiple"]
     hybrid = is_hybrid(meta)
+    gtao = GTAOSettings(blur=hybrid_gtao_blur(meta, str(onnx_path)))  # the GTAO the hybrid was trained on
     version = int(meta["preprocess_version"])
 
     def predict(f: dict, r: float | None) -> np.ndarray:
@@ -162,7 +164,7 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         check_network_size(np.shape(frame["depth"]), internal_height, onnx_path)
         if not hybrid:
             return scaled(frame, radius)
-        return scaled(dict(frame) | {"gtao": run_gtao(frame, frame_radius(frame, radius))}, radius)
+        return scaled(dict(frame) | {"gtao": run_gtao(frame, frame_radius(frame, radius), gtao)}, radius)
 
     return predict_frame
 

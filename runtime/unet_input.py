@@ -135,18 +135,36 @@ HYBRID_DESCRIPTION = {
 }
 
 
-def hybrid_description(version: int) -> dict[str, str]:
-    """The metadata a hybrid U-Net of contract ``version`` adds: its channels, GTAO's last."""
+# A hybrid that reads GTAO before its blur says so in its metadata (``gtao_blur``: "false"); absent, or any
+# other value, GTAO is blurred (the hybrids exported before the key existed).
+RAW_GTAO_CHANNEL = (
+    "GTAO's pass alone, without its 4x4 blur (the rotation pattern of its noise tile left in: the network "
+    "denoises it)"
+)
+
+
+def hybrid_description(version: int, gtao_blur: bool = True) -> dict[str, str]:
+    """The metadata a hybrid U-Net of contract ``version`` adds: its channels, GTAO's last, and with
+    ``gtao_blur`` False that its GTAO is the pass without its blur."""
     channels = input_channels(version, gtao=True)
-    if channels == HYBRID_CHANNELS:
-        return HYBRID_DESCRIPTION
-    layout = f"NCHW float32, N=1, C={len(channels)}, H and W multiples of pad_multiple (pad, run, crop)"
-    gtao = HYBRID_DESCRIPTION["gtao_channel"].replace("channel 4", f"channel {len(channels) - 1}")
-    return HYBRID_DESCRIPTION | {
-        "input_layout": layout,
-        "input_channels": ",".join(channels),
-        "gtao_channel": gtao,
-    }
+    out = dict(HYBRID_DESCRIPTION)
+    if channels != HYBRID_CHANNELS:
+        layout = f"NCHW float32, N=1, C={len(channels)}, H and W multiples of pad_multiple (pad, run, crop)"
+        gtao = HYBRID_DESCRIPTION["gtao_channel"].replace("channel 4", f"channel {len(channels) - 1}")
+        out |= {"input_layout": layout, "input_channels": ",".join(channels), "gtao_channel": gtao}
+    if not gtao_blur:
+        out["gtao_channel"] = out["gtao_channel"].replace("the engine's GTAO pass", RAW_GTAO_CHANNEL)
+        out["gtao_blur"] = "false"
+    return out
+
+
+def hybrid_gtao_blur(meta: dict, where: str = "model") -> bool:
+    """Whether a hybrid's GTAO channel is GTAO after its blur: metadata ``gtao_blur`` "true" (or absent:
+    the hybrids exported before the key existed) or "false"; anything else is a one-line error."""
+    value = str(meta.get("gtao_blur", "true")).strip().lower()
+    if value not in ("true", "false"):
+        raise NeuralaoError(f"{where}: metadata gtao_blur must be true or false, got {meta['gtao_blur']!r}")
+    return value == "true"
 
 
 def depth_scale(depth: np.ndarray, mask: np.ndarray) -> float:

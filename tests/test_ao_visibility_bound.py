@@ -158,3 +158,45 @@ def test_sphere_on_floor_two_layers_match_the_mesh():
     assert np.sqrt(np.mean(err**2)) < 0.011
     assert abs(np.mean(err)) < 0.005
     assert np.sqrt(np.mean((ao["1L-inf"] - mesh) ** 2)) > 0.04  # the height field fills the far side
+
+
+def _plane_depth(n: np.ndarray, c: float, w: int, h: int, yfov: float) -> np.ndarray:
+    """(H, W) view depth of the camera-space plane n . x = c along each pixel-centre ray (closed form)."""
+    q = vb.pixel_rays_cam(w, h, yfov, np.arange(w * h))
+    return (c / (q @ n)).reshape(h, w)
+
+
+def test_depth_planes_rebuild_a_tilted_plane_from_its_depth_alone():
+    w, h, yfov = 24, 16, 1.0
+    n = np.array([0.3, -0.5, 0.81])
+    n /= np.linalg.norm(n)
+    depth = _plane_depth(n, -2.0, w, h, yfov)  # the plane 2 units in front, seen at a slant
+    assert (depth > 0).all()
+    depth[:, :5] = np.nan  # background to the left: those edge pixels take their other neighbour
+    pix = np.flatnonzero(np.isfinite(depth).reshape(-1))
+    planes = vb.depth_planes(depth, yfov, pix, "depth")
+    # n . x = -2 already has the camera (the origin) on its positive side, so the plane keeps its sign
+    np.testing.assert_allclose(planes[:, :3], np.broadcast_to(n, (len(pix), 3)), atol=1e-9)
+    np.testing.assert_allclose(planes[:, 3], -2.0, rtol=1e-9)
+    flat = vb.depth_planes(depth, yfov, pix, "center")  # constant depth through each pixel centre
+    np.testing.assert_allclose(flat[:, :3], np.broadcast_to([0.0, 0.0, 1.0], (len(pix), 3)), atol=0)
+    row, col = np.divmod(pix, w)
+    np.testing.assert_allclose(flat[:, 3], -depth[row, col], rtol=1e-12)
+
+
+def test_depth_planes_take_the_nearer_side_at_a_depth_jump():
+    """A pixel on a near plane beside a far one keeps its own facet: the neighbour nearer in depth."""
+    w, h, yfov = 20, 12, 1.0
+    near = _plane_depth(np.array([0.0, 0.0, 1.0]), -1.0, w, h, yfov)
+    tilt = np.array([0.6, 0.0, 0.8])
+    far = _plane_depth(tilt, -5.0, w, h, yfov)
+    depth = np.where(np.arange(w)[None, :] < w // 2, near, far)
+    pix = np.arange(w * h)
+    planes = vb.depth_planes(depth, yfov, pix, "depth")
+    col = pix % w
+    np.testing.assert_allclose(
+        planes[col < w // 2, :3], np.broadcast_to([0, 0, 1.0], ((col < w // 2).sum(), 3)), atol=1e-9
+    )
+    np.testing.assert_allclose(
+        planes[col >= w // 2, :3], np.broadcast_to(tilt, ((col >= w // 2).sum(), 3)), atol=1e-9
+    )

@@ -348,3 +348,49 @@ def test_input_version_4_frame_reads_the_back_layer_like_the_reference(tmp_path,
                 moved.append(float(np.abs(predict(thin, r) - want).max()))
     assert max(errors) <= TOL.frame_passes_vs_reference, errors
     assert max(moved) > 20 * TOL.frame_passes_vs_reference, moved
+
+
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_hybrid_on_gtao_without_its_blur_runs_like_the_reference(tmp_path, frames, dialect):
+    """A seeded hybrid trained on GTAO's pass without its blur (metadata gtao_blur "false"): its frame has
+    no blur step and feeds the raw GTAO to the network, as onnxruntime on the unblurred GTAO does; the same
+    weights read as a blurred hybrid give another AO, so a frame that kept the blur would fail."""
+    import torch
+
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+
+    _needs(dialect)
+    torch.manual_seed(6)
+    args = UNetArgs(in_channels=5, widths=[4, 8], gtao_input=True, gtao_blur=False)
+    model = UNet(args).eval()
+    with torch.no_grad():
+        model.out.weight.mul_(4.0)
+    meta = onnx_metadata(model) | {"internal_height": str(INTERNAL_HEIGHT)}
+    assert meta["gtao_blur"] == "false"
+    proto = export_onnx(model, tmp_path / "model.onnx", meta)
+    blurred = export_onnx(
+        model, tmp_path / "blurred.onnx", {k: v for k, v in meta.items() if k != "gtao_blur"}
+    )
+    predict, predict_blurred = (
+        unet_predictor(tmp_path / "model.onnx"),
+        unet_predictor(tmp_path / "blurred.onnx"),
+    )
+    program = frame_program(proto, APIS[dialect][0])
+
+    def frame_passes(p) -> list[str]:
+        return [s["frame_pass"] for s in p.manifest["frame"]["steps"] if "frame_pass" in s]
+
+    assert "f_gtao" in frame_passes(program) and "f_gtao_blur" not in frame_passes(program)
+    assert "gtao_raw" not in program.manifest["frame"]["textures"]
+    assert "f_gtao_blur" in frame_passes(frame_program(blurred, APIS[dialect][0]))
+    errors, moved = [], []
+    for size in SIZES[1:]:
+        f = frames[size]
+        with _runner(program, size, dialect) as runner:
+            for r in RADII[:2]:
+                want = predict(f, r)
+                errors.append(float(np.abs(runner.run(f, r) - want).max()))
+                moved.append(float(np.abs(predict_blurred(f, r) - want).max()))
+    assert max(errors) <= TOL.frame_passes_vs_reference, errors
+    assert max(moved) > 20 * TOL.frame_passes_vs_reference, moved

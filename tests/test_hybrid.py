@@ -248,7 +248,7 @@ def write_internal_export(model: UNet, out, internal_height: int) -> dict:
     meta = onnx_metadata(model) | {"internal_height": str(internal_height)}
     proto = export_onnx(model, out / "model.onnx", meta)
     glsl = write_glsl(proto, out / "glsl")
-    internal = write_internal_passes(glsl, internal_height, model.args.gtao_input)
+    internal = write_internal_passes(glsl, internal_height, model.args.gtao_input, model.args.gtao_blur)
     manifest = {"kind": "unet", "internal_height": internal_height, "internal_resolution": internal}
     write_json(out / "manifest.json", manifest)
     return manifest
@@ -278,7 +278,10 @@ def run_export_gtao(export_dir, frame: dict, radius: float) -> np.ndarray:
     formulas = {"u_proj": (p00, p11), "u_radius": (radius,), "u_pixels_per_unit": (0.5 * h * p11,)}
     GL.glViewport(0, 0, w, h)
     GL.glBindVertexArray(gl.context().empty_vao)
-    passes = [("gtao", g["textures"], tex["u_raw"]), ("gtao_blur", g["blur"]["textures"], out)]
+    if g["blur"] is None:  # a hybrid on GTAO's pass alone
+        passes = [("gtao", g["textures"], out)]
+    else:
+        passes = [("gtao", g["textures"], tex["u_raw"]), ("gtao_blur", g["blur"]["textures"], out)]
     for key, bindings, target in passes:
         prog = gl.compile_program(vertex=src["vertex"], fragment=src[key])
         fbo = gl.create_framebuffer([target], w, h, depth=False)
@@ -316,3 +319,59 @@ def test_hybrid_export_carries_the_gtao_pass_it_refines(tmp_path, frame):
     entry = write_internal_export(pure, tmp_path / "pure", 32)["internal_resolution"]
     assert "gtao" not in entry and "gtao" not in entry["sources"]
     assert not (tmp_path / "pure" / "glsl" / "internal" / "gtao.frag").exists()
+
+
+def test_hybrid_on_gtao_without_its_blur_exports_and_loads_that_gtao(tmp_path, frame, tiny_dataset):
+    """A hybrid trained on GTAO's pass alone (``gtao_blur`` False): its training frames hold that GTAO,
+    prepared apart from the blurred one's; its export carries the pass and no blur, which run from the
+    files reproduce neuralao.runtime.baselines' unblurred GTAO bit for bit; its predictor feeds it the
+    same."""
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_frames import frames_to_set, prepared_folder
+    from neuralao.runtime.baselines import GTAOSettings
+    from neuralao.runtime.internal_resolution import downsample_frame
+    from neuralao.runtime.predict import unet_predictor
+
+    raw = GTAOSettings(blur=False)
+    frames = list(open_dataset(tiny_dataset).frames(split="train"))
+    data = frames_to_set(frames, internal_height=24, gtao=True, gtao_blur=False)
+    f0 = frames[0]
+    want = downsample_frame({"depth": f0["depth"], "a": run_gtao(f0, float(f0["radii"][1]), raw)}, 32, 24)[
+        "a"
+    ]
+    np.testing.assert_array_equal(data.g[0][1].numpy(), want.astype(np.float16))
+    blurred = frames_to_set(frames[:1], internal_height=24, gtao=True)
+    assert not np.array_equal(blurred.g[0][1].numpy(), data.g[0][1].numpy())
+    ds = open_dataset(tiny_dataset)
+    keys = {prepared_folder(tiny_dataset, ds, 24, True, 3, blur) for blur in (True, False)}
+    assert len(keys) == 2 and prepared_folder(tiny_dataset, ds, 24, True, 3) in keys
+
+    f, radius = frame
+    torch.manual_seed(0)
+    model = UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True, gtao_blur=False)).eval()
+    manifest = write_internal_export(model, tmp_path / "raw", 32)
+    entry = manifest["internal_resolution"]
+    assert (
+        "gtao" in entry["sources"] and "gtao_blur" not in entry["sources"] and entry["gtao"]["blur"] is None
+    )
+    assert not (tmp_path / "raw" / "glsl" / "internal" / "gtao_blur.frag").exists()
+    unblurred = run_gtao(f, radius, raw)
+    np.testing.assert_array_equal(run_export_gtao(tmp_path / "raw", f, radius), unblurred)
+    assert np.abs(unblurred - f["gtao"]).max() > 1e-2  # the blur matters on this frame
+
+    with torch.no_grad():  # no correction: the predictor's AO is the GTAO it feeds the network
+        model.out.weight.zero_()
+        model.out.bias.zero_()
+    write_internal_export(model, tmp_path / "zero", 32)
+    got = unet_predictor(tmp_path / "zero" / "model.onnx", internal_height=None)(f, radius)
+    np.testing.assert_allclose(got, unblurred, atol=TOL.parity_unet_fp32)
+
+
+def test_a_hybrid_says_which_gtao_it_reads_or_is_refused():
+    from neuralao.runtime.unet_input import hybrid_description, hybrid_gtao_blur
+
+    assert hybrid_gtao_blur({}) and hybrid_gtao_blur(hybrid_description(3))  # the hybrids before the key
+    assert not hybrid_gtao_blur(hybrid_description(3, gtao_blur=False))
+    assert not hybrid_gtao_blur({"gtao_blur": False}) and hybrid_gtao_blur({"gtao_blur": "True"})
+    with pytest.raises(NeuralaoError, match="gtao_blur must be true or false"):
+        hybrid_gtao_blur({"gtao_blur": "sometimes"}, "m.onnx")

@@ -227,8 +227,12 @@ def frame_passes(
         )
     passes = []
     if hybrid:
-        tex["gtao_raw"] = _ao_texture("gtao_raw", precision, dialect, "GTAO before its blur", GTAO_FORMATS)
-        tex["gtao"] = _ao_texture("gtao", precision, dialect, "GTAO, 1 on background", GTAO_FORMATS)
+        if s.blur:
+            tex["gtao_raw"] = _ao_texture(
+                "gtao_raw", precision, dialect, "GTAO before its blur", GTAO_FORMATS
+            )
+        about = "GTAO, 1 on background" if s.blur else "GTAO's pass without its blur, 1 on background"
+        tex["gtao"] = _ao_texture("gtao", precision, dialect, about, GTAO_FORMATS)
         passes.append(
             FramePass(
                 "f_gtao",

@@ -229,6 +229,7 @@ def run_unet(args: argparse.Namespace) -> int:
         internal_height=settings.internal_height,
         gtao=settings.gtao_input,
         version=settings.preprocess_version,
+        gtao_blur=settings.gtao_blur,
     )
     log = _log("unet")
     log.info(

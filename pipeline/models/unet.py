@@ -76,6 +76,9 @@ class UNetArgs:
     # Hybrid: GTAO's AO at the same radius is a fifth input channel and the network predicts a
     # correction to it: ao = clip(gtao + conv(x), 0, 1) (GTAO stays a GL pass the engine runs first).
     gtao_input: bool = False
+    # The hybrid's GTAO: after its 4x4 blur (True, the classic pass) or the pass alone (False: the
+    # network does the denoising, and sees the detail the blur smears across silhouettes).
+    gtao_blur: bool = True
     # The input contract (neuralao.runtime.unet_input): 3 = frame-local (log depth, rho =
     # log(R / tan(yfov/2))); 2 = the whole frame's mean depth. Checkpoints without it are version 2.
     preprocess_version: int = PREPROCESS_VERSION

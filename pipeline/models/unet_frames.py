@@ -158,13 +158,19 @@ class PreparedFrame:
 
 
 def prepare_frame(
-    f: FrameLike, index: int, internal_height: int = 0, gtao: bool = False, version: int = PREPROCESS_VERSION
+    f: FrameLike,
+    index: int,
+    internal_height: int = 0,
+    gtao: bool = False,
+    version: int = PREPROCESS_VERSION,
+    gtao_blur: bool = True,
 ) -> PreparedFrame:
     """One frame dict (labels at several radii) -> :class:`PreparedFrame`. ``index`` names a frame that
-    has no view number."""
+    has no view number. ``gtao_blur`` False: the hybrid's GTAO is its pass without the blur."""
     _, _, r = frame_labels(f)
     if gtao:
-        f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v)) for v in r], axis=-1)}
+        g = GTAOSettings(blur=gtao_blur)
+        f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v), g) for v in r], axis=-1)}
     h, w = np.shape(f["depth"])
     lw, lh = internal_size(w, h, internal_height or None)
     if (lw, lh) != (w, h):
@@ -215,7 +221,11 @@ def assemble(frames: Iterable[PreparedFrame]) -> FrameSet:
 
 
 def frames_to_set(
-    frames, internal_height: int = 0, gtao: bool = False, version: int = PREPROCESS_VERSION
+    frames,
+    internal_height: int = 0,
+    gtao: bool = False,
+    version: int = PREPROCESS_VERSION,
+    gtao_blur: bool = True,
 ) -> FrameSet:
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` in memory (one radius count).
 
@@ -225,8 +235,11 @@ def frames_to_set(
     as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept. ``version``: the input contract the frames are preprocessed for.
+    ``gtao_blur`` False: GTAO without its blur (the pass alone).
     """
-    return assemble(prepare_frame(f, i, internal_height, gtao, version) for i, f in enumerate(frames))
+    return assemble(
+        prepare_frame(f, i, internal_height, gtao, version, gtao_blur) for i, f in enumerate(frames)
+    )
 
 
 # ----------------------------------------------------------------------------------------------- on disk
@@ -234,14 +247,16 @@ def frames_to_set(
 _ARRAYS = ("x", "y", "m", "g")
 
 
-def prepared_folder(data: Path, ds: Dataset, internal_height: int, gtao: bool, version: int) -> Path:
+def prepared_folder(
+    data: Path, ds: Dataset, internal_height: int, gtao: bool, version: int, gtao_blur: bool = True
+) -> Path:
     """``<dataset>.prepared/<key>``: the key hashes everything a prepared array depends on."""
     key = {
         "format": PREPARED_FORMAT,
         "version": PREPARED_VERSION,
         "dataset_hash": ds.manifest.get("dataset_hash"),
         "internal_height": internal_height,
-        "gtao": gtao_settings_entry(GTAOSettings()) if gtao else None,
+        "gtao": gtao_settings_entry(GTAOSettings(blur=gtao_blur)) if gtao else None,
         "preprocess_version": version,
         # the back layer's files (a version-4 input reads them); absent before, so older keys stay
         **({"back_layer": (ds.back_layer or {}).get("hash")} if version >= BACK_LAYER_VERSION else {}),
@@ -316,7 +331,13 @@ def _read_shard(bin_path: Path, json_path: Path) -> list[PreparedFrame]:
 
 
 def prepared_shards(
-    ds: Dataset, entries: list[dict], folder: Path, internal_height: int, gtao: bool, version: int
+    ds: Dataset,
+    entries: list[dict],
+    folder: Path,
+    internal_height: int,
+    gtao: bool,
+    version: int,
+    gtao_blur: bool = True,
 ) -> Iterator[PreparedFrame]:
     """Every frame of ``entries`` (manifest shards, in order), prepared once into ``folder`` and read back
     memory-mapped."""
@@ -333,7 +354,8 @@ def prepared_shards(
         bin_path, json_path = stem.with_suffix(".bin"), stem.with_suffix(".json")
         if not json_path.exists():
             frames = [
-                prepare_frame(f, i, internal_height, gtao, version) for i, f in enumerate(ds.shard_frames(e))
+                prepare_frame(f, i, internal_height, gtao, version, gtao_blur)
+                for i, f in enumerate(ds.shard_frames(e))
             ]
             _write_shard(frames, bin_path, json_path)
             done += 1
@@ -387,13 +409,15 @@ def load_dataset_frames(
     internal_height: int = 0,
     gtao: bool = False,
     version: int = PREPROCESS_VERSION,
+    gtao_blur: bool = True,
 ) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
     ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
     the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
     dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
-    instead of read again. ``internal_height``, ``gtao`` and ``version``: see :func:`frames_to_set`. The
+    instead of read again. ``internal_height``, ``gtao``, ``version`` and ``gtao_blur``: see
+    :func:`frames_to_set`. The
     frames are prepared once on disk and memory-mapped (see the module docstring).
     """
     data = Path(data)
@@ -418,6 +442,7 @@ def load_dataset_frames(
             or full_info.get("dataset_hash") != ds.manifest.get("dataset_hash")
             or full_info.get("internal_height") != internal_height
             or full_info.get("gtao") != gtao
+            or full_info.get("gtao_blur", True) != gtao_blur
             or full_info.get("preprocess_version") != version
         ):
             raise NeuralaoError(
@@ -430,9 +455,9 @@ def load_dataset_frames(
             for e in ds.manifest["shards"]
             if (e["split"] == "train" and e["scene"] in keep_set) or (has_val and e["split"] == "val")
         ]
-        folder = prepared_folder(data, ds, internal_height, gtao, version)
+        folder = prepared_folder(data, ds, internal_height, gtao, version, gtao_blur)
         train_frames, val_frames = [], []
-        for p in prepared_shards(ds, entries, folder, internal_height, gtao, version):
+        for p in prepared_shards(ds, entries, folder, internal_height, gtao, version, gtao_blur):
             if p.split == "train" and not p.holdout:
                 train_frames.append(p)
             elif (p.split == "val") if has_val else (p.split == "train" and p.holdout):
@@ -452,5 +477,7 @@ def load_dataset_frames(
         "internal_height": internal_height,
         "gtao": gtao,
         "preprocess_version": version,
+        # only where GTAO is the pass without its blur (the records of every other run stay as they were)
+        **({"gtao_blur": False} if gtao and not gtao_blur else {}),
     }
     return train, val, info

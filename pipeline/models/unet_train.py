@@ -140,6 +140,8 @@ class UNetTrainSettings:
     # Hybrid: GTAO's AO at each label radius (neuralao.runtime.baselines, computed on the frame before any
     # point sampling, as an engine would) is a fifth input channel; the network learns a correction.
     gtao_input: bool = False
+    # The hybrid's GTAO after its blur (True) or the GTAO pass alone (False: the network denoises it).
+    gtao_blur: bool = True
     # The input contract the model is trained for (neuralao.runtime.unet_input): 3 = frame-local (log
     # depth, the radius through the projection); 2 = the whole frame's mean depth, as the earlier models.
     preprocess_version: int = PREPROCESS_VERSION
@@ -476,6 +478,7 @@ def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
         scale=int(settings.scale),
         refine_width=int(settings.refine_width),
         gtao_input=bool(settings.gtao_input),
+        gtao_blur=bool(settings.gtao_blur),
         preprocess_version=int(settings.preprocess_version),
     )
 

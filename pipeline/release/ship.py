@@ -317,11 +317,13 @@ def ship_model(
     ckpt_path = _path(settings.checkpoints) / f"{spec.name}.pt"
     ckpt_path.parent.mkdir(parents=True, exist_ok=True)
     # the corpus is ~13 GB on disk: read it once per way of reading it (internal height, GTAO input,
-    # input contract)
-    key = (str(data), int(ts.internal_height), bool(ts.gtao_input), int(ts.preprocess_version))
+    # input contract, GTAO's blur)
+    key = (str(data), int(ts.internal_height), bool(ts.gtao_input), int(ts.preprocess_version), ts.gtao_blur)
     if _LOADED.get("key") != key:
         _LOADED.clear()
-        sets = load_dataset_frames(data, internal_height=key[1], gtao=key[2], version=key[3])
+        sets = load_dataset_frames(
+            data, internal_height=key[1], gtao=key[2], version=key[3], gtao_blur=bool(key[4])
+        )
         _LOADED.update(key=key, sets=sets)
     train_set, val_set, info = _LOADED["sets"]
     if ts.train_fraction != 1.0:  # the corpus-size models: a subset cut from the frames in memory
@@ -332,6 +334,7 @@ def ship_model(
             internal_height=key[1],
             gtao=key[2],
             version=key[3],
+            gtao_blur=bool(key[4]),
         )
     log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
