@@ -180,8 +180,9 @@ def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Pa
     return np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
 
 
+@pytest.mark.parametrize("blur", [True, False], ids=["gtao", "gtao-pass-alone"])
 @pytest.mark.parametrize("route", ["frame", "fragment"])
-def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, tmp_path):
+def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, blur, tmp_path):
     """GTAO pass, point sampling, the network at the internal size, upsampling of its correction and
     clamp(GTAO + correction), by the export's frame section (compute passes, ``frame``) or, without one,
     by its internal-resolution fragment passes with the CPU between them (``fragment``): the C host from
@@ -189,17 +190,17 @@ def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, tmp_path)
     reference (onnxruntime network, float64 numpy upsampler). The two differ by the generated GLSL vs
     onnxruntime (TOL.parity_unet_fp32; the correction passes through the upsampler's convex weights, so
     it does not grow) plus the GLSL vs numpy upsampler (TOL.upsample_glsl_vs_numpy); GTAO is the same
-    shader on the same driver."""
+    shader on the same driver. A hybrid trained on GTAO's pass alone (``blur`` False) runs no blur."""
     from test_hybrid import _hybrid, write_internal_export
 
-    from neuralao.runtime.baselines import run_gtao
+    from neuralao.runtime.baselines import GTAOSettings, run_gtao
     from neuralao.runtime.internal_resolution import downsample_frame, upsample_ao
     from neuralao.runtime.predict import unet_predictor
 
     host = _build_host()
     frame = render_parity_frames((96, 64))[0]
     radius, internal = 0.3, 40  # the network runs at 60 x 40
-    write_internal_export(_hybrid(), tmp_path / "export", internal)
+    write_internal_export(_hybrid(gtao_blur=blur), tmp_path / "export", internal)
     if route == "fragment":
         _drop_frame_section(tmp_path / "export")
     ao = _run_host(host, tmp_path / "export", frame, radius, tmp_path)
@@ -211,7 +212,7 @@ def test_c_host_runs_a_hybrid_export_at_its_internal_resolution(route, tmp_path)
 
     # the test can fail: the correction is visible, and a shortcut (GTAO run on the point-sampled frame,
     # the AO upsampled as a pure export's is) lands far outside the tolerance
-    assert float(np.abs(ref - run_gtao(frame, radius)).max()) > 10 * tol
+    assert float(np.abs(ref - run_gtao(frame, radius, GTAOSettings(blur=blur))).max()) > 10 * tol
     low = downsample_frame(frame, 60, internal)
     shortcut = upsample_ao(unet_predictor(tmp_path / "export" / "model.onnx", None)(low, radius), frame)
     assert float(np.abs(shortcut - ref).max()) > 10 * tol

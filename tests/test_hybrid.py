@@ -27,9 +27,9 @@ from neuralao.runtime.unet_input import HYBRID_CHANNELS, frame_radius_param, pre
 WIDTHS = [4, 8, 16]
 
 
-def _hybrid(seed: int = 0) -> UNet:
+def _hybrid(seed: int = 0, gtao_blur: bool = True) -> UNet:
     torch.manual_seed(seed)
-    model = UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True)).eval()
+    model = UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True, gtao_blur=gtao_blur)).eval()
     with torch.no_grad():  # a correction of visible size, so the comparisons mean something
         model.out.weight.mul_(4.0)
     return model
