@@ -190,22 +190,13 @@ class ScreenSpaceTrace(ScreenSpaceAO):
         super().release()
 
 
-def trace_predictor(
-    rays: int,
-    steps: int,
-    thickness: float,
-    facets: bool,
-    back_layer: bool = False,
-    crossing: bool = False,
-    bias: float = 0.02,
-    blur: bool = True,
-    start_px: float = 1.3,
-):
+def trace_predictor(rays: int, steps: int, thickness: float, facets: bool, **options):
+    """The trace as a predictor; ``options``: :class:`ScreenSpaceTrace`'s keywords (back_layer, crossing,
+    bias, blur, start_px)."""
+
     def run(frame, radius: float) -> np.ndarray:
         h, w = np.shape(frame["mask"])
-        with ScreenSpaceTrace(
-            w, h, radius, rays, steps, thickness, facets, back_layer, crossing, bias, blur, start_px
-        ) as p:
+        with ScreenSpaceTrace(w, h, radius, rays, steps, thickness, facets, **options) as p:
             p.upload(frame)
             p.draw()
             out = p.read()
@@ -303,7 +294,15 @@ def run(args: argparse.Namespace) -> int:
                             tags += ("-x" if cross else "") + ("" if blur else "-noblur")
                             name = f"trace-{rays}x{args.steps}-T{t:g}{tags}"
                             methods[name] = trace_predictor(
-                                rays, args.steps, t, facets, back, cross, args.bias, blur, args.start_px
+                                rays,
+                                args.steps,
+                                t,
+                                facets,
+                                back_layer=back,
+                                crossing=cross,
+                                bias=args.bias,
+                                blur=blur,
+                                start_px=args.start_px,
                             )
     rows = []
     for frame in open_dataset(args.frames).frames(split="test"):
