@@ -78,6 +78,7 @@ TAMPERED = [
     ({"internal_height": "1e3"}, "internal_height '1e3' is not an integer"),
     ({"pad_mode": "bogus"}, "pad_mode 'bogus' is not 'reflect'"),
     ({"pad_mode": None}, "metadata has no pad_mode"),
+    ({"gtao_blur": "sometimes"}, "metadata gtao_blur must be true or false"),
 ]
 
 
