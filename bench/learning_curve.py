@@ -72,7 +72,13 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
     done = folder / "model.pt"
     if done.exists() and all((folder / f"{point_name(p)}.pt").exists() for p in points if p <= run["hours"]):
         return folder
-    key = (settings.internal_height, settings.gtao_input, settings.preprocess_version, settings.gtao_blur)
+    key = (
+        settings.internal_height,
+        settings.gtao_input,
+        settings.preprocess_version,
+        settings.gtao_blur,
+        settings.gtao_raw_input,
+    )
     if cache.get("key") != key:
         cache.clear()
         cache.update(
@@ -83,6 +89,7 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
                 gtao=key[1],
                 version=key[2],
                 gtao_blur=key[3],
+                gtao_raw=key[4],
             ),
         )
     sets = cache["sets"]
@@ -95,6 +102,7 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
             gtao=key[1],
             version=key[2],
             gtao_blur=key[3],
+            gtao_raw=key[4],
         )
     train_set, val_set, info = sets
 

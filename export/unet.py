@@ -129,7 +129,11 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
         "neuralao_kind": "unet",
         **DESCRIPTIONS[int(model.args.preprocess_version)],
         **(
-            hybrid_description(int(model.args.preprocess_version), bool(model.args.gtao_blur))
+            hybrid_description(
+                int(model.args.preprocess_version),
+                bool(model.args.gtao_blur),
+                bool(model.args.gtao_raw_input),
+            )
             if model.args.gtao_input
             else {}
         ),
@@ -290,7 +294,8 @@ def glsl_runner(glsl_dir: str | Path) -> Runner:
 
 def random_input(width: int, height: int, seed: int = 0, channels: int = 4) -> np.ndarray:
     """A G-buffer-like network input (C, H, W) float32: smooth depth around 1, unit normals, a background
-    band; with ``channels`` 5 a GTAO-like fifth channel in [0, 1] (1 on background)."""
+    band; each channel past the fourth (a hybrid's GTAO images, the back layer's thickness) a smooth image in
+    [0, 1] (1 on background)."""
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
     depth = (
@@ -303,8 +308,9 @@ def random_input(width: int, height: int, seed: int = 0, channels: int = 4) -> n
     n /= np.linalg.norm(n, axis=0, keepdims=True)
     x = np.concatenate([depth[None], n]).astype(np.float32)
     x[:, :, : max(1, width // 8)] = 0.0  # background: depth 0, normal 0
-    if channels == 5:
-        gtao = np.clip(0.7 + 0.3 * np.cos(xx / 9.0) * np.sin(yy / 6.0), 0.0, 1.0).astype(np.float32)
+    for c in range(4, channels):
+        phase = 1.3 * (c - 4)
+        gtao = np.clip(0.7 + 0.3 * np.cos(xx / 9.0 + phase) * np.sin(yy / 6.0), 0.0, 1.0).astype(np.float32)
         gtao[:, : max(1, width // 8)] = 1.0
         x = np.concatenate([x, gtao[None]])
     return x

@@ -133,6 +133,11 @@ def is_hybrid(meta: dict) -> bool:
     return str(meta.get("input_channels", "")).split(",")[-1] == "gtao"
 
 
+def reads_gtao_raw(meta: dict) -> bool:
+    """True for a hybrid that also reads GTAO's pass before its blur (a ``gtao_raw`` channel)."""
+    return "gtao_raw" in str(meta.get("input_channels", "")).split(",")
+
+
 def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "model") -> Predictor:
     """``predict(frame, radius) -> ao (H, W) float32`` of a U-Net export with onnxruntime.
 
@@ -153,8 +158,10 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     gtao = GTAOSettings(blur=hybrid_gtao_blur(meta, str(onnx_path)))  # the GTAO the hybrid was trained on
     version = int(meta["preprocess_version"])
 
+    raw = hybrid and reads_gtao_raw(meta)
+
     def predict(f: dict, r: float | None) -> np.ndarray:
-        x = preprocess_frame(f, f["gtao"] if hybrid else None, version)
+        x = preprocess_frame(f, f["gtao"] if hybrid else None, version, f["gtao_raw"] if raw else None)
         return composite(run_padded(run, x, multiple, frame_radius_param(f, r, version)), f)
 
     scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
@@ -164,7 +171,11 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         check_network_size(np.shape(frame["depth"]), internal_height, onnx_path)
         if not hybrid:
             return scaled(frame, radius)
-        return scaled(dict(frame) | {"gtao": run_gtao(frame, frame_radius(frame, radius), gtao)}, radius)
+        r = frame_radius(frame, radius)
+        extra = {"gtao": run_gtao(frame, r, gtao)}
+        if raw:  # the same pass before its blur
+            extra["gtao_raw"] = run_gtao(frame, r, GTAOSettings(blur=False))
+        return scaled(dict(frame) | extra, radius)
 
     return predict_frame
 

@@ -64,10 +64,15 @@ INPUT_CHANNELS = ("depth", "normal_cam_x", "normal_cam_y", "normal_cam_z")
 HYBRID_CHANNELS = (*INPUT_CHANNELS, "gtao")
 
 
-def input_channels(version: int = PREPROCESS_VERSION, gtao: bool = False) -> tuple[str, ...]:
-    """The network input's channels for a contract version (with GTAO's last for a hybrid)."""
+def input_channels(
+    version: int = PREPROCESS_VERSION, gtao: bool = False, gtao_raw: bool = False
+) -> tuple[str, ...]:
+    """The network input's channels for a contract version (with GTAO's last for a hybrid, and before it
+    with ``gtao_raw`` GTAO's pass before its blur)."""
     base = (*INPUT_CHANNELS, "thickness") if int(version) >= BACK_LAYER_VERSION else INPUT_CHANNELS
-    return (*base, "gtao") if gtao else base
+    if not gtao:
+        return base
+    return (*base, "gtao_raw", "gtao") if gtao_raw else (*base, "gtao")
 
 
 BACKGROUND_DEPTH = 0.0
@@ -143,11 +148,18 @@ RAW_GTAO_CHANNEL = (
 )
 
 
-def hybrid_description(version: int, gtao_blur: bool = True) -> dict[str, str]:
-    """The metadata a hybrid U-Net of contract ``version`` adds: its channels, GTAO's last, and with
-    ``gtao_blur`` False that its GTAO is the pass without its blur."""
-    channels = input_channels(version, gtao=True)
+def hybrid_description(version: int, gtao_blur: bool = True, gtao_raw: bool = False) -> dict[str, str]:
+    """The metadata a hybrid U-Net of contract ``version`` adds: its channels, GTAO's last, with
+    ``gtao_blur`` False that its GTAO is the pass without its blur, and with ``gtao_raw`` the channel of
+    GTAO's pass before its blur in front of the blurred GTAO (which stays the base of the correction)."""
+    channels = input_channels(version, gtao=True, gtao_raw=gtao_raw)
     out = dict(HYBRID_DESCRIPTION)
+    if gtao_raw:
+        out["gtao_raw_channel"] = (
+            f"channel {len(channels) - 2}: GTAO's pass at the same radius before its blur (the engine's "
+            "f_gtao output, the rotation pattern of its noise tile in it), 1 on background: the detail the "
+            "blur averages away; the correction is still added to the blurred GTAO of the last channel"
+        )
     if channels != HYBRID_CHANNELS:
         layout = f"NCHW float32, N=1, C={len(channels)}, H and W multiples of pad_multiple (pad, run, crop)"
         gtao = HYBRID_DESCRIPTION["gtao_channel"].replace("channel 4", f"channel {len(channels) - 1}")
@@ -292,21 +304,30 @@ def frame_radius_param(
 
 
 def preprocess_frame(
-    frame: FrameLike, gtao: np.ndarray | None = None, version: int = PREPROCESS_VERSION
+    frame: FrameLike,
+    gtao: np.ndarray | None = None,
+    version: int = PREPROCESS_VERSION,
+    gtao_raw: np.ndarray | None = None,
 ) -> np.ndarray:
     """``preprocess`` on a frame (keys depth, normal_cam, mask; depth_back for version 4). Returns
-    (C, H, W) float32, with ``gtao`` (H, W) as the hybrid's last channel (1 on background)."""
+    (C, H, W) float32, with ``gtao`` (H, W) as the hybrid's last channel (1 on background), and
+    ``gtao_raw`` (H, W), GTAO before its blur, before it."""
     missing = [k for k in ("depth", "normal_cam", "mask") if k not in frame]
     if missing:
         raise NeuralaoError(f"frame lacks G-buffer channel(s) {', '.join(missing)}")
     x = preprocess(frame["depth"], frame["normal_cam"], frame["mask"], version, frame.get("depth_back"))
     if gtao is None:
         return x
-    gtao = np.asarray(gtao, np.float32)
-    if gtao.shape != x.shape[1:]:
-        raise NeuralaoError(f"GTAO image is {gtao.shape}, the G-buffer {x.shape[1:]}")
     mask = np.asarray(frame["mask"], bool)
-    return np.concatenate([x, np.where(mask, gtao, np.float32(1.0))[None]], axis=0)
+    extra = []
+    for name, image in (("GTAO image before its blur", gtao_raw), ("GTAO image", gtao)):
+        if image is None:
+            continue
+        image = np.asarray(image, np.float32)
+        if image.shape != x.shape[1:]:
+            raise NeuralaoError(f"{name} is {image.shape}, the G-buffer {x.shape[1:]}")
+        extra.append(np.where(mask, image, np.float32(1.0))[None])
+    return np.concatenate([x, *extra], axis=0)
 
 
 def pad_amount(height: int, width: int, multiple: int) -> tuple[int, int]:

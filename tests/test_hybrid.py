@@ -375,3 +375,81 @@ def test_a_hybrid_says_which_gtao_it_reads_or_is_refused():
     assert not hybrid_gtao_blur({"gtao_blur": False}) and hybrid_gtao_blur({"gtao_blur": "True"})
     with pytest.raises(NeuralaoError, match="gtao_blur must be true or false"):
         hybrid_gtao_blur({"gtao_blur": "sometimes"}, "m.onnx")
+
+
+def test_hybrid_reading_gtao_before_its_blur_too_keeps_the_blurred_gtao_as_its_base(
+    tmp_path, frame, tiny_dataset
+):
+    """``gtao_raw_input``: GTAO before its blur as a channel in front of the blurred GTAO. The training
+    frames hold both, the network's input has both in that order, the correction is added to the blurred
+    one (a zeroed correction gives it back exactly through the runtime's predictor), and the metadata says
+    so. The generated frame passes do not feed the extra channel yet: refused in one line."""
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_frames import frames_to_set, network_input, prepared_folder
+    from neuralao.runtime.baselines import GTAOSettings
+    from neuralao.runtime.frame_runner import frame_program
+    from neuralao.runtime.internal_resolution import downsample_frame
+    from neuralao.runtime.predict import unet_predictor
+
+    with pytest.raises(NeuralaoError, match="gtao_raw_input"):
+        UNet(UNetArgs(in_channels=6, widths=WIDTHS, gtao_input=True, gtao_blur=False, gtao_raw_input=True))
+    with pytest.raises(NeuralaoError, match="6 channels"):
+        UNet(UNetArgs(in_channels=5, widths=WIDTHS, gtao_input=True, gtao_raw_input=True))
+
+    frames = list(open_dataset(tiny_dataset).frames(split="train"))
+    data = frames_to_set(frames, internal_height=24, gtao=True, gtao_raw=True)
+    f0, r1 = frames[0], float(frames[0]["radii"][1])
+    low = lambda img: downsample_frame({"depth": f0["depth"], "a": img}, 32, 24)["a"].astype(np.float16)  # noqa: E731
+    raw = run_gtao(f0, r1, GTAOSettings(blur=False))
+    np.testing.assert_array_equal(data.r[0][1].numpy(), low(raw))
+    np.testing.assert_array_equal(data.g[0][1].numpy(), low(run_gtao(f0, r1)))
+    x = network_input(data, 0, 1)
+    assert x.shape == (6, 24, 32)
+    np.testing.assert_array_equal(x[4].numpy(), data.r[0][1].float().numpy())
+    np.testing.assert_array_equal(x[5].numpy(), data.g[0][1].float().numpy())
+    ds = open_dataset(tiny_dataset)
+    assert prepared_folder(tiny_dataset, ds, 24, True, 3, gtao_raw=True) != prepared_folder(
+        tiny_dataset, ds, 24, True, 3
+    )
+
+    f, radius = frame
+    torch.manual_seed(0)
+    model = UNet(UNetArgs(in_channels=6, widths=WIDTHS, gtao_input=True, gtao_raw_input=True)).eval()
+    with torch.no_grad():
+        model.out.weight.zero_()
+        model.out.bias.zero_()
+    meta = onnx_metadata(model)
+    assert meta["input_channels"].endswith("gtao_raw,gtao") and "gtao_raw_channel" in meta
+    proto = export_onnx(model, tmp_path / "model.onnx", meta)
+    got = unet_predictor(tmp_path / "model.onnx", internal_height=None)(f, radius)
+    np.testing.assert_allclose(got, f["gtao"], atol=TOL.parity_unet_fp32)
+    assert np.abs(f["gtao"] - run_gtao(f, radius, GTAOSettings(blur=False))).max() > 1e-2
+    with pytest.raises(NeuralaoError, match="do not feed yet"):
+        frame_program(proto)
+
+
+def test_hybrid_on_both_gtao_images_trains_and_its_export_is_refused_in_one_line(tiny_dataset, tmp_path):
+    from neuralao.export.unet import export_checkpoint
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
+
+    ts = UNetTrainSettings(
+        epochs=1,
+        batch_size=2,
+        crop=16,
+        widths=[4, 8],
+        gtao_input=True,
+        gtao_raw_input=True,
+        internal_height=32,
+        threads=1,
+        seed=0,
+    )
+    sets = load_dataset_frames(tiny_dataset, internal_height=32, gtao=True, gtao_raw=True)
+    assert sets[2]["gtao_raw"] is True and sets[0].r is not None
+    ckpt = train(ts, sets[0], sets[1], tmp_path / "h.pt", sets[2], progress=False)
+    assert ckpt["model_args"]["gtao_raw_input"] and ckpt["model_args"]["in_channels"] == 6
+    assert np.isfinite(ckpt["metrics"]["val_rmse"])
+    with pytest.raises(NeuralaoError, match="do not feed yet"):
+        export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
+    assert not (tmp_path / "export" / "manifest.json").exists()

@@ -230,6 +230,7 @@ def run_unet(args: argparse.Namespace) -> int:
         gtao=settings.gtao_input,
         version=settings.preprocess_version,
         gtao_blur=settings.gtao_blur,
+        gtao_raw=settings.gtao_raw_input,
     )
     log = _log("unet")
     log.info(

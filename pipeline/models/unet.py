@@ -79,6 +79,9 @@ class UNetArgs:
     # The hybrid's GTAO: after its 4x4 blur (True, the classic pass) or the pass alone (False: the
     # network does the denoising, and sees the detail the blur smears across silhouettes).
     gtao_blur: bool = True
+    # The hybrid also reads GTAO's pass before its blur, a channel in front of the (blurred) GTAO that stays
+    # the base of its correction: the detail the blur averages away, and a smooth base at any resolution.
+    gtao_raw_input: bool = False
     # The input contract (neuralao.runtime.unet_input): 3 = frame-local (log depth, rho =
     # log(R / tan(yfov/2))); 2 = the whole frame's mean depth. Checkpoints without it are version 2.
     preprocess_version: int = PREPROCESS_VERSION
@@ -121,7 +124,12 @@ class UNet(nn.Module):
                 f"U-Net widths must list at least two positive channel counts, got {args.widths}"
             )
         check_version(args.preprocess_version, "this U-Net")
-        hybrid = input_channels(args.preprocess_version, gtao=True)
+        if args.gtao_raw_input and not (args.gtao_input and args.gtao_blur):
+            raise NeuralaoError(
+                "gtao_raw_input adds GTAO before its blur beside the blurred GTAO of a hybrid: it needs "
+                "gtao_input true and gtao_blur true"
+            )
+        hybrid = input_channels(args.preprocess_version, gtao=True, gtao_raw=bool(args.gtao_raw_input))
         if args.gtao_input and (int(args.scale) != 1 or int(args.in_channels) != len(hybrid)):
             raise NeuralaoError(
                 f"a GTAO-input U-Net takes {len(hybrid)} channels ({', '.join(hybrid)}) at "
@@ -152,7 +160,9 @@ class UNet(nn.Module):
         self.register_buffer("first", select.clone().view(-1, 1, 1, 1), persistent=False)
         if args.gtao_input:
             guide = torch.zeros(1, cin, 1, 1)  # _unet sees the radius channel appended after GTAO
-            guide[0, len(plain)] = 1.0  # the GTAO channel, read like depth: no Slice in the graph
+            guide[0, len(hybrid) - 1] = (
+                1.0  # the (blurred) GTAO channel, read like depth: no Slice in the graph
+            )
             self.register_buffer("guide", guide, persistent=False)
         self.down = nn.ModuleList(
             nn.Sequential(_conv3x3(cin if i == 0 else w[i - 1], w[i]), nn.LeakyReLU(slope))

@@ -85,6 +85,7 @@ class FrameSet:
     names: list[str]
     scenes: list[str]
     g: torch.Tensor | list[torch.Tensor] | None = None  # hybrid: GTAO (N, K, H, W) float16 at each radius
+    r: torch.Tensor | list[torch.Tensor] | None = None  # and GTAO before its blur, where the hybrid reads it
 
     def __len__(self) -> int:
         return len(self.names)
@@ -108,18 +109,24 @@ class FrameSet:
             [self.names[k] for k in index],
             [self.scenes[k] for k in index],
             pick(self.g),
+            pick(self.r),
         )
 
 
 def network_input(data: FrameSet, f: int, j: int, crop: tuple[slice, slice] | None = None) -> torch.Tensor:
     """(C, H, W) float32 input of frame ``f`` at radius index ``j``: the G-buffer channels, and for a
-    hybrid set GTAO at that radius as the fifth. ``crop``: (rows, columns) slices, taken before anything
-    is copied (the frame may be a memory-mapped view)."""
+    hybrid set GTAO at that radius last (GTAO before its blur in front of it where the set has it).
+    ``crop``: (rows, columns) slices, taken before anything is copied (the frame may be a memory-mapped
+    view)."""
     rows, cols = crop or (slice(None), slice(None))
     x = data.x[f][:, rows, cols]
     if data.g is None:
         return x.float()
-    return torch.cat([x.float(), data.g[f][j : j + 1, rows, cols].float()], dim=0)
+    parts = [x.float()]
+    if data.r is not None:
+        parts.append(data.r[f][j : j + 1, rows, cols].float())
+    parts.append(data.g[f][j : j + 1, rows, cols].float())
+    return torch.cat(parts, dim=0)
 
 
 def frame_labels(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,7 +150,8 @@ def frame_labels(frame: FrameLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 class PreparedFrame:
     """One frame as training reads it: x (4, H, W) float32 input channels; y (K, H, W) float16 labels; m
     (K, H, W) bool valid & foreground; g (K, H, W) float16 GTAO at each radius or None; rho (K,) radius
-    parameters; radii (K,) float32 scene units; its name "scene/view", scene, split and holdout flag."""
+    parameters; radii (K,) float32 scene units; its name "scene/view", scene, split and holdout flag; r
+    (K, H, W) float16 GTAO before its blur at each radius, for a hybrid that reads it, or None."""
 
     x: np.ndarray
     y: np.ndarray
@@ -155,6 +163,7 @@ class PreparedFrame:
     scene: str
     split: str = ""
     holdout: bool = False
+    r: np.ndarray | None = None
 
 
 def prepare_frame(
@@ -164,13 +173,18 @@ def prepare_frame(
     gtao: bool = False,
     version: int = PREPROCESS_VERSION,
     gtao_blur: bool = True,
+    gtao_raw: bool = False,
 ) -> PreparedFrame:
     """One frame dict (labels at several radii) -> :class:`PreparedFrame`. ``index`` names a frame that
-    has no view number. ``gtao_blur`` False: the hybrid's GTAO is its pass without the blur."""
+    has no view number. ``gtao_blur`` False: the hybrid's GTAO is its pass without the blur; ``gtao_raw``:
+    that pass is kept as well, beside the blurred GTAO."""
     _, _, r = frame_labels(f)
     if gtao:
         g = GTAOSettings(blur=gtao_blur)
         f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v), g) for v in r], axis=-1)}
+    if gtao and gtao_raw:
+        raw = GTAOSettings(blur=False)
+        f = dict(f) | {"gtao_raw_radii": np.stack([run_gtao(f, float(v), raw) for v in r], axis=-1)}
     h, w = np.shape(f["depth"])
     lw, lh = internal_size(w, h, internal_height or None)
     if (lw, lh) != (w, h):
@@ -188,6 +202,7 @@ def prepare_frame(
         scene=scene,
         split=str(f.get("split", "")),
         holdout=bool(f.get("holdout", False)),
+        r=np.moveaxis(f["gtao_raw_radii"], -1, 0).astype(np.float16) if gtao and gtao_raw else None,
     )
 
 
@@ -200,11 +215,8 @@ def assemble(frames: Iterable[PreparedFrame]) -> FrameSet:
     counts = {len(p.rho) for p in frames}
     if len(counts) != 1:
         raise NeuralaoError(f"frames have labels at {sorted(counts)} radii; use one radius list per dataset")
-    gtao = frames[0].g is not None
-    tensors = {
-        k: [torch.from_numpy(getattr(p, k)) for p in frames]
-        for k in ("x", "y", "m", *(("g",) if gtao else ()))
-    }
+    kept = [k for k in ("g", "r") if getattr(frames[0], k) is not None]
+    tensors = {k: [torch.from_numpy(getattr(p, k)) for p in frames] for k in ("x", "y", "m", *kept)}
     size = sum(t.numel() * t.element_size() for ts in tensors.values() for t in ts)
     if len({p.x.shape for p in frames}) == 1 and size <= STACK_BYTES:
         tensors = {k: torch.stack(v) for k, v in tensors.items()}
@@ -217,6 +229,7 @@ def assemble(frames: Iterable[PreparedFrame]) -> FrameSet:
         [p.name for p in frames],
         [p.scene for p in frames],
         tensors.get("g"),
+        tensors.get("r"),
     )
 
 
@@ -226,6 +239,7 @@ def frames_to_set(
     gtao: bool = False,
     version: int = PREPROCESS_VERSION,
     gtao_blur: bool = True,
+    gtao_raw: bool = False,
 ) -> FrameSet:
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` in memory (one radius count).
 
@@ -235,20 +249,27 @@ def frames_to_set(
     as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept. ``version``: the input contract the frames are preprocessed for.
-    ``gtao_blur`` False: GTAO without its blur (the pass alone).
+    ``gtao_blur`` False: GTAO without its blur (the pass alone); ``gtao_raw``: that pass kept as ``r``
+    beside the blurred GTAO.
     """
     return assemble(
-        prepare_frame(f, i, internal_height, gtao, version, gtao_blur) for i, f in enumerate(frames)
+        prepare_frame(f, i, internal_height, gtao, version, gtao_blur, gtao_raw) for i, f in enumerate(frames)
     )
 
 
 # ----------------------------------------------------------------------------------------------- on disk
 
-_ARRAYS = ("x", "y", "m", "g")
+_ARRAYS = ("x", "y", "m", "g", "r")
 
 
 def prepared_folder(
-    data: Path, ds: Dataset, internal_height: int, gtao: bool, version: int, gtao_blur: bool = True
+    data: Path,
+    ds: Dataset,
+    internal_height: int,
+    gtao: bool,
+    version: int,
+    gtao_blur: bool = True,
+    gtao_raw: bool = False,
 ) -> Path:
     """``<dataset>.prepared/<key>``: the key hashes everything a prepared array depends on."""
     key = {
@@ -260,6 +281,8 @@ def prepared_folder(
         "preprocess_version": version,
         # the back layer's files (a version-4 input reads them); absent before, so older keys stay
         **({"back_layer": (ds.back_layer or {}).get("hash")} if version >= BACK_LAYER_VERSION else {}),
+        # GTAO before its blur beside the blurred one (absent before, so older keys stay)
+        **({"gtao_raw": True} if gtao and gtao_raw else {}),
     }
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     return data.parent / f"{data.name}.prepared" / digest
@@ -325,6 +348,7 @@ def _read_shard(bin_path: Path, json_path: Path) -> list[PreparedFrame]:
                 d["scene"],
                 d["split"],
                 d["holdout"],
+                view("r"),
             )
         )
     return out
@@ -338,13 +362,14 @@ def prepared_shards(
     gtao: bool,
     version: int,
     gtao_blur: bool = True,
+    gtao_raw: bool = False,
 ) -> Iterator[PreparedFrame]:
     """Every frame of ``entries`` (manifest shards, in order), prepared once into ``folder`` and read back
     memory-mapped."""
     folder.mkdir(parents=True, exist_ok=True)
     todo = [e for e in entries if not (folder / f"{e['sha256'][:32]}.json").exists()]
     if todo:
-        _check_room(ds, todo, folder, internal_height, gtao, version)
+        _check_room(ds, todo, folder, internal_height, gtao, version, gtao_raw)
         log.info(
             "preparing %d of %d shards into %s (once; later runs read them)", len(todo), len(entries), folder
         )
@@ -354,7 +379,7 @@ def prepared_shards(
         bin_path, json_path = stem.with_suffix(".bin"), stem.with_suffix(".json")
         if not json_path.exists():
             frames = [
-                prepare_frame(f, i, internal_height, gtao, version, gtao_blur)
+                prepare_frame(f, i, internal_height, gtao, version, gtao_blur, gtao_raw)
                 for i, f in enumerate(ds.shard_frames(e))
             ]
             _write_shard(frames, bin_path, json_path)
@@ -364,11 +389,15 @@ def prepared_shards(
         yield from _read_shard(bin_path, json_path)
 
 
-def prepared_bytes(ds: Dataset, entries: list[dict], internal_height: int, gtao: bool, version: int) -> int:
+def prepared_bytes(
+    ds: Dataset, entries: list[dict], internal_height: int, gtao: bool, version: int, gtao_raw: bool = False
+) -> int:
     """The bytes the prepared frames of ``entries`` take on disk: per pixel at the size training reads,
-    the input's channels (float32), the labels and GTAO at each radius (float16) and the masks (bool)."""
+    the input's channels (float32), the labels and GTAO (and GTAO before its blur) at each radius
+    (float16) and the masks (bool)."""
     radii = len(ds.manifest.get("config", {}).get("labels", {}).get("radii_rel") or [1])
-    per_pixel = 4 * len(input_channels(version)) + radii * (2 + 1 + (2 if gtao else 0))
+    gtao_bytes = (2 if gtao else 0) + (2 if gtao and gtao_raw else 0)
+    per_pixel = 4 * len(input_channels(version)) + radii * (2 + 1 + gtao_bytes)
     total = 0
     for e in entries:
         w, h = e.get("size") or ds.manifest.get("size") or (0, 0)
@@ -377,7 +406,15 @@ def prepared_bytes(ds: Dataset, entries: list[dict], internal_height: int, gtao:
     return total
 
 
-def _check_room(ds: Dataset, todo: list[dict], folder: Path, internal_height: int, gtao: bool, version: int):
+def _check_room(
+    ds: Dataset,
+    todo: list[dict],
+    folder: Path,
+    internal_height: int,
+    gtao: bool,
+    version: int,
+    gtao_raw: bool = False,
+):
     """Refuse, before any is written, prepared frames the disk cannot hold (naming the other prepared sets
     beside them, which can be removed: each is made again when a run needs it)."""
     others = sorted(p.name for p in folder.parent.iterdir() if p.is_dir() and p != folder)
@@ -385,7 +422,7 @@ def _check_room(ds: Dataset, todo: list[dict], folder: Path, internal_height: in
     try:
         check_disk(
             "the prepared frames",
-            prepared_bytes(ds, todo, internal_height, gtao, version),
+            prepared_bytes(ds, todo, internal_height, gtao, version, gtao_raw),
             folder,
             f"of {len(todo)} shards in {folder}",
         )
@@ -410,13 +447,14 @@ def load_dataset_frames(
     gtao: bool = False,
     version: int = PREPROCESS_VERSION,
     gtao_blur: bool = True,
+    gtao_raw: bool = False,
 ) -> tuple[FrameSet, FrameSet | None, dict]:
     """Train frames (train scenes, held-back views excluded), validation frames and dataset info.
 
     ``train_fraction`` < 1 keeps that fraction of the training SCENES (every k-th in sorted order), for
     the corpus-size study; validation is unchanged. ``loaded``: what this function returned for the same
     dataset at ``train_fraction`` 1; the subset is then cut from it (same frames, same order, same info)
-    instead of read again. ``internal_height``, ``gtao``, ``version`` and ``gtao_blur``: see
+    instead of read again. ``internal_height``, ``gtao``, ``version``, ``gtao_blur`` and ``gtao_raw``: see
     :func:`frames_to_set`. The
     frames are prepared once on disk and memory-mapped (see the module docstring).
     """
@@ -443,6 +481,7 @@ def load_dataset_frames(
             or full_info.get("internal_height") != internal_height
             or full_info.get("gtao") != gtao
             or full_info.get("gtao_blur", True) != gtao_blur
+            or full_info.get("gtao_raw", False) != (gtao and gtao_raw)
             or full_info.get("preprocess_version") != version
         ):
             raise NeuralaoError(
@@ -455,9 +494,9 @@ def load_dataset_frames(
             for e in ds.manifest["shards"]
             if (e["split"] == "train" and e["scene"] in keep_set) or (has_val and e["split"] == "val")
         ]
-        folder = prepared_folder(data, ds, internal_height, gtao, version, gtao_blur)
+        folder = prepared_folder(data, ds, internal_height, gtao, version, gtao_blur, gtao_raw)
         train_frames, val_frames = [], []
-        for p in prepared_shards(ds, entries, folder, internal_height, gtao, version, gtao_blur):
+        for p in prepared_shards(ds, entries, folder, internal_height, gtao, version, gtao_blur, gtao_raw):
             if p.split == "train" and not p.holdout:
                 train_frames.append(p)
             elif (p.split == "val") if has_val else (p.split == "train" and p.holdout):
@@ -479,5 +518,6 @@ def load_dataset_frames(
         "preprocess_version": version,
         # only where GTAO is the pass without its blur (the records of every other run stay as they were)
         **({"gtao_blur": False} if gtao and not gtao_blur else {}),
+        **({"gtao_raw": True} if gtao and gtao_raw else {}),
     }
     return train, val, info

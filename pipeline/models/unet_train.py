@@ -142,6 +142,9 @@ class UNetTrainSettings:
     gtao_input: bool = False
     # The hybrid's GTAO after its blur (True) or the GTAO pass alone (False: the network denoises it).
     gtao_blur: bool = True
+    # The hybrid also reads GTAO's pass before its blur (a channel in front of the blurred GTAO, which stays
+    # the base of the correction).
+    gtao_raw_input: bool = False
     # The input contract the model is trained for (neuralao.runtime.unet_input): 3 = frame-local (log
     # depth, the radius through the projection); 2 = the whole frame's mean depth, as the earlier models.
     preprocess_version: int = PREPROCESS_VERSION
@@ -471,7 +474,11 @@ def pick_device(name: str) -> torch.device:
 
 def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
     return UNetArgs(
-        in_channels=len(input_channels(int(settings.preprocess_version), bool(settings.gtao_input))),
+        in_channels=len(
+            input_channels(
+                int(settings.preprocess_version), bool(settings.gtao_input), bool(settings.gtao_raw_input)
+            )
+        ),
         widths=list(settings.widths),
         negative_slope=settings.negative_slope,
         radius_input=True,
@@ -479,6 +486,7 @@ def model_args_of(settings: UNetTrainSettings) -> UNetArgs:
         refine_width=int(settings.refine_width),
         gtao_input=bool(settings.gtao_input),
         gtao_blur=bool(settings.gtao_blur),
+        gtao_raw_input=bool(settings.gtao_raw_input),
         preprocess_version=int(settings.preprocess_version),
     )
 

@@ -318,11 +318,18 @@ def ship_model(
     ckpt_path.parent.mkdir(parents=True, exist_ok=True)
     # the corpus is ~13 GB on disk: read it once per way of reading it (internal height, GTAO input,
     # input contract, GTAO's blur)
-    key = (str(data), int(ts.internal_height), bool(ts.gtao_input), int(ts.preprocess_version), ts.gtao_blur)
+    key = (
+        str(data),
+        int(ts.internal_height),
+        bool(ts.gtao_input),
+        int(ts.preprocess_version),
+        bool(ts.gtao_blur),
+        bool(ts.gtao_raw_input),
+    )
     if _LOADED.get("key") != key:
         _LOADED.clear()
         sets = load_dataset_frames(
-            data, internal_height=key[1], gtao=key[2], version=key[3], gtao_blur=bool(key[4])
+            data, internal_height=key[1], gtao=key[2], version=key[3], gtao_blur=key[4], gtao_raw=key[5]
         )
         _LOADED.update(key=key, sets=sets)
     train_set, val_set, info = _LOADED["sets"]
@@ -334,7 +341,8 @@ def ship_model(
             internal_height=key[1],
             gtao=key[2],
             version=key[3],
-            gtao_blur=bool(key[4]),
+            gtao_blur=key[4],
+            gtao_raw=key[5],
         )
     log.info("%s: %d training frames, %d validation frames", spec.name, len(train_set), len(val_set))
     ckpt = train(ts, train_set, val_set, ckpt_path, info, progress=False)
