@@ -351,7 +351,9 @@ def check_backends(
 # ----------------------------------------------------------------------------------------------- export
 
 
-def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool, gtao_blur: bool = True) -> dict:
+def write_internal_passes(
+    glsl_dir: Path, height: int, hybrid: bool, gtao_blur: bool = True, gtao_raw: bool = False
+) -> dict:
     """The fragment passes around the network at its internal height (neuralao.runtime.internal_resolution) as
     files under ``glsl_dir/internal/``, and the manifest entry that says how an engine runs them. A
     hybrid also gets the GTAO pass it refines (neuralao.runtime.baselines' shaders, default settings but
@@ -400,7 +402,15 @@ def write_internal_passes(glsl_dir: Path, height: int, hybrid: bool, gtao_blur: 
             *steps[1:],
             "AO = clamp(GTAO + upsampled correction, 0, 1) at W x H, 1 on background",
         ]
+    if gtao_raw:  # the network also reads GTAO before its blur: gtao.frag's own output, point-sampled too
+        steps.insert(
+            2 if hybrid else 1,
+            "the network's input also takes gtao.frag's output before the blur, point-sampled the same way, "
+            "as the channel in front of GTAO (input_channels ..., gtao_raw, gtao)",
+        )
     entry = {"height": height, "folder": "internal", "sources": sources, "steps": steps}
+    if gtao_raw:
+        entry["gtao_raw"] = True
     if hybrid:
         entry["gtao"] = gtao_pass_description(gtao) | {
             "resolution": "W x H, the frame's own; the network reads it point-sampled with the G-buffer"
@@ -441,7 +451,9 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
     glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
     height = (ckpt.get("dataset") or {}).get("internal_height") or None
     internal = (
-        write_internal_passes(glsl_dir, int(height), model.args.gtao_input, model.args.gtao_blur)
+        write_internal_passes(
+            glsl_dir, int(height), model.args.gtao_input, model.args.gtao_blur, model.args.gtao_raw_input
+        )
         if height
         else None
     )

@@ -90,15 +90,8 @@ def frame_settings(
 
 def model_frame_settings(proto: onnx.ModelProto) -> FrameSettings:
     """:func:`frame_settings` for one U-Net: GTAO with or without its blur, as the model was trained
-    (its metadata's ``gtao_blur``). A hybrid that also reads GTAO before its blur (``gtao_raw``) has no
-    frame passes yet: a one-line error (onnxruntime and :mod:`neuralao.runtime.predict` run it)."""
-    meta = get_metadata(proto)
-    if "gtao_raw" in str(meta.get("input_channels", "")).split(","):
-        raise NeuralaoError(
-            "this hybrid also reads GTAO before its blur (input channel gtao_raw), which the generated frame "
-            "passes do not feed yet: run it with onnxruntime (neuralao infer) or feed its input yourself"
-        )
-    return frame_settings(GTAOSettings(blur=hybrid_gtao_blur(meta, "the ONNX model")))
+    (its metadata's ``gtao_blur``)."""
+    return frame_settings(GTAOSettings(blur=hybrid_gtao_blur(get_metadata(proto), "the ONNX model")))
 
 
 def frame_program(model: str | Path | onnx.ModelProto, dialect: str = "glsl430", **kw) -> ComputeProgram:

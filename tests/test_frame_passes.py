@@ -394,3 +394,57 @@ def test_hybrid_on_gtao_without_its_blur_runs_like_the_reference(tmp_path, frame
                 moved.append(float(np.abs(predict_blurred(f, r) - want).max()))
     assert max(errors) <= TOL.frame_passes_vs_reference, errors
     assert max(moved) > 20 * TOL.frame_passes_vs_reference, moved
+
+
+@pytest.mark.parametrize("version", [3, 4])
+@pytest.mark.parametrize("dialect", DIALECTS)
+def test_hybrid_on_both_gtao_images_runs_like_the_reference(tmp_path, frames, dialect, version):
+    """A seeded hybrid that reads GTAO before its blur beside the blurred GTAO (input channels ...,
+    gtao_raw, gtao; with the back layer's thickness in front at version 4): the frame point-samples both
+    images and packs them where onnxruntime's input has them, as numpy's preprocessing does; swapping the
+    two images moves the AO, so a frame that mixed them up would fail."""
+    import torch
+
+    from neuralao.export.unet import export_onnx, onnx_metadata
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+    from neuralao.runtime.predict import reads_gtao_raw
+
+    _needs(dialect)
+    torch.manual_seed(7)
+    channels = 7 if version == 4 else 6
+    args = UNetArgs(
+        in_channels=channels, widths=[4, 8], gtao_input=True, gtao_raw_input=True, preprocess_version=version
+    )
+    model = UNet(args).eval()
+    with torch.no_grad():
+        model.out.weight.mul_(4.0)
+    meta = onnx_metadata(model) | {"internal_height": str(INTERNAL_HEIGHT)}
+    proto = export_onnx(model, tmp_path / "model.onnx", meta)
+    assert reads_gtao_raw(meta)
+    predict = unet_predictor(tmp_path / "model.onnx")
+    program = frame_program(proto, APIS[dialect][0])
+    errors, moved = [], []
+    for size in SIZES[1:]:
+        f = _with_back_layer(frames[size]) if version == 4 else frames[size]
+        with _runner(program, size, dialect) as runner:
+            for r in RADII[:2]:
+                want = predict(f, r)
+                errors.append(float(np.abs(runner.run(f, r) - want).max()))
+    # the test can fail: onnxruntime on the same frame with the blurred GTAO in both channels gives
+    # another AO, so the unblurred image the frame packs in front of GTAO matters to these weights
+    from neuralao.runtime.baselines import GTAOSettings, run_gtao
+    from neuralao.runtime.predict import ort_runner, run_padded
+    from neuralao.runtime.unet_input import frame_radius_param, preprocess_frame
+
+    run = ort_runner(str(tmp_path / "model.onnx"))
+    f = _with_back_layer(frames[SIZES[1]]) if version == 4 else frames[SIZES[1]]
+    for r in RADII[:2]:
+        blurred, raw = run_gtao(f, r), run_gtao(f, r, GTAOSettings(blur=False))
+        rho = frame_radius_param(f, r, version)
+        ao = [
+            run_padded(run, preprocess_frame(f, blurred, version, image), model.pad_multiple, rho)
+            for image in (raw, blurred)
+        ]
+        moved.append(float(np.abs(ao[0] - ao[1])[np.asarray(f["mask"], bool)].max()))
+    assert max(errors) <= TOL.frame_passes_vs_reference, errors
+    assert max(moved) > 20 * TOL.frame_passes_vs_reference, moved

@@ -244,3 +244,40 @@ def test_c_host_refuses_a_model_that_reads_an_input_it_does_not_feed(tmp_path):
     )
     assert r.returncode != 0 and not (tmp_path / "ao.f32").exists()
     assert "depth_back" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_c_host_runs_a_hybrid_on_both_gtao_images_from_its_frame_section_only(tmp_path):
+    """A hybrid that reads GTAO before its blur beside the blurred GTAO: the C host runs its frame section
+    (both images made, point-sampled and packed by the generated passes) as neuralao.runtime.predict does;
+    its fragment route, which assembles one GTAO image on the CPU, refuses it in one line."""
+    import torch
+    from test_hybrid import write_internal_export
+
+    from neuralao.pipeline.models.unet import UNet, UNetArgs
+    from neuralao.runtime.predict import unet_predictor
+
+    host = _build_host()
+    torch.manual_seed(3)
+    model = UNet(UNetArgs(in_channels=6, widths=[4, 8, 16], gtao_input=True, gtao_raw_input=True)).eval()
+    with torch.no_grad():
+        model.out.weight.mul_(4.0)
+    frame = render_parity_frames((96, 64))[0]
+    radius, internal = 0.3, 40
+    write_internal_export(model, tmp_path / "export", internal)
+    ao = _run_host(host, tmp_path / "export", frame, radius, tmp_path)
+    ref = unet_predictor(tmp_path / "export" / "model.onnx", "model")(frame, radius)
+    err = float(np.abs(ao - ref).max())
+    assert err <= TOL.frame_passes_vs_reference, err
+
+    _drop_frame_section(tmp_path / "export")
+    (tmp_path / "ao.f32").unlink()
+    h, w = frame["depth"].shape
+    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius), repr(math.degrees(frame["yfov"]))]
+    r = subprocess.run(
+        [str(host), str(tmp_path / "export"), *args, str(tmp_path / "ao.f32")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode != 0 and not (tmp_path / "ao.f32").exists()
+    assert "before its blur" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

@@ -248,7 +248,9 @@ def write_internal_export(model: UNet, out, internal_height: int) -> dict:
     meta = onnx_metadata(model) | {"internal_height": str(internal_height)}
     proto = export_onnx(model, out / "model.onnx", meta)
     glsl = write_glsl(proto, out / "glsl")
-    internal = write_internal_passes(glsl, internal_height, model.args.gtao_input, model.args.gtao_blur)
+    internal = write_internal_passes(
+        glsl, internal_height, model.args.gtao_input, model.args.gtao_blur, model.args.gtao_raw_input
+    )
     manifest = {"kind": "unet", "internal_height": internal_height, "internal_resolution": internal}
     write_json(out / "manifest.json", manifest)
     return manifest
@@ -383,12 +385,11 @@ def test_hybrid_reading_gtao_before_its_blur_too_keeps_the_blurred_gtao_as_its_b
     """``gtao_raw_input``: GTAO before its blur as a channel in front of the blurred GTAO. The training
     frames hold both, the network's input has both in that order, the correction is added to the blurred
     one (a zeroed correction gives it back exactly through the runtime's predictor), and the metadata says
-    so. The generated frame passes do not feed the extra channel yet: refused in one line."""
+    so."""
     from neuralao.export.unet import export_onnx, onnx_metadata
     from neuralao.pipeline.datasets.dataset import open_dataset
     from neuralao.pipeline.models.unet_frames import frames_to_set, network_input, prepared_folder
     from neuralao.runtime.baselines import GTAOSettings
-    from neuralao.runtime.frame_runner import frame_program
     from neuralao.runtime.internal_resolution import downsample_frame
     from neuralao.runtime.predict import unet_predictor
 
@@ -421,15 +422,13 @@ def test_hybrid_reading_gtao_before_its_blur_too_keeps_the_blurred_gtao_as_its_b
         model.out.bias.zero_()
     meta = onnx_metadata(model)
     assert meta["input_channels"].endswith("gtao_raw,gtao") and "gtao_raw_channel" in meta
-    proto = export_onnx(model, tmp_path / "model.onnx", meta)
+    export_onnx(model, tmp_path / "model.onnx", meta)
     got = unet_predictor(tmp_path / "model.onnx", internal_height=None)(f, radius)
     np.testing.assert_allclose(got, f["gtao"], atol=TOL.parity_unet_fp32)
     assert np.abs(f["gtao"] - run_gtao(f, radius, GTAOSettings(blur=False))).max() > 1e-2
-    with pytest.raises(NeuralaoError, match="do not feed yet"):
-        frame_program(proto)
 
 
-def test_hybrid_on_both_gtao_images_trains_and_its_export_is_refused_in_one_line(tiny_dataset, tmp_path):
+def test_hybrid_on_both_gtao_images_trains_and_exports(tiny_dataset, tmp_path):
     from neuralao.export.unet import export_checkpoint
     from neuralao.pipeline.models.unet_frames import load_dataset_frames
     from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
@@ -450,6 +449,6 @@ def test_hybrid_on_both_gtao_images_trains_and_its_export_is_refused_in_one_line
     ckpt = train(ts, sets[0], sets[1], tmp_path / "h.pt", sets[2], progress=False)
     assert ckpt["model_args"]["gtao_raw_input"] and ckpt["model_args"]["in_channels"] == 6
     assert np.isfinite(ckpt["metrics"]["val_rmse"])
-    with pytest.raises(NeuralaoError, match="do not feed yet"):
-        export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
-    assert not (tmp_path / "export" / "manifest.json").exists()
+    manifest = export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
+    assert manifest["internal_resolution"]["gtao_raw"] is True
+    assert manifest["metadata"]["input_channels"].endswith("gtao_raw,gtao")

@@ -188,6 +188,12 @@ def _model_facts(manifest: dict) -> tuple[bool, int, int | None]:
     return hybrid, version, internal
 
 
+def _reads_gtao_raw(manifest: dict) -> bool:
+    """Whether the U-Net also reads GTAO before its blur (an input channel ``gtao_raw`` before ``gtao``)."""
+    channels = str(manifest.get("source_model_metadata", {}).get("input_channels", "")).split(",")
+    return "gtao_raw" in channels
+
+
 def _network_io(manifest: dict) -> tuple[str, str, str]:
     """(input texture, radius texture, output texture) of the network: what the frame writes and reads."""
     radius = [p for p in manifest["passes"] if p["kind"] == "uniform"]
@@ -203,6 +209,11 @@ def frame_passes(
     manifest's precision in ``dialect`` (glsl430, vulkan or wgsl)."""
     precision = str(manifest.get("precision", "fp32"))
     hybrid, version, internal = _model_facts(manifest)
+    raw = hybrid and _reads_gtao_raw(manifest)
+    if raw and not settings.blur:
+        raise NeuralaoError(
+            "a hybrid that reads GTAO before its blur needs the blur pass, which these frame settings skip"
+        )
     net_in, net_radius, net_out = _network_io(manifest)
     scaled = internal is not None
     back = version >= 4  # the back layer: one more engine input, a thickness channel
@@ -266,9 +277,15 @@ def frame_passes(
         "the engine's depth and normal point-sampled to the network's size: layer 0 camera-space position "
         "+ mask (w), layer 1 normal"
         + (" + the back layer's depth (w)" if back else "")
-        + ("; layer 2: GTAO point-sampled" if hybrid else ""),
+        + ("; layer 2: GTAO point-sampled" if hybrid else "")
+        + (" (x) and GTAO before its blur (y)" if raw else ""),
     )
-    sampled = ("depth", "normal") + (("gtao",) if hybrid else ()) + (("depth_back",) if back else ())
+    sampled = (
+        ("depth", "normal")
+        + (("gtao",) if hybrid else ())
+        + (("gtao_raw",) if raw else ())
+        + (("depth_back",) if back else ())
+    )
     passes.append(
         FramePass(
             "f_downsample",
@@ -280,7 +297,9 @@ def frame_passes(
             + (", GTAO" if hybrid else ""),
             "before",
             {
-                "gtao": ("downsample_gtao", {}) if hybrid else "",
+                "gtao": ("downsample_gtao", {"raw": "nao_load(src3, q, 0).x" if raw else "0.0"})
+                if hybrid
+                else "",
                 "back": ("downsample_back", {"src": f"src{len(sampled) - 1}"}) if back else "0.0",
             },
         )
@@ -328,7 +347,7 @@ def frame_passes(
             {
                 "foreground": ("foreground_mask" if version == 2 else "foreground_positive", {}),
                 "depth": depth,
-                "gtao": _network_input_rest(hybrid, back, s.thickness_cap),
+                "gtao": _network_input_rest(hybrid, back, s.thickness_cap, raw),
             },
         )
     )
@@ -380,8 +399,11 @@ def frame_passes(
     return passes, tex
 
 
-def _network_input_rest(hybrid: bool, back: bool, cap: float) -> tuple[str, dict] | str:
-    """The network input's layer 1: GTAO (a hybrid), the thickness (version 4) and GTAO, or nothing."""
+def _network_input_rest(hybrid: bool, back: bool, cap: float, raw: bool = False) -> tuple[str, dict] | str:
+    """The network input's layer 1, its channels after the fourth in order: GTAO (a hybrid), the thickness
+    (version 4) then GTAO, GTAO before its blur in front of GTAO where the model reads it, or nothing."""
+    if back and raw:
+        return ("network_input_back_raw", {"cap": glsl_float(cap)})
     if back:
         return (
             "network_input_back",
@@ -391,7 +413,9 @@ def _network_input_rest(hybrid: bool, back: bool, cap: float) -> tuple[str, dict
                 "cap": glsl_float(cap),
             },
         )
-    return ("network_input_gtao", {}) if hybrid else ""
+    if not hybrid:
+        return ""
+    return ("network_input_gtao_raw", {}) if raw else ("network_input_gtao", {})
 
 
 # --------------------------------------------------------------------------- the writer

@@ -407,8 +407,8 @@ _FT["gtao_blur_body"] = """    if (!(nao_load(src0, px, 0).x > 0.0)) {
 # Point sampling to the network's size: low texel t of an axis of n texels copies pixel
 # floor((t + 0.5) * N / n) (GL order) of N, exactly, never a blend across an edge. src0: the depth, src1:
 # the normal, into layer 0 = (camera-space position, mask) and layer 1 = (normal, 0), zeros on
-# background; a hybrid's src2: GTAO, into layer 2; with the back layer (input version 4) its depth goes
-# into layer 1's last lane.
+# background; a hybrid's src2: GTAO, into layer 2 (x), and where it reads it GTAO before its blur (src3,
+# into y); with the back layer (input version 4) its depth goes into layer 1's last lane.
 _FT["downsample_body"] = """    ${let_ivec2} hi = nao_size(src0);
     ${let_ivec2} q = min(((2 * px + 1) * hi) / (2 * out_size), hi - 1);
     ${let_float} z = nao_load(src0, q, 0).x;
@@ -421,7 +421,7 @@ _FT["downsample_body"] = """    ${let_ivec2} hi = nao_size(src0);
     }${gtao}"""
 _FT["downsample_back"] = "nao_load(${src}, q, 0).x"
 _FT["downsample_gtao"] = """
-    nao_store(px, 2, ${vec4}(nao_load(src2, q, 0).x, 0.0, 0.0, 0.0));"""
+    nao_store(px, 2, ${vec4}(nao_load(src2, q, 0).x, ${raw}, 0.0, 0.0));"""
 
 # The mean foreground depth, in two passes: the sum and count of each column (GL row order, so a frame
 # stored either way sums in the same order), then of the columns; 1 with no foreground.
@@ -484,6 +484,29 @@ _FT["network_input_back"] = """
     nao_store(px, 1, ${vec4}(t, g, 0.0, 0.0));"""
 _FT["network_input_back_gtao"] = """
         g = nao_load(src0, px, 2).x;"""
+# A hybrid that also reads GTAO before its blur (layer 2's y): layer 1 = (GTAO before its blur, GTAO, 0, 0),
+# and with the back layer (thickness, GTAO before its blur, GTAO, 0); 1 on background for both.
+_FT["network_input_gtao_raw"] = """
+    ${var_float:g} = 1.0;
+    ${var_float:r} = 1.0;
+    if (pw.w >= 0.5) {
+        g = nao_load(src0, px, 2).x;
+        r = nao_load(src0, px, 2).y;
+    }
+    nao_store(px, 1, ${vec4}(r, g, 0.0, 0.0));"""
+_FT["network_input_back_raw"] = """
+    ${var_float:t} = 0.0;
+    ${var_float:g} = 1.0;
+    ${var_float:r} = 1.0;
+    if (pw.w >= 0.5) {
+        ${let_float} back = nao_load(src0, px, 1).w;
+        if (-pw.z > 0.0 && back > -pw.z) {
+            t = clamp(log(back / -pw.z), 0.0, ${cap});
+        }
+        g = nao_load(src0, px, 2).x;
+        r = nao_load(src0, px, 2).y;
+    }
+    nao_store(px, 1, ${vec4}(t, r, g, 0.0));"""
 
 # The network's radius input rho, into the texture its uniform pass would write (1 x 1, lane 0).
 _FT["network_radius_body"] = """    nao_store(px, 0, ${vec4}(${rho}, 0.0, 0.0, 0.0));"""

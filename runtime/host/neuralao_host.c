@@ -530,6 +530,9 @@ static float *run_internal(const Json *m, const char *dir, const Json *ir, const
     Json *sources = jreq(ir, "sources");
     const int hybrid = jget(sources, "gtao") != NULL;
     if (hybrid && !jget(ir, "gtao")) die("manifest: a gtao source without its \"gtao\" entry");
+    if (jget(ir, "gtao_raw"))
+        die("this model also reads GTAO before its blur, which this host's fragment route does not feed: "
+            "give it an export with its frame section");
     const int ih = (int)jnum(ir, "height");
     const int lh = ih, lw = (int)fmax(1.0, rint((double)W * ih / H));  /* round half to even, as Python */
     const size_t px = (size_t)W * H, lpx = (size_t)lw * lh;
