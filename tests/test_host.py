@@ -168,16 +168,23 @@ def test_c_host_refuses_a_wrong_gbuffer(tmp_path):
     assert r.returncode == 1 and "5 floats a pixel" in r.stderr and not (tmp_path / "ao.f32").exists()
 
 
-def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Path) -> np.ndarray:
+def _host_process(
+    host: Path, export: Path, frame: dict, radius: float, tmp_path: Path
+) -> subprocess.CompletedProcess:
+    """The C host on ``frame``'s G-buffer (written to tmp_path/gbuffer.f32), its AO to tmp_path/ao.f32."""
     h, w = frame["depth"].shape
     gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
     gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
     args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius), repr(math.degrees(frame["yfov"]))]
-    r = subprocess.run(
+    return subprocess.run(
         [str(host), str(export), *args, str(tmp_path / "ao.f32")], capture_output=True, text=True, timeout=300
     )
+
+
+def _run_host(host: Path, export: Path, frame: dict, radius: float, tmp_path: Path) -> np.ndarray:
+    r = _host_process(host, export, frame, radius, tmp_path)
     assert r.returncode == 0, r.stderr
-    return np.fromfile(tmp_path / "ao.f32", "<f4").reshape(h, w)
+    return np.fromfile(tmp_path / "ao.f32", "<f4").reshape(frame["depth"].shape)
 
 
 @pytest.mark.parametrize("blur", [True, False], ids=["gtao", "gtao-pass-alone"])
@@ -231,17 +238,7 @@ def test_c_host_refuses_a_model_that_reads_an_input_it_does_not_feed(tmp_path):
     with torch.no_grad():
         proto = export_onnx(model, tmp_path / "model.onnx", onnx_metadata(model) | {"internal_height": "32"})
     write_compute_export(frame_program(proto), tmp_path / "v4" / "glsl", validate=False)
-    frame = analytic_gbuffer(*FRAME_SIZE)
-    h, w = frame["depth"].shape
-    gbuffer = np.concatenate([frame["depth"][..., None], frame["normal_cam"], frame["mask"][..., None]], -1)
-    gbuffer.astype("<f4").tofile(tmp_path / "gbuffer.f32")
-    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), "0.5", repr(math.degrees(frame["yfov"]))]
-    r = subprocess.run(
-        [str(host), str(tmp_path / "v4"), *args, str(tmp_path / "ao.f32")],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    r = _host_process(host, tmp_path / "v4", analytic_gbuffer(*FRAME_SIZE), 0.5, tmp_path)
     assert r.returncode != 0 and not (tmp_path / "ao.f32").exists()
     assert "depth_back" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
@@ -271,13 +268,6 @@ def test_c_host_runs_a_hybrid_on_both_gtao_images_from_its_frame_section_only(tm
 
     _drop_frame_section(tmp_path / "export")
     (tmp_path / "ao.f32").unlink()
-    h, w = frame["depth"].shape
-    args = [str(tmp_path / "gbuffer.f32"), str(w), str(h), repr(radius), repr(math.degrees(frame["yfov"]))]
-    r = subprocess.run(
-        [str(host), str(tmp_path / "export"), *args, str(tmp_path / "ao.f32")],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    r = _host_process(host, tmp_path / "export", frame, radius, tmp_path)
     assert r.returncode != 0 and not (tmp_path / "ao.f32").exists()
     assert "before its blur" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
