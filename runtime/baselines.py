@@ -323,6 +323,10 @@ class ScreenSpaceAO:
     def read(self) -> np.ndarray:
         return gl.read_texture(self.out, self.w, self.h, GL.GL_R32F)[..., 0].copy()
 
+    def read_raw(self) -> np.ndarray:
+        """The AO pass before its blur (what :meth:`read` gives where the settings have no blur)."""
+        return gl.read_texture(self.raw, self.w, self.h, GL.GL_R32F)[..., 0].copy()
+
     def release(self) -> None:
         fbos = [f for f in (self.raw_fbo, self.out_fbo) if f is not None]
         GL.glDeleteFramebuffers(len(fbos), fbos)
@@ -413,6 +417,23 @@ def run_ssao(frame: FrameLike, radius: float, settings: SSAOSettings | None = No
 def run_gtao(frame: FrameLike, radius: float, settings: GTAOSettings | None = None) -> np.ndarray:
     """GTAO of ``frame``: (H, W) float32, 1 on background."""
     return run_screen_space(frame, "gtao", radius, settings)
+
+
+def run_gtao_both(
+    frame: FrameLike, radius: float, settings: GTAOSettings | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """GTAO of ``frame`` after and before its blur, from one draw: two (H, W) float32, 1 on background.
+    The second is :func:`run_gtao` with the same settings but ``blur=False``."""
+    s = settings if settings is not None else GTAOSettings()
+    if not s.blur:
+        raise NeuralaoError("run_gtao_both needs GTAO settings with the blur on")
+    h, w = np.shape(frame["mask"])
+    with ScreenSpaceAO("gtao", w, h, radius, s) as p:
+        p.upload(frame)
+        p.draw()
+        out, raw = p.read(), p.read_raw()
+    fg = np.asarray(frame["mask"], bool)
+    return tuple(np.where(fg, a, np.float32(1.0)).astype(np.float32) for a in (out, raw))
 
 
 def time_screen_space(

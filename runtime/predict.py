@@ -23,7 +23,7 @@ from typing import Protocol
 import numpy as np
 import onnx
 
-from neuralao.runtime.baselines import GTAOSettings, run_gtao
+from neuralao.runtime.baselines import GTAOSettings, run_gtao, run_gtao_both
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import PIXEL_BYTES, available_memory, format_bytes
 from neuralao.runtime.foundation.manifest import read_manifest
@@ -172,10 +172,10 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         if not hybrid:
             return scaled(frame, radius)
         r = frame_radius(frame, radius)
-        extra = {"gtao": run_gtao(frame, r, gtao)}
-        if raw:  # the same pass before its blur
-            extra["gtao_raw"] = run_gtao(frame, r, GTAOSettings(blur=False))
-        return scaled(dict(frame) | extra, radius)
+        if raw:  # one draw gives GTAO after and before its blur
+            blurred, before = run_gtao_both(frame, r, gtao)
+            return scaled(dict(frame) | {"gtao": blurred, "gtao_raw": before}, radius)
+        return scaled(dict(frame) | {"gtao": run_gtao(frame, r, gtao)}, radius)
 
     return predict_frame
 

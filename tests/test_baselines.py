@@ -18,6 +18,7 @@ from neuralao.runtime.baselines import (
     SSAOSettings,
     camera_space_position,
     run_gtao,
+    run_gtao_both,
     run_screen_space,
     run_ssao,
     time_screen_space,
@@ -140,6 +141,17 @@ def test_settings_change_the_result_and_are_checked(corner):
     with pytest.raises(NeuralaoError):
         run_screen_space(frame, "hbao+", radius)
     assert time_screen_space(frame, "ssao", radius, repeats=2, warmup=1) > 0
+
+
+def test_gtao_both_is_one_draw_of_the_two_gtao_passes(corner):
+    """One draw's blurred and unblurred images are, bit for bit, the two separate runs (which differ)."""
+    _, frame, radius, _, _ = corner
+    blurred, raw = run_gtao_both(frame, radius)
+    assert np.array_equal(blurred, run_gtao(frame, radius))
+    assert np.array_equal(raw, run_gtao(frame, radius, GTAOSettings(blur=False)))
+    assert not np.array_equal(blurred, raw)
+    with pytest.raises(NeuralaoError, match="blur"):
+        run_gtao_both(frame, radius, GTAOSettings(blur=False))
 
 
 def test_camera_space_position_matches_world_position(corner):
