@@ -681,6 +681,47 @@ def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeyp
     assert [h["train_loss"] for h in resumed["history"]] == [h["train_loss"] for h in reference["history"]]
 
 
+def test_constant_rate_budget_run_continues_to_a_larger_budget(frames, tmp_path, monkeypatch):
+    """A constant-rate budget run asked for twice its budget continues from where it ended (no new
+    calibration): its plan doubles, and it ends with the weights of one run of that many epochs."""
+    import neuralao.pipeline.models.unet_train as ut
+
+    train_set, val_set, info = frames
+    settings = replace(TINY, epochs=100, widths=[2, 4], budget_minutes=1.0, lr_schedule="constant")
+    reference = train(
+        replace(settings, budget_minutes=0.0, epochs=4), train_set, val_set, tmp_path / "r.pt", info
+    )
+
+    monkeypatch.setattr(ut, "plan_budget", lambda s, steps, cal: 2)  # the budget buys two epochs
+    out = tmp_path / "run.pt"
+    first = train(settings, train_set, val_set, out, info)
+    assert first["plan"]["epochs"] == 2 and first["complete"]
+
+    def no_calibration(*a, **k):
+        raise AssertionError("a continued budget run must not calibrate again")
+
+    monkeypatch.setattr(ut, "calibrate", no_calibration)
+    seen = []
+    longer = train(
+        replace(settings, budget_minutes=2.0),
+        train_set,
+        val_set,
+        out,
+        info,
+        on_epoch_end=lambda e, c: seen.append(e),
+    )
+    assert seen == [3, 4] and longer["plan"]["epochs"] == 4 and longer["plan"]["extended_from"] == 2
+    assert longer["history"][:2] == first["history"]
+    assert _state_equal(longer["state_dict"], reference["state_dict"])
+    # a cosine run's rate depends on where it ends: a larger budget starts it over
+    assert ut.extended_plan(
+        {"epochs": 2, "budget_minutes": 1.0}, replace(settings, lr_schedule="cosine", budget_minutes=2.0)
+    ) == {
+        "epochs": 2,
+        "budget_minutes": 1.0,
+    }
+
+
 def test_reduced_resolution_variant_trains_and_starts_from_the_full_network(frames, trained, tmp_path):
     """scale=2: the U-Net runs at half resolution with a full-resolution refinement; ``init`` copies
     every weight of the full network whose shape matches (all but the refinement's)."""

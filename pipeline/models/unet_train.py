@@ -430,14 +430,24 @@ def model_from_checkpoint(ckpt: dict) -> UNet:
 
 
 def _resume_key(config: dict, dataset_hash: str | None) -> dict:
-    """What must match for a checkpoint to be continued: everything but the device, and but the epoch
-    count under a constant learning rate without a budget (a continued run may then add epochs)."""
-    free = {"device"} | (
-        {"epochs"}
-        if config.get("lr_schedule", "constant") == "constant" and not config.get("budget_minutes")
-        else set()
-    )
+    """What must match for a checkpoint to be continued: everything but the device, and under a constant
+    learning rate but the epoch count and the budget (a continued run may then add epochs: no step's rate
+    depends on where the run ends)."""
+    constant = config.get("lr_schedule", "constant") == "constant"
+    free = {"device"} | ({"epochs", "budget_minutes"} if constant else set())
     return {"config": {k: v for k, v in config.items() if k not in free}, "dataset_hash": dataset_hash}
+
+
+def extended_plan(plan_info: dict, settings: UNetTrainSettings) -> dict:
+    """The plan of a constant-rate budget run continued with a larger budget: its epochs grow in
+    proportion, at the step cost measured when the run started (so the epochs it already has, and the
+    snapshots a learning curve takes of them, stay where they were). Any other run keeps its plan."""
+    old = float(plan_info.get("budget_minutes") or 0.0)
+    if settings.lr_schedule != "constant" or old <= 0 or settings.budget_minutes <= old:
+        return plan_info
+    epochs = int(plan_info["epochs"])
+    grown = min(settings.epochs, max(epochs, math.floor(epochs * settings.budget_minutes / old)))
+    return dict(plan_info, epochs=grown, budget_minutes=settings.budget_minutes, extended_from=epochs)
 
 
 def _find_resumable(out: Path, key: dict, epochs: int) -> dict | None:
@@ -742,8 +752,10 @@ def train(
             history = list(resumed["history"])
             start = int(resumed["epoch"])
             wall = float(resumed.get("wall_seconds", 0.0))
-            if settings.budget_minutes > 0:  # a budget run follows the plan it made when it started
-                plan_info = dict(resumed.get("plan", {}))
+            planned = dict(resumed.get("plan", {}))
+            if settings.budget_minutes > 0 and planned.get("budget_minutes"):
+                # a budget run follows the plan it made when it started (grown with its budget)
+                plan_info = extended_plan(planned, settings)
         if not plan_info:
             epochs = settings.epochs
             plan_info = {"epochs": epochs, "steps_per_epoch": steps_per_epoch}
