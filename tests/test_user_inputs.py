@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -603,6 +604,42 @@ def _relu(folder: Path, weights_beside: bool = False) -> Path:
     path = folder / ("conv_ext.onnx" if weights_beside else "conv.onnx")
     onnx.save(model, path, save_as_external_data=weights_beside, location="conv.weights", size_threshold=0)
     return path
+
+
+def test_evaluate_refuses_two_models_one_column_would_hold(tmp_path, capsys):
+    """The tables name a model by its folder: two folders of one name (or one named like a baseline)
+    are refused before any frame is rendered, instead of one model's scores silently replacing the other's."""
+    from neuralao.runtime.shipped import default_export
+
+    config = tmp_path / "eval.json"
+    config.write_text(
+        json.dumps(
+            {
+                "name": "t",
+                "categories": [{"name": "scans", "meshes": ["horse"]}],
+                "resolutions": [{"size": [32, 32]}],
+            }
+        )
+    )
+    for where in ("a/1h", "b/1h", "gtao"):
+        shutil.copytree(default_export("unet"), tmp_path / where)
+    out = tmp_path / "out"
+    line = refusal(
+        capsys,
+        [
+            "evaluate",
+            str(config),
+            "--models",
+            str(tmp_path / "a/1h"),
+            str(tmp_path / "b/1h"),
+            "--out",
+            str(out),
+        ],
+    )
+    assert "same folder name" in line and f"{tmp_path / 'a/1h'}" in line and f"{tmp_path / 'b/1h'}" in line
+    line = refusal(capsys, ["evaluate", str(config), "--models", str(tmp_path / "gtao"), "--out", str(out)])
+    assert "baseline" in line
+    assert not out.exists()
 
 
 def test_an_export_folder_is_replaced_whole_never_merged(tmp_path, capsys):

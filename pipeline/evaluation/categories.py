@@ -256,8 +256,11 @@ def internal_height_of(policy: str, manifest: dict) -> int | None:
     raise NeuralaoError(f"--internal {policy!r}: use native, model or h<HEIGHT> (e.g. h256)")
 
 
+BASELINES = ("ssao", "gtao")  # the screen-space methods every table scores beside the U-Nets
+
+
 def baseline_predictors() -> dict[str, Predictor]:
-    return {"ssao": screen_space_predictor("ssao"), "gtao": screen_space_predictor("gtao")}
+    return {name: screen_space_predictor(name) for name in BASELINES}
 
 
 # ------------------------------------------------------------------------------------------ scoring
@@ -338,6 +341,21 @@ def markdown(summary: dict, reference: str = "gtao", level: int = 3) -> str:
     return "\n".join(lines)
 
 
+def check_model_names(models: list[Path]) -> None:
+    """The tables name each U-Net by its folder: two folders of one name, or one named like a baseline,
+    would share a column (one model's scores lost). One line naming them."""
+    seen: dict[str, Path] = {}
+    for folder in map(Path, models):
+        if folder.name in BASELINES:
+            raise NeuralaoError(f"--models {folder}: the folder's name is a baseline's column; rename it")
+        if folder.name in seen:
+            raise NeuralaoError(
+                f"--models {seen[folder.name]} and {folder} have the same folder name, and the tables name "
+                "each model by its folder; give them different names"
+            )
+        seen[folder.name] = folder
+
+
 def evaluate(
     settings: EvalSettings,
     out: Path,
@@ -348,6 +366,7 @@ def evaluate(
     progress: bool = True,
 ) -> dict:
     """Build (or resume) the frames of every resolution, score every method, write the tables."""
+    check_model_names(models)
     check_frames(settings, out)
     methods: dict[str, Predictor] = {}
     saw_held_aside: set[str] = set()  # methods whose model trained on the held-aside meshes
