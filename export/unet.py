@@ -50,6 +50,7 @@ from neuralao.runtime.baselines import (
     fragment_source,
     gtao_pass_description,
     run_gtao,
+    run_gtao_both,
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
@@ -69,6 +70,7 @@ from neuralao.runtime.predict import (
     is_hybrid,
     ort_runner,
     radius_array,
+    reads_gtao_raw,
     run_padded,
     unet_predictor,
 )
@@ -527,11 +529,15 @@ def render_parity_frames(size: tuple[int, int] = (128, 128), room: bool = False)
     return frames
 
 
-def _gtao_at_rho(frame: FrameLike, rho: float, version: int, blur: bool = True) -> np.ndarray:
-    """GTAO (neuralao.runtime.baselines, with or without its blur) of ``frame`` at the radius whose
-    parameter is ``rho``."""
+def _hybrid_input(frame: FrameLike, rho: float, version: int, blur: bool, raw: bool) -> np.ndarray:
+    """A hybrid's input on ``frame`` at the radius whose parameter is ``rho``: the G-buffer channels and
+    GTAO (neuralao.runtime.baselines, with or without its blur; with ``raw`` its pass before the blur
+    in front of it, from the same draw)."""
     radius = radius_of_param(rho, frame["depth"], frame["mask"], float(frame["yfov"]), version)
-    return run_gtao(frame, radius, GTAOSettings(blur=blur))
+    if raw:
+        blurred, before = run_gtao_both(frame, radius)
+        return preprocess_frame(frame, blurred, version, before)
+    return preprocess_frame(frame, run_gtao(frame, radius, GTAOSettings(blur=blur)), version)
 
 
 def parity(
@@ -558,6 +564,7 @@ def parity(
     ort, gl = ort_runner(proto.SerializeToString()), glsl_runner(glsl_dir)
     hybrid = is_hybrid(meta)
     blur = hybrid_gtao_blur(meta, str(onnx_path))
+    raw = hybrid and reads_gtao_raw(meta)
     version = check_version(meta.get("preprocess_version"), str(onnx_path))
     rows = []
     for i, frame in enumerate(frames):
@@ -568,8 +575,8 @@ def parity(
                 continue
             f = crop_frame(frame, w, h)
             rho = CHECK_RHOS[version][len(rows) % len(CHECK_RHOS[version])]
-            # a hybrid's fifth channel: GTAO on the same frame at the radius rho stands for
-            x = preprocess_frame(f, _gtao_at_rho(f, rho, version, blur) if hybrid else None, version)
+            # a hybrid's GTAO channels: GTAO on the same frame at the radius rho stands for
+            x = _hybrid_input(f, rho, version, blur, raw) if hybrid else preprocess_frame(f, None, version)
             y_ort = run_padded(ort, x, m, rho)
             t0 = time.perf_counter()
             y_gl = run_padded(gl, x, m, rho)

@@ -452,3 +452,9 @@ def test_hybrid_on_both_gtao_images_trains_and_exports(tiny_dataset, tmp_path):
     manifest = export_checkpoint(tmp_path / "h.pt", tmp_path / "export")
     assert manifest["internal_resolution"]["gtao_raw"] is True
     assert manifest["metadata"]["input_channels"].endswith("gtao_raw,gtao")
+    # `neuralao parity` (and `neuralao ship`, which runs it) gives it both GTAO images
+    from neuralao.export.unet import parity
+    from neuralao.pipeline.datasets.dataset import open_dataset
+
+    par = parity(tmp_path / "export", frames=[next(iter(open_dataset(tiny_dataset).frames()))])
+    assert par["passed"] and par["max_abs_err"] <= TOL.parity_unet_fp32
