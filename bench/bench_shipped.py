@@ -67,7 +67,7 @@ def measure(args) -> dict:
     from neuralao.runtime.glsl_runner import time_compute
     from neuralao.runtime.internal_resolution import internal_size, time_scaling_passes
     from neuralao.runtime.shipped import read_index
-    from neuralao.runtime.unet_input import hybrid_gtao_blur
+    from neuralao.runtime.unet_input import hybrid_gtao_blur, scales_up
 
     models_dir = Path(args.models)
     index = read_index(models_dir)
@@ -113,7 +113,8 @@ def measure(args) -> dict:
     def network_seconds(m: str, w: int, h: int, repeats: int, warmup: int) -> float:
         if m in internal:
             model, height = internal[m]
-            lw, lh = internal_size(w, h, height)
+            version = _manifest(models_dir / model).get("metadata", {}).get("preprocess_version", 3)
+            lw, lh = internal_size(w, h, height, scales_up(int(version)))
             if (lw, lh) == (w, h):
                 return time_compute(models_dir / model / "glsl", h, w, repeats=repeats, warmup=warmup)
             net = time_compute(models_dir / model / "glsl", lh, lw, repeats=repeats, warmup=warmup)

@@ -90,12 +90,14 @@ INPUT, RADIUS, OUTPUT = UNET_INPUT, UNET_RADIUS, "ao"
 # Radius parameters (rho) of the export-time checks and of parity: a small and a large radius on screen.
 # Radius parameters the backend and GLSL checks run at, per preprocessing version (version 3's reach the
 # radius channel's cap on the check inputs' depths around 1, and its small end).
-CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4), 3: (-1.5, 0.5, 2.5), 4: (-1.5, 0.5, 2.5)}
+CHECK_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.4)} | {v: (-1.5, 0.5, 2.5) for v in (3, 4, 5)}
 # The composed room of the fp16 check: primitives only (no mesh to load), two walls, objects on the floor.
 PARITY_ROOM = ComposeSettings(seed=3, objects=(6, 6), mesh_fraction=0.0, walls=(2, 2), ceiling=0.0)
 # The fp16 bound's radii: wider, to the small radii (a few pixels) where fp16's rounding of the network's
 # features moves the AO most.
-FP16_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.2, 0.4), 3: (-3.0, -2.0, -1.0, 0.5, 2.5)}
+FP16_RHOS: dict[int, tuple[float, ...]] = {2: (0.05, 0.2, 0.4)} | {
+    v: (-3.0, -2.0, -1.0, 0.5, 2.5) for v in (3, 4, 5)
+}
 # Sizes (width, height) of the export-time backend checks: a power of two, a non-square multiple of
 # 8, odd sizes that need padding on both axes (through the pad/crop wrapper).
 CHECK_SIZES: tuple[tuple[int, int], ...] = ((64, 64), (96, 72), (101, 67), (37, 53))

@@ -45,15 +45,18 @@ class UpsampleSettings:
     floor: float = 1e-3  # share of the spatial weight kept where geometry disagrees (thin parts)
 
 
-def internal_size(width: int, height: int, internal_height: int | None) -> tuple[int, int]:
+def internal_size(width: int, height: int, internal_height: int | None, up: bool = True) -> tuple[int, int]:
     """(w, h) the network runs at for a ``width`` x ``height`` frame: ``internal_height`` rows (same
     aspect ratio, at least 1 column), whether the frame is taller or shorter (shorter frames are
     point-sampled *up*), so the network always sees a radius cover the same number of pixels;
-    None -> the frame's own size."""
+    None -> the frame's own size. ``up`` False (a network told its pixel scale, input contract 5):
+    ``internal_height`` is the most rows it runs at, and shorter frames keep their own size."""
     if internal_height is None:
         return int(width), int(height)
     if internal_height < 1:
         raise NeuralaoError(f"internal height must be >= 1, got {internal_height}")
+    if not up and height <= internal_height:
+        return int(width), int(height)
     return max(1, round(width * internal_height / height)), int(internal_height)
 
 
@@ -140,6 +143,7 @@ def at_internal_resolution(
     internal_height: int | None,
     settings: UpsampleSettings = UpsampleSettings(),
     residual_of: str | None = None,
+    up: bool = True,
 ):
     """Wrap ``predict(frame, radius) -> ao (H, W)`` so it runs at ``internal_height`` rows and is
     resampled to the frame's size (frames shorter than that are point-sampled up, and the AO
@@ -148,19 +152,20 @@ def at_internal_resolution(
     ``residual_of``: the key of a full-resolution AO image in the frame that ``predict`` refines (a
     hybrid's "gtao"): then the network's *correction* (its AO minus the point-sampled input) is what
     is upsampled, and it is added to the full-resolution image, so the input's own detail survives.
+    ``up``: see :func:`internal_size`.
     """
 
     def scaled(frame: FrameLike, radius: float) -> np.ndarray:
         h, w = np.shape(frame["depth"])
-        lw, lh = internal_size(w, h, internal_height)
+        lw, lh = internal_size(w, h, internal_height, up)
         if (lw, lh) == (w, h):
             return predict(frame, radius)
         low = downsample_frame(frame, lw, lh)
         if residual_of is None:
             return upsample_ao(predict(low, radius), frame, settings)
         correction = predict(low, radius) - np.asarray(low[residual_of], np.float32)
-        up = upsample_ao(correction, frame, settings, empty=0.0)
-        ao = np.clip(np.asarray(frame[residual_of], np.float32) + up, 0.0, 1.0)
+        lifted = upsample_ao(correction, frame, settings, empty=0.0)
+        ao = np.clip(np.asarray(frame[residual_of], np.float32) + lifted, 0.0, 1.0)
         return np.where(np.asarray(frame["mask"], bool), ao, np.float32(1.0)).astype(np.float32)
 
     return scaled

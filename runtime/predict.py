@@ -43,6 +43,7 @@ from neuralao.runtime.unet_input import (
     hybrid_gtao_blur,
     pad_to_multiple,
     preprocess_frame,
+    scales_up,
 )
 
 
@@ -164,11 +165,12 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         x = preprocess_frame(f, f["gtao"] if hybrid else None, version, f["gtao_raw"] if raw else None)
         return composite(run_padded(run, x, multiple, frame_radius_param(f, r, version)), f)
 
-    scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None)
+    up = scales_up(version)
+    scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None, up=up)
 
     def predict_frame(frame: FrameLike, radius: float | None = None) -> np.ndarray:
         check_unet_frame(frame)
-        check_network_size(np.shape(frame["depth"]), internal_height, onnx_path)
+        check_network_size(np.shape(frame["depth"]), internal_height, onnx_path, up)
         if not hybrid:
             return scaled(frame, radius)
         r = frame_radius(frame, radius)
@@ -193,12 +195,14 @@ def check_unet_frame(frame: FrameLike, where: str | Path = "frame") -> None:
             )
 
 
-def check_network_size(shape: tuple[int, ...], internal_height: int | None, where: str | Path) -> None:
+def check_network_size(
+    shape: tuple[int, ...], internal_height: int | None, where: str | Path, up: bool = True
+) -> None:
     """Refuse a frame of ``shape`` (H, W) whose network input (at the model's ``internal_height`` rows,
     the frame's aspect kept: a strip one row tall becomes as wide as it is scaled tall) this machine
     cannot hold, before anything is allocated."""
     h, w = shape[:2]
-    lw, lh = internal_size(w, h, internal_height)
+    lw, lh = internal_size(w, h, internal_height, up)
     need, avail = lw * lh * PIXEL_BYTES, available_memory()
     if need > avail:
         at = f"internal_height {internal_height}, the frame's aspect kept" if internal_height else "its size"

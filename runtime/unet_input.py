@@ -24,6 +24,16 @@ Version 4, frame-local with the back layer: version 3's channels and a fifth, be
                     on background. An engine renders the back layer with one more pass of the opaque
                     geometry (pipeline/gbuffers/rasterizer.py's second pass says how).
 
+Version 5, frame-local at any resolution: version 3's channels and graph, with the radius input also
+stating the pixel scale of the network's input:
+
+    radius   rho = log(R / tan(yfov / 2) * H / REFERENCE_ROWS), H the rows of the network's input (the
+             frame's, or the internal height it is resampled to): the graph's radius channel is then the
+             radius on screen in units of REFERENCE_ROWS / 2 pixels, so one network learns and runs at
+             any number of rows. At H = REFERENCE_ROWS the input is version 3's. A version-5 export's
+             ``internal_height`` is the most rows it runs at: taller frames are point-sampled down to it,
+             shorter ones run at their own size.
+
 Version 2, whole-frame (the models shipped before): depth divided by the frame's MEAN foreground depth,
 rho = R / (mean foreground depth * tan(yfov / 2)); the graph's radius channel is
 clip(rho / max(depth, RADIUS_DEPTH_FLOOR), 0, RADIUS_CAP). The mean couples every pixel of a frame and
@@ -46,9 +56,12 @@ from neuralao.runtime.frame import FrameLike
 # Bumped whenever ``preprocess`` changes meaning; exported models record it and consumers follow it.
 # New models are trained with PREPROCESS_VERSION; every version of VERSIONS still runs.
 PREPROCESS_VERSION = 3
-VERSIONS = (2, 3, 4)
-# The first version whose input has the back layer's thickness channel.
+VERSIONS = (2, 3, 4, 5)
+# The version whose input has the back layer's thickness channel.
 BACK_LAYER_VERSION = 4
+# The version whose radius input states the pixel scale of the network's input (rows over REFERENCE_ROWS).
+PIXEL_SCALE_VERSION = 5
+REFERENCE_ROWS = 256
 # Version 4's thickness channel: log(depth_back / depth) clipped to [0, THICKNESS_CAP] (a slab 55 times
 # the visible depth deep reads as one that deep).
 THICKNESS_CAP = 4.0
@@ -69,7 +82,7 @@ def input_channels(
 ) -> tuple[str, ...]:
     """The network input's channels for a contract version (with GTAO's last for a hybrid, and before it
     with ``gtao_raw`` GTAO's pass before its blur)."""
-    base = (*INPUT_CHANNELS, "thickness") if int(version) >= BACK_LAYER_VERSION else INPUT_CHANNELS
+    base = (*INPUT_CHANNELS, "thickness") if int(version) == BACK_LAYER_VERSION else INPUT_CHANNELS
     if not gtao:
         return base
     return (*base, "gtao_raw", "gtao") if gtao_raw else (*base, "gtao")
@@ -128,7 +141,24 @@ DESCRIPTIONS[4] = DESCRIPTIONS[3] | {
     "behind the visible one (its own triangle excluded) when that surface faces the camera ray the other "
     "way, i.e. where the ray leaves the solid it entered: one more depth pass of the opaque geometry",
 }
+DESCRIPTIONS[5] = DESCRIPTIONS[3] | {
+    "preprocess_version": "5",
+    "radius_input": f"{RADIUS_INPUT}: (1,1,1,1) float32 rho = log(R / tan(yfov/2) * H / {REFERENCE_ROWS}), "
+    "R = AO radius in scene units (the distance beyond which nothing occludes), yfov the vertical field "
+    "of view, H the rows of the network's input; the graph replaces the depth channel by depth - rho and "
+    f"adds clip(exp(rho - depth), 0, {RADIUS_CAP:g}) (the radius on screen, in units of "
+    f"{REFERENCE_ROWS // 2} pixels) as a fifth channel",
+    "internal_height_rule": "internal_height is the most rows the network runs at: taller frames are "
+    "point-sampled down to it (the AO upsampled back), shorter ones run at their own size",
+}
 PREPROCESS_DESCRIPTION = DESCRIPTIONS[PREPROCESS_VERSION]
+
+
+def scales_up(version: int) -> bool:
+    """Whether a model of contract ``version`` runs frames shorter than its internal height point-sampled
+    up to it (versions 2-4: the network knows one pixel scale) or at their own size (version 5)."""
+    return int(version) != PIXEL_SCALE_VERSION
+
 
 # Added to the metadata of a hybrid (GTAO-input) U-Net (:func:`hybrid_description`: by version).
 HYBRID_DESCRIPTION = {
@@ -223,7 +253,7 @@ def preprocess(
             f"mask {mask.shape}"
         )
     version = check_version(version)
-    if version >= BACK_LAYER_VERSION:
+    if version == BACK_LAYER_VERSION:
         if depth_back is None:
             raise NeuralaoError(
                 "this model reads the G-buffer's back layer (depth_back); render the frames with it "
@@ -243,7 +273,7 @@ def preprocess(
             x[0] = np.where(fg, np.log(np.where(fg, depth, np.float32(1.0))), np.float32(BACKGROUND_DEPTH))
         mask = fg
     x[1:4] = np.where(mask[None], np.moveaxis(normal_cam, -1, 0), np.float32(0.0))
-    if version >= BACK_LAYER_VERSION:
+    if version == BACK_LAYER_VERSION:
         x[4] = thickness_channel(depth, depth_back, mask)
     return x
 
@@ -264,15 +294,23 @@ def thickness_channel(depth: np.ndarray, depth_back: np.ndarray, mask: np.ndarra
 def radius_param(
     radius: float, depth: np.ndarray, mask: np.ndarray, yfov: float, version: int = PREPROCESS_VERSION
 ) -> float:
-    """rho for AO radius R in scene units (> 0): log(R / tan(yfov / 2)) (version 3, the frame's depth
-    unused), or R / (mean foreground depth * tan(yfov / 2)) (version 2)."""
+    """rho for AO radius R in scene units (> 0): log(R / tan(yfov / 2)) (versions 3 and 4, the frame's
+    depth unused), that plus log(H / REFERENCE_ROWS) (version 5, H the rows of ``depth``, the network's
+    input), or R / (mean foreground depth * tan(yfov / 2)) (version 2)."""
     if not (np.isfinite(radius) and radius > 0):
         raise NeuralaoError(f"the AO radius must be a positive number of scene units, got {radius}")
     if not (np.isfinite(yfov) and 0 < yfov < np.pi):
         raise NeuralaoError(f"yfov must lie in (0, pi) radians, got {yfov}")
     if check_version(version) == 2:
         return float(radius) / (depth_scale(depth, mask) * float(np.tan(0.5 * float(yfov))))
-    return float(np.log(float(radius)) - np.log(np.tan(0.5 * float(yfov))))
+    return float(np.log(float(radius)) - np.log(np.tan(0.5 * float(yfov)))) + pixel_scale(depth, version)
+
+
+def pixel_scale(depth: np.ndarray, version: int) -> float:
+    """log(H / REFERENCE_ROWS) for version 5 (H: the rows of ``depth``), 0 for the others."""
+    if int(version) != PIXEL_SCALE_VERSION:
+        return 0.0
+    return float(np.log(np.shape(depth)[0] / REFERENCE_ROWS))
 
 
 def radius_of_param(rho: float, depth: np.ndarray, mask: np.ndarray, yfov: float, version: int) -> float:
@@ -280,7 +318,7 @@ def radius_of_param(rho: float, depth: np.ndarray, mask: np.ndarray, yfov: float
     tan = float(np.tan(0.5 * float(yfov)))
     if check_version(version) == 2:
         return float(rho) * depth_scale(depth, mask) * tan
-    return float(np.exp(float(rho))) * tan
+    return float(np.exp(float(rho) - pixel_scale(depth, version))) * tan
 
 
 def frame_radius(frame: FrameLike, radius: float | None = None) -> float:

@@ -177,6 +177,14 @@ def test_loader_point_samples_to_the_internal_height_and_adds_gtao(tiny_dataset)
     assert network_input(data, 0, 1).shape == (5, 24, 32)
     assert frames_to_set(frames, internal_height=96).x.shape == (3, 4, 96, 128)  # shorter frames go up
     assert frames_to_set(frames).x.shape == (3, 4, 48, 64)  # 0: as rendered
+    # input contract 5: the internal height is a most (shorter frames as rendered), rho of the rows kept
+    from neuralao.runtime.unet_input import frame_radius_param
+
+    v5 = frames_to_set(frames, internal_height=96, gtao=True, version=5)
+    assert v5.x.shape == (3, 4, 48, 64) and v5.g.shape == (3, 2, 48, 64)
+    assert v5.rho[0][1] == pytest.approx(frame_radius_param(f, float(f["radii"][1]), 5))
+    assert v5.rho[0][1] == pytest.approx(frame_radius_param(f, float(f["radii"][1]), 3) + np.log(48 / 256))
+    assert frames_to_set(frames, internal_height=24, version=5).x.shape == (3, 4, 24, 32)
 
 
 def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
@@ -458,3 +466,33 @@ def test_hybrid_on_both_gtao_images_trains_and_exports(tiny_dataset, tmp_path):
 
     par = parity(tmp_path / "export", frames=[next(iter(open_dataset(tiny_dataset).frames()))])
     assert par["passed"] and par["max_abs_err"] <= TOL.parity_unet_fp32
+
+
+def test_a_hybrid_trains_on_input_contract_5_and_its_onnx_runs_at_any_height(tiny_dataset, tmp_path):
+    """Contract 5 (the radius input states the rows the network sees): trained on frames as rendered up
+    to its internal height, its ONNX runs through the predictor; the generated frame passes do not know it
+    yet and say so in one line."""
+    from neuralao.export.unet import export_checkpoint, export_onnx, load_model, onnx_metadata
+    from neuralao.pipeline.datasets.dataset import open_dataset
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
+    from neuralao.runtime.predict import unet_predictor
+
+    ts = UNetTrainSettings(
+        epochs=1, batch_size=2, crop=16, widths=[4, 8], gtao_input=True, internal_height=96,
+        preprocess_version=5, threads=1, seed=0,
+    )  # fmt: skip
+    sets = load_dataset_frames(tiny_dataset, internal_height=96, gtao=True, version=5)
+    assert sets[0].x.shape[-2:] == (48, 64)  # as rendered: shorter than 96 rows
+    ckpt = train(ts, sets[0], sets[1], tmp_path / "v5.pt", sets[2], progress=False)
+    assert np.isfinite(ckpt["metrics"]["val_rmse"])
+    model, ck = load_model(tmp_path / "v5.pt")
+    meta = onnx_metadata(model, ck)
+    assert meta["preprocess_version"] == "5" and meta["internal_height"] == "96"
+    export_onnx(model, tmp_path / "v5.onnx", meta)
+    frame = next(iter(open_dataset(tiny_dataset).frames()))
+    ao = unet_predictor(tmp_path / "v5.onnx")(frame)
+    assert ao.shape == frame["depth"].shape and np.isfinite(ao).all()
+    with pytest.raises(NeuralaoError, match="preprocess versions 2, 3 and 4, the model has 5") as e:
+        export_checkpoint(tmp_path / "v5.pt", tmp_path / "export")
+    assert "\n" not in str(e.value)

@@ -216,7 +216,7 @@ def frame_passes(
         )
     net_in, net_radius, net_out = _network_io(manifest)
     scaled = internal is not None
-    back = version >= 4  # the back layer: one more engine input, a thickness channel
+    back = version == 4  # the back layer: one more engine input, a thickness channel
     s = settings
     tex = {
         "depth": FrameTexture(
@@ -683,7 +683,7 @@ def _section(
                     "ray the other way (where the ray leaves the solid), else 0; one more depth pass of the "
                     "opaque geometry"
                 }
-                if version >= 4
+                if version == 4
                 else {}
             ),
         },

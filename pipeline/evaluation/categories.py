@@ -236,7 +236,7 @@ def unet_predictors(folder: Path, policies: list[str]) -> dict[str, Predictor]:
 def reads_back_layer(manifest: dict) -> bool:
     """Whether an export's input has the G-buffer's back layer (its input contract's version)."""
     version = (manifest.get("metadata") or {}).get("preprocess_version", 0)
-    return str(version).isdigit() and int(version) >= BACK_LAYER_VERSION
+    return str(version).isdigit() and int(version) == BACK_LAYER_VERSION
 
 
 def trained_on_held_aside(manifest: dict) -> bool:

@@ -136,7 +136,7 @@ class UNet(nn.Module):
                 f"scale 1, got in_channels {args.in_channels} and scale {args.scale}"
             )
         plain = input_channels(args.preprocess_version)
-        if not args.gtao_input and int(args.preprocess_version) >= 4 and int(args.in_channels) != len(plain):
+        if not args.gtao_input and int(args.preprocess_version) == 4 and int(args.in_channels) != len(plain):
             raise NeuralaoError(
                 f"a version-{args.preprocess_version} U-Net takes {len(plain)} channels "
                 f"({', '.join(plain)}), got in_channels {args.in_channels}"

@@ -43,6 +43,7 @@ from neuralao.runtime.unet_input import (
     frame_radius_param,
     input_channels,
     preprocess_frame,
+    scales_up,
 )
 
 log = logging.getLogger(__name__)
@@ -189,7 +190,7 @@ def prepare_frame(
         g = GTAOSettings(blur=gtao_blur)
         f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v), g) for v in r], axis=-1)}
     h, w = np.shape(f["depth"])
-    lw, lh = internal_size(w, h, internal_height or None)
+    lw, lh = internal_size(w, h, internal_height or None, scales_up(version))
     if (lw, lh) != (w, h):
         f = downsample_frame(f, lw, lh)
     ao, valid, r = frame_labels(f)
@@ -246,10 +247,12 @@ def frames_to_set(
 ) -> FrameSet:
     """Frame dicts (with labels at several radii) -> :class:`FrameSet` in memory (one radius count).
 
-    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down), labels
-    included (:func:`neuralao.runtime.internal_resolution.downsample_frame`; the radius parameter does not
-    change, it is relative to the screen). ``gtao``: GTAO's AO at every label radius, run on the frame
-    as rendered (before the point sampling, as an engine runs it at full resolution), is kept as ``g``.
+    ``internal_height`` > 0: every frame is point-sampled to that many rows first (up or down; input
+    contract 5: down only, shorter frames as rendered), labels included
+    (:func:`neuralao.runtime.internal_resolution.downsample_frame`; the radius parameter is relative to the
+    screen, and under contract 5 states the rows kept). ``gtao``: GTAO's AO at every label radius, run on
+    the frame as rendered (before the point sampling, as an engine runs it at full resolution), is kept
+    as ``g``.
     ``frames`` may be any iterable (a dataset's generator): frames are converted one at a time and
     only the compact arrays are kept. ``version``: the input contract the frames are preprocessed for.
     ``gtao_blur`` False: GTAO without its blur (the pass alone); ``gtao_raw``: that pass kept as ``r``
@@ -283,7 +286,7 @@ def prepared_folder(
         "gtao": gtao_settings_entry(GTAOSettings(blur=gtao_blur)) if gtao else None,
         "preprocess_version": version,
         # the back layer's files (a version-4 input reads them); absent before, so older keys stay
-        **({"back_layer": (ds.back_layer or {}).get("hash")} if version >= BACK_LAYER_VERSION else {}),
+        **({"back_layer": (ds.back_layer or {}).get("hash")} if version == BACK_LAYER_VERSION else {}),
         # GTAO before its blur beside the blurred one (absent before, so older keys stay)
         **({"gtao_raw": True} if gtao and gtao_raw else {}),
     }
@@ -404,7 +407,7 @@ def prepared_bytes(
     total = 0
     for e in entries:
         w, h = e.get("size") or ds.manifest.get("size") or (0, 0)
-        lw, lh = internal_size(int(w), int(h), internal_height or None)
+        lw, lh = internal_size(int(w), int(h), internal_height or None, scales_up(version))
         total += len(e["views"]) * lw * lh * per_pixel
     return total
 
@@ -463,7 +466,7 @@ def load_dataset_frames(
     """
     data = Path(data)
     ds = open_dataset(data)
-    if version >= BACK_LAYER_VERSION and ds.back_layer is None:
+    if version == BACK_LAYER_VERSION and ds.back_layer is None:
         raise NeuralaoError(
             f"dataset {data} has no back layer (depth_back), which a version-{version} U-Net reads: set "
             '"back_layer": true in its config and run `neuralao dataset` again (it renders only the layer)'

@@ -58,6 +58,7 @@ from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.glsl_runner import time_compute
 from neuralao.runtime.internal_resolution import internal_size
 from neuralao.runtime.predict import is_hybrid
+from neuralao.runtime.unet_input import scales_up
 
 log = logging.getLogger(__name__)
 
@@ -378,7 +379,9 @@ def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dic
     height = manifest.get("internal_height")
     gl_seconds = {
         f"{w}x{h}": time_compute(
-            tmp / "glsl", *internal_size(w, h, height)[::-1], repeats=settings.time_repeats
+            tmp / "glsl",
+            *internal_size(w, h, height, scales_up(ts.preprocess_version))[::-1],
+            repeats=settings.time_repeats,
         )
         for w, h in settings.time_sizes
     }
