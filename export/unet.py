@@ -49,8 +49,7 @@ from neuralao.runtime.baselines import (
     blur_source,
     fragment_source,
     gtao_pass_description,
-    run_gtao,
-    run_gtao_both,
+    hybrid_gtao,
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
@@ -536,10 +535,8 @@ def _hybrid_input(frame: FrameLike, rho: float, version: int, blur: bool, raw: b
     GTAO (neuralao.runtime.baselines, with or without its blur; with ``raw`` its pass before the blur
     in front of it, from the same draw)."""
     radius = radius_of_param(rho, frame["depth"], frame["mask"], float(frame["yfov"]), version)
-    if raw:
-        blurred, before = run_gtao_both(frame, radius)
-        return preprocess_frame(frame, blurred, version, before)
-    return preprocess_frame(frame, run_gtao(frame, radius, GTAOSettings(blur=blur)), version)
+    g = hybrid_gtao(frame, radius, blur, raw)
+    return preprocess_frame(frame, g["gtao"], version, g.get("gtao_raw"))
 
 
 def parity(

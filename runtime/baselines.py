@@ -436,6 +436,17 @@ def run_gtao_both(
     return tuple(np.where(fg, a, np.float32(1.0)).astype(np.float32) for a in (out, raw))
 
 
+def hybrid_gtao(
+    frame: FrameLike, radius: float, blur: bool = True, raw: bool = False
+) -> dict[str, np.ndarray]:
+    """The GTAO images a hybrid reads at ``radius``: ``{"gtao": ...}`` (with or without GTAO's blur) and,
+    with ``raw``, ``"gtao_raw"`` as well (the pass before the blur, from the same draw)."""
+    if raw:
+        blurred, before = run_gtao_both(frame, radius, GTAOSettings(blur=True))
+        return {"gtao": blurred, "gtao_raw": before}
+    return {"gtao": run_gtao(frame, radius, GTAOSettings(blur=blur))}
+
+
 def time_screen_space(
     frame: FrameLike, method: Method, radius: float, settings=None, repeats: int = 20, warmup: int = 3
 ) -> float:

@@ -23,7 +23,7 @@ from typing import Protocol
 import numpy as np
 import onnx
 
-from neuralao.runtime.baselines import GTAOSettings, run_gtao, run_gtao_both
+from neuralao.runtime.baselines import hybrid_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.limits import PIXEL_BYTES, available_memory, format_bytes
 from neuralao.runtime.foundation.manifest import read_manifest
@@ -156,7 +156,7 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     run = ort_runner(proto.SerializeToString())
     multiple = meta["pad_multiple"]
     hybrid = is_hybrid(meta)
-    gtao = GTAOSettings(blur=hybrid_gtao_blur(meta, str(onnx_path)))  # the GTAO the hybrid was trained on
+    blur = hybrid_gtao_blur(meta, str(onnx_path))  # the GTAO the hybrid was trained on
     version = int(meta["preprocess_version"])
 
     raw = hybrid and reads_gtao_raw(meta)
@@ -173,11 +173,7 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
         check_network_size(np.shape(frame["depth"]), internal_height, onnx_path, up)
         if not hybrid:
             return scaled(frame, radius)
-        r = frame_radius(frame, radius)
-        if raw:  # one draw gives GTAO after and before its blur
-            blurred, before = run_gtao_both(frame, r, gtao)
-            return scaled(dict(frame) | {"gtao": blurred, "gtao_raw": before}, radius)
-        return scaled(dict(frame) | {"gtao": run_gtao(frame, r, gtao)}, radius)
+        return scaled(dict(frame) | hybrid_gtao(frame, frame_radius(frame, radius), blur, raw), radius)
 
     return predict_frame
 

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from neuralao.pipeline.datasets.dataset import Dataset, open_dataset
-from neuralao.runtime.baselines import GTAOSettings, gtao_settings_entry, run_gtao, run_gtao_both
+from neuralao.runtime.baselines import GTAOSettings, gtao_settings_entry, hybrid_gtao
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import write_bytes, write_json
 from neuralao.runtime.foundation.limits import check_disk
@@ -180,15 +180,9 @@ def prepare_frame(
     has no view number. ``gtao_blur`` False: the hybrid's GTAO is its pass without the blur; ``gtao_raw``:
     that pass is kept as well, beside the blurred GTAO."""
     _, _, r = frame_labels(f)
-    if gtao and gtao_raw:  # one draw gives GTAO after and before its blur
-        both = [run_gtao_both(f, float(v), GTAOSettings()) for v in r]
-        f = dict(f) | {
-            "gtao_radii": np.stack([b[0] for b in both], axis=-1),
-            "gtao_raw_radii": np.stack([b[1] for b in both], axis=-1),
-        }
-    elif gtao:
-        g = GTAOSettings(blur=gtao_blur)
-        f = dict(f) | {"gtao_radii": np.stack([run_gtao(f, float(v), g) for v in r], axis=-1)}
+    if gtao:
+        images = [hybrid_gtao(f, float(v), gtao_blur, gtao_raw) for v in r]
+        f = dict(f) | {f"{k}_radii": np.stack([g[k] for g in images], axis=-1) for k in images[0]}
     h, w = np.shape(f["depth"])
     lw, lh = internal_size(w, h, internal_height or None, scales_up(version))
     if (lw, lh) != (w, h):
