@@ -53,7 +53,9 @@ from neuralao.runtime.baselines import (
 )
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import sha256_file, write_json, write_text
+from neuralao.runtime.foundation.limits import check_int_range
 from neuralao.runtime.foundation.manifest import read_manifest
+from neuralao.runtime.foundation.metadata import MAX_INTERNAL_HEIGHT, MIN_INTERNAL_HEIGHT
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.frame import FrameLike
 from neuralao.runtime.frame_runner import FrameRunner, frame_program, model_frame_settings
@@ -119,10 +121,12 @@ def load_model(ckpt_path: str | Path) -> tuple[UNet, dict]:
     return model_from_checkpoint(ckpt), ckpt
 
 
-def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
-    """Metadata for ``metadata_props``: input semantics, units, padding contract, provenance, error."""
+def onnx_metadata(model: UNet, ckpt: dict | None = None, internal_height: int | None = None) -> dict:
+    """Metadata for ``metadata_props``: input semantics, units, padding contract, provenance, error.
+    ``internal_height``: the rows the network runs at, when not the rows it trained at."""
     ckpt = ckpt or {}
     dataset = ckpt.get("dataset", {})
+    trained_height = dataset.get("internal_height") or None
     metrics = {
         k: v
         for k, v in ckpt.get("metrics", {}).items()
@@ -151,9 +155,14 @@ def onnx_metadata(model: UNet, ckpt: dict | None = None) -> dict:
         "dataset_hash": dataset.get("dataset_hash") or "",
         "epochs": str(ckpt.get("epoch", 0)),
         "scale": str(model.args.scale),
-        # rows the training frames were resampled to; inference resamples to it
-        # (neuralao.runtime.internal_resolution)
-        "internal_height": str(dataset.get("internal_height") or ""),
+        # rows inference resamples frames to (neuralao.runtime.internal_resolution): the rows the training
+        # frames were resampled to unless the export chose others
+        "internal_height": str(internal_height or trained_height or ""),
+        **(
+            {"trained_internal_height": str(trained_height or "")}
+            if internal_height and internal_height != trained_height
+            else {}
+        ),
         "trained_radii_rel": (dataset.get("labels") or {}).get("radii_rel") or [],
         "training": {
             "plan": ckpt.get("plan", {}),
@@ -441,18 +450,27 @@ def write_glsl(proto: onnx.ModelProto, out_dir: Path, precision: str = "fp32", p
     return out_dir
 
 
-def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
-    """model.onnx + glsl/ (fp32 compute passes) + manifest.json in ``out_dir``. Returns the manifest."""
+def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, internal_height: int | None = None) -> dict:
+    """model.onnx + glsl/ (fp32 compute passes) + manifest.json in ``out_dir``. Returns the manifest.
+
+    ``internal_height``: the rows the exported network runs at (its metadata, frame passes and manifest
+    say so), instead of the rows it trained at: more rows cost the network's passes in proportion and
+    change its AO (docs/results.md measures it at 256 and 512 rows)."""
     t0 = time.perf_counter()
     ckpt_path, out_dir = Path(ckpt_path), Path(out_dir)
+    if internal_height is not None:
+        internal_height = check_int_range(
+            "internal_height", internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
+        )
     model, ckpt = load_model(ckpt_path)
     out_dir.mkdir(parents=True, exist_ok=True)
     onnx_path = out_dir / "model.onnx"
-    metadata = onnx_metadata(model, ckpt)
+    metadata = onnx_metadata(model, ckpt, internal_height)
     proto = export_onnx(model, onnx_path, metadata)
     checks = check_backends(model, onnx_path)
     glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
-    height = (ckpt.get("dataset") or {}).get("internal_height") or None
+    trained_height = (ckpt.get("dataset") or {}).get("internal_height") or None
+    height = internal_height or trained_height
     internal = (
         write_internal_passes(
             glsl_dir, int(height), model.args.gtao_input, model.args.gtao_blur, model.args.gtao_raw_input
@@ -475,7 +493,8 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path) -> dict:
         "preprocess_version": int(model.args.preprocess_version),
         "parameters": n_params,
         "bytes_fp32": 4 * n_params,
-        "internal_height": (ckpt.get("dataset") or {}).get("internal_height") or None,
+        "internal_height": height,
+        **({"trained_internal_height": trained_height} if height != trained_height else {}),
         "internal_resolution": internal,
         "checks": checks,
         "checkpoint": {"path": str(ckpt_path), "sha256": sha256_file(ckpt_path), "epoch": ckpt.get("epoch")},

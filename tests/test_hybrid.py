@@ -214,6 +214,59 @@ def test_hybrid_trains_exports_and_declares_itself(tiny_dataset, tmp_path):
     assert is_hybrid(meta) and str(meta["internal_height"]) == "32" and manifest["internal_height"] == 32
 
 
+def test_an_export_runs_the_network_at_the_rows_it_is_given(tiny_dataset, tmp_path, capsys):
+    """`neuralao export --internal-height`: the export declares the rows it was given (and the rows it
+    trained at), and its predictor, its frame passes and the model run at those rows explicitly agree."""
+    import onnx
+    from helpers import analytic_gbuffer
+
+    from neuralao.export.onnx_io import get_metadata, load_onnx
+    from neuralao.pipeline.cli.main import main
+    from neuralao.pipeline.models.unet_frames import load_dataset_frames
+    from neuralao.pipeline.models.unet_train import UNetTrainSettings, train
+    from neuralao.runtime.foundation.manifest import read_json
+    from neuralao.runtime.frame_runner import FrameRunner, frame_program
+    from neuralao.runtime.predict import unet_predictor
+
+    ts = UNetTrainSettings(
+        epochs=1, batch_size=2, crop=16, widths=[4, 8], gtao_input=True, internal_height=32, threads=1, seed=0
+    )
+    train_set, val_set, info = load_dataset_frames(tiny_dataset, internal_height=32, gtao=True)
+    train(ts, train_set, val_set, tmp_path / "h.pt", info, progress=False)
+    assert main(["export", str(tmp_path / "h.pt"), "--out", str(tmp_path / "at32")]) == 0
+    assert (
+        main(["export", str(tmp_path / "h.pt"), "--out", str(tmp_path / "at48"), "--internal-height", "48"])
+        == 0
+    )
+    manifest = read_json(tmp_path / "at48" / "manifest.json", "manifest")
+    meta = get_metadata(load_onnx(tmp_path / "at48" / "model.onnx"))
+    assert manifest["internal_height"] == 48 and manifest["trained_internal_height"] == 32
+    assert str(meta["internal_height"]) == "48" and str(meta["trained_internal_height"]) == "32"
+    assert manifest["internal_resolution"]["height"] == 48
+    assert "trained_internal_height" not in read_json(tmp_path / "at32" / "manifest.json", "manifest")
+
+    f = analytic_gbuffer(75, 53)
+    at48 = unet_predictor(tmp_path / "at48" / "model.onnx", "model")(f, 0.4)
+    explicit = unet_predictor(tmp_path / "at32" / "model.onnx", 48)(f, 0.4)
+    trained = unet_predictor(tmp_path / "at32" / "model.onnx", "model")(f, 0.4)
+    assert np.array_equal(at48, explicit)
+    assert float(np.abs(at48 - trained).max()) > 1e-3  # the rows change the AO: the check can fail
+    program = frame_program(onnx.load(str(tmp_path / "at48" / "model.onnx")), "glsl430")
+    with FrameRunner(program, 75, 53) as runner:
+        assert float(np.abs(runner.run(f, 0.4) - at48).max()) <= TOL.frame_passes_vs_reference
+
+    # refused in one line, nothing written: rows outside the range
+    for bad in ("0", "-5", "100000"):
+        capsys.readouterr()
+        assert (
+            main(["export", str(tmp_path / "h.pt"), "--out", str(tmp_path / "bad"), "--internal-height", bad])
+            != 0
+        )
+        err = capsys.readouterr().err.strip()
+        assert "--internal-height" in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "bad").exists()
+
+
 def test_export_carries_the_internal_resolution_passes(tiny_dataset, tmp_path):
     """An export trained at an internal height ships the two fragment passes an engine runs around the
     network, and they compile on Mesa."""

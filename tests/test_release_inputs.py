@@ -198,3 +198,11 @@ def test_select_never_writes_inside_the_folders_it_reads(capsys, tmp_path):
     # outside the folders it reads, the output passes the check (the report is then refused as a report)
     msg = refusal(capsys, [*base, "--report", str(report), "--out", str(tmp_path / "s.json")])
     assert "is not a neuralao report.json" in msg and not (tmp_path / "s.json").exists()
+
+
+@pytest.mark.parametrize("rows", [-1, 8, 100000, "512", 2.5])
+def test_ship_refuses_an_export_height_out_of_range(capsys, tmp_path, rows):
+    config = ship_config(tmp_path / "w")
+    config["models"][0]["internal_height"] = rows
+    msg = ship_refusal(capsys, tmp_path / "w", config)
+    assert "internal_height" in msg, msg

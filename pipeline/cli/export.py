@@ -10,6 +10,8 @@ from neuralao.pipeline.models.checkpoint import check_finished, read_checkpoint
 from neuralao.runtime import kinds
 from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_folder
+from neuralao.runtime.foundation.limits import check_int_range
+from neuralao.runtime.foundation.metadata import MAX_INTERNAL_HEIGHT, MIN_INTERNAL_HEIGHT
 from neuralao.runtime.foundation.paths import FOLDER, check_replaceable_folder
 
 # What the command writes (dest -> a file or a folder) and reads: checked before it runs, by
@@ -44,11 +46,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="export folder: model.onnx, GLSL shaders, manifest.json (replaced whole, never merged)",
     )
     p.add_argument("--force", action="store_true", help="replace --out even when it holds files of no export")
+    p.add_argument(
+        "--internal-height",
+        type=int,
+        metavar="ROWS",
+        help="screen-space U-Net: run the network at ROWS rows instead of the rows it trained at (more rows "
+        "cost the network's passes in proportion; see docs/results.md for what they change)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     kind = checkpoint_kind(args.model)
     check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
+    extra = {}
+    if args.internal_height is not None:
+        if kind != "unet":
+            raise NeuralaoError(f"--internal-height is for screen-space U-Nets; {args.model} is a {kind}")
+        extra["internal_height"] = check_int_range(
+            "--internal-height", args.internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
+        )
     with atomic_folder(args.out) as folder:  # written whole, then put in --out's place
-        kinds.role(kind, "exporter")(Path(args.model), folder)
+        kinds.role(kind, "exporter")(Path(args.model), folder, **extra)
     return 0

@@ -52,6 +52,7 @@ from neuralao.runtime.foundation.errors import NeuralaoError
 from neuralao.runtime.foundation.io import atomic_folder, sha256_file, write_json
 from neuralao.runtime.foundation.limits import MAX_CAP, check_int_range, check_pixels
 from neuralao.runtime.foundation.manifest import read_json
+from neuralao.runtime.foundation.metadata import MAX_INTERNAL_HEIGHT, MIN_INTERNAL_HEIGHT
 from neuralao.runtime.foundation.paths import FOLDER, check_output, check_plain_name
 from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
@@ -76,6 +77,8 @@ class ShippedModel:
     # constant-rate phase this model continues with its own schedule
     init_checkpoint: str = ""
     train: dict = field(default_factory=dict)  # UNetTrainSettings fields
+    # the rows its export runs the network at (neuralao export --internal-height); 0: the rows it trained at
+    internal_height: int = 0
 
 
 @dataclass
@@ -169,6 +172,13 @@ def _check_model(i: int, entry: object, earlier: list[str]) -> ShippedModel:
     if not isinstance(spec.train, dict):
         raise NeuralaoError(
             f"model {spec.name}: train must be an object of training settings, got {spec.train!r}"
+        )
+    if spec.internal_height != 0:
+        check_int_range(
+            f"model {spec.name}: internal_height",
+            spec.internal_height,
+            MIN_INTERNAL_HEIGHT,
+            MAX_INTERNAL_HEIGHT,
         )
     ts = from_dict(UNetTrainSettings, dict(spec.train), prefix=f"models.{spec.name}.train.")
     try:
@@ -355,7 +365,7 @@ def ship_model(
 
 def _export(settings, spec, data, ckpt, ckpt_path, info, ts, tmp, commit) -> dict:
     """Export, check and time one trained model into the folder ``tmp``; returns its index entry."""
-    manifest = export_checkpoint(ckpt_path, tmp)
+    manifest = export_checkpoint(ckpt_path, tmp, spec.internal_height or None)
     ds = open_dataset(data)
     frames = []
     for f in ds.frames(split=settings.test_split):
