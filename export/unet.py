@@ -430,6 +430,14 @@ def write_internal_passes(
     return entry
 
 
+def write_internal_passes_of(glsl_dir: Path, height: int, meta: dict) -> dict:
+    """:func:`write_internal_passes` for the model whose ONNX metadata is ``meta``: a hybrid's GTAO (with or
+    without its blur, and the image before it when the network reads both) as its metadata declares."""
+    hybrid = is_hybrid(meta)
+    blur = hybrid_gtao_blur(meta) if hybrid else True
+    return write_internal_passes(glsl_dir, height, hybrid, blur, hybrid and reads_gtao_raw(meta))
+
+
 # The compute dialects an export carries besides glsl/ (GLSL 4.30, HLSL and MSL), each in its own folder
 # beside it, with the frame passes: (folder, dialect).
 FRAME_TARGETS = (("vulkan", "vulkan"), ("wgsl", "wgsl"))

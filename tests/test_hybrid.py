@@ -519,6 +519,13 @@ def test_hybrid_on_both_gtao_images_trains_and_exports(tiny_dataset, tmp_path):
 
     par = parity(tmp_path / "export", frames=[next(iter(open_dataset(tiny_dataset).frames()))])
     assert par["passed"] and par["max_abs_err"] <= TOL.parity_unet_fp32
+    # `neuralao ship --shaders-only` regenerates its passes from the ONNX alone: the same passes
+    from neuralao.pipeline.release.ship import refresh_shaders
+    from neuralao.runtime.foundation.manifest import read_json
+
+    refresh_shaders(tmp_path / "export", 64 << 20)
+    again = read_json(tmp_path / "export" / "manifest.json", "manifest")
+    assert again["internal_resolution"] == json.loads(json.dumps(manifest["internal_resolution"]))
 
 
 def test_a_hybrid_trains_on_input_contract_5_and_its_onnx_runs_at_any_height(tiny_dataset, tmp_path):

@@ -38,7 +38,7 @@ from neuralao.export.unet import (
     parity,
     parity_fp16,
     write_glsl,
-    write_internal_passes,
+    write_internal_passes_of,
 )
 from neuralao.pipeline.datasets.dataset import open_dataset, scene_of
 from neuralao.pipeline.evaluation.report_baselines import timing_frame as report_timing_frame
@@ -58,7 +58,6 @@ from neuralao.runtime.foundation.settings import from_dict, settings_to_dict
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.glsl_runner import time_compute
 from neuralao.runtime.internal_resolution import internal_size
-from neuralao.runtime.predict import is_hybrid
 from neuralao.runtime.unet_input import scales_up
 
 log = logging.getLogger(__name__)
@@ -510,7 +509,7 @@ def refresh_shaders(model_dir: Path, max_bytes: int, commit: str | None = None) 
         shutil.copy2(onnx_path, tmp / onnx_path.name)
         glsl_dir = write_glsl(proto, tmp / "glsl", "fp32")
         height = manifest.get("internal_height")
-        internal = write_internal_passes(glsl_dir, int(height), is_hybrid(meta)) if height else None
+        internal = write_internal_passes_of(glsl_dir, int(height), meta) if height else None
         manifest.update(glsl=glsl_dir.name, internal_resolution=internal)
         manifest["shaders"] = {
             "commit": commit or git_commit(),
