@@ -521,6 +521,59 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, internal_heigh
     return manifest
 
 
+def export_folder_at_height(src: str | Path, out_dir: str | Path, internal_height: int) -> dict:
+    """An existing U-Net export (a shipped model's folder: no checkpoint needed) written again to
+    ``out_dir`` with the network at ``internal_height`` rows: the same graph and weights, its metadata's
+    ``internal_height`` (and ``trained_internal_height``), every pass regenerated for those rows, the GLSL
+    checked against onnxruntime. Returns the manifest."""
+    src, out_dir = Path(src), Path(out_dir)
+    height = check_int_range("internal_height", internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT)
+    manifest = read_manifest(src, "unet", "a U-Net")
+    onnx_in = src / str(manifest.get("onnx", "model.onnx"))
+    proto = load_onnx(onnx_in)
+    check_unet_onnx(proto, onnx_in)
+    trained = manifest.get("trained_internal_height") or manifest.get("internal_height") or None
+    props = {p.key: p for p in proto.metadata_props}
+    if "internal_height" in props:
+        props["internal_height"].value = str(height)
+    else:
+        proto.metadata_props.add(key="internal_height", value=str(height))
+    if "trained_internal_height" in props:
+        proto.metadata_props.remove(props["trained_internal_height"])
+    if trained and int(trained) != height:
+        proto.metadata_props.add(key="trained_internal_height", value=str(trained))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    onnx_path = save_onnx(proto, out_dir / "model.onnx")
+    glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
+    meta = check_unet_onnx(proto, onnx_path)
+    # what was measured at the trained rows (test scores, times, parity) does not describe these rows
+    measured = ("evaluation", "shaders", "seconds", "trained_internal_height")
+    manifest = {k: v for k, v in manifest.items() if k not in measured}
+    if isinstance(manifest.get("provenance"), dict):
+        manifest["provenance"] = {
+            k: v for k, v in manifest["provenance"].items() if not k.startswith(("test", "gl_", "parity"))
+        }
+    manifest |= {
+        "onnx": onnx_path.name,
+        "onnx_sha256": sha256_file(onnx_path),
+        "glsl": glsl_dir.name,
+        "metadata": meta,
+        "internal_height": height,
+        **({"trained_internal_height": int(trained)} if trained and int(trained) != height else {}),
+        "internal_resolution": write_internal_passes_of(glsl_dir, height, meta),
+        "exported_from": {"folder": str(src), "onnx_sha256": sha256_file(onnx_in)},
+    }
+    write_json(out_dir / "manifest.json", manifest)
+    par = parity(out_dir)
+    if not par["passed"]:
+        raise NeuralaoError(
+            f"{out_dir}: GLSL differs from onnxruntime by {par['max_abs_err']:.3g} > {par['tolerance']:g}"
+        )
+    manifest["parity"] = {"glsl_vs_onnxruntime": par["max_abs_err"], "tolerance": par["tolerance"]}
+    write_json(out_dir / "manifest.json", manifest)
+    return manifest
+
+
 # ----------------------------------------------------------------------------------------------- inference
 
 

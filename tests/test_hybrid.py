@@ -255,6 +255,31 @@ def test_an_export_runs_the_network_at_the_rows_it_is_given(tiny_dataset, tmp_pa
     with FrameRunner(program, 75, 53) as runner:
         assert float(np.abs(runner.run(f, 0.4) - at48).max()) <= TOL.frame_passes_vs_reference
 
+    # an export folder (a shipped model's: no checkpoint) written again at other rows: the same model
+    assert (
+        main(["export", str(tmp_path / "at32"), "--out", str(tmp_path / "re48"), "--internal-height", "48"])
+        == 0
+    )
+    again = read_json(tmp_path / "re48" / "manifest.json", "manifest")
+    assert again["internal_height"] == 48 and again["trained_internal_height"] == 32
+    assert again["parity"]["glsl_vs_onnxruntime"] <= again["parity"]["tolerance"]
+    assert (
+        again["exported_from"]["onnx_sha256"]
+        == read_json(tmp_path / "at32" / "manifest.json", "m")["onnx_sha256"]
+    )
+    assert again["internal_resolution"] == json.loads(json.dumps(manifest["internal_resolution"]))
+    assert np.array_equal(unet_predictor(tmp_path / "re48" / "model.onnx", "model")(f, 0.4), at48)
+    assert (
+        main(["export", str(tmp_path / "re48"), "--out", str(tmp_path / "re32"), "--internal-height", "32"])
+        == 0
+    )
+    back = read_json(tmp_path / "re32" / "manifest.json", "manifest")
+    assert back["internal_height"] == 32 and "trained_internal_height" not in back
+    assert np.array_equal(unet_predictor(tmp_path / "re32" / "model.onnx", "model")(f, 0.4), trained)
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "at32"), "--out", str(tmp_path / "bad")]) != 0
+    assert "give --internal-height" in capsys.readouterr().err
+
     # refused in one line, nothing written: rows outside the range
     for bad in ("0", "-5", "100000"):
         capsys.readouterr()

@@ -39,7 +39,11 @@ def checkpoint_kind(path: str | Path) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", help="checkpoint written by `neuralao train` (MODEL.pt)")
+    p.add_argument(
+        "model",
+        help="checkpoint written by `neuralao train` (MODEL.pt), or a U-Net's export folder (with "
+        "--internal-height: the same model written again at other rows, e.g. runtime/models/unet-gtao)",
+    )
     p.add_argument(
         "--out",
         required=True,
@@ -56,6 +60,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if Path(args.model).is_dir():  # an export (a shipped model's folder): written again at other rows
+        if args.internal_height is None:
+            raise NeuralaoError(
+                f"{args.model} is an export folder: give --internal-height to write it again at other rows "
+                "(a checkpoint, MODEL.pt, is exported whole)"
+            )
+        rows = check_int_range(
+            "--internal-height", args.internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
+        )
+        check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
+        from neuralao.export.unet import export_folder_at_height
+
+        with atomic_folder(args.out) as folder:
+            export_folder_at_height(Path(args.model), folder, rows)
+        return 0
     kind = checkpoint_kind(args.model)
     check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
     extra = {}
