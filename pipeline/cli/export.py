@@ -60,15 +60,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    rows = (
+        None
+        if args.internal_height is None
+        else check_int_range(
+            "--internal-height", args.internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
+        )
+    )
     if Path(args.model).is_dir():  # an export (a shipped model's folder): written again at other rows
-        if args.internal_height is None:
+        if rows is None:
             raise NeuralaoError(
                 f"{args.model} is an export folder: give --internal-height to write it again at other rows "
                 "(a checkpoint, MODEL.pt, is exported whole)"
             )
-        rows = check_int_range(
-            "--internal-height", args.internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
-        )
         check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
         from neuralao.export.unet import export_folder_at_height
 
@@ -76,14 +80,10 @@ def run(args: argparse.Namespace) -> int:
             export_folder_at_height(Path(args.model), folder, rows)
         return 0
     kind = checkpoint_kind(args.model)
+    if rows is not None and kind != "unet":
+        raise NeuralaoError(f"--internal-height is for screen-space U-Nets; {args.model} is a {kind}")
     check_replaceable_folder("--out", args.out, kinds.KINDS, args.force, {"MODEL": args.model})
-    extra = {}
-    if args.internal_height is not None:
-        if kind != "unet":
-            raise NeuralaoError(f"--internal-height is for screen-space U-Nets; {args.model} is a {kind}")
-        extra["internal_height"] = check_int_range(
-            "--internal-height", args.internal_height, MIN_INTERNAL_HEIGHT, MAX_INTERNAL_HEIGHT
-        )
+    extra = {} if rows is None else {"internal_height": rows}
     with atomic_folder(args.out) as folder:  # written whole, then put in --out's place
         kinds.role(kind, "exporter")(Path(args.model), folder, **extra)
     return 0
