@@ -480,11 +480,7 @@ def export_checkpoint(ckpt_path: str | Path, out_dir: str | Path, internal_heigh
     trained_height = (ckpt.get("dataset") or {}).get("internal_height") or None
     height = internal_height or trained_height
     internal = (
-        write_internal_passes(
-            glsl_dir, int(height), model.args.gtao_input, model.args.gtao_blur, model.args.gtao_raw_input
-        )
-        if height
-        else None
+        write_internal_passes_of(glsl_dir, int(height), check_unet_onnx(proto, onnx_path)) if height else None
     )
     n_params = count_parameters(model)
     manifest = {
