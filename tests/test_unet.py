@@ -655,7 +655,10 @@ def test_budgeted_training_resumes_to_the_same_weights(frames, tmp_path, monkeyp
         TINY, epochs=3, widths=[2, 4], budget_minutes=60.0, lr_schedule="cosine", warmup_steps=2
     )
     reference = train(settings, train_set, val_set, tmp_path / "ref.pt", info)
-    assert reference["plan"]["epochs"] == 3 and reference["plan"]["seconds_per_step"] > 0
+    plan = reference["plan"]
+    assert plan["epochs"] == 3 and plan["seconds_data"] > 0 and plan["seconds_compute"] > 0
+    # a step's cost counts its batch's reading (page faults where the frames do not fit in memory)
+    assert plan["seconds_per_step"] == pytest.approx(plan["seconds_data"] + plan["seconds_compute"])
     assert [h["epoch"] for h in reference["history"]] == [1, 2, 3]
     wall = [h["wall_seconds"] for h in reference["history"]]
     assert wall == sorted(wall) and wall[-1] == pytest.approx(reference["wall_seconds"])

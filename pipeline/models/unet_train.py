@@ -535,17 +535,22 @@ def calibrate(
     steps: int = 10,
 ) -> dict:
     """Seconds per training step and per validation pass, measured on a COPY of the model and optimizer
-    with batches from a separate generator (the run's own state and randomness are untouched)."""
+    with batches from a separate generator (the run's own state and randomness are untouched). A step's
+    seconds are its batch's reading and cropping (``seconds_data``: page faults, where the prepared frames
+    do not fit in memory) and its forward and backward pass (``seconds_compute``), each the median of the
+    steps after the first two."""
     probe = copy.deepcopy(model)
     opt = torch.optim.Adam(probe.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
     plan = plan_epoch(train_set, sat, settings, torch.Generator().manual_seed(settings.seed + 7919))
     kw = _loss_kw(settings)
-    times = []
+    data, compute = [], []
     for k in range(steps + 2):
         idx = range(k * settings.batch_size, min((k + 1) * settings.batch_size, len(plan.frame)))
         if not len(idx):
             break
+        t0 = time.perf_counter()
         xb, rb, yb, mb, _ = make_batch(train_set, plan, idx, settings.crop)
+        data.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         probe.train()
         _step(
@@ -559,12 +564,18 @@ def calibrate(
             "calibration",
             settings.lr,
         )
-        times.append(time.perf_counter() - t0)
-    per_step = float(np.median(times[2:] or times))  # the first steps warm up allocators
+        compute.append(time.perf_counter() - t0)
+    seconds_data = float(np.median(data[2:] or data))  # the first steps warm up allocators
+    seconds_compute = float(np.median(compute[2:] or compute))
     t0 = time.perf_counter()
     if val_set is not None:
         evaluate(probe, val_set, device)
-    return {"seconds_per_step": per_step, "val_seconds": time.perf_counter() - t0}
+    return {
+        "seconds_per_step": seconds_data + seconds_compute,
+        "seconds_data": seconds_data,
+        "seconds_compute": seconds_compute,
+        "val_seconds": time.perf_counter() - t0,
+    }
 
 
 def plan_budget(settings: UNetTrainSettings, steps_per_epoch: int, cal: dict) -> int:
