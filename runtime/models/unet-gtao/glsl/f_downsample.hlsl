@@ -15,6 +15,8 @@ Texture2DArray<float4> src1 : register(t1);
 SamplerState _src1_sampler : register(s1);
 Texture2DArray<float4> src2 : register(t2);
 SamplerState _src2_sampler : register(s2);
+Texture2DArray<float4> src3 : register(t3);
+SamplerState _src3_sampler : register(s3);
 
 static uint3 gl_GlobalInvocationID;
 struct SPIRV_Cross_Input
@@ -134,10 +136,12 @@ void f_downsample_inner()
     }
     int2 param_21 = q;
     int param_22 = 0;
-    int2 param_23 = px;
-    int param_24 = 2;
-    float4 param_25 = float4(nao_load(src2, _src2_sampler, param_21, param_22).x, 0.0f, 0.0f, 0.0f);
-    nao_store(param_23, param_24, param_25);
+    int2 param_23 = q;
+    int param_24 = 0;
+    int2 param_25 = px;
+    int param_26 = 2;
+    float4 param_27 = float4(nao_load(src2, _src2_sampler, param_21, param_22).x, nao_load(src3, _src3_sampler, param_23, param_24).x, 0.0f, 0.0f);
+    nao_store(param_25, param_26, param_27);
 }
 
 [numthreads(8, 8, 1)]

@@ -61,7 +61,7 @@ void nao_store(thread const int2& p, thread const int& layer, thread const float
     dst.write(v, uint2(_112.xy), uint(_112.z));
 }
 
-kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], texture2d_array<float> src2 [[texture(3)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], sampler src2Smplr [[sampler(3)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
+kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_array<float, access::write> dst [[texture(0)]], texture2d_array<float> src0 [[texture(1)]], texture2d_array<float> src1 [[texture(2)]], texture2d_array<float> src2 [[texture(3)]], texture2d_array<float> src3 [[texture(4)]], sampler src0Smplr [[sampler(1)]], sampler src1Smplr [[sampler(2)]], sampler src2Smplr [[sampler(3)]], sampler src3Smplr [[sampler(4)]], uint3 gl_GlobalInvocationID [[thread_position_in_grid]])
 {
     int2 gid = int2(gl_GlobalInvocationID.xy);
     int2 out_size = int3(dst.get_width(), dst.get_height(), dst.get_array_size()).xy;
@@ -116,9 +116,11 @@ kernel void f_downsample(constant FrameUniforms& frame [[buffer(0)]], texture2d_
     }
     int2 param_21 = q;
     int param_22 = 0;
-    int2 param_23 = px;
-    int param_24 = 2;
-    float4 param_25 = float4(nao_load(src2, src2Smplr, param_21, param_22, frame).x, 0.0, 0.0, 0.0);
-    nao_store(param_23, param_24, param_25, frame, dst);
+    int2 param_23 = q;
+    int param_24 = 0;
+    int2 param_25 = px;
+    int param_26 = 2;
+    float4 param_27 = float4(nao_load(src2, src2Smplr, param_21, param_22, frame).x, nao_load(src3, src3Smplr, param_23, param_24, frame).x, 0.0, 0.0);
+    nao_store(param_25, param_26, param_27, frame, dst);
 }
 

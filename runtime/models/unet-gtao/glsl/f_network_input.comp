@@ -63,8 +63,10 @@ void main() {
     }
     nao_store(px, 0, x);
     float g = 1.0;
+    float r = 1.0;
     if (pw.w >= 0.5) {
         g = nao_load(src0, px, 2).x;
+        r = nao_load(src0, px, 2).y;
     }
-    nao_store(px, 1, vec4(g, 0.0, 0.0, 0.0));
+    nao_store(px, 1, vec4(r, g, 0.0, 0.0));
 }

@@ -115,16 +115,20 @@ void f_network_input_inner()
     float4 param_8 = x;
     nao_store(param_6, param_7, param_8);
     float g = 1.0f;
+    float r = 1.0f;
     if (pw.w >= 0.5f)
     {
         int2 param_9 = px;
         int param_10 = 2;
         g = nao_load(src0, _src0_sampler, param_9, param_10).x;
+        int2 param_11 = px;
+        int param_12 = 2;
+        r = nao_load(src0, _src0_sampler, param_11, param_12).y;
     }
-    int2 param_11 = px;
-    int param_12 = 1;
-    float4 param_13 = float4(g, 0.0f, 0.0f, 0.0f);
-    nao_store(param_11, param_12, param_13);
+    int2 param_13 = px;
+    int param_14 = 1;
+    float4 param_15 = float4(r, g, 0.0f, 0.0f);
+    nao_store(param_13, param_14, param_15);
 }
 
 [numthreads(8, 8, 1)]

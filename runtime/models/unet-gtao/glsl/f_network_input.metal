@@ -100,15 +100,19 @@ kernel void f_network_input(constant FrameUniforms& frame [[buffer(0)]], texture
     float4 param_8 = x;
     nao_store(param_6, param_7, param_8, frame, dst);
     float g = 1.0;
+    float r = 1.0;
     if (pw.w >= 0.5)
     {
         int2 param_9 = px;
         int param_10 = 2;
         g = nao_load(src0, src0Smplr, param_9, param_10, frame).x;
+        int2 param_11 = px;
+        int param_12 = 2;
+        r = nao_load(src0, src0Smplr, param_11, param_12, frame).y;
     }
-    int2 param_11 = px;
-    int param_12 = 1;
-    float4 param_13 = float4(g, 0.0, 0.0, 0.0);
-    nao_store(param_11, param_12, param_13, frame, dst);
+    int2 param_13 = px;
+    int param_14 = 1;
+    float4 param_15 = float4(r, g, 0.0, 0.0);
+    nao_store(param_13, param_14, param_15, frame, dst);
 }
 

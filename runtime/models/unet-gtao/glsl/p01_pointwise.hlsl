@@ -76,9 +76,9 @@ void p01_pointwise_inner()
     float4 v0[2];
     v0[0] = r;
     float4 _161 = src0.Load(int4(int3(rx, ry, 1), 0));
-    float4 a_1 = float4(bool4(true, false, false, false).x ? _161.x : 0.0f.xxxx.x, bool4(true, false, false, false).y ? _161.y : 0.0f.xxxx.y, bool4(true, false, false, false).z ? _161.z : 0.0f.xxxx.z, bool4(true, false, false, false).w ? _161.w : 0.0f.xxxx.w);
+    float4 a_1 = float4(bool4(true, true, false, false).x ? _161.x : 0.0f.xxxx.x, bool4(true, true, false, false).y ? _161.y : 0.0f.xxxx.y, bool4(true, true, false, false).z ? _161.z : 0.0f.xxxx.z, bool4(true, true, false, false).w ? _161.w : 0.0f.xxxx.w);
     float4 _171 = src0.Load(int4(int3(rx, ry, 1), 0));
-    float4 b_1 = float4(bool4(true, false, false, false).x ? _171.x : 0.0f.xxxx.x, bool4(true, false, false, false).y ? _171.y : 0.0f.xxxx.y, bool4(true, false, false, false).z ? _171.z : 0.0f.xxxx.z, bool4(true, false, false, false).w ? _171.w : 0.0f.xxxx.w);
+    float4 b_1 = float4(bool4(true, true, false, false).x ? _171.x : 0.0f.xxxx.x, bool4(true, true, false, false).y ? _171.y : 0.0f.xxxx.y, bool4(true, true, false, false).z ? _171.z : 0.0f.xxxx.z, bool4(true, true, false, false).w ? _171.w : 0.0f.xxxx.w);
     float4 r_1 = a_1 * b_1;
     v0[1] = r_1;
     float4 r_2 = asfloat(params.Load4(128));
@@ -91,7 +91,7 @@ void p01_pointwise_inner()
     float4 _313 = src0.Load(int4(int3(rx, ry, 0), 0));
     r_3 += mul(float4(bool4(true, true, true, true).x ? _313.x : 0.0f.xxxx.x, bool4(true, true, true, true).y ? _313.y : 0.0f.xxxx.y, bool4(true, true, true, true).z ? _313.z : 0.0f.xxxx.z, bool4(true, true, true, true).w ? _313.w : 0.0f.xxxx.w), float4x4(float4(asfloat(params.Load4(144))), float4(asfloat(params.Load4(160))), float4(asfloat(params.Load4(176))), float4(asfloat(params.Load4(192)))));
     float4 _356 = src0.Load(int4(int3(rx, ry, 1), 0));
-    r_3 += mul(float4(bool4(true, false, false, false).x ? _356.x : 0.0f.xxxx.x, bool4(true, false, false, false).y ? _356.y : 0.0f.xxxx.y, bool4(true, false, false, false).z ? _356.z : 0.0f.xxxx.z, bool4(true, false, false, false).w ? _356.w : 0.0f.xxxx.w), float4x4(float4(asfloat(params.Load4(208))), float4(asfloat(params.Load4(224))), float4(asfloat(params.Load4(240))), float4(asfloat(params.Load4(256)))));
+    r_3 += mul(float4(bool4(true, true, false, false).x ? _356.x : 0.0f.xxxx.x, bool4(true, true, false, false).y ? _356.y : 0.0f.xxxx.y, bool4(true, true, false, false).z ? _356.z : 0.0f.xxxx.z, bool4(true, true, false, false).w ? _356.w : 0.0f.xxxx.w), float4x4(float4(asfloat(params.Load4(208))), float4(asfloat(params.Load4(224))), float4(asfloat(params.Load4(240))), float4(asfloat(params.Load4(256)))));
     float4 v2[1];
     v2[0] = r_3;
     float4 a_2 = v2[0];

@@ -96,9 +96,9 @@ kernel void p01_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     spvUnsafeArray<float4, 2> v0;
     v0[0] = r;
     int3 _159 = int3(rx, ry, 1);
-    float4 a_1 = select(float4(0.0), src0.read(uint2(_159.xy), uint(_159.z), 0), bool4(true, false, false, false));
+    float4 a_1 = select(float4(0.0), src0.read(uint2(_159.xy), uint(_159.z), 0), bool4(true, true, false, false));
     int3 _169 = int3(rx, ry, 1);
-    float4 b_1 = select(float4(0.0), src0.read(uint2(_169.xy), uint(_169.z), 0), bool4(true, false, false, false));
+    float4 b_1 = select(float4(0.0), src0.read(uint2(_169.xy), uint(_169.z), 0), bool4(true, true, false, false));
     float4 r_1 = a_1 * b_1;
     v0[1] = r_1;
     float4 r_2 = params.prm[8];
@@ -111,7 +111,7 @@ kernel void p01_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     int3 _311 = int3(rx, ry, 0);
     r_3 += (float4x4(float4(params.prm[9]), float4(params.prm[10]), float4(params.prm[11]), float4(params.prm[12])) * select(float4(0.0), src0.read(uint2(_311.xy), uint(_311.z), 0), bool4(true)));
     int3 _354 = int3(rx, ry, 1);
-    r_3 += (float4x4(float4(params.prm[13]), float4(params.prm[14]), float4(params.prm[15]), float4(params.prm[16])) * select(float4(0.0), src0.read(uint2(_354.xy), uint(_354.z), 0), bool4(true, false, false, false)));
+    r_3 += (float4x4(float4(params.prm[13]), float4(params.prm[14]), float4(params.prm[15]), float4(params.prm[16])) * select(float4(0.0), src0.read(uint2(_354.xy), uint(_354.z), 0), bool4(true, true, false, false)));
     spvUnsafeArray<float4, 1> v2;
     v2[0] = r_3;
     float4 a_2 = v2[0];
@@ -137,7 +137,7 @@ kernel void p01_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     spvUnsafeArray<float4, 1> v6;
     v6[0] = r_7;
     float4 r_8 = v6[gid.z];
-    int3 _435 = int3(gid.xy, gid.z);
-    dst.write(r_8, uint2(_435.xy), uint(_435.z));
+    int3 _436 = int3(gid.xy, gid.z);
+    dst.write(r_8, uint2(_436.xy), uint(_436.z));
 }
 

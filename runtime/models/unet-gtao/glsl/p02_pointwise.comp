@@ -48,16 +48,16 @@ void main() {
     }
     vec4 v0[2];
     {
-    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
-    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
+    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
+    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no guard
     vec4 r = a * b;
     // no epilogue
         v0[0] = r;
     }
     {
-    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
-    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
+    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
+    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no guard
     vec4 r = a * b;
     // no epilogue
@@ -74,8 +74,8 @@ void main() {
     vec4 v2[1];
     {
     vec4 r = prm[17];
-    r += mat4(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
-    r += mat4(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
+    r += mat4(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
+    r += mat4(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no epilogue
         v2[0] = r;
     }
@@ -111,7 +111,7 @@ void main() {
     vec4 r = prm[26];
     r += mat4(prm[18], prm[18 + 1], prm[18 + 2], prm[18 + 3]) * v5[0];
     {
-        vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
+        vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
         vec4 b = r;
     // no guard
         r = a + b;
@@ -122,7 +122,7 @@ void main() {
     vec4 r = prm[27];
     r += mat4(prm[22], prm[22 + 1], prm[22 + 2], prm[22 + 3]) * v5[0];
     {
-        vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
+        vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
         vec4 b = r;
     // no guard
         r = a + b;

@@ -96,9 +96,9 @@ kernel void p02_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     spvUnsafeArray<float4, 2> v0;
     v0[0] = r;
     int3 _160 = int3(rx, ry, 1);
-    float4 a_1 = select(float4(0.0), src0.read(uint2(_160.xy), uint(_160.z), 0), bool4(true, false, false, false));
+    float4 a_1 = select(float4(0.0), src0.read(uint2(_160.xy), uint(_160.z), 0), bool4(true, true, false, false));
     int3 _170 = int3(rx, ry, 1);
-    float4 b_1 = select(float4(0.0), src0.read(uint2(_170.xy), uint(_170.z), 0), bool4(true, false, false, false));
+    float4 b_1 = select(float4(0.0), src0.read(uint2(_170.xy), uint(_170.z), 0), bool4(true, true, false, false));
     float4 r_1 = a_1 * b_1;
     v0[1] = r_1;
     float4 r_2 = params.prm[8];
@@ -111,7 +111,7 @@ kernel void p02_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     int3 _311 = int3(rx, ry, 0);
     r_3 += (float4x4(float4(params.prm[9]), float4(params.prm[10]), float4(params.prm[11]), float4(params.prm[12])) * select(float4(0.0), src0.read(uint2(_311.xy), uint(_311.z), 0), bool4(true)));
     int3 _354 = int3(rx, ry, 1);
-    r_3 += (float4x4(float4(params.prm[13]), float4(params.prm[14]), float4(params.prm[15]), float4(params.prm[16])) * select(float4(0.0), src0.read(uint2(_354.xy), uint(_354.z), 0), bool4(true, false, false, false)));
+    r_3 += (float4x4(float4(params.prm[13]), float4(params.prm[14]), float4(params.prm[15]), float4(params.prm[16])) * select(float4(0.0), src0.read(uint2(_354.xy), uint(_354.z), 0), bool4(true, true, false, false)));
     spvUnsafeArray<float4, 1> v2;
     v2[0] = r_3;
     float4 a_2 = v2[0];
@@ -140,7 +140,7 @@ kernel void p02_pointwise(constant int& u_flip_y [[buffer(0)]], const device Par
     float4 r_8 = params.prm[27];
     r_8 += (float4x4(float4(params.prm[22]), float4(params.prm[23]), float4(params.prm[24]), float4(params.prm[25])) * v5[0]);
     int3 _510 = int3(rx, ry, 1);
-    float4 a_6 = select(float4(0.0), src0.read(uint2(_510.xy), uint(_510.z), 0), bool4(true, false, false, false));
+    float4 a_6 = select(float4(0.0), src0.read(uint2(_510.xy), uint(_510.z), 0), bool4(true, true, false, false));
     float4 b_6 = r_8;
     r_8 = a_6 + b_6;
     v6[1] = r_8;

@@ -6,8 +6,9 @@ layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 layout(set = 0, binding = 0) uniform highp texture2DArray src0;
 layout(set = 0, binding = 1) uniform highp texture2DArray src1;
 layout(set = 0, binding = 2) uniform highp texture2DArray src2;
-layout(set = 0, binding = 3, rgba32f) writeonly uniform highp image2DArray dst;
-layout(std140, set = 0, binding = 4) uniform FrameUniforms {
+layout(set = 0, binding = 3) uniform highp texture2DArray src3;
+layout(set = 0, binding = 4, rgba32f) writeonly uniform highp image2DArray dst;
+layout(std140, set = 0, binding = 5) uniform FrameUniforms {
     vec2 u_proj;               // (P00, P11) of the projection matrix
     float u_radius;            // R, the AO radius in scene units
     float u_pixels_per_unit;   // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
@@ -69,5 +70,5 @@ void main() {
         nao_store(px, 0, vec4(0.0));
         nao_store(px, 1, vec4(0.0));
     }
-    nao_store(px, 2, vec4(nao_load(src2, q, 0).x, 0.0, 0.0, 0.0));
+    nao_store(px, 2, vec4(nao_load(src2, q, 0).x, nao_load(src3, q, 0).x, 0.0, 0.0));
 }

@@ -50,16 +50,16 @@ void main() {
     }
     vec4 v0[2];
     {
-    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
-    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
+    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
+    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no guard
     vec4 r = a * b;
     // no epilogue
         v0[0] = r;
     }
     {
-    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
-    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
+    vec4 a = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
+    vec4 b = mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no guard
     vec4 r = a * b;
     // no epilogue
@@ -76,8 +76,8 @@ void main() {
     vec4 v2[1];
     {
     vec4 r = prm[17];
-    r += mat4(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(5)));
-    r += mat4(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(5)));
+    r += mat4(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 0), 0), lessThan(ivec4(4 * 0) + ivec4(0, 1, 2, 3), ivec4(6)));
+    r += mat4(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * mix(vec4(0.0), texelFetch(src0, ivec3(rx, ry, 1), 0), lessThan(ivec4(4 * 1) + ivec4(0, 1, 2, 3), ivec4(6)));
     // no epilogue
         v2[0] = r;
     }

@@ -4,14 +4,15 @@
 @group(0) @binding(0) var src0: texture_2d_array<f32>;
 @group(0) @binding(1) var src1: texture_2d_array<f32>;
 @group(0) @binding(2) var src2: texture_2d_array<f32>;
-@group(0) @binding(3) var dst: texture_storage_2d_array<rgba32float, write>;
+@group(0) @binding(3) var src3: texture_2d_array<f32>;
+@group(0) @binding(4) var dst: texture_storage_2d_array<rgba32float, write>;
 struct FrameUniforms {
     proj: vec2<f32>,           // (P00, P11) of the projection matrix
     radius: f32,               // R, the AO radius in scene units
     pixels_per_unit: f32,      // 0.5 * H * P11: pixels spanned by one scene unit at depth 1
     flip_y: i32,               // 1: textures bottom-up (GL), 0: row 0 at the top
 };
-@group(0) @binding(4) var<uniform> nao_frame: FrameUniforms;
+@group(0) @binding(5) var<uniform> nao_frame: FrameUniforms;
 
 // GL-order pixel (row 0 at the bottom) <-> texel of a texture of this frame (its own row order).
 fn nao_texel(p: vec2<i32>, size: vec2<i32>) -> vec2<i32> {
@@ -75,5 +76,5 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
         nao_store(px, 0, vec4<f32>(0.0));
         nao_store(px, 1, vec4<f32>(0.0));
     }
-    nao_store(px, 2, vec4<f32>(nao_load(src2, q, 0).x, 0.0, 0.0, 0.0));
+    nao_store(px, 2, vec4<f32>(nao_load(src2, q, 0).x, nao_load(src3, q, 0).x, 0.0, 0.0));
 }

@@ -70,8 +70,10 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     }
     nao_store(px, 0, x);
     var g: f32 = 1.0;
+    var r: f32 = 1.0;
     if (pw.w >= 0.5) {
         g = nao_load(src0, px, 2).x;
+        r = nao_load(src0, px, 2).y;
     }
-    nao_store(px, 1, vec4<f32>(g, 0.0, 0.0, 0.0));
+    nao_store(px, 1, vec4<f32>(r, g, 0.0, 0.0));
 }

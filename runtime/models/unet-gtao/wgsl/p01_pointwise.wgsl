@@ -53,16 +53,16 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     }
     var v0: array<vec4<f32>, 2>;
     {
-    let a = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
-    var b = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
+    let a = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
+    var b = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
     // no guard
     var r = a * b;
     // no epilogue
         v0[0] = r;
     }
     {
-    let a = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
-    var b = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
+    let a = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
+    var b = select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
     // no guard
     var r = a * b;
     // no epilogue
@@ -79,8 +79,8 @@ fn main(@builtin(global_invocation_id) gid_u: vec3<u32>) {
     var v2: array<vec4<f32>, 1>;
     {
     var r = prm[17];
-    r += mat4x4<f32>(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
-    r += mat4x4<f32>(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(5));
+    r += mat4x4<f32>(prm[9], prm[9 + 1], prm[9 + 2], prm[9 + 3]) * select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 0)), vec4<i32>(4 * 0) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
+    r += mat4x4<f32>(prm[13], prm[13 + 1], prm[13 + 2], prm[13 + 3]) * select(vec4<f32>(0.0), nao_fetch(src0, vec3<i32>(rx, ry, 1)), vec4<i32>(4 * 1) + vec4<i32>(0, 1, 2, 3) < vec4<i32>(6));
     // no epilogue
         v2[0] = r;
     }
