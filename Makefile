@@ -129,13 +129,18 @@ corpus-full: $(CORPUS_FULL) ## Render and label the composed-room corpus of the 
 # `make corpus-large curve models evaluate`.
 MODELS_CONFIG := configs/models.json
 MODELS ?=
+# The Unity, Unreal and Godot wrappers of docs/engines written again from the installed models' manifests.
+ENGINE_DOCS = for f in runtime/models/*/model.onnx; do m=$$(basename $$(dirname $$f)); \
+	$(PY) -m neuralao.export.glsl.engines $$f $$m docs/engines || exit 1; done
 models: $(CORPUS_LARGE) $(MODELS_CONFIG) | $(STAMP) ## Train, export, check and install the release U-Nets (configs/models.json)
 	$(NEURALAO) ship $(MODELS_CONFIG) $(if $(MODELS),--only $(MODELS))
+	$(ENGINE_DOCS)
 
 # The installed models' shaders regenerated from their committed ONNX files (no corpus, no training): after
 # a change of the shader generator. Checked against onnxruntime before each folder is replaced.
 model-shaders: $(MODELS_CONFIG) | $(STAMP) ## Regenerate the shipped models' shaders from their ONNX files (no training)
 	$(NEURALAO) ship $(MODELS_CONFIG) --shaders-only $(if $(MODELS),--only $(MODELS))
+	$(ENGINE_DOCS)
 
 # Learning curves of the screen-space U-Net on the larger corpus (configs/curve.json): one run per line of
 # the config, snapshots at 0.25-4 hours scored on the validation split and the test categories against

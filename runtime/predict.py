@@ -168,12 +168,23 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
     up = scales_up(version)
     scaled = at_internal_resolution(predict, internal_height, residual_of="gtao" if hybrid else None, up=up)
 
-    def predict_frame(frame: FrameLike, radius: float | None = None) -> np.ndarray:
+    def predict_frame(frame: FrameLike, radius: float | None = None, gtao: dict | None = None) -> np.ndarray:
+        """``gtao``: a hybrid's GTAO images at the frame's size (``gtao``, and ``gtao_raw`` where it reads
+        the pass before the blur) made elsewhere, an engine's, instead of this runtime's GTAO."""
         check_unet_frame(frame)
         check_network_size(np.shape(frame["depth"]), internal_height, onnx_path, up)
         if not hybrid:
             return scaled(frame, radius)
-        return scaled(dict(frame) | hybrid_gtao(frame, frame_radius(frame, radius), blur, raw), radius)
+        if gtao is None:
+            gtao = hybrid_gtao(frame, frame_radius(frame, radius), blur, raw)
+        needed = ("gtao", "gtao_raw") if raw else ("gtao",)
+        if sorted(gtao) != sorted(needed) or any(
+            np.shape(gtao[k]) != np.shape(frame["depth"]) for k in needed
+        ):
+            raise NeuralaoError(
+                f"{onnx_path} reads GTAO images {', '.join(needed)}, each of the frame's size"
+            )
+        return scaled(dict(frame) | gtao, radius)
 
     return predict_frame
 

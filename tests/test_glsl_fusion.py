@@ -119,13 +119,15 @@ def test_the_shipped_unet_fuses_the_pad_every_pool_and_resize():
     assert _kinds(cpu.manifest).count("pool_avg") == 3 and _kinds(cpu.manifest).count("resize_linear") == 3
     assert not {"pad", "pool_avg", "resize_linear"} & set(_kinds(gpu.manifest))
     assert len(gpu.manifest["passes"]) == 14 and len(cpu.manifest["passes"]) == 32
-    x = np.random.default_rng(6).normal(size=(1, 5, 29, 35)).astype(np.float32)
+    channels = model.graph.input[0].type.tensor_type.shape.dim[1].dim_value  # 5 or 6: GTAO's images
+    x = np.random.default_rng(6).normal(size=(1, channels, 29, 35)).astype(np.float32)
     x[:, 0] = np.abs(x[:, 0]) + 0.5  # depth
     padded = np.pad(x, ((0, 0), (0, 0), (0, 3), (0, 5)), mode="reflect")
     feeds = {"gbuffer": padded, "radius": np.full((1, 1, 1, 1), 0.3, np.float32)}
     ref = run_onnxruntime(model.SerializeToString(), feeds)[0][:, :, :29, :35]
     got = next(iter(run_compute_all(gpu, x, scalars={"radius": 0.3}).values()))
-    assert got.shape == ref.shape and float(np.abs(got - ref).max()) <= TOL.glsl_op_fp32
+    # the whole network: a U-Net's tolerance, not one op's
+    assert got.shape == ref.shape and float(np.abs(got - ref).max()) <= TOL.parity_unet_fp32
 
 
 @pytest.mark.parametrize(

@@ -65,14 +65,13 @@ def cross_export(request, tmp_path_factory):
 
 def _gbuffer(channels: int, height: int, width: int, seed: int) -> np.ndarray:
     """(1, C, H, W) float32 network input of the shipped layout: log depth, a unit normal facing the
-    camera, and for the hybrid a GTAO channel in [0, 1]."""
+    camera, and for the hybrid its GTAO channels (one image or two) in [0, 1]."""
     rng = np.random.default_rng(seed)
     x = np.empty((1, channels, height, width), np.float32)
     x[0, 0] = rng.normal(0.0, 0.3, (height, width))
     n = rng.normal(size=(3, height, width)) * 0.4 + np.array([0.0, 0.0, 1.0])[:, None, None]
     x[0, 1:4] = n / np.linalg.norm(n, axis=0)
-    if channels > 4:
-        x[0, 4] = rng.uniform(0.0, 1.0, (height, width))
+    x[0, 4:] = rng.uniform(0.0, 1.0, (channels - 4, height, width))
     return x
 
 

@@ -581,3 +581,27 @@ def test_a_hybrid_trains_on_input_contract_5_and_its_onnx_runs_at_any_height(tin
     with pytest.raises(NeuralaoError, match="preprocess versions 2, 3 and 4, the model has 5") as e:
         export_checkpoint(tmp_path / "v5.pt", tmp_path / "export")
     assert "\n" not in str(e.value)
+
+
+def test_the_predictor_refines_gtao_images_it_is_given(frame):
+    """The shipped default on GTAO images made elsewhere (an engine's): the runtime's own images give its AO
+    bit for bit, other images another AO, and images it does not read, or of another size, are refused."""
+    from neuralao.runtime.baselines import hybrid_gtao
+    from neuralao.runtime.predict import unet_predictor
+    from neuralao.runtime.shipped import default_export
+
+    f, radius = frame
+    f = {k: v for k, v in f.items() if k != "gtao"}
+    onnx_path = default_export("unet") / "model.onnx"
+    predict = unet_predictor(onnx_path)
+    raw = "gtao_raw" in json.dumps(json.loads((onnx_path.parent / "manifest.json").read_text())["metadata"])
+    images = hybrid_gtao(f, radius, raw=raw)
+    np.testing.assert_array_equal(predict(f, radius, gtao=images), predict(f, radius))
+    darker = {k: np.clip(v - 0.2, 0.0, 1.0) for k, v in images.items()}
+    assert np.abs(predict(f, radius, gtao=darker) - predict(f, radius))[f["mask"]].max() > 0.05
+    for wrong in (
+        {"gtao": images["gtao"]} if raw else {**images, "gtao_raw": images["gtao"]},
+        {k: v[:-1] for k, v in images.items()},
+    ):
+        with pytest.raises(NeuralaoError, match="reads GTAO images"):
+            predict(f, radius, gtao=wrong)

@@ -28,7 +28,7 @@ from helpers import needs_chromium
 from neuralao.export.glsl import ComputeProgram
 from neuralao.pipeline import cli
 from neuralao.pipeline.bakes.viewer_inputs import method_from_unet, screen_space_mesh
-from neuralao.runtime.baselines import run_gtao
+from neuralao.runtime.baselines import hybrid_gtao
 from neuralao.runtime.chromium import SWIFTSHADER_WEBGL, headless_chromium, wait_for_page
 from neuralao.runtime.foundation.tolerances import TOL
 from neuralao.runtime.predict import unet_predictor
@@ -105,6 +105,12 @@ def _read_network_texture(driver, ident: str) -> np.ndarray:
     return np.frombuffer(base64.b64decode(r["out"]), np.float32)
 
 
+def hybrid_images(method) -> list[str]:
+    """The GTAO textures a hybrid's network reads: ``gtao``, and ``gtao_raw`` where it reads both images."""
+    textures = method.network["manifest"]["frame"]["textures"]
+    return [k for k in ("gtao", "gtao_raw") if k in textures]
+
+
 def _reference_gbuffer(pos: np.ndarray) -> dict:
     """The project's rasterizer (pipeline/gbuffers/rasterizer.py) from the camera the page uses."""
     from neuralao.pipeline.gbuffers.rasterizer import render_gbuffer
@@ -176,27 +182,36 @@ def test_the_page_runs_the_whole_frame_as_the_references(browser, page, index):
     r = _capture_network(browser, index)
     assert r["model"] == name and r["internal"] == [341, 256]  # round(64 * 256 / 48) x the shipped 256
     frame = _frame(r)
-    references = {"unet_predictor": unet_predictor(method.info["onnx"])(frame, r["radius"])}
-    if hybrid:  # GTAO itself, against the GL fragment shaders
-        gtao = _read_network_texture(browser, "gtao").reshape(H, W)
-        references["run_gtao"] = run_gtao(frame, r["radius"])
-    wgpu_ao = _wgpu_frame(method, frame, r["radius"])
-    if wgpu_ao is not None:
-        references["wgpu"] = wgpu_ao
-    report = []
+    predict = unet_predictor(method.info["onnx"])
+    references, got = {}, {}
+    if hybrid:
+        # GTAO's images against the GL fragment shaders, then the network and its frame passes on the page's
+        # own GTAO: SwiftShader's GTAO differs from llvmpipe's by up to ~7e-5, which the network carries on
+        page_gtao = {k: _read_network_texture(browser, k).reshape(H, W) for k in hybrid_images(method)}
+        for k, expected in hybrid_gtao(frame, r["radius"], raw="gtao_raw" in page_gtao).items():
+            references[f"run_gtao {k}"], got[f"run_gtao {k}"] = expected, page_gtao[k]
+        references["unet_predictor on the page's GTAO"] = predict(frame, r["radius"], gtao=page_gtao)
+    else:
+        references["unet_predictor"] = predict(frame, r["radius"])
+        wgpu_ao = _wgpu_frame(method, frame, r["radius"])
+        if wgpu_ao is not None:
+            references["wgpu"] = wgpu_ao
+    report, worst = [], {}
     for what, expected in references.items():
-        got = gtao if what == "run_gtao" else r["ao"]
-        err = np.abs(got - expected)[frame["mask"]]
+        err = np.abs(got.get(what, r["ao"]) - expected)[frame["mask"]]
         over = np.mean(err > TOL.frame_passes_vs_reference)
         report.append(f"{what} max {err.max():.2e} ({over:.2%} of the foreground > 1e-4)")
-        # GTAO's slice directions are baked constants: SwiftShader's coarse cos / sin move no tap
-        assert float(err.max()) <= TOL.frame_passes_vs_reference, what
+        worst[what] = float(err.max())
     print(
         f"\nWebGPU frame of {name} in Chromium (adapter {r['adapter']!r}, {W}x{H}, network "
         f"{r['internal']}, {r['ms']:.0f} ms) vs " + "; ".join(report)
     )
+    for what, err in worst.items():
+        # GTAO's slice directions are baked constants: SwiftShader's coarse cos / sin move no tap
+        bound = TOL.gtao_other_driver if what.startswith("run_gtao") else TOL.frame_passes_vs_reference
+        assert err <= bound, what
     assert np.all(r["ao"][~frame["mask"]] == 1.0)
-    assert np.ptp(references["unet_predictor"][frame["mask"]]) > 0.05  # a non-trivial AO over the view
+    assert np.ptp(r["ao"][frame["mask"]]) > 0.05  # a non-trivial AO over the view
 
 
 def test_the_command_writes_the_default_hybrid(tmp_path):

@@ -58,7 +58,7 @@ const TEXTURES := {
 const PASSES := {
     "f_gtao": ["f_gtao.spv", ["gtao_raw", 8, 8, 1], [[0, "texture", "depth"], [1, "texture", "normal"], [2, "image", "gtao_raw"], [3, "frame", "FrameUniforms"]]],
     "f_gtao_blur": ["f_gtao_blur.spv", ["gtao", 8, 8, 1], [[0, "texture", "depth"], [1, "texture", "gtao_raw"], [2, "image", "gtao"], [3, "frame", "FrameUniforms"]]],
-    "f_downsample": ["f_downsample.spv", ["low_gbuffer", 8, 8, 1], [[0, "texture", "depth"], [1, "texture", "normal"], [2, "texture", "gtao"], [3, "image", "low_gbuffer"], [4, "frame", "FrameUniforms"]]],
+    "f_downsample": ["f_downsample.spv", ["low_gbuffer", 8, 8, 1], [[0, "texture", "depth"], [1, "texture", "normal"], [2, "texture", "gtao"], [3, "texture", "gtao_raw"], [4, "image", "low_gbuffer"], [5, "frame", "FrameUniforms"]]],
     "f_network_input": ["f_network_input.spv", ["t0", 8, 8, 1], [[0, "texture", "low_gbuffer"], [1, "image", "t0"], [2, "frame", "FrameUniforms"]]],
     "f_network_radius": ["f_network_radius.spv", ["t2", 1, 1, 1], [[0, "image", "t2"], [1, "frame", "FrameUniforms"]]],
     "p01_pointwise": ["p01_pointwise.spv", ["t9", 8, 8, 1], [[0, "texture", "t0"], [1, "texture", "t2"], [2, "image", "t9"], [3, "weights", [0, 288]], [4, "uniform", "u_flip_y"]]],

@@ -141,6 +141,7 @@ public sealed class NeuralAOUnetGtao : System.IDisposable
         shader.SetTexture(k, "src0", tex["depth"]);
         shader.SetTexture(k, "src1", tex["normal"]);
         shader.SetTexture(k, "src2", tex["gtao"]);
+        shader.SetTexture(k, "src3", tex["gtao_raw"]);
         shader.SetTexture(k, "dst", tex["low_gbuffer"]);
         shader.SetConstantBuffer("FrameUniforms", frameUniforms, 0, 32);
         shader.Dispatch(k, CeilDiv(tex["low_gbuffer"].width, 8), CeilDiv(tex["low_gbuffer"].height, 8), 1);

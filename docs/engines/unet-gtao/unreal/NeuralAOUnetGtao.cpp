@@ -103,6 +103,7 @@ FRDGTextureRef AddPasses(FRDGBuilder& GraphBuilder, const FResources& R, FIntPoi
         P->src0 = Srv(TEXT("depth"));
         P->src1 = Srv(TEXT("normal"));
         P->src2 = Srv(TEXT("gtao"));
+        P->src3 = Srv(TEXT("gtao_raw"));
         P->dst = Uav(TEXT("low_gbuffer"));
         P->FrameUniforms = FrameUniformBuffer;
         FComputeShaderUtils::AddPass(GraphBuilder, RDG_EVENT_NAME("f_downsample"), TShaderMapRef<Ff_downsample>(ShaderMap), P,

@@ -67,6 +67,7 @@ public:
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src0)  // t0
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src1)  // t1
         SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src2)  // t2
+        SHADER_PARAMETER_RDG_TEXTURE_SRV(Texture2DArray<float4>, src3)  // t3
         SHADER_PARAMETER_RDG_TEXTURE_UAV(RWTexture2DArray<float4>, dst)  // u0
         SHADER_PARAMETER_RDG_UNIFORM_BUFFER(FFrameUniforms, FrameUniforms)  // b0
     END_SHADER_PARAMETER_STRUCT()
