@@ -529,17 +529,12 @@ def export_folder_at_height(src: str | Path, out_dir: str | Path, internal_heigh
     proto = load_onnx(onnx_in)
     check_unet_onnx(proto, onnx_in)
     trained = manifest.get("trained_internal_height") or manifest.get("internal_height") or None
-    props = {p.key: p for p in proto.metadata_props}
-    if "internal_height" in props:
-        props["internal_height"].value = str(height)
-    else:
-        proto.metadata_props.add(key="internal_height", value=str(height))
-    if "trained_internal_height" in props:
-        proto.metadata_props.remove(props["trained_internal_height"])
+    props = {p.key: p.value for p in proto.metadata_props if p.key != "trained_internal_height"}
+    props["internal_height"] = str(height)
     if trained and int(trained) != height:
-        proto.metadata_props.add(key="trained_internal_height", value=str(trained))
+        props["trained_internal_height"] = str(trained)
     out_dir.mkdir(parents=True, exist_ok=True)
-    onnx_path = save_onnx(proto, out_dir / "model.onnx")
+    onnx_path = save_onnx(proto, out_dir / "model.onnx", props)
     glsl_dir = write_glsl(proto, out_dir / "glsl", "fp32")
     meta = check_unet_onnx(proto, onnx_path)
     # what was measured at the trained rows (test scores, times, parity) does not describe these rows

@@ -177,13 +177,14 @@ def unet_predictor(onnx_path: str | Path, internal_height: int | str | None = "m
             return scaled(frame, radius)
         if gtao is None:
             gtao = hybrid_gtao(frame, frame_radius(frame, radius), blur, raw)
-        needed = ("gtao", "gtao_raw") if raw else ("gtao",)
-        if sorted(gtao) != sorted(needed) or any(
-            np.shape(gtao[k]) != np.shape(frame["depth"]) for k in needed
-        ):
-            raise NeuralaoError(
-                f"{onnx_path} reads GTAO images {', '.join(needed)}, each of the frame's size"
-            )
+        else:  # an engine's images: the ones this model reads, at the frame's size
+            needed = ("gtao", "gtao_raw") if raw else ("gtao",)
+            if sorted(gtao) != sorted(needed) or any(
+                np.shape(gtao[k]) != np.shape(frame["depth"]) for k in needed
+            ):
+                raise NeuralaoError(
+                    f"{onnx_path} reads GTAO images {', '.join(needed)}, each of the frame's size"
+                )
         return scaled(dict(frame) | gtao, radius)
 
     return predict_frame

@@ -106,11 +106,11 @@ class Tolerances:
     # cos / sin, off by up to 1.9e-4, move no horizon tap; its other cos / sin / acos stay smooth); a
     # wrong tap, row order or formula is off by > 1e-2.
     frame_passes_vs_reference: float = 1e-4
-    # GTAO's images (before and after its blur) computed by another driver's math than the GL reference's:
-    # Chromium's WebGPU on SwiftShader, whose WGSL cos / sin / acos are off by up to 1.9e-4 (the slice
-    # directions are baked, so no horizon tap moves; the integrand's cos / sin move the value smoothly).
-    # Measured max 1.15e-4 before the blur and 6.8e-5 after it (tests/test_viewer_webgpu.py); a wrong
-    # tap, noise texel or row order is off by > 1e-2.
+    # GTAO's pass before its blur computed by another driver's math than the GL reference's: Chromium's
+    # WebGPU on SwiftShader, whose WGSL cos / sin / acos are off by up to 1.9e-4 (the slice directions are
+    # baked, so no horizon tap moves; the integrand's cos / sin move the value smoothly). Measured max
+    # 1.15e-4 (tests/test_viewer_webgpu.py; after the blur, which averages it, 6.8e-5, held to
+    # frame_passes_vs_reference); a wrong tap, noise texel or row order is off by > 1e-2.
     gtao_other_driver: float = 2e-4
     # The same view at 256 and at 1024 pixels, the 1024 AO averaged over 4 x 4 foreground blocks, with
     # the network at the internal height 256: mean |difference| over foreground (tests/
