@@ -266,6 +266,49 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     assert (out / "level_baked.glb").read_bytes() == first
 
 
+def test_a_big_piece_of_small_components_is_solved_in_groups_of_them(baked, tmp_path):
+    """With ``trace.subdomains``, a piece of at least ``component_vertices`` vertices none of whose
+    components is that big (the first buildings' piece: 144 vertices, 36 components of 4) is solved as
+    ``subdomains`` tasks, each a group of whole components, beside the terrain's subdomains' assembly;
+    every static vertex gets the AO of the pieces' one-task solves, the groups' files are joined into the
+    piece's, and a rerun reads that file back and writes the same bytes."""
+    root, level, cfg, info = baked
+    overrides = ["trace.subdomains=4", "trace.component_vertices=100", "lod.enabled=false", "piece_faces=100"]
+    s = load_level_settings(cfg, overrides)
+    out = tmp_path / "groups"
+    grouped = bake_level(level, s, out)
+    bake_level(level, load_level_settings(cfg, overrides[2:]), tmp_path / "components")
+    _assert_same_static_ao(tmp_path / "components", out, atol=1e-6)
+    per_wave = np.bincount(grouped["task_waves"]["solve"])
+    # the component check (the terrain's mesh: the buildings' meshes are smaller than 100 vertices), then
+    # the terrain's 4 subdomains' assembly beside the buildings' 4 groups and the last piece's solve
+    assert per_wave[0] == 1 and per_wave[1] == 4 + 4 + 1 and set(per_wave[2:]) == {4}
+    assert sorted(f.name for f in (out / "stages" / "solve").glob("*.npz")) == [
+        "p00000.npz",
+        "p00001.npz",
+        "p00002.npz",
+    ]
+    first = (out / "level_baked.glb").read_bytes()
+    (out / "stages" / "solve.npz").unlink()
+    (out / "level_baked.glb").unlink()
+    again = bake_level(level, s, out)
+    assert _row(again, "solve").get("tasks", 0) == 0  # every piece's file read back
+    assert (out / "level_baked.glb").read_bytes() == first
+
+
+def test_component_groups_pack_whole_components_evenly():
+    """Components packed largest first into the emptiest group: sizes 5, 4, 3, 3, 1 in two groups give 8 and
+    8; a component is never split; with more groups than components the others stay empty."""
+    from neuralao.pipeline.bakes.level_stages import component_groups
+
+    components = np.repeat(np.arange(5), [3, 5, 1, 4, 3])  # component c's vertices, sizes 3 5 1 4 3
+    groups = component_groups(components, 2)
+    assert np.bincount(groups).tolist() == [8, 8]
+    for c in range(5):
+        assert len(set(groups[components == c])) == 1
+    assert np.bincount(component_groups(components, 8), minlength=8).tolist() == [5, 4, 3, 3, 1, 0, 0, 0]
+
+
 # The stages a bake stores under OUT/stages/ (each with its own key).
 STORED = {"trace", "solve", "small_decorators", "lod", "lod_check", "blend_check", "decorators"}
 

@@ -248,14 +248,15 @@ def test_two_node_level_bake_in_subdomains_driver_killed_mid_solve_resumes_to_sa
     cluster, local_level, tmp_path
 ):
     """The terrain's piece solved in subdomains, each subdomain's rows of the equations made by its worker
-    (on either node) from the piece's samples there: the driver is killed once the pieces solved beside the
-    subdomains' assembly are written, and the rerun ends with the bytes of a local bake of the same
-    settings."""
+    (on either node) from the piece's samples there, the first buildings' piece (144 vertices in 36
+    components) in groups of its components, a task each: the driver is killed once the pieces and groups
+    solved beside the subdomains' assembly are written, and the rerun ends with the bytes of a local bake of
+    the same settings."""
     from neuralao.pipeline.bakes.level import bake_level
     from neuralao.pipeline.bakes.level_settings import load_level_settings
 
     level, cfg, *_ = local_level
-    split = ["trace.subdomains=4", "trace.component_vertices=200"]
+    split = ["trace.subdomains=4", "trace.component_vertices=100"]
     local = tmp_path / "local"
     info = bake_level(level, load_level_settings(cfg, [*LEVEL_TASKS, *split]), local)
     assert next(st for st in info["stages"] if st["stage"] == "solve")["seconds_driver"] > 0

@@ -11,6 +11,7 @@ skips the files it finds, and the driver's memory is one piece's, not the level'
 from __future__ import annotations
 
 import copy
+import heapq
 import threading
 import time
 import zipfile
@@ -45,6 +46,7 @@ from neuralao.pipeline.geometry.least_squares import (
     solve_amg,
     touching_faces,
     vertex_equations,
+    with_ridge,
 )
 from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import (
@@ -62,6 +64,7 @@ from neuralao.pipeline.geometry.surface import (
     samples_per_face,
     surface_samples,
     vertex_colours,
+    vertex_components,
 )
 from neuralao.pipeline.tracing.labeller import LabelSettings
 from neuralao.pipeline.tracing.level_tracer import LevelLabeller, resample_in_spheres
@@ -400,10 +403,15 @@ def solve_stage(
         p.index for p in todo if any(largest.get(m, 0) >= t.component_vertices for m in meshes(index, p))
     }
     here = [p for p in big if p.index in found or files.has(piece_stem(p))]
-    stems = frozenset(piece_stem(p) for p in here)
-    files.keep_only({piece_stem(p) for p in pieces})
+    # A big piece of small components only (a soup, a piece of many instances): its components in groups,
+    # a task each (they share no vertex: each group's equations are its own).
+    grouped = [p for p in todo if p.index not in found]
+    stems = frozenset(piece_stem(p) for p in here + grouped)
     rest = [p for p in pieces if piece_stem(p) not in stems]
     jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
+    groups = group_jobs(ctx, grouped, rule, trace_files, s, whole, files.key)
+    jobs += groups
+    files.keep_only({piece_stem(p) for p in pieces} | {stem for stem, _ in jobs})
     # The other pieces' solves run beside the first big piece's assembly, in one wave: on many machines they
     # then take no wave of their own after the big pieces' iterations.
     beside = unfinished(files, jobs, keys)
@@ -417,9 +425,112 @@ def solve_stage(
             files.put(piece_stem(p), result)
             fresh.add(piece_stem(p))
             beside = []
-    yield from run_to_files(files, runner, jobs, "solve", progress, stems, keys)
+    group_stems = {stem for stem, _ in groups}
+    for stem, result, reused in run_to_files(files, runner, jobs, "solve", progress, stems, keys):
+        if stem not in group_stems:
+            yield stem, result, reused
+    for p in grouped:  # its groups' results joined into the piece's
+        files.put(piece_stem(p), joined_groups(files, p, t.subdomains))
+        for g in range(t.subdomains):
+            files.path(group_stem(p, g)).unlink(missing_ok=True)
+        fresh.add(piece_stem(p))
     for stem in sorted(stems):
         yield stem, files.get(stem, keys), stem not in fresh
+
+
+def group_stem(piece: Piece, group: int) -> str:
+    return f"{piece_stem(piece)}_g{group:04d}"
+
+
+def group_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole, key: str):
+    """(stem, task maker) per group of each of ``pieces``: ``trace.subdomains`` groups of its whole connected
+    components (:func:`component_groups`), a task each (:func:`_solve_group`). The piece's traces travel
+    to each worker once (a :class:`Shared` item under the solve's ``key`` and the piece)."""
+    jobs, last = [], {}
+
+    def source(p: Piece) -> Shared:
+        if last.get("piece") != p.index:
+            ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
+            rows = PieceRows(p, rule, ao, valid, s.trace.alpha, whole)
+            last.update(piece=p.index, source=Shared(content_key(key, "groups", piece_stem(p)), rows))
+        return last["source"]
+
+    count = s.trace.subdomains
+    for p in pieces:
+        for g in range(count):
+            jobs.append((group_stem(p, g), lambda p=p, g=g: Task(ctx, _solve_group, (source(p), g, count))))
+    return jobs
+
+
+def component_groups(components: np.ndarray, count: int) -> np.ndarray:
+    """(n,) int64: the group of each vertex, given its connected component (``components`` (n,)): the
+    components packed, largest first, each into the group of fewest vertices so far (the lowest of equal
+    ones), ``count`` groups whose sizes differ by at most the largest component's."""
+    sizes = np.bincount(components)
+    heap = [(0, g) for g in range(count)]
+    of = np.empty(len(sizes), np.int64)
+    for c in np.argsort(-sizes, kind="stable"):
+        load, g = heapq.heappop(heap)
+        of[c] = g
+        heapq.heappush(heap, (load + int(sizes[c]), g))
+    return of[components]
+
+
+# A worker's latest pieces' component groups, by (bake, piece, group count).
+_GROUPS: OrderedDict[tuple, np.ndarray] = OrderedDict()
+
+
+def _solve_group(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: the least squares of one group of whole connected components of a piece
+    (:func:`group_jobs`), its vertices' rows made here (:class:`PieceRows`), then one sparse direct solve
+    with the ridge of the group's own diagonal. The result's "v" (vertices, 2) float32 in [0, 1] and
+    "vertices" (the piece's numbers, ascending)."""
+    source, group, count = args
+    t0 = time.perf_counter()
+    piece = source.piece
+    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
+    labels = remembered(
+        _GROUPS,
+        (state.key, piece.index, count),
+        lambda: component_groups(vertex_components(scene.faces, len(scene.vertices)), count),
+    )
+    vertices = np.flatnonzero(labels == group)
+    v = np.zeros((0, 2))
+    if len(vertices):
+        columns, rows, rhs = source.rows(state, vertices)
+        if not np.array_equal(columns, vertices):  # whole components couple to nothing outside them
+            raise NeuralaoError(f"piece {piece.index}: a group of whole components has rows outside it")
+        a, b = with_ridge(rows, rhs.reshape(len(vertices), -1), source.whole.prior)
+        t1 = time.perf_counter()
+        v = splu(a).solve(b)
+    else:
+        t1 = time.perf_counter()
+    took = time.perf_counter() - t1
+    return {
+        "vertices": vertices,
+        "v": np.clip(v, 0.0, 1.0).astype(np.float32),
+        "seconds_assembly": np.array(t1 - t0),
+        "seconds_blocks": np.array(took),
+        "seconds_largest_block": np.array(took),
+        "seconds_driver": np.array(0.0),
+    }
+
+
+def joined_groups(files: TaskFiles, piece: Piece, count: int) -> dict[str, np.ndarray]:
+    """A piece's solve result (as :func:`_solve_piece`'s) from its ``count`` groups' files."""
+    v = np.full((piece.nv, 2), np.nan, np.float32)
+    times = dict.fromkeys(("assembly", "blocks", "driver"), 0.0) | {"largest_block": 0.0}
+    for g in range(count):
+        stem = group_stem(piece, g)
+        if (r := files.get(stem)) is None:
+            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+        v[r["vertices"]] = r["v"]
+        for k in ("assembly", "blocks", "driver"):
+            times[k] += float(r[f"seconds_{k}"])
+        times["largest_block"] = max(times["largest_block"], float(r["seconds_largest_block"]))
+    if np.isnan(v).any():
+        raise NeuralaoError(f"piece {piece.index}: its component groups do not cover its vertices")
+    return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in times.items()}}
 
 
 def meshes(index: PieceIndex, piece: Piece) -> set[int]:

@@ -331,11 +331,17 @@ def sum_shares(n: int, shares: list[dict[str, np.ndarray]], prior) -> tuple:
     rr = np.concatenate([s["rhs_rows"] for s in shares])
     rv = np.concatenate([s["rhs"].reshape(len(s["rhs"]), -1) for s in shares])
     rhs = np.stack([np.bincount(rr, weights=rv[:, j], minlength=n) for j in range(rv.shape[1])], 1)
+    a, rhs = with_ridge(a, rhs, prior)
+    return a, rhs.reshape((n,) + prior.shape)
+
+
+def with_ridge(a, rhs: np.ndarray, prior) -> tuple:
+    """A (n, n) sparse and rhs (n, c) with the module-doc ridge toward ``prior`` (a scalar or (c,)): RIDGE_REL
+    times A's largest diagonal entry (1 when none is positive). Returns (A csc, rhs (n, c) float64)."""
     diag = a.diagonal()
     ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
-    a = (a + ridge * sp.identity(n, format="csc")).tocsc()
-    rhs = rhs + ridge * prior.reshape(1, -1)
-    return a, rhs.reshape((n,) + prior.shape)
+    a = (a + ridge * sp.identity(a.shape[0], format="csc")).tocsc()
+    return a, rhs + ridge * np.asarray(prior, np.float64).reshape(1, -1)
 
 
 def fit_least_squares(

@@ -76,6 +76,7 @@ from scipy.sparse.linalg import splu
 
 from neuralao.pipeline.engines.engine import Context, Shared, Task, no_state
 from neuralao.pipeline.geometry.least_squares import RIDGE_REL
+from neuralao.pipeline.geometry.surface import vertex_components
 from neuralao.runtime.foundation.errors import NeuralaoError
 
 # Relative residual (2-norm, per column) at which CG stops: the level's multigrid CG's. Measured max abs
@@ -211,12 +212,6 @@ class _FaceGraph:
         out[self.faces[(label[:, 0] != label[:, 1]) | (label[:, 1] != label[:, 2])].reshape(-1)] = True
         return out
 
-    def components(self) -> np.ndarray:
-        """(n,) int64 connected component of each vertex (a vertex in no face: one of its own)."""
-        e = self.faces[:, [0, 1, 1, 2]].reshape(-1, 2)
-        graph = sp.coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(self.n, self.n))
-        return connected_components(graph, directed=False)[1].astype(np.int64)
-
 
 def grow(
     graph,
@@ -266,7 +261,8 @@ def mesh_partition(
     corners of every face, so its graph is the faces' (a face of zero area adds only zeros, but here it
     joins its corners). ``connected``: every vertex is in one connected component."""
     graph = _FaceGraph(faces, len(points))
-    return _partition(points, count, overlap, graph, None if connected else graph.components())
+    component = None if connected else vertex_components(faces, len(points))
+    return _partition(points, count, overlap, graph, component)
 
 
 def _partition(

@@ -213,12 +213,14 @@ def vertex_colours(ao: np.ndarray) -> np.ndarray:
     return np.stack([g, g, g, np.full_like(g, 255)], axis=1)
 
 
-def largest_component(faces: np.ndarray, n: int) -> int:
-    """Vertices in the largest connected component of a mesh of ``n`` vertices and ``faces`` (f, 3) (vertices
-    joined by a face are connected; a vertex in no face is a component of its own); 0 without vertices."""
-    if n == 0:
-        return 0
+def vertex_components(faces: np.ndarray, n: int) -> np.ndarray:
+    """(n,) int64: the connected component of each vertex of a mesh of ``n`` vertices and ``faces`` (f, 3)
+    (vertices joined by a face are connected; a vertex in no face is a component of its own)."""
     e = np.asarray(faces, np.int64)[:, [0, 1, 1, 2]].reshape(-1, 2)
     graph = sp.coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    return int(np.bincount(label).max())
+    return connected_components(graph, directed=False)[1].astype(np.int64)
+
+
+def largest_component(faces: np.ndarray, n: int) -> int:
+    """Vertices in the largest connected component (:func:`vertex_components`); 0 without vertices."""
+    return int(np.bincount(vertex_components(faces, n)).max()) if n else 0
