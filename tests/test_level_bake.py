@@ -270,8 +270,8 @@ def test_a_big_piece_of_small_components_is_solved_in_groups_of_them(baked, tmp_
     """With ``trace.subdomains``, a piece of at least ``component_vertices`` vertices none of whose
     components is that big (the first buildings' piece: 144 vertices, 36 components of 4) is solved as
     ``subdomains`` tasks, each a group of whole components, beside the terrain's subdomains' assembly;
-    every static vertex gets the AO of the pieces' one-task solves, the groups' files are joined into the
-    piece's, and a rerun reads that file back and writes the same bytes."""
+    every static vertex gets the AO of the pieces' one-task solves, the groups' results are written as the
+    piece's one file, and a rerun reads that file back and writes the same bytes."""
     root, level, cfg, info = baked
     overrides = ["trace.subdomains=4", "trace.component_vertices=100", "lod.enabled=false", "piece_faces=100"]
     s = load_level_settings(cfg, overrides)

@@ -409,33 +409,44 @@ def solve_stage(
     stems = frozenset(piece_stem(p) for p in here + grouped)
     rest = [p for p in pieces if piece_stem(p) not in stems]
     jobs = solve_jobs(ctx, rest, rule, trace_files, s, whole)
-    groups = group_jobs(ctx, grouped, rule, trace_files, s, whole, files.key)
-    jobs += groups
-    files.keep_only({piece_stem(p) for p in pieces} | {stem for stem, _ in jobs})
-    # The other pieces' solves run beside the first big piece's assembly, in one wave: on many machines they
-    # then take no wave of their own after the big pieces' iterations.
-    beside = unfinished(files, jobs, keys)
-    fresh = set()
+    files.keep_only({piece_stem(p) for p in pieces})
+    # The other pieces' solves and the groups run beside the first big piece's assembly, in one wave: on many
+    # machines they then take no wave of their own after the big pieces' iterations. A group's result is
+    # kept here until its piece's are all in (then written as the piece's: a rerun redoes a piece's groups).
+    pending = unfinished(files, jobs, keys) + group_jobs(ctx, grouped, rule, trace_files, s, whole, files.key)
+    parts: dict[int, list] = {p.index: [] for p in grouped}
+    owner = {group_stem(p, g): p for p in grouped for g in range(t.subdomains)}
+
+    def deliver(i: int, result: dict[str, np.ndarray]) -> None:
+        stem = pending[i][0]
+        if (p := owner.get(stem)) is None:
+            files.put(stem, result)
+            return
+        parts[p.index].append(result)
+        if len(parts[p.index]) == t.subdomains:
+            files.put(piece_stem(p), joined_groups(p, parts.pop(p.index)))
+
+    fresh = {stem for stem, _ in pending if stem not in owner} | {piece_stem(p) for p in grouped}
     for p in here:
         if not files.has(piece_stem(p)):
             # one mesh's instance whose largest component is all of it: one component, the cores' aggregates
             (mesh,) = meshes(index, p) if p.stop - p.first == 1 else (None,)
             connected = mesh is not None and largest.get(mesh) == p.nv
-            result = _solve_piece_here(runner, ctx, p, rule, trace_files, s, whole, beside, files, connected)
+            here_args = (rule, trace_files, s, whole, pending, deliver, connected)
+            result = _solve_piece_here(runner, ctx, p, *here_args)
             files.put(piece_stem(p), result)
             fresh.add(piece_stem(p))
-            beside = []
-    group_stems = {stem for stem, _ in groups}
-    for stem, result, reused in run_to_files(files, runner, jobs, "solve", progress, stems, keys):
-        if stem not in group_stems:
-            yield stem, result, reused
-    for p in grouped:  # its groups' results joined into the piece's
-        files.put(piece_stem(p), joined_groups(files, p, t.subdomains))
-        for g in range(t.subdomains):
-            files.path(group_stem(p, g)).unlink(missing_ok=True)
-        fresh.add(piece_stem(p))
-    for stem in sorted(stems):
-        yield stem, files.get(stem, keys), stem not in fresh
+            pending = []
+    if pending:
+        with tqdm(total=len(pending), desc="solve", disable=not progress, leave=False) as bar:
+            for i, result in runner.map(make() for _, make in pending):
+                deliver(i, result)
+                bar.update(1)
+    for p in pieces:
+        stem = piece_stem(p)
+        if (data := files.get(stem, keys)) is None:
+            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+        yield stem, data, stem not in fresh
 
 
 def group_stem(piece: Piece, group: int) -> str:
@@ -516,14 +527,12 @@ def _solve_group(state: PieceState, args) -> dict[str, np.ndarray]:
     }
 
 
-def joined_groups(files: TaskFiles, piece: Piece, count: int) -> dict[str, np.ndarray]:
-    """A piece's solve result (as :func:`_solve_piece`'s) from its ``count`` groups' files."""
+def joined_groups(piece: Piece, groups: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """A piece's solve result (as :func:`_solve_piece`'s) from its groups' (:func:`_solve_group`), in any
+    order."""
     v = np.full((piece.nv, 2), np.nan, np.float32)
-    times = dict.fromkeys(("assembly", "blocks", "driver"), 0.0) | {"largest_block": 0.0}
-    for g in range(count):
-        stem = group_stem(piece, g)
-        if (r := files.get(stem)) is None:
-            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+    times = dict.fromkeys(("assembly", "blocks", "driver", "largest_block"), 0.0)
+    for r in groups:
         v[r["vertices"]] = r["v"]
         for k in ("assembly", "blocks", "driver"):
             times[k] += float(r[f"seconds_{k}"])
@@ -568,7 +577,7 @@ def _solve_piece_here(
     s,
     whole,
     beside=(),
-    files=None,
+    deliver=None,
     connected: bool = False,
 ):
     """:func:`_solve_piece` with the driver as the coordinator, its equations never whole anywhere: the
@@ -577,8 +586,8 @@ def _solve_piece_here(
     rows from the piece's samples on the faces that touch it (:class:`PieceRows`, the first wave) and keeps
     them for the CG's steps, and the coarse system is added up here from their shares. The driver reads the
     piece's traces and makes its vertices, not its samples, and drops everything with the result.
-    ``beside``: jobs (stem, task maker) of other pieces run in the first wave, each result put in ``files``
-    as it arrives."""
+    ``beside``: jobs (stem, task maker) of other pieces run in the first wave, each result handed to
+    ``deliver(index in beside, result)`` as it arrives."""
     level, index, _ = ctx.value()
     t0 = time.perf_counter()
     scene = piece_scene(level, index, piece)
@@ -596,7 +605,7 @@ def _solve_piece_here(
         info=info,
         ridge=whole.prior,
         beside=(make() for _, make in beside),
-        aside=lambda i, r: files.put(beside[i][0], r),
+        aside=deliver,
     )
     v = np.clip(x, 0.0, 1.0).astype(np.float32)
     timing = {
