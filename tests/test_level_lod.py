@@ -64,6 +64,22 @@ def test_tiles_cover_a_piece_once_and_keep_their_cuts():
     assert len(whole_f) < len(f) // 4  # untiled, the flat interior goes
 
 
+def test_tiles_hold_equal_face_counts_where_faces_crowd():
+    """A grid with a 40 x 40 grid over one of its cells (most of the faces, crowded in a corner): the tiles
+    still hold as many faces as each other, to one (a uniform grid of cells gave one tile most of them)."""
+    parts_v, parts_f = [], []
+    for size, m in ((8.0, 8), (1.0, 40)):  # an 8 x 8 grid of unit cells, then a fine one over its corner
+        gx, gz = np.meshgrid(np.linspace(0, size, m + 1), np.linspace(0, size, m + 1), indexing="ij")
+        q = (np.arange(m)[:, None] * (m + 1) + np.arange(m)[None, :]).ravel()
+        faces = np.r_[np.c_[q, q + 1, q + m + 1], np.c_[q + 1, q + m + 2, q + m + 1]]
+        parts_f.append(faces + sum(len(v) for v in parts_v))
+        parts_v.append(np.c_[gx.ravel(), np.full(gx.size, 0.5 * len(parts_v)), gz.ravel()])
+    scene = scene_from_arrays(np.concatenate(parts_v), np.concatenate(parts_f), "crowded")
+    for tiles in (3, 4, 7):
+        counts = np.bincount(tile_cells(scene, tiles), minlength=tiles)
+        assert counts.sum() == len(scene.faces) and counts.max() - counts.min() <= 1, (tiles, counts)
+
+
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     root = tmp_path_factory.mktemp("level_lod")
