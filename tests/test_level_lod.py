@@ -3,6 +3,8 @@ closed and split-vertex meshes, and per-piece bakes of the tiny level against it
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 import trimesh
@@ -117,6 +119,32 @@ def test_the_simplified_lod_keeps_the_unsimplified_error(tiny):
     for k in ("rmse_vertex", "rmse_least_squares"):
         assert b[k] <= 1.15 * a[k], (k, a[k], b[k])
         assert b[k] < 0.8 * b["rmse_constant"]
+
+
+def test_the_simplifications_run_in_the_solve_s_wave_or_in_the_lod_s_own(tiny, tmp_path):
+    """The per-piece LOD's simplifications need no solved value: a fresh bake runs them in the solve's first
+    wave (the LOD stage runs none), each a task of the solve's row; a bake whose solve is stored runs them
+    in the LOD stage, and both write the same bytes."""
+    root, level, _, simplified = tiny
+    solve = next(s for s in simplified["stages"] if s["stage"] == "solve")
+    lod = next(s for s in simplified["stages"] if s["stage"] == "lod")
+    assert lod["simplify_tasks"] == 0
+    # one piece: its solve and its simplification (one tile), in one wave
+    assert simplified["counts"]["pieces"] == 1 and solve["tasks"] == 2
+    assert simplified["task_waves"]["solve"] == [0, 0]
+    out = tmp_path / "again"
+    shutil.copytree(root / "simplified", out)
+    for name in ("lod", "lod_meshes", "lod_resample"):
+        shutil.rmtree(out / "stages" / name, ignore_errors=True)
+    for name in ("lod.npz", "lod_check.npz", "decorators.npz"):
+        (out / "stages" / name).unlink(missing_ok=True)
+    (out / "level_baked.glb").unlink()
+    cfg = root / "in" / "bake.json"
+    common = ["trace.rays=32", "decorators.local_rays=16", "lod.holdout_samples=1000", "lod.max_error=1.0"]
+    again = bake_level(level, load_level_settings(cfg, common), out)
+    rows = {s["stage"]: s for s in again["stages"]}
+    assert rows["solve"]["reused"] and not rows["lod"]["reused"] and rows["lod"]["simplify_tasks"] == 1
+    assert (out / "level_baked.glb").read_bytes() == (root / "simplified" / "level_baked.glb").read_bytes()
 
 
 def test_a_resampling_block_makes_the_piece_s_points(tmp_path):

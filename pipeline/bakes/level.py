@@ -98,6 +98,7 @@ from neuralao.pipeline.bakes.level_stages import (
     split_lod,
     task_rays,
     trace_jobs,
+    unfinished,
     worker_settings,
 )
 from neuralao.pipeline.engines.engine import LocalEngine, ResultStore, Task, content_key
@@ -489,12 +490,25 @@ def bake_level(
     weight = float(traced["valid_weight"])
     prior = traced["valid_weighted"] / weight if weight > 0 else np.ones(2)
     whole = Whole(weight, rule.area_all, prior)
+    lod_files = TaskFiles(blog.dir / "lod", keys["lod"]) if s.lod.enabled else None
+    # The per-piece LOD's simplifications need no solved value: they run in the solve's first wave, beside
+    # its own tasks (on many machines they then take no wave of their own).
     solved = blog.stored(
         "solve",
         "Least squares solve (both distances)",
         lambda: _summary(
             solve_stage(
-                solve_files, runner, light, pieces, rule, trace_files, s, whole, progress, SOLVE_TIMES
+                solve_files,
+                runner,
+                light,
+                pieces,
+                rule,
+                trace_files,
+                s,
+                whole,
+                progress,
+                SOLVE_TIMES,
+                aside=_lod_ahead(lod_files, light, pieces, s),
             ),
             **{k: lambda r, k=k: float(r[k]) for k in SOLVE_TIMES},
         ),
@@ -511,7 +525,6 @@ def bake_level(
             level, Resampler(runner, ctx, blog.parts("small_decorators"), task_rays(s, runner)), values, s
         ),
     )
-    lod_files = TaskFiles(blog.dir / "lod", keys["lod"]) if s.lod.enabled else None
     lod = None
     if lod_files is not None:
         lod = blog.stored(
@@ -712,19 +725,12 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, 
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
     have_meshes = all(mesh_files.has(stem) for stem in stems)
+    simplified = 0
     if s.lod.max_error is not None and not have_meshes:
-        # Per piece (a big one in tiles), a task each, at one shared error; the pieces' meshes joined from
-        # their tiles here, the radius from the level's median LOD edge.
-        tile_files = TaskFiles(lod_files.folder.parent / "lod_tiles", lod_files.key)
-        jobs = [
-            (
-                f"{piece_stem(p)}_{t:04d}",
-                lambda p=p, t=t, n=n: Task(light, simplify_piece, (p, n, t, s.lod.max_error)),
-            )
-            for p in pieces
-            for n in [lod_tiles(p, s.lod.tile_faces)]
-            for t in range(n)
-        ]
+        # Per piece (a big one in tiles), a task each, at one shared error (those not done beside the solve);
+        # the pieces' meshes joined from their tiles here, the radius from the level's median LOD edge.
+        tile_files, jobs = _lod_tile_jobs(lod_files, light, pieces, s)
+        simplified = len(unfinished(tile_files, jobs))
         edges, tiles = [], []
         for stem, r, _ in run_to_files(tile_files, runner, jobs, "lod simplify", progress):
             edges.append(r["edges"])
@@ -766,14 +772,42 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, 
         pass  # read again, piece by piece, by the summary
     out = _lod_summary(lod_files, pieces)
     out["seconds_simplify"] = np.array(t1 - t0)
-    # The stage's tasks in order: its simplifications (one of the whole level, or one per piece), its
-    # resampling, then a task per piece.
-    per_piece = s.lod.max_error is not None
-    out["simplify_tasks"] = np.array(sum(lod_tiles(p, s.lod.tile_faces) for p in pieces) if per_piece else 1)
+    # The stage's tasks in order: its simplifications (one of the whole level, or those of the pieces and
+    # tiles not made beside the solve), its resampling, then a task per piece.
+    out["simplify_tasks"] = np.array(simplified if s.lod.max_error is not None else int(not have_meshes))
     out["resample_tasks"] = np.array(resample_tasks)
     out["seconds_resample"] = np.array(t2 - t1)
     out["radius"] = np.array(radius)
     return out
+
+
+def _lod_tile_jobs(lod_files: TaskFiles, light, pieces, s: LevelBakeSettings) -> tuple[TaskFiles, list]:
+    """The per-piece LOD's simplifications (``lod.max_error``): their files and (stem, task maker) per piece,
+    or per tile of a piece of more than ``lod.tile_faces`` faces (:func:`simplify_piece`)."""
+    jobs = [
+        (
+            f"{piece_stem(p)}_{t:04d}",
+            lambda p=p, t=t, n=n: Task(light, simplify_piece, (p, n, t, s.lod.max_error)),
+        )
+        for p in pieces
+        for n in [lod_tiles(p, s.lod.tile_faces)]
+        for t in range(n)
+    ]
+    return TaskFiles(lod_files.folder.parent / "lod_tiles", lod_files.key), jobs
+
+
+def _lod_ahead(lod_files: TaskFiles | None, light, pieces, s: LevelBakeSettings):
+    """What the solve's first wave runs beside its own tasks: the per-piece LOD's simplifications that
+    are not done yet (they need no solved value), as (their files, their jobs); None when there are none
+    (no LOD, one global simplification, or the LOD's meshes already made)."""
+    if lod_files is None or s.lod.max_error is None:
+        return None
+    stems = {piece_stem(p) for p in pieces} | {"radius"}
+    if all(lod_mesh_files(lod_files).has(stem) for stem in stems):
+        return None
+    files, jobs = _lod_tile_jobs(lod_files, light, pieces, s)
+    todo = unfinished(files, jobs)
+    return (files, todo) if todo else None
 
 
 # What the LOD stage's summary reads of each piece's result (not its meshes and values).

@@ -380,6 +380,7 @@ def solve_stage(
     whole,
     progress: bool,
     keys: tuple[str, ...] | None = None,
+    aside: tuple[TaskFiles, list] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece with a
     connected component of at least ``trace.component_vertices`` vertices is solved from here in subdomains
@@ -387,7 +388,9 @@ def solve_stage(
     runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`), its steps tasks of ``runner`` under
     ``ctx`` (its workers hold it already). Every other piece is one task. The results are the same bytes with
     any engine: each task is a pure function of its arguments, and the driver adds the results in a fixed
-    order. ``keys``: the arrays of each result read back (None: all)."""
+    order. ``keys``: the arrays of each result read back (None: all). ``aside``: (files, jobs (stem, task
+    maker)) of another stage's tasks that need nothing of this one, run in its first wave, each result put in
+    those files."""
     t = s.trace
     # The subdomains are cut from the mesh before the equations exist: their graph is the faces' when the
     # regulariser couples every face. Without one (alpha 0) a big piece is one task, in subdomains there.
@@ -415,11 +418,19 @@ def solve_stage(
     # machines they then take no wave of their own after the big pieces' iterations. A group's result is
     # kept here until its piece's are all in (then written as the piece's: a rerun redoes a piece's groups).
     pending = unfinished(files, jobs, keys) + group_jobs(ctx, grouped, rule, trace_files, s, whole, files.key)
+    others = len(pending)
+    other_files, other_jobs = aside or (None, [])
+    pending += other_jobs
     parts: dict[int, list] = {p.index: [] for p in grouped}
     owner = {group_stem(p, g): p for p in grouped for g in range(t.subdomains)}
 
+    first = tuple(stem for stem, _ in pending)  # the first wave's, in order
+
     def deliver(i: int, result: dict[str, np.ndarray]) -> None:
-        stem = pending[i][0]
+        stem = first[i]
+        if i >= others:
+            other_files.put(stem, result)
+            return
         if (p := owner.get(stem)) is None:
             files.put(stem, result)
             return
@@ -427,7 +438,7 @@ def solve_stage(
         if len(parts[p.index]) == t.subdomains:
             files.put(piece_stem(p), joined_groups(p, parts.pop(p.index)))
 
-    fresh = {stem for stem, _ in pending if stem not in owner} | {piece_stem(p) for p in grouped}
+    fresh = {stem for stem, _ in pending[:others] if stem not in owner} | {piece_stem(p) for p in grouped}
     for p in here:
         if not files.has(piece_stem(p)):
             # one mesh's instance whose largest component is all of it: one component, the cores' aggregates
