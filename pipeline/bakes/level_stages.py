@@ -43,6 +43,7 @@ from neuralao.pipeline.geometry.least_squares import (
     Whole,
     fit_least_squares,
     normal_equations,
+    ridge_of,
     solve_amg,
     touching_faces,
     vertex_equations,
@@ -417,28 +418,21 @@ def solve_stage(
     # The other pieces' solves and the groups run beside the first big piece's assembly, in one wave: on many
     # machines they then take no wave of their own after the big pieces' iterations. A group's result is
     # kept here until its piece's are all in (then written as the piece's: a rerun redoes a piece's groups).
-    pending = unfinished(files, jobs, keys) + group_jobs(ctx, grouped, rule, trace_files, s, whole, files.key)
+    groups = GroupSolve(ctx, grouped, rule, trace_files, s, whole, files.key)
+    pending = unfinished(files, jobs, keys) + groups.jobs("rows")
     others = len(pending)
     other_files, other_jobs = aside or (None, [])
     pending += other_jobs
-    parts: dict[int, list] = {p.index: [] for p in grouped}
-    owner = {group_stem(p, g): p for p in grouped for g in range(t.subdomains)}
-
     first = tuple(stem for stem, _ in pending)  # the first wave's, in order
 
     def deliver(i: int, result: dict[str, np.ndarray]) -> None:
         stem = first[i]
         if i >= others:
             other_files.put(stem, result)
-            return
-        if (p := owner.get(stem)) is None:
+        elif not groups.take(stem, result):
             files.put(stem, result)
-            return
-        parts[p.index].append(result)
-        if len(parts[p.index]) == t.subdomains:
-            files.put(piece_stem(p), joined_groups(p, parts.pop(p.index)))
 
-    fresh = {stem for stem, _ in pending[:others] if stem not in owner} | {piece_stem(p) for p in grouped}
+    fresh = {stem for stem, _ in pending[:others] if not groups.owns(stem)} | {piece_stem(p) for p in grouped}
     for p in here:
         if not files.has(piece_stem(p)):
             # one mesh's instance whose largest component is all of it: one component, the cores' aggregates
@@ -454,6 +448,12 @@ def solve_stage(
             for i, result in runner.map(make() for _, make in pending):
                 deliver(i, result)
                 bar.update(1)
+    if grouped:  # each group solved with its piece's ridge, from its groups' largest diagonal entries
+        solves = groups.jobs("solve")
+        for i, result in runner.map(make() for _, make in solves):
+            groups.take(solves[i][0], result)
+        for p in grouped:
+            files.put(piece_stem(p), groups.joined(p))
     for p in pieces:
         stem = piece_stem(p)
         if (data := files.get(stem, keys)) is None:
@@ -465,24 +465,71 @@ def group_stem(piece: Piece, group: int) -> str:
     return f"{piece_stem(piece)}_g{group:04d}"
 
 
-def group_jobs(ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole, key: str):
-    """(stem, task maker) per group of each of ``pieces``: ``trace.subdomains`` groups of its whole connected
-    components (:func:`component_groups`), a task each (:func:`_solve_group`). The piece's traces travel
-    to each worker once (a :class:`Shared` item under the solve's ``key`` and the piece)."""
-    jobs, last = [], {}
+class GroupSolve:
+    """The least squares of big pieces of small components only (:func:`solve_stage`), each in
+    ``trace.subdomains`` groups of whole components (:func:`component_groups`), two waves of a task per group:
+    its rows made where it runs (:class:`PieceRows`, kept there for the next) and their largest diagonal
+    entry; then, with the piece's ridge (from the largest of its groups': the one the piece's one-task solve
+    adds, so the values are that solve's), a sparse direct solve (:func:`_group_step`). The piece's traces
+    travel to each worker once (a :class:`Shared` item under the solve's ``key`` and the piece); a group's
+    two tasks go to one worker (``Task.affinity``), and one that lost its rows makes them again. Results are
+    kept here until a piece's are all in (:meth:`joined`: a rerun redoes a piece's groups)."""
 
-    def source(p: Piece) -> Shared:
-        if last.get("piece") != p.index:
-            ao, valid = piece_trace(trace_files, p, s.trace.block_samples)
-            rows = PieceRows(p, rule, ao, valid, s.trace.alpha, whole)
-            last.update(piece=p.index, source=Shared(content_key(key, "groups", piece_stem(p)), rows))
-        return last["source"]
+    def __init__(self, ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole, key):
+        self.ctx, self.pieces, self.rule, self.trace_files = ctx, pieces, rule, trace_files
+        self.s, self.whole, self.key, self.count = s, whole, key, s.trace.subdomains
+        self.owner = {group_stem(p, g): (p, g) for p in pieces for g in range(self.count)}
+        self.largest: dict[int, float] = {}  # piece -> largest diagonal entry of its groups so far
+        self.parts: dict[int, list] = {p.index: [] for p in pieces}
+        self._last: dict[str, Any] = {}
 
-    count = s.trace.subdomains
-    for p in pieces:
-        for g in range(count):
-            jobs.append((group_stem(p, g), lambda p=p, g=g: Task(ctx, _solve_group, (source(p), g, count))))
-    return jobs
+    def owns(self, stem: str) -> bool:
+        return stem in self.owner
+
+    def _source(self, p: Piece) -> Shared:
+        if self._last.get("piece") != p.index:
+            ao, valid = piece_trace(self.trace_files, p, self.s.trace.block_samples)
+            rows = PieceRows(p, self.rule, ao, valid, self.s.trace.alpha, self.whole)
+            shared = Shared(content_key(self.key, "groups", piece_stem(p)), rows)
+            self._last.update(piece=p.index, source=shared)
+        return self._last["source"]
+
+    def jobs(self, step: str) -> list[tuple[str, Callable[[], Task]]]:
+        """(stem, task maker) per group of every piece: its "rows", or its "solve" (after every "rows")."""
+        out = []
+        for i, (stem, (p, g)) in enumerate(self.owner.items()):
+            ridge = ridge_of(self.largest[p.index]) if step == "solve" else None
+
+            def make(p=p, g=g, ridge=ridge, i=i) -> Task:
+                args = (self._source(p), self.key, g, self.count, ridge)
+                return Task(self.ctx, _group_step, args, affinity=i)
+
+            out.append((stem, make))
+        return out
+
+    def take(self, stem: str, result: dict[str, np.ndarray]) -> bool:
+        """Keep a group's result (False: ``stem`` is no group's)."""
+        if stem not in self.owner:
+            return False
+        p, _ = self.owner[stem]
+        if "diagonal" in result:
+            self.largest[p.index] = max(self.largest.get(p.index, -np.inf), float(result["diagonal"]))
+        else:
+            self.parts[p.index].append(result)
+        return True
+
+    def joined(self, piece: Piece) -> dict[str, np.ndarray]:
+        """The piece's solve result (as :func:`_solve_piece`'s) from its groups'."""
+        v = np.full((piece.nv, 2), np.nan, np.float32)
+        times = dict.fromkeys(("assembly", "blocks", "driver", "largest_block"), 0.0)
+        for r in self.parts.pop(piece.index):
+            v[r["vertices"]] = r["v"]
+            for k in ("assembly", "blocks", "driver"):
+                times[k] += float(r[f"seconds_{k}"])
+            times["largest_block"] = max(times["largest_block"], float(r["seconds_largest_block"]))
+        if np.isnan(v).any():
+            raise NeuralaoError(f"piece {piece.index}: its component groups do not cover its vertices")
+        return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in times.items()}}
 
 
 def component_groups(components: np.ndarray, count: int) -> np.ndarray:
@@ -499,35 +546,37 @@ def component_groups(components: np.ndarray, count: int) -> np.ndarray:
     return of[components]
 
 
-# A worker's latest pieces' component groups, by (bake, piece, group count).
+# A worker's latest pieces' component groups, by (bake, piece, group count); and the rows of the groups
+# whose first task ran here, by (solve key, piece, group), until their second takes them.
 _GROUPS: OrderedDict[tuple, np.ndarray] = OrderedDict()
+_GROUP_ROWS: dict[tuple, tuple] = {}
+_GROUP_LOCK = threading.Lock()
 
 
-def _solve_group(state: PieceState, args) -> dict[str, np.ndarray]:
-    """Engine task: the least squares of one group of whole connected components of a piece
-    (:func:`group_jobs`), its vertices' rows made here (:class:`PieceRows`), then one sparse direct solve
-    with the ridge of the group's own diagonal. The result's "v" (vertices, 2) float32 in [0, 1] and
-    "vertices" (the piece's numbers, ascending)."""
-    source, group, count = args
+def _group_step(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: one group of whole connected components of a piece (:class:`GroupSolve`). Without a
+    ridge: its vertices' rows (:class:`PieceRows`), kept here, and their largest diagonal entry. With one:
+    the group's values by one sparse direct solve of its rows (kept, or made again) with that ridge: "v"
+    (vertices, 2) float32 in [0, 1] and "vertices" (the piece's numbers, ascending)."""
+    source, key, group, count, ridge = args
     t0 = time.perf_counter()
     piece = source.piece
-    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
-    labels = remembered(
-        _GROUPS,
-        (state.key, piece.index, count),
-        lambda: component_groups(vertex_components(scene.faces, len(scene.vertices)), count),
-    )
-    vertices = np.flatnonzero(labels == group)
+    mine = (key, piece.index, group)
+    with _GROUP_LOCK:
+        made = _GROUP_ROWS.pop(mine, None) if ridge is not None else None
+    if made is None:
+        made = _group_rows(state, source, group, count)
+    vertices, rows, rhs = made
+    t1 = time.perf_counter()
+    if ridge is None:
+        with _GROUP_LOCK:
+            _GROUP_ROWS[mine] = made
+        diagonal = float(rows.diagonal().max()) if len(vertices) else -np.inf
+        return {"diagonal": np.array(diagonal), "seconds_assembly": np.array(t1 - t0)}
     v = np.zeros((0, 2))
     if len(vertices):
-        columns, rows, rhs = source.rows(state, vertices)
-        if not np.array_equal(columns, vertices):  # whole components couple to nothing outside them
-            raise NeuralaoError(f"piece {piece.index}: a group of whole components has rows outside it")
-        a, b = with_ridge(rows, rhs.reshape(len(vertices), -1), source.whole.prior)
-        t1 = time.perf_counter()
+        a, b = with_ridge(rows, rhs, source.whole.prior, ridge)
         v = splu(a).solve(b)
-    else:
-        t1 = time.perf_counter()
     took = time.perf_counter() - t1
     return {
         "vertices": vertices,
@@ -539,19 +588,22 @@ def _solve_group(state: PieceState, args) -> dict[str, np.ndarray]:
     }
 
 
-def joined_groups(piece: Piece, groups: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """A piece's solve result (as :func:`_solve_piece`'s) from its groups' (:func:`_solve_group`), in any
-    order."""
-    v = np.full((piece.nv, 2), np.nan, np.float32)
-    times = dict.fromkeys(("assembly", "blocks", "driver", "largest_block"), 0.0)
-    for r in groups:
-        v[r["vertices"]] = r["v"]
-        for k in ("assembly", "blocks", "driver"):
-            times[k] += float(r[f"seconds_{k}"])
-        times["largest_block"] = max(times["largest_block"], float(r["seconds_largest_block"]))
-    if np.isnan(v).any():
-        raise NeuralaoError(f"piece {piece.index}: its component groups do not cover its vertices")
-    return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in times.items()}}
+def _group_rows(state: PieceState, source: PieceRows, group: int, count: int) -> tuple:
+    """(vertices, their rows (csr, square: whole components), rhs (vertices, c)) of one group."""
+    piece = source.piece
+    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
+    labels = remembered(
+        _GROUPS,
+        (state.key, piece.index, count),
+        lambda: component_groups(vertex_components(scene.faces, len(scene.vertices)), count),
+    )
+    vertices = np.flatnonzero(labels == group)
+    if not len(vertices):
+        return vertices, None, np.zeros((0, 2))
+    columns, rows, rhs = source.rows(state, vertices)
+    if not np.array_equal(columns, vertices):  # whole components couple to nothing outside them
+        raise NeuralaoError(f"piece {piece.index}: a group of whole components has rows outside it")
+    return vertices, rows, np.asarray(rhs, np.float64).reshape(len(vertices), -1)
 
 
 def meshes(index: PieceIndex, piece: Piece) -> set[int]:

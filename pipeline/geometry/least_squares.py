@@ -335,11 +335,18 @@ def sum_shares(n: int, shares: list[dict[str, np.ndarray]], prior) -> tuple:
     return a, rhs.reshape((n,) + prior.shape)
 
 
-def with_ridge(a, rhs: np.ndarray, prior) -> tuple:
-    """A (n, n) sparse and rhs (n, c) with the module-doc ridge toward ``prior`` (a scalar or (c,)): RIDGE_REL
-    times A's largest diagonal entry (1 when none is positive). Returns (A csc, rhs (n, c) float64)."""
-    diag = a.diagonal()
-    ridge = RIDGE_REL * (float(diag.max()) if diag.size and diag.max() > 0 else 1.0)
+def ridge_of(largest_diagonal: float) -> float:
+    """The module-doc ridge of a system whose largest diagonal entry is ``largest_diagonal``: RIDGE_REL times
+    it (times 1 when it is not positive)."""
+    return RIDGE_REL * (float(largest_diagonal) if largest_diagonal > 0 else 1.0)
+
+
+def with_ridge(a, rhs: np.ndarray, prior, ridge: float | None = None) -> tuple:
+    """A (n, n) sparse and rhs (n, c) with the module-doc ridge toward ``prior`` (a scalar or (c,)):
+    ``ridge``, or None: :func:`ridge_of` A's largest diagonal entry. Returns (A csc, rhs (n, c) float64)."""
+    if ridge is None:
+        diag = a.diagonal()
+        ridge = ridge_of(float(diag.max()) if diag.size else 0.0)
     a = (a + ridge * sp.identity(a.shape[0], format="csc")).tocsc()
     return a, rhs + ridge * np.asarray(prior, np.float64).reshape(1, -1)
 

@@ -75,7 +75,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
 from neuralao.pipeline.engines.engine import Context, Shared, Task, no_state
-from neuralao.pipeline.geometry.least_squares import RIDGE_REL
+from neuralao.pipeline.geometry.least_squares import ridge_of
 from neuralao.pipeline.geometry.surface import vertex_components
 from neuralao.runtime.foundation.errors import NeuralaoError
 
@@ -596,7 +596,7 @@ class _Solve:
         largest = max(float(r["diagonal"]) for r in results)
         ridge = None
         if self.prior is not None:  # normal_equations' ridge toward the prior, on A's largest diagonal entry
-            value = RIDGE_REL * (largest if largest > 0 else 1.0)
+            value = ridge_of(largest)
             prior = np.asarray(self.prior, np.float64).reshape(-1)
             coarse = coarse + sp.diags(value * self.counts)
             ztb = ztb + value * self.counts[:, None] * prior[None, :]
