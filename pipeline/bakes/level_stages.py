@@ -467,7 +467,7 @@ def group_stem(piece: Piece, group: int) -> str:
 
 class GroupSolve:
     """The least squares of big pieces of small components only (:func:`solve_stage`), each in
-    ``trace.subdomains`` groups of whole components (:func:`component_groups`), two waves of a task per group:
+    :func:`group_count` groups of whole components (:func:`component_groups`), two waves of a task per group:
     its rows made where it runs (:class:`PieceRows`, kept there for the next) and their largest diagonal
     entry; then, with the piece's ridge (from the largest of its groups': the one the piece's one-task solve
     adds, so the values are that solve's), a sparse direct solve (:func:`_group_step`). The piece's traces
@@ -477,8 +477,9 @@ class GroupSolve:
 
     def __init__(self, ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole, key):
         self.ctx, self.pieces, self.rule, self.trace_files = ctx, pieces, rule, trace_files
-        self.s, self.whole, self.key, self.count = s, whole, key, s.trace.subdomains
-        self.owner = {group_stem(p, g): (p, g) for p in pieces for g in range(self.count)}
+        self.s, self.whole, self.key = s, whole, key
+        self.count = {p.index: group_count(p, s.trace) for p in pieces}
+        self.owner = {group_stem(p, g): (p, g) for p in pieces for g in range(self.count[p.index])}
         self.largest: dict[int, float] = {}  # piece -> largest diagonal entry of its groups so far
         self.parts: dict[int, list] = {p.index: [] for p in pieces}
         self._last: dict[str, Any] = {}
@@ -501,7 +502,7 @@ class GroupSolve:
             ridge = ridge_of(self.largest[p.index]) if step == "solve" else None
 
             def make(p=p, g=g, ridge=ridge, i=i) -> Task:
-                args = (self._source(p), self.key, g, self.count, ridge)
+                args = (self._source(p), self.key, g, self.count[p.index], ridge)
                 return Task(self.ctx, _group_step, args, affinity=i)
 
             out.append((stem, make))
@@ -530,6 +531,18 @@ class GroupSolve:
         if np.isnan(v).any():
             raise NeuralaoError(f"piece {piece.index}: its component groups do not cover its vertices")
         return {"short": v[:, 0], "long": v[:, 1], **{f"seconds_{k}": np.array(x) for k, x in times.items()}}
+
+
+# A group of a big piece's small components holds about component_vertices / GROUP_SHARE vertices (at most
+# trace.subdomains groups): Table 1's Sponza (175,688 vertices, 6,132 components) in 8 groups of 0.1 s each,
+# about a terrain subdomain's assembly; the 10x world's pieces of houses (524,280) in 21. Smaller groups
+# only add tasks (two each) to the driver's work.
+GROUP_SHARE = 4
+
+
+def group_count(piece: Piece, t: TraceSettings) -> int:
+    """How many groups of its components :class:`GroupSolve` solves ``piece`` in."""
+    return max(1, min(t.subdomains, -(-GROUP_SHARE * piece.nv // t.component_vertices)))
 
 
 def component_groups(components: np.ndarray, count: int) -> np.ndarray:
