@@ -52,7 +52,6 @@ from neuralao.pipeline.geometry.least_squares import (
 from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import (
     SolveInfo,
-    bisect,
     mesh_partition,
     solve_partitioned,
     solve_subdomains,
@@ -891,11 +890,11 @@ def lod_tiles(piece: Piece, tile_faces: int) -> int:
 
 
 def tile_cells(scene: Scene, tiles: int) -> np.ndarray:
-    """(m,) int64 tile of each face of ``scene`` among ``tiles``: its centroid's part in a recursive bisection
-    of the centroids in x-z (:func:`neuralao.pipeline.geometry.partitioned_solve.bisect`, each cut across
-    the longer side), so the tiles hold equal numbers of faces (to one) however the faces crowd: a
-    Sponza's middle is as many tiles as its faces make. The centroids' x and z only, a column at a time:
-    the 10x world's terrain (8.7M faces) without (m, 3, 3) corners."""
+    """(m,) int64 tile of each face of ``scene`` among ``tiles``: ceil(sqrt(tiles)) columns across x, each cut
+    across z into rows, by the ranks of the face centroids' x, then z (numpy's selection, linear time), so
+    that tile t holds the faces of ranks floor(m t / tiles) .. floor(m (t + 1) / tiles): equal face counts, to
+    one, however the faces crowd (a Sponza's middle is as many tiles as its faces make). The centroids' x and
+    z only, a column at a time: the 10x world's terrain (8.7M faces) in well under a second."""
     if tiles == 1:
         return np.zeros(len(scene.faces), np.int64)
     f = np.ascontiguousarray(scene.faces.T)
@@ -903,7 +902,27 @@ def tile_cells(scene: Scene, tiles: int) -> np.ndarray:
         (x[f[0]] + x[f[1]] + x[f[2]]) / 3.0  # the corners' mean, as numpy's mean adds and divides
         for x in (np.ascontiguousarray(scene.vertices[:, k]) for k in (0, 2))
     )
-    return bisect(np.stack([cx, np.zeros_like(cx), cz], axis=1), tiles)
+    m = len(cx)
+    bound = [(m * t) // tiles for t in range(tiles + 1)]  # tile t's first rank
+    columns = int(np.ceil(np.sqrt(tiles)))
+    # column c holds tiles first[c] .. first[c + 1] - 1 (the first tiles % columns columns one row more)
+    first = np.cumsum([0] + [tiles // columns + (c < tiles % columns) for c in range(columns)])
+    by_x = _ranked(cx, [bound[t] for t in first[1:-1]])
+    out = np.empty(m, np.int64)
+    for c in range(columns):
+        lo, hi = bound[first[c]], bound[first[c + 1]]
+        mine = by_x[lo:hi]
+        by_z = mine[_ranked(cz[mine], [bound[t] - lo for t in range(first[c] + 1, first[c + 1])])]
+        for t in range(first[c], first[c + 1]):
+            out[by_z[bound[t] - lo : bound[t + 1] - lo]] = t
+    return out
+
+
+def _ranked(values: np.ndarray, cuts: list[int]) -> np.ndarray:
+    """Indices of ``values`` with the ``cuts`` (ranks) in place: every index before a cut has a value at most
+    every one after it (:func:`numpy.argpartition`)."""
+    cuts = [c for c in cuts if 0 < c < len(values)]
+    return np.argpartition(values, cuts) if cuts else np.arange(len(values))
 
 
 def simplify_piece(state: PieceState, args) -> dict[str, np.ndarray]:
