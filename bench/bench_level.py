@@ -102,15 +102,29 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+# Run first in the baseline's process (PYTHONPATH): the editable install maps neuralao's packages to this
+# checkout's folders; this points them at NEURALAO_ROOT's.
+BASELINE_SITE = """import os, sys
+for finder in sys.meta_path:
+    mapping = getattr(finder, "MAPPING", None) or getattr(sys.modules.get(finder.__module__), "MAPPING", None)
+    if isinstance(mapping, dict) and any(k.startswith("neuralao.") for k in mapping):
+        for name in list(mapping):
+            mapping[name] = os.path.join(os.environ["NEURALAO_ROOT"], name.split(".")[1])
+"""
+
+
 def run_baseline(checkout: Path, args) -> dict:
     """bench/bench_level.py of the checkout at ``checkout`` (fresh, same preset and seed), run as its own
-    process with that checkout first on the path; returns its bench_level.json."""
+    process with neuralao's packages imported from that checkout; returns its bench_level.json."""
     import subprocess
 
     out = Path(args.out).resolve() / "baseline"
+    site = out / "site"
+    site.mkdir(parents=True, exist_ok=True)
+    (site / "sitecustomize.py").write_text(BASELINE_SITE)
     cmd = [sys.executable, "bench/bench_level.py", "--preset", args.preset, "--seed", str(args.seed)]
     cmd += ["--out", str(out), "--fresh"] + [f"--set={kv}" for kv in args.set]
-    env = dict(os.environ, PYTHONPATH=str(checkout.resolve()))
+    env = dict(os.environ, PYTHONPATH=str(site), NEURALAO_ROOT=str(checkout.resolve()))
     subprocess.run(cmd, cwd=checkout, env=env, check=True)
     return json.loads((out / "level" / args.preset / "bench_level.json").read_text())
 

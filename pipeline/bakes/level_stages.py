@@ -386,7 +386,8 @@ def solve_stage(
     connected component of at least ``trace.component_vertices`` vertices is solved from here in subdomains
     (:func:`_solve_piece_here`): each subdomain's worker makes its rows of the equations, and the iteration
     runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`), its steps tasks of ``runner`` under
-    ``ctx`` (its workers hold it already). Every other piece is one task. The results are the same bytes with
+    ``ctx`` (its workers hold it already); a piece of that many vertices in smaller components only, in groups
+    of them (:class:`GroupSolve`). Every other piece is one task. The results are the same bytes with
     any engine: each task is a pure function of its arguments, and the driver adds the results in a fixed
     order. ``keys``: the arrays of each result read back (None: all). ``aside``: (files, jobs (stem, task
     maker)) of another stage's tasks that need nothing of this one, run in its first wave, each result put in
