@@ -143,6 +143,7 @@ def main() -> int:
         st = next(s for s in info["stages"] if s["stage"] == "lod")
         tasks = info["task_seconds"].get("lod", [])
         n_simplify = int(st.get("simplify_tasks", 1))  # one of the whole level, or per piece and tile
+        beside = int(st.get("simplified_beside", 0))  # in the solve's wave: not timed apart
         runs.append(
             {
                 "name": name,
@@ -151,8 +152,8 @@ def main() -> int:
                 "kept": st["lod_faces"] / info["counts"]["receiver_faces"],
                 "lod_seconds": st["seconds"],
                 "simplify_seconds": st["seconds_simplify"],
-                "simplify_tasks": n_simplify,
-                "simplify_largest_s": max(tasks[:n_simplify], default=0.0),
+                "simplify_tasks": n_simplify + beside,
+                "simplify_largest_s": max(tasks[:n_simplify], default=0.0) if not beside else float("nan"),
                 "errors": info["errors"]["lod"],
                 "per_kind": per_kind(bake, info["keys"], kinds, source_faces),
             }

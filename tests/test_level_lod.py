@@ -128,7 +128,7 @@ def test_the_simplifications_run_in_the_solve_s_wave_or_in_the_lod_s_own(tiny, t
     root, level, _, simplified = tiny
     solve = next(s for s in simplified["stages"] if s["stage"] == "solve")
     lod = next(s for s in simplified["stages"] if s["stage"] == "lod")
-    assert lod["simplify_tasks"] == 0
+    assert lod["simplify_tasks"] == 0 and lod["simplified_beside"] == 1
     # one piece: its solve and its simplification (one tile), in one wave
     assert simplified["counts"]["pieces"] == 1 and solve["tasks"] == 2
     assert simplified["task_waves"]["solve"] == [0, 0]
@@ -144,6 +144,7 @@ def test_the_simplifications_run_in_the_solve_s_wave_or_in_the_lod_s_own(tiny, t
     again = bake_level(level, load_level_settings(cfg, common), out)
     rows = {s["stage"]: s for s in again["stages"]}
     assert rows["solve"]["reused"] and not rows["lod"]["reused"] and rows["lod"]["simplify_tasks"] == 1
+    assert rows["lod"]["simplified_beside"] == 0
     assert (out / "level_baked.glb").read_bytes() == (root / "simplified" / "level_baked.glb").read_bytes()
 
 

@@ -549,6 +549,7 @@ def bake_level(
             lod_faces=int(lod["lod_faces"]),
             resample_points=int(lod["resample_points"]),
             simplify_tasks=int(lod.get("simplify_tasks", 1)),
+            simplified_beside=int(lod.get("simplified_beside", 0)),
             **({"resample_tasks": int(lod["resample_tasks"])} if "resample_tasks" in lod else {}),
             **{
                 k: float(lod[k])
@@ -725,12 +726,13 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, 
     stems = {piece_stem(p) for p in pieces} | {"radius"}
     mesh_files.keep_only(stems)
     have_meshes = all(mesh_files.has(stem) for stem in stems)
-    simplified = 0
+    simplified = beside = 0
     if s.lod.max_error is not None and not have_meshes:
         # Per piece (a big one in tiles), a task each, at one shared error (those not done beside the solve);
         # the pieces' meshes joined from their tiles here, the radius from the level's median LOD edge.
         tile_files, jobs = _lod_tile_jobs(lod_files, light, pieces, s)
         simplified = len(unfinished(tile_files, jobs))
+        beside = len(jobs) - simplified  # made in the solve's first wave
         edges, tiles = [], []
         for stem, r, _ in run_to_files(tile_files, runner, jobs, "lod simplify", progress):
             edges.append(r["edges"])
@@ -775,6 +777,7 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, 
     # The stage's tasks in order: its simplifications (one of the whole level, or those of the pieces and
     # tiles not made beside the solve), its resampling, then a task per piece.
     out["simplify_tasks"] = np.array(simplified if s.lod.max_error is not None else int(not have_meshes))
+    out["simplified_beside"] = np.array(beside)
     out["resample_tasks"] = np.array(resample_tasks)
     out["seconds_resample"] = np.array(t2 - t1)
     out["radius"] = np.array(radius)
