@@ -244,11 +244,7 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     subdomains' assembly, and every static vertex gets the default bake's AO; a rerun reuses the driver-solved
     piece's file and writes the same bytes. The bake log gives each task's wave (map call)."""
     root, level, cfg, info = baked
-    overrides = ["trace.subdomains=4", "trace.component_vertices=200", "lod.enabled=false", "piece_faces=100"]
-    s = load_level_settings(cfg, overrides)
-    out = tmp_path / "sub"
-    sub = bake_level(level, s, out)
-    bake_level(level, load_level_settings(cfg, overrides[2:]), tmp_path / "components")
+    s, out, sub = _bake_split(baked, tmp_path / "sub", 200)
     _assert_same_static_ao(tmp_path / "components", out, atol=1e-6)
     solve = next(st for st in sub["stages"] if st["stage"] == "solve")
     assert solve["tasks"] > 4 * 5 and solve["seconds_driver"] > 0  # subdomain tasks, >= 5 iterations
@@ -266,6 +262,19 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     assert (out / "level_baked.glb").read_bytes() == first
 
 
+def _bake_split(baked, out, component_vertices: int) -> tuple:
+    """The module's level in pieces of 100 faces without its LOD, baked into ``out`` with the solve in 4
+    subdomains (or groups) from ``component_vertices`` and into ``out``'s sibling ``components`` without
+    them: (the first's settings, ``out``, its log)."""
+    _, level, cfg, _ = baked
+    split = ["trace.subdomains=4", f"trace.component_vertices={component_vertices}"]
+    common = ["lod.enabled=false", "piece_faces=100"]
+    s = load_level_settings(cfg, split + common)
+    log = bake_level(level, s, out)
+    bake_level(level, load_level_settings(cfg, common), out.parent / "components")
+    return s, out, log
+
+
 def test_a_big_piece_of_small_components_is_solved_in_groups_of_them(baked, tmp_path):
     """With ``trace.subdomains``, a piece of at least ``component_vertices`` vertices none of whose
     components is that big (the first buildings' piece: 144 vertices, 36 components of 4) is solved as
@@ -274,11 +283,7 @@ def test_a_big_piece_of_small_components_is_solved_in_groups_of_them(baked, tmp_
     solves, the groups' results are written as the
     piece's one file, and a rerun reads that file back and writes the same bytes."""
     root, level, cfg, info = baked
-    overrides = ["trace.subdomains=4", "trace.component_vertices=100", "lod.enabled=false", "piece_faces=100"]
-    s = load_level_settings(cfg, overrides)
-    out = tmp_path / "groups"
-    grouped = bake_level(level, s, out)
-    bake_level(level, load_level_settings(cfg, overrides[2:]), tmp_path / "components")
+    s, out, grouped = _bake_split(baked, tmp_path / "groups", 100)
     # to a float32 step or two: each group takes its piece's ridge (a group's own moved these by 3e-7)
     _assert_same_static_ao(tmp_path / "components", out, atol=1e-7)
     per_wave = np.bincount(grouped["task_waves"]["solve"])
