@@ -9,7 +9,9 @@ warm-up, and keeps a snapshot of the
 weights when the run's plan reaches each of ``points_hours``: the curve's points come from one run, as
 a longer run passes through them (the release run then anneals over the budget the curve chooses).
 The plan (epochs for the budget) is measured once when the run starts and stored in its checkpoint,
-so a run killed midway resumes from its last epoch and keeps the same snapshots: rerun the command.
+so a run killed midway resumes from its last epoch and keeps the same snapshots: rerun the command. A
+run with ``steps_per_hour`` is not measured: it takes ``hours`` x that many optimiser steps (whole epochs),
+the same on any machine (the rate of the runs it is compared with, so its points sit at their steps).
 
 At each point: the validation split's SSIM and RMSE (from the training run) and the evaluation
 categories (``eval`` in the config, the same frames for every point) against GTAO and SSAO at every
@@ -25,6 +27,7 @@ are kept from that file).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import shutil
 import sys
@@ -37,7 +40,7 @@ from neuralao.export.unet import export_onnx, load_model, onnx_metadata  # noqa:
 from neuralao.pipeline.evaluation.categories import EvalSettings, evaluate  # noqa: E402
 from neuralao.pipeline.models.checkpoint import save_checkpoint  # noqa: E402
 from neuralao.pipeline.models.unet_frames import load_dataset_frames  # noqa: E402
-from neuralao.pipeline.models.unet_train import UNetTrainSettings, train  # noqa: E402
+from neuralao.pipeline.models.unet_train import UNetTrainSettings, epoch_steps, train  # noqa: E402
 from neuralao.runtime.foundation.errors import NeuralaoError  # noqa: E402
 from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 from neuralao.runtime.foundation.machine import cpu_name  # noqa: E402
@@ -105,6 +108,10 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
             gtao_raw=key[4],
         )
     train_set, val_set, info = sets
+    if "steps_per_hour" in run:  # a fixed step count per CPU-hour: the same points on any machine
+        per_epoch = epoch_steps(settings, len(train_set))
+        epochs = max(1, round(float(run["hours"]) * float(run["steps_per_hour"]) / per_epoch))
+        settings = dataclasses.replace(settings, budget_minutes=0.0, epochs=epochs)
 
     def keep_snapshot(epoch: int, ckpt: dict) -> None:
         at = snapshot_epochs(int(ckpt["plan"]["epochs"]), float(run["hours"]), points)

@@ -55,7 +55,11 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
             "batch_size": 4,
             "threads": 1,
         },
-        "runs": [{"name": "main", "hours": 0.001, "train": {}}],
+        "runs": [
+            {"name": "main", "hours": 0.001, "train": {}},
+            # 8 steps in 0.001 h, one an epoch (4 frames of one crop, batches of 4): 4 at the first point
+            {"name": "fixed", "hours": 0.001, "steps_per_hour": 8000, "train": {}},
+        ],
     }
     (tmp_path / "curve.json").write_text(json.dumps(cfg))
     results = tmp_path / "results.md"
@@ -76,7 +80,9 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
     first = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=env)
     assert first.returncode == 0, first.stderr[-3000:]
     out = json.loads((tmp_path / "out" / "curve.json").read_text())
-    records = out["records"]
+    fixed = [(r["hours"], r["steps"]) for r in out["records"] if r["run"] == "fixed"]
+    assert fixed == [(0.0005, 4), (0.001, 8)]  # whatever the machine's speed
+    records = [r for r in out["records"] if r["run"] == "main"]
     assert [r["hours"] for r in records] == [0.0005, 0.001]
     assert records[0]["steps"] <= records[1]["steps"] and all(r["val_rmse"] is not None for r in records)
     for r in records:
@@ -88,11 +94,14 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
     second = subprocess.run(argv, capture_output=True, text=True, timeout=600, env=env)
     assert second.returncode == 0, second.stderr[-3000:]
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps  # nothing trained again
-    assert json.loads((tmp_path / "out" / "curve.json").read_text())["records"] == records
+    again = json.loads((tmp_path / "out" / "curve.json").read_text())["records"]
+    assert [r for r in again if r["run"] == "main"] == records
     assert "| elsewhere | 1 | - | - | 0.5000 | 0.750 |" in results.read_text()
     kept = json.loads((tmp_path / "learning_curve.json").read_text())["records"]
     assert sorted((r["run"], r["hours"]) for r in kept) == [
         ("elsewhere", 1.0),
+        ("fixed", 0.0005),
+        ("fixed", 0.001),
         ("main", 0.0005),
         ("main", 0.001),
     ]

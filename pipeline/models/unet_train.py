@@ -578,6 +578,11 @@ def calibrate(
     }
 
 
+def epoch_steps(settings: UNetTrainSettings, frames: int) -> int:
+    """Optimiser steps an epoch takes over ``frames`` training frames (the last batch may be short)."""
+    return -(-frames * settings.crops_per_frame // settings.batch_size)
+
+
 def plan_budget(settings: UNetTrainSettings, steps_per_epoch: int, cal: dict) -> int:
     """Epochs that fit ``budget_minutes`` at the calibrated cost (at least 1, at most ``epochs``)."""
     per_epoch = steps_per_epoch * cal["seconds_per_step"] + cal["val_seconds"]
@@ -754,7 +759,7 @@ def train(
         plan_info: dict = {}
         resumed = None if restart else _find_resumable(out, key, settings.epochs)
         sat = Foreground.of(train_set)
-        steps_per_epoch = -(-len(train_set) * settings.crops_per_frame // settings.batch_size)
+        steps_per_epoch = epoch_steps(settings, len(train_set))
         if resumed is not None:
             model.load_state_dict(resumed["state_dict"])
             opt.load_state_dict(resumed["optimizer"])
