@@ -476,11 +476,12 @@ class GroupSolve:
     kept here until a piece's are all in (:meth:`joined`: a rerun redoes a piece's groups)."""
 
     def __init__(self, ctx, pieces, rule, trace_files: TaskFiles, s: LevelBakeSettings, whole: Whole, key):
-        self.ctx, self.pieces, self.rule, self.trace_files = ctx, pieces, rule, trace_files
+        self.ctx, self.rule, self.trace_files = ctx, rule, trace_files
         self.s, self.whole, self.key = s, whole, key
         self.count = {p.index: group_count(p, s.trace) for p in pieces}
         self.owner = {group_stem(p, g): (p, g) for p in pieces for g in range(self.count[p.index])}
         self.largest: dict[int, float] = {}  # piece -> largest diagonal entry of its groups so far
+        self.assembly: dict[int, float] = {}  # piece -> its groups' seconds making their rows
         self.parts: dict[int, list] = {p.index: [] for p in pieces}
         self._last: dict[str, Any] = {}
 
@@ -515,6 +516,7 @@ class GroupSolve:
         p, _ = self.owner[stem]
         if "diagonal" in result:
             self.largest[p.index] = max(self.largest.get(p.index, -np.inf), float(result["diagonal"]))
+            self.assembly[p.index] = self.assembly.get(p.index, 0.0) + float(result["seconds_assembly"])
         else:
             self.parts[p.index].append(result)
         return True
@@ -523,6 +525,7 @@ class GroupSolve:
         """The piece's solve result (as :func:`_solve_piece`'s) from its groups'."""
         v = np.full((piece.nv, 2), np.nan, np.float32)
         times = dict.fromkeys(("assembly", "blocks", "driver", "largest_block"), 0.0)
+        times["assembly"] = self.assembly.pop(piece.index, 0.0)
         for r in self.parts.pop(piece.index):
             v[r["vertices"]] = r["v"]
             for k in ("assembly", "blocks", "driver"):
@@ -534,9 +537,9 @@ class GroupSolve:
 
 
 # A group of a big piece's small components holds about component_vertices / GROUP_SHARE vertices (at most
-# trace.subdomains groups): Table 1's Sponza (175,688 vertices, 6,132 components) in 8 groups of 0.1 s each,
-# about a terrain subdomain's assembly; the 10x world's pieces of houses (524,280) in 21. Smaller groups
-# only add tasks (two each) to the driver's work.
+# trace.subdomains groups): Table 1's Sponza (175,688 vertices, 6,132 components) in 8, none longer than a
+# terrain subdomain's assembly; the 10x world's pieces of houses (524,280) in 21. Smaller groups only add
+# tasks (two each) to the driver's work and, as each finds its piece's components, to one machine's.
 GROUP_SHARE = 4
 
 
