@@ -723,9 +723,8 @@ def _lod_stage(runner, contexts, level, index, pieces, rule, values, lod_files, 
     ctx, light, simplify_ctx = contexts
     t0 = time.perf_counter()
     mesh_files = lod_mesh_files(lod_files)
-    stems = {piece_stem(p) for p in pieces} | {"radius"}
-    mesh_files.keep_only(stems)
-    have_meshes = all(mesh_files.has(stem) for stem in stems)
+    mesh_files.keep_only({piece_stem(p) for p in pieces} | {"radius"})
+    have_meshes = _lod_meshes_made(lod_files, pieces)
     simplified = beside = 0
     if s.lod.max_error is not None and not have_meshes:
         # Per piece (a big one in tiles), a task each, at one shared error (those not done beside the solve);
@@ -799,14 +798,17 @@ def _lod_tile_jobs(lod_files: TaskFiles, light, pieces, s: LevelBakeSettings) ->
     return TaskFiles(lod_files.folder.parent / "lod_tiles", lod_files.key), jobs
 
 
+def _lod_meshes_made(lod_files: TaskFiles, pieces) -> bool:
+    """Whether every piece's LOD mesh and the resampling radius are stored (no simplification is left)."""
+    mesh_files = lod_mesh_files(lod_files)
+    return all(mesh_files.has(stem) for stem in [*(piece_stem(p) for p in pieces), "radius"])
+
+
 def _lod_ahead(lod_files: TaskFiles | None, light, pieces, s: LevelBakeSettings):
     """What the solve's first wave runs beside its own tasks: the per-piece LOD's simplifications that
     are not done yet (they need no solved value), as (their files, their jobs); None when there are none
     (no LOD, one global simplification, or the LOD's meshes already made)."""
-    if lod_files is None or s.lod.max_error is None:
-        return None
-    stems = {piece_stem(p) for p in pieces} | {"radius"}
-    if all(lod_mesh_files(lod_files).has(stem) for stem in stems):
+    if lod_files is None or s.lod.max_error is None or _lod_meshes_made(lod_files, pieces):
         return None
     files, jobs = _lod_tile_jobs(lod_files, light, pieces, s)
     todo = unfinished(files, jobs)

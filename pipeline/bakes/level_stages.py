@@ -898,7 +898,7 @@ def tile_cells(scene: Scene, tiles: int) -> np.ndarray:
     across z into rows, by the ranks of the face centroids' x, then z (numpy's selection, linear time), so
     that tile t holds the faces of ranks floor(m t / tiles) .. floor(m (t + 1) / tiles): equal face counts, to
     one, however the faces crowd (a Sponza's middle is as many tiles as its faces make). The centroids' x and
-    z only, a column at a time: the 10x world's terrain (8.7M faces) in well under a second."""
+    z only, a column at a time: the 10x world's terrain (8.7M faces) in 1.2 s."""
     if tiles == 1:
         return np.zeros(len(scene.faces), np.int64)
     f = np.ascontiguousarray(scene.faces.T)
