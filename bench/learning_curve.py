@@ -109,8 +109,11 @@ def train_run(cfg: dict, run: dict, out: Path, cache: dict) -> Path:
         )
     train_set, val_set, info = sets
     if "steps_per_hour" in run:  # a fixed step count per CPU-hour: the same points on any machine
+        rate = run["steps_per_hour"]
+        if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not 0 < rate < 1e9:
+            raise NeuralaoError(f"runs.{run['name']}.steps_per_hour must be a positive number, got {rate!r}")
         per_epoch = epoch_steps(settings, len(train_set))
-        epochs = max(1, round(float(run["hours"]) * float(run["steps_per_hour"]) / per_epoch))
+        epochs = max(1, round(float(run["hours"]) * float(rate) / per_epoch))
         settings = dataclasses.replace(settings, budget_minutes=0.0, epochs=epochs)
 
     def keep_snapshot(epoch: int, ckpt: dict) -> None:

@@ -111,3 +111,9 @@ def test_learning_curve_trains_snapshots_scores_and_resumes(tmp_path):
     third = subprocess.run(gone, capture_output=True, text=True, timeout=600, env=env)
     assert third.returncode == 0, third.stderr[-3000:]
     assert results.read_text() == table
+    # a step rate that is not a positive number: one line, no traceback
+    cfg["runs"] = [{"name": "bad", "hours": 0.001, "steps_per_hour": "fast", "train": {}}]
+    (tmp_path / "bad.json").write_text(json.dumps(cfg))
+    bad = argv[:2] + ["--config", str(tmp_path / "bad.json"), "--out", str(tmp_path / "bad")]
+    fourth = subprocess.run(bad, capture_output=True, text=True, timeout=600, env=env)
+    assert fourth.returncode != 0 and "steps_per_hour" in fourth.stderr and "Traceback" not in fourth.stderr
