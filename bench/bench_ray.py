@@ -50,12 +50,14 @@ from neuralao.runtime.foundation.io import write_json, write_text  # noqa: E402
 
 # Tasks per core in the projection: enough that the last round of tasks balances (block size follows).
 TASKS_PER_CORE = 4
-# Measured on a private Ray instance on this machine (2 single-CPU actors, no-op tasks): a wave's round
-# trip (a one-task map, 1.9 ms of wall clock, a network round trip across machines is of the same order)
-# and the driver's CPU seconds per task it submits (0.8 ms in maps of 2,000; a Ray bake's log has them in
-# its driver's CPU seconds, a local bake's does not).
+# Measured on a private Ray instance on this machine (2 single-CPU actors, no-op tasks:
+# ``bench_ray.py --driver-only``, :func:`driver_costs`): a wave's round trip (a one-task map: 1.4 ms of wall
+# clock in the latest run; 1.9 ms kept, a network round trip across machines being of that order) and the
+# driver's CPU seconds per task it submits and takes the result of, in maps of 2,000 (a Ray bake's log has
+# them in its driver's CPU seconds, a local bake's does not): 0.69 ms with each task's call as six
+# arguments, 0.58 ms as one tuple (back to back, 2026-12-06, AMD EPYC, 2 cores; 0.8 ms in an older run).
 WAVE_S = 1.9e-3
-SUBMIT_S = 0.8e-3
+SUBMIT_S = 0.58e-3
 
 
 def _noop_state(payload):
@@ -227,6 +229,28 @@ def measure(args) -> dict:
 TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check")
 # Stages that only produce the error tables (a production bake leaves them out: ``error_tables`` false).
 CHECK_STAGES = ("blend_check", "lod_check")
+
+
+def driver_costs(engine, tasks: int = 2000, waves: int = 50) -> dict:
+    """The driver's CPU seconds per task of a map of ``tasks`` no-op tasks on ``engine`` (what it costs to
+    submit one and take its result) and the wall seconds of a one-task map (a wave's round trip), best of
+    three each."""
+    import operator
+
+    from neuralao.pipeline.engines.engine import no_state
+
+    ctx = Context("noop-driver", no_state, None)
+    list(engine.map([Task(ctx, operator.is_, 0)]))  # the context on the workers
+    submit, wave = [], []
+    for _ in range(3):
+        c0 = time.process_time()
+        list(engine.map(Task(ctx, operator.is_, i) for i in range(tasks)))
+        submit.append((time.process_time() - c0) / tasks)
+        t0 = time.perf_counter()
+        for i in range(waves):
+            list(engine.map([Task(ctx, operator.is_, i)]))
+        wave.append((time.perf_counter() - t0) / waves)
+    return {"submit_cpu_s": min(submit), "wave_s": min(wave), "tasks": tasks, "workers": engine.workers}
 
 
 def traces(info: dict, stage: dict, count: int) -> list[bool]:
@@ -477,8 +501,24 @@ def main() -> None:
     p.add_argument(
         "--project-only", action="store_true", help="recompute the projection from OUT/bench_ray.json"
     )
+    p.add_argument(
+        "--driver-only",
+        action="store_true",
+        help="only the driver's costs per task and per wave on 2 actors (OUT/ray_driver.json)",
+    )
     args = p.parse_args()
     out = Path(args.out)
+    if args.driver_only:
+        engine = RayEngine(None, workers=2)
+        engine.worker_info()
+        costs = driver_costs(engine)
+        engine.close()
+        write_json(out / "ray_driver.json", costs)
+        print(
+            f"driver CPU a task {costs['submit_cpu_s'] * 1e3:.3f} ms (maps of {costs['tasks']:,}), "
+            f"a one-task map {costs['wave_s'] * 1e3:.2f} ms"
+        )
+        return
     result = json.loads((out / "bench_ray.json").read_text()) if args.project_only else measure(args)
     proj = projection(
         result,
