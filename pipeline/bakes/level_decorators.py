@@ -22,7 +22,13 @@ from neuralao.pipeline.bakes.level_settings import (
     halves,
     label_settings,
 )
-from neuralao.pipeline.bakes.level_stages import LabellerFrame, PieceState, gold_context, worker_settings
+from neuralao.pipeline.bakes.level_stages import (
+    LabellerFrame,
+    PieceState,
+    gold_scene,
+    shared_level,
+    worker_settings,
+)
 from neuralao.pipeline.engines.engine import Context, Shared, Task, content_key
 from neuralao.pipeline.geometry.least_squares import fit_least_squares
 from neuralao.pipeline.geometry.level_files import Level, LevelNode, flatten
@@ -180,23 +186,31 @@ def gold_stage_context(
 ) -> Context | None:
     """The engine context of the trees' gold standard (the level with every tree opaque, and the foliage
     without the trees in its frame), or None for a level without trees. Arguments as
-    :func:`bake_decorators`'."""
+    :func:`bake_decorators`'. Its state is built where its tasks run (:func:`_gold_state`), foliage
+    included: the driver only names it."""
     if not level.nodes_with("tree"):
         return None
     settings = worker_settings(label_settings(s, diagonal), runner)
-    # Foliage lives in the gold labeller's local frame (its scene's centre and diagonal), found here
-    # one instance at a time, without flattening the level.
-    bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))
-    frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
-    gold_foliage = (
-        build_foliage(level, frame, s.foliage, include_trees=False, shrubs=shrubs)
-        if s.foliage.enabled
-        else None
-    )
     keys = keys or {}
-    return gold_context(
-        keys.get("geometry", ""), level, settings, gold_foliage, s.trace.bvh, keys.get("foliage", "")
-    )
+    key, bvh = keys.get("geometry", ""), s.trace.bvh
+    foliage = (s.foliage, shrubs) if s.foliage.enabled else None
+    payload = (shared_level(key, level, None)[0], settings, bvh, foliage)
+    name = content_key(key, settings, bvh, keys.get("foliage", ""))
+    return Context(f"level-gold/{name}", _gold_state, payload, heavy=True)
+
+
+def _gold_state(payload) -> tuple[LevelLabeller, Foliage | None]:
+    """The gold labeller (:func:`gold_scene`) and the foliage without the trees, in the frame of the
+    level's static, blocker and tree instances (found one instance batch at a time); ``payload``: the
+    level, label settings, BVH quality and (foliage settings, the shrubs' boxes or None), or None."""
+    level, settings, bvh, foliage = payload
+    gold_foliage = None
+    if foliage is not None:
+        foliage_settings, shrubs = foliage
+        bounds = level_bounds(level, level.nodes_with("static", "blocker", "tree"))
+        frame = LabellerFrame(bounds.mean(0), float(np.linalg.norm(bounds[1] - bounds[0])), settings)
+        gold_foliage = build_foliage(level, frame, foliage_settings, include_trees=False, shrubs=shrubs)
+    return LevelLabeller(gold_scene(level), settings, bvh), gold_foliage
 
 
 def bake_decorators(

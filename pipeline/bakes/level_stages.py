@@ -116,11 +116,6 @@ def _opaque_state(payload) -> PieceState:
     return PieceState(LevelLabeller(opaque_scene(level), settings, bvh), level, index, key)
 
 
-def _gold_state(payload) -> tuple[LevelLabeller, Any]:
-    level, settings, bvh, foliage = payload
-    return LevelLabeller(gold_scene(level), settings, bvh), foliage
-
-
 class LabellerFrame:
     """The local frame (``center``, ``scale``) and label settings of the opaque labeller, without its scene:
     what the driver needs to build the foliage in the frame the workers trace in."""
@@ -161,17 +156,6 @@ def shared_foliage(foliage, settings: LabelSettings, foliage_key: str) -> Shared
     if foliage is None:
         return None
     return Shared(f"foliage/{content_key(foliage_key, settings)}", foliage)
-
-
-def gold_context(
-    key: str, level: Level, settings: LabelSettings, foliage, bvh: str = "fast", foliage_key: str = ""
-) -> Context:
-    """The engine context of the trees' gold standard: the opaque level with every tree opaque (keys as
-    :func:`opaque_context`'s)."""
-    payload = (shared_level(key, level, None)[0], settings, bvh, foliage)
-    return Context(
-        f"level-gold/{content_key(key, settings, bvh, foliage_key)}", _gold_state, payload, heavy=True
-    )
 
 
 def shared_level(key: str, level: Level, index: PieceIndex | None) -> tuple[Shared, Shared]:
