@@ -70,6 +70,7 @@ def run_stage(
                 "row": self.stages[-1],
                 "task_seconds": self.task_seconds.get(name, []),
                 "task_waves": self.task_waves.get(name, []),
+                "task_aside": self.task_aside.get(name, []),
             }
 
     def stop_before_next(self):
@@ -113,6 +114,7 @@ def patched(log: dict, fresh: dict, bvh_scale: float, local: bool) -> dict:
                         row[k] = run["row"][k]
         out["task_seconds"][stage] = list(run["task_seconds"])
         out.setdefault("task_waves", {})[stage] = list(run["task_waves"])
+        out.setdefault("task_aside", {})[stage] = list(run["task_aside"])
     out["state_seconds"] = {
         k: [x * (bvh_scale if k in TRACING_STAGES else 1.0) for x in v]
         for k, v in out.get("state_seconds", {}).items()

@@ -293,7 +293,9 @@ def stage_costs(info: dict, checks: bool = False) -> list[dict]:
         if name in CHECK_STAGES and not checks:
             continue
         t = list(tasks.get(name, []))
-        traced = traces(info, st, len(t))
+        # another stage's tasks run in this one's wave (the solve's plans beside the trace) trace nothing
+        aside = set(info.get("task_aside", {}).get(name, []))
+        traced = [tr and i not in aside for i, tr in enumerate(traces(info, st, len(t)))]
         cores = [x * (threads if tr else 1) for x, tr in zip(t, traced, strict=True)]
         state = prepared = waited = 0.0
         at = ahead.get("trace" if name == "bvh" else name)
@@ -343,22 +345,29 @@ def wave_spans(
     any of its tasks ``traced``: a wave is one of the engine's map calls, and the driver starts the next
     once it has this one's results (the partitioned solve's CG: one wave per iteration). Each wave takes
     the makespan of its tasks scheduled longest first, or, if its work ``divides`` (the trace's blocks,
-    sized to the cores), its work over the slots; and a round trip (:data:`WAVE_S`)."""
-    traced = traced or [False] * len(work)
-    groups: dict[int, list[float]] = {}
-    tracing: dict[int, bool] = {}
+    sized to the cores), its work over the slots, but no less than the makespan of its tasks that do not
+    trace (another stage's, run beside the blocks: they do not divide); and a round trip
+    (:data:`WAVE_S`)."""
+    traced = traced if traced is not None else [divides] * len(work)
+    groups: dict[int, list[tuple[float, bool]]] = {}
     for w, x, tr in zip(waves, work, traced, strict=True):
-        groups.setdefault(w, []).append(x)
-        tracing[w] = tracing.get(w, False) or tr
-    return [
-        ((sum(g) / slots if divides else makespan(g, slots)) + WAVE_S, tracing[w])
-        for w, g in sorted(groups.items())
-    ]
+        groups.setdefault(w, []).append((x, tr))
+    spans = []
+    for _, g in sorted(groups.items()):
+        if divides:
+            whole = makespan([x for x, tr in g if not tr], slots)
+            span = max(sum(x for x, _ in g) / slots, whole)
+        else:
+            span = makespan([x for x, _ in g], slots)
+        spans.append((span + WAVE_S, any(tr for _, tr in g)))
+    return spans
 
 
-def wave_span(work: list[float], waves: list[int], slots: int, divides: bool) -> float:
+def wave_span(
+    work: list[float], waves: list[int], slots: int, divides: bool, traced: list[bool] | None = None
+) -> float:
     """The seconds of a stage's tasks, wave after wave (:func:`wave_spans`)."""
-    return sum(span for span, _ in wave_spans(work, waves, slots, divides))
+    return sum(span for span, _ in wave_spans(work, waves, slots, divides, traced))
 
 
 def makespan(durations: list[float], cores: int) -> float:
@@ -396,7 +405,7 @@ def projection(result: dict, level_json: Path | None, cores: int, machines: list
         per_stage = {}
         for c in costs:
             work = [x / efficiency for x in c["task_core_s"]]
-            span = wave_span(work, c["waves"], p, c["stage"] == "trace")
+            span = wave_span(work, c["waves"], p, c["stage"] == "trace", c["traces"])
             if work:  # each core's share of the tasks' round trips (the trace's blocks: a few per core)
                 span += t_task * (TASKS_PER_CORE if c["stage"] == "trace" else len(work) / p)
             # single-CPU actors: a state built ahead shares its actor's one core, so all of it is counted

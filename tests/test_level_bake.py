@@ -287,10 +287,12 @@ def test_a_big_piece_of_small_components_is_solved_in_groups_of_them(baked, tmp_
     # to a float32 step or two: each group takes its piece's ridge (a group's own moved these by 3e-7)
     _assert_same_static_ao(tmp_path / "components", out, atol=1e-7)
     per_wave = np.bincount(grouped["task_waves"]["solve"])
-    # the component check (the terrain's mesh: the buildings' meshes are smaller than 100 vertices), then
-    # the terrain's 4 subdomains' assembly beside the buildings' 4 groups' rows and the last piece's solve,
-    # 4 tasks a step of the terrain's CG, and last the 4 groups' solves
-    assert per_wave[0] == 1 and per_wave[1] == 4 + 4 + 1 and set(per_wave[2:]) == {4}
+    # the terrain's plan (its components and subdomains) was made beside the trace's blocks (the buildings'
+    # meshes are smaller than 100 vertices: they need none); then the terrain's 4 subdomains' assembly
+    # beside the buildings' 4 groups' rows and the last piece's solve, 4 tasks a step of the terrain's CG,
+    # and last the 4 groups' solves
+    assert len(grouped["task_aside"]["trace"]) == 1
+    assert per_wave[0] == 4 + 4 + 1 and set(per_wave[1:]) == {4}
     assert sorted(f.name for f in (out / "stages" / "solve").glob("*.npz")) == [
         "p00000.npz",
         "p00001.npz",

@@ -20,7 +20,7 @@ from neuralao.pipeline.geometry.least_squares import (
     vertex_equations,
 )
 from neuralao.pipeline.geometry.scene import Scene
-from neuralao.pipeline.geometry.surface import SurfaceSamples, largest_component, surface_samples
+from neuralao.pipeline.geometry.surface import SurfaceSamples, surface_samples, vertex_components
 
 # Entries are sums of a few hundred float64 products of one sign per term: a relative 1e-12 of the largest
 # entry leaves room for any summation order, and is far below what a different matrix would change.
@@ -184,11 +184,12 @@ def test_a_vertex_s_row_is_the_same_bits_whatever_is_asked_with_it(soup):
         assert rows[0] == rows[1], u
 
 
-def test_largest_component_counts_vertices_joined_by_faces():
+def test_vertex_components_join_vertices_by_faces():
     faces = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7], [8, 8, 9]])
-    assert largest_component(faces, 12) == 5  # 0-4; then 5-7, 8-9, and 10, 11 in no face
-    assert largest_component(np.zeros((0, 3), np.int64), 3) == 1
-    assert largest_component(np.zeros((0, 3), np.int64), 0) == 0
+    sizes = sorted(np.bincount(vertex_components(faces, 12)).tolist())
+    assert sizes == [1, 1, 2, 3, 5]  # 0-4; then 5-7, 8-9, and 10, 11 in no face
+    assert np.bincount(vertex_components(np.zeros((0, 3), np.int64), 3)).tolist() == [1, 1, 1]
+    assert len(vertex_components(np.zeros((0, 3), np.int64), 0)) == 0
 
 
 def test_the_driver_coordinates_only_pieces_with_a_big_component(tmp_path):
@@ -198,7 +199,7 @@ def test_the_driver_coordinates_only_pieces_with_a_big_component(tmp_path):
     from neuralao.pipeline.bakes.level import bake_level
     from neuralao.pipeline.bakes.level_pieces import index_level
     from neuralao.pipeline.bakes.level_settings import load_level_settings
-    from neuralao.pipeline.bakes.level_stages import big_components, pieces_context
+    from neuralao.pipeline.bakes.level_stages import TaskFiles, pieces_context, plan_partition, solve_plans
     from neuralao.pipeline.engines.engine import LocalEngine
     from neuralao.pipeline.geometry.level_files import read_level
     from neuralao.pipeline.geometry.level_gen import settings_for, write_level
@@ -221,5 +222,14 @@ def test_the_driver_coordinates_only_pieces_with_a_big_component(tmp_path):
     index = index_level(lv, 400)
     ctx = pieces_context("k", lv, index)
     many = [p for p in index.pieces if p.nv >= 200]
-    chosen = big_components(LocalEngine(), ctx, many, 200)
-    assert len(many) == 2 and [f"p{p.index:05d}" for p in chosen] == here, (many, chosen)
+    t = load_level_settings(cfg, [*base, *split]).trace
+    plans = solve_plans(TaskFiles(tmp_path / "plans", "k"), LocalEngine(), ctx, many, t)
+    chosen = sorted(i for i, plan in plans.items() if int(plan["largest"]) >= 200)
+    assert len(many) == 2 and [f"p{i:05d}" for i in chosen] == here, (many, chosen)
+    # the chosen piece's plan: 4 subdomains whose cores cover its vertices once, grown inside it
+    part = plan_partition(plans[chosen[0]])
+    nv = next(p.nv for p in many if p.index == chosen[0])
+    assert len(part.parts) == 4 and np.bincount(part.core, minlength=4).sum() == nv
+    assert all(np.isin(c, q).all() for c, q in zip(part.cores, part.parts, strict=True))
+    # the plans were made in the trace's wave, beside its blocks (its log names them), not by the solve
+    assert len(sub["task_aside"]["trace"]) == len(plans) and "solve" not in sub["task_aside"]

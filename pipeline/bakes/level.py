@@ -90,6 +90,7 @@ from neuralao.pipeline.bakes.level_stages import (
     piece_stem,
     piece_trace,
     pieces_context,
+    plan_jobs,
     run_to_files,
     shared_foliage,
     simplify_level,
@@ -134,6 +135,9 @@ class BakeLog:
         self.task_seconds: dict[str, list[float]] = {}
         # per stage, the wave (0, 1, ...: the engine's map calls in order) each of its tasks ran in
         self.task_waves: dict[str, list[int]] = {}
+        # per stage whose wave ran another stage's tasks (Task.aside: the solve's plans beside the trace),
+        # the positions of those tasks in its task seconds
+        self.task_aside: dict[str, list[int]] = {}
         # per stage, the seconds of each state its tasks were the first to use (built there or prepared
         # ahead), the seconds the first task waited for it and whether it was prepared (Engine.prepare)
         self.state_seconds: dict[str, list[float]] = {}
@@ -234,6 +238,9 @@ class BakeLog:
             self.task_seconds[name] = done
             _, waves = np.unique(waves, return_inverse=True)  # numbered from 0 in the stage
             self.task_waves[name] = waves.reshape(-1).tolist()
+            aside, self.runner.task_aside = self.runner.task_aside, []
+            if any(aside):
+                self.task_aside[name] = [i for i, a in enumerate(aside) if a]
             self.stages[-1].update(tasks=len(done), task_seconds_max=max(done))
         if self.runner is not None and self.runner.state_seconds:
             built, self.runner.state_seconds = self.runner.state_seconds, []
@@ -455,6 +462,10 @@ def bake_level(
         runner = engine
     blog.runner = runner  # each stage's row counts its tasks' seconds
     trace_files = TaskFiles(blog.dir / "trace", keys["trace"])
+    # The solve's plans of its pieces in subdomains (a connected component check and the subdomains, from
+    # the mesh alone) are made in the trace's wave, beside its blocks.
+    plan_files = TaskFiles(blog.dir / "solve_plan", keys["solve"])
+    plans = unfinished(plan_files, plan_jobs(light, pieces, t)) if blog.will_make("solve") else []
     traced = blog.stored(
         "trace",
         "Ray trace samples (2 distances, foliage)",
@@ -466,6 +477,7 @@ def bake_level(
                 "trace blocks",
                 progress,
                 keys=("valid", "weight", "weighted"),
+                aside=(plan_files, plans),
             ),
             invalid=lambda r: int((~r["valid"]).sum()),
             valid_weight=lambda r: float(r["weight"]),
@@ -507,6 +519,7 @@ def bake_level(
                 s,
                 whole,
                 progress,
+                plan_files,
                 SOLVE_TIMES,
                 aside=_lod_ahead(lod_files, light, pieces, s),
             ),
@@ -515,6 +528,7 @@ def bake_level(
         vertices=index.vertices,
     )
     blog.note("solve", **{k: float(v) for k, v in solved.items() if k.startswith("seconds_")})
+    shutil.rmtree(plan_files.folder, ignore_errors=True)  # the plans' subdomains are in the solve's results
     # The baked AO of every opaque vertex (NaN on blockers): what the resampling of grass, shrubs and the
     # LOD reads, one float each.
     values = Resampler.share(_final_values(solve_files, pieces, index, level, s))
@@ -651,6 +665,7 @@ def bake_level(
         # projects onto N machines.
         "task_seconds": blog.task_seconds,
         "task_waves": blog.task_waves,
+        "task_aside": blog.task_aside,
         "state_seconds": blog.state_seconds,
         "state_waits": blog.state_waits,
         "state_prepared": blog.state_prepared,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import heapq
+import itertools
 import threading
 import time
 import zipfile
@@ -34,7 +35,6 @@ from neuralao.pipeline.bakes.level_pieces import (
     cached_piece,
     face_samples,
     instance_vertices,
-    piece_scene,
     remembered,
 )
 from neuralao.pipeline.bakes.level_settings import LevelBakeSettings, TraceSettings, blend, halves
@@ -51,6 +51,7 @@ from neuralao.pipeline.geometry.least_squares import (
 )
 from neuralao.pipeline.geometry.level_files import GltfWriter, Level, flatten
 from neuralao.pipeline.geometry.partitioned_solve import (
+    Partition,
     SolveInfo,
     mesh_partition,
     solve_partitioned,
@@ -60,7 +61,6 @@ from neuralao.pipeline.geometry.scene import Scene, scene_from_arrays
 from neuralao.pipeline.geometry.surface import (
     face_areas,
     interpolate,
-    largest_component,
     samples_in_range,
     samples_per_face,
     surface_samples,
@@ -251,16 +251,25 @@ def run_to_files(
     progress: bool,
     keep: frozenset[str] = frozenset(),
     keys: tuple[str, ...] | None = None,
+    aside: tuple[TaskFiles, list] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """Run the jobs (file stem, task maker) a file does not hold yet on ``runner``, writing each result as it
     arrives; then yield (stem, result, reused) for every job in order, one file read at a time. ``keep``:
     stems of files the stage writes otherwise (left in place). ``keys``: the arrays of each result to read
-    back (None: all; a file without one of them is redone)."""
+    back (None: all; a file without one of them is redone). ``aside``: (files, jobs) of another stage's
+    tasks run first in the same wave (``Task.aside``), each result put in those files."""
     files.keep_only({stem for stem, _ in jobs} | keep)
     pending = unfinished(files, jobs, keys)
+    other_files, other = aside or (None, [])
+    tasks = itertools.chain(
+        (replace(make(), aside=True) for _, make in other), (make() for _, make in pending)
+    )
     with tqdm(total=len(pending), desc=desc, disable=not progress, leave=False) as bar:
-        for i, r in runner.map(make() for _, make in pending):
-            files.put(pending[i][0], r)
+        for i, r in runner.map(tasks):
+            if i < len(other):
+                other_files.put(other[i][0], r)
+                continue
+            files.put(pending[i - len(other)][0], r)
             bar.update(1)
     fresh = {stem for stem, _ in pending}
     for stem, _ in jobs:
@@ -363,12 +372,14 @@ def solve_stage(
     s,
     whole,
     progress: bool,
+    plans: TaskFiles,
     keys: tuple[str, ...] | None = None,
     aside: tuple[TaskFiles, list] | None = None,
 ) -> Iterator[tuple[str, dict[str, np.ndarray], bool]]:
     """(stem, result, reused) of every piece's least squares. With ``trace.subdomains`` > 1 a piece with a
     connected component of at least ``trace.component_vertices`` vertices is solved from here in subdomains
-    (:func:`_solve_piece_here`): each subdomain's worker makes its rows of the equations, and the iteration
+    (:func:`_solve_piece_here`, cut by its plan: :func:`solve_plans`, whose ``plans`` files the trace's wave
+    may have made already): each subdomain's worker makes its rows of the equations, and the iteration
     runs here (:mod:`neuralao.pipeline.geometry.partitioned_solve`), its steps tasks of ``runner`` under
     ``ctx`` (its workers hold it already); a piece of that many vertices in smaller components only, in groups
     of them (:class:`GroupSolve`). Every other piece is one task. The results are the same bytes with
@@ -386,11 +397,8 @@ def solve_stage(
     ]
     # a piece whose result is stored is read back wherever it was solved: only the others are looked at
     todo = [p for p in big if not files.has(piece_stem(p))]
-    _, index, _ = ctx.value()
-    largest = largest_components(runner, ctx, todo, t.component_vertices) if todo else {}
-    found = {
-        p.index for p in todo if any(largest.get(m, 0) >= t.component_vertices for m in meshes(index, p))
-    }
+    made = solve_plans(plans, runner, ctx, todo, t)
+    found = {i for i, plan in made.items() if int(plan["largest"]) >= t.component_vertices}
     here = [p for p in big if p.index in found or files.has(piece_stem(p))]
     # A big piece of small components only (a soup, a piece of many instances): its components in groups,
     # a task each (they share no vertex: each group's equations are its own).
@@ -419,10 +427,7 @@ def solve_stage(
     fresh = {stem for stem, _ in pending[:others] if not groups.owns(stem)} | {piece_stem(p) for p in grouped}
     for p in here:
         if not files.has(piece_stem(p)):
-            # one mesh's instance whose largest component is all of it: one component, the cores' aggregates
-            (mesh,) = meshes(index, p) if p.stop - p.first == 1 else (None,)
-            connected = mesh is not None and largest.get(mesh) == p.nv
-            here_args = (rule, trace_files, s, whole, pending, deliver, connected)
+            here_args = (rule, trace_files, s, whole, plan_partition(made[p.index]), pending, deliver)
             result = _solve_piece_here(runner, ctx, p, *here_args)
             files.put(piece_stem(p), result)
             fresh.add(piece_stem(p))
@@ -611,25 +616,63 @@ def meshes(index: PieceIndex, piece: Piece) -> set[int]:
     return {index.nodes[k].mesh for k in index.table[piece.first : piece.stop, 0]}
 
 
-def largest_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> dict[int, int]:
-    """{mesh: vertices of its largest connected component} of the ``pieces``' meshes of at least
-    ``at_least`` vertices, each counted once, by a task of ``runner`` (workers hold the level)."""
+def plan_jobs(ctx: Context, pieces: list[Piece], t: TraceSettings) -> list[tuple[str, Callable[[], Task]]]:
+    """(stem, task maker) of the solve's plan (:func:`_solve_plan`) of each of the ``pieces`` that may be
+    solved in subdomains (:func:`solve_stage`: ``trace.subdomains`` > 1, the components solver with a
+    regulariser, at least ``trace.component_vertices`` vertices) and has a mesh of that many vertices (a
+    piece's instances share no vertex: a component that big lies in one of its meshes)."""
+    if not (t.solver == "components" and t.subdomains > 1 and t.alpha > 0):
+        return []
     level, index, _ = ctx.value()
-    todo = sorted({m for p in pieces for m in meshes(index, p) if len(level.meshes[m].vertices) >= at_least})
-    return {todo[i]: int(r["vertices"]) for i, r in runner.map(Task(ctx, _mesh_component, m) for m in todo)}
+    at_least = t.component_vertices
+    return [
+        (piece_stem(p), lambda p=p: Task(ctx, _solve_plan, (p, at_least, t.subdomains)))
+        for p in pieces
+        if p.nv >= at_least and any(len(level.meshes[m].vertices) >= at_least for m in meshes(index, p))
+    ]
 
 
-def big_components(runner, ctx: Context, pieces: list[Piece], at_least: int) -> list[Piece]:
-    """The ``pieces`` with a connected component of at least ``at_least`` vertices. A piece's instances
-    share no vertex, so that is one of its meshes' components (:func:`largest_components`)."""
-    _, index, _ = ctx.value()
-    largest = largest_components(runner, ctx, pieces, at_least)
-    return [p for p in pieces if any(largest.get(m, 0) >= at_least for m in meshes(index, p))]
+def _solve_plan(state: PieceState, args) -> dict[str, np.ndarray]:
+    """Engine task: a piece's plan for the partitioned solve, made from its mesh alone: "largest", the
+    vertices of its largest connected component, and if that is at least ``at_least``, its subdomains
+    (:func:`neuralao.pipeline.geometry.partitioned_solve.mesh_partition`: "core", "coarse", the parts joined
+    in "parts" with their "part_sizes"; int32)."""
+    piece, at_least, subdomains = args
+    scene, _ = cached_piece(state.key, state.level, state.index, piece, None)
+    components = vertex_components(scene.faces, len(scene.vertices))
+    largest = int(np.bincount(components).max(initial=0))
+    out = {"largest": np.array(largest)}
+    if largest >= at_least:
+        part = mesh_partition(scene.vertices, scene.faces, subdomains, components=components)
+        out.update(
+            core=part.core.astype(np.int32),
+            coarse=part.coarse.astype(np.int32),
+            parts=np.concatenate(part.parts).astype(np.int32),
+            part_sizes=np.array([len(x) for x in part.parts], np.int64),
+        )
+    return out
 
 
-def _mesh_component(state: PieceState, mesh: int) -> dict[str, np.ndarray]:
-    m = state.level.meshes[mesh]
-    return {"vertices": np.array(largest_component(m.faces, len(m.vertices)))}
+def plan_partition(plan: dict[str, np.ndarray]) -> Partition:
+    """The :class:`Partition` of a piece's plan (:func:`_solve_plan`)."""
+    parts = np.split(plan["parts"].astype(np.int64), np.cumsum(plan["part_sizes"])[:-1])
+    return Partition(plan["core"].astype(np.int64), parts, plan["coarse"].astype(np.int64))
+
+
+def solve_plans(files: TaskFiles, runner, ctx: Context, pieces: list[Piece], t: TraceSettings) -> dict:
+    """{piece index: plan} (:func:`_solve_plan`) of the ``pieces`` that may be solved in subdomains
+    (:func:`plan_jobs`; the others have none): read from ``files`` (the trace's wave makes them beside its
+    blocks), the missing ones made by a wave of ``runner`` (workers hold the level) and put there."""
+    jobs = plan_jobs(ctx, pieces, t)
+    pending = unfinished(files, jobs)
+    for i, result in runner.map(make() for _, make in pending):
+        files.put(pending[i][0], result)
+    plans = {}
+    for stem, _ in jobs:
+        if (plan := files.get(stem)) is None:
+            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
+        plans[int(stem[1:])] = plan
+    return plans
 
 
 def _solve_piece_here(
@@ -640,25 +683,20 @@ def _solve_piece_here(
     trace_files: TaskFiles,
     s,
     whole,
+    part: Partition,
     beside=(),
     deliver=None,
-    connected: bool = False,
 ):
     """:func:`_solve_piece` with the driver as the coordinator, its equations never whole anywhere: the
-    subdomains are cut from the piece's mesh here (:func:`neuralao.pipeline.geometry.partitioned_solve.
-    mesh_partition`; ``connected``: the piece is one connected component), each subdomain's worker makes its
-    rows from the piece's samples on the faces that touch it (:class:`PieceRows`, the first wave) and keeps
-    them for the CG's steps, and the coarse system is added up here from their shares. The driver reads the
-    piece's traces and makes its vertices, not its samples, and drops everything with the result.
+    subdomains ``part`` (the piece's plan, :func:`solve_plans`) cut from the piece's mesh, each subdomain's
+    worker makes its rows from the piece's samples on the faces that touch it (:class:`PieceRows`, the first
+    wave) and keeps them for the CG's steps, and the coarse system is added up here from their shares. The
+    driver reads the piece's traces, not its mesh or samples, and drops everything with the result.
     ``beside``: jobs (stem, task maker) of other pieces run in the first wave, each result handed to
     ``deliver(index in beside, result)`` as it arrives."""
-    level, index, _ = ctx.value()
     t0 = time.perf_counter()
-    scene = piece_scene(level, index, piece)
     ao, valid = piece_trace(trace_files, piece, s.trace.block_samples)
-    part = mesh_partition(scene.vertices, scene.faces, s.trace.subdomains, connected=connected)
     source = PieceRows(piece, rule, ao, valid, s.trace.alpha, whole)
-    del scene
     assembly = time.perf_counter() - t0
     info = SolveInfo()
     x = solve_subdomains(

@@ -118,6 +118,10 @@ class Task:
     # Tasks of the same affinity go to the same worker where an engine has several (RayEngine): a cache
     # they share there (a subdomain's factor, made by its first task) is then made once. None: any worker.
     affinity: int | None = None
+    # A task of another stage's work run in this map's wave (a plan made beside the trace): the engine
+    # notes it beside the task's seconds (``Engine.task_aside``), so a projection does not take it for
+    # this stage's kind of work.
+    aside: bool = False
 
 
 @dataclass(frozen=True)
@@ -319,6 +323,7 @@ class Engine:
         # next map starts once it has read this one's results, so a map's tasks are a wave that the next
         # waits for (what a projection onto more machines adds up, wave by wave).
         self.task_waves: list[int] = []
+        self.task_aside: list[bool] = []  # each task's ``Task.aside``
         self._waves = 0
 
     def _timing(self, timed: _Timed) -> Any:
@@ -351,6 +356,7 @@ class Engine:
                 self.reused += 1
             else:  # _run timed it (_timing) just before yielding it
                 self.task_waves.append(wave)
+                self.task_aside.append(task.aside)
                 if store is not None and task.key is not None:
                     store.put(task.key, result)
             self.completed += 1

@@ -254,15 +254,22 @@ def partition(
 
 
 def mesh_partition(
-    points: np.ndarray, faces: np.ndarray, count: int, overlap: int = OVERLAP, connected: bool = False
+    points: np.ndarray,
+    faces: np.ndarray,
+    count: int,
+    overlap: int = OVERLAP,
+    connected: bool = False,
+    components: np.ndarray | None = None,
 ) -> Partition:
     """:func:`partition` of the least-squares normal equations of the mesh ``points`` (n, 3), ``faces``
     (f, 3), from the mesh alone, before the equations are made: with a regulariser their matrix couples the
     corners of every face, so its graph is the faces' (a face of zero area adds only zeros, but here it
-    joins its corners). ``connected``: every vertex is in one connected component."""
+    joins its corners). ``connected``: every vertex is in one connected component; ``components``: the
+    vertices' (:func:`neuralao.pipeline.geometry.surface.vertex_components`), if found already."""
     graph = _FaceGraph(faces, len(points))
-    component = None if connected else vertex_components(faces, len(points))
-    return _partition(points, count, overlap, graph, component)
+    if components is None and not connected:
+        components = vertex_components(faces, len(points))
+    return _partition(points, count, overlap, graph, None if connected else components)
 
 
 def _partition(

@@ -219,8 +219,3 @@ def vertex_components(faces: np.ndarray, n: int) -> np.ndarray:
     e = np.asarray(faces, np.int64)[:, [0, 1, 1, 2]].reshape(-1, 2)
     graph = sp.coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
     return connected_components(graph, directed=False)[1].astype(np.int64)
-
-
-def largest_component(faces: np.ndarray, n: int) -> int:
-    """Vertices in the largest connected component (:func:`vertex_components`); 0 without vertices."""
-    return int(np.bincount(vertex_components(faces, n)).max()) if n else 0
