@@ -16,7 +16,9 @@ rounding and inexact coarse solves):
   neighbour in ``A`` lies inside its subdomain whatever the faces' size (the houses' boxes are faces metres
   wide);
 * local solves ``A_i = R_i A R_i^T`` (the subdomain's principal block: zero Dirichlet data outside), a
-  SuperLU factor made once per subdomain where its tasks run and reused by every iteration;
+  SuperLU factor made once per subdomain with its system, where its tasks run, and reused by every
+  iteration (a solve with a ridge factors A_i plus the ridge of A_i's own largest diagonal entry: the
+  solve's needs every subdomain's, and the preconditioner need not hold it exactly);
 * coarse space ``Z``: one aggregate per (subdomain core, connected component) pair, the indicator of its
   vertices. It holds each component's constant, the mode that a part without valid samples keeps only
   through the 1e-9 ridge (a condition number of 1e9 no local solve reaches). Measured at 32 subdomains
@@ -123,7 +125,7 @@ class SolveInfo:
     subdomain_vertices: list[int] = field(default_factory=list)  # unknowns of each subdomain (with overlap)
     coarse_size: int = 0  # coarse aggregates
     seconds_setup: float = 0.0  # driver: partition, subdomain blocks, coarse factor
-    seconds_tasks: list[float] = field(default_factory=list)  # each local task (a subdomain's first: +factor)
+    seconds_tasks: list[float] = field(default_factory=list)  # each local task (a subdomain's assembly: +factor)
     seconds_driver: float = 0.0  # driver: the iterations' own work (coarse solves, sums), not the tasks'
     restarts: int = 0  # times the solve started again because a worker lost its subdomains' vectors
 
@@ -356,7 +358,9 @@ class Subdomain:
     # (subdomain j, positions in P): the part of this subdomain's local solution j receives, ascending j
     sends: list[tuple[int, np.ndarray]]
     az: sp.csr_matrix | None = None  # (|P|, m): (A Z)'s rows of P, made by the first local solve
-    factor: Any = None  # SuperLU factor of A_i (P's rows at P's columns), made by the first local solve
+    # SuperLU factor of A_i (P's rows at P's columns; with the solve's ridge, A_i plus its own: the ridge
+    # rule on A_i's largest diagonal entry), made with the system: the local solves' preconditioner
+    factor: Any = None
 
 
 def _indicator(coarse: np.ndarray, m: int) -> sp.csr_matrix:
@@ -408,13 +412,20 @@ class Subdomains:
     A p (s) on P, kept on every subdomain that holds a vertex, each copy computed alike (the same rows, the
     same sums in the same order: the same bits as the owner's), so a step needs no neighbour's r."""
 
-    def __init__(self, part: Partition, source, m: int):
-        self.part, self.source, self.m = part, source, m
+    def __init__(self, part: Partition, source, m: int, ridged: bool = False):
+        self.part, self.source, self.m, self.ridged = part, source, m, ridged
         self.systems: dict[int, Subdomain] = {}
         self.vectors: dict[int, dict[str, Any]] = {}
 
     def __getstate__(self) -> dict:
-        return {"part": self.part, "source": self.source, "m": self.m, "systems": {}, "vectors": {}}
+        return {
+            "part": self.part,
+            "source": self.source,
+            "m": self.m,
+            "ridged": self.ridged,
+            "systems": {},
+            "vectors": {},
+        }
 
     def step(self, state, i: int, token: str, phase: str, step: int, data) -> dict[str, Any]:
         """Subdomain i's part of the CG's ``phase`` at ``step`` (:func:`solve_subdomains`)."""
@@ -454,6 +465,12 @@ class Subdomains:
         s = Subdomain(
             token, rows, p_in_e, core_in_p, core_in_e, coarse_e[core_in_e], coarse_e, rhs, receives, sends
         )
+        # The factor is made now, not by the first local solve: the solve's ridge needs every subdomain's
+        # largest diagonal entry, so A_i takes its own (a preconditioner need not be the operator's block).
+        block = rows[:, p_in_e]
+        if self.ridged:
+            block = block + ridge_of(block.diagonal().max(initial=0.0)) * sp.identity(len(p), format="csr")
+        s.factor = factorise(block)
         self.systems[i] = s
         self.vectors.pop(i, None)
         core_rows = rows[core_in_p]
@@ -468,14 +485,13 @@ class Subdomains:
 
     def _prepare(self, s: Subdomain, ridge) -> None:
         """Before subdomain i's first local solve: the ridge (None, or (value, prior (c,))) on its diagonal
-        and right-hand side, (A Z)'s rows of P and the factor of A_i."""
+        and right-hand side, and (A Z)'s rows of P."""
         if ridge is not None:
             value, prior = ridge
             k = len(s.p_in_e)
             s.rows = s.rows + sp.csr_matrix((np.full(k, value), (np.arange(k), s.p_in_e)), shape=s.rows.shape)
             s.rhs = s.rhs + value * np.asarray(prior, np.float64).reshape(1, -1)
         s.az = (s.rows @ _indicator(s.coarse_e, self.m)).tocsr()
-        s.factor = factorise(s.rows[:, s.p_in_e])
 
     def _solve(self, i, s: Subdomain, vec, alpha, beta, c) -> dict[str, Any]:
         """The previous step's update (x += alpha p, r -= alpha s after p = u + beta p, s = w + beta s), then
@@ -545,7 +561,7 @@ class _Solve:
         self.part, self.engine, self.context, self.info, self.prior = part, engine, context, info, ridge
         self.k, self.m = len(part.parts), int(part.coarse.max(initial=-1)) + 1
         self.counts = np.bincount(part.coarse, minlength=self.m).astype(np.float64)  # vertices per aggregate
-        self.subdomains: Subdomains | Shared = Subdomains(part, source, self.m)
+        self.subdomains: Subdomains | Shared = Subdomains(part, source, self.m, ridge is not None)
         if engine is not None:  # sent once per worker, under the solve's own name
             self.subdomains = Shared(f"schwarz/{name}", self.subdomains)
         self.waited = 0.0  # wall seconds of the waves (tasks, sending, gathering)
