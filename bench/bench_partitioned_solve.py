@@ -18,7 +18,7 @@ beside SuperLU and today's one-task multigrid CG, on three systems:
 Sample values are smooth signals plus noise (the solve's cost does not depend on them). Per case: SuperLU of
 the whole system (the reference), multigrid CG (pyamg, rtol 1e-10: today's one task for a big component),
 then the partitioned solve at each ``--subdomains`` count, in this process: CG iterations, max abs error
-against SuperLU, wall seconds, the largest single task (a subdomain's factorisation and first solve: what
+against SuperLU, wall seconds, the largest single task (a subdomain's system and factorisation: what
 bounds the scale-out) and the projected wall time on one worker per subdomain (the driver's setup and
 iterations plus, per wave, the slowest subdomain's step; no transfer time). An ablation at the
 largest count compares coarse spaces. Writes OUT/bench_partitioned_solve.json and .md.
