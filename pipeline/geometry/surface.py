@@ -217,5 +217,8 @@ def vertex_components(faces: np.ndarray, n: int) -> np.ndarray:
     """(n,) int64: the connected component of each vertex of a mesh of ``n`` vertices and ``faces`` (f, 3)
     (vertices joined by a face are connected; a vertex in no face is a component of its own)."""
     e = np.asarray(faces, np.int64)[:, [0, 1, 1, 2]].reshape(-1, 2)
-    graph = sp.coo_matrix((np.ones(len(e), np.int8), (e[:, 0], e[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1].astype(np.int64)
+    graph = sp.csr_matrix((np.ones(len(e), bool), (e[:, 0], e[:, 1])), shape=(n, n))
+    # weak components of the directed edges are the mesh's, without the symmetric copy of the graph that
+    # directed=False makes: the same labels, less memory (the 10x world's terrain, 4.4M vertices, six runs:
+    # 0.87-2.48 s, median 1.3, against 0.85-1.77 s, median 0.86)
+    return connected_components(graph, directed=True, connection="weak")[1].astype(np.int64)
