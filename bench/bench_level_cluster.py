@@ -38,7 +38,7 @@ os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # keep 127.0.0.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_ray import stage_costs, wave_spans  # noqa: E402
+from bench_ray import IDLE_CPU, stage_costs, wave_spans  # noqa: E402
 
 from neuralao.pipeline.bakes.level import bake_level  # noqa: E402
 from neuralao.pipeline.bakes.level_settings import load_level_settings  # noqa: E402
@@ -55,6 +55,7 @@ def project(
     checks: bool = False,
     same_run: bool = False,
     ahead: bool = True,
+    driver: dict[str, float] | None = None,
 ) -> dict:
     """Seconds per stage of the bake ``info`` (a bake log) on ``machines`` x ``cores``: the driver's own
     seconds (with a local bake's, what Ray's driver would spend submitting its tasks), plus the stage's
@@ -70,6 +71,9 @@ def project(
     same_run : the run that made ``info`` itself: a state built ahead (``Engine.prepare``) costs what its
         stage's first tasks waited for it, as measured.
     ahead : False: every state costs its whole build, as if its stage's first task built it.
+    driver : {stage: driver seconds} to take instead of the log's (:func:`ray_driver_seconds` of a Ray
+        bake of the same level and settings: what a Ray driver spends, where a local bake's log has its
+        own seconds and Ray's cost of an empty task).
 
     A state built ahead on machines of one actor costs max(0, its build at the machine's threads - the
     seconds its machine's cores are free between the prepare call and the stage that needs it), the free
@@ -83,6 +87,8 @@ def project(
     costs = stage_costs(info, checks)
     for c in costs:
         name, work = c["stage"], c["task_core_s"]
+        if driver is not None and name in driver:
+            c = {**c, "driver_s": driver[name]}
         if threads_per_actor == 1:
             slots = machines * cores
         else:  # one actor per machine: tracing tasks spread over its threads, the others use one
@@ -105,6 +111,15 @@ def project(
             state = max(state, ahead_s)
         out[name] = c["driver_s"] + state + sum(span for span, _ in spans)
     return {"stages": out, "total_s": sum(out.values())}
+
+
+def ray_driver_seconds(log: dict, idle: float = IDLE_CPU) -> dict[str, float]:
+    """{stage: its driver's CPU seconds} of a Ray bake's log, less what an idle Ray driver spends over the
+    stage's wall clock (``idle``, a fraction of it: Ray's own threads in the driver's process), which on
+    a cluster that makes the stage shorter shrinks with it."""
+    if log.get("engine") != "ray":
+        raise SystemExit("--driver-from needs a Ray bake's log (bake_log.json of --engine ray)")
+    return {st["stage"]: max(0.0, st["cpu_seconds"] - idle * st["seconds"]) for st in log["stages"]}
 
 
 def _build_bvh(level: str, cpus: list[int], queue) -> None:
@@ -218,6 +233,8 @@ def markdown(r: dict) -> str:
         proj = r["projection"][key]
         names = list(proj[0]["stages"])
         source = r.get("projected_from", "the 1-node run")
+        if r.get("driver_from"):
+            source += f" with the driver seconds of {r['driver_from']}"
         lines += ["", f"Projection of {source}, machines of 16 cores, {label}:", ""]
         lines += ["| machines | " + " | ".join(names) + " | total s | vs 1 machine | bound by |"]
         lines += ["|---:|" + "---:|" * (len(names) + 2) + "---|"]
@@ -290,6 +307,12 @@ def main() -> int:
         "1-node run; written to OUT/bench_cluster_projected.{json,md} (a local bake's tasks run one per "
         "core, as single-CPU actors' do)",
     )
+    p.add_argument(
+        "--driver-from",
+        default=None,
+        help="a Ray bake's bake_log.json of the same level and settings: the projections take its driver's "
+        "CPU seconds per stage (less an idle Ray driver's) instead of the projected log's",
+    )
     args = p.parse_args()
     out = Path(args.out) / "level_cluster" / args.preset
     if args.project_only:
@@ -344,11 +367,18 @@ def main() -> int:
         data = json.loads(Path(args.project_from).read_text())
         base = data.get("bake", data.get("bake_log", data))
         result["projected_from"] = args.project_from
+    driver = None
+    if args.driver_from:
+        driver = ray_driver_seconds(json.loads(Path(args.driver_from).read_text()))
+        result["driver_from"] = args.driver_from
     result["projection"] = {
-        "single": [{"machines": m, **project(base, m, 16)} for m in args.machines],
-        "threads": [{"machines": m, **project(base, m, 16, 16, speedup)} for m in args.machines],
+        "single": [{"machines": m, **project(base, m, 16, driver=driver)} for m in args.machines],
+        "threads": [
+            {"machines": m, **project(base, m, 16, 16, speedup, driver=driver)} for m in args.machines
+        ],
         "threads_in_line": [
-            {"machines": m, **project(base, m, 16, 16, speedup, ahead=False)} for m in args.machines
+            {"machines": m, **project(base, m, 16, 16, speedup, ahead=False, driver=driver)}
+            for m in args.machines
         ],
     }
     name = "bench_cluster_projected" if args.project_from else "bench_cluster"

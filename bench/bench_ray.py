@@ -58,6 +58,10 @@ TASKS_PER_CORE = 4
 # arguments, 0.58 ms as one tuple (back to back, 2026-12-06, AMD EPYC, 2 cores; 0.8 ms in an older run).
 WAVE_S = 1.9e-3
 SUBMIT_S = 0.58e-3
+# The CPU an idle Ray driver spends, a fraction of the wall clock (its process's Ray threads; the same
+# measurement, 20 s of sleep): 0.36% and 0.44% in two runs. What a Ray bake's driver seconds hold beyond
+# its own work, in proportion to a stage's length (bench_level_cluster.ray_driver_seconds).
+IDLE_CPU = 0.004
 
 
 def _noop_state(payload):
@@ -231,10 +235,10 @@ TRACING_STAGES = ("trace", "decorators", "small_decorators", "lod", "blend_check
 CHECK_STAGES = ("blend_check", "lod_check")
 
 
-def driver_costs(engine, tasks: int = 2000, waves: int = 50) -> dict:
+def driver_costs(engine, tasks: int = 2000, waves: int = 50, idle_s: float = 20.0) -> dict:
     """The driver's CPU seconds per task of a map of ``tasks`` no-op tasks on ``engine`` (what it costs to
     submit one and take its result) and the wall seconds of a one-task map (a wave's round trip), best of
-    three each."""
+    three each; and the CPU it spends idle for ``idle_s`` seconds, a fraction of the wall clock."""
     import operator
 
     from neuralao.pipeline.engines.engine import no_state
@@ -250,7 +254,16 @@ def driver_costs(engine, tasks: int = 2000, waves: int = 50) -> dict:
         for i in range(waves):
             list(engine.map([Task(ctx, operator.is_, i)]))
         wave.append((time.perf_counter() - t0) / waves)
-    return {"submit_cpu_s": min(submit), "wave_s": min(wave), "tasks": tasks, "workers": engine.workers}
+    c0, t0 = time.process_time(), time.perf_counter()
+    time.sleep(idle_s)
+    idle = (time.process_time() - c0) / (time.perf_counter() - t0)
+    return {
+        "submit_cpu_s": min(submit),
+        "wave_s": min(wave),
+        "idle_cpu": idle,
+        "tasks": tasks,
+        "workers": engine.workers,
+    }
 
 
 def traces(info: dict, stage: dict, count: int) -> list[bool]:
@@ -525,7 +538,7 @@ def main() -> None:
         write_json(out / "ray_driver.json", costs)
         print(
             f"driver CPU a task {costs['submit_cpu_s'] * 1e3:.3f} ms (maps of {costs['tasks']:,}), "
-            f"a one-task map {costs['wave_s'] * 1e3:.2f} ms"
+            f"a one-task map {costs['wave_s'] * 1e3:.2f} ms, idle {100 * costs['idle_cpu']:.2f}% of a CPU"
         )
         return
     result = json.loads((out / "bench_ray.json").read_text()) if args.project_only else measure(args)
