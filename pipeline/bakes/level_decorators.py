@@ -118,10 +118,11 @@ class _TreeModel:
     l_train: np.ndarray  # (train,) float64 local AO at the fit samples
 
 
-def _tree_model(level: Level, diagonal: float, mi: int, s: LevelBakeSettings) -> _TreeModel:
-    """Local AO of tree model ``mi`` baked in isolation (both distances, least squares, blended)."""
+def _tree_model(state, args) -> _TreeModel:
+    """Engine task: the local AO of one tree model baked in isolation (both distances, least squares,
+    blended). args: (its mesh, the level's diagonal, settings); ``state`` is not read."""
+    mesh, diagonal, s = args
     d = s.decorators
-    mesh = level.meshes[mi]
     model = scene_from_arrays(mesh.vertices, mesh.faces, mesh.name, drop_degenerate=False)
     loc_lab = LevelLabeller(
         model,
@@ -226,7 +227,8 @@ def bake_decorators(
 ) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
 
-    The local AO of each model is baked here; every instance's in-place trace and fits is a task of
+    The local AO of each model is a task of ``runner``, then every instance's in-place trace and fits is a
+    task of
     ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
     ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
     (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
@@ -249,8 +251,11 @@ def bake_decorators(
     models = sorted({n.mesh for n in trees})
     out: dict[str, Any] = {}
     jobs = []  # (shared model, transform, uid) in the order of the result rows
-    for mi in models:
-        tm = _tree_model(level, diagonal, mi, s)
+    # Each model's local AO is a task (a wave before its instances', which read it), under the gold context
+    # its instances use: a worker holds no other state for it.
+    made = dict(runner.map(Task(ctx, _tree_model, (level.meshes[mi], diagonal, s)) for mi in models))
+    for k, mi in enumerate(models):
+        tm = made[k]
         out[f"local_{mi}"] = tm.local
         shared = Shared(content_key(key, "tree-model", mi), tm)
         for node in (n for n in trees if n.mesh == mi):

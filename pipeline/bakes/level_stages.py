@@ -388,13 +388,7 @@ def solve_stage(
     maker)) of another stage's tasks that need nothing of this one, run in its first wave, each result put in
     those files."""
     t = s.trace
-    # The subdomains are cut from the mesh before the equations exist: their graph is the faces' when the
-    # regulariser couples every face. Without one (alpha 0) a big piece is one task, in subdomains there.
-    big = [
-        p
-        for p in pieces
-        if t.solver == "components" and t.subdomains > 1 and t.alpha > 0 and p.nv >= t.component_vertices
-    ]
+    big = [p for p in pieces if splits(t) and p.nv >= t.component_vertices]
     # a piece whose result is stored is read back wherever it was solved: only the others are looked at
     todo = [p for p in big if not files.has(piece_stem(p))]
     made = solve_plans(plans, runner, ctx, todo, t)
@@ -616,12 +610,19 @@ def meshes(index: PieceIndex, piece: Piece) -> set[int]:
     return {index.nodes[k].mesh for k in index.table[piece.first : piece.stop, 0]}
 
 
+def splits(t: TraceSettings) -> bool:
+    """Whether the solve cuts pieces of at least ``component_vertices`` vertices (:func:`solve_stage`). The
+    subdomains are cut from the mesh before the equations exist: their graph is the faces' when the
+    regulariser couples every face. Without one (alpha 0) a big piece is one task, in subdomains there."""
+    return t.solver == "components" and t.subdomains > 1 and t.alpha > 0
+
+
 def plan_jobs(ctx: Context, pieces: list[Piece], t: TraceSettings) -> list[tuple[str, Callable[[], Task]]]:
     """(stem, task maker) of the solve's plan (:func:`_solve_plan`) of each of the ``pieces`` that may be
     solved in subdomains (:func:`solve_stage`: ``trace.subdomains`` > 1, the components solver with a
     regulariser, at least ``trace.component_vertices`` vertices) and has a mesh of that many vertices (a
     piece's instances share no vertex: a component that big lies in one of its meshes)."""
-    if not (t.solver == "components" and t.subdomains > 1 and t.alpha > 0):
+    if not splits(t):
         return []
     level, index, _ = ctx.value()
     at_least = t.component_vertices
