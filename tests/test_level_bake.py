@@ -251,8 +251,10 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     waves = sub["task_waves"]["solve"]
     assert len(waves) == solve["tasks"] and waves == sorted(waves) and waves[0] == 0
     per_wave = np.bincount(waves)
-    # the component check, the subdomains' assembly with the other two pieces' solves, then 4 tasks a step
-    assert sub["counts"]["pieces"] == 3 and per_wave[1] > 2 and set(per_wave[2:]) == {4}
+    # the subdomains' assembly with the other two pieces' solves, then 4 tasks a step (the terrain's plan,
+    # its components and subdomains, was made beside the trace's blocks)
+    assert sub["counts"]["pieces"] == 3 and per_wave[0] == 4 + 2 and set(per_wave[1:]) == {4}
+    assert len(sub["task_aside"]["trace"]) == 1
     first = (out / "level_baked.glb").read_bytes()
     (out / "stages" / "solve.npz").unlink()
     (out / "level_baked.glb").unlink()
@@ -260,6 +262,18 @@ def test_subdomain_solve_bakes_the_component_solve_and_resumes(baked, tmp_path):
     solve = next(st for st in again["stages"] if st["stage"] == "solve")
     assert not solve["reused"] and solve.get("tasks", 0) == 0  # the piece's file was kept and read back
     assert (out / "level_baked.glb").read_bytes() == first
+
+
+def test_a_rerun_with_the_trace_stored_makes_the_solve_plans_in_the_solve(baked, tmp_path):
+    """With the trace stored, a rerun that solves in subdomains redoes the solve only: the plans a fresh
+    bake makes beside its trace's blocks are the rerun's solve's first wave, and both write the same bytes;
+    the plans' files go once the solve is stored."""
+    again, fresh = _rerun_and_fresh(baked, tmp_path, ["trace.subdomains=4", "trace.component_vertices=200"])
+    assert "trace" in _reused(again) and "solve" not in _reused(again)
+    plans = len(fresh["task_aside"]["trace"])
+    assert plans >= 1 and "trace" not in again["task_aside"]
+    assert np.bincount(again["task_waves"]["solve"])[0] == plans
+    assert not (tmp_path / "rerun" / "stages" / "solve_plan").exists()
 
 
 def _bake_split(baked, out, component_vertices: int) -> tuple:
