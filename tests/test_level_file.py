@@ -47,6 +47,23 @@ def test_reader_roles_counts_and_instancing(tiny):
     assert level.nodes_with("shrub")[0].params == {"density": s.shrub_density}
 
 
+def test_a_level_pickles_its_nodes_in_band_and_reads_back_the_same(tiny):
+    """A level travels to workers pickled (protocol 5, Ray's object store): its nodes' matrices come back
+    the same bits, writable, and go in the pickle's own bytes, not an out-of-band buffer a node (only the
+    meshes' arrays are buffers)."""
+    import pickle
+
+    level = read_level(tiny)
+    buffers: list = []
+    back = pickle.loads(pickle.dumps(level, protocol=5, buffer_callback=buffers.append), buffers=buffers)
+    mesh_bytes = sum(m.vertices.nbytes + m.faces.nbytes for m in level.meshes)
+    assert sum(memoryview(b).nbytes for b in buffers) == mesh_bytes and len(buffers) <= 2 * len(level.meshes)
+    for a, b in zip(level.nodes, back.nodes, strict=True):
+        assert (a.index, a.name, a.role, a.mesh, a.params) == (b.index, b.name, b.role, b.mesh, b.params)
+        assert a.transforms.dtype == b.transforms.dtype and a.transforms.tobytes() == b.transforms.tobytes()
+        assert a.transforms.shape == b.transforms.shape and b.transforms.flags.writeable
+
+
 def test_instance_transforms_match_an_independent_quaternion_convention(tiny):
     """The reader's TRS (glTF quaternion x, y, z, w) against trimesh.transformations (w, x, y, z)."""
     doc = json.loads(tiny.read_text())
