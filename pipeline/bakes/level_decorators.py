@@ -227,9 +227,8 @@ def bake_decorators(
 ) -> dict[str, np.ndarray]:
     """Local AO per tree model, gold standard per instance, equation-3 coefficients, errors.
 
-    The local AO of each model is a task of ``runner``, then every instance's in-place trace and fits is a
-    task of
-    ``runner`` (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
+    The local AO of each model is a task of ``runner``, then every instance's in-place trace and fits is one
+    (``local``: a LocalEngine, lent the gold labeller built here for the stage), results kept in
     ``store`` (:class:`neuralao.pipeline.engines.engine.ResultStore`) as they arrive. Instances are numbered
     (and traced with ray ids) in a fixed order, so the result is the same bytes wherever the tasks run.
     ``diagonal``: the opaque level's (the rays' length). ``keys``: the bake's stage keys
