@@ -252,9 +252,8 @@ def bake_decorators(
     jobs = []  # (shared model, transform, uid) in the order of the result rows
     # Each model's local AO is a task (a wave before its instances', which read it), under the gold context
     # its instances use: a worker holds no other state for it.
-    made = dict(runner.map(Task(ctx, _tree_model, (level.meshes[mi], diagonal, s)) for mi in models))
-    for k, mi in enumerate(models):
-        tm = made[k]
+    made = runner.ordered(Task(ctx, _tree_model, (level.meshes[mi], diagonal, s)) for mi in models)
+    for mi, tm in zip(models, made, strict=True):
         out[f"local_{mi}"] = tm.local
         shared = Shared(content_key(key, "tree-model", mi), tm)
         for node in (n for n in trees if n.mesh == mi):

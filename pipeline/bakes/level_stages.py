@@ -664,16 +664,11 @@ def solve_plans(files: TaskFiles, runner, ctx: Context, pieces: list[Piece], t: 
     """{piece index: plan} (:func:`_solve_plan`) of the ``pieces`` that may be solved in subdomains
     (:func:`plan_jobs`; the others have none): read from ``files`` (the trace's wave makes them beside its
     blocks), the missing ones made by a wave of ``runner`` (workers hold the level) and put there."""
-    jobs = plan_jobs(ctx, pieces, t)
-    pending = unfinished(files, jobs)
-    for i, result in runner.map(make() for _, make in pending):
-        files.put(pending[i][0], result)
-    plans = {}
-    for stem, _ in jobs:
-        if (plan := files.get(stem)) is None:
-            raise NeuralaoError(f"{files.path(stem)} could not be read back: is the disk full?")
-        plans[int(stem[1:])] = plan
-    return plans
+    index = {piece_stem(p): p.index for p in pieces}
+    return {
+        index[stem]: plan
+        for stem, plan, _ in run_to_files(files, runner, plan_jobs(ctx, pieces, t), "", False)
+    }
 
 
 def _solve_piece_here(

