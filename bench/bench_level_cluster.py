@@ -113,6 +113,19 @@ def project(
     return {"stages": out, "total_s": sum(out.values())}
 
 
+def read_log(path: str, option: str) -> dict:
+    """The bake log (bench_level.json, bench_world.json or bake_log.json) at ``path``, given as ``option``;
+    a missing or unreadable file is a one-line error."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        raise SystemExit(f"{option} {path}: not a readable bake log ({type(e).__name__}: {e})") from None
+    log = data.get("bake", data.get("bake_log", data)) if isinstance(data, dict) else None
+    if not isinstance(log, dict) or not isinstance(log.get("stages"), list):
+        raise SystemExit(f"{option} {path}: not a bake log (no stages)")
+    return log
+
+
 def ray_driver_seconds(log: dict, idle: float = IDLE_CPU) -> dict[str, float]:
     """{stage: its driver's CPU seconds} of a Ray bake's log, less what an idle Ray driver spends over the
     stage's wall clock (``idle``, a fraction of it: Ray's own threads in the driver's process), which on
@@ -364,12 +377,11 @@ def main() -> int:
     speedup = result.get("bvh_speedup_16", 1.0)
     base = result["runs"][0]["bake"] if result["runs"] else None
     if args.project_from:
-        data = json.loads(Path(args.project_from).read_text())
-        base = data.get("bake", data.get("bake_log", data))
+        base = read_log(args.project_from, "--project-from")
         result["projected_from"] = args.project_from
     driver = None
     if args.driver_from:
-        driver = ray_driver_seconds(json.loads(Path(args.driver_from).read_text()))
+        driver = ray_driver_seconds(read_log(args.driver_from, "--driver-from"))
         result["driver_from"] = args.driver_from
     result["projection"] = {
         "single": [{"machines": m, **project(base, m, 16, driver=driver)} for m in args.machines],
